@@ -1,0 +1,189 @@
+"""The values that flow between pipeline stages.
+
+``cad`` makes a :class:`CadPath`, ``demo`` a :class:`TrackerLog` and then a :class:`Demonstration`,
+``fuse`` a :class:`FusedPath`; ``optimise`` and ``timing`` produce the joint path and its timing,
+gathered in a :class:`Trajectory` that every exporter reads. All arrays are float64 numpy arrays,
+SI units, frames named in each field.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from refine.errors import InputError
+
+Array = NDArray[np.float64]
+
+
+def _check_rows(name: str, arr: Array, n: int, tail: tuple[int, ...]) -> None:
+    if arr.shape != (n, *tail):
+        raise InputError(f"{name}: expected shape {(n, *tail)}, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"{name}: contains NaN or infinite values")
+
+
+@dataclass(frozen=True)
+class CadPath:
+    """A CAD/CAM path in the world frame {F}, resampled by arc length.
+
+    Attributes:
+        s: arc length from the first point [m], shape (N,), s[0] = 0, strictly increasing.
+        positions: path points in {F} [m], shape (N, 3).
+        closed: whether the path returns to its start (the last point equals the first).
+        source: where it came from (file name and entity), for messages.
+    """
+
+    s: Array
+    positions: Array
+    closed: bool = False
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        n = len(self.s)
+        if n < 2:
+            raise InputError(f"CadPath from {self.source!r}: needs at least 2 points, got {n}")
+        _check_rows("CadPath.s", self.s, n, ())
+        _check_rows("CadPath.positions", self.positions, n, (3,))
+        if np.any(np.diff(self.s) <= 0.0):
+            raise InputError(f"CadPath from {self.source!r}: arc length must strictly increase")
+
+    @property
+    def length(self) -> float:
+        """Total arc length [m]."""
+        return float(self.s[-1])
+
+    @property
+    def tangents(self) -> Array:
+        """Unit tangents [-], shape (N, 3), by central differences in arc length."""
+        d = np.gradient(self.positions, self.s, axis=0)
+        return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+@dataclass(frozen=True)
+class TrackerLog:
+    """Raw tracker samples as read from a log: the sensor {E} pose in the receiver frame {S}.
+
+    Attributes:
+        t: sample times [s], shape (M,), non-decreasing, t[0] = 0.
+        positions: sensor origin in {S} [m], shape (M, 3).
+        rotations: sensor orientation R_S_E, shape (M, 3, 3).
+        station: tracker station (sensor) number the samples belong to.
+        source: file name, for messages.
+    """
+
+    t: Array
+    positions: Array
+    rotations: Array
+    station: int = 1
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        m = len(self.t)
+        if m < 2:
+            raise InputError(f"tracker log {self.source!r}: needs at least 2 samples, got {m}")
+        _check_rows("TrackerLog.t", self.t, m, ())
+        _check_rows("TrackerLog.positions", self.positions, m, (3,))
+        _check_rows("TrackerLog.rotations", self.rotations, m, (3, 3))
+
+
+@dataclass(frozen=True)
+class Demonstration:
+    """A cleaned demonstration: outliers replaced, poses smoothed, the start pause located.
+
+    Attributes:
+        t: sample times [s], shape (M,).
+        positions: smoothed sensor origin in {S} [m], shape (M, 3).
+        rotations: smoothed sensor orientation R_S_E (smoothed on SO(3)), shape (M, 3, 3).
+        speed: sensor speed along its own track [m/s], shape (M,).
+        motion_start: index of the first sample after the static pause at the start.
+        n_outliers: number of samples the outlier filter replaced.
+        source: file name, for messages.
+    """
+
+    t: Array
+    positions: Array
+    rotations: Array
+    speed: Array
+    motion_start: int = 0
+    n_outliers: int = 0
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        m = len(self.t)
+        _check_rows("Demonstration.positions", self.positions, m, (3,))
+        _check_rows("Demonstration.rotations", self.rotations, m, (3, 3))
+        _check_rows("Demonstration.speed", self.speed, m, ())
+        if not 0 <= self.motion_start < m:
+            raise InputError(f"Demonstration.motion_start {self.motion_start} outside [0, {m})")
+
+
+@dataclass(frozen=True)
+class FusedPath:
+    """CAD positions fused with demonstrated tool orientations and speeds, per waypoint.
+
+    Attributes:
+        s: arc length along the CAD path [m], shape (N,).
+        positions: TCP targets from the CAD path in {F} [m], shape (N, 3).
+        rotations: demonstrated tool (TCP) orientation in {F}, R_F_TCP, shape (N, 3, 3).
+        speed: demonstrated TCP speed along the CAD path [m/s], shape (N,), > 0.
+        t_demo: demonstration time matched to each waypoint [s], shape (N,), increasing.
+        residual: distance between the aligned demonstration and the CAD point [m], shape (N,).
+    """
+
+    s: Array
+    positions: Array
+    rotations: Array
+    speed: Array
+    t_demo: Array
+    residual: Array
+
+    def __post_init__(self) -> None:
+        n = len(self.s)
+        _check_rows("FusedPath.positions", self.positions, n, (3,))
+        _check_rows("FusedPath.rotations", self.rotations, n, (3, 3))
+        _check_rows("FusedPath.speed", self.speed, n, ())
+        _check_rows("FusedPath.t_demo", self.t_demo, n, ())
+        _check_rows("FusedPath.residual", self.residual, n, ())
+        if np.any(self.speed <= 0.0):
+            raise InputError("FusedPath.speed: every demonstrated speed must be > 0 m/s")
+
+    def __len__(self) -> int:
+        return len(self.s)
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """The refined and timed path: what every exporter reads.
+
+    Attributes:
+        t: time of each waypoint [s], shape (N,), t[0] = 0.
+        s: arc length along the CAD path [m], shape (N,).
+        q: joint positions [rad], shape (N, n_joints).
+        positions_ref: CAD target of each waypoint in {F} [m], shape (N, 3).
+        poses: TCP pose reached, T_F_TCP, shape (N, 4, 4) (verified with Pinocchio).
+        rotations_demo: fused demonstrated orientation R_F_TCP, shape (N, 3, 3).
+        speed: planned TCP speed [m/s], shape (N,).
+    """
+
+    t: Array
+    s: Array
+    q: Array
+    positions_ref: Array
+    poses: Array
+    rotations_demo: Array
+    speed: Array
+
+    def __post_init__(self) -> None:
+        n = len(self.t)
+        _check_rows("Trajectory.s", self.s, n, ())
+        _check_rows("Trajectory.q", self.q, n, (self.q.shape[1] if self.q.ndim == 2 else -1,))
+        _check_rows("Trajectory.positions_ref", self.positions_ref, n, (3,))
+        _check_rows("Trajectory.poses", self.poses, n, (4, 4))
+        _check_rows("Trajectory.rotations_demo", self.rotations_demo, n, (3, 3))
+        _check_rows("Trajectory.speed", self.speed, n, ())
+
+    def __len__(self) -> int:
+        return len(self.t)

@@ -1,0 +1,282 @@
+"""Problem files: ``problems/<name>/problem.toml`` loaded into frozen, self-checking dataclasses.
+
+Every key is documented in ``docs/problem-file.md``. Unknown keys and missing files are errors that
+name the key or the path. Paths in the file are relative to the problem file. Poses are written
+``{ xyz = [x, y, z], rpy_deg = [rx, ry, rz] }``: metres, and fixed-axis X-Y-Z angles in degrees.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from refine.errors import InputError
+from refine.frames import check_transform
+
+try:  # Python 3.11+
+    import tomllib
+except ModuleNotFoundError:  # pragma: no cover - Python 3.10
+    import tomli as tomllib  # type: ignore[no-redef]
+
+Matrix4 = np.ndarray
+
+
+def _positive(owner: str, name: str, value: float) -> None:
+    if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+        raise InputError(f"{owner}.{name} must be a finite number > 0, got {value!r}")
+
+
+def _non_negative(owner: str, name: str, value: float) -> None:
+    if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+        raise InputError(f"{owner}.{name} must be a finite number >= 0, got {value!r}")
+
+
+def _one_of(owner: str, name: str, value: str, allowed: tuple[str, ...]) -> None:
+    if value not in allowed:
+        raise InputError(f"{owner}.{name} = {value!r} is not one of {', '.join(allowed)}")
+
+
+@dataclass(frozen=True)
+class RobotSettings:
+    """``[robot]``: which robot, where it stands, optional limit overrides.
+
+    Attributes:
+        model: registry name, a folder of ``robots/`` (e.g. ``"abb_irb4600_60_205"``).
+        base_in_world: T_F_R, the robot base in the world frame {F}, (4, 4).
+        joint_acceleration_deg_s2: per-joint acceleration limits [deg/s^2] overriding the
+            robot's default, or None.
+        velocity_scale: fraction of the data-sheet joint speeds the plan may use, in (0, 1].
+        home_deg: a preferred joint configuration [deg] to start the IK seed from, or None.
+    """
+
+    model: str
+    base_in_world: Matrix4 = field(default_factory=lambda: np.eye(4))
+    joint_acceleration_deg_s2: tuple[float, ...] | None = None
+    velocity_scale: float = 1.0
+    home_deg: tuple[float, ...] | None = None
+
+    def __post_init__(self) -> None:
+        check_transform(self.base_in_world, "robot.base_in_world")
+        if not 0.0 < self.velocity_scale <= 1.0:
+            raise InputError(f"robot.velocity_scale must be in (0, 1], got {self.velocity_scale}")
+        for a in self.joint_acceleration_deg_s2 or ():
+            _positive("robot", "joint_acceleration_deg_s2[]", a)
+
+
+@dataclass(frozen=True)
+class ToolSettings:
+    """``[tool]``: the process tool on the flange and the tracker sensor on the hand tool.
+
+    Attributes:
+        name: tool name, used for RAPID tooldata / KRL tool names.
+        tcp_in_flange: T_flange_TCP, (4, 4); the TCP z axis points along the nozzle/torch.
+        sensor_in_tcp: T_TCP_E, pose of the tracker sensor {E} in the TCP frame of the hand
+            tool the worker used, (4, 4).
+        axisymmetric: the spin about the TCP z axis is free (it is not constrained to the demo).
+        mass_kg: tool mass [kg] for the program's tooldata.
+        cog_in_flange_m: tool centre of gravity in the flange frame [m].
+    """
+
+    name: str
+    tcp_in_flange: Matrix4
+    sensor_in_tcp: Matrix4 = field(default_factory=lambda: np.eye(4))
+    axisymmetric: bool = False
+    mass_kg: float = 5.0
+    cog_in_flange_m: tuple[float, float, float] = (0.0, 0.0, 0.1)
+
+    def __post_init__(self) -> None:
+        check_transform(self.tcp_in_flange, "tool.tcp_in_flange")
+        check_transform(self.sensor_in_tcp, "tool.sensor_in_tcp")
+        _positive("tool", "mass_kg", self.mass_kg)
+
+
+@dataclass(frozen=True)
+class FrameSettings:
+    """``[frames]``: where the tracker receiver and the CAD frame sit in the world {F}.
+
+    Attributes:
+        source_in_world: T_F_S, the tracker receiver (source) in {F}.
+        cad_in_world: T_F_CAD, the frame the CAD/CAM coordinates are given in.
+    """
+
+    source_in_world: Matrix4 = field(default_factory=lambda: np.eye(4))
+    cad_in_world: Matrix4 = field(default_factory=lambda: np.eye(4))
+
+    def __post_init__(self) -> None:
+        check_transform(self.source_in_world, "frames.source_in_world")
+        check_transform(self.cad_in_world, "frames.cad_in_world")
+
+
+@dataclass(frozen=True)
+class CadSettings:
+    """``[cad]``: the CAD/CAM path file.
+
+    Attributes:
+        file: absolute path of the file.
+        format: ``"csv"`` or ``"dxf"`` (from the extension when not given).
+        units: length unit of the file: ``"m"``, ``"mm"`` or ``"in"``.
+        spacing_m: waypoint spacing along the path after resampling [m].
+        layer: DXF layer holding the path, or None for the only/first path entity.
+        reverse: run the path in the opposite direction.
+    """
+
+    file: Path
+    format: str = "csv"
+    units: str = "mm"
+    spacing_m: float = 0.005
+    layer: str | None = None
+    reverse: bool = False
+
+    def __post_init__(self) -> None:
+        _one_of("cad", "format", self.format, ("csv", "dxf"))
+        _one_of("cad", "units", self.units, ("m", "mm", "in"))
+        _positive("cad", "spacing_m", self.spacing_m)
+
+
+@dataclass(frozen=True)
+class DemoSettings:
+    """``[demonstration]``: the tracker log and how to clean it.
+
+    Attributes:
+        file: absolute path of the log.
+        format: ``"liberty_ascii"`` or ``"csv"``.
+        units: position unit of the log: ``"in"`` or ``"cm"`` (Liberty), ``"m"``/``"mm"`` (CSV).
+        station: tracker station (sensor) number to read.
+        rate_hz: sample rate [Hz] for logs without timestamps.
+        hampel_window: half-width of the Hampel outlier filter [samples].
+        hampel_sigmas: threshold of the Hampel filter [robust standard deviations].
+        smoothing_s: smoothing time constant for positions and orientations [s].
+        pause_speed_m_s: below this speed the tool counts as still (start pause) [m/s].
+        truth: absolute path of a ``truth.csv`` (simulated demonstrations only), or None.
+    """
+
+    file: Path
+    format: str = "liberty_ascii"
+    units: str = "in"
+    station: int = 1
+    rate_hz: float = 240.0
+    hampel_window: int = 7
+    hampel_sigmas: float = 3.0
+    smoothing_s: float = 0.15
+    pause_speed_m_s: float = 0.01
+    truth: Path | None = None
+
+    def __post_init__(self) -> None:
+        _one_of("demonstration", "format", self.format, ("liberty_ascii", "csv"))
+        _one_of("demonstration", "units", self.units, ("in", "cm", "m", "mm"))
+        _positive("demonstration", "rate_hz", self.rate_hz)
+        _positive("demonstration", "hampel_window", self.hampel_window)
+        _positive("demonstration", "hampel_sigmas", self.hampel_sigmas)
+        _non_negative("demonstration", "smoothing_s", self.smoothing_s)
+        _positive("demonstration", "pause_speed_m_s", self.pause_speed_m_s)
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    """``[tolerances]``: what the refined path must satisfy.
+
+    Attributes:
+        position_m: largest TCP position error against the CAD path accepted in verification [m].
+        orientation_deg: half-angle of the cone around the demonstrated orientation [deg].
+        joint_margin_deg: distance kept from every joint limit [deg].
+        singularity_margin: lower bound on the singularity measure (smallest singular value of
+            the Jacobian with its position rows divided by the robot's reach) [-].
+    """
+
+    position_m: float = 1e-6
+    orientation_deg: float = 3.0
+    joint_margin_deg: float = 2.0
+    singularity_margin: float = 0.02
+
+    def __post_init__(self) -> None:
+        _positive("tolerances", "position_m", self.position_m)
+        _positive("tolerances", "orientation_deg", self.orientation_deg)
+        if self.orientation_deg >= 90.0:
+            raise InputError(f"tolerances.orientation_deg must be < 90, got {self.orientation_deg}")
+        _non_negative("tolerances", "joint_margin_deg", self.joint_margin_deg)
+        _non_negative("tolerances", "singularity_margin", self.singularity_margin)
+
+
+@dataclass(frozen=True)
+class ProcessParameter:
+    """One process value with its unit, e.g. the glue flow rate in ``ml/s``."""
+
+    name: str
+    value: float
+    unit: str
+
+
+@dataclass(frozen=True)
+class ProcessSettings:
+    """``[process]``: what the tool does along the path.
+
+    Attributes:
+        kind: ``"glue"``, ``"weld"``, ``"seal"`` or ``"other"``.
+        output: name of the digital output that switches the process on and off.
+        parameters: process values (flow rate, current, ...), written to PathML and programs.
+    """
+
+    kind: str = "other"
+    output: str = "doProcess"
+    parameters: tuple[ProcessParameter, ...] = ()
+
+    def __post_init__(self) -> None:
+        _one_of("process", "kind", self.kind, ("glue", "weld", "seal", "other"))
+
+
+@dataclass(frozen=True)
+class OutputSettings:
+    """``[output]``: which programs to write.
+
+    Attributes:
+        programs: program formats, from ``"rapid"`` (more to come).
+    """
+
+    programs: tuple[str, ...] = ("rapid",)
+
+    def __post_init__(self) -> None:
+        for p in self.programs:
+            _one_of("output", "programs[]", p, ("rapid",))
+
+
+@dataclass(frozen=True)
+class Problem:
+    """A whole problem file.
+
+    Attributes:
+        name: problem name (defaults to the folder name).
+        root: folder of the problem file; relative paths are resolved against it.
+        description: free text.
+    """
+
+    name: str
+    root: Path
+    robot: RobotSettings
+    tool: ToolSettings
+    cad: CadSettings
+    demonstration: DemoSettings
+    frames: FrameSettings = field(default_factory=FrameSettings)
+    tolerances: Tolerances = field(default_factory=Tolerances)
+    process: ProcessSettings = field(default_factory=ProcessSettings)
+    output: OutputSettings = field(default_factory=OutputSettings)
+    description: str = ""
+
+
+def load_problem(path: str | Path) -> Problem:
+    """Load ``problem.toml`` (or the folder holding it) into a :class:`Problem`.
+
+    Raises:
+        InputError: unknown or missing keys, bad values, missing files; the message names them.
+    """
+    raise NotImplementedError  # filled in below by the loader section
+
+
+def _table(data: dict[str, Any], key: str) -> dict[str, Any]:
+    value = data.get(key, {})
+    if not isinstance(value, dict):
+        raise InputError(f"[{key}] must be a table, got {type(value).__name__}")
+    return value
