@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from refine.errors import InputError
-from refine.frames import check_transform
+from refine.frames import check_transform, transform_from_xyz_rpy
 
 try:  # Python 3.11+
     import tomllib
@@ -272,7 +272,52 @@ def load_problem(path: str | Path) -> Problem:
     Raises:
         InputError: unknown or missing keys, bad values, missing files; the message names them.
     """
-    raise NotImplementedError  # filled in below by the loader section
+    path = Path(path)
+    if path.is_dir():
+        path = path / "problem.toml"
+    if not path.is_file():
+        raise InputError(f"problem file not found: {path}")
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as e:
+        raise InputError(f"{path}: not valid TOML: {e}") from e
+    root = path.parent.resolve()
+    _check_keys(data, "", _TOP_KEYS, path)
+    for table in ("robot", "tool", "cad", "demonstration"):
+        if table not in data:
+            raise InputError(f"{path}: missing required table [{table}]")
+    try:
+        return Problem(
+            name=str(data.get("name", root.name)),
+            root=root,
+            description=str(data.get("description", "")),
+            robot=_robot(_table(data, "robot"), path),
+            tool=_tool(_table(data, "tool"), path),
+            frames=_frames(_table(data, "frames"), path),
+            cad=_cad(_table(data, "cad"), root, path),
+            demonstration=_demo(_table(data, "demonstration"), root, path),
+            tolerances=_build(Tolerances, _table(data, "tolerances"), "tolerances", path),
+            process=_process(_table(data, "process"), path),
+            output=_output(_table(data, "output"), path),
+        )
+    except InputError as e:
+        raise InputError(f"{path}: {e}") from e
+
+
+# ---- loader internals ---------------------------------------------------------------------------
+
+_TOP_KEYS = {
+    "name",
+    "description",
+    "robot",
+    "tool",
+    "frames",
+    "cad",
+    "demonstration",
+    "tolerances",
+    "process",
+    "output",
+}
 
 
 def _table(data: dict[str, Any], key: str) -> dict[str, Any]:
@@ -280,3 +325,114 @@ def _table(data: dict[str, Any], key: str) -> dict[str, Any]:
     if not isinstance(value, dict):
         raise InputError(f"[{key}] must be a table, got {type(value).__name__}")
     return value
+
+
+def _check_keys(table: dict[str, Any], where: str, allowed: set[str], path: Path) -> None:
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        prefix = f"[{where}] " if where else ""
+        raise InputError(
+            f"{path}: {prefix}unknown key(s) {', '.join(map(repr, unknown))}; "
+            f"allowed: {', '.join(sorted(allowed))}"
+        )
+
+
+def _pose(value: Any, key: str) -> Matrix4:
+    if not isinstance(value, dict) or set(value) - {"xyz", "rpy_deg"}:
+        raise InputError(f"{key} must be a table {{ xyz = [m, m, m], rpy_deg = [deg, deg, deg] }}")
+    return transform_from_xyz_rpy(value.get("xyz", [0.0, 0.0, 0.0]), value.get("rpy_deg", [0.0] * 3))
+
+
+def _file(root: Path, value: Any, key: str) -> Path:
+    if not isinstance(value, str) or not value:
+        raise InputError(f"{key} must be a file name relative to the problem folder, got {value!r}")
+    f = (root / value).resolve()
+    if not f.is_file():
+        raise InputError(f"{key} = {value!r}: file not found at {f}")
+    return f
+
+
+def _fields(cls: type) -> set[str]:
+    return set(cls.__dataclass_fields__)  # type: ignore[attr-defined]
+
+
+def _build(cls: type, table: dict[str, Any], where: str, path: Path, **overrides: Any) -> Any:
+    _check_keys(table, where, _fields(cls), path)
+    kwargs = {**table, **overrides}
+    try:
+        return cls(**kwargs)
+    except TypeError as e:
+        raise InputError(f"[{where}] {e}") from e
+
+
+def _robot(t: dict[str, Any], path: Path) -> RobotSettings:
+    _check_keys(t, "robot", _fields(RobotSettings), path)
+    if "model" not in t:
+        raise InputError("[robot] missing required key 'model'")
+    out: dict[str, Any] = {"model": str(t["model"])}
+    if "base_in_world" in t:
+        out["base_in_world"] = _pose(t["base_in_world"], "robot.base_in_world")
+    for key in ("joint_acceleration_deg_s2", "home_deg"):
+        if key in t:
+            out[key] = tuple(float(v) for v in t[key])
+    if "velocity_scale" in t:
+        out["velocity_scale"] = float(t["velocity_scale"])
+    return RobotSettings(**out)
+
+
+def _tool(t: dict[str, Any], path: Path) -> ToolSettings:
+    _check_keys(t, "tool", _fields(ToolSettings), path)
+    for key in ("name", "tcp_in_flange"):
+        if key not in t:
+            raise InputError(f"[tool] missing required key {key!r}")
+    out: dict[str, Any] = dict(t)
+    out["tcp_in_flange"] = _pose(t["tcp_in_flange"], "tool.tcp_in_flange")
+    if "sensor_in_tcp" in t:
+        out["sensor_in_tcp"] = _pose(t["sensor_in_tcp"], "tool.sensor_in_tcp")
+    if "cog_in_flange_m" in t:
+        out["cog_in_flange_m"] = tuple(float(v) for v in t["cog_in_flange_m"])
+    return ToolSettings(**out)
+
+
+def _frames(t: dict[str, Any], path: Path) -> FrameSettings:
+    _check_keys(t, "frames", _fields(FrameSettings), path)
+    return FrameSettings(**{k: _pose(v, f"frames.{k}") for k, v in t.items()})
+
+
+def _cad(t: dict[str, Any], root: Path, path: Path) -> CadSettings:
+    if "file" not in t:
+        raise InputError("[cad] missing required key 'file'")
+    f = _file(root, t["file"], "cad.file")
+    fmt = t.get("format", {".dxf": "dxf", ".csv": "csv"}.get(f.suffix.lower(), f.suffix))
+    return _build(CadSettings, t, "cad", path, file=f, format=fmt)
+
+
+def _demo(t: dict[str, Any], root: Path, path: Path) -> DemoSettings:
+    if "file" not in t:
+        raise InputError("[demonstration] missing required key 'file'")
+    overrides: dict[str, Any] = {"file": _file(root, t["file"], "demonstration.file")}
+    if "truth" in t:
+        overrides["truth"] = _file(root, t["truth"], "demonstration.truth")
+    return _build(DemoSettings, t, "demonstration", path, **overrides)
+
+
+def _process(t: dict[str, Any], path: Path) -> ProcessSettings:
+    _check_keys(t, "process", _fields(ProcessSettings), path)
+    params = []
+    for i, p in enumerate(t.get("parameters", [])):
+        _check_keys(p, f"process.parameters[{i}]", {"name", "value", "unit"}, path)
+        if set(p) != {"name", "value", "unit"}:
+            raise InputError(f"[[process.parameters]] #{i + 1} needs name, value and unit, got {p}")
+        params.append(ProcessParameter(str(p["name"]), float(p["value"]), str(p["unit"])))
+    return ProcessSettings(
+        kind=str(t.get("kind", "other")),
+        output=str(t.get("output", "doProcess")),
+        parameters=tuple(params),
+    )
+
+
+def _output(t: dict[str, Any], path: Path) -> OutputSettings:
+    _check_keys(t, "output", _fields(OutputSettings), path)
+    if "programs" in t:
+        return OutputSettings(programs=tuple(str(p) for p in t["programs"]))
+    return OutputSettings()

@@ -1,0 +1,71 @@
+"""The CAD/CAM stage: read the path file, bring it to the world frame, resample it by arc length.
+
+``read_cad_path`` is the entry point; ``csv_`` and ``dxf`` read one format each into points in the
+CAD frame [m], and ``resample`` places the waypoints.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from refine.cad.csv_ import points_from_csv
+from refine.cad.dxf import points_from_dxf
+from refine.cad.resample import resample_by_arc_length
+from refine.errors import InputError
+from refine.frames import check_transform, transform_points
+from refine.paths import CadPath
+from refine.problem import CadSettings
+
+__all__ = ["CLOSED_TOLERANCE_M", "points_from_csv", "points_from_dxf", "read_cad_path",
+           "resample_by_arc_length"]
+
+#: A path whose last point lies this close to its first is closed [m].
+CLOSED_TOLERANCE_M = 1e-6
+
+_READERS: dict[str, Callable[[CadSettings], NDArray]] = {
+    "csv": lambda c: points_from_csv(c.file, c.units),
+    "dxf": lambda c: points_from_dxf(c.file, c.units, layer=c.layer),
+}
+
+
+def read_cad_path(settings: CadSettings, cad_in_world: NDArray) -> CadPath:
+    """Read the CAD/CAM path and return it in the world frame {F}, resampled by arc length.
+
+    Steps: read the file in ``settings.format`` and convert ``settings.units`` to metres; a path
+    whose last point is within :data:`CLOSED_TOLERANCE_M` of its first is closed; reverse it if
+    ``settings.reverse``; map it with ``cad_in_world``; resample it every ``settings.spacing_m``
+    or a little less (see :func:`refine.cad.resample.resample_by_arc_length`).
+
+    Args:
+        settings: the ``[cad]`` settings (file, format, units, spacing, layer, reverse).
+        cad_in_world: T_F_CAD, pose of the CAD frame in the world frame {F}, shape (4, 4).
+
+    Returns:
+        The path in {F}: waypoints [m], their arc length [m] and whether it is closed.
+
+    Raises:
+        InputError: an unknown format (listing the known ones), a bad transform, or anything the
+            reader or resampler rejects.
+    """
+    T_world_cad = check_transform(cad_in_world, "frames.cad_in_world")
+    if T_world_cad.shape != (4, 4):
+        raise InputError(f"frames.cad_in_world: expected shape (4, 4), got {T_world_cad.shape}")
+    reader = _READERS.get(settings.format)
+    if reader is None:
+        raise InputError(
+            f"cad.format = {settings.format!r} is not one of {', '.join(sorted(_READERS))}"
+        )
+    points = reader(settings)
+    closed = bool(
+        len(points) > 2 and np.linalg.norm(points[-1] - points[0]) <= CLOSED_TOLERANCE_M
+    )
+    if settings.reverse:
+        points = points[::-1].copy()
+    points_world = transform_points(T_world_cad, points)
+    s, positions = resample_by_arc_length(points_world, settings.spacing_m, closed=closed)
+    source = Path(settings.file).name + (f" (layer {settings.layer})" if settings.layer else "")
+    return CadPath(s=s, positions=positions, closed=closed, source=source)

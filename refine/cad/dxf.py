@@ -1,0 +1,210 @@
+"""CAD paths from DXF drawings (read with ezdxf).
+
+Path entities, all taken from model space and returned in world coordinates (WCS) of the drawing:
+
+* ``POLYLINE`` (3D, and 2D with bulges and elevation) and ``LWPOLYLINE`` (bulges and elevation):
+  straight segments stay straight, a bulge becomes the circular arc it encodes.
+* ``SPLINE``: flattened by ezdxf's own B-spline evaluation (``Spline.flattening``).
+* ``LINE`` and ``ARC``: pieces that are joined end to end into one chain.
+
+Which entities make the path:
+
+* With ``layer`` given, every path entity on that layer (names compare case-insensitively);
+  the pieces are chained end to end, reversing pieces where needed.
+* Without ``layer``, the drawing must hold exactly one ``POLYLINE``/``LWPOLYLINE``/``SPLINE``, or
+  only ``LINE``/``ARC`` entities that form one chain. Anything else is an :class:`InputError`
+  that lists the layers and their entities, so the user can pick a layer.
+
+A chain runs from its loose end that belongs to the earliest entity in drawing order; a loop starts
+at the first entity's start. Curves are flattened so that no chord is farther than
+``flatten_tolerance_m`` from the true curve. A closed path (closed polyline or spline, or a chain
+whose ends meet) is *marked closed* by returning its first point again as its last point, exactly.
+The drawing's ``$INSUNITS`` is only checked against ``units`` (a mismatch is logged as a warning);
+``units`` decides.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections import defaultdict
+from pathlib import Path
+
+import ezdxf
+import numpy as np
+from ezdxf.math import bulge_center
+from numpy.typing import NDArray
+
+from refine.cad.csv_ import metres_per_unit
+from refine.errors import InputError
+
+logger = logging.getLogger(__name__)
+
+#: Entity types that can form a path.
+PATH_TYPES = ("POLYLINE", "LWPOLYLINE", "SPLINE", "LINE", "ARC")
+_WHOLE_PATH_TYPES = ("POLYLINE", "LWPOLYLINE", "SPLINE")
+_INSUNITS = {1: "in", 4: "mm", 6: "m"}
+
+
+def _label(e) -> str:
+    return f"{e.dxftype()} #{e.dxf.handle} on layer {e.dxf.layer!r}"
+
+
+def _bulged_polyline(xyb: NDArray, elevation: float, ocs, closed: bool, tol: float) -> NDArray:
+    """Vertices (x, y, bulge) in the entity's OCS -> flattened WCS points (K, 3)."""
+    n = len(xyb)
+    pts: list[NDArray] = [xyb[:1, :2]]
+    for i in range(n - 1 + int(closed)):
+        a, b, bulge = xyb[i, :2], xyb[(i + 1) % n, :2], xyb[i, 2]
+        if bulge == 0.0 or np.allclose(a, b):
+            pts.append(b[None])
+            continue
+        c = np.asarray(bulge_center(tuple(a), tuple(b), bulge))
+        r = float(np.linalg.norm(a - c))
+        sweep = 4.0 * math.atan(bulge)  # signed: positive is counter-clockwise
+        step = 2.0 * math.acos(max(-1.0, 1.0 - tol / r)) if tol < r else math.pi / 2
+        k = max(2, math.ceil(abs(sweep) / step))
+        ang = math.atan2(a[1] - c[1], a[0] - c[0]) + np.linspace(0.0, sweep, k + 1)[1:]
+        arc = c + r * np.column_stack([np.cos(ang), np.sin(ang)])
+        arc[-1] = b
+        pts.append(arc)
+    xy = np.vstack(pts)
+    ocs_pts = np.column_stack([xy, np.full(len(xy), elevation)])
+    return np.array([tuple(v) for v in ocs.points_to_wcs(ocs_pts.tolist())], dtype=float)
+
+
+def _entity_points(e, tol: float) -> tuple[NDArray, bool]:
+    """One path entity -> (points (K, 3) in drawing units, closed)."""
+    kind = e.dxftype()
+    if kind == "LINE":
+        return np.array([tuple(e.dxf.start), tuple(e.dxf.end)], dtype=float), False
+    if kind == "ARC":
+        return np.array([tuple(v) for v in e.flattening(tol)], dtype=float), False
+    if kind == "SPLINE":
+        pts = np.array([tuple(v) for v in e.flattening(tol)], dtype=float)
+        return pts, bool(e.closed)
+    if kind == "LWPOLYLINE":
+        xyb = np.array(e.get_points("xyb"), dtype=float).reshape(-1, 3)
+        return _bulged_polyline(xyb, e.dxf.elevation, e.ocs(), e.closed, tol), bool(e.closed)
+    # POLYLINE
+    if e.is_3d_polyline:
+        return np.array([tuple(v) for v in e.points_in_wcs()], dtype=float), bool(e.is_closed)
+    xyb = np.array([(*v.dxf.location.xy, v.dxf.bulge) for v in e.vertices], dtype=float)
+    elevation = e.dxf.elevation.z
+    return _bulged_polyline(xyb, elevation, e.ocs(), e.is_closed, tol), bool(e.is_closed)
+
+
+def _chain(pieces: list[NDArray], labels: list[str], tol: float, source: str) -> NDArray:
+    """Join open pieces end to end; see the module docstring for the start rule."""
+    if len(pieces) == 1:
+        return pieces[0]
+    ends = np.array([[p[0], p[-1]] for p in pieces])  # (n, 2, 3)
+
+    def touching(point: NDArray, exclude: set[int]) -> list[tuple[int, int]]:
+        d = np.linalg.norm(ends - point, axis=2)
+        hits = np.argwhere(d <= tol)
+        return [(int(i), int(j)) for i, j in hits if i not in exclude]
+
+    loose = [(i, j) for i in range(len(pieces)) for j in (0, 1) if not touching(ends[i, j], {i})]
+    if len(loose) not in (0, 2):
+        listed = "; ".join(f"{labels[i]} at {np.round(ends[i, j], 6).tolist()}" for i, j in loose)
+        raise InputError(
+            f"{source}: the path entities do not form one chain ({len(loose)} loose ends: "
+            f"{listed}); choose one path with cad.layer"
+        )
+    first, end = loose[0] if loose else (0, 0)
+    out = [pieces[first] if end == 0 else pieces[first][::-1]]
+    used, last = {first}, first
+    while len(used) < len(pieces):
+        nxt = touching(out[-1][-1], used)
+        if len(nxt) != 1:
+            why = "a gap" if not nxt else "a branch"
+            raise InputError(
+                f"{source}: {why} in the chain after {labels[last]} at "
+                f"{np.round(out[-1][-1], 6).tolist()}; choose one path with cad.layer"
+            )
+        i, j = nxt[0]
+        used.add(i)
+        last = i
+        out.append((pieces[i] if j == 0 else pieces[i][::-1])[1:])
+    return np.vstack(out)
+
+
+def _select(entities: list, layer: str | None, source: str) -> list:
+    by_layer: dict[str, list[str]] = defaultdict(list)
+    for e in entities:
+        by_layer[e.dxf.layer].append(f"{e.dxftype()} #{e.dxf.handle}")
+    listing = "; ".join(f"layer {k!r}: {', '.join(v)}" for k, v in sorted(by_layer.items()))
+    if not entities:
+        raise InputError(f"{source}: no path entities ({', '.join(PATH_TYPES)}) in model space")
+    if layer is not None:
+        chosen = [e for e in entities if e.dxf.layer.casefold() == layer.casefold()]
+        if not chosen:
+            raise InputError(f"{source}: no path entities on layer {layer!r}; found {listing}")
+        return chosen
+    whole = [e for e in entities if e.dxftype() in _WHOLE_PATH_TYPES]
+    if whole and len(entities) > 1:
+        raise InputError(
+            f"{source}: {len(entities)} path entities and no cad.layer to choose from: {listing}"
+        )
+    return entities
+
+
+def points_from_dxf(
+    path: str | Path, units: str = "mm", layer: str | None = None, flatten_tolerance_m: float = 1e-6
+) -> NDArray:
+    """Read one path from a DXF drawing (see the module docstring for which one and how).
+
+    Args:
+        path: the DXF file.
+        units: length unit of the drawing: ``"m"``, ``"mm"`` or ``"in"``.
+        layer: layer holding the path, or None when the drawing holds a single path.
+        flatten_tolerance_m: largest distance between a curve and its chords [m].
+
+    Returns:
+        The path points in the CAD frame [m], shape (K, 3); for a closed path the last point
+        equals the first.
+
+    Raises:
+        InputError: unreadable file, no or ambiguous path entities (listing layers and entities),
+            pieces that do not chain (naming the entity and point).
+    """
+    path = Path(path)
+    source = f"DXF file {str(path)!r}"
+    scale = metres_per_unit(units, str(path))
+    try:
+        doc = ezdxf.readfile(path)
+    except (OSError, ezdxf.DXFError) as e:
+        raise InputError(f"{source} cannot be read: {e}") from e
+    insunits = _INSUNITS.get(doc.header.get("$INSUNITS", 0))
+    if insunits is not None and insunits != units:
+        logger.warning("%s says $INSUNITS=%s but cad.units=%s; using %s", source, insunits, units, units)
+    entities = [
+        e
+        for e in doc.modelspace()
+        if e.dxftype() in PATH_TYPES
+        and not (e.dxftype() == "POLYLINE" and (e.is_poly_face_mesh or e.is_polygon_mesh))
+    ]
+    chosen = _select(entities, layer, source)
+    tol = flatten_tolerance_m / scale
+    pieces, labels, closed = [], [], []
+    for e in chosen:
+        pts, is_closed = _entity_points(e, tol)
+        if len(pts) < 2:
+            raise InputError(f"{source}: {_label(e)} has fewer than 2 points")
+        pieces.append(pts)
+        labels.append(_label(e))
+        closed.append(is_closed)
+    extent = float(np.ptp(np.vstack(pieces), axis=0).max())
+    join_tol = 1e-6 * max(extent, 1.0)
+    if len(pieces) > 1 and any(closed):
+        shut = [lb for lb, c in zip(labels, closed, strict=True) if c]
+        raise InputError(f"{source}: closed {', '.join(shut)} cannot be chained with other entities")
+    points = _chain(pieces, labels, join_tol, source)
+    if closed[0] or (len(points) > 2 and np.linalg.norm(points[-1] - points[0]) <= join_tol):
+        if np.linalg.norm(points[-1] - points[0]) <= join_tol:
+            points[-1] = points[0]
+        else:
+            points = np.vstack([points, points[:1]])
+    logger.debug("%s: %d points from %s", source, len(points), ", ".join(labels))
+    return points * scale

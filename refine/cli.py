@@ -1,0 +1,101 @@
+"""Command line: ``refine run PROBLEM --out DIR``, ``refine check PROBLEM``, ``refine robots``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import sys
+import time
+from pathlib import Path
+
+
+def _seconds_since_process_start() -> float | None:
+    """Wall time since this process started [s] (Linux /proc), or None elsewhere."""
+    try:
+        fields = Path("/proc/self/stat").read_text().rsplit(")", 1)[1].split()
+        start_ticks = int(fields[19])
+        uptime = float(Path("/proc/uptime").read_text().split()[0])
+        return uptime - start_ticks / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="refine", description="Refine a demonstrated robot path onto a CAD path."
+    )
+    p.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-v info, -vv debug)")
+    sub = p.add_subparsers(dest="command", required=True)
+    run = sub.add_parser(
+        "run", help="solve a problem and write result.json, trajectory.csv, PathML and programs"
+    )
+    run.add_argument("problem", type=Path, help="problem folder or its problem.toml")
+    run.add_argument("--out", type=Path, default=None, help="output folder (default: out/<problem name>)")
+    run.add_argument(
+        "--programs",
+        default=None,
+        help="comma-separated program formats overriding [output] programs (available: rapid)",
+    )
+    run.add_argument("--json", action="store_true", help="print result.json instead of the summary")
+    check = sub.add_parser("check", help="load and check a problem file without solving it")
+    check.add_argument("problem", type=Path)
+    sub.add_parser("robots", help="list the robots of the registry")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``refine`` command; returns the exit status."""
+    args = _parser().parse_args(argv)
+    level = [logging.WARNING, logging.INFO, logging.DEBUG][min(args.verbose, 2)]
+    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
+
+    from refine.errors import RefineError
+
+    try:
+        if args.command == "robots":
+            from refine.robot import available_robots, load_robot
+
+            for name in available_robots():
+                spec = load_robot(name).spec
+                axes = len(spec.joint_names)
+                print(f"{name:24s} {spec.maker}, {axes} axes, reach {spec.reach_m:.2f} m, urdf {spec.urdf}")
+            return 0
+        from refine.problem import load_problem
+
+        problem = load_problem(args.problem)
+        if args.command == "check":
+            print(
+                f"{problem.name}: problem file OK (robot {problem.robot.model}, CAD {problem.cad.file.name}, "
+                f"demonstration {problem.demonstration.file.name})"
+            )
+            return 0
+        return _run(args, problem)
+    except RefineError as e:
+        print(f"refine: error: {e}", file=sys.stderr)
+        return 2
+
+
+def _run(args: argparse.Namespace, problem) -> int:  # noqa: ANN001 - Problem, imported lazily
+    from refine.export.result_json import result_dict, write_result_json
+    from refine.pipeline import run, summary_lines
+
+    out = args.out or Path("out") / problem.name
+    programs = tuple(p.strip() for p in args.programs.split(",")) if args.programs else None
+    t0 = time.perf_counter()
+    result = run(problem, out, programs)
+    since_start = _seconds_since_process_start()
+    result.timings_s["run"] = time.perf_counter() - t0
+    result.timings_s["total"] = since_start if since_start is not None else result.timings_s["run"]
+    write_result_json(result.outputs["result"], result)  # again, now with the total time
+    if args.json:
+        print(json.dumps(result_dict(result), indent=2))
+    else:
+        print("\n".join(summary_lines(result)))
+        print(f"outputs      {out}/: " + ", ".join(p.name for p in result.outputs.values()))
+    return 0 if result.status == "ok" else 1
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,106 @@
+"""Demonstrations as plain CSV: one tracker sample per line, with a header.
+
+The format::
+
+    # optional comment lines start with '#'
+    t, x, y, z, azimuth, elevation, roll
+    0.000, 0.1234, -0.0456, 0.2100, -12.345, 45.678, 170.123
+
+* The header names the seven columns, any case, spaces allowed, in any order; other columns are
+  ignored.
+* ``t`` is the sample time [s] and must strictly increase; it is shifted so the first sample is at
+  ``t = 0``.
+* ``x, y, z`` is the sensor position in the receiver frame {S}, in the unit the caller names
+  (``m``, ``mm``, ``cm`` or ``in``); it is returned in metres.
+* ``azimuth, elevation, roll`` are the Polhemus angles [deg]: ``R = Rz(azimuth)·Ry(elevation)·Rx(roll)``.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from refine.errors import InputError
+from refine.frames import matrix_from_tracker_angles
+from refine.paths import TrackerLog
+
+logger = logging.getLogger(__name__)
+
+#: Length of one position unit [m].
+METRES_PER_UNIT = {"m": 1.0, "mm": 1e-3, "cm": 1e-2, "in": 0.0254}
+COLUMNS = ("t", "x", "y", "z", "azimuth", "elevation", "roll")
+
+
+def read_demo_csv(path: str | Path, units: str = "m") -> TrackerLog:
+    """Read a demonstration CSV (format in the module docstring).
+
+    Args:
+        path: the CSV file.
+        units: position unit in the file: ``"m"``, ``"mm"``, ``"cm"`` or ``"in"``.
+
+    Returns:
+        The samples: times [s] from 0, positions [m], rotations R_S_E.
+
+    Raises:
+        InputError: unreadable file, unknown unit, missing header columns (naming them), a
+            malformed line (naming file, line number and text), time that does not increase.
+    """
+    path = Path(path)
+    if units not in METRES_PER_UNIT:
+        raise InputError(
+            f"{path}: unknown position unit {units!r}; use one of {', '.join(METRES_PER_UNIT)}"
+        )
+    try:
+        lines = path.read_text(encoding="utf-8-sig").splitlines()
+    except (OSError, UnicodeDecodeError) as e:
+        raise InputError(f"demonstration CSV {str(path)!r} cannot be read: {e}") from e
+    idx: list[int] | None = None
+    rows: list[list[float]] = []
+    linenos: list[int] = []
+    for lineno, raw in enumerate(lines, start=1):
+        line = raw.strip()
+        if not line or line.startswith("#"):
+            continue
+        cells = [c.strip() for c in line.split(",")]
+        where = f"{path}:{lineno}"
+        if idx is None:
+            names = [c.lower() for c in cells]
+            missing = [c for c in COLUMNS if c not in names]
+            if missing:
+                raise InputError(
+                    f"{where}: header {line!r} lacks column(s) {', '.join(missing)} "
+                    f"(expected {', '.join(COLUMNS)})"
+                )
+            idx = [names.index(c) for c in COLUMNS]
+            continue
+        if len(cells) <= max(idx):
+            raise InputError(f"{where}: expected {max(idx) + 1} values, got {len(cells)}: {line!r}")
+        try:
+            values = [float(cells[i]) for i in idx]
+        except ValueError as e:
+            raise InputError(f"{where}: not a number in {line!r} ({e})") from e
+        if not np.all(np.isfinite(values)):
+            raise InputError(f"{where}: non-finite value in {line!r}")
+        rows.append(values)
+        linenos.append(lineno)
+    if idx is None:
+        raise InputError(f"demonstration CSV {str(path)!r}: no header line ({', '.join(COLUMNS)})")
+    if len(rows) < 2:
+        raise InputError(f"demonstration CSV {str(path)!r}: needs at least 2 samples, got {len(rows)}")
+    data = np.asarray(rows, dtype=float)
+    bad = np.flatnonzero(np.diff(data[:, 0]) <= 0.0)
+    if bad.size:
+        k = int(bad[0]) + 1
+        raise InputError(
+            f"{path}:{linenos[k]}: t = {data[k, 0]} s does not increase after "
+            f"t = {data[k - 1, 0]} s (line {linenos[k - 1]})"
+        )
+    logger.debug("%s: %d samples over %.3f s", path, len(data), data[-1, 0] - data[0, 0])
+    return TrackerLog(
+        t=data[:, 0] - data[0, 0],
+        positions=data[:, 1:4] * METRES_PER_UNIT[units],
+        rotations=matrix_from_tracker_angles(data[:, 4], data[:, 5], data[:, 6], degrees=True),
+        source=str(path),
+    )

@@ -1,0 +1,224 @@
+"""Cleaning tracker samples: outliers, smoothing on R^3 and SO(3), speed, the start pause.
+
+All functions are vectorised over samples and assume sample times that strictly increase and are
+roughly uniform (as a tracker's are): smoothing widths are converted from seconds to samples with
+the median time step.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.ndimage import gaussian_filter1d, median_filter
+from scipy.spatial.transform import Rotation, Slerp
+
+from refine.errors import InputError
+from refine.frames import (
+    continuous_quaternions,
+    matrix_from_quaternion,
+    quaternion_from_matrix,
+    rotvec_from_matrix,
+)
+
+#: Scale from the median absolute deviation to the standard deviation of normal noise.
+MAD_TO_SIGMA = 1.4826
+
+
+def _check_times(t: ArrayLike) -> NDArray:
+    t = np.asarray(t, dtype=float)
+    if t.ndim != 1 or len(t) < 2:
+        raise InputError(f"sample times: expected shape (M,) with M >= 2, got {t.shape}")
+    steps = np.diff(t)
+    if np.any(steps <= 0.0):
+        k = int(np.flatnonzero(steps <= 0.0)[0]) + 1
+        raise InputError(f"sample times must strictly increase: t[{k}] = {t[k]} s after {t[k - 1]} s")
+    return t
+
+
+def _sigma_samples(t: NDArray, time_constant_s: float) -> float:
+    if not (math.isfinite(time_constant_s) and time_constant_s >= 0.0):
+        raise InputError(f"time_constant_s must be a finite number >= 0 s, got {time_constant_s!r}")
+    return time_constant_s / float(np.median(np.diff(t)))
+
+
+def hampel(
+    x: ArrayLike, half_window: int, n_sigmas: float, min_deviation: float = 0.0
+) -> tuple[NDArray, NDArray]:
+    """Hampel filter: replace samples far from their running median by that median.
+
+    For each sample ``k`` (and each column independently) with the window ``k ± half_window``:
+    ``m_k`` is the window median, ``sigma_k = 1.4826 · median(|x - m|)`` over the window (the MAD
+    scaled to a standard deviation for normal noise), and ``x_k`` is an outlier when
+    ``|x_k - m_k| > max(n_sigmas · sigma_k, min_deviation)``. The window is mirrored at the ends,
+    so the end samples are tested too. Runs of up to ``half_window`` outliers are found.
+
+    Args:
+        x: samples, shape (M,) or (M, k), M >= 2.
+        half_window: half-width of the window [samples], >= 1.
+        n_sigmas: threshold [robust standard deviations], > 0.
+        min_deviation: floor on the threshold, in the unit of ``x``; keeps flat or quantised
+            stretches (where the MAD is zero) from flagging their smallest wiggles.
+
+    Returns:
+        ``(filtered, outlier_mask)``: ``x`` with outliers replaced by the running median, and the
+        mask, both of the shape of ``x``.
+    """
+    x = np.asarray(x, dtype=float)
+    if x.ndim not in (1, 2) or len(x) < 2:
+        raise InputError(f"hampel: expected shape (M,) or (M, k) with M >= 2, got {x.shape}")
+    if int(half_window) < 1 or not n_sigmas > 0.0:
+        raise InputError(f"hampel: need half_window >= 1 and n_sigmas > 0, got {half_window}, {n_sigmas}")
+    size = (2 * int(half_window) + 1,) + (1,) * (x.ndim - 1)
+    med = median_filter(x, size=size, mode="mirror")
+    dev = np.abs(x - med)
+    sigma = MAD_TO_SIGMA * median_filter(dev, size=size, mode="mirror")
+    mask = dev > np.maximum(n_sigmas * sigma, min_deviation)
+    return np.where(mask, med, x), mask
+
+
+def rotation_outliers(
+    rotations: ArrayLike, half_window: int, n_sigmas: float, min_angle_deg: float = 0.0
+) -> NDArray:
+    """Hampel test for orientations, done on SO(3) rather than on Euler angles.
+
+    The running median rotation is the component-wise median of sign-continuous quaternions over
+    the window, normalised. Each sample's residual is the rotation vector of
+    ``R_median^T · R`` [rad]; :func:`hampel` is applied to its three components (floor
+    ``min_angle_deg``), and a sample is an outlier if any component is.
+
+    Args:
+        rotations: orientations, shape (M, 3, 3).
+        half_window: half-width of the window [samples].
+        n_sigmas: threshold [robust standard deviations].
+        min_angle_deg: floor on the threshold [deg].
+
+    Returns:
+        Outlier mask, shape (M,).
+    """
+    R = np.asarray(rotations, dtype=float)
+    q = continuous_quaternions(quaternion_from_matrix(R))
+    size = (2 * int(half_window) + 1, 1)
+    q_med = median_filter(q, size=size, mode="mirror")
+    R_med = matrix_from_quaternion(q_med)
+    residual = rotvec_from_matrix(np.einsum("kji,kjl->kil", R_med, R))
+    _, mask = hampel(residual, half_window, n_sigmas, min_deviation=math.radians(min_angle_deg))
+    return mask.any(axis=1)
+
+
+def fill_positions(t: ArrayLike, positions: ArrayLike, mask: ArrayLike) -> NDArray:
+    """Replace masked samples (M,) of positions (M, 3) by linear interpolation in time ``t`` [s]."""
+    t, p, mask = np.asarray(t, float), np.array(positions, float), np.asarray(mask, bool)
+    good = ~mask
+    if mask.any() and good.any():
+        for axis in range(p.shape[1]):
+            p[mask, axis] = np.interp(t[mask], t[good], p[good, axis])
+    return p
+
+
+def fill_rotations(t: ArrayLike, rotations: ArrayLike, mask: ArrayLike) -> NDArray:
+    """Replace masked samples of rotations (M, 3, 3) by Slerp between the good neighbours.
+
+    Masked samples before the first or after the last good sample take that sample's rotation.
+    """
+    t, R, mask = np.asarray(t, float), np.array(rotations, float), np.asarray(mask, bool)
+    good = np.flatnonzero(~mask)
+    if not mask.any() or len(good) == 0:
+        return R
+    if len(good) == 1:
+        R[mask] = R[good[0]]
+        return R
+    slerp = Slerp(t[good], Rotation.from_matrix(R[good]))
+    R[mask] = slerp(np.clip(t[mask], t[good[0]], t[good[-1]])).as_matrix()
+    return R
+
+
+def smooth_positions(t: ArrayLike, positions: ArrayLike, time_constant_s: float) -> NDArray:
+    """Gaussian smoothing of positions with standard deviation ``time_constant_s`` in time.
+
+    Args:
+        t: sample times [s], shape (M,), strictly increasing, about uniform.
+        positions: positions [m], shape (M, 3).
+        time_constant_s: standard deviation of the Gaussian kernel [s]; 0 returns a copy.
+
+    Returns:
+        Smoothed positions [m], shape (M, 3); the ends are extended with their edge value.
+    """
+    sigma = _sigma_samples(_check_times(t), time_constant_s)
+    p = np.array(positions, dtype=float)
+    return gaussian_filter1d(p, sigma, axis=0, mode="nearest") if sigma > 0.0 else p
+
+
+def smooth_rotations(t: ArrayLike, rotations: ArrayLike, time_constant_s: float) -> NDArray:
+    """Gaussian smoothing of orientations on SO(3).
+
+    Quaternions are first made sign-continuous (so a path through ``q`` and ``-q``, or a full
+    turn, is not averaged with its antipode), then Gaussian-weighted component-wise and
+    renormalised. For sign-aligned quaternions this normalised weighted sum is the chordal
+    (quaternion L2) mean of the window; it matches the geodesic mean to third order in the spread
+    of the window and, unlike filtering Euler angles, has no wrap-around or gimbal-lock artefacts.
+
+    Args:
+        t: sample times [s], shape (M,), strictly increasing, about uniform.
+        rotations: orientations, shape (M, 3, 3).
+        time_constant_s: standard deviation of the Gaussian kernel [s]; 0 returns a copy.
+
+    Returns:
+        Smoothed orientations, shape (M, 3, 3).
+    """
+    sigma = _sigma_samples(_check_times(t), time_constant_s)
+    R = np.array(rotations, dtype=float)
+    if sigma == 0.0:
+        return R
+    q = continuous_quaternions(quaternion_from_matrix(R))
+    return matrix_from_quaternion(gaussian_filter1d(q, sigma, axis=0, mode="nearest"))
+
+
+def speed_along_track(t: ArrayLike, positions: ArrayLike) -> NDArray:
+    """Speed of the sensor along its own track [m/s], shape (M,), by central differences."""
+    t = _check_times(t)
+    velocity = np.gradient(np.asarray(positions, dtype=float), t, axis=0)
+    return np.linalg.norm(velocity, axis=1)
+
+
+def find_motion_start(
+    t: ArrayLike,
+    positions_smoothed: ArrayLike,
+    pause_speed_m_s: float,
+    leave_radius_m: float = 0.005,
+    sustain_s: float = 0.2,
+) -> int:
+    """Index of the first sample at which the tool leaves the start pause for good.
+
+    The rule: split the samples into runs where the speed is above ``pause_speed_m_s``. The
+    motion starts at the first sample of the first run that either lasts ``sustain_s`` or longer,
+    or carries the tool farther than ``leave_radius_m`` from the median position of all samples
+    before the run (the pause). Short blips of noise and slow drift inside the pause therefore
+    do not count. A log that starts moving returns 0.
+
+    Args:
+        t: sample times [s], shape (M,).
+        positions_smoothed: smoothed sensor positions [m], shape (M, 3).
+        pause_speed_m_s: speed under which the tool counts as still [m/s].
+        leave_radius_m: distance from the pause position that counts as having left it [m].
+        sustain_s: how long the speed must stay above the threshold to count [s].
+
+    Raises:
+        InputError: the tool never leaves the pause (naming the largest speed and distance).
+    """
+    t = _check_times(t)
+    p = np.asarray(positions_smoothed, dtype=float)
+    moving = speed_along_track(t, p) > pause_speed_m_s
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], moving.astype(np.int8), [0]])))
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
+        if t[b - 1] - t[a] >= sustain_s:
+            return int(a)
+        pause = np.median(p[:a], axis=0) if a > 0 else p[0]
+        if np.max(np.linalg.norm(p[a:b] - pause, axis=1)) > leave_radius_m:
+            return int(a)
+    reach = float(np.max(np.linalg.norm(p - p[0], axis=1)))
+    raise InputError(
+        f"no motion found: speed never stays above pause_speed_m_s = {pause_speed_m_s} m/s for "
+        f"{sustain_s} s and the tool stays within {reach:.4f} m of its start"
+    )

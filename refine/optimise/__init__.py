@@ -1,0 +1,1 @@
+"""The joint-path NLP: symbolic kinematics, constraints and the IPOPT solve (CasADi)."""

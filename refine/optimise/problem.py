@@ -1,0 +1,219 @@
+"""The refinement NLP: one CasADi problem over the joint vectors of all waypoints.
+
+Decision variables are the joints ``Q`` (n, N), column k the joints at waypoint k. Per waypoint, one
+CasADi function gives the constraint rows and the cost term; ``Function.map`` applies it to every
+waypoint, so the problem is block-banded and its size grows linearly with N:
+
+* hard: TCP position equal to the CAD point (3 rows, equality); joint limits shrunk by the margin
+  (variable bounds);
+* bounded: orientation inside a cone around the demonstrated orientation (1 row; for an
+  axisymmetric tool only the tool axis is constrained), singularity measure above the margin (1 row);
+* cost: orientation deviation from the demonstration, plus joint smoothness (squared first and
+  second differences along the path, per metre of path).
+
+:func:`build_refinement` returns the problem without solving it, so it can be inspected, dumped or
+benchmarked; :func:`refine.optimise.solve.solve_refinement` solves and verifies it.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import casadi as ca
+import numpy as np
+from numpy.typing import NDArray
+from refine.optimise.kinematics import fk_function, jacobian_function
+
+from refine.errors import InputError
+from refine.paths import FusedPath
+from refine.problem import Tolerances
+from refine.robot import Robot
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Weights:
+    """Cost weights of the refinement.
+
+    Attributes:
+        orientation: weight of (1 - cos θ) per waypoint, θ the deviation from the demonstration.
+        velocity: weight of the squared joint step per metre of path [rad²/m²], per waypoint.
+        acceleration: weight of the squared second difference per metre² [rad²/m⁴], per waypoint.
+    """
+
+    orientation: float = 1.0
+    velocity: float = 1e-6
+    acceleration: float = 1e-9
+
+    def __post_init__(self) -> None:
+        for name in ("orientation", "velocity", "acceleration"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise InputError(f"Weights.{name} must be a finite number >= 0, got {value!r}")
+
+
+@dataclass(frozen=True)
+class RefinementNLP:
+    """A built refinement problem, ready for :func:`solve_refinement`.
+
+    Attributes:
+        nlp: the CasADi problem dict (``x``, ``p``, ``f``, ``g``).
+        params: numeric value of ``p`` (CAD points and demonstrated orientations).
+        lbx, ubx: variable bounds (joint limits minus margin) [rad], shape (n·N,).
+        lbg, ubg: constraint bounds, shape (5·N,).
+        n_waypoints, dof: sizes.
+        row_names: names of the 5 constraint rows of each waypoint, in order.
+        waypoint: the per-waypoint CasADi function (constraints and cost), for inspection.
+        robot, base_in_world, tcp_in_flange, fused, tolerances: what it was built from.
+        build_time_s: wall time of the build [s].
+    """
+
+    nlp: dict[str, Any]
+    params: Array
+    lbx: Array
+    ubx: Array
+    lbg: Array
+    ubg: Array
+    n_waypoints: int
+    dof: int
+    row_names: tuple[str, ...]
+    waypoint: ca.Function
+    robot: Robot
+    base_in_world: Array
+    tcp_in_flange: Array
+    fused: FusedPath
+    tolerances: Tolerances
+    axisymmetric: bool
+    weights: Weights = field(default_factory=Weights)
+    build_time_s: float = 0.0
+
+
+ROW_NAMES = ("position x", "position y", "position z", "orientation cone", "singularity")
+
+
+def waypoint_function(
+    robot: Robot, base_in_world: Array, tcp_in_flange: Array, axisymmetric: bool
+) -> ca.Function:
+    """Per-waypoint constraints ``g`` (5,) and orientation cost for joints ``q``.
+
+    Inputs: ``q`` (n,), ``p_ref`` (3,) CAD point [m], ``R_demo`` (9,) demonstrated rotation
+    (column-major). Outputs: ``g`` = [TCP position - p_ref (3), cone measure, singularity measure]
+    and ``cost`` = 1 - cos θ. The cone measure is cos θ (θ the angle between the orientations, or
+    between the tool axes for an axisymmetric tool); the singularity measure is the scaled
+    manipulability ``sqrt(det(Js Jsᵀ))`` with the Jacobian's linear rows divided by the reach.
+    """
+    n = robot.nq
+    fk = fk_function(robot, base_in_world, tcp_in_flange)
+    jac = jacobian_function(robot, base_in_world, tcp_in_flange)
+    q = ca.SX.sym("q", n)
+    p_ref = ca.SX.sym("p_ref", 3)
+    r_demo = ca.SX.sym("R_demo", 9)
+    R_demo = ca.reshape(r_demo, 3, 3)
+    p, R = fk(q)
+    if axisymmetric:
+        cos_theta = ca.dot(R[:, 2], R_demo[:, 2])
+    else:
+        cos_theta = (ca.trace(ca.mtimes(R_demo.T, R)) - 1.0) / 2.0
+    J = jac(q)
+    Js = ca.vertcat(J[:3, :] / robot.spec.reach_m, J[3:, :])
+    manipulability = ca.sqrt(ca.det(ca.mtimes(Js, Js.T)) + 1e-12)
+    g = ca.vertcat(p - p_ref, cos_theta, manipulability)
+    return ca.Function(
+        "waypoint", [q, p_ref, r_demo], [g, 1.0 - cos_theta], ["q", "p_ref", "R_demo"], ["g", "cost"]
+    )
+
+
+def build_refinement(
+    robot: Robot,
+    fused: FusedPath,
+    base_in_world: Array,
+    tcp_in_flange: Array,
+    tolerances: Tolerances,
+    *,
+    axisymmetric: bool = False,
+    weights: Weights | None = None,
+) -> RefinementNLP:
+    """Build the refinement NLP for ``fused`` on ``robot`` (no solve).
+
+    Args:
+        robot: the robot model.
+        fused: CAD points with demonstrated orientations, N waypoints.
+        base_in_world: T_F_R (4, 4).
+        tcp_in_flange: T_flange_TCP (4, 4).
+        tolerances: orientation cone [deg], joint margin [deg], singularity margin [-].
+        axisymmetric: leave the spin about the tool axis free.
+        weights: cost weights (defaults of :class:`Weights`).
+
+    Returns:
+        The problem with bounds and parameters filled in.
+    """
+    t0 = time.perf_counter()
+    weights = weights or Weights()
+    N, n = len(fused), robot.nq
+    if N < 3:
+        raise InputError(f"refinement needs at least 3 waypoints, got {N}")
+    spec = robot.spec
+    margin = math.radians(tolerances.joint_margin_deg)
+    lower, upper = spec.lower + margin, spec.upper - margin
+    if np.any(lower >= upper):
+        raise InputError(
+            f"tolerances.joint_margin_deg = {tolerances.joint_margin_deg} deg leaves no joint range"
+        )
+
+    # ---- decision variables and parameters
+    Q = ca.MX.sym("Q", n, N)
+    P_ref = ca.MX.sym("P_ref", 3, N)
+    R_demo = ca.MX.sym("R_demo", 9, N)
+
+    # ---- path constraints and orientation cost, mapped over the waypoints
+    waypoint = waypoint_function(robot, base_in_world, tcp_in_flange, axisymmetric)
+    G, cost = waypoint.map(N)(Q, P_ref, R_demo)
+
+    # ---- objective: orientation deviation + joint smoothness per metre of path
+    h = float(np.mean(np.diff(fused.s)))
+    dQ = Q[:, 1:] - Q[:, :-1]
+    d2Q = Q[:, 2:] - 2 * Q[:, 1:-1] + Q[:, :-2]
+    f = (
+        weights.orientation * ca.sum2(cost)
+        + weights.velocity * ca.sumsqr(dQ) / h**2
+        + weights.acceleration * ca.sumsqr(d2Q) / h**4
+    ) / N
+
+    # ---- bounds
+    cos_alpha = math.cos(math.radians(tolerances.orientation_deg))
+    lbg_k = np.array([0.0, 0.0, 0.0, cos_alpha, tolerances.singularity_margin])
+    ubg_k = np.array([0.0, 0.0, 0.0, 1.0 + 1e-9, np.inf])
+    # CasADi vectorises column-major: Q[:, k] is x[k*n:(k+1)*n] and R_demo[:, k] is R_k column-major.
+    params = np.concatenate(
+        [fused.positions.ravel(), np.transpose(fused.rotations, (0, 2, 1)).reshape(N, 9).ravel()]
+    )
+    nlp = {
+        "x": ca.vec(Q),
+        "p": ca.vertcat(ca.vec(P_ref), ca.vec(R_demo)),
+        "f": f,
+        "g": ca.vec(G),
+    }
+    return RefinementNLP(
+        nlp=nlp,
+        params=params,
+        lbx=np.tile(lower, N),
+        ubx=np.tile(upper, N),
+        lbg=np.tile(lbg_k, N),
+        ubg=np.tile(ubg_k, N),
+        n_waypoints=N,
+        dof=n,
+        row_names=ROW_NAMES,
+        waypoint=waypoint,
+        robot=robot,
+        base_in_world=np.asarray(base_in_world, dtype=float),
+        tcp_in_flange=np.asarray(tcp_in_flange, dtype=float),
+        fused=fused,
+        tolerances=tolerances,
+        axisymmetric=axisymmetric,
+        weights=weights,
+        build_time_s=time.perf_counter() - t0,
+    )

@@ -1,0 +1,153 @@
+"""Initial guess for the refinement: damped least-squares IK chained along the path.
+
+Each waypoint's IK starts from the previous waypoint's solution, so the seed stays on one IK branch
+and never wraps a joint. The first waypoint is solved from several start configurations (the
+problem's home, the robot's mid-range, and seeded random ones); the start that converges with the
+largest joint-limit margin wins. The seed asks for the full demonstrated pose; where that pose is
+out of reach or past a limit the DLS step lands on the nearest reachable one, and the NLP takes it
+from there.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import NDArray
+
+from refine.robot import Robot
+
+log = logging.getLogger(__name__)
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class TcpKinematics:
+    """Numeric TCP kinematics of a robot placed in the world with a tool.
+
+    Attributes:
+        robot: the robot model.
+        base_in_world: T_F_R (4, 4).
+        tcp_in_flange: T_flange_TCP (4, 4).
+    """
+
+    robot: Robot
+    base_in_world: Array
+    tcp_in_flange: Array
+
+    def pose(self, q: Array) -> Array:
+        """T_F_TCP for joints ``q`` [rad], shape (4, 4)."""
+        return self.base_in_world @ self.robot.fk(q) @ self.tcp_in_flange
+
+    def poses(self, qs: Array) -> Array:
+        """T_F_TCP for joint rows ``qs`` (N, n), shape (N, 4, 4)."""
+        return self.base_in_world @ self.robot.fk_many(qs) @ self.tcp_in_flange
+
+    def jacobian(self, q: Array) -> Array:
+        """Geometric Jacobian (6, n) of the TCP, world-aligned axes, linear rows first."""
+        R_wb = self.base_in_world[:3, :3]
+        J = self.robot.jacobian(q)
+        Jv, Jw = R_wb @ J[:3], R_wb @ J[3:]
+        T_wf = self.base_in_world @ self.robot.fk(q)
+        r = T_wf[:3, :3] @ self.tcp_in_flange[:3, 3]  # flange origin -> TCP, world axes
+        return np.vstack([Jv - np.cross(r, Jw.T).T, Jw])
+
+
+def _pose_error(T: Array, T_target: Array) -> Array:
+    e_p = T_target[:3, 3] - T[:3, 3]
+    e_r = pin.log3(T_target[:3, :3] @ T[:3, :3].T)
+    return np.concatenate([e_p, e_r])
+
+
+def solve_ik(
+    kin: TcpKinematics,
+    T_target: Array,
+    q0: Array,
+    lower: Array,
+    upper: Array,
+    *,
+    max_iterations: int = 100,
+    damping: float = 1e-3,
+    tol: float = 1e-10,
+) -> tuple[Array, float]:
+    """Damped least-squares IK for one TCP pose, clamped to [lower, upper].
+
+    Args:
+        kin: TCP kinematics.
+        T_target: wanted T_F_TCP (4, 4).
+        q0: start joints [rad], shape (n,).
+        lower: lower joint bounds [rad], shape (n,).
+        upper: upper joint bounds [rad], shape (n,).
+        max_iterations: iteration cap.
+        damping: DLS damping λ [-] (on a Jacobian with rows in m and rad).
+        tol: stop when the squared pose error is below this [m² + rad²].
+
+    Returns:
+        joints [rad] (n,) and the remaining pose error norm (position [m] and angle [rad] stacked).
+    """
+    q = np.clip(np.asarray(q0, dtype=float), lower, upper)
+    err = _pose_error(kin.pose(q), T_target)
+    for _ in range(max_iterations):
+        if float(err @ err) < tol:
+            break
+        J = kin.jacobian(q)
+        dq = J.T @ np.linalg.solve(J @ J.T + damping**2 * np.eye(6), err)
+        step = float(np.max(np.abs(dq)))
+        if step > 0.3:  # keep steps small so the chain does not jump branches
+            dq *= 0.3 / step
+        q = np.clip(q + dq, lower, upper)
+        err = _pose_error(kin.pose(q), T_target)
+    return q, float(np.linalg.norm(err))
+
+
+def ik_chain(
+    kin: TcpKinematics,
+    targets: Array,
+    lower: Array,
+    upper: Array,
+    starts: list[Array],
+) -> tuple[Array, Array]:
+    """IK chained along ``targets`` (N, 4, 4) from the best of several starts.
+
+    Args:
+        kin: TCP kinematics.
+        targets: T_F_TCP per waypoint, shape (N, 4, 4).
+        lower: lower joint bounds [rad] (n,) (already shrunk by the joint margin).
+        upper: upper joint bounds [rad] (n,) (already shrunk by the joint margin).
+        starts: candidate start configurations for the first waypoint [rad].
+
+    Returns:
+        joints (N, n) [rad] and the pose error norm per waypoint (N,).
+    """
+    best: tuple[float, Array] | None = None
+    for q_start in starts:
+        q, err = solve_ik(kin, targets[0], q_start, lower, upper, max_iterations=300)
+        margin = float(np.min(np.minimum(q - lower, upper - q)))
+        score = err * 1e3 - margin  # converge first, then prefer room to the limits
+        if best is None or score < best[0]:
+            best = (score, q)
+    assert best is not None
+    q = best[1]
+    qs = np.empty((len(targets), len(q)))
+    errors = np.empty(len(targets))
+    for k, T in enumerate(targets):
+        q, errors[k] = solve_ik(kin, T, q, lower, upper)
+        qs[k] = q
+    log.debug("IK seed: max pose error %.3g over %d waypoints", errors.max(), len(targets))
+    return qs, errors
+
+
+def start_candidates(
+    lower: Array, upper: Array, home: Array | None, n_random: int = 6, seed: int = 0
+) -> list[Array]:
+    """Start configurations for the first waypoint: home, mid-range, and seeded random ones [rad]."""
+    rng = np.random.default_rng(seed)
+    mid = 0.5 * (lower + upper)
+    span = np.minimum(upper - lower, 2 * np.pi)
+    cands = [] if home is None else [np.asarray(home, dtype=float)]
+    cands.append(mid)
+    cands += [mid + (rng.random(len(mid)) - 0.5) * span for _ in range(n_random)]
+    return cands

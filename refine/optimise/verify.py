@@ -1,0 +1,134 @@
+"""Numeric verification of a joint path with plain Pinocchio, independent of the CasADi model.
+
+Every refined path is checked here before it is reported: TCP position against the CAD points,
+orientation against the demonstration, joint-limit margins and the singularity measure, all per
+waypoint, with the segments that break a tolerance listed with their reason.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from refine.frames import rotation_angle_deg
+from refine.optimise.seed import TcpKinematics
+from refine.paths import FusedPath
+from refine.problem import Tolerances
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Violation:
+    """A run of consecutive waypoints breaking one tolerance.
+
+    Attributes:
+        index_start, index_end: first and last waypoint (inclusive).
+        s_start_m, s_end_m: their arc lengths [m].
+        reason: ``"position"``, ``"orientation"``, ``"joint limit (joint 3)"``, ``"singularity"``.
+        worst: the worst value inside, in the unit of ``unit``.
+        unit: unit of ``worst`` and ``limit``.
+        limit: the tolerance it breaks.
+    """
+
+    index_start: int
+    index_end: int
+    s_start_m: float
+    s_end_m: float
+    reason: str
+    worst: float
+    unit: str
+    limit: float
+
+    def describe(self) -> str:
+        """One line for messages and reports."""
+        return (
+            f"{self.reason} at waypoints {self.index_start}-{self.index_end} "
+            f"(s = {self.s_start_m:.3f}-{self.s_end_m:.3f} m): worst {self.worst:.4g} {self.unit}, "
+            f"limit {self.limit:.4g} {self.unit}"
+        )
+
+
+@dataclass(frozen=True)
+class PathCheck:
+    """Per-waypoint figures of a joint path and the tolerances it breaks.
+
+    Attributes:
+        poses: T_F_TCP reached, shape (N, 4, 4).
+        position_error_m: |TCP - CAD point| [m], shape (N,).
+        orientation_deviation_deg: angle to the demonstrated orientation (tool axis only for an
+            axisymmetric tool) [deg], shape (N,).
+        joint_margin_rad: distance of each waypoint's closest joint to its limit [rad], shape (N,).
+        singularity: scaled manipulability sqrt(det(Js Jsᵀ)) [-], shape (N,).
+        sigma_min: smallest singular value of the scaled Jacobian [-], shape (N,).
+        violations: the runs that break a tolerance (empty when the path passes).
+    """
+
+    poses: Array
+    position_error_m: Array
+    orientation_deviation_deg: Array
+    joint_margin_rad: Array
+    singularity: Array
+    sigma_min: Array
+    violations: tuple[Violation, ...]
+
+    @property
+    def ok(self) -> bool:
+        """True when no tolerance is broken."""
+        return not self.violations
+
+
+def _runs(mask: Array) -> list[tuple[int, int]]:
+    idx = np.flatnonzero(mask)
+    if idx.size == 0:
+        return []
+    breaks = np.flatnonzero(np.diff(idx) > 1)
+    starts = np.concatenate([[idx[0]], idx[breaks + 1]])
+    ends = np.concatenate([idx[breaks], [idx[-1]]])
+    return list(zip(starts.tolist(), ends.tolist(), strict=True))
+
+
+def check_path(
+    kin: TcpKinematics, q: Array, fused: FusedPath, tolerances: Tolerances, axisymmetric: bool
+) -> PathCheck:
+    """Check joints ``q`` (N, n) [rad] against ``fused`` and ``tolerances`` with Pinocchio."""
+    poses = kin.poses(q)
+    pos_err = np.linalg.norm(poses[:, :3, 3] - fused.positions, axis=1)
+    if axisymmetric:
+        cosines = np.einsum("ij,ij->i", poses[:, :3, 2], fused.rotations[:, :, 2])
+        ori = np.degrees(np.arccos(np.clip(cosines, -1.0, 1.0)))
+    else:
+        ori = rotation_angle_deg(fused.rotations, poses[:, :3, :3])
+    spec = kin.robot.spec
+    margins = np.minimum(q - spec.lower, spec.upper - q)
+    joint_margin = margins.min(axis=1)
+    scale = np.array([1.0 / spec.reach_m] * 3 + [1.0] * 3)[:, None]
+    sing = np.empty(len(q))
+    smin = np.empty(len(q))
+    for k, qk in enumerate(q):
+        Js = scale * kin.jacobian(qk)
+        sv = np.linalg.svd(Js, compute_uv=False)
+        smin[k] = sv[-1] if Js.shape[1] >= 6 else 0.0
+        sing[k] = math.sqrt(max(float(np.linalg.det(Js @ Js.T)), 0.0))
+
+    s = fused.s
+    violations: list[Violation] = []
+
+    def add(mask: Array, reason: str, values: Array, unit: str, limit: float, worst_is_max: bool) -> None:
+        for a, b in _runs(mask):
+            seg = values[a : b + 1]
+            worst = float(seg.max() if worst_is_max else seg.min())
+            violations.append(Violation(a, b, float(s[a]), float(s[b]), reason, worst, unit, limit))
+
+    add(pos_err > tolerances.position_m, "position", pos_err, "m", tolerances.position_m, True)
+    ori_tol = tolerances.orientation_deg + 1e-6
+    add(ori > ori_tol, "orientation", ori, "deg", tolerances.orientation_deg, True)
+    margin = math.radians(tolerances.joint_margin_deg) - 1e-7
+    for j in range(q.shape[1]):
+        add(margins[:, j] < margin, f"joint limit (joint {j + 1})", margins[:, j], "rad", margin, False)
+    sing_tol = tolerances.singularity_margin - 1e-9
+    add(sing < sing_tol, "singularity", sing, "-", tolerances.singularity_margin, False)
+    return PathCheck(poses, pos_err, ori, joint_margin, sing, smin, tuple(violations))

@@ -1,0 +1,431 @@
+"""Time parameterisation: the fastest timing of a joint path under the demonstrated speed.
+
+The joint path ``q(s)`` from ``optimise`` is a cubic spline through the waypoints, parameterised by
+the CAD arc length ``s`` [m]. Because the TCP follows the CAD path with ``|dp/ds| = 1``, the path
+speed ``ds/dt`` is the TCP speed. TOPPRA (reachability analysis) finds the fastest ``s(t)`` with
+
+* joint velocities ``|q'(s) sdot| <= v_max``,
+* joint accelerations ``|q''(s) sdot^2 + q'(s) sddot| <= a_max``,
+* the TCP speed ``sdot <= speed_cap(s)``, the smoothed demonstrated speed.
+
+Since the plan is never faster than the demonstration, "fastest" means: it reproduces the demonstrated
+speed wherever the robot can and slows down only where a limit binds. :func:`time_parameterise`
+reports those places as :class:`SlowSegment` values, each with the limit responsible.
+
+Discretisation: the TOPPRA gridpoints are the waypoints. Between two gridpoints the path acceleration
+``sddot`` is constant (so ``sdot^2`` is linear in ``s``). The acceleration limits use TOPPRA's
+interpolation scheme: they hold at both ends of every segment with that segment's ``sddot``. Inside
+a segment they can be exceeded only by a second-order term in the segment length.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import toppra
+import toppra.algorithm
+import toppra.constraint
+from numpy.typing import NDArray
+
+from refine.errors import InputError, SolverError
+
+Array = NDArray[np.float64]
+
+logger = logging.getLogger(__name__)
+
+_VELOCITY_SLACK_REL = 1e-6
+"""Relative slack of the final check on joint velocities and on the speed cap."""
+_ACCELERATION_SLACK_REL = 1e-3
+"""Relative slack of the final check on joint accelerations. TOPPRA shaves 0.01 % off ``sdot^2``
+after choosing each ``sddot``; recomputing ``sddot`` from the shaved speeds, as the timing does,
+moves the accelerations by that order."""
+_BINDING_REL = 0.01
+"""A limit explains a slowdown when a joint uses at least 99 % of it."""
+RAMP = "start/stop ramp"
+
+
+@dataclass(frozen=True)
+class SlowSegment:
+    """A run of consecutive waypoints where the plan is slower than the demonstration.
+
+    Attributes:
+        index_start: first waypoint of the run.
+        index_end: last waypoint of the run (inclusive).
+        s_start_m: arc length at ``index_start`` [m].
+        s_end_m: arc length at ``index_end`` [m].
+        min_ratio: smallest planned / demonstrated speed inside the run [-].
+        reason: ``"start/stop ramp"``, ``"joint velocity (joint k)"``,
+            ``"joint acceleration (joint k)"`` (k 1-based), or ``"not explained by limits
+            (closest: ...)"`` when no limit is within 1 % of binding.
+    """
+
+    index_start: int
+    index_end: int
+    s_start_m: float
+    s_end_m: float
+    min_ratio: float
+    reason: str
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.index_start <= self.index_end:
+            raise InputError(
+                f"SlowSegment: need 0 <= index_start <= index_end, got {self.index_start}, {self.index_end}"
+            )
+
+    @property
+    def explained(self) -> bool:
+        """Whether a ramp or a joint limit accounts for the slowdown."""
+        return not self.reason.startswith("not explained")
+
+
+@dataclass(frozen=True)
+class Timing:
+    """The timed path: when each waypoint is reached and how fast the joints move there.
+
+    ``qdd`` and the accelerations are one-sided: the path acceleration ``sddot`` is constant on each
+    segment, so ``qdd[i]`` uses the segment that starts at waypoint ``i`` (the last waypoint uses the
+    last segment).
+
+    Attributes:
+        t: time at each waypoint [s], shape (N,), t[0] = 0.
+        speed: planned path (TCP) speed ds/dt at each waypoint [m/s], shape (N,).
+        speed_cap: the demonstrated speed used as the cap [m/s], shape (N,).
+        qd: joint velocities [rad/s], shape (N, n).
+        qdd: joint accelerations [rad/s^2], shape (N, n).
+        cycle_time_s: t[-1] [s].
+        slow_segments: runs where speed < (1 - tolerance_rel) * speed_cap, in path order.
+        speed_tracking_error_rel: largest relative deficit ``(cap - speed) / cap`` [-] over the
+            waypoints where the robot could follow the demonstration, i.e. all waypoints except
+            those in a slow segment explained by a ramp or a joint limit. It is below
+            ``tolerance_rel`` unless some slowdown is not explained by any limit. 0 when every
+            waypoint is explained. Negative deficits (round-off) count as 0.
+        speed_tracking_error_mean_rel: mean of the same deficits over the same waypoints [-].
+        solve_time_s: wall time of :func:`time_parameterise` [s].
+    """
+
+    t: Array
+    speed: Array
+    speed_cap: Array
+    qd: Array
+    qdd: Array
+    cycle_time_s: float
+    slow_segments: tuple[SlowSegment, ...]
+    speed_tracking_error_rel: float
+    solve_time_s: float
+    speed_tracking_error_mean_rel: float
+
+    def __post_init__(self) -> None:
+        n = len(self.t)
+        for name in ("speed", "speed_cap"):
+            if getattr(self, name).shape != (n,):
+                raise InputError(f"Timing.{name}: expected shape {(n,)}, got {getattr(self, name).shape}")
+        if self.qd.ndim != 2 or self.qd.shape[0] != n or self.qdd.shape != self.qd.shape:
+            raise InputError(
+                f"Timing.qd, qdd: expected shape ({n}, n), got {self.qd.shape}, {self.qdd.shape}"
+            )
+
+
+class _PathSpeedConstraint(toppra.constraint.LinearConstraint):
+    """TOPPRA constraint ``sdot <= cap(s)``: a bound on ``x = sdot^2`` at every gridpoint."""
+
+    def __init__(self, s: Array, cap: Array) -> None:
+        super().__init__()
+        self.s, self.cap = s, cap
+        self.dof = -1  # independent of the path dimension
+
+    def compute_constraint_params(self, path, gridpoints, *args, **kwargs):  # noqa: D102
+        cap = np.interp(gridpoints, self.s, self.cap)
+        xbound = np.column_stack([np.zeros_like(cap), cap**2])
+        return None, None, None, None, None, None, xbound
+
+
+def _check_inputs(s, q, speed_cap, velocity_limits, acceleration_limits, tolerance_rel, n_min):
+    s = np.asarray(s, dtype=float)
+    q = np.asarray(q, dtype=float)
+    if s.ndim != 1 or len(s) < n_min:
+        raise InputError(f"s: expected shape (N,) with N >= {n_min}, got {s.shape}")
+    n_pts = len(s)
+    if q.ndim != 2 or q.shape[0] != n_pts or q.shape[1] < 1:
+        raise InputError(f"q: expected shape ({n_pts}, n), got {q.shape}")
+    dof = q.shape[1]
+    arrays = {"s": s, "q": q}
+    for name, value, shape in (
+        ("speed_cap", speed_cap, (n_pts,)),
+        ("velocity_limits", velocity_limits, (dof,)),
+        ("acceleration_limits", acceleration_limits, (dof,)),
+    ):
+        arr = np.asarray(value, dtype=float)
+        if arr.shape != shape:
+            raise InputError(f"{name}: expected shape {shape}, got {arr.shape}")
+        arrays[name] = arr
+    for name, arr in arrays.items():
+        if not np.all(np.isfinite(arr)):
+            raise InputError(f"{name}: contains NaN or infinite values")
+    for name in ("speed_cap", "velocity_limits", "acceleration_limits"):
+        bad = np.flatnonzero(arrays[name] <= 0.0)
+        if bad.size:
+            raise InputError(f"{name}: must be > 0, got {arrays[name][bad[0]]:g} at index {bad[0]}")
+    steps = np.diff(s)
+    if np.any(steps <= 0.0):
+        i = int(np.flatnonzero(steps <= 0.0)[0])
+        raise InputError(f"s: must strictly increase, got s[{i}] = {s[i]:g} m, s[{i + 1}] = {s[i + 1]:g} m")
+    if not (isinstance(tolerance_rel, (int, float)) and 0.0 < tolerance_rel < 1.0):
+        raise InputError(f"tolerance_rel: must be in (0, 1), got {tolerance_rel!r}")
+    return (arrays[k] for k in ("s", "q", "speed_cap", "velocity_limits", "acceleration_limits"))
+
+
+def build_toppra(s, q, speed_cap, velocity_limits, acceleration_limits):
+    """Build the TOPPRA instance without solving it (for inspection and benchmarks).
+
+    Args:
+        s: arc length at each waypoint [m], shape (N,), strictly increasing.
+        q: joint waypoints [rad], shape (N, n).
+        speed_cap: TCP speed cap at each waypoint [m/s], shape (N,).
+        velocity_limits: joint speed limits [rad/s], shape (n,).
+        acceleration_limits: joint acceleration limits [rad/s^2], shape (n,).
+
+    Returns:
+        A ``toppra.algorithm.TOPPRA`` on the spline through (s, q), gridpoints ``s``.
+    """
+    path = toppra.SplineInterpolator(s, q)
+    constraints = [
+        toppra.constraint.JointVelocityConstraint(velocity_limits),
+        toppra.constraint.JointAccelerationConstraint(
+            acceleration_limits, toppra.constraint.DiscretizationType.Interpolation
+        ),
+        _PathSpeedConstraint(s, speed_cap),
+    ]
+    return toppra.algorithm.TOPPRA(constraints, path, gridpoints=s, solver_wrapper="seidel")
+
+
+def _coasting_speed(cap: Array, dq: Array, ddq: Array, vlim: Array, alim: Array) -> Array:
+    """Largest speed [m/s] per waypoint at which the robot may move with sddot = 0 there.
+
+    That is the cap, the joint velocity limits (``|q'| sdot <= v``) and the acceleration limits with
+    no path acceleration (``|q''| sdot^2 <= a``). Such an end speed is always controllable.
+    """
+    with np.errstate(divide="ignore"):
+        by_velocity = np.min(vlim / np.abs(dq), axis=1)
+        by_acceleration = np.sqrt(np.min(alim / np.abs(ddq), axis=1))
+    return np.minimum(cap, np.minimum(by_velocity, by_acceleration))
+
+
+def _solve_path_speed(instance, sd_start: float, sd_end: float) -> Array:
+    """Run TOPPRA; on an uncontrollable start speed retry at the largest controllable one."""
+    rc = toppra.algorithm.ParameterizationReturnCode
+    try:
+        _, sd, _ = instance.compute_parameterization(sd_start, sd_end)
+        data = instance.problem_data
+        if data.return_code == rc.FailUncontrollable and data.K is not None and sd_start > 0:
+            sd_start = float(np.sqrt(data.K[0, 1]) * (1.0 - 1e-6))
+            logger.debug("start speed lowered to the controllable %.4g m/s", sd_start)
+            _, sd, _ = instance.compute_parameterization(sd_start, sd_end)
+    except Exception as e:
+        raise SolverError(f"TOPPRA failed: {e}") from e
+    code = instance.problem_data.return_code
+    if code != rc.Ok or sd is None or not np.all(np.isfinite(sd)):
+        raise SolverError(
+            f"TOPPRA found no timing ({code.value}): the joint path cannot be followed within "
+            f"the joint velocity and acceleration limits from {sd_start:g} m/s to {sd_end:g} m/s"
+        )
+    return np.asarray(sd, dtype=float)
+
+
+def _verify(s, qd, qdd_pairs, speed, cap, vlim, alim) -> None:
+    """Raise SolverError naming the first joint, s [m] and value that breaks a limit."""
+    excess = np.abs(qd) / vlim - (1.0 + _VELOCITY_SLACK_REL)
+    if np.any(excess > 0):
+        i, j = np.unravel_index(np.argmax(excess), excess.shape)
+        raise SolverError(
+            f"joint {j + 1} velocity {qd[i, j]:.6g} rad/s exceeds its limit {vlim[j]:.6g} rad/s "
+            f"at s = {s[i]:.4f} m"
+        )
+    for qdd in qdd_pairs:
+        excess = np.abs(qdd) / alim - (1.0 + _ACCELERATION_SLACK_REL)
+        if np.any(excess > 0):
+            i, j = np.unravel_index(np.argmax(excess), excess.shape)
+            raise SolverError(
+                f"joint {j + 1} acceleration {qdd[i, j]:.6g} rad/s^2 exceeds its limit "
+                f"{alim[j]:.6g} rad/s^2 at s = {s[i]:.4f} m"
+            )
+    excess = speed / cap - (1.0 + _VELOCITY_SLACK_REL)
+    if np.any(excess > 0):
+        i = int(np.argmax(excess))
+        raise SolverError(
+            f"TCP speed {speed[i]:.6g} m/s exceeds the cap {cap[i]:.6g} m/s at s = {s[i]:.4f} m"
+        )
+
+
+def _binding_limit(run: Array, k: int, vel_ratio: Array, acc_ratio: Array) -> str:
+    """Name the limit behind a slowdown: what binds at the slowest waypoint, else in the run."""
+    candidates = (
+        ("joint velocity", vel_ratio[[k]]),
+        ("joint acceleration", acc_ratio[[k]]),
+        ("joint velocity", vel_ratio[run]),
+        ("joint acceleration", acc_ratio[run]),
+    )
+    for kind, ratio in candidates:
+        if ratio.max() >= 1.0 - _BINDING_REL:
+            return f"{kind} (joint {int(np.argmax(ratio.max(axis=0))) + 1})"
+    kind, ratio = max(candidates[2:], key=lambda c: c[1].max())
+    joint = int(np.argmax(ratio.max(axis=0))) + 1
+    return f"not explained by limits (closest: {kind} (joint {joint}) at {ratio.max():.0%})"
+
+
+def _ramp_length(speed: Array, vel_bound: Array) -> int:
+    """Waypoints of the ramp from rest: speed keeps rising and no joint velocity binds yet."""
+    k = 1
+    while k < len(speed) and speed[k] > speed[k - 1] and not vel_bound[k]:
+        k += 1
+    return k
+
+
+def _slow_segments(s, speed, ratio, slow, start_stop, vel_ratio, acc_ratio):
+    """Split the slow waypoints into runs; name each run's reason.
+
+    With ``start_stop``, a run touching the first (last) waypoint begins (ends) with the ramp from
+    (to) rest; the ramp stops where the speed stops rising or a joint velocity limit binds, and the
+    rest of such a run is a segment of its own, explained by a limit.
+    """
+    vel_bound = vel_ratio.max(axis=1) >= 1.0 - _BINDING_REL
+    n_pts = len(s)
+    pieces = []
+    edges = np.diff(np.concatenate([[0], slow.astype(int), [0]]))
+    for i0, i1 in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1, strict=True):
+        head = tail = None
+        if start_stop and i0 == 0:
+            head = (0, min(i1, _ramp_length(speed[: i1 + 1], vel_bound) - 1))
+            i0 = head[1] + 1
+        if start_stop and i1 == n_pts - 1 and i0 <= i1:
+            back = _ramp_length(speed[i0:][::-1], vel_bound[i0:][::-1])
+            tail = (n_pts - back, n_pts - 1)
+            i1 = tail[0] - 1
+        pieces += [(head, RAMP)] if head else []
+        pieces += [((i0, i1), None)] if i0 <= i1 else []
+        pieces += [(tail, RAMP)] if tail else []
+    segments = []
+    for (a, b), reason in pieces:
+        run = np.arange(a, b + 1)
+        k = int(run[np.argmin(ratio[run])])
+        reason = reason or _binding_limit(run, k, vel_ratio, acc_ratio)
+        segments.append(SlowSegment(int(a), int(b), float(s[a]), float(s[b]), float(ratio[k]), reason))
+    return tuple(segments)
+
+
+def time_parameterise(
+    s,
+    q,
+    speed_cap,
+    velocity_limits,
+    acceleration_limits,
+    *,
+    tolerance_rel: float = 0.05,
+    start_stop: bool = True,
+) -> Timing:
+    """Time the joint path as fast as the limits allow, never faster than the demonstration.
+
+    Args:
+        s: arc length of the CAD path at each waypoint [m], shape (N,), strictly increasing.
+        q: joint waypoints [rad], shape (N, n); the TCP follows the CAD path with |dp/ds| = 1.
+        speed_cap: demonstrated TCP speed at each waypoint [m/s], shape (N,), > 0; linearly
+            interpolated in between.
+        velocity_limits: joint speed limits [rad/s], shape (n,), > 0.
+        acceleration_limits: joint acceleration limits [rad/s^2], shape (n,), > 0.
+        tolerance_rel: a waypoint is slow when speed < (1 - tolerance_rel) * speed_cap [-].
+        start_stop: start and end at rest (needs N >= 3). Otherwise start and end as fast as
+            the cap and the limits allow with no path acceleration on the first and last segment
+            (lowered further at the start if the path ahead demands it).
+
+    Returns:
+        The timing, verified against the limits at every waypoint.
+
+    Raises:
+        InputError: a shape, a non-increasing ``s`` or a non-positive cap or limit.
+        SolverError: TOPPRA fails, or its result breaks a limit (the message names the joint,
+            ``s`` [m] and the value).
+    """
+    t_start = time.perf_counter()
+    s, q, cap, vlim, alim = _check_inputs(
+        s,
+        q,
+        speed_cap,
+        velocity_limits,
+        acceleration_limits,
+        tolerance_rel,
+        3 if start_stop else 2,
+    )
+
+    # ---- TOPPRA on the spline through the waypoints
+    instance = build_toppra(s, q, cap, vlim, alim)
+    dq = instance.path(s, 1)
+    ddq = instance.path(s, 2)
+    if start_stop:
+        sd_start = sd_end = 0.0
+    else:
+        sd_max = _coasting_speed(cap, dq, ddq, vlim, alim)
+        sd_start, sd_end = min(sd_max[0], sd_max[1]), min(sd_max[-2], sd_max[-1])
+    speed = _solve_path_speed(instance, float(sd_start), float(sd_end))
+
+    # ---- times, with sddot constant on each segment
+    x = speed**2
+    ds = np.diff(s)
+    sdd = (x[1:] - x[:-1]) / (2.0 * ds)
+    mean_speed = 0.5 * (speed[1:] + speed[:-1])
+    if np.any(mean_speed <= 0.0):
+        i = int(np.flatnonzero(mean_speed <= 0.0)[0])
+        raise SolverError(f"TOPPRA stopped the path at s = {s[i]:.4f} m: the timing never ends")
+    t = np.concatenate([[0.0], np.cumsum(ds / mean_speed)])
+
+    # ---- joint velocities and one-sided accelerations
+    qd = dq * speed[:, None]
+    qdd = ddq * x[:, None] + dq * np.append(sdd, sdd[-1])[:, None]  # segment starting here
+    qdd_left = ddq[1:] * x[1:, None] + dq[1:] * sdd[:, None]  # segment ending here
+    _verify(s, qd, (qdd, qdd_left), speed, cap, vlim, alim)
+
+    # ---- where and why the plan is slower than the demonstration
+    ratio = speed / cap
+    vel_ratio = np.abs(qd) / vlim
+    acc_ratio = np.abs(qdd) / alim
+    acc_ratio[1:] = np.maximum(acc_ratio[1:], np.abs(qdd_left) / alim)
+    slow = ratio < 1.0 - tolerance_rel
+    segments = _slow_segments(s, speed, ratio, slow, start_stop, vel_ratio, acc_ratio)
+    tracked = np.ones(len(s), dtype=bool)
+    for seg in segments:
+        if seg.explained:
+            tracked[seg.index_start : seg.index_end + 1] = False
+    deficit = np.clip(1.0 - ratio[tracked], 0.0, None)
+    error_max = float(deficit.max()) if deficit.size else 0.0
+    error_mean = float(deficit.mean()) if deficit.size else 0.0
+
+    elapsed = time.perf_counter() - t_start
+    logger.info(
+        "timed %d waypoints: cycle time %.3f s, %d slow segment(s), tracking error %.1f %% (%.3f s)",
+        len(s),
+        t[-1],
+        len(segments),
+        100 * error_max,
+        elapsed,
+    )
+    for seg in segments:
+        logger.debug(
+            "slow s = %.4f..%.4f m, min %.0f %% of demo: %s",
+            seg.s_start_m,
+            seg.s_end_m,
+            100 * seg.min_ratio,
+            seg.reason,
+        )
+    return Timing(
+        t=t,
+        speed=speed,
+        speed_cap=cap.copy(),
+        qd=qd,
+        qdd=qdd,
+        cycle_time_s=float(t[-1]),
+        slow_segments=segments,
+        speed_tracking_error_rel=error_max,
+        solve_time_s=elapsed,
+        speed_tracking_error_mean_rel=error_mean,
+    )

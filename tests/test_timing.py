@@ -1,0 +1,168 @@
+import numpy as np
+import pytest
+import toppra
+from scipy.integrate import trapezoid
+
+import refine.timing as timing
+from refine.errors import InputError, SolverError
+from refine.timing import RAMP, time_parameterise
+
+N_JOINTS = 6
+
+
+def smooth_path(n_pts=501, length=1.0, seed=0):
+    """Waypoints of a smooth 6-joint path: random sums of slow sines, |q'| of order 1 rad/m."""
+    rng = np.random.default_rng(seed)
+    s = np.linspace(0.0, length, n_pts)
+    amp = rng.uniform(0.05, 0.2, (3, N_JOINTS))
+    freq = rng.uniform(0.5, 2.0, (3, N_JOINTS)) * 2 * np.pi / length
+    phase = rng.uniform(0, 2 * np.pi, (3, N_JOINTS))
+    q = np.sum(amp * np.sin(freq * s[:, None, None] + phase), axis=1)
+    return s, q
+
+
+def dense_joint_motion(s, q, tm, per_segment=20):
+    """Joint velocity and acceleration inside every segment, as the robot would execute them.
+
+    sdot^2 is linear in s on each segment (constant sddot), the path is the same not-a-knot spline
+    TOPPRA uses.
+    """
+    path = toppra.SplineInterpolator(s, q)
+    x = tm.speed**2
+    u = np.diff(x) / (2 * np.diff(s))
+    frac = np.linspace(0.0, 1.0, per_segment)
+    s_d = (s[:-1, None] + np.diff(s)[:, None] * frac).ravel()
+    x_d = (x[:-1, None] + np.diff(x)[:, None] * frac).ravel()
+    u_d = np.repeat(u, per_segment)
+    dq, ddq = path(s_d, 1), path(s_d, 2)
+    return dq * np.sqrt(x_d)[:, None], ddq * x_d[:, None] + dq * u_d[:, None]
+
+
+def test_loose_limits_reproduce_the_demonstrated_speed():
+    s, q = smooth_path()
+    cap = 0.05 + 0.02 * np.sin(2 * np.pi * s)
+    tm = time_parameterise(s, q, cap, np.full(N_JOINTS, 3.0), np.full(N_JOINTS, 20.0))
+
+    assert all(seg.reason == RAMP for seg in tm.slow_segments)
+    ramps = np.zeros(len(s), dtype=bool)
+    for seg in tm.slow_segments:
+        ramps[seg.index_start : seg.index_end + 1] = True
+    assert ramps.sum() < 10
+    np.testing.assert_allclose(tm.speed[~ramps], cap[~ramps], rtol=0.01)
+    s_fine = np.linspace(0, 1, 20001)
+    expected = trapezoid(1 / np.interp(s_fine, s, cap), s_fine)
+    assert tm.cycle_time_s == pytest.approx(expected, rel=0.01)
+    assert tm.t[0] == 0.0 and np.all(np.diff(tm.t) > 0)
+    assert tm.speed[0] == 0.0 and tm.speed[-1] == 0.0
+    assert tm.speed_tracking_error_rel < 1e-3
+    assert tm.speed_tracking_error_mean_rel <= tm.speed_tracking_error_rel
+
+
+def test_joint_velocity_limit_slows_the_middle_and_is_never_exceeded():
+    s, q = smooth_path(seed=1)
+    q[:, 3] = 0.3 * np.tanh((s - 0.5) / 0.05)  # |q4'| peaks at 6 rad/m at s = 0.5 m
+    vlim = np.array([3.0, 3.0, 3.0, 0.3, 3.0, 3.0])
+    tm = time_parameterise(s, q, np.full(len(s), 0.1), vlim, np.full(N_JOINTS, 20.0))
+
+    middle = [seg for seg in tm.slow_segments if seg.s_start_m < 0.5 < seg.s_end_m]
+    assert len(middle) == 1
+    assert middle[0].reason == "joint velocity (joint 4)"
+    assert middle[0].min_ratio == pytest.approx(0.3 / 6 / 0.1, rel=0.01)
+    assert all(seg.reason == RAMP for seg in tm.slow_segments if seg is not middle[0])
+    assert np.all(np.abs(tm.qd) <= vlim * (1 + 1e-6))
+    qd_dense, _ = dense_joint_motion(s, q, tm)
+    # Inside a segment sdot^2 is linear in s while the bound (v4 / q4')^2 is convex at the dip,
+    # so the chord overshoots by a second-order term ~ (ds / w)^2 = (2 mm / 5 cm)^2 = 1.6e-3
+    # (measured 1.0e-3).
+    assert np.all(np.abs(qd_dense) <= vlim * (1 + 5e-3))
+    # the edges of the slowdown, within 5 % of the demo, still count in the tracking error
+    assert 0.0 < tm.speed_tracking_error_rel < 0.05
+
+
+def test_acceleration_limits_hold_between_waypoints():
+    s, q = smooth_path(seed=2)
+    alim = np.array([0.5, 0.8, 0.6, 1.0, 0.7, 0.9])
+    tm = time_parameterise(s, q, np.full(len(s), 0.5), np.full(N_JOINTS, 3.0), alim)
+
+    assert any(seg.reason.startswith("joint acceleration") for seg in tm.slow_segments)
+    assert np.all(np.abs(tm.qdd) <= alim * (1 + 1e-3))
+    _, qdd_dense = dense_joint_motion(s, q, tm)
+    # TOPPRA enforces the limits at both ends of each 2 mm segment with that segment's sddot;
+    # in between qdd(s) is smooth, so it can overshoot by about ds^2 / 8 * |d2 qdd / ds2|,
+    # ~ (2 pi ds / 0.5 m)^2 / 8 = 8e-5 for these sines (shortest period 0.5 m; measured 1.3e-4).
+    # Add the 1e-3 slack time_parameterise itself accepts at waypoints: 2e-3 in all.
+    assert np.max(np.abs(qdd_dense) / alim) <= 1 + 2e-3
+
+
+def test_robot_brakes_before_the_demonstrated_speed_steps_down():
+    s = np.linspace(0.0, 1.0, 501)
+    slope = np.array([1.0, -0.5, 2.0, 0.2, -1.0, 0.5])
+    q = s[:, None] * slope  # straight in joint space: q'' = 0
+    alim = np.full(N_JOINTS, 0.5)
+    cap = np.where(s < 0.6, 0.2, 0.05)
+    tm = time_parameterise(s, q, cap, np.full(N_JOINTS, 3.0), alim)
+
+    i_step = int(np.argmax(s >= 0.6))
+    decel = np.min(alim / np.abs(slope))  # largest sddot the limits allow [m/s^2]
+    braking = (0.2**2 - 0.05**2) / (2 * decel)  # braking distance [m]
+    before = (s > 0.6 - braking + 0.01) & (s < 0.6)
+    profile = np.sqrt(0.05**2 + 2 * decel * (s[i_step] - s[before]))
+    np.testing.assert_allclose(tm.speed[before], profile, rtol=0.01)
+    assert np.all(np.diff(tm.speed[before]) < 0)
+    assert np.all(tm.speed[i_step:] <= 0.05 * (1 + 1e-6))
+    braking_segments = [seg for seg in tm.slow_segments if seg.s_start_m < 0.59 < seg.s_end_m]
+    assert [seg.reason for seg in braking_segments] == ["joint acceleration (joint 3)"]
+
+
+def test_without_start_stop_the_path_starts_and_ends_at_the_demonstrated_speed():
+    s, q = smooth_path(seed=3)
+    cap = np.full(len(s), 0.05)
+    tm = time_parameterise(s, q, cap, np.full(N_JOINTS, 3.0), np.full(N_JOINTS, 20.0), start_stop=False)
+    np.testing.assert_allclose(tm.speed, cap, rtol=0.01)
+    assert tm.slow_segments == ()
+    assert tm.cycle_time_s == pytest.approx(1.0 / 0.05, rel=0.01)
+
+
+def test_a_result_breaking_a_joint_limit_raises_solver_error(monkeypatch):
+    s, q = smooth_path(seed=4)
+    real = timing._solve_path_speed
+    monkeypatch.setattr(timing, "_solve_path_speed", lambda *a: 1e3 * real(*a))
+    with pytest.raises(SolverError, match=r"joint \d velocity .* rad/s exceeds .* at s = "):
+        time_parameterise(s, q, np.full(len(s), 0.05), np.full(N_JOINTS, 3.0), np.full(N_JOINTS, 20.0))
+
+
+GOOD = {
+    "s": np.linspace(0.0, 1.0, 11),
+    "q": np.zeros((11, 2)) + np.linspace(0.0, 1.0, 11)[:, None],
+    "speed_cap": np.full(11, 0.1),
+    "velocity_limits": np.ones(2),
+    "acceleration_limits": np.ones(2),
+}
+
+
+@pytest.mark.parametrize(
+    ("name", "value", "message"),
+    [
+        ("s", np.linspace(0.0, 1.0, 10), r"q: expected shape \(10, n\)"),
+        ("s", np.r_[0.0, 0.1, 0.1, np.linspace(0.3, 1.0, 8)], "s: must strictly increase"),
+        ("q", np.zeros((11, 2, 1)), r"q: expected shape \(11, n\)"),
+        ("speed_cap", np.r_[np.full(10, 0.1), 0.0], "speed_cap: must be > 0, got 0 at index 10"),
+        ("speed_cap", np.full(10, 0.1), r"speed_cap: expected shape \(11,\), got \(10,\)"),
+        ("velocity_limits", np.ones(3), r"velocity_limits: expected shape \(2,\)"),
+        ("acceleration_limits", np.array([1.0, -1.0]), "acceleration_limits: must be > 0"),
+        ("q", np.full((11, 2), np.nan), "q: contains NaN"),
+    ],
+)
+def test_bad_inputs_raise_input_error_naming_the_argument(name, value, message):
+    args = {**GOOD, name: value}
+    with pytest.raises(InputError, match=message):
+        time_parameterise(**args)
+
+
+def test_bad_tolerance_and_too_few_waypoints_raise_input_error():
+    with pytest.raises(InputError, match="tolerance_rel"):
+        time_parameterise(**GOOD, tolerance_rel=1.5)
+    with pytest.raises(InputError, match=r"N >= 3"):
+        time_parameterise(
+            **{**GOOD, "s": GOOD["s"][:2], "q": GOOD["q"][:2], "speed_cap": GOOD["speed_cap"][:2]}
+        )
