@@ -208,7 +208,7 @@ def load_robot(name: str) -> Robot:
     return _load_robot(name, str(robots_dir().resolve()))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _load_robot(name: str, root: str) -> Robot:
     folder = Path(root) / name
     if not (folder / "robot.toml").is_file():

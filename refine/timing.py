@@ -174,10 +174,21 @@ def _check_inputs(s, q, speed_cap, velocity_limits, acceleration_limits, toleran
         raise InputError(f"s: must strictly increase, got s[{i}] = {s[i]:g} m, s[{i + 1}] = {s[i + 1]:g} m")
     if not (isinstance(tolerance_rel, (int, float)) and 0.0 < tolerance_rel < 1.0):
         raise InputError(f"tolerance_rel: must be in (0, 1), got {tolerance_rel!r}")
-    return (arrays[k] for k in ("s", "q", "speed_cap", "velocity_limits", "acceleration_limits"))
+    return tuple(arrays[k] for k in ("s", "q", "speed_cap", "velocity_limits", "acceleration_limits"))
 
 
-def build_toppra(s, q, speed_cap, velocity_limits, acceleration_limits):
+class _FreeEndTOPPRA(toppra.algorithm.TOPPRA):
+    """TOPPRA whose end speed may be anything from 0 up to the ``sd_end`` it is given.
+
+    ``compute_parameterization`` pins the end speed to ``sd_end``; widening the end of the
+    controllable sets to ``[0, sd_end]`` lets the greedy forward pass end as fast as it can.
+    """
+
+    def compute_controllable_sets(self, sdmin, sdmax):  # noqa: D102
+        return super().compute_controllable_sets(0.0, sdmax)
+
+
+def build_toppra(s, q, speed_cap, velocity_limits, acceleration_limits, *, free_end=False):
     """Build the TOPPRA instance without solving it (for inspection and benchmarks).
 
     Args:
@@ -186,6 +197,8 @@ def build_toppra(s, q, speed_cap, velocity_limits, acceleration_limits):
         speed_cap: TCP speed cap at each waypoint [m/s], shape (N,).
         velocity_limits: joint speed limits [rad/s], shape (n,).
         acceleration_limits: joint acceleration limits [rad/s^2], shape (n,).
+        free_end: let the end speed be anything up to the ``sd_end`` given to
+            ``compute_parameterization`` instead of exactly ``sd_end``.
 
     Returns:
         A ``toppra.algorithm.TOPPRA`` on the spline through (s, q), gridpoints ``s``.
@@ -198,19 +211,8 @@ def build_toppra(s, q, speed_cap, velocity_limits, acceleration_limits):
         ),
         _PathSpeedConstraint(s, speed_cap),
     ]
-    return toppra.algorithm.TOPPRA(constraints, path, gridpoints=s, solver_wrapper="seidel")
-
-
-def _coasting_speed(cap: Array, dq: Array, ddq: Array, vlim: Array, alim: Array) -> Array:
-    """Largest speed [m/s] per waypoint at which the robot may move with sddot = 0 there.
-
-    That is the cap, the joint velocity limits (``|q'| sdot <= v``) and the acceleration limits with
-    no path acceleration (``|q''| sdot^2 <= a``). Such an end speed is always controllable.
-    """
-    with np.errstate(divide="ignore"):
-        by_velocity = np.min(vlim / np.abs(dq), axis=1)
-        by_acceleration = np.sqrt(np.min(alim / np.abs(ddq), axis=1))
-    return np.minimum(cap, np.minimum(by_velocity, by_acceleration))
+    algorithm = _FreeEndTOPPRA if free_end else toppra.algorithm.TOPPRA
+    return algorithm(constraints, path, gridpoints=s, solver_wrapper="seidel")
 
 
 def _solve_path_speed(instance, sd_start: float, sd_end: float) -> Array:
@@ -234,29 +236,17 @@ def _solve_path_speed(instance, sd_start: float, sd_end: float) -> Array:
     return np.asarray(sd, dtype=float)
 
 
-def _verify(s, qd, qdd_pairs, speed, cap, vlim, alim) -> None:
-    """Raise SolverError naming the first joint, s [m] and value that breaks a limit."""
-    excess = np.abs(qd) / vlim - (1.0 + _VELOCITY_SLACK_REL)
-    if np.any(excess > 0):
-        i, j = np.unravel_index(np.argmax(excess), excess.shape)
-        raise SolverError(
-            f"joint {j + 1} velocity {qd[i, j]:.6g} rad/s exceeds its limit {vlim[j]:.6g} rad/s "
-            f"at s = {s[i]:.4f} m"
-        )
-    for qdd in qdd_pairs:
-        excess = np.abs(qdd) / alim - (1.0 + _ACCELERATION_SLACK_REL)
+def _verify(s: Array, checks) -> None:
+    """Raise SolverError at the worst breach among ``(what, unit, values (N, k), limits, slack)``."""
+    for what, unit, values, limits, slack in checks:
+        limits = np.broadcast_to(limits, values.shape)
+        excess = np.abs(values) / limits - (1.0 + slack)
         if np.any(excess > 0):
             i, j = np.unravel_index(np.argmax(excess), excess.shape)
             raise SolverError(
-                f"joint {j + 1} acceleration {qdd[i, j]:.6g} rad/s^2 exceeds its limit "
-                f"{alim[j]:.6g} rad/s^2 at s = {s[i]:.4f} m"
+                f"{what.format(j + 1)} {values[i, j]:.6g} {unit} exceeds its limit {limits[i, j]:.6g} "
+                f"{unit} at s = {s[i]:.4f} m"
             )
-    excess = speed / cap - (1.0 + _VELOCITY_SLACK_REL)
-    if np.any(excess > 0):
-        i = int(np.argmax(excess))
-        raise SolverError(
-            f"TCP speed {speed[i]:.6g} m/s exceeds the cap {cap[i]:.6g} m/s at s = {s[i]:.4f} m"
-        )
 
 
 def _binding_limit(run: Array, k: int, vel_ratio: Array, acc_ratio: Array) -> str:
@@ -335,9 +325,9 @@ def time_parameterise(
         velocity_limits: joint speed limits [rad/s], shape (n,), > 0.
         acceleration_limits: joint acceleration limits [rad/s^2], shape (n,), > 0.
         tolerance_rel: a waypoint is slow when speed < (1 - tolerance_rel) * speed_cap [-].
-        start_stop: start and end at rest (needs N >= 3). Otherwise start and end as fast as
-            the cap and the limits allow with no path acceleration on the first and last segment
-            (lowered further at the start if the path ahead demands it).
+        start_stop: start and end at rest (needs N >= 3). Otherwise start at the cap, lowered
+            to what the joint velocity limits and the path ahead allow, and end as fast as the
+            cap and the limits allow.
 
     Returns:
         The timing, verified against the limits at every waypoint.
@@ -348,25 +338,19 @@ def time_parameterise(
             ``s`` [m] and the value).
     """
     t_start = time.perf_counter()
-    s, q, cap, vlim, alim = _check_inputs(
-        s,
-        q,
-        speed_cap,
-        velocity_limits,
-        acceleration_limits,
-        tolerance_rel,
-        3 if start_stop else 2,
-    )
+    n_min = 3 if start_stop else 2
+    checked = _check_inputs(s, q, speed_cap, velocity_limits, acceleration_limits, tolerance_rel, n_min)
+    s, q, cap, vlim, alim = checked
 
     # ---- TOPPRA on the spline through the waypoints
-    instance = build_toppra(s, q, cap, vlim, alim)
-    dq = instance.path(s, 1)
-    ddq = instance.path(s, 2)
+    instance = build_toppra(s, q, cap, vlim, alim, free_end=not start_stop)
+    dq, ddq = instance.path(s, 1), instance.path(s, 2)
     if start_stop:
         sd_start = sd_end = 0.0
     else:
-        sd_max = _coasting_speed(cap, dq, ddq, vlim, alim)
-        sd_start, sd_end = min(sd_max[0], sd_max[1]), min(sd_max[-2], sd_max[-1])
+        with np.errstate(divide="ignore"):
+            sd_bound = np.min(vlim / np.abs(dq[[0, -1]]), axis=1)
+        sd_start, sd_end = np.minimum(cap[[0, -1]], sd_bound)
     speed = _solve_path_speed(instance, float(sd_start), float(sd_end))
 
     # ---- times, with sddot constant on each segment
@@ -383,7 +367,15 @@ def time_parameterise(
     qd = dq * speed[:, None]
     qdd = ddq * x[:, None] + dq * np.append(sdd, sdd[-1])[:, None]  # segment starting here
     qdd_left = ddq[1:] * x[1:, None] + dq[1:] * sdd[:, None]  # segment ending here
-    _verify(s, qd, (qdd, qdd_left), speed, cap, vlim, alim)
+    _verify(
+        s,
+        [
+            ("joint {} velocity", "rad/s", qd, vlim, _VELOCITY_SLACK_REL),
+            ("joint {} acceleration", "rad/s^2", qdd, alim, _ACCELERATION_SLACK_REL),
+            ("joint {} acceleration", "rad/s^2", qdd_left, alim, _ACCELERATION_SLACK_REL),
+            ("TCP speed", "m/s", speed[:, None], cap[:, None], _VELOCITY_SLACK_REL),
+        ],
+    )
 
     # ---- where and why the plan is slower than the demonstration
     ratio = speed / cap
@@ -402,21 +394,12 @@ def time_parameterise(
 
     elapsed = time.perf_counter() - t_start
     logger.info(
-        "timed %d waypoints: cycle time %.3f s, %d slow segment(s), tracking error %.1f %% (%.3f s)",
-        len(s),
-        t[-1],
-        len(segments),
-        100 * error_max,
-        elapsed,
+        "timed %d waypoints in %.3f s: cycle time %.3f s, %d slow segment(s), tracking error %.1f %%",
+        *(len(s), elapsed, t[-1], len(segments), 100 * error_max),
     )
     for seg in segments:
-        logger.debug(
-            "slow s = %.4f..%.4f m, min %.0f %% of demo: %s",
-            seg.s_start_m,
-            seg.s_end_m,
-            100 * seg.min_ratio,
-            seg.reason,
-        )
+        msg = "slow at s = %.4f..%.4f m, down to %.0f %% of the demo: %s"
+        logger.debug(msg, seg.s_start_m, seg.s_end_m, 100 * seg.min_ratio, seg.reason)
     return Timing(
         t=t,
         speed=speed,

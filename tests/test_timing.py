@@ -123,6 +123,16 @@ def test_without_start_stop_the_path_starts_and_ends_at_the_demonstrated_speed()
     assert tm.cycle_time_s == pytest.approx(1.0 / 0.05, rel=0.01)
 
 
+def test_without_start_stop_a_curved_start_is_entered_as_fast_as_the_limits_allow():
+    s = np.linspace(0.0, 1.0, 201)
+    q = np.column_stack([np.sin(8 * s), s])  # |q1''| up to 64 rad/m^2 near both ends
+    alim = np.array([0.5, 0.5])
+    tm = time_parameterise(s, q, np.full(len(s), 0.5), np.array([3.0, 3.0]), alim, start_stop=False)
+    assert 0.0 < tm.speed[0] < 0.5 and 0.0 < tm.speed[-1] < 0.5
+    assert all(seg.reason.startswith("joint acceleration") for seg in tm.slow_segments)
+    assert np.all(np.abs(tm.qdd) <= alim * (1 + 1e-3))
+
+
 def test_a_result_breaking_a_joint_limit_raises_solver_error(monkeypatch):
     s, q = smooth_path(seed=4)
     real = timing._solve_path_speed

@@ -7,7 +7,10 @@ waypoint, so the problem is block-banded and its size grows linearly with N:
 * hard: TCP position equal to the CAD point (3 rows, equality); joint limits shrunk by the margin
   (variable bounds);
 * bounded: orientation inside a cone around the demonstrated orientation (1 row; for an
-  axisymmetric tool only the tool axis is constrained), singularity measure above the margin (1 row);
+  axisymmetric tool only the tool axis is constrained), singularity measure above the margin (1 row,
+  on the waypoints of ``singular_waypoints`` only: the measure is a 6x6 determinant whose graph is
+  fifteen times the rest, so it is imposed where it can bind and the solver's outer loop adds
+  waypoints until the verified path keeps the margin everywhere);
 * cost: orientation deviation from the demonstration, plus joint smoothness (squared first and
   second differences along the path, per metre of path).
 
@@ -25,9 +28,9 @@ from typing import Any
 import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
-from refine.optimise.kinematics import fk_function, jacobian_function
 
 from refine.errors import InputError
+from refine.optimise.kinematics import fk_function, jacobian_function
 from refine.paths import FusedPath
 from refine.problem import Tolerances
 from refine.robot import Robot
@@ -64,10 +67,12 @@ class RefinementNLP:
         nlp: the CasADi problem dict (``x``, ``p``, ``f``, ``g``).
         params: numeric value of ``p`` (CAD points and demonstrated orientations).
         lbx, ubx: variable bounds (joint limits minus margin) [rad], shape (n·N,).
-        lbg, ubg: constraint bounds, shape (5·N,).
+        lbg, ubg: constraint bounds, shape (4·N + len(singular_waypoints),).
         n_waypoints, dof: sizes.
-        row_names: names of the 5 constraint rows of each waypoint, in order.
+        row_names: names of the 4 constraint rows of each waypoint, in order; the singularity
+            rows of ``singular_waypoints`` follow all of them.
         waypoint: the per-waypoint CasADi function (constraints and cost), for inspection.
+        singular_waypoints: the waypoints whose singularity measure is bounded.
         robot, base_in_world, tcp_in_flange, fused, tolerances: what it was built from.
         build_time_s: wall time of the build [s].
     """
@@ -89,27 +94,38 @@ class RefinementNLP:
     tolerances: Tolerances
     axisymmetric: bool
     weights: Weights = field(default_factory=Weights)
+    singular_waypoints: tuple[int, ...] = ()
     build_time_s: float = 0.0
 
+    def with_singular_waypoints(self, waypoints: tuple[int, ...]) -> RefinementNLP:
+        """The same problem with the singularity bound on ``waypoints`` (rebuilt, not solved)."""
+        return build_refinement(
+            self.robot,
+            self.fused,
+            self.base_in_world,
+            self.tcp_in_flange,
+            self.tolerances,
+            axisymmetric=self.axisymmetric,
+            weights=self.weights,
+            singular_waypoints=waypoints,
+        )
 
-ROW_NAMES = ("position x", "position y", "position z", "orientation cone", "singularity")
+
+ROW_NAMES = ("position x", "position y", "position z", "orientation cone")
 
 
 def waypoint_function(
     robot: Robot, base_in_world: Array, tcp_in_flange: Array, axisymmetric: bool
 ) -> ca.Function:
-    """Per-waypoint constraints ``g`` (5,) and orientation cost for joints ``q``.
+    """Per-waypoint constraints ``g`` (4,) and orientation cost for joints ``q``.
 
     Inputs: ``q`` (n,), ``p_ref`` (3,) CAD point [m], ``R_demo`` (9,) demonstrated rotation
-    (column-major). Outputs: ``g`` = [TCP position - p_ref (3), cone measure, singularity measure]
-    and ``cost`` = 1 - cos θ. The cone measure is cos θ (θ the angle between the orientations, or
-    between the tool axes for an axisymmetric tool); the singularity measure is the scaled
-    manipulability ``sqrt(det(Js Jsᵀ))`` with the Jacobian's linear rows divided by the reach.
+    (column-major). Outputs: ``g`` = [TCP position - p_ref (3), cos θ] and ``cost`` = 1 - cos θ,
+    θ the angle between the reached and demonstrated orientations (between the tool axes for an
+    axisymmetric tool).
     """
-    n = robot.nq
     fk = fk_function(robot, base_in_world, tcp_in_flange)
-    jac = jacobian_function(robot, base_in_world, tcp_in_flange)
-    q = ca.SX.sym("q", n)
+    q = ca.SX.sym("q", robot.nq)
     p_ref = ca.SX.sym("p_ref", 3)
     r_demo = ca.SX.sym("R_demo", 9)
     R_demo = ca.reshape(r_demo, 3, 3)
@@ -118,13 +134,24 @@ def waypoint_function(
         cos_theta = ca.dot(R[:, 2], R_demo[:, 2])
     else:
         cos_theta = (ca.trace(ca.mtimes(R_demo.T, R)) - 1.0) / 2.0
-    J = jac(q)
-    Js = ca.vertcat(J[:3, :] / robot.spec.reach_m, J[3:, :])
-    manipulability = ca.sqrt(ca.det(ca.mtimes(Js, Js.T)) + 1e-12)
-    g = ca.vertcat(p - p_ref, cos_theta, manipulability)
+    g = ca.vertcat(p - p_ref, cos_theta)
     return ca.Function(
         "waypoint", [q, p_ref, r_demo], [g, 1.0 - cos_theta], ["q", "p_ref", "R_demo"], ["g", "cost"]
     )
+
+
+def singularity_function(robot: Robot, base_in_world: Array, tcp_in_flange: Array) -> ca.Function:
+    """Scaled manipulability ``sqrt(det(Js Jsᵀ))`` of joints ``q`` [-].
+
+    ``Js`` is the TCP Jacobian with its linear rows divided by the robot's reach, so both halves are
+    unitless and the measure compares across robots.
+    """
+    jac = jacobian_function(robot, base_in_world, tcp_in_flange)
+    q = ca.SX.sym("q", robot.nq)
+    J = jac(q)
+    Js = ca.vertcat(J[:3, :] / robot.spec.reach_m, J[3:, :])
+    w = ca.sqrt(ca.det(ca.mtimes(Js, Js.T)) + 1e-12)
+    return ca.Function("singularity", [q], [w], ["q"], ["w"])
 
 
 def build_refinement(
@@ -136,6 +163,7 @@ def build_refinement(
     *,
     axisymmetric: bool = False,
     weights: Weights | None = None,
+    singular_waypoints: tuple[int, ...] = (),
 ) -> RefinementNLP:
     """Build the refinement NLP for ``fused`` on ``robot`` (no solve).
 
@@ -147,6 +175,7 @@ def build_refinement(
         tolerances: orientation cone [deg], joint margin [deg], singularity margin [-].
         axisymmetric: leave the spin about the tool axis free.
         weights: cost weights (defaults of :class:`Weights`).
+        singular_waypoints: waypoints whose singularity measure is bounded below by the margin.
 
     Returns:
         The problem with bounds and parameters filled in.
@@ -172,6 +201,13 @@ def build_refinement(
     # ---- path constraints and orientation cost, mapped over the waypoints
     waypoint = waypoint_function(robot, base_in_world, tcp_in_flange, axisymmetric)
     G, cost = waypoint.map(N)(Q, P_ref, R_demo)
+    singular = tuple(sorted(set(int(k) for k in singular_waypoints)))
+    if singular and not 0 <= singular[0] <= singular[-1] < N:
+        raise InputError(f"singular_waypoints must lie in [0, {N}), got {singular[0]}..{singular[-1]}")
+    rows = [ca.vec(G)]
+    if singular:
+        W = singularity_function(robot, base_in_world, tcp_in_flange).map(len(singular))(Q[:, list(singular)])
+        rows.append(ca.vec(W))
 
     # ---- objective: orientation deviation + joint smoothness per metre of path
     h = float(np.mean(np.diff(fused.s)))
@@ -185,8 +221,9 @@ def build_refinement(
 
     # ---- bounds
     cos_alpha = math.cos(math.radians(tolerances.orientation_deg))
-    lbg_k = np.array([0.0, 0.0, 0.0, cos_alpha, tolerances.singularity_margin])
-    ubg_k = np.array([0.0, 0.0, 0.0, 1.0 + 1e-9, np.inf])
+    lbg_k = np.array([0.0, 0.0, 0.0, cos_alpha])
+    ubg_k = np.array([0.0, 0.0, 0.0, 1.0 + 1e-9])
+    n_s = len(singular)
     # CasADi vectorises column-major: Q[:, k] is x[k*n:(k+1)*n] and R_demo[:, k] is R_k column-major.
     params = np.concatenate(
         [fused.positions.ravel(), np.transpose(fused.rotations, (0, 2, 1)).reshape(N, 9).ravel()]
@@ -195,15 +232,15 @@ def build_refinement(
         "x": ca.vec(Q),
         "p": ca.vertcat(ca.vec(P_ref), ca.vec(R_demo)),
         "f": f,
-        "g": ca.vec(G),
+        "g": ca.vertcat(*rows),
     }
     return RefinementNLP(
         nlp=nlp,
         params=params,
         lbx=np.tile(lower, N),
         ubx=np.tile(upper, N),
-        lbg=np.tile(lbg_k, N),
-        ubg=np.tile(ubg_k, N),
+        lbg=np.concatenate([np.tile(lbg_k, N), np.full(n_s, tolerances.singularity_margin)]),
+        ubg=np.concatenate([np.tile(ubg_k, N), np.full(n_s, np.inf)]),
         n_waypoints=N,
         dof=n,
         row_names=ROW_NAMES,
@@ -215,5 +252,6 @@ def build_refinement(
         tolerances=tolerances,
         axisymmetric=axisymmetric,
         weights=weights,
+        singular_waypoints=singular,
         build_time_s=time.perf_counter() - t0,
     )

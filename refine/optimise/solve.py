@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from refine.errors import SolverError
 from refine.optimise.problem import RefinementNLP
 from refine.optimise.seed import TcpKinematics, ik_chain, start_candidates
-from refine.optimise.verify import PathCheck, check_path
+from refine.optimise.verify import PathCheck, check_path, singularity_measures
 
 log = logging.getLogger(__name__)
 
@@ -39,6 +39,19 @@ IPOPT_DEFAULTS: dict[str, Any] = {
     "ipopt.warm_start_mult_bound_push": 1e-9,
 }
 
+MAX_OUTER_ITERATIONS = 5
+"""Rounds of solve -> verify -> add singularity rows before giving up on adding more."""
+
+
+def _near_singular(kin: TcpKinematics, q: Array, margin: float, active: tuple[int, ...]) -> tuple[int, ...]:
+    """Waypoints not in ``active`` with a singularity measure under 1.5x the margin, widened by two."""
+    w, _ = singularity_measures(kin, q)
+    near = np.flatnonzero(w < 1.5 * margin)
+    if near.size == 0:
+        return ()
+    widened = np.unique(np.clip(near[:, None] + np.arange(-2, 3), 0, len(q) - 1))
+    return tuple(sorted(set(widened.tolist()) - set(active)))
+
 
 @dataclass(frozen=True)
 class Refinement:
@@ -51,7 +64,9 @@ class Refinement:
         q_seed: the IK seed the solver started from [rad], shape (N, n).
         check: the numeric verification of ``q``.
         solver_status: IPOPT's return status.
-        iterations: IPOPT iterations.
+        iterations: IPOPT iterations, summed over the outer rounds.
+        outer_iterations: solve -> verify rounds.
+        singular_waypoints: waypoints that carried the singularity bound in the last round.
         timings_s: ``seed``, ``solve``, ``verify`` wall times [s].
     """
 
@@ -62,6 +77,8 @@ class Refinement:
     check: PathCheck
     solver_status: str
     iterations: int
+    outer_iterations: int = 1
+    singular_waypoints: tuple[int, ...] = ()
     timings_s: dict[str, float] = field(default_factory=dict)
 
 
@@ -101,28 +118,45 @@ def solve_refinement(
     q_seed = initial_guess(problem, home) if q0 is None else np.asarray(q0, dtype=float)
     timings["seed"] = time.perf_counter() - t0
 
-    t0 = time.perf_counter()
-    opts = {**IPOPT_DEFAULTS, **(solver_options or {})}
-    solver = ca.nlpsol("refine", "ipopt", problem.nlp, opts)
-    try:
-        sol = solver(
-            x0=q_seed.ravel(),
-            p=problem.params,
-            lbx=problem.lbx,
-            ubx=problem.ubx,
-            lbg=problem.lbg,
-            ubg=problem.ubg,
-        )
-    except RuntimeError as e:
-        raise SolverError(f"IPOPT failed to run: {e}") from e
-    stats = solver.stats()
-    timings["solve"] = time.perf_counter() - t0
-    q = np.asarray(sol["x"]).reshape(problem.n_waypoints, problem.dof)
-
-    t0 = time.perf_counter()
     kin = TcpKinematics(problem.robot, problem.base_in_world, problem.tcp_in_flange)
-    check = check_path(kin, q, problem.fused, problem.tolerances, problem.axisymmetric)
-    timings["verify"] = time.perf_counter() - t0
+    margin = problem.tolerances.singularity_margin
+    if margin > 0 and not problem.singular_waypoints:
+        near = _near_singular(kin, q_seed, margin, ())
+        if near:
+            problem = problem.with_singular_waypoints(near)
+
+    opts = {**IPOPT_DEFAULTS, **(solver_options or {})}
+    q_start, iterations, timings["solve"], timings["verify"] = q_seed, 0, 0.0, 0.0
+    outer = 0
+    while outer < MAX_OUTER_ITERATIONS:
+        outer += 1
+        t0 = time.perf_counter()
+        solver = ca.nlpsol("refine", "ipopt", problem.nlp, opts)
+        try:
+            sol = solver(
+                x0=q_start.ravel(),
+                p=problem.params,
+                lbx=problem.lbx,
+                ubx=problem.ubx,
+                lbg=problem.lbg,
+                ubg=problem.ubg,
+            )
+        except RuntimeError as e:
+            raise SolverError(f"IPOPT failed to run: {e}") from e
+        stats = solver.stats()
+        iterations += int(stats.get("iter_count", 0))
+        timings["solve"] += time.perf_counter() - t0
+        q = np.asarray(sol["x"]).reshape(problem.n_waypoints, problem.dof)
+
+        t0 = time.perf_counter()
+        check = check_path(kin, q, problem.fused, problem.tolerances, problem.axisymmetric)
+        timings["verify"] += time.perf_counter() - t0
+        missing = _near_singular(kin, q, margin, problem.singular_waypoints) if margin > 0 else ()
+        if not missing:
+            break
+        log.info("singularity bound added on %d more waypoints; solving again", len(missing))
+        problem = problem.with_singular_waypoints(problem.singular_waypoints + missing)
+        q_start = q
 
     solver_status = str(stats.get("return_status", "unknown"))
     if solver_status in {"Invalid_Option", "Invalid_Problem_Definition", "Insufficient_Memory"}:
@@ -139,7 +173,7 @@ def solve_refinement(
     log.info(
         "refinement %s after %d IPOPT iterations (seed %.3f s, solve %.3f s)",
         status,
-        stats.get("iter_count", -1),
+        iterations,
         timings["seed"],
         timings["solve"],
     )
@@ -150,6 +184,8 @@ def solve_refinement(
         q_seed=q_seed,
         check=check,
         solver_status=solver_status,
-        iterations=int(stats.get("iter_count", -1)),
+        iterations=iterations,
+        outer_iterations=outer,
+        singular_waypoints=problem.singular_waypoints,
         timings_s=timings,
     )

@@ -91,6 +91,23 @@ def _runs(mask: Array) -> list[tuple[int, int]]:
     return list(zip(starts.tolist(), ends.tolist(), strict=True))
 
 
+def singularity_measures(kin: TcpKinematics, q: Array) -> tuple[Array, Array]:
+    """Scaled manipulability and smallest singular value of the scaled TCP Jacobian per row of ``q``.
+
+    The Jacobian's linear rows are divided by the robot's reach so both halves are unitless.
+
+    Returns:
+        ``sqrt(det(Js Jsᵀ))`` (N,) and the smallest singular value of ``Js`` (N,) [-]
+        (0 for a robot with fewer than 6 joints).
+    """
+    scale = np.array([1.0 / kin.robot.spec.reach_m] * 3 + [1.0] * 3)[:, None]
+    Js = np.stack([scale * kin.jacobian(qk) for qk in np.atleast_2d(q)])
+    sv = np.linalg.svd(Js, compute_uv=False)
+    w = np.sqrt(np.clip(np.linalg.det(Js @ np.swapaxes(Js, 1, 2)), 0.0, None))
+    smin = sv[:, -1] if Js.shape[2] >= 6 else np.zeros(len(Js))
+    return w, smin
+
+
 def check_path(
     kin: TcpKinematics, q: Array, fused: FusedPath, tolerances: Tolerances, axisymmetric: bool
 ) -> PathCheck:
@@ -105,14 +122,7 @@ def check_path(
     spec = kin.robot.spec
     margins = np.minimum(q - spec.lower, spec.upper - q)
     joint_margin = margins.min(axis=1)
-    scale = np.array([1.0 / spec.reach_m] * 3 + [1.0] * 3)[:, None]
-    sing = np.empty(len(q))
-    smin = np.empty(len(q))
-    for k, qk in enumerate(q):
-        Js = scale * kin.jacobian(qk)
-        sv = np.linalg.svd(Js, compute_uv=False)
-        smin[k] = sv[-1] if Js.shape[1] >= 6 else 0.0
-        sing[k] = math.sqrt(max(float(np.linalg.det(Js @ Js.T)), 0.0))
+    sing, smin = singularity_measures(kin, q)
 
     s = fused.s
     violations: list[Violation] = []

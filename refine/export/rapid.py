@@ -1,0 +1,242 @@
+"""ABB RAPID module: the refined path as ``MoveL`` instructions through ``robtarget`` constants.
+
+What the module holds, in order:
+
+* ``PERS tooldata``: the TCP in the flange (mm, quaternion ``[q1, q2, q3, q4]`` scalar first),
+  the tool mass [kg] and centre of gravity [mm].
+* ``PERS wobjdata``: its user frame is the world frame {F} in the robot base frame,
+  ``inv(base_in_world)``, so every ``robtarget`` is a TCP pose in {F}. This assumes the controller's
+  world frame is the robot base (no base frame configured in the controller).
+* ``CONST speeddata``: one per distinct segment speed; a segment's ``v_tcp`` is the mean of the
+  planned speeds at its two ends [mm/s]. ``v_ori``, ``v_leax``, ``v_reax`` take ABB's values for the
+  predefined ``v100``..``v1000`` (500 deg/s, 5000 mm/s, 1000 deg/s).
+* ``CONST robtarget``: one per waypoint, in path order, from ``trajectory.poses``; ``robconf``
+  from ``trajectory.q`` (:func:`abb_confdata`); external axes unused (``9E+09``).
+* ``PROC main``: ``MoveJ`` to a point ``retract`` behind the first target along the tool z axis,
+  ``MoveL`` onto it (``fine``), the process output on, ``MoveL`` through every target (small zone,
+  ``fine`` at the last), the output off, and a ``MoveL`` retract along the tool z axis.
+
+Configuration data (RAPID Technical Reference Manual, data type ``confdata``): ``cf1``, ``cf4``,
+``cf6`` are the quadrants of axes 1, 4, 6: quadrant 0 is [0, 90) deg, 1 is [90, 180), -1 is
+[-90, 0), -2 is [-180, -90), i.e. ``floor(q / 90 deg)``. ``cfx`` numbers the eight arm
+configurations of a serial six-axis robot: ``4·b1 + 2·b2 + b3`` where ``b1`` = 1 when the wrist
+centre is behind axis 1, ``b2`` = 1 when it is behind the lower arm, ``b3`` = 1 when axis 5 is
+negative (manual's table: 0 = front/front/positive ... 7 = behind/behind/negative).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import NDArray
+
+from refine import __version__
+from refine.errors import InputError
+from refine.frames import continuous_quaternions, invert_transform, quaternion_from_matrix
+from refine.paths import Array, Trajectory
+from refine.problem import Problem
+
+log = logging.getLogger(__name__)
+
+_EXTAX = "[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]"
+_SPEED_TAIL = "500,5000,1000"  # v_ori [deg/s], v_leax [mm/s], v_reax [deg/s]
+
+
+def _identifier(text: str, fallback: str) -> str:
+    """A RAPID identifier: letters, digits, underscores, a letter first, at most 32 characters."""
+    name = re.sub(r"[^A-Za-z0-9_]", "_", text)
+    if not name or not name[0].isalpha():
+        name = f"{fallback}_{name}".rstrip("_")
+    return name[:32]
+
+
+def _num(value: float, decimals: int) -> str:
+    text = f"{value:.{decimals}f}"
+    return "0" if float(text) == 0.0 else text.rstrip("0").rstrip(".")
+
+
+def _pose(T: Array) -> str:
+    """``[[x,y,z],[q1,q2,q3,q4]]`` with x, y, z in mm."""
+    trans = ",".join(_num(v * 1000.0, 4) for v in T[:3, 3])
+    quat = ",".join(_num(v, 9) for v in quaternion_from_matrix(T[:3, :3]))
+    return f"[[{trans}],[{quat}]]"
+
+
+def abb_confdata(robot: Any, q: Array) -> NDArray[np.int64]:
+    """ABB configuration data ``[cf1, cf4, cf6, cfx]`` of joint vectors (see the module docstring).
+
+    The geometry comes from the robot model: the wrist centre is the origin of joint 5 (axes 4, 5,
+    6 intersect there); "in front of axis 1" means a positive x in the frame of joint 1 (the arm
+    points along x at zero); "in front of the lower arm" means on the side of the plane through
+    axes 2 and 3 that ``axis2 × (joint 3 - joint 2)`` points to, which is forward for ABB's
+    positive-forward axis 2.
+
+    Args:
+        robot: a :class:`refine.robot.Robot` with six joints (an ABB serial arm).
+        q: joint positions [rad], shape (N, 6) or (6,).
+
+    Returns:
+        Integer configuration data, shape (N, 4) (or (4,) for a single q).
+    """
+    q = np.asarray(q, dtype=float)
+    single = q.ndim == 1
+    qs = np.atleast_2d(q)
+    if qs.shape[1] != 6 or robot.nq != 6:
+        raise InputError(f"ABB confdata needs a six-axis robot and q of shape (N, 6), got "
+                         f"{robot.spec.name!r} with q {q.shape}")
+    conf = np.zeros((len(qs), 4), dtype=np.int64)
+    conf[:, :3] = np.floor(np.degrees(qs[:, [0, 3, 5]]) / 90.0)
+    model, data = robot.model, robot.data
+    for k, qk in enumerate(qs):
+        pin.computeJointJacobians(model, data, qk)
+        p2, p3 = data.oMi[2].translation, data.oMi[3].translation
+        wrist = data.oMi[5].translation
+        axis2 = pin.getJointJacobian(model, data, 2, pin.LOCAL_WORLD_ALIGNED)[3:, 1]
+        behind_axis1 = (data.oMi[1].rotation.T @ (wrist - data.oMi[1].translation))[0] < 0.0
+        behind_lower_arm = float(np.dot(wrist - p2, np.cross(axis2, p3 - p2))) < 0.0
+        conf[k, 3] = 4 * int(behind_axis1) + 2 * int(behind_lower_arm) + int(qk[4] < 0.0)
+    return conf[0] if single else conf
+
+
+def segment_speeds(trajectory: Trajectory) -> Array:
+    """Planned speed of each segment k -> k+1 [m/s], shape (N-1,): mean of its end speeds."""
+    return 0.5 * (trajectory.speed[:-1] + trajectory.speed[1:])
+
+
+def write_rapid(path: str | Path, trajectory: Trajectory, problem: Problem, robot: Any, *,
+                zone: str = "z1", approach_speed_m_s: float = 0.25,
+                retract_m: float = 0.1) -> Path:
+    """Write the trajectory as an ABB RAPID module (``.mod``).
+
+    Args:
+        path: output file; the module is named after the problem.
+        trajectory: the refined, timed path (poses in {F}, joints for the configuration data).
+        problem: tool data, robot base, process output.
+        robot: the :class:`refine.robot.Robot` the joints belong to (six-axis ABB).
+        zone: zone between path targets (``"z0"``, ``"z1"``, ...); the last target is ``fine``.
+        approach_speed_m_s: TCP speed of the approach and retract moves [m/s].
+        retract_m: approach and retract distance along the tool z axis [m].
+
+    Returns:
+        The path written.
+    """
+    path = Path(path)
+    n = len(trajectory)
+    if n < 2:
+        raise InputError(f"RAPID export needs at least 2 waypoints, got {n}")
+    if getattr(robot.spec, "controller", "abb") != "abb":
+        raise InputError(f"RAPID is for ABB robots; {robot.spec.name!r} has controller "
+                         f"{robot.spec.controller!r}")
+    if not re.fullmatch(r"z\d+", zone):
+        raise InputError(f"RAPID zone must be z0, z1, z5, ..., got {zone!r}")
+    module = _identifier(problem.name, "m")
+    tool = _identifier(problem.tool.name, "t")
+    wobj = "wobjWorld"
+    output = _identifier(problem.process.output, "do")
+    tool_t = problem.tool
+    cog = ",".join(_num(v * 1000.0, 4) for v in tool_t.cog_in_flange_m)
+
+    conf = abb_confdata(robot, trajectory.q)
+    quats = continuous_quaternions(quaternion_from_matrix(trajectory.poses[:, :3, :3]))
+    width = max(4, len(str(n - 1)))
+    names = [f"p{k:0{width}d}" for k in range(n)]
+
+    speed_names: dict[str, str] = {}
+    seg_speed = []
+    for v in segment_speeds(trajectory):
+        text = _num(v * 1000.0, 3)
+        seg_speed.append(speed_names.setdefault(text, f"vPath{len(speed_names) + 1}"))
+    retract_mm = _num(retract_m * 1000.0, 3)
+
+    lines = [
+        f"MODULE {module}",
+        f"    ! Written by refine {__version__} for problem '{problem.name}', robot "
+        f"{problem.robot.model}, {n} targets, {float(trajectory.t[-1]):.3f} s planned.",
+        f"    ! Targets: TCP poses in the world frame {{F}} ({wobj}); trans [mm], "
+        "rot [q1,q2,q3,q4], robconf [cf1,cf4,cf6,cfx] of the refined joints.",
+        f"    PERS tooldata {tool}:=[TRUE,{_pose(tool_t.tcp_in_flange)},"
+        f"[{_num(tool_t.mass_kg, 3)},[{cog}],[1,0,0,0],0,0,0]];",
+        f"    PERS wobjdata {wobj}:=[FALSE,TRUE,\"\","
+        f"{_pose(invert_transform(problem.robot.base_in_world))},[[0,0,0],[1,0,0,0]]];",
+        f"    CONST speeddata vAir:=[{_num(approach_speed_m_s * 1000.0, 3)},{_SPEED_TAIL}];",
+    ]
+    lines += [f"    CONST speeddata {name}:=[{text},{_SPEED_TAIL}];"
+              for text, name in speed_names.items()]
+    for k in range(n):
+        trans = ",".join(_num(v * 1000.0, 4) for v in trajectory.poses[k, :3, 3])
+        rot = ",".join(_num(v, 9) for v in quats[k])
+        cf = ",".join(str(int(c)) for c in conf[k])
+        lines.append(f"    CONST robtarget {names[k]}:=[[{trans}],[{rot}],[{cf}],{_EXTAX}];")
+
+    move_tail = f"{tool}\\WObj:={wobj};"
+    lines += [
+        "",
+        "    PROC main()",
+        "        ConfJ\\On;",
+        "        ConfL\\On;",
+        f"        MoveJ RelTool({names[0]},0,0,-{retract_mm}),vAir,z10,{move_tail}",
+        f"        MoveL {names[0]},vAir,fine,{move_tail}",
+        f"        SetDO {output},1;",
+    ]
+    for k in range(1, n):
+        z = "fine" if k == n - 1 else zone
+        lines.append(f"        MoveL {names[k]},{seg_speed[k - 1]},{z},{move_tail}")
+    lines += [
+        f"        SetDO {output},0;",
+        f"        MoveL RelTool({names[-1]},0,0,-{retract_mm}),vAir,z10,{move_tail}",
+        "    ENDPROC",
+        "ENDMODULE",
+    ]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    log.info("wrote RAPID module %s: %d targets, %d speeddata", path, n, len(speed_names))
+    return path
+
+
+_NUMS = r"\[([^\[\]]*)\]"
+_TARGET_RE = re.compile(rf"CONST\s+robtarget\s+(\w+)\s*:=\s*\[\s*{_NUMS}\s*,\s*{_NUMS}\s*,\s*"
+                        rf"{_NUMS}\s*,\s*{_NUMS}\s*\]\s*;")
+_SPEED_RE = re.compile(rf"CONST\s+speeddata\s+(\w+)\s*:=\s*{_NUMS}\s*;")
+_MOVE_RE = re.compile(r"\bMove[LJ]\s+(\w+)\s*,\s*(\w+)\s*,")
+
+
+def _floats(text: str, count: int, where: str) -> list[float]:
+    values = [float(v) for v in text.split(",")]
+    if len(values) != count:
+        raise InputError(f"RAPID {where}: expected {count} numbers, got {len(values)}")
+    return values
+
+
+def parse_rapid_targets(path: str | Path) -> tuple[Array, Array, NDArray[np.int64], Array]:
+    """Read back the targets of a module written by :func:`write_rapid`.
+
+    Returns:
+        positions [m], shape (N, 3); quaternions (q1..q4, scalar first), shape (N, 4);
+        configuration data, shape (N, 4); speeds [m/s], shape (N,): ``v_tcp`` of the first move
+        instruction that ends at each target (NaN if none does).
+
+    Raises:
+        InputError: no robtarget in the file or a malformed one.
+    """
+    text = Path(path).read_text(encoding="utf-8")
+    speeds = {m.group(1): _floats(m.group(2), 4, m.group(1))[0] / 1000.0
+              for m in _SPEED_RE.finditer(text)}
+    targets = list(_TARGET_RE.finditer(text))
+    if not targets:
+        raise InputError(f"RAPID {path}: no CONST robtarget found")
+    index = {m.group(1): k for k, m in enumerate(targets)}
+    positions = np.array([_floats(m.group(2), 3, m.group(1)) for m in targets]) / 1000.0
+    quats = np.array([_floats(m.group(3), 4, m.group(1)) for m in targets])
+    confs = np.array([[int(v) for v in _floats(m.group(4), 4, m.group(1))] for m in targets])
+    target_speed = np.full(len(targets), math.nan)
+    for m in _MOVE_RE.finditer(text):
+        k = index.get(m.group(1))
+        if k is not None and math.isnan(target_speed[k]):
+            target_speed[k] = speeds.get(m.group(2), math.nan)
+    return positions, quats, confs.astype(np.int64), target_speed

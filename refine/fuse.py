@@ -1,0 +1,293 @@
+"""Align a demonstration to the CAD path: demonstrated tool orientation and speed per waypoint.
+
+Method (all in the receiver frame {S}, where the tracker's error lives; distances are frame-free):
+
+1. Demonstrated TCP poses ``T_F_TCP = T_F_S @ T_S_E @ inv(T_TCP_E)``.
+2. Coarse alignment by monotone dynamic time warping (DTW) between the demo TCP positions, from
+   ``PRE_MOTION_S`` before ``motion_start``, box-averaged and resampled in time so that a demo row
+   advances about half a CAD step at the mean speed, and the CAD points, thinned to at most
+   ``DTW_MAX_POINTS``. Each demo row may advance the CAD index by 0, 1 or 2; the first row is matched
+   to the CAD start, the last to the CAD end. The recursion is vectorised per row with numpy.
+3. Tracker distortion (``fit_distortion``): a quadratic polynomial in the sensor position in {S}
+   (10 terms per axis) is added to the positions. It is fitted by ridge-damped, Huber-weighted
+   least squares on the *cross-track* part of the residual only (point-to-line, as in ICP): the
+   along-track part of a residual is the alignment's own guess, while a smooth field seen
+   cross-track on one stretch of path is along-track elsewhere, so it is recovered there too.
+   Three fit/re-project rounds after each of two DTW passes, then a final DTW pass.
+4. Every demo sample is projected onto the CAD polyline near its match, giving its arc length
+   ``s_i``; ``isotonic_regression`` makes the sequence monotone. For each waypoint ``s`` the samples
+   whose (monotone) arc length lies within ``s ± speed_smoothing_m / 2`` are fitted by least squares
+   with a line ``s_i ≈ s̄ + v (t_i - t̄)``: ``v`` is the demonstrated speed along the CAD path and
+   ``t(s) = t̄ + (s - s̄) / v`` (clipped to the window, then made strictly increasing) the matched
+   demo time. Speeds below ``SPEED_FLOOR_FRACTION`` of the median speed (the start pause and the
+   ramps) are raised to that floor, so every speed is > 0.
+5. Tool orientation at ``t(s)`` by ``scipy`` ``Slerp`` over the demo TCP rotations.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.ndimage import uniform_filter1d
+from scipy.optimize import isotonic_regression
+from scipy.spatial.distance import cdist
+from scipy.spatial.transform import Rotation, Slerp
+
+from refine.errors import InputError
+from refine.frames import check_transform, invert_transform, transform_points
+from refine.paths import CadPath, Demonstration, FusedPath
+
+logger = logging.getLogger(__name__)
+Array = NDArray[np.float64]
+
+PRE_MOTION_S = 0.5  # demo kept before motion_start [s]
+DTW_MAX_POINTS = 600  # CAD points used by the DTW at most
+SPEED_FLOOR_FRACTION = 0.1  # speed floor as a fraction of the median demonstrated speed
+MAX_MEDIAN_RESIDUAL_M = 0.1  # median demo-to-CAD distance above which the demo is rejected [m]
+MAX_HAND_SPEED_M_S = 2.0  # mean speed above which a demonstration is implausible [m/s]
+_FIT_ROUNDS = (3, 3, 0)  # distortion fit/re-project rounds after each DTW pass
+
+
+@dataclass(frozen=True)
+class Alignment:
+    """The demonstration matched to the CAD waypoints.
+
+    Attributes:
+        t: demo time matched to each waypoint [s], shape (N,), strictly increasing.
+        speed: demonstrated speed along the CAD path [m/s], shape (N,), >= speed_floor.
+        speed_floor: the floor applied to ``speed`` [m/s].
+        residual: distance between the corrected demo TCP at ``t`` and the CAD point [m], shape (N,).
+        raw_median_residual: median demo-to-path distance before any distortion correction [m].
+        max_correction: largest fitted tracker position correction on the demo [m].
+    """
+
+    t: Array
+    speed: Array
+    speed_floor: float
+    residual: Array
+    raw_median_residual: float
+    max_correction: float
+
+
+def demo_tcp_poses(demo: Demonstration, source_in_world: ArrayLike, sensor_in_tcp: ArrayLike) -> Array:
+    """Demonstrated TCP poses ``T_F_TCP = T_F_S @ T_S_E @ inv(T_TCP_E)``, shape (M, 4, 4)."""
+    T_F_S = check_transform(source_in_world, "source_in_world")
+    T_TCP_E = check_transform(sensor_in_tcp, "sensor_in_tcp")
+    T_S_E = np.zeros((len(demo.t), 4, 4))
+    T_S_E[:, :3, :3], T_S_E[:, :3, 3], T_S_E[:, 3, 3] = demo.rotations, demo.positions, 1.0
+    return T_F_S @ T_S_E @ invert_transform(T_TCP_E)
+
+
+def monotone_dtw(cost: Array) -> NDArray[np.intp]:
+    """Monotone DTW: the column matched to each row, first row to column 0, last to the last.
+
+    Args:
+        cost: matching cost, shape (M, N); each row may advance the column by 0, 1 or 2.
+
+    Returns:
+        Column index per row, shape (M,), non-decreasing.
+
+    Raises:
+        InputError: when M rows cannot reach the last column (M < (N - 1) / 2 + 1).
+    """
+    m, n = cost.shape
+    D = np.full((m, n), np.inf)
+    D[0, 0] = cost[0, 0]
+    for i in range(1, m):
+        prev, row = D[i - 1], D[i]
+        row[:] = prev
+        np.minimum(row[1:], prev[:-1], out=row[1:])
+        np.minimum(row[2:], prev[:-2], out=row[2:])
+        row += cost[i]
+    if not np.isfinite(D[-1, -1]):
+        raise InputError(f"DTW: {m} demo rows cannot cover {n} path points (need >= {(n + 1) // 2})")
+    cols = np.empty(m, dtype=np.intp)
+    j = cols[-1] = n - 1
+    for i in range(m - 1, 0, -1):
+        lo = max(j - 2, 0)
+        j = lo + int(np.argmin(D[i - 1, lo : j + 1]))
+        cols[i - 1] = j
+    return cols
+
+
+def _project(points: Array, centre_s: Array, cad_s: Array, cad: Array, radius: float):
+    """Closest point on the CAD polyline within ``radius`` [m] of arc length around ``centre_s``."""
+    n_seg = len(cad_s) - 1
+    k = min(int(np.ceil(radius / np.median(np.diff(cad_s)))) + 1, n_seg)
+    seg0 = np.clip(np.searchsorted(cad_s, centre_s) - 1, 0, n_seg - 1)
+    seg = np.clip(seg0[:, None] + np.arange(-k, k + 1), 0, n_seg - 1)
+    A, AB = cad[seg], cad[seg + 1] - cad[seg]
+    u = np.clip(np.einsum("mkd,mkd->mk", points[:, None] - A, AB) / np.sum(AB**2, axis=-1), 0, 1)
+    foot = A + u[..., None] * AB
+    best = np.argmin(np.sum((points[:, None] - foot) ** 2, axis=-1), axis=1)
+    rows = np.arange(len(points))
+    seg, u, foot, AB = seg[rows, best], u[rows, best], foot[rows, best], AB[rows, best]
+    s = cad_s[seg] + u * (cad_s[seg + 1] - cad_s[seg])
+    tangent = AB / np.linalg.norm(AB, axis=1, keepdims=True)
+    return s, foot, tangent, np.linalg.norm(points - foot, axis=1)
+
+
+def _basis(q: Array, centre: Array, scale: float) -> Array:
+    """Quadratic monomials of normalised positions, shape (M, 10)."""
+    x, y, z = ((q - centre) / scale).T
+    return np.stack([np.ones_like(x), x, y, z, x * x, y * y, z * z, x * y, x * z, y * z], axis=1)
+
+
+def _fit_distortion(phi: Array, p: Array, foot: Array, tangent: Array, dist: Array) -> Array:
+    """Coefficients W (10, 3) minimising the Huber-weighted cross-track part of p + phi W - foot."""
+    scale = 1.4826 * np.median(dist) + 1e-4
+    w = np.minimum(1.0, 2.0 * scale / np.maximum(dist, 1e-12))
+    P = np.eye(3) - tangent[:, :, None] * tangent[:, None, :]  # projector onto the normal plane
+    nk = phi.shape[1]
+    N = np.einsum("i,ik,il,iab->kalb", w, phi, phi, P).reshape(3 * nk, 3 * nk)
+    rhs = np.einsum("i,ik,iab,ib->ka", w, phi, P, foot - p).reshape(-1)
+    N[np.diag_indices_from(N)] += 1e-3 * np.trace(N) / len(N)
+    return np.linalg.solve(N, rhs).reshape(nk, 3)
+
+
+def _time_law(t: Array, s_raw: Array, s_mono: Array, cad_s: Array, width: float):
+    """Windowed least-squares line s ≈ s̄ + v (t - t̄) per waypoint: (speed, matched time)."""
+    m = len(t)
+    lo = np.minimum(np.searchsorted(s_mono, cad_s - width / 2, "left"), m - 3)
+    hi = np.maximum(np.searchsorted(s_mono, cad_s + width / 2, "right"), lo + 3)
+    tc = t - t.mean()
+    sums = [np.concatenate([[0.0], np.cumsum(x)]) for x in (tc, s_raw, tc * tc, tc * s_raw)]
+    St, Ss, Stt, Sts = (c[hi] - c[lo] for c in sums)
+    n = (hi - lo).astype(float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        v = (n * Sts - St * Ss) / (n * Stt - St**2)
+        t_fit = t.mean() + St / n + (cad_s - Ss / n) / v
+    ok = np.isfinite(v) & (v > 0)
+    t_fit = np.where(ok, t_fit, 0.5 * (t[lo] + t[hi - 1]))
+    t_fit = np.maximum.accumulate(np.clip(t_fit, t[lo], t[hi - 1]))
+    t_fit += 1e-9 * np.arange(len(t_fit))  # strictly increasing; 1 ns per waypoint is harmless
+    return np.where(ok, v, np.nan), t_fit
+
+
+def align(
+    cad: CadPath,
+    demo: Demonstration,
+    source_in_world: ArrayLike,
+    sensor_in_tcp: ArrayLike,
+    *,
+    speed_smoothing_m: float = 0.03,
+    fit_distortion: bool = True,
+) -> Alignment:
+    """Match every CAD waypoint to a demonstration time (see the module docstring for the method).
+
+    Args:
+        cad: the CAD path in {F}.
+        demo: the cleaned demonstration (sensor {E} in the receiver {S}).
+        source_in_world: receiver pose in the world, T_F_S, shape (4, 4).
+        sensor_in_tcp: sensor pose in the tool frame, T_TCP_E, shape (4, 4).
+        speed_smoothing_m: arc-length window of the speed and time fit [m], > 0.
+        fit_distortion: fit and remove a smooth tracker position error before the final match.
+
+    Raises:
+        InputError: bad arguments, or a demonstration that does not cover the path.
+    """
+    if not speed_smoothing_m > 0.0:
+        raise InputError(f"speed_smoothing_m must be > 0 m, got {speed_smoothing_m}")
+    T_S_F = invert_transform(check_transform(source_in_world, "source_in_world"))
+    T_E_TCP = invert_transform(check_transform(sensor_in_tcp, "sensor_in_tcp"))
+    i0 = int(np.searchsorted(demo.t, demo.t[demo.motion_start] - PRE_MOTION_S))
+    t, q = demo.t[i0:], demo.positions[i0:]
+    if len(t) < 10 or np.any(np.diff(t) <= 0.0):
+        raise InputError(f"demo {demo.source!r}: need >= 10 samples with strictly increasing "
+                         f"times from motion start, got {len(t)}")
+    p = q + np.einsum("mij,j->mi", demo.rotations[i0:], T_E_TCP[:3, 3])  # TCP in {S}
+    cad_s, cad_S, L = cad.s, transform_points(T_S_F, cad.positions), cad.length
+
+    # ---- coarse grids: CAD thinned for the DTW, demo resampled to ~half a coarse step per row
+    cols = np.unique(np.r_[np.arange(0, len(cad_s), -(-len(cad_s) // DTW_MAX_POINTS)), len(cad_s) - 1])
+    h = L / (len(cols) - 1)
+    dt_demo = float(np.median(np.diff(t)))
+    dt_grid = max(0.5 * h * (t[-1] - demo.t[demo.motion_start]) / L, (t[-1] - t[0]) / (8 * len(cols)))
+    width = max(1, int(round(dt_grid / dt_demo)))
+    tg = np.linspace(t[0], t[-1], int(np.ceil((t[-1] - t[0]) / dt_grid)) + 1)
+    pg, qg = (np.column_stack([np.interp(tg, t, c) for c in uniform_filter1d(x, width, axis=0).T])
+              for x in (p, q))
+    centre, scale = q.mean(axis=0), float(np.sqrt(np.mean(np.sum((q - q.mean(axis=0)) ** 2, 1))))
+    phi_g, W = _basis(qg, centre, max(scale, 1e-3)), np.zeros((10, 3))
+    radius = 2.0 * h + 0.02
+
+    # ---- DTW passes, with the distortion fit between them
+    raw_median = np.nan
+    for rounds in _FIT_ROUNDS if fit_distortion else (0,):
+        pc = pg + phi_g @ W
+        sg = cad_s[cols][monotone_dtw(cdist(pc, cad_S[cols]))]
+        sg, foot, tangent, dist = _project(pc, sg, cad_s, cad_S, radius)
+        if np.isnan(raw_median):
+            raw_median = float(np.median(dist))
+            if raw_median > MAX_MEDIAN_RESIDUAL_M:
+                raise InputError(f"demo {demo.source!r} does not follow the CAD path {cad.source!r}: "
+                                 f"median distance {raw_median * 1e3:.0f} mm after alignment "
+                                 f"(limit {MAX_MEDIAN_RESIDUAL_M * 1e3:.0f} mm); check frames and units")
+        for _ in range(rounds):
+            W = _fit_distortion(phi_g, pg, foot, tangent, dist)
+            sg, foot, tangent, dist = _project(pg + phi_g @ W, sg, cad_s, cad_S, radius)
+
+    # ---- every sample projected near its match; speed and time per waypoint
+    correction = _basis(q, centre, max(scale, 1e-3)) @ W
+    pc = p + correction
+    s_raw = _project(pc, np.interp(t, tg, sg), cad_s, cad_S, radius)[0]
+    s_mono = isotonic_regression(s_raw).x
+    v, t_match = _time_law(t, s_raw, s_mono, cad_s, speed_smoothing_m)
+    floor = SPEED_FLOOR_FRACTION * float(np.nanmedian(v)) if np.any(np.isfinite(v)) else np.nan
+    residual = np.linalg.norm(
+        np.column_stack([np.interp(t_match, t, c) for c in pc.T]) - cad_S, axis=1)
+
+    # ---- does the demonstration cover the path?
+    span = float(t_match[-1] - t_match[0])
+    far = residual > MAX_MEDIAN_RESIDUAL_M
+    if np.median(residual) > MAX_MEDIAN_RESIDUAL_M or far.mean() > 0.05:
+        raise InputError(f"demo {demo.source!r} does not cover the CAD path {cad.source!r}: "
+                         f"{far.mean():.0%} of waypoints (s = {cad_s[far].min():.2f}-"
+                         f"{cad_s[far].max():.2f} m of {L:.2f} m) are farther than "
+                         f"{MAX_MEDIAN_RESIDUAL_M * 1e3:.0f} mm from it")
+    if not np.isfinite(floor) or span <= 0.0 or L / span > MAX_HAND_SPEED_M_S:
+        raise InputError(f"demo {demo.source!r}: the {L:.2f} m path is matched to {span:.3f} s of "
+                         f"demonstration (> {MAX_HAND_SPEED_M_S} m/s); wrong time units?")
+    speed = np.maximum(np.nan_to_num(v, nan=floor), floor)
+    logger.info("aligned %d waypoints to %d demo samples: raw median distance %.1f mm, max "
+                "correction %.1f mm, residual median %.1f mm max %.1f mm, %.0f%% at speed floor",
+                len(cad_s), len(t), raw_median * 1e3, np.abs(correction).max() * 1e3,
+                np.median(residual) * 1e3, residual.max() * 1e3, 100 * np.mean(speed == floor))
+    return Alignment(t_match, speed, floor, residual, raw_median,
+                     float(np.linalg.norm(correction, axis=1).max()))
+
+
+def fuse(
+    cad: CadPath,
+    demo: Demonstration,
+    source_in_world: ArrayLike,
+    sensor_in_tcp: ArrayLike,
+    *,
+    speed_smoothing_m: float = 0.03,
+    fit_distortion: bool = True,
+) -> FusedPath:
+    """CAD positions with the demonstrated tool orientation and speed at every waypoint.
+
+    Args:
+        cad: the CAD path in {F}.
+        demo: the cleaned demonstration (sensor {E} in the receiver {S}).
+        source_in_world: receiver pose in the world, T_F_S, shape (4, 4).
+        sensor_in_tcp: sensor pose in the tool frame, T_TCP_E, shape (4, 4).
+        speed_smoothing_m: arc-length window of the speed fit [m]; see :func:`align`.
+        fit_distortion: fit and remove a smooth tracker position error; see :func:`align`.
+
+    Returns:
+        The fused path; ``speed`` is floored at 10 % of the median demonstrated speed.
+
+    Raises:
+        InputError: bad arguments, or a demonstration that does not cover the path.
+    """
+    a = align(cad, demo, source_in_world, sensor_in_tcp,
+              speed_smoothing_m=speed_smoothing_m, fit_distortion=fit_distortion)
+    T_F_TCP = demo_tcp_poses(demo, source_in_world, sensor_in_tcp)
+    slerp = Slerp(demo.t, Rotation.from_matrix(T_F_TCP[:, :3, :3]))
+    rotations = slerp(np.clip(a.t, demo.t[0], demo.t[-1])).as_matrix()
+    return FusedPath(cad.s.copy(), cad.positions.copy(), rotations, a.speed, a.t, a.residual)

@@ -1,0 +1,135 @@
+"""Behaviour of the DXF CAD path reader (refine.cad.dxf)."""
+
+import math
+
+import ezdxf
+import numpy as np
+import pytest
+
+from refine.cad.dxf import points_from_dxf
+from refine.errors import InputError
+
+
+def _save(tmp_path, build, name="part.dxf"):
+    doc = ezdxf.new()
+    build(doc.modelspace())
+    path = tmp_path / name
+    doc.saveas(path)
+    return path
+
+
+def test_3d_polyline_keeps_its_vertices_in_metres(tmp_path):
+    verts = [(0, 0, 0), (100, 0, 10), (100, 50, 20)]
+    f = _save(tmp_path, lambda msp: msp.add_polyline3d(verts))
+    np.testing.assert_allclose(points_from_dxf(f, "mm"), np.array(verts) / 1000.0)
+
+
+def test_closed_3d_polyline_repeats_its_first_point_last(tmp_path):
+    verts = [(0, 0, 0), (1, 0, 1), (1, 1, 2)]
+    f = _save(tmp_path, lambda msp: msp.add_polyline3d(verts, close=True))
+    pts = points_from_dxf(f, "m")
+    np.testing.assert_allclose(pts[:3], verts)
+    assert np.array_equal(pts[-1], pts[0]) and len(pts) == 4
+
+
+def test_lwpolyline_bulge_becomes_an_arc_at_the_elevation(tmp_path):
+    # (0,0) -> (10,0) straight, then a half circle (bulge 1) to (10,10), centre (10,5), r 5
+    def build(msp):
+        msp.add_lwpolyline(
+            [(0, 0, 0), (10, 0, 1), (10, 10, 0)], format="xyb", dxfattribs={"elevation": 5.0}
+        )
+
+    pts = points_from_dxf(_save(tmp_path, build), "mm", flatten_tolerance_m=1e-7) * 1000.0
+    np.testing.assert_allclose(pts[:, 2], 5.0)
+    np.testing.assert_allclose(pts[0], [0, 0, 5]) and np.testing.assert_allclose(pts[-1], [10, 10, 5])
+    arc = pts[2:]
+    np.testing.assert_allclose(np.hypot(arc[:, 0] - 10, arc[:, 1] - 5), 5.0, atol=1e-12)
+    assert arc[:, 0].max() == pytest.approx(15.0, abs=1e-3)  # bulge 1 > 0: counter-clockwise
+    chord = np.linalg.norm(np.diff(arc, axis=0), axis=1).max()
+    assert 5.0 * (1 - math.cos(chord / 5.0 / 2)) <= 1e-4 + 1e-12  # sagitta <= tolerance [mm]
+
+
+def test_negative_bulge_turns_clockwise(tmp_path):
+    f = _save(tmp_path, lambda m: m.add_lwpolyline([(0, 0, -1), (0, 10, 0)], format="xyb"))
+    pts = points_from_dxf(f, "mm")
+    assert pts[:, 0].min() == pytest.approx(-0.005, abs=1e-6)  # going up +y it bulges to -x
+    assert pts[:, 0].max() < 1e-12
+
+
+def test_spline_is_flattened_and_closed_spline_is_closed(tmp_path):
+    ctrl = [(0, 0, 0), (1, 1, 0), (2, 0, 0), (3, 1, 0)]
+    pts = points_from_dxf(_save(tmp_path, lambda m: m.add_spline_control_frame(ctrl)), "m")
+    assert len(pts) > 10
+    np.testing.assert_allclose(pts[0], ctrl[0], atol=1e-12)
+    np.testing.assert_allclose(pts[-1], ctrl[-1], atol=1e-12)
+
+    def build(msp):
+        msp.add_spline([(0, 0, 0), (2, 0, 0), (2, 2, 0), (0, 2, 0)]).closed = True
+
+    loop = points_from_dxf(_save(tmp_path, build, "loop.dxf"), "m")
+    assert np.array_equal(loop[0], loop[-1])
+
+
+def test_lines_and_arcs_in_any_order_and_direction_are_chained(tmp_path):
+    def build(msp):
+        msp.add_line((10, 10, 0), (10, 0, 0))  # stored backwards
+        msp.add_line((0, 0, 0), (10, 0, 0)).dxf.layer = "other"
+        msp.add_arc(center=(10, 15, 0), radius=5, start_angle=-90, end_angle=90)  # up to (10, 20)
+
+    pts = points_from_dxf(_save(tmp_path, build), "mm") * 1000.0
+    # the first line has no loose end, so the chain starts at the second line's
+    np.testing.assert_allclose(pts[0], [0, 0, 0], atol=1e-9)
+    np.testing.assert_allclose(pts[-1], [10, 20, 0], atol=1e-9)
+    np.testing.assert_allclose(pts[1:3], [[10, 0, 0], [10, 10, 0]], atol=1e-9)
+    arc = pts[2:]
+    np.testing.assert_allclose(np.hypot(arc[:, 0] - 10, arc[:, 1] - 15), 5.0, atol=1e-9)
+    assert len(arc) > 10
+
+
+def test_lines_that_meet_at_both_ends_make_a_closed_path(tmp_path):
+    corners = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)]
+
+    def build(msp):
+        for a, b in zip(corners, corners[1:] + corners[:1], strict=True):
+            msp.add_line(a, b)
+
+    pts = points_from_dxf(_save(tmp_path, build), "m")
+    assert len(pts) == 5 and np.array_equal(pts[0], pts[-1])
+
+
+def test_several_paths_without_layer_list_the_layers(tmp_path):
+    def build(msp):
+        msp.add_lwpolyline([(0, 0), (1, 0)], dxfattribs={"layer": "BEAD"})
+        msp.add_lwpolyline([(0, 1), (1, 1)], dxfattribs={"layer": "CONTOUR"})
+
+    with pytest.raises(InputError, match=r"layer 'BEAD': LWPOLYLINE.*layer 'CONTOUR'"):
+        points_from_dxf(_save(tmp_path, build), "mm")
+
+
+def test_a_layer_picks_its_entities_and_chains_them(tmp_path):
+    def build(msp):
+        msp.add_lwpolyline([(0, 0), (5, 0)], dxfattribs={"layer": "BEAD"})
+        msp.add_line((5, 0, 0), (5, 5, 0), dxfattribs={"layer": "bead"})
+        msp.add_lwpolyline([(0, 9), (9, 9)], dxfattribs={"layer": "CONTOUR"})
+
+    f = _save(tmp_path, build)
+    np.testing.assert_allclose(points_from_dxf(f, "m", layer="Bead"), [[0, 0, 0], [5, 0, 0], [5, 5, 0]])
+    np.testing.assert_allclose(points_from_dxf(f, "m", layer="CONTOUR"), [[0, 9, 0], [9, 9, 0]])
+    with pytest.raises(InputError, match="no path entities on layer 'MISSING'.*'BEAD'"):
+        points_from_dxf(f, "m", layer="MISSING")
+
+
+def test_pieces_with_a_gap_are_rejected_naming_the_loose_ends(tmp_path):
+    def build(msp):
+        msp.add_line((0, 0, 0), (1, 0, 0))
+        msp.add_line((2, 0, 0), (3, 0, 0))
+
+    with pytest.raises(InputError, match="4 loose ends"):
+        points_from_dxf(_save(tmp_path, build), "m")
+
+
+def test_unreadable_file_is_an_input_error(tmp_path):
+    f = tmp_path / "broken.dxf"
+    f.write_text("not a dxf")
+    with pytest.raises(InputError, match="broken.dxf"):
+        points_from_dxf(f, "mm")
