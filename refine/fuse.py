@@ -48,6 +48,9 @@ DTW_MAX_POINTS = 600  # CAD points used by the DTW at most
 SPEED_FLOOR_FRACTION = 0.1  # speed floor as a fraction of the median demonstrated speed
 MAX_MEDIAN_RESIDUAL_M = 0.1  # median demo-to-CAD distance above which the demo is rejected [m]
 MAX_HAND_SPEED_M_S = 2.0  # mean speed above which a demonstration is implausible [m/s]
+TIME_HALF_WIDTH_M = 0.005  # half-width of the arc-length window that fits t(s) [m]
+PRIOR_ERROR_M = (0.005, 0.005, 0.05)  # expected tracker error along the receiver's x, y, z [m]
+_NOISE_M = 1e-3  # tracker noise the ridge is scaled by [m]
 _FIT_ROUNDS = (3, 3, 0)  # distortion fit/re-project rounds after each DTW pass
 
 
@@ -144,27 +147,45 @@ def _fit_distortion(phi: Array, p: Array, foot: Array, tangent: Array, dist: Arr
     nk = phi.shape[1]
     N = np.einsum("i,ik,il,iab->kalb", w, phi, phi, P).reshape(3 * nk, 3 * nk)
     rhs = np.einsum("i,ik,iab,ib->ka", w, phi, P, foot - p).reshape(-1)
-    N[np.diag_indices_from(N)] += 1e-3 * np.trace(N) / len(N)
+    N[np.diag_indices_from(N)] += np.tile((_NOISE_M / np.asarray(PRIOR_ERROR_M)) ** 2, nk)
     return np.linalg.solve(N, rhs).reshape(nk, 3)
 
 
-def _time_law(t: Array, s_raw: Array, s_mono: Array, cad_s: Array, width: float):
-    """Windowed least-squares line s ≈ s̄ + v (t - t̄) per waypoint: (speed, matched time)."""
+def _window_fit(t: Array, s_raw: Array, s_mono: Array, centre: Array, s_lo: Array, s_hi: Array):
+    """Least-squares line s ≈ s̄ + v (t - t̄) over the samples with s_mono in [s_lo, s_hi].
+
+    Returns:
+        Speed v [m/s] (NaN where not positive) and the time the line passes ``centre`` [s],
+        clipped to the window; both shape (N,).
+    """
     m = len(t)
-    lo = np.minimum(np.searchsorted(s_mono, cad_s - width / 2, "left"), m - 3)
-    hi = np.maximum(np.searchsorted(s_mono, cad_s + width / 2, "right"), lo + 3)
+    mid = np.searchsorted(s_mono, centre)
+    lo = np.clip(np.minimum(np.searchsorted(s_mono, s_lo, "left"), mid - 2), 0, m - 5)
+    hi = np.minimum(np.maximum(np.searchsorted(s_mono, s_hi, "right"), lo + 5), m)
     tc = t - t.mean()
     sums = [np.concatenate([[0.0], np.cumsum(x)]) for x in (tc, s_raw, tc * tc, tc * s_raw)]
     St, Ss, Stt, Sts = (c[hi] - c[lo] for c in sums)
     n = (hi - lo).astype(float)
     with np.errstate(divide="ignore", invalid="ignore"):
         v = (n * Sts - St * Ss) / (n * Stt - St**2)
-        t_fit = t.mean() + St / n + (cad_s - Ss / n) / v
+        t_fit = t.mean() + St / n + (centre - Ss / n) / v
     ok = np.isfinite(v) & (v > 0)
-    t_fit = np.where(ok, t_fit, 0.5 * (t[lo] + t[hi - 1]))
-    t_fit = np.maximum.accumulate(np.clip(t_fit, t[lo], t[hi - 1]))
-    t_fit += 1e-9 * np.arange(len(t_fit))  # strictly increasing; 1 ns per waypoint is harmless
+    t_fit = np.clip(np.where(ok, t_fit, 0.5 * (t[lo] + t[hi - 1])), t[lo], t[hi - 1])
     return np.where(ok, v, np.nan), t_fit
+
+
+def _time_law(t: Array, s_raw: Array, cad_s: Array, width: float):
+    """Speed [m/s] (NaN where undefined) and strictly increasing matched time [s] per waypoint."""
+    s_mono = isotonic_regression(s_raw).x
+    # both fits stay clear of the samples resting at either end (pause, ramp)
+    noise = 1.4826 * float(np.median(np.abs(s_raw - s_mono)))
+    s_a, s_b = s_mono[0] + 3.0 * noise, s_mono[-1] - 3.0 * noise
+    v = _window_fit(t, s_raw, s_mono, cad_s, np.maximum(cad_s - width, s_a),
+                    np.minimum(cad_s + width, s_b))[0]
+    half = np.clip(np.minimum(cad_s - s_a, s_b - cad_s), 0.0, TIME_HALF_WIDTH_M)
+    t_fit = _window_fit(t, s_raw, s_mono, cad_s, cad_s - half, cad_s + half)[1]
+    t_fit = np.maximum.accumulate(t_fit)
+    return v, t_fit + 1e-9 * np.arange(len(t_fit))  # strictly increasing; 1 ns steps are harmless
 
 
 def align(
@@ -234,8 +255,7 @@ def align(
     correction = _basis(q, centre, max(scale, 1e-3)) @ W
     pc = p + correction
     s_raw = _project(pc, np.interp(t, tg, sg), cad_s, cad_S, radius)[0]
-    s_mono = isotonic_regression(s_raw).x
-    v, t_match = _time_law(t, s_raw, s_mono, cad_s, speed_smoothing_m)
+    v, t_match = _time_law(t, s_raw, cad_s, speed_smoothing_m)
     floor = SPEED_FLOOR_FRACTION * float(np.nanmedian(v)) if np.any(np.isfinite(v)) else np.nan
     residual = np.linalg.norm(
         np.column_stack([np.interp(t_match, t, c) for c in pc.T]) - cad_S, axis=1)

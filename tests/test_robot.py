@@ -47,7 +47,7 @@ def robots() -> dict[str, Robot]:
     return {name: load_robot(name) for name in NAMES}
 
 
-def _deg(*angles: float) -> np.ndarray:
+def _from_deg(*angles: float) -> np.ndarray:
     return np.radians(angles)
 
 
@@ -152,7 +152,7 @@ def test_irb4600_flange_at_zero_is_1270_0_1570_pointing_along_x(robots):
     ],
 )
 def test_irb4600_hand_computed_poses(robots, q_deg, position, tool_z):
-    T = robots["abb_irb4600_60_205"].fk(_deg(*q_deg))
+    T = robots["abb_irb4600_60_205"].fk(_from_deg(*q_deg))
     np.testing.assert_allclose(T[:3, 3], position, atol=1e-12)
     np.testing.assert_allclose(T[:3, 2], tool_z, atol=1e-12)
 
@@ -165,9 +165,9 @@ def test_iiwa_flange_at_zero_is_1306_above_the_base(robots):
 
 def test_iiwa_axis_4_turns_opposite_to_axis_2(robots):
     iiwa = robots["kuka_iiwa14_r820"]
-    np.testing.assert_allclose(iiwa.fk(_deg(0, 90, 0, 0, 0, 0, 0))[:3, 3], [0.946, 0.0, 0.36],
+    np.testing.assert_allclose(iiwa.fk(_from_deg(0, 90, 0, 0, 0, 0, 0))[:3, 3], [0.946, 0.0, 0.36],
                                atol=1e-12)
-    np.testing.assert_allclose(iiwa.fk(_deg(0, 0, 0, 90, 0, 0, 0))[:3, 3], [-0.526, 0.0, 0.78],
+    np.testing.assert_allclose(iiwa.fk(_from_deg(0, 0, 0, 90, 0, 0, 0))[:3, 3], [-0.526, 0.0, 0.78],
                                atol=1e-12)
 
 
@@ -203,7 +203,7 @@ def test_reach_matches_the_data_sheet(robots):
     assert span == pytest.approx(iiwa.spec.reach_m, abs=1e-9)
 
     ur = robots["ur10e"]
-    assert -ur.fk(_deg(0, 0, 0, -90, 0, 0))[0, 3] == pytest.approx(ur.spec.reach_m, abs=0.005)
+    assert -ur.fk(_from_deg(0, 0, 0, -90, 0, 0))[0, 3] == pytest.approx(ur.spec.reach_m, abs=0.005)
 
 
 @pytest.mark.parametrize("name", NAMES)

@@ -38,7 +38,6 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-import tomllib
 from pathlib import Path
 
 import ezdxf
@@ -54,6 +53,11 @@ from refine.frames import (
     transform_from_xyz_rpy,
     transform_points,
 )
+
+try:  # Python 3.11+
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib  # type: ignore[no-redef]
 
 HERE = Path(__file__).resolve().parent
 SEED = 20240611
@@ -239,14 +243,15 @@ def check_reachability(problem: dict, positions, rotations, step: int = 10) -> b
         rows.append((e_p, e_r, joint_margin, sigma_min, manip, q.copy()))
     e_p, e_r, jm, smin, manip = (np.array([r[i] for r in rows]) for i in range(5))
     qs = np.degrees(np.array([r[5] for r in rows]))
-    ok = bool(e_p.max() < 1e-6 and e_r.max() < 1e-4 and jm.min() > margin and smin.min() > 0.02)
+    singular = problem["tolerances"]["singularity_margin"]
+    ok = bool(e_p.max() < 1e-6 and e_r.max() < 1e-4 and jm.min() > margin and manip.min() > singular)
     print(f"reachability: {len(rows)} IK targets (every {step}th point), chained from q0 [deg] = "
           f"{np.round(qs[0], 1).tolist()}")
     print(f"  worst position error {e_p.max():.2e} m, worst orientation error {e_r.max():.2e} rad")
     print(f"  smallest joint-limit margin {math.degrees(jm.min()):.1f} deg "
           f"(required {math.degrees(margin):.1f} deg)")
     print(f"  smallest singular value of the scaled TCP Jacobian {smin.min():.3f}, "
-          f"smallest scaled manipulability {manip.min():.3f}")
+          f"smallest scaled manipulability {manip.min():.3f} (required {singular})")
     print("  joint ranges [deg]: " + ", ".join(
         f"q{j + 1} {qs[:, j].min():.0f}..{qs[:, j].max():.0f}" for j in range(qs.shape[1])))
     print(f"  reachable: {ok}")

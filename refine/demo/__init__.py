@@ -12,6 +12,7 @@ from collections.abc import Callable
 
 from refine.demo.csv_ import read_demo_csv
 from refine.demo.filters import (
+    check_times,
     fill_positions,
     fill_rotations,
     find_motion_start,
@@ -28,6 +29,7 @@ from refine.problem import DemoSettings
 
 __all__ = [
     "ANGLE_OUTLIER_FLOOR_DEG",
+    "MOTION_START_SMOOTHING_S",
     "POSITION_OUTLIER_FLOOR_M",
     "clean_demonstration",
     "read_demo_csv",
@@ -43,6 +45,10 @@ logger = logging.getLogger(__name__)
 POSITION_OUTLIER_FLOOR_M = 1e-3
 #: The same floor for orientations [deg].
 ANGLE_OUTLIER_FLOOR_DEG = 0.5
+#: Smoothing [s] of the positions used to find the motion start, whatever
+#: ``smoothing_s`` is: heavier smoothing spreads the start of the motion over +-2 sigma and finds
+#: it too early; none leaves tracker noise to look like motion.
+MOTION_START_SMOOTHING_S = 0.05
 
 _READERS: dict[str, Callable[[DemoSettings], TrackerLog]] = {
     "liberty_ascii": lambda d: read_liberty_ascii(
@@ -80,8 +86,9 @@ def clean_demonstration(log: TrackerLog, settings: DemoSettings) -> Demonstratio
        between the good neighbours.
     3. Gaussian smoothing of positions and of orientations (on SO(3)) with standard deviation
        ``settings.smoothing_s``.
-    4. Speed along the smoothed track and the end of the start pause
-       (:func:`~refine.demo.filters.find_motion_start` with ``settings.pause_speed_m_s``).
+    4. Speed along the smoothed track, and the end of the start pause
+       (:func:`~refine.demo.filters.find_motion_start` with ``settings.pause_speed_m_s``) on the
+       positions smoothed with :data:`MOTION_START_SMOOTHING_S`.
 
     Args:
         log: the raw samples; times must strictly increase.
@@ -94,6 +101,7 @@ def clean_demonstration(log: TrackerLog, settings: DemoSettings) -> Demonstratio
     Raises:
         InputError: times that do not increase, or a log in which the tool never moves.
     """
+    check_times(log.t)
     h, n_sigmas = settings.hampel_window, settings.hampel_sigmas
     _, pos_mask = hampel(log.positions, h, n_sigmas, min_deviation=POSITION_OUTLIER_FLOOR_M)
     pos_bad = pos_mask.any(axis=1)
@@ -110,10 +118,12 @@ def clean_demonstration(log: TrackerLog, settings: DemoSettings) -> Demonstratio
         int(rot_bad.sum()),
     )
 
+    start = find_motion_start(
+        log.t, smooth_positions(log.t, positions, MOTION_START_SMOOTHING_S), settings.pause_speed_m_s
+    )
     positions = smooth_positions(log.t, positions, settings.smoothing_s)
     rotations = smooth_rotations(log.t, rotations, settings.smoothing_s)
     speed = speed_along_track(log.t, positions)
-    start = find_motion_start(log.t, positions, settings.pause_speed_m_s)
     logger.info(
         "%s: motion starts at sample %d (t = %.3f s); peak speed %.3f m/s",
         log.source or "tracker log",

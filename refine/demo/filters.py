@@ -10,8 +10,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike, NDArray
-from scipy.ndimage import gaussian_filter1d, median_filter
+from scipy.ndimage import gaussian_filter1d
 from scipy.spatial.transform import Rotation, Slerp
 
 from refine.errors import InputError
@@ -26,7 +27,8 @@ from refine.frames import (
 MAD_TO_SIGMA = 1.4826
 
 
-def _check_times(t: ArrayLike) -> NDArray:
+def check_times(t: ArrayLike) -> NDArray:
+    """Return sample times [s] (M,) as floats after checking that M >= 2 and they increase."""
     t = np.asarray(t, dtype=float)
     if t.ndim != 1 or len(t) < 2:
         raise InputError(f"sample times: expected shape (M,) with M >= 2, got {t.shape}")
@@ -43,19 +45,73 @@ def _sigma_samples(t: NDArray, time_constant_s: float) -> float:
     return time_constant_s / float(np.median(np.diff(t)))
 
 
+def _robust_odd_extension(x: NDArray, h: int) -> NDArray:
+    """Pad ``x`` (M, k) with ``h`` samples at each end: point reflection about a robust line.
+
+    At the start, ``b`` is the median slope ``(x[j+h] - x[j]) / h`` and ``a`` the median of
+    ``x[j] - b j`` over the first ``2h + 1`` samples; the padding is ``x[-j] = 2a - x[j]``. A linear
+    trend continues unchanged (so a running median does not lag at the ends), noise keeps its
+    level, and an outlier at the end sample is neither copied nor trusted as the pivot.
+    """
+    n = min(len(x), 2 * h + 1)
+    j = np.arange(n)[:, None]
+
+    def pivot(y: NDArray) -> NDArray:
+        lag = min(h, n - 1)
+        slope = np.median((y[lag:n] - y[: n - lag]) / lag, axis=0)
+        return np.median(y[:n] - slope * j, axis=0)
+
+    reach = np.minimum(np.arange(1, h + 1), len(x) - 1)  # short logs reuse their last sample
+    head = 2.0 * pivot(x) - x[reach][::-1]
+    tail = 2.0 * pivot(x[::-1]) - x[::-1][reach]
+    return np.concatenate([head, x, tail])
+
+
+def _detrended_windows(x: NDArray, h: int) -> tuple[NDArray, NDArray]:
+    """Windows ``k ± h`` of ``x`` (M, k) with their local slope removed, and their medians.
+
+    The slope at ``k`` is the median of the first differences inside the window, so a few
+    outliers do not tilt it. Returns ``(D, m)``: ``D[k, c, i] = x[k+i-h, c] - slope[k, c] (i-h)``,
+    shape (M, k, 2h+1), and ``m = median(D, axis=-1)``, shape (M, k).
+    """
+    padded = _robust_odd_extension(x, h)
+    windows = sliding_window_view(padded, 2 * h + 1, axis=0)  # (M, k, 2h+1)
+    slope = np.median(sliding_window_view(np.diff(padded, axis=0), 2 * h, axis=0), axis=-1)
+    detrended = windows - slope[: len(x), :, None] * np.arange(-h, h + 1)
+    return detrended, np.median(detrended, axis=-1)
+
+
+def running_median(x: ArrayLike, half_window: int) -> NDArray:
+    """Trend-corrected running median of each column of ``x`` (M,) or (M, k).
+
+    Value at ``k``: the median over the window ``k ± half_window`` of ``x_j - b_k (j - k)``, with
+    ``b_k`` the median first difference in the window. On a flat signal this is the plain running
+    median; on a steep one it stays on the signal, where a plain median is shifted by one sample
+    step for every outlier in the window. Ends are padded by a robust point reflection.
+    """
+    x = np.asarray(x, dtype=float)
+    _, med = _detrended_windows(x.reshape(len(x), -1), int(half_window))
+    return med.reshape(x.shape)
+
+
 def hampel(
     x: ArrayLike, half_window: int, n_sigmas: float, min_deviation: float = 0.0
 ) -> tuple[NDArray, NDArray]:
     """Hampel filter: replace samples far from their running median by that median.
 
     For each sample ``k`` (and each column independently) with the window ``k ± half_window``:
-    ``m_k`` is the window median, ``sigma_k = 1.4826 · median(|x - m|)`` over the window (the MAD
-    scaled to a standard deviation for normal noise), and ``x_k`` is an outlier when
-    ``|x_k - m_k| > max(n_sigmas · sigma_k, min_deviation)``. The window is mirrored at the ends,
-    so the end samples are tested too. Runs of up to ``half_window`` outliers are found.
+    ``m_k`` is the window median, ``sigma_k = 1.4826 · median_j |x_j - m_k|`` (the MAD scaled to
+    a standard deviation for normal noise), and ``x_k`` is an outlier when
+    ``|x_k - m_k| > max(n_sigmas · sigma_k, min_deviation)``. Runs of up to ``half_window``
+    outliers are found.
+
+    The window is detrended first (see :func:`running_median`): on a steep signal a plain window
+    median and MAD grow with the slope, hide outliers and drag in their neighbours. The ends are
+    padded by point reflection about a robust line through the first (last) ``2 half_window + 1``
+    samples, so a spike on the very first or last sample is found too.
 
     Args:
-        x: samples, shape (M,) or (M, k), M >= 2.
+        x: samples, shape (M,) or (M, k), M >= 2, uniformly sampled.
         half_window: half-width of the window [samples], >= 1.
         n_sigmas: threshold [robust standard deviations], > 0.
         min_deviation: floor on the threshold, in the unit of ``x``; keeps flat or quantised
@@ -70,12 +126,12 @@ def hampel(
         raise InputError(f"hampel: expected shape (M,) or (M, k) with M >= 2, got {x.shape}")
     if int(half_window) < 1 or not n_sigmas > 0.0:
         raise InputError(f"hampel: need half_window >= 1 and n_sigmas > 0, got {half_window}, {n_sigmas}")
-    size = (2 * int(half_window) + 1,) + (1,) * (x.ndim - 1)
-    med = median_filter(x, size=size, mode="mirror")
-    dev = np.abs(x - med)
-    sigma = MAD_TO_SIGMA * median_filter(dev, size=size, mode="mirror")
-    mask = dev > np.maximum(n_sigmas * sigma, min_deviation)
-    return np.where(mask, med, x), mask
+    x2 = x.reshape(len(x), -1)
+    detrended, med = _detrended_windows(x2, int(half_window))
+    sigma = MAD_TO_SIGMA * np.median(np.abs(detrended - med[..., None]), axis=-1)
+    mask = np.abs(x2 - med) > np.maximum(n_sigmas * sigma, min_deviation)
+    filtered = np.where(mask, med, x2)
+    return filtered.reshape(x.shape), mask.reshape(x.shape)
 
 
 def rotation_outliers(
@@ -83,8 +139,8 @@ def rotation_outliers(
 ) -> NDArray:
     """Hampel test for orientations, done on SO(3) rather than on Euler angles.
 
-    The running median rotation is the component-wise median of sign-continuous quaternions over
-    the window, normalised. Each sample's residual is the rotation vector of
+    The running median rotation is the component-wise :func:`running_median` of sign-continuous
+    quaternions, normalised. Each sample's residual is the rotation vector of
     ``R_median^T · R`` [rad]; :func:`hampel` is applied to its three components (floor
     ``min_angle_deg``), and a sample is an outlier if any component is.
 
@@ -99,9 +155,7 @@ def rotation_outliers(
     """
     R = np.asarray(rotations, dtype=float)
     q = continuous_quaternions(quaternion_from_matrix(R))
-    size = (2 * int(half_window) + 1, 1)
-    q_med = median_filter(q, size=size, mode="mirror")
-    R_med = matrix_from_quaternion(q_med)
+    R_med = matrix_from_quaternion(running_median(q, half_window))
     residual = rotvec_from_matrix(np.einsum("kji,kjl->kil", R_med, R))
     _, mask = hampel(residual, half_window, n_sigmas, min_deviation=math.radians(min_angle_deg))
     return mask.any(axis=1)
@@ -145,7 +199,7 @@ def smooth_positions(t: ArrayLike, positions: ArrayLike, time_constant_s: float)
     Returns:
         Smoothed positions [m], shape (M, 3); the ends are extended with their edge value.
     """
-    sigma = _sigma_samples(_check_times(t), time_constant_s)
+    sigma = _sigma_samples(check_times(t), time_constant_s)
     p = np.array(positions, dtype=float)
     return gaussian_filter1d(p, sigma, axis=0, mode="nearest") if sigma > 0.0 else p
 
@@ -167,7 +221,7 @@ def smooth_rotations(t: ArrayLike, rotations: ArrayLike, time_constant_s: float)
     Returns:
         Smoothed orientations, shape (M, 3, 3).
     """
-    sigma = _sigma_samples(_check_times(t), time_constant_s)
+    sigma = _sigma_samples(check_times(t), time_constant_s)
     R = np.array(rotations, dtype=float)
     if sigma == 0.0:
         return R
@@ -177,7 +231,7 @@ def smooth_rotations(t: ArrayLike, rotations: ArrayLike, time_constant_s: float)
 
 def speed_along_track(t: ArrayLike, positions: ArrayLike) -> NDArray:
     """Speed of the sensor along its own track [m/s], shape (M,), by central differences."""
-    t = _check_times(t)
+    t = check_times(t)
     velocity = np.gradient(np.asarray(positions, dtype=float), t, axis=0)
     return np.linalg.norm(velocity, axis=1)
 
@@ -207,7 +261,7 @@ def find_motion_start(
     Raises:
         InputError: the tool never leaves the pause (naming the largest speed and distance).
     """
-    t = _check_times(t)
+    t = check_times(t)
     p = np.asarray(positions_smoothed, dtype=float)
     moving = speed_along_track(t, p) > pause_speed_m_s
     edges = np.flatnonzero(np.diff(np.concatenate([[0], moving.astype(np.int8), [0]])))

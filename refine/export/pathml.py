@@ -1,4 +1,4 @@
-"""PathML: the refined path as a CAEX 3.0 (AutomationML 2.10) document, and back.
+"""PathML: the refined path as a CAEX 3.0 (AutomationML 2.10) document, and its validation.
 
 Layout of the document (child order as ``CAEX_ClassModel_V.3.0.xsd`` requires)::
 
@@ -23,15 +23,12 @@ IDs are name-based GUIDs (UUID version 5) from the problem name and the element'
 hierarchy, so writing the same problem twice gives the same IDs and the files diff cleanly. A track's
 parameters refine its layer's: a reader takes the track value where both give one.
 
-The reader (:func:`read_pathml`) finds elements by the last segment of their role path (``Path``,
-``Layer``, ``Track``, ``Point``), so PathML from another tool that uses the same role names reads
-too; it converts the common length, angle, speed and time units to SI and degrees.
+:func:`refine.export.pathml_read.read_pathml` reads such documents back.
 """
 
 from __future__ import annotations
 
 import logging
-import math
 import uuid
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -43,8 +40,8 @@ from lxml import etree
 
 from refine import __version__
 from refine.errors import InputError
-from refine.frames import fixed_xyz_from_matrix, matrix_from_fixed_xyz
-from refine.paths import Array, Trajectory
+from refine.frames import fixed_xyz_from_matrix
+from refine.paths import Trajectory
 from refine.problem import Problem, ProcessParameter
 
 log = logging.getLogger(__name__)
@@ -55,18 +52,21 @@ ROLE_LIB = "PathMLRoleClassLib"
 _BASE_ROLE = "AutomationMLBaseRoleClassLib/AutomationMLBaseRole"
 _FRAME_TYPE = "AutomationMLBaseAttributeTypeLib/Frame"
 _GUID_NAMESPACE = uuid.uuid5(uuid.NAMESPACE_DNS, "pathml.refine")
-_FRAME_KEYS = (("x", "m"), ("y", "m"), ("z", "m"), ("rx", "deg"), ("ry", "deg"), ("rz", "deg"))
-_POINT_VALUES = (("speed", "m/s"), ("time", "s"), ("arcLength", "m"))
-_TO_SI = {"m": 1.0, "mm": 1e-3, "cm": 1e-2, "m/s": 1.0, "mm/s": 1e-3, "s": 1.0, "ms": 1e-3,
-          "deg": 1.0, "degree": 1.0, "°": 1.0, "rad": 180.0 / math.pi}
+# (name, unit) of the Frame sub-attributes and of the other values of every Point.
+FRAME_KEYS = (("x", "m"), ("y", "m"), ("z", "m"), ("rx", "deg"), ("ry", "deg"), ("rz", "deg"))
+POINT_VALUES = (("speed", "m/s"), ("time", "s"), ("arcLength", "m"))
 
 
-def _tag(name: str) -> str:
+def caex_tag(name: str) -> str:
+    """Qualified name ``{http://www.dke.de/CAEX}name`` of a CAEX element."""
     return f"{{{CAEX_NS}}}{name}"
 
 
-_IE, _ATTR, _VALUE, _ROLE_REQ = _tag("InternalElement"), _tag("Attribute"), _tag("Value"), _tag(
-    "RoleRequirements"
+_IE, _ATTR, _VALUE, _ROLE_REQ = (
+    caex_tag("InternalElement"),
+    caex_tag("Attribute"),
+    caex_tag("Value"),
+    caex_tag("RoleRequirements"),
 )
 
 
@@ -96,50 +96,6 @@ class LayerLayout:
     parameters: tuple[ProcessParameter, ...] = ()
 
 
-@dataclass(frozen=True)
-class PathMLTrack:
-    """A track read back: points in {F}.
-
-    Attributes:
-        positions: TCP positions [m], shape (N, 3).
-        rotations: TCP orientations R_F_TCP, shape (N, 3, 3).
-        speed: TCP speed [m/s], shape (N,).
-        time: time stamps [s], shape (N,).
-        s: arc length [m], shape (N,).
-    """
-
-    name: str
-    id: str
-    parameters: tuple[ProcessParameter, ...]
-    positions: Array
-    rotations: Array
-    speed: Array
-    time: Array
-    s: Array
-
-
-@dataclass(frozen=True)
-class PathMLLayer:
-    """A layer read back, with its tracks in document order."""
-
-    name: str
-    id: str
-    parameters: tuple[ProcessParameter, ...]
-    tracks: tuple[PathMLTrack, ...]
-
-
-@dataclass(frozen=True)
-class PathMLDocument:
-    """A PathML document read back: header facts and the layers of its (first) Path element."""
-
-    file_name: str
-    origin_name: str
-    origin_version: str
-    written_at: str
-    path_name: str
-    layers: tuple[PathMLLayer, ...]
-
-
 def default_layers(trajectory: Trajectory, problem: Problem) -> list[LayerLayout]:
     """One layer holding one track over all waypoints, both with the problem's process parameters."""
     params = problem.process.parameters
@@ -150,13 +106,18 @@ def default_layers(trajectory: Trajectory, problem: Problem) -> list[LayerLayout
 def _check_layers(layers: Sequence[LayerLayout], n: int) -> None:
     if not layers:
         raise InputError("PathML layers: need at least one layer")
+    names = [layer.name for layer in layers]
+    if len(set(names)) != len(names):
+        raise InputError(f"PathML layers: names must be unique (they key the GUIDs), got {names}")
     for layer in layers:
-        if not layer.tracks:
-            raise InputError(f"PathML layer {layer.name!r}: needs at least one track")
+        if not layer.tracks or len({t.name for t in layer.tracks}) != len(layer.tracks):
+            raise InputError(f"PathML layer {layer.name!r}: needs one or more uniquely named tracks")
         for tr in layer.tracks:
             if not 0 <= tr.start < tr.stop <= n:
-                raise InputError(f"PathML track {layer.name}/{tr.name}: waypoints [{tr.start}, "
-                                 f"{tr.stop}) must be a non-empty range inside [0, {n})")
+                raise InputError(
+                    f"PathML track {layer.name}/{tr.name}: waypoints [{tr.start}, "
+                    f"{tr.stop}) must be a non-empty range inside [0, {n})"
+                )
 
 
 # ---- writing ----------------------------------------------------------------------------------
@@ -175,8 +136,9 @@ class _Writer:
         return etree.SubElement(parent, _IE, Name=name, ID=self.guid(key))
 
 
-def _value(parent: etree._Element, name: str, text: str, unit: str | None,
-           data_type: str = "xs:double") -> etree._Element:
+def _value(
+    parent: etree._Element, name: str, text: str, unit: str | None, data_type: str = "xs:double"
+) -> etree._Element:
     attrib = {"Name": name, "AttributeDataType": data_type}
     if unit is not None:
         attrib["Unit"] = unit
@@ -200,40 +162,52 @@ def _write_points(w: _Writer, track_el: etree._Element, key: str, rows: list[lis
         name = f"P{i:0{width}d}"
         point = w.element(track_el, name, f"{key}/{name}")
         frame = etree.SubElement(point, _ATTR, Name="Frame", RefAttributeType=_FRAME_TYPE)
-        for (sub, unit), v in zip(_FRAME_KEYS, row[:6]):
+        for (sub, unit), v in zip(FRAME_KEYS, row[:6], strict=True):
             _value(frame, sub, repr(v), unit)
-        for (attr, unit), v in zip(_POINT_VALUES, row[6:]):
+        for (attr, unit), v in zip(POINT_VALUES, row[6:], strict=True):
             _value(point, attr, repr(v), unit)
         _role(point, "Point")
 
 
 def _role_library(root: etree._Element, w: _Writer) -> None:
-    lib = etree.SubElement(root, _tag("RoleClassLib"), Name=ROLE_LIB)
-    etree.SubElement(lib, _tag("Description")).text = (
-        "PathML roles: a process Path made of Layers, a Layer of Tracks, a Track of Points")
-    etree.SubElement(lib, _tag("Version")).text = "1.0.0"
+    lib = etree.SubElement(root, caex_tag("RoleClassLib"), Name=ROLE_LIB)
+    etree.SubElement(
+        lib, caex_tag("Description")
+    ).text = "PathML roles: a process Path made of Layers, a Layer of Tracks, a Track of Points"
+    etree.SubElement(lib, caex_tag("Version")).text = "1.0.0"
     for role in ("Path", "Layer", "Track", "Point"):
-        rc = etree.SubElement(lib, _tag("RoleClass"), Name=role, ID=w.guid(f"{ROLE_LIB}/{role}"),
-                              RefBaseClassPath=_BASE_ROLE)
+        rc = etree.SubElement(
+            lib,
+            caex_tag("RoleClass"),
+            Name=role,
+            ID=w.guid(f"{ROLE_LIB}/{role}"),
+            RefBaseClassPath=_BASE_ROLE,
+        )
         if role == "Point":
             frame = etree.SubElement(rc, _ATTR, Name="Frame", RefAttributeType=_FRAME_TYPE)
-            for sub, unit in _FRAME_KEYS:
+            for sub, unit in FRAME_KEYS:
                 etree.SubElement(frame, _ATTR, Name=sub, AttributeDataType="xs:double", Unit=unit)
-            for attr, unit in _POINT_VALUES:
+            for attr, unit in POINT_VALUES:
                 etree.SubElement(rc, _ATTR, Name=attr, AttributeDataType="xs:double", Unit=unit)
-    base = etree.SubElement(root, _tag("RoleClassLib"), Name="AutomationMLBaseRoleClassLib")
-    etree.SubElement(base, _tag("Version")).text = "2.10.0"
-    etree.SubElement(base, _tag("RoleClass"), Name="AutomationMLBaseRole")
-    types = etree.SubElement(root, _tag("AttributeTypeLib"), Name="AutomationMLBaseAttributeTypeLib")
-    etree.SubElement(types, _tag("Version")).text = "2.10.0"
-    frame_type = etree.SubElement(types, _tag("AttributeType"), Name="Frame")
-    for sub, unit in _FRAME_KEYS:
-        _value(frame_type, sub, "0.0", unit)
+    base = etree.SubElement(root, caex_tag("RoleClassLib"), Name="AutomationMLBaseRoleClassLib")
+    etree.SubElement(base, caex_tag("Version")).text = "2.10.0"
+    etree.SubElement(base, caex_tag("RoleClass"), Name="AutomationMLBaseRole")
+    types = etree.SubElement(root, caex_tag("AttributeTypeLib"), Name="AutomationMLBaseAttributeTypeLib")
+    etree.SubElement(types, caex_tag("Version")).text = "2.10.0"
+    frame_type = etree.SubElement(types, caex_tag("AttributeType"), Name="Frame")
+    for sub, unit in FRAME_KEYS:
+        a = etree.SubElement(frame_type, _ATTR, Name=sub, AttributeDataType="xs:double", Unit=unit)
+        etree.SubElement(a, caex_tag("DefaultValue")).text = "0.0"
 
 
-def write_pathml(path: str | Path, trajectory: Trajectory, problem: Problem, *,
-                 layers: Sequence[LayerLayout] | None = None,
-                 written_at: datetime | None = None) -> Path:
+def write_pathml(
+    path: str | Path,
+    trajectory: Trajectory,
+    problem: Problem,
+    *,
+    layers: Sequence[LayerLayout] | None = None,
+    written_at: datetime | None = None,
+) -> Path:
     """Write the trajectory as a PathML (CAEX 3.0) document.
 
     Args:
@@ -252,28 +226,38 @@ def write_pathml(path: str | Path, trajectory: Trajectory, problem: Problem, *,
     w = _Writer(problem.name)
     stamp = (written_at or datetime.now(timezone.utc)).isoformat()
 
-    root = etree.Element(_tag("CAEXFile"), nsmap={None: CAEX_NS, "xsi": _XSI_NS},
-                         SchemaVersion="3.0", FileName=path.name)
+    root = etree.Element(
+        caex_tag("CAEXFile"), nsmap={None: CAEX_NS, "xsi": _XSI_NS}, SchemaVersion="3.0", FileName=path.name
+    )
     root.set(f"{{{_XSI_NS}}}schemaLocation", f"{CAEX_NS} CAEX_ClassModel_V.3.0.xsd")
-    etree.SubElement(root, _tag("SuperiorStandardVersion")).text = "AutomationML 2.10"
-    etree.SubElement(root, _tag("SourceDocumentInformation"), OriginName="refine",
-                     OriginID=str(uuid.uuid5(_GUID_NAMESPACE, "refine")),
-                     OriginVersion=__version__, OriginRelease=__version__,
-                     LastWritingDateTime=stamp, OriginProjectTitle=problem.name,
-                     OriginProjectID=w.guid("project"))
-    hierarchy = etree.SubElement(root, _tag("InstanceHierarchy"), Name=problem.name,
-                                 ID=w.guid("InstanceHierarchy"))
+    etree.SubElement(root, caex_tag("SuperiorStandardVersion")).text = "AutomationML 2.10"
+    etree.SubElement(
+        root,
+        caex_tag("SourceDocumentInformation"),
+        OriginName="refine",
+        OriginID=str(uuid.uuid5(_GUID_NAMESPACE, "refine")),
+        OriginVersion=__version__,
+        OriginRelease=__version__,
+        LastWritingDateTime=stamp,
+        OriginProjectTitle=problem.name,
+        OriginProjectID=w.guid("project"),
+    )
+    hierarchy = etree.SubElement(
+        root, caex_tag("InstanceHierarchy"), Name=problem.name, ID=w.guid("InstanceHierarchy")
+    )
 
     path_el = w.element(hierarchy, "Path", "Path")
-    etree.SubElement(path_el, _tag("Description")).text = (
-        "TCP path in the world frame {F}: Frame x, y, z [m], rx, ry, rz [deg] about fixed x, y, z")
+    etree.SubElement(
+        path_el, caex_tag("Description")
+    ).text = "TCP path in the world frame {F}: Frame x, y, z [m], rx, ry, rz [deg] about fixed x, y, z"
     _value(path_el, "processKind", problem.process.kind, None, "xs:string")
     _value(path_el, "robot", problem.robot.model, None, "xs:string")
     _value(path_el, "tool", problem.tool.name, None, "xs:string")
 
     angles = fixed_xyz_from_matrix(trajectory.poses[:, :3, :3])
-    table = np.column_stack([trajectory.poses[:, :3, 3], angles, trajectory.speed,
-                             trajectory.t, trajectory.s]).tolist()
+    table = np.column_stack(
+        [trajectory.poses[:, :3, 3], angles, trajectory.speed, trajectory.t, trajectory.s]
+    ).tolist()
     for layer in layers:
         layer_el = w.element(path_el, layer.name, f"Path/{layer.name}")
         _parameters(layer_el, layer.parameters)
@@ -281,20 +265,20 @@ def write_pathml(path: str | Path, trajectory: Trajectory, problem: Problem, *,
             key = f"Path/{layer.name}/{tr.name}"
             track_el = w.element(layer_el, tr.name, key)
             _parameters(track_el, tr.parameters)
-            _write_points(w, track_el, key, table[tr.start:tr.stop])
+            _write_points(w, track_el, key, table[tr.start : tr.stop])
             _role(track_el, "Track")
         _role(layer_el, "Layer")
     _role(path_el, "Path")
     _role_library(root, w)
 
     path.parent.mkdir(parents=True, exist_ok=True)
-    etree.ElementTree(root).write(str(path), xml_declaration=True, encoding="utf-8",
-                                  pretty_print=True)
+    body = etree.tostring(root, encoding="utf-8", pretty_print=True)
+    path.write_bytes(b'<?xml version="1.0" encoding="utf-8"?>\n' + body)
     log.info("wrote PathML %s: %d layer(s), %d points", path, len(layers), len(trajectory))
     return path
 
 
-# ---- validating and reading -------------------------------------------------------------------
+# ---- validating -------------------------------------------------------------------------------
 
 
 def validate_pathml(path: str | Path, xsd_path: str | Path) -> list[str]:
@@ -321,83 +305,3 @@ def validate_pathml(path: str | Path, xsd_path: str | Path) -> list[str]:
     if schema.validate(doc):
         return []
     return [f"{Path(path).name}:{err.line}: {err.message}" for err in schema.error_log]
-
-
-def _role_of(el: etree._Element) -> str:
-    req = el.find(_ROLE_REQ)
-    return "" if req is None else req.get("RefBaseRoleClassPath", "").rsplit("/", 1)[-1]
-
-
-def _children(el: etree._Element, role: str) -> list[etree._Element]:
-    return [child for child in el.iterchildren(_IE) if _role_of(child) == role]
-
-
-def _number(attr: etree._Element, where: str) -> float:
-    text = attr.findtext(_VALUE)
-    if text is None:
-        text = attr.findtext(_tag("DefaultValue"))
-    unit = attr.get("Unit")
-    try:
-        return float(text) * (_TO_SI[unit] if unit else 1.0)  # type: ignore[arg-type]
-    except (TypeError, ValueError) as e:
-        raise InputError(f"PathML {where}/{attr.get('Name')}: not a number: {text!r}") from e
-    except KeyError as e:
-        raise InputError(f"PathML {where}/{attr.get('Name')}: unknown unit {unit!r}; "
-                         f"known: {', '.join(_TO_SI)}") from e
-
-
-def _read_parameters(el: etree._Element) -> tuple[ProcessParameter, ...]:
-    return tuple(ProcessParameter(a.get("Name", ""), float(a.findtext(_VALUE) or "nan"),
-                                  a.get("Unit", ""))
-                 for a in el.iterchildren(_ATTR) if a.get("AttributeDataType") == "xs:double")
-
-
-def _read_track(el: etree._Element, where: str) -> PathMLTrack:
-    points = _children(el, "Point")
-    if not points:
-        raise InputError(f"PathML {where}: a track without points")
-    rows = np.empty((len(points), 9))
-    for k, p in enumerate(points):
-        attrs = {a.get("Name"): a for a in p.iterchildren(_ATTR)}
-        here = f"{where}/{p.get('Name')}"
-        if "Frame" not in attrs:
-            raise InputError(f"PathML {here}: no Frame attribute")
-        frame = {a.get("Name"): a for a in attrs["Frame"].iterchildren(_ATTR)}
-        for j, (key, _unit) in enumerate(_FRAME_KEYS + _POINT_VALUES):
-            source = frame if j < 6 else attrs
-            rows[k, j] = _number(source[key], here) if key in source else math.nan
-        if np.isnan(rows[k, :6]).any():
-            raise InputError(f"PathML {here}: Frame needs x, y, z, rx, ry, rz")
-    return PathMLTrack(el.get("Name", ""), el.get("ID", ""), _read_parameters(el), rows[:, :3],
-                       matrix_from_fixed_xyz(rows[:, 3:6]), rows[:, 6], rows[:, 7], rows[:, 8])
-
-
-def read_pathml(path: str | Path) -> PathMLDocument:
-    """Read a PathML document (ours or another tool's with the same role names).
-
-    Missing ``speed``, ``time`` or ``arcLength`` values read as NaN.
-
-    Raises:
-        InputError: not XML, no Path element, or a point without a complete Frame.
-    """
-    try:
-        root = etree.parse(str(path)).getroot()
-    except (OSError, etree.XMLSyntaxError) as e:
-        raise InputError(f"cannot read PathML {path}: {e}") from e
-    paths = [el for h in root.iterchildren(_tag("InstanceHierarchy"))
-             for el in h.iter(_IE) if _role_of(el) == "Path"]
-    if not paths:
-        raise InputError(f"PathML {path}: no InternalElement with a Path role requirement")
-    if len(paths) > 1:
-        log.warning("PathML %s: %d Path elements, reading the first", path, len(paths))
-    layers = []
-    for layer in _children(paths[0], "Layer"):
-        where = f"{paths[0].get('Name')}/{layer.get('Name')}"
-        tracks = tuple(_read_track(t, f"{where}/{t.get('Name')}") for t in _children(layer, "Track"))
-        layers.append(PathMLLayer(layer.get("Name", ""), layer.get("ID", ""),
-                                  _read_parameters(layer), tracks))
-    info = root.find(_tag("SourceDocumentInformation"))
-    info_get = info.get if info is not None else (lambda key, default="": default)
-    return PathMLDocument(root.get("FileName", ""), info_get("OriginName", ""),
-                          info_get("OriginVersion", ""), info_get("LastWritingDateTime", ""),
-                          paths[0].get("Name", ""), tuple(layers))

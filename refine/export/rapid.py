@@ -8,7 +8,8 @@ What the module holds, in order:
   ``inv(base_in_world)``, so every ``robtarget`` is a TCP pose in {F}. This assumes the controller's
   world frame is the robot base (no base frame configured in the controller).
 * ``CONST speeddata``: one per distinct segment speed; a segment's ``v_tcp`` is the mean of the
-  planned speeds at its two ends [mm/s]. ``v_ori``, ``v_leax``, ``v_reax`` take ABB's values for the
+  planned speeds at its two ends [mm/s], rounded to a resolution (0.1 mm/s by default) so that
+  equal speeds share one ``speeddata``. ``v_ori``, ``v_leax``, ``v_reax`` take ABB's values for the
   predefined ``v100``..``v1000`` (500 deg/s, 5000 mm/s, 1000 deg/s).
 * ``CONST robtarget``: one per waypoint, in path order, from ``trajectory.poses``; ``robconf``
   from ``trajectory.q`` (:func:`abb_confdata`); external axes unused (``9E+09``).
@@ -88,8 +89,10 @@ def abb_confdata(robot: Any, q: Array) -> NDArray[np.int64]:
     single = q.ndim == 1
     qs = np.atleast_2d(q)
     if qs.shape[1] != 6 or robot.nq != 6:
-        raise InputError(f"ABB confdata needs a six-axis robot and q of shape (N, 6), got "
-                         f"{robot.spec.name!r} with q {q.shape}")
+        raise InputError(
+            f"ABB confdata needs a six-axis robot and q of shape (N, 6), got "
+            f"{robot.spec.name!r} with q {q.shape}"
+        )
     conf = np.zeros((len(qs), 4), dtype=np.int64)
     conf[:, :3] = np.floor(np.degrees(qs[:, [0, 3, 5]]) / 90.0)
     model, data = robot.model, robot.data
@@ -109,9 +112,17 @@ def segment_speeds(trajectory: Trajectory) -> Array:
     return 0.5 * (trajectory.speed[:-1] + trajectory.speed[1:])
 
 
-def write_rapid(path: str | Path, trajectory: Trajectory, problem: Problem, robot: Any, *,
-                zone: str = "z1", approach_speed_m_s: float = 0.25,
-                retract_m: float = 0.1) -> Path:
+def write_rapid(
+    path: str | Path,
+    trajectory: Trajectory,
+    problem: Problem,
+    robot: Any,
+    *,
+    zone: str = "z1",
+    approach_speed_m_s: float = 0.25,
+    retract_m: float = 0.1,
+    speed_resolution_m_s: float = 1e-4,
+) -> Path:
     """Write the trajectory as an ABB RAPID module (``.mod``).
 
     Args:
@@ -122,6 +133,8 @@ def write_rapid(path: str | Path, trajectory: Trajectory, problem: Problem, robo
         zone: zone between path targets (``"z0"``, ``"z1"``, ...); the last target is ``fine``.
         approach_speed_m_s: TCP speed of the approach and retract moves [m/s].
         retract_m: approach and retract distance along the tool z axis [m].
+        speed_resolution_m_s: segment speeds are rounded to this step [m/s] (0.1 mm/s by
+            default); equal rounded speeds share one ``speeddata``.
 
     Returns:
         The path written.
@@ -131,14 +144,19 @@ def write_rapid(path: str | Path, trajectory: Trajectory, problem: Problem, robo
     if n < 2:
         raise InputError(f"RAPID export needs at least 2 waypoints, got {n}")
     if getattr(robot.spec, "controller", "abb") != "abb":
-        raise InputError(f"RAPID is for ABB robots; {robot.spec.name!r} has controller "
-                         f"{robot.spec.controller!r}")
+        raise InputError(
+            f"RAPID is for ABB robots; {robot.spec.name!r} has controller {robot.spec.controller!r}"
+        )
     if not re.fullmatch(r"z\d+", zone):
         raise InputError(f"RAPID zone must be z0, z1, z5, ..., got {zone!r}")
     module = _identifier(problem.name, "m")
     tool = _identifier(problem.tool.name, "t")
     wobj = "wobjWorld"
-    output = _identifier(problem.process.output, "do")
+    output = problem.process.output
+    if not re.fullmatch(r"[A-Za-z]\w{0,31}", output):
+        raise InputError(
+            f"process.output {output!r} is not a RAPID signal name (letter, then letters, digits, _)"
+        )
     tool_t = problem.tool
     cog = ",".join(_num(v * 1000.0, 4) for v in tool_t.cog_in_flange_m)
 
@@ -147,10 +165,13 @@ def write_rapid(path: str | Path, trajectory: Trajectory, problem: Problem, robo
     width = max(4, len(str(n - 1)))
     names = [f"p{k:0{width}d}" for k in range(n)]
 
+    if not speed_resolution_m_s > 0.0:
+        raise InputError(f"speed_resolution_m_s must be > 0, got {speed_resolution_m_s}")
+    step = speed_resolution_m_s
     speed_names: dict[str, str] = {}
     seg_speed = []
     for v in segment_speeds(trajectory):
-        text = _num(v * 1000.0, 3)
+        text = _num(max(round(v / step), 1) * step * 1000.0, 6)
         seg_speed.append(speed_names.setdefault(text, f"vPath{len(speed_names) + 1}"))
     retract_mm = _num(retract_m * 1000.0, 3)
 
@@ -162,34 +183,33 @@ def write_rapid(path: str | Path, trajectory: Trajectory, problem: Problem, robo
         "rot [q1,q2,q3,q4], robconf [cf1,cf4,cf6,cfx] of the refined joints.",
         f"    PERS tooldata {tool}:=[TRUE,{_pose(tool_t.tcp_in_flange)},"
         f"[{_num(tool_t.mass_kg, 3)},[{cog}],[1,0,0,0],0,0,0]];",
-        f"    PERS wobjdata {wobj}:=[FALSE,TRUE,\"\","
+        f'    PERS wobjdata {wobj}:=[FALSE,TRUE,"",'
         f"{_pose(invert_transform(problem.robot.base_in_world))},[[0,0,0],[1,0,0,0]]];",
         f"    CONST speeddata vAir:=[{_num(approach_speed_m_s * 1000.0, 3)},{_SPEED_TAIL}];",
     ]
-    lines += [f"    CONST speeddata {name}:=[{text},{_SPEED_TAIL}];"
-              for text, name in speed_names.items()]
+    lines += [f"    CONST speeddata {name}:=[{text},{_SPEED_TAIL}];" for text, name in speed_names.items()]
     for k in range(n):
         trans = ",".join(_num(v * 1000.0, 4) for v in trajectory.poses[k, :3, 3])
         rot = ",".join(_num(v, 9) for v in quats[k])
         cf = ",".join(str(int(c)) for c in conf[k])
         lines.append(f"    CONST robtarget {names[k]}:=[[{trans}],[{rot}],[{cf}],{_EXTAX}];")
 
-    move_tail = f"{tool}\\WObj:={wobj};"
+    move_tail = f"{tool} \\WObj:={wobj};"
     lines += [
         "",
         "    PROC main()",
-        "        ConfJ\\On;",
-        "        ConfL\\On;",
-        f"        MoveJ RelTool({names[0]},0,0,-{retract_mm}),vAir,z10,{move_tail}",
-        f"        MoveL {names[0]},vAir,fine,{move_tail}",
-        f"        SetDO {output},1;",
+        "        ConfJ \\On;",
+        "        ConfL \\On;",
+        f"        MoveJ RelTool({names[0]}, 0, 0, -{retract_mm}), vAir, z10, {move_tail}",
+        f"        MoveL {names[0]}, vAir, fine, {move_tail}",
+        f"        SetDO {output}, 1;",
     ]
     for k in range(1, n):
         z = "fine" if k == n - 1 else zone
-        lines.append(f"        MoveL {names[k]},{seg_speed[k - 1]},{z},{move_tail}")
+        lines.append(f"        MoveL {names[k]}, {seg_speed[k - 1]}, {z}, {move_tail}")
     lines += [
-        f"        SetDO {output},0;",
-        f"        MoveL RelTool({names[-1]},0,0,-{retract_mm}),vAir,z10,{move_tail}",
+        f"        SetDO {output}, 0;",
+        f"        MoveL RelTool({names[-1]}, 0, 0, -{retract_mm}), vAir, z10, {move_tail}",
         "    ENDPROC",
         "ENDMODULE",
     ]
@@ -200,8 +220,10 @@ def write_rapid(path: str | Path, trajectory: Trajectory, problem: Problem, robo
 
 
 _NUMS = r"\[([^\[\]]*)\]"
-_TARGET_RE = re.compile(rf"CONST\s+robtarget\s+(\w+)\s*:=\s*\[\s*{_NUMS}\s*,\s*{_NUMS}\s*,\s*"
-                        rf"{_NUMS}\s*,\s*{_NUMS}\s*\]\s*;")
+_TARGET_RE = re.compile(
+    rf"CONST\s+robtarget\s+(\w+)\s*:=\s*\[\s*{_NUMS}\s*,\s*{_NUMS}\s*,\s*"
+    rf"{_NUMS}\s*,\s*{_NUMS}\s*\]\s*;"
+)
 _SPEED_RE = re.compile(rf"CONST\s+speeddata\s+(\w+)\s*:=\s*{_NUMS}\s*;")
 _MOVE_RE = re.compile(r"\bMove[LJ]\s+(\w+)\s*,\s*(\w+)\s*,")
 
@@ -225,8 +247,7 @@ def parse_rapid_targets(path: str | Path) -> tuple[Array, Array, NDArray[np.int6
         InputError: no robtarget in the file or a malformed one.
     """
     text = Path(path).read_text(encoding="utf-8")
-    speeds = {m.group(1): _floats(m.group(2), 4, m.group(1))[0] / 1000.0
-              for m in _SPEED_RE.finditer(text)}
+    speeds = {m.group(1): _floats(m.group(2), 4, m.group(1))[0] / 1000.0 for m in _SPEED_RE.finditer(text)}
     targets = list(_TARGET_RE.finditer(text))
     if not targets:
         raise InputError(f"RAPID {path}: no CONST robtarget found")

@@ -21,15 +21,34 @@ from pathlib import Path
 import numpy as np
 
 from refine.errors import InputError
-from refine.frames import continuous_quaternions, make_transform, matrix_from_quaternion
-from refine.frames import quaternion_from_matrix
+from refine.frames import (
+    continuous_quaternions,
+    make_transform,
+    matrix_from_quaternion,
+    quaternion_from_matrix,
+)
 from refine.paths import Trajectory
 
 log = logging.getLogger(__name__)
 
 _BEFORE_Q = ["t", "s"]
-_AFTER_Q = ["x_ref", "y_ref", "z_ref", "x", "y", "z", "qw", "qx", "qy", "qz",
-            "qw_demo", "qx_demo", "qy_demo", "qz_demo", "speed"]
+_AFTER_Q = [
+    "x_ref",
+    "y_ref",
+    "z_ref",
+    "x",
+    "y",
+    "z",
+    "qw",
+    "qx",
+    "qy",
+    "qz",
+    "qw_demo",
+    "qx_demo",
+    "qy_demo",
+    "qz_demo",
+    "speed",
+]
 
 
 def trajectory_columns(n_joints: int) -> list[str]:
@@ -57,8 +76,18 @@ def write_trajectory_csv(path: str | Path, trajectory: Trajectory) -> Path:
     """
     path = Path(path)
     quat, demo = _quaternion_columns(trajectory)
-    table = np.column_stack([trajectory.t, trajectory.s, trajectory.q, trajectory.positions_ref,
-                             trajectory.poses[:, :3, 3], quat, demo, trajectory.speed])
+    table = np.column_stack(
+        [
+            trajectory.t,
+            trajectory.s,
+            trajectory.q,
+            trajectory.positions_ref,
+            trajectory.poses[:, :3, 3],
+            quat,
+            demo,
+            trajectory.speed,
+        ]
+    )
     lines = [",".join(trajectory_columns(trajectory.q.shape[1]))]
     lines += [",".join(map(repr, row)) for row in table.tolist()]
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -87,24 +116,32 @@ def read_trajectory_csv(path: str | Path) -> Trajectory:
     header = [h.strip() for h in lines[0].split(",")]
     n_joints = len(header) - len(_BEFORE_Q) - len(_AFTER_Q)
     if n_joints < 1 or header != trajectory_columns(n_joints):
-        raise InputError(f"trajectory CSV {path}: header {header} is not "
-                         f"t, s, q1..qn, {', '.join(_AFTER_Q)}")
-    try:
-        data = np.array([[float(v) for v in line.split(",")] for line in lines[1:] if line.strip()])
-    except ValueError as e:
-        raise InputError(f"trajectory CSV {path}: {e}") from e
-    if data.ndim != 2 or data.shape[1] != len(header):
-        raise InputError(f"trajectory CSV {path}: every row needs {len(header)} values")
+        raise InputError(f"trajectory CSV {path}: header {header} is not t, s, q1..qn, {', '.join(_AFTER_Q)}")
+    rows = []
+    for number, line in enumerate(lines[1:], start=2):
+        if not line.strip():
+            continue
+        try:
+            row = [float(v) for v in line.split(",")]
+        except ValueError as e:
+            raise InputError(f"trajectory CSV {path}, line {number}: {e}") from e
+        if len(row) != len(header):
+            raise InputError(
+                f"trajectory CSV {path}, line {number}: {len(row)} values, expected {len(header)}"
+            )
+        rows.append(row)
+    data = np.array(rows, dtype=float).reshape(-1, len(header))
     c = {name: i for i, name in enumerate(header)}
-    q = data[:, c["q1"]:c["q1"] + n_joints]
-    poses = make_transform(matrix_from_quaternion(data[:, c["qw"]:c["qz"] + 1]),
-                           data[:, c["x"]:c["z"] + 1])
+    q = data[:, c["q1"] : c["q1"] + n_joints]
+    poses = make_transform(
+        matrix_from_quaternion(data[:, c["qw"] : c["qz"] + 1]), data[:, c["x"] : c["z"] + 1]
+    )
     return Trajectory(
         t=data[:, c["t"]].copy(),
         s=data[:, c["s"]].copy(),
         q=q.copy(),
-        positions_ref=data[:, c["x_ref"]:c["z_ref"] + 1].copy(),
+        positions_ref=data[:, c["x_ref"] : c["z_ref"] + 1].copy(),
         poses=poses,
-        rotations_demo=matrix_from_quaternion(data[:, c["qw_demo"]:c["qz_demo"] + 1]),
+        rotations_demo=matrix_from_quaternion(data[:, c["qw_demo"] : c["qz_demo"] + 1]),
         speed=data[:, c["speed"]].copy(),
     )

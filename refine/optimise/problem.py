@@ -40,17 +40,21 @@ Array = NDArray[np.float64]
 
 @dataclass(frozen=True)
 class Weights:
-    """Cost weights of the refinement.
+    """Cost weights of the refinement; the cost is a mean over waypoints, in squared degrees.
+
+    The orientation term is ``2(1 - cos θ)·(180/π)²``, which is θ² in deg² for small θ, so an
+    objective of about 1 means the path keeps about one degree from the demonstration (a scale
+    IPOPT converges well on).
 
     Attributes:
-        orientation: weight of (1 - cos θ) per waypoint, θ the deviation from the demonstration.
-        velocity: weight of the squared joint step per metre of path [rad²/m²], per waypoint.
-        acceleration: weight of the squared second difference per metre² [rad²/m⁴], per waypoint.
+        orientation: weight of the squared deviation from the demonstration [1/deg²·deg²].
+        velocity: weight of the squared joint step per metre of path |Δq/Δs|² [deg²·m²/rad²].
+        acceleration: weight of the squared second difference per metre² |Δ²q/Δs²|² [deg²·m⁴/rad²].
     """
 
     orientation: float = 1.0
-    velocity: float = 1e-6
-    acceleration: float = 1e-9
+    velocity: float = 5e-3
+    acceleration: float = 5e-6
 
     def __post_init__(self) -> None:
         for name in ("orientation", "velocity", "acceleration"):
@@ -65,6 +69,8 @@ class RefinementNLP:
 
     Attributes:
         nlp: the CasADi problem dict (``x``, ``p``, ``f``, ``g``).
+        solver: the IPOPT solver CasADi built for it (derivatives included).
+        solver_options: the options it was built with.
         params: numeric value of ``p`` (CAD points and demonstrated orientations).
         lbx, ubx: variable bounds (joint limits minus margin) [rad], shape (n·N,).
         lbg, ubg: constraint bounds, shape (4·N + len(singular_waypoints),).
@@ -78,6 +84,8 @@ class RefinementNLP:
     """
 
     nlp: dict[str, Any]
+    solver: ca.Function
+    solver_options: dict[str, Any]
     params: Array
     lbx: Array
     ubx: Array
@@ -110,6 +118,21 @@ class RefinementNLP:
             singular_waypoints=waypoints,
         )
 
+
+IPOPT_DEFAULTS: dict[str, Any] = {
+    "ipopt.print_level": 0,
+    "ipopt.sb": "yes",
+    "print_time": False,
+    "ipopt.tol": 1e-9,
+    "ipopt.constr_viol_tol": 1e-10,
+    "ipopt.max_iter": 300,
+    "ipopt.mu_strategy": "adaptive",
+    "ipopt.warm_start_init_point": "yes",
+    "ipopt.warm_start_bound_push": 1e-9,
+    "ipopt.warm_start_mult_bound_push": 1e-9,
+}
+"""IPOPT settings: a warm start from the IK seed, which is usually close to the answer, and a
+constraint tolerance well under the 1e-6 m position tolerance of the verification."""
 
 ROW_NAMES = ("position x", "position y", "position z", "orientation cone")
 
@@ -164,6 +187,7 @@ def build_refinement(
     axisymmetric: bool = False,
     weights: Weights | None = None,
     singular_waypoints: tuple[int, ...] = (),
+    solver_options: dict[str, Any] | None = None,
 ) -> RefinementNLP:
     """Build the refinement NLP for ``fused`` on ``robot`` (no solve).
 
@@ -176,6 +200,7 @@ def build_refinement(
         axisymmetric: leave the spin about the tool axis free.
         weights: cost weights (defaults of :class:`Weights`).
         singular_waypoints: waypoints whose singularity measure is bounded below by the margin.
+        solver_options: CasADi/IPOPT options overriding :data:`IPOPT_DEFAULTS`.
 
     Returns:
         The problem with bounds and parameters filled in.
@@ -214,7 +239,7 @@ def build_refinement(
     dQ = Q[:, 1:] - Q[:, :-1]
     d2Q = Q[:, 2:] - 2 * Q[:, 1:-1] + Q[:, :-2]
     f = (
-        weights.orientation * ca.sum2(cost)
+        weights.orientation * 2.0 * (180.0 / math.pi) ** 2 * ca.sum2(cost)
         + weights.velocity * ca.sumsqr(dQ) / h**2
         + weights.acceleration * ca.sumsqr(d2Q) / h**4
     ) / N
@@ -234,8 +259,11 @@ def build_refinement(
         "f": f,
         "g": ca.vertcat(*rows),
     }
+    options = {**IPOPT_DEFAULTS, **(solver_options or {})}
     return RefinementNLP(
         nlp=nlp,
+        solver=ca.nlpsol("refine", "ipopt", nlp, options),
+        solver_options=options,
         params=params,
         lbx=np.tile(lower, N),
         ubx=np.tile(upper, N),

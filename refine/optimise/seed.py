@@ -23,6 +23,9 @@ log = logging.getLogger(__name__)
 
 Array = NDArray[np.float64]
 
+CONVERGED = 1e-6
+"""Pose error norm [m and rad stacked] under which an IK solution counts as converged."""
+
 
 @dataclass(frozen=True)
 class TcpKinematics:
@@ -71,7 +74,7 @@ def solve_ik(
     *,
     max_iterations: int = 100,
     damping: float = 1e-3,
-    tol: float = 1e-10,
+    tol: float = CONVERGED,
 ) -> tuple[Array, float]:
     """Damped least-squares IK for one TCP pose, clamped to [lower, upper].
 
@@ -83,7 +86,7 @@ def solve_ik(
         upper: upper joint bounds [rad], shape (n,).
         max_iterations: iteration cap.
         damping: DLS damping λ [-] (on a Jacobian with rows in m and rad).
-        tol: stop when the squared pose error is below this [m² + rad²].
+        tol: stop when the pose error norm is below this [m and rad stacked].
 
     Returns:
         joints [rad] (n,) and the remaining pose error norm (position [m] and angle [rad] stacked).
@@ -91,7 +94,7 @@ def solve_ik(
     q = np.clip(np.asarray(q0, dtype=float), lower, upper)
     err = _pose_error(kin.pose(q), T_target)
     for _ in range(max_iterations):
-        if float(err @ err) < tol:
+        if float(err @ err) < tol * tol:
             break
         J = kin.jacobian(q)
         dq = J.T @ np.linalg.solve(J @ J.T + damping**2 * np.eye(6), err)
@@ -103,14 +106,48 @@ def solve_ik(
     return q, float(np.linalg.norm(err))
 
 
+def _chain(
+    kin: TcpKinematics, targets: Array, q_first: Array, lower: Array, upper: Array
+) -> tuple[Array, Array]:
+    qs = np.empty((len(targets), len(q_first)))
+    errors = np.empty(len(targets))
+    q = q_first
+    for k, T in enumerate(targets):
+        q, errors[k] = solve_ik(kin, T, q, lower, upper)
+        qs[k] = q
+    return qs, errors
+
+
+def shift_turns(qs: Array, lower: Array, upper: Array) -> Array:
+    """Shift every joint whose range spans more than a full turn by whole turns to fit its limits.
+
+    A revolute joint at q and at q ± 2π puts the robot in the same pose, so for joints like ABB's
+    axes 4 and 6 (±400°) the chain's excursion can be moved as a whole. The shift chosen centres
+    the excursion in the limits as well as whole turns allow.
+    """
+    qs = np.array(qs, dtype=float)
+    for j in np.flatnonzero(upper - lower > 2 * np.pi):
+        lo, hi = qs[:, j].min(), qs[:, j].max()
+        centre = 0.5 * (lower[j] + upper[j]) - 0.5 * (lo + hi)
+        qs[:, j] += 2 * np.pi * np.round(centre / (2 * np.pi))
+    return qs
+
+
 def ik_chain(
     kin: TcpKinematics,
     targets: Array,
     lower: Array,
     upper: Array,
     starts: list[Array],
+    *,
+    max_chains: int = 4,
 ) -> tuple[Array, Array]:
-    """IK chained along ``targets`` (N, 4, 4) from the best of several starts.
+    """IK chained along ``targets`` (N, 4, 4), trying the distinct first-waypoint solutions of ``starts``.
+
+    Joints whose range spans more than a full turn are chained without their limits and then shifted
+    by whole turns (:func:`shift_turns`); a chain that still leaves the limits is chained again with
+    them. Up to ``max_chains`` distinct IK branches of the first waypoint are chained; the first chain
+    that converges everywhere inside the limits wins, otherwise the one with the smallest error.
 
     Args:
         kin: TCP kinematics.
@@ -118,26 +155,41 @@ def ik_chain(
         lower: lower joint bounds [rad] (n,) (already shrunk by the joint margin).
         upper: upper joint bounds [rad] (n,) (already shrunk by the joint margin).
         starts: candidate start configurations for the first waypoint [rad].
+        max_chains: how many distinct first-waypoint solutions to chain at most.
 
     Returns:
         joints (N, n) [rad] and the pose error norm per waypoint (N,).
     """
-    best: tuple[float, Array] | None = None
+    wraps = upper - lower > 2 * np.pi
+    free_lower = np.where(wraps, -np.inf, lower)
+    free_upper = np.where(wraps, np.inf, upper)
+    firsts: list[tuple[float, Array]] = []
     for q_start in starts:
-        q, err = solve_ik(kin, targets[0], q_start, lower, upper, max_iterations=300)
-        margin = float(np.min(np.minimum(q - lower, upper - q)))
-        score = err * 1e3 - margin  # converge first, then prefer room to the limits
+        q, err = solve_ik(kin, targets[0], q_start, free_lower, free_upper, max_iterations=300)
+        if err > CONVERGED:
+            continue
+        key = np.where(wraps, np.mod(q, 2 * np.pi), q)
+        if any(np.allclose(key, np.where(wraps, np.mod(f, 2 * np.pi), f), atol=1e-3) for _, f in firsts):
+            continue
+        firsts.append((-float(np.min(np.minimum(q - free_lower, free_upper - q))), q))
+    if not firsts:  # nothing converged: chain from the closest attempt and let the NLP decide
+        firsts = [(0.0, solve_ik(kin, targets[0], starts[0], lower, upper, max_iterations=300)[0])]
+    firsts.sort(key=lambda item: item[0])
+
+    best: tuple[float, Array, Array] | None = None
+    for _, q_first in firsts[:max_chains]:
+        qs, errors = _chain(kin, targets, q_first, free_lower, free_upper)
+        qs = shift_turns(qs, lower, upper)
+        if np.any(qs < lower - 1e-9) or np.any(qs > upper + 1e-9):
+            qs, errors = _chain(kin, targets, np.clip(qs[0], lower, upper), lower, upper)
+        score = float(errors.max())
         if best is None or score < best[0]:
-            best = (score, q)
+            best = (score, qs, errors)
+        if score <= CONVERGED:
+            break
     assert best is not None
-    q = best[1]
-    qs = np.empty((len(targets), len(q)))
-    errors = np.empty(len(targets))
-    for k, T in enumerate(targets):
-        q, errors[k] = solve_ik(kin, T, q, lower, upper)
-        qs[k] = q
-    log.debug("IK seed: max pose error %.3g over %d waypoints", errors.max(), len(targets))
-    return qs, errors
+    log.debug("IK seed: max pose error %.3g over %d waypoints", best[0], len(targets))
+    return best[1], best[2]
 
 
 def start_candidates(

@@ -11,9 +11,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
-from typing import Any
 
-import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
@@ -25,19 +23,6 @@ from refine.optimise.verify import PathCheck, check_path, singularity_measures
 log = logging.getLogger(__name__)
 
 Array = NDArray[np.float64]
-
-IPOPT_DEFAULTS: dict[str, Any] = {
-    "ipopt.print_level": 0,
-    "ipopt.sb": "yes",
-    "print_time": False,
-    "ipopt.tol": 1e-9,
-    "ipopt.constr_viol_tol": 1e-10,
-    "ipopt.max_iter": 300,
-    "ipopt.mu_strategy": "adaptive",
-    "ipopt.warm_start_init_point": "yes",
-    "ipopt.warm_start_bound_push": 1e-9,
-    "ipopt.warm_start_mult_bound_push": 1e-9,
-}
 
 MAX_OUTER_ITERATIONS = 5
 """Rounds of solve -> verify -> add singularity rows before giving up on adding more."""
@@ -67,7 +52,8 @@ class Refinement:
         iterations: IPOPT iterations, summed over the outer rounds.
         outer_iterations: solve -> verify rounds.
         singular_waypoints: waypoints that carried the singularity bound in the last round.
-        timings_s: ``seed``, ``solve``, ``verify`` wall times [s].
+        timings_s: ``seed``, ``solve``, ``verify`` wall times [s], and ``build`` when singularity
+            rows had to be added (a rebuild).
     """
 
     status: str
@@ -100,7 +86,6 @@ def solve_refinement(
     q0: Array | None = None,
     *,
     home: Array | None = None,
-    solver_options: dict[str, Any] | None = None,
 ) -> Refinement:
     """Solve ``problem`` with IPOPT from ``q0`` (or the IK seed) and verify the answer.
 
@@ -108,7 +93,6 @@ def solve_refinement(
         problem: from :func:`refine.optimise.problem.build_refinement`.
         q0: initial joints (N, n) [rad]; None to chain IK from ``home`` and other starts.
         home: preferred first configuration [rad] for the IK seed.
-        solver_options: CasADi/IPOPT options overriding :data:`IPOPT_DEFAULTS`.
 
     Raises:
         SolverError: IPOPT itself failed (not an infeasibility): the message names its status.
@@ -123,15 +107,16 @@ def solve_refinement(
     if margin > 0 and not problem.singular_waypoints:
         near = _near_singular(kin, q_seed, margin, ())
         if near:
+            t0 = time.perf_counter()
             problem = problem.with_singular_waypoints(near)
+            timings["build"] = time.perf_counter() - t0
 
-    opts = {**IPOPT_DEFAULTS, **(solver_options or {})}
     q_start, iterations, timings["solve"], timings["verify"] = q_seed, 0, 0.0, 0.0
     outer = 0
     while outer < MAX_OUTER_ITERATIONS:
         outer += 1
         t0 = time.perf_counter()
-        solver = ca.nlpsol("refine", "ipopt", problem.nlp, opts)
+        solver = problem.solver
         try:
             sol = solver(
                 x0=q_start.ravel(),
@@ -155,7 +140,9 @@ def solve_refinement(
         if not missing:
             break
         log.info("singularity bound added on %d more waypoints; solving again", len(missing))
+        t0 = time.perf_counter()
         problem = problem.with_singular_waypoints(problem.singular_waypoints + missing)
+        timings["build"] = timings.get("build", 0.0) + time.perf_counter() - t0
         q_start = q
 
     solver_status = str(stats.get("return_status", "unknown"))

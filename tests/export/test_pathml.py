@@ -12,10 +12,10 @@ from refine.export.pathml import (
     CAEX_NS,
     LayerLayout,
     TrackLayout,
-    read_pathml,
     validate_pathml,
     write_pathml,
 )
+from refine.export.pathml_read import read_pathml
 from refine.frames import rotation_angle_deg
 from refine.problem import ProcessParameter
 
@@ -115,8 +115,12 @@ def test_every_double_carries_a_unit_and_every_element_a_guid(written):
 
 def test_every_internal_element_requires_a_pathml_role(written):
     root = etree.parse(str(written)).getroot()
-    roles = {rc.get("Name") for lib in root.iter(ns("RoleClassLib"))
-             if lib.get("Name") == "PathMLRoleClassLib" for rc in lib.iter(ns("RoleClass"))}
+    roles = {
+        rc.get("Name")
+        for lib in root.iter(ns("RoleClassLib"))
+        if lib.get("Name") == "PathMLRoleClassLib"
+        for rc in lib.iter(ns("RoleClass"))
+    }
     assert roles == {"Path", "Layer", "Track", "Point"}
     for el in root.iter(ns("InternalElement")):
         ref = el.find(ns("RoleRequirements")).get("RefBaseRoleClassPath")
@@ -134,8 +138,11 @@ def test_writing_twice_gives_identical_files(tmp_path, trajectory, problem):
 def test_several_layers_and_tracks_round_trip(aml_dir, tmp_path, trajectory, problem):
     amps = (ProcessParameter("current", 140.0, "A"),)
     layers = [
-        LayerLayout("Pass1", (TrackLayout("Root", 0, 20, amps), TrackLayout("Fill", 20, 35)),
-                    (ProcessParameter("layerHeight", 0.002, "m"),)),
+        LayerLayout(
+            "Pass1",
+            (TrackLayout("Root", 0, 20, amps), TrackLayout("Fill", 20, 35)),
+            (ProcessParameter("layerHeight", 0.002, "m"),),
+        ),
         LayerLayout("Pass2", (TrackLayout("Cap", 35, 60, amps),)),
     ]
     path = write_pathml(tmp_path / "weld.aml", trajectory, problem, layers=layers)
@@ -152,6 +159,34 @@ def test_a_track_outside_the_trajectory_is_rejected(tmp_path, trajectory, proble
     layers = [LayerLayout("L", (TrackLayout("T", 10, 999),))]
     with pytest.raises(InputError, match="T"):
         write_pathml(tmp_path / "x.aml", trajectory, problem, layers=layers)
+
+
+def test_duplicate_track_names_are_rejected(tmp_path, trajectory, problem):
+    layers = [LayerLayout("L", (TrackLayout("T", 0, 10), TrackLayout("T", 10, 20)))]
+    with pytest.raises(InputError, match="uniquely named"):
+        write_pathml(tmp_path / "x.aml", trajectory, problem, layers=layers)
+
+
+def test_reader_converts_the_units_other_tools_write(written, tmp_path, trajectory):
+    """A point written in mm and radians, and a speed in mm/s, read back in m, deg and m/s."""
+    tree = etree.parse(str(written))
+    point = next(e for e in tree.getroot().iter(ns("InternalElement")) if e.get("Name") == "P0003")
+    frame = {a.get("Name"): a for a in point.find(ns("Attribute")).iter(ns("Attribute"))}
+    values = {a.get("Name"): a for a in point.findall(ns("Attribute"))}
+    for attr, unit, factor in (
+        (frame["x"], "mm", 1e3),
+        (frame["rz"], "rad", np.pi / 180.0),
+        (values["speed"], "mm/s", 1e3),
+    ):
+        attr.set("Unit", unit)
+        attr.find(ns("Value")).text = repr(float(attr.findtext(ns("Value"))) * factor)
+    foreign = tmp_path / "foreign.aml"
+    tree.write(str(foreign))
+    track = read_pathml(foreign).layers[0].tracks[0]
+    assert track.positions[3, 0] == pytest.approx(trajectory.poses[3, 0, 3], abs=1e-12)
+    assert track.speed[3] == pytest.approx(trajectory.speed[3], abs=1e-12)
+    angle = rotation_angle_deg(track.rotations[3], trajectory.poses[3, :3, :3])
+    assert float(angle) < 1e-9
 
 
 def test_reading_a_document_without_a_path_says_so(aml_dir):

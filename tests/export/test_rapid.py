@@ -1,0 +1,160 @@
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from refine.errors import InputError
+from refine.export.rapid import abb_confdata, parse_rapid_targets, segment_speeds, write_rapid
+from refine.frames import invert_transform, make_transform, matrix_from_quaternion, rotvec_from_matrix
+
+
+@pytest.fixture()
+def module(tmp_path, trajectory, problem, irb4600):
+    return write_rapid(tmp_path / "bead.mod", trajectory, problem, irb4600)
+
+
+def test_round_trip_recovers_positions_and_orientations(module, trajectory):
+    positions, quats, _, _ = parse_rapid_targets(module)
+    np.testing.assert_allclose(positions, trajectory.poses[:, :3, 3], rtol=0, atol=1e-6)
+    R = matrix_from_quaternion(quats)
+    R_rel = np.swapaxes(R, -1, -2) @ trajectory.poses[:, :3, :3]
+    assert np.linalg.norm(rotvec_from_matrix(R_rel), axis=1).max() < 1e-6
+    np.testing.assert_allclose(np.linalg.norm(quats, axis=1), 1.0, atol=1e-8)
+    assert np.all(np.sum(quats[1:] * quats[:-1], axis=1) > 0.0), "quaternion signs jump"
+
+
+def test_each_target_is_reached_at_its_segment_speed(module, trajectory):
+    _, _, _, speeds = parse_rapid_targets(module)
+    assert speeds[0] == pytest.approx(0.25)  # the approach onto the first target
+    np.testing.assert_allclose(speeds[1:], segment_speeds(trajectory), rtol=0, atol=0.5e-4 + 1e-12)
+
+
+def test_written_confdata_is_that_of_the_refined_joints(module, trajectory, irb4600):
+    _, _, confs, _ = parse_rapid_targets(module)
+    np.testing.assert_array_equal(confs, abb_confdata(irb4600, trajectory.q))
+
+
+def test_targets_are_tcp_poses_in_the_world_through_wobj_and_tool(module, trajectory, problem, irb4600):
+    """uframe · target == base-frame TCP pose == fk(q) · tooldata, for every waypoint."""
+    text = module.read_text()
+    nums = r"\[([^\]]*)\]"
+    uf = re.search(rf"wobjdata \w+:=\[FALSE,TRUE,\"\",\[{nums},{nums}\]", text)
+    T_base_world = make_transform(
+        matrix_from_quaternion([float(v) for v in uf[2].split(",")]),
+        np.array([float(v) for v in uf[1].split(",")]) / 1000.0,
+    )
+    np.testing.assert_allclose(T_base_world, invert_transform(problem.robot.base_in_world), atol=1e-7)
+    positions, quats, _, _ = parse_rapid_targets(module)
+    for k in (0, len(trajectory) // 2, len(trajectory) - 1):
+        T_target = make_transform(matrix_from_quaternion(quats[k]), positions[k])
+        expected = irb4600.fk(trajectory.q[k]) @ problem.tool.tcp_in_flange
+        np.testing.assert_allclose(T_base_world @ T_target, expected, atol=1e-6)
+
+
+def test_module_is_syntactically_sane(module, trajectory, problem):
+    text = module.read_text()
+    lines = [ln.strip() for ln in text.splitlines()]
+    assert lines[0].startswith("MODULE ") and lines[-1] == "ENDMODULE"
+    assert sum(ln.startswith("MODULE ") for ln in lines) == 1
+    assert sum(ln.startswith("PROC ") for ln in lines) == sum(ln == "ENDPROC" for ln in lines) == 1
+    code = [ln for ln in lines if ln and not ln.startswith("!")]
+    assert all(
+        ln.endswith(";") for ln in code if not ln.startswith(("MODULE", "ENDMODULE", "PROC", "ENDPROC"))
+    )
+    assert all(ln.count("[") == ln.count("]") and ln.count("(") == ln.count(")") for ln in code)
+    targets = re.findall(r"CONST robtarget (\w+):=", text)
+    assert len(targets) == len(trajectory) == len(set(targets))
+    body = text.split("PROC main()")[1]
+    for name in targets:
+        assert re.search(rf"\b{name}\b", body), f"robtarget {name} never used"
+    speeds = re.findall(r"CONST speeddata (\w+):=", text)
+    assert all(re.search(rf"\b{name}\b", body) for name in speeds)
+    moves = re.findall(r"^\s*MoveL (p\d+), \w+, (\w+),", body, re.M)
+    assert [m[0] for m in moves] == targets
+    zones = [m[1] for m in moves]
+    assert zones[0] == "fine" and zones[-1] == "fine" and set(zones[1:-1]) == {"z1"}
+    on = body.index(f"SetDO {problem.process.output}, 1;")
+    off = body.index(f"SetDO {problem.process.output}, 0;")
+    assert body.index(f"MoveL {targets[0]},") < on < body.index(f"MoveL {targets[1]},")
+    assert body.index(f"MoveL {targets[-1]},") < off < body.index("ENDPROC")
+    assert "PERS tooldata glue_gun:=[TRUE,[[10,0,220]," in text
+    assert "[4.5,[0,10,80],[1,0,0,0],0,0,0]]" in text
+
+
+# ---- configuration data ------------------------------------------------------------------------
+
+
+def _quadrant(deg: float) -> int:
+    """ABB quadrant by the manual's wording: 0 for [0, 90), -1 for [-90, 0), 1 for [90, 180)..."""
+    k = 0
+    while deg >= 90.0 * (k + 1):
+        k += 1
+    while deg < 90.0 * k:
+        k -= 1
+    return k
+
+
+def _expected_cfx(robot, q) -> int:
+    """Independent geometry: the arm plane seen in the frame of link 1 (x forward, z up)."""
+    links = robot.link_poses(q)
+    to_link1 = invert_transform(links["link_1"])
+    p2, p3, wrist = ((to_link1 @ links[name][:, 3])[:3] for name in ("link_2", "link_3", "link_5"))
+    arm, w = p3 - p2, wrist - p2
+    behind_axis1 = wrist[0] < 0.0
+    behind_lower_arm = arm[2] * w[0] - arm[0] * w[2] < 0.0
+    return 4 * behind_axis1 + 2 * behind_lower_arm + (q[4] < 0.0)
+
+
+ANCHORS = [  # joints [deg] -> cfx known from the arm's shape
+    ([0, 0, 0, 0, 0, 0], 0),  # arm out front, wrist straight: front/front/positive
+    ([0, 0, 0, 0, -30, 0], 1),  # same arm, wrist bent the other way
+    ([0, 0, -120, 0, 30, 0], 6),  # forearm folded back over the top: behind axis 1 and lower arm
+    ([0, 60, -100, 0, -30, 0], 3),  # lower arm leaning forward, forearm up and back
+    ([0, -80, 20, 0, 30, 0], 4),  # lower arm leaning back, forearm level: behind axis 1 only
+]
+
+
+@pytest.mark.parametrize(("q_deg", "cfx"), ANCHORS)
+def test_cfx_of_known_arm_shapes(irb4600, q_deg, cfx):
+    assert abb_confdata(irb4600, np.radians(q_deg))[3] == cfx
+
+
+def test_confdata_spans_quadrants_and_both_wrist_signs(irb4600):
+    rng = np.random.default_rng(7)
+    lo, hi = irb4600.spec.lower, irb4600.spec.upper
+    q = rng.uniform(lo, hi, size=(400, 6))
+    q[:8, [0, 3, 5]] = np.radians(
+        [
+            [-179, -391, 355],
+            [-91, -269, -181],
+            [-90, -90, -90],
+            [-45, -1, -0.5],
+            [0, 0, 0],
+            [45, 89.9, 90],
+            [120, 181, 270],
+            [179.9, 399, 399],
+        ]
+    )
+    conf = abb_confdata(irb4600, q)
+    deg = np.degrees(q)
+    for k in range(len(q)):
+        assert list(conf[k, :3]) == [_quadrant(deg[k, j]) for j in (0, 3, 5)]
+        assert conf[k, 3] == _expected_cfx(irb4600, q[k])
+    assert set(conf[:, 3] % 2) == {0, 1}  # both signs of axis 5
+    assert {-2, -1, 0, 1} <= set(conf[:, 0])
+    assert conf[:, 1].min() <= -4 and conf[:, 1].max() >= 3
+    assert len(set(conf[:, 3])) >= 4
+
+
+def test_single_and_many_configurations_agree(irb4600, trajectory):
+    many = abb_confdata(irb4600, trajectory.q[:5])
+    assert all(
+        list(abb_confdata(irb4600, qk)) == list(row) for qk, row in zip(trajectory.q[:5], many, strict=True)
+    )
+
+
+def test_rejects_a_bad_zone(tmp_path, trajectory, problem, irb4600):
+    with pytest.raises(InputError, match="zone"):
+        write_rapid(tmp_path / "x.mod", trajectory, problem, irb4600, zone="zz")
