@@ -49,6 +49,7 @@ SPEED_FLOOR_FRACTION = 0.1  # speed floor as a fraction of the median demonstrat
 MAX_MEDIAN_RESIDUAL_M = 0.1  # median demo-to-CAD distance above which the demo is rejected [m]
 MAX_HAND_SPEED_M_S = 2.0  # mean speed above which a demonstration is implausible [m/s]
 TIME_HALF_WIDTH_M = 0.005  # half-width of the arc-length window that fits t(s) [m]
+BASIS_SMOOTHING_M = 0.02  # path length the distortion's argument is averaged over [m]
 PRIOR_ERROR_M = (0.005, 0.005, 0.05)  # expected tracker error along the receiver's x, y, z [m]
 _NOISE_M = 1e-3  # tracker noise the ridge is scaled by [m]
 _FIT_ROUNDS = (3, 3, 0)  # distortion fit/re-project rounds after each DTW pass
@@ -131,6 +132,11 @@ def _project(points: Array, centre_s: Array, cad_s: Array, cad: Array, radius: f
     s = cad_s[seg] + u * (cad_s[seg + 1] - cad_s[seg])
     tangent = AB / np.linalg.norm(AB, axis=1, keepdims=True)
     return s, foot, tangent, np.linalg.norm(points - foot, axis=1)
+
+
+def _resample(t: Array, x: Array, t_new: Array) -> Array:
+    """Linear interpolation of the rows of x (M, 3) from times t to t_new [s]."""
+    return np.column_stack([np.interp(t_new, t, c) for c in x.T])
 
 
 def _basis(q: Array, centre: Array, scale: float) -> Array:
@@ -225,14 +231,17 @@ def align(
     # ---- coarse grids: CAD thinned for the DTW, demo resampled to ~half a coarse step per row
     cols = np.unique(np.r_[np.arange(0, len(cad_s), -(-len(cad_s) // DTW_MAX_POINTS)), len(cad_s) - 1])
     h = L / (len(cols) - 1)
-    dt_demo = float(np.median(np.diff(t)))
-    dt_grid = max(0.5 * h * (t[-1] - demo.t[demo.motion_start]) / L, (t[-1] - t[0]) / (8 * len(cols)))
-    width = max(1, int(round(dt_grid / dt_demo)))
+    dt_demo, t_move = float(np.median(np.diff(t))), t[-1] - demo.t[demo.motion_start]
+    dt_grid = max(0.5 * h * t_move / L, (t[-1] - t[0]) / (8 * len(cols)))
     tg = np.linspace(t[0], t[-1], int(np.ceil((t[-1] - t[0]) / dt_grid)) + 1)
-    pg, qg = (np.column_stack([np.interp(tg, t, c) for c in uniform_filter1d(x, width, axis=0).T])
-              for x in (p, q))
-    centre, scale = q.mean(axis=0), float(np.sqrt(np.mean(np.sum((q - q.mean(axis=0)) ** 2, 1))))
-    phi_g, W = _basis(qg, centre, max(scale, 1e-3)), np.zeros((10, 3))
+    pg = _resample(t, uniform_filter1d(p, max(1, round(dt_grid / dt_demo)), axis=0), tg)
+    # the distortion is a function of heavily smoothed positions: noise in its argument would
+    # let the polynomial "explain" the noise (errors in variables)
+    n_arg = max(1, round(BASIS_SMOOTHING_M * t_move / L / dt_demo))
+    q_arg = uniform_filter1d(q, n_arg, axis=0)
+    centre = q_arg.mean(axis=0)
+    scale = max(float(np.sqrt(np.mean(np.sum((q_arg - centre) ** 2, axis=1)))), 1e-3)
+    phi_g, W = _basis(_resample(t, q_arg, tg), centre, scale), np.zeros((10, 3))
     radius = 2.0 * h + 0.02
 
     # ---- DTW passes, with the distortion fit between them
@@ -252,13 +261,13 @@ def align(
             sg, foot, tangent, dist = _project(pg + phi_g @ W, sg, cad_s, cad_S, radius)
 
     # ---- every sample projected near its match; speed and time per waypoint
-    correction = _basis(q, centre, max(scale, 1e-3)) @ W
+    correction = _basis(q_arg, centre, scale) @ W
     pc = p + correction
     s_raw = _project(pc, np.interp(t, tg, sg), cad_s, cad_S, radius)[0]
     v, t_match = _time_law(t, s_raw, cad_s, speed_smoothing_m)
     floor = SPEED_FLOOR_FRACTION * float(np.nanmedian(v)) if np.any(np.isfinite(v)) else np.nan
     residual = np.linalg.norm(
-        np.column_stack([np.interp(t_match, t, c) for c in pc.T]) - cad_S, axis=1)
+        _resample(t, pc, t_match) - cad_S, axis=1)
 
     # ---- does the demonstration cover the path?
     span = float(t_match[-1] - t_match[0])
