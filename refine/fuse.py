@@ -9,18 +9,20 @@ Method (all in the receiver frame {S}, where the tracker's error lives; distance
    ``DTW_MAX_POINTS``. Each demo row may advance the CAD index by 0, 1 or 2; the first row is matched
    to the CAD start, the last to the CAD end. The recursion is vectorised per row with numpy.
 3. Tracker distortion (``fit_distortion``): a quadratic polynomial in the sensor position in {S}
-   (10 terms per axis) is added to the positions. It is fitted by ridge-damped, Huber-weighted
+   (10 terms per axis) is added to the positions. It is fitted by ridge-damped, Tukey-weighted
    least squares on the *cross-track* part of the residual only (point-to-line, as in ICP): the
    along-track part of a residual is the alignment's own guess, while a smooth field seen
    cross-track on one stretch of path is along-track elsewhere, so it is recovered there too.
    Three fit/re-project rounds after each of two DTW passes, then a final DTW pass.
-4. Every demo sample is projected onto the CAD polyline near its match, giving its arc length
-   ``s_i``; ``isotonic_regression`` makes the sequence monotone. For each waypoint ``s`` the samples
-   whose (monotone) arc length lies within ``s ± speed_smoothing_m / 2`` are fitted by least squares
-   with a line ``s_i ≈ s̄ + v (t_i - t̄)``: ``v`` is the demonstrated speed along the CAD path and
-   ``t(s) = t̄ + (s - s̄) / v`` (clipped to the window, then made strictly increasing) the matched
-   demo time. Speeds below ``SPEED_FLOOR_FRACTION`` of the median speed (the start pause and the
-   ramps) are raised to that floor, so every speed is > 0.
+4. Every corrected demo sample is projected onto the CAD polyline near its match, giving its arc
+   length ``s_i``; a monotone copy (``isotonic_regression``) only picks the samples of each window.
+   Samples resting at either end (within 3 noise sigmas + 1 mm of the first or last arc length:
+   the pause) are left out. Speed ``v(s)``: least-squares slope of ``s_i`` over ``t_i`` for the
+   samples within ``s ± speed_smoothing_m`` (a box window twice ``speed_smoothing_m`` wide).
+   Matched time ``t(s)``: where the least-squares line over ``s ± TIME_HALF_WIDTH_M`` passes ``s``,
+   clipped to that window, then made strictly increasing. Speeds below ``SPEED_FLOOR_FRACTION`` of
+   the median speed (none at all where a window holds no motion) are raised to that floor, so
+   every speed is > 0 for the timing stage.
 5. Tool orientation at ``t(s)`` by ``scipy`` ``Slerp`` over the demo TCP rotations.
 """
 
@@ -43,15 +45,16 @@ from refine.paths import CadPath, Demonstration, FusedPath
 logger = logging.getLogger(__name__)
 Array = NDArray[np.float64]
 
-PRE_MOTION_S = 0.5  # demo kept before motion_start [s]
+PRE_MOTION_S = 1.0  # demo kept before motion_start [s]
 DTW_MAX_POINTS = 600  # CAD points used by the DTW at most
 SPEED_FLOOR_FRACTION = 0.1  # speed floor as a fraction of the median demonstrated speed
-MAX_MEDIAN_RESIDUAL_M = 0.1  # median demo-to-CAD distance above which the demo is rejected [m]
+MAX_RESIDUAL_M = 0.1  # demo-to-CAD distance beyond which a waypoint is not covered [m]
+MAX_CORRECTION_M = 0.15  # largest tracker position correction accepted [m]
 MAX_HAND_SPEED_M_S = 2.0  # mean speed above which a demonstration is implausible [m/s]
 TIME_HALF_WIDTH_M = 0.005  # half-width of the arc-length window that fits t(s) [m]
 BASIS_SMOOTHING_M = 0.02  # path length the distortion's argument is averaged over [m]
-PRIOR_ERROR_M = (0.005, 0.005, 0.05)  # expected tracker error along the receiver's x, y, z [m]
-_NOISE_M = 1e-3  # tracker noise the ridge is scaled by [m]
+PRIOR_ERROR_M = (0.01, 0.01, 0.05)  # expected tracker error along the receiver's x, y, z [m]
+_RIDGE_NOISE_M = 3e-3  # noise the ridge assumes, pessimistic: rows are correlated [m]
 _FIT_ROUNDS = (3, 3, 0)  # distortion fit/re-project rounds after each DTW pass
 
 
@@ -117,8 +120,14 @@ def monotone_dtw(cost: Array) -> NDArray[np.intp]:
     return cols
 
 
-def _project(points: Array, centre_s: Array, cad_s: Array, cad: Array, radius: float):
-    """Closest point on the CAD polyline within ``radius`` [m] of arc length around ``centre_s``."""
+def _project(
+    points: Array, centre_s: Array, cad_s: Array, cad: Array, radius: float
+) -> tuple[Array, Array, Array, Array]:
+    """Closest point on the CAD polyline within ``radius`` [m] of arc length around ``centre_s``.
+
+    Returns:
+        Arc length [m] (M,), foot point [m] (M, 3), unit tangent (M, 3), distance [m] (M,).
+    """
     n_seg = len(cad_s) - 1
     k = min(int(np.ceil(radius / np.median(np.diff(cad_s)))) + 1, n_seg)
     seg0 = np.clip(np.searchsorted(cad_s, centre_s) - 1, 0, n_seg - 1)
@@ -146,18 +155,22 @@ def _basis(q: Array, centre: Array, scale: float) -> Array:
 
 
 def _fit_distortion(phi: Array, p: Array, foot: Array, tangent: Array, dist: Array) -> Array:
-    """Coefficients W (10, 3) minimising the Huber-weighted cross-track part of p + phi W - foot."""
-    scale = 1.4826 * np.median(dist) + 1e-4
-    w = np.minimum(1.0, 2.0 * scale / np.maximum(dist, 1e-12))
+    """Coefficients W (10, 3) minimising the robust cross-track part of p + phi W - foot."""
+    cutoff = 4.685 * (1.4826 * np.median(dist) + 1e-4)  # Tukey's biweight: far rows get no say
+    w = np.clip(1.0 - (dist / cutoff) ** 2, 0.0, None) ** 2
     P = np.eye(3) - tangent[:, :, None] * tangent[:, None, :]  # projector onto the normal plane
-    nk = phi.shape[1]
-    N = np.einsum("i,ik,il,iab->kalb", w, phi, phi, P).reshape(3 * nk, 3 * nk)
-    rhs = np.einsum("i,ik,iab,ib->ka", w, phi, P, foot - p).reshape(-1)
-    N[np.diag_indices_from(N)] += np.tile((_NOISE_M / np.asarray(PRIOR_ERROR_M)) ** 2, nk)
+    nk, wphi = phi.shape[1], w[:, None] * phi
+    outer = (wphi[:, :, None] * phi[:, None, :]).reshape(len(phi), -1)
+    N = (outer.T @ P.reshape(len(P), 9)).reshape(nk, nk, 3, 3).transpose(0, 2, 1, 3)
+    N = N.reshape(3 * nk, 3 * nk)
+    rhs = (wphi.T @ np.einsum("iab,ib->ia", P, foot - p)).reshape(-1)
+    N[np.diag_indices_from(N)] += np.tile((_RIDGE_NOISE_M / np.asarray(PRIOR_ERROR_M)) ** 2, nk)
     return np.linalg.solve(N, rhs).reshape(nk, 3)
 
 
-def _window_fit(t: Array, s_raw: Array, s_mono: Array, centre: Array, s_lo: Array, s_hi: Array):
+def _window_fit(
+    t: Array, s_raw: Array, s_mono: Array, centre: Array, s_lo: Array, s_hi: Array
+) -> tuple[Array, Array]:
     """Least-squares line s ≈ s̄ + v (t - t̄) over the samples with s_mono in [s_lo, s_hi].
 
     Returns:
@@ -180,18 +193,43 @@ def _window_fit(t: Array, s_raw: Array, s_mono: Array, centre: Array, s_lo: Arra
     return np.where(ok, v, np.nan), t_fit
 
 
-def _time_law(t: Array, s_raw: Array, cad_s: Array, width: float):
+def _time_law(t: Array, s_raw: Array, cad_s: Array, half_width: float) -> tuple[Array, Array]:
     """Speed [m/s] (NaN where undefined) and strictly increasing matched time [s] per waypoint."""
     s_mono = isotonic_regression(s_raw).x
     # both fits stay clear of the samples resting at either end (pause, ramp)
     noise = 1.4826 * float(np.median(np.abs(s_raw - s_mono)))
-    s_a, s_b = s_mono[0] + 3.0 * noise, s_mono[-1] - 3.0 * noise
-    v = _window_fit(t, s_raw, s_mono, cad_s, np.maximum(cad_s - width, s_a),
-                    np.minimum(cad_s + width, s_b))[0]
+    s_a, s_b = s_mono[0] + 3.0 * noise + 1e-3, s_mono[-1] - 3.0 * noise - 1e-3
+    v = _window_fit(
+        t, s_raw, s_mono, cad_s, np.maximum(cad_s - half_width, s_a), np.minimum(cad_s + half_width, s_b)
+    )[0]
     half = np.clip(np.minimum(cad_s - s_a, s_b - cad_s), 0.0, TIME_HALF_WIDTH_M)
     t_fit = _window_fit(t, s_raw, s_mono, cad_s, cad_s - half, cad_s + half)[1]
     t_fit = np.maximum.accumulate(t_fit)
     return v, t_fit + 1e-9 * np.arange(len(t_fit))  # strictly increasing; 1 ns steps are harmless
+
+
+def _coarse_match(
+    pg: Array, phi_g: Array, cad_s: Array, cad: Array, cols: Array, radius: float, fit: bool
+) -> tuple[Array, Array, float]:
+    """DTW passes on the grid rows, with the distortion fit between them.
+
+    Returns:
+        Arc length [m] per grid row (M,), distortion coefficients (10, 3) and the median
+        row-to-path distance of the first pass, before any correction [m].
+    """
+    W, raw_median = np.zeros((phi_g.shape[1], 3)), np.nan
+    for rounds in _FIT_ROUNDS if fit else (0,):
+        pc = pg + phi_g @ W
+        sg = cad_s[cols][monotone_dtw(cdist(pc, cad[cols]))]
+        sg, foot, tangent, dist = _project(pc, sg, cad_s, cad, radius)
+        if np.isnan(raw_median):
+            raw_median = float(np.median(dist))
+            if raw_median > MAX_RESIDUAL_M:
+                break
+        for _ in range(rounds):
+            W = _fit_distortion(phi_g, pg, foot, tangent, dist)
+            sg, foot, tangent, dist = _project(pg + phi_g @ W, sg, cad_s, cad, radius)
+    return sg, W, raw_median
 
 
 def align(
@@ -210,21 +248,29 @@ def align(
         demo: the cleaned demonstration (sensor {E} in the receiver {S}).
         source_in_world: receiver pose in the world, T_F_S, shape (4, 4).
         sensor_in_tcp: sensor pose in the tool frame, T_TCP_E, shape (4, 4).
-        speed_smoothing_m: arc-length window of the speed and time fit [m], > 0.
+        speed_smoothing_m: half-width of the arc-length window of the speed fit [m], > 0.
         fit_distortion: fit and remove a smooth tracker position error before the final match.
 
     Raises:
-        InputError: bad arguments, or a demonstration that does not cover the path.
+        InputError: bad arguments; a demonstration that does not follow the path (median
+            distance > ``MAX_RESIDUAL_M`` before correction), stops short of it (> 5 % of the
+            waypoints farther than ``MAX_RESIDUAL_M``), needs a correction > ``MAX_CORRECTION_M``
+            or covers it faster than ``MAX_HAND_SPEED_M_S``.
     """
     if not speed_smoothing_m > 0.0:
         raise InputError(f"speed_smoothing_m must be > 0 m, got {speed_smoothing_m}")
     T_S_F = invert_transform(check_transform(source_in_world, "source_in_world"))
     T_E_TCP = invert_transform(check_transform(sensor_in_tcp, "sensor_in_tcp"))
+    if np.any(np.diff(demo.t) <= 0.0):
+        k = int(np.argmax(np.diff(demo.t) <= 0.0))
+        raise InputError(
+            f"demo {demo.source!r}: times must be strictly increasing, but sample {k + 1} "
+            f"is at {demo.t[k + 1]:.4f} s after {demo.t[k]:.4f} s"
+        )
     i0 = int(np.searchsorted(demo.t, demo.t[demo.motion_start] - PRE_MOTION_S))
     t, q = demo.t[i0:], demo.positions[i0:]
-    if len(t) < 10 or np.any(np.diff(t) <= 0.0):
-        raise InputError(f"demo {demo.source!r}: need >= 10 samples with strictly increasing "
-                         f"times from motion start, got {len(t)}")
+    if len(t) < 10:
+        raise InputError(f"demo {demo.source!r}: needs >= 10 samples from motion start, got {len(t)}")
     p = q + np.einsum("mij,j->mi", demo.rotations[i0:], T_E_TCP[:3, 3])  # TCP in {S}
     cad_s, cad_S, L = cad.s, transform_points(T_S_F, cad.positions), cad.length
 
@@ -241,52 +287,59 @@ def align(
     q_arg = uniform_filter1d(q, n_arg, axis=0)
     centre = q_arg.mean(axis=0)
     scale = max(float(np.sqrt(np.mean(np.sum((q_arg - centre) ** 2, axis=1)))), 1e-3)
-    phi_g, W = _basis(_resample(t, q_arg, tg), centre, scale), np.zeros((10, 3))
-    radius = 2.0 * h + 0.02
+    phi_g = _basis(_resample(t, q_arg, tg), centre, scale)
 
     # ---- DTW passes, with the distortion fit between them
-    raw_median = np.nan
-    for rounds in _FIT_ROUNDS if fit_distortion else (0,):
-        pc = pg + phi_g @ W
-        sg = cad_s[cols][monotone_dtw(cdist(pc, cad_S[cols]))]
-        sg, foot, tangent, dist = _project(pc, sg, cad_s, cad_S, radius)
-        if np.isnan(raw_median):
-            raw_median = float(np.median(dist))
-            if raw_median > MAX_MEDIAN_RESIDUAL_M:
-                raise InputError(f"demo {demo.source!r} does not follow the CAD path {cad.source!r}: "
-                                 f"median distance {raw_median * 1e3:.0f} mm after alignment "
-                                 f"(limit {MAX_MEDIAN_RESIDUAL_M * 1e3:.0f} mm); check frames and units")
-        for _ in range(rounds):
-            W = _fit_distortion(phi_g, pg, foot, tangent, dist)
-            sg, foot, tangent, dist = _project(pg + phi_g @ W, sg, cad_s, cad_S, radius)
+    sg, W, raw_median = _coarse_match(pg, phi_g, cad_s, cad_S, cols, 2.0 * h + 0.02, fit_distortion)
+    if raw_median > MAX_RESIDUAL_M:
+        raise InputError(
+            f"demo {demo.source!r} does not follow the CAD path {cad.source!r}: "
+            f"median distance {raw_median * 1e3:.0f} mm after alignment "
+            f"(limit {MAX_RESIDUAL_M * 1e3:.0f} mm); check frames and units"
+        )
 
     # ---- every sample projected near its match; speed and time per waypoint
     correction = _basis(q_arg, centre, scale) @ W
     pc = p + correction
-    s_raw = _project(pc, np.interp(t, tg, sg), cad_s, cad_S, radius)[0]
+    s_raw = _project(pc, np.interp(t, tg, sg), cad_s, cad_S, 0.5 * h + 0.005)[0]
     v, t_match = _time_law(t, s_raw, cad_s, speed_smoothing_m)
     floor = SPEED_FLOOR_FRACTION * float(np.nanmedian(v)) if np.any(np.isfinite(v)) else np.nan
-    residual = np.linalg.norm(
-        _resample(t, pc, t_match) - cad_S, axis=1)
+    residual = np.linalg.norm(_resample(t, pc, t_match) - cad_S, axis=1)
 
     # ---- does the demonstration cover the path?
-    span = float(t_match[-1] - t_match[0])
-    far = residual > MAX_MEDIAN_RESIDUAL_M
-    if np.median(residual) > MAX_MEDIAN_RESIDUAL_M or far.mean() > 0.05:
-        raise InputError(f"demo {demo.source!r} does not cover the CAD path {cad.source!r}: "
-                         f"{far.mean():.0%} of waypoints (s = {cad_s[far].min():.2f}-"
-                         f"{cad_s[far].max():.2f} m of {L:.2f} m) are farther than "
-                         f"{MAX_MEDIAN_RESIDUAL_M * 1e3:.0f} mm from it")
+    span, max_corr = float(t_match[-1] - t_match[0]), float(np.linalg.norm(correction, axis=1).max())
+    far = residual > MAX_RESIDUAL_M
+    if far.mean() > 0.05:
+        raise InputError(
+            f"demo {demo.source!r} does not cover the CAD path {cad.source!r}: "
+            f"{far.mean():.0%} of waypoints, between s = {cad_s[far].min():.2f} and "
+            f"{cad_s[far].max():.2f} m of {L:.2f} m, are farther than "
+            f"{MAX_RESIDUAL_M * 1e3:.0f} mm from it (largest {residual.max() * 1e3:.0f} mm)"
+        )
+    if max_corr > MAX_CORRECTION_M:
+        raise InputError(
+            f"demo {demo.source!r} follows the CAD path {cad.source!r} only after a "
+            f"tracker correction of {max_corr * 1e3:.0f} mm (limit "
+            f"{MAX_CORRECTION_M * 1e3:.0f} mm); check source_in_world and the path"
+        )
     if not np.isfinite(floor) or span <= 0.0 or L / span > MAX_HAND_SPEED_M_S:
-        raise InputError(f"demo {demo.source!r}: the {L:.2f} m path is matched to {span:.3f} s of "
-                         f"demonstration (> {MAX_HAND_SPEED_M_S} m/s); wrong time units?")
+        raise InputError(
+            f"demo {demo.source!r}: the {L:.2f} m path is matched to {span:.3f} s of "
+            f"demonstration (> {MAX_HAND_SPEED_M_S} m/s); wrong time units?"
+        )
     speed = np.maximum(np.nan_to_num(v, nan=floor), floor)
-    logger.info("aligned %d waypoints to %d demo samples: raw median distance %.1f mm, max "
-                "correction %.1f mm, residual median %.1f mm max %.1f mm, %.0f%% at speed floor",
-                len(cad_s), len(t), raw_median * 1e3, np.abs(correction).max() * 1e3,
-                np.median(residual) * 1e3, residual.max() * 1e3, 100 * np.mean(speed == floor))
-    return Alignment(t_match, speed, floor, residual, raw_median,
-                     float(np.linalg.norm(correction, axis=1).max()))
+    logger.info(
+        "aligned %d waypoints to %d demo samples: raw median distance %.1f mm, max "
+        "correction %.1f mm, residual median %.1f mm max %.1f mm, %.0f%% at speed floor",
+        len(cad_s),
+        len(t),
+        raw_median * 1e3,
+        max_corr * 1e3,
+        np.median(residual) * 1e3,
+        residual.max() * 1e3,
+        100 * np.mean(speed == floor),
+    )
+    return Alignment(t_match, speed, floor, residual, raw_median, max_corr)
 
 
 def fuse(
@@ -305,7 +358,7 @@ def fuse(
         demo: the cleaned demonstration (sensor {E} in the receiver {S}).
         source_in_world: receiver pose in the world, T_F_S, shape (4, 4).
         sensor_in_tcp: sensor pose in the tool frame, T_TCP_E, shape (4, 4).
-        speed_smoothing_m: arc-length window of the speed fit [m]; see :func:`align`.
+        speed_smoothing_m: half-width of the arc-length window of the speed fit [m].
         fit_distortion: fit and remove a smooth tracker position error; see :func:`align`.
 
     Returns:
@@ -314,8 +367,14 @@ def fuse(
     Raises:
         InputError: bad arguments, or a demonstration that does not cover the path.
     """
-    a = align(cad, demo, source_in_world, sensor_in_tcp,
-              speed_smoothing_m=speed_smoothing_m, fit_distortion=fit_distortion)
+    a = align(
+        cad,
+        demo,
+        source_in_world,
+        sensor_in_tcp,
+        speed_smoothing_m=speed_smoothing_m,
+        fit_distortion=fit_distortion,
+    )
     T_F_TCP = demo_tcp_poses(demo, source_in_world, sensor_in_tcp)
     slerp = Slerp(demo.t, Rotation.from_matrix(T_F_TCP[:, :3, :3]))
     rotations = slerp(np.clip(a.t, demo.t[0], demo.t[-1])).as_matrix()

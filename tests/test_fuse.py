@@ -61,7 +61,18 @@ def spatial_curve(ds=1e-4):
     return s, pts, heading
 
 
-def make_case(curve, closed, seed=0, pause=2.0, rate=240.0, noise=1e-3, z_err=0.06, xy_err=3e-3):
+def make_case(
+    curve,
+    closed,
+    seed=0,
+    pause=2.0,
+    rate=240.0,
+    noise=1e-3,
+    z_err=0.06,
+    xy_err=3e-3,
+    spacing=0.005,
+    end_pause=0.5,
+):
     """CAD path every 5 mm and a demonstration of it with the tracker errors of a Liberty."""
     rng = np.random.default_rng(seed)
     s_d, pts_d, head_d = curve
@@ -80,22 +91,28 @@ def make_case(curve, closed, seed=0, pause=2.0, rate=240.0, noise=1e-3, z_err=0.
         ramp = lambda x: 0.2 + 0.8 * np.clip(x / 0.03, 0, 1) ** 2 * (3 - 2 * np.clip(x / 0.03, 0, 1))  # noqa: E731
         return (0.09 + 0.03 * np.sin(2 * np.pi * s / 1.3 + 0.5)) * ramp(s) * ramp(L - s)
 
-    s_cad = np.linspace(0.0, L, int(round(L / 0.005)) + 1)
+    s_cad = np.linspace(0.0, L, int(round(L / spacing)) + 1)
     cad = CadPath(s_cad, position(s_cad), closed=closed, source="synthetic")
 
     s_f = np.linspace(0.0, L, 50_001)
     t_f = pause + cumulative_trapezoid(1.0 / speed(s_f), s_f, initial=0.0)
-    t = np.arange(0.0, t_f[-1] + 0.5, 1.0 / rate)
+    t = np.arange(0.0, t_f[-1] + end_pause, 1.0 / rate)
     s_t = np.interp(t, t_f, s_f)
     T_F_TCP = make_transform(rotation(s_t), position(s_t))
     T_S_E = invert_transform(T_F_S) @ T_F_TCP @ T_TCP_E
     p = T_S_E[:, :3, 3]
     d = np.linalg.norm(p, axis=1)
-    p = p + np.column_stack([
-        xy_err * np.sin(2.1 * p[:, 0] + 1.3 * p[:, 1] + 0.3),
-        xy_err * np.cos(1.7 * p[:, 0] - 2.2 * p[:, 1] + 0.7),
-        z_err * (d / d.max()) ** 2,
-    ]) + rng.normal(0.0, noise, p.shape)
+    p = (
+        p
+        + np.column_stack(
+            [
+                xy_err * np.sin(2.1 * p[:, 0] + 1.3 * p[:, 1] + 0.3),
+                xy_err * np.cos(1.7 * p[:, 0] - 2.2 * p[:, 1] + 0.7),
+                z_err * (d / d.max()) ** 2,
+            ]
+        )
+        + rng.normal(0.0, noise, p.shape)
+    )
     v = np.linalg.norm(np.gradient(p, t, axis=0), axis=1)
     demo = Demonstration(t, p, T_S_E[:, :3, :3], v, int(np.searchsorted(t, pause)), 0, "synthetic")
     return Case(cad, demo, lambda tq: np.interp(tq, t_f, s_f), speed, rotation)
@@ -119,10 +136,17 @@ def accuracy(case, fused):
     inner = (fused.s > 0.05) & (fused.s < fused.s[-1] - 0.05)
     v_err = fused.speed[inner] / case.speed_of_s(fused.s[inner]) - 1.0
     ang = rotation_angle_deg(fused.rotations, case.rotation_of_s(fused.s))
-    log.info("s error RMS %.2f max %.2f mm; speed error RMS %.2f max %.2f %%; orientation error "
-             "RMS %.3f max %.3f deg; residual median %.2f mm", 1e3 * np.sqrt(np.mean(s_err**2)),
-             1e3 * np.abs(s_err).max(), 100 * np.sqrt(np.mean(v_err**2)), 100 * np.abs(v_err).max(),
-             np.sqrt(np.mean(ang**2)), ang.max(), 1e3 * np.median(fused.residual))
+    log.info(
+        "s error RMS %.2f max %.2f mm; speed error RMS %.2f max %.2f %%; orientation error "
+        "RMS %.3f max %.3f deg; residual median %.2f mm",
+        1e3 * np.sqrt(np.mean(s_err**2)),
+        1e3 * np.abs(s_err).max(),
+        100 * np.sqrt(np.mean(v_err**2)),
+        100 * np.abs(v_err).max(),
+        np.sqrt(np.mean(ang**2)),
+        ang.max(),
+        1e3 * np.median(fused.residual),
+    )
     return s_err, v_err, ang
 
 
@@ -191,8 +215,7 @@ def test_demo_in_the_wrong_frame_is_rejected(loop):
 def test_demo_that_stops_early_is_rejected(loop):
     case, _ = loop
     d, m = case.demo, int(0.7 * len(case.demo.t))
-    short = replace(d, t=d.t[:m], positions=d.positions[:m], rotations=d.rotations[:m],
-                    speed=d.speed[:m])
+    short = replace(d, t=d.t[:m], positions=d.positions[:m], rotations=d.rotations[:m], speed=d.speed[:m])
     with pytest.raises(InputError, match="does not (cover|follow)"):
         fuse(case.cad, short, T_F_S, T_TCP_E)
 

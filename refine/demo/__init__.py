@@ -10,11 +10,13 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial.transform import Rotation, Slerp
+
 from refine.demo.csv_ import read_demo_csv
 from refine.demo.filters import (
     check_times,
-    fill_positions,
-    fill_rotations,
     find_motion_start,
     hampel,
     rotation_outliers,
@@ -32,6 +34,8 @@ __all__ = [
     "MOTION_START_SMOOTHING_S",
     "POSITION_OUTLIER_FLOOR_M",
     "clean_demonstration",
+    "fill_positions",
+    "fill_rotations",
     "read_demo_csv",
     "read_liberty_ascii",
     "read_tracker_log",
@@ -56,6 +60,33 @@ _READERS: dict[str, Callable[[DemoSettings], TrackerLog]] = {
     ),
     "csv": lambda d: read_demo_csv(d.file, units=d.units),
 }
+
+
+def fill_positions(t: ArrayLike, positions: ArrayLike, mask: ArrayLike) -> NDArray:
+    """Replace masked samples (M,) of positions (M, 3) by linear interpolation in time ``t`` [s]."""
+    t, p, mask = np.asarray(t, float), np.array(positions, float), np.asarray(mask, bool)
+    good = ~mask
+    if mask.any() and good.any():
+        for axis in range(p.shape[1]):
+            p[mask, axis] = np.interp(t[mask], t[good], p[good, axis])
+    return p
+
+
+def fill_rotations(t: ArrayLike, rotations: ArrayLike, mask: ArrayLike) -> NDArray:
+    """Replace masked samples of rotations (M, 3, 3) by Slerp between the good neighbours.
+
+    Masked samples before the first or after the last good sample take that sample's rotation.
+    """
+    t, R, mask = np.asarray(t, float), np.array(rotations, float), np.asarray(mask, bool)
+    good = np.flatnonzero(~mask)
+    if not mask.any() or len(good) == 0:
+        return R
+    if len(good) == 1:
+        R[mask] = R[good[0]]
+        return R
+    slerp = Slerp(t[good], Rotation.from_matrix(R[good]))
+    R[mask] = slerp(np.clip(t[mask], t[good[0]], t[good[-1]])).as_matrix()
+    return R
 
 
 def read_tracker_log(settings: DemoSettings) -> TrackerLog:

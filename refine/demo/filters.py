@@ -13,7 +13,6 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike, NDArray
 from scipy.ndimage import gaussian_filter1d
-from scipy.spatial.transform import Rotation, Slerp
 
 from refine.errors import InputError
 from refine.frames import (
@@ -85,9 +84,10 @@ def running_median(x: ArrayLike, half_window: int) -> NDArray:
     """Trend-corrected running median of each column of ``x`` (M,) or (M, k).
 
     Value at ``k``: the median over the window ``k ± half_window`` of ``x_j - b_k (j - k)``, with
-    ``b_k`` the window's robust slope (median of ``(x_{j+h} - x_j) / h``). On a flat signal this is the plain running
-    median; on a steep one it stays on the signal, where a plain median is shifted by one sample
-    step for every outlier in the window. Ends are padded by a robust point reflection.
+    ``b_k`` the window's robust slope (median of ``(x_{j+h} - x_j) / h``). On a flat signal this
+    is the plain running median; on a steep one it stays on the signal, where a plain median is
+    shifted by one sample step for every outlier in the window. Ends are padded by a robust point
+    reflection.
     """
     x = np.asarray(x, dtype=float)
     _, med = _detrended_windows(x.reshape(len(x), -1), int(half_window))
@@ -101,7 +101,8 @@ def hampel(
 
     For each sample ``k`` (and each column independently) with the window ``k ± half_window``:
     ``m_k`` is the window median, ``sigma_k = 1.4826 · median_j |x_j - m_k|`` (the MAD scaled to
-    a standard deviation for normal noise), and ``x_k`` is an outlier when
+    a standard deviation for normal noise, times ``n / (n - 0.8)`` for a window of ``n`` samples,
+    the usual small-sample correction), and ``x_k`` is an outlier when
     ``|x_k - m_k| > max(n_sigmas · sigma_k, min_deviation)``. Runs of up to ``half_window``
     outliers are found.
 
@@ -132,7 +133,8 @@ def hampel(
         raise InputError(f"hampel: need half_window >= 1 and n_sigmas > 0, got {half_window}, {n_sigmas}")
     x2 = x.reshape(len(x), -1)
     detrended, med = _detrended_windows(x2, int(half_window))
-    sigma = MAD_TO_SIGMA * np.median(np.abs(detrended - med[..., None]), axis=-1)
+    n = detrended.shape[-1]  # small-sample correction of the MAD (Croux & Rousseeuw, 1992)
+    sigma = MAD_TO_SIGMA * n / (n - 0.8) * np.median(np.abs(detrended - med[..., None]), axis=-1)
     sigma = np.maximum(sigma, np.median(sigma, axis=0))
     mask = np.abs(x2 - med) > np.maximum(n_sigmas * sigma, min_deviation)
     filtered = np.where(mask, med, x2)
@@ -164,33 +166,6 @@ def rotation_outliers(
     residual = rotvec_from_matrix(np.einsum("kji,kjl->kil", R_med, R))
     _, mask = hampel(residual, half_window, n_sigmas, min_deviation=math.radians(min_angle_deg))
     return mask.any(axis=1)
-
-
-def fill_positions(t: ArrayLike, positions: ArrayLike, mask: ArrayLike) -> NDArray:
-    """Replace masked samples (M,) of positions (M, 3) by linear interpolation in time ``t`` [s]."""
-    t, p, mask = np.asarray(t, float), np.array(positions, float), np.asarray(mask, bool)
-    good = ~mask
-    if mask.any() and good.any():
-        for axis in range(p.shape[1]):
-            p[mask, axis] = np.interp(t[mask], t[good], p[good, axis])
-    return p
-
-
-def fill_rotations(t: ArrayLike, rotations: ArrayLike, mask: ArrayLike) -> NDArray:
-    """Replace masked samples of rotations (M, 3, 3) by Slerp between the good neighbours.
-
-    Masked samples before the first or after the last good sample take that sample's rotation.
-    """
-    t, R, mask = np.asarray(t, float), np.array(rotations, float), np.asarray(mask, bool)
-    good = np.flatnonzero(~mask)
-    if not mask.any() or len(good) == 0:
-        return R
-    if len(good) == 1:
-        R[mask] = R[good[0]]
-        return R
-    slerp = Slerp(t[good], Rotation.from_matrix(R[good]))
-    R[mask] = slerp(np.clip(t[mask], t[good[0]], t[good[-1]])).as_matrix()
-    return R
 
 
 def smooth_positions(t: ArrayLike, positions: ArrayLike, time_constant_s: float) -> NDArray:

@@ -192,8 +192,8 @@ def write_liberty_ascii(
     uniform = np.allclose(log.t - log.t[0], np.arange(len(log.t)) / rate_hz, atol=1e-6)
     if not with_frame_count and not uniform:
         logger.warning("%s: sample times are not uniform at %g Hz; times will be lost", path, rate_hz)
-    positions = log.positions / scale
-    angles = tracker_angles_from_matrix(log.rotations, degrees=True)
+    positions = np.round(log.positions / scale, 4) + 0.0  # + 0.0 turns -0.0 into 0.0
+    angles = np.round(tracker_angles_from_matrix(log.rotations, degrees=True), 3) + 0.0
     out = [
         "# Polhemus Liberty ASCII records written by refine",
         f"# units: {units}",

@@ -115,9 +115,7 @@ def fk_function(robot: Robot, base_in_world: ArrayLike, tcp_in_flange: ArrayLike
     return ca.Function("fk", [q], [p, R], ["q"], ["p", "R"])
 
 
-def jacobian_function(
-    robot: Robot, base_in_world: ArrayLike, tcp_in_flange: ArrayLike
-) -> ca.Function:
+def jacobian_function(robot: Robot, base_in_world: ArrayLike, tcp_in_flange: ArrayLike) -> ca.Function:
     """Symbolic geometric Jacobian of the TCP with world-aligned axes.
 
     Column k maps joint speed k [rad/s] to the TCP's linear velocity [m/s] (rows 0-2) and the

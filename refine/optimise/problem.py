@@ -73,12 +73,13 @@ class RefinementNLP:
         solver_options: the options it was built with.
         params: numeric value of ``p`` (CAD points and demonstrated orientations).
         lbx, ubx: variable bounds (joint limits minus margin) [rad], shape (n·N,).
-        lbg, ubg: constraint bounds, shape (4·N + len(singular_waypoints),).
+        lbg, ubg: constraint bounds, shape (4·N + len(singular_waypoints) + len(singular_segments),).
         n_waypoints, dof: sizes.
         row_names: names of the 4 constraint rows of each waypoint, in order; the singularity
-            rows of ``singular_waypoints`` follow all of them.
+            rows of ``singular_waypoints`` and then of ``singular_segments`` follow all of them.
         waypoint: the per-waypoint CasADi function (constraints and cost), for inspection.
         singular_waypoints: the waypoints whose singularity measure is bounded.
+        singular_segments: the (segment, fraction) points whose singularity measure is bounded.
         robot, base_in_world, tcp_in_flange, fused, tolerances: what it was built from.
         build_time_s: wall time of the build [s].
     """
@@ -103,10 +104,16 @@ class RefinementNLP:
     axisymmetric: bool
     weights: Weights = field(default_factory=Weights)
     singular_waypoints: tuple[int, ...] = ()
+    singular_segments: tuple[tuple[int, float], ...] = ()
     build_time_s: float = 0.0
 
-    def with_singular_waypoints(self, waypoints: tuple[int, ...]) -> RefinementNLP:
-        """The same problem with the singularity bound on ``waypoints`` (rebuilt, not solved)."""
+    def with_singularity_bounds(
+        self, waypoints: tuple[int, ...], segments: tuple[int, ...] = ()
+    ) -> RefinementNLP:
+        """The same problem with the singularity bound on more waypoints and segment midpoints.
+
+        The bounds already present are kept; the problem is rebuilt, not solved.
+        """
         return build_refinement(
             self.robot,
             self.fused,
@@ -115,7 +122,9 @@ class RefinementNLP:
             self.tolerances,
             axisymmetric=self.axisymmetric,
             weights=self.weights,
-            singular_waypoints=waypoints,
+            singular_waypoints=self.singular_waypoints + tuple(waypoints),
+            singular_segments=self.singular_segments + tuple(segments),
+            solver_options=self.solver_options,
         )
 
 
@@ -187,6 +196,7 @@ def build_refinement(
     axisymmetric: bool = False,
     weights: Weights | None = None,
     singular_waypoints: tuple[int, ...] = (),
+    singular_segments: tuple[tuple[int, float], ...] = (),
     solver_options: dict[str, Any] | None = None,
 ) -> RefinementNLP:
     """Build the refinement NLP for ``fused`` on ``robot`` (no solve).
@@ -200,6 +210,8 @@ def build_refinement(
         axisymmetric: leave the spin about the tool axis free.
         weights: cost weights (defaults of :class:`Weights`).
         singular_waypoints: waypoints whose singularity measure is bounded below by the margin.
+        singular_segments: points inside segments, as (k, f): the joints ``(1-f)·q_k + f·q_{k+1}``
+            get the same bound (how a wrist flip between two waypoints is kept out).
         solver_options: CasADi/IPOPT options overriding :data:`IPOPT_DEFAULTS`.
 
     Returns:
@@ -229,9 +241,22 @@ def build_refinement(
     singular = tuple(sorted(set(int(k) for k in singular_waypoints)))
     if singular and not 0 <= singular[0] <= singular[-1] < N:
         raise InputError(f"singular_waypoints must lie in [0, {N}), got {singular[0]}..{singular[-1]}")
+    segments = tuple(sorted({(int(k), float(f)) for k, f in singular_segments}))
+    for k, f in segments:
+        if not (0 <= k < N - 1 and 0.0 < f < 1.0):
+            raise InputError(f"singular_segments: ({k}, {f}) needs 0 <= k < {N - 1} and 0 < f < 1")
     rows = [ca.vec(G)]
+    q_bounded = []
     if singular:
-        W = singularity_function(robot, base_in_world, tcp_in_flange).map(len(singular))(Q[:, list(singular)])
+        q_bounded.append(Q[:, list(singular)])
+    if segments:
+        idx = [k for k, _ in segments]
+        frac = ca.DM([f for _, f in segments]).T
+        Qa, Qb_ = Q[:, idx], Q[:, [k + 1 for k in idx]]
+        q_bounded.append(Qa + (Qb_ - Qa) * ca.repmat(frac, robot.nq, 1))
+    if q_bounded:
+        Qb = ca.horzcat(*q_bounded)
+        W = singularity_function(robot, base_in_world, tcp_in_flange).map(Qb.shape[1])(Qb)
         rows.append(ca.vec(W))
 
     # ---- objective: orientation deviation + joint smoothness per metre of path
@@ -248,7 +273,7 @@ def build_refinement(
     cos_alpha = math.cos(math.radians(tolerances.orientation_deg))
     lbg_k = np.array([0.0, 0.0, 0.0, cos_alpha])
     ubg_k = np.array([0.0, 0.0, 0.0, 1.0 + 1e-9])
-    n_s = len(singular)
+    n_s = len(singular) + len(segments)
     # CasADi vectorises column-major: Q[:, k] is x[k*n:(k+1)*n] and R_demo[:, k] is R_k column-major.
     params = np.concatenate(
         [fused.positions.ravel(), np.transpose(fused.rotations, (0, 2, 1)).reshape(N, 9).ravel()]
@@ -281,5 +306,6 @@ def build_refinement(
         axisymmetric=axisymmetric,
         weights=weights,
         singular_waypoints=singular,
+        singular_segments=segments,
         build_time_s=time.perf_counter() - t0,
     )

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from refine.errors import SolverError
 from refine.optimise.problem import RefinementNLP
 from refine.optimise.seed import TcpKinematics, ik_chain, start_candidates
-from refine.optimise.verify import PathCheck, check_path, singularity_measures
+from refine.optimise.verify import PathCheck, check_path, segment_singularity, singularity_measures
 
 log = logging.getLogger(__name__)
 
@@ -52,6 +52,7 @@ class Refinement:
         iterations: IPOPT iterations, summed over the outer rounds.
         outer_iterations: solve -> verify rounds.
         singular_waypoints: waypoints that carried the singularity bound in the last round.
+        singular_segments: (segment, fraction) points inside segments that carried it.
         timings_s: ``seed``, ``solve``, ``verify`` wall times [s], and ``build`` when singularity
             rows had to be added (a rebuild).
     """
@@ -65,6 +66,7 @@ class Refinement:
     iterations: int
     outer_iterations: int = 1
     singular_waypoints: tuple[int, ...] = ()
+    singular_segments: tuple[tuple[int, float], ...] = ()
     timings_s: dict[str, float] = field(default_factory=dict)
 
 
@@ -108,7 +110,7 @@ def solve_refinement(
         near = _near_singular(kin, q_seed, margin, ())
         if near:
             t0 = time.perf_counter()
-            problem = problem.with_singular_waypoints(near)
+            problem = problem.with_singularity_bounds(near)
             timings["build"] = time.perf_counter() - t0
 
     q_start, iterations, timings["solve"], timings["verify"] = q_seed, 0, 0.0, 0.0
@@ -137,11 +139,20 @@ def solve_refinement(
         check = check_path(kin, q, problem.fused, problem.tolerances, problem.axisymmetric)
         timings["verify"] += time.perf_counter() - t0
         missing = _near_singular(kin, q, margin, problem.singular_waypoints) if margin > 0 else ()
-        if not missing:
+        segments: tuple[tuple[int, float], ...] = ()
+        if margin > 0:
+            w_between, frac = segment_singularity(kin, q)
+            segments = tuple((int(k), float(frac[k])) for k in np.flatnonzero(w_between < 1.5 * margin))
+            segments = tuple(sorted(set(segments) - set(problem.singular_segments)))
+        if not missing and not segments:
             break
-        log.info("singularity bound added on %d more waypoints; solving again", len(missing))
+        log.info(
+            "singularity bound added on %d waypoints and %d segments; solving again",
+            len(missing),
+            len(segments),
+        )
         t0 = time.perf_counter()
-        problem = problem.with_singular_waypoints(problem.singular_waypoints + missing)
+        problem = problem.with_singularity_bounds(missing, segments)
         timings["build"] = timings.get("build", 0.0) + time.perf_counter() - t0
         q_start = q
 
@@ -174,5 +185,6 @@ def solve_refinement(
         iterations=iterations,
         outer_iterations=outer,
         singular_waypoints=problem.singular_waypoints,
+        singular_segments=problem.singular_segments,
         timings_s=timings,
     )

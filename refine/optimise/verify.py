@@ -28,7 +28,8 @@ class Violation:
     Attributes:
         index_start, index_end: first and last waypoint (inclusive).
         s_start_m, s_end_m: their arc lengths [m].
-        reason: ``"position"``, ``"orientation"``, ``"joint limit (joint 3)"``, ``"singularity"``.
+        reason: ``"position"``, ``"orientation"``, ``"joint limit (joint 3)"``, ``"singularity"``,
+            ``"singularity between waypoints"`` (a run k..m means the segments after k..m).
         worst: the worst value inside, in the unit of ``unit``.
         unit: unit of ``worst`` and ``limit``.
         limit: the tolerance it breaks.
@@ -64,6 +65,8 @@ class PathCheck:
         joint_margin_rad: distance of each waypoint's closest joint to its limit [rad], shape (N,).
         singularity: scaled manipulability sqrt(det(Js Jsᵀ)) [-], shape (N,).
         sigma_min: smallest singular value of the scaled Jacobian [-], shape (N,).
+        singularity_between: smallest scaled manipulability inside each segment, joints
+            interpolated linearly (:func:`segment_singularity`) [-], shape (N-1,).
         violations: the runs that break a tolerance (empty when the path passes).
     """
 
@@ -73,6 +76,7 @@ class PathCheck:
     joint_margin_rad: Array
     singularity: Array
     sigma_min: Array
+    singularity_between: Array
     violations: tuple[Violation, ...]
 
     @property
@@ -108,6 +112,27 @@ def singularity_measures(kin: TcpKinematics, q: Array) -> tuple[Array, Array]:
     return w, smin
 
 
+def segment_singularity(kin: TcpKinematics, q: Array, max_step_deg: float = 1.0) -> tuple[Array, Array]:
+    """Smallest scaled manipulability inside each segment between consecutive waypoints [-].
+
+    Joints are interpolated linearly inside each segment with steps of at most ``max_step_deg`` on
+    every joint (at least the midpoint), which is how a wrist flip between two waypoints that are
+    each clear of the singularity shows up.
+
+    Returns:
+        the smallest measure per segment (N-1,) and the fraction of the segment in (0, 1) where it
+        occurs (N-1,); entry k covers the open segment between waypoints k and k+1.
+    """
+    dq = np.diff(q, axis=0)
+    n_sub = np.maximum(2, np.ceil(np.degrees(np.abs(dq).max(axis=1)) / max_step_deg)).astype(int)
+    seg = np.repeat(np.arange(len(dq)), n_sub - 1)
+    frac = np.concatenate([np.arange(1, m) / m for m in n_sub])
+    w, _ = singularity_measures(kin, q[seg] + frac[:, None] * dq[seg])
+    order = np.lexsort((w, seg))  # by segment, then by measure: the first of each segment is its minimum
+    first = order[np.searchsorted(seg[order], np.arange(len(dq)))]
+    return w[first], frac[first]
+
+
 def check_path(
     kin: TcpKinematics, q: Array, fused: FusedPath, tolerances: Tolerances, axisymmetric: bool
 ) -> PathCheck:
@@ -141,4 +166,13 @@ def check_path(
         add(margins[:, j] < margin, f"joint limit (joint {j + 1})", margins[:, j], "rad", margin, False)
     sing_tol = tolerances.singularity_margin - 1e-9
     add(sing < sing_tol, "singularity", sing, "-", tolerances.singularity_margin, False)
-    return PathCheck(poses, pos_err, ori, joint_margin, sing, smin, tuple(violations))
+    between, _ = segment_singularity(kin, q)
+    add(
+        np.append(between < sing_tol, False),
+        "singularity between waypoints",
+        np.append(between, np.inf),
+        "-",
+        tolerances.singularity_margin,
+        False,
+    )
+    return PathCheck(poses, pos_err, ori, joint_margin, sing, smin, between, tuple(violations))

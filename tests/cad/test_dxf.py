@@ -133,3 +133,18 @@ def test_unreadable_file_is_an_input_error(tmp_path):
     f.write_text("not a dxf")
     with pytest.raises(InputError, match="broken.dxf"):
         points_from_dxf(f, "mm")
+
+
+def test_read_cad_path_reads_a_closed_dxf_loop_on_a_layer(tmp_path):
+    from refine.cad import read_cad_path
+    from refine.problem import CadSettings
+
+    def build(msp):
+        msp.add_lwpolyline([(0, 0), (100, 0), (100, 50), (0, 50)], close=True, dxfattribs={"layer": "PANE"})
+        msp.add_line((0, 0, 0), (1, 1, 0), dxfattribs={"layer": "NOTES"})
+
+    f = _save(tmp_path, build)
+    path = read_cad_path(CadSettings(file=f, format="dxf", units="mm", layer="PANE", spacing_m=0.007), np.eye(4))
+    assert path.closed and path.length == pytest.approx(0.3)
+    assert np.array_equal(path.positions[0], path.positions[-1])
+    assert np.all(np.diff(path.s) <= 0.007)

@@ -6,9 +6,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from refine.demo import clean_demonstration
+from refine.demo import clean_demonstration, fill_rotations
 from refine.demo.filters import (
-    fill_rotations,
     find_motion_start,
     hampel,
     rotation_outliers,
