@@ -7,13 +7,17 @@ Method (all in the receiver frame {S}, where the tracker's error lives; distance
    ``PRE_MOTION_S`` before ``motion_start``, box-averaged and resampled in time so that a demo row
    advances about half a CAD step at the mean speed, and the CAD points, thinned to at most
    ``DTW_MAX_POINTS``. Each demo row may advance the CAD index by 0, 1 or 2; the first row is matched
-   to the CAD start, the last to the CAD end. The recursion is vectorised per row with numpy.
-3. Tracker distortion (``fit_distortion``): a quadratic polynomial in the sensor position in {S}
-   (10 terms per axis) is added to the positions. It is fitted by ridge-damped, Tukey-weighted
-   least squares on the *cross-track* part of the residual only (point-to-line, as in ICP): the
-   along-track part of a residual is the alignment's own guess, while a smooth field seen
-   cross-track on one stretch of path is along-track elsewhere, so it is recovered there too.
-   Three fit/re-project rounds after each of two DTW passes, then a final DTW pass.
+   to the CAD start, the last to the CAD end. The recursion is vectorised per row with numpy
+   (no DTW package is installed, and this one needs just these steps and end conditions).
+3. Tracker distortion (``fit_distortion``): the sensor positions get a correction that is a
+   quadratic polynomial (10 terms per axis) of the sensor position in {S}, averaged over
+   ``BASIS_SMOOTHING_M`` of path (noise in the argument would let the polynomial fit the noise).
+   It is fitted by Tukey-weighted least squares on the *cross-track* part of the residual only
+   (point-to-line, as in ICP): a residual's along-track part is the alignment's own guess, while
+   a smooth field seen cross-track on one stretch is along-track on another and recovered there.
+   A ridge from ``PRIOR_ERROR_M`` (z errors of tens of mm, x/y of a few) settles what the path
+   cannot: among fields that explain the data alike, the one mostly along z. Three fit/re-project
+   rounds follow each of two DTW passes; a third DTW pass runs on the corrected positions.
 4. Every corrected demo sample is projected onto the CAD polyline near its match, giving its arc
    length ``s_i``; a monotone copy (``isotonic_regression``) only picks the samples of each window.
    Samples resting at either end (within 3 noise sigmas + 1 mm of the first or last arc length:
@@ -24,6 +28,11 @@ Method (all in the receiver frame {S}, where the tracker's error lives; distance
    the median speed (none at all where a window holds no motion) are raised to that floor, so
    every speed is > 0 for the timing stage.
 5. Tool orientation at ``t(s)`` by ``scipy`` ``Slerp`` over the demo TCP rotations.
+
+Limits: only the position error is corrected (the tracker's orientation error is not); a field
+along the path that no stretch of it sees cross-track (e.g. an x error on a straight line along x)
+cannot be told from timing; where the worker stops mid-path, ``t(s)`` may be off by up to
+``TIME_HALF_WIDTH_M`` of arc length.
 """
 
 from __future__ import annotations
@@ -85,7 +94,7 @@ def demo_tcp_poses(demo: Demonstration, source_in_world: ArrayLike, sensor_in_tc
     T_TCP_E = check_transform(sensor_in_tcp, "sensor_in_tcp")
     T_S_E = np.zeros((len(demo.t), 4, 4))
     T_S_E[:, :3, :3], T_S_E[:, :3, 3], T_S_E[:, 3, 3] = demo.rotations, demo.positions, 1.0
-    return T_F_S @ T_S_E @ invert_transform(T_TCP_E)
+    return np.einsum("ij,mjk,kl->mil", T_F_S, T_S_E, invert_transform(T_TCP_E), optimize=False)
 
 
 def monotone_dtw(cost: Array) -> NDArray[np.intp]:
@@ -154,6 +163,11 @@ def _basis(q: Array, centre: Array, scale: float) -> Array:
     return np.stack([np.ones_like(x), x, y, z, x * x, y * y, z * z, x * y, x * z, y * z], axis=1)
 
 
+def _apply(phi: Array, W: Array) -> Array:
+    """Correction phi @ W [m], shape (M, 3); einsum keeps these tiny products off threaded BLAS."""
+    return np.einsum("ik,ka->ia", phi, W)
+
+
 def _fit_distortion(phi: Array, p: Array, foot: Array, tangent: Array, dist: Array) -> Array:
     """Coefficients W (10, 3) minimising the robust cross-track part of p + phi W - foot."""
     cutoff = 4.685 * (1.4826 * np.median(dist) + 1e-4)  # Tukey's biweight: far rows get no say
@@ -161,9 +175,9 @@ def _fit_distortion(phi: Array, p: Array, foot: Array, tangent: Array, dist: Arr
     P = np.eye(3) - tangent[:, :, None] * tangent[:, None, :]  # projector onto the normal plane
     nk, wphi = phi.shape[1], w[:, None] * phi
     outer = (wphi[:, :, None] * phi[:, None, :]).reshape(len(phi), -1)
-    N = (outer.T @ P.reshape(len(P), 9)).reshape(nk, nk, 3, 3).transpose(0, 2, 1, 3)
+    N = np.einsum("iq,ir->qr", outer, P.reshape(len(P), 9)).reshape(nk, nk, 3, 3).transpose(0, 2, 1, 3)
     N = N.reshape(3 * nk, 3 * nk)
-    rhs = (wphi.T @ np.einsum("iab,ib->ia", P, foot - p)).reshape(-1)
+    rhs = np.einsum("ik,iab,ib->ka", wphi, P, foot - p).reshape(-1)
     N[np.diag_indices_from(N)] += np.tile((_RIDGE_NOISE_M / np.asarray(PRIOR_ERROR_M)) ** 2, nk)
     return np.linalg.solve(N, rhs).reshape(nk, 3)
 
@@ -219,7 +233,7 @@ def _coarse_match(
     """
     W, raw_median = np.zeros((phi_g.shape[1], 3)), np.nan
     for rounds in _FIT_ROUNDS if fit else (0,):
-        pc = pg + phi_g @ W
+        pc = pg + _apply(phi_g, W)
         sg = cad_s[cols][monotone_dtw(cdist(pc, cad[cols]))]
         sg, foot, tangent, dist = _project(pc, sg, cad_s, cad, radius)
         if np.isnan(raw_median):
@@ -228,7 +242,7 @@ def _coarse_match(
                 break
         for _ in range(rounds):
             W = _fit_distortion(phi_g, pg, foot, tangent, dist)
-            sg, foot, tangent, dist = _project(pg + phi_g @ W, sg, cad_s, cad, radius)
+            sg, foot, tangent, dist = _project(pg + _apply(phi_g, W), sg, cad_s, cad, radius)
     return sg, W, raw_median
 
 
@@ -299,7 +313,7 @@ def align(
         )
 
     # ---- every sample projected near its match; speed and time per waypoint
-    correction = _basis(q_arg, centre, scale) @ W
+    correction = _apply(_basis(q_arg, centre, scale), W)
     pc = p + correction
     s_raw = _project(pc, np.interp(t, tg, sg), cad_s, cad_S, 0.5 * h + 0.005)[0]
     v, t_match = _time_law(t, s_raw, cad_s, speed_smoothing_m)

@@ -161,7 +161,7 @@ class DemoSettings:
     rate_hz: float = 240.0
     hampel_window: int = 7
     hampel_sigmas: float = 3.0
-    smoothing_s: float = 0.15
+    smoothing_s: float = 0.03
     pause_speed_m_s: float = 0.01
     truth: Path | None = None
 

@@ -421,3 +421,94 @@ def test_a_pose_given_as_a_list_is_rejected_naming_the_field(problem_toml):
         "cad_in_world = [1.30, 0.0, 0.60, 0.0, 0.0, 90.0]",
     )
     assert "frames.cad_in_world" in load_error(problem_toml)
+
+
+# ---- values of the wrong type -------------------------------------------------------------------
+
+NOT_A_NUMBER_BUG = (
+    "refine/problem.py converts with float() without catching ValueError (lines 377, 379, 426; and "
+    "np.asarray(dtype=float) in frames.transform_from_xyz_rpy via _pose, line 343): a plain "
+    "ValueError 'could not convert string to float' escapes, not an InputError naming the field"
+)
+NOT_CHECKED_BUG = (
+    "refine/problem.py: the documented type of this key is not checked; the value loads silently"
+)
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "field"),
+    [
+        pytest.param(
+            'model = "abb_irb4600_60_205"',
+            'model = "abb_irb4600_60_205"\nvelocity_scale = "fast"',
+            "robot.velocity_scale",
+            marks=pytest.mark.xfail(strict=True, reason=NOT_A_NUMBER_BUG),
+            id="velocity_scale-string",
+        ),
+        pytest.param(
+            'model = "abb_irb4600_60_205"',
+            'model = "abb_irb4600_60_205"\nhome_deg = [0, "up", 0, 0, 0, 0]',
+            "robot.home_deg",
+            marks=pytest.mark.xfail(strict=True, reason=NOT_A_NUMBER_BUG),
+            id="home_deg-string",
+        ),
+        pytest.param(
+            "value = 4.0",
+            'value = "lots"',
+            "process.parameters",
+            marks=pytest.mark.xfail(strict=True, reason=NOT_A_NUMBER_BUG),
+            id="parameter-value-string",
+        ),
+        pytest.param(
+            "xyz = [0.0, 0.0, 0.35]",
+            'xyz = ["a", 0.0, 0.35]',
+            "tool.tcp_in_flange",
+            marks=pytest.mark.xfail(strict=True, reason=NOT_A_NUMBER_BUG),
+            id="pose-string",
+        ),
+        pytest.param(
+            "station = 1",
+            'station = "one"',
+            "demonstration.station",
+            marks=pytest.mark.xfail(strict=True, reason=NOT_CHECKED_BUG),
+            id="station-string",
+        ),
+        pytest.param(
+            "station = 1",
+            "station = 1\nhampel_window = 2.5",
+            "demonstration.hampel_window",
+            marks=pytest.mark.xfail(strict=True, reason=NOT_CHECKED_BUG),
+            id="hampel_window-fraction",
+        ),
+        pytest.param(
+            "axisymmetric = false",
+            'axisymmetric = "no"',
+            "tool.axisymmetric",
+            marks=pytest.mark.xfail(strict=True, reason=NOT_CHECKED_BUG),
+            id="axisymmetric-string",
+        ),
+        pytest.param(
+            "spacing_m = 0.005",
+            "spacing_m = true",
+            "cad.spacing_m",
+            marks=pytest.mark.xfail(strict=True, reason=NOT_CHECKED_BUG + " (bool passes as int)"),
+            id="spacing_m-bool",
+        ),
+        ("mass_kg = 6.5", 'mass_kg = "6.5"', "tool.mass_kg"),
+        ("orientation_deg = 3.0", "orientation_deg = nan", "tolerances.orientation_deg"),
+    ],
+)
+def test_a_value_of_the_wrong_type_is_an_input_error_naming_the_field(problem_toml, old, new, field):
+    edit(problem_toml, old, new)
+    assert field in load_error(problem_toml)
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="refine/problem.py line 437 iterates a string: programs = 'rapid' is reported as "
+    "\"output.programs[] = 'r' is not one of rapid\"",
+)
+def test_programs_given_as_a_string_is_reported_with_the_value_written(problem_toml):
+    edit(problem_toml, 'programs = ["rapid"]', 'programs = "rapid"')
+    message = load_error(problem_toml)
+    assert "output.programs" in message and "'rapid'" in message

@@ -75,6 +75,7 @@ def solve_ik(
     max_iterations: int = 100,
     damping: float = 1e-3,
     tol: float = CONVERGED,
+    position_only: bool = False,
 ) -> tuple[Array, float]:
     """Damped least-squares IK for one TCP pose, clamped to [lower, upper].
 
@@ -87,22 +88,24 @@ def solve_ik(
         max_iterations: iteration cap.
         damping: DLS damping λ [-] (on a Jacobian with rows in m and rad).
         tol: stop when the pose error norm is below this [m and rad stacked].
+        position_only: solve for the TCP position alone (orientation free).
 
     Returns:
         joints [rad] (n,) and the remaining pose error norm (position [m] and angle [rad] stacked).
     """
+    rows = slice(0, 3) if position_only else slice(0, 6)
     q = np.clip(np.asarray(q0, dtype=float), lower, upper)
-    err = _pose_error(kin.pose(q), T_target)
+    err = _pose_error(kin.pose(q), T_target)[rows]
     for _ in range(max_iterations):
         if float(err @ err) < tol * tol:
             break
-        J = kin.jacobian(q)
-        dq = J.T @ np.linalg.solve(J @ J.T + damping**2 * np.eye(6), err)
+        J = kin.jacobian(q)[rows]
+        dq = J.T @ np.linalg.solve(J @ J.T + damping**2 * np.eye(len(err)), err)
         step = float(np.max(np.abs(dq)))
         if step > 0.3:  # keep steps small so the chain does not jump branches
             dq *= 0.3 / step
         q = np.clip(q + dq, lower, upper)
-        err = _pose_error(kin.pose(q), T_target)
+        err = _pose_error(kin.pose(q), T_target)[rows]
     return q, float(np.linalg.norm(err))
 
 
@@ -203,3 +206,24 @@ def start_candidates(
     cands.append(mid)
     cands += [mid + (rng.random(len(mid)) - 0.5) * span for _ in range(n_random)]
     return cands
+
+
+def reach_shortfall(
+    kin: TcpKinematics, targets: Array, lower: Array, upper: Array, starts: list[Array]
+) -> Array:
+    """How far each target position stays out of reach [m], shape (N,): 0 for reachable ones.
+
+    Position-only DLS IK from every start for the first target, then from the previous target's
+    answer and the first two starts; the best distance found. A shortfall well above the IK
+    tolerance means the point is out of the robot's reach inside its joint limits.
+    """
+    out = np.empty(len(targets))
+    previous: list[Array] = []
+    for k, T in enumerate(targets):
+        best = (np.inf, starts[0])
+        for q0 in previous + starts[: 2 if previous else None]:
+            q, err = solve_ik(kin, T, q0, lower, upper, max_iterations=200, position_only=True)
+            if err < best[0]:
+                best = (err, q)
+        out[k], previous = best[0], [best[1]]
+    return np.where(out < 1e-6, 0.0, out)

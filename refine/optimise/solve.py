@@ -17,12 +17,22 @@ from numpy.typing import NDArray
 
 from refine.errors import SolverError
 from refine.optimise.problem import RefinementNLP
-from refine.optimise.seed import TcpKinematics, ik_chain, start_candidates
-from refine.optimise.verify import PathCheck, check_path, segment_singularity, singularity_measures
+from refine.optimise.seed import TcpKinematics, ik_chain, reach_shortfall, start_candidates
+from refine.optimise.verify import (
+    PathCheck,
+    Violation,
+    check_path,
+    runs,
+    segment_singularity,
+    singularity_measures,
+)
 
 log = logging.getLogger(__name__)
 
 Array = NDArray[np.float64]
+
+REACH_TOLERANCE_M = 1e-3
+"""A CAD point the best position-only IK misses by more than this is reported out of reach [m]."""
 
 MAX_OUTER_ITERATIONS = 5
 """Rounds of solve -> verify -> add singularity rows before giving up on adding more."""
@@ -70,17 +80,48 @@ class Refinement:
     timings_s: dict[str, float] = field(default_factory=dict)
 
 
-def initial_guess(problem: RefinementNLP, home: Array | None = None) -> Array:
-    """IK seed (N, n) [rad] chained along the path, from the best of several first-waypoint starts."""
-    kin = TcpKinematics(problem.robot, problem.base_in_world, problem.tcp_in_flange)
+def _targets(problem: RefinementNLP) -> Array:
     targets = np.zeros((problem.n_waypoints, 4, 4))
     targets[:, :3, :3] = problem.fused.rotations
     targets[:, :3, 3] = problem.fused.positions
     targets[:, 3, 3] = 1.0
-    lower = problem.lbx[: problem.dof]
-    upper = problem.ubx[: problem.dof]
-    qs, _ = ik_chain(kin, targets, lower, upper, start_candidates(lower, upper, home))
+    return targets
+
+
+def initial_guess(problem: RefinementNLP, home: Array | None = None) -> Array:
+    """IK seed (N, n) [rad] chained along the path, from the best of several first-waypoint starts."""
+    kin = TcpKinematics(problem.robot, problem.base_in_world, problem.tcp_in_flange)
+    lower, upper = problem.lbx[: problem.dof], problem.ubx[: problem.dof]
+    qs, _ = ik_chain(kin, _targets(problem), lower, upper, start_candidates(lower, upper, home))
     return qs
+
+
+def _out_of_reach(problem: RefinementNLP, q_seed: Array, home: Array | None) -> list[Violation]:
+    """Runs of waypoints whose CAD point no configuration inside the limits reaches (1 mm test)."""
+    kin = TcpKinematics(problem.robot, problem.base_in_world, problem.tcp_in_flange)
+    missed = np.linalg.norm(kin.poses(q_seed)[:, :3, 3] - problem.fused.positions, axis=1) > REACH_TOLERANCE_M
+    if not missed.any():
+        return []
+    lower, upper = problem.lbx[: problem.dof], problem.ubx[: problem.dof]
+    idx = np.flatnonzero(missed)
+    shortfall = np.zeros(problem.n_waypoints)
+    shortfall[idx] = reach_shortfall(
+        kin, _targets(problem)[idx], lower, upper, start_candidates(lower, upper, home)
+    )
+    s = problem.fused.s
+    return [
+        Violation(
+            a,
+            b,
+            float(s[a]),
+            float(s[b]),
+            "out of reach",
+            float(shortfall[a : b + 1].max()),
+            "m",
+            REACH_TOLERANCE_M,
+        )
+        for a, b in runs(shortfall > REACH_TOLERANCE_M)
+    ]
 
 
 def solve_refinement(
@@ -105,6 +146,23 @@ def solve_refinement(
     timings["seed"] = time.perf_counter() - t0
 
     kin = TcpKinematics(problem.robot, problem.base_in_world, problem.tcp_in_flange)
+    unreachable = _out_of_reach(problem, q_seed, home)
+    timings["seed"] = time.perf_counter() - t0
+    if unreachable:
+        check = check_path(kin, q_seed, problem.fused, problem.tolerances, problem.axisymmetric)
+        reason = "; ".join(v.describe() for v in unreachable)
+        log.info("refinement infeasible before solving: %s", reason)
+        return Refinement(
+            status="infeasible",
+            reason=reason,
+            q=q_seed,
+            q_seed=q_seed,
+            check=PathCheck(**{**check.__dict__, "violations": tuple(unreachable) + check.violations}),
+            solver_status="not run (out of reach)",
+            iterations=0,
+            outer_iterations=0,
+            timings_s=timings,
+        )
     margin = problem.tolerances.singularity_margin
     if margin > 0 and not problem.singular_waypoints:
         near = _near_singular(kin, q_seed, margin, ())
@@ -138,6 +196,8 @@ def solve_refinement(
         t0 = time.perf_counter()
         check = check_path(kin, q, problem.fused, problem.tolerances, problem.axisymmetric)
         timings["verify"] += time.perf_counter() - t0
+        if not stats.get("success", False):
+            break  # more bounds cannot help a problem IPOPT could not solve
         missing = _near_singular(kin, q, margin, problem.singular_waypoints) if margin > 0 else ()
         segments: tuple[tuple[int, float], ...] = ()
         if margin > 0:

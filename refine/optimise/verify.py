@@ -85,7 +85,8 @@ class PathCheck:
         return not self.violations
 
 
-def _runs(mask: Array) -> list[tuple[int, int]]:
+def runs(mask: Array) -> list[tuple[int, int]]:
+    """First and last index (inclusive) of every run of True in ``mask``."""
     idx = np.flatnonzero(mask)
     if idx.size == 0:
         return []
@@ -153,7 +154,7 @@ def check_path(
     violations: list[Violation] = []
 
     def add(mask: Array, reason: str, values: Array, unit: str, limit: float, worst_is_max: bool) -> None:
-        for a, b in _runs(mask):
+        for a, b in runs(mask):
             seg = values[a : b + 1]
             worst = float(seg.max() if worst_is_max else seg.min())
             violations.append(Violation(a, b, float(s[a]), float(s[b]), reason, worst, unit, limit))

@@ -1,0 +1,53 @@
+import numpy as np
+
+from refine.optimise.seed import ik_chain, shift_turns, solve_ik, start_candidates
+from refine.synthetic import wave_path
+
+
+def test_dls_ik_reaches_a_reachable_pose(kin):
+    spec = kin.robot.spec
+    q_true = np.array([0.3, 0.4, -0.2, 0.5, -0.9, 1.2])
+    q, err = solve_ik(kin, kin.pose(q_true), np.zeros(6), spec.lower, spec.upper, max_iterations=300)
+    assert err < 1e-6
+    assert np.abs(kin.pose(q) - kin.pose(q_true)).max() < 1e-6
+
+
+def test_tcp_jacobian_matches_finite_differences(kin):
+    q = np.array([0.3, 0.4, -0.2, 0.5, -0.9, 1.2])
+    J = kin.jacobian(q)
+    h = 1e-7
+    for j in range(6):
+        dq = np.zeros(6)
+        dq[j] = h
+        dp = (kin.pose(q + dq)[:3, 3] - kin.pose(q - dq)[:3, 3]) / (2 * h)
+        np.testing.assert_allclose(J[:3, j], dp, atol=1e-6)
+
+
+def test_shift_turns_moves_a_wrapped_joint_by_whole_turns_into_its_limits():
+    lower = np.radians([-180, -90, -180, -400, -125, -400])
+    upper = np.radians([180, 150, 75, 400, 120, 400])
+    qs = np.zeros((10, 6))
+    qs[:, 5] = np.radians(np.linspace(-80, -440, 10))  # 360 deg of turn, past -400
+    shifted = shift_turns(qs, lower, upper)
+    assert np.all(shifted[:, 5] >= lower[5]) and np.all(shifted[:, 5] <= upper[5])
+    np.testing.assert_allclose(np.mod(shifted[:, 5] - qs[:, 5], 2 * np.pi) % (2 * np.pi), 0, atol=1e-12)
+    np.testing.assert_array_equal(shifted[:, :5], qs[:, :5])
+
+
+def test_chained_seed_follows_a_full_turn_of_the_tool_without_leaving_the_limits(kin):
+    """A closed loop whose tool heading turns 360 degrees: axis 6 must unwind within +-400 deg."""
+    n = 120
+    theta = np.linspace(0, 2 * np.pi, n)
+    base = wave_path(n)
+    positions = np.column_stack([1.3 + 0.2 * np.cos(theta), 0.2 * np.sin(theta), np.full(n, 0.6)])
+    heading = theta + np.pi / 2
+    R = np.stack([np.array([[np.cos(a), np.sin(a), 0], [np.sin(a), -np.cos(a), 0], [0, 0, -1]]) for a in heading])
+    targets = np.tile(np.eye(4), (n, 1, 1))
+    targets[:, :3, :3], targets[:, :3, 3] = R, positions
+    spec = kin.robot.spec
+    lower, upper = spec.lower + np.radians(2), spec.upper - np.radians(2)
+    qs, errors = ik_chain(kin, targets, lower, upper, start_candidates(lower, upper, None))
+    assert errors.max() < 1e-5
+    assert np.all(qs >= lower - 1e-9) and np.all(qs <= upper + 1e-9)
+    assert np.degrees(np.abs(np.diff(qs, axis=0)).max()) < 20.0  # continuous: no branch jumps
+    assert base is not None

@@ -1,0 +1,81 @@
+import numpy as np
+import pytest
+
+from refine.frames import rotation_about, rotation_angle_deg
+from refine.optimise.problem import Weights, build_refinement
+from refine.optimise.solve import solve_refinement
+from refine.paths import FusedPath
+from refine.problem import Tolerances
+from refine.synthetic import wave_path
+
+
+@pytest.fixture(scope="module")
+def wave_result(irb4600, straight_tool):
+    nlp = build_refinement(irb4600, wave_path(120), np.eye(4), straight_tool, Tolerances())
+    return nlp, solve_refinement(nlp)
+
+
+def test_refined_path_is_verified_on_the_cad_path_within_tolerances(wave_result, kin):
+    nlp, result = wave_result
+    assert result.status == "ok", result.reason
+    poses = kin.poses(result.q)  # recomputed here, independently of the result's own check
+    assert np.linalg.norm(poses[:, :3, 3] - nlp.fused.positions, axis=1).max() < 1e-6
+    assert rotation_angle_deg(poses[:, :3, :3], nlp.fused.rotations).max() <= 3.0 + 1e-6
+    spec = kin.robot.spec
+    margin = np.radians(2.0)
+    assert np.all(result.q >= spec.lower + margin - 1e-9) and np.all(result.q <= spec.upper - margin + 1e-9)
+
+
+def test_refining_a_reachable_smooth_demo_stays_close_to_it(wave_result):
+    """The demo is exactly reachable and smooth: the refinement follows it to a fraction of a degree."""
+    _, result = wave_result
+    assert result.check.orientation_deviation_deg.max() < 0.5
+    assert np.abs(result.q - result.q_seed).max() < np.radians(1.0)
+
+
+def test_orientation_cone_holds_when_smoothness_pulls_away_from_a_wavy_demo(irb4600, straight_tool, kin):
+    base = wave_path(80, amplitude_m=0.0)
+    wobble = np.radians(8.0) * np.sin(np.linspace(0, 6 * np.pi, 80))
+    rotations = base.rotations @ rotation_about("x", wobble)
+    fused = FusedPath(base.s, base.positions, rotations, base.speed, base.t_demo, base.residual)
+    nlp = build_refinement(irb4600, fused, np.eye(4), straight_tool, Tolerances(orientation_deg=3.0),
+                           weights=Weights(velocity=50.0, acceleration=0.05))
+    result = solve_refinement(nlp)
+    assert result.status == "ok", result.reason
+    dev = result.check.orientation_deviation_deg
+    assert dev.max() <= 3.0 + 1e-6
+    assert dev.max() > 2.9  # the cone binds: smoothness wants to cut the wobble
+
+
+def test_unreachable_points_are_reported_infeasible_with_the_segment(irb4600, straight_tool):
+    fused = wave_path(40, centre=(3.5, 0.0, 0.6))  # 3.5 m away: beyond the 2.05 m reach
+    nlp = build_refinement(irb4600, fused, np.eye(4), straight_tool, Tolerances())
+    result = solve_refinement(nlp)
+    assert result.status == "infeasible"
+    assert result.reason.startswith("out of reach at waypoints 0-39")
+    worst = result.check.violations[0]
+    assert worst.reason == "out of reach" and worst.unit == "m"
+    # the wave's nearest point is 3.5 - 0.05 m out; the arm reaches about 2.05 m + 0.35 m tool from axis 1
+    assert 0.5 < worst.worst < 1.5
+    assert not result.check.ok
+    assert result.iterations == 0  # diagnosed without running IPOPT
+
+
+def test_singularity_margin_is_kept_at_and_between_waypoints_when_the_demo_grazes_it(irb4600, straight_tool, kin):
+    """A demo that brings the wrist close to q5 = 0 in the middle of the path: the refined path keeps
+    the scaled manipulability above the margin everywhere, bounds added only where needed."""
+    n = 60
+    q = np.zeros((n, 6))
+    q[:, 0] = np.linspace(-0.2, 0.2, n)
+    q[:, 1], q[:, 2] = 0.3, -0.3
+    q[:, 4] = -np.radians(20.0) + np.radians(18.0) * np.sin(np.linspace(0, np.pi, n))  # down to -2 deg
+    T = kin.poses(q)
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(T[:, :3, 3], axis=0), axis=1))])
+    fused = FusedPath(s, T[:, :3, 3], T[:, :3, :3], np.full(n, 0.1), s / 0.1, np.zeros(n))
+    nlp = build_refinement(irb4600, fused, np.eye(4), straight_tool,
+                           Tolerances(orientation_deg=10.0, singularity_margin=0.02))
+    result = solve_refinement(nlp)
+    assert result.status == "ok", result.reason
+    assert result.check.singularity.min() >= 0.02 - 1e-6
+    assert result.check.singularity_between.min() >= 0.02 - 1e-6
+    assert 0 < len(result.singular_waypoints) < n
