@@ -149,7 +149,7 @@ class DemoSettings:
         rate_hz: sample rate [Hz] for logs without timestamps.
         hampel_window: half-width of the Hampel outlier filter [samples].
         hampel_sigmas: threshold of the Hampel filter [robust standard deviations].
-        smoothing_s: smoothing time constant for positions and orientations [s].
+        smoothing_s: standard deviation of the Gaussian smoothing of positions and orientations [s].
         pause_speed_m_s: below this speed the tool counts as still (start pause) [m/s].
         truth: absolute path of a ``truth.csv`` (simulated demonstrations only), or None.
     """
@@ -183,8 +183,9 @@ class Tolerances:
         position_m: largest TCP position error against the CAD path accepted in verification [m].
         orientation_deg: half-angle of the cone around the demonstrated orientation [deg].
         joint_margin_deg: distance kept from every joint limit [deg].
-        singularity_margin: lower bound on the singularity measure (smallest singular value of
-            the Jacobian with its position rows divided by the robot's reach) [-].
+        singularity_margin: lower bound on the singularity measure, the scaled manipulability
+            ``sqrt(det(Js Jsᵀ))`` with Js the TCP Jacobian whose position rows are divided by the
+            robot's reach [-].
     """
 
     position_m: float = 1e-6
@@ -337,10 +338,51 @@ def _check_keys(table: dict[str, Any], where: str, allowed: set[str], path: Path
         )
 
 
+def _number(value: Any, key: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise InputError(f"{key} must be a number, got {value!r}")
+    return float(value)
+
+
+def _numbers(value: Any, key: str, count: int | None = None) -> tuple[float, ...]:
+    if not isinstance(value, list) or (count is not None and len(value) != count):
+        size = "a list of numbers" if count is None else f"a list of {count} numbers"
+        raise InputError(f"{key} must be {size}, got {value!r}")
+    return tuple(_number(v, f"{key}[{i}]") for i, v in enumerate(value))
+
+
 def _pose(value: Any, key: str) -> Matrix4:
-    if not isinstance(value, dict) or set(value) - {"xyz", "rpy_deg"}:
-        raise InputError(f"{key} must be a table {{ xyz = [m, m, m], rpy_deg = [deg, deg, deg] }}")
-    return transform_from_xyz_rpy(value.get("xyz", [0.0, 0.0, 0.0]), value.get("rpy_deg", [0.0] * 3))
+    form = f"{key} must be a table {{ xyz = [m, m, m], rpy_deg = [deg, deg, deg] }}"
+    if not isinstance(value, dict):
+        raise InputError(f"{form}, got {value!r}")
+    unknown = sorted(set(value) - {"xyz", "rpy_deg"})
+    if unknown:
+        raise InputError(f"{form}; unknown key(s) {', '.join(map(repr, unknown))}")
+    xyz = _numbers(value.get("xyz", [0.0, 0.0, 0.0]), f"{key}.xyz", 3)
+    rpy = _numbers(value.get("rpy_deg", [0.0, 0.0, 0.0]), f"{key}.rpy_deg", 3)
+    return transform_from_xyz_rpy(xyz, rpy)
+
+
+_SCALAR_TYPES: dict[str, tuple[type, ...]] = {
+    "float": (int, float),
+    "int": (int,),
+    "bool": (bool,),
+    "str": (str,),
+}
+
+
+def _check_types(cls: type, table: dict[str, Any], where: str) -> None:
+    """Reject TOML values whose type does not match the field's annotation (bools are not numbers)."""
+    for key, value in table.items():
+        annotation = str(cls.__dataclass_fields__[key].type).replace(" | None", "")  # type: ignore[attr-defined]
+        allowed = _SCALAR_TYPES.get(annotation)
+        if allowed is None:
+            continue
+        if (isinstance(value, bool) and bool not in allowed) or not isinstance(value, allowed):
+            kind = {"float": "a number", "int": "an integer", "bool": "true or false", "str": "a string"}[
+                annotation
+            ]
+            raise InputError(f"{where}.{key} must be {kind}, got {value!r}")
 
 
 def _file(root: Path, value: Any, key: str) -> Path:
@@ -358,6 +400,7 @@ def _fields(cls: type) -> set[str]:
 
 def _build(cls: type, table: dict[str, Any], where: str, path: Path, **overrides: Any) -> Any:
     _check_keys(table, where, _fields(cls), path)
+    _check_types(cls, {k: v for k, v in table.items() if k not in overrides}, where)
     kwargs = {**table, **overrides}
     try:
         return cls(**kwargs)
@@ -374,9 +417,9 @@ def _robot(t: dict[str, Any], path: Path) -> RobotSettings:
         out["base_in_world"] = _pose(t["base_in_world"], "robot.base_in_world")
     for key in ("joint_acceleration_deg_s2", "home_deg"):
         if key in t:
-            out[key] = tuple(float(v) for v in t[key])
+            out[key] = _numbers(t[key], f"robot.{key}")
     if "velocity_scale" in t:
-        out["velocity_scale"] = float(t["velocity_scale"])
+        out["velocity_scale"] = _number(t["velocity_scale"], "robot.velocity_scale")
     return RobotSettings(**out)
 
 
@@ -385,12 +428,15 @@ def _tool(t: dict[str, Any], path: Path) -> ToolSettings:
     for key in ("name", "tcp_in_flange"):
         if key not in t:
             raise InputError(f"[tool] missing required key {key!r}")
+    _check_types(
+        ToolSettings, {k: v for k, v in t.items() if k in ("name", "axisymmetric", "mass_kg")}, "tool"
+    )
     out: dict[str, Any] = dict(t)
     out["tcp_in_flange"] = _pose(t["tcp_in_flange"], "tool.tcp_in_flange")
     if "sensor_in_tcp" in t:
         out["sensor_in_tcp"] = _pose(t["sensor_in_tcp"], "tool.sensor_in_tcp")
     if "cog_in_flange_m" in t:
-        out["cog_in_flange_m"] = tuple(float(v) for v in t["cog_in_flange_m"])
+        out["cog_in_flange_m"] = _numbers(t["cog_in_flange_m"], "tool.cog_in_flange_m", 3)
     return ToolSettings(**out)
 
 
@@ -423,7 +469,8 @@ def _process(t: dict[str, Any], path: Path) -> ProcessSettings:
         _check_keys(p, f"process.parameters[{i}]", {"name", "value", "unit"}, path)
         if set(p) != {"name", "value", "unit"}:
             raise InputError(f"[[process.parameters]] #{i + 1} needs name, value and unit, got {p}")
-        params.append(ProcessParameter(str(p["name"]), float(p["value"]), str(p["unit"])))
+        value = _number(p["value"], f"process.parameters[{i}].value")
+        params.append(ProcessParameter(str(p["name"]), value, str(p["unit"])))
     return ProcessSettings(
         kind=str(t.get("kind", "other")),
         output=str(t.get("output", "doProcess")),
@@ -434,5 +481,8 @@ def _process(t: dict[str, Any], path: Path) -> ProcessSettings:
 def _output(t: dict[str, Any], path: Path) -> OutputSettings:
     _check_keys(t, "output", _fields(OutputSettings), path)
     if "programs" in t:
-        return OutputSettings(programs=tuple(str(p) for p in t["programs"]))
+        programs = t["programs"]
+        if not isinstance(programs, list) or not all(isinstance(p, str) for p in programs):
+            raise InputError(f'output.programs must be a list of strings such as ["rapid"], got {programs!r}')
+        return OutputSettings(programs=tuple(programs))
     return OutputSettings()

@@ -170,7 +170,7 @@ def test_clean_demonstration_replaces_spikes_smooths_and_finds_the_start(tmp_pat
     R[rot_spikes] = matrix_from_rotvec([[0.0, 0.0, 0.3]]) @ R[rot_spikes]
     log = TrackerLog(t=t, positions=noisy, rotations=R, source="synthetic")
     with caplog.at_level(logging.INFO, logger="refine.demo"):
-        demo = clean_demonstration(log, DemoSettings(file=tmp_path / "unused.txt"))
+        demo = clean_demonstration(log, DemoSettings(file=tmp_path / "unused.txt", smoothing_s=0.15))
     assert demo.n_outliers == 5
     assert "replaced 5 outlier sample(s)" in caplog.text
     # 0.15 s of smoothing rounds off the 0.25 m/s^2 start by about a*sigma^2/2 ~ 3 mm
