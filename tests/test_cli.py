@@ -1,0 +1,59 @@
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from refine.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+GLASS = ROOT / "problems" / "glass_adhesive"
+
+
+def test_robots_lists_every_registered_robot(capsys):
+    assert main(["robots"]) == 0
+    out = capsys.readouterr().out
+    for name in ("abb_irb4600_60_205", "kuka_iiwa14_r820", "ur10e"):
+        assert name in out
+
+
+def test_check_accepts_the_bundled_problem(capsys):
+    assert main(["check", str(GLASS)]) == 0
+    assert "problem file OK" in capsys.readouterr().out
+
+
+def test_bad_problem_file_exits_2_with_the_key_named(tmp_path, capsys):
+    problem = tmp_path / "glass"
+    shutil.copytree(GLASS, problem)
+    toml = problem / "problem.toml"
+    toml.write_text(toml.read_text().replace("[tolerances]", "[tolerances]\ncone_deg = 3"))
+    assert main(["check", str(problem)]) == 2
+    err = capsys.readouterr().err
+    assert "cone_deg" in err and "orientation_deg" in err
+
+
+def test_missing_problem_exits_2(tmp_path, capsys):
+    assert main(["run", str(tmp_path / "nowhere")]) == 2
+    assert "problem file not found" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_run_writes_every_output_and_a_result_with_the_documented_keys(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["run", str(GLASS), "--out", str(out)]) == 0
+    assert "status       ok" in capsys.readouterr().out
+    names = {p.name for p in out.iterdir()}
+    assert {"result.json", "trajectory.csv", "glass_adhesive.aml", "glass_adhesive.mod"} <= names
+    doc = json.loads((out / "result.json").read_text())
+    for key in ("status", "problem", "n_waypoints", "dof", "robot", "tool", "tolerances", "metrics",
+                "timings_s", "repairs", "outputs"):
+        assert key in doc
+    assert set(doc["robot"]) >= {"urdf", "flange_frame", "base_in_world"}
+    assert set(doc["tool"]) >= {"tcp_in_flange", "axisymmetric"}
+    for key in ("max_position_error_m", "max_orientation_deviation_deg", "min_joint_margin_rad",
+                "min_singularity_measure", "min_clearance_m", "cycle_time_s", "speed_tracking_error_rel"):
+        assert key in doc["metrics"]
+    for stage in ("cad", "demo", "fuse", "build", "seed", "solve", "verify", "timing", "export", "total"):
+        assert doc["timings_s"][stage] >= 0.0
+    assert (ROOT / doc["robot"]["urdf"]).is_file()
+    assert set(doc["outputs"].values()) <= names
