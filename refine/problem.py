@@ -7,7 +7,6 @@ name the key or the path. Paths in the file are relative to the problem file. Po
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -15,7 +14,24 @@ from typing import Any
 import numpy as np
 
 from refine.errors import InputError
-from refine.frames import check_transform, transform_from_xyz_rpy
+from refine.frames import transform_from_xyz_rpy
+from refine.settings import (
+    CadSettings,
+    CollisionSettings,
+    DemoSettings,
+    ExpectedOutcome,
+    FrameSettings,
+    MultipassSettings,
+    OptimiseSettings,
+    OutputSettings,
+    ProcessParameter,
+    ProcessSettings,
+    RepairSettings,
+    RobotSettings,
+    Shape,
+    Tolerances,
+    ToolSettings,
+)
 
 try:  # Python 3.11+
     import tomllib
@@ -24,224 +40,19 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10
 
 Matrix4 = np.ndarray
 
-
-def _positive(owner: str, name: str, value: float) -> None:
-    if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-        raise InputError(f"{owner}.{name} must be a finite number > 0, got {value!r}")
-
-
-def _non_negative(owner: str, name: str, value: float) -> None:
-    if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-        raise InputError(f"{owner}.{name} must be a finite number >= 0, got {value!r}")
-
-
-def _one_of(owner: str, name: str, value: str, allowed: tuple[str, ...]) -> None:
-    if value not in allowed:
-        raise InputError(f"{owner}.{name} = {value!r} is not one of {', '.join(allowed)}")
-
-
-@dataclass(frozen=True)
-class RobotSettings:
-    """``[robot]``: which robot, where it stands, optional limit overrides.
-
-    Attributes:
-        model: registry name, a folder of ``robots/`` (e.g. ``"abb_irb4600_60_205"``).
-        base_in_world: T_F_R, the robot base in the world frame {F}, (4, 4).
-        joint_acceleration_deg_s2: per-joint acceleration limits [deg/s^2] overriding the
-            robot's default, or None.
-        velocity_scale: fraction of the data-sheet joint speeds the plan may use, in (0, 1].
-        home_deg: a preferred joint configuration [deg] to start the IK seed from, or None.
-    """
-
-    model: str
-    base_in_world: Matrix4 = field(default_factory=lambda: np.eye(4))
-    joint_acceleration_deg_s2: tuple[float, ...] | None = None
-    velocity_scale: float = 1.0
-    home_deg: tuple[float, ...] | None = None
-
-    def __post_init__(self) -> None:
-        check_transform(self.base_in_world, "robot.base_in_world")
-        if not 0.0 < self.velocity_scale <= 1.0:
-            raise InputError(f"robot.velocity_scale must be in (0, 1], got {self.velocity_scale}")
-        for a in self.joint_acceleration_deg_s2 or ():
-            _positive("robot", "joint_acceleration_deg_s2[]", a)
-
-
-@dataclass(frozen=True)
-class ToolSettings:
-    """``[tool]``: the process tool on the flange and the tracker sensor on the hand tool.
-
-    Attributes:
-        name: tool name, used for RAPID tooldata / KRL tool names.
-        tcp_in_flange: T_flange_TCP, (4, 4); the TCP z axis points along the nozzle/torch.
-        sensor_in_tcp: T_TCP_E, pose of the tracker sensor {E} in the TCP frame of the hand
-            tool the worker used, (4, 4).
-        axisymmetric: the spin about the TCP z axis is free (it is not constrained to the demo).
-        mass_kg: tool mass [kg] for the program's tooldata.
-        cog_in_flange_m: tool centre of gravity in the flange frame [m].
-    """
-
-    name: str
-    tcp_in_flange: Matrix4
-    sensor_in_tcp: Matrix4 = field(default_factory=lambda: np.eye(4))
-    axisymmetric: bool = False
-    mass_kg: float = 5.0
-    cog_in_flange_m: tuple[float, float, float] = (0.0, 0.0, 0.1)
-
-    def __post_init__(self) -> None:
-        check_transform(self.tcp_in_flange, "tool.tcp_in_flange")
-        check_transform(self.sensor_in_tcp, "tool.sensor_in_tcp")
-        _positive("tool", "mass_kg", self.mass_kg)
-
-
-@dataclass(frozen=True)
-class FrameSettings:
-    """``[frames]``: where the tracker receiver and the CAD frame sit in the world {F}.
-
-    Attributes:
-        source_in_world: T_F_S, the tracker receiver (source) in {F}.
-        cad_in_world: T_F_CAD, the frame the CAD/CAM coordinates are given in.
-    """
-
-    source_in_world: Matrix4 = field(default_factory=lambda: np.eye(4))
-    cad_in_world: Matrix4 = field(default_factory=lambda: np.eye(4))
-
-    def __post_init__(self) -> None:
-        check_transform(self.source_in_world, "frames.source_in_world")
-        check_transform(self.cad_in_world, "frames.cad_in_world")
-
-
-@dataclass(frozen=True)
-class CadSettings:
-    """``[cad]``: the CAD/CAM path file.
-
-    Attributes:
-        file: absolute path of the file.
-        format: ``"csv"`` or ``"dxf"`` (from the extension when not given).
-        units: length unit of the file: ``"m"``, ``"mm"`` or ``"in"``.
-        spacing_m: waypoint spacing along the path after resampling [m].
-        layer: DXF layer holding the path, or None for the only/first path entity.
-        reverse: run the path in the opposite direction.
-    """
-
-    file: Path
-    format: str = "csv"
-    units: str = "mm"
-    spacing_m: float = 0.005
-    layer: str | None = None
-    reverse: bool = False
-
-    def __post_init__(self) -> None:
-        _one_of("cad", "format", self.format, ("csv", "dxf"))
-        _one_of("cad", "units", self.units, ("m", "mm", "in"))
-        _positive("cad", "spacing_m", self.spacing_m)
-
-
-@dataclass(frozen=True)
-class DemoSettings:
-    """``[demonstration]``: the tracker log and how to clean it.
-
-    Attributes:
-        file: absolute path of the log.
-        format: ``"liberty_ascii"`` or ``"csv"``.
-        units: position unit of the log: ``"in"`` or ``"cm"`` (Liberty), ``"m"``/``"mm"`` (CSV).
-        station: tracker station (sensor) number to read.
-        rate_hz: sample rate [Hz] for logs without timestamps.
-        hampel_window: half-width of the Hampel outlier filter [samples].
-        hampel_sigmas: threshold of the Hampel filter [robust standard deviations].
-        smoothing_s: standard deviation of the Gaussian smoothing of positions and orientations [s].
-        pause_speed_m_s: below this speed the tool counts as still (start pause) [m/s].
-        truth: absolute path of a ``truth.csv`` (simulated demonstrations only), or None.
-    """
-
-    file: Path
-    format: str = "liberty_ascii"
-    units: str = "in"
-    station: int = 1
-    rate_hz: float = 240.0
-    hampel_window: int = 7
-    hampel_sigmas: float = 3.0
-    smoothing_s: float = 0.03
-    pause_speed_m_s: float = 0.01
-    truth: Path | None = None
-
-    def __post_init__(self) -> None:
-        _one_of("demonstration", "format", self.format, ("liberty_ascii", "csv"))
-        _one_of("demonstration", "units", self.units, ("in", "cm", "m", "mm"))
-        _positive("demonstration", "rate_hz", self.rate_hz)
-        _positive("demonstration", "hampel_window", self.hampel_window)
-        _positive("demonstration", "hampel_sigmas", self.hampel_sigmas)
-        _non_negative("demonstration", "smoothing_s", self.smoothing_s)
-        _positive("demonstration", "pause_speed_m_s", self.pause_speed_m_s)
-
-
-@dataclass(frozen=True)
-class Tolerances:
-    """``[tolerances]``: what the refined path must satisfy.
-
-    Attributes:
-        position_m: largest TCP position error against the CAD path accepted in verification [m].
-        orientation_deg: half-angle of the cone around the demonstrated orientation [deg].
-        joint_margin_deg: distance kept from every joint limit [deg].
-        singularity_margin: lower bound on the singularity measure, the scaled manipulability
-            ``sqrt(det(Js Jsᵀ))`` with Js the TCP Jacobian whose position rows are divided by the
-            robot's reach [-].
-    """
-
-    position_m: float = 1e-6
-    orientation_deg: float = 3.0
-    joint_margin_deg: float = 2.0
-    singularity_margin: float = 0.02
-
-    def __post_init__(self) -> None:
-        _positive("tolerances", "position_m", self.position_m)
-        _positive("tolerances", "orientation_deg", self.orientation_deg)
-        if self.orientation_deg >= 90.0:
-            raise InputError(f"tolerances.orientation_deg must be < 90, got {self.orientation_deg}")
-        _non_negative("tolerances", "joint_margin_deg", self.joint_margin_deg)
-        _non_negative("tolerances", "singularity_margin", self.singularity_margin)
-
-
-@dataclass(frozen=True)
-class ProcessParameter:
-    """One process value with its unit, e.g. the glue flow rate in ``ml/s``."""
-
-    name: str
-    value: float
-    unit: str
-
-
-@dataclass(frozen=True)
-class ProcessSettings:
-    """``[process]``: what the tool does along the path.
-
-    Attributes:
-        kind: ``"glue"``, ``"weld"``, ``"seal"`` or ``"other"``.
-        output: name of the digital output that switches the process on and off.
-        parameters: process values (flow rate, current, ...), written to PathML and programs.
-    """
-
-    kind: str = "other"
-    output: str = "doProcess"
-    parameters: tuple[ProcessParameter, ...] = ()
-
-    def __post_init__(self) -> None:
-        _one_of("process", "kind", self.kind, ("glue", "weld", "seal", "other"))
-
-
-@dataclass(frozen=True)
-class OutputSettings:
-    """``[output]``: which programs to write.
-
-    Attributes:
-        programs: program formats, from ``"rapid"`` (more to come).
-    """
-
-    programs: tuple[str, ...] = ("rapid",)
-
-    def __post_init__(self) -> None:
-        for p in self.programs:
-            _one_of("output", "programs[]", p, ("rapid",))
+__all__ = [
+    "CadSettings",
+    "DemoSettings",
+    "FrameSettings",
+    "OutputSettings",
+    "Problem",
+    "ProcessParameter",
+    "ProcessSettings",
+    "RobotSettings",
+    "Tolerances",
+    "ToolSettings",
+    "load_problem",
+]
 
 
 @dataclass(frozen=True)
@@ -251,6 +62,11 @@ class Problem:
     Attributes:
         name: problem name (defaults to the folder name).
         root: folder of the problem file; relative paths are resolved against it.
+        demonstration: the tracker log settings; None when the path and its orientations and
+            speeds come from a PathML document.
+        cell: ``[[cell.objects]]``: the cell's collision objects in the world frame.
+        multipass: ``[multipass]``: the passes of a multi-layer weld, or None for one pass.
+        expected: ``[expected]``: the outcome a test problem is built to produce, or None.
         description: free text.
     """
 
@@ -259,12 +75,24 @@ class Problem:
     robot: RobotSettings
     tool: ToolSettings
     cad: CadSettings
-    demonstration: DemoSettings
+    demonstration: DemoSettings | None
     frames: FrameSettings = field(default_factory=FrameSettings)
     tolerances: Tolerances = field(default_factory=Tolerances)
     process: ProcessSettings = field(default_factory=ProcessSettings)
     output: OutputSettings = field(default_factory=OutputSettings)
+    cell: tuple[Shape, ...] = ()
+    collision: CollisionSettings = field(default_factory=CollisionSettings)
+    optimise: OptimiseSettings = field(default_factory=OptimiseSettings)
+    repair: RepairSettings = field(default_factory=RepairSettings)
+    multipass: MultipassSettings | None = None
+    expected: ExpectedOutcome | None = None
     description: str = ""
+
+    def __post_init__(self) -> None:
+        if self.demonstration is None and self.cad.format != "pathml":
+            raise InputError(
+                'missing required table [demonstration] (only a PathML path, [cad] format = "pathml", may go without)'
+            )
 
 
 def load_problem(path: str | Path) -> Problem:
@@ -284,7 +112,7 @@ def load_problem(path: str | Path) -> Problem:
         raise InputError(f"{path}: not valid TOML: {e}") from e
     root = path.parent.resolve()
     _check_keys(data, "", _TOP_KEYS, path)
-    for table in ("robot", "tool", "cad", "demonstration"):
+    for table in ("robot", "tool", "cad"):
         if table not in data:
             raise InputError(f"{path}: missing required table [{table}]")
     try:
@@ -296,10 +124,18 @@ def load_problem(path: str | Path) -> Problem:
             tool=_tool(_table(data, "tool"), path),
             frames=_frames(_table(data, "frames"), path),
             cad=_cad(_table(data, "cad"), root, path),
-            demonstration=_demo(_table(data, "demonstration"), root, path),
+            demonstration=_demo(_table(data, "demonstration"), root, path)
+            if "demonstration" in data
+            else None,
             tolerances=_build(Tolerances, _table(data, "tolerances"), "tolerances", path),
             process=_process(_table(data, "process"), path),
             output=_output(_table(data, "output"), path),
+            cell=_cell(_table(data, "cell"), root, path),
+            collision=_build(CollisionSettings, _table(data, "collision"), "collision", path),
+            optimise=_build(OptimiseSettings, _table(data, "optimise"), "optimise", path),
+            repair=_build(RepairSettings, _table(data, "repair"), "repair", path),
+            multipass=_multipass(_table(data, "multipass"), path) if "multipass" in data else None,
+            expected=_expected(_table(data, "expected"), path) if "expected" in data else None,
         )
     except InputError as e:
         raise InputError(f"{path}: {e}") from e
@@ -308,6 +144,12 @@ def load_problem(path: str | Path) -> Problem:
 # ---- loader internals ---------------------------------------------------------------------------
 
 _TOP_KEYS = {
+    "cell",
+    "collision",
+    "optimise",
+    "repair",
+    "multipass",
+    "expected",
     "name",
     "description",
     "robot",
@@ -437,6 +279,11 @@ def _tool(t: dict[str, Any], path: Path) -> ToolSettings:
         out["sensor_in_tcp"] = _pose(t["sensor_in_tcp"], "tool.sensor_in_tcp")
     if "cog_in_flange_m" in t:
         out["cog_in_flange_m"] = _numbers(t["cog_in_flange_m"], "tool.cog_in_flange_m", 3)
+    if "collision" in t:
+        out["collision"] = tuple(
+            _shape(item, f"tool.collision[{i}]", None, path)
+            for i, item in enumerate(_list(t["collision"], "tool.collision"))
+        )
     return ToolSettings(**out)
 
 
@@ -449,8 +296,82 @@ def _cad(t: dict[str, Any], root: Path, path: Path) -> CadSettings:
     if "file" not in t:
         raise InputError("[cad] missing required key 'file'")
     f = _file(root, t["file"], "cad.file")
-    fmt = t.get("format", {".dxf": "dxf", ".csv": "csv"}.get(f.suffix.lower(), f.suffix))
-    return _build(CadSettings, t, "cad", path, file=f, format=fmt)
+    fmt = t.get("format", _CAD_SUFFIXES.get(f.suffix.lower(), f.suffix))
+    overrides: dict[str, Any] = {"file": f, "format": fmt}
+    for key in ("section_origin", "section_normal", "start_near"):
+        if key in t:
+            overrides[key] = _numbers(t[key], f"cad.{key}", 3)
+    return _build(CadSettings, t, "cad", path, **overrides)
+
+
+_CAD_SUFFIXES = {
+    ".dxf": "dxf",
+    ".csv": "csv",
+    ".nc": "gcode",
+    ".ngc": "gcode",
+    ".gcode": "gcode",
+    ".tap": "gcode",
+    ".stl": "mesh",
+    ".obj": "mesh",
+    ".ply": "mesh",
+    ".aml": "pathml",
+}
+
+
+def _list(value: Any, key: str) -> list[Any]:
+    if not isinstance(value, list):
+        raise InputError(f"{key} must be a list of tables ([[{key}]]), got {value!r}")
+    return value
+
+
+def _shape(t: Any, key: str, root: Path | None, path: Path) -> Shape:
+    if not isinstance(t, dict):
+        raise InputError(f"{key} must be a table, got {t!r}")
+    _check_keys(t, key, _fields(Shape), path)
+    out: dict[str, Any] = dict(t)
+    if "pose" in t:
+        out["pose"] = _pose(t["pose"], f"{key}.pose")
+    if "size_m" in t:
+        out["size_m"] = _numbers(t["size_m"], f"{key}.size_m", 3)
+    if "file" in t:
+        if root is None:
+            raise InputError(f"{key}: mesh files are for cell objects only")
+        out["file"] = _file(root, t["file"], f"{key}.file")
+    try:
+        return Shape(**out)
+    except TypeError as e:
+        raise InputError(f"{key}: {e}") from e
+
+
+def _cell(t: dict[str, Any], root: Path, path: Path) -> tuple[Shape, ...]:
+    _check_keys(t, "cell", {"objects"}, path)
+    return tuple(
+        _shape(o, f"cell.objects[{i}]", root, path)
+        for i, o in enumerate(_list(t.get("objects", []), "cell.objects"))
+    )
+
+
+def _multipass(t: dict[str, Any], path: Path) -> MultipassSettings:
+    _check_keys(t, "multipass", _fields(MultipassSettings), path)
+    out: dict[str, Any] = dict(t)
+    for key in ("lateral_offsets_m", "work_angle_change_deg"):
+        if key in t:
+            out[key] = tuple(
+                _numbers(row, f"multipass.{key}[{i}]")
+                for i, row in enumerate(_list(t[key], f"multipass.{key}"))
+            )
+    return _build(
+        MultipassSettings,
+        {k: v for k, v in t.items() if k not in out or k in ("layers", "layer_height_m")},
+        "multipass",
+        path,
+        **{k: v for k, v in out.items() if k in ("lateral_offsets_m", "work_angle_change_deg")},
+    )
+
+
+def _expected(t: dict[str, Any], path: Path) -> ExpectedOutcome:
+    overrides = {"s_range_m": _numbers(t["s_range_m"], "expected.s_range_m", 2)} if "s_range_m" in t else {}
+    return _build(ExpectedOutcome, t, "expected", path, **overrides)
 
 
 def _demo(t: dict[str, Any], root: Path, path: Path) -> DemoSettings:

@@ -1,0 +1,428 @@
+"""The settings of a problem file, one frozen, self-checking dataclass per table.
+
+``refine.problem`` reads ``problem.toml`` into these; every key is documented in
+``docs/problem-file.md``. Each ``__post_init__`` rejects a bad value with a message naming the table,
+the key, the value and what is allowed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from refine.errors import InputError
+from refine.frames import check_transform
+
+Matrix4 = np.ndarray
+
+CAD_FORMATS = ("csv", "dxf", "gcode", "mesh", "pathml")
+DEMO_FORMATS = ("liberty_ascii", "liberty_binary", "csv")
+PROGRAM_FORMATS = ("rapid", "krl", "urscript")
+SHAPES = ("box", "cylinder", "sphere", "mesh")
+
+
+def _positive(owner: str, name: str, value: float) -> None:
+    if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+        raise InputError(f"{owner}.{name} must be a finite number > 0, got {value!r}")
+
+
+def _non_negative(owner: str, name: str, value: float) -> None:
+    if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+        raise InputError(f"{owner}.{name} must be a finite number >= 0, got {value!r}")
+
+
+def _one_of(owner: str, name: str, value: str, allowed: tuple[str, ...]) -> None:
+    if value not in allowed:
+        raise InputError(f"{owner}.{name} = {value!r} is not one of {', '.join(allowed)}")
+
+
+@dataclass(frozen=True)
+class RobotSettings:
+    """``[robot]``: which robot, where it stands, optional limit overrides.
+
+    Attributes:
+        model: registry name, a folder of ``robots/`` (e.g. ``"abb_irb4600_60_205"``).
+        base_in_world: T_F_R, the robot base in the world frame {F}, (4, 4).
+        joint_acceleration_deg_s2: per-joint acceleration limits [deg/s^2] overriding the
+            robot's default, or None.
+        velocity_scale: fraction of the data-sheet joint speeds the plan may use, in (0, 1].
+        home_deg: a preferred joint configuration [deg] to start the IK seed from, or None.
+    """
+
+    model: str
+    base_in_world: Matrix4 = field(default_factory=lambda: np.eye(4))
+    joint_acceleration_deg_s2: tuple[float, ...] | None = None
+    velocity_scale: float = 1.0
+    home_deg: tuple[float, ...] | None = None
+
+    def __post_init__(self) -> None:
+        check_transform(self.base_in_world, "robot.base_in_world")
+        if not 0.0 < self.velocity_scale <= 1.0:
+            raise InputError(f"robot.velocity_scale must be in (0, 1], got {self.velocity_scale}")
+        for a in self.joint_acceleration_deg_s2 or ():
+            _positive("robot", "joint_acceleration_deg_s2[]", a)
+
+
+@dataclass(frozen=True)
+class ToolSettings:
+    """``[tool]``: the process tool on the flange and the tracker sensor on the hand tool.
+
+    Attributes:
+        name: tool name, used for RAPID tooldata / KRL tool names.
+        tcp_in_flange: T_flange_TCP, (4, 4); the TCP z axis points along the nozzle/torch.
+        sensor_in_tcp: T_TCP_E, pose of the tracker sensor {E} in the TCP frame of the hand
+            tool the worker used, (4, 4).
+        axisymmetric: the spin about the TCP z axis is free (it is not constrained to the demo).
+        mass_kg: tool mass [kg] for the program's tooldata.
+        cog_in_flange_m: tool centre of gravity in the flange frame [m].
+        collision: the tool's collision shapes, poses in the flange frame.
+    """
+
+    name: str
+    tcp_in_flange: Matrix4
+    sensor_in_tcp: Matrix4 = field(default_factory=lambda: np.eye(4))
+    axisymmetric: bool = False
+    mass_kg: float = 5.0
+    cog_in_flange_m: tuple[float, float, float] = (0.0, 0.0, 0.1)
+    collision: tuple[Shape, ...] = ()
+
+    def __post_init__(self) -> None:
+        check_transform(self.tcp_in_flange, "tool.tcp_in_flange")
+        check_transform(self.sensor_in_tcp, "tool.sensor_in_tcp")
+        _positive("tool", "mass_kg", self.mass_kg)
+
+
+@dataclass(frozen=True)
+class FrameSettings:
+    """``[frames]``: where the tracker receiver and the CAD frame sit in the world {F}.
+
+    Attributes:
+        source_in_world: T_F_S, the tracker receiver (source) in {F}.
+        cad_in_world: T_F_CAD, the frame the CAD/CAM coordinates are given in.
+    """
+
+    source_in_world: Matrix4 = field(default_factory=lambda: np.eye(4))
+    cad_in_world: Matrix4 = field(default_factory=lambda: np.eye(4))
+
+    def __post_init__(self) -> None:
+        check_transform(self.source_in_world, "frames.source_in_world")
+        check_transform(self.cad_in_world, "frames.cad_in_world")
+
+
+@dataclass(frozen=True)
+class CadSettings:
+    """``[cad]``: the CAD/CAM path file.
+
+    Attributes:
+        file: absolute path of the file.
+        format: ``"csv"``, ``"dxf"``, ``"gcode"``, ``"mesh"`` (STL, OBJ, PLY) or ``"pathml"``
+            (from the extension when not given).
+        units: length unit of the file: ``"m"``, ``"mm"`` or ``"in"``.
+        spacing_m: waypoint spacing along the path after resampling [m].
+        layer: DXF layer holding the path, or None for the only/first path entity.
+        reverse: run the path in the opposite direction.
+        section_origin: a point of the cutting plane [file units] (mesh: plane section).
+        section_normal: the cutting plane's normal (mesh: plane section).
+        boundary: take the mesh's open boundary instead of a section (mesh).
+        start_near: start a closed contour at its point nearest to this [file units], or None.
+        track: PathML track to read, as ``"layer/track"`` names, or None for the first (pathml).
+    """
+
+    file: Path
+    format: str = "csv"
+    units: str = "mm"
+    spacing_m: float = 0.005
+    layer: str | None = None
+    reverse: bool = False
+    section_origin: tuple[float, float, float] | None = None
+    section_normal: tuple[float, float, float] | None = None
+    boundary: bool = False
+    start_near: tuple[float, float, float] | None = None
+    track: str | None = None
+
+    def __post_init__(self) -> None:
+        _one_of("cad", "format", self.format, CAD_FORMATS)
+        if self.format == "mesh" and self.boundary == (self.section_normal is not None):
+            raise InputError(
+                "cad: a mesh path needs either boundary = true or section_origin + section_normal"
+            )
+        if (self.section_origin is None) != (self.section_normal is None):
+            raise InputError("cad: section_origin and section_normal go together")
+        _one_of("cad", "units", self.units, ("m", "mm", "in"))
+        _positive("cad", "spacing_m", self.spacing_m)
+
+
+@dataclass(frozen=True)
+class DemoSettings:
+    """``[demonstration]``: the tracker log and how to clean it.
+
+    Attributes:
+        file: absolute path of the log.
+        format: ``"liberty_ascii"``, ``"liberty_binary"`` or ``"csv"``.
+        units: position unit of the log: ``"in"`` or ``"cm"`` (Liberty), ``"m"``/``"mm"`` (CSV).
+        station: tracker station (sensor) number to read.
+        rate_hz: sample rate [Hz] for logs without timestamps.
+        hampel_window: half-width of the Hampel outlier filter [samples].
+        hampel_sigmas: threshold of the Hampel filter [robust standard deviations].
+        smoothing_s: standard deviation of the Gaussian smoothing of positions and orientations [s].
+        pause_speed_m_s: below this speed the tool counts as still (start pause) [m/s].
+        truth: absolute path of a ``truth.csv`` (simulated demonstrations only), or None.
+    """
+
+    file: Path
+    format: str = "liberty_ascii"
+    units: str = "in"
+    station: int = 1
+    rate_hz: float = 240.0
+    hampel_window: int = 7
+    hampel_sigmas: float = 3.0
+    smoothing_s: float = 0.03
+    pause_speed_m_s: float = 0.01
+    truth: Path | None = None
+
+    def __post_init__(self) -> None:
+        _one_of("demonstration", "format", self.format, DEMO_FORMATS)
+        _one_of("demonstration", "units", self.units, ("in", "cm", "m", "mm"))
+        _positive("demonstration", "rate_hz", self.rate_hz)
+        _positive("demonstration", "hampel_window", self.hampel_window)
+        _positive("demonstration", "hampel_sigmas", self.hampel_sigmas)
+        _non_negative("demonstration", "smoothing_s", self.smoothing_s)
+        _positive("demonstration", "pause_speed_m_s", self.pause_speed_m_s)
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    """``[tolerances]``: what the refined path must satisfy.
+
+    Attributes:
+        position_m: largest TCP position error against the CAD path accepted in verification [m].
+        orientation_deg: half-angle of the cone around the demonstrated orientation [deg].
+        joint_margin_deg: distance kept from every joint limit [deg].
+        singularity_margin: lower bound on the singularity measure, the scaled manipulability
+            ``sqrt(det(Js Jsᵀ))`` with Js the TCP Jacobian whose position rows are divided by the
+            robot's reach [-].
+    """
+
+    position_m: float = 1e-6
+    orientation_deg: float = 3.0
+    joint_margin_deg: float = 2.0
+    singularity_margin: float = 0.02
+
+    def __post_init__(self) -> None:
+        _positive("tolerances", "position_m", self.position_m)
+        _positive("tolerances", "orientation_deg", self.orientation_deg)
+        if self.orientation_deg >= 90.0:
+            raise InputError(f"tolerances.orientation_deg must be < 90, got {self.orientation_deg}")
+        _non_negative("tolerances", "joint_margin_deg", self.joint_margin_deg)
+        _non_negative("tolerances", "singularity_margin", self.singularity_margin)
+
+
+@dataclass(frozen=True)
+class ProcessParameter:
+    """One process value with its unit, e.g. the glue flow rate in ``ml/s``."""
+
+    name: str
+    value: float
+    unit: str
+
+
+@dataclass(frozen=True)
+class ProcessSettings:
+    """``[process]``: what the tool does along the path.
+
+    Attributes:
+        kind: ``"glue"``, ``"weld"``, ``"seal"`` or ``"other"``.
+        output: name of the digital output that switches the process on and off.
+        parameters: process values (flow rate, current, ...), written to PathML and programs.
+    """
+
+    kind: str = "other"
+    output: str = "doProcess"
+    parameters: tuple[ProcessParameter, ...] = ()
+
+    def __post_init__(self) -> None:
+        _one_of("process", "kind", self.kind, ("glue", "weld", "seal", "other"))
+
+
+@dataclass(frozen=True)
+class OutputSettings:
+    """``[output]``: which programs to write.
+
+    Attributes:
+        programs: program formats, from :data:`PROGRAM_FORMATS`.
+    """
+
+    programs: tuple[str, ...] = ("rapid",)
+
+    def __post_init__(self) -> None:
+        for p in self.programs:
+            _one_of("output", "programs[]", p, PROGRAM_FORMATS)
+
+
+@dataclass(frozen=True)
+class Shape:
+    """A collision shape: ``[[cell.objects]]`` in the world, or ``[[tool.collision]]`` on the flange.
+
+    Attributes:
+        name: object name, used in messages and repair reports.
+        shape: one of :data:`SHAPES`.
+        pose: pose of the shape's frame (world {F} for cell objects, flange for tool shapes), (4, 4);
+            boxes, cylinders and spheres are centred on it, cylinders along its z axis.
+        size_m: box edge lengths [m].
+        radius_m: cylinder or sphere radius [m].
+        length_m: cylinder length [m].
+        file: mesh file (STL, OBJ, PLY), absolute path.
+        units: length unit of the mesh file.
+        workpiece: the process is meant to touch it (the tool's own shapes are not checked against
+            it; the links are).
+    """
+
+    name: str
+    shape: str
+    pose: Matrix4 = field(default_factory=lambda: np.eye(4))
+    size_m: tuple[float, float, float] | None = None
+    radius_m: float | None = None
+    length_m: float | None = None
+    file: Path | None = None
+    units: str = "m"
+    workpiece: bool = False
+
+    def __post_init__(self) -> None:
+        owner = f"shape {self.name!r}"
+        _one_of(owner, "shape", self.shape, SHAPES)
+        check_transform(self.pose, f"{owner}.pose")
+        need = {
+            "box": ("size_m",),
+            "cylinder": ("radius_m", "length_m"),
+            "sphere": ("radius_m",),
+            "mesh": ("file",),
+        }
+        for key in need[self.shape]:
+            if getattr(self, key) is None:
+                raise InputError(f"{owner}: a {self.shape} needs {key}")
+        for key in ("radius_m", "length_m"):
+            if getattr(self, key) is not None:
+                _positive(owner, key, getattr(self, key))
+        for v in self.size_m or ():
+            _positive(owner, "size_m[]", v)
+        _one_of(owner, "units", self.units, ("m", "mm", "in"))
+
+
+@dataclass(frozen=True)
+class CollisionSettings:
+    """``[collision]``: clearance to the cell and between the robot's own links.
+
+    Attributes:
+        enabled: check and keep clearance (needs ``[[cell.objects]]`` or a tool with shapes).
+        margin_m: smallest distance kept between robot or tool and the cell [m].
+        self_margin_m: smallest distance kept between non-adjacent links [m].
+        check_step_m: largest TCP travel between two poses of the dense final check [m].
+        max_outer_iterations: rounds of linearise -> solve -> check before giving up.
+    """
+
+    enabled: bool = True
+    margin_m: float = 0.01
+    self_margin_m: float = 0.005
+    check_step_m: float = 0.001
+    max_outer_iterations: int = 8
+
+    def __post_init__(self) -> None:
+        _non_negative("collision", "margin_m", self.margin_m)
+        _non_negative("collision", "self_margin_m", self.self_margin_m)
+        _positive("collision", "check_step_m", self.check_step_m)
+        _positive("collision", "max_outer_iterations", self.max_outer_iterations)
+
+
+@dataclass(frozen=True)
+class OptimiseSettings:
+    """``[optimise]``: cost weights of the refinement (see ``refine.optimise.problem.Weights``).
+
+    Attributes:
+        orientation_weight: weight of the squared deviation from the demonstration.
+        velocity_weight: weight of the squared joint step per metre of path.
+        acceleration_weight: weight of the squared second difference per metre².
+        mid_range_weight: weight of the squared distance of each joint from the middle of its range
+            (normalised by the range); the secondary cost that resolves a redundant arm's extra
+            freedom. Default: 0 for 6-axis arms, 0.05 when the robot has more than 6 joints.
+    """
+
+    orientation_weight: float = 1.0
+    velocity_weight: float = 5e-3
+    acceleration_weight: float = 5e-6
+    mid_range_weight: float | None = None
+
+    def __post_init__(self) -> None:
+        for key in ("orientation_weight", "velocity_weight", "acceleration_weight"):
+            _non_negative("optimise", key, getattr(self, key))
+        if self.mid_range_weight is not None:
+            _non_negative("optimise", "mid_range_weight", self.mid_range_weight)
+
+
+@dataclass(frozen=True)
+class RepairSettings:
+    """``[repair]``: what to do when the strict problem is infeasible.
+
+    Attributes:
+        enabled: look for the smallest extra orientation slack per waypoint that makes it feasible.
+        max_slack_deg: the largest extra slack [deg] on top of the orientation tolerance.
+    """
+
+    enabled: bool = True
+    max_slack_deg: float = 15.0
+
+    def __post_init__(self) -> None:
+        _non_negative("repair", "max_slack_deg", self.max_slack_deg)
+
+
+@dataclass(frozen=True)
+class MultipassSettings:
+    """``[multipass]``: the passes of a multi-layer weld, generated from the demonstrated first pass.
+
+    Attributes:
+        layers: number of layers (the first is the demonstrated root pass).
+        layer_height_m: height of each layer above the previous, along the seam's bisector [m].
+        lateral_offsets_m: per layer, the lateral offset of each pass from the seam line [m];
+            layer 1 must be ``[0.0]``.
+        work_angle_change_deg: per layer and pass, the change of the work angle (tilt about the
+            seam tangent) from the demonstrated one [deg]; zeros when absent.
+    """
+
+    layers: int = 1
+    layer_height_m: float = 0.0
+    lateral_offsets_m: tuple[tuple[float, ...], ...] = ((0.0,),)
+    work_angle_change_deg: tuple[tuple[float, ...], ...] | None = None
+
+    def __post_init__(self) -> None:
+        _positive("multipass", "layers", self.layers)
+        _non_negative("multipass", "layer_height_m", self.layer_height_m)
+        if len(self.lateral_offsets_m) != self.layers:
+            raise InputError(
+                f"multipass.lateral_offsets_m needs one list per layer ({self.layers}), got {len(self.lateral_offsets_m)}"
+            )
+        if self.work_angle_change_deg is not None and [len(x) for x in self.work_angle_change_deg] != [
+            len(x) for x in self.lateral_offsets_m
+        ]:
+            raise InputError("multipass.work_angle_change_deg must have the shape of lateral_offsets_m")
+
+
+@dataclass(frozen=True)
+class ExpectedOutcome:
+    """``[expected]``: what a test problem is built to produce (checked by the test suite).
+
+    Attributes:
+        status: ``"ok"``, ``"repaired"`` or ``"infeasible"``.
+        reason: a text the repair or infeasibility reason must contain (e.g. ``"joint limit"``).
+        max_slack_deg: for a repaired problem, the largest slack it may use [deg].
+        s_range_m: arc-length range [m] the reported segment must overlap, or None.
+    """
+
+    status: str
+    reason: str = ""
+    max_slack_deg: float | None = None
+    s_range_m: tuple[float, float] | None = None
+
+    def __post_init__(self) -> None:
+        _one_of("expected", "status", self.status, ("ok", "repaired", "infeasible"))
