@@ -204,12 +204,15 @@ class Tolerances:
         singularity_margin: lower bound on the singularity measure, the scaled manipulability
             ``sqrt(det(Js Jsᵀ))`` with Js the TCP Jacobian whose position rows are divided by the
             robot's reach [-].
+        joint_step_deg: largest change of any joint between consecutive waypoints [deg]; keeps
+            the path continuous (no IK branch jump, no full turn of a wrist between two waypoints).
     """
 
     position_m: float = 1e-6
     orientation_deg: float = 3.0
     joint_margin_deg: float = 2.0
     singularity_margin: float = 0.02
+    joint_step_deg: float = 20.0
 
     def __post_init__(self) -> None:
         _positive("tolerances", "position_m", self.position_m)
@@ -218,6 +221,7 @@ class Tolerances:
             raise InputError(f"tolerances.orientation_deg must be < 90, got {self.orientation_deg}")
         _non_negative("tolerances", "joint_margin_deg", self.joint_margin_deg)
         _non_negative("tolerances", "singularity_margin", self.singularity_margin)
+        _positive("tolerances", "joint_step_deg", self.joint_step_deg)
 
 
 @dataclass(frozen=True)

@@ -50,14 +50,18 @@ class Weights:
         orientation: weight of the squared deviation from the demonstration [1/deg²·deg²].
         velocity: weight of the squared joint step per metre of path |Δq/Δs|² [deg²·m²/rad²].
         acceleration: weight of the squared second difference per metre² |Δ²q/Δs²|² [deg²·m⁴/rad²].
+        mid_range: weight of the squared distance of each joint from the middle of its range,
+            divided by the half range [deg²]: the secondary cost that settles a redundant arm's
+            self-motion (elbow) away from the limits.
     """
 
     orientation: float = 1.0
     velocity: float = 5e-3
     acceleration: float = 5e-6
+    mid_range: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ("orientation", "velocity", "acceleration"):
+        for name in ("orientation", "velocity", "acceleration", "mid_range"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise InputError(f"Weights.{name} must be a finite number >= 0, got {value!r}")
@@ -72,14 +76,14 @@ class RefinementNLP:
         solver: the IPOPT solver CasADi built for it (derivatives included).
         solver_options: the options it was built with.
         params: numeric value of ``p`` (CAD points and demonstrated orientations).
-        lbx, ubx: variable bounds (joint limits minus margin) [rad], shape (n·N,).
-        lbg, ubg: constraint bounds, shape (4·N + len(singular_waypoints) + len(singular_segments),).
+        lbx, ubx: variable bounds: joint limits minus margin [rad] (n·N), then the slacks (N) when elastic.
+        lbg, ubg: constraint bounds: 4 rows per waypoint, n per segment, then the active set's rows.
         n_waypoints, dof: sizes.
-        row_names: names of the 4 constraint rows of each waypoint, in order; the singularity
-            rows of ``singular_waypoints`` and then of ``singular_segments`` follow all of them.
+        row_names: names of the 4 constraint rows of each waypoint, in order; then the joint
+            steps (n per segment), then the active set's rows (singularity points, linear rows).
         waypoint: the per-waypoint CasADi function (constraints and cost), for inspection.
-        singular_waypoints: the waypoints whose singularity measure is bounded.
-        singular_segments: the (segment, fraction) points whose singularity measure is bounded.
+        active: the singularity bounds and linearised rows beyond the per-waypoint ones.
+        elastic_deg: None for the strict problem, else the largest extra cone slack [deg].
         robot, base_in_world, tcp_in_flange, fused, tolerances: what it was built from.
         build_time_s: wall time of the build [s].
     """
@@ -103,17 +107,12 @@ class RefinementNLP:
     tolerances: Tolerances
     axisymmetric: bool
     weights: Weights = field(default_factory=Weights)
-    singular_waypoints: tuple[int, ...] = ()
-    singular_segments: tuple[tuple[int, float], ...] = ()
+    active: ActiveSet = field(default_factory=lambda: ActiveSet())
+    elastic_deg: float | None = None
     build_time_s: float = 0.0
 
-    def with_singularity_bounds(
-        self, waypoints: tuple[int, ...], segments: tuple[int, ...] = ()
-    ) -> RefinementNLP:
-        """The same problem with the singularity bound on more waypoints and segment midpoints.
-
-        The bounds already present are kept; the problem is rebuilt, not solved.
-        """
+    def rebuilt(self, *, active: ActiveSet | None = None, elastic_deg: float | None = None) -> RefinementNLP:
+        """The same problem with another active set or elastic setting (rebuilt, not solved)."""
         return build_refinement(
             self.robot,
             self.fused,
@@ -122,9 +121,24 @@ class RefinementNLP:
             self.tolerances,
             axisymmetric=self.axisymmetric,
             weights=self.weights,
-            singular_waypoints=self.singular_waypoints + tuple(waypoints),
-            singular_segments=self.singular_segments + tuple(segments),
+            active=self.active if active is None else active,
+            elastic_deg=elastic_deg,
             solver_options=self.solver_options,
+        )
+
+    def joints(self, x: Array) -> Array:
+        """The joints (N, n) [rad] in a solution vector ``x``."""
+        return np.asarray(x).ravel()[: self.n_waypoints * self.dof].reshape(self.n_waypoints, self.dof)
+
+    def slack_deg(self, x: Array) -> Array:
+        """Extra orientation slack per waypoint [deg] in a solution of the elastic problem, (N,)."""
+        if self.elastic_deg is None:
+            return np.zeros(self.n_waypoints)
+        sigma = np.clip(np.asarray(x).ravel()[self.n_waypoints * self.dof :], 0.0, None)
+        alpha = math.radians(self.tolerances.orientation_deg)
+        return (
+            np.degrees(np.arccos(np.clip(math.cos(alpha) - sigma, -1.0, 1.0)))
+            - self.tolerances.orientation_deg
         )
 
 
@@ -186,6 +200,52 @@ def singularity_function(robot: Robot, base_in_world: Array, tcp_in_flange: Arra
     return ca.Function("singularity", [q], [w], ["q"], ["w"])
 
 
+@dataclass(frozen=True)
+class LinearRow:
+    """A linearised constraint ``g·((1-f)·q_k + f·q_{k+1}) >= lower`` on the joints [rad].
+
+    Collision avoidance adds one per close pair and outer iteration: the signed distance's
+    gradient at the witness points, ``g``, and ``lower = margin - d0 + g·q0``.
+
+    Attributes:
+        k: segment start waypoint.
+        f: position inside the segment, 0 for the waypoint itself, in [0, 1).
+        gradient: shape (n,).
+        lower: the bound.
+        label: what the row keeps apart (for messages), e.g. ``"link_3 / table"``.
+    """
+
+    k: int
+    f: float
+    gradient: Array
+    lower: float
+    label: str = ""
+
+
+@dataclass(frozen=True)
+class ActiveSet:
+    """The constraints added where they can bind, grown by the solver's outer loop.
+
+    Attributes:
+        singular_waypoints: waypoints whose singularity measure is bounded below by the margin.
+        singular_segments: points inside segments, as (k, f): the joints ``(1-f)·q_k + f·q_{k+1}``
+            get the same bound (how a wrist flip between two waypoints is kept out).
+        linear_rows: linearised constraints, e.g. clearance to the cell.
+    """
+
+    singular_waypoints: tuple[int, ...] = ()
+    singular_segments: tuple[tuple[int, float], ...] = ()
+    linear_rows: tuple[LinearRow, ...] = ()
+
+    def union(self, other: ActiveSet) -> ActiveSet:
+        """Both sets together (singularity points merged, rows appended)."""
+        return ActiveSet(
+            tuple(sorted(set(self.singular_waypoints) | set(other.singular_waypoints))),
+            tuple(sorted(set(self.singular_segments) | set(other.singular_segments))),
+            self.linear_rows + other.linear_rows,
+        )
+
+
 def build_refinement(
     robot: Robot,
     fused: FusedPath,
@@ -195,8 +255,8 @@ def build_refinement(
     *,
     axisymmetric: bool = False,
     weights: Weights | None = None,
-    singular_waypoints: tuple[int, ...] = (),
-    singular_segments: tuple[tuple[int, float], ...] = (),
+    active: ActiveSet | None = None,
+    elastic_deg: float | None = None,
     solver_options: dict[str, Any] | None = None,
 ) -> RefinementNLP:
     """Build the refinement NLP for ``fused`` on ``robot`` (no solve).
@@ -209,9 +269,10 @@ def build_refinement(
         tolerances: orientation cone [deg], joint margin [deg], singularity margin [-].
         axisymmetric: leave the spin about the tool axis free.
         weights: cost weights (defaults of :class:`Weights`).
-        singular_waypoints: waypoints whose singularity measure is bounded below by the margin.
-        singular_segments: points inside segments, as (k, f): the joints ``(1-f)·q_k + f·q_{k+1}``
-            get the same bound (how a wrist flip between two waypoints is kept out).
+        active: singularity bounds and linearised rows beyond the per-waypoint ones.
+        elastic_deg: None for the strict problem; otherwise the largest extra orientation slack
+            per waypoint [deg]: each cone row gets a slack variable σ_k >= 0 (in cosine units) with
+            an L1 penalty, so the answer uses the least slack where it must (repair).
         solver_options: CasADi/IPOPT options overriding :data:`IPOPT_DEFAULTS`.
 
     Returns:
@@ -219,6 +280,7 @@ def build_refinement(
     """
     t0 = time.perf_counter()
     weights = weights or Weights()
+    active = active or ActiveSet()
     N, n = len(fused), robot.nq
     if N < 3:
         raise InputError(f"refinement needs at least 3 waypoints, got {N}")
@@ -229,37 +291,43 @@ def build_refinement(
         raise InputError(
             f"tolerances.joint_margin_deg = {tolerances.joint_margin_deg} deg leaves no joint range"
         )
+    _check_active(active, N, n)
 
     # ---- decision variables and parameters
     Q = ca.MX.sym("Q", n, N)
     P_ref = ca.MX.sym("P_ref", 3, N)
     R_demo = ca.MX.sym("R_demo", 9, N)
+    sigma = ca.MX.sym("sigma", N if elastic_deg is not None else 0)
 
     # ---- path constraints and orientation cost, mapped over the waypoints
     waypoint = waypoint_function(robot, base_in_world, tcp_in_flange, axisymmetric)
     G, cost = waypoint.map(N)(Q, P_ref, R_demo)
-    singular = tuple(sorted(set(int(k) for k in singular_waypoints)))
-    if singular and not 0 <= singular[0] <= singular[-1] < N:
-        raise InputError(f"singular_waypoints must lie in [0, {N}), got {singular[0]}..{singular[-1]}")
-    segments = tuple(sorted({(int(k), float(f)) for k, f in singular_segments}))
-    for k, f in segments:
-        if not (0 <= k < N - 1 and 0.0 < f < 1.0):
-            raise InputError(f"singular_segments: ({k}, {f}) needs 0 <= k < {N - 1} and 0 < f < 1")
-    rows = [ca.vec(G)]
-    q_bounded = []
-    if singular:
-        q_bounded.append(Q[:, list(singular)])
-    if segments:
-        idx = [k for k, _ in segments]
-        frac = ca.DM([f for _, f in segments]).T
-        Qa, Qb_ = Q[:, idx], Q[:, [k + 1 for k in idx]]
-        q_bounded.append(Qa + (Qb_ - Qa) * ca.repmat(frac, robot.nq, 1))
-    if q_bounded:
-        Qb = ca.horzcat(*q_bounded)
-        W = singularity_function(robot, base_in_world, tcp_in_flange).map(Qb.shape[1])(Qb)
-        rows.append(ca.vec(W))
+    if elastic_deg is not None:
+        G = ca.vertcat(G[:3, :], G[3, :] + sigma.T)  # cos θ_k + σ_k >= cos α
+    rows, lbg_extra, ubg_extra = [ca.vec(G)], [], []
+    step = math.radians(tolerances.joint_step_deg)
+    rows.append(ca.vec(Q[:, 1:] - Q[:, :-1]))  # continuity: every joint moves at most `step` per waypoint
+    lbg_extra.append(np.full(n * (N - 1), -step))
+    ubg_extra.append(np.full(n * (N - 1), step))
 
-    # ---- objective: orientation deviation + joint smoothness per metre of path
+    def at(k_idx: list[int], f: list[float]) -> ca.MX:
+        Qa, Qb = Q[:, k_idx], Q[:, [min(k + 1, N - 1) for k in k_idx]]
+        return Qa + (Qb - Qa) * ca.repmat(ca.DM(f).T, n, 1)
+
+    points = [(k, 0.0) for k in active.singular_waypoints] + list(active.singular_segments)
+    if points:
+        Qs = at([k for k, _ in points], [f for _, f in points])
+        rows.append(ca.vec(singularity_function(robot, base_in_world, tcp_in_flange).map(len(points))(Qs)))
+        lbg_extra.append(np.full(len(points), tolerances.singularity_margin))
+        ubg_extra.append(np.full(len(points), np.inf))
+    if active.linear_rows:
+        Ql = at([r.k for r in active.linear_rows], [r.f for r in active.linear_rows])
+        Gm = ca.DM(np.array([r.gradient for r in active.linear_rows]).T)  # (n, R)
+        rows.append(ca.sum1(Ql * Gm).T)
+        lbg_extra.append(np.array([r.lower for r in active.linear_rows]))
+        ubg_extra.append(np.full(len(active.linear_rows), np.inf))
+
+    # ---- objective: orientation deviation + joint smoothness per metre of path (+ secondary, slack)
     h = float(np.mean(np.diff(fused.s)))
     dQ = Q[:, 1:] - Q[:, :-1]
     d2Q = Q[:, 2:] - 2 * Q[:, 1:-1] + Q[:, :-2]
@@ -268,18 +336,30 @@ def build_refinement(
         + weights.velocity * ca.sumsqr(dQ) / h**2
         + weights.acceleration * ca.sumsqr(d2Q) / h**4
     ) / N
+    if weights.mid_range > 0:
+        mid, half = 0.5 * (spec.lower + spec.upper), 0.5 * (spec.upper - spec.lower)
+        f += (
+            weights.mid_range
+            * ca.sumsqr((Q - ca.repmat(ca.DM(mid), 1, N)) / ca.repmat(ca.DM(half), 1, N))
+            / N
+        )
+    if elastic_deg is not None:
+        f += ELASTIC_WEIGHT * ca.sum1(sigma)
 
     # ---- bounds
-    cos_alpha = math.cos(math.radians(tolerances.orientation_deg))
-    lbg_k = np.array([0.0, 0.0, 0.0, cos_alpha])
-    ubg_k = np.array([0.0, 0.0, 0.0, 1.0 + 1e-9])
-    n_s = len(singular) + len(segments)
+    alpha = math.radians(tolerances.orientation_deg)
+    lbg_k = np.array([0.0, 0.0, 0.0, math.cos(alpha)])
+    ubg_k = np.array([0.0, 0.0, 0.0, 1.0 + 1e-9 if elastic_deg is None else np.inf])
+    lbx, ubx = np.tile(lower, N), np.tile(upper, N)
+    if elastic_deg is not None:
+        sigma_max = math.cos(alpha) - math.cos(min(alpha + math.radians(elastic_deg), math.pi))
+        lbx, ubx = np.concatenate([lbx, np.zeros(N)]), np.concatenate([ubx, np.full(N, sigma_max)])
     # CasADi vectorises column-major: Q[:, k] is x[k*n:(k+1)*n] and R_demo[:, k] is R_k column-major.
     params = np.concatenate(
         [fused.positions.ravel(), np.transpose(fused.rotations, (0, 2, 1)).reshape(N, 9).ravel()]
     )
     nlp = {
-        "x": ca.vec(Q),
+        "x": ca.vertcat(ca.vec(Q), sigma),
         "p": ca.vertcat(ca.vec(P_ref), ca.vec(R_demo)),
         "f": f,
         "g": ca.vertcat(*rows),
@@ -290,10 +370,10 @@ def build_refinement(
         solver=ca.nlpsol("refine", "ipopt", nlp, options),
         solver_options=options,
         params=params,
-        lbx=np.tile(lower, N),
-        ubx=np.tile(upper, N),
-        lbg=np.concatenate([np.tile(lbg_k, N), np.full(n_s, tolerances.singularity_margin)]),
-        ubg=np.concatenate([np.tile(ubg_k, N), np.full(n_s, np.inf)]),
+        lbx=lbx,
+        ubx=ubx,
+        lbg=np.concatenate([np.tile(lbg_k, N), *lbg_extra]),
+        ubg=np.concatenate([np.tile(ubg_k, N), *ubg_extra]),
         n_waypoints=N,
         dof=n,
         row_names=ROW_NAMES,
@@ -305,7 +385,27 @@ def build_refinement(
         tolerances=tolerances,
         axisymmetric=axisymmetric,
         weights=weights,
-        singular_waypoints=singular,
-        singular_segments=segments,
+        active=active,
+        elastic_deg=elastic_deg,
         build_time_s=time.perf_counter() - t0,
     )
+
+
+ELASTIC_WEIGHT = 1e4
+"""Penalty per unit of cone slack (cosine units) in the elastic problem: one degree of slack at a
+3° cone (about 1.1e-3) costs about 11, more than the whole orientation cost of a good path, so
+slack is used only where the strict problem has no answer (an exact L1 penalty)."""
+
+
+def _check_active(active: ActiveSet, N: int, n: int) -> None:
+    for k in active.singular_waypoints:
+        if not 0 <= k < N:
+            raise InputError(f"singular waypoint {k} outside [0, {N})")
+    for k, f in active.singular_segments:
+        if not (0 <= k < N - 1 and 0.0 < f < 1.0):
+            raise InputError(f"singular segment point ({k}, {f}) needs 0 <= k < {N - 1} and 0 < f < 1")
+    for r in active.linear_rows:
+        if not (0 <= r.k < N and 0.0 <= r.f < 1.0 and np.shape(r.gradient) == (n,)):
+            raise InputError(
+                f"linear row {r.label!r}: k = {r.k}, f = {r.f}, gradient shape {np.shape(r.gradient)}"
+            )

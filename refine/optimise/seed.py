@@ -183,8 +183,19 @@ def ik_chain(
     for _, q_first in firsts[:max_chains]:
         qs, errors = _chain(kin, targets, q_first, free_lower, free_upper)
         qs = shift_turns(qs, lower, upper)
-        if np.any(qs < lower - 1e-9) or np.any(qs > upper + 1e-9):
+        outside = np.any(qs < lower - 1e-9, axis=0) | np.any(qs > upper + 1e-9, axis=0)
+        if np.any(outside & ~wraps):
             qs, errors = _chain(kin, targets, np.clip(qs[0], lower, upper), lower, upper)
+        elif np.any(outside):
+            # a multi-turn joint whose excursion exceeds its range: no whole-turn shift fits it, so
+            # centre it exactly (turning the tool by the shift) and clip both ends; the strict
+            # problem is infeasible and its repair takes the excess out of the orientation at both ends
+            for j in np.flatnonzero(outside):
+                qs[:, j] += 0.5 * (lower[j] + upper[j]) - 0.5 * (qs[:, j].max() + qs[:, j].min())
+            qs = np.clip(qs, lower, upper)
+            errors = np.array(
+                [np.linalg.norm(_pose_error(kin.pose(q), T)) for q, T in zip(qs, targets, strict=True)]
+            )
         score = float(errors.max())
         if best is None or score < best[0]:
             best = (score, qs, errors)

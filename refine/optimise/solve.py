@@ -1,22 +1,27 @@
-"""Solve a built refinement NLP with IPOPT and verify the answer with Pinocchio.
+"""Solve a built refinement NLP with IPOPT, verify the answer, and repair it when it is infeasible.
 
-:func:`initial_guess` chains IK along the path; :func:`solve_refinement` runs IPOPT from it and
-checks the result numerically (:mod:`refine.optimise.verify`) before reporting ``ok``. A problem
-IPOPT cannot satisfy, or whose answer fails the check, is reported ``infeasible`` with the
-segments and the binding reason.
+The loop: chain IK for a seed (reporting points out of reach at once), solve, verify with plain
+Pinocchio (:mod:`refine.optimise.verify`), add the constraints that only bind in places (the
+singularity bound at waypoints and inside segments near a singularity, linearised clearance rows
+from a :class:`ConstraintSource` such as the collision model) and solve again until the verified
+path needs nothing more. When the strict problem has no answer and repair is on, the elastic problem
+finds the smallest extra orientation slack per waypoint that makes it feasible (an exact L1
+penalty), and the segments that needed slack are reported with the constraint that forced it.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from refine.errors import SolverError
-from refine.optimise.problem import RefinementNLP
+from refine.optimise.problem import ActiveSet, LinearRow, RefinementNLP
 from refine.optimise.seed import TcpKinematics, ik_chain, reach_shortfall, start_candidates
 from refine.optimise.verify import (
     PathCheck,
@@ -34,18 +39,50 @@ Array = NDArray[np.float64]
 REACH_TOLERANCE_M = 1e-3
 """A CAD point the best position-only IK misses by more than this is reported out of reach [m]."""
 
-MAX_OUTER_ITERATIONS = 5
-"""Rounds of solve -> verify -> add singularity rows before giving up on adding more."""
+MAX_OUTER_ITERATIONS = 8
+"""Rounds of solve -> verify -> add constraints before giving up on adding more."""
 
 
-def _near_singular(kin: TcpKinematics, q: Array, margin: float, active: tuple[int, ...]) -> tuple[int, ...]:
-    """Waypoints not in ``active`` with a singularity measure under 1.5x the margin, widened by two."""
-    w, _ = singularity_measures(kin, q)
-    near = np.flatnonzero(w < 1.5 * margin)
-    if near.size == 0:
-        return ()
-    widened = np.unique(np.clip(near[:, None] + np.arange(-2, 3), 0, len(q) - 1))
-    return tuple(sorted(set(widened.tolist()) - set(active)))
+class ConstraintSource(Protocol):
+    """Adds linearised rows where a constraint binds and checks the final path (e.g. collision)."""
+
+    def rows(self, problem: RefinementNLP, q: Array) -> tuple[LinearRow, ...]:
+        """New rows for the close pairs of joints ``q`` (N, n) not yet in ``problem.active``."""
+        ...
+
+    def violations(self, problem: RefinementNLP, q: Array) -> list[Violation]:
+        """Runs of waypoints/segments where the dense check finds the constraint broken."""
+        ...
+
+
+@dataclass(frozen=True)
+class Repair:
+    """A segment the strict tolerances could not hold, and what it took.
+
+    Attributes:
+        index_start, index_end: first and last waypoint (inclusive).
+        s_start_m, s_end_m: their arc lengths [m].
+        slack_deg: the largest extra orientation slack used inside [deg].
+        reason: the binding constraint: ``"joint limit (joint 5)"``, ``"singularity"``,
+            ``"collision"``, ``"joint wrap (joint 6)"`` or ``"orientation"`` when none is active.
+        objects: the cell objects or links involved (collision), else empty.
+    """
+
+    index_start: int
+    index_end: int
+    s_start_m: float
+    s_end_m: float
+    slack_deg: float
+    reason: str
+    objects: tuple[str, ...] = ()
+
+    def describe(self) -> str:
+        """One line for messages and reports."""
+        objs = f" ({', '.join(self.objects)})" if self.objects else ""
+        return (
+            f"waypoints {self.index_start}-{self.index_end} (s = {self.s_start_m:.3f}-{self.s_end_m:.3f} m): "
+            f"{self.slack_deg:.2f} deg extra orientation slack, {self.reason}{objs}"
+        )
 
 
 @dataclass(frozen=True)
@@ -53,18 +90,18 @@ class Refinement:
     """The outcome of a refinement.
 
     Attributes:
-        status: ``"ok"`` or ``"infeasible"``.
+        status: ``"ok"``, ``"repaired"`` (feasible with extra orientation slack) or ``"infeasible"``.
         reason: empty when ok; otherwise why, naming segments, constraint and figures.
         q: joints per waypoint [rad], shape (N, n).
         q_seed: the IK seed the solver started from [rad], shape (N, n).
         check: the numeric verification of ``q``.
-        solver_status: IPOPT's return status.
-        iterations: IPOPT iterations, summed over the outer rounds.
+        solver_status: IPOPT's return status (of the last solve).
+        iterations: IPOPT iterations, summed over all solves.
         outer_iterations: solve -> verify rounds.
-        singular_waypoints: waypoints that carried the singularity bound in the last round.
-        singular_segments: (segment, fraction) points inside segments that carried it.
-        timings_s: ``seed``, ``solve``, ``verify`` wall times [s], and ``build`` when singularity
-            rows had to be added (a rebuild).
+        active: the constraints added by the outer loop in the last round.
+        slack_deg: extra orientation slack used per waypoint [deg], (N,) (zeros unless repaired).
+        repairs: the repaired segments.
+        timings_s: ``seed``, ``solve``, ``verify``, ``build`` (rebuilds) wall times [s].
     """
 
     status: str
@@ -75,9 +112,13 @@ class Refinement:
     solver_status: str
     iterations: int
     outer_iterations: int = 1
-    singular_waypoints: tuple[int, ...] = ()
-    singular_segments: tuple[tuple[int, float], ...] = ()
+    active: ActiveSet = field(default_factory=ActiveSet)
+    slack_deg: Array = field(default_factory=lambda: np.zeros(0))
+    repairs: tuple[Repair, ...] = ()
     timings_s: dict[str, float] = field(default_factory=dict)
+
+
+# ---- seed ----------------------------------------------------------------------------------------
 
 
 def _targets(problem: RefinementNLP) -> Array:
@@ -88,26 +129,33 @@ def _targets(problem: RefinementNLP) -> Array:
     return targets
 
 
+def _kin(problem: RefinementNLP) -> TcpKinematics:
+    return TcpKinematics(problem.robot, problem.base_in_world, problem.tcp_in_flange)
+
+
+def _bounds(problem: RefinementNLP) -> tuple[Array, Array]:
+    n = problem.dof
+    return problem.lbx[:n], problem.ubx[:n]
+
+
 def initial_guess(problem: RefinementNLP, home: Array | None = None) -> Array:
     """IK seed (N, n) [rad] chained along the path, from the best of several first-waypoint starts."""
-    kin = TcpKinematics(problem.robot, problem.base_in_world, problem.tcp_in_flange)
-    lower, upper = problem.lbx[: problem.dof], problem.ubx[: problem.dof]
-    qs, _ = ik_chain(kin, _targets(problem), lower, upper, start_candidates(lower, upper, home))
+    lower, upper = _bounds(problem)
+    qs, _ = ik_chain(_kin(problem), _targets(problem), lower, upper, start_candidates(lower, upper, home))
     return qs
 
 
 def _out_of_reach(problem: RefinementNLP, q_seed: Array, home: Array | None) -> list[Violation]:
-    """Runs of waypoints whose CAD point no configuration inside the limits reaches (1 mm test)."""
-    kin = TcpKinematics(problem.robot, problem.base_in_world, problem.tcp_in_flange)
+    """Runs of waypoints whose CAD point no configuration inside the limits reaches."""
+    kin = _kin(problem)
     missed = np.linalg.norm(kin.poses(q_seed)[:, :3, 3] - problem.fused.positions, axis=1) > REACH_TOLERANCE_M
     if not missed.any():
         return []
-    lower, upper = problem.lbx[: problem.dof], problem.ubx[: problem.dof]
+    lower, upper = _bounds(problem)
     idx = np.flatnonzero(missed)
     shortfall = np.zeros(problem.n_waypoints)
-    shortfall[idx] = reach_shortfall(
-        kin, _targets(problem)[idx], lower, upper, start_candidates(lower, upper, home)
-    )
+    starts = start_candidates(lower, upper, home)
+    shortfall[idx] = reach_shortfall(kin, _targets(problem)[idx], lower, upper, starts)
     s = problem.fused.s
     return [
         Violation(
@@ -124,18 +172,106 @@ def _out_of_reach(problem: RefinementNLP, q_seed: Array, home: Array | None) -> 
     ]
 
 
+# ---- the outer loop ------------------------------------------------------------------------------
+
+
+def _new_singular(kin: TcpKinematics, q: Array, margin: float, active: ActiveSet) -> ActiveSet:
+    """Waypoints and segment points near the singularity not yet bounded in ``active``."""
+    if margin <= 0:
+        return ActiveSet()
+    w, _ = singularity_measures(kin, q)
+    near = np.flatnonzero(w < 1.5 * margin)
+    widened = np.unique(np.clip(near[:, None] + np.arange(-2, 3), 0, len(q) - 1)) if near.size else near
+    waypoints = tuple(sorted(set(widened.tolist()) - set(active.singular_waypoints)))
+    w_between, frac = segment_singularity(kin, q)
+    points = {(int(k), float(frac[k])) for k in np.flatnonzero(w_between < 1.5 * margin)}
+    return ActiveSet(waypoints, tuple(sorted(points - set(active.singular_segments))))
+
+
+@dataclass
+class _Loop:
+    problem: RefinementNLP
+    timings: dict[str, float]
+    iterations: int = 0
+    outer: int = 0
+
+    def solve(self, x0: Array) -> tuple[Array, dict]:
+        t0 = time.perf_counter()
+        p = self.problem
+        try:
+            sol = p.solver(x0=x0, p=p.params, lbx=p.lbx, ubx=p.ubx, lbg=p.lbg, ubg=p.ubg)
+        except RuntimeError as e:
+            raise SolverError(f"IPOPT failed to run: {e}") from e
+        stats = p.solver.stats()
+        status = str(stats.get("return_status", "unknown"))
+        if status in {"Invalid_Option", "Invalid_Problem_Definition", "Insufficient_Memory"}:
+            raise SolverError(f"IPOPT could not solve the refinement: {status}")
+        self.iterations += int(stats.get("iter_count", 0))
+        self.timings["solve"] = self.timings.get("solve", 0.0) + time.perf_counter() - t0
+        return np.asarray(sol["x"]).ravel(), stats
+
+    def rebuild(self, **changes) -> None:
+        t0 = time.perf_counter()
+        self.problem = self.problem.rebuilt(**changes)
+        self.timings["build"] = self.timings.get("build", 0.0) + time.perf_counter() - t0
+
+
+def _run_rounds(
+    loop: _Loop, x0: Array, sources: tuple[ConstraintSource, ...]
+) -> tuple[Array, dict, PathCheck, Array]:
+    """Solve, verify and grow the active set until nothing more is needed (or the rounds run out)."""
+    kin = _kin(loop.problem)
+    margin = loop.problem.tolerances.singularity_margin
+    while True:
+        loop.outer += 1
+        x, stats = loop.solve(x0)
+        p = loop.problem
+        q, slack = p.joints(x), p.slack_deg(x)
+        t0 = time.perf_counter()
+        check = check_path(
+            kin, q, p.fused, p.tolerances, p.axisymmetric, slack if p.elastic_deg is not None else None
+        )
+        extra = [v for src in sources for v in src.violations(p, q)]
+        if extra:
+            check = replace(check, violations=check.violations + tuple(extra))
+        loop.timings["verify"] = loop.timings.get("verify", 0.0) + time.perf_counter() - t0
+        if not stats.get("success", False) or loop.outer >= MAX_OUTER_ITERATIONS:
+            return x, stats, check, slack
+        more = _new_singular(kin, q, margin, p.active)
+        rows = tuple(r for src in sources for r in src.rows(p, q))
+        if not (more.singular_waypoints or more.singular_segments or rows):
+            return x, stats, check, slack
+        log.info(
+            "outer round %d: +%d singular waypoints, +%d segment points, +%d linear rows",
+            loop.outer,
+            len(more.singular_waypoints),
+            len(more.singular_segments),
+            len(rows),
+        )
+        loop.rebuild(
+            active=p.active.union(ActiveSet(more.singular_waypoints, more.singular_segments, rows)),
+            elastic_deg=p.elastic_deg,
+        )
+        x0 = x if p.elastic_deg is not None else q.ravel()
+
+
 def solve_refinement(
     problem: RefinementNLP,
     q0: Array | None = None,
     *,
     home: Array | None = None,
+    sources: tuple[ConstraintSource, ...] = (),
+    repair_max_slack_deg: float | None = None,
 ) -> Refinement:
-    """Solve ``problem`` with IPOPT from ``q0`` (or the IK seed) and verify the answer.
+    """Solve ``problem`` with IPOPT from ``q0`` (or the IK seed), verify, and repair if asked.
 
     Args:
-        problem: from :func:`refine.optimise.problem.build_refinement`.
+        problem: from :func:`refine.optimise.problem.build_refinement` (strict).
         q0: initial joints (N, n) [rad]; None to chain IK from ``home`` and other starts.
         home: preferred first configuration [rad] for the IK seed.
+        sources: constraint sources (collision) adding linearised rows and dense checks.
+        repair_max_slack_deg: when the strict problem is infeasible, the largest extra orientation
+            slack [deg] the elastic problem may use; None for no repair.
 
     Raises:
         SolverError: IPOPT itself failed (not an infeasibility): the message names its status.
@@ -143,98 +279,65 @@ def solve_refinement(
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     q_seed = initial_guess(problem, home) if q0 is None else np.asarray(q0, dtype=float)
-    timings["seed"] = time.perf_counter() - t0
-
-    kin = TcpKinematics(problem.robot, problem.base_in_world, problem.tcp_in_flange)
     unreachable = _out_of_reach(problem, q_seed, home)
     timings["seed"] = time.perf_counter() - t0
+    kin = _kin(problem)
     if unreachable:
         check = check_path(kin, q_seed, problem.fused, problem.tolerances, problem.axisymmetric)
         reason = "; ".join(v.describe() for v in unreachable)
         log.info("refinement infeasible before solving: %s", reason)
         return Refinement(
-            status="infeasible",
-            reason=reason,
-            q=q_seed,
-            q_seed=q_seed,
-            check=PathCheck(**{**check.__dict__, "violations": tuple(unreachable) + check.violations}),
-            solver_status="not run (out of reach)",
-            iterations=0,
-            outer_iterations=0,
+            "infeasible",
+            reason,
+            q_seed,
+            q_seed,
+            replace(check, violations=tuple(unreachable) + check.violations),
+            "not run (out of reach)",
+            0,
+            0,
             timings_s=timings,
         )
-    margin = problem.tolerances.singularity_margin
-    if margin > 0 and not problem.singular_waypoints:
-        near = _near_singular(kin, q_seed, margin, ())
-        if near:
-            t0 = time.perf_counter()
-            problem = problem.with_singularity_bounds(near)
-            timings["build"] = time.perf_counter() - t0
 
-    q_start, iterations, timings["solve"], timings["verify"] = q_seed, 0, 0.0, 0.0
-    outer = 0
-    while outer < MAX_OUTER_ITERATIONS:
-        outer += 1
-        t0 = time.perf_counter()
-        solver = problem.solver
-        try:
-            sol = solver(
-                x0=q_start.ravel(),
-                p=problem.params,
-                lbx=problem.lbx,
-                ubx=problem.ubx,
-                lbg=problem.lbg,
-                ubg=problem.ubg,
-            )
-        except RuntimeError as e:
-            raise SolverError(f"IPOPT failed to run: {e}") from e
-        stats = solver.stats()
-        iterations += int(stats.get("iter_count", 0))
-        timings["solve"] += time.perf_counter() - t0
-        q = np.asarray(sol["x"]).reshape(problem.n_waypoints, problem.dof)
+    loop = _Loop(problem, timings)
+    initial = _new_singular(kin, q_seed, problem.tolerances.singularity_margin, problem.active)
+    if initial.singular_waypoints or initial.singular_segments:
+        loop.rebuild(active=problem.active.union(initial))
+    x, stats, check, slack = _run_rounds(loop, q_seed.ravel(), sources)
+    q = loop.problem.joints(x)
+    status = "ok" if check.ok else "infeasible"
+    repairs: tuple[Repair, ...] = ()
 
-        t0 = time.perf_counter()
-        check = check_path(kin, q, problem.fused, problem.tolerances, problem.axisymmetric)
-        timings["verify"] += time.perf_counter() - t0
-        if not stats.get("success", False):
-            break  # more bounds cannot help a problem IPOPT could not solve
-        missing = _near_singular(kin, q, margin, problem.singular_waypoints) if margin > 0 else ()
-        segments: tuple[tuple[int, float], ...] = ()
-        if margin > 0:
-            w_between, frac = segment_singularity(kin, q)
-            segments = tuple((int(k), float(frac[k])) for k in np.flatnonzero(w_between < 1.5 * margin))
-            segments = tuple(sorted(set(segments) - set(problem.singular_segments)))
-        if not missing and not segments:
-            break
-        log.info(
-            "singularity bound added on %d waypoints and %d segments; solving again",
-            len(missing),
-            len(segments),
+    if status == "infeasible" and repair_max_slack_deg is not None and repair_max_slack_deg > 0:
+        strict_reason = _describe(check, stats)
+        loop.rebuild(active=loop.problem.active, elastic_deg=repair_max_slack_deg)
+        # start from the seed (on the path, orientation off only where the limits clamped it), with
+        # each slack at what that start needs, so IPOPT begins feasible wherever it can
+        q_start = q_seed
+        start = check_path(kin, q_start, problem.fused, problem.tolerances, problem.axisymmetric)
+        cos_needed = math.cos(math.radians(problem.tolerances.orientation_deg)) - np.cos(
+            np.radians(start.orientation_deviation_deg)
         )
-        t0 = time.perf_counter()
-        problem = problem.with_singularity_bounds(missing, segments)
-        timings["build"] = timings.get("build", 0.0) + time.perf_counter() - t0
-        q_start = q
+        sigma0 = np.clip(cos_needed, 0.0, loop.problem.ubx[problem.n_waypoints * problem.dof :])
+        x, stats, check, slack = _run_rounds(loop, np.concatenate([q_start.ravel(), sigma0]), sources)
+        q = loop.problem.joints(x)
+        if check.ok:
+            status = "repaired"
+            repairs = _diagnose(loop.problem, q, slack, sources)
+        else:
+            log.info("repair within %.1f deg failed: %s", repair_max_slack_deg, _describe(check, stats))
+            stats = {**stats, "return_status": f"{stats.get('return_status')} (strict: {strict_reason})"}
 
     solver_status = str(stats.get("return_status", "unknown"))
-    if solver_status in {"Invalid_Option", "Invalid_Problem_Definition", "Insufficient_Memory"}:
-        raise SolverError(f"IPOPT could not solve the refinement: {solver_status}")
-    if check.ok:
-        status, reason = "ok", ""
-        if not stats.get("success", False):
-            log.warning("IPOPT returned %s but the verified path meets every tolerance", solver_status)
-    else:
-        status = "infeasible"
-        reason = f"IPOPT: {solver_status}; " + "; ".join(v.describe() for v in check.violations[:10])
-        if len(check.violations) > 10:
-            reason += f"; and {len(check.violations) - 10} more segments"
-    log.info(
-        "refinement %s after %d IPOPT iterations (seed %.3f s, solve %.3f s)",
-        status,
-        iterations,
-        timings["seed"],
-        timings["solve"],
+    if status == "ok" and not stats.get("success", False):
+        log.warning("IPOPT returned %s but the verified path meets every tolerance", solver_status)
+    reason = (
+        ""
+        if status == "ok"
+        else _describe(check, stats)
+        if status == "infeasible"
+        else "; ".join(r.describe() for r in repairs)
     )
+    log.info("refinement %s after %d IPOPT iterations in %d rounds", status, loop.iterations, loop.outer)
     return Refinement(
         status=status,
         reason=reason,
@@ -242,9 +345,55 @@ def solve_refinement(
         q_seed=q_seed,
         check=check,
         solver_status=solver_status,
-        iterations=iterations,
-        outer_iterations=outer,
-        singular_waypoints=problem.singular_waypoints,
-        singular_segments=problem.singular_segments,
+        iterations=loop.iterations,
+        outer_iterations=loop.outer,
+        active=loop.problem.active,
+        slack_deg=slack if status == "repaired" else np.zeros(problem.n_waypoints),
+        repairs=repairs,
         timings_s=timings,
     )
+
+
+def _describe(check: PathCheck, stats: dict) -> str:
+    text = f"IPOPT: {stats.get('return_status', 'unknown')}; " + "; ".join(
+        v.describe() for v in check.violations[:10]
+    )
+    if len(check.violations) > 10:
+        text += f"; and {len(check.violations) - 10} more segments"
+    return text
+
+
+def _diagnose(
+    problem: RefinementNLP, q: Array, slack: Array, sources: tuple[ConstraintSource, ...]
+) -> tuple[Repair, ...]:
+    """Group waypoints that used slack into segments and name the constraint active there."""
+    kin = _kin(problem)
+    lower, upper = _bounds(problem)
+    w, _ = singularity_measures(kin, q)
+    margin = problem.tolerances.singularity_margin
+    s = problem.fused.s
+    out = []
+    for a, b in runs(slack > 1e-3):
+        seg = slice(max(a - 2, 0), b + 3)
+        reason, objects = "orientation", ()
+        at_bound = (np.abs(q[seg] - lower) < 1e-4) | (np.abs(q[seg] - upper) < 1e-4)
+        near_rows = [r for r in problem.active.linear_rows if a - 2 <= r.k <= b + 2]
+        if near_rows and _rows_active(near_rows, q):
+            reason, objects = "collision", tuple(sorted({r.label for r in _rows_active(near_rows, q)}))
+        elif at_bound.any():
+            j = int(np.flatnonzero(at_bound.any(axis=0))[0])
+            wraps = upper[j] - lower[j] > 2 * math.pi
+            reason = f"joint {'wrap' if wraps else 'limit'} (joint {j + 1})"
+        elif margin > 0 and w[seg].min() < 1.05 * margin:
+            reason = "singularity"
+        out.append(Repair(a, b, float(s[a]), float(s[b]), float(slack[a : b + 1].max()), reason, objects))
+    return tuple(out)
+
+
+def _rows_active(rows: list[LinearRow], q: Array, tol: float = 1e-5) -> list[LinearRow]:
+    out = []
+    for r in rows:
+        qk = q[r.k] if r.f == 0.0 else (1 - r.f) * q[r.k] + r.f * q[min(r.k + 1, len(q) - 1)]
+        if float(r.gradient @ qk) - r.lower < tol:
+            out.append(r)
+    return out

@@ -135,9 +135,17 @@ def segment_singularity(kin: TcpKinematics, q: Array, max_step_deg: float = 1.0)
 
 
 def check_path(
-    kin: TcpKinematics, q: Array, fused: FusedPath, tolerances: Tolerances, axisymmetric: bool
+    kin: TcpKinematics,
+    q: Array,
+    fused: FusedPath,
+    tolerances: Tolerances,
+    axisymmetric: bool,
+    slack_deg: Array | None = None,
 ) -> PathCheck:
-    """Check joints ``q`` (N, n) [rad] against ``fused`` and ``tolerances`` with Pinocchio."""
+    """Check joints ``q`` (N, n) [rad] against ``fused`` and ``tolerances`` with Pinocchio.
+
+    ``slack_deg`` (N,) widens the orientation cone per waypoint (a repaired path) [deg].
+    """
     poses = kin.poses(q)
     pos_err = np.linalg.norm(poses[:, :3, 3] - fused.positions, axis=1)
     if axisymmetric:
@@ -160,11 +168,22 @@ def check_path(
             violations.append(Violation(a, b, float(s[a]), float(s[b]), reason, worst, unit, limit))
 
     add(pos_err > tolerances.position_m, "position", pos_err, "m", tolerances.position_m, True)
-    ori_tol = tolerances.orientation_deg + 1e-6
-    add(ori > ori_tol, "orientation", ori, "deg", tolerances.orientation_deg, True)
+    ori_limit = tolerances.orientation_deg + (0.0 if slack_deg is None else np.asarray(slack_deg))
+    add(ori - ori_limit > 1e-6, "orientation", ori, "deg", float(np.max(ori_limit)), True)
     margin = math.radians(tolerances.joint_margin_deg) - 1e-7
     for j in range(q.shape[1]):
         add(margins[:, j] < margin, f"joint limit (joint {j + 1})", margins[:, j], "rad", margin, False)
+    steps = np.abs(np.diff(q, axis=0))
+    step_limit = math.radians(tolerances.joint_step_deg) + 1e-9
+    for j in range(q.shape[1]):
+        add(
+            np.append(steps[:, j] > step_limit, False),
+            f"joint step (joint {j + 1})",
+            np.degrees(np.append(steps[:, j], 0.0)),
+            "deg",
+            tolerances.joint_step_deg,
+            True,
+        )
     sing_tol = tolerances.singularity_margin - 1e-9
     add(sing < sing_tol, "singularity", sing, "-", tolerances.singularity_margin, False)
     between, _ = segment_singularity(kin, q)

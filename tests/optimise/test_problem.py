@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from refine.errors import InputError
-from refine.optimise.problem import Weights, build_refinement, waypoint_function
+from refine.optimise.problem import ActiveSet, Weights, build_refinement, waypoint_function
 from refine.problem import Tolerances
 from refine.synthetic import wave_path
 
@@ -75,5 +75,7 @@ def test_bad_settings_are_rejected_with_the_field_named(irb4600, straight_tool):
         build_refinement(irb4600, wave_path(10), np.eye(4), straight_tool, Tolerances(joint_margin_deg=500))
     with pytest.raises(InputError, match="Weights.velocity"):
         Weights(velocity=-1.0)
-    with pytest.raises(InputError, match="singular_segments"):
-        build_refinement(irb4600, wave_path(10), np.eye(4), straight_tool, Tolerances(), singular_segments=((3, 1.5),))
+    with pytest.raises(InputError, match="singular segment point"):
+        build_refinement(
+            irb4600, wave_path(10), np.eye(4), straight_tool, Tolerances(), active=ActiveSet(singular_segments=((3, 1.5),))
+        )

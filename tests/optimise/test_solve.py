@@ -78,4 +78,4 @@ def test_singularity_margin_is_kept_at_and_between_waypoints_when_the_demo_graze
     assert result.status == "ok", result.reason
     assert result.check.singularity.min() >= 0.02 - 1e-6
     assert result.check.singularity_between.min() >= 0.02 - 1e-6
-    assert 0 < len(result.singular_waypoints) < n
+    assert 0 < len(result.active.singular_waypoints) < n
