@@ -111,8 +111,8 @@ def _section_loops(mesh: trimesh.Trimesh, origin: NDArray, normal: NDArray) -> l
     if section is None:
         return []
     loops = []
-    for p in section.discrete:
-        p = np.asarray(p, dtype=float)
+    for entity in section.entities:  # .discrete would drop open chains
+        p = np.asarray(entity.discrete(section.vertices), dtype=float)
         if len(p) < 2:
             continue
         if len(p) > 3 and np.allclose(p[0], p[-1]):

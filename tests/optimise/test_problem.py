@@ -12,8 +12,8 @@ def test_build_returns_an_inspectable_problem_without_solving(irb4600, straight_
     fused = wave_path(50)
     nlp = build_refinement(irb4600, fused, np.eye(4), straight_tool, Tolerances())
     assert nlp.nlp["x"].shape == (6 * 50, 1)
-    assert nlp.nlp["g"].shape == (4 * 50, 1)
-    assert nlp.lbg.shape == nlp.ubg.shape == (200,)
+    assert nlp.nlp["g"].shape == (4 * 50 + 6 * 49, 1)  # per waypoint, then joint steps per segment
+    assert nlp.lbg.shape == nlp.ubg.shape == (4 * 50 + 6 * 49,)
     assert nlp.lbx.shape == (300,)
     assert nlp.solver.name() == "refine"  # IPOPT is set up, not run
     # joint bounds are the limits shrunk by the margin
@@ -30,7 +30,7 @@ def test_problem_parameters_hold_the_cad_points_and_demo_rotations(irb4600, stra
 
     q = initial_guess(nlp)
     g = ca.Function("g", [nlp.nlp["x"], nlp.nlp["p"]], [nlp.nlp["g"]])(q.ravel(), nlp.params)
-    g = np.asarray(g).reshape(20, 4)
+    g = np.asarray(g).ravel()[: 4 * 20].reshape(20, 4)
     assert np.abs(g[:, :3]).max() < 1e-6  # TCP on the CAD point
     assert np.all(g[:, 3] > np.cos(np.radians(0.01)))  # orientation equal to the demo
 

@@ -1,0 +1,262 @@
+"""Polhemus Liberty binary tracker logs (``F1`` output mode): read and write.
+
+A log is the byte stream the Liberty sends, one record per station and frame. Each record is an
+8-byte header and a payload, all little-endian::
+
+    offset  size  field
+    0       2     "LY" (0x4C 0x59; the Patriot sends "PA", the Latus "LU")
+    2       1     station number (1-based, binary)
+    3       1     initiating command (ASCII code: 'C' continuous, 'P' single P&O record)
+    4       1     error indicator (0, or an ASCII space, when there is no error)
+    5       1     reserved
+    6       2     response size: the payload's length in bytes (uint16)
+    8       n     payload: the items of the station's output list, in the order of the list
+
+Output list items (Liberty ``O`` command) that refine reads, with their binary sizes:
+``2``/``3`` position x, y, z (3 x float32, inches, or centimetres after ``U1``), ``7`` orientation
+quaternion w, x, y, z (4 x float32), ``8`` timestamp [ms] (uint32), ``9`` frame count (uint32),
+``11`` distortion level (4 bytes, skipped), ``0`` a space (1 byte), ``1`` CR LF (2 bytes).
+Sources: the binary header structs of Polhemus' PDI SDK (``PDItracker.h``: preamble 0x594C "LY",
+station, cmd, err, reserved, length) and of the TUM/IAS ``polhemus_ros_driver``
+(``liberty_protocol.h``: header, then ``O*,8,9,11,3,7`` as timestamp, frame count, distortion,
+x y z, quaternion w x y z); VRPN's ``vrpn_Tracker_Liberty`` requests ``O*,2,7,8,0`` and reads
+x y z, w x y z, the uint32 millisecond timestamp and a space.
+
+The record carries no position unit (the reserved byte is 0 on the Liberty), so the caller names
+it: ``units`` ``"in"`` (the Liberty's default) or ``"cm"``. Without ``output_list`` the reader
+recognises position + quaternion with an optional uint32 timestamp first or last and an optional
+trailing space or CR LF, by the response size and by the quaternions being unit length (a
+timestamp read as a float is a tiny denormal, so the right layout is unambiguous).
+
+Time: from timestamps ``t = (ms - ms[0]) / 1000``; from frame counts ``(f - f[0]) / rate_hz``;
+without either, sample ``k`` is at ``t = k / rate_hz``.
+"""
+
+from __future__ import annotations
+
+import logging
+import struct
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from refine.demo.liberty import METRES_PER_UNIT
+from refine.errors import InputError
+from refine.frames import matrix_from_quaternion, quaternion_from_matrix
+from refine.paths import TrackerLog
+
+logger = logging.getLogger(__name__)
+
+HEADER = struct.Struct("<2sBBBBH")
+PREAMBLE = b"LY"
+#: Item number -> (struct format of its payload, name, number of values it unpacks to).
+ITEMS = {
+    0: ("1s", "space", 1),
+    1: ("2s", "crlf", 1),
+    2: ("3f", "position", 3),
+    3: ("3f", "position", 3),
+    7: ("4f", "quaternion", 4),
+    8: ("I", "timestamp", 1),
+    9: ("I", "frame", 1),
+    11: ("4s", "distortion", 1),
+}
+_FILL = {"space": b" ", "crlf": b"\r\n", "distortion": bytes(4)}
+#: Layouts tried, in this order, when no output list is given.
+AUTO_LAYOUTS = tuple(
+    (*ts_first, 2, 7, *ts_last, *end)
+    for ts_first, ts_last in (((), ()), ((8,), ()), ((), (8,)))
+    for end in ((), (0,), (1,))
+)
+_COMMANDS = {ord(c) for c in "CcPp"}
+_NO_ERROR = {0, 0x20}
+
+
+def _item_format(output_list: Sequence[int], where: str) -> struct.Struct:
+    unknown = [i for i in output_list if i not in ITEMS]
+    if unknown or 7 not in output_list or not {2, 3} & set(output_list):
+        raise InputError(
+            f"{where}: output list {list(output_list)} must hold a position (2 or 3) and the "
+            f"quaternion (7), from items {sorted(ITEMS)}; unsupported: {unknown}"
+        )
+    return struct.Struct("<" + "".join(ITEMS[i][0] for i in output_list))
+
+
+def _decode(output_list: Sequence[int], payloads: list[bytes], where: str) -> dict[str, list]:
+    """Payloads -> {item name: per-record value tuples}."""
+    fmt = _item_format(output_list, where)
+    rows = [fmt.unpack(p) for p in payloads]
+    out, col = {}, 0
+    for item in output_list:
+        _, name, n = ITEMS[item]
+        out[name] = [r[col : col + n] for r in rows]
+        col += n
+    return out
+
+
+def _fits(output_list: Sequence[int], payloads: list[bytes]) -> bool:
+    """Whether every payload reads as ``output_list`` with unit quaternions and its padding."""
+    if _item_format(output_list, "").size != len(payloads[0]):
+        return False
+    fields = _decode(output_list, payloads, "")
+    for name in ("space", "crlf"):
+        if name in fields and any(v[0] != _FILL[name] for v in fields[name]):
+            return False
+    q = np.array(fields["quaternion"], dtype=float)
+    return bool(np.all(np.abs(np.linalg.norm(q, axis=1) - 1.0) < 1e-3))
+
+
+def read_liberty_binary(
+    path: str | Path,
+    station: int = 1,
+    rate_hz: float = 240.0,
+    *,
+    units: str = "in",
+    output_list: Sequence[int] | None = None,
+) -> TrackerLog:
+    """Read one station's samples from a Liberty binary log (format in the module docstring).
+
+    Args:
+        path: the binary log.
+        station: station (sensor) number to read; other stations' records are skipped.
+        rate_hz: sample rate [Hz] for logs without timestamps (and for frame counts).
+        units: position unit of the log, ``"in"`` or ``"cm"``.
+        output_list: the station's output list items (e.g. ``(8, 2, 7)``), or None to recognise
+            the layout (see the module docstring).
+
+    Returns:
+        The station's samples: times [s] from 0, positions [m], rotations R_S_E from the
+        normalised quaternions.
+
+    Raises:
+        InputError: unreadable file; a bad header or truncated record (naming the byte offset);
+            records of one station with different sizes; no records of ``station`` (listing the
+            stations found); a layout that cannot be recognised; times that do not increase.
+    """
+    path = Path(path)
+    if units not in METRES_PER_UNIT:
+        raise InputError(f"{path}: unknown Liberty unit {units!r}; use 'in' or 'cm'")
+    if not (np.isfinite(rate_hz) and rate_hz > 0):
+        raise InputError(f"{path}: rate_hz must be a number > 0 Hz, got {rate_hz!r}")
+    try:
+        data = path.read_bytes()
+    except OSError as e:
+        raise InputError(f"tracker log {str(path)!r} cannot be read: {e}") from e
+    payloads: list[bytes] = []
+    offsets: list[int] = []
+    stations: set[int] = set()
+    n_errors = 0
+    offset = 0
+    while offset < len(data):
+        if len(data) - offset < HEADER.size:
+            raise InputError(
+                f"{path}: truncated record header at byte offset {offset} "
+                f"({len(data) - offset} of {HEADER.size} bytes)"
+            )
+        preamble, st, cmd, err, _, size = HEADER.unpack_from(data, offset)
+        if preamble != PREAMBLE:
+            raise InputError(f"{path}: bad record header at byte offset {offset}: expected b'LY', got {preamble!r}")
+        end = offset + HEADER.size + size
+        if end > len(data):
+            raise InputError(
+                f"{path}: truncated record at byte offset {offset}: station {st}, response size "
+                f"{size} bytes, only {len(data) - offset - HEADER.size} left"
+            )
+        stations.add(st)
+        if st == station and cmd in _COMMANDS:
+            if payloads and size != len(payloads[0]):
+                raise InputError(
+                    f"{path}: record at byte offset {offset} has {size} payload bytes, the first "
+                    f"record of station {station} (offset {offsets[0]}) has {len(payloads[0])}"
+                )
+            n_errors += err not in _NO_ERROR
+            payloads.append(data[offset + HEADER.size : end])
+            offsets.append(offset)
+        offset = end
+    if not payloads:
+        found = ", ".join(str(s) for s in sorted(stations)) or "none"
+        raise InputError(f"tracker log {str(path)!r}: no P&O records of station {station}; stations found: {found}")
+    if output_list is None:
+        layouts = [lay for lay in AUTO_LAYOUTS if _fits(lay, payloads)]
+        if len(layouts) != 1:
+            raise InputError(
+                f"{path}: cannot tell the output list of {len(payloads[0])}-byte records of station "
+                f"{station} (candidates: {layouts or 'none'}); give it as output_list"
+            )
+        output_list = layouts[0]
+    elif _item_format(output_list, str(path)).size != len(payloads[0]):
+        raise InputError(
+            f"{path}: output list {list(output_list)} needs {_item_format(output_list, '').size} "
+            f"bytes, the records hold {len(payloads[0])}"
+        )
+    fields = {k: np.array(v) for k, v in _decode(output_list, payloads, str(path)).items()}
+    if n_errors:
+        logger.warning("%s: %d record(s) of station %d flag an error", path, n_errors, station)
+    if "timestamp" in fields:
+        t = (fields["timestamp"][:, 0].astype(np.int64) - int(fields["timestamp"][0, 0])) / 1000.0
+    elif "frame" in fields:
+        t = (fields["frame"][:, 0].astype(np.int64) - int(fields["frame"][0, 0])) / rate_hz
+    else:
+        t = np.arange(len(payloads)) / rate_hz
+    bad = np.flatnonzero(np.diff(t) <= 0.0)
+    if bad.size:
+        k = int(bad[0]) + 1
+        raise InputError(
+            f"{path}: record at byte offset {offsets[k]}: time {t[k]:.3f} s does not increase "
+            f"after {t[k - 1]:.3f} s (offset {offsets[k - 1]})"
+        )
+    logger.debug("%s: %d records of station %d, output list %s", path, len(t), station, output_list)
+    return TrackerLog(
+        t=t,
+        positions=fields["position"].astype(float) * METRES_PER_UNIT[units],
+        rotations=matrix_from_quaternion(fields["quaternion"].astype(float)),
+        station=station,
+        source=str(path),
+    )
+
+
+def write_liberty_binary(
+    path: str | Path,
+    log: TrackerLog,
+    with_timestamp: bool = False,
+    *,
+    units: str = "in",
+    output_list: Sequence[int] | None = None,
+    rate_hz: float = 240.0,
+) -> None:
+    """Write a tracker log as Liberty binary records that :func:`read_liberty_binary` reads.
+
+    Records carry ``log.station``, command ``'C'`` (continuous), no error, and float32 values.
+
+    Args:
+        path: the file to write.
+        log: samples to write; positions [m], rotations R_S_E.
+        with_timestamp: write the output list ``(8, 2, 7)`` (timestamp ``round(t * 1000)`` [ms]
+            first, as the TUM driver requests it) instead of ``(2, 7)``.
+        units: position unit in the file, ``"in"`` or ``"cm"``.
+        output_list: any layout of :data:`ITEMS` instead (overrides ``with_timestamp``).
+        rate_hz: frame rate [Hz] for a frame count item (``round(t * rate_hz)``).
+
+    Raises:
+        InputError: an unknown unit or an unsupported output list.
+    """
+    path = Path(path)
+    if units not in METRES_PER_UNIT:
+        raise InputError(f"{path}: unknown Liberty unit {units!r}; use 'in' or 'cm'")
+    items = tuple(output_list) if output_list is not None else ((8, 2, 7) if with_timestamp else (2, 7))
+    fmt = _item_format(items, str(path))
+    positions = log.positions / METRES_PER_UNIT[units]
+    quats = quaternion_from_matrix(log.rotations)
+    ms = np.rint((log.t - log.t[0]) * 1000.0).astype(np.int64)
+    frames = np.rint((log.t - log.t[0]) * rate_hz).astype(np.int64)
+    columns = {"position": positions, "quaternion": quats, "timestamp": ms[:, None], "frame": frames[:, None]}
+    out = bytearray()
+    for k in range(len(log.t)):
+        values: list = []
+        for item in items:
+            name = ITEMS[item][1]
+            values += [_FILL[name]] if name in _FILL else [v.item() for v in columns[name][k]]
+        body = fmt.pack(*values)
+        out += HEADER.pack(PREAMBLE, log.station, ord("C"), 0, 0, len(body)) + body
+    path.write_bytes(bytes(out))
+    logger.debug("%s: wrote %d records of station %d, output list %s", path, len(log.t), log.station, items)
