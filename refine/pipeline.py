@@ -1,8 +1,8 @@
 """The whole pipeline for one problem: read, fuse, refine, time, verify, write.
 
 :func:`run` is what ``refine run PROBLEM`` calls. Each stage is a call into its own module (see the
-diagram in ``docs/design.md``); this module only strings them together, times them and collects the
-figures for ``result.json``.
+diagram in the README); this module only strings them together, times them and collects the
+figures for ``result.json``. A multi-pass weld runs the refine and timing stages once per pass.
 """
 
 from __future__ import annotations
@@ -12,21 +12,46 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from refine.cad import read_cad_path
-from refine.demo import clean_demonstration, read_tracker_log
 from refine.evaluate import TruthComparison, compare_with_truth
-from refine.fuse import fuse
-from refine.optimise.problem import build_refinement
-from refine.optimise.solve import Refinement, solve_refinement
+from refine.optimise.problem import Weights, build_refinement
+from refine.optimise.solve import ConstraintSource, Refinement, solve_refinement
 from refine.paths import FusedPath, Trajectory
 from refine.problem import Problem
 from refine.robot import Robot, load_robot
 from refine.timing import Timing, time_parameterise
 
 log = logging.getLogger(__name__)
+
+EXECUTABLE = ("ok", "repaired")
+
+
+@dataclass(frozen=True)
+class PassResult:
+    """One pass of the path: the fused input, its refinement and its timing.
+
+    Attributes:
+        name: ``"pass 1"`` for a single pass, ``"layer 2 pass 1"`` in a multi-pass weld.
+        layer: 1-based layer number.
+        index: 1-based pass number within its layer.
+        fused: the pass's fused path.
+        refinement: the optimiser's result and its verification.
+        timing: the time parameterisation (None when the refinement was infeasible).
+        trajectory: the timed path the exporters read (None when infeasible).
+        clearance: the dense clearance check of the refined path (None without collision).
+    """
+
+    name: str
+    layer: int
+    index: int
+    fused: FusedPath
+    refinement: Refinement
+    timing: Timing | None
+    trajectory: Trajectory | None
+    clearance: Any = None
 
 
 @dataclass(frozen=True)
@@ -36,29 +61,49 @@ class RunResult:
     Attributes:
         problem: the problem that was run.
         robot: the loaded robot.
-        fused: the fused path (CAD points + demonstrated orientations and speeds).
-        refinement: the optimiser's result and its verification.
-        timing: the time parameterisation (None when the refinement was infeasible).
-        trajectory: the timed path the exporters read (None when infeasible).
-        truth: comparison with the simulator's truth, when the problem has one.
-        timings_s: wall time per stage [s].
+        passes: one entry per pass (one for a single-pass path).
+        truth: comparison of the first pass with the simulator's truth, when there is one.
+        timings_s: wall time per stage [s], summed over passes.
         outputs: kind -> file written.
     """
 
     problem: Problem
     robot: Robot
-    fused: FusedPath
-    refinement: Refinement
-    timing: Timing | None
-    trajectory: Trajectory | None
+    passes: tuple[PassResult, ...]
     truth: TruthComparison | None
     timings_s: dict[str, float] = field(default_factory=dict)
     outputs: dict[str, Path] = field(default_factory=dict)
 
     @property
+    def first(self) -> PassResult:
+        """The first (demonstrated) pass."""
+        return self.passes[0]
+
+    @property
+    def fused(self) -> FusedPath:
+        """The first pass's fused path."""
+        return self.first.fused
+
+    @property
+    def refinement(self) -> Refinement:
+        """The first pass's refinement."""
+        return self.first.refinement
+
+    @property
+    def timing(self) -> Timing | None:
+        """The first pass's timing."""
+        return self.first.timing
+
+    @property
+    def trajectory(self) -> Trajectory | None:
+        """The first pass's timed trajectory."""
+        return self.first.trajectory
+
+    @property
     def status(self) -> str:
-        """``ok`` or ``infeasible``."""
-        return self.refinement.status
+        """``ok`` when every pass is ok, ``infeasible`` when any is, else ``repaired``."""
+        statuses = {p.refinement.status for p in self.passes}
+        return "infeasible" if "infeasible" in statuses else "repaired" if "repaired" in statuses else "ok"
 
 
 class _Stopwatch:
@@ -71,18 +116,62 @@ class _Stopwatch:
         self.times[name] = self.times.get(name, 0.0) + now - self._t
         self._t = now
 
+    def add(self, times: dict[str, float]) -> None:
+        for stage, seconds in times.items():
+            self.times[stage] = self.times.get(stage, 0.0) + seconds
 
-def solve_problem(problem: Problem) -> RunResult:
-    """Run every stage up to the timed trajectory, without writing files."""
-    watch = _Stopwatch()
-    robot = load_robot(problem.robot.model)
-    watch.lap("load")
+
+def fused_path(problem: Problem, watch: _Stopwatch | None = None) -> FusedPath:
+    """The fused path of ``problem``: CAD path + cleaned, aligned demonstration, or a PathML path."""
+    watch = watch or _Stopwatch()
+    if problem.cad.format == "pathml":
+        from refine.cad.pathml_ import fused_from_pathml
+
+        track = problem.cad.track
+        fused = fused_from_pathml(problem.cad.file, problem.cad.spacing_m, track=track)
+        watch.lap("cad")
+        return fused
+    from refine.cad import read_cad_path
+    from refine.demo import clean_demonstration, read_tracker_log
+    from refine.fuse import fuse
+
+    assert problem.demonstration is not None  # Problem checks this
     cad = read_cad_path(problem.cad, problem.frames.cad_in_world)
     watch.lap("cad")
     demo = clean_demonstration(read_tracker_log(problem.demonstration), problem.demonstration)
     watch.lap("demo")
     fused = fuse(cad, demo, problem.frames.source_in_world, problem.tool.sensor_in_tcp)
     watch.lap("fuse")
+    return fused
+
+
+def weights_for(problem: Problem, robot: Robot) -> Weights:
+    """Cost weights from ``[optimise]``; a redundant arm gets a mid-range cost by default."""
+    o = problem.optimise
+    mid = o.mid_range_weight if o.mid_range_weight is not None else (0.05 if robot.nq > 6 else 0.0)
+    return Weights(o.orientation_weight, o.velocity_weight, o.acceleration_weight, mid)
+
+
+def constraint_sources(problem: Problem, robot: Robot) -> tuple[ConstraintSource, ...]:
+    """Collision constraints when the problem has a cell or tool shapes and collision is on."""
+    if not problem.collision.enabled or not (problem.cell or problem.tool.collision):
+        return ()
+    from refine.optimise.clearance import ClearanceSource
+
+    return (ClearanceSource.for_problem(problem, robot),)
+
+
+def refine_pass(
+    problem: Problem,
+    robot: Robot,
+    fused: FusedPath,
+    watch: _Stopwatch,
+    name: str = "pass 1",
+    layer: int = 1,
+    index: int = 1,
+    sources: tuple[ConstraintSource, ...] = (),
+) -> PassResult:
+    """Refine, verify and time one pass."""
     nlp = build_refinement(
         robot,
         fused,
@@ -90,16 +179,21 @@ def solve_problem(problem: Problem) -> RunResult:
         problem.tool.tcp_in_flange,
         problem.tolerances,
         axisymmetric=problem.tool.axisymmetric,
+        weights=weights_for(problem, robot),
     )
     watch.lap("build")
     home = None if problem.robot.home_deg is None else np.radians(problem.robot.home_deg)
-    refinement = solve_refinement(nlp, home=home)
+    refinement = solve_refinement(
+        nlp,
+        home=home,
+        sources=sources,
+        repair_max_slack_deg=problem.repair.max_slack_deg if problem.repair.enabled else None,
+    )
     watch.lap("refine")
-    del watch.times["refine"]  # reported by stage below: seed, solve, verify (and any rebuild)
-    for stage, seconds in refinement.timings_s.items():
-        watch.times[stage] = watch.times.get(stage, 0.0) + seconds
+    del watch.times["refine"]  # reported by stage: seed, solve, verify (and rebuilds under build)
+    watch.add(refinement.timings_s)
     timing = trajectory = None
-    if refinement.status == "ok":
+    if refinement.status in EXECUTABLE:
         spec = robot.spec
         accel = spec.acceleration
         if problem.robot.joint_acceleration_deg_s2 is not None:
@@ -117,11 +211,38 @@ def solve_problem(problem: Problem) -> RunResult:
             speed=timing.speed,
         )
         watch.lap("timing")
+    clearance = None
+    for source in sources:
+        clearance = source.clearance(refinement.q)  # the dense check's figures, for the report
+    return PassResult(name, layer, index, fused, refinement, timing, trajectory, clearance)
+
+
+def solve_problem(problem: Problem) -> RunResult:
+    """Run every stage up to the timed trajectories, without writing files."""
+    watch = _Stopwatch()
+    robot = load_robot(problem.robot.model)
+    watch.lap("load")
+    fused = fused_path(problem, watch)
+    sources = constraint_sources(problem, robot)
+    watch.lap("load")
+    passes = [refine_pass(problem, robot, fused, watch, sources=sources)]
+    if problem.multipass is not None and problem.multipass.layers > 1:
+        from refine.multipass import generate_passes
+
+        for p in generate_passes(fused, problem.multipass)[1:]:
+            name = f"layer {p.layer} pass {p.index}"
+            passes.append(refine_pass(problem, robot, p.path, watch, name, p.layer, p.index, sources))
     truth = None
-    if problem.demonstration.truth is not None and trajectory is not None and timing is not None:
-        truth = compare_with_truth(problem.demonstration.truth, trajectory, timing)
+    first = passes[0]
+    if (
+        problem.demonstration is not None
+        and problem.demonstration.truth is not None
+        and first.trajectory is not None
+    ):
+        assert first.timing is not None
+        truth = compare_with_truth(problem.demonstration.truth, first.trajectory, first.timing)
         watch.lap("truth")
-    return RunResult(problem, robot, fused, refinement, timing, trajectory, truth, watch.times)
+    return RunResult(problem, robot, tuple(passes), truth, watch.times)
 
 
 def run(problem: Problem, out_dir: Path, programs: tuple[str, ...] | None = None) -> RunResult:
@@ -135,49 +256,43 @@ def run(problem: Problem, out_dir: Path, programs: tuple[str, ...] | None = None
     Returns:
         The run's result, with ``outputs`` naming the files written.
     """
-    from refine.export import write_pathml, write_rapid, write_trajectory_csv
     from refine.export.result_json import write_result_json
+    from refine.export.writers import write_outputs
 
     result = solve_problem(problem)
     t0 = time.perf_counter()
     out_dir.mkdir(parents=True, exist_ok=True)
-    outputs: dict[str, Path] = {}
-    if result.trajectory is not None:
-        outputs["trajectory"] = write_trajectory_csv(out_dir / "trajectory.csv", result.trajectory)
-        outputs["pathml"] = write_pathml(out_dir / f"{problem.name}.aml", result.trajectory, problem)
-        for kind in programs or problem.output.programs:
-            if kind == "rapid":
-                outputs["rapid"] = write_rapid(
-                    out_dir / f"{problem.name}.mod", result.trajectory, problem, result.robot
-                )
+    result.outputs.update(write_outputs(result, out_dir, programs or problem.output.programs))
     result.timings_s["export"] = time.perf_counter() - t0
-    result.outputs.update(outputs)
-    outputs["result"] = out_dir / "result.json"
-    result.outputs["result"] = outputs["result"]
-    write_result_json(outputs["result"], result)
+    result.outputs["result"] = out_dir / "result.json"
+    write_result_json(result.outputs["result"], result)
     return result
 
 
 def summary_lines(result: RunResult) -> list[str]:
     """Human-readable summary of a run, for the CLI."""
-    check = result.refinement.check
     lines = [
-        f"problem      {result.problem.name}: {len(result.fused)} waypoints, robot {result.robot.spec.name}",
-        f"status       {result.status}"
-        + (f" ({result.refinement.reason})" if result.refinement.reason else ""),
-        f"position     max error {check.position_error_m.max():.2e} m "
-        f"(tolerance {result.problem.tolerances.position_m:.0e} m)",
-        f"orientation  max deviation from demo {check.orientation_deviation_deg.max():.3f} deg "
-        f"(cone {result.problem.tolerances.orientation_deg:g} deg)",
-        f"joints       min margin to limits {math.degrees(check.joint_margin_rad.min()):.2f} deg",
-        f"singularity  min scaled manipulability {check.singularity.min():.4f}, "
-        f"min singular value {check.sigma_min.min():.4f}",
+        f"problem      {result.problem.name}: robot {result.robot.spec.name}, {len(result.passes)} pass(es)"
     ]
-    if result.timing is not None:
-        t = result.timing
-        lines.append(
-            f"timing       cycle {t.cycle_time_s:.2f} s, {len(t.slow_segments)} segment(s) slower than the demo"
-        )
+    tol = result.problem.tolerances
+    for p in result.passes:
+        check = p.refinement.check
+        head = f"{p.name}: " if len(result.passes) > 1 else ""
+        lines += [
+            f"status       {head}{p.refinement.status}, {len(p.fused)} waypoints"
+            + (f" ({p.refinement.reason})" if p.refinement.reason else ""),
+            f"position     max error {check.position_error_m.max():.2e} m (tolerance {tol.position_m:.0e} m)",
+            f"orientation  max deviation from demo {check.orientation_deviation_deg.max():.3f} deg "
+            f"(cone {tol.orientation_deg:g} deg)",
+            f"joints       min margin to limits {math.degrees(check.joint_margin_rad.min()):.2f} deg",
+            f"singularity  min scaled manipulability {check.singularity.min():.4f}, "
+            f"min singular value {check.sigma_min.min():.4f}",
+        ]
+        if p.timing is not None:
+            lines.append(
+                f"timing       cycle {p.timing.cycle_time_s:.2f} s, "
+                f"{len(p.timing.slow_segments)} segment(s) slower than the demo"
+            )
     if result.truth is not None:
         lines.append(f"truth        {result.truth.describe()}")
     total = result.timings_s.get("total")

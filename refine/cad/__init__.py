@@ -1,7 +1,9 @@
 """The CAD/CAM stage: read the path file, bring it to the world frame, resample it by arc length.
 
-``read_cad_path`` is the entry point; ``csv_`` and ``dxf`` read one format each into points in the
-CAD frame [m], and ``resample`` places the waypoints.
+``read_cad_path`` is the entry point; ``csv_``, ``dxf``, ``gcode`` and ``mesh`` read one format each
+into points in the CAD frame [m], and ``resample`` places the waypoints. A PathML document holds
+orientations and speeds as well, so it skips this stage and the fusion:
+:func:`~refine.cad.pathml_.fused_from_pathml` reads it straight into a fused path.
 """
 
 from __future__ import annotations
@@ -14,14 +16,25 @@ from numpy.typing import NDArray
 
 from refine.cad.csv_ import points_from_csv
 from refine.cad.dxf import points_from_dxf
+from refine.cad.gcode import points_from_gcode
+from refine.cad.mesh import points_from_mesh
+from refine.cad.pathml_ import fused_from_pathml
 from refine.cad.resample import resample_by_arc_length
 from refine.errors import InputError
 from refine.frames import check_transform, transform_points
 from refine.paths import CadPath
 from refine.problem import CadSettings
 
-__all__ = ["CLOSED_TOLERANCE_M", "points_from_csv", "points_from_dxf", "read_cad_path",
-           "resample_by_arc_length"]
+__all__ = [
+    "CLOSED_TOLERANCE_M",
+    "fused_from_pathml",
+    "points_from_csv",
+    "points_from_dxf",
+    "points_from_gcode",
+    "points_from_mesh",
+    "read_cad_path",
+    "resample_by_arc_length",
+]
 
 #: A path whose last point lies this close to its first is closed [m].
 CLOSED_TOLERANCE_M = 1e-6
@@ -29,6 +42,15 @@ CLOSED_TOLERANCE_M = 1e-6
 _READERS: dict[str, Callable[[CadSettings], NDArray]] = {
     "csv": lambda c: points_from_csv(c.file, c.units),
     "dxf": lambda c: points_from_dxf(c.file, c.units, layer=c.layer),
+    "gcode": lambda c: points_from_gcode(c.file, c.units, program=c.track),
+    "mesh": lambda c: points_from_mesh(
+        c.file,
+        c.units,
+        section_origin=c.section_origin,
+        section_normal=c.section_normal,
+        boundary=c.boundary,
+        start_near=c.start_near,
+    ),
 }
 
 
@@ -41,20 +63,28 @@ def read_cad_path(settings: CadSettings, cad_in_world: NDArray) -> CadPath:
     or a little less (see :func:`refine.cad.resample.resample_by_arc_length`).
 
     Args:
-        settings: the ``[cad]`` settings (file, format, units, spacing, layer, reverse).
+        settings: the ``[cad]`` settings (file, format, units, spacing, layer, reverse; for
+            G-code ``track`` is the feed sequence number; for meshes the section plane or
+            ``boundary`` and ``start_near``).
         cad_in_world: T_F_CAD, pose of the CAD frame in the world frame {F}, shape (4, 4).
 
     Returns:
         The path in {F}: waypoints [m], their arc length [m] and whether it is closed.
 
     Raises:
-        InputError: an unknown format (listing the known ones), a bad transform, or anything the
-            reader or resampler rejects.
+        InputError: an unknown format (listing the known ones), ``"pathml"`` (read with
+            :func:`~refine.cad.pathml_.fused_from_pathml` instead), a bad transform, or anything
+            the reader or resampler rejects.
     """
     T_world_cad = check_transform(cad_in_world, "frames.cad_in_world")
     if T_world_cad.shape != (4, 4):
         raise InputError(f"frames.cad_in_world: expected shape (4, 4), got {T_world_cad.shape}")
     reader = _READERS.get(settings.format)
+    if settings.format == "pathml":
+        raise InputError(
+            f"cad.format = 'pathml': {settings.file} holds orientations and speeds too; read it with "
+            "refine.cad.fused_from_pathml(file, spacing_m, track), not read_cad_path"
+        )
     if reader is None:
         raise InputError(
             f"cad.format = {settings.format!r} is not one of {', '.join(sorted(_READERS))}"

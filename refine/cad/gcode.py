@@ -63,9 +63,10 @@ class _Sequence:
 
 
 def _strip_comments(text: str, where: str) -> str:
-    text = text.split(";", 1)[0]
     out, depth = [], 0
     for ch in text:
+        if ch == ";" and not depth:
+            break
         if ch == "(":
             if depth:
                 raise InputError(f"{where}: nested comment parentheses are not supported: {text!r}")

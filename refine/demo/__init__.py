@@ -1,6 +1,7 @@
 """The demonstration stage: read the tracker log and clean it into a :class:`Demonstration`.
 
-``read_tracker_log`` dispatches on the log format (``liberty`` and ``csv_`` hold the readers);
+``read_tracker_log`` dispatches on the log format (``liberty``, ``liberty_binary`` and ``csv_`` hold
+the readers);
 ``clean_demonstration`` removes outliers, smooths positions and orientations, computes the speed
 and finds the end of the start pause, with the pieces from ``filters``.
 """
@@ -25,6 +26,7 @@ from refine.demo.filters import (
     speed_along_track,
 )
 from refine.demo.liberty import read_liberty_ascii, write_liberty_ascii
+from refine.demo.liberty_binary import read_liberty_binary, write_liberty_binary
 from refine.errors import InputError
 from refine.paths import Demonstration, TrackerLog
 from refine.problem import DemoSettings
@@ -38,8 +40,10 @@ __all__ = [
     "fill_rotations",
     "read_demo_csv",
     "read_liberty_ascii",
+    "read_liberty_binary",
     "read_tracker_log",
     "write_liberty_ascii",
+    "write_liberty_binary",
 ]
 
 logger = logging.getLogger(__name__)
@@ -57,6 +61,9 @@ MOTION_START_SMOOTHING_S = 0.05
 _READERS: dict[str, Callable[[DemoSettings], TrackerLog]] = {
     "liberty_ascii": lambda d: read_liberty_ascii(
         d.file, units=d.units, station=d.station, rate_hz=d.rate_hz
+    ),
+    "liberty_binary": lambda d: read_liberty_binary(
+        d.file, station=d.station, rate_hz=d.rate_hz, units=d.units
     ),
     "csv": lambda d: read_demo_csv(d.file, units=d.units),
 }

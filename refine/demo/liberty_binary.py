@@ -26,7 +26,8 @@ The record carries no position unit (the reserved byte is 0 on the Liberty), so 
 it: ``units`` ``"in"`` (the Liberty's default) or ``"cm"``. Without ``output_list`` the reader
 recognises position + quaternion with an optional uint32 timestamp first or last and an optional
 trailing space or CR LF, by the response size and by the quaternions being unit length (a
-timestamp read as a float is a tiny denormal, so the right layout is unambiguous).
+millisecond timestamp read as a float32 is a tiny denormal for the first 2.3 hours after the
+tracker's clock was reset, so the wrong layout fails that test).
 
 Time: from timestamps ``t = (ms - ms[0]) / 1000``; from frame counts ``(f - f[0]) / rate_hz``;
 without either, sample ``k`` is at ``t = k / rate_hz``.
@@ -190,6 +191,15 @@ def read_liberty_binary(
             f"bytes, the records hold {len(payloads[0])}"
         )
     fields = {k: np.array(v) for k, v in _decode(output_list, payloads, str(path)).items()}
+    positions, quats = fields["position"].astype(float), fields["quaternion"].astype(float)
+    norms = np.linalg.norm(quats, axis=1)
+    bad = np.flatnonzero(~np.isfinite(positions).all(axis=1) | ~(np.abs(norms - 1.0) < 0.01))
+    if bad.size:
+        k = int(bad[0])
+        raise InputError(
+            f"{path}: record at byte offset {offsets[k]}: position {positions[k].tolist()} {units} "
+            f"or quaternion {quats[k].tolist()} (norm {norms[k]:.4g}, expected 1) is invalid"
+        )
     if n_errors:
         logger.warning("%s: %d record(s) of station %d flag an error", path, n_errors, station)
     if "timestamp" in fields:
@@ -208,8 +218,8 @@ def read_liberty_binary(
     logger.debug("%s: %d records of station %d, output list %s", path, len(t), station, output_list)
     return TrackerLog(
         t=t,
-        positions=fields["position"].astype(float) * METRES_PER_UNIT[units],
-        rotations=matrix_from_quaternion(fields["quaternion"].astype(float)),
+        positions=positions * METRES_PER_UNIT[units],
+        rotations=matrix_from_quaternion(quats),
         station=station,
         source=str(path),
     )

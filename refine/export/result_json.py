@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
-    from refine.pipeline import RunResult
+    from refine.pipeline import PassResult, RunResult
 
 SCHEMA_VERSION = 1
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -21,32 +21,61 @@ def _finite(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
 
 
-def result_dict(result: RunResult) -> dict[str, Any]:
-    """The JSON document of ``result`` as plain Python values."""
-    problem, ref, check = result.problem, result.refinement, result.refinement.check
-    spec = result.robot.spec
-    timing = result.timing
-    metrics: dict[str, Any] = {
+def _pass_metrics(p: PassResult) -> dict[str, Any]:
+    check, timing = p.refinement.check, p.timing
+    clearance = p.clearance
+    return {
         "max_position_error_m": float(check.position_error_m.max()),
         "max_orientation_deviation_deg": float(check.orientation_deviation_deg.max()),
         "mean_orientation_deviation_deg": float(check.orientation_deviation_deg.mean()),
+        "max_slack_deg": float(p.refinement.slack_deg.max()) if p.refinement.slack_deg.size else 0.0,
         "min_joint_margin_rad": float(check.joint_margin_rad.min()),
         "min_singularity_measure": float(check.singularity.min()),
         "min_singular_value": float(check.sigma_min.min()),
-        "min_clearance_m": None,  # collision checking is not part of this pipeline yet
+        "min_clearance_m": None if clearance is None else float(clearance.min_distance_m),
         "cycle_time_s": None if timing is None else timing.cycle_time_s,
         "speed_tracking_error_rel": None if timing is None else _finite(timing.speed_tracking_error_rel),
-        "fusion_residual_median_m": float(np.median(result.fused.residual)),
+        "fusion_residual_median_m": float(np.median(p.fused.residual)),
     }
+
+
+def _aggregate(per_pass: list[dict[str, Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key in per_pass[0]:
+        values = [m[key] for m in per_pass if m[key] is not None]
+        if not values:
+            out[key] = None
+        elif key.startswith("min_"):
+            out[key] = min(values)
+        elif key.startswith("max_") or key.endswith("_error_rel") or key.startswith("fusion"):
+            out[key] = max(values)
+        elif key == "cycle_time_s":
+            out[key] = sum(values)
+        else:
+            out[key] = float(np.mean(values))
+    return out
+
+
+def result_dict(result: RunResult) -> dict[str, Any]:
+    """The JSON document of ``result`` as plain Python values."""
+    problem = result.problem
+    spec = result.robot.spec
+    per_pass = [_pass_metrics(p) for p in result.passes]
+    first = result.first
     doc: dict[str, Any] = {
         "schema_version": SCHEMA_VERSION,
-        "status": ref.status,
-        "reason": ref.reason,
+        "status": result.status,
+        "reason": "; ".join(
+            (f"{p.name}: " if len(result.passes) > 1 else "") + p.refinement.reason
+            for p in result.passes
+            if p.refinement.reason
+        ),
         "problem": problem.name,
         "problem_dir": os.path.relpath(problem.root, REPO_ROOT),
-        "n_waypoints": len(result.fused),
+        "n_waypoints": len(first.fused),
+        "n_passes": len(result.passes),
         "dof": result.robot.nq,
-        "path_length_m": float(result.fused.s[-1]),
+        "path_length_m": float(first.fused.s[-1]),
         "robot": {
             "model": spec.name,
             "urdf": os.path.relpath(spec.urdf, REPO_ROOT),
@@ -65,14 +94,20 @@ def result_dict(result: RunResult) -> dict[str, Any]:
             "orientation_deg": problem.tolerances.orientation_deg,
             "joint_margin_deg": problem.tolerances.joint_margin_deg,
             "singularity_margin": problem.tolerances.singularity_margin,
+            "joint_step_deg": problem.tolerances.joint_step_deg,
+            "clearance_m": problem.collision.margin_m if problem.collision.enabled else None,
         },
-        "metrics": metrics,
-        "solver": {"name": "ipopt", "status": ref.solver_status, "iterations": ref.iterations},
-        "violations": [v.describe() for v in check.violations],
-        "slow_segments": []
-        if timing is None
-        else [
+        "metrics": _aggregate(per_pass),
+        "solver": {
+            "name": "ipopt",
+            "status": first.refinement.solver_status,
+            "iterations": sum(p.refinement.iterations for p in result.passes),
+            "outer_iterations": sum(p.refinement.outer_iterations for p in result.passes),
+        },
+        "violations": [v.describe() for p in result.passes for v in p.refinement.check.violations],
+        "slow_segments": [
             {
+                "pass": p.name,
                 "index_start": seg.index_start,
                 "index_end": seg.index_end,
                 "s_start_m": seg.s_start_m,
@@ -80,9 +115,28 @@ def result_dict(result: RunResult) -> dict[str, Any]:
                 "min_ratio": seg.min_ratio,
                 "reason": seg.reason,
             }
-            for seg in timing.slow_segments
+            for p in result.passes
+            if p.timing is not None
+            for seg in p.timing.slow_segments
         ],
-        "repairs": [],
+        "repairs": [
+            {
+                "pass": p.name,
+                "index_start": r.index_start,
+                "index_end": r.index_end,
+                "s_start_m": r.s_start_m,
+                "s_end_m": r.s_end_m,
+                "reason": r.reason,
+                "slack_deg": r.slack_deg,
+                "objects": list(r.objects),
+            }
+            for p in result.passes
+            for r in p.refinement.repairs
+        ],
+        "passes": [
+            {"name": p.name, "layer": p.layer, "index": p.index, "status": p.refinement.status, "metrics": m}
+            for p, m in zip(result.passes, per_pass, strict=True)
+        ],
         "truth": None if result.truth is None else result.truth.as_json(),
         "timings_s": {k: round(v, 6) for k, v in result.timings_s.items()},
         "outputs": {k: p.name for k, p in result.outputs.items()},

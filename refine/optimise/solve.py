@@ -54,6 +54,10 @@ class ConstraintSource(Protocol):
         """Runs of waypoints/segments where the dense check finds the constraint broken."""
         ...
 
+    def clearance(self, q: Array) -> object:
+        """The dense check's figures for joints ``q`` (N, n), for reports."""
+        ...
+
 
 @dataclass(frozen=True)
 class Repair:

@@ -1,0 +1,107 @@
+"""A PathML track as the input of a refinement: positions, orientations and speeds in one file.
+
+A PathML document (from refine or another tool, read with
+:func:`refine.export.pathml_read.read_pathml`) already holds what the CAD and demonstration
+stages produce together: TCP positions in the world frame {F} [m], tool orientations R_F_TCP and
+speeds. :func:`fused_from_pathml` turns one of its tracks into a :class:`~refine.paths.FusedPath`
+at the waypoint spacing of the problem, so it can go straight to the optimiser:
+
+* The track's points, consecutive duplicates dropped, form a polyline; waypoints are placed on it
+  every ``spacing_m`` or a little less (:func:`refine.cad.resample.resample_by_arc_length`).
+  Arc length is measured along the points, not taken from their ``arcLength`` values.
+* Orientations are interpolated by Slerp at the waypoints' arc lengths, speeds linearly; speeds
+  below :data:`MIN_SPEED_M_S` (a trajectory that starts or ends at rest has speed 0 there) are
+  raised to it, because a fused path's speed is a cap that must be > 0.
+* ``t_demo`` is the time to travel the waypoints at those speeds (trapezoidal in 1/v); the
+  ``residual`` (demo-to-CAD distance) is zero, as there is no separate demonstration.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
+
+from refine.cad.resample import DUPLICATE_TOLERANCE_M, resample_by_arc_length
+from refine.errors import InputError
+from refine.export.pathml_read import PathMLTrack, read_pathml
+from refine.paths import FusedPath
+
+logger = logging.getLogger(__name__)
+
+#: Smallest speed a waypoint gets [m/s] (1 mm/s).
+MIN_SPEED_M_S = 1e-3
+
+
+def _select_track(path: Path, tracks: list[tuple[str, PathMLTrack]], track: str | None) -> PathMLTrack:
+    names = [name for name, _ in tracks]
+    if not tracks:
+        raise InputError(f"PathML {path}: no tracks in the document")
+    if track is None:
+        if len(tracks) > 1:
+            logger.info("PathML %s: %d tracks (%s); reading the first", path, len(tracks), ", ".join(names))
+        return tracks[0][1]
+    if "/" in track:
+        hits = [t for name, t in tracks if name == track]
+    else:
+        hits = [t for name, t in tracks if name.split("/", 1)[1] == track]
+    if len(hits) != 1:
+        why = "is not in" if not hits else "names several tracks of"
+        raise InputError(
+            f"PathML {path}: track {track!r} {why} the document; give one of {', '.join(names)} "
+            "(as \"layer/track\")"
+        )
+    return hits[0]
+
+
+def fused_from_pathml(path: str | Path, spacing_m: float, track: str | None = None) -> FusedPath:
+    """Read one PathML track as a fused path resampled by arc length (see the module docstring).
+
+    Args:
+        path: the PathML (``.aml``) document.
+        spacing_m: largest waypoint spacing along the path [m], > 0.
+        track: ``"layer/track"`` (or a track name that is unique in the document), or None for
+            the first track of the first layer.
+
+    Returns:
+        The fused path in {F}: arc length [m], positions [m], orientations R_F_TCP, speeds
+        [m/s] (>= :data:`MIN_SPEED_M_S`), times [s] from 0 and zero residuals, shape (N, ...).
+
+    Raises:
+        InputError: anything :func:`read_pathml` rejects, an unknown track (listing the tracks),
+            a track with missing or non-finite speeds or fewer than two distinct points.
+    """
+    path = Path(path)
+    doc = read_pathml(path)
+    tracks = [(f"{layer.name}/{t.name}", t) for layer in doc.layers for t in layer.tracks]
+    tr = _select_track(path, tracks, track)
+    if not np.all(np.isfinite(tr.speed)):
+        k = int(np.flatnonzero(~np.isfinite(tr.speed))[0])
+        raise InputError(f"PathML {path}: track {tr.name!r} point {k} has no valid speed [m/s]")
+
+    keep = np.zeros(len(tr.positions), dtype=bool)
+    keep[0] = True
+    last = tr.positions[0]
+    for k in range(1, len(tr.positions)):
+        if np.linalg.norm(tr.positions[k] - last) > DUPLICATE_TOLERANCE_M:
+            keep[k], last = True, tr.positions[k]
+    points, rotations, speed = tr.positions[keep], tr.rotations[keep], tr.speed[keep]
+    if len(points) < 2:
+        raise InputError(f"PathML {path}: track {tr.name!r} needs at least 2 distinct points")
+    s_points = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+
+    s, positions = resample_by_arc_length(points, spacing_m)
+    s = np.clip(s, 0.0, s_points[-1])
+    R = Slerp(s_points, Rotation.from_matrix(rotations))(s).as_matrix()
+    v = np.interp(s, s_points, speed)
+    low = v < MIN_SPEED_M_S
+    if low.any():
+        logger.info(
+            "PathML %s: %d waypoint speed(s) below %g m/s raised to it", path, int(low.sum()), MIN_SPEED_M_S
+        )
+        v = np.maximum(v, MIN_SPEED_M_S)
+    t = np.concatenate([[0.0], np.cumsum(np.diff(s) / (0.5 * (v[1:] + v[:-1])))])
+    logger.debug("PathML %s: track %r, %d points -> %d waypoints", path, tr.name, len(points), len(s))
+    return FusedPath(s=s, positions=positions, rotations=R, speed=v, t_demo=t, residual=np.zeros(len(s)))
