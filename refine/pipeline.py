@@ -28,6 +28,11 @@ log = logging.getLogger(__name__)
 
 EXECUTABLE = ("ok", "repaired")
 
+REDUNDANT_MID_RANGE_WEIGHT = 2.0
+"""Default ``[optimise] mid_range_weight`` for arms with more than 6 joints: on the LBR iiwa it
+keeps every joint >= 18 deg from its limits on the test paths while costing < 0.05 deg of
+orientation, and the solution moves by < 0.2 deg of joint angle when the demo is perturbed."""
+
 
 @dataclass(frozen=True)
 class PassResult:
@@ -148,7 +153,7 @@ def fused_path(problem: Problem, watch: _Stopwatch | None = None) -> FusedPath:
 def weights_for(problem: Problem, robot: Robot) -> Weights:
     """Cost weights from ``[optimise]``; a redundant arm gets a mid-range cost by default."""
     o = problem.optimise
-    mid = o.mid_range_weight if o.mid_range_weight is not None else (0.05 if robot.nq > 6 else 0.0)
+    mid = o.mid_range_weight if o.mid_range_weight is not None else (REDUNDANT_MID_RANGE_WEIGHT if robot.nq > 6 else 0.0)
     return Weights(o.orientation_weight, o.velocity_weight, o.acceleration_weight, mid)
 
 

@@ -350,7 +350,7 @@ class OptimiseSettings:
         acceleration_weight: weight of the squared second difference per metre².
         mid_range_weight: weight of the squared distance of each joint from the middle of its range
             (normalised by the range); the secondary cost that resolves a redundant arm's extra
-            freedom. Default: 0 for 6-axis arms, 0.05 when the robot has more than 6 joints.
+            freedom. Default: 0 for 6-axis arms, 2.0 when the robot has more than 6 joints.
     """
 
     orientation_weight: float = 1.0

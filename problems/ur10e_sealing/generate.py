@@ -19,8 +19,8 @@ Geometry (all numbers below, explained in README.md):
   the footprint scaled by 0.9, 0.8, ... with fewer vertices; a fan closes the centre. Every
   vertex lies exactly on the saddle.
 * The true path is the mesh's open boundary, found with trimesh (``Trimesh.outline``) on the STL
-  as written, independently of ``refine.cad``: started at the vertex nearest ``START_NEAR`` (the
-  middle of the long edge nearest the robot) and run counter-clockwise seen from above.
+  as written, independently of ``refine.cad``: started at the vertex nearest ``[cad] start_near``
+  (the middle of the long edge nearest the robot) and run counter-clockwise seen from above.
 * True tool orientation: the nozzle (TCP z) points into the panel, against its upward surface
   normal (analytic, from the saddle), tilted back by the drag angle (12-18 deg, smooth along the
   path) so that the nozzle points at the bead already laid; the TCP x axis follows the travel
@@ -71,7 +71,6 @@ RADIUS_ACROSS = 1.2  # ... across it (convex up)
 EDGE_SPACING = 0.003  # vertex spacing along the boundary ring [m]
 N_RINGS = 10  # boundary ring + inner rings
 INNER_DENSITY = 0.3  # inner rings: this fraction of the boundary ring's vertices, times the scale
-START_NEAR = (0.0, 0.250, -0.026)  # CAD frame [m]: the middle of the long edge nearest the robot
 
 # ---- worker
 SPEED_STRAIGHT = 0.120  # [m/s]
@@ -157,7 +156,8 @@ def zip_rings(outer: np.ndarray, inner: np.ndarray) -> list[tuple[int, int, int]
 def panel_mesh() -> tuple[trimesh.Trimesh, float]:
     """The panel as a triangle mesh in the CAD frame [mm], and the footprint's perimeter [m]."""
     half_u, half_v = PANEL_LENGTH / 2, PANEL_WIDTH / 2
-    n_edge = int(math.ceil(rounded_rectangle(half_u, half_v, CORNER_RADIUS, 1)[2] / EDGE_SPACING))
+    # an even count puts a vertex in the middle of each long edge, where the bead starts
+    n_edge = 2 * math.ceil(rounded_rectangle(half_u, half_v, CORNER_RADIUS, 1)[2] / (2 * EDGE_SPACING))
     vertices, rings = [], []
     count = 0
     for k in range(N_RINGS):
@@ -337,7 +337,8 @@ def main(argv: list[str] | None = None) -> int:
     mesh, footprint_perimeter = panel_mesh()
     (HERE / MESH_FILE).write_bytes(mesh.export(file_type="stl"))
     written = trimesh.load(HERE / MESH_FILE, file_type="stl", process=True)
-    bead_cad = boundary_path(written, START_NEAR)
+    start_near = np.asarray(problem["cad"]["start_near"]) / 1000.0  # [mm] in problem.toml
+    bead_cad = boundary_path(written, start_near)
 
     # ---- the closed path in the world, arc length as a polyline reader measures it
     positions = transform_points(T_F_CAD, bead_cad)

@@ -23,6 +23,9 @@ log = logging.getLogger(__name__)
 
 Array = NDArray[np.float64]
 
+NULLSPACE_GAIN = 0.05
+"""Step toward mid-range per IK iteration for redundant arms, in the task's null space [rad·rad]."""
+
 CONVERGED = 1e-6
 """Pose error norm [m and rad stacked] under which an IK solution counts as converged."""
 
@@ -100,7 +103,12 @@ def solve_ik(
         if float(err @ err) < tol * tol:
             break
         J = kin.jacobian(q)[rows]
-        dq = J.T @ np.linalg.solve(J @ J.T + damping**2 * np.eye(len(err)), err)
+        JJt_inv = np.linalg.inv(J @ J.T + damping**2 * np.eye(len(err)))
+        dq = J.T @ JJt_inv @ err
+        if J.shape[1] > J.shape[0]:  # redundant: drift toward mid-range in the null space of the task
+            mid, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
+            pull = np.where(np.isfinite(half), (mid - q) / np.where(np.isfinite(half), half, 1.0) ** 2, 0.0)
+            dq += NULLSPACE_GAIN * (pull - J.T @ (JJt_inv @ (J @ pull)))
         step = float(np.max(np.abs(dq)))
         if step > 0.3:  # keep steps small so the chain does not jump branches
             dq *= 0.3 / step
