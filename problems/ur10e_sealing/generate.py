@@ -241,36 +241,44 @@ def _fcl_object(shape: dict, T_world_shape: np.ndarray):
         geometry = fcl.Box(*shape["size_m"])
     elif shape["shape"] == "cylinder":
         geometry = fcl.Cylinder(shape["radius_m"], shape["length_m"])
+    elif shape["shape"] == "mesh":
+        mesh = trimesh.load(HERE / shape["file"], file_type="stl")
+        geometry = fcl.BVHModel()
+        geometry.beginModel(len(mesh.vertices), len(mesh.faces))
+        geometry.addSubModel(mesh.vertices * (0.001 if shape["units"] == "mm" else 1.0), mesh.faces)
+        geometry.endModel()
     else:
         raise ValueError(f"no FCL object for {shape['shape']!r} here")
     return fcl.CollisionObject(geometry, fcl.Transform(T_world_shape[:3, :3], T_world_shape[:3, 3]))
 
 
-def clearance(problem: dict, robot, T_F_R: np.ndarray, qs: np.ndarray):
-    """Smallest distance [m] between the robot's links and tool and the table and fixture.
+def clearances(problem: dict, robot, T_F_R: np.ndarray, qs: np.ndarray) -> dict[str, tuple[float, str]]:
+    """Smallest distance [m] and the closest pair, per cell object, over the joint rows ``qs``.
 
-    The workpiece (the panel, touched by the nozzle) is left out: it is a mesh, and the point is
-    that nothing else of the arm comes near the furniture.
+    Robot links and tool shapes are checked against the table and fixture; against the workpiece
+    (the panel, which the nozzle touches) only the robot's links are, as in the refinement.
     """
     import fcl
 
-    boxes = [o for o in problem["cell"]["objects"] if o["shape"] == "box"]
-    cell = [(o["name"], _fcl_object(o, pose(o["pose"]))) for o in boxes]
+    cell = [(o, _fcl_object(o, pose(o["pose"]))) for o in problem["cell"]["objects"]]
     T_flange_tool = [(s["name"], s, pose(s["pose"])) for s in problem["tool"]["collision"]]
-    request, best = fcl.DistanceRequest(), (math.inf, "")
+    request = fcl.DistanceRequest()
+    best = {o["name"]: (math.inf, "") for o, _ in cell}
     for q in qs:
         links = robot.link_poses(q)
         movers = [
-            (f"{shape.link}/{shape.name}", shape.collision_object(T_F_R @ links[shape.link]))
+            (f"{shape.link}/{shape.name}", shape.collision_object(T_F_R @ links[shape.link]), False)
             for shape in robot.collision_shapes()
         ]
         T_F_flange = T_F_R @ robot.fk(q)
-        movers += [(f"tool/{n}", _fcl_object(s, T_F_flange @ T)) for n, s, T in T_flange_tool]
-        for mover_name, mover in movers:
-            for cell_name, obj in cell:
+        movers += [(f"tool/{n}", _fcl_object(s, T_F_flange @ T), True) for n, s, T in T_flange_tool]
+        for mover_name, mover, is_tool in movers:
+            for o, obj in cell:
+                if is_tool and o.get("workpiece", False):
+                    continue
                 d = fcl.distance(mover, obj, request, fcl.DistanceResult())
-                if d < best[0]:
-                    best = (d, f"{mover_name} - {cell_name}")
+                if d < best[o["name"]][0]:
+                    best[o["name"]] = (d, mover_name)
     return best
 
 
@@ -293,14 +301,14 @@ def check_reachability(problem: dict, positions, rotations) -> bool:
     margins = np.minimum(qs - spec.lower, spec.upper - qs)
     manip, sigma_min = singularity_measures(kin, qs)
     steps = np.degrees(np.abs(np.diff(qs, axis=0)).max(axis=1))
-    gap, pair = clearance(problem, robot, T_F_R, qs)
+    gaps = clearances(problem, robot, T_F_R, qs)
     singular = problem["tolerances"]["singularity_margin"]
     collision_margin = problem.get("collision", {}).get("margin_m", 0.01)
     ok = bool(
         errors.max() < 1e-6
         and margins.min() > margin
         and manip.min() > singular
-        and gap > collision_margin
+        and min(d for d, _ in gaps.values()) > collision_margin
     )
     qd = np.degrees(qs)
     worst_joint = int(np.unravel_index(np.argmin(margins), margins.shape)[1]) + 1
@@ -312,8 +320,8 @@ def check_reachability(problem: dict, positions, rotations) -> bool:
           f"required {math.degrees(margin):.1f} deg)")
     print(f"  smallest singular value of the scaled TCP Jacobian {sigma_min.min():.3f}, "
           f"smallest scaled manipulability {manip.min():.4f} (required {singular})")
-    print(f"  smallest clearance to table and fixture {gap * 1000:.0f} mm ({pair}; required "
-          f"{collision_margin * 1000:.0f} mm)")
+    print(f"  smallest clearance (required {collision_margin * 1000:.0f} mm): " + ", ".join(
+        f"{name} {d * 1000:.0f} mm ({who})" for name, (d, who) in gaps.items()))
     print("  joint ranges [deg]: " + ", ".join(
         f"q{j + 1} {qd[:, j].min():.0f}..{qd[:, j].max():.0f}" for j in range(qd.shape[1])))
     print(f"  reachable: {ok}")

@@ -149,7 +149,7 @@ def _program_index(program: int | str | None, n: int, source: str) -> int | None
         k = int(str(program).strip())
     except ValueError as e:
         raise InputError(f"{source}: feed sequence {program!r} is not a number (1..{n})") from e
-    if isinstance(program, bool) or not 1 <= k <= n:
+    if not 1 <= k <= n:
         raise InputError(f"{source}: feed sequence {program!r} does not exist; the file has {n} (1..{n})")
     return k - 1
 
@@ -181,6 +181,8 @@ def points_from_gcode(
     path = Path(path)
     source = f"G-code file {str(path)!r}"
     scale = metres_per_unit(units, str(path))
+    if not (math.isfinite(arc_tolerance_m) and arc_tolerance_m > 0.0):
+        raise InputError(f"{source}: arc_tolerance_m must be a number > 0 m, got {arc_tolerance_m!r}")
     try:
         lines = path.read_text(encoding="utf-8-sig").splitlines()
     except (OSError, UnicodeDecodeError) as e:
@@ -269,9 +271,10 @@ def points_from_gcode(
         )
         raise InputError(
             f"{source}: {len(sequences)} feed sequences separated by rapids (G0): {listed}; "
-            "choose one with cad.track = \"<number>\""
+            'choose one with cad.track = "<number>"'
         )
     chosen = sequences[k or 0]
-    logger.debug("%s: feed sequence %d of %d, %d points", source, (k or 0) + 1, len(sequences),
-                 len(chosen.points))
+    logger.debug(
+        "%s: feed sequence %d of %d, %d points", source, (k or 0) + 1, len(sequences), len(chosen.points)
+    )
     return np.array(chosen.points, dtype=float)

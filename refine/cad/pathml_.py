@@ -51,7 +51,7 @@ def _select_track(path: Path, tracks: list[tuple[str, PathMLTrack]], track: str 
         why = "is not in" if not hits else "names several tracks of"
         raise InputError(
             f"PathML {path}: track {track!r} {why} the document; give one of {', '.join(names)} "
-            "(as \"layer/track\")"
+            '(as "layer/track")'
         )
     return hits[0]
 

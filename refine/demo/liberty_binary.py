@@ -29,8 +29,12 @@ trailing space or CR LF, by the response size and by the quaternions being unit 
 millisecond timestamp read as a float32 is a tiny denormal for the first 2.3 hours after the
 tracker's clock was reset, so the wrong layout fails that test).
 
-Time: from timestamps ``t = (ms - ms[0]) / 1000``; from frame counts ``(f - f[0]) / rate_hz``;
-without either, sample ``k`` is at ``t = k / rate_hz``.
+Records of other stations, and records a command other than ``C``/``P`` initiated (replies to
+configuration commands), are skipped. An error indicator other than 0 or a space is counted and
+logged as a warning; the sample is kept (the outlier filter deals with disturbed samples).
+
+Time: from timestamps ``t = (ms - ms[0]) / 1000``; from frame counts ``(f - f[0]) / rate_hz``
+(both uint32 counters, unwrapped); without either, sample ``k`` is at ``t = k / rate_hz``.
 """
 
 from __future__ import annotations
@@ -156,7 +160,9 @@ def read_liberty_binary(
             )
         preamble, st, cmd, err, _, size = HEADER.unpack_from(data, offset)
         if preamble != PREAMBLE:
-            raise InputError(f"{path}: bad record header at byte offset {offset}: expected b'LY', got {preamble!r}")
+            raise InputError(
+                f"{path}: bad record header at byte offset {offset}: expected b'LY', got {preamble!r}"
+            )
         end = offset + HEADER.size + size
         if end > len(data):
             raise InputError(
@@ -176,7 +182,9 @@ def read_liberty_binary(
         offset = end
     if not payloads:
         found = ", ".join(str(s) for s in sorted(stations)) or "none"
-        raise InputError(f"tracker log {str(path)!r}: no P&O records of station {station}; stations found: {found}")
+        raise InputError(
+            f"tracker log {str(path)!r}: no P&O records of station {station}; stations found: {found}"
+        )
     if output_list is None:
         layouts = [lay for lay in AUTO_LAYOUTS if _fits(lay, payloads)]
         if len(layouts) != 1:
@@ -202,10 +210,12 @@ def read_liberty_binary(
         )
     if n_errors:
         logger.warning("%s: %d record(s) of station %d flag an error", path, n_errors, station)
-    if "timestamp" in fields:
-        t = (fields["timestamp"][:, 0].astype(np.int64) - int(fields["timestamp"][0, 0])) / 1000.0
-    elif "frame" in fields:
-        t = (fields["frame"][:, 0].astype(np.int64) - int(fields["frame"][0, 0])) / rate_hz
+    counter = fields.get("timestamp", fields.get("frame"))
+    if counter is not None:
+        steps = np.diff(counter[:, 0].astype(np.int64))
+        steps[steps < -(2**31)] += 2**32  # the uint32 counter wrapped around
+        ticks = np.concatenate([[0], np.cumsum(steps)])
+        t = ticks / 1000.0 if "timestamp" in fields else ticks / rate_hz
     else:
         t = np.arange(len(payloads)) / rate_hz
     bad = np.flatnonzero(np.diff(t) <= 0.0)
@@ -253,6 +263,8 @@ def write_liberty_binary(
     path = Path(path)
     if units not in METRES_PER_UNIT:
         raise InputError(f"{path}: unknown Liberty unit {units!r}; use 'in' or 'cm'")
+    if not 0 <= log.station <= 255:
+        raise InputError(f"{path}: station {log.station} does not fit the record's station byte (0..255)")
     items = tuple(output_list) if output_list is not None else ((8, 2, 7) if with_timestamp else (2, 7))
     fmt = _item_format(items, str(path))
     positions = log.positions / METRES_PER_UNIT[units]

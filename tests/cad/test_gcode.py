@@ -58,7 +58,12 @@ def test_chords_stay_within_the_arc_tolerance(tmp_path):
 
 @pytest.mark.parametrize(
     ("code", "r", "centre", "sweep"),
-    [("G2", 10, (0, 0), -0.5), ("G2", -10, (10, -10), -1.5), ("G3", 10, (10, -10), 0.5), ("G3", -10, (0, 0), 1.5)],
+    [
+        ("G2", 10, (0, 0), -0.5),
+        ("G2", -10, (10, -10), -1.5),
+        ("G3", 10, (10, -10), 0.5),
+        ("G3", -10, (0, 0), 1.5),
+    ],
 )
 def test_radius_form_picks_the_short_or_long_arc_by_its_sign(tmp_path, code, r, centre, sweep):
     f = _write(tmp_path, f"G21\nG0 X10 Y0\n{code} X0 Y-10 R{r}\n")
@@ -147,9 +152,16 @@ def test_a_missing_feed_sequence_is_an_error(tmp_path, program):
 
 @pytest.mark.parametrize(
     ("line", "why"),
-    [("G1 X12.5.3", "cannot read"), ("G1 X", "cannot read"), ("G28 X0", "unsupported code G28"),
-     ("G1 A30", "unsupported word A30"), ("G2 X5 Y5", "needs I/J/K or R"), ("G2 X20 Y0 I3", "not on one circle"),
-     ("G1 X1 (open", "unclosed comment"), ("G2 X40 Y0 R10", "smaller than half the chord")],
+    [
+        ("G1 X12.5.3", "cannot read"),
+        ("G1 X", "cannot read"),
+        ("G28 X0", "unsupported code G28"),
+        ("G1 A30", "unsupported word A30"),
+        ("G2 X5 Y5", "needs I/J/K or R"),
+        ("G2 X20 Y0 I3", "not on one circle"),
+        ("G1 X1 (open", "unclosed comment"),
+        ("G2 X40 Y0 R10", "smaller than half the chord"),
+    ],
 )
 def test_a_malformed_line_names_the_file_and_line(tmp_path, line, why):
     f = _write(tmp_path, f"G21\nG1 X1\n{line}\n")

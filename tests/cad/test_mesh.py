@@ -93,7 +93,9 @@ def test_several_loops_longest_first_or_the_one_nearest_start_near():
 
 def test_open_section_chain_starts_at_the_end_nearer_start_near(tmp_path):
     f = _save(tmp_path, _grid(), "plate.stl")
-    p = points_from_mesh(f, "mm", section_origin=(50, 0, 0), section_normal=(1, 0, 0), start_near=(50, 200, 0))
+    p = points_from_mesh(
+        f, "mm", section_origin=(50, 0, 0), section_normal=(1, 0, 0), start_near=(50, 200, 0)
+    )
     np.testing.assert_allclose(p[[0, -1]], [[0.05, 0.1, 0.0], [0.05, 0.0, 0.0]], atol=1e-12)
 
 
@@ -125,7 +127,9 @@ def test_closed_mesh_has_no_boundary_and_bad_arguments_are_errors(tmp_path):
 
 
 def test_bracket_example_sections():
-    profile = points_from_mesh(DATA / "bracket.stl", "mm", section_origin=(0, 50, 0), section_normal=(0, 1, 0))
+    profile = points_from_mesh(
+        DATA / "bracket.stl", "mm", section_origin=(0, 50, 0), section_normal=(0, 1, 0)
+    )
     assert _length(profile) == pytest.approx(0.200, abs=1e-12)  # the L profile
     web = points_from_mesh(DATA / "bracket.stl", "mm", section_origin=(0, 0, 20), section_normal=(0, 0, 1))
     assert _length(web) == pytest.approx(0.216, abs=1e-12)  # 8 mm x 100 mm

@@ -1,0 +1,196 @@
+"""Collision bodies: FCL objects with the bounds and support functions the queries need.
+
+A :class:`Body` is one FCL object of the collision model: a robot link primitive, a tool shape on
+the flange, or a cell object. Next to the FCL object it keeps what FCL does not offer in a usable
+form: a box bounding the shape in its own frame (for the broad phase), its support function (the
+point deepest along a direction, used to measure how far a body reaches through a mesh face), and
+for meshes the triangles and outward face normals (FCL's mesh witness points are repaired with
+them, see :mod:`refine.collision.distance`).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import fcl
+import numpy as np
+import trimesh
+from numpy.typing import NDArray
+
+from refine.errors import InputError
+from refine.settings import Shape
+
+log = logging.getLogger(__name__)
+
+Array = NDArray[np.float64]
+
+UNIT_SCALE = {"m": 1.0, "mm": 1e-3, "in": 0.0254}
+"""Metres per unit of a mesh file."""
+
+
+@dataclass(eq=False)
+class Body:
+    """One collision object and what the queries need to know about it.
+
+    Attributes:
+        name: the name contacts report: the robot link, ``"tool:<shape>"`` or the cell object.
+        shape: the shape's own name (URDF collision name, tool or cell shape name).
+        kind: ``"link"``, ``"tool"`` or ``"cell"``.
+        link: the URDF link (Pinocchio frame) the body moves with; None for cell objects.
+        frame_id: Pinocchio frame index of ``link`` (-1 for cell objects).
+        joint: Pinocchio joint that moves ``link`` (0: fixed to the base; -1 for cell objects).
+        link_T_shape: pose of the shape in its link frame, or in the world for cell objects, (4, 4).
+        geometry: the FCL geometry, in the shape frame [m].
+        obj: the FCL object placed in the world.
+        kind_params: ``("box", half sizes)``, ``("cylinder", radius, half length)``,
+            ``("sphere", radius)`` or ``("mesh",)``.
+        half_extent: half sizes of a box bounding the shape, centred on ``centre`` [m], (3,).
+        centre: centre of that box in the shape frame [m], (3,).
+        vertices: mesh vertices in the shape frame [m], (V, 3), or None.
+        faces: mesh triangles as vertex indices, (F, 3), or None.
+        face_normals: outward unit normals of the triangles in the shape frame, (F, 3), or None.
+        workpiece: a cell object the process touches by design (the tool is not checked against it).
+    """
+
+    name: str
+    shape: str
+    kind: str
+    link: str | None
+    frame_id: int
+    joint: int
+    link_T_shape: Array
+    geometry: fcl.CollisionGeometry
+    obj: fcl.CollisionObject
+    kind_params: tuple
+    half_extent: Array
+    centre: Array
+    vertices: Array | None = None
+    faces: NDArray[np.int64] | None = None
+    face_normals: Array | None = None
+    workpiece: bool = False
+
+    @property
+    def is_mesh(self) -> bool:
+        """True for a triangle mesh (an FCL BVHModel)."""
+        return self.vertices is not None
+
+    def bounding_radius(self) -> float:
+        """Radius of a sphere about the shape frame's origin holding the whole shape [m]."""
+        return float(np.linalg.norm(np.abs(self.centre) + self.half_extent))
+
+    def support(self, T: Array, direction: Array) -> Array:
+        """The point of the body placed at T (4, 4) furthest along ``direction`` (3,), world [m]."""
+        R, c = T[:3, :3], T[:3, 3]
+        u = R.T @ direction
+        tag = self.kind_params[0]
+        if tag == "sphere":
+            return c + self.kind_params[1] * direction / np.linalg.norm(direction)
+        if tag == "box":
+            return c + R @ (np.sign(u) * self.kind_params[1])
+        if tag == "cylinder":
+            radius, half_length = self.kind_params[1], self.kind_params[2]
+            local = np.array([0.0, 0.0, np.sign(u[2]) * half_length])
+            radial = np.hypot(u[0], u[1])
+            if radial > 1e-12:
+                local[:2] = radius * u[:2] / radial
+            return c + R @ local
+        assert self.vertices is not None
+        return c + R @ self.vertices[int(np.argmax(self.vertices @ u))]
+
+
+def _primitive(shape: Shape) -> tuple[fcl.CollisionGeometry, tuple, Array]:
+    if shape.shape == "box":
+        half = np.asarray(shape.size_m, dtype=float) / 2.0
+        return fcl.Box(*shape.size_m), ("box", half), half
+    if shape.shape == "cylinder":
+        r, h = float(shape.radius_m), float(shape.length_m) / 2.0  # type: ignore[arg-type]
+        return fcl.Cylinder(r, 2.0 * h), ("cylinder", r, h), np.array([r, r, h])
+    r = float(shape.radius_m)  # type: ignore[arg-type]
+    return fcl.Sphere(r), ("sphere", r), np.full(3, r)
+
+
+def primitive_from_fcl(geometry: fcl.CollisionGeometry, where: str) -> tuple[tuple, Array]:
+    """Support parameters and half extents [m] of an FCL box, cylinder or sphere."""
+    if isinstance(geometry, fcl.Box):
+        half = np.asarray(geometry.side, dtype=float) / 2.0
+        return ("box", half), half
+    if isinstance(geometry, fcl.Cylinder):
+        r, h = float(geometry.radius), float(geometry.lz) / 2.0
+        return ("cylinder", r, h), np.array([r, r, h])
+    if isinstance(geometry, fcl.Sphere):
+        r = float(geometry.radius)
+        return ("sphere", r), np.full(3, r)
+    raise InputError(f"{where}: collision geometry {type(geometry).__name__} is not supported")
+
+
+def load_mesh(shape: Shape) -> trimesh.Trimesh:
+    """Read a shape's mesh file in metres, with outward normals when the mesh is closed.
+
+    Raises:
+        InputError: naming the shape and file if it cannot be read or holds no triangles.
+    """
+    path = Path(shape.file) if shape.file is not None else None
+    if path is None or not path.is_file():
+        raise InputError(f"shape {shape.name!r}: mesh file {path} not found")
+    try:
+        mesh = trimesh.load(str(path), force="mesh")
+    except Exception as e:  # trimesh raises many kinds for bad files
+        raise InputError(f"shape {shape.name!r}: cannot read mesh {path}: {e}") from e
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise InputError(f"shape {shape.name!r}: mesh {path} holds no triangles")
+    mesh.apply_scale(UNIT_SCALE[shape.units])
+    if mesh.is_watertight and mesh.volume < 0.0:
+        mesh.invert()
+    if not mesh.is_watertight:
+        log.warning(
+            "mesh %r (%s) is not closed: penetration into it is measured against its faces' "
+            "planes as wound in the file", shape.name, path
+        )
+    return mesh
+
+
+def mesh_body_parts(mesh: trimesh.Trimesh) -> dict:
+    """FCL BVH (OBBRSS) geometry and the mesh arrays of a :class:`Body`."""
+    vertices = np.ascontiguousarray(mesh.vertices, dtype=float)
+    faces = np.ascontiguousarray(mesh.faces, dtype=np.int64)
+    geometry = fcl.BVHModel()
+    geometry.beginModel(len(vertices), len(faces))
+    geometry.addSubModel(vertices, faces.astype(np.int32))
+    geometry.endModel()
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    return {
+        "geometry": geometry,
+        "kind_params": ("mesh",),
+        "half_extent": (hi - lo) / 2.0,
+        "centre": (hi + lo) / 2.0,
+        "vertices": vertices,
+        "faces": faces,
+        "face_normals": np.asarray(mesh.face_normals, dtype=float),
+    }
+
+
+def shape_body(
+    shape: Shape, *, name: str, kind: str, link: str | None, frame_id: int, joint: int
+) -> Body:
+    """A :class:`Body` for a tool shape (pose in the flange frame) or a cell object (world)."""
+    pose = np.array(shape.pose, dtype=float)
+    if shape.shape == "mesh":
+        parts = mesh_body_parts(load_mesh(shape))
+    else:
+        geometry, params, half = _primitive(shape)
+        parts = {"geometry": geometry, "kind_params": params, "half_extent": half, "centre": np.zeros(3)}
+    obj = fcl.CollisionObject(parts["geometry"], fcl.Transform(pose[:3, :3], pose[:3, 3]))
+    return Body(
+        name=name, shape=shape.name, kind=kind, link=link, frame_id=frame_id, joint=joint,
+        link_T_shape=pose, obj=obj, workpiece=bool(shape.workpiece) and kind == "cell", **parts,
+    )
+
+
+def world_aabb(T: Array, centre: Array, half: Array) -> tuple[Array, Array]:
+    """Axis-aligned box (centre, half sizes) [m] around a shape box placed at T (..., 4, 4)."""
+    R = T[..., :3, :3]
+    c = T[..., :3, 3] + np.einsum("...ij,...j->...i", R, centre)
+    h = np.einsum("...ij,...j->...i", np.abs(R), half)
+    return c, h
