@@ -28,7 +28,8 @@ class TruthComparison:
     """Planned path against the truth.
 
     Attributes:
-        orientation_error_deg: reached TCP orientation vs the true tool orientation [deg], (N,).
+        orientation_error_deg: reached TCP orientation vs the true tool orientation [deg], (N,)
+            (the tool axes' angle for an axisymmetric tool).
         demo_orientation_error_deg: fused demonstrated orientation vs the truth [deg], (N,).
         speed_error_rel: (planned - true) / true speed [-], (N,).
         speed_compared: waypoints where the speed is compared (outside the segments where the
@@ -75,10 +76,20 @@ class TruthComparison:
         }
 
 
-def compare_with_truth(truth_csv: Path, trajectory: Trajectory, timing: Timing) -> TruthComparison:
+def _angle_deg(R_a: NDArray, R_b: NDArray, axis_only: bool) -> NDArray:
+    if not axis_only:
+        return rotation_angle_deg(R_a, R_b)
+    cosines = np.einsum("ij,ij->i", R_a[:, :, 2], R_b[:, :, 2])
+    return np.degrees(np.arccos(np.clip(cosines, -1.0, 1.0)))
+
+
+def compare_with_truth(
+    truth_csv: Path, trajectory: Trajectory, timing: Timing, *, axisymmetric: bool = False
+) -> TruthComparison:
     """Compare ``trajectory`` with the truth file of a simulated demonstration.
 
-    The truth is interpolated to the waypoints' arc lengths (Slerp for orientations).
+    The truth is interpolated to the waypoints' arc lengths (Slerp for orientations). For an
+    axisymmetric tool only the tool axis is compared: the spin about it is free by design.
 
     Raises:
         InputError: the truth does not cover the path's arc length range.
@@ -94,8 +105,8 @@ def compare_with_truth(truth_csv: Path, trajectory: Trajectory, timing: Timing) 
     xyzw = np.concatenate([q_true[:, 1:], q_true[:, :1]], axis=1)
     R_true = Slerp(s_true, Rotation.from_quat(xyzw))(s_clip).as_matrix()
     v = np.interp(s_clip, s_true, v_true)
-    ori = rotation_angle_deg(R_true, trajectory.poses[:, :3, :3])
-    demo = rotation_angle_deg(R_true, trajectory.rotations_demo)
+    ori = _angle_deg(R_true, trajectory.poses[:, :3, :3], axisymmetric)
+    demo = _angle_deg(R_true, trajectory.rotations_demo, axisymmetric)
     compared = np.ones(len(s), dtype=bool)
     for seg in timing.slow_segments:
         compared[seg.index_start : seg.index_end + 1] = False

@@ -153,7 +153,11 @@ def fused_path(problem: Problem, watch: _Stopwatch | None = None) -> FusedPath:
 def weights_for(problem: Problem, robot: Robot) -> Weights:
     """Cost weights from ``[optimise]``; a redundant arm gets a mid-range cost by default."""
     o = problem.optimise
-    mid = o.mid_range_weight if o.mid_range_weight is not None else (REDUNDANT_MID_RANGE_WEIGHT if robot.nq > 6 else 0.0)
+    mid = (
+        o.mid_range_weight
+        if o.mid_range_weight is not None
+        else (REDUNDANT_MID_RANGE_WEIGHT if robot.nq > 6 else 0.0)
+    )
     return Weights(o.orientation_weight, o.velocity_weight, o.acceleration_weight, mid)
 
 
@@ -193,6 +197,7 @@ def refine_pass(
         home=home,
         sources=sources,
         repair_max_slack_deg=problem.repair.max_slack_deg if problem.repair.enabled else None,
+        **({"max_rounds": problem.collision.max_outer_iterations} if sources else {}),
     )
     watch.lap("refine")
     del watch.times["refine"]  # reported by stage: seed, solve, verify (and rebuilds under build)
@@ -245,7 +250,12 @@ def solve_problem(problem: Problem) -> RunResult:
         and first.trajectory is not None
     ):
         assert first.timing is not None
-        truth = compare_with_truth(problem.demonstration.truth, first.trajectory, first.timing)
+        truth = compare_with_truth(
+            problem.demonstration.truth,
+            first.trajectory,
+            first.timing,
+            axisymmetric=problem.tool.axisymmetric,
+        )
         watch.lap("truth")
     return RunResult(problem, robot, tuple(passes), truth, watch.times)
 

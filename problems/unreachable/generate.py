@@ -34,7 +34,7 @@ from refine.frames import (
     transform_from_xyz_rpy,
     transform_points,
 )
-from refine.optimise.seed import TcpKinematics
+from refine.optimise.seed import TcpKinematics, solve_ik
 from refine.robot import load_robot
 
 try:  # Python 3.11+
@@ -216,8 +216,76 @@ def wrist_flip(case: Case) -> Demo:
     return Demo(positions, rotations, worker_speed(s, 0.04))
 
 
+JOINT_LIMIT_BEND_DEG = (-112.0, -130.0)  # axis-5 bend the demonstrated orientation needs: ends, middle
+
+
+def joint_limit(case: Case) -> Demo:
+    """Straight line; the worker tips the gun up and back until axis 5 would need -130 deg.
+
+    Built in joint space: axes 4 and 6 at 0, axis 5 going smoothly from -112 deg at the ends to
+    ``JOINT_LIMIT_BEND_DEG[1]`` on s = 0.08-0.12 m, axes 1-3 solved for the TCP on the line; the
+    demonstrated orientation is the one these joints give. Axis 5 reaches -125..+120 deg, so this
+    is 5 deg past its lower limit (7 deg past the limit less the 2 deg joint margin); the same
+    orientation with the wrist flipped (axis 4 + 180, axis 5 negated, axis 6 + 180) is worse, at
+    +130 deg against +120.
+    """
+    positions = line([1.30, -0.10, 0.90], [1.30, 0.10, 0.90])
+    s = arc_length(positions)
+    lo, hi = np.radians(JOINT_LIMIT_BEND_DEG)
+    rise = smoothstep((s - 0.03) / 0.05) * smoothstep((0.17 - s) / 0.05)
+    wrist = np.column_stack([np.zeros_like(s), lo + (hi - lo) * rise, np.zeros_like(s)])
+    q = arm_path(case.kin, positions, wrist, np.radians([0, 35, -25, 0, -112, 0]))
+    return Demo(positions, case.kin.poses(q)[:, :3, :3], worker_speed(s, 0.04))
+
+SPIRAL_RADII_M = (0.015, 0.035)  # inner and outer radius of the spiral bead [m]
+
+
+def spiral(case: Case, centre, turns: float) -> Demo:
+    """A flat spiral bead, the slot nozzle pointing straight down and kept across the radius.
+
+    The spiral runs counter-clockwise (seen from above) and outwards from ``SPIRAL_RADII_M[0]`` to
+    ``[1]`` in ``turns`` turns about the vertical through ``centre``; the nozzle's x axis stays
+    along the circumferential direction, so the tool spins ``turns`` full turns about its own
+    (vertical) axis, all of it on axis 6 (axis 6 decreasing). Whether a spin fits axis 6 depends
+    on its phase as well as on its size: the spiral starts at the polar angle that centres the
+    spin in axis 6's range (the start at axis 6 = +turns * 180 deg), the most favourable phase.
+    """
+    r0, r1 = SPIRAL_RADII_M
+    centre = np.asarray(centre, dtype=float)
+    phi_end = 2.0 * math.pi * turns
+
+    def frames(phi):
+        across = np.column_stack([-np.sin(phi), np.cos(phi), 0 * phi])
+        return frame_from_z_x(np.tile([0.0, 0.0, -1.0], (len(phi), 1)), across)
+
+    # axis 6 at the start for polar angle 0, from IK; the spin about the downward tool axis
+    # turns axis 6 by -phi, so starting at phi0 = q6(0) - turns * 180 deg centres the spin
+    T = make_transform(frames(np.zeros(1))[0], centre + [r0, 0.0, 0.0])
+    free = np.full(case.kin.robot.nq, np.inf)
+    q, err = solve_ik(case.kin, T, np.radians([0, 15, 10, 0, 60, 0]), -free, free, max_iterations=500)
+    if err > 1e-6:
+        raise RuntimeError(f"{case.name}: IK for the spiral start failed (error {err:.1e})")
+    phi0 = float(np.mod(q[5] - np.pi * turns + np.pi, 2 * np.pi) - np.pi)
+    phi = phi0 + np.linspace(0.0, phi_end, int(math.ceil(phi_end * 0.5 * (r0 + r1) / POINT_SPACING)) + 1)
+    r = r0 + (r1 - r0) * (phi - phi0) / phi_end
+    positions = centre + np.column_stack([r * np.cos(phi), r * np.sin(phi), 0 * phi])
+    return Demo(positions, frames(phi), worker_speed(arc_length(positions), 0.04))
+
+
+def joint_wrap(case: Case) -> Demo:
+    """Spiral of 2.25 turns: the tool spins 810 deg; axis 6 spans 800 deg (796 inside the margins)."""
+    return spiral(case, [1.35, 0.0, 0.60], 2.25)
+
+
+def joint_wrap_infeasible(case: Case) -> Demo:
+    """Spiral of 2.6 turns: the tool spins 936 deg, 140 deg more than axis 6 spans inside its margins."""
+    return spiral(case, [1.35, 0.0, 0.60], 2.6)
+
 CASES: dict[str, Callable[[Case], Demo]] = {
     "wrist_flip": wrist_flip,
+    "joint_limit": joint_limit,
+    "joint_wrap": joint_wrap,
+    "joint_wrap_infeasible": joint_wrap_infeasible,
 }
 
 

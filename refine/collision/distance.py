@@ -21,6 +21,8 @@ What python-fcl 0.7 gives, measured (``tests/collision/test_distance.py`` keeps 
 
 from __future__ import annotations
 
+import math
+
 import fcl
 import numpy as np
 from numpy.typing import NDArray
@@ -62,7 +64,7 @@ def signed_distance(a: Body, T_a: Array, b: Body, T_b: Array) -> tuple[float, Ar
         d = float(fcl.distance(a.obj, b.obj, _SIGNED, res))
         p_a, p_b = np.asarray(res.nearest_points[0]), np.asarray(res.nearest_points[1])
         return d, p_a, p_b, _normal(d, p_a, p_b, a, T_a, b, T_b)
-    swap = not b.is_mesh  # FCL handles BVH-first pairs natively; keep the mesh as the first object
+    swap = not a.is_mesh  # FCL handles BVH-first pairs natively; keep the mesh as the first object
     m, T_m, o, T_o = (b, T_b, a, T_a) if swap else (a, T_a, b, T_b)
     d, p_m, p_o, n_m = _mesh_distance(m, T_m, o, T_o)
     if swap:
@@ -72,7 +74,7 @@ def signed_distance(a: Body, T_a: Array, b: Body, T_b: Array) -> tuple[float, Ar
 
 def _normal(d: float, p_a: Array, p_b: Array, a: Body, T_a: Array, b: Body, T_b: Array) -> Array:
     gap = p_a - p_b
-    length = float(np.linalg.norm(gap))
+    length = math.sqrt(float(gap @ gap))
     if length > _EPS:
         return gap / length if d >= 0.0 else -gap / length
     res = fcl.CollisionResult()

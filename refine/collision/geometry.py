@@ -191,6 +191,6 @@ def shape_body(
 def world_aabb(T: Array, centre: Array, half: Array) -> tuple[Array, Array]:
     """Axis-aligned box (centre, half sizes) [m] around a shape box placed at T (..., 4, 4)."""
     R = T[..., :3, :3]
-    c = T[..., :3, 3] + np.einsum("...ij,...j->...i", R, centre)
-    h = np.einsum("...ij,...j->...i", np.abs(R), half)
+    c = T[..., :3, 3] + (R @ centre[..., None])[..., 0]
+    h = (np.abs(R) @ half[..., None])[..., 0]
     return c, h

@@ -198,6 +198,7 @@ class _Loop:
     timings: dict[str, float]
     iterations: int = 0
     outer: int = 0
+    max_rounds: int = MAX_OUTER_ITERATIONS
 
     def solve(self, x0: Array) -> tuple[Array, dict]:
         t0 = time.perf_counter()
@@ -239,23 +240,23 @@ def _run_rounds(
         if extra:
             check = replace(check, violations=check.violations + tuple(extra))
         loop.timings["verify"] = loop.timings.get("verify", 0.0) + time.perf_counter() - t0
-        if not stats.get("success", False) or loop.outer >= MAX_OUTER_ITERATIONS:
+        if not stats.get("success", False) or loop.outer >= loop.max_rounds:
             return x, stats, check, slack
         more = _new_singular(kin, q, margin, p.active)
         rows = tuple(r for src in sources for r in src.rows(p, q))
         if not (more.singular_waypoints or more.singular_segments or rows):
             return x, stats, check, slack
         log.info(
-            "outer round %d: +%d singular waypoints, +%d segment points, +%d linear rows",
+            "outer round %d: +%d singular waypoints, +%d segment points, %d linear rows",
             loop.outer,
             len(more.singular_waypoints),
             len(more.singular_segments),
             len(rows),
         )
-        loop.rebuild(
-            active=p.active.union(ActiveSet(more.singular_waypoints, more.singular_segments, rows)),
-            elastic_deg=p.elastic_deg,
-        )
+        # relinearised rows replace the last round's; singularity points accumulate
+        grown = p.active.union(ActiveSet(more.singular_waypoints, more.singular_segments))
+        active = ActiveSet(grown.singular_waypoints, grown.singular_segments, rows or p.active.linear_rows)
+        loop.rebuild(active=active, elastic_deg=p.elastic_deg)
         x0 = x if p.elastic_deg is not None else q.ravel()
 
 
@@ -266,6 +267,7 @@ def solve_refinement(
     home: Array | None = None,
     sources: tuple[ConstraintSource, ...] = (),
     repair_max_slack_deg: float | None = None,
+    max_rounds: int = MAX_OUTER_ITERATIONS,
 ) -> Refinement:
     """Solve ``problem`` with IPOPT from ``q0`` (or the IK seed), verify, and repair if asked.
 
@@ -276,6 +278,7 @@ def solve_refinement(
         sources: constraint sources (collision) adding linearised rows and dense checks.
         repair_max_slack_deg: when the strict problem is infeasible, the largest extra orientation
             slack [deg] the elastic problem may use; None for no repair.
+        max_rounds: solve -> verify -> add constraints rounds at most.
 
     Raises:
         SolverError: IPOPT itself failed (not an infeasibility): the message names its status.
@@ -302,10 +305,15 @@ def solve_refinement(
             timings_s=timings,
         )
 
-    loop = _Loop(problem, timings)
+    loop = _Loop(problem, timings, max_rounds=max_rounds)
     initial = _new_singular(kin, q_seed, problem.tolerances.singularity_margin, problem.active)
-    if initial.singular_waypoints or initial.singular_segments:
-        loop.rebuild(active=problem.active.union(initial))
+    seed_rows = tuple(r for src in sources for r in src.rows(problem, q_seed))
+    if initial.singular_waypoints or initial.singular_segments or seed_rows:
+        loop.rebuild(
+            active=problem.active.union(
+                ActiveSet(initial.singular_waypoints, initial.singular_segments, seed_rows)
+            )
+        )
     x, stats, check, slack = _run_rounds(loop, q_seed.ravel(), sources)
     q = loop.problem.joints(x)
     status = "ok" if check.ok else "infeasible"

@@ -1,0 +1,333 @@
+"""The collision model of a robot cell: signed distances, witness points and their Jacobians.
+
+The model holds one FCL object per robot link primitive (from the URDF), per tool shape (on the
+flange link) and per cell object (box, cylinder, sphere or mesh). Which pairs it checks is decided
+once, by the rules of :mod:`refine.collision.pairs`. A query at joints q places the moving bodies,
+runs a broad phase (world-aligned boxes around every body, compared in one vectorised step, so a
+pair farther apart than the query distance costs no FCL call), and asks FCL only for the pairs left.
+
+FCL is not differentiable inside CasADi; the optimiser linearises instead: at a witness point pair
+the signed distance changes as ``n^T (J_body - J_other) dq`` (:func:`linearised_distance`), with
+``J`` the Jacobian of the witness point as a point fixed to its link (:meth:`point_jacobian`).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import fcl
+import numpy as np
+import pinocchio as pin
+from numpy.typing import ArrayLike, NDArray
+
+from refine.collision.distance import place, signed_distance
+from refine.collision.geometry import Body, primitive_from_fcl, shape_body, world_aabb
+from refine.collision.pairs import exclusion, joint_axes
+from refine.errors import InputError
+from refine.frames import check_transform
+from refine.robot import Robot
+from refine.settings import Shape
+
+log = logging.getLogger(__name__)
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Contact:
+    """One close pair: a robot or tool body and a cell object or another robot body.
+
+    Attributes:
+        body: robot link name or ``"tool:<shape name>"``.
+        other: cell object name, or the other link (or tool shape) for a self pair.
+        distance_m: signed distance [m]; negative = penetration depth.
+        point_body: witness point on the body, world frame [m], (3,).
+        point_other: witness point on the other, world frame [m], (3,).
+        normal: unit vector (3,) along which moving the body increases the distance (from the
+            other towards the body when apart).
+        link: the robot link the body point moves with (the flange link for tool shapes).
+        self_pair: the other is part of the robot or tool too.
+        other_link: the link the other's point moves with (self pairs), else None.
+        margin_m: the clearance this pair must keep [m] (``margin_m`` or ``self_margin_m``).
+        body_shape: the body's shape name (a link may carry several).
+        other_shape: the other's shape name.
+    """
+
+    body: str
+    other: str
+    distance_m: float
+    point_body: Array
+    point_other: Array
+    normal: Array
+    link: str
+    self_pair: bool
+    other_link: str | None = None
+    margin_m: float = 0.0
+    body_shape: str = ""
+    other_shape: str = ""
+
+    @property
+    def clearance_m(self) -> float:
+        """Distance left above the pair's margin [m]; negative when the margin is broken."""
+        return self.distance_m - self.margin_m
+
+
+def linearised_distance(contact: Contact, J_body: Array, J_other: Array | None = None) -> Array:
+    """Gradient of a contact's signed distance with respect to the joints, shape (n,).
+
+    Args:
+        contact: the contact.
+        J_body: Jacobian (3, n) of ``contact.point_body`` as a point fixed to ``contact.link``.
+        J_other: Jacobian (3, n) of ``contact.point_other`` (self pairs), None for a static object.
+    """
+    J = np.asarray(J_body, dtype=float)
+    if J_other is not None:
+        J = J - np.asarray(J_other, dtype=float)
+    return contact.normal @ J
+
+
+class CollisionModel:
+    """Robot, tool and cell as FCL objects, with the pairs to check.
+
+    Attributes:
+        robot: the robot model.
+        base_in_world: T_F_R, (4, 4).
+        tcp_in_flange: T_flange_TCP, (4, 4).
+        margin_m: clearance kept between robot or tool and the cell [m].
+        self_margin_m: clearance kept between the robot's own bodies and the tool [m].
+        bodies: every body, the moving ones (links, then tool shapes) first.
+        pairs: the checked pairs as (body, other) names.
+        excluded: the pairs not checked, as (body, other, reason) (see :mod:`refine.collision.pairs`).
+        queries: narrow-phase (FCL) pair queries made so far.
+    """
+
+    def __init__(
+        self, robot: Robot, base_in_world: ArrayLike, tcp_in_flange: ArrayLike,
+        tool_shapes: tuple[Shape, ...], cell: tuple[Shape, ...], *, margin_m: float, self_margin_m: float,
+    ) -> None:
+        for key, value in (("margin_m", margin_m), ("self_margin_m", self_margin_m)):
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0.0):
+                raise InputError(f"collision model: {key} must be a finite number >= 0, got {value!r}")
+        self.robot = robot
+        self.base_in_world = check_transform(base_in_world, "collision model: base_in_world").copy()
+        self.tcp_in_flange = check_transform(tcp_in_flange, "collision model: tcp_in_flange").copy()
+        self.margin_m, self.self_margin_m = float(margin_m), float(self_margin_m)
+        self._model = robot.model
+        self._data = robot.model.createData()
+        self.bodies: list[Body] = self._robot_bodies() + self._tool_bodies(tool_shapes)
+        self._n_moving = len(self.bodies)
+        self.bodies += self._cell_bodies(cell)
+        self._check_names()
+        moving = self.bodies[: self._n_moving]
+        self._joints = sorted({b.joint for b in moving})
+        self._joint_slot = np.array([self._joints.index(b.joint) for b in moving], dtype=int)
+        self._joint_T_shape = np.array(  # shape pose in its joint's frame: frame placement, then shape
+            [self._model.frames[b.frame_id].placement.homogeneous @ b.link_T_shape for b in moving]
+        )
+        self._centre = np.array([b.centre for b in self.bodies])
+        self._half = np.array([b.half_extent for b in self.bodies])
+        self._poses = np.array([b.link_T_shape for b in self.bodies])  # cell poses are final
+        self._aabb_c, self._aabb_h = world_aabb(self._poses, self._centre, self._half)
+        self._select_pairs()
+        self.queries = 0
+        self._q: Array | None = None
+
+    # ---- building ----------------------------------------------------------------------------
+
+    def _robot_bodies(self) -> list[Body]:
+        bodies = []
+        for s in self.robot.collision_shapes():
+            fid = self.robot.frame_id(s.link)
+            params, half = primitive_from_fcl(s.geometry, f"robot {self.robot.spec.name!r} link {s.link!r}")
+            obj = fcl.CollisionObject(s.geometry)
+            bodies.append(Body(
+                name=s.link, shape=s.name, kind="link", link=s.link, frame_id=fid,
+                joint=int(self._model.frames[fid].parentJoint), link_T_shape=np.array(s.link_T_shape),
+                geometry=s.geometry, obj=obj, kind_params=params, half_extent=half, centre=np.zeros(3),
+            ))
+        return bodies
+
+    def _tool_bodies(self, shapes: tuple[Shape, ...]) -> list[Body]:
+        fid = self.robot.flange_id
+        link = self.robot.spec.flange_frame
+        joint = int(self._model.frames[fid].parentJoint)
+        return [shape_body(s, name=f"tool:{s.name}", kind="tool", link=link, frame_id=fid, joint=joint)
+                for s in shapes]
+
+    def _cell_bodies(self, shapes: tuple[Shape, ...]) -> list[Body]:
+        return [shape_body(s, name=s.name, kind="cell", link=None, frame_id=-1, joint=-1) for s in shapes]
+
+    def _check_names(self) -> None:
+        links = {b.name for b in self.bodies if b.kind == "link"}
+        seen: set[str] = set()
+        for b in self.bodies:
+            if b.kind == "link":
+                continue
+            if b.name in seen or b.name in links:
+                raise InputError(
+                    f"collision model: the name {b.name!r} is used twice (tool shapes, cell objects and "
+                    f"robot links {sorted(links)} must all have distinct names)"
+                )
+            seen.add(b.name)
+
+    def _select_pairs(self) -> None:
+        self._place_all(pin.neutral(self._model))
+        axes = joint_axes(self._model, self.base_in_world)
+        kept: list[tuple[int, int]] = []
+        excluded: list[tuple[str, str, str]] = []
+        for i in range(self._n_moving):
+            for j in range(i + 1, len(self.bodies)):
+                a, b = self._order(i, j)
+                why = exclusion(self.bodies[a], self.bodies[b], self._model, axes, self.self_margin_m)
+                if why is None:
+                    kept.append((a, b))
+                else:
+                    excluded.append((self.bodies[a].name, self.bodies[b].name, why))
+                    log.debug("not checking %s vs %s: %s", self.bodies[a].name, self.bodies[b].name, why)
+        self._pa = np.array([p[0] for p in kept], dtype=int)
+        self._pb = np.array([p[1] for p in kept], dtype=int)
+        self._self = np.array([self.bodies[b].kind != "cell" for b in self._pb], dtype=bool)
+        self._margin = np.where(self._self, self.self_margin_m, self.margin_m)
+        self.pairs = tuple((self.bodies[a].name, self.bodies[b].name) for a, b in kept)
+        self.excluded = tuple(excluded)
+
+    def _order(self, i: int, j: int) -> tuple[int, int]:
+        """Body first: the tool before links, the distal link before the proximal one."""
+        bi, bj = self.bodies[i], self.bodies[j]
+        if bj.kind == "cell" or bi.kind == "tool":
+            return i, j
+        if bj.kind == "tool" or bj.joint > bi.joint:
+            return j, i
+        return i, j
+
+    # ---- placing -----------------------------------------------------------------------------
+
+    def _check_q(self, q: ArrayLike) -> Array:
+        q = np.asarray(q, dtype=float)
+        if q.shape != (self.robot.nq,) or not np.all(np.isfinite(q)):
+            raise InputError(f"collision model: q must be {self.robot.nq} finite joint values [rad], got {q}")
+        return q
+
+    def _update(self, q: ArrayLike) -> None:
+        q = self._check_q(q)
+        if self._q is not None and np.array_equal(q, self._q):
+            return
+        pin.forwardKinematics(self._model, self._data, q)
+        oMi = self._data.oMi
+        T_joint = self.base_in_world @ np.array([oMi[j].homogeneous for j in self._joints])
+        n = self._n_moving
+        self._poses[:n] = T_joint[self._joint_slot] @ self._joint_T_shape
+        self._aabb_c[:n], self._aabb_h[:n] = world_aabb(self._poses[:n], self._centre[:n], self._half[:n])
+        self._placed = np.zeros(len(self.bodies), dtype=bool)
+        self._placed[n:] = True
+        self._q = q.copy()
+
+    def _place_all(self, q: Array) -> None:
+        self._q = None
+        self._update(q)
+        for k in range(self._n_moving):
+            self._ensure_placed(k)
+
+    def _ensure_placed(self, k: int) -> None:
+        if not self._placed[k]:
+            place(self.bodies[k], self._poses[k])
+            self._placed[k] = True
+
+    def _gaps(self) -> Array:
+        """Lower bounds [m] on the distance of every checked pair, from the world-aligned boxes."""
+        c, h = self._aabb_c, self._aabb_h
+        d = np.maximum(np.abs(c[self._pa] - c[self._pb]) - h[self._pa] - h[self._pb], 0.0)
+        return np.sqrt(np.einsum("ij,ij->i", d, d))
+
+    def _pair(self, k: int) -> Contact:
+        a, b = int(self._pa[k]), int(self._pb[k])
+        self._ensure_placed(a)
+        self._ensure_placed(b)
+        A, B = self.bodies[a], self.bodies[b]
+        d, p_a, p_b, n = signed_distance(A, self._poses[a], B, self._poses[b])
+        self.queries += 1
+        return Contact(
+            body=A.name, other=B.name, distance_m=d, point_body=p_a, point_other=p_b, normal=n,
+            link=str(A.link), self_pair=bool(self._self[k]), other_link=B.link,
+            margin_m=float(self._margin[k]), body_shape=A.shape, other_shape=B.shape,
+        )
+
+    # ---- queries -----------------------------------------------------------------------------
+
+    def contacts(self, q: ArrayLike, query_distance_m: float) -> list[Contact]:
+        """Every checked pair closer than ``query_distance_m`` at joints q, nearest first.
+
+        Args:
+            q: joints [rad], shape (n,).
+            query_distance_m: report pairs whose signed distance is below this [m].
+        """
+        if not math.isfinite(query_distance_m):
+            raise InputError(f"contacts: query_distance_m must be finite, got {query_distance_m!r}")
+        self._update(q)
+        near = np.flatnonzero(self._gaps() < query_distance_m)
+        found = [c for c in (self._pair(int(k)) for k in near) if c.distance_m < query_distance_m]
+        return sorted(found, key=lambda c: c.distance_m)
+
+    def nearest_pairs(self, q: ArrayLike) -> tuple[Contact | None, Contact | None]:
+        """The pair with the least distance and the pair with the least clearance at joints q.
+
+        Pairs are visited by their broad-phase lower bound, and the search stops once no bound left
+        could beat either answer, so far pairs cost no FCL call. None, None when nothing is checked.
+        """
+        self._update(q)
+        if len(self._pa) == 0:
+            return None, None
+        gaps = self._gaps()
+        top_margin = float(self._margin.max())
+        by_distance: Contact | None = None
+        by_clearance: Contact | None = None
+        for k in np.argsort(gaps):
+            if by_distance is not None and by_clearance is not None and (
+                gaps[k] >= by_distance.distance_m and gaps[k] - top_margin >= by_clearance.clearance_m
+            ):
+                break
+            if by_clearance is not None and by_distance is not None and (
+                gaps[k] >= by_distance.distance_m and gaps[k] - self._margin[k] >= by_clearance.clearance_m
+            ):
+                continue
+            c = self._pair(int(k))
+            if by_distance is None or c.distance_m < by_distance.distance_m:
+                by_distance = c
+            if by_clearance is None or c.clearance_m < by_clearance.clearance_m:
+                by_clearance = c
+        return by_distance, by_clearance
+
+    def min_distance(self, q: ArrayLike) -> tuple[float, str, str]:
+        """Smallest signed distance [m] over the checked pairs at joints q, and the pair's names."""
+        c = self.nearest_pairs(q)[0]
+        return (math.inf, "", "") if c is None else (c.distance_m, c.body, c.other)
+
+    def point_jacobian(self, q: ArrayLike, link: str, point_world: ArrayLike) -> Array:
+        """Jacobian (3, n) of a point fixed to ``link``, world axes: d(point) / dq [m/rad]."""
+        q = self._check_q(q)
+        pin.computeJointJacobians(self._model, self._data, q)
+        return self._point_jacobian(link, point_world)
+
+    def _point_jacobian(self, link: str, point_world: ArrayLike) -> Array:
+        if not self._model.existFrame(link):
+            names = sorted({b.link for b in self.bodies if b.link})
+            raise InputError(f"point_jacobian: no link {link!r}; links with collision bodies: {names}")
+        fid = self._model.getFrameId(link)
+        oMf = pin.updateFramePlacement(self._model, self._data, fid)
+        J = pin.getFrameJacobian(self._model, self._data, fid, pin.LOCAL_WORLD_ALIGNED)
+        R_wb = self.base_in_world[:3, :3]
+        p_base = R_wb.T @ (np.asarray(point_world, dtype=float) - self.base_in_world[:3, 3])
+        r = p_base - oMf.translation
+        return R_wb @ (J[:3] - np.cross(r, J[3:].T).T)
+
+    def distance_gradients(self, q: ArrayLike, contacts: list[Contact]) -> Array:
+        """Gradients (m, n) of the contacts' signed distances w.r.t. q [m/rad], one row each."""
+        q = self._check_q(q)
+        pin.computeJointJacobians(self._model, self._data, q)
+        rows = np.zeros((len(contacts), self.robot.nq))
+        for i, c in enumerate(contacts):
+            J_other = self._point_jacobian(c.other_link, c.point_other) if c.other_link else None
+            rows[i] = linearised_distance(c, self._point_jacobian(c.link, c.point_body), J_other)
+        return rows

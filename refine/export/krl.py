@@ -1,0 +1,350 @@
+"""KUKA KRL program: the refined path as ``LIN`` moves through ``E6POS`` points (``.src`` + ``.dat``).
+
+The ``.dat`` declares the data, the ``.src`` (``DEF``/``END``, the standard ``INI`` fold) moves:
+
+* ``DECL FRAME TOOL_<tool>``: the TCP in the flange (X, Y, Z [mm]; A, B, C [deg]), and
+  ``DECL FRAME BASE_WORLD``: the world {F} in the robot base, ``inv(base_in_world)``; the program sets
+  ``$TOOL`` and ``$BASE`` from them (and ``$LOAD`` from ``DECL LOAD``), so every ``E6POS`` is a TCP pose
+  in {F}. This assumes the controller's ``$WORLD`` is the robot base (``$ROBROOT`` = ``$NULLFRAME``).
+* ``DECL E6POS``: one per waypoint, ``XP<k>`` (``XP<pass>_<k>`` for several passes), plus an approach
+  point ``XAPP<pass>`` and a retract point ``XRET<pass>`` ``retract_m`` behind the first and last
+  waypoint along the tool z axis. A, B, C are :func:`refine.frames.kuka_abc_from_matrix`
+  (``Rz(A)·Ry(B)·Rx(C)``; at B = ±90 deg, C = 0). Positions carry 4 decimals [mm], angles 6 [deg];
+  the controller itself keeps KRL ``REAL`` in single precision.
+* Each pass is one fold ``;FOLD pass i of n: <name>``: ``PTP`` to the approach point, ``LIN`` onto the
+  first point (exact stop), ``$OUT[n]=TRUE``, ``LIN ... C_DIS`` through the points (``$APO.CDIS``
+  approximation; the last point exact), ``$OUT[n]=FALSE``, ``LIN`` to the retract point. Writing ``$OUT``
+  stops the advance run, so the output switches while the robot stands on the first / last point.
+  ``$VEL.CP`` [m/s] is the segment speed (mean of the planned speeds at its ends, as in
+  :func:`refine.export.rapid.segment_speeds`), rounded to ``speed_resolution_m_s`` and written only
+  when the rounded value changes.
+
+Process output: ``process.output`` of the form ``$OUT[12]`` or ``12`` gives the output number; any
+other name (a RAPID-style signal such as ``doGlue``) maps to ``$OUT[1]`` (:data:`DEFAULT_OUTPUT`), and a
+comment in the program names the signal so the cell integrator can re-map it.
+
+Status and Turn (:func:`kuka_status_turn`). Six axes, from the KUKA expert programming manual as quoted
+in robot-forum.com thread 7173 ("x value of wrist root point") and Beckhoff TF5200 "Status & Turn (IS,
+IT)", which documents KUKA's convention:
+
+* S bit 0 = 1 when the wrist root point has a negative x in the A1 coordinate system (the frame that
+  turns with axis 1): overhead area, else basic area;
+* S bit 1 = 1 when the wrist root point lies in front of the line through axes 2 and 3 (its side
+  flips at the stretched-elbow singularity; normal elbow-up poses have bit 1 set, hence KUKA's usual
+  ``S 2`` / ``S 6``);
+* S bit 2 = 1 when A5 < 0;
+* T bit i = 1 when axis i+1 < 0.
+
+LBR iiwa (7 axes) on a KRC: the LBR's redundancy information as the Sunrise handbook defines it,
+quoted in ``IFL-CAMP/iiwa_stack`` ``iiwa_msgs/msg/RedundancyInformation.msg``: S bit 0 = 1 when
+working overhead (the same wrist-root-point test, the wrist root being the intersection of axes 5, 6
+and 7), bit 1 = 1 when A4 < 0, bit 2 = 1 when A6 <= 0; E1 = the redundancy angle, the angle of axis 3
+[deg]. The same source notes that Turn is not used for the iiwa (every axis stays within ±180 deg);
+T is still written with bit i = A(i+1) < 0 for all seven axes, which is consistent and harmless.
+Geometry comes from the model: link frames parallel to the base at zero (as in ``robots/``), the
+wrist root at the origin of the second-to-last joint. Joint signs must follow KUKA's conventions.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import NDArray
+
+from refine import __version__
+from refine.errors import InputError
+from refine.export.rapid import segment_speeds
+from refine.frames import invert_transform, kuka_abc_from_matrix, make_transform, matrix_from_kuka_abc
+from refine.paths import Array, Trajectory
+from refine.problem import Problem
+
+log = logging.getLogger(__name__)
+
+DEFAULT_OUTPUT = 1  # $OUT number used when process.output names no number
+_INI = [
+    ";FOLD INI",
+    "  ;FOLD BASISTECH INI",
+    "    GLOBAL INTERRUPT DECL 3 WHEN $STOPMESS==TRUE DO IR_STOPM ( )",
+    "    INTERRUPT ON 3",
+    "    BAS (#INITMOV,0 )",
+    "  ;ENDFOLD (BASISTECH INI)",
+    ";ENDFOLD (INI)",
+]
+
+
+def _name(text: str, fallback: str) -> str:
+    """A KRL name: letters, digits, ``_``, not starting with a digit, at most 24 characters."""
+    name = re.sub(r"[^A-Za-z0-9_]", "_", text)
+    if not name or name[0].isdigit():
+        name = f"{fallback}_{name}".rstrip("_")
+    return name[:24]
+
+
+def _real(value: float, decimals: int) -> str:
+    text = f"{value:.{decimals}f}".rstrip("0")
+    text = text + "0" if text.endswith(".") else text
+    return "0.0" if float(text) == 0.0 else text
+
+
+def _xyzabc(T: Array) -> str:
+    """``X ..,Y ..,Z ..,A ..,B ..,C ..`` of a transform: mm and degrees."""
+    xyz = [_real(v * 1000.0, 4) for v in T[:3, 3]]
+    abc = [_real(v, 6) for v in kuka_abc_from_matrix(T[:3, :3])]
+    return ",".join(f"{k} {v}" for k, v in zip("XYZABC", xyz + abc, strict=True))
+
+
+def krl_output_number(output: str) -> int | None:
+    """The ``$OUT`` number named by ``process.output`` (``"$OUT[12]"`` or ``"12"``), else None."""
+    m = re.fullmatch(r"\s*(?:\$OUT\[\s*(\d+)\s*\]|(\d+))\s*", output, re.IGNORECASE)
+    if m is None:
+        return None
+    number = int(m.group(1) or m.group(2))
+    if not 1 <= number <= 4096:
+        raise InputError(f"process.output {output!r}: KRL outputs are $OUT[1]..$OUT[4096]")
+    return number
+
+
+def kuka_status_turn(robot: Any, q: Array) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """KUKA Status and Turn of joint vectors (rules and sources in the module docstring).
+
+    Args:
+        robot: a :class:`refine.robot.Robot` with 6 joints (KUKA serial arm) or 7 (LBR iiwa).
+        q: joint positions [rad], shape (N, n) or (n,).
+
+    Returns:
+        Status and Turn, each of shape (N,) (integers for a single q).
+    """
+    q = np.asarray(q, dtype=float)
+    qs = np.atleast_2d(q)
+    n = robot.nq
+    if n not in (6, 7) or qs.shape[1] != n:
+        raise InputError(
+            f"KUKA Status/Turn needs a 6- or 7-axis robot and q of shape (N, n), got "
+            f"{robot.spec.name!r} ({n} joints) with q {q.shape}"
+        )
+    status = np.zeros(len(qs), dtype=np.int64)
+    model, data = robot.model, robot.data
+    for k, qk in enumerate(qs):
+        pin.forwardKinematics(model, data, qk)
+        a1, wrist = data.oMi[1], data.oMi[n - 1].translation
+        overhead = float((a1.rotation.T @ (wrist - a1.translation))[0]) < 0.0
+        if n == 6:
+            p2, p3 = data.oMi[2].translation, data.oMi[3].translation
+            front = float(np.dot(np.cross(a1.rotation[:, 1], p3 - p2), wrist - p2)) > 0.0
+            status[k] = int(overhead) + 2 * int(front) + 4 * int(qk[4] < 0.0)
+        else:
+            status[k] = int(overhead) + 2 * int(qk[3] < 0.0) + 4 * int(qk[5] <= 0.0)
+    turn = ((qs < 0.0) * (1 << np.arange(n))).sum(axis=1).astype(np.int64)
+    return (status[0], turn[0]) if q.ndim == 1 else (status, turn)
+
+
+def _e6pos(name: str, T: Array, s: int, t: int, e1_deg: float) -> str:
+    tail = ",".join(f"E{i} 0.0" for i in range(2, 7))
+    return f"DECL E6POS {name}={{{_xyzabc(T)},S {s},T {t},E1 {_real(e1_deg, 6)},{tail}}}"
+
+
+def write_krl(
+    path_src: str | Path,
+    trajectory: Trajectory,
+    problem: Problem,
+    robot: Any,
+    *,
+    passes: list[tuple[str, Trajectory]] | None = None,
+    approximation_m: float = 0.001,
+    approach_speed_m_s: float = 0.25,
+    retract_m: float = 0.1,
+    ptp_percent: int = 20,
+    speed_resolution_m_s: float = 1e-4,
+) -> tuple[Path, Path]:
+    """Write the trajectory as a KUKA KRL program, ``<name>.src`` and ``<name>.dat``.
+
+    Args:
+        path_src: output ``.src`` file; its stem, made a KRL name, names the program and both files.
+        trajectory: the refined, timed path (poses in {F}, joints for Status, Turn and E1).
+        problem: tool, robot base, process output.
+        robot: the :class:`refine.robot.Robot` the joints belong to (controller ``"kuka"``).
+        passes: several passes of a multi-pass weld as ``(name, trajectory)`` in order, the root pass
+            included; when given, ``trajectory`` is not written. One fold per pass.
+        approximation_m: ``$APO.CDIS`` approximation distance between path points [m].
+        approach_speed_m_s: ``$VEL.CP`` of the moves onto the first point and to the retract [m/s].
+        retract_m: approach and retract distance along the tool z axis [m].
+        ptp_percent: axis speed of the ``PTP`` approach [% of the maximum].
+        speed_resolution_m_s: ``$VEL.CP`` is rounded to this step [m/s] and rewritten only when the
+            rounded value changes.
+
+    Returns:
+        The ``.src`` and ``.dat`` paths written.
+    """
+    if getattr(robot.spec, "controller", "") != "kuka":
+        raise InputError(f"KRL is for KUKA robots; {robot.spec.name!r} has controller {robot.spec.controller!r}")
+    runs = [(problem.name, trajectory)] if passes is None else list(passes)
+    if not runs:
+        raise InputError("KRL export: passes is empty; give at least one (name, trajectory)")
+    for name, tr in runs:
+        if len(tr) < 2 or tr.q.shape[1] != robot.nq:
+            raise InputError(f"KRL pass {name!r}: needs >= 2 waypoints of {robot.nq} joints, got q {tr.q.shape}")
+    if not speed_resolution_m_s > 0.0 or not approach_speed_m_s > 0.0:
+        raise InputError("KRL export: speed_resolution_m_s and approach_speed_m_s must be > 0")
+    if passes is not None:
+        log.debug("KRL export: writing %d passes; the trajectory argument is not written", len(runs))
+    path_src = Path(path_src)
+    prog = _name(path_src.stem, "prog")
+    src, dat = path_src.with_name(f"{prog}.src"), path_src.with_name(f"{prog}.dat")
+    tool, load = _name(f"TOOL_{problem.tool.name}", "TOOL"), _name(f"LOAD_{problem.tool.name}", "LOAD")
+    signal = problem.process.output
+    number = krl_output_number(signal)
+    out_note = f"process output {signal!r}"
+    if number is None:
+        number, out_note = DEFAULT_OUTPUT, f"process output {signal!r} mapped to $OUT[{DEFAULT_OUTPUT}] (refine default)"
+    cog = [_real(v * 1000.0, 4) for v in problem.tool.cog_in_flange_m]
+    header = (
+        f"; Written by refine {__version__} for problem '{problem.name}', robot {problem.robot.model}, "
+        f"{len(runs)} pass(es)."
+    )
+    dat_lines = [
+        "&ACCESS RVP",
+        "&REL 1",
+        f"DEFDAT {prog}",
+        header,
+        "; E6POS: TCP poses in the world frame {F} ($BASE = BASE_WORLD): X Y Z [mm], A B C [deg] "
+        "(Rz(A)Ry(B)Rx(C)); S, T (and E1 = A3 [deg] on a 7-axis LBR) of the refined joints.",
+        f"DECL FRAME {tool}={{{_xyzabc(problem.tool.tcp_in_flange)}}}",
+        f"DECL FRAME BASE_WORLD={{{_xyzabc(invert_transform(problem.robot.base_in_world))}}}",
+        f"DECL LOAD {load}={{M {_real(problem.tool.mass_kg, 4)},CM {{X {cog[0]},"
+        f"Y {cog[1]},Z {cog[2]},A 0.0,B 0.0,C 0.0}},J {{X 0.0,Y 0.0,Z 0.0}}}}",
+    ]
+    src_lines = ["&ACCESS RVP", "&REL 1", f"DEF {prog}( )", *_INI, header]
+    src_lines += [
+        "$BASE = BASE_WORLD",
+        f"$TOOL = {tool}",
+        f"$LOAD = {load}",
+        f"$APO.CDIS = {_real(approximation_m * 1000.0, 4)}",
+        f"BAS (#VEL_PTP,{int(ptp_percent)} )",
+        f"; {out_note} is $OUT[{number}]",
+    ]
+    step = speed_resolution_m_s
+    back = make_transform(p=[0.0, 0.0, -retract_m])
+    for i, (pass_name, tr) in enumerate(runs, start=1):
+        n = len(tr)
+        status, turn = kuka_status_turn(robot, tr.q)
+        e1 = np.degrees(tr.q[:, 2]) if robot.nq == 7 else np.zeros(n)
+        names = [f"XP{k}" if len(runs) == 1 else f"XP{i}_{k}" for k in range(1, n + 1)]
+        app, ret = f"XAPP{i}", f"XRET{i}"
+        dat_lines.append(_e6pos(app, tr.poses[0] @ back, status[0], turn[0], e1[0]))
+        dat_lines += [_e6pos(names[k], tr.poses[k], status[k], turn[k], e1[k]) for k in range(n)]
+        dat_lines.append(_e6pos(ret, tr.poses[-1] @ back, status[-1], turn[-1], e1[-1]))
+        label = re.sub(r"[;\r\n]", " ", str(pass_name))
+        air = _real(approach_speed_m_s, 6)
+        body = [f"$VEL.CP = {air}", f"PTP {app}", f"LIN {names[0]}", f"$OUT[{number}]=TRUE ; {signal} on"]
+        current = None
+        for k, v in enumerate(segment_speeds(tr), start=1):
+            text = _real(max(round(v / step), 1) * step, 6)
+            if text != current:
+                body.append(f"$VEL.CP = {text}")
+                current = text
+            body.append(f"LIN {names[k]}" + (" C_DIS" if k < n - 1 else ""))
+        body += [f"$OUT[{number}]=FALSE ; {signal} off", f"$VEL.CP = {air}", f"LIN {ret}"]
+        src_lines += [
+            f";FOLD pass {i} of {len(runs)}: {label}",
+            f"  ; pass {i} of {len(runs)}: {label}, {n} points, {float(tr.t[-1]):.3f} s planned",
+            *(f"  {line}" for line in body),
+            ";ENDFOLD",
+        ]
+    src_lines.append("END")
+    dat_lines.append("ENDDAT")
+    src.parent.mkdir(parents=True, exist_ok=True)
+    src.write_text("\n".join(src_lines) + "\n", encoding="utf-8")
+    dat.write_text("\n".join(dat_lines) + "\n", encoding="utf-8")
+    log.info("wrote KRL program %s (+ .dat): %d pass(es), $OUT[%d]", src, len(runs), number)
+    return src, dat
+
+
+@dataclass(frozen=True)
+class KrlPass:
+    """One pass read back from a KRL program: its path points, in path order.
+
+    Attributes:
+        name: the pass name from its fold.
+        points: the E6POS names.
+        positions: TCP positions in {F} [m], shape (N, 3).
+        rotations: TCP orientations R_F_TCP, shape (N, 3, 3).
+        status: Status S, shape (N,). turn: Turn T, shape (N,).
+        e1_deg: E1 of each point [deg] (the LBR's redundancy angle), shape (N,).
+        speeds: ``$VEL.CP`` of the move ending at each point [m/s], shape (N,).
+        output: the ``$OUT`` number switched around the pass.
+    """
+
+    name: str
+    points: tuple[str, ...]
+    positions: Array
+    rotations: Array
+    status: NDArray[np.int64]
+    turn: NDArray[np.int64]
+    e1_deg: Array
+    speeds: Array
+    output: int
+
+
+_DECL_RE = re.compile(r"^\s*DECL\s+E6POS\s+(\w+)\s*=\s*\{([^{}]*)\}", re.IGNORECASE | re.MULTILINE)
+_FOLD_RE = re.compile(r";\s*FOLD\s+pass\s+\d+\s+of\s+\d+:\s*(.*)$", re.IGNORECASE)
+
+
+def _fields(body: str, where: str) -> dict[str, float]:
+    try:
+        return {k.upper(): float(v) for k, v in (item.split() for item in body.split(","))}
+    except ValueError as e:
+        raise InputError(f"KRL {where}: malformed E6POS {{{body}}}") from e
+
+
+def parse_krl(path_src: str | Path, path_dat: str | Path) -> list[KrlPass]:
+    """Read back the passes of a program written by :func:`write_krl`.
+
+    Raises:
+        InputError: no pass found, a point used but not declared, or a malformed declaration.
+    """
+    points = {m.group(1).upper(): _fields(m.group(2), m.group(1)) for m in _DECL_RE.finditer(Path(path_dat).read_text())}
+    passes: list[dict[str, Any]] = []
+    label, speed = "", float("nan")
+    for raw in Path(path_src).read_text(encoding="utf-8").splitlines():
+        if fold := _FOLD_RE.match(raw.strip()):
+            label = fold.group(1).strip()
+        code = raw.split(";", 1)[0].strip()
+        if m := re.fullmatch(r"\$VEL\.CP\s*=\s*(\S+)", code, re.IGNORECASE):
+            speed = float(m.group(1))
+        elif re.match(r"PTP\s", code, re.IGNORECASE):
+            passes.append({"name": label, "moves": [], "on": None, "off": None, "out": 0})
+        elif (m := re.fullmatch(r"LIN\s+(\w+)(\s+C_DIS)?", code, re.IGNORECASE)) and passes:
+            if m.group(1).upper() not in points:
+                raise InputError(f"KRL {path_src}: point {m.group(1)} is not declared in {path_dat}")
+            passes[-1]["moves"].append((m.group(1).upper(), speed))
+        elif (m := re.fullmatch(r"\$OUT\[(\d+)\]\s*=\s*(TRUE|FALSE)", code, re.IGNORECASE)) and passes:
+            key = "on" if m.group(2).upper() == "TRUE" else "off"
+            passes[-1][key], passes[-1]["out"] = len(passes[-1]["moves"]), int(m.group(1))
+    result = []
+    for p in passes:
+        if not p["on"] or p["off"] is None:
+            raise InputError(f"KRL {path_src}: pass {p['name']!r} does not switch its output on and off")
+        moves = p["moves"][p["on"] - 1 : p["off"]]
+        vals = np.array([[points[name][k] for k in ("X", "Y", "Z", "A", "B", "C", "S", "T", "E1")] for name, _ in moves])
+        result.append(
+            KrlPass(
+                name=p["name"],
+                points=tuple(name for name, _ in moves),
+                positions=vals[:, :3] / 1000.0,
+                rotations=matrix_from_kuka_abc(vals[:, 3:6]),
+                status=vals[:, 6].astype(np.int64),
+                turn=vals[:, 7].astype(np.int64),
+                e1_deg=vals[:, 8],
+                speeds=np.array([v for _, v in moves]),
+                output=p["out"],
+            )
+        )
+    if not result:
+        raise InputError(f"KRL {path_src}: no pass (PTP approach followed by LIN moves) found")
+    return result

@@ -1,0 +1,133 @@
+"""Clearance to the cell as linearised constraints, the way sequential trajectory optimisers do it.
+
+FCL distances are not differentiable inside CasADi. Each outer round of
+:func:`refine.optimise.solve.solve_refinement` asks :class:`ClearanceSource` for rows: at every
+waypoint (and inside every segment the dense check found too close) the pairs closer than the
+margin plus a look-ahead give one row each, the signed distance linearised at the witness points,
+``d(q) ≈ d0 + g·(q - q0) >= margin``. The rows replace the previous round's; the loop ends when the
+dense check (:func:`refine.collision.check_path_clearance`, between waypoints at the problem's
+``check_step_m`` of TCP travel) finds every margin kept.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from refine.collision import CollisionModel, Contact, PathClearance, check_path_clearance
+from refine.optimise.problem import LinearRow, RefinementNLP
+from refine.optimise.seed import TcpKinematics
+from refine.optimise.verify import Violation
+from refine.problem import Problem
+from refine.robot import Robot
+
+log = logging.getLogger(__name__)
+
+Array = NDArray[np.float64]
+
+LOOK_AHEAD_M = 0.03
+"""Pairs within margin + this distance get a row, so the next solve cannot push them in [m]."""
+
+
+@dataclass
+class ClearanceSource:
+    """Linearised clearance rows and the dense clearance check for one robot, tool and cell.
+
+    Attributes:
+        model: the FCL collision model.
+        kin: TCP kinematics of the same robot, base and tool.
+        check_step_m: largest TCP travel between two poses of the dense check [m].
+        last: the last dense check made, by joints (for reports).
+        stats: queries and time spent, for the collision cost figures.
+    """
+
+    model: CollisionModel
+    kin: TcpKinematics
+    check_step_m: float
+    last: PathClearance | None = None
+    _last_q: Array | None = None
+    stats: dict[str, float] = field(
+        default_factory=lambda: {"rounds": 0, "rows": 0, "check_s": 0.0, "rows_s": 0.0}
+    )
+
+    @classmethod
+    def for_problem(cls, problem: Problem, robot: Robot) -> ClearanceSource:
+        """The source for a problem's robot placement, tool shapes, cell and ``[collision]``."""
+        base, tcp = problem.robot.base_in_world, problem.tool.tcp_in_flange
+        model = CollisionModel(
+            robot,
+            base,
+            tcp,
+            problem.tool.collision,
+            problem.cell,
+            margin_m=problem.collision.margin_m,
+            self_margin_m=problem.collision.self_margin_m,
+        )
+        return cls(model, TcpKinematics(robot, base, tcp), problem.collision.check_step_m)
+
+    # ---- the ConstraintSource protocol ------------------------------------------------------
+
+    def clearance(self, q: Array) -> PathClearance:
+        """The dense check of joints ``q`` (N, n), reused when ``q`` is the last one checked."""
+        if (
+            self.last is None
+            or self._last_q is None
+            or self._last_q.shape != q.shape
+            or not np.array_equal(self._last_q, q)
+        ):
+            t0 = time.perf_counter()
+            self.last = check_path_clearance(self.model, q, self.kin, self.check_step_m)
+            self._last_q = np.array(q)
+            self.stats["check_s"] += time.perf_counter() - t0
+        return self.last
+
+    def violations(self, problem: RefinementNLP, q: Array) -> list[Violation]:
+        """Runs of segments below the margin, as violations naming the objects [m]."""
+        check = self.clearance(q)
+        s = problem.fused.s
+        return [
+            Violation(
+                r.index_start,
+                r.index_end,
+                float(s[r.index_start]),
+                float(s[r.index_end]),
+                f"collision ({', '.join(r.objects)})",
+                r.min_distance_m,
+                "m",
+                self.model.margin_m,
+            )
+            for r in check.runs
+        ]
+
+    def rows(self, problem: RefinementNLP, q: Array) -> tuple[LinearRow, ...]:
+        """Fresh rows for every close pair along ``q``; empty when the dense check passes."""
+        if self.clearance(q).ok:
+            return ()
+        t0 = time.perf_counter()
+        self.stats["rounds"] += 1
+        reach = self.model.margin_m + LOOK_AHEAD_M
+        rows: list[LinearRow] = []
+        for k in range(len(q)):
+            rows += self._rows_at(q[k], k, 0.0, reach)
+        for k in np.flatnonzero(self.last.segment_clearance_m < 0.0):  # type: ignore[union-attr]
+            if k + 1 < len(q):
+                rows += self._rows_at(0.5 * (q[k] + q[k + 1]), int(k), 0.5, reach)
+        self.stats["rows"] += len(rows)
+        self.stats["rows_s"] += time.perf_counter() - t0
+        log.info("clearance: %d linearised rows from %d waypoints", len(rows), len(q))
+        return tuple(rows)
+
+    def _rows_at(self, qk: Array, k: int, f: float, reach: float) -> list[LinearRow]:
+        contacts: list[Contact] = self.model.contacts(qk, reach)
+        if not contacts:
+            return []
+        grads = self.model.distance_gradients(qk, contacts)
+        return [
+            LinearRow(k, f, g, c.margin_m - c.distance_m + float(g @ qk), f"{c.body} / {c.other}")
+            for c, g in zip(contacts, grads, strict=True)
+            if np.linalg.norm(g) > 1e-9
+        ]
