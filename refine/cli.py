@@ -39,6 +39,7 @@ def _parser() -> argparse.ArgumentParser:
         help="comma-separated program formats overriding [output] programs (available: rapid)",
     )
     run.add_argument("--json", action="store_true", help="print result.json instead of the summary")
+    run.add_argument("--no-report", action="store_true", help="do not write report.html")
     check = sub.add_parser("check", help="load and check a problem file without solving it")
     check.add_argument("problem", type=Path)
     sub.add_parser("robots", help="list the robots of the registry")
@@ -84,7 +85,7 @@ def _run(args: argparse.Namespace, problem) -> int:  # noqa: ANN001 - Problem, i
     out = args.out or Path("out") / problem.name
     programs = tuple(p.strip() for p in args.programs.split(",")) if args.programs else None
     t0 = time.perf_counter()
-    result = run(problem, out, programs)
+    result = run(problem, out, programs, report=not args.no_report)
     since_start = _seconds_since_process_start()
     result.timings_s["run"] = time.perf_counter() - t0
     result.timings_s["total"] = since_start if since_start is not None else result.timings_s["run"]

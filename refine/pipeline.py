@@ -260,13 +260,16 @@ def solve_problem(problem: Problem) -> RunResult:
     return RunResult(problem, robot, tuple(passes), truth, watch.times)
 
 
-def run(problem: Problem, out_dir: Path, programs: tuple[str, ...] | None = None) -> RunResult:
+def run(
+    problem: Problem, out_dir: Path, programs: tuple[str, ...] | None = None, *, report: bool = True
+) -> RunResult:
     """Solve ``problem`` and write every output into ``out_dir``.
 
     Args:
         problem: the loaded problem.
         out_dir: folder for ``result.json``, ``trajectory.csv``, ``<name>.aml`` and programs.
         programs: program formats overriding ``[output] programs``.
+        report: also write ``report.html``.
 
     Returns:
         The run's result, with ``outputs`` naming the files written.
@@ -279,6 +282,12 @@ def run(problem: Problem, out_dir: Path, programs: tuple[str, ...] | None = None
     out_dir.mkdir(parents=True, exist_ok=True)
     result.outputs.update(write_outputs(result, out_dir, programs or problem.output.programs))
     result.timings_s["export"] = time.perf_counter() - t0
+    if report:
+        from refine.report.html import write_report
+
+        t0 = time.perf_counter()
+        result.outputs["report"] = write_report(out_dir / "report.html", result)
+        result.timings_s["report"] = time.perf_counter() - t0
     result.outputs["result"] = out_dir / "result.json"
     write_result_json(result.outputs["result"], result)
     return result
