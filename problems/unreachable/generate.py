@@ -1,17 +1,18 @@
 """Generate the data of the ``unreachable`` problems: per case ``path.csv``, ``demo.liberty``, ``truth.csv``.
 
-Each case is a short demonstration (0.2-0.4 m of path, 100 Hz tracker log) that the robot cannot
+Each case is a short demonstration (0.14-0.41 m of path, 100 Hz tracker log) that the robot cannot
 execute as shown, for one named reason; README.md explains each case and what refine is expected to
 answer. The robot, tool and frames are read from each case's ``problem.toml``, so the data always
 agree with the problem file; the geometry of the path and the worker's tool orientations are built
 here, several of them relative to the robot's own kinematics (the forearm direction, axis 5's bend),
-so that the defect sits exactly where the case says. Everything is deterministic (``SEED`` + the
-case index).
+so that the defect sits exactly where the case says. Everything is deterministic (``SEED`` + a
+number from the case name).
 
 Run from the repository root::
 
     python problems/unreachable/generate.py                # every case
     python problems/unreachable/generate.py joint_wrap     # some cases
+    python problems/unreachable/generate.py --check        # + the clearance check of the collision cases
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+import zlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -96,7 +98,9 @@ def load_case(name: str) -> Case:
     """Read ``<name>/problem.toml`` into the transforms the generator needs."""
     problem = tomllib.loads((HERE / name / "problem.toml").read_text(encoding="utf-8"))
     robot = load_robot(problem["robot"]["model"])
-    kin = TcpKinematics(robot, pose(problem["robot"].get("base_in_world")), pose(problem["tool"]["tcp_in_flange"]))
+    kin = TcpKinematics(
+        robot, pose(problem["robot"].get("base_in_world")), pose(problem["tool"]["tcp_in_flange"])
+    )
     frames = problem.get("frames", {})
     return Case(
         name,
@@ -187,40 +191,41 @@ def write_case(case: Case, demo: Demo, seed: int) -> None:
 
 # ---- the cases ----------------------------------------------------------------------------------
 
-WRIST_FLIP_SWEEP_DEG = 20.0  # the gun axis pitches from +20 to -20 deg about the forearm axis
-WRIST_FLIP_MISS_DEG = 2.0  # ... and passes this far beside it
+WRIST_FLIP_SWEEP_DEG = 20.0  # the gun axis pitches from +20 to -20 deg about axis 5
+WRIST_FLIP_MISS_DEG = 2.0  # ... and passes this far beside the forearm axis
 
 
 def wrist_flip(case: Case) -> Demo:
     """Straight line; the gun axis pitches through the forearm direction, 2 deg to its side.
 
     The reference is the robot's own singular configuration at each point (axes 4, 5, 6 at 0, the
-    gun axis along the forearm): the demonstrated gun axis is that direction pitched by ``β(s)``
-    about axis 5 (from +20 to -20 deg between s = 0.04 and 0.16 m) and turned
-    ``WRIST_FLIP_MISS_DEG`` about the third axis, so it passes 2 deg beside the singularity at
-    s = 0.10 m. The spin about the gun axis stays as at axis 6 = 0.
+    gun axis along the forearm): the demonstrated orientation is that one pitched by ``β(s)`` about
+    axis 5 (from +20 to -20 deg between s = 0.02 and 0.12 m) and turned ``WRIST_FLIP_MISS_DEG``
+    about the axis perpendicular to both, so the gun axis passes 2 deg beside the singular
+    direction at s = 0.07 m. The spin about the gun axis stays as at axis 6 = 0.
     """
-    positions = line([1.55, -0.10, 0.80], [1.55, 0.10, 0.80])
+    positions = line([1.55, -0.07, 0.80], [1.55, 0.07, 0.80])
     s = arc_length(positions)
     q_sing = arm_path(case.kin, positions, np.zeros((len(s), 3)), np.radians([0, 30, 10, 0, 0, 0]))
     R_sing = case.kin.poses(q_sing)[:, :3, :3]
-    beta = np.radians(WRIST_FLIP_SWEEP_DEG) * np.cos(np.pi * smoothstep((s - 0.04) / 0.12))
+    beta = np.radians(WRIST_FLIP_SWEEP_DEG) * np.cos(np.pi * smoothstep((s - 0.02) / 0.10))
     axis5 = R_sing[:, :, 1]  # at axes 4, 5, 6 = 0 the flange y axis is axis 5
     side = R_sing[:, :, 0]  # perpendicular to axis 5 and to the gun axis
+    miss = math.radians(WRIST_FLIP_MISS_DEG)
     rotations = np.stack(
         [
-            matrix_from_rotvec(math.radians(WRIST_FLIP_MISS_DEG) * c) @ matrix_from_rotvec(b * a) @ R
+            matrix_from_rotvec(miss * c) @ matrix_from_rotvec(b * a) @ R
             for a, c, b, R in zip(axis5, side, beta, R_sing, strict=True)
         ]
     )
     return Demo(positions, rotations, worker_speed(s, 0.04))
 
 
-JOINT_LIMIT_BEND_DEG = (-112.0, -130.0)  # axis-5 bend the demonstrated orientation needs: ends, middle
+JOINT_LIMIT_BEND_DEG = (-112.0, -130.0)  # axis-5 angle the demonstrated orientation needs: ends, middle
 
 
 def joint_limit(case: Case) -> Demo:
-    """Straight line; the worker tips the gun up and back until axis 5 would need -130 deg.
+    """Straight line; the worker tips the gun back towards the robot until axis 5 would need -130 deg.
 
     Built in joint space: axes 4 and 6 at 0, axis 5 going smoothly from -112 deg at the ends to
     ``JOINT_LIMIT_BEND_DEG[1]`` on s = 0.08-0.12 m, axes 1-3 solved for the TCP on the line; the
@@ -237,21 +242,23 @@ def joint_limit(case: Case) -> Demo:
     q = arm_path(case.kin, positions, wrist, np.radians([0, 35, -25, 0, -112, 0]))
     return Demo(positions, case.kin.poses(q)[:, :3, :3], worker_speed(s, 0.04))
 
+
 SPIRAL_RADII_M = (0.015, 0.035)  # inner and outer radius of the spiral bead [m]
+SPIRAL_CENTRE = (1.35, 0.0, 0.60)  # [m], in {F}
 
 
-def spiral(case: Case, centre, turns: float) -> Demo:
+def spiral(case: Case, turns: float) -> Demo:
     """A flat spiral bead, the slot nozzle pointing straight down and kept across the radius.
 
     The spiral runs counter-clockwise (seen from above) and outwards from ``SPIRAL_RADII_M[0]`` to
-    ``[1]`` in ``turns`` turns about the vertical through ``centre``; the nozzle's x axis stays
-    along the circumferential direction, so the tool spins ``turns`` full turns about its own
-    (vertical) axis, all of it on axis 6 (axis 6 decreasing). Whether a spin fits axis 6 depends
-    on its phase as well as on its size: the spiral starts at the polar angle that centres the
-    spin in axis 6's range (the start at axis 6 = +turns * 180 deg), the most favourable phase.
+    ``[1]`` in ``turns`` turns about the vertical through ``SPIRAL_CENTRE``; the nozzle's x axis
+    stays along the circumferential direction, so the tool spins ``turns`` full turns about its
+    own (vertical) axis, all of it on axis 6 (axis 6 decreasing). Whether a spin fits axis 6
+    depends on its phase as well as on its size: the spiral starts at the polar angle that centres
+    the spin in axis 6's range (the start at axis 6 = +turns * 180 deg), the most favourable one.
     """
     r0, r1 = SPIRAL_RADII_M
-    centre = np.asarray(centre, dtype=float)
+    centre = np.asarray(SPIRAL_CENTRE)
     phi_end = 2.0 * math.pi * turns
 
     def frames(phi):
@@ -266,7 +273,8 @@ def spiral(case: Case, centre, turns: float) -> Demo:
     if err > 1e-6:
         raise RuntimeError(f"{case.name}: IK for the spiral start failed (error {err:.1e})")
     phi0 = float(np.mod(q[5] - np.pi * turns + np.pi, 2 * np.pi) - np.pi)
-    phi = phi0 + np.linspace(0.0, phi_end, int(math.ceil(phi_end * 0.5 * (r0 + r1) / POINT_SPACING)) + 1)
+    n = int(math.ceil(phi_end * 0.5 * (r0 + r1) / POINT_SPACING))
+    phi = phi0 + np.linspace(0.0, phi_end, n + 1)
     r = r0 + (r1 - r0) * (phi - phi0) / phi_end
     positions = centre + np.column_stack([r * np.cos(phi), r * np.sin(phi), 0 * phi])
     return Demo(positions, frames(phi), worker_speed(arc_length(positions), 0.04))
@@ -274,31 +282,199 @@ def spiral(case: Case, centre, turns: float) -> Demo:
 
 def joint_wrap(case: Case) -> Demo:
     """Spiral of 2.25 turns: the tool spins 810 deg; axis 6 spans 800 deg (796 inside the margins)."""
-    return spiral(case, [1.35, 0.0, 0.60], 2.25)
+    return spiral(case, 2.25)
 
 
 def joint_wrap_infeasible(case: Case) -> Demo:
     """Spiral of 2.6 turns: the tool spins 936 deg, 140 deg more than axis 6 spans inside its margins."""
-    return spiral(case, [1.35, 0.0, 0.60], 2.6)
+    return spiral(case, 2.6)
+
+
+def drag_frames(travel: np.ndarray, drag_deg: float) -> np.ndarray:
+    """Gun pointing down, tipped back along the travel by ``drag_deg`` (the nozzle points at the
+    bead already laid), upright across it; x along the travel ``travel`` (N, 3), horizontal."""
+    d = math.radians(drag_deg)
+    z = math.cos(d) * np.array([0.0, 0.0, -1.0]) - math.sin(d) * travel
+    return frame_from_z_x(z, travel)
+
+
+def tool_through_fixture(case: Case) -> Demo:
+    """Straight line along y at x = 1.40 m on the plate, the gun upright across the travel.
+
+    The clamp's face is 30 mm from the path, on the far side (+x), for |y| <= 20 mm; the robot's
+    gun body (radius 45 mm) starts 200 mm above the nozzle tip and the clamp is 270 mm tall, so the
+    upright gun overlaps it by 15 mm where the body passes (the 10 deg drag moves that stretch
+    back along the path: the body runs ahead of the tip).
+    """
+    positions = line([1.40, -0.125, 0.56], [1.40, 0.125, 0.56])
+    s = arc_length(positions)
+    travel = np.tile([0.0, 1.0, 0.0], (len(s), 1))
+    return Demo(positions, drag_frames(travel, 10.0), worker_speed(s, 0.04))
+
+
+ELBOW_DRAG_DEG = 20.0  # drag angle of the elbow_through_table demonstration [deg]
+
+
+def elbow_through_table(case: Case) -> Demo:
+    """Straight line away from the robot on a part on a high bench, the gun dragged 20 deg.
+
+    The robot stands on the floor in front of the bench (top at 0.90 m, front edge 0.50 m from
+    axis 1); the bead runs on a 20 mm part from x = 1.30 to 1.60 m. Dragging the gun back towards
+    the robot puts the wrist farther out, so the arm leans over the bench until the upper arm,
+    below the elbow, goes through the bench's front edge, deeper the farther out the TCP is.
+    """
+    positions = line([1.30, 0.0, 0.92], [1.60, 0.0, 0.92])
+    s = arc_length(positions)
+    travel = np.tile([1.0, 0.0, 0.0], (len(s), 1))
+    return Demo(positions, drag_frames(travel, ELBOW_DRAG_DEG), worker_speed(s, 0.03))
+
+
+OUT_OF_REACH_CENTRE = (1.04, 0.0, 0.10)  # centre of the half-circle bead in {F} [m]
+OUT_OF_REACH_RADIUS = 0.10  # [m]
+
+
+def out_of_reach(case: Case) -> Demo:
+    """Half circle around the far side of a round part; its middle lies beyond the arm's reach.
+
+    The bead runs from (1.04, -0.10) through (1.14, 0) to (1.04, 0.10) at 0.10 m above the robot's
+    mounting surface; the iiwa's TCP (0.20 m tool) reaches about 1.116 m from axis 1 at that
+    height with any orientation, so the middle of the arc, s = 0.085-0.23 m, is out of reach by up
+    to 27 mm. The gun points down, tipped 20 deg away from the robot, its x axis along the travel.
+    """
+    c = np.asarray(OUT_OF_REACH_CENTRE)
+    n = int(math.ceil(math.pi * OUT_OF_REACH_RADIUS / POINT_SPACING))
+    theta = np.linspace(-0.5 * math.pi, 0.5 * math.pi, n + 1)
+    positions = c + OUT_OF_REACH_RADIUS * np.column_stack([np.cos(theta), np.sin(theta), 0 * theta])
+    travel = np.column_stack([-np.sin(theta), np.cos(theta), 0 * theta])
+    away = positions * [1.0, 1.0, 0.0]
+    away /= np.linalg.norm(away, axis=1, keepdims=True)  # horizontal, away from axis 1
+    tip = math.radians(20.0)
+    z = math.cos(tip) * np.array([0.0, 0.0, -1.0]) + math.sin(tip) * away
+    return Demo(positions, frame_from_z_x(z, travel), worker_speed(arc_length(positions), 0.04))
+
 
 CASES: dict[str, Callable[[Case], Demo]] = {
     "wrist_flip": wrist_flip,
     "joint_limit": joint_limit,
     "joint_wrap": joint_wrap,
     "joint_wrap_infeasible": joint_wrap_infeasible,
+    "tool_through_fixture": tool_through_fixture,
+    "elbow_through_table": elbow_through_table,
+    "out_of_reach": out_of_reach,
 }
+
+
+# ---- clearance check (design aid for the collision cases) --------------------------------------
+
+
+def _fcl_geometry(shape):
+    import fcl
+
+    if shape.shape == "box":
+        return fcl.Box(*shape.size_m)
+    if shape.shape == "cylinder":
+        return fcl.Cylinder(shape.radius_m, shape.length_m)
+    if shape.shape == "sphere":
+        return fcl.Sphere(shape.radius_m)
+    raise ValueError(f"clearance check: {shape.shape} shapes are not supported here")
+
+
+def _signed_distance(a, b) -> float:
+    import fcl
+
+    return fcl.distance(a, b, fcl.DistanceRequest(enable_signed_distance=True), fcl.DistanceResult())
+
+
+def clearance_check(name: str, every: int = 10, max_tilt_deg: float = 18.0) -> None:
+    """Print, along the path, the clearance of the demonstrated orientation and the best one a tilt
+    of the tool axis can reach, to tell a repairable collision from an infeasible one.
+
+    Independent of refine's optimiser: joints from IK chained along the true poses
+    (:func:`refine.optimise.seed.ik_chain`); then per waypoint the tool axis is tilted by 0..
+    ``max_tilt_deg`` in 12 directions, the joints re-solved by IK from the chain's, and the smallest
+    signed distance between robot links or tool shapes and the cell objects measured with FCL
+    (the tool's shapes are not checked against workpieces).
+    """
+    import fcl
+
+    from refine.optimise.seed import ik_chain, start_candidates
+    from refine.problem import load_problem
+
+    problem = load_problem(HERE / name)
+    case = load_case(name)
+    kin, robot = case.kin, case.kin.robot
+    demo = CASES[name](case)
+    s = arc_length(demo.positions)
+    T_F_R = kin.base_in_world
+    margin = math.radians(problem.tolerances.joint_margin_deg)
+    lower, upper = robot.spec.lower + margin, robot.spec.upper - margin
+    free = np.where(upper - lower > 2 * np.pi, np.inf, 1.0)
+    lo, hi = np.where(np.isinf(free), -np.inf, lower), np.where(np.isinf(free), np.inf, upper)
+    targets = make_transform(demo.rotations, demo.positions)
+    qs, err = ik_chain(kin, targets, lower, upper, start_candidates(lower, upper, None))
+    cell = [
+        (o, fcl.CollisionObject(_fcl_geometry(o), fcl.Transform(o.pose[:3, :3], o.pose[:3, 3])))
+        for o in problem.cell
+    ]
+    tool = [(t, _fcl_geometry(t)) for t in problem.tool.collision]
+    links = robot.collision_shapes()
+
+    def clearance(q):
+        best = (np.inf, "")
+        poses = robot.link_poses(q)
+        flange = T_F_R @ robot.fk(q)
+        for o, obj in cell:
+            for sh in links:
+                d = _signed_distance(sh.collision_object(T_F_R @ poses[sh.link]), obj)
+                best = min(best, (d, f"{sh.link} / {o.name}"))
+            if o.workpiece:
+                continue
+            for t, geom in tool:
+                T = flange @ t.pose
+                d = _signed_distance(fcl.CollisionObject(geom, fcl.Transform(T[:3, :3], T[:3, 3])), obj)
+                best = min(best, (d, f"tool {t.name} / {o.name}"))
+        return best
+
+    tilts = np.arange(0.0, max_tilt_deg + 1e-9, 1.0)
+    print(
+        f"{name}: clearance [mm] (margin {problem.collision.margin_m * 1e3:.0f} mm), IK error max {err.max():.1e}"
+    )
+    print("     s [m]  demo  (closest pair)                best<=3deg  best<=18deg  tilt needed [deg]")
+    for k in range(0, len(s), every):
+        d0, pair = clearance(qs[k])
+        R = demo.rotations[k]
+        best = np.full(len(tilts), -np.inf)
+        for i, a in enumerate(tilts):
+            for az in np.radians(np.arange(0, 360, 30)) if a > 0 else [0.0]:
+                axis = math.cos(az) * R[:, 0] + math.sin(az) * R[:, 1]
+                T = make_transform(matrix_from_rotvec(math.radians(a) * axis) @ R, demo.positions[k])
+                q, e = solve_ik(kin, T, qs[k], lo, hi, max_iterations=200)
+                if e < 1e-6 and np.all(q >= lower - 1e-9) and np.all(q <= upper + 1e-9):
+                    best[i] = max(best[i], clearance(q)[0])
+        ok = np.flatnonzero(best >= problem.collision.margin_m)
+        need = f"{tilts[ok[0]]:.0f}" if ok.size else f"> {max_tilt_deg:.0f}"
+        print(
+            f"  {s[k]:8.3f} {d0 * 1e3:6.0f}  ({pair:28s})  {best[tilts <= 3].max() * 1e3:9.0f} "
+            f"{best.max() * 1e3:11.0f}   {need}"
+        )
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("cases", nargs="*", help=f"cases to make (default: all of {', '.join(CASES)})")
+    parser.add_argument(
+        "--check", action="store_true", help="also print the clearance check of the cases with a cell"
+    )
     args = parser.parse_args(argv)
     unknown = sorted(set(args.cases) - set(CASES))
     if unknown:
         parser.error(f"unknown case(s) {', '.join(unknown)}; available: {', '.join(CASES)}")
-    for index, name in enumerate(CASES):
+    for name in CASES:
         if not args.cases or name in args.cases:
-            write_case(load_case(name), CASES[name](load_case(name)), SEED + index)
+            case = load_case(name)
+            write_case(case, CASES[name](case), SEED + zlib.crc32(name.encode()) % 1000)
+            if args.check and "cell" in tomllib.loads((HERE / name / "problem.toml").read_text("utf-8")):
+                clearance_check(name)
     return 0
 
 

@@ -253,9 +253,12 @@ def _run_rounds(
             len(more.singular_segments),
             len(rows),
         )
-        # relinearised rows replace the last round's; singularity points accumulate
+        # rows accumulate, a pair's fresh linearisation at the same point replacing its old one:
+        # replacing whole rounds lets the path swing between two sides of an obstacle
         grown = p.active.union(ActiveSet(more.singular_waypoints, more.singular_segments))
-        active = ActiveSet(grown.singular_waypoints, grown.singular_segments, rows or p.active.linear_rows)
+        active = ActiveSet(
+            grown.singular_waypoints, grown.singular_segments, _merge_rows(p.active.linear_rows, rows)
+        )
         loop.rebuild(active=active, elastic_deg=p.elastic_deg)
         x0 = x if p.elastic_deg is not None else q.ravel()
 
@@ -337,7 +340,20 @@ def solve_refinement(
             repairs = _diagnose(loop.problem, q, slack, sources)
         else:
             log.info("repair within %.1f deg failed: %s", repair_max_slack_deg, _describe(check, stats))
-            stats = {**stats, "return_status": f"{stats.get('return_status')} (strict: {strict_reason})"}
+            # name what held the orientation back where even the largest slack was not enough
+            at_limit = np.where(slack >= repair_max_slack_deg - 1e-3, repair_max_slack_deg, 0.0)
+            binding = "; ".join(
+                f"s = {r.s_start_m:.3f}-{r.s_end_m:.3f} m limited by {r.reason}"
+                + (f" ({', '.join(r.objects)})" if r.objects else "")
+                for r in _diagnose(loop.problem, q, at_limit, sources)
+            )
+            note = f"no repair within {repair_max_slack_deg:g} deg of extra slack" + (
+                f": {binding}" if binding else ""
+            )
+            stats = {
+                **stats,
+                "return_status": f"{stats.get('return_status')}; {note} (strict: {strict_reason})",
+            }
 
     solver_status = str(stats.get("return_status", "unknown"))
     if status == "ok" and not stats.get("success", False):
@@ -364,6 +380,12 @@ def solve_refinement(
         repairs=repairs,
         timings_s=timings,
     )
+
+
+def _merge_rows(old: tuple[LinearRow, ...], new: tuple[LinearRow, ...]) -> tuple[LinearRow, ...]:
+    merged = {(r.k, r.f, r.label): r for r in old}
+    merged.update({(r.k, r.f, r.label): r for r in new})
+    return tuple(merged.values())
 
 
 def _describe(check: PathCheck, stats: dict) -> str:
