@@ -312,6 +312,12 @@ def summary_lines(result: RunResult) -> list[str]:
             f"singularity  min scaled manipulability {check.singularity.min():.4f}, "
             f"min singular value {check.sigma_min.min():.4f}",
         ]
+        if p.clearance is not None:
+            c = p.clearance
+            lines.append(
+                f"clearance    min distance {c.min_distance_m * 1e3:.1f} mm (margin {result.problem.collision.margin_m * 1e3:g} mm), "
+                f"checked between waypoints: {c.queries} queries in {c.time_s:.2f} s"
+            )
         if p.timing is not None:
             lines.append(
                 f"timing       cycle {p.timing.cycle_time_s:.2f} s, "
