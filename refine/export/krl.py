@@ -1,48 +1,37 @@
 """KUKA KRL program: the refined path as ``LIN`` moves through ``E6POS`` points (``.src`` + ``.dat``).
 
-The ``.dat`` declares the data, the ``.src`` (``DEF``/``END``, the standard ``INI`` fold) moves:
+* ``.dat``: ``DECL FRAME TOOL_<tool>`` (TCP in the flange), ``DECL FRAME BASE_WORLD`` (the world {F} in
+  the robot base, ``inv(base_in_world)``), ``DECL LOAD`` (tool mass, centre of gravity), one ``DECL
+  E6POS`` per waypoint (``XP<k>``, ``XP<pass>_<k>`` for several passes), an approach and a retract point
+  (``XAPP<pass>``, ``XRET<pass>``) ``retract_m`` behind the end waypoints along the tool z axis. X, Y, Z
+  [mm, 4 decimals]; A, B, C [deg, 6 decimals] from :func:`refine.frames.kuka_abc_from_matrix`
+  (``Rz(A)·Ry(B)·Rx(C)``, C = 0 at B = ±90 deg); the controller stores ``REAL`` in single precision.
+* ``.src``: ``DEF``/``END``, KUKA's ``INI`` fold, ``$BASE``, ``$TOOL``, ``$LOAD`` from those (every
+  ``E6POS`` is then a TCP pose in {F}, assuming the controller's ``$WORLD`` is the robot base),
+  ``$APO.CDIS``, then a fold ``;FOLD pass i of n: <name>`` per pass: ``PTP`` to the approach point,
+  ``LIN`` onto the first point, ``$OUT[n]=TRUE``, ``LIN ... C_DIS`` through the points (the last one
+  exact), ``$OUT[n]=FALSE``, ``LIN`` to the retract point (writing ``$OUT`` stops the advance run, so
+  the output switches with the robot on the end points). ``$VEL.CP`` [m/s]: the segment speed
+  (:func:`refine.export.rapid.segment_speeds`) rounded to ``speed_resolution_m_s``, set when it changes.
 
-* ``DECL FRAME TOOL_<tool>``: the TCP in the flange (X, Y, Z [mm]; A, B, C [deg]), and
-  ``DECL FRAME BASE_WORLD``: the world {F} in the robot base, ``inv(base_in_world)``; the program sets
-  ``$TOOL`` and ``$BASE`` from them (and ``$LOAD`` from ``DECL LOAD``), so every ``E6POS`` is a TCP pose
-  in {F}. This assumes the controller's ``$WORLD`` is the robot base (``$ROBROOT`` = ``$NULLFRAME``).
-* ``DECL E6POS``: one per waypoint, ``XP<k>`` (``XP<pass>_<k>`` for several passes), plus an approach
-  point ``XAPP<pass>`` and a retract point ``XRET<pass>`` ``retract_m`` behind the first and last
-  waypoint along the tool z axis. A, B, C are :func:`refine.frames.kuka_abc_from_matrix`
-  (``Rz(A)·Ry(B)·Rx(C)``; at B = ±90 deg, C = 0). Positions carry 4 decimals [mm], angles 6 [deg];
-  the controller itself keeps KRL ``REAL`` in single precision.
-* Each pass is one fold ``;FOLD pass i of n: <name>``: ``PTP`` to the approach point, ``LIN`` onto the
-  first point (exact stop), ``$OUT[n]=TRUE``, ``LIN ... C_DIS`` through the points (``$APO.CDIS``
-  approximation; the last point exact), ``$OUT[n]=FALSE``, ``LIN`` to the retract point. Writing ``$OUT``
-  stops the advance run, so the output switches while the robot stands on the first / last point.
-  ``$VEL.CP`` [m/s] is the segment speed (mean of the planned speeds at its ends, as in
-  :func:`refine.export.rapid.segment_speeds`), rounded to ``speed_resolution_m_s`` and written only
-  when the rounded value changes.
+Process output: ``process.output`` ``"$OUT[12]"`` or ``"12"`` names the output; any other name (such as
+``doGlue``) maps to ``$OUT[1]`` (:data:`DEFAULT_OUTPUT`), with a comment naming the signal for re-mapping.
 
-Process output: ``process.output`` of the form ``$OUT[12]`` or ``12`` gives the output number; any
-other name (a RAPID-style signal such as ``doGlue``) maps to ``$OUT[1]`` (:data:`DEFAULT_OUTPUT`), and a
-comment in the program names the signal so the cell integrator can re-map it.
+Status and Turn (:func:`kuka_status_turn`) of a six-axis KUKA, from the KUKA expert programming manual
+as quoted in robot-forum.com thread 7173 ("x value of wrist root point") and from Beckhoff TF5200
+"Status & Turn (IS, IT)", which documents KUKA's convention: S bit 0 = 1 when the wrist root point
+has a negative x in the A1 coordinate system (the frame turning with axis 1): overhead area; bit 1 = 1
+when the wrist root point lies in front of the line through axes 2 and 3 (it flips at the stretched
+elbow; elbow-up poses have it set, hence KUKA's usual ``S 2`` / ``S 6``); bit 2 = 1 when A5 < 0.
+T bit i = 1 when axis i+1 < 0.
 
-Status and Turn (:func:`kuka_status_turn`). Six axes, from the KUKA expert programming manual as quoted
-in robot-forum.com thread 7173 ("x value of wrist root point") and Beckhoff TF5200 "Status & Turn (IS,
-IT)", which documents KUKA's convention:
-
-* S bit 0 = 1 when the wrist root point has a negative x in the A1 coordinate system (the frame that
-  turns with axis 1): overhead area, else basic area;
-* S bit 1 = 1 when the wrist root point lies in front of the line through axes 2 and 3 (its side
-  flips at the stretched-elbow singularity; normal elbow-up poses have bit 1 set, hence KUKA's usual
-  ``S 2`` / ``S 6``);
-* S bit 2 = 1 when A5 < 0;
-* T bit i = 1 when axis i+1 < 0.
-
-LBR iiwa (7 axes) on a KRC: the LBR's redundancy information as the Sunrise handbook defines it,
-quoted in ``IFL-CAMP/iiwa_stack`` ``iiwa_msgs/msg/RedundancyInformation.msg``: S bit 0 = 1 when
-working overhead (the same wrist-root-point test, the wrist root being the intersection of axes 5, 6
-and 7), bit 1 = 1 when A4 < 0, bit 2 = 1 when A6 <= 0; E1 = the redundancy angle, the angle of axis 3
-[deg]. The same source notes that Turn is not used for the iiwa (every axis stays within ±180 deg);
-T is still written with bit i = A(i+1) < 0 for all seven axes, which is consistent and harmless.
-Geometry comes from the model: link frames parallel to the base at zero (as in ``robots/``), the
-wrist root at the origin of the second-to-last joint. Joint signs must follow KUKA's conventions.
+LBR iiwa (7 axes) on a KRC: the Sunrise handbook's redundancy information as quoted in
+``IFL-CAMP/iiwa_stack`` ``iiwa_msgs/msg/RedundancyInformation.msg``: S bit 0 = 1 when working overhead
+(the same wrist-root test; the wrist root is where axes 5, 6, 7 meet), bit 1 = 1 when A4 < 0, bit 2 = 1
+when A6 <= 0; E1 = the redundancy angle, the angle of axis 3 [deg]. That source says Turn is not used
+on the iiwa (no axis passes ±180 deg, so T selects nothing); T is still written, bit i = A(i+1) < 0.
+Geometry from the model (link frames parallel to the base at zero as in ``robots/``, the wrist root at
+the second-to-last joint); joint signs must be KUKA's.
 """
 
 from __future__ import annotations
@@ -67,29 +56,21 @@ from refine.problem import Problem
 log = logging.getLogger(__name__)
 
 DEFAULT_OUTPUT = 1  # $OUT number used when process.output names no number
-_INI = [
-    ";FOLD INI",
-    "  ;FOLD BASISTECH INI",
-    "    GLOBAL INTERRUPT DECL 3 WHEN $STOPMESS==TRUE DO IR_STOPM ( )",
-    "    INTERRUPT ON 3",
-    "    BAS (#INITMOV,0 )",
-    "  ;ENDFOLD (BASISTECH INI)",
-    ";ENDFOLD (INI)",
-]
+_INI = (  # the INI fold of KUKA's standard program template
+    ";FOLD INI|  ;FOLD BASISTECH INI|    GLOBAL INTERRUPT DECL 3 WHEN $STOPMESS==TRUE DO IR_STOPM ( )|"
+    "    INTERRUPT ON 3|    BAS (#INITMOV,0 )|  ;ENDFOLD (BASISTECH INI)|;ENDFOLD (INI)"
+).split("|")
 
 
 def _name(text: str, fallback: str) -> str:
     """A KRL name: letters, digits, ``_``, not starting with a digit, at most 24 characters."""
     name = re.sub(r"[^A-Za-z0-9_]", "_", text)
-    if not name or name[0].isdigit():
-        name = f"{fallback}_{name}".rstrip("_")
-    return name[:24]
+    return (name if name and not name[0].isdigit() else f"{fallback}_{name}".rstrip("_"))[:24]
 
 
 def _real(value: float, decimals: int) -> str:
-    text = f"{value:.{decimals}f}".rstrip("0")
-    text = text + "0" if text.endswith(".") else text
-    return "0.0" if float(text) == 0.0 else text
+    text = f"{value:.{decimals}f}".rstrip("0").rstrip(".")
+    return "0.0" if float(text) == 0.0 else (text if "." in text else f"{text}.0")
 
 
 def _xyzabc(T: Array) -> str:
@@ -121,13 +102,9 @@ def kuka_status_turn(robot: Any, q: Array) -> tuple[NDArray[np.int64], NDArray[n
         Status and Turn, each of shape (N,) (integers for a single q).
     """
     q = np.asarray(q, dtype=float)
-    qs = np.atleast_2d(q)
-    n = robot.nq
+    qs, n = np.atleast_2d(q), robot.nq
     if n not in (6, 7) or qs.shape[1] != n:
-        raise InputError(
-            f"KUKA Status/Turn needs a 6- or 7-axis robot and q of shape (N, n), got "
-            f"{robot.spec.name!r} ({n} joints) with q {q.shape}"
-        )
+        raise InputError(f"KUKA Status/Turn needs 6 or 7 axes; got {robot.spec.name!r} with q {q.shape}")
     status = np.zeros(len(qs), dtype=np.int64)
     model, data = robot.model, robot.data
     for k, qk in enumerate(qs):
@@ -144,9 +121,31 @@ def kuka_status_turn(robot: Any, q: Array) -> tuple[NDArray[np.int64], NDArray[n
     return (status[0], turn[0]) if q.ndim == 1 else (status, turn)
 
 
-def _e6pos(name: str, T: Array, s: int, t: int, e1_deg: float) -> str:
+def _declarations(names: list[str], tr: Trajectory, robot: Any, back: Array) -> list[str]:
+    """``DECL E6POS`` of the approach point, every waypoint and the retract point of one pass."""
+    n = len(tr)
+    status, turn = kuka_status_turn(robot, tr.q)
+    if len(set(status)) > 1:  # a CP motion keeps its start Status: a change means a singular pose
+        log.warning("KRL: Status changes along a LIN pass (%s): a singularity", sorted(set(status.tolist())))
+    e1 = np.degrees(tr.q[:, 2]) if robot.nq == 7 else np.zeros(n)
+    poses, rows = [tr.poses[0] @ back, *tr.poses, tr.poses[-1] @ back], [0, *range(n), n - 1]
     tail = ",".join(f"E{i} 0.0" for i in range(2, 7))
-    return f"DECL E6POS {name}={{{_xyzabc(T)},S {s},T {t},E1 {_real(e1_deg, 6)},{tail}}}"
+    return [
+        f"DECL E6POS {name}={{{_xyzabc(T)},S {status[r]},T {turn[r]},E1 {_real(e1[r], 6)},{tail}}}"
+        for name, T, r in zip(names, poses, rows, strict=True)
+    ]
+
+
+def _moves(names: list[str], tr: Trajectory, output: tuple[int, str], air: str, step: float) -> list[str]:
+    """The motion of one pass: approach, output on, the seam, output off, retract."""
+    (number, signal), path, current = output, names[1:-1], None
+    lines = [f"$VEL.CP = {air}", f"PTP {names[0]}", f"LIN {path[0]}", f"$OUT[{number}]=TRUE ; on ({signal})"]
+    for k, v in enumerate(segment_speeds(tr), start=1):
+        text = _real(max(round(v / step), 1) * step, 6)
+        lines += [f"$VEL.CP = {text}"] if text != current else []
+        current = text
+        lines.append(f"LIN {path[k]}" + (" C_DIS" if k < len(path) - 1 else ""))
+    return lines + [f"$OUT[{number}]=FALSE ; off ({signal})", f"$VEL.CP = {air}", f"LIN {names[-1]}"]
 
 
 def write_krl(
@@ -175,92 +174,49 @@ def write_krl(
         approach_speed_m_s: ``$VEL.CP`` of the moves onto the first point and to the retract [m/s].
         retract_m: approach and retract distance along the tool z axis [m].
         ptp_percent: axis speed of the ``PTP`` approach [% of the maximum].
-        speed_resolution_m_s: ``$VEL.CP`` is rounded to this step [m/s] and rewritten only when the
-            rounded value changes.
+        speed_resolution_m_s: ``$VEL.CP`` is rounded to this step [m/s].
 
     Returns:
         The ``.src`` and ``.dat`` paths written.
     """
     if getattr(robot.spec, "controller", "") != "kuka":
-        raise InputError(f"KRL is for KUKA robots; {robot.spec.name!r} has controller {robot.spec.controller!r}")
+        raise InputError(f"KRL is for KUKA robots; {robot.spec.name!r} is for {robot.spec.controller}")
     runs = [(problem.name, trajectory)] if passes is None else list(passes)
-    if not runs:
-        raise InputError("KRL export: passes is empty; give at least one (name, trajectory)")
-    for name, tr in runs:
-        if len(tr) < 2 or tr.q.shape[1] != robot.nq:
-            raise InputError(f"KRL pass {name!r}: needs >= 2 waypoints of {robot.nq} joints, got q {tr.q.shape}")
-    if not speed_resolution_m_s > 0.0 or not approach_speed_m_s > 0.0:
-        raise InputError("KRL export: speed_resolution_m_s and approach_speed_m_s must be > 0")
-    if passes is not None:
-        log.debug("KRL export: writing %d passes; the trajectory argument is not written", len(runs))
-    path_src = Path(path_src)
-    prog = _name(path_src.stem, "prog")
-    src, dat = path_src.with_name(f"{prog}.src"), path_src.with_name(f"{prog}.dat")
+    if not runs or any(len(tr) < 2 or tr.q.shape[1] != robot.nq for _, tr in runs):
+        raise InputError(f"KRL export: needs passes of >= 2 waypoints of {robot.nq} joints, got {len(runs)}")
+    if not (speed_resolution_m_s > 0.0 and approach_speed_m_s > 0.0 and approximation_m >= 0.0):
+        raise InputError("KRL export: speeds must be > 0 and approximation_m >= 0")
+    prog = _name(Path(path_src).stem, "prog")
+    src, dat = (Path(path_src).with_name(prog + ext) for ext in (".src", ".dat"))
     tool, load = _name(f"TOOL_{problem.tool.name}", "TOOL"), _name(f"LOAD_{problem.tool.name}", "LOAD")
-    signal = problem.process.output
-    number = krl_output_number(signal)
-    out_note = f"process output {signal!r}"
-    if number is None:
-        number, out_note = DEFAULT_OUTPUT, f"process output {signal!r} mapped to $OUT[{DEFAULT_OUTPUT}] (refine default)"
+    number = krl_output_number(signal := problem.process.output) or DEFAULT_OUTPUT
+    mapped = "" if krl_output_number(signal) else "mapped to "
+    note = f"process output {signal!r} is {mapped}$OUT[{number}]" + (" (refine default)" if mapped else "")
     cog = [_real(v * 1000.0, 4) for v in problem.tool.cog_in_flange_m]
-    header = (
-        f"; Written by refine {__version__} for problem '{problem.name}', robot {problem.robot.model}, "
-        f"{len(runs)} pass(es)."
-    )
+    header = f"; Written by refine {__version__} for problem '{problem.name}', robot {problem.robot.model}."
     dat_lines = [
-        "&ACCESS RVP",
-        "&REL 1",
-        f"DEFDAT {prog}",
-        header,
-        "; E6POS: TCP poses in the world frame {F} ($BASE = BASE_WORLD): X Y Z [mm], A B C [deg] "
-        "(Rz(A)Ry(B)Rx(C)); S, T (and E1 = A3 [deg] on a 7-axis LBR) of the refined joints.",
+        *("&ACCESS RVP", "&REL 1", f"DEFDAT {prog}", header),
+        "; E6POS: TCP in {F} ($BASE = BASE_WORLD), X Y Z [mm], A B C [deg], S T (E1 = A3 [deg] on an LBR)",
         f"DECL FRAME {tool}={{{_xyzabc(problem.tool.tcp_in_flange)}}}",
         f"DECL FRAME BASE_WORLD={{{_xyzabc(invert_transform(problem.robot.base_in_world))}}}",
-        f"DECL LOAD {load}={{M {_real(problem.tool.mass_kg, 4)},CM {{X {cog[0]},"
-        f"Y {cog[1]},Z {cog[2]},A 0.0,B 0.0,C 0.0}},J {{X 0.0,Y 0.0,Z 0.0}}}}",
+        f"DECL LOAD {load}={{M {_real(problem.tool.mass_kg, 4)},CM {{X {cog[0]},Y {cog[1]},Z {cog[2]},"
+        "A 0.0,B 0.0,C 0.0},J {X 0.0,Y 0.0,Z 0.0}}",
     ]
-    src_lines = ["&ACCESS RVP", "&REL 1", f"DEF {prog}( )", *_INI, header]
-    src_lines += [
-        "$BASE = BASE_WORLD",
-        f"$TOOL = {tool}",
-        f"$LOAD = {load}",
-        f"$APO.CDIS = {_real(approximation_m * 1000.0, 4)}",
-        f"BAS (#VEL_PTP,{int(ptp_percent)} )",
-        f"; {out_note} is $OUT[{number}]",
-    ]
-    step = speed_resolution_m_s
-    back = make_transform(p=[0.0, 0.0, -retract_m])
+    src_lines = [*("&ACCESS RVP", "&REL 1", f"DEF {prog}( )"), *_INI, header, f"; {note}"]
+    src_lines += ["$BASE = BASE_WORLD", f"$TOOL = {tool}", f"$LOAD = {load}"]
+    src_lines += [f"$APO.CDIS = {_real(approximation_m * 1000.0, 4)}", f"BAS (#VEL_PTP,{int(ptp_percent)} )"]
+    air, back = _real(approach_speed_m_s, 6), make_transform(p=[0.0, 0.0, -retract_m])
     for i, (pass_name, tr) in enumerate(runs, start=1):
-        n = len(tr)
-        status, turn = kuka_status_turn(robot, tr.q)
-        e1 = np.degrees(tr.q[:, 2]) if robot.nq == 7 else np.zeros(n)
-        names = [f"XP{k}" if len(runs) == 1 else f"XP{i}_{k}" for k in range(1, n + 1)]
-        app, ret = f"XAPP{i}", f"XRET{i}"
-        dat_lines.append(_e6pos(app, tr.poses[0] @ back, status[0], turn[0], e1[0]))
-        dat_lines += [_e6pos(names[k], tr.poses[k], status[k], turn[k], e1[k]) for k in range(n)]
-        dat_lines.append(_e6pos(ret, tr.poses[-1] @ back, status[-1], turn[-1], e1[-1]))
-        label = re.sub(r"[;\r\n]", " ", str(pass_name))
-        air = _real(approach_speed_m_s, 6)
-        body = [f"$VEL.CP = {air}", f"PTP {app}", f"LIN {names[0]}", f"$OUT[{number}]=TRUE ; {signal} on"]
-        current = None
-        for k, v in enumerate(segment_speeds(tr), start=1):
-            text = _real(max(round(v / step), 1) * step, 6)
-            if text != current:
-                body.append(f"$VEL.CP = {text}")
-                current = text
-            body.append(f"LIN {names[k]}" + (" C_DIS" if k < n - 1 else ""))
-        body += [f"$OUT[{number}]=FALSE ; {signal} off", f"$VEL.CP = {air}", f"LIN {ret}"]
-        src_lines += [
-            f";FOLD pass {i} of {len(runs)}: {label}",
-            f"  ; pass {i} of {len(runs)}: {label}, {n} points, {float(tr.t[-1]):.3f} s planned",
-            *(f"  {line}" for line in body),
-            ";ENDFOLD",
-        ]
-    src_lines.append("END")
-    dat_lines.append("ENDDAT")
+        points = [f"XP{k}" if len(runs) == 1 else f"XP{i}_{k}" for k in range(1, len(tr) + 1)]
+        names = [f"XAPP{i}", *points, f"XRET{i}"]
+        dat_lines += _declarations(names, tr, robot, back)
+        head = f"pass {i} of {len(runs)}: " + re.sub(r"[;\r\n]", " ", str(pass_name))
+        src_lines += [f";FOLD {head}", f"  ; {head}, {len(tr)} points, {float(tr.t[-1]):.3f} s planned"]
+        src_lines += [f"  {line}" for line in _moves(names, tr, (number, signal), air, speed_resolution_m_s)]
+        src_lines.append(";ENDFOLD")
     src.parent.mkdir(parents=True, exist_ok=True)
-    src.write_text("\n".join(src_lines) + "\n", encoding="utf-8")
-    dat.write_text("\n".join(dat_lines) + "\n", encoding="utf-8")
+    src.write_text("\n".join([*src_lines, "END"]) + "\n", encoding="utf-8")
+    dat.write_text("\n".join([*dat_lines, "ENDDAT"]) + "\n", encoding="utf-8")
     log.info("wrote KRL program %s (+ .dat): %d pass(es), $OUT[%d]", src, len(runs), number)
     return src, dat
 
@@ -274,7 +230,7 @@ class KrlPass:
         points: the E6POS names.
         positions: TCP positions in {F} [m], shape (N, 3).
         rotations: TCP orientations R_F_TCP, shape (N, 3, 3).
-        status: Status S, shape (N,). turn: Turn T, shape (N,).
+        status, turn: Status S and Turn T, shape (N,) each.
         e1_deg: E1 of each point [deg] (the LBR's redundancy angle), shape (N,).
         speeds: ``$VEL.CP`` of the move ending at each point [m/s], shape (N,).
         output: the ``$OUT`` number switched around the pass.
@@ -296,7 +252,7 @@ _FOLD_RE = re.compile(r";\s*FOLD\s+pass\s+\d+\s+of\s+\d+:\s*(.*)$", re.IGNORECAS
 
 
 def _fields(body: str, where: str) -> dict[str, float]:
-    try:
+    try:  # "X 1.0,Y 2.0,..." -> {"X": 1.0, ...}
         return {k.upper(): float(v) for k, v in (item.split() for item in body.split(","))}
     except ValueError as e:
         raise InputError(f"KRL {where}: malformed E6POS {{{body}}}") from e
@@ -308,7 +264,8 @@ def parse_krl(path_src: str | Path, path_dat: str | Path) -> list[KrlPass]:
     Raises:
         InputError: no pass found, a point used but not declared, or a malformed declaration.
     """
-    points = {m.group(1).upper(): _fields(m.group(2), m.group(1)) for m in _DECL_RE.finditer(Path(path_dat).read_text())}
+    decls = _DECL_RE.finditer(Path(path_dat).read_text(encoding="utf-8"))
+    points = {m.group(1).upper(): _fields(m.group(2), m.group(1)) for m in decls}
     passes: list[dict[str, Any]] = []
     label, speed = "", float("nan")
     for raw in Path(path_src).read_text(encoding="utf-8").splitlines():
@@ -319,7 +276,9 @@ def parse_krl(path_src: str | Path, path_dat: str | Path) -> list[KrlPass]:
             speed = float(m.group(1))
         elif re.match(r"PTP\s", code, re.IGNORECASE):
             passes.append({"name": label, "moves": [], "on": None, "off": None, "out": 0})
-        elif (m := re.fullmatch(r"LIN\s+(\w+)(\s+C_DIS)?", code, re.IGNORECASE)) and passes:
+        elif re.match(r"LIN\s", code, re.IGNORECASE) and passes:
+            if not (m := re.fullmatch(r"LIN\s+(\w+)(\s+C_DIS)?", code, re.IGNORECASE)):
+                raise InputError(f"KRL {path_src}: cannot read {code!r}")
             if m.group(1).upper() not in points:
                 raise InputError(f"KRL {path_src}: point {m.group(1)} is not declared in {path_dat}")
             passes[-1]["moves"].append((m.group(1).upper(), speed))
@@ -331,20 +290,10 @@ def parse_krl(path_src: str | Path, path_dat: str | Path) -> list[KrlPass]:
         if not p["on"] or p["off"] is None:
             raise InputError(f"KRL {path_src}: pass {p['name']!r} does not switch its output on and off")
         moves = p["moves"][p["on"] - 1 : p["off"]]
-        vals = np.array([[points[name][k] for k in ("X", "Y", "Z", "A", "B", "C", "S", "T", "E1")] for name, _ in moves])
-        result.append(
-            KrlPass(
-                name=p["name"],
-                points=tuple(name for name, _ in moves),
-                positions=vals[:, :3] / 1000.0,
-                rotations=matrix_from_kuka_abc(vals[:, 3:6]),
-                status=vals[:, 6].astype(np.int64),
-                turn=vals[:, 7].astype(np.int64),
-                e1_deg=vals[:, 8],
-                speeds=np.array([v for _, v in moves]),
-                output=p["out"],
-            )
-        )
+        v = np.array([[points[name][k] for k in "X Y Z A B C S T E1".split()] for name, _ in moves])
+        names, speeds = tuple(name for name, _ in moves), np.array([s for _, s in moves])
+        S, T, R = v[:, 6].astype(np.int64), v[:, 7].astype(np.int64), matrix_from_kuka_abc(v[:, 3:6])
+        result.append(KrlPass(p["name"], names, v[:, :3] / 1000.0, R, S, T, v[:, 8], speeds, p["out"]))
     if not result:
         raise InputError(f"KRL {path_src}: no pass (PTP approach followed by LIN moves) found")
     return result

@@ -92,13 +92,17 @@ def _approach_joints(robot: Any, q0: Array, T_base_flange: Array, label: str) ->
     q = np.array(q0, dtype=float)
     for _ in range(100):
         T = robot.fk(q)
-        err = np.concatenate([T_base_flange[:3, 3] - T[:3, 3], rotvec_from_matrix(T_base_flange[:3, :3] @ T[:3, :3].T)])
+        err = np.concatenate(
+            [T_base_flange[:3, 3] - T[:3, 3], rotvec_from_matrix(T_base_flange[:3, :3] @ T[:3, :3].T)]
+        )
         if np.linalg.norm(err) < 1e-11:
             break
         J = robot.jacobian(q)
         q = q + J.T @ np.linalg.solve(J @ J.T + 1e-10 * np.eye(6), err)
     else:
-        raise SolverError(f"URScript pass {label!r}: no joints reach the approach pose (residual {np.linalg.norm(err):.1e})")
+        raise SolverError(
+            f"URScript pass {label!r}: no joints reach the approach pose (residual {np.linalg.norm(err):.1e})"
+        )
     if np.any(q < robot.spec.lower) or np.any(q > robot.spec.upper):
         raise SolverError(f"URScript pass {label!r}: the approach pose needs joints outside their limits")
     return q
@@ -140,13 +144,17 @@ def write_urscript(
         The path written.
     """
     if getattr(robot.spec, "controller", "") != "ur":
-        raise InputError(f"URScript is for UR robots; {robot.spec.name!r} has controller {robot.spec.controller!r}")
+        raise InputError(
+            f"URScript is for UR robots; {robot.spec.name!r} has controller {robot.spec.controller!r}"
+        )
     runs = [(problem.name, trajectory)] if passes is None else list(passes)
     if not runs:
         raise InputError("URScript export: passes is empty; give at least one (name, trajectory)")
     for name, tr in runs:
         if len(tr) < 2 or tr.q.shape[1] != robot.nq:
-            raise InputError(f"URScript pass {name!r}: needs >= 2 waypoints of {robot.nq} joints, got q {tr.q.shape}")
+            raise InputError(
+                f"URScript pass {name!r}: needs >= 2 waypoints of {robot.nq} joints, got q {tr.q.shape}"
+            )
     if not (speed_resolution_m_s > 0.0 and approach_speed_m_s > 0.0 and blend_m >= 0.0):
         raise InputError("URScript export: speeds must be > 0 and blend_m >= 0")
     path = Path(path)
@@ -175,7 +183,9 @@ def write_urscript(
     for i, (pass_name, tr) in enumerate(runs, start=1):
         n, label = len(tr), re.sub(r"[\r\n]", " ", str(pass_name))
         poses = np.concatenate([T_base_world @ tr.poses, [T_base_world @ tr.poses[-1] @ back]])
-        q_app = _approach_joints(robot, tr.q[0], poses[0] @ back @ invert_transform(tool.tcp_in_flange), label)
+        q_app = _approach_joints(
+            robot, tr.q[0], poses[0] @ back @ invert_transform(tool.tcp_in_flange), label
+        )
         rv = continuous_rotvecs(poses[:, :3, :3], previous)
         previous = rv[-1]
         gaps = np.linalg.norm(np.diff(poses[:n, :3, 3], axis=0), axis=1)
@@ -191,7 +201,10 @@ def write_urscript(
         for k, v in enumerate(segment_speeds(tr), start=1):
             speed = _num(max(round(v / step), 1) * step, 6)
             lines.append(f"  movel({_pose(poses[k], rv[k])}, a={a}, v={speed}, r={_num(blends[k], 6)})")
-        lines += [f"  set_digital_out({number}, False)", f"  movel({_pose(poses[n], rv[n])}, a={a}, v={air}, r=0)"]
+        lines += [
+            f"  set_digital_out({number}, False)",
+            f"  movel({_pose(poses[n], rv[n])}, a={a}, v={air}, r=0)",
+        ]
     lines.append("end")
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
@@ -228,9 +241,12 @@ _NUMS = r"\[([^\[\]]*)\]"
 _MOVEL_RE = re.compile(rf"movel\(p{_NUMS}\s*,\s*a=([^,]+),\s*v=([^,]+),\s*r=([^)]+)\)")
 
 
-def _vector(text: str, count: int, where: str) -> Array:
-    values = np.array([float(v) for v in text.split(",")])
-    if values.shape != (count,):
+def _vector(text: str, count: int | None, where: str) -> Array:
+    try:
+        values = np.array([float(v) for v in text.split(",")])
+    except ValueError as e:
+        raise InputError(f"URScript {where}: not a list of numbers: [{text}]") from e
+    if count is not None and values.shape != (count,):
         raise InputError(f"URScript {where}: expected {count} numbers, got {values.size}")
     return values
 
@@ -246,7 +262,8 @@ def parse_urscript(path: str | Path) -> list[UrPass]:
     Raises:
         InputError: no pass found, a pass that does not switch its output, or a malformed pose.
     """
-    tcp, label, passes = np.eye(4), "", []
+    tcp, label = np.eye(4), ""
+    passes: list[dict[str, Any]] = []
     for raw in Path(path).read_text(encoding="utf-8").splitlines():
         line = raw.strip()
         if m := re.match(r"#\s*pass\s+\d+\s+of\s+\d+:\s*(.*?)(?:, \d+ waypoints,.*)?$", line):
@@ -254,9 +271,11 @@ def parse_urscript(path: str | Path) -> list[UrPass]:
         elif m := re.fullmatch(rf"set_tcp\(p{_NUMS}\)", line):
             tcp = _transform(m.group(1), "set_tcp")
         elif m := re.match(rf"movej\({_NUMS}", line):
-            passes.append({"name": label, "q": _vector(m.group(1), len(m.group(1).split(",")), "movej"), "moves": []})
-            passes[-1].update(on=None, off=None, out=-1)
-        elif (m := _MOVEL_RE.fullmatch(line)) and passes:
+            q = _vector(m.group(1), None, "movej")
+            passes.append({"name": label, "q": q, "moves": [], "on": None, "off": None, "out": -1})
+        elif line.startswith("movel(") and passes:
+            if not (m := _MOVEL_RE.fullmatch(line)):
+                raise InputError(f"URScript {path}: cannot read {line!r}")
             passes[-1]["moves"].append((m.group(1), float(m.group(3)), float(m.group(4))))
         elif (m := re.fullmatch(r"set_digital_out\((\d+),\s*(True|False)\)", line)) and passes:
             key = "on" if m.group(2) == "True" else "off"
@@ -266,19 +285,10 @@ def parse_urscript(path: str | Path) -> list[UrPass]:
         if not p["on"] or p["off"] is None:
             raise InputError(f"URScript {path}: pass {p['name']!r} does not switch its output on and off")
         moves = p["moves"][p["on"] - 1 : p["off"]]
+        poses = np.array([_transform(text, "movel") for text, _, _ in moves])
         rotvecs = np.array([_vector(text, 6, "movel")[3:] for text, _, _ in moves])
-        result.append(
-            UrPass(
-                name=p["name"],
-                poses=np.array([_transform(text, "movel") for text, _, _ in moves]),
-                rotvecs=rotvecs,
-                speeds=np.array([v for _, v, _ in moves]),
-                blend_radii=np.array([r for _, _, r in moves]),
-                q_approach=p["q"],
-                output=p["out"],
-                tcp_in_flange=tcp,
-            )
-        )
+        speeds, radii = np.array([v for _, v, _ in moves]), np.array([r for _, _, r in moves])
+        result.append(UrPass(p["name"], poses, rotvecs, speeds, radii, p["q"], p["out"], tcp))
     if not result:
         raise InputError(f"URScript {path}: no pass (movej approach followed by movel moves) found")
     return result

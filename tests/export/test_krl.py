@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import dataclasses
+import logging
 import re
 import warnings
 from pathlib import Path
@@ -38,7 +39,9 @@ def iiwa_problem() -> Problem:
     return Problem(
         name="tig seam-2",
         root=Path("."),
-        robot=RobotSettings(model=IIWA, base_in_world=transform_from_xyz_rpy([0.3, -0.2, 0.75], [0.0, 0.0, -40.0])),
+        robot=RobotSettings(
+            model=IIWA, base_in_world=transform_from_xyz_rpy([0.3, -0.2, 0.75], [0.0, 0.0, -40.0])
+        ),
         tool=ToolSettings(
             name="tig torch",
             tcp_in_flange=transform_from_xyz_rpy([0.0, 0.015, 0.21], [0.0, 25.0, 0.0]),
@@ -114,6 +117,18 @@ def test_status_turn_and_e1_written_are_those_of_the_refined_joints(program, sea
     np.testing.assert_array_equal(run.status, [_lbr_status(iiwa, q) for q in seam.q])
     np.testing.assert_allclose(run.e1_deg, np.degrees(seam.q[:, 2]), atol=1e-6)
     assert len(set(run.turn)) > 1, "the seam should cross axis sign changes"
+
+
+def test_a_status_change_along_a_pass_is_reported_as_a_singularity(tmp_path, seam, iiwa_problem, iiwa, caplog):
+    """A LIN motion keeps its start Status; the seam's A6 crosses 0 (a wrist singularity) mid-pass."""
+    with caplog.at_level(logging.WARNING, logger="refine.export.krl"):
+        write_krl(tmp_path / "w.src", seam, iiwa_problem, iiwa)
+    assert "Status changes along a LIN pass ([2, 6])" in caplog.text
+    caplog.clear()
+    calm = make_trajectory(iiwa, iiwa_problem, 10, Q0, np.add(Q0, 10.0))
+    with caplog.at_level(logging.WARNING, logger="refine.export.krl"):
+        write_krl(tmp_path / "c.src", calm, iiwa_problem, iiwa)
+    assert "Status changes" not in caplog.text
 
 
 def test_tool_base_and_points_chain_to_the_flange_pose(program, seam, iiwa_problem, iiwa):
@@ -276,10 +291,15 @@ def test_abc_match_frames_and_scipy_on_10000_rotations_with_gimbal_lock(tmp_path
     n = len(R)
     poses = make_transform(R, rng.uniform(-1.0, 1.0, (n, 3)))
     q = rng.uniform(iiwa.spec.lower, iiwa.spec.upper, size=(n, 7))
-    tr = Trajectory(np.arange(n, dtype=float), np.arange(n, dtype=float), q, poses[:, :3, 3], poses, R, np.full(n, 0.01))
+    tr = Trajectory(
+        np.arange(n, dtype=float), np.arange(n, dtype=float), q, poses[:, :3, 3], poses, R, np.full(n, 0.01)
+    )
     src, dat = write_krl(tmp_path / "abc.src", tr, iiwa_problem, iiwa)
     written = np.array(
-        [[float(x) for x in m] for m in re.findall(r"DECL E6POS XP\d+=\{[^}]*?A (\S+),B (\S+),C (\S+),", dat.read_text())]
+        [
+            [float(x) for x in m]
+            for m in re.findall(r"DECL E6POS XP\d+=\{[^}]*?A (\S+),B (\S+),C (\S+),", dat.read_text())
+        ]
     )
     diff = (written - kuka_abc_from_matrix(R) + 180.0) % 360.0 - 180.0
     assert np.abs(diff).max() < 1e-6

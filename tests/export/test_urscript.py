@@ -30,7 +30,9 @@ def ur_problem() -> Problem:
     return Problem(
         name="seal window-3",
         root=Path("."),
-        robot=RobotSettings(model=UR, base_in_world=transform_from_xyz_rpy([-0.5, 0.4, 0.9], [0.0, 0.0, 135.0])),
+        robot=RobotSettings(
+            model=UR, base_in_world=transform_from_xyz_rpy([-0.5, 0.4, 0.9], [0.0, 0.0, 135.0])
+        ),
         tool=ToolSettings(
             name="nozzle",
             tcp_in_flange=transform_from_xyz_rpy([0.0, 0.01, 0.18], [0.0, 15.0, 0.0]),
@@ -157,7 +159,10 @@ def test_rejects_a_bad_output_and_a_non_ur_robot(tmp_path, path, ur_problem, ur1
 
 
 def test_three_passes_make_three_blocks_read_back_as_three_passes(tmp_path, ur10e, ur_problem):
-    runs = [(f"bead {i}", make_trajectory(ur10e, ur_problem, 8 + i, Q0, np.add(Q1, [0, 3.0 * i, 0, 0, 0, 0]))) for i in (1, 2, 3)]
+    runs = [
+        (f"bead {i}", make_trajectory(ur10e, ur_problem, 8 + i, Q0, np.add(Q1, [0, 3.0 * i, 0, 0, 0, 0])))
+        for i in (1, 2, 3)
+    ]
     target = write_urscript(tmp_path / "multi.script", runs[0][1], ur_problem, ur10e, passes=runs)
     text = target.read_text()
     assert [int(m) for m in re.findall(r"^  # pass (\d) of 3: bead", text, re.M)] == [1, 2, 3]
