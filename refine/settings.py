@@ -355,7 +355,7 @@ class OptimiseSettings:
 
     orientation_weight: float = 1.0
     velocity_weight: float = 5e-3
-    acceleration_weight: float = 5e-6
+    acceleration_weight: float = 5e-8
     mid_range_weight: float | None = None
 
     def __post_init__(self) -> None:

@@ -84,11 +84,17 @@ def add_key(toml: Path, table: str, line: str) -> None:
 
 
 def remove_table(toml: Path, table: str) -> None:
-    """Delete ``[table]`` and its keys (up to the next table header)."""
+    """Delete ``[table]`` and its keys, and its sub-tables such as ``[[table.collision]]``."""
     lines = toml.read_text(encoding="utf-8").splitlines(keepends=True)
-    start = lines.index(f"[{table}]\n")
-    end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("[")), len(lines))
-    toml.write_text("".join(lines[:start] + lines[end:]), encoding="utf-8")
+    kept, dropping = [], False
+    for line in lines:
+        if line.startswith("["):
+            name = line.strip().strip("[]")
+            dropping = name == table or name.startswith(table + ".")
+        if not dropping:
+            kept.append(line)
+    assert len(kept) < len(lines), f"no table [{table}]"
+    toml.write_text("".join(kept), encoding="utf-8")
 
 
 def remove_line(toml: Path, prefix: str) -> None:

@@ -57,7 +57,7 @@ class Weights:
 
     orientation: float = 1.0
     velocity: float = 5e-3
-    acceleration: float = 5e-6
+    acceleration: float = 5e-8
     mid_range: float = 0.0
 
     def __post_init__(self) -> None:
