@@ -23,6 +23,11 @@ from refine.timing import Timing
 Array = NDArray[np.float64]
 
 
+FOLLOWING = 0.99
+"""A waypoint's planned speed at or above this fraction of the demonstrated speed counts as
+following the demonstration; the speed comparison with the truth is made there."""
+
+
 @dataclass(frozen=True)
 class TruthComparison:
     """Planned path against the truth.
@@ -32,8 +37,9 @@ class TruthComparison:
             (the tool axes' angle for an axisymmetric tool).
         demo_orientation_error_deg: fused demonstrated orientation vs the truth [deg], (N,).
         speed_error_rel: (planned - true) / true speed [-], (N,).
-        speed_compared: waypoints where the speed is compared (outside the segments where the
-            joint limits or the start/stop ramps hold the robot below the demonstrated speed), (N,).
+        speed_compared: waypoints where the speed is compared: where the plan follows the
+            demonstrated speed (at least :data:`FOLLOWING` of it), i.e. where neither the joint
+            limits nor the start/stop ramps hold the robot back, (N,).
     """
 
     orientation_error_deg: Array
@@ -107,7 +113,9 @@ def compare_with_truth(
     v = np.interp(s_clip, s_true, v_true)
     ori = _angle_deg(R_true, trajectory.poses[:, :3, :3], axisymmetric)
     demo = _angle_deg(R_true, trajectory.rotations_demo, axisymmetric)
-    compared = np.ones(len(s), dtype=bool)
+    # where the joint limits allow, the plan runs at the demonstrated speed (the cap); where it runs
+    # below it the robot is holding back, and the comparison with the worker's speed says nothing
+    compared = trajectory.speed >= FOLLOWING * timing.speed_cap
     for seg in timing.slow_segments:
         compared[seg.index_start : seg.index_end + 1] = False
     return TruthComparison(ori, demo, (trajectory.speed - v) / v, compared)
