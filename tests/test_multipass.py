@@ -129,7 +129,9 @@ def test_offsets_are_exact_on_a_straight_seam():
     for p in generate_passes(root, THREE_LAYERS)[1:]:
         shift = p.path.positions - root.positions
         distance = np.linalg.norm(shift, axis=1)
-        assert distance == pytest.approx(np.full(len(root), math.hypot(p.height_m, p.lateral_offset_m)), abs=1e-12)
+        assert distance == pytest.approx(
+            np.full(len(root), math.hypot(p.height_m, p.lateral_offset_m)), abs=1e-12
+        )
         np.testing.assert_allclose(shift, expected_shift(p, t, b), atol=1e-12)
     # on this seam l = t x b = x cross z = -y: the direction is the world's
     third = generate_passes(root, THREE_LAYERS)[5]
@@ -142,7 +144,9 @@ def test_offsets_are_exact_on_a_bent_seam_without_smoothing():
     for p in generate_passes(root, THREE_LAYERS, smoothing_m=0.0)[1:]:
         shift = p.path.positions - root.positions
         distance = np.linalg.norm(shift, axis=1)
-        assert distance == pytest.approx(np.full(len(root), math.hypot(p.height_m, p.lateral_offset_m)), abs=1e-12)
+        assert distance == pytest.approx(
+            np.full(len(root), math.hypot(p.height_m, p.lateral_offset_m)), abs=1e-12
+        )
         err = np.linalg.norm(shift - expected_shift(p, t, b), axis=1)
         assert err[inside].max() < 1e-12
         # where a line meets an arc the discrete tangent is off by about spacing / (4 radius)
@@ -163,7 +167,9 @@ def test_smoothing_keeps_the_bisector_on_a_bent_seam():
 def test_smoothing_removes_orientation_noise_from_the_bisector():
     root, t, b, _ = ramp_seam()
     rng = np.random.default_rng(7)
-    noisy = matrix_from_rotvec(np.radians(1.0) * rng.normal(size=(len(root), 3)) / math.sqrt(3)) @ root.rotations
+    noisy = (
+        matrix_from_rotvec(np.radians(1.0) * rng.normal(size=(len(root), 3)) / math.sqrt(3)) @ root.rotations
+    )
     root = FusedPath(root.s, root.positions, noisy, root.speed, root.t_demo, root.residual)
     raw = np.degrees(np.arccos(np.clip(np.sum(seam_frames(root, 0.0)[1] * b, axis=1), -1.0, 1.0)))
     smooth = np.degrees(np.arccos(np.clip(np.sum(seam_frames(root)[1] * b, axis=1), -1.0, 1.0)))
@@ -179,7 +185,9 @@ def test_the_tool_turns_about_the_seam_tangent_by_the_work_angle_change():
         np.testing.assert_allclose(rotvec, t * math.radians(p.work_angle_change_deg), atol=1e-9)
         # the push angle (torch against the tangent) is kept
         np.testing.assert_allclose(
-            np.sum(p.path.rotations[:, :, 2] * t, axis=1), np.sum(root.rotations[:, :, 2] * t, axis=1), atol=1e-12
+            np.sum(p.path.rotations[:, :, 2] * t, axis=1),
+            np.sum(root.rotations[:, :, 2] * t, axis=1),
+            atol=1e-12,
         )
 
 

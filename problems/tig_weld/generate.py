@@ -182,10 +182,20 @@ def plate_boxes() -> list[tuple[str, np.ndarray, np.ndarray]]:
         x_mid = 0.5 * (BASE_BACK_SIDE - BASE_FILLET_SIDE)
         base_centre = mid + x_mid * np.array([1.0, 0.0, 0.0]) - 0.5 * PLATE_THICKNESS * n[0]
         web_centre = mid + 0.5 * PLATE_THICKNESS * np.array([1.0, 0.0, 0.0]) + 0.5 * WEB_HEIGHT * n[0]
-        boxes.append((f"base_plate_{name}", np.array([BASE_FILLET_SIDE + BASE_BACK_SIDE, length,
-                                                       PLATE_THICKNESS]), make_transform(R, base_centre)))
-        boxes.append((f"web_plate_{name}", np.array([PLATE_THICKNESS, length, WEB_HEIGHT]),
-                      make_transform(R, web_centre)))
+        boxes.append(
+            (
+                f"base_plate_{name}",
+                np.array([BASE_FILLET_SIDE + BASE_BACK_SIDE, length, PLATE_THICKNESS]),
+                make_transform(R, base_centre),
+            )
+        )
+        boxes.append(
+            (
+                f"web_plate_{name}",
+                np.array([PLATE_THICKNESS, length, WEB_HEIGHT]),
+                make_transform(R, web_centre),
+            )
+        )
     return boxes
 
 
@@ -210,6 +220,9 @@ def write_seam_dxf(path: Path, seam_cad: np.ndarray, sigma_fine: np.ndarray) -> 
             msp.add_polyline3d(((pts + offset) * 1000.0).tolist(), dxfattribs={"layer": "BASE"})
         web_top = pts + WEB_HEIGHT * n
         msp.add_polyline3d((web_top * 1000.0).tolist(), dxfattribs={"layer": "WEB"})
+        # the CLASSES section comes out in set order (it varies with PYTHONHASHSEED): fix it
+        doc.classes.add_required_classes(doc.dxfversion)
+        doc.classes.classes = dict(sorted(doc.classes.classes.items()))
         doc.saveas(path)
     finally:
         ezdxf.options.write_fixed_meta_data_for_testing = fixed
@@ -258,11 +271,13 @@ def compare_cell(problem: dict, print_toml: bool) -> bool:
     for name, size, T, workpiece in cell_boxes(problem):
         xyz, rpy = T[:3, 3] + 0.0, np.round(fixed_xyz_from_matrix(T[:3, :3]), 1) + 0.0
         if print_toml:
-            print(f'\n[[cell.objects]]\nname = "{name}"\nshape = "box"\n'
-                  f"size_m = [{', '.join(f'{v:.4f}' for v in size)}]\n"
-                  f"pose = {{ xyz = [{', '.join(f'{v:.4f}' for v in xyz)}], "
-                  f"rpy_deg = [{', '.join(f'{v:.1f}' for v in rpy)}] }}"
-                  + ("\nworkpiece = true" if workpiece else ""))
+            print(
+                f'\n[[cell.objects]]\nname = "{name}"\nshape = "box"\n'
+                f"size_m = [{', '.join(f'{v:.4f}' for v in size)}]\n"
+                f"pose = {{ xyz = [{', '.join(f'{v:.4f}' for v in xyz)}], "
+                f"rpy_deg = [{', '.join(f'{v:.1f}' for v in rpy)}] }}"
+                + ("\nworkpiece = true" if workpiece else "")
+            )
         o = listed.get(name)
         if o is None or o.get("workpiece", False) != workpiece:
             print(f"cell: {name} missing from problem.toml or workpiece is not {str(workpiece).lower()}")
@@ -307,7 +322,9 @@ def polish_ik(kin, T_target, q, iterations: int = 5):
 
     def error(q):
         T = kin.pose(q)
-        return np.concatenate([T_target[:3, 3] - T[:3, 3], rotvec_from_matrix(T_target[:3, :3] @ T[:3, :3].T)])
+        return np.concatenate(
+            [T_target[:3, 3] - T[:3, 3], rotvec_from_matrix(T_target[:3, :3] @ T[:3, :3].T)]
+        )
 
     for _ in range(iterations):
         q = q + np.linalg.pinv(kin.jacobian(q)) @ error(q)
@@ -343,8 +360,10 @@ def run_checks(s, positions, rotations, speed, step: int = 5) -> bool:
     links = [(c, c.geometry) for c in robot.collision_shapes() if c.link != "base_link"]  # base: fixed
     tool = [(o, _fcl_geometry(o)) for o in problem.tool.collision]
     ok = True
-    print(f"checks: every {step}th point, chained DLS IK (refine.optimise.seed.ik_chain) inside the "
-          f"limits shrunk by {problem.tolerances.joint_margin_deg:g} deg")
+    print(
+        f"checks: every {step}th point, chained DLS IK (refine.optimise.seed.ik_chain) inside the "
+        f"limits shrunk by {problem.tolerances.joint_margin_deg:g} deg"
+    )
     for p in passes:
         path = p.path
         idx = np.arange(0, len(path), step)
@@ -382,25 +401,39 @@ def run_checks(s, positions, rotations, speed, step: int = 5) -> bool:
                         tool_work[shape.name] = min(tool_work[shape.name], d)
                     else:
                         tool_cell_min = min(tool_cell_min, d)
-        good = bool(chain_error < 1e-6 and errors.max() < 1e-9 and jm.min() >= margin - 1e-9
-                    and min(man) > problem.tolerances.singularity_margin
-                    and links_min > problem.collision.margin_m and tool_cell_min > problem.collision.margin_m)
+        good = bool(
+            chain_error < 1e-6
+            and errors.max() < 1e-9
+            and jm.min() >= margin - 1e-9
+            and min(man) > problem.tolerances.singularity_margin
+            and links_min > problem.collision.margin_m
+            and tool_cell_min > problem.collision.margin_m
+        )
         ok &= good
         step_max = np.degrees(np.abs(np.diff(qs, axis=0)).max())
         qd = np.degrees(qs)
-        print(f"  layer {p.layer} pass {p.index} (offset {p.lateral_offset_m * 1000:+.1f} mm, height "
-              f"{p.height_m * 1000:.0f} mm, work {p.work_angle_change_deg:+.0f} deg): {len(idx)} targets, "
-              f"IK error {chain_error:.1e} (chain), {errors.max():.1e} (polished), min joint margin {math.degrees(jm.min()):.1f} deg "
-              f"(joint {int(np.argmin(jm.min(axis=0))) + 1}), min singular value {min(sig):.3f}, "
-              f"min manipulability {min(man):.3f}, max joint step {step_max:.1f} deg")
-        print(f"    clearance: links-cell {links_min * 1000:.0f} mm ({worst}), tool-table/fixture "
-              f"{tool_cell_min * 1000:.0f} mm, tool-workpiece (information) "
-              + ", ".join(f"{k} {v * 1000:.1f} mm" for k, v in tool_work.items()) + "; "
-              + ("start q [deg] " + str(np.round(qd[0], 1).tolist()) if p.layer == 1 else "")
-              + f"{'' if good else '  <-- FAILS'}")
+        print(
+            f"  layer {p.layer} pass {p.index} (offset {p.lateral_offset_m * 1000:+.1f} mm, height "
+            f"{p.height_m * 1000:.0f} mm, work {p.work_angle_change_deg:+.0f} deg): {len(idx)} targets, "
+            f"IK error {chain_error:.1e} (chain), {errors.max():.1e} (polished), min joint margin {math.degrees(jm.min()):.1f} deg "
+            f"(joint {int(np.argmin(jm.min(axis=0))) + 1}), min singular value {min(sig):.3f}, "
+            f"min manipulability {min(man):.3f}, max joint step {step_max:.1f} deg"
+        )
+        print(
+            f"    clearance: links-cell {links_min * 1000:.0f} mm ({worst}), tool-table/fixture "
+            f"{tool_cell_min * 1000:.0f} mm, tool-workpiece (information) "
+            + ", ".join(f"{k} {v * 1000:.1f} mm" for k, v in tool_work.items())
+            + "; "
+            + ("start q [deg] " + str(np.round(qd[0], 1).tolist()) if p.layer == 1 else "")
+            + f"{'' if good else '  <-- FAILS'}"
+        )
         if p.layer == 1:
-            print("    joint ranges [deg]: " + ", ".join(
-                f"q{j + 1} {qd[:, j].min():.0f}..{qd[:, j].max():.0f}" for j in range(qd.shape[1])))
+            print(
+                "    joint ranges [deg]: "
+                + ", ".join(
+                    f"q{j + 1} {qd[:, j].min():.0f}..{qd[:, j].max():.0f}" for j in range(qd.shape[1])
+                )
+            )
     print(f"  all passes reachable and clear: {ok}")
     return ok
 
@@ -437,7 +470,9 @@ def main(argv: list[str] | None = None) -> int:
     valley, ridge = bend_bumps(sigma)
     push = PUSH_DEG + PUSH_BEND_DEG[0] * valley + PUSH_BEND_DEG[1] * ridge
     push += slow_wave(sigma, length, PUSH_WANDER_DEG, rng)
-    work = WORK_BEND_DEG[0] * valley + WORK_BEND_DEG[1] * ridge + slow_wave(sigma, length, WORK_WANDER_DEG, rng)
+    work = (
+        WORK_BEND_DEG[0] * valley + WORK_BEND_DEG[1] * ridge + slow_wave(sigma, length, WORK_WANDER_DEG, rng)
+    )
     rotations = torch_rotations(t, b, push, work)
     speed = SPEED - (SPEED - SPEED_BEND) * np.maximum(valley, ridge)
     speed += slow_wave(sigma, length, SPEED_WANDER, rng, periods=(3.0, 5.0))
@@ -452,20 +487,28 @@ def main(argv: list[str] | None = None) -> int:
     sensor = demo.sensor_in_source[:, :3, 3]
     dist = np.linalg.norm(sensor, axis=1)
     bounds = np.cumsum([0.0] + [piece for piece, _ in sections()])
-    print(f"seam: {len(sigma)} points, {s[-1]:.4f} m, sections [mm] "
-          + ", ".join(f"{(b1 - b0) * 1000:.1f}" for b0, b1 in zip(bounds[:-1], bounds[1:], strict=True))
-          + f"; ramp {RAMP_DEG:g} deg, bend radius {BEND_RADIUS * 1000:.0f} mm")
+    print(
+        f"seam: {len(sigma)} points, {s[-1]:.4f} m, sections [mm] "
+        + ", ".join(f"{(b1 - b0) * 1000:.1f}" for b0, b1 in zip(bounds[:-1], bounds[1:], strict=True))
+        + f"; ramp {RAMP_DEG:g} deg, bend radius {BEND_RADIUS * 1000:.0f} mm"
+    )
     lo, hi = positions.min(axis=0), positions.max(axis=0)
-    print(f"seam in world: x {lo[0]:.3f}..{hi[0]:.3f}, y {lo[1]:.3f}..{hi[1]:.3f}, z {lo[2]:.3f}..{hi[2]:.3f} m;"
-          f" from the base {np.linalg.norm(positions - pose(problem['robot']['base_in_world'])[:3, 3], axis=1).min():.3f}"
-          f"..{np.linalg.norm(positions - pose(problem['robot']['base_in_world'])[:3, 3], axis=1).max():.3f} m")
+    print(
+        f"seam in world: x {lo[0]:.3f}..{hi[0]:.3f}, y {lo[1]:.3f}..{hi[1]:.3f}, z {lo[2]:.3f}..{hi[2]:.3f} m;"
+        f" from the base {np.linalg.norm(positions - pose(problem['robot']['base_in_world'])[:3, 3], axis=1).min():.3f}"
+        f"..{np.linalg.norm(positions - pose(problem['robot']['base_in_world'])[:3, 3], axis=1).max():.3f} m"
+    )
     tilt = np.degrees(np.arccos(np.clip(-rotations[:, 2, 2], -1.0, 1.0)))
-    print(f"push {push.min():.1f}..{push.max():.1f} deg, work angle from the base plate "
-          f"{45 + work.min():.1f}..{45 + work.max():.1f} deg, torch {tilt.min():.1f}..{tilt.max():.1f} deg "
-          f"from vertical, speed {speed.min() * 1000:.2f}..{speed.max() * 1000:.2f} mm/s")
+    print(
+        f"push {push.min():.1f}..{push.max():.1f} deg, work angle from the base plate "
+        f"{45 + work.min():.1f}..{45 + work.max():.1f} deg, torch {tilt.min():.1f}..{tilt.max():.1f} deg "
+        f"from vertical, speed {speed.min() * 1000:.2f}..{speed.max() * 1000:.2f} mm/s"
+    )
     size = (HERE / "demo.liberty").stat().st_size
-    print(f"demo: {len(demo.log.t)} samples at {model.rate_hz:g} Hz, {demo.duration_s:.2f} s "
-          f"({model.pause_s:g} s pause), {size / 1e6:.2f} MB, outliers at {list(demo.outlier_indices)}")
+    print(
+        f"demo: {len(demo.log.t)} samples at {model.rate_hz:g} Hz, {demo.duration_s:.2f} s "
+        f"({model.pause_s:g} s pause), {size / 1e6:.2f} MB, outliers at {list(demo.outlier_indices)}"
+    )
     print(f"sensor to receiver {dist.min():.2f}..{dist.max():.2f} m")
     print(f"wrote seam.dxf, demo.liberty, truth.csv in {HERE}")
 

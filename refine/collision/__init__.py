@@ -10,7 +10,8 @@
 """
 
 from refine.collision.check import ClearanceRun, PathClearance, check_path_clearance, joint_reach
-from refine.collision.model import CollisionModel, Contact, linearised_distance
+from refine.collision.contact import Contact, linearised_distance
+from refine.collision.model import CollisionModel
 
 __all__ = [
     "ClearanceRun",

@@ -3,7 +3,8 @@
 The robot moves between two waypoints with its joints interpolated linearly, so a link can sweep
 through an obstacle that neither waypoint touches. Each segment is cut into enough sub-steps that
 
-* the TCP moves at most ``step_m`` between checks (measured on the TCP chord of the segment), and
+* the TCP moves at most ``step_m`` between checks (the chord between consecutive checks; the
+  segment's chord sets a first count, raised while the TCP curve makes a sub-step longer), and
 * no point of any link or tool shape moves more than ``link_step_m``. That bound is taken from the
   joints: a point turning about joint j moves at most ``|dq_j| * R_j``, with ``R_j`` the largest
   distance any body downstream of joint j can have from it (link offsets plus shape extents, a
@@ -66,7 +67,7 @@ class ClearanceRun:
         )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class PathClearance:
     """Result of :func:`check_path_clearance`.
 
@@ -119,8 +120,9 @@ class PathClearance:
         )
         if self.ok:
             return head + "; every margin kept"
-        return "\n".join([head + f"; {len(self.runs)} run(s) below the margin:"]
-                         + ["  " + r.describe() for r in self.runs])
+        return "\n".join(
+            [head + f"; {len(self.runs)} run(s) below the margin:"] + ["  " + r.describe() for r in self.runs]
+        )
 
 
 class _Sample(NamedTuple):
@@ -140,19 +142,15 @@ def joint_reach(model: CollisionModel) -> Array:
     pm = model.robot.model
     offset = [float(np.linalg.norm(pm.jointPlacements[j].translation)) for j in range(pm.njoints)]
     reach = np.zeros(model.robot.nq)
-    tcp = model.tcp_in_flange[:3, 3]
     for body in model.bodies:
         if body.kind == "cell" or body.joint <= 0:
             continue
         jMs = pm.frames[body.frame_id].placement.homogeneous @ body.link_T_shape
-        extent = float(np.linalg.norm(jMs[:3, :3] @ body.centre + jMs[:3, 3])) + float(
-            np.linalg.norm(body.half_extent))
-        if body.link == model.robot.spec.flange_frame:
-            flange = pm.frames[body.frame_id].placement.homogeneous
-            extent = max(extent, float(np.linalg.norm(flange[:3, :3] @ tcp + flange[:3, 3])))
+        centre = jMs[:3, :3] @ body.centre + jMs[:3, 3]
+        extent = float(np.linalg.norm(centre) + np.linalg.norm(body.half_extent))
         chain = list(pm.supports[body.joint])[1:]  # joints from the base to the body's joint
         for i, j in enumerate(chain):
-            along = sum(offset[k] for k in chain[i + 1:])
+            along = sum(offset[k] for k in chain[i + 1 :])
             v = pm.joints[j].idx_v
             reach[v] = max(reach[v], along + extent)
     return reach
@@ -163,9 +161,30 @@ def _interpolate(q0: Array, q1: Array, m: int) -> Array:
     return q0 + t * (q1 - q0)
 
 
+def _sub_steps(kin: TcpKinematics, q0: Array, q1: Array, m: int, step_m: float) -> int:
+    """Raise ``m`` until no TCP chord between consecutive sub-steps exceeds ``step_m``.
+
+    The TCP runs on a curve between waypoints, so equal joint sub-steps can take it further than
+    the segment's chord divided by their number.
+    """
+    for _ in range(4):
+        t = np.linspace(0.0, 1.0, m + 1)[:, None]
+        tcp = kin.poses(q0 + t * (q1 - q0))[:, :3, 3]
+        longest = float(np.max(np.linalg.norm(np.diff(tcp, axis=0), axis=1)))
+        if longest <= step_m:
+            break
+        m = math.ceil(m * longest / step_m * 1.01)
+    return m
+
+
 def check_path_clearance(
-    model: CollisionModel, q_path: ArrayLike, kin: TcpKinematics, step_m: float, *,
-    link_step_m: float = LINK_STEP_M, tolerance_m: float = 1e-4,
+    model: CollisionModel,
+    q_path: ArrayLike,
+    kin: TcpKinematics,
+    step_m: float,
+    *,
+    link_step_m: float = LINK_STEP_M,
+    tolerance_m: float = 1e-4,
 ) -> PathClearance:
     """Check a joint path densely against the collision model.
 
@@ -183,10 +202,19 @@ def check_path_clearance(
     q_path = np.asarray(q_path, dtype=float)
     n = model.robot.nq
     if q_path.ndim != 2 or q_path.shape[1] != n or len(q_path) == 0 or not np.all(np.isfinite(q_path)):
-        raise InputError(f"check_path_clearance: q_path must be (N, {n}) finite joints [rad], got {q_path.shape}")
+        raise InputError(
+            f"check_path_clearance: q_path must be (N, {n}) finite joints [rad], got {q_path.shape}"
+        )
     for key, value in (("step_m", step_m), ("link_step_m", link_step_m)):
         if not (math.isfinite(value) and value > 0.0):
             raise InputError(f"check_path_clearance: {key} must be a number > 0 [m], got {value!r}")
+    same = kin.robot is model.robot and all(
+        np.allclose(getattr(kin, key), getattr(model, key)) for key in ("base_in_world", "tcp_in_flange")
+    )
+    if not same:
+        raise InputError(
+            "check_path_clearance: kin must have the collision model's robot, base_in_world and tcp_in_flange"
+        )
     start, queries = time.perf_counter(), model.queries
     top_margin = max(model.margin_m, model.self_margin_m)
 
@@ -200,8 +228,9 @@ def check_path_clearance(
                 if c.clearance_m < -tolerance_m:
                     names.update((c.body, c.other))
         pair = (by_clearance.body, by_clearance.other)
-        return _Sample(by_distance.distance_m, by_clearance.clearance_m, pair, by_clearance.distance_m,
-                       frozenset(names))
+        return _Sample(
+            by_distance.distance_m, by_clearance.clearance_m, pair, by_clearance.distance_m, frozenset(names)
+        )
 
     points = [sample(q) for q in q_path]
     wp_dist = np.array([p.distance for p in points])
@@ -209,19 +238,34 @@ def check_path_clearance(
     tcp = kin.poses(q_path)[:, :3, 3]
     chord = np.linalg.norm(np.diff(tcp, axis=0), axis=1)
     sweep = np.abs(np.diff(q_path, axis=0)) @ joint_reach(model)
-    steps = np.maximum(1, np.maximum(np.ceil(chord / step_m), np.ceil(sweep / link_step_m))).astype(np.int64)
+    least = np.maximum(1, np.maximum(np.ceil(chord / step_m), np.ceil(sweep / link_step_m))).astype(int)
+    steps = np.array([_sub_steps(kin, q_path[k], q_path[k + 1], m, step_m) for k, m in enumerate(least)])
+    steps = steps.astype(np.int64)
     worst: list[_Sample] = []
     seg_dist = np.empty(len(steps))
     for k, m in enumerate(steps):
-        found = [points[k], points[k + 1], *(sample(q) for q in _interpolate(q_path[k], q_path[k + 1], int(m)))]
+        found = [
+            points[k],
+            points[k + 1],
+            *(sample(q) for q in _interpolate(q_path[k], q_path[k + 1], int(m))),
+        ]
         seg_dist[k] = min(s.distance for s in found)
-        worst.append(min(found, key=lambda s: s.clearance)._replace(below=frozenset().union(*(s.below for s in found))))
+        worst.append(
+            min(found, key=lambda s: s.clearance)._replace(below=frozenset().union(*(s.below for s in found)))
+        )
     seg_clear = np.array([w.clearance for w in worst])
     runs = _runs(worst if len(steps) else points[:1], tolerance_m, single=len(steps) == 0)
     result = PathClearance(
-        waypoint_distance_m=wp_dist, waypoint_clearance_m=wp_clear, segment_distance_m=seg_dist,
-        segment_clearance_m=seg_clear, segment_pair=tuple(w.pair for w in worst), segment_samples=steps, runs=runs,
-        queries=model.queries - queries, time_s=time.perf_counter() - start, tolerance_m=tolerance_m,
+        waypoint_distance_m=wp_dist,
+        waypoint_clearance_m=wp_clear,
+        segment_distance_m=seg_dist,
+        segment_clearance_m=seg_clear,
+        segment_pair=tuple(w.pair for w in worst),
+        segment_samples=steps,
+        runs=runs,
+        queries=model.queries - queries,
+        time_s=time.perf_counter() - start,
+        tolerance_m=tolerance_m,
     )
     log.info("%s", result.summary())
     return result

@@ -2,16 +2,18 @@
 
 A :class:`Body` is one FCL object of the collision model: a robot link primitive, a tool shape on
 the flange, or a cell object. Next to the FCL object it keeps what FCL does not offer in a usable
-form: a box bounding the shape in its own frame (for the broad phase), its support function (the
-point deepest along a direction, used to measure how far a body reaches through a mesh face), and
-for meshes the triangles and outward face normals (FCL's mesh witness points are repaired with
-them, see :mod:`refine.collision.distance`).
+form: a box bounding the shape in its own frame (for the broad phase); its support function (the
+point furthest along a direction: it certifies FCL's answers against a separating plane and
+measures how far a body reaches through a mesh face); and for meshes the triangles, outward face
+normals and convex hull (FCL's mesh witness points are repaired with them, and the hull gives a
+cheap lower bound; see :mod:`refine.collision.distance`).
 """
 
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import fcl
@@ -20,6 +22,7 @@ import trimesh
 from numpy.typing import NDArray
 
 from refine.errors import InputError
+from refine.robot_geometry import CollisionShape
 from refine.settings import Shape
 
 log = logging.getLogger(__name__)
@@ -51,7 +54,12 @@ class Body:
         vertices: mesh vertices in the shape frame [m], (V, 3), or None.
         faces: mesh triangles as vertex indices, (F, 3), or None.
         face_normals: outward unit normals of the triangles in the shape frame, (F, 3), or None.
+        vertex_faces: per vertex, the triangles using it, padded with -1, (V, k), or None.
+        hull: the mesh's convex hull as an FCL object placed like the body, or None.
+        hull_vertices: the hull's corners in the shape frame [m], (H, 3), or None.
         workpiece: a cell object the process touches by design (the tool is not checked against it).
+        triangles: single world-frame triangles of a cell mesh as (FCL object, geometry, corners),
+            built on demand.
     """
 
     name: str
@@ -69,16 +77,55 @@ class Body:
     vertices: Array | None = None
     faces: NDArray[np.int64] | None = None
     face_normals: Array | None = None
+    vertex_faces: NDArray[np.int64] | None = None
+    hull: fcl.CollisionObject | None = None
+    hull_vertices: Array | None = None
     workpiece: bool = False
+    triangles: dict[int, tuple] = field(default_factory=dict)
+
+    @property
+    def label(self) -> str:
+        """``name`` for tool shapes and cell objects, ``"<link>/<shape>"`` for link shapes."""
+        return f"{self.name}/{self.shape}" if self.kind == "link" else self.name
 
     @property
     def is_mesh(self) -> bool:
         """True for a triangle mesh (an FCL BVHModel)."""
         return self.vertices is not None
 
-    def bounding_radius(self) -> float:
-        """Radius of a sphere about the shape frame's origin holding the whole shape [m]."""
-        return float(np.linalg.norm(np.abs(self.centre) + self.half_extent))
+    def ring(self, index: int) -> NDArray[np.int64]:
+        """The triangle ``index`` of a mesh and every triangle sharing a corner with it."""
+        assert self.vertex_faces is not None and self.faces is not None
+        near = np.unique(self.vertex_faces[self.faces[index]])
+        return near[near >= 0]
+
+    def outside_distance(self, T: Array, point: Array) -> float:
+        """Distance [m] from a world point to the body placed at T (4, 4); zero inside."""
+        x = T[:3, :3].T @ (np.asarray(point, dtype=float) - T[:3, 3])
+        tag = self.kind_params[0]
+        if tag == "sphere":
+            return max(float(np.linalg.norm(x)) - self.kind_params[1], 0.0)
+        if tag == "box":
+            return float(np.linalg.norm(np.maximum(np.abs(x) - self.kind_params[1], 0.0)))
+        if tag == "cylinder":
+            radial = max(float(np.hypot(x[0], x[1])) - self.kind_params[1], 0.0)
+            return float(np.hypot(radial, max(abs(float(x[2])) - self.kind_params[2], 0.0)))
+        probe = fcl.CollisionObject(fcl.Sphere(1e-9), fcl.Transform(np.eye(3), np.asarray(point, float)))
+        return max(float(fcl.distance(probe, self.obj, fcl.DistanceRequest())), 0.0)
+
+    def reach(self, T: Array, direction: Array) -> float:
+        """Largest ``direction . x`` [m] over the points x of the body placed at T (4, 4)."""
+        base = float(direction @ T[:3, 3])
+        if self.vertices is not None:
+            return base + float(np.max(self.vertices @ (direction @ T[:3, :3])))
+        ux, uy, uz = (direction @ T[:3, :3]).tolist()  # the direction in the shape frame
+        tag, *dims = self.kind_params
+        if tag == "sphere":
+            return base + dims[0] * math.sqrt(ux * ux + uy * uy + uz * uz)
+        if tag == "box":
+            hx, hy, hz = dims[0].tolist()
+            return base + hx * abs(ux) + hy * abs(uy) + hz * abs(uz)
+        return base + dims[1] * abs(uz) + dims[0] * math.hypot(ux, uy)
 
     def support(self, T: Array, direction: Array) -> Array:
         """The point of the body placed at T (4, 4) furthest along ``direction`` (3,), world [m]."""
@@ -125,6 +172,25 @@ def primitive_from_fcl(geometry: fcl.CollisionGeometry, where: str) -> tuple[tup
     raise InputError(f"{where}: collision geometry {type(geometry).__name__} is not supported")
 
 
+def link_body(shape: CollisionShape, frame_id: int, joint: int, where: str) -> Body:
+    """A :class:`Body` for a robot link primitive from the URDF (its FCL geometry is shared)."""
+    params, half = primitive_from_fcl(shape.geometry, f"{where} link {shape.link!r}")
+    return Body(
+        name=shape.link,
+        shape=shape.name,
+        kind="link",
+        link=shape.link,
+        frame_id=frame_id,
+        joint=joint,
+        link_T_shape=np.array(shape.link_T_shape),
+        geometry=shape.geometry,
+        obj=fcl.CollisionObject(shape.geometry),
+        kind_params=params,
+        half_extent=half,
+        centre=np.zeros(3),
+    )
+
+
 def load_mesh(shape: Shape) -> trimesh.Trimesh:
     """Read a shape's mesh file in metres, with outward normals when the mesh is closed.
 
@@ -146,7 +212,9 @@ def load_mesh(shape: Shape) -> trimesh.Trimesh:
     if not mesh.is_watertight:
         log.warning(
             "mesh %r (%s) is not closed: penetration into it is measured against its faces' "
-            "planes as wound in the file", shape.name, path
+            "planes as wound in the file",
+            shape.name,
+            path,
         )
     return mesh
 
@@ -168,12 +236,26 @@ def mesh_body_parts(mesh: trimesh.Trimesh) -> dict:
         "vertices": vertices,
         "faces": faces,
         "face_normals": np.asarray(mesh.face_normals, dtype=float),
+        "vertex_faces": np.asarray(mesh.vertex_faces, dtype=np.int64),
+        **_hull(mesh),
     }
 
 
-def shape_body(
-    shape: Shape, *, name: str, kind: str, link: str | None, frame_id: int, joint: int
-) -> Body:
+def _hull(mesh: trimesh.Trimesh) -> dict:
+    try:
+        hull = mesh.convex_hull
+    except Exception as e:  # qhull fails on flat or degenerate meshes; the bound is only a speed-up
+        log.debug("no convex hull for a mesh (%s): its pairs are bounded by boxes only", e)
+        return {}
+    corners = np.ascontiguousarray(hull.vertices, dtype=float)
+    faces = np.hstack([np.full((len(hull.faces), 1), 3), hull.faces]).ravel()
+    return {
+        "hull": fcl.CollisionObject(fcl.Convex(corners, len(hull.faces), faces)),
+        "hull_vertices": corners,
+    }
+
+
+def shape_body(shape: Shape, *, name: str, kind: str, link: str | None, frame_id: int, joint: int) -> Body:
     """A :class:`Body` for a tool shape (pose in the flange frame) or a cell object (world)."""
     pose = np.array(shape.pose, dtype=float)
     if shape.shape == "mesh":
@@ -182,9 +264,19 @@ def shape_body(
         geometry, params, half = _primitive(shape)
         parts = {"geometry": geometry, "kind_params": params, "half_extent": half, "centre": np.zeros(3)}
     obj = fcl.CollisionObject(parts["geometry"], fcl.Transform(pose[:3, :3], pose[:3, 3]))
+    if parts.get("hull") is not None:
+        parts["hull"].setTransform(fcl.Transform(pose[:3, :3], pose[:3, 3]))
     return Body(
-        name=name, shape=shape.name, kind=kind, link=link, frame_id=frame_id, joint=joint,
-        link_T_shape=pose, obj=obj, workpiece=bool(shape.workpiece) and kind == "cell", **parts,
+        name=name,
+        shape=shape.name,
+        kind=kind,
+        link=link,
+        frame_id=frame_id,
+        joint=joint,
+        link_T_shape=pose,
+        obj=obj,
+        workpiece=bool(shape.workpiece) and kind == "cell",
+        **parts,
     )
 
 

@@ -15,15 +15,14 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
 
-import fcl
 import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
-from refine.collision.distance import place, signed_distance
-from refine.collision.geometry import Body, primitive_from_fcl, shape_body, world_aabb
+from refine.collision.contact import Contact, linearised_distance
+from refine.collision.distance import hull_bound, place, signed_distance
+from refine.collision.geometry import Body, link_body, shape_body, world_aabb
 from refine.collision.pairs import exclusion, joint_axes
 from refine.errors import InputError
 from refine.frames import check_transform
@@ -33,59 +32,6 @@ from refine.settings import Shape
 log = logging.getLogger(__name__)
 
 Array = NDArray[np.float64]
-
-
-@dataclass(frozen=True)
-class Contact:
-    """One close pair: a robot or tool body and a cell object or another robot body.
-
-    Attributes:
-        body: robot link name or ``"tool:<shape name>"``.
-        other: cell object name, or the other link (or tool shape) for a self pair.
-        distance_m: signed distance [m]; negative = penetration depth.
-        point_body: witness point on the body, world frame [m], (3,).
-        point_other: witness point on the other, world frame [m], (3,).
-        normal: unit vector (3,) along which moving the body increases the distance (from the
-            other towards the body when apart).
-        link: the robot link the body point moves with (the flange link for tool shapes).
-        self_pair: the other is part of the robot or tool too.
-        other_link: the link the other's point moves with (self pairs), else None.
-        margin_m: the clearance this pair must keep [m] (``margin_m`` or ``self_margin_m``).
-        body_shape: the body's shape name (a link may carry several).
-        other_shape: the other's shape name.
-    """
-
-    body: str
-    other: str
-    distance_m: float
-    point_body: Array
-    point_other: Array
-    normal: Array
-    link: str
-    self_pair: bool
-    other_link: str | None = None
-    margin_m: float = 0.0
-    body_shape: str = ""
-    other_shape: str = ""
-
-    @property
-    def clearance_m(self) -> float:
-        """Distance left above the pair's margin [m]; negative when the margin is broken."""
-        return self.distance_m - self.margin_m
-
-
-def linearised_distance(contact: Contact, J_body: Array, J_other: Array | None = None) -> Array:
-    """Gradient of a contact's signed distance with respect to the joints, shape (n,).
-
-    Args:
-        contact: the contact.
-        J_body: Jacobian (3, n) of ``contact.point_body`` as a point fixed to ``contact.link``.
-        J_other: Jacobian (3, n) of ``contact.point_other`` (self pairs), None for a static object.
-    """
-    J = np.asarray(J_body, dtype=float)
-    if J_other is not None:
-        J = J - np.asarray(J_other, dtype=float)
-    return contact.normal @ J
 
 
 class CollisionModel:
@@ -98,14 +44,23 @@ class CollisionModel:
         margin_m: clearance kept between robot or tool and the cell [m].
         self_margin_m: clearance kept between the robot's own bodies and the tool [m].
         bodies: every body, the moving ones (links, then tool shapes) first.
-        pairs: the checked pairs as (body, other) names.
-        excluded: the pairs not checked, as (body, other, reason) (see :mod:`refine.collision.pairs`).
+        pairs: the checked shape pairs as (body, other) labels: ``"<link>/<shape>"`` for link
+            shapes, the name for tool shapes and cell objects.
+        excluded: the shape pairs not checked, as (body, other, reason) labels
+            (the reasons are those of :mod:`refine.collision.pairs`).
         queries: narrow-phase (FCL) pair queries made so far.
     """
 
     def __init__(
-        self, robot: Robot, base_in_world: ArrayLike, tcp_in_flange: ArrayLike,
-        tool_shapes: tuple[Shape, ...], cell: tuple[Shape, ...], *, margin_m: float, self_margin_m: float,
+        self,
+        robot: Robot,
+        base_in_world: ArrayLike,
+        tcp_in_flange: ArrayLike,
+        tool_shapes: tuple[Shape, ...],
+        cell: tuple[Shape, ...],
+        *,
+        margin_m: float,
+        self_margin_m: float,
     ) -> None:
         for key, value in (("margin_m", margin_m), ("self_margin_m", self_margin_m)):
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0.0):
@@ -137,24 +92,21 @@ class CollisionModel:
     # ---- building ----------------------------------------------------------------------------
 
     def _robot_bodies(self) -> list[Body]:
+        where = f"robot {self.robot.spec.name!r}"
         bodies = []
         for s in self.robot.collision_shapes():
             fid = self.robot.frame_id(s.link)
-            params, half = primitive_from_fcl(s.geometry, f"robot {self.robot.spec.name!r} link {s.link!r}")
-            obj = fcl.CollisionObject(s.geometry)
-            bodies.append(Body(
-                name=s.link, shape=s.name, kind="link", link=s.link, frame_id=fid,
-                joint=int(self._model.frames[fid].parentJoint), link_T_shape=np.array(s.link_T_shape),
-                geometry=s.geometry, obj=obj, kind_params=params, half_extent=half, centre=np.zeros(3),
-            ))
+            bodies.append(link_body(s, fid, int(self._model.frames[fid].parentJoint), where))
         return bodies
 
     def _tool_bodies(self, shapes: tuple[Shape, ...]) -> list[Body]:
         fid = self.robot.flange_id
         link = self.robot.spec.flange_frame
         joint = int(self._model.frames[fid].parentJoint)
-        return [shape_body(s, name=f"tool:{s.name}", kind="tool", link=link, frame_id=fid, joint=joint)
-                for s in shapes]
+        return [
+            shape_body(s, name=f"tool:{s.name}", kind="tool", link=link, frame_id=fid, joint=joint)
+            for s in shapes
+        ]
 
     def _cell_bodies(self, shapes: tuple[Shape, ...]) -> list[Body]:
         return [shape_body(s, name=s.name, kind="cell", link=None, frame_id=-1, joint=-1) for s in shapes]
@@ -180,17 +132,26 @@ class CollisionModel:
         for i in range(self._n_moving):
             for j in range(i + 1, len(self.bodies)):
                 a, b = self._order(i, j)
-                why = exclusion(self.bodies[a], self.bodies[b], self._model, axes, self.self_margin_m)
+                A, B = self.bodies[a], self.bodies[b]
+                why = exclusion(A, B, self._poses[a], self._poses[b], self._model, axes, self.self_margin_m)
                 if why is None:
                     kept.append((a, b))
-                else:
-                    excluded.append((self.bodies[a].name, self.bodies[b].name, why))
-                    log.debug("not checking %s vs %s: %s", self.bodies[a].name, self.bodies[b].name, why)
+                    continue
+                excluded.append((A.label, B.label, why))
+                log.debug("not checking %s vs %s: %s", A.label, B.label, why)
+                if why == "constant distance":
+                    d = signed_distance(A, self._poses[a], B, self._poses[b])[0]
+                    level = logging.WARNING if d < self.self_margin_m else logging.INFO
+                    msg = "%s and %s are %.1f mm apart at every configuration (self margin %.1f mm): not checked"
+                    log.log(level, msg, A.label, B.label, d * 1e3, self.self_margin_m * 1e3)
         self._pa = np.array([p[0] for p in kept], dtype=int)
         self._pb = np.array([p[1] for p in kept], dtype=int)
         self._self = np.array([self.bodies[b].kind != "cell" for b in self._pb], dtype=bool)
         self._margin = np.where(self._self, self.self_margin_m, self.margin_m)
-        self.pairs = tuple((self.bodies[a].name, self.bodies[b].name) for a, b in kept)
+        self._hulled = np.array(
+            [self.bodies[b].hull is not None and self.bodies[b].kind == "cell" for b in self._pb]
+        )
+        self.pairs = tuple((self.bodies[a].label, self.bodies[b].label) for a, b in kept)
         self.excluded = tuple(excluded)
 
     def _order(self, i: int, j: int) -> tuple[int, int]:
@@ -249,9 +210,18 @@ class CollisionModel:
         d, p_a, p_b, n = signed_distance(A, self._poses[a], B, self._poses[b])
         self.queries += 1
         return Contact(
-            body=A.name, other=B.name, distance_m=d, point_body=p_a, point_other=p_b, normal=n,
-            link=str(A.link), self_pair=bool(self._self[k]), other_link=B.link,
-            margin_m=float(self._margin[k]), body_shape=A.shape, other_shape=B.shape,
+            body=A.name,
+            other=B.name,
+            distance_m=d,
+            point_body=p_a,
+            point_other=p_b,
+            normal=n,
+            link=str(A.link),
+            self_pair=bool(self._self[k]),
+            other_link=B.link,
+            margin_m=float(self._margin[k]),
+            body_shape=A.shape,
+            other_shape=B.shape,
         )
 
     # ---- queries -----------------------------------------------------------------------------
@@ -261,14 +231,21 @@ class CollisionModel:
 
         Args:
             q: joints [rad], shape (n,).
-            query_distance_m: report pairs whose signed distance is below this [m].
+            query_distance_m: report pairs whose signed distance is below this [m]; ``inf`` for all
+                checked pairs, 0 for the pairs in contact, -0.01 for those 1 cm deep or more.
         """
-        if not math.isfinite(query_distance_m):
-            raise InputError(f"contacts: query_distance_m must be finite, got {query_distance_m!r}")
+        if math.isnan(query_distance_m):
+            raise InputError("contacts: query_distance_m must be a number [m], got nan")
         self._update(q)
-        near = np.flatnonzero(self._gaps() < query_distance_m)
-        found = [c for c in (self._pair(int(k)) for k in near) if c.distance_m < query_distance_m]
+        near = [int(k) for k in np.flatnonzero(self._gaps() <= max(query_distance_m, 0.0))]
+        near = [k for k in near if not (self._hulled[k] and self._hull_bound(k) >= query_distance_m)]
+        found = [c for c in (self._pair(k) for k in near) if c.distance_m < query_distance_m]
         return sorted(found, key=lambda c: c.distance_m)
+
+    def _hull_bound(self, k: int) -> float:
+        a, b = int(self._pa[k]), int(self._pb[k])
+        self._ensure_placed(a)
+        return hull_bound(self.bodies[a], self._poses[a], self.bodies[b], self._poses[b])
 
     def nearest_pairs(self, q: ArrayLike) -> tuple[Contact | None, Contact | None]:
         """The pair with the least distance and the pair with the least clearance at joints q.
@@ -280,16 +257,24 @@ class CollisionModel:
         if len(self._pa) == 0:
             return None, None
         gaps = self._gaps()
+        bound = np.where(gaps > 0.0, gaps, -np.inf)  # boxes that overlap bound nothing: may penetrate
         top_margin = float(self._margin.max())
         by_distance: Contact | None = None
         by_clearance: Contact | None = None
+
+        def hopeless(lower: float, margin: float) -> bool:
+            return (
+                by_distance is not None
+                and by_clearance is not None
+                and lower >= by_distance.distance_m
+                and lower - margin >= by_clearance.clearance_m
+            )
+
         for k in np.argsort(gaps):
-            if by_distance is not None and by_clearance is not None and (
-                gaps[k] >= by_distance.distance_m and gaps[k] - top_margin >= by_clearance.clearance_m
-            ):
-                break
-            if by_clearance is not None and by_distance is not None and (
-                gaps[k] >= by_distance.distance_m and gaps[k] - self._margin[k] >= by_clearance.clearance_m
+            if hopeless(bound[k], top_margin):
+                break  # visited by bound: no pair left can beat either answer
+            if hopeless(bound[k], self._margin[k]) or (
+                self._hulled[k] and hopeless(self._hull_bound(int(k)), self._margin[k])
             ):
                 continue
             c = self._pair(int(k))

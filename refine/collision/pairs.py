@@ -1,33 +1,40 @@
 """Which pairs of bodies the collision model checks, and why it leaves the others out.
 
-A pair is left out for one of these reasons, and for no other (nothing is dropped because it
-happens to touch at some sampled configuration):
+A pair is left out for one of these reasons and for no other. Nothing is dropped because it happens
+to touch at some sampled configuration: every rule below is a fact of the kinematics and shapes.
 
 1. ``"static"``: two cell objects; nothing moves them.
 2. ``"fixed link"``: a link fixed to the robot base (no joint between it and the world) against a
-   cell object. Its distance does not depend on q, so no joint motion could change it; a robot on a
-   pedestal touches the pedestal by design.
+   cell object. Its distance does not depend on q; a robot on a pedestal touches it by design.
 3. ``"workpiece"``: a tool shape against a cell object marked ``workpiece = true``. The nozzle or
    torch touches the part by design; the links are still checked against it.
-4. ``"same body"``: two shapes moved by the same joint (Pinocchio merges links joined by fixed joints
-   into one body, e.g. ``link_6`` and ``tool0``; the tool moves with the flange link).
+4. ``"same body"``: two shapes moved by the same joint (Pinocchio merges links joined by fixed
+   joints into one body, e.g. ``link_6`` and ``tool0``; the tool moves with the flange link).
 5. ``"adjacent"``: one body's joint is the other's parent joint in the kinematic tree (the two
    bodies meet at that joint). Tool shapes are thus not checked against the flange link and the
    link before it.
-6. ``"always close"``: the joints between the two bodies are all revolute and their axes meet in one
-   point p that lies within ``self_margin_m`` of the two shapes together
-   (``dist(p, A) + dist(p, B) <= self_margin_m``). Every joint between them turns about p, so p keeps
-   its place on both bodies at every configuration; their distance can never exceed that sum and the
-   margin could never be met. The housings of a spherical wrist are the usual case. The test is
-   made once, on the kinematics, at the neutral configuration (where the axes meet they meet at
-   every configuration).
+6. ``"always close"``: the joints between the two bodies are all revolute and their axes meet in
+   one point p that lies within ``self_margin_m`` of the two shapes together
+   (``dist(p, A) + dist(p, B) <= self_margin_m``). Every joint between them turns about p, so p
+   keeps its place on both bodies at every configuration; their distance never exceeds that sum,
+   and the margin could never be met. The housings of a spherical wrist are the usual case.
+7. ``"constant distance"``: the distance cannot change, because the joints between the two bodies,
+   taken in order from A to B, are first joints about whose axes A's shape is symmetric, then joints
+   about whose axes B's shape is symmetric (a sphere is symmetric about every axis through its
+   centre, a cylinder about its own axis). Turning a shape about its own symmetry axis moves none of
+   it. A UR arm's shoulder housing turning about joint 2 above its round base is the usual case.
+   Such a pair can neither break its margin by moving nor be repaired; it is logged, with a warning
+   when it is closer than ``self_margin_m``.
+
+Rules 6 and 7 are tested once, at the neutral configuration; both hold at every configuration
+(joint axes that meet keep meeting, and the relative pose of the two bodies is a product of
+rotations about the neutral axes).
 """
 
 from __future__ import annotations
 
 import logging
 
-import fcl
 import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
@@ -37,18 +44,22 @@ from refine.collision.geometry import Body
 log = logging.getLogger(__name__)
 
 Array = NDArray[np.float64]
+Axes = dict[int, "tuple[Array, Array] | None"]
 
-_AXES_MEET_M = 1e-9
-"""Axes whose common point is farther than this from one of them do not meet [m]."""
+_TOL = 1e-7
+"""Lines closer than this [m] meet; directions closer than this [rad] are parallel."""
 
 
-def exclusion(a: Body, b: Body, model: pin.Model, axes: dict[int, tuple[Array, Array] | None],
-              self_margin_m: float) -> str | None:
+def exclusion(
+    a: Body, b: Body, T_a: Array, T_b: Array, model: pin.Model, axes: Axes, self_margin_m: float
+) -> str | None:
     """Why the pair (a, b) is not checked (one of the reasons above), or None when it is.
 
     Args:
-        a: a body (robot link, tool shape or cell object), placed at the neutral configuration.
-        b: another body, placed likewise.
+        a: a body (robot link, tool shape or cell object).
+        b: another body.
+        T_a: world pose of ``a``'s shape frame at the neutral configuration, (4, 4).
+        T_b: world pose of ``b``'s shape frame at the neutral configuration, (4, 4).
         model: the robot's Pinocchio model.
         axes: per joint index, its axis at the neutral configuration as (unit direction, point)
             in the world, or None for a joint that is not revolute (see :func:`joint_axes`).
@@ -67,56 +78,75 @@ def exclusion(a: Body, b: Body, model: pin.Model, axes: dict[int, tuple[Array, A
         return "same body"
     if model.parents[a.joint] == b.joint or model.parents[b.joint] == a.joint:
         return "adjacent"
-    p = _common_point(_joints_between(model, a.joint, b.joint), axes)
-    if p is not None and _point_distance(p, a) + _point_distance(p, b) <= self_margin_m:
+    joints = joints_between(model, a.joint, b.joint)
+    if any(axes[j] is None for j in joints):
+        return None
+    lines = [axes[j] for j in joints]
+    p = _common_point(lines)  # type: ignore[arg-type]
+    if p is not None and a.outside_distance(T_a, p) + b.outside_distance(T_b, p) <= self_margin_m:
         return "always close"
+    if _constant(a, T_a, b, T_b, lines):  # type: ignore[arg-type]
+        return "constant distance"
     return None
 
 
-def joint_axes(model: pin.Model, T_world_base: Array) -> dict[int, tuple[Array, Array] | None]:
+def joint_axes(model: pin.Model, T_world_base: Array) -> Axes:
     """Every joint's axis at the neutral configuration, (unit direction, point) in the world."""
     data = model.createData()
-    q0 = pin.neutral(model)
-    pin.computeJointJacobians(model, data, q0)
+    pin.computeJointJacobians(model, data, pin.neutral(model))
     J = data.J  # WORLD convention: linear part is the velocity of the point at the base origin
-    axes: dict[int, tuple[Array, Array] | None] = {}
+    R, t = T_world_base[:3, :3], T_world_base[:3, 3]
+    axes: Axes = {}
     for j in range(1, model.njoints):
         col = J[:, model.joints[j].idx_v]
         v, w = col[:3], col[3:]
         if model.joints[j].nv != 1 or np.linalg.norm(w) < 0.5:
-            axes[j] = None  # prismatic or multi-DoF: no fixed point
+            axes[j] = None  # prismatic or multi-DoF: no fixed axis
             continue
         w = w / np.linalg.norm(w)
-        p = np.cross(w, v)  # v = p x w for p on the axis, so w x v is such a p
-        axes[j] = (T_world_base[:3, :3] @ w, T_world_base[:3, :3] @ p + T_world_base[:3, 3])
+        axes[j] = (R @ w, R @ np.cross(w, v) + t)  # v = p x w for p on the axis, so w x v is one
     return axes
 
 
-def _joints_between(model: pin.Model, ja: int, jb: int) -> list[int]:
-    sa, sb = set(model.supports[ja]), set(model.supports[jb])
-    return sorted((sa ^ sb) - {0})
+def joints_between(model: pin.Model, ja: int, jb: int) -> list[int]:
+    """The joints on the tree path between two bodies' joints, in order from ``ja`` to ``jb``."""
+    sa, sb = list(model.supports[ja]), list(model.supports[jb])
+    common = set(sa) & set(sb)
+    return [j for j in reversed(sa) if j not in common] + [j for j in sb if j not in common]
 
 
-def _common_point(joints: list[int], axes: dict[int, tuple[Array, Array] | None]) -> Array | None:
-    if not joints or any(axes[j] is None for j in joints):
-        return None
-    lines = [axes[j] for j in joints]
+def _off_line(x: Array, line: tuple[Array, Array]) -> float:
+    w, p = line
+    d = x - p
+    return float(np.linalg.norm(d - w * float(w @ d)))
+
+
+def _common_point(lines: list[tuple[Array, Array]]) -> Array | None:
     A = np.zeros((3, 3))
     rhs = np.zeros(3)
-    for w, p in lines:  # type: ignore[misc]
+    for w, p in lines:
         P = np.eye(3) - np.outer(w, w)
         A += P
         rhs += P @ p
     x = np.linalg.lstsq(A, rhs, rcond=None)[0]
-    for w, p in lines:  # type: ignore[misc]
-        off = (x - p) - w * float(w @ (x - p))
-        if float(np.linalg.norm(off)) > _AXES_MEET_M:
-            return None
-    return x
+    return x if all(_off_line(x, line) <= _TOL for line in lines) else None
 
 
-def _point_distance(p: Array, body: Body) -> float:
-    probe_radius = 1e-6
-    probe = fcl.CollisionObject(fcl.Sphere(probe_radius), fcl.Transform(np.eye(3), p))
-    d = fcl.distance(probe, body.obj, fcl.DistanceRequest(enable_signed_distance=True))
-    return max(float(d) + probe_radius, 0.0)
+def _symmetric_about(body: Body, T: Array, line: tuple[Array, Array]) -> bool:
+    tag = body.kind_params[0]
+    centre = T[:3, 3]
+    if tag == "sphere":
+        return _off_line(centre, line) <= _TOL
+    if tag == "cylinder":
+        parallel = float(np.linalg.norm(np.cross(line[0], T[:3, 2]))) <= _TOL
+        return parallel and _off_line(centre, line) <= _TOL
+    return False
+
+
+def _constant(a: Body, T_a: Array, b: Body, T_b: Array, lines: list[tuple[Array, Array]]) -> bool:
+    for split in range(len(lines) + 1):
+        if all(_symmetric_about(a, T_a, line) for line in lines[:split]) and all(
+            _symmetric_about(b, T_b, line) for line in lines[split:]
+        ):
+            return True
+    return False

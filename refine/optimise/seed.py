@@ -152,6 +152,7 @@ def ik_chain(
     starts: list[Array],
     *,
     max_chains: int = 4,
+    prefer_first: bool = False,
 ) -> tuple[Array, Array]:
     """IK chained along ``targets`` (N, 4, 4), trying the distinct first-waypoint solutions of ``starts``.
 
@@ -167,6 +168,8 @@ def ik_chain(
         upper: upper joint bounds [rad] (n,) (already shrunk by the joint margin).
         starts: candidate start configurations for the first waypoint [rad].
         max_chains: how many distinct first-waypoint solutions to chain at most.
+        prefer_first: chain the first start's branch first (the problem's home), whatever its
+            joint margin; otherwise branches are tried by decreasing joint margin.
 
     Returns:
         joints (N, n) [rad] and the pose error norm per waypoint (N,).
@@ -175,14 +178,15 @@ def ik_chain(
     free_lower = np.where(wraps, -np.inf, lower)
     free_upper = np.where(wraps, np.inf, upper)
     firsts: list[tuple[float, Array]] = []
-    for q_start in starts:
+    for i, q_start in enumerate(starts):
         q, err = solve_ik(kin, targets[0], q_start, free_lower, free_upper, max_iterations=300)
         if err > CONVERGED:
             continue
         key = np.where(wraps, np.mod(q, 2 * np.pi), q)
         if any(np.allclose(key, np.where(wraps, np.mod(f, 2 * np.pi), f), atol=1e-3) for _, f in firsts):
             continue
-        firsts.append((-float(np.min(np.minimum(q - free_lower, free_upper - q))), q))
+        margin = float(np.min(np.minimum(q - free_lower, free_upper - q)))
+        firsts.append((-np.inf if prefer_first and i == 0 else -margin, q))
     if not firsts:  # nothing converged: chain from the closest attempt and let the NLP decide
         firsts = [(0.0, solve_ik(kin, targets[0], starts[0], lower, upper, max_iterations=300)[0])]
     firsts.sort(key=lambda item: item[0])

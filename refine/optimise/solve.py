@@ -145,7 +145,8 @@ def _bounds(problem: RefinementNLP) -> tuple[Array, Array]:
 def initial_guess(problem: RefinementNLP, home: Array | None = None) -> Array:
     """IK seed (N, n) [rad] chained along the path, from the best of several first-waypoint starts."""
     lower, upper = _bounds(problem)
-    qs, _ = ik_chain(_kin(problem), _targets(problem), lower, upper, start_candidates(lower, upper, home))
+    starts = start_candidates(lower, upper, home)
+    qs, _ = ik_chain(_kin(problem), _targets(problem), lower, upper, starts, prefer_first=home is not None)
     return qs
 
 

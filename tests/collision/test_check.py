@@ -1,0 +1,127 @@
+"""The dense clearance check between waypoints."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from refine.collision import check_path_clearance, joint_reach
+from refine.errors import InputError
+from refine.frames import make_transform
+from refine.optimise.seed import TcpKinematics
+from refine.settings import Shape
+
+PILLAR = Shape("pillar", "box", pose=make_transform(p=[1.0, 0.0, 1.0]), size_m=(0.2, 0.2, 2.0))
+
+
+@pytest.fixture(scope="module")
+def pillar_model(irb4600, nozzle, make_model):
+    return make_model(irb4600, (PILLAR,), (nozzle,))
+
+
+def _swing(deg_from, deg_to, n=2):
+    q = np.zeros((n, 6))
+    q[:, 0] = np.radians(np.linspace(deg_from, deg_to, n))
+    return q
+
+
+def test_a_swing_through_a_pillar_between_two_clear_waypoints_is_found(pillar_model, kin):
+    q = _swing(-45.0, 45.0)
+    result = check_path_clearance(pillar_model, q, kin, step_m=0.01)
+    assert np.all(result.waypoint_clearance_m > 0.1)  # both waypoints are well clear
+    assert not result.ok and len(result.runs) == 1
+    run = result.runs[0]
+    assert (run.index_start, run.index_end) == (0, 1)
+    assert run.min_clearance_m < -0.05 and run.min_distance_m == pytest.approx(run.min_clearance_m + 0.01)
+    assert "pillar" in run.objects and "link_4" in run.objects and "pillar" in run.worst_pair
+    assert result.segment_pair[0] == run.worst_pair
+    summary = result.summary()
+    assert "waypoints 0-1" in summary and "pillar" in summary and "below the margin" in summary
+    assert result.queries > 0 and result.time_s > 0.0
+
+
+def test_a_path_that_stays_clear_passes(pillar_model, kin):
+    result = check_path_clearance(pillar_model, _swing(-80.0, -45.0, 5), kin, step_m=0.01)
+    assert result.ok and not result.runs
+    assert 0.0 < result.min_clearance_m < result.min_distance_m
+    assert len(result.segment_distance_m) == 4 and len(result.waypoint_distance_m) == 5
+    assert np.all(
+        result.segment_distance_m
+        <= np.minimum(result.waypoint_distance_m[:-1], result.waypoint_distance_m[1:]) + 1e-12
+    )
+    assert "every margin kept" in result.summary()
+
+
+def test_runs_split_where_the_path_is_clear_again(pillar_model, kin):
+    """Swinging through the pillar and back out the other way gives one run per pass."""
+    q = _swing(0.0, 0.0, 4)
+    q[:, 0] = np.radians([-45.0, 45.0, 90.0, -45.0])
+    result = check_path_clearance(pillar_model, q, kin, step_m=0.02)
+    assert [(r.index_start, r.index_end) for r in result.runs] == [(0, 1), (2, 3)]
+
+
+def test_a_single_waypoint_in_collision_is_one_run(pillar_model, kin):
+    result = check_path_clearance(pillar_model, _swing(0.0, 0.0, 1), kin, step_m=0.01)
+    assert len(result.segment_distance_m) == 0
+    assert [(r.index_start, r.index_end) for r in result.runs] == [(0, 0)]
+    assert "pillar" in result.runs[0].objects
+
+
+def test_sub_steps_bound_the_tcp_step_and_every_link_point_step(pillar_model, kin):
+    q = np.array([[0.3, 0.2, -0.1, 0.5, 0.4, 0.0], [0.35, 0.25, -0.05, 0.6, 0.5, 2.0]])
+    result = check_path_clearance(pillar_model, q, kin, step_m=0.004, link_step_m=0.005)
+    sweep = np.abs(q[1] - q[0]) @ joint_reach(pillar_model)
+    assert result.segment_samples[0] >= sweep / 0.005
+
+
+def test_the_tcp_moves_at_most_one_step_between_checks_on_a_curved_segment(pillar_model, kin):
+    """A 60 deg swing of joint 1 moves the TCP on an arc 5 % longer than its chord."""
+    q = _swing(-120.0, -60.0)
+    step = 0.01
+    result = check_path_clearance(pillar_model, q, kin, step_m=step, link_step_m=10.0)
+    m = int(result.segment_samples[0])
+    chord = np.linalg.norm(np.diff(kin.poses(q)[:, :3, 3], axis=0))
+    assert m > chord / step
+    tcp = kin.poses(q[0] + np.linspace(0.0, 1.0, m + 1)[:, None] * (q[1] - q[0]))[:, :3, 3]
+    assert np.max(np.linalg.norm(np.diff(tcp, axis=0), axis=1)) <= step
+
+
+def test_a_wrist_flip_with_the_tcp_still_is_sampled_by_the_joint_bound(pillar_model, kin):
+    """Joint 6 turns the tool about its own axis: the TCP stays put but the check still sub-steps."""
+    q = np.zeros((2, 6))
+    q[1, 5] = np.pi
+    result = check_path_clearance(pillar_model, q, kin, step_m=0.001)
+    chord = np.linalg.norm(np.diff(kin.poses(q)[:, :3, 3], axis=0))
+    assert chord < 1e-9 and result.segment_samples[0] > 10
+
+
+def test_joint_reach_bounds_the_motion_of_every_body_point(pillar_model, irb4600):
+    rng = np.random.default_rng(3)
+    reach = joint_reach(pillar_model)
+    corners = np.array(list(itertools.product((-1.0, 1.0), repeat=3)))
+    for _ in range(20):
+        q = rng.uniform(-2.0, 2.0, 6)
+        dq = rng.normal(size=6) * 1e-3
+        bound = np.abs(dq) @ reach
+        for body in pillar_model.bodies:
+            if body.kind == "cell":
+                continue
+            local = body.centre + corners * body.half_extent
+            moved = [
+                (irb4600.frame_pose(qq, body.link) @ body.link_T_shape)[:3, :3] @ local.T
+                + (irb4600.frame_pose(qq, body.link) @ body.link_T_shape)[:3, 3:]
+                for qq in (q, q + dq)
+            ]
+            assert np.max(np.linalg.norm(moved[1] - moved[0], axis=0)) <= bound + 1e-12, body.label
+
+
+def test_bad_paths_are_rejected_naming_the_value(pillar_model, kin):
+    with pytest.raises(InputError, match=r"q_path must be \(N, 6\)"):
+        check_path_clearance(pillar_model, np.zeros((3, 5)), kin, step_m=0.01)
+    with pytest.raises(InputError, match="step_m"):
+        check_path_clearance(pillar_model, np.zeros((3, 6)), kin, step_m=0.0)
+    other_tool = TcpKinematics(kin.robot, kin.base_in_world, make_transform(p=[0.0, 0.0, 0.2]))
+    with pytest.raises(InputError, match="tcp_in_flange"):
+        check_path_clearance(pillar_model, np.zeros((3, 6)), other_tool, step_m=0.01)

@@ -1,0 +1,209 @@
+"""The collision model: pair rules, broad phase, point Jacobians and linearised distances."""
+
+from __future__ import annotations
+
+import fcl
+import numpy as np
+import pytest
+import trimesh
+
+from refine.collision import CollisionModel, linearised_distance
+from refine.errors import InputError
+from refine.frames import make_transform
+from refine.robot import available_robots, load_robot
+from refine.settings import Shape
+
+NEAR_TABLE_DEG = [0.0, 45.0, 40.0, 0.0, 5.0, 0.0]
+"""An IRB 4600 pose reaching down with the flange close to the fixture and table."""
+
+
+def _random_q(robot, rng, scale=1.0):
+    mid = 0.5 * (robot.spec.lower + robot.spec.upper)
+    half = 0.5 * np.minimum(robot.spec.upper - robot.spec.lower, 2 * np.pi) * scale
+    return mid + rng.uniform(-half, half)
+
+
+def _point_in_link(robot, base, q, link, point_world):
+    T = base @ robot.frame_pose(q, link)
+    return np.linalg.solve(T, np.append(point_world, 1.0))
+
+
+def test_the_zero_configuration_of_the_irb4600_has_no_self_collision(irb4600, make_model):
+    model = make_model(irb4600)
+    d, body, other = model.min_distance(np.zeros(6))
+    assert d > 0.1, (body, other)
+    assert all(why == "adjacent" or why == "same body" for *_, why in model.excluded)
+
+
+@pytest.mark.parametrize("name", available_robots())
+def test_every_registered_robot_is_clear_of_itself_at_zero(name):
+    robot = load_robot(name)
+    model = CollisionModel(robot, np.eye(4), np.eye(4), (), (), margin_m=0.01, self_margin_m=0.005)
+    assert model.pairs and model.min_distance(np.zeros(robot.nq))[0] > 0.005
+
+
+def test_folding_the_forearm_into_the_base_is_a_self_collision(irb4600, make_model):
+    """Joint 2 far forward and joint 3 fully down fold the forearm and wrist into the foot."""
+    model = make_model(irb4600)
+    q = np.radians([0.0, 120.0, 75.0, 0.0, 0.0, 0.0])
+    hits = {(c.body, c.other): c for c in model.contacts(q, 0.0)}
+    assert hits[("link_4", "base_link")].distance_m < -0.1
+    assert all(c.self_pair and c.margin_m == 0.005 for c in hits.values())
+    d, body, other = model.min_distance(q)
+    assert d == min(c.distance_m for c in hits.values()) and (body, other) in hits
+    deep = model.contacts(q, -0.1)
+    assert deep and {(c.body, c.other) for c in deep} == {k for k, c in hits.items() if c.distance_m < -0.1}
+
+
+def test_adjacent_links_and_the_tool_on_the_flange_are_not_paired(irb4600, nozzle, make_model):
+    model = make_model(irb4600, tool=(nozzle,))
+    excluded = {(a, b): why for a, b, why in model.excluded}
+    for k in range(1, 6):
+        assert excluded[(f"link_{k + 1}/{_SHAPE[k + 1]}", f"link_{k}/{_SHAPE[k]}")] == "adjacent"
+    assert excluded[("tool:nozzle", "link_6/flange")] == "same body"
+    assert excluded[("tool:nozzle", "link_5/wrist")] == "adjacent"
+    assert ("tool:nozzle", "link_4/forearm") in model.pairs
+    assert ("link_4/forearm", "base_link/foot") in model.pairs
+
+
+_SHAPE = {0: "foot", 1: "column", 2: "upper_arm", 3: "elbow", 4: "forearm", 5: "wrist", 6: "flange"}
+
+
+def test_the_tool_skips_the_workpiece_but_the_links_do_not(cell_model):
+    excluded = {(a, b): why for a, b, why in cell_model.excluded}
+    assert excluded[("tool:nozzle", "part")] == "workpiece"
+    assert ("tool:nozzle", "table") in cell_model.pairs and ("tool:nozzle", "fixture") in cell_model.pairs
+    assert all((f"link_{k}/{_SHAPE[k]}", "part") in cell_model.pairs for k in range(1, 7))
+    assert excluded[("base_link/foot", "table")] == "fixed link"
+
+
+def test_a_nozzle_dipped_into_the_workpiece_is_ignored_but_a_link_there_is_found(
+    irb4600, nozzle, make_model, tmp_path
+):
+    cube = tmp_path / "cube.stl"
+    trimesh.creation.box((0.04, 0.04, 0.04)).export(cube)
+    q = np.radians(NEAR_TABLE_DEG)
+    nozzle_tip = (irb4600.fk(q) @ [0.0, 0.0, 0.28, 1.0])[:3]
+    wrist_centre = irb4600.frame_pose(q, "link_5")[:3, 3]
+
+    def hits(at, workpiece, kind="mesh"):
+        spec = dict(file=cube) if kind == "mesh" else dict(size_m=(0.04, 0.04, 0.04))
+        part = Shape("part", kind, pose=make_transform(p=at), workpiece=workpiece, **spec)
+        return {c.body for c in make_model(irb4600, (part,), (nozzle,)).contacts(q, 0.0) if c.other == "part"}
+
+    assert hits(nozzle_tip, workpiece=False, kind="box") == {"tool:nozzle"}
+    assert hits(nozzle_tip, workpiece=False) == {"tool:nozzle"}
+    assert hits(nozzle_tip, workpiece=True) == set()
+    assert "link_5" in hits(wrist_centre, workpiece=True)
+
+
+def test_always_close_pairs_follow_the_axes_rule(irb4600, make_model):
+    """A tool sleeve reaching back through the wrist centre (where axes 5 and 6 meet) is 0.16 m
+    from the forearm at every configuration: skipped as always close once the self margin exceeds
+    that, and checked below it."""
+    sleeve = Shape("sleeve", "cylinder", pose=make_transform(p=[0.0, 0.0, -0.1]), radius_m=0.03, length_m=0.2)
+    assert ("tool:sleeve", "link_4/forearm") in make_model(irb4600, tool=(sleeve,)).pairs
+    wide = make_model(irb4600, tool=(sleeve,), self_margin_m=0.2)
+    assert ("tool:sleeve", "link_4/forearm", "always close") in wide.excluded
+
+
+def test_a_constant_distance_pair_is_skipped_with_its_reason():
+    """The UR10e's shoulder housing turns about its own axis above its round base: 0.7 mm at every
+    configuration, so it can neither be kept 5 mm clear nor be changed by the optimiser."""
+    ur10e = load_robot("ur10e")
+    model = CollisionModel(ur10e, np.eye(4), np.eye(4), (), (), margin_m=0.01, self_margin_m=0.005)
+    assert ("link_2/shoulder_housing", "base_link/base", "constant distance") in model.excluded
+    shapes = {(s.link, s.name): s for s in ur10e.collision_shapes()}
+    rng = np.random.default_rng(2)
+    distances = []
+    for _ in range(5):
+        poses = ur10e.link_poses(_random_q(ur10e, rng))
+        housing = shapes[("link_2", "shoulder_housing")].collision_object(poses["link_2"])
+        base = shapes[("base_link", "base")].collision_object(poses["base_link"])
+        distances.append(fcl.distance(housing, base, fcl.DistanceRequest()))
+    assert np.ptp(distances) < 1e-6 and distances[0] == pytest.approx(0.0007, abs=1e-5)
+
+
+def test_contacts_with_the_broad_phase_equal_a_check_of_every_pair(cell_model, irb4600):
+    rng = np.random.default_rng(4)
+    for _ in range(20):
+        q = _random_q(irb4600, rng)
+        near = {(c.body_shape, c.other_shape): c.distance_m for c in cell_model.contacts(q, 0.15)}
+        every = {(c.body_shape, c.other_shape): c.distance_m for c in cell_model.contacts(q, np.inf)}
+        assert len(every) == len(cell_model.pairs)
+        assert near == {k: d for k, d in every.items() if d < 0.15}
+        d, body, other = cell_model.min_distance(q)
+        assert d == pytest.approx(min(every.values()))
+
+
+def test_point_jacobian_matches_finite_differences(cell_model, irb4600, base_in_world):
+    rng = np.random.default_rng(5)
+    for _ in range(10):
+        q = _random_q(irb4600, rng, 0.5)
+        for link in ("link_2", "link_4", "tool0", "base_link"):
+            point = base_in_world[:3, 3] + rng.uniform(-1.0, 1.0, 3)
+            local = _point_in_link(irb4600, base_in_world, q, link, point)
+            J = cell_model.point_jacobian(q, link, point)
+            J_fd = np.zeros((3, 6))
+            for j in range(6):
+                dq = np.zeros(6)
+                dq[j] = 1e-6
+                plus = (base_in_world @ irb4600.frame_pose(q + dq, link) @ local)[:3]
+                minus = (base_in_world @ irb4600.frame_pose(q - dq, link) @ local)[:3]
+                J_fd[:, j] = (plus - minus) / 2e-6
+            np.testing.assert_allclose(J, J_fd, atol=1e-7)
+
+
+def test_linearised_distance_predicts_the_change_for_a_small_joint_step(cell_model, irb4600):
+    """Against the table, fixture, mesh part and the robot's own links, to first order. Pairs with
+    a cylinder get FCL's GJK tolerance on top (its distances scatter by ~2e-5 m)."""
+    rng = np.random.default_rng(6)
+    checked = set()
+    for _ in range(60):
+        q = _random_q(irb4600, rng)
+        contacts = [c for c in cell_model.contacts(q, 0.3) if abs(c.distance_m) > 1e-3]
+        if not contacts:
+            continue
+        grads = cell_model.distance_gradients(q, contacts)
+        dq = rng.normal(size=6)
+        dq *= 1e-3 / np.linalg.norm(dq)
+        after = {(c.body_shape, c.other_shape): c.distance_m for c in cell_model.contacts(q + dq, np.inf)}
+        for c, g in zip(contacts, grads, strict=True):
+            J_other = cell_model.point_jacobian(q, c.other_link, c.point_other) if c.other_link else None
+            J_body = cell_model.point_jacobian(q, c.link, c.point_body)
+            np.testing.assert_allclose(g, linearised_distance(c, J_body, J_other), atol=1e-12)
+            change = after[(c.body_shape, c.other_shape)] - c.distance_m
+            noise = 5e-5 if {c.body_shape, c.other_shape} & _CYLINDERS else 2e-6
+            assert change == pytest.approx(g @ dq, abs=noise + 0.05 * abs(g @ dq)), (c.body, c.other)
+            checked.add(c.other if not c.self_pair else "self")
+    assert {"table", "fixture", "part", "self"} <= checked
+
+
+_CYLINDERS = {"foot", "column", "forearm", "wrist", "flange", "nozzle"}
+
+
+def test_a_distance_fcl_gets_wrong_is_caught_by_the_separating_plane_check(cell_model):
+    """At this pose FCL's GJK reports the forearm 0.245 m from the upper arm; they are 0.150 m apart
+    (checked by sampling the cylinder's surface against the box). Swapping the arguments fixes it."""
+    q = np.array([1.04542250, -0.21382341, -0.16175982, 0.72269328, 1.17899150, -0.12432522])
+    (c,) = [
+        c for c in cell_model.contacts(q, np.inf) if (c.body_shape, c.other_shape) == ("forearm", "upper_arm")
+    ]
+    assert c.distance_m == pytest.approx(0.1504365, abs=2e-6)
+    assert np.linalg.norm(c.point_body - c.point_other) == pytest.approx(c.distance_m, abs=1e-9)
+
+
+def test_bad_inputs_are_named(irb4600, make_model, table_cell):
+    with pytest.raises(InputError, match="table"):
+        make_model(irb4600, table_cell + (Shape("table", "sphere", radius_m=0.1),))
+    with pytest.raises(InputError, match="link_3"):
+        make_model(irb4600, (Shape("link_3", "sphere", radius_m=0.1),))
+    with pytest.raises(InputError, match="margin_m"):
+        make_model(irb4600, margin_m=-0.01)
+    model = make_model(irb4600)
+    with pytest.raises(InputError, match="q must be 6"):
+        model.contacts(np.zeros(5), 0.1)
+    with pytest.raises(InputError, match="no link 'link_9'"):
+        model.point_jacobian(np.zeros(6), "link_9", np.zeros(3))
+    with pytest.raises(InputError, match="not found"):
+        make_model(irb4600, (Shape("part", "mesh", file="/nonexistent/part.stl"),))
