@@ -91,3 +91,75 @@ def test_rapid_module_targets_and_configurations_match_the_refined_joints(glass)
     np.testing.assert_array_equal(confs, abb_confdata(load_robot("abb_irb4600_60_205"), traj.q))
     text = (out / "glass_adhesive.mod").read_text()
     assert text.count("SetDO doGlueGun, 1;") == 1 and text.count("SetDO doGlueGun, 0;") == 1
+
+
+# ---- the welding and sealing cells -------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def tig(tmp_path_factory):
+    out = tmp_path_factory.mktemp("tig")
+    return run(load_problem(ROOT / "problems" / "tig_weld"), out, report=False), out
+
+
+@pytest.fixture(scope="module")
+def sealing(tmp_path_factory):
+    out = tmp_path_factory.mktemp("sealing")
+    return run(load_problem(ROOT / "problems" / "ur10e_sealing"), out, report=False), out
+
+
+@pytest.mark.parametrize("case", ["tig", "sealing"])
+def test_weld_and_sealing_cells_meet_the_glass_checks(case, request):
+    result, _ = request.getfixturevalue(case)
+    tol = result.problem.tolerances
+    for p in result.passes:
+        check = p.refinement.check
+        assert p.refinement.status == "ok", p.refinement.reason
+        assert check.position_error_m.max() <= 1e-6
+        assert check.orientation_deviation_deg.max() <= tol.orientation_deg + 1e-6
+        assert check.joint_margin_rad.min() >= np.radians(tol.joint_margin_deg) - 1e-9
+    assert result.truth is not None and result.truth.orientation_rms_deg <= 1.0
+
+
+@pytest.mark.parametrize("case", ["glass", "tig", "sealing"])
+def test_every_bundled_path_keeps_its_clearance_between_waypoints_too(case, request):
+    result, _ = request.getfixturevalue(case)
+    margin = result.problem.collision.margin_m
+    for p in result.passes:
+        assert p.clearance is not None, "the problem has a cell: the dense check must run"
+        assert p.clearance.ok
+        assert p.clearance.min_clearance_m >= -1e-4  # distance minus the pair's margin
+        assert p.clearance.min_distance_m >= min(margin, result.problem.collision.self_margin_m) - 1e-4
+        assert p.clearance.segment_samples.sum() >= len(p.fused) - 1  # between waypoints, not only at them
+
+
+@pytest.mark.skipif(not XSD.is_file(), reason=f"CAEX 3.0 schema not found at {XSD}")
+def test_three_layer_weld_is_valid_pathml_with_three_layers_and_a_matching_krl_program(tig):
+    from refine.export.krl import parse_krl
+
+    result, out = tig
+    assert [(p.layer, p.index) for p in result.passes] == [(1, 1), (2, 1), (2, 2), (3, 1), (3, 2), (3, 3)]
+    aml = out / "tig_weld.aml"
+    assert validate_pathml(aml, XSD) == []
+    doc = read_pathml(aml)
+    assert len(doc.layers) == 3
+    assert [len(layer.tracks) for layer in doc.layers] == [1, 2, 3]
+    krl = parse_krl(out / "tig_weld.src", out / "tig_weld.dat")
+    assert len(krl) == len(result.passes) == 6
+    for kp, p in zip(krl, result.passes, strict=True):
+        np.testing.assert_allclose(kp.positions, p.trajectory.poses[:, :3, 3], atol=1e-6)
+        assert rotation_angle_deg(kp.rotations, p.trajectory.poses[:, :3, :3]).max() < 1e-4
+    # the PathML tracks hold the same poses, layer by layer
+    tracks = [t for layer in doc.layers for t in layer.tracks]
+    for t, p in zip(tracks, result.passes, strict=True):
+        np.testing.assert_allclose(t.positions, p.trajectory.poses[:, :3, 3], atol=1e-9)
+
+
+def test_sealing_program_is_urscript_whose_poses_match_the_path(sealing):
+    from refine.export.urscript import parse_urscript
+
+    result, out = sealing
+    (ur,) = parse_urscript(out / "ur10e_sealing.script")
+    base_from_world = np.linalg.inv(result.problem.robot.base_in_world)
+    expected = base_from_world @ result.trajectory.poses
+    np.testing.assert_allclose(ur.poses[:, :3, 3], expected[:, :3, 3], atol=1e-6)
