@@ -163,3 +163,21 @@ def test_sealing_program_is_urscript_whose_poses_match_the_path(sealing):
     base_from_world = np.linalg.inv(result.problem.robot.base_in_world)
     expected = base_from_world @ result.trajectory.poses
     np.testing.assert_allclose(ur.poses[:, :3, 3], expected[:, :3, 3], atol=1e-6)
+
+
+def test_a_pathml_document_is_a_problem_input_of_its_own(glass, tmp_path):
+    """Refining the PathML the glass run wrote, with no demonstration: the same path comes back ok."""
+    result, out = glass
+    source = ROOT / "problems" / "glass_adhesive" / "problem.toml"
+    text = source.read_text(encoding="utf-8")
+    cad = text[text.index("[cad]") : text.index("[demonstration]")]
+    demo = text[text.index("[demonstration]") : text.index("[tolerances]")]
+    text = text.replace(cad, '[cad]\nfile = "input.aml"\nformat = "pathml"\nspacing_m = 0.005\n\n').replace(demo, "")
+    (tmp_path / "problem.toml").write_text(text.replace('name = "glass_adhesive"', 'name = "glass_from_pathml"'))
+    (tmp_path / "input.aml").write_bytes((out / "glass_adhesive.aml").read_bytes())
+    again = run(load_problem(tmp_path), tmp_path / "out", report=False)
+    assert again.status == "ok", again.refinement.reason
+    assert again.refinement.check.position_error_m.max() <= 1e-6
+    # the input's orientations are the first run's reached poses: the second run keeps them
+    assert again.refinement.check.orientation_deviation_deg.max() < 0.5
+    assert abs(again.fused.s[-1] - result.fused.s[-1]) < 1e-3

@@ -172,3 +172,13 @@ def test_nothing_fails_silently(run):
         for r in refinement.repairs:
             assert r.reason.startswith(REPAIR_REASONS), r.reason
             assert r.slack_deg > 0 and r.index_start <= r.index_end and r.s_start_m <= r.s_end_m
+
+
+def test_a_repaired_path_in_a_cell_keeps_at_least_the_margin_everywhere(run):
+    """Checked densely between waypoints: the smallest distance to the cell is at least the margin."""
+    problem, result = run
+    if result.status != "repaired" or not _uses_collision(problem):
+        pytest.skip("not a repaired problem with a cell")
+    for p in result.passes:
+        assert p.clearance is not None and p.clearance.ok
+        assert p.clearance.min_clearance_m >= 0.0, p.clearance.summary()
