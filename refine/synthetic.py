@@ -1,15 +1,32 @@
-"""Generated paths for tests and benchmarks: a fused path with known orientations and speed.
+"""Generated paths for tests, benchmarks and the simulated problems under ``problems/``.
 
-These stand in for the output of :func:`refine.fuse.fuse` when a test or a benchmark needs a
-refinement problem of a chosen size without reading files.
+:func:`wave_path` stands in for the output of :func:`refine.fuse.fuse` when a test or a benchmark
+needs a refinement problem of a chosen size without reading files. The other helpers are shared by
+the problem generators: footprints of closed beads (:func:`rounded_rectangle`), a worker's smooth
+periodic variation (:func:`periodic_wave`), tool orientations of a dragged nozzle
+(:func:`tool_rotations`), and a check that the robot can follow a generated path
+(:func:`reachability_report`).
 """
 
 from __future__ import annotations
 
-import numpy as np
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-from refine.frames import matrix_from_zyx, rotation_about
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from refine.frames import matrix_from_zyx, rotation_about, rotvec_from_matrix
+from refine.optimise.seed import TcpKinematics, ik_chain
+from refine.optimise.verify import singularity_measures
 from refine.paths import FusedPath
+
+if TYPE_CHECKING:
+    from refine.collision import CollisionModel
+
+Array = NDArray[np.float64]
 
 
 def wave_path(
@@ -59,4 +76,240 @@ def wave_path(
         speed=speed,
         t_demo=s / speed_m_s,
         residual=np.zeros(n_waypoints),
+    )
+
+
+# ---- closed beads: footprints, worker variation, tool orientations ---------------------------------
+
+
+def rounded_rectangle(
+    half_u: float, half_v: float, r: float, n: int
+) -> tuple[Array, Array, Array, Array, NDArray[np.bool_], float]:
+    """``n`` points of a rounded rectangle at equal arc length, counter-clockwise from (0, -half_v).
+
+    The rectangle is centred on the origin with its sides along the axes; its four corners are
+    quarter circles. Point k lies at arc length ``k L / n`` from the middle of the bottom edge.
+
+    Args:
+        half_u: half the extent along the first axis [m] (> ``r``).
+        half_v: half the extent along the second axis [m] (> ``r``).
+        r: corner radius [m] (> 0).
+        n: number of points (>= 1).
+
+    Returns:
+        u, v: coordinates of the points [m], each (n,).
+        du, dv: unit tangents along the travel, each (n,).
+        corner: whether each point lies on a corner arc, (n,).
+        perimeter: the length L of the closed curve [m].
+    """
+    a, b = half_u - r, half_v - r
+    # (length, kind, origin, extra): straights carry their start point and direction, arcs their
+    # centre and start angle; the counter-clockwise order starts in the middle of the bottom edge.
+    pieces = [
+        (a, "line", (0.0, -half_v), (1.0, 0.0)),
+        (0.5 * math.pi * r, "arc", (a, -b), -0.5 * math.pi),
+        (2 * b, "line", (half_u, -b), (0.0, 1.0)),
+        (0.5 * math.pi * r, "arc", (a, b), 0.0),
+        (2 * a, "line", (a, half_v), (-1.0, 0.0)),
+        (0.5 * math.pi * r, "arc", (-a, b), 0.5 * math.pi),
+        (2 * b, "line", (-half_u, b), (0.0, -1.0)),
+        (0.5 * math.pi * r, "arc", (-a, -b), math.pi),
+        (a, "line", (-a, -half_v), (1.0, 0.0)),
+    ]
+    perimeter = sum(p[0] for p in pieces)
+    sigma = np.arange(n) * perimeter / n
+    u, v, du, dv = (np.empty(n) for _ in range(4))
+    corner = np.zeros(n, dtype=bool)
+    start = 0.0
+    for length, kind, origin, extra in pieces:
+        m = (sigma >= start) & (sigma < start + length)
+        d = sigma[m] - start
+        if kind == "line":
+            u[m], v[m] = origin[0] + d * extra[0], origin[1] + d * extra[1]
+            du[m], dv[m] = extra
+        else:
+            phi = extra + d / r
+            u[m], v[m] = origin[0] + r * np.cos(phi), origin[1] + r * np.sin(phi)
+            du[m], dv[m] = -np.sin(phi), np.cos(phi)
+            corner[m] = True
+        start += length
+    return u, v, du, dv, corner, perimeter
+
+
+def periodic_wave(
+    sigma: ArrayLike, perimeter: float, amplitudes: Sequence[float], rng: np.random.Generator
+) -> Array:
+    """A smooth wander that closes on itself: sines with 1, 2, ... periods per lap.
+
+    One phase per amplitude is drawn from ``rng`` (uniform in [0, 2π)), in order, so the draw
+    advances ``rng`` by ``len(amplitudes)`` numbers whatever the amplitudes are (a zero amplitude
+    still consumes its phase).
+
+    Args:
+        sigma: arc length along the closed path [m], (N,).
+        perimeter: length of the lap [m].
+        amplitudes: amplitude of the k-th harmonic (k = 1, 2, ...), in the unit wanted.
+        rng: random generator for the phases.
+
+    Returns:
+        the sum of ``a_k sin(2π k σ / L + φ_k)``, (N,).
+    """
+    sigma = np.asarray(sigma, dtype=float)
+    phases = rng.uniform(0.0, 2.0 * math.pi, size=len(amplitudes))
+    return sum(  # type: ignore[return-value]
+        a * np.sin(2.0 * math.pi * (k + 1) * sigma / perimeter + p)
+        for k, (a, p) in enumerate(zip(amplitudes, phases, strict=True))
+    )
+
+
+def tool_rotations(
+    tangents: ArrayLike, normals: ArrayLike, drag_rad: ArrayLike, *, project: bool = False
+) -> Array:
+    """Tool orientations R_F_TCP for a bead: z into the surface, tilted back by the drag angle.
+
+    The tool z axis points against the surface normal, leaned back against the travel direction
+    by the drag angle (the nozzle points at the bead already laid); the x axis follows the travel.
+
+    Args:
+        tangents: unit travel directions, (N, 3).
+        normals: unit surface normals pointing out of the surface (towards the tool), (N, 3).
+        drag_rad: drag angle per point [rad], (N,).
+        project: first make the tangents orthogonal to the normals (and unit again); leave it off
+            when they already are (an analytic surface), so no rounding is added.
+
+    Returns:
+        rotation matrices (N, 3, 3), columns the tool x, y, z axes in {F}.
+    """
+    tangents = np.asarray(tangents, dtype=float)
+    normals = np.asarray(normals, dtype=float)
+    drag_rad = np.asarray(drag_rad, dtype=float)
+    if project:
+        tangents = tangents - np.einsum("ij,ij->i", tangents, normals)[:, None] * normals
+        tangents /= np.linalg.norm(tangents, axis=1, keepdims=True)
+    ca, sa = np.cos(drag_rad)[:, None], np.sin(drag_rad)[:, None]
+    z = -ca * normals - sa * tangents
+    x = ca * tangents - sa * normals
+    y = np.cross(z, x)
+    return np.stack([x, y, z], axis=-1)
+
+
+# ---- reachability of a generated path ----------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Reachability:
+    """What chained IK along a generated path found.
+
+    Attributes:
+        qs: joints per target [rad], (N, n).
+        errors: pose error norm per target (position [m] and angle [rad] stacked), (N,).
+        chain_errors: the same straight from the chain, before any polishing, (N,).
+        joint_margins: distance of every joint to its nearer limit [rad], (N, n).
+        manipulability: scaled manipulability per target [-], (N,).
+        sigma_min: smallest singular value of the scaled TCP Jacobian per target [-], (N,).
+        max_step_deg: largest change of any joint between consecutive targets [deg].
+        clearance: per cell object, the smallest signed distance [m] to a robot link or tool shape
+            over all targets and that body's label; None when no collision model was given.
+    """
+
+    qs: Array
+    errors: Array
+    chain_errors: Array
+    joint_margins: Array
+    manipulability: Array
+    sigma_min: Array
+    max_step_deg: float
+    clearance: dict[str, tuple[float, str]] | None = None
+
+    @property
+    def worst_joint(self) -> int:
+        """The joint (1-based) with the smallest limit margin."""
+        return int(np.unravel_index(np.argmin(self.joint_margins), self.joint_margins.shape)[1]) + 1
+
+
+def polish_ik(kin: TcpKinematics, T_target: Array, q: Array, iterations: int = 5) -> tuple[Array, float]:
+    """Minimum-norm Gauss-Newton steps on the TCP pose, from a nearly converged ``q``.
+
+    :func:`refine.optimise.seed.solve_ik` stops at its tolerance (1e-6); a few Gauss-Newton steps
+    from there take the error down to rounding, without joint limits.
+
+    Args:
+        kin: TCP kinematics.
+        T_target: wanted T_F_TCP, (4, 4).
+        q: start joints [rad], (n,).
+        iterations: number of steps.
+
+    Returns:
+        joints [rad] (n,) and the remaining pose error norm (position [m] and angle [rad] stacked).
+    """
+
+    def error(q: Array) -> Array:
+        T = kin.pose(q)
+        return np.concatenate(
+            [T_target[:3, 3] - T[:3, 3], rotvec_from_matrix(T_target[:3, :3] @ T[:3, :3].T)]
+        )
+
+    for _ in range(iterations):
+        q = q + np.linalg.pinv(kin.jacobian(q)) @ error(q)
+    return q, float(np.linalg.norm(error(q)))
+
+
+def reachability_report(
+    kin: TcpKinematics,
+    targets: ArrayLike,
+    *,
+    joint_margin_rad: float,
+    starts: list[Array],
+    collision: CollisionModel | None = None,
+    polish_iterations: int = 0,
+) -> Reachability:
+    """Chain IK along target TCP poses and measure how well the robot can follow them.
+
+    IK is chained with :func:`refine.optimise.seed.ik_chain` inside the joint limits shrunk by
+    ``joint_margin_rad``; optionally each solution is polished (:func:`polish_ik`). The
+    singularity measures come from :func:`refine.optimise.verify.singularity_measures`, the
+    clearance from :meth:`refine.collision.CollisionModel.contacts` (every checked pair between a
+    moving body and a cell object; the model's own rules decide which pairs are checked).
+
+    Args:
+        kin: TCP kinematics of the robot in the world with its tool.
+        targets: wanted T_F_TCP per target, (N, 4, 4).
+        joint_margin_rad: margin kept from every joint limit [rad].
+        starts: candidate start joints for the first target [rad], each (n,).
+        collision: collision model of the cell, or None to skip the clearance.
+        polish_iterations: Gauss-Newton steps per target after the chain (0: none).
+
+    Returns:
+        the figures, see :class:`Reachability`.
+    """
+    targets = np.asarray(targets, dtype=float)
+    spec = kin.robot.spec
+    lower, upper = spec.lower + joint_margin_rad, spec.upper - joint_margin_rad
+    qs, chain_errors = ik_chain(kin, targets, lower, upper, starts)
+    errors = chain_errors.copy()
+    if polish_iterations > 0:
+        for k, T in enumerate(targets):
+            qs[k], errors[k] = polish_ik(kin, T, qs[k], polish_iterations)
+    margins = np.minimum(qs - spec.lower, spec.upper - qs)
+    manipulability, sigma_min = singularity_measures(kin, qs)
+    steps = np.degrees(np.abs(np.diff(qs, axis=0)).max(axis=1)) if len(qs) > 1 else np.zeros(1)
+    clearance = None
+    if collision is not None:
+        cell = [b for b in collision.bodies if b.kind == "cell"]
+        clearance = {b.name: (math.inf, "") for b in cell}
+        names = set(clearance)
+        for q in qs:
+            for c in collision.contacts(q, math.inf):
+                if c.other in names and c.distance_m < clearance[c.other][0]:
+                    body = c.body if c.body.startswith("tool:") else f"{c.body}/{c.body_shape}"
+                    clearance[c.other] = (c.distance_m, body)
+    return Reachability(
+        qs=qs,
+        errors=errors,
+        chain_errors=chain_errors,
+        joint_margins=margins,
+        manipulability=manipulability,
+        sigma_min=sigma_min,
+        max_step_deg=float(steps.max()),
+        clearance=clearance,
     )

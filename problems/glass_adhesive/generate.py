@@ -46,18 +46,9 @@ from scipy.ndimage import gaussian_filter1d
 
 from refine.demo.liberty import write_liberty_ascii
 from refine.demo.simulate import TrackerModel, simulate_demonstration, write_truth_csv
-from refine.frames import (
-    invert_transform,
-    make_transform,
-    rotvec_from_matrix,
-    transform_from_xyz_rpy,
-    transform_points,
-)
-
-try:  # Python 3.11+
-    import tomllib
-except ModuleNotFoundError:  # Python 3.10
-    import tomli as tomllib  # type: ignore[no-redef]
+from refine.frames import invert_transform, make_transform, rotvec_from_matrix, transform_points
+from refine.problem import Problem, load_problem
+from refine.synthetic import periodic_wave, rounded_rectangle, tool_rotations
 
 HERE = Path(__file__).resolve().parent
 SEED = 20240611
@@ -82,47 +73,6 @@ DRAG_WAVES_DEG = (3.5, 1.0)  # amplitudes of the once- and twice-per-lap drag va
 # ---- geometry -----------------------------------------------------------------------------------
 
 
-def rounded_rectangle(half_u: float, half_v: float, r: float, n: int):
-    """Points of a rounded rectangle by arc length, counter-clockwise from (0, -half_v).
-
-    Returns:
-        (u, v) developed coordinates [m], unit tangents (du, dv), and a corner flag, each (n,),
-        sampled at sigma_k = k L / n, k = 0..n-1, and the perimeter L [m].
-    """
-    a, b = half_u - r, half_v - r
-    # (length, kind, data): straights carry start point and direction, arcs their centre and
-    # start angle; the counter-clockwise order starts in the middle of the bottom edge.
-    pieces = [
-        (a, "line", (0.0, -half_v), (1.0, 0.0)),
-        (0.5 * math.pi * r, "arc", (a, -b), -0.5 * math.pi),
-        (2 * b, "line", (half_u, -b), (0.0, 1.0)),
-        (0.5 * math.pi * r, "arc", (a, b), 0.0),
-        (2 * a, "line", (a, half_v), (-1.0, 0.0)),
-        (0.5 * math.pi * r, "arc", (-a, b), 0.5 * math.pi),
-        (2 * b, "line", (-half_u, b), (0.0, -1.0)),
-        (0.5 * math.pi * r, "arc", (-a, -b), math.pi),
-        (a, "line", (-a, -half_v), (1.0, 0.0)),
-    ]
-    perimeter = sum(p[0] for p in pieces)
-    sigma = np.arange(n) * perimeter / n
-    u, v, du, dv = (np.empty(n) for _ in range(4))
-    corner = np.zeros(n, dtype=bool)
-    start = 0.0
-    for length, kind, origin, extra in pieces:
-        m = (sigma >= start) & (sigma < start + length)
-        d = sigma[m] - start
-        if kind == "line":
-            u[m], v[m] = origin[0] + d * extra[0], origin[1] + d * extra[1]
-            du[m], dv[m] = extra
-        else:
-            phi = extra + d / r
-            u[m], v[m] = origin[0] + r * np.cos(phi), origin[1] + r * np.sin(phi)
-            du[m], dv[m] = -np.sin(phi), np.cos(phi)
-            corner[m] = True
-        start += length
-    return u, v, du, dv, corner, perimeter
-
-
 def on_glass(u, v, du=None, dv=None):
     """Map developed coordinates onto the glass in the CAD frame.
 
@@ -138,24 +88,6 @@ def on_glass(u, v, du=None, dv=None):
     tangents = np.column_stack([c * du, dv, s * du])
     normals = np.column_stack([-s, np.zeros_like(s), c])
     return points, tangents, normals
-
-
-def tool_rotations(tangents, normals, drag_rad):
-    """R_F_TCP: z into the glass tilted back by the drag angle, x along the travel direction."""
-    ca, sa = np.cos(drag_rad)[:, None], np.sin(drag_rad)[:, None]
-    z = -ca * normals - sa * tangents
-    x = ca * tangents - sa * normals
-    y = np.cross(z, x)
-    return np.stack([x, y, z], axis=-1)
-
-
-def periodic_wave(sigma, perimeter, amplitudes, rng):
-    """Sum of sines with 1, 2, ... periods per lap, the given amplitudes and random phases."""
-    phases = rng.uniform(0.0, 2.0 * math.pi, size=len(amplitudes))
-    return sum(
-        a * np.sin(2.0 * math.pi * (k + 1) * sigma / perimeter + p)
-        for k, (a, p) in enumerate(zip(amplitudes, phases, strict=True))
-    )
 
 
 # ---- files --------------------------------------------------------------------------------------
@@ -174,13 +106,12 @@ def write_bead_dxf(path: Path, bead_cad: np.ndarray, glass_cad: np.ndarray) -> N
         bead_mm, glass_mm = (bead_cad * 1000.0).tolist(), (glass_cad * 1000.0).tolist()
         msp.add_polyline3d(bead_mm, close=True, dxfattribs={"layer": "BEAD"})
         msp.add_polyline3d(glass_mm, close=True, dxfattribs={"layer": "GLASS"})
+        # the CLASSES section comes out in set order (it varies with PYTHONHASHSEED): fix it
+        doc.classes.add_required_classes(doc.dxfversion)
+        doc.classes.classes = dict(sorted(doc.classes.classes.items()))
         doc.saveas(path)
     finally:
         ezdxf.options.write_fixed_meta_data_for_testing = fixed
-
-
-def pose(table: dict) -> np.ndarray:
-    return transform_from_xyz_rpy(table["xyz"], table["rpy_deg"])
 
 
 # ---- reachability -------------------------------------------------------------------------------
@@ -204,17 +135,17 @@ def solve_ik(robot, T_base_flange, q, iterations=300, damping=1e-3):
     return q, e_p, e_r
 
 
-def check_reachability(problem: dict, positions, rotations, step: int = 10) -> bool:
+def check_reachability(problem: Problem, positions, rotations, step: int = 10) -> bool:
     """Chained DLS IK over every ``step``-th point of the true path; prints the worst figures."""
     try:
         from refine.robot import load_robot
     except ImportError as e:  # pragma: no cover - the robot module is optional here
         print(f"reachability check skipped: {e}")
         return True
-    robot = load_robot(problem["robot"]["model"])
-    T_F_R = pose(problem["robot"]["base_in_world"])
-    T_flange_tcp = pose(problem["tool"]["tcp_in_flange"])
-    margin = math.radians(problem["tolerances"]["joint_margin_deg"])
+    robot = load_robot(problem.robot.model)
+    T_F_R = problem.robot.base_in_world
+    T_flange_tcp = problem.tool.tcp_in_flange
+    margin = math.radians(problem.tolerances.joint_margin_deg)
     reach = robot.spec.reach_m
     targets = invert_transform(T_F_R) @ make_transform(rotations, positions)
     targets = targets[::step] @ invert_transform(T_flange_tcp)
@@ -243,7 +174,7 @@ def check_reachability(problem: dict, positions, rotations, step: int = 10) -> b
         rows.append((e_p, e_r, joint_margin, sigma_min, manip, q.copy()))
     e_p, e_r, jm, smin, manip = (np.array([r[i] for r in rows]) for i in range(5))
     qs = np.degrees(np.array([r[5] for r in rows]))
-    singular = problem["tolerances"]["singularity_margin"]
+    singular = problem.tolerances.singularity_margin
     ok = bool(e_p.max() < 1e-6 and e_r.max() < 1e-4 and jm.min() > margin and manip.min() > singular)
     print(f"reachability: {len(rows)} IK targets (every {step}th point), chained from q0 [deg] = "
           f"{np.round(qs[0], 1).tolist()}")
@@ -265,10 +196,10 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--no-check", action="store_true", help="skip the IK reachability check")
     args = parser.parse_args(argv)
-    problem = tomllib.loads((HERE / "problem.toml").read_text(encoding="utf-8"))
-    T_F_CAD = pose(problem["frames"]["cad_in_world"])
-    T_F_S = pose(problem["frames"]["source_in_world"])
-    T_TCP_E = pose(problem["tool"]["sensor_in_tcp"])
+    problem = load_problem(HERE)
+    T_F_CAD = problem.frames.cad_in_world
+    T_F_S = problem.frames.source_in_world
+    T_TCP_E = problem.tool.sensor_in_tcp
     rng = np.random.default_rng(SEED)
 
     # ---- bead and glass edge in the CAD frame

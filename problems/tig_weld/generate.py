@@ -46,12 +46,9 @@ import numpy as np
 
 from refine.demo.liberty import write_liberty_ascii
 from refine.demo.simulate import TrackerModel, simulate_demonstration, write_truth_csv
-from refine.frames import fixed_xyz_from_matrix, make_transform, rotation_about, transform_from_xyz_rpy
-
-try:  # Python 3.11+
-    import tomllib
-except ModuleNotFoundError:  # Python 3.10
-    import tomli as tomllib  # type: ignore[no-redef]
+from refine.frames import fixed_xyz_from_matrix, make_transform, rotation_about
+from refine.problem import Problem, load_problem
+from refine.synthetic import polish_ik
 
 HERE = Path(__file__).resolve().parent
 SEED = 20240612
@@ -228,17 +225,13 @@ def write_seam_dxf(path: Path, seam_cad: np.ndarray, sigma_fine: np.ndarray) -> 
         ezdxf.options.write_fixed_meta_data_for_testing = fixed
 
 
-def pose(table: dict) -> np.ndarray:
-    return transform_from_xyz_rpy(table["xyz"], table["rpy_deg"])
-
-
 def box_corners(size: np.ndarray, T: np.ndarray) -> np.ndarray:
     """The 8 corners (8, 3) [m] of a box of ``size`` centred on the pose ``T``."""
     signs = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], dtype=float)
     return (0.5 * signs * size) @ T[:3, :3].T + T[:3, 3]
 
 
-def cell_boxes(problem: dict) -> list[tuple[str, np.ndarray, np.ndarray, bool]]:
+def cell_boxes(problem: Problem) -> list[tuple[str, np.ndarray, np.ndarray, bool]]:
     """The plate boxes placed in the world by ``cad_in_world``, and the cradles under them.
 
     A cradle is a block from the table top (the top face of the cell object ``table``) up to
@@ -248,10 +241,10 @@ def cell_boxes(problem: dict) -> list[tuple[str, np.ndarray, np.ndarray, bool]]:
     Returns:
         (name, size (3,) [m], pose T_F_box (4, 4), workpiece) per box.
     """
-    T_F_CAD = pose(problem["frames"]["cad_in_world"])
+    T_F_CAD = problem.frames.cad_in_world
     plates = [(name, size, T_F_CAD @ T, True) for name, size, T in plate_boxes()]
-    table = next(o for o in problem["cell"]["objects"] if o["name"] == "table")
-    table_top = pose(table["pose"])[2, 3] + 0.5 * table["size_m"][2]
+    table = next(o for o in problem.cell if o.name == "table")
+    table_top = table.pose[2, 3] + 0.5 * table.size_m[2]
     cradles = []
     for section, label in (("1", "low"), ("5", "high")):
         corners = np.vstack([box_corners(size, T) for name, size, T, _ in plates if name.endswith(section)])
@@ -264,9 +257,9 @@ def cell_boxes(problem: dict) -> list[tuple[str, np.ndarray, np.ndarray, bool]]:
     return plates + cradles
 
 
-def compare_cell(problem: dict, print_toml: bool) -> bool:
+def compare_cell(problem: Problem, print_toml: bool) -> bool:
     """Do the plates and cradles of ``problem.toml`` match the geometry? Optionally print TOML."""
-    listed = {o["name"]: o for o in problem.get("cell", {}).get("objects", [])}
+    listed = {o.name: o for o in problem.cell}
     ok = True
     for name, size, T, workpiece in cell_boxes(problem):
         xyz, rpy = T[:3, 3] + 0.0, np.round(fixed_xyz_from_matrix(T[:3, :3]), 1) + 0.0
@@ -279,11 +272,11 @@ def compare_cell(problem: dict, print_toml: bool) -> bool:
                 + ("\nworkpiece = true" if workpiece else "")
             )
         o = listed.get(name)
-        if o is None or o.get("workpiece", False) != workpiece:
+        if o is None or o.workpiece != workpiece:
             print(f"cell: {name} missing from problem.toml or workpiece is not {str(workpiece).lower()}")
             ok = False
             continue
-        if np.abs(np.array(o["size_m"]) - size).max() > 2e-4 or np.abs(pose(o["pose"]) - T).max() > 2e-4:
+        if o.size_m is None or np.abs(np.array(o.size_m) - size).max() > 2e-4 or np.abs(o.pose - T).max() > 2e-4:
             print(f"cell: {name} in problem.toml differs from the geometry (run with --print-cell)")
             ok = False
     return ok
@@ -316,21 +309,6 @@ def _distance(a, b) -> float:
     return float(fcl.distance(a, b, fcl.DistanceRequest(), fcl.DistanceResult()))
 
 
-def polish_ik(kin, T_target, q, iterations: int = 5):
-    """A few minimum-norm Gauss-Newton steps on the TCP pose from ``q``; joints and error norm."""
-    from refine.frames import rotvec_from_matrix
-
-    def error(q):
-        T = kin.pose(q)
-        return np.concatenate(
-            [T_target[:3, 3] - T[:3, 3], rotvec_from_matrix(T_target[:3, :3] @ T[:3, :3].T)]
-        )
-
-    for _ in range(iterations):
-        q = q + np.linalg.pinv(kin.jacobian(q)) @ error(q)
-    return q, float(np.linalg.norm(error(q)))
-
-
 def run_checks(s, positions, rotations, speed, step: int = 5) -> bool:
     """Chained DLS IK over every ``step``-th point of every pass of the true path; clearances.
 
@@ -343,7 +321,6 @@ def run_checks(s, positions, rotations, speed, step: int = 5) -> bool:
     from refine.multipass import Pass, generate_passes
     from refine.optimise.seed import TcpKinematics, ik_chain, start_candidates
     from refine.paths import FusedPath
-    from refine.problem import load_problem
     from refine.robot import load_robot
 
     problem = load_problem(HERE)
@@ -373,7 +350,7 @@ def run_checks(s, positions, rotations, speed, step: int = 5) -> bool:
         qs, errors = ik_chain(kin, targets, lower, upper, starts)
         chain_error = float(errors.max())
         for k, T in enumerate(targets):  # polish: the chain stops near 1e-6; Gauss-Newton from there
-            qs[k], errors[k] = polish_ik(kin, T, qs[k])
+            qs[k], errors[k] = polish_ik(kin, T, qs[k])  # 5 steps
         jm = np.minimum(qs - spec.lower, spec.upper - qs)
         sig, man = [], []
         for q in qs:
@@ -446,10 +423,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-check", action="store_true", help="skip the reach and clearance checks")
     parser.add_argument("--print-cell", action="store_true", help="print the plate boxes as TOML")
     args = parser.parse_args(argv)
-    problem = tomllib.loads((HERE / "problem.toml").read_text(encoding="utf-8"))
-    T_F_CAD = pose(problem["frames"]["cad_in_world"])
-    T_F_S = pose(problem["frames"]["source_in_world"])
-    T_TCP_E = pose(problem["tool"]["sensor_in_tcp"])
+    problem = load_problem(HERE)
+    T_F_CAD = problem.frames.cad_in_world
+    T_F_S = problem.frames.source_in_world
+    T_TCP_E = problem.tool.sensor_in_tcp
     rng = np.random.default_rng(SEED)
 
     # ---- the seam in the CAD frame, vertices POINT_SPACING apart (piece ends included)
@@ -495,8 +472,8 @@ def main(argv: list[str] | None = None) -> int:
     lo, hi = positions.min(axis=0), positions.max(axis=0)
     print(
         f"seam in world: x {lo[0]:.3f}..{hi[0]:.3f}, y {lo[1]:.3f}..{hi[1]:.3f}, z {lo[2]:.3f}..{hi[2]:.3f} m;"
-        f" from the base {np.linalg.norm(positions - pose(problem['robot']['base_in_world'])[:3, 3], axis=1).min():.3f}"
-        f"..{np.linalg.norm(positions - pose(problem['robot']['base_in_world'])[:3, 3], axis=1).max():.3f} m"
+        f" from the base {np.linalg.norm(positions - problem.robot.base_in_world[:3, 3], axis=1).min():.3f}"
+        f"..{np.linalg.norm(positions - problem.robot.base_in_world[:3, 3], axis=1).max():.3f} m"
     )
     tilt = np.degrees(np.arccos(np.clip(-rotations[:, 2, 2], -1.0, 1.0)))
     print(

@@ -29,20 +29,10 @@ import numpy as np
 
 from refine.demo.liberty import write_liberty_ascii
 from refine.demo.simulate import TrackerModel, simulate_demonstration, write_truth_csv
-from refine.frames import (
-    invert_transform,
-    make_transform,
-    matrix_from_rotvec,
-    transform_from_xyz_rpy,
-    transform_points,
-)
+from refine.frames import invert_transform, make_transform, matrix_from_rotvec, transform_points
 from refine.optimise.seed import TcpKinematics, solve_ik
+from refine.problem import load_problem
 from refine.robot import load_robot
-
-try:  # Python 3.11+
-    import tomllib
-except ModuleNotFoundError:  # Python 3.10
-    import tomli as tomllib  # type: ignore[no-redef]
 
 HERE = Path(__file__).resolve().parent
 SEED = 20240917
@@ -88,26 +78,12 @@ class Demo:
     speed: np.ndarray
 
 
-def pose(table: dict | None) -> np.ndarray:
-    """A problem-file pose ``{xyz, rpy_deg}`` as (4, 4); identity when absent."""
-    table = table or {}
-    return transform_from_xyz_rpy(table.get("xyz", [0.0, 0.0, 0.0]), table.get("rpy_deg", [0.0, 0.0, 0.0]))
-
-
 def load_case(name: str) -> Case:
     """Read ``<name>/problem.toml`` into the transforms the generator needs."""
-    problem = tomllib.loads((HERE / name / "problem.toml").read_text(encoding="utf-8"))
-    robot = load_robot(problem["robot"]["model"])
-    kin = TcpKinematics(
-        robot, pose(problem["robot"].get("base_in_world")), pose(problem["tool"]["tcp_in_flange"])
-    )
-    frames = problem.get("frames", {})
+    problem = load_problem(HERE / name)
+    kin = TcpKinematics(load_robot(problem.robot.model), problem.robot.base_in_world, problem.tool.tcp_in_flange)
     return Case(
-        name,
-        kin,
-        pose(frames.get("source_in_world")),
-        pose(problem["tool"].get("sensor_in_tcp")),
-        pose(frames.get("cad_in_world")),
+        name, kin, problem.frames.source_in_world, problem.tool.sensor_in_tcp, problem.frames.cad_in_world
     )
 
 
@@ -398,8 +374,6 @@ def clearance_check(name: str, every: int = 10, max_tilt_deg: float = 18.0) -> N
     import fcl
 
     from refine.optimise.seed import ik_chain, start_candidates
-    from refine.problem import load_problem
-
     problem = load_problem(HERE / name)
     case = load_case(name)
     kin, robot = case.kin, case.kin.robot
@@ -473,7 +447,7 @@ def main(argv: list[str] | None = None) -> int:
         if not args.cases or name in args.cases:
             case = load_case(name)
             write_case(case, CASES[name](case), SEED + zlib.crc32(name.encode()) % 1000)
-            if args.check and "cell" in tomllib.loads((HERE / name / "problem.toml").read_text("utf-8")):
+            if args.check and load_problem(HERE / name).cell:
                 clearance_check(name)
     return 0
 

@@ -41,6 +41,7 @@ Run from the repository root::
 from __future__ import annotations
 
 import argparse
+import logging
 import math
 import sys
 from pathlib import Path
@@ -51,12 +52,9 @@ from scipy.ndimage import gaussian_filter1d
 
 from refine.demo.liberty import write_liberty_ascii
 from refine.demo.simulate import TrackerModel, simulate_demonstration, write_truth_csv
-from refine.frames import make_transform, transform_from_xyz_rpy, transform_points
-
-try:  # Python 3.11+
-    import tomllib
-except ModuleNotFoundError:  # Python 3.10
-    import tomli as tomllib  # type: ignore[no-redef]
+from refine.frames import make_transform, transform_points
+from refine.problem import Problem, load_problem
+from refine.synthetic import periodic_wave, reachability_report, rounded_rectangle, tool_rotations
 
 HERE = Path(__file__).resolve().parent
 SEED = 20240917
@@ -85,42 +83,6 @@ CHECK_STEP = 5  # check every 5th point of the true path
 
 
 # ---- geometry -----------------------------------------------------------------------------------
-
-
-def rounded_rectangle(half_u: float, half_v: float, r: float, n: int):
-    """``n`` points of a rounded rectangle at equal arc length, counter-clockwise from (0, -half_v).
-
-    Returns:
-        x, y of the points [m], each (n,), and the perimeter [m].
-    """
-    a, b = half_u - r, half_v - r
-    # (length, kind, origin, extra): straights carry their start and direction, arcs their centre
-    # and start angle
-    pieces = [
-        (a, "line", (0.0, -half_v), (1.0, 0.0)),
-        (0.5 * math.pi * r, "arc", (a, -b), -0.5 * math.pi),
-        (2 * b, "line", (half_u, -b), (0.0, 1.0)),
-        (0.5 * math.pi * r, "arc", (a, b), 0.0),
-        (2 * a, "line", (a, half_v), (-1.0, 0.0)),
-        (0.5 * math.pi * r, "arc", (-a, b), 0.5 * math.pi),
-        (2 * b, "line", (-half_u, b), (0.0, -1.0)),
-        (0.5 * math.pi * r, "arc", (-a, -b), math.pi),
-        (a, "line", (-a, -half_v), (1.0, 0.0)),
-    ]
-    perimeter = sum(p[0] for p in pieces)
-    sigma = np.arange(n) * perimeter / n
-    x, y = np.empty(n), np.empty(n)
-    start = 0.0
-    for length, kind, origin, extra in pieces:
-        m = (sigma >= start) & (sigma < start + length)
-        d = sigma[m] - start
-        if kind == "line":
-            x[m], y[m] = origin[0] + d * extra[0], origin[1] + d * extra[1]
-        else:
-            phi = extra + d / r
-            x[m], y[m] = origin[0] + r * np.cos(phi), origin[1] + r * np.sin(phi)
-        start += length
-    return x, y, perimeter
 
 
 def saddle_z(x, y):
@@ -157,13 +119,13 @@ def panel_mesh() -> tuple[trimesh.Trimesh, float]:
     """The panel as a triangle mesh in the CAD frame [mm], and the footprint's perimeter [m]."""
     half_u, half_v = PANEL_LENGTH / 2, PANEL_WIDTH / 2
     # an even count puts a vertex in the middle of each long edge, where the bead starts
-    n_edge = 2 * math.ceil(rounded_rectangle(half_u, half_v, CORNER_RADIUS, 1)[2] / (2 * EDGE_SPACING))
+    n_edge = 2 * math.ceil(rounded_rectangle(half_u, half_v, CORNER_RADIUS, 1)[-1] / (2 * EDGE_SPACING))
     vertices, rings = [], []
     count = 0
     for k in range(N_RINGS):
         scale = 1.0 - k / N_RINGS
         n = n_edge if k == 0 else max(16, round(n_edge * scale * INNER_DENSITY))
-        x, y, perimeter = rounded_rectangle(half_u, half_v, CORNER_RADIUS, n)
+        x, y, *_, perimeter = rounded_rectangle(half_u, half_v, CORNER_RADIUS, n)
         x, y = scale * x, scale * y
         vertices.append(np.column_stack([x, y, saddle_z(x, y)]))
         rings.append(count + np.arange(n))
@@ -207,121 +169,53 @@ def closed_tangents(points: np.ndarray) -> np.ndarray:
     return np.vstack([t, t[:1]])
 
 
-def tool_rotations(tangents, normals, drag_rad):
-    """R_F_TCP: z into the panel tilted back by the drag angle, x along the travel direction."""
-    tangents = tangents - np.einsum("ij,ij->i", tangents, normals)[:, None] * normals
-    tangents /= np.linalg.norm(tangents, axis=1, keepdims=True)
-    ca, sa = np.cos(drag_rad)[:, None], np.sin(drag_rad)[:, None]
-    z = -ca * normals - sa * tangents
-    x = ca * tangents - sa * normals
-    y = np.cross(z, x)
-    return np.stack([x, y, z], axis=-1)
-
-
-def periodic_wave(sigma, perimeter, amplitudes, rng):
-    """Sum of sines with 1, 2, ... periods per lap, the given amplitudes and random phases."""
-    phases = rng.uniform(0.0, 2.0 * math.pi, size=len(amplitudes))
-    return sum(
-        a * np.sin(2.0 * math.pi * (k + 1) * sigma / perimeter + p)
-        for k, (a, p) in enumerate(zip(amplitudes, phases, strict=True))
-    )
-
-
-def pose(table: dict) -> np.ndarray:
-    return transform_from_xyz_rpy(table["xyz"], table.get("rpy_deg", [0.0, 0.0, 0.0]))
-
-
 # ---- reachability and clearance ------------------------------------------------------------------
 
 
-def _fcl_object(shape: dict, T_world_shape: np.ndarray):
-    import fcl
-
-    if shape["shape"] == "box":
-        geometry = fcl.Box(*shape["size_m"])
-    elif shape["shape"] == "cylinder":
-        geometry = fcl.Cylinder(shape["radius_m"], shape["length_m"])
-    elif shape["shape"] == "mesh":
-        mesh = trimesh.load(HERE / shape["file"], file_type="stl")
-        geometry = fcl.BVHModel()
-        geometry.beginModel(len(mesh.vertices), len(mesh.faces))
-        geometry.addSubModel(mesh.vertices * (0.001 if shape["units"] == "mm" else 1.0), mesh.faces)
-        geometry.endModel()
-    else:
-        raise ValueError(f"no FCL object for {shape['shape']!r} here")
-    return fcl.CollisionObject(geometry, fcl.Transform(T_world_shape[:3, :3], T_world_shape[:3, 3]))
-
-
-def clearances(problem: dict, robot, T_F_R: np.ndarray, qs: np.ndarray) -> dict[str, tuple[float, str]]:
-    """Smallest distance [m] and the closest pair, per cell object, over the joint rows ``qs``.
-
-    Robot links and tool shapes are checked against the table and fixture; against the workpiece
-    (the panel, which the nozzle touches) only the robot's links are, as in the refinement.
-    """
-    import fcl
-
-    cell = [(o, _fcl_object(o, pose(o["pose"]))) for o in problem["cell"]["objects"]]
-    T_flange_tool = [(s["name"], s, pose(s["pose"])) for s in problem["tool"]["collision"]]
-    request = fcl.DistanceRequest()
-    best = {o["name"]: (math.inf, "") for o, _ in cell}
-    for q in qs:
-        links = robot.link_poses(q)
-        movers = [
-            (f"{shape.link}/{shape.name}", shape.collision_object(T_F_R @ links[shape.link]), False)
-            for shape in robot.collision_shapes()
-        ]
-        T_F_flange = T_F_R @ robot.fk(q)
-        movers += [(f"tool/{n}", _fcl_object(s, T_F_flange @ T), True) for n, s, T in T_flange_tool]
-        for mover_name, mover, is_tool in movers:
-            for o, obj in cell:
-                if is_tool and o.get("workpiece", False):
-                    continue
-                d = fcl.distance(mover, obj, request, fcl.DistanceResult())
-                if d < best[o["name"]][0]:
-                    best[o["name"]] = (d, mover_name)
-    return best
-
-
-def check_reachability(problem: dict, positions, rotations) -> bool:
+def check_reachability(problem: Problem, positions, rotations) -> bool:
     """Chained DLS IK over every ``CHECK_STEP``-th point of the true path; prints the figures."""
-    from refine.optimise.seed import TcpKinematics, ik_chain, start_candidates
-    from refine.optimise.verify import singularity_measures
+    from refine.collision import CollisionModel
+    from refine.optimise.seed import TcpKinematics, start_candidates
     from refine.robot import load_robot
 
-    robot = load_robot(problem["robot"]["model"])
+    robot = load_robot(problem.robot.model)
     spec = robot.spec
-    T_F_R = pose(problem["robot"]["base_in_world"])
-    kin = TcpKinematics(robot, T_F_R, pose(problem["tool"]["tcp_in_flange"]))
-    margin = math.radians(problem["tolerances"]["joint_margin_deg"])
-    lower, upper = spec.lower + margin, spec.upper - margin
-    home = np.radians(problem["robot"]["home_deg"])
+    kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange)
+    margin = math.radians(problem.tolerances.joint_margin_deg)
+    home = np.radians(problem.robot.home_deg)
     targets = make_transform(rotations, positions)[::CHECK_STEP]
-
-    qs, errors = ik_chain(kin, targets, lower, upper, start_candidates(lower, upper, home, seed=SEED))
-    margins = np.minimum(qs - spec.lower, spec.upper - qs)
-    manip, sigma_min = singularity_measures(kin, qs)
-    steps = np.degrees(np.abs(np.diff(qs, axis=0)).max(axis=1))
-    gaps = clearances(problem, robot, T_F_R, qs)
-    singular = problem["tolerances"]["singularity_margin"]
-    collision_margin = problem.get("collision", {}).get("margin_m", 0.01)
+    logging.getLogger("refine.collision").setLevel(logging.ERROR)  # the open panel mesh is meant
+    collision = CollisionModel(
+        robot,
+        kin.base_in_world,
+        kin.tcp_in_flange,
+        problem.tool.collision,
+        problem.cell,
+        margin_m=problem.collision.margin_m,
+        self_margin_m=problem.collision.self_margin_m,
+    )
+    starts = start_candidates(spec.lower + margin, spec.upper - margin, home, seed=SEED)
+    report = reachability_report(kin, targets, joint_margin_rad=margin, starts=starts, collision=collision)
+    gaps = report.clearance or {}
+    singular = problem.tolerances.singularity_margin
+    collision_margin = problem.collision.margin_m
     ok = bool(
-        errors.max() < 1e-6
-        and margins.min() > margin
-        and manip.min() > singular
+        report.errors.max() < 1e-6
+        and report.joint_margins.min() > margin
+        and report.manipulability.min() > singular
         and min(d for d, _ in gaps.values()) > collision_margin
     )
-    qd = np.degrees(qs)
-    worst_joint = int(np.unravel_index(np.argmin(margins), margins.shape)[1]) + 1
-    print(f"reachability: {len(qs)} IK targets (every {CHECK_STEP}th point), chained from q0 [deg] = "
+    qd = np.degrees(report.qs)
+    print(f"reachability: {len(qd)} IK targets (every {CHECK_STEP}th point), chained from q0 [deg] = "
           f"{np.round(qd[0], 1).tolist()}")
-    print(f"  worst pose error {errors.max():.2e} (m and rad stacked), largest joint step between "
-          f"targets {steps.max():.1f} deg")
-    print(f"  smallest joint-limit margin {math.degrees(margins.min()):.1f} deg (joint {worst_joint}; "
-          f"required {math.degrees(margin):.1f} deg)")
-    print(f"  smallest singular value of the scaled TCP Jacobian {sigma_min.min():.3f}, "
-          f"smallest scaled manipulability {manip.min():.4f} (required {singular})")
+    print(f"  worst pose error {report.errors.max():.2e} (m and rad stacked), largest joint step between "
+          f"targets {report.max_step_deg:.1f} deg")
+    print(f"  smallest joint-limit margin {math.degrees(report.joint_margins.min()):.1f} deg "
+          f"(joint {report.worst_joint}; required {math.degrees(margin):.1f} deg)")
+    print(f"  smallest singular value of the scaled TCP Jacobian {report.sigma_min.min():.3f}, "
+          f"smallest scaled manipulability {report.manipulability.min():.4f} (required {singular})")
     print(f"  smallest clearance (required {collision_margin * 1000:.0f} mm): " + ", ".join(
-        f"{name} {d * 1000:.0f} mm ({who})" for name, (d, who) in gaps.items()))
+        f"{name} {d * 1000:.0f} mm ({who.replace('tool:', 'tool/')})" for name, (d, who) in gaps.items()))
     print("  joint ranges [deg]: " + ", ".join(
         f"q{j + 1} {qd[:, j].min():.0f}..{qd[:, j].max():.0f}" for j in range(qd.shape[1])))
     print(f"  reachable: {ok}")
@@ -335,17 +229,17 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--no-check", action="store_true", help="skip the IK and clearance check")
     args = parser.parse_args(argv)
-    problem = tomllib.loads((HERE / "problem.toml").read_text(encoding="utf-8"))
-    T_F_CAD = pose(problem["frames"]["cad_in_world"])
-    T_F_S = pose(problem["frames"]["source_in_world"])
-    T_TCP_E = pose(problem["tool"]["sensor_in_tcp"])
+    problem = load_problem(HERE)
+    T_F_CAD = problem.frames.cad_in_world
+    T_F_S = problem.frames.source_in_world
+    T_TCP_E = problem.tool.sensor_in_tcp
     rng = np.random.default_rng(SEED)
 
     # ---- the panel mesh, written and read back: the truth comes from the file the reader sees
     mesh, footprint_perimeter = panel_mesh()
     (HERE / MESH_FILE).write_bytes(mesh.export(file_type="stl"))
     written = trimesh.load(HERE / MESH_FILE, file_type="stl", process=True)
-    start_near = np.asarray(problem["cad"]["start_near"]) / 1000.0  # [mm] in problem.toml
+    start_near = np.asarray(problem.cad.start_near) / 1000.0  # [mm] in problem.toml
     bead_cad = boundary_path(written, start_near)
 
     # ---- the closed path in the world, arc length as a polyline reader measures it
@@ -358,7 +252,7 @@ def main(argv: list[str] | None = None) -> int:
 
     # ---- the worker: drag angle and speed, smooth and periodic over the lap
     drag_deg = DRAG_MEAN_DEG + periodic_wave(s, perimeter, DRAG_WAVES_DEG, rng)
-    rotations = tool_rotations(tangents, normals, np.radians(drag_deg))
+    rotations = tool_rotations(tangents, normals, np.radians(drag_deg), project=True)
     half_u, half_v = PANEL_LENGTH / 2 - CORNER_RADIUS, PANEL_WIDTH / 2 - CORNER_RADIUS
     corner = (np.abs(bead_cad[:-1, 0]) > half_u + 1e-9) & (np.abs(bead_cad[:-1, 1]) > half_v + 1e-9)
     spacing = perimeter / len(corner)
