@@ -174,25 +174,55 @@ def ik_chain(
     Returns:
         joints (N, n) [rad] and the pose error norm per waypoint (N,).
     """
+    firsts = first_solutions(kin, targets[0], lower, upper, starts, prefer_first=prefer_first)
+    if not firsts:  # nothing converged: chain from the closest attempt and let the NLP decide
+        firsts = [solve_ik(kin, targets[0], starts[0], lower, upper, max_iterations=300)[0]]
+    best: tuple[float, Array, Array] | None = None
+    for qs, errors in _chains(kin, targets, lower, upper, firsts[:max_chains]):
+        score = float(errors.max())
+        if best is None or score < best[0]:
+            best = (score, qs, errors)
+        if score <= CONVERGED:
+            break
+    assert best is not None
+    log.debug("IK seed: max pose error %.3g over %d waypoints", best[0], len(targets))
+    return best[1], best[2]
+
+
+def first_solutions(
+    kin: TcpKinematics,
+    T_first: Array,
+    lower: Array,
+    upper: Array,
+    starts: list[Array],
+    *,
+    prefer_first: bool = False,
+) -> list[Array]:
+    """The distinct IK solutions of the first pose from ``starts``, multi-turn joints unbounded.
+
+    The home start's solution comes first when ``prefer_first``, the others by decreasing joint margin.
+    """
     wraps = upper - lower > 2 * np.pi
-    free_lower = np.where(wraps, -np.inf, lower)
-    free_upper = np.where(wraps, np.inf, upper)
-    firsts: list[tuple[float, Array]] = []
+    free_lower, free_upper = np.where(wraps, -np.inf, lower), np.where(wraps, np.inf, upper)
+    found: list[tuple[float, Array]] = []
     for i, q_start in enumerate(starts):
-        q, err = solve_ik(kin, targets[0], q_start, free_lower, free_upper, max_iterations=300)
+        q, err = solve_ik(kin, T_first, q_start, free_lower, free_upper, max_iterations=300)
         if err > CONVERGED:
             continue
         key = np.where(wraps, np.mod(q, 2 * np.pi), q)
-        if any(np.allclose(key, np.where(wraps, np.mod(f, 2 * np.pi), f), atol=1e-3) for _, f in firsts):
+        if any(np.allclose(key, np.where(wraps, np.mod(f, 2 * np.pi), f), atol=1e-3) for _, f in found):
             continue
         margin = float(np.min(np.minimum(q - free_lower, free_upper - q)))
-        firsts.append((-np.inf if prefer_first and i == 0 else -margin, q))
-    if not firsts:  # nothing converged: chain from the closest attempt and let the NLP decide
-        firsts = [(0.0, solve_ik(kin, targets[0], starts[0], lower, upper, max_iterations=300)[0])]
-    firsts.sort(key=lambda item: item[0])
+        found.append((-np.inf if prefer_first and i == 0 else -margin, q))
+    found.sort(key=lambda item: item[0])
+    return [q for _, q in found]
 
-    best: tuple[float, Array, Array] | None = None
-    for _, q_first in firsts[:max_chains]:
+
+def _chains(kin: TcpKinematics, targets: Array, lower: Array, upper: Array, firsts: list[Array]):
+    """Chain IK from each first-waypoint solution in turn (a generator: chains cost time)."""
+    wraps = upper - lower > 2 * np.pi
+    free_lower, free_upper = np.where(wraps, -np.inf, lower), np.where(wraps, np.inf, upper)
+    for q_first in firsts:
         qs, errors = _chain(kin, targets, q_first, free_lower, free_upper)
         qs = shift_turns(qs, lower, upper)
         outside = np.any(qs < lower - 1e-9, axis=0) | np.any(qs > upper + 1e-9, axis=0)
@@ -208,14 +238,28 @@ def ik_chain(
             errors = np.array(
                 [np.linalg.norm(_pose_error(kin.pose(q), T)) for q, T in zip(qs, targets, strict=True)]
             )
-        score = float(errors.max())
-        if best is None or score < best[0]:
-            best = (score, qs, errors)
-        if score <= CONVERGED:
-            break
-    assert best is not None
-    log.debug("IK seed: max pose error %.3g over %d waypoints", best[0], len(targets))
-    return best[1], best[2]
+        yield qs, errors
+
+
+def alternative_seeds(
+    kin: TcpKinematics,
+    targets: Array,
+    lower: Array,
+    upper: Array,
+    starts: list[Array],
+    *,
+    skip: Array,
+    count: int = 2,
+) -> list[Array]:
+    """Up to ``count`` seeds chained from other IK branches of the first waypoint than ``skip``'s."""
+    wraps = upper - lower > 2 * np.pi
+    key = np.where(wraps, np.mod(skip[0], 2 * np.pi), skip[0])
+    others = [
+        q
+        for q in first_solutions(kin, targets[0], lower, upper, starts)
+        if not np.allclose(np.where(wraps, np.mod(q, 2 * np.pi), q), key, atol=1e-2)
+    ]
+    return [qs for qs, _ in _chains(kin, targets, lower, upper, others[:count])]
 
 
 def start_candidates(

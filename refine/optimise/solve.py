@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 
 from refine.errors import SolverError
 from refine.optimise.problem import ActiveSet, LinearRow, RefinementNLP
-from refine.optimise.seed import TcpKinematics, ik_chain, reach_shortfall, start_candidates
+from refine.optimise.seed import TcpKinematics, alternative_seeds, ik_chain, reach_shortfall, start_candidates
 from refine.optimise.verify import (
     PathCheck,
     Violation,
@@ -272,8 +272,12 @@ def solve_refinement(
     sources: tuple[ConstraintSource, ...] = (),
     repair_max_slack_deg: float | None = None,
     max_rounds: int = MAX_OUTER_ITERATIONS,
+    max_branches: int = 3,
 ) -> Refinement:
     """Solve ``problem`` with IPOPT from ``q0`` (or the IK seed), verify, and repair if asked.
+
+    When the answer from the seed's IK branch is infeasible (even repaired), the first waypoint's
+    other IK branches are chained and tried in turn, up to ``max_branches`` in all.
 
     Args:
         problem: from :func:`refine.optimise.problem.build_refinement` (strict).
@@ -283,6 +287,7 @@ def solve_refinement(
         repair_max_slack_deg: when the strict problem is infeasible, the largest extra orientation
             slack [deg] the elastic problem may use; None for no repair.
         max_rounds: solve -> verify -> add constraints rounds at most.
+        max_branches: IK branches of the first waypoint to try (only when ``q0`` is None).
 
     Raises:
         SolverError: IPOPT itself failed (not an infeasibility): the message names its status.
@@ -309,6 +314,49 @@ def solve_refinement(
             timings_s=timings,
         )
 
+    attempt = _attempt(problem, q_seed, sources, repair_max_slack_deg, max_rounds, timings)
+    if attempt.status == "infeasible" and q0 is None and max_branches > 1:
+        # the first IK branch may be the wrong one: try the first waypoint's other branches
+        t0 = time.perf_counter()
+        lower, upper = _bounds(problem)
+        others = alternative_seeds(
+            kin,
+            _targets(problem),
+            lower,
+            upper,
+            start_candidates(lower, upper, home),
+            skip=q_seed,
+            count=max_branches - 1,
+        )
+        timings["seed"] += time.perf_counter() - t0
+        for k, q_other in enumerate(others, start=2):
+            other = _attempt(problem, q_other, sources, repair_max_slack_deg, max_rounds, timings)
+            log.info("IK branch %d: %s", k, other.status)
+            if other.status != "infeasible":
+                attempt = replace(other, iterations=attempt.iterations + other.iterations)
+                break
+        else:
+            tried = f"{1 + len(others)} IK branch(es) tried"
+            attempt = replace(attempt, reason=f"{attempt.reason} ({tried})" if others else attempt.reason)
+    log.info(
+        "refinement %s after %d IPOPT iterations in %d rounds",
+        attempt.status,
+        attempt.iterations,
+        attempt.outer_iterations,
+    )
+    return attempt
+
+
+def _attempt(
+    problem: RefinementNLP,
+    q_seed: Array,
+    sources: tuple[ConstraintSource, ...],
+    repair_max_slack_deg: float | None,
+    max_rounds: int,
+    timings: dict[str, float],
+) -> Refinement:
+    """Strict solve from ``q_seed``, then the elastic repair when the strict problem fails."""
+    kin = _kin(problem)
     loop = _Loop(problem, timings, max_rounds=max_rounds)
     initial = _new_singular(kin, q_seed, problem.tolerances.singularity_margin, problem.active)
     seed_rows = tuple(r for src in sources for r in src.rows(problem, q_seed))
@@ -366,7 +414,6 @@ def solve_refinement(
         if status == "infeasible"
         else "; ".join(r.describe() for r in repairs)
     )
-    log.info("refinement %s after %d IPOPT iterations in %d rounds", status, loop.iterations, loop.outer)
     return Refinement(
         status=status,
         reason=reason,
