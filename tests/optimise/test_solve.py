@@ -116,3 +116,17 @@ def test_redundant_arm_solution_is_stable_under_small_changes_of_the_demo(iiwa_w
     assert np.degrees(np.abs(other.q - base.q)).max() < 0.5
     # the elbow moves smoothly along the path: no step larger than 2 deg per 3 mm waypoint
     assert np.degrees(np.abs(np.diff(base.q[:, 2]))).max() < 2.0
+
+
+def test_an_infeasible_answer_is_retried_from_other_ik_branches_and_says_so(irb4600, straight_tool):
+    """2.6 turns of tool spin on a short line cannot fit axis 6 (+-400 deg) within 15 deg of slack."""
+    n = 80
+    s = np.linspace(0.0, 0.3, n)
+    positions = np.column_stack([np.full(n, 1.3), s - 0.15, np.full(n, 0.6)])
+    rotations = rotation_about("x", np.pi) @ rotation_about("z", np.linspace(0.0, 2.6 * 2 * np.pi, n))
+    fused = FusedPath(s, positions, rotations, np.full(n, 0.1), s / 0.1, np.zeros(n))
+    nlp = build_refinement(irb4600, fused, np.eye(4), straight_tool, Tolerances())
+    result = solve_refinement(nlp, repair_max_slack_deg=15.0)
+    assert result.status == "infeasible"
+    assert "joint wrap (joint 6)" in result.reason
+    assert "IK branch(es) tried" in result.reason
