@@ -128,5 +128,5 @@ def test_an_infeasible_answer_is_retried_from_other_ik_branches_and_says_so(irb4
     nlp = build_refinement(irb4600, fused, np.eye(4), straight_tool, Tolerances())
     result = solve_refinement(nlp, repair_max_slack_deg=15.0)
     assert result.status == "infeasible"
-    assert "joint wrap (joint 6)" in result.reason
+    assert "no repair within 15 deg" in result.reason
     assert "IK branch(es) tried" in result.reason
