@@ -44,6 +44,7 @@ from pathlib import Path
 import ezdxf
 import numpy as np
 
+from refine.collision.geometry import fcl_geometry
 from refine.demo.liberty import write_liberty_ascii
 from refine.demo.simulate import TrackerModel, simulate_demonstration, write_truth_csv
 from refine.frames import fixed_xyz_from_matrix, make_transform, rotation_about
@@ -276,7 +277,11 @@ def compare_cell(problem: Problem, print_toml: bool) -> bool:
             print(f"cell: {name} missing from problem.toml or workpiece is not {str(workpiece).lower()}")
             ok = False
             continue
-        if o.size_m is None or np.abs(np.array(o.size_m) - size).max() > 2e-4 or np.abs(o.pose - T).max() > 2e-4:
+        if (
+            o.size_m is None
+            or np.abs(np.array(o.size_m) - size).max() > 2e-4
+            or np.abs(o.pose - T).max() > 2e-4
+        ):
             print(f"cell: {name} in problem.toml differs from the geometry (run with --print-cell)")
             ok = False
     return ok
@@ -289,18 +294,6 @@ def _fcl_object(geometry, T):
     import fcl
 
     return fcl.CollisionObject(geometry, fcl.Transform(T[:3, :3], T[:3, 3]))
-
-
-def _fcl_geometry(shape):
-    import fcl
-
-    if shape.shape == "box":
-        return fcl.Box(*shape.size_m)
-    if shape.shape == "cylinder":
-        return fcl.Cylinder(shape.radius_m, shape.length_m)
-    if shape.shape == "sphere":
-        return fcl.Sphere(shape.radius_m)
-    raise ValueError(f"{shape.name}: only primitives are checked here, got {shape.shape}")
 
 
 def _distance(a, b) -> float:
@@ -333,9 +326,9 @@ def run_checks(s, positions, rotations, speed, step: int = 5) -> bool:
     starts = start_candidates(lower, upper, home)
     root = FusedPath(s, positions, rotations, speed, s / speed, np.zeros(len(s)))
     passes = generate_passes(root, problem.multipass) if problem.multipass else [Pass(1, 1, 0, 0, 0, root)]
-    cell = [(o, _fcl_object(_fcl_geometry(o), o.pose)) for o in problem.cell]
+    cell = [(o, _fcl_object(fcl_geometry(o), o.pose)) for o in problem.cell]
     links = [(c, c.geometry) for c in robot.collision_shapes() if c.link != "base_link"]  # base: fixed
-    tool = [(o, _fcl_geometry(o)) for o in problem.tool.collision]
+    tool = [(o, fcl_geometry(o)) for o in problem.tool.collision]
     ok = True
     print(
         f"checks: every {step}th point, chained DLS IK (refine.optimise.seed.ik_chain) inside the "

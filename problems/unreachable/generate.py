@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from refine.collision.geometry import fcl_geometry
 from refine.demo.liberty import write_liberty_ascii
 from refine.demo.simulate import TrackerModel, simulate_demonstration, write_truth_csv
 from refine.frames import invert_transform, make_transform, matrix_from_rotvec, transform_points
@@ -81,7 +82,9 @@ class Demo:
 def load_case(name: str) -> Case:
     """Read ``<name>/problem.toml`` into the transforms the generator needs."""
     problem = load_problem(HERE / name)
-    kin = TcpKinematics(load_robot(problem.robot.model), problem.robot.base_in_world, problem.tool.tcp_in_flange)
+    kin = TcpKinematics(
+        load_robot(problem.robot.model), problem.robot.base_in_world, problem.tool.tcp_in_flange
+    )
     return Case(
         name, kin, problem.frames.source_in_world, problem.tool.sensor_in_tcp, problem.frames.cad_in_world
     )
@@ -343,18 +346,6 @@ CASES: dict[str, Callable[[Case], Demo]] = {
 # ---- clearance check (design aid for the collision cases) --------------------------------------
 
 
-def _fcl_geometry(shape):
-    import fcl
-
-    if shape.shape == "box":
-        return fcl.Box(*shape.size_m)
-    if shape.shape == "cylinder":
-        return fcl.Cylinder(shape.radius_m, shape.length_m)
-    if shape.shape == "sphere":
-        return fcl.Sphere(shape.radius_m)
-    raise ValueError(f"clearance check: {shape.shape} shapes are not supported here")
-
-
 def _signed_distance(a, b) -> float:
     import fcl
 
@@ -374,6 +365,7 @@ def clearance_check(name: str, every: int = 10, max_tilt_deg: float = 18.0) -> N
     import fcl
 
     from refine.optimise.seed import ik_chain, start_candidates
+
     problem = load_problem(HERE / name)
     case = load_case(name)
     kin, robot = case.kin, case.kin.robot
@@ -387,10 +379,10 @@ def clearance_check(name: str, every: int = 10, max_tilt_deg: float = 18.0) -> N
     targets = make_transform(demo.rotations, demo.positions)
     qs, err = ik_chain(kin, targets, lower, upper, start_candidates(lower, upper, None))
     cell = [
-        (o, fcl.CollisionObject(_fcl_geometry(o), fcl.Transform(o.pose[:3, :3], o.pose[:3, 3])))
+        (o, fcl.CollisionObject(fcl_geometry(o), fcl.Transform(o.pose[:3, :3], o.pose[:3, 3])))
         for o in problem.cell
     ]
-    tool = [(t, _fcl_geometry(t)) for t in problem.tool.collision]
+    tool = [(t, fcl_geometry(t)) for t in problem.tool.collision]
     links = robot.collision_shapes()
 
     def clearance(q):

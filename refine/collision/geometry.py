@@ -147,15 +147,21 @@ class Body:
         return c + R @ self.vertices[int(np.argmax(self.vertices @ u))]
 
 
-def _primitive(shape: Shape) -> tuple[fcl.CollisionGeometry, tuple, Array]:
+def fcl_geometry(shape: Shape) -> fcl.CollisionGeometry:
+    """The FCL box, cylinder (along z, centred) or sphere of a primitive :class:`Shape`."""
     if shape.shape == "box":
-        half = np.asarray(shape.size_m, dtype=float) / 2.0
-        return fcl.Box(*shape.size_m), ("box", half), half
+        return fcl.Box(*shape.size_m)
     if shape.shape == "cylinder":
-        r, h = float(shape.radius_m), float(shape.length_m) / 2.0  # type: ignore[arg-type]
-        return fcl.Cylinder(r, 2.0 * h), ("cylinder", r, h), np.array([r, r, h])
-    r = float(shape.radius_m)  # type: ignore[arg-type]
-    return fcl.Sphere(r), ("sphere", r), np.full(3, r)
+        return fcl.Cylinder(float(shape.radius_m), float(shape.length_m))  # type: ignore[arg-type]
+    if shape.shape == "sphere":
+        return fcl.Sphere(float(shape.radius_m))  # type: ignore[arg-type]
+    raise InputError(f"shape {shape.name!r}: {shape.shape} is not a primitive (box, cylinder, sphere)")
+
+
+def _primitive(shape: Shape) -> tuple[fcl.CollisionGeometry, tuple, Array]:
+    geometry = fcl_geometry(shape)
+    params, half = primitive_from_fcl(geometry, f"shape {shape.name!r}")
+    return geometry, params, half
 
 
 def primitive_from_fcl(geometry: fcl.CollisionGeometry, where: str) -> tuple[tuple, Array]:
