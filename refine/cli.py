@@ -80,7 +80,8 @@ def main(argv: list[str] | None = None) -> int:
 
 def _run(args: argparse.Namespace, problem) -> int:  # noqa: ANN001 - Problem, imported lazily
     from refine.export.result_json import result_dict, write_result_json
-    from refine.pipeline import run, summary_lines
+    from refine.pipeline import run
+    from refine.result import summary_lines
 
     out = args.out or Path("out") / problem.name
     programs = tuple(p.strip() for p in args.programs.split(",")) if args.programs else None

@@ -20,7 +20,7 @@ from plotly.offline import get_plotlyjs
 from plotly.subplots import make_subplots
 
 if TYPE_CHECKING:
-    from refine.pipeline import PassResult, RunResult
+    from refine.result import PassResult, RunResult
 
 ROBOT_POSES = 5
 """How many configurations of the robot the 3D view draws along the path."""
@@ -182,7 +182,7 @@ def _pass_figure(result: RunResult, p: PassResult) -> go.Figure:
 
 
 def _summary_html(result: RunResult) -> str:
-    from refine.pipeline import summary_lines
+    from refine.result import summary_lines
 
     items = "\n".join(html.escape(line) for line in summary_lines(result))
     repairs = [

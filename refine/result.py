@@ -1,0 +1,135 @@
+"""What a run produced, in memory: :class:`RunResult` and its :class:`PassResult` per pass.
+
+These types sit below the pipeline and the writers: the pipeline builds them, and the exporters,
+the report and the library API read them. This module imports no stage at run time.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from refine.evaluate import TruthComparison
+    from refine.optimise.solve import Refinement
+    from refine.paths import FusedPath, Trajectory
+    from refine.problem import Problem
+    from refine.robot import Robot
+    from refine.timing import Timing
+
+
+@dataclass(frozen=True)
+class PassResult:
+    """One pass of the path: the fused input, its refinement and its timing.
+
+    Attributes:
+        name: ``"pass 1"`` for a single pass, ``"layer 2 pass 1"`` in a multi-pass weld.
+        layer: 1-based layer number.
+        index: 1-based pass number within its layer.
+        fused: the pass's fused path.
+        refinement: the optimiser's result and its verification.
+        timing: the time parameterisation (None when the refinement was infeasible).
+        trajectory: the timed path the exporters read (None when infeasible).
+        clearance: the dense clearance check of the refined path (None without collision).
+    """
+
+    name: str
+    layer: int
+    index: int
+    fused: FusedPath
+    refinement: Refinement
+    timing: Timing | None
+    trajectory: Trajectory | None
+    clearance: Any = None
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """Everything a run produced, in memory.
+
+    Attributes:
+        problem: the problem that was run.
+        robot: the loaded robot.
+        passes: one entry per pass (one for a single-pass path).
+        truth: comparison of the first pass with the simulator's truth, when there is one.
+        timings_s: wall time per stage [s], summed over passes.
+        outputs: kind -> file written.
+    """
+
+    problem: Problem
+    robot: Robot
+    passes: tuple[PassResult, ...]
+    truth: TruthComparison | None
+    timings_s: dict[str, float] = field(default_factory=dict)
+    outputs: dict[str, Path] = field(default_factory=dict)
+
+    @property
+    def first(self) -> PassResult:
+        """The first (demonstrated) pass."""
+        return self.passes[0]
+
+    @property
+    def fused(self) -> FusedPath:
+        """The first pass's fused path."""
+        return self.first.fused
+
+    @property
+    def refinement(self) -> Refinement:
+        """The first pass's refinement."""
+        return self.first.refinement
+
+    @property
+    def timing(self) -> Timing | None:
+        """The first pass's timing."""
+        return self.first.timing
+
+    @property
+    def trajectory(self) -> Trajectory | None:
+        """The first pass's timed trajectory."""
+        return self.first.trajectory
+
+    @property
+    def status(self) -> str:
+        """``ok`` when every pass is ok, ``infeasible`` when any is, else ``repaired``."""
+        statuses = {p.refinement.status for p in self.passes}
+        return "infeasible" if "infeasible" in statuses else "repaired" if "repaired" in statuses else "ok"
+
+
+def summary_lines(result: RunResult) -> list[str]:
+    """Human-readable summary of a run, for the CLI."""
+    lines = [
+        f"problem      {result.problem.name}: robot {result.robot.spec.name}, {len(result.passes)} pass(es)"
+    ]
+    tol = result.problem.tolerances
+    for p in result.passes:
+        check = p.refinement.check
+        head = f"{p.name}: " if len(result.passes) > 1 else ""
+        lines += [
+            f"status       {head}{p.refinement.status}, {len(p.fused)} waypoints"
+            + (f" ({p.refinement.reason})" if p.refinement.reason else ""),
+            f"position     max error {check.position_error_m.max():.2e} m (tolerance {tol.position_m:.0e} m)",
+            f"orientation  max deviation from demo {check.orientation_deviation_deg.max():.3f} deg "
+            f"(cone {tol.orientation_deg:g} deg)",
+            f"joints       min margin to limits {math.degrees(check.joint_margin_rad.min()):.2f} deg",
+            f"singularity  min scaled manipulability {check.singularity.min():.4f}, "
+            f"min singular value {check.sigma_min.min():.4f}",
+        ]
+        if p.clearance is not None:
+            c = p.clearance
+            lines.append(
+                f"clearance    min distance {c.min_distance_m * 1e3:.1f} mm (margin {result.problem.collision.margin_m * 1e3:g} mm), "
+                f"checked between waypoints: {c.queries} queries in {c.time_s:.2f} s"
+            )
+        if p.timing is not None:
+            lines.append(
+                f"timing       cycle {p.timing.cycle_time_s:.2f} s, "
+                f"{len(p.timing.slow_segments)} segment(s) slower than the demo"
+            )
+    if result.truth is not None:
+        lines.append(f"truth        {result.truth.describe()}")
+    total = result.timings_s.get("total")
+    stages = ", ".join(f"{k} {v:.3f}" for k, v in result.timings_s.items() if k != "total")
+    lines.append(f"time [s]     {stages}" + (f"; total {total:.2f}" if total else ""))
+    return lines
