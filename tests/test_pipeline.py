@@ -69,8 +69,8 @@ def test_trajectory_csv_lets_an_outside_checker_recompute_the_tcp(glass):
     assert np.all(np.diff(traj.t) > 0) and traj.t[0] == 0.0
 
 
-@pytest.mark.skipif(not XSD.is_file(), reason=f"CAEX 3.0 schema not found at {XSD}")
-def test_pathml_is_valid_caex_and_holds_the_trajectory(glass):
+def test_pathml_is_valid_caex_and_holds_the_trajectory(glass, require):
+    require.path(XSD, "the CAEX 3.0 schema")
     result, out = glass
     aml = out / "glass_adhesive.aml"
     assert validate_pathml(aml, XSD) == []
@@ -133,8 +133,8 @@ def test_every_bundled_path_keeps_its_clearance_between_waypoints_too(case, requ
         assert p.clearance.segment_samples.sum() >= len(p.fused) - 1  # between waypoints, not only at them
 
 
-@pytest.mark.skipif(not XSD.is_file(), reason=f"CAEX 3.0 schema not found at {XSD}")
-def test_three_layer_weld_is_valid_pathml_with_three_layers_and_a_matching_krl_program(tig):
+def test_three_layer_weld_is_valid_pathml_with_three_layers_and_a_matching_krl_program(tig, require):
+    require.path(XSD, "the CAEX 3.0 schema")
     from refine.export.krl import parse_krl
 
     result, out = tig

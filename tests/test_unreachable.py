@@ -4,8 +4,8 @@ Every folder under ``problems/unreachable`` with a ``problem.toml`` is run throu
 :func:`refine.pipeline.solve_problem` once and checked against its ``[expected]`` table: the status,
 the reason (in a repair's reason when repaired, in the refinement's reason when infeasible), the
 slack a repair used, the arc-length range the reported segment must overlap, and that nothing fails
-silently. Cases with collision shapes need ``refine.optimise.clearance``; they are skipped, saying
-so, until it can be imported.
+silently. Cases with collision shapes import ``refine.optimise.clearance``: an import error fails
+them, it never skips them.
 """
 
 from __future__ import annotations
@@ -55,12 +55,8 @@ def run(request):
     """The problem and its result, solved once per case."""
     problem = load_problem(FOLDER / request.param)
     if _uses_collision(problem):
-        try:
-            importlib.import_module("refine.optimise.clearance")
-        except ImportError as e:
-            pytest.skip(
-                f"{request.param} needs collision constraints: refine.optimise.clearance not importable ({e})"
-            )
+        # part of the package, not optional: an ImportError here is an error of every case, never a skip
+        importlib.import_module("refine.optimise.clearance")
     return problem, solve_problem(problem)
 
 

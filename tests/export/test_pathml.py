@@ -25,10 +25,9 @@ XSD215 = AML_DIR / "CAEX_ClassModel_V2.15.xsd"
 
 
 @pytest.fixture(scope="module")
-def aml_dir() -> Path:
-    if not AML_DIR.is_dir():
-        pytest.skip(f"the shared AutomationML folder {AML_DIR} (CAEX schemas, examples) is absent")
-    return AML_DIR
+def aml_dir(require) -> Path:
+    """The shared AutomationML folder: a skip with its reason on a workstation, a failure under CI=true."""
+    return require.path(AML_DIR, "the shared AutomationML folder (CAEX schemas, examples)")
 
 
 @pytest.fixture()

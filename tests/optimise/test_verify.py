@@ -1,0 +1,314 @@
+"""The verifier (``check_path``) on joint paths built to break each tolerance by a known amount.
+
+Every expectation here comes from outside the code under test: the IRB 4600 forward kinematics and
+geometric Jacobian are rebuilt from the data-sheet table in ``shared/ROBOTS.md`` with scipy rotations,
+the targets are offset from those poses by hand-chosen distances and scipy rotation vectors, and each
+check is put just beyond and just inside its threshold (by 0.1 %, or a few hundredths of a degree).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from refine.optimise.verify import check_path, runs
+from refine.paths import FusedPath
+from refine.problem import Tolerances
+
+# ---- the IRB 4600-60/2.05 from its data sheet (shared/ROBOTS.md), not from the package's model
+ORIGINS = np.array(
+    [
+        [0.0, 0.0, 0.495],
+        [0.175, 0.0, 0.0],
+        [0.0, 0.0, 0.900],
+        [0.0, 0.0, 0.175],
+        [0.960, 0.0, 0.0],
+        [0.135, 0.0, 0.0],
+    ]
+)
+AXES = np.eye(3)[[2, 1, 1, 0, 1, 0]]
+LOWER_DEG = np.array([-180.0, -90.0, -180.0, -400.0, -125.0, -400.0])
+UPPER_DEG = np.array([180.0, 150.0, 75.0, 400.0, 120.0, 400.0])
+REACH_M = 2.05
+TCP_Z_M = 0.35  # the ``straight_tool`` fixture: TCP 0.35 m along the flange z axis
+
+LOOSE = dict(
+    position_m=1.0, orientation_deg=89.0, joint_margin_deg=0.0, singularity_margin=0.0, joint_step_deg=1e3
+)
+"""Tolerances no test path breaks: each test tightens only the one it is about."""
+
+Q0_DEG = np.array([10.0, 20.0, -30.0, 40.0, 50.0, 60.0])
+
+
+def fk(q: np.ndarray) -> tuple[np.ndarray, list[tuple[np.ndarray, np.ndarray]]]:
+    """T_base_TCP and, per joint, (origin, axis) in the base frame."""
+    T = np.eye(4)
+    joints = []
+    for origin, axis, qi in zip(ORIGINS, AXES, q, strict=True):
+        T = T @ _transform(np.eye(3), origin)
+        joints.append((T[:3, 3].copy(), T[:3, :3] @ axis))
+        T = T @ _transform(Rotation.from_rotvec(axis * qi).as_matrix(), np.zeros(3))
+    flange = _transform(Rotation.from_euler("y", 90.0, degrees=True).as_matrix(), np.zeros(3))
+    return T @ flange @ _transform(np.eye(3), [0.0, 0.0, TCP_Z_M]), joints
+
+
+def _transform(R, p) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, p
+    return T
+
+
+def scaled_jacobian(q: np.ndarray) -> np.ndarray:
+    """Geometric TCP Jacobian with the linear rows divided by the data-sheet reach."""
+    T, joints = fk(q)
+    J = np.array([np.concatenate([np.cross(z, T[:3, 3] - o), z]) for o, z in joints]).T
+    return np.diag([1.0 / REACH_M] * 3 + [1.0] * 3) @ J
+
+
+def manipulability(q: np.ndarray) -> float:
+    """sqrt(det(Js Jsᵀ)) = |det Js| for six joints."""
+    return abs(float(np.linalg.det(scaled_jacobian(q))))
+
+
+def path(rows_deg) -> np.ndarray:
+    return np.radians(np.asarray(rows_deg, dtype=float))
+
+
+def fused_on(q: np.ndarray, offsets=None, turns=None) -> FusedPath:
+    """Targets at the data-sheet FK of ``q``, moved by ``offsets`` [m] and turned by ``turns`` (R_TCP_target)."""
+    poses = np.array([fk(qk)[0] for qk in q])
+    positions = poses[:, :3, 3] + (0.0 if offsets is None else offsets)
+    rotations = poses[:, :3, :3] if turns is None else poses[:, :3, :3] @ turns
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(positions, axis=0), axis=1))])
+    n = len(q)
+    return FusedPath(s, positions, rotations, np.full(n, 0.1), np.arange(n, dtype=float), np.zeros(n))
+
+
+def reasons(check) -> list[tuple[str, int, int]]:
+    return [(v.reason, v.index_start, v.index_end) for v in check.violations]
+
+
+def near_q0(n: int) -> np.ndarray:
+    """``n`` waypoints one degree apart on every joint, starting at Q0."""
+    return path(Q0_DEG + np.arange(n)[:, None] * 1.0)
+
+
+def test_the_independent_model_is_the_robot_the_verifier_checks(kin):
+    """Guards the premise of this file: the data-sheet FK above equals the package's (to 1e-12 m)."""
+    q = near_q0(4)
+    np.testing.assert_allclose(kin.poses(q), np.array([fk(qk)[0] for qk in q]), atol=1e-12)
+
+
+def test_a_path_on_its_targets_passes_with_the_default_tolerances(kin):
+    q = near_q0(6)
+    check = check_path(kin, q, fused_on(q), Tolerances(), axisymmetric=False)
+    assert check.ok and check.violations == ()
+    np.testing.assert_allclose(check.position_error_m, 0.0, atol=1e-12)
+    np.testing.assert_allclose(check.orientation_deviation_deg, 0.0, atol=1e-5)
+
+
+# ---- position
+
+
+def test_a_position_error_just_beyond_the_tolerance_is_reported_with_its_size(kin):
+    tol = 1e-6
+    q = near_q0(6)
+    sizes = tol * np.array([0.5, 0.999, 1.001, 1.002, 0.999, 1.0005])
+    directions = np.random.default_rng(3).normal(size=(6, 3))
+    offsets = sizes[:, None] * directions / np.linalg.norm(directions, axis=1)[:, None]
+    fused = fused_on(q, offsets=offsets)
+    check = check_path(kin, q, fused, Tolerances(**{**LOOSE, "position_m": tol}), axisymmetric=False)
+    np.testing.assert_allclose(check.position_error_m, sizes, rtol=1e-6)
+    assert reasons(check) == [("position", 2, 3), ("position", 5, 5)]
+    first = check.violations[0]
+    assert first.worst == pytest.approx(1.002e-6, rel=1e-6) and first.unit == "m" and first.limit == tol
+    assert (first.s_start_m, first.s_end_m) == (fused.s[2], fused.s[3])
+    assert check.violations[1].worst == pytest.approx(1.0005e-6, rel=1e-6)
+
+
+# ---- orientation cone
+
+
+def _turns(axes, angles_deg) -> np.ndarray:
+    axes = np.asarray(axes, dtype=float)
+    axes = axes / np.linalg.norm(axes, axis=1)[:, None]
+    return Rotation.from_rotvec(axes * np.radians(angles_deg)[:, None]).as_matrix()
+
+
+def test_an_orientation_just_outside_the_cone_is_reported_with_its_angle(kin):
+    q = near_q0(5)
+    angles = np.array([0.0, 2.99, 3.01, 1.0, 3.05])
+    axes = np.random.default_rng(5).normal(size=(5, 3))
+    check = check_path(
+        kin,
+        q,
+        fused_on(q, turns=_turns(axes, angles)),
+        Tolerances(**{**LOOSE, "orientation_deg": 3.0}),
+        False,
+    )
+    np.testing.assert_allclose(check.orientation_deviation_deg, angles, atol=1e-6)
+    assert reasons(check) == [("orientation", 2, 2), ("orientation", 4, 4)]
+    assert [v.worst for v in check.violations] == pytest.approx([3.01, 3.05], abs=1e-6)
+    assert check.violations[0].unit == "deg" and check.violations[0].limit == 3.0
+
+
+def test_an_axisymmetric_tool_is_judged_on_its_axis_tilt_alone(kin):
+    """A 40 deg spin about the tool axis is free for a round nozzle; only the tilt of z counts."""
+    q = near_q0(4)
+    tilt = np.array([2.99, 3.01, 0.5, 2.0])
+    # in the TCP frame: spin about z, then tilt about an axis in the xy plane
+    spin = Rotation.from_euler("z", 40.0, degrees=True).as_matrix()
+    turns = spin @ _turns([[1.0, 0.0, 0.0], [0.3, 1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]], tilt)
+    tol = Tolerances(**{**LOOSE, "orientation_deg": 3.0})
+    round_tool = check_path(kin, q, fused_on(q, turns=turns), tol, axisymmetric=True)
+    np.testing.assert_allclose(round_tool.orientation_deviation_deg, tilt, atol=1e-6)
+    assert reasons(round_tool) == [("orientation", 1, 1)]
+    assert round_tool.violations[0].worst == pytest.approx(3.01, abs=1e-6)
+    full = check_path(kin, q, fused_on(q, turns=turns), tol, axisymmetric=False)
+    expected = np.degrees(Rotation.from_matrix(turns).magnitude())
+    np.testing.assert_allclose(full.orientation_deviation_deg, expected, atol=1e-6)
+    assert reasons(full) == [("orientation", 0, 3)]
+
+
+def test_the_slack_of_a_repaired_path_widens_the_cone_where_it_is_given(kin):
+    q = near_q0(4)
+    angles = np.array([3.01, 3.01, 3.3, 3.3])
+    turns = _turns(np.random.default_rng(7).normal(size=(4, 3)), angles)
+    tol = Tolerances(**{**LOOSE, "orientation_deg": 3.0})
+    slack = np.array([0.02, 0.0, 0.29, 0.31])
+    check = check_path(kin, q, fused_on(q, turns=turns), tol, False, slack_deg=slack)
+    assert reasons(check) == [("orientation", 1, 2)]
+    assert check.violations[0].worst == pytest.approx(3.3, abs=1e-6)
+
+
+# ---- joint-limit margin
+
+
+@pytest.mark.parametrize("joint", range(6))
+@pytest.mark.parametrize("side", ["lower", "upper"])
+def test_a_joint_just_inside_its_margin_is_reported_and_one_just_outside_is_not(kin, joint, side):
+    margin_deg = 2.0
+    rows = np.tile(Q0_DEG, (4, 1))
+    limit = LOWER_DEG[joint] if side == "lower" else UPPER_DEG[joint]
+    inward = 1.0 if side == "lower" else -1.0
+    rows[1, joint] = limit + inward * (margin_deg - 0.01)  # 1.99 deg from the limit: too close
+    rows[2, joint] = limit + inward * (margin_deg + 0.01)  # 2.01 deg: fine
+    rows[3, joint] = limit + inward * 0.5 * margin_deg
+    q = path(rows)
+    check = check_path(kin, q, fused_on(q), Tolerances(**{**LOOSE, "joint_margin_deg": margin_deg}), False)
+    name = f"joint limit (joint {joint + 1})"
+    assert reasons(check) == [(name, 1, 1), (name, 3, 3)]
+    assert check.violations[0].worst == pytest.approx(math.radians(1.99), abs=1e-12)
+    assert check.violations[1].worst == pytest.approx(math.radians(1.0), abs=1e-12)
+    assert check.violations[0].unit == "rad" and check.violations[0].limit == pytest.approx(
+        math.radians(2.0), abs=1e-6
+    )
+    assert check.joint_margin_rad[2] == pytest.approx(math.radians(2.01), abs=1e-12)
+
+
+def test_the_joint_margin_figure_is_the_closest_joint_to_its_limit(kin):
+    q = near_q0(3)
+    expected = np.min(np.minimum(q - np.radians(LOWER_DEG), np.radians(UPPER_DEG) - q), axis=1)
+    check = check_path(kin, q, fused_on(q), Tolerances(), False)
+    np.testing.assert_allclose(check.joint_margin_rad, expected, atol=1e-12)
+    assert np.allclose(
+        expected, np.radians(120.0 - 50.0 - np.array([0.0, 1.0, 2.0]))
+    )  # joint 5, upper limit 120 deg
+
+
+# ---- joint step
+
+
+def test_a_joint_step_just_over_the_limit_is_reported_in_degrees(kin):
+    rows = np.tile(Q0_DEG, (4, 1))
+    rows[:, 0] += [0.0, 19.99, 40.0, 40.0]  # steps 19.99, 20.01, 0
+    rows[:, 3] += [0.0, 0.0, 0.0, -20.5]
+    q = path(rows)
+    check = check_path(kin, q, fused_on(q), Tolerances(**{**LOOSE, "joint_step_deg": 20.0}), False)
+    assert reasons(check) == [("joint step (joint 1)", 1, 1), ("joint step (joint 4)", 2, 2)]
+    assert [v.worst for v in check.violations] == pytest.approx([20.01, 20.5], abs=1e-9)
+    assert check.violations[0].unit == "deg" and check.violations[0].limit == 20.0
+
+
+# ---- singularity at the waypoints
+
+
+def test_the_singularity_figures_are_the_scaled_manipulability_and_smallest_singular_value(kin):
+    q = path([Q0_DEG, [0.0, 100.0, -150.0, 0.0, 40.0, 0.0], [10.0, 20.0, -30.0, 40.0, 5.0, 60.0]])
+    check = check_path(kin, q, fused_on(q), Tolerances(**LOOSE), False)
+    np.testing.assert_allclose(check.singularity, [manipulability(qk) for qk in q], rtol=1e-9)
+    smallest = [np.linalg.svd(scaled_jacobian(qk), compute_uv=False)[-1] for qk in q]
+    np.testing.assert_allclose(check.sigma_min, smallest, rtol=1e-9)
+
+
+def test_a_wrist_just_below_the_singularity_margin_is_reported_with_its_measure(kin):
+    """Wrist angles 30, 20, 5, 20, 30 deg: the margin set 0.1 % above / below the measure at 5 deg."""
+    rows = np.tile(Q0_DEG, (5, 1))
+    rows[:, 4] = [30.0, 20.0, 5.0, 20.0, 30.0]
+    q = path(rows)
+    w5 = manipulability(q[2])
+    beyond = check_path(kin, q, fused_on(q), Tolerances(**{**LOOSE, "singularity_margin": 1.001 * w5}), False)
+    assert reasons(beyond) == [("singularity", 2, 2)]
+    assert beyond.violations[0].worst == pytest.approx(w5, rel=1e-9)
+    assert beyond.violations[0].limit == pytest.approx(1.001 * w5)
+    inside = check_path(kin, q, fused_on(q), Tolerances(**{**LOOSE, "singularity_margin": 0.999 * w5}), False)
+    assert inside.ok
+
+
+def test_a_stretched_wrist_is_a_singularity_of_measure_zero(kin):
+    rows = np.tile(Q0_DEG, (3, 1))
+    rows[:, 4] = [10.0, 0.0, 10.0]  # axes 4 and 6 in line
+    q = path(rows)
+    check = check_path(kin, q, fused_on(q), Tolerances(**{**LOOSE, "singularity_margin": 1e-6}), False)
+    assert ("singularity", 1, 1) in reasons(check)
+    assert check.singularity[1] < 1e-12 and check.sigma_min[1] < 1e-12
+
+
+# ---- singularity between the waypoints
+
+
+def test_a_wrist_flip_between_two_clear_waypoints_is_reported_between_them(kin):
+    """Wrist +1.25 -> -1.25 deg is sampled at +-0.4167 deg (2.5 deg in three steps of at most 1 deg).
+
+    The margin is put 0.1 % above and below the measure there; both waypoints stay clear of it.
+    """
+    rows = np.tile(Q0_DEG, (4, 1))
+    rows[:, 4] = [10.0, 1.25, -1.25, -10.0]
+    q = path(rows)
+    inner = np.array(Q0_DEG)
+    inner[4] = 1.25 - 2.5 / 3.0
+    w_inner = manipulability(np.radians(inner))
+    assert manipulability(q[1]) > 2.0 * w_inner  # the waypoints themselves are clear
+    beyond = check_path(
+        kin, q, fused_on(q), Tolerances(**{**LOOSE, "singularity_margin": 1.001 * w_inner}), False
+    )
+    assert reasons(beyond) == [("singularity between waypoints", 1, 1)]
+    assert beyond.violations[0].worst == pytest.approx(w_inner, rel=1e-9)
+    assert beyond.singularity_between[1] == pytest.approx(w_inner, rel=1e-9)
+    inside = check_path(
+        kin, q, fused_on(q), Tolerances(**{**LOOSE, "singularity_margin": 0.999 * w_inner}), False
+    )
+    assert inside.ok
+
+
+def test_a_flip_through_the_stretched_wrist_at_the_midpoint_measures_zero(kin):
+    rows = np.tile(Q0_DEG, (2, 1))
+    rows[:, 4] = [0.4, -0.4]  # under one degree: sampled at its midpoint, the stretched wrist
+    q = path(rows)
+    margin = 0.5 * manipulability(q[0])
+    check = check_path(kin, q, fused_on(q), Tolerances(**{**LOOSE, "singularity_margin": margin}), False)
+    assert reasons(check) == [("singularity between waypoints", 0, 0)]
+    assert check.violations[0].worst < 1e-12
+
+
+# ---- runs
+
+
+def test_runs_are_the_inclusive_bounds_of_each_stretch_of_true():
+    mask = np.array([True, True, False, True, False, False, True, True, True])
+    assert runs(mask) == [(0, 1), (3, 3), (6, 8)]
+    assert runs(np.zeros(4, dtype=bool)) == []
+    assert runs(np.ones(3, dtype=bool)) == [(0, 2)]
