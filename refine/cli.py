@@ -96,7 +96,12 @@ def _run(args: argparse.Namespace, problem) -> int:  # noqa: ANN001 - Problem, i
     else:
         print("\n".join(summary_lines(result)))
         print(f"outputs      {out}/: " + ", ".join(p.name for p in result.outputs.values()))
-    return 0 if result.status == "ok" else 1
+    return exit_status(result.status)
+
+
+def exit_status(status: str) -> int:
+    """The exit status of a run: 0 for ``ok`` and ``repaired`` (executable), 1 for ``infeasible``."""
+    return 0 if status in ("ok", "repaired") else 1
 
 
 if __name__ == "__main__":  # pragma: no cover

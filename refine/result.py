@@ -117,10 +117,17 @@ def summary_lines(result: RunResult) -> list[str]:
             f"min singular value {check.sigma_min.min():.4f}",
         ]
         if p.clearance is not None:
-            c = p.clearance
+            from refine.diagnosis import closest_pair_text
+
+            c, col = p.clearance, result.problem.collision
+            pair = closest_pair_text(
+                c, {o.name for o in result.problem.cell}, col.margin_m, col.self_margin_m
+            )
             lines.append(
-                f"clearance    min distance {c.min_distance_m * 1e3:.1f} mm (margin {result.problem.collision.margin_m * 1e3:g} mm), "
-                f"checked between waypoints: {c.queries} queries in {c.time_s:.2f} s"
+                f"clearance    min distance {c.min_distance_m * 1e3:.1f} mm (cell margin {col.margin_m * 1e3:g} mm, "
+                f"self margin {col.self_margin_m * 1e3:g} mm)"
+                + (f", {pair}" if pair else "")
+                + f"; checked between waypoints: {c.queries} queries in {c.time_s:.2f} s"
             )
         if p.timing is not None:
             lines.append(

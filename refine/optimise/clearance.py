@@ -93,19 +93,24 @@ class ClearanceSource:
         """Runs of segments below the margin, as violations naming the objects [m]."""
         check = self.clearance(q)
         s = problem.fused.s
-        return [
-            Violation(
-                r.index_start,
-                r.index_end,
-                float(s[r.index_start]),
-                float(s[r.index_end]),
-                f"collision ({', '.join(r.objects)})",
-                r.min_distance_m,
-                "m",
-                self.model.margin_m,
+        cell = {b.name for b in self.model.bodies if b.kind == "cell"}
+        out = []
+        for r in check.runs:
+            # the worst pair's own margin: the cell margin, or the self margin for a robot/tool pair
+            own_self = r.worst_pair[1] not in cell
+            out.append(
+                Violation(
+                    r.index_start,
+                    r.index_end,
+                    float(s[r.index_start]),
+                    float(s[r.index_end]),
+                    f"{'self-collision' if own_self else 'collision'} ({', '.join(r.objects)})",
+                    r.min_distance_m,
+                    "m",
+                    r.min_distance_m - r.min_clearance_m,
+                )
             )
-            for r in check.runs
-        ]
+        return out
 
     def rows(self, problem: RefinementNLP, q: Array) -> tuple[LinearRow, ...]:
         """Fresh rows for every close pair along ``q``; empty when the dense check passes."""
