@@ -10,6 +10,8 @@ import sys
 import time
 from pathlib import Path
 
+from refine.check import add_safety_options, check_command
+
 
 def _seconds_since_process_start() -> float | None:
     """Wall time since this process started [s] (Linux /proc), or None elsewhere."""
@@ -40,8 +42,14 @@ def _parser() -> argparse.ArgumentParser:
     )
     run.add_argument("--json", action="store_true", help="print result.json instead of the summary")
     run.add_argument("--no-report", action="store_true", help="do not write report.html")
-    check = sub.add_parser("check", help="load and check a problem file without solving it")
+    check = sub.add_parser(
+        "check", help="read every input and run every check of `run` without solving (exit 2 when run would)"
+    )
     check.add_argument("problem", type=Path)
+    check.add_argument("--out", type=Path, default=None, help="also check this output folder")
+    check.add_argument("--programs", default=None, help="program formats to check, as for run")
+    for parser in (run, check):
+        add_safety_options(parser)
     sub.add_parser("robots", help="list the robots of the registry")
     return p
 
@@ -65,16 +73,14 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         from refine.problem import load_problem
 
-        problem = load_problem(args.problem)
+        problem = load_problem(args.problem, allow_outside=args.allow_outside)
         if args.command == "check":
-            print(
-                f"{problem.name}: problem file OK (robot {problem.robot.model}, CAD {problem.cad.file.name}, "
-                f"demonstration {problem.demonstration.file.name})"
-            )
-            return 0
+            return check_command(args, problem)
         return _run(args, problem)
     except RefineError as e:
-        print(f"refine: error: {e}", file=sys.stderr)
+        from refine.names import message_text
+
+        print(f"refine: error: {message_text(e)}", file=sys.stderr)
         return 2
 
 
@@ -84,7 +90,9 @@ def _run(args: argparse.Namespace, problem) -> int:  # noqa: ANN001 - Problem, i
     from refine.result import summary_lines
 
     out = args.out or Path("out") / problem.name
-    programs = tuple(p.strip() for p in args.programs.split(",")) if args.programs else None
+    from refine.preflight import parse_programs
+
+    programs = parse_programs(args.programs, problem)
     t0 = time.perf_counter()
     result = run(problem, out, programs, report=not args.no_report)
     since_start = _seconds_since_process_start()

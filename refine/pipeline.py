@@ -47,8 +47,14 @@ class _Stopwatch:
             self.times[stage] = self.times.get(stage, 0.0) + seconds
 
 
-def fused_path(problem: Problem, watch: _Stopwatch | None = None) -> FusedPath:
-    """The fused path of ``problem``: CAD path + cleaned, aligned demonstration, or a PathML path."""
+def fused_path(
+    problem: Problem, watch: _Stopwatch | None = None, *, accept_frame_error: bool = False
+) -> FusedPath:
+    """The fused path of ``problem``: CAD path + cleaned, aligned demonstration, or a PathML path.
+
+    ``accept_frame_error`` turns the quality gate's stop on a tracker frame that looks wrong into a
+    warning (see :mod:`refine.demo.quality`).
+    """
     watch = watch or _Stopwatch()
     if problem.cad.format == "pathml":
         from refine.cad.pathml_ import fused_from_pathml
@@ -197,7 +203,9 @@ def run(
     """
     from refine.export.result_json import write_result_json
     from refine.export.writers import write_outputs
+    from refine.preflight import preflight
 
+    preflight(problem, out_dir, programs, report=report)
     result = solve_problem(problem)
     t0 = time.perf_counter()
     out_dir.mkdir(parents=True, exist_ok=True)

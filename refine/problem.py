@@ -7,6 +7,8 @@ name the key or the path. Paths in the file are relative to the problem file. Po
 
 from __future__ import annotations
 
+import logging
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -15,6 +17,7 @@ import numpy as np
 
 from refine.errors import InputError
 from refine.frames import transform_from_xyz_rpy
+from refine.names import comment_text, file_stem
 from refine.settings import (
     CadSettings,
     CollisionSettings,
@@ -39,6 +42,8 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10
     import tomli as tomllib  # type: ignore[no-redef]
 
 Matrix4 = np.ndarray
+MAX_POSE_M = 100.0
+"""Largest pose translation accepted [m]: a robot cell fits in 100 m."""
 
 __all__ = [
     "CadSettings",
@@ -54,6 +59,11 @@ __all__ = [
     "load_problem",
 ]
 
+MAX_PROBLEM_FILE_BYTES = 1 << 20
+"""Largest problem.toml read [bytes] (1 MiB; the bundled ones are under 5 kB)."""
+MAX_INPUT_FILE_BYTES = 1 << 30
+"""Largest data file a problem may name [bytes] (1 GiB; a 2-million-line Liberty log is 130 MB)."""
+
 
 @dataclass(frozen=True)
 class Problem:
@@ -68,6 +78,7 @@ class Problem:
         multipass: ``[multipass]``: the passes of a multi-layer weld, or None for one pass.
         expected: ``[expected]``: the outcome a test problem is built to produce, or None.
         description: free text.
+        source: the problem file it was loaded from, for messages (None when built in code).
     """
 
     name: str
@@ -87,6 +98,7 @@ class Problem:
     multipass: MultipassSettings | None = None
     expected: ExpectedOutcome | None = None
     description: str = ""
+    source: Path | None = None
 
     def __post_init__(self) -> None:
         if self.demonstration is None and self.cad.format != "pathml":
@@ -94,54 +106,111 @@ class Problem:
                 'missing required table [demonstration] (only a PathML path, [cad] format = "pathml", may go without)'
             )
 
+    @property
+    def file_stem(self) -> str:
+        """The stem of the output files named after the problem (:func:`refine.names.file_stem`)."""
+        return file_stem(self.name)
 
-def load_problem(path: str | Path) -> Problem:
+    @property
+    def input_files(self) -> tuple[Path, ...]:
+        """Every data file the problem reads (resolved paths), for the outputs-never-overwrite check."""
+        files = [self.cad.file]
+        if self.demonstration is not None:
+            files += [self.demonstration.file, *([self.demonstration.truth] if self.demonstration.truth else [])]
+        files += [s.file for s in (*self.cell, *self.tool.collision) if s.file is not None]
+        return tuple(files)
+
+
+def load_problem(path: str | Path, *, allow_outside: bool = False) -> Problem:
     """Load ``problem.toml`` (or the folder holding it) into a :class:`Problem`.
 
+    Args:
+        path: the problem file or its folder.
+        allow_outside: accept data files outside the problem folder (by default a path that
+            leaves the folder, by ``..``, an absolute path or a symbolic link, is an error).
+
     Raises:
-        InputError: unknown or missing keys, bad values, missing files; the message names them.
+        InputError: unknown or missing keys, bad values, missing files, files outside the problem
+            folder; the message names the file and the key (and the line for TOML syntax).
     """
     path = Path(path)
     if path.is_dir():
         path = path / "problem.toml"
     if not path.is_file():
         raise InputError(f"problem file not found: {path}")
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as e:
-        raise InputError(f"{path}: not valid TOML: {e}") from e
+    data = _read_toml(path)
     root = path.parent.resolve()
     _check_keys(data, "", _TOP_KEYS, path)
     for table in ("robot", "tool", "cad"):
         if table not in data:
             raise InputError(f"{path}: missing required table [{table}]")
     try:
+        inside = None if allow_outside else root
         return Problem(
-            name=str(data.get("name", root.name)),
+            name=_name(data.get("name", root.name)),
             root=root,
-            description=str(data.get("description", "")),
+            description=comment_text(_string(data.get("description", ""), "description"), 2000),
             robot=_robot(_table(data, "robot"), path),
             tool=_tool(_table(data, "tool"), path),
             frames=_frames(_table(data, "frames"), path),
-            cad=_cad(_table(data, "cad"), root, path),
-            demonstration=_demo(_table(data, "demonstration"), root, path)
+            cad=_cad(_table(data, "cad"), root, path, inside),
+            demonstration=_demo(_table(data, "demonstration"), root, path, inside)
             if "demonstration" in data
             else None,
             tolerances=_build(Tolerances, _table(data, "tolerances"), "tolerances", path),
             process=_process(_table(data, "process"), path),
             output=_output(_table(data, "output"), path),
-            cell=_cell(_table(data, "cell"), root, path),
+            cell=_cell(_table(data, "cell"), root, path, inside),
             collision=_build(CollisionSettings, _table(data, "collision"), "collision", path),
             optimise=_build(OptimiseSettings, _table(data, "optimise"), "optimise", path),
             repair=_build(RepairSettings, _table(data, "repair"), "repair", path),
             multipass=_multipass(_table(data, "multipass"), path) if "multipass" in data else None,
             expected=_expected(_table(data, "expected"), path) if "expected" in data else None,
+            source=path,
         )
     except InputError as e:
         raise InputError(f"{path}: {e}") from e
 
 
 # ---- loader internals ---------------------------------------------------------------------------
+
+
+def _read_toml(path: Path) -> dict[str, Any]:
+    """The parsed TOML of ``path``; size, encoding and syntax errors name the file and line."""
+    try:
+        size = path.stat().st_size
+        if size > MAX_PROBLEM_FILE_BYTES:
+            raise InputError(
+                f"{path}: {size} bytes is too large for a problem file (limit {MAX_PROBLEM_FILE_BYTES} bytes)"
+            )
+        raw = path.read_bytes()
+    except OSError as e:
+        raise InputError(f"{path}: cannot be read: {e.strerror}") from e
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        line = raw[: e.start].count(b"\n") + 1
+        raise InputError(f"{path}:{line}: not UTF-8 text (byte 0x{raw[e.start]:02x} at offset {e.start})") from e
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise InputError(f"{path}: not valid TOML: {e}") from e
+
+
+def _string(value: Any, key: str) -> str:
+    if not isinstance(value, str):
+        raise InputError(f"{key} must be a string, got {type(value).__name__}")
+    return value
+
+
+def _name(value: Any) -> str:
+    """The problem name as one printable line (see :mod:`refine.names`); empty names are refused."""
+    name = comment_text(_string(value, "name"), 200)
+    if name != value:
+        logging.getLogger(__name__).warning("name %r made printable: %r", value, name)
+    if not name.strip("._- "):
+        raise InputError(f"name must have at least one letter or digit, got {value!r}")
+    return name
 
 _TOP_KEYS = {
     "cell",
@@ -183,6 +252,8 @@ def _check_keys(table: dict[str, Any], where: str, allowed: set[str], path: Path
 def _number(value: Any, key: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise InputError(f"{key} must be a number, got {value!r}")
+    if not math.isfinite(value):
+        raise InputError(f"{key} must be a finite number, got {value!r}")
     return float(value)
 
 
@@ -202,6 +273,8 @@ def _pose(value: Any, key: str) -> Matrix4:
         raise InputError(f"{form}; unknown key(s) {', '.join(map(repr, unknown))}")
     xyz = _numbers(value.get("xyz", [0.0, 0.0, 0.0]), f"{key}.xyz", 3)
     rpy = _numbers(value.get("rpy_deg", [0.0, 0.0, 0.0]), f"{key}.rpy_deg", 3)
+    if max(abs(v) for v in xyz) > MAX_POSE_M or max(abs(v) for v in rpy) > 720.0:
+        raise InputError(f"{key}: xyz must lie within ±{MAX_POSE_M:g} m and rpy_deg within ±720 deg, got {value!r}")
     return transform_from_xyz_rpy(xyz, rpy)
 
 
@@ -225,14 +298,27 @@ def _check_types(cls: type, table: dict[str, Any], where: str) -> None:
                 annotation
             ]
             raise InputError(f"{where}.{key} must be {kind}, got {value!r}")
+        if isinstance(value, float) and not math.isfinite(value):
+            raise InputError(f"{where}.{key} must be a finite number, got {value!r}")
+        if isinstance(value, str) and comment_text(value, 10_000) != value:
+            raise InputError(f"{where}.{key} must be one line of printable ASCII text, got {value!r}")
 
 
-def _file(root: Path, value: Any, key: str) -> Path:
-    if not isinstance(value, str) or not value:
+def _file(root: Path, value: Any, key: str, inside: Path | None) -> Path:
+    """The resolved data file named by ``key``; it must lie in ``inside`` unless that is None."""
+    if not isinstance(value, str) or not value or "\0" in value:
         raise InputError(f"{key} must be a file name relative to the problem folder, got {value!r}")
     f = (root / value).resolve()
+    if inside is not None and not f.is_relative_to(inside):
+        raise InputError(
+            f"{key} = {value!r} lies outside the problem folder {inside} (resolved to {f}); "
+            "copy the file into the folder, or pass --allow-outside"
+        )
     if not f.is_file():
-        raise InputError(f"{key} = {value!r}: file not found at {f}")
+        raise InputError(f"{key} = {value!r}: not a regular file at {f}")
+    size = f.stat().st_size
+    if size > MAX_INPUT_FILE_BYTES:
+        raise InputError(f"{key} = {value!r}: {size} bytes exceeds the limit of {MAX_INPUT_FILE_BYTES} bytes")
     return f
 
 
@@ -254,7 +340,7 @@ def _robot(t: dict[str, Any], path: Path) -> RobotSettings:
     _check_keys(t, "robot", _fields(RobotSettings), path)
     if "model" not in t:
         raise InputError("[robot] missing required key 'model'")
-    out: dict[str, Any] = {"model": str(t["model"])}
+    out: dict[str, Any] = {"model": _robot_model(t["model"])}
     if "base_in_world" in t:
         out["base_in_world"] = _pose(t["base_in_world"], "robot.base_in_world")
     for key in ("joint_acceleration_deg_s2", "home_deg"):
@@ -263,6 +349,15 @@ def _robot(t: dict[str, Any], path: Path) -> RobotSettings:
     if "velocity_scale" in t:
         out["velocity_scale"] = _number(t["velocity_scale"], "robot.velocity_scale")
     return RobotSettings(**out)
+
+
+def _robot_model(value: Any) -> str:
+    from refine.robot import available_robots
+
+    known = available_robots()
+    if not isinstance(value, str) or value not in known:
+        raise InputError(f"robot.model = {value!r} is not a robot of the registry; available: {', '.join(known)}")
+    return value
 
 
 def _tool(t: dict[str, Any], path: Path) -> ToolSettings:
@@ -292,10 +387,10 @@ def _frames(t: dict[str, Any], path: Path) -> FrameSettings:
     return FrameSettings(**{k: _pose(v, f"frames.{k}") for k, v in t.items()})
 
 
-def _cad(t: dict[str, Any], root: Path, path: Path) -> CadSettings:
+def _cad(t: dict[str, Any], root: Path, path: Path, inside: Path | None) -> CadSettings:
     if "file" not in t:
         raise InputError("[cad] missing required key 'file'")
-    f = _file(root, t["file"], "cad.file")
+    f = _file(root, t["file"], "cad.file", inside)
     fmt = t.get("format", _CAD_SUFFIXES.get(f.suffix.lower(), f.suffix))
     overrides: dict[str, Any] = {"file": f, "format": fmt}
     for key in ("section_origin", "section_normal", "start_near"):
@@ -324,7 +419,7 @@ def _list(value: Any, key: str) -> list[Any]:
     return value
 
 
-def _shape(t: Any, key: str, root: Path | None, path: Path) -> Shape:
+def _shape(t: Any, key: str, root: Path | None, path: Path, inside: Path | None = None) -> Shape:
     if not isinstance(t, dict):
         raise InputError(f"{key} must be a table, got {t!r}")
     _check_keys(t, key, _fields(Shape), path)
@@ -336,17 +431,21 @@ def _shape(t: Any, key: str, root: Path | None, path: Path) -> Shape:
     if "file" in t:
         if root is None:
             raise InputError(f"{key}: mesh files are for cell objects only")
-        out["file"] = _file(root, t["file"], f"{key}.file")
+        out["file"] = _file(root, t["file"], f"{key}.file", inside)
+    _check_types(Shape, {k: v for k, v in t.items() if k in ("name", "shape", "units", "workpiece")}, key)
+    for k in ("radius_m", "length_m"):
+        if k in t:
+            out[k] = _number(t[k], f"{key}.{k}")
     try:
         return Shape(**out)
     except TypeError as e:
         raise InputError(f"{key}: {e}") from e
 
 
-def _cell(t: dict[str, Any], root: Path, path: Path) -> tuple[Shape, ...]:
+def _cell(t: dict[str, Any], root: Path, path: Path, inside: Path | None) -> tuple[Shape, ...]:
     _check_keys(t, "cell", {"objects"}, path)
     return tuple(
-        _shape(o, f"cell.objects[{i}]", root, path)
+        _shape(o, f"cell.objects[{i}]", root, path, inside)
         for i, o in enumerate(_list(t.get("objects", []), "cell.objects"))
     )
 
@@ -374,27 +473,31 @@ def _expected(t: dict[str, Any], path: Path) -> ExpectedOutcome:
     return _build(ExpectedOutcome, t, "expected", path, **overrides)
 
 
-def _demo(t: dict[str, Any], root: Path, path: Path) -> DemoSettings:
+def _demo(t: dict[str, Any], root: Path, path: Path, inside: Path | None) -> DemoSettings:
     if "file" not in t:
         raise InputError("[demonstration] missing required key 'file'")
-    overrides: dict[str, Any] = {"file": _file(root, t["file"], "demonstration.file")}
+    overrides: dict[str, Any] = {"file": _file(root, t["file"], "demonstration.file", inside)}
     if "truth" in t:
-        overrides["truth"] = _file(root, t["truth"], "demonstration.truth")
+        overrides["truth"] = _file(root, t["truth"], "demonstration.truth", inside)
     return _build(DemoSettings, t, "demonstration", path, **overrides)
 
 
 def _process(t: dict[str, Any], path: Path) -> ProcessSettings:
     _check_keys(t, "process", _fields(ProcessSettings), path)
     params = []
-    for i, p in enumerate(t.get("parameters", [])):
+    for i, p in enumerate(_list(t.get("parameters", []), "process.parameters")):
+        if not isinstance(p, dict):
+            raise InputError(f"process.parameters[{i}] must be a table {{ name, value, unit }}, got {p!r}")
         _check_keys(p, f"process.parameters[{i}]", {"name", "value", "unit"}, path)
         if set(p) != {"name", "value", "unit"}:
             raise InputError(f"[[process.parameters]] #{i + 1} needs name, value and unit, got {p}")
+        _check_types(ProcessParameter, p, f"process.parameters[{i}]")
         value = _number(p["value"], f"process.parameters[{i}].value")
-        params.append(ProcessParameter(str(p["name"]), value, str(p["unit"])))
+        params.append(ProcessParameter(p["name"], value, p["unit"]))
+    _check_types(ProcessSettings, {k: v for k, v in t.items() if k != "parameters"}, "process")
     return ProcessSettings(
-        kind=str(t.get("kind", "other")),
-        output=str(t.get("output", "doProcess")),
+        kind=t.get("kind", "other"),
+        output=t.get("output", "doProcess"),
         parameters=tuple(params),
     )
 

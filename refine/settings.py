@@ -23,6 +23,18 @@ DEMO_FORMATS = ("liberty_ascii", "liberty_binary", "csv")
 PROGRAM_FORMATS = ("rapid", "krl", "urscript")
 SHAPES = ("box", "cylinder", "sphere", "mesh")
 
+# ---- documented ranges that bound the work (docs/problem-file.md, "Ranges and limits")
+MIN_SPACING_M = 1e-4
+"""Finest waypoint spacing [m]: 0.1 mm, a tenth of the finest tracker resolution that matters."""
+MAX_HAMPEL_WINDOW = 50
+"""Widest Hampel half-window [samples]: 0.2 s at 240 Hz; wider windows only blur real motion."""
+MAX_SMOOTHING_S = 1.0
+"""Heaviest demonstration smoothing [s]: more would flatten every bend of a hand-held path."""
+MIN_CHECK_STEP_M = 1e-4
+"""Finest step of the dense collision check [m]."""
+MIN_ORIENTATION_DEG = 0.01
+"""Narrowest orientation cone [deg]: well above the verifier's accuracy (1e-6 deg)."""
+
 
 def _positive(owner: str, name: str, value: float) -> None:
     if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
@@ -32,6 +44,14 @@ def _positive(owner: str, name: str, value: float) -> None:
 def _non_negative(owner: str, name: str, value: float) -> None:
     if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
         raise InputError(f"{owner}.{name} must be a finite number >= 0, got {value!r}")
+
+
+def _in_range(owner: str, name: str, value: float, lo: float, hi: float, unit: str = "") -> None:
+    """Reject a value that is not a finite number in [lo, hi] (the documented range)."""
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    if not (ok and lo <= value <= hi):
+        u = f" {unit}" if unit else ""
+        raise InputError(f"{owner}.{name} must be a finite number in [{lo:g}, {hi:g}]{u}, got {value!r}")
 
 
 def _one_of(owner: str, name: str, value: str, allowed: tuple[str, ...]) -> None:
@@ -60,10 +80,13 @@ class RobotSettings:
 
     def __post_init__(self) -> None:
         check_transform(self.base_in_world, "robot.base_in_world")
-        if not 0.0 < self.velocity_scale <= 1.0:
+        if not (math.isfinite(self.velocity_scale) and 0.0 < self.velocity_scale <= 1.0):
             raise InputError(f"robot.velocity_scale must be in (0, 1], got {self.velocity_scale}")
         for a in self.joint_acceleration_deg_s2 or ():
             _positive("robot", "joint_acceleration_deg_s2[]", a)
+            _in_range("robot", "joint_acceleration_deg_s2[]", a, 0.0, 1e5, "deg/s^2")
+        for a in self.home_deg or ():
+            _in_range("robot", "home_deg[]", a, -720.0, 720.0, "deg")
 
 
 @dataclass(frozen=True)
@@ -93,6 +116,9 @@ class ToolSettings:
         check_transform(self.tcp_in_flange, "tool.tcp_in_flange")
         check_transform(self.sensor_in_tcp, "tool.sensor_in_tcp")
         _positive("tool", "mass_kg", self.mass_kg)
+        _in_range("tool", "mass_kg", self.mass_kg, 0.0, 2000.0, "kg")
+        for v in self.cog_in_flange_m:
+            _in_range("tool", "cog_in_flange_m[]", v, -5.0, 5.0, "m")
 
 
 @dataclass(frozen=True)
@@ -152,7 +178,10 @@ class CadSettings:
         if (self.section_origin is None) != (self.section_normal is None):
             raise InputError("cad: section_origin and section_normal go together")
         _one_of("cad", "units", self.units, ("m", "mm", "in"))
-        _positive("cad", "spacing_m", self.spacing_m)
+        _in_range("cad", "spacing_m", self.spacing_m, MIN_SPACING_M, 1.0, "m")
+        for key in ("section_origin", "section_normal", "start_near"):
+            for v in getattr(self, key) or ():
+                _in_range("cad", f"{key}[]", v, -1e6, 1e6, "file units")
 
 
 @dataclass(frozen=True)
@@ -186,11 +215,15 @@ class DemoSettings:
     def __post_init__(self) -> None:
         _one_of("demonstration", "format", self.format, DEMO_FORMATS)
         _one_of("demonstration", "units", self.units, ("in", "cm", "m", "mm"))
+        _in_range("demonstration", "station", self.station, 1, 32)
         _positive("demonstration", "rate_hz", self.rate_hz)
-        _positive("demonstration", "hampel_window", self.hampel_window)
+        _in_range("demonstration", "rate_hz", self.rate_hz, 1.0, 10_000.0, "Hz")
+        _in_range("demonstration", "hampel_window", self.hampel_window, 1, MAX_HAMPEL_WINDOW, "samples")
         _positive("demonstration", "hampel_sigmas", self.hampel_sigmas)
-        _non_negative("demonstration", "smoothing_s", self.smoothing_s)
+        _in_range("demonstration", "hampel_sigmas", self.hampel_sigmas, 0.5, 100.0)
+        _in_range("demonstration", "smoothing_s", self.smoothing_s, 0.0, MAX_SMOOTHING_S, "s")
         _positive("demonstration", "pause_speed_m_s", self.pause_speed_m_s)
+        _in_range("demonstration", "pause_speed_m_s", self.pause_speed_m_s, 0.0, 1.0, "m/s")
 
 
 @dataclass(frozen=True)
@@ -215,13 +248,12 @@ class Tolerances:
     joint_step_deg: float = 20.0
 
     def __post_init__(self) -> None:
-        _positive("tolerances", "position_m", self.position_m)
-        _positive("tolerances", "orientation_deg", self.orientation_deg)
-        if self.orientation_deg >= 90.0:
-            raise InputError(f"tolerances.orientation_deg must be < 90, got {self.orientation_deg}")
-        _non_negative("tolerances", "joint_margin_deg", self.joint_margin_deg)
-        _non_negative("tolerances", "singularity_margin", self.singularity_margin)
+        _in_range("tolerances", "position_m", self.position_m, 1e-8, 0.01, "m")
+        _in_range("tolerances", "orientation_deg", self.orientation_deg, MIN_ORIENTATION_DEG, 89.0, "deg")
+        _in_range("tolerances", "joint_margin_deg", self.joint_margin_deg, 0.0, 45.0, "deg")
+        _in_range("tolerances", "singularity_margin", self.singularity_margin, 0.0, 0.9)
         _positive("tolerances", "joint_step_deg", self.joint_step_deg)
+        _in_range("tolerances", "joint_step_deg", self.joint_step_deg, 0.0, 180.0, "deg")
 
 
 @dataclass(frozen=True)
@@ -249,6 +281,8 @@ class ProcessSettings:
 
     def __post_init__(self) -> None:
         _one_of("process", "kind", self.kind, ("glue", "weld", "seal", "other"))
+        for i, p in enumerate(self.parameters):
+            _in_range(f"process.parameters[{i}]", "value", p.value, -1e9, 1e9, p.unit)
 
 
 @dataclass(frozen=True)
@@ -310,8 +344,10 @@ class Shape:
         for key in ("radius_m", "length_m"):
             if getattr(self, key) is not None:
                 _positive(owner, key, getattr(self, key))
+                _in_range(owner, key, getattr(self, key), 0.0, 100.0, "m")
         for v in self.size_m or ():
             _positive(owner, "size_m[]", v)
+            _in_range(owner, "size_m[]", v, 0.0, 100.0, "m")
         _one_of(owner, "units", self.units, ("m", "mm", "in"))
 
 
@@ -334,10 +370,10 @@ class CollisionSettings:
     max_outer_iterations: int = 8
 
     def __post_init__(self) -> None:
-        _non_negative("collision", "margin_m", self.margin_m)
-        _non_negative("collision", "self_margin_m", self.self_margin_m)
-        _positive("collision", "check_step_m", self.check_step_m)
-        _positive("collision", "max_outer_iterations", self.max_outer_iterations)
+        _in_range("collision", "margin_m", self.margin_m, 0.0, 1.0, "m")
+        _in_range("collision", "self_margin_m", self.self_margin_m, 0.0, 0.5, "m")
+        _in_range("collision", "check_step_m", self.check_step_m, MIN_CHECK_STEP_M, 0.1, "m")
+        _in_range("collision", "max_outer_iterations", self.max_outer_iterations, 1, 50)
 
 
 @dataclass(frozen=True)
@@ -360,9 +396,9 @@ class OptimiseSettings:
 
     def __post_init__(self) -> None:
         for key in ("orientation_weight", "velocity_weight", "acceleration_weight"):
-            _non_negative("optimise", key, getattr(self, key))
+            _in_range("optimise", key, getattr(self, key), 0.0, 1e6)
         if self.mid_range_weight is not None:
-            _non_negative("optimise", "mid_range_weight", self.mid_range_weight)
+            _in_range("optimise", "mid_range_weight", self.mid_range_weight, 0.0, 1e6)
 
 
 @dataclass(frozen=True)
@@ -378,7 +414,7 @@ class RepairSettings:
     max_slack_deg: float = 15.0
 
     def __post_init__(self) -> None:
-        _non_negative("repair", "max_slack_deg", self.max_slack_deg)
+        _in_range("repair", "max_slack_deg", self.max_slack_deg, 0.0, 90.0, "deg")
 
 
 @dataclass(frozen=True)
@@ -400,8 +436,12 @@ class MultipassSettings:
     work_angle_change_deg: tuple[tuple[float, ...], ...] | None = None
 
     def __post_init__(self) -> None:
-        _positive("multipass", "layers", self.layers)
-        _non_negative("multipass", "layer_height_m", self.layer_height_m)
+        _in_range("multipass", "layers", self.layers, 1, 50)
+        _in_range("multipass", "layer_height_m", self.layer_height_m, 0.0, 0.1, "m")
+        for key, bound, unit in (("lateral_offsets_m", 0.2, "m"), ("work_angle_change_deg", 90.0, "deg")):
+            for row in getattr(self, key) or ():
+                for v in row:
+                    _in_range("multipass", f"{key}[][]", v, -bound, bound, unit)
         if len(self.lateral_offsets_m) != self.layers:
             raise InputError(
                 f"multipass.lateral_offsets_m needs one list per layer ({self.layers}), got {len(self.lateral_offsets_m)}"

@@ -50,6 +50,7 @@ from refine import __version__
 from refine.errors import InputError
 from refine.export.rapid import segment_speeds
 from refine.frames import invert_transform, kuka_abc_from_matrix, make_transform, matrix_from_kuka_abc
+from refine.names import comment_text, identifier
 from refine.paths import Array, Trajectory
 from refine.problem import Problem
 
@@ -63,9 +64,8 @@ _INI = (  # the INI fold of KUKA's standard program template
 
 
 def _name(text: str, fallback: str) -> str:
-    """A KRL name: letters, digits, ``_``, not starting with a digit, at most 24 characters."""
-    name = re.sub(r"[^A-Za-z0-9_]", "_", text)
-    return (name if name and not name[0].isdigit() else f"{fallback}_{name}".rstrip("_"))[:24]
+    """A KRL name: letters, digits, ``_``, starting with a letter, at most 24 characters."""
+    return identifier(text, fallback, 24)
 
 
 def _real(value: float, decimals: int) -> str:
@@ -193,7 +193,7 @@ def write_krl(
     mapped = "" if krl_output_number(signal) else "mapped to "
     note = f"process output {signal!r} is {mapped}$OUT[{number}]" + (" (refine default)" if mapped else "")
     cog = [_real(v * 1000.0, 4) for v in problem.tool.cog_in_flange_m]
-    header = f"; Written by refine {__version__} for problem '{problem.name}', robot {problem.robot.model}."
+    header = f"; Written by refine {__version__} for problem '{comment_text(problem.name)}', robot {problem.robot.model}."
     dat_lines = [
         *("&ACCESS RVP", "&REL 1", f"DEFDAT {prog}", header),
         "; E6POS: TCP in {F} ($BASE = BASE_WORLD), X Y Z [mm], A B C [deg], S T (E1 = A3 [deg] on an LBR)",
@@ -210,7 +210,7 @@ def write_krl(
         points = [f"XP{k}" if len(runs) == 1 else f"XP{i}_{k}" for k in range(1, len(tr) + 1)]
         names = [f"XAPP{i}", *points, f"XRET{i}"]
         dat_lines += _declarations(names, tr, robot, back)
-        head = f"pass {i} of {len(runs)}: " + re.sub(r"[;\r\n]", " ", str(pass_name))
+        head = f"pass {i} of {len(runs)}: " + comment_text(str(pass_name)).replace(";", ",")
         src_lines += [f";FOLD {head}", f"  ; {head}, {len(tr)} points, {float(tr.t[-1]):.3f} s planned"]
         src_lines += [f"  {line}" for line in _moves(names, tr, (number, signal), air, speed_resolution_m_s)]
         src_lines.append(";ENDFOLD")

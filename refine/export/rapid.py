@@ -40,6 +40,7 @@ from numpy.typing import NDArray
 from refine import __version__
 from refine.errors import InputError
 from refine.frames import continuous_quaternions, invert_transform, quaternion_from_matrix
+from refine.names import comment_text, identifier
 from refine.paths import Array, Trajectory
 from refine.problem import Problem
 
@@ -50,11 +51,7 @@ _SPEED_TAIL = "500,5000,1000"  # v_ori [deg/s], v_leax [mm/s], v_reax [deg/s]
 
 
 def _identifier(text: str, fallback: str) -> str:
-    """A RAPID identifier: letters, digits, underscores, a letter first, at most 32 characters."""
-    name = re.sub(r"[^A-Za-z0-9_]", "_", text)
-    if not name or not name[0].isalpha():
-        name = f"{fallback}_{name}".rstrip("_")
-    return name[:32]
+    return identifier(text, fallback, 32)
 
 
 def _num(value: float, decimals: int) -> str:
@@ -177,7 +174,7 @@ def write_rapid(
 
     lines = [
         f"MODULE {module}",
-        f"    ! Written by refine {__version__} for problem '{problem.name}', robot "
+        f"    ! Written by refine {__version__} for problem '{comment_text(problem.name)}', robot "
         f"{problem.robot.model}, {n} targets, {float(trajectory.t[-1]):.3f} s planned.",
         f"    ! Targets: TCP poses in the world frame {{F}} ({wobj}); trans [mm], "
         "rot [q1,q2,q3,q4], robconf [cf1,cf4,cf6,cfx] of the refined joints.",

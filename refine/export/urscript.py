@@ -39,6 +39,7 @@ from refine import __version__
 from refine.errors import InputError, SolverError
 from refine.export.rapid import segment_speeds
 from refine.frames import invert_transform, make_transform, matrix_from_rotvec, rotvec_from_matrix
+from refine.names import comment_text, identifier
 from refine.paths import Array, Trajectory
 from refine.problem import Problem
 
@@ -158,8 +159,7 @@ def write_urscript(
     if not (speed_resolution_m_s > 0.0 and approach_speed_m_s > 0.0 and blend_m >= 0.0):
         raise InputError("URScript export: speeds must be > 0 and blend_m >= 0")
     path = Path(path)
-    prog = re.sub(r"\W", "_", problem.name, flags=re.ASCII)
-    prog = prog if prog[:1].isalpha() else f"p_{prog}"
+    prog = identifier(problem.name, "p", 63)
     signal = problem.process.output
     number = ur_output_number(signal)
     note = f"process output {signal!r} is digital output {number}"
@@ -172,7 +172,7 @@ def write_urscript(
     a, air, step = _num(acceleration_m_s2, 6), _num(approach_speed_m_s, 6), speed_resolution_m_s
     lines = [
         f"def {prog}():",
-        f"  # Written by refine {__version__} for problem '{problem.name}', robot {problem.robot.model}, "
+        f"  # Written by refine {__version__} for problem '{comment_text(problem.name)}', robot {problem.robot.model}, "
         f"{len(runs)} pass(es).",
         "  # Poses: TCP in the robot base frame, p[x, y, z [m], rx, ry, rz (rotation vector) [rad]].",
         f"  # {note}",
@@ -181,7 +181,7 @@ def write_urscript(
     ]
     previous = None
     for i, (pass_name, tr) in enumerate(runs, start=1):
-        n, label = len(tr), re.sub(r"[\r\n]", " ", str(pass_name))
+        n, label = len(tr), comment_text(str(pass_name))
         poses = np.concatenate([T_base_world @ tr.poses, [T_base_world @ tr.poses[-1] @ back]])
         q_app = _approach_joints(
             robot, tr.q[0], poses[0] @ back @ invert_transform(tool.tcp_in_flange), label

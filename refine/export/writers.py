@@ -71,7 +71,7 @@ def write_outputs(result: RunResult, out_dir: Path, programs: tuple[str, ...]) -
             len(result.passes),
         )
         return {}
-    problem, name = result.problem, result.problem.name
+    problem, name = result.problem, result.problem.file_stem
     trajectories = [p.trajectory for p in done if p.trajectory is not None]
     outputs: dict[str, Path] = {}
     if len(trajectories) == 1:

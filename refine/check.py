@@ -1,0 +1,45 @@
+"""``refine check``: every reader and every check of ``refine run``, without solving or writing.
+
+It fails (exit 2) exactly when ``run`` would fail on its input: it loads the problem, runs the
+:mod:`refine.preflight` checks (programs, I/O names, joint lists, output folder), reads the CAD path
+and the demonstration, runs the demonstration quality gate and the alignment, and stops there.
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from refine.problem import Problem
+
+
+def add_safety_options(parser: argparse.ArgumentParser) -> None:
+    """The options ``run`` and ``check`` share about what input to accept."""
+    parser.add_argument(
+        "--allow-outside",
+        action="store_true",
+        help="accept data files outside the problem folder (refused by default)",
+    )
+    parser.add_argument(
+        "--accept-frame-error",
+        action="store_true",
+        help="go on when the tracker frame looks rotated or shifted against the CAD path (a warning "
+        "in result.json instead of a stop)",
+    )
+
+
+def check_command(args: argparse.Namespace, problem: Problem) -> int:
+    """Run every check on ``problem`` and print what was read; returns 0 (errors raise)."""
+    from refine.pipeline import fused_path
+    from refine.preflight import parse_programs, preflight
+
+    programs = parse_programs(args.programs, problem)
+    pre = preflight(problem, args.out, programs)
+    fused = fused_path(problem, accept_frame_error=args.accept_frame_error)
+    demo = "" if problem.demonstration is None else f", demonstration {problem.demonstration.file.name}"
+    print(
+        f"{problem.name}: problem file OK, inputs read and checked (robot {problem.robot.model}, CAD {problem.cad.file.name}{demo}, "
+        f"{len(fused)} waypoints over {fused.s[-1]:.3f} m; programs {', '.join(pre.programs) or 'none'})"
+    )
+    return 0

@@ -1,0 +1,194 @@
+"""Checks that run before anything is solved or written: what ``refine check`` and ``refine run`` share.
+
+A problem that loads (``refine.problem`` checks every value and file) can still be wrong for the
+robot or the output folder. :func:`preflight` finds those mistakes before the solve, so a run never
+spends minutes and then refuses to write:
+
+* the program formats exist and the robot's controller runs them (RAPID: ABB, KRL: KUKA,
+  URScript: Universal Robots);
+* ``process.output`` is a signal each of those programs can switch (a RAPID signal name, a KRL
+  ``$OUT[n]`` with n in 1..4096, a UR standard output 0..7);
+* ``robot.home_deg`` and ``robot.joint_acceleration_deg_s2`` have one value per joint;
+* the output folder is a folder (or can be made one), and no output would overwrite an input file.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+from refine.errors import InputError
+from refine.names import identifier
+from refine.problem import Problem
+from refine.settings import PROGRAM_FORMATS
+
+CONTROLLER_OF_FORMAT = {"rapid": "abb", "krl": "kuka", "urscript": "ur"}
+"""The controller family each program format runs on."""
+
+_RAPID_SIGNAL = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,31}")
+
+
+@dataclass(frozen=True)
+class Preflight:
+    """What the checks established.
+
+    Attributes:
+        programs: the program formats to write.
+        out_dir: the output folder, resolved (None when not checked).
+        outputs: the file names a run may write into ``out_dir``.
+    """
+
+    programs: tuple[str, ...]
+    out_dir: Path | None
+    outputs: tuple[str, ...]
+
+
+def parse_programs(text: str | None, problem: Problem) -> tuple[str, ...]:
+    """The program formats from ``--programs`` (comma-separated) or the problem's ``[output]``."""
+    if text is None:
+        return problem.output.programs
+    programs = tuple(p.strip() for p in text.split(",") if p.strip())
+    for kind in programs:
+        if kind not in PROGRAM_FORMATS:
+            raise InputError(f"--programs: {kind!r} is not one of {', '.join(PROGRAM_FORMATS)}")
+    return programs
+
+
+def check_programs(problem: Problem, controller: str, robot_name: str, programs: tuple[str, ...]) -> None:
+    """Every program format is known, runs on ``controller`` and can switch ``process.output``."""
+    for kind in programs:
+        if kind not in PROGRAM_FORMATS:
+            raise InputError(f"program format {kind!r} is not one of {', '.join(PROGRAM_FORMATS)}")
+        if CONTROLLER_OF_FORMAT[kind] != controller:
+            fits = [k for k, c in CONTROLLER_OF_FORMAT.items() if c == controller]
+            raise InputError(
+                f"program format {kind!r} is for {CONTROLLER_OF_FORMAT[kind]} controllers, but robot "
+                f"{robot_name!r} has a {controller} controller; use {', '.join(fits) or 'none'} "
+                "([output] programs or --programs)"
+            )
+        check_output_signal(kind, problem.process.output)
+
+
+def check_output_signal(kind: str, output: str) -> None:
+    """``output`` (``process.output``) is a signal the ``kind`` program can switch.
+
+    Raises:
+        InputError: a name RAPID cannot declare, or an output number outside the controller's range.
+    """
+    if kind == "rapid" and not _RAPID_SIGNAL.fullmatch(output):
+        raise InputError(
+            f"process.output {output!r} is not a RAPID signal name (a letter, then up to 31 letters, "
+            "digits or _)"
+        )
+    if kind == "krl":
+        from refine.export.krl import krl_output_number
+
+        krl_output_number(output)  # raises outside $OUT[1..4096]; a name maps to the default
+    if kind == "urscript":
+        from refine.export.urscript import ur_output_number
+
+        ur_output_number(output)  # raises outside 0..7; a name maps to the default
+
+
+def check_joint_lists(problem: Problem, n_joints: int, robot_name: str) -> None:
+    """``home_deg`` and ``joint_acceleration_deg_s2`` have one value per joint of the robot."""
+    for key in ("home_deg", "joint_acceleration_deg_s2"):
+        values = getattr(problem.robot, key)
+        if values is not None and len(values) != n_joints:
+            raise InputError(
+                f"robot.{key} has {len(values)} values but robot {robot_name!r} has {n_joints} joints"
+            )
+
+
+def planned_outputs(problem: Problem, programs: tuple[str, ...], report: bool = True) -> tuple[str, ...]:
+    """Every file name a run of ``problem`` may write (the writers' naming rules)."""
+    stem = problem.file_stem
+    mp = problem.multipass
+    passes = [(1, 1)]
+    if mp is not None and mp.layers > 1:
+        passes = [(k, i) for k, row in enumerate(mp.lateral_offsets_m, 1) for i in range(1, len(row) + 1)]
+    names = ["result.json", f"{stem}.aml"]
+    names += ["trajectory.csv"] if len(passes) == 1 else [f"trajectory_L{k}P{i}.csv" for k, i in passes]
+    if report:
+        names.append("report.html")
+    for kind in programs:
+        if kind == "rapid":
+            names += [f"{stem}.mod"] if len(passes) == 1 else [f"{stem}_L{k}P{i}.mod" for k, i in passes]
+        elif kind == "krl":
+            prog = identifier(stem, "prog", 24)
+            names += [f"{prog}.src", f"{prog}.dat"]
+        elif kind == "urscript":
+            names.append(f"{stem}.script")
+    return tuple(names)
+
+
+def check_output_dir(problem: Problem, out_dir: Path, outputs: tuple[str, ...]) -> Path:
+    """The output folder is usable and no output file would replace an input file.
+
+    Returns:
+        ``out_dir`` resolved.
+
+    Raises:
+        InputError: ``out_dir`` is a file, lies under a file, cannot be created or written, or an
+            output name would land on one of the problem's input files.
+    """
+    out = Path(out_dir).resolve()
+    probe = out
+    while not probe.exists():
+        if probe.parent == probe:
+            break
+        probe = probe.parent
+    if not probe.is_dir():
+        raise InputError(f"--out {str(out_dir)!r}: {probe} is a file, not a folder")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise InputError(f"--out {str(out_dir)!r}: no permission to write in {probe}")
+    inputs = {p.resolve() for p in (*problem.input_files, problem.root / "problem.toml")}
+    for name in outputs:
+        target = out / name
+        if target.resolve() in inputs or (target.is_symlink() or (target.exists() and not target.is_file())):
+            raise InputError(
+                f"--out {str(out_dir)!r}: the output {name!r} would replace {target.resolve()}, which is "
+                "an input of the problem or not a regular file; choose another output folder"
+            )
+    return out
+
+
+def preflight(
+    problem: Problem,
+    out_dir: Path | None = None,
+    programs: tuple[str, ...] | None = None,
+    *,
+    report: bool = True,
+) -> Preflight:
+    """Run every check that needs the robot or the output folder (module docstring).
+
+    Args:
+        problem: the loaded problem.
+        out_dir: the output folder, or None to skip the folder checks.
+        programs: program formats overriding ``[output] programs``.
+        report: whether ``report.html`` will be written.
+
+    Raises:
+        InputError: the first failed check, naming the key or the option.
+    """
+    from refine.robot import load_robot
+
+    where = f"{problem.source}: " if problem.source is not None else ""
+    if programs is None:
+        programs = problem.output.programs
+    else:
+        where = "--programs: "
+    robot = load_robot(problem.robot.model)
+    try:
+        check_programs(problem, robot.spec.controller, robot.spec.name, programs)
+    except InputError as e:
+        raise InputError(f"{where}{e}") from e
+    try:
+        check_joint_lists(problem, robot.nq, robot.spec.name)
+    except InputError as e:
+        raise InputError(f"{problem.source}: {e}" if problem.source else str(e)) from e
+    outputs = planned_outputs(problem, programs, report)
+    out = None if out_dir is None else check_output_dir(problem, out_dir, outputs)
+    return Preflight(programs, out, outputs)
