@@ -248,12 +248,12 @@ class Tolerances:
     joint_step_deg: float = 20.0
 
     def __post_init__(self) -> None:
-        _in_range("tolerances", "position_m", self.position_m, 1e-8, 0.01, "m")
+        _in_range("tolerances", "position_m", self.position_m, 1e-8, 1.0, "m")
         _in_range("tolerances", "orientation_deg", self.orientation_deg, MIN_ORIENTATION_DEG, 89.0, "deg")
         _in_range("tolerances", "joint_margin_deg", self.joint_margin_deg, 0.0, 45.0, "deg")
         _in_range("tolerances", "singularity_margin", self.singularity_margin, 0.0, 0.9)
         _positive("tolerances", "joint_step_deg", self.joint_step_deg)
-        _in_range("tolerances", "joint_step_deg", self.joint_step_deg, 0.0, 180.0, "deg")
+        _in_range("tolerances", "joint_step_deg", self.joint_step_deg, 0.0, 1000.0, "deg")
 
 
 @dataclass(frozen=True)
