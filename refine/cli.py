@@ -51,6 +51,9 @@ def _parser() -> argparse.ArgumentParser:
     for parser in (run, check):
         add_safety_options(parser)
     sub.add_parser("robots", help="list the robots of the registry")
+    from refine.calibrate.cli import add_parser as add_calibrate
+
+    add_calibrate(sub)
     return p
 
 
@@ -63,6 +66,10 @@ def main(argv: list[str] | None = None) -> int:
     from refine.errors import RefineError
 
     try:
+        if args.command == "calibrate":
+            from refine.calibrate.cli import run as run_calibrate
+
+            return run_calibrate(args)
         if args.command == "robots":
             from refine.robot import available_robots, load_robot
 

@@ -221,6 +221,66 @@ def _pick_outliers(rng: np.random.Generator, first: int, stop: int, n: int) -> t
 # ---- the simulation -----------------------------------------------------------------------------
 
 
+def corrupt_sensor_poses(
+    t: ArrayLike, sensor_in_source: ArrayLike, model: TrackerModel, first_outlier: int = 0
+) -> tuple[Array, Array, tuple[int, ...]]:
+    """Apply the tracker error model to intended sensor poses, as the tracker would report them.
+
+    Tremor, distortion, noise and outliers are drawn from one generator seeded by
+    ``model.seed`` (in that order) and applied in {S}.
+
+    Args:
+        t: sample times [s], shape (M,).
+        sensor_in_source: intended sensor poses T_S_E, shape (M, 4, 4).
+        model: the error model.
+        first_outlier: index of the first sample that may carry a spike.
+
+    Returns:
+        Measured positions [m] (M, 3), measured rotations R_S_E (M, 3, 3) and the indices of the
+        samples carrying a spike, increasing.
+
+    Raises:
+        InputError: too few samples after ``first_outlier`` to place the spikes.
+    """
+    t = np.asarray(t, dtype=float)
+    T_S_E = np.asarray(sensor_in_source, dtype=float)
+    p_true, R_true = T_S_E[:, :3, 3], T_S_E[:, :3, :3]
+
+    # ---- errors, drawn in a fixed order from one generator
+    rng = np.random.default_rng(model.seed)
+    m = len(t)
+    rms_axis = np.radians(model.tremor_orientation_deg) / math.sqrt(3.0)
+    tremor_p = _tremor(rng, t, model.tremor_band_hz, model.tremor_position_m)
+    tremor_r = _tremor(rng, t, model.tremor_band_hz, rms_axis)
+    xy_field, rot_field = _WaveField(rng, 2), _WaveField(rng, 3)
+    noise_p = rng.normal(scale=model.position_noise_m, size=(m, 3))
+    noise_r = rng.normal(scale=np.radians(model.orientation_noise_deg) / math.sqrt(3.0), size=(m, 3))
+    outliers: tuple[int, ...] = ()
+    if model.n_outliers > 0:
+        outliers = _pick_outliers(rng, first_outlier, m - 5, model.n_outliers)
+    idx = np.array(outliers, dtype=int)
+    spike_p = _random_directions(rng, len(idx)) * rng.uniform(
+        *model.outlier_position_m, size=(len(idx), 1)
+    )
+    spike_r = _random_directions(rng, len(idx)) * np.radians(
+        rng.uniform(*model.outlier_orientation_deg, size=(len(idx), 1))
+    )
+
+    # ---- apply them in {S}
+    p = p_true + tremor_p
+    p[:, 2] += z_distortion(p_true, model)
+    p[:, :2] += (model.xy_error_max_m / math.sqrt(2.0)) * xy_field(p_true)
+    p += noise_p
+    p[idx] += spike_p
+    rot_dist = (np.radians(model.orientation_distortion_max_deg) / math.sqrt(3.0)) * rot_field(
+        p_true
+    )
+    R = matrix_from_rotvec(noise_r) @ matrix_from_rotvec(rot_dist) @ matrix_from_rotvec(tremor_r)
+    R = R @ R_true
+    R[idx] = matrix_from_rotvec(spike_r) @ R[idx]
+    return p, R, outliers
+
+
 def _check_path(s: Array, positions: Array, rotations: Array, speed: Array) -> None:
     n = len(s)
     if s.shape != (n,) or n < 2:
@@ -295,40 +355,9 @@ def simulate_demonstration(
     p_F_TCP = np.stack([np.interp(sample_s, s, positions[:, j]) for j in range(3)], axis=1)
     R_F_TCP = Slerp(s, Rotation.from_matrix(rotations))(sample_s).as_matrix()
     T_S_E = invert_transform(T_F_S) @ make_transform(R_F_TCP, p_F_TCP) @ T_TCP_E
-    p_true, R_true = T_S_E[:, :3, 3], T_S_E[:, :3, :3]
 
-    # ---- errors, drawn in a fixed order from one generator
-    rng = np.random.default_rng(model.seed)
+    p, R, outliers = corrupt_sensor_poses(t, T_S_E, model, first_outlier=n_pause + 5)
     m = len(t)
-    rms_axis = np.radians(model.tremor_orientation_deg) / math.sqrt(3.0)
-    tremor_p = _tremor(rng, t, model.tremor_band_hz, model.tremor_position_m)
-    tremor_r = _tremor(rng, t, model.tremor_band_hz, rms_axis)
-    xy_field, rot_field = _WaveField(rng, 2), _WaveField(rng, 3)
-    noise_p = rng.normal(scale=model.position_noise_m, size=(m, 3))
-    noise_r = rng.normal(scale=np.radians(model.orientation_noise_deg) / math.sqrt(3.0), size=(m, 3))
-    outliers: tuple[int, ...] = ()
-    if model.n_outliers > 0:
-        outliers = _pick_outliers(rng, n_pause + 5, m - 5, model.n_outliers)
-    idx = np.array(outliers, dtype=int)
-    spike_p = _random_directions(rng, len(idx)) * rng.uniform(
-        *model.outlier_position_m, size=(len(idx), 1)
-    )
-    spike_r = _random_directions(rng, len(idx)) * np.radians(
-        rng.uniform(*model.outlier_orientation_deg, size=(len(idx), 1))
-    )
-
-    # ---- apply them in {S}
-    p = p_true + tremor_p
-    p[:, 2] += z_distortion(p_true, model)
-    p[:, :2] += (model.xy_error_max_m / math.sqrt(2.0)) * xy_field(p_true)
-    p += noise_p
-    p[idx] += spike_p
-    rot_dist = (np.radians(model.orientation_distortion_max_deg) / math.sqrt(3.0)) * rot_field(
-        p_true
-    )
-    R = matrix_from_rotvec(noise_r) @ matrix_from_rotvec(rot_dist) @ matrix_from_rotvec(tremor_r)
-    R = R @ R_true
-    R[idx] = matrix_from_rotvec(spike_r) @ R[idx]
 
     log = TrackerLog(
         t=t, positions=p, rotations=R, station=station, source=f"simulated (seed {model.seed})"

@@ -1,0 +1,346 @@
+"""Receiver registration: the tracker receiver in the world frame (``source_in_world``).
+
+Two measurements give it:
+
+* **touched points** (:func:`register_receiver`): the tip of the pivot-calibrated hand tool rests
+  on N points of known world coordinates, one after the other, each for a dwell of at least
+  ``min_dwell_s``; :func:`find_dwells` finds the dwells in the log. The rigid transform comes from
+  Kabsch/SVD (:mod:`refine.calibrate.rigid`), refined together with the tracker's z error
+  (:mod:`refine.calibrate.zfield`) by least squares, inside a RANSAC that rejects a wrongly
+  touched point.
+* **a trace along the CAD path** (:func:`register_receiver_to_path`): a short demonstration with
+  the tip on the path; ICP matches every tip position to its nearest path point (scipy
+  ``cKDTree``) and refines the transform and the z error, from a first guess.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.optimize import least_squares
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
+
+from refine.calibrate import zfield
+from refine.calibrate.result import Calibration
+from refine.calibrate.rigid import check_point_geometry, kabsch, ransac
+from refine.demo.filters import hampel, smooth_positions, speed_along_track
+from refine.errors import InputError
+from refine.frames import invert_transform, make_transform, rotation_angle_deg
+from refine.paths import TrackerLog
+
+logger = logging.getLogger(__name__)
+
+Array = NDArray[np.float64]
+
+#: Tip speed under which the tool counts as resting on a point [m/s].
+DWELL_SPEED_M_S = 0.01
+#: Smoothing of the tip track before its speed is taken [s].
+DWELL_SMOOTHING_S = 0.1
+#: Default inlier threshold of the point registration [m].
+RECEIVER_THRESHOLD_M = 0.002
+#: Farthest a Liberty-class tracker reads [m]; farther positions mean wrong units.
+MAX_TRACKER_RANGE_M = 3.0
+
+
+@dataclass(frozen=True)
+class Dwell:
+    """One rest of the tip on a point.
+
+    Attributes:
+        start: first sample index.
+        stop: one past the last sample index.
+        sensor_position: median sensor position in {S} over the dwell [m], shape (3,).
+        sensor_rotation: mean sensor orientation R_S_E over the dwell, shape (3, 3).
+        duration_s: length of the dwell [s].
+    """
+
+    start: int
+    stop: int
+    sensor_position: Array
+    sensor_rotation: Array
+    duration_s: float
+
+
+def check_tracker_range(log: TrackerLog) -> None:
+    """Raise InputError when the log's positions are beyond any tracker's range (wrong units)."""
+    far = float(np.max(np.linalg.norm(log.positions, axis=1)))
+    if far > MAX_TRACKER_RANGE_M:
+        raise InputError(
+            f"tracker log {log.source!r}: positions reach {far:.1f} m from the receiver, beyond a "
+            f"tracker's {MAX_TRACKER_RANGE_M:.0f} m: are the units right (--units)?"
+        )
+
+
+def find_dwells(log: TrackerLog, tip_in_sensor: ArrayLike, min_dwell_s: float = 0.5) -> list[Dwell]:
+    """The rests of the tool tip in a log, in time order.
+
+    The tip track ``p + R t`` is cleaned of spikes (Hampel filter), smoothed over
+    :data:`DWELL_SMOOTHING_S` and differentiated; runs where the tip moves slower than
+    :data:`DWELL_SPEED_M_S` for at least ``min_dwell_s`` are dwells. Each dwell's sensor pose is
+    the median position and the mean orientation of its middle 80 %.
+    """
+    t = np.asarray(tip_in_sensor, dtype=float)
+    cleaned, spikes = hampel(log.positions, 7, 4.0, min_deviation=0.003)
+    tip = cleaned + log.rotations @ t
+    speed = speed_along_track(log.t, smooth_positions(log.t, tip, DWELL_SMOOTHING_S))
+    still = speed < DWELL_SPEED_M_S
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], still.astype(int), [0]])))
+    dwells = []
+    for start, stop in zip(edges[::2], edges[1::2], strict=True):
+        duration = float(log.t[stop - 1] - log.t[start])
+        if duration < min_dwell_s:
+            continue
+        trim = (stop - start) // 10
+        a, b = start + trim, stop - trim
+        good = ~spikes.any(axis=1)[a:b]
+        rot = Rotation.from_matrix(log.rotations[a:b][good]).mean()
+        dwells.append(
+            Dwell(
+                start=int(start),
+                stop=int(stop),
+                sensor_position=np.median(cleaned[a:b][good], axis=0),
+                sensor_rotation=rot.as_matrix(),
+                duration_s=duration,
+            )
+        )
+    return dwells
+
+
+# ---- touched points ----------------------------------------------------------------------------
+
+
+def _unpack(x: Array) -> tuple[Array, Array]:
+    return make_transform(Rotation.from_rotvec(x[:3]).as_matrix(), x[3:6]), x[6:8]
+
+
+def _pack(T: Array, coeffs: Array) -> Array:
+    return np.concatenate([Rotation.from_matrix(T[:3, :3]).as_rotvec(), T[:3, 3], coeffs])
+
+
+def _touch_residuals(x: Array, p: Array, R: Array, tip: Array, world: Array, fit_z: bool) -> Array:
+    """Measured minus predicted sensor positions in {S} [m], shape (N, 3)."""
+    T_F_S, coeffs = _unpack(x)
+    if not fit_z:
+        coeffs = np.zeros(zfield.N_COEFFS)
+    T_S_F = invert_transform(T_F_S)
+    tip_in_source = world @ T_S_F[:3, :3].T + T_S_F[:3, 3]
+    return p - zfield.distort(tip_in_source - R @ tip, coeffs)
+
+
+def register_receiver(
+    sensor_positions: ArrayLike,
+    sensor_rotations: ArrayLike,
+    tip_in_sensor: ArrayLike,
+    points_world: ArrayLike,
+    fit_z: bool = True,
+    threshold_m: float = RECEIVER_THRESHOLD_M,
+    labels: tuple[str, ...] = (),
+) -> Calibration:
+    """Solve ``source_in_world`` from the tool tip resting on points of known world position.
+
+    Args:
+        sensor_positions: sensor position in {S} at each point [m], shape (N, 3).
+        sensor_rotations: sensor orientation R_S_E at each point, shape (N, 3, 3).
+        tip_in_sensor: the tip offset in {E} [m], shape (3,).
+        points_world: the touched points in {F} [m], shape (N, 3), in the same order.
+        fit_z: also estimate the tracker's z error (needs at least 4 points).
+        threshold_m: largest residual of a point that counts as touched right [m].
+            With the z model, RANSAC fits subsets of at least 5 points, so finding a wrongly
+            touched point takes at least 6 points; without it, subsets of 3 and 4 points do.
+        labels: point names for the report.
+
+    Returns:
+        ``source_in_world`` (4, 4), a residual per point (outliers included) and the rejected
+        points; figures: the fitted z error coefficients and its range over the points.
+
+    Raises:
+        InputError: fewer points than the model needs, collinear points, or no consistent subset.
+    """
+    world = check_point_geometry(points_world, "receiver registration points", 4 if fit_z else 3)
+    p = np.asarray(sensor_positions, dtype=float)
+    R = np.asarray(sensor_rotations, dtype=float)
+    tip = np.asarray(tip_in_sensor, dtype=float)
+    n = len(world)
+    if p.shape != (n, 3) or R.shape != (n, 3, 3):
+        raise InputError(
+            f"receiver registration: {n} points but {len(p)} dwells in the log; touch the points in "
+            f"the order of the points file, resting at least the dwell time on each"
+        )
+
+    def fit(idx: NDArray[np.intp]) -> Array:
+        check_point_geometry(world[idx], "RANSAC subset", 3)
+        T0 = kabsch(p[idx] + R[idx] @ tip, world[idx])
+        x0 = _pack(T0, np.zeros(zfield.N_COEFFS))
+        sol = least_squares(
+            lambda x: _touch_residuals(x, p[idx], R[idx], tip, world[idx], fit_z).ravel(), x0, x_scale="jac"
+        )
+        return sol.x
+
+    def residuals(x: Array) -> Array:
+        return np.linalg.norm(_touch_residuals(x, p, R, tip, world, fit_z), axis=1)
+
+    sample = (max(5, n - max(1, n // 4)) if n >= 6 else n) if fit_z else 3
+    x, inliers = ransac(n, fit, residuals, sample, threshold_m)
+    T_F_S, coeffs = _unpack(x)
+    if not fit_z:
+        coeffs = np.zeros(zfield.N_COEFFS)
+    res = residuals(x)
+    dz_min, dz_max = zfield.z_error_range_m(p, coeffs)
+    return Calibration(
+        kind="receiver",
+        values={"source_in_world": T_F_S},
+        residuals_m=res,
+        outliers=tuple(int(i) for i in np.flatnonzero(~inliers)),
+        figures={
+            "threshold_m": float(threshold_m),
+            "z_coeffs_c2_per_m": float(coeffs[0]),
+            "z_coeffs_c3_per_m2": float(coeffs[1]),
+            "z_error_min_m": dz_min,
+            "z_error_max_m": dz_max,
+        },
+        labels=labels,
+    )
+
+
+def register_receiver_from_log(
+    log: TrackerLog,
+    tip_in_sensor: ArrayLike,
+    points_world: ArrayLike,
+    min_dwell_s: float = 0.5,
+    fit_z: bool = True,
+    threshold_m: float = RECEIVER_THRESHOLD_M,
+    labels: tuple[str, ...] = (),
+) -> Calibration:
+    """:func:`register_receiver` on the dwells :func:`find_dwells` finds in a log.
+
+    Raises:
+        InputError: a log beyond the tracker's range (units), or a number of dwells different
+            from the number of points (listing the dwells found).
+    """
+    check_tracker_range(log)
+    world = np.asarray(points_world, dtype=float)
+    dwells = find_dwells(log, tip_in_sensor, min_dwell_s)
+    if len(dwells) != len(world):
+        found = ", ".join(f"{log.t[d.start]:.1f}-{log.t[d.stop - 1]:.1f} s" for d in dwells) or "none"
+        raise InputError(
+            f"tracker log {log.source!r}: {len(dwells)} dwell(s) of at least {min_dwell_s} s found "
+            f"({found}) but {len(world)} points given; rest the tip on every point, in the order of "
+            f"the points file"
+        )
+    cal = register_receiver(
+        np.array([d.sensor_position for d in dwells]),
+        np.array([d.sensor_rotation for d in dwells]),
+        tip_in_sensor,
+        world,
+        fit_z=fit_z,
+        threshold_m=threshold_m,
+        labels=labels,
+    )
+    cal.figures["n_dwells"] = float(len(dwells))
+    return cal
+
+
+# ---- trace along the CAD path ------------------------------------------------------------------
+
+
+def register_receiver_to_path(
+    log: TrackerLog,
+    tip_in_sensor: ArrayLike,
+    path_world: ArrayLike,
+    initial_source_in_world: ArrayLike,
+    fit_z: bool = True,
+    spacing_m: float = 0.0005,
+    max_iterations: int = 40,
+    threshold_m: float = 0.01,
+    stride: int = 4,
+) -> Calibration:
+    """Solve ``source_in_world`` from a demonstration traced with the tip along the CAD path (ICP).
+
+    Each iteration matches every tip position (every ``stride``-th sample, spikes removed) to its
+    nearest point of the path resampled every ``spacing_m``, then refits the transform and the z
+    error with a robust (soft-L1) least squares; it stops when the transform moves less than a
+    micrometre. Tip positions farther than ``threshold_m`` from the path at the end are outliers.
+
+    Args:
+        log: the tracker log of the trace.
+        tip_in_sensor: tip offset in {E} [m], shape (3,).
+        path_world: the CAD path in {F} [m], shape (P, 3), ordered.
+        initial_source_in_world: first guess (4, 4), within a few centimetres and degrees.
+        fit_z: also estimate the tracker's z error.
+        spacing_m: resampling step of the path [m].
+        max_iterations: ICP iterations at most.
+        threshold_m: distance from the path beyond which a sample is an outlier [m].
+        stride: use every ``stride``-th sample.
+
+    Raises:
+        InputError: a log beyond the tracker's range, or a fit that leaves most samples off the
+            path (a bad first guess or the wrong path).
+    """
+    check_tracker_range(log)
+    tip = np.asarray(tip_in_sensor, dtype=float)
+    cleaned, spikes = hampel(log.positions, 7, 4.0, min_deviation=0.003)
+    keep = ~spikes.any(axis=1)
+    keep[np.arange(len(keep)) % stride != 0] = False
+    p, R = cleaned[keep], log.rotations[keep]
+    path = np.asarray(path_world, dtype=float)
+    seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    s_dense = np.arange(0.0, s[-1], spacing_m)
+    dense = np.column_stack([np.interp(s_dense, s, path[:, j]) for j in range(3)])
+    tree = cKDTree(dense)
+
+    def tips_world(x: Array) -> Array:
+        T, coeffs = _unpack(x)
+        true_sensor = zfield.correct(p, coeffs if fit_z else np.zeros(zfield.N_COEFFS))
+        tips = true_sensor + R @ tip
+        return tips @ T[:3, :3].T + T[:3, 3]
+
+    x = _pack(np.asarray(initial_source_in_world, dtype=float), np.zeros(zfield.N_COEFFS))
+    iterations = 0
+    for iterations in range(1, max_iterations + 1):  # noqa: B007 - the count is reported
+        _, nearest = tree.query(tips_world(x))
+        target = dense[nearest]
+        sol = least_squares(
+            lambda y, target=target: (tips_world(y) - target).ravel(),
+            x,
+            loss="soft_l1",
+            f_scale=0.002,
+            x_scale="jac",
+        )
+        T_old, _ = _unpack(x)
+        T_new, _ = _unpack(sol.x)
+        x = sol.x
+        moved_m = float(np.linalg.norm(T_new[:3, 3] - T_old[:3, 3]))
+        turned_rad = float(np.radians(rotation_angle_deg(T_old[:3, :3], T_new[:3, :3])))
+        if moved_m + turned_rad < 1e-6:
+            break
+    dist, _ = tree.query(tips_world(x))
+    outliers = np.flatnonzero(dist > threshold_m)
+    if len(outliers) > 0.5 * len(dist):
+        raise InputError(
+            f"path registration: {len(outliers)} of {len(dist)} tip positions stay more than "
+            f"{threshold_m * 1000:.0f} mm from the CAD path; the first guess of source_in_world is "
+            f"too far off, or the log does not trace this path"
+        )
+    T_F_S, coeffs = _unpack(x)
+    if not fit_z:
+        coeffs = np.zeros(zfield.N_COEFFS)
+    dz_min, dz_max = zfield.z_error_range_m(p, coeffs)
+    return Calibration(
+        kind="receiver_path",
+        values={"source_in_world": T_F_S},
+        residuals_m=dist,
+        outliers=tuple(int(i) for i in outliers),
+        figures={
+            "icp_iterations": float(iterations),
+            "samples_used": float(len(dist)),
+            "z_coeffs_c2_per_m": float(coeffs[0]),
+            "z_coeffs_c3_per_m2": float(coeffs[1]),
+            "z_error_min_m": dz_min,
+            "z_error_max_m": dz_max,
+        },
+    )
