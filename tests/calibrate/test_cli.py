@@ -8,39 +8,27 @@ import pytest
 from refine.calibrate.simulate import calibration_tracker_model, simulate_pivot, simulate_touches
 from refine.cli import main
 from refine.demo import write_liberty_ascii
-from refine.frames import invert_transform, rotation_angle_deg, transform_from_xyz_rpy
+from refine.frames import invert_transform, rotation_angle_deg
 from refine.problem import load_problem
 
 ROOT = Path(__file__).resolve().parents[2]
 GLASS = ROOT / "problems" / "glass_adhesive"
-TIP = np.array([0.03, -0.01, 0.25])
-SOURCE_IN_WORLD = transform_from_xyz_rpy([1.30, -0.82, 0.72], [0.0, 0.0, 90.0])
-POINTS = np.array(
-    [
-        [1.00, -0.55, 0.45],
-        [1.70, -0.35, 0.60],
-        [1.05, -0.05, 0.80],
-        [1.75, 0.15, 0.45],
-        [0.90, 0.40, 0.60],
-        [1.55, 0.60, 0.95],
-    ]
-)
 
 
 @pytest.fixture(scope="module")
-def pivot_log(tmp_path_factory):
+def pivot_log(tmp_path_factory, cell):
     path = tmp_path_factory.mktemp("pivot") / "pivot.liberty"
-    sim = simulate_pivot(TIP, [0.55, 0.25, -0.25], model=calibration_tracker_model(seed=0))
+    sim = simulate_pivot(cell.tip, [0.55, 0.25, -0.25], model=calibration_tracker_model(seed=0))
     write_liberty_ascii(path, sim.log, units="cm", with_frame_count=True, rate_hz=240.0)
     return path
 
 
-def test_pivot_json_has_the_documented_keys_in_metres(pivot_log, capsys):
+def test_pivot_json_has_the_documented_keys_in_metres(pivot_log, capsys, cell):
     assert main(["calibrate", "pivot", str(pivot_log), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     for key in ("tip_in_sensor_m", "pivot_in_source_m", "rms_residual_m", "max_residual_m", "outliers"):
         assert key in out
-    assert np.linalg.norm(np.array(out["tip_in_sensor_m"]) - TIP) < 0.5e-3
+    assert np.linalg.norm(np.array(out["tip_in_sensor_m"]) - cell.tip) < 0.5e-3
     assert out["rms_residual_m"] < 3e-3
 
 
@@ -50,14 +38,14 @@ def test_pivot_summary_prints_a_problem_snippet(pivot_log, capsys):
     assert "[tool]" in out and "sensor_in_tcp = { xyz = [" in out and "rms residual" in out
 
 
-def test_pivot_write_keeps_the_tool_orientation(pivot_log, tmp_path, capsys):
+def test_pivot_write_keeps_the_tool_orientation(pivot_log, tmp_path, capsys, cell):
     problem = tmp_path / "glass"
     shutil.copytree(GLASS, problem)
     before = load_problem(problem).tool.sensor_in_tcp
     assert main(["calibrate", "pivot", str(pivot_log), "--write", str(problem)]) == 0
     after = load_problem(problem).tool.sensor_in_tcp
     assert rotation_angle_deg(before[:3, :3], after[:3, :3]) < 1e-3
-    assert np.linalg.norm(invert_transform(after)[:3, 3] - TIP) < 0.5e-3
+    assert np.linalg.norm(invert_transform(after)[:3, 3] - cell.tip) < 0.5e-3
     text = (problem / "problem.toml").read_text()
     assert "# the Liberty sensor on the hand gun's barrel" in text  # comments kept
 
@@ -74,38 +62,44 @@ def test_units_mixed_up_exit_2(pivot_log, capsys):
     assert "units: cm" in err and "'in'" in err
 
 
-def test_too_little_swing_exits_2(tmp_path, capsys):
+def test_too_little_swing_exits_2(tmp_path, capsys, cell):
     path = tmp_path / "still.liberty"
-    sim = simulate_pivot(TIP, [0.55, 0.25, -0.25], swing_deg=2.0, model=calibration_tracker_model(seed=0))
+    sim = simulate_pivot(
+        cell.tip, [0.55, 0.25, -0.25], swing_deg=2.0, model=calibration_tracker_model(seed=0)
+    )
     write_liberty_ascii(path, sim.log, units="in")
     assert main(["calibrate", "pivot", str(path)]) == 2
     assert "too little swing" in capsys.readouterr().err
 
 
 @pytest.fixture(scope="module")
-def touch_files(tmp_path_factory):
+def touch_files(tmp_path_factory, cell):
     folder = tmp_path_factory.mktemp("touch")
     sim = simulate_touches(
-        POINTS, SOURCE_IN_WORLD, TIP, wrong={4: [0.0, 0.0, 0.02]}, model=calibration_tracker_model(seed=1)
+        cell.points,
+        cell.source_in_world,
+        cell.tip,
+        wrong={4: [0.0, 0.0, 0.02]},
+        model=calibration_tracker_model(seed=1),
     )
     write_liberty_ascii(folder / "touch.liberty", sim.log, units="in")
-    lines = ["name,x,y,z"] + [f"corner{k},{p[0]},{p[1]},{p[2]}" for k, p in enumerate(POINTS)]
+    lines = ["name,x,y,z"] + [f"corner{k},{p[0]},{p[1]},{p[2]}" for k, p in enumerate(cell.points)]
     (folder / "points.csv").write_text("\n".join(lines) + "\n")
     return folder / "touch.liberty", folder / "points.csv"
 
 
-def test_receiver_json_and_the_wrong_point(touch_files, capsys):
+def test_receiver_json_and_the_wrong_point(touch_files, capsys, cell):
     log, points = touch_files
-    args = ["calibrate", "receiver", str(log), str(points), "--tip-in-sensor", *map(str, TIP), "--json"]
+    args = ["calibrate", "receiver", str(log), str(points), "--tip-in-sensor", *map(str, cell.tip), "--json"]
     assert main(args) == 0
     out = json.loads(capsys.readouterr().out)
     T = np.array(out["source_in_world"])
-    assert np.linalg.norm(T[:3, 3] - SOURCE_IN_WORLD[:3, 3]) < 1e-3
-    assert rotation_angle_deg(T[:3, :3], SOURCE_IN_WORLD[:3, :3]) < 0.2
+    assert np.linalg.norm(T[:3, 3] - cell.source_in_world[:3, 3]) < 1e-3
+    assert rotation_angle_deg(T[:3, :3], cell.source_in_world[:3, :3]) < 0.2
     assert out["outliers"] == [4] and len(out["residuals_m"]) == 6
 
 
-def test_receiver_write_updates_the_frames_table(touch_files, tmp_path, capsys):
+def test_receiver_write_updates_the_frames_table(touch_files, tmp_path, capsys, cell):
     log, points = touch_files
     problem = tmp_path / "glass"
     shutil.copytree(GLASS, problem)
@@ -115,23 +109,23 @@ def test_receiver_write_updates_the_frames_table(touch_files, tmp_path, capsys):
         str(log),
         str(points),
         "--tip-in-sensor",
-        *map(str, TIP),
+        *map(str, cell.tip),
         "--write",
         str(problem),
     ]
     assert main(args) == 0
     assert "REJECTED" in capsys.readouterr().out
     T = load_problem(problem).frames.source_in_world
-    assert np.linalg.norm(T[:3, 3] - SOURCE_IN_WORLD[:3, 3]) < 1e-3
+    assert np.linalg.norm(T[:3, 3] - cell.source_in_world[:3, 3]) < 1e-3
 
 
-def test_receiver_points_in_millimetres_exit_2(touch_files, tmp_path, capsys):
+def test_receiver_points_in_millimetres_exit_2(touch_files, tmp_path, capsys, cell):
     log, _ = touch_files
     points = tmp_path / "mm.csv"
     points.write_text(
-        "x,y,z\n" + "\n".join(f"{p[0] * 1000},{p[1] * 1000},{p[2] * 1000}" for p in POINTS) + "\n"
+        "x,y,z\n" + "\n".join(f"{p[0] * 1000},{p[1] * 1000},{p[2] * 1000}" for p in cell.points) + "\n"
     )
-    assert main(["calibrate", "receiver", str(log), str(points), "--tip-in-sensor", *map(str, TIP)]) == 2
+    assert main(["calibrate", "receiver", str(log), str(points), "--tip-in-sensor", *map(str, cell.tip)]) == 2
     assert "millimetres" in capsys.readouterr().err
 
 
