@@ -20,14 +20,12 @@ a segment they can be exceeded only by a second-order term in the segment length
 
 from __future__ import annotations
 
+import functools
 import logging
 import time
 from dataclasses import dataclass
 
 import numpy as np
-import toppra
-import toppra.algorithm
-import toppra.constraint
 from numpy.typing import NDArray
 
 from refine.errors import InputError, SolverError
@@ -128,20 +126,6 @@ class Timing:
             )
 
 
-class _PathSpeedConstraint(toppra.constraint.LinearConstraint):
-    """TOPPRA constraint ``sdot <= cap(s)``: a bound on ``x = sdot^2`` at every gridpoint."""
-
-    def __init__(self, s: Array, cap: Array) -> None:
-        super().__init__()
-        self.s, self.cap = s, cap
-        self.dof = -1  # independent of the path dimension
-
-    def compute_constraint_params(self, path, gridpoints, *args, **kwargs):  # noqa: D102
-        cap = np.interp(gridpoints, self.s, self.cap)
-        xbound = np.column_stack([np.zeros_like(cap), cap**2])
-        return None, None, None, None, None, None, xbound
-
-
 def _check_inputs(s, q, speed_cap, velocity_limits, acceleration_limits, tolerance_rel, n_min):
     s = np.asarray(s, dtype=float)
     q = np.asarray(q, dtype=float)
@@ -177,15 +161,41 @@ def _check_inputs(s, q, speed_cap, velocity_limits, acceleration_limits, toleran
     return tuple(arrays[k] for k in ("s", "q", "speed_cap", "velocity_limits", "acceleration_limits"))
 
 
-class _FreeEndTOPPRA(toppra.algorithm.TOPPRA):
-    """TOPPRA whose end speed may be anything from 0 up to the ``sd_end`` it is given.
+@functools.cache
+def _toppra():
+    """The toppra package and this module's two subclasses of it, imported on first use.
 
-    ``compute_parameterization`` pins the end speed to ``sd_end``; widening the end of the
-    controllable sets to ``[0, sd_end]`` lets the greedy forward pass end as fast as it can.
+    toppra imports matplotlib's pyplot when it is imported, a large part of a run's start-up, so
+    it is imported only by a run that times a path.
     """
+    import toppra
+    import toppra.algorithm
+    import toppra.constraint
 
-    def compute_controllable_sets(self, sdmin, sdmax):  # noqa: D102
-        return super().compute_controllable_sets(0.0, sdmax)
+    class _PathSpeedConstraint(toppra.constraint.LinearConstraint):
+        """TOPPRA constraint ``sdot <= cap(s)``: a bound on ``x = sdot^2`` at every gridpoint."""
+
+        def __init__(self, s: Array, cap: Array) -> None:
+            super().__init__()
+            self.s, self.cap = s, cap
+            self.dof = -1  # independent of the path dimension
+
+        def compute_constraint_params(self, path, gridpoints, *args, **kwargs):  # noqa: D102
+            cap = np.interp(gridpoints, self.s, self.cap)
+            xbound = np.column_stack([np.zeros_like(cap), cap**2])
+            return None, None, None, None, None, None, xbound
+
+    class _FreeEndTOPPRA(toppra.algorithm.TOPPRA):
+        """TOPPRA whose end speed may be anything from 0 up to the ``sd_end`` it is given.
+
+        ``compute_parameterization`` pins the end speed to ``sd_end``; widening the end of the
+        controllable sets to ``[0, sd_end]`` lets the greedy forward pass end as fast as it can.
+        """
+
+        def compute_controllable_sets(self, sdmin, sdmax):  # noqa: D102
+            return super().compute_controllable_sets(0.0, sdmax)
+
+    return toppra, _PathSpeedConstraint, _FreeEndTOPPRA
 
 
 def build_toppra(s, q, speed_cap, velocity_limits, acceleration_limits, *, free_end=False):
@@ -203,6 +213,7 @@ def build_toppra(s, q, speed_cap, velocity_limits, acceleration_limits, *, free_
     Returns:
         A ``toppra.algorithm.TOPPRA`` on the spline through (s, q), gridpoints ``s``.
     """
+    toppra, _PathSpeedConstraint, _FreeEndTOPPRA = _toppra()
     path = toppra.SplineInterpolator(s, q)
     constraints = [
         toppra.constraint.JointVelocityConstraint(velocity_limits),
@@ -217,7 +228,7 @@ def build_toppra(s, q, speed_cap, velocity_limits, acceleration_limits, *, free_
 
 def _solve_path_speed(instance, sd_start: float, sd_end: float) -> Array:
     """Run TOPPRA; on an uncontrollable start speed retry at the largest controllable one."""
-    rc = toppra.algorithm.ParameterizationReturnCode
+    rc = _toppra()[0].algorithm.ParameterizationReturnCode
     try:
         _, sd, _ = instance.compute_parameterization(sd_start, sd_end)
         data = instance.problem_data

@@ -30,6 +30,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from refine.errors import InputError
+from refine.optimise.derivatives import (
+    derivative_functions,
+    orientation_factor,
+    smoothness_matrix,
+    waypoint_kernels,
+)
 from refine.optimise.kinematics import fk_function, jacobian_function
 from refine.paths import FusedPath
 from refine.problem import Tolerances
@@ -84,6 +90,8 @@ class RefinementNLP:
         waypoint: the per-waypoint CasADi function (constraints and cost), for inspection.
         active: the singularity bounds and linearised rows beyond the per-waypoint ones.
         elastic_deg: None for the strict problem, else the largest extra cone slack [deg].
+        derivatives: the ``grad_f``, ``jac_g`` and ``hess_lag`` functions the solver was given
+            (:func:`refine.optimise.derivatives.derivative_functions`).
         robot, base_in_world, tcp_in_flange, fused, tolerances: what it was built from.
         build_time_s: wall time of the build [s].
     """
@@ -110,6 +118,7 @@ class RefinementNLP:
     active: ActiveSet = field(default_factory=lambda: ActiveSet())
     elastic_deg: float | None = None
     build_time_s: float = 0.0
+    derivatives: dict[str, ca.Function] = field(default_factory=dict)
 
     def rebuilt(self, *, active: ActiveSet | None = None, elastic_deg: float | None = None) -> RefinementNLP:
         """The same problem with another active set or elastic setting (rebuilt, not solved)."""
@@ -155,12 +164,14 @@ IPOPT_DEFAULTS: dict[str, Any] = {
     "ipopt.warm_start_mult_bound_push": 1e-9,
     "ipopt.mumps_scaling": 0,
     "ipopt.mumps_permuting_scaling": 0,
+    "ipopt.mumps_pivot_order": 6,
 }
 """IPOPT settings: a warm start from the IK seed, which is usually close to the answer, and a
 constraint tolerance well under the 1e-6 m position tolerance of the verification. MUMPS's own
 matrix scaling is off: the problem is scaled by construction (metres, radians, cost in deg²), and
 the scaling pass costs more than the factorisation at thousands of waypoints (6,400 waypoints:
-2.3 s -> 1.1 s, same iterations)."""
+2.3 s -> 1.1 s, same iterations). MUMPS orders the banded KKT matrix with QAMD (pivot order 6)
+rather than letting it choose: its automatic choice took 2.5 times as long at 6,400 waypoints."""
 
 ROW_NAMES = ("position x", "position y", "position z", "orientation cone")
 
@@ -299,15 +310,18 @@ def build_refinement(
     _check_active(active, N, n)
 
     # ---- decision variables and parameters
-    Q = ca.MX.sym("Q", n, N)
-    P_ref = ca.MX.sym("P_ref", 3, N)
-    R_demo = ca.MX.sym("R_demo", 9, N)
-    sigma = ca.MX.sym("sigma", N if elastic_deg is not None else 0)
+    elastic = elastic_deg is not None
+    x = ca.MX.sym("x", N * n + (N if elastic else 0))
+    p = ca.MX.sym("p", 12 * N)
+    Q = ca.reshape(x[: N * n], n, N)
+    P_ref = ca.reshape(p[: 3 * N], 3, N)
+    R_demo = ca.reshape(p[3 * N :], 9, N)
+    sigma = x[N * n :]
 
-    # ---- path constraints and orientation cost, mapped over the waypoints
-    waypoint = waypoint_function(robot, base_in_world, tcp_in_flange, axisymmetric)
-    G, cost = waypoint.map(N)(Q, P_ref, R_demo)
-    if elastic_deg is not None:
+    # ---- path constraints and orientation cost, mapped over the waypoints (compiled kernels)
+    kernels = waypoint_kernels(robot, base_in_world, tcp_in_flange, axisymmetric)
+    G, cost = kernels["waypoint"].map(N)(Q, P_ref, R_demo)
+    if elastic:
         G = ca.vertcat(G[:3, :], G[3, :] + sigma.T)  # cos θ_k + σ_k >= cos α
     rows, lbg_extra, ubg_extra = [ca.vec(G)], [], []
     step = math.radians(tolerances.joint_step_deg)
@@ -322,7 +336,7 @@ def build_refinement(
     points = [(k, 0.0) for k in active.singular_waypoints] + list(active.singular_segments)
     if points:
         Qs = at([k for k, _ in points], [f for _, f in points])
-        rows.append(ca.vec(singularity_function(robot, base_in_world, tcp_in_flange).map(len(points))(Qs)))
+        rows.append(ca.vec(kernels["singularity"].map(len(points))(Qs)))
         lbg_extra.append(np.full(len(points), tolerances.singularity_margin))
         ubg_extra.append(np.full(len(points), np.inf))
     if active.linear_rows:
@@ -333,23 +347,18 @@ def build_refinement(
         ubg_extra.append(np.full(len(active.linear_rows), np.inf))
 
     # ---- objective: orientation deviation + joint smoothness per metre of path (+ secondary, slack)
+    # The smoothness and mid-range terms are the constant quadratic ½ qᵀKq + bᵀq + c of q = vec(Q).
     h = float(np.mean(np.diff(fused.s)))
-    dQ = Q[:, 1:] - Q[:, :-1]
-    d2Q = Q[:, 2:] - 2 * Q[:, 1:-1] + Q[:, :-2]
-    f = (
-        weights.orientation * 2.0 * (180.0 / math.pi) ** 2 * ca.sum2(cost)
-        + weights.velocity * ca.sumsqr(dQ) / h**2
-        + weights.acceleration * ca.sumsqr(d2Q) / h**4
-    ) / N
-    if weights.mid_range > 0:
-        mid, half = 0.5 * (spec.lower + spec.upper), 0.5 * (spec.upper - spec.lower)
-        f += (
-            weights.mid_range
-            * ca.sumsqr((Q - ca.repmat(ca.DM(mid), 1, N)) / ca.repmat(ca.DM(half), 1, N))
-            / N
-        )
-    if elastic_deg is not None:
+    mid, half = 0.5 * (spec.lower + spec.upper), 0.5 * (spec.upper - spec.lower)
+    K = smoothness_matrix(n, N, h, weights.velocity, weights.acceleration, weights.mid_range, half) / N
+    b = np.tile(-2.0 * weights.mid_range / N * mid / half**2, N)
+    c0 = weights.mid_range * N * float(np.sum((mid / half) ** 2)) / N
+    qv = x[: N * n]
+    coef = orientation_factor(weights.orientation, N)
+    f = coef * ca.sum2(cost) + 0.5 * ca.dot(qv, ca.mtimes(K, qv)) + ca.dot(ca.DM(b), qv) + c0
+    if elastic:
         f += ELASTIC_WEIGHT * ca.sum1(sigma)
+    g = ca.vertcat(*rows)
 
     # ---- bounds
     alpha = math.radians(tolerances.orientation_deg)
@@ -363,16 +372,26 @@ def build_refinement(
     params = np.concatenate(
         [fused.positions.ravel(), np.transpose(fused.rotations, (0, 2, 1)).reshape(N, 9).ravel()]
     )
-    nlp = {
-        "x": ca.vertcat(ca.vec(Q), sigma),
-        "p": ca.vertcat(ca.vec(P_ref), ca.vec(R_demo)),
-        "f": f,
-        "g": ca.vertcat(*rows),
-    }
+    nlp = {"x": x, "p": p, "f": f, "g": g}
+    derivatives = derivative_functions(
+        kernels,
+        N=N,
+        n=n,
+        x=x,
+        p=p,
+        f=f,
+        g=g,
+        orientation_coef=coef,
+        K=K,
+        b=b,
+        elastic_weight=ELASTIC_WEIGHT if elastic else None,
+        singular_points=points,
+        linear_rows=[(r.k, r.f, np.asarray(r.gradient, dtype=float)) for r in active.linear_rows],
+    )
     options = {**IPOPT_DEFAULTS, **(solver_options or {})}
     return RefinementNLP(
         nlp=nlp,
-        solver=ca.nlpsol("refine", "ipopt", nlp, options),
+        solver=ca.nlpsol("refine", "ipopt", nlp, {**derivatives, **options}),
         solver_options=options,
         params=params,
         lbx=lbx,
@@ -382,7 +401,7 @@ def build_refinement(
         n_waypoints=N,
         dof=n,
         row_names=ROW_NAMES,
-        waypoint=waypoint,
+        waypoint=kernels["waypoint"],
         robot=robot,
         base_in_world=np.asarray(base_in_world, dtype=float),
         tcp_in_flange=np.asarray(tcp_in_flange, dtype=float),
@@ -393,6 +412,7 @@ def build_refinement(
         active=active,
         elastic_deg=elastic_deg,
         build_time_s=time.perf_counter() - t0,
+        derivatives=derivatives,
     )
 
 

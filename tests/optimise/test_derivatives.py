@@ -1,0 +1,119 @@
+"""The hand-assembled derivatives of the refinement NLP against CasADi's own differentiation, and the
+on-disk cache of compiled kernels."""
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from refine.optimise import compiled as compiled_module
+from refine.optimise.compiled import compiled, compiler
+from refine.optimise.derivatives import waypoint_kernels
+from refine.optimise.problem import ActiveSet, LinearRow, Weights, build_refinement
+from refine.problem import Tolerances
+from refine.synthetic import wave_path
+
+
+def _problem(robot, tool, *, elastic: bool):
+    rng = np.random.default_rng(3)
+    N = 12
+    active = ActiveSet(
+        singular_waypoints=(2, 5),
+        singular_segments=((7, 0.3), (10, 0.8)),
+        linear_rows=(
+            LinearRow(3, 0.0, rng.normal(size=6), 0.1, "a"),
+            LinearRow(8, 0.6, rng.normal(size=6), -0.2, "b"),
+            LinearRow(8, 0.6, rng.normal(size=6), 0.0, "c"),
+        ),
+    )
+    return build_refinement(
+        robot,
+        wave_path(N),
+        np.eye(4),
+        tool,
+        Tolerances(),
+        weights=Weights(mid_range=0.3, acceleration=1e-3),
+        active=active,
+        elastic_deg=2.0 if elastic else None,
+    )
+
+
+@pytest.mark.parametrize("elastic", [False, True])
+def test_assembled_derivatives_equal_casadi_differentiation(irb4600, straight_tool, monkeypatch, elastic):
+    # in the virtual machine, CasADi can differentiate the symbolic problem twice itself
+    monkeypatch.setenv("REFINE_COMPILE", "0")
+    nlp = _problem(irb4600, straight_tool, elastic=elastic)
+    x, p, f, g = (nlp.nlp[k] for k in ("x", "p", "f", "g"))
+    lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", g.shape[0])
+    reference = ca.Function(
+        "reference",
+        [x, p, lam_f, lam_g],
+        [f, ca.gradient(f, x), g, ca.jacobian(g, x), ca.triu(ca.hessian(lam_f * f + ca.dot(lam_g, g), x)[0])],
+    )
+    rng = np.random.default_rng(7)
+    xv = np.concatenate(
+        [
+            rng.uniform(nlp.lbx[: nlp.n_waypoints * 6], nlp.ubx[: nlp.n_waypoints * 6]) * 0.5,
+            rng.uniform(0.0, 0.01, x.shape[0] - nlp.n_waypoints * 6),
+        ]
+    )
+    lf, lg = 0.7, rng.normal(size=g.shape[0])
+    f_ref, grad_ref, g_ref, jac_ref, hess_ref = (
+        np.array(ca.densify(v)) for v in reference(xv, nlp.params, lf, lg)
+    )
+    f_val, grad = nlp.derivatives["grad_f"](xv, nlp.params)
+    g_val, jac = nlp.derivatives["jac_g"](xv, nlp.params)
+    hess = nlp.derivatives["hess_lag"](xv, nlp.params, lf, lg)
+    np.testing.assert_allclose(float(f_val), f_ref.item(), rtol=1e-12)
+    np.testing.assert_allclose(np.array(g_val).ravel(), g_ref.ravel(), atol=1e-12)
+    np.testing.assert_allclose(np.array(grad).ravel(), grad_ref.ravel(), rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(np.array(ca.densify(jac)), jac_ref, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(np.array(ca.densify(hess)), hess_ref, rtol=1e-8, atol=1e-8)
+    assert np.abs(hess_ref).max() > 1.0  # the comparison is not of zeros
+
+
+@pytest.mark.skipif(compiler() is None, reason="no C compiler: the kernels run in the virtual machine")
+def test_compiled_kernels_give_the_virtual_machine_values(irb4600, straight_tool, monkeypatch):
+    fast = waypoint_kernels(irb4600, np.eye(4), straight_tool, False)
+    monkeypatch.setenv("REFINE_COMPILE", "0")
+    slow = waypoint_kernels(irb4600, np.eye(4), straight_tool, False)
+    assert "external" in str(fast["waypoint_h"]).lower() or fast["waypoint_h"].is_a("External")
+    q = np.array([0.1, 0.2, -0.1, 0.3, -0.8, 0.4])
+    args = (q, [1.0, 0.2, 0.5], np.eye(3).ravel(), [0.1, -0.2, 0.3, 0.5], 2.0)
+    np.testing.assert_allclose(
+        np.array(fast["waypoint_h"](*args)), np.array(slow["waypoint_h"](*args)), rtol=1e-12
+    )
+    for a, b in zip(fast["waypoint_d"](*args[:3]), slow["waypoint_d"](*args[:3]), strict=True):
+        np.testing.assert_allclose(np.array(a), np.array(b), rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.skipif(compiler() is None, reason="no C compiler")
+def test_compiled_library_is_cached_on_disk_by_key(tmp_path, monkeypatch):
+    monkeypatch.setenv("REFINE_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(compiled_module, "_loaded", {})
+    made = []
+
+    def make(scale):
+        def build():
+            made.append(scale)
+            x = ca.SX.sym("x")
+            return [ca.Function("twice", [x], [scale * x])]
+
+        return build
+
+    assert float(compiled("t", "key-a", make(2.0))["twice"](3.0)) == 6.0
+    assert len(list(tmp_path.glob("t-*.so"))) == 1 and made == [2.0]
+    monkeypatch.setattr(compiled_module, "_loaded", {})  # a new process: only the disk remains
+    assert float(compiled("t", "key-a", make(2.0))["twice"](3.0)) == 6.0
+    assert made == [2.0]  # loaded from disk, not built again
+    assert float(compiled("t", "key-b", make(5.0))["twice"](3.0)) == 15.0  # another key, another library
+    assert len(list(tmp_path.glob("t-*.so"))) == 2
+
+
+def test_without_compilation_the_functions_themselves_are_used(tmp_path, monkeypatch):
+    monkeypatch.setenv("REFINE_CACHE_DIR", str(tmp_path))
+    monkeypatch.setenv("REFINE_COMPILE", "0")
+    x = ca.SX.sym("x")
+    f = ca.Function("square", [x], [x * x])
+    out = compiled("t", "key", lambda: [f])
+    assert float(out["square"](4.0)) == 16.0
+    assert not list(tmp_path.iterdir())
