@@ -41,7 +41,8 @@ def test_lwpolyline_bulge_becomes_an_arc_at_the_elevation(tmp_path):
 
     pts = points_from_dxf(_save(tmp_path, build), "mm", flatten_tolerance_m=1e-7) * 1000.0
     np.testing.assert_allclose(pts[:, 2], 5.0)
-    np.testing.assert_allclose(pts[0], [0, 0, 5]) and np.testing.assert_allclose(pts[-1], [10, 10, 5])
+    np.testing.assert_allclose(pts[0], [0, 0, 5])
+    np.testing.assert_allclose(pts[-1], [10, 10, 5])
     arc = pts[2:]
     np.testing.assert_allclose(np.hypot(arc[:, 0] - 10, arc[:, 1] - 5), 5.0, atol=1e-12)
     assert arc[:, 0].max() == pytest.approx(15.0, abs=1e-3)  # bulge 1 > 0: counter-clockwise

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import time
 
 import numpy as np
 import pytest
@@ -29,7 +30,9 @@ def _swing(deg_from, deg_to, n=2):
 
 def test_a_swing_through_a_pillar_between_two_clear_waypoints_is_found(pillar_model, kin):
     q = _swing(-45.0, 45.0)
+    queries_before, start = pillar_model.queries, time.perf_counter()
     result = check_path_clearance(pillar_model, q, kin, step_m=0.01)
+    wall_s = time.perf_counter() - start
     assert np.all(result.waypoint_clearance_m > 0.1)  # both waypoints are well clear
     assert not result.ok and len(result.runs) == 1
     run = result.runs[0]
@@ -39,7 +42,10 @@ def test_a_swing_through_a_pillar_between_two_clear_waypoints_is_found(pillar_mo
     assert result.segment_pair[0] == run.worst_pair
     summary = result.summary()
     assert "waypoints 0-1" in summary and "pillar" in summary and "below the margin" in summary
-    assert result.queries > 0 and result.time_s > 0.0
+    # every checked configuration (2 waypoints, m - 1 sub-steps) asks FCL for at least its nearest pair
+    assert result.queries == pillar_model.queries - queries_before
+    assert result.queries >= 2 + result.segment_samples[0] - 1
+    assert 0.0 < result.time_s <= wall_s
 
 
 def test_a_path_that_stays_clear_passes(pillar_model, kin):

@@ -121,7 +121,14 @@ def test_a_constant_distance_pair_is_skipped_with_its_reason():
         housing = shapes[("link_2", "shoulder_housing")].collision_object(poses["link_2"])
         base = shapes[("base_link", "base")].collision_object(poses["base_link"])
         distances.append(fcl.distance(housing, base, fcl.DistanceRequest()))
-    assert np.ptp(distances) < 1e-6 and distances[0] == pytest.approx(0.0007, abs=1e-5)
+    # the housing (a horizontal cylinder about joint 2's axis, at the data sheet's d1 = 0.1807 m above
+    # the base) hangs over the base cylinder: gap = d1 - housing radius - top of the base
+    housing, base = shapes[("link_2", "shoulder_housing")], shapes[("base_link", "base")]
+    base_top = base.link_T_shape[2, 3] + 0.5 * base.geometry.lz
+    gap = 0.1807 - housing.geometry.radius - base_top
+    assert gap == pytest.approx(0.0007, abs=1e-12)  # 0.1807 - 0.09 - 0.09
+    assert np.ptp(distances) < 1e-6
+    np.testing.assert_allclose(distances, gap, atol=2e-6)
 
 
 def test_contacts_with_the_broad_phase_equal_a_check_of_every_pair(cell_model, irb4600):
@@ -182,14 +189,39 @@ def test_linearised_distance_predicts_the_change_for_a_small_joint_step(cell_mod
 _CYLINDERS = {"foot", "column", "forearm", "wrist", "flange", "nozzle"}
 
 
-def test_a_distance_fcl_gets_wrong_is_caught_by_the_separating_plane_check(cell_model):
-    """At this pose FCL's GJK reports the forearm 0.245 m from the upper arm; they are 0.150 m apart
-    (checked by sampling the cylinder's surface against the box). Swapping the arguments fixes it."""
+def _cylinder_surface(radius: float, length: float) -> np.ndarray:
+    """Points on a cylinder's side (every 0.25 deg, 0.8 mm) and caps, in its frame (axis z) [m]."""
+    theta = np.linspace(0.0, 2.0 * np.pi, 1441)[:-1]
+    t, z = (a.ravel() for a in np.meshgrid(theta, np.linspace(-length / 2, length / 2, 801), indexing="ij"))
+    points = [np.column_stack([radius * np.cos(t), radius * np.sin(t), z])]
+    r, t = (a.ravel() for a in np.meshgrid(np.linspace(0.0, radius, 61), theta, indexing="ij"))
+    for zc in (-length / 2, length / 2):
+        points.append(np.column_stack([r * np.cos(t), r * np.sin(t), np.full(len(r), zc)]))
+    return np.vstack(points)
+
+
+def test_a_distance_fcl_gets_wrong_is_caught_by_the_separating_plane_check(cell_model, irb4600):
+    """At this pose FCL's GJK reports the forearm 0.245 m from the upper arm; they are 0.150 m apart.
+
+    The expectation is derived here: points sampled densely on the forearm cylinder's surface, each
+    measured to the upper-arm box in closed form. Their least distance is an upper bound of the true
+    one and, at this sampling, within 0.1 mm of it.
+    """
     q = np.array([1.04542250, -0.21382341, -0.16175982, 0.72269328, 1.17899150, -0.12432522])
     (c,) = [
         c for c in cell_model.contacts(q, np.inf) if (c.body_shape, c.other_shape) == ("forearm", "upper_arm")
     ]
-    assert c.distance_m == pytest.approx(0.1504365, abs=2e-6)
+    shapes = {(s.link, s.name): s for s in irb4600.collision_shapes()}
+    forearm, upper_arm = shapes[("link_4", "forearm")], shapes[("link_2", "upper_arm")]
+    poses = irb4600.link_poses(q)
+    T_f = poses["link_4"] @ forearm.link_T_shape
+    T_u = poses["link_2"] @ upper_arm.link_T_shape
+    points = _cylinder_surface(forearm.geometry.radius, forearm.geometry.lz) @ T_f[:3, :3].T + T_f[:3, 3]
+    in_box = (points - T_u[:3, 3]) @ T_u[:3, :3]
+    outside = np.maximum(np.abs(in_box) - 0.5 * np.asarray(upper_arm.geometry.side), 0.0)
+    sampled = np.linalg.norm(outside, axis=1).min()
+    assert 0.14 < sampled < 0.16  # the pose is the one the docstring describes
+    assert sampled - 1e-4 <= c.distance_m <= sampled + 1e-9
     assert np.linalg.norm(c.point_body - c.point_other) == pytest.approx(c.distance_m, abs=1e-9)
 
 

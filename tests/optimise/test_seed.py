@@ -1,7 +1,6 @@
 import numpy as np
 
 from refine.optimise.seed import ik_chain, shift_turns, solve_ik, start_candidates
-from refine.synthetic import wave_path
 
 
 def test_dls_ik_reaches_a_reachable_pose(kin):
@@ -38,7 +37,6 @@ def test_chained_seed_follows_a_full_turn_of_the_tool_without_leaving_the_limits
     """A closed loop whose tool heading turns 360 degrees: axis 6 must unwind within +-400 deg."""
     n = 120
     theta = np.linspace(0, 2 * np.pi, n)
-    base = wave_path(n)
     positions = np.column_stack([1.3 + 0.2 * np.cos(theta), 0.2 * np.sin(theta), np.full(n, 0.6)])
     heading = theta + np.pi / 2
     R = np.stack([np.array([[np.cos(a), np.sin(a), 0], [np.sin(a), -np.cos(a), 0], [0, 0, -1]]) for a in heading])
@@ -50,4 +48,3 @@ def test_chained_seed_follows_a_full_turn_of_the_tool_without_leaving_the_limits
     assert errors.max() < 1e-5
     assert np.all(qs >= lower - 1e-9) and np.all(qs <= upper + 1e-9)
     assert np.degrees(np.abs(np.diff(qs, axis=0)).max()) < 20.0  # continuous: no branch jumps
-    assert base is not None
