@@ -188,7 +188,9 @@ def test_ur10e_fk_equals_the_dh_product(robots):
     qs = np.vstack([np.zeros(6), rng.uniform(ur.spec.lower, ur.spec.upper, size=(20, 6))])
     for q in qs:
         np.testing.assert_allclose(ur.fk(q), _dh_product(q), atol=1e-12)
-    np.testing.assert_allclose(ur.fk(np.zeros(6))[:3, 3], [-1.18425, -0.2907, 0.06085], atol=1e-12)
+    # all zero: arm stretched along -x (a2 + a3), wrist offsets d4 + d6 along -y, d5 down from d1
+    expected = [UR_A[1] + UR_A[2], -(UR_D[3] + UR_D[5]), UR_D[0] - UR_D[4]]
+    np.testing.assert_allclose(ur.fk(np.zeros(6))[:3, 3], expected, atol=1e-12)
 
 
 def test_reach_matches_the_data_sheet(robots):
