@@ -1,0 +1,410 @@
+"""Every field a controller reads, checked by interpreting the program text as the controller would.
+
+Each language gets a small interpreter written here, independent of the writers and their parsers:
+it reads the declarations (tool, work object or base, payload, targets, speeds) and walks the
+motion instructions in order, keeping the state a controller keeps (current speed, tool, base,
+process output). What comes out is, per motion, the TCP pose the robot is sent to in its base
+frame, the speed, the zone or blend and whether the process is on. The checks then hold the
+program to the plan, with expectations derived from the plan alone:
+
+* the flange pose each path target implies (target and tool data composed the way the controller
+  does) equals the robot's forward kinematics at the planned joints;
+* each path motion's speed equals the spacing of its two targets divided by the planned time
+  between them (to half the documented rounding step);
+* the process output is on exactly from the first path target to the last;
+* zones/blends: approximate motion inside the path, exact stops at its ends;
+* approach and retract lie on the tool axis, the documented distance behind the first/last target.
+
+Rotations are rebuilt with scipy from each language's documented convention (RAPID quaternions
+scalar first, KUKA A-B-C intrinsic Z-Y'-X'', UR rotation vectors).
+"""
+
+from __future__ import annotations
+
+import ast
+import re
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from lxml import etree
+
+from refine.export.krl import write_krl
+from refine.export.pathml import write_pathml
+from refine.export.rapid import write_rapid
+from refine.export.urscript import write_urscript
+from refine.frames import transform_from_xyz_rpy
+from refine.paths import Trajectory
+from refine.problem import CadSettings, DemoSettings, Problem, ProcessSettings, RobotSettings, ToolSettings
+from refine.robot import load_robot
+
+RESOLUTION_M_S = 1e-4  # the writers' documented default speed rounding step
+RETRACT_M = 0.1  # the writers' documented default approach / retract distance
+
+
+@dataclass(frozen=True)
+class Motion:
+    """One motion instruction as a controller executes it."""
+
+    kind: str  # "lin" or "joint"
+    T_base_tcp: np.ndarray | None  # where the TCP goes, in the robot base frame (None: a joint target)
+    speed_m_s: float | None
+    exact: bool  # True: exact stop (fine, no C_DIS, r=0)
+    blend_m: float | None
+    output_on: bool
+    T_flange_tcp: np.ndarray | None  # the tool active for the motion
+    zone: str | None = None  # RAPID zonedata name
+
+
+def _T(R, p) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, p
+    return T
+
+
+def _inv(T) -> np.ndarray:
+    return np.linalg.inv(T)
+
+
+# ---- RAPID ------------------------------------------------------------------------------------
+
+
+def _rapid_value(text: str):
+    """A RAPID aggregate ``[[1,2],TRUE,"x"]`` as nested Python lists."""
+    return ast.literal_eval(re.sub(r"\bTRUE\b", "True", re.sub(r"\bFALSE\b", "False", text)))
+
+
+def _rapid_pose(value) -> np.ndarray:
+    """``[[x,y,z] mm, [q1,q2,q3,q4] scalar first]`` as a transform [m]."""
+    (x, y, z), (q1, q2, q3, q4) = value
+    return _T(Rotation.from_quat([q2, q3, q4, q1]).as_matrix(), np.array([x, y, z]) / 1000.0)
+
+
+def interpret_rapid(text: str) -> tuple[list[Motion], dict]:
+    decls = {
+        m.group(3): (m.group(2), _rapid_value(m.group(4)))
+        for m in re.finditer(r"\b(CONST|PERS|VAR)\s+(\w+)\s+(\w+)\s*:=\s*(.*?);", text, re.DOTALL)
+    }
+    motions, output, info = [], False, {"tools": {}, "outputs": set()}
+    for line in text.splitlines():
+        line = line.strip()
+        if m := re.match(r"SetDO\s+(\w+)\s*,\s*(\d)\s*;", line):
+            info["outputs"].add(m.group(1))
+            output = m.group(2) == "1"
+            continue
+        m = re.match(r"Move([LJ])\s+(RelTool\((\w+)\s*,([^)]*)\)|\w+)\s*,\s*(\w+)\s*,\s*(\w+)\s*,\s*(\w+)(.*);", line)
+        if not m:
+            continue
+        lj, _, rel_name, rel_args, speed, zone, tool, rest = m.groups()
+        wobj_name = re.search(r"\\WObj:=(\w+)", rest).group(1)
+        kind_w, wobj = decls[wobj_name]
+        assert kind_w == "wobjdata" and wobj[0] is False  # the robot holds the tool, not the object
+        T_wobj = _rapid_pose(wobj[3]) @ _rapid_pose(wobj[4])  # uframe · oframe
+        kind_t, tooldata = decls[tool]
+        assert kind_t == "tooldata" and tooldata[0] is True
+        info["tools"][tool] = tooldata
+        target = decls[rel_name or m.group(2)][1]
+        T_target = _rapid_pose(target[:2])
+        if rel_name:  # RelTool: displacement along the tool's own axes [mm]
+            dx, dy, dz = (float(v) for v in rel_args.split(","))
+            T_target = T_target @ _T(np.eye(3), np.array([dx, dy, dz]) / 1000.0)
+        motions.append(
+            Motion(
+                "lin" if lj == "L" else "joint",
+                T_wobj @ T_target,
+                decls[speed][1][0] / 1000.0,
+                zone == "fine",
+                None,
+                output,
+                _rapid_pose(tooldata[1]),
+                zone,
+            )
+        )
+    return motions, info
+
+
+# ---- KRL --------------------------------------------------------------------------------------
+
+
+def _krl_fields(body: str) -> dict[str, float]:
+    return {k.upper(): float(v) for k, v in re.findall(r"([A-Za-z]\w*)\s+(-?[\d.]+(?:[eE][-+]?\d+)?)", body)}
+
+
+def _krl_frame(f: dict[str, float]) -> np.ndarray:
+    R = Rotation.from_euler("ZYX", [f["A"], f["B"], f["C"]], degrees=True).as_matrix()  # intrinsic Z, Y', X''
+    return _T(R, np.array([f["X"], f["Y"], f["Z"]]) / 1000.0)
+
+
+def interpret_krl(src: str, dat: str) -> list[Motion]:
+    decls = {
+        m.group(2).upper(): _krl_fields(m.group(3))
+        for m in re.finditer(r"DECL\s+(E6POS|FRAME|POS|E6AXIS)\s+(\w+)\s*=\s*\{([^{}]*)\}", dat, re.IGNORECASE)
+    }
+    motions, state = [], {"vel": None, "base": None, "tool": None, "out": False}
+    for raw in src.splitlines():
+        line = raw.split(";")[0].strip()
+        if m := re.match(r"\$VEL\.CP\s*=\s*([-\d.eE+]+)", line):
+            state["vel"] = float(m.group(1))
+        elif m := re.match(r"\$BASE\s*=\s*(\w+)", line):
+            state["base"] = _krl_frame(decls[m.group(1).upper()])
+        elif m := re.match(r"\$TOOL\s*=\s*(\w+)", line):
+            state["tool"] = _krl_frame(decls[m.group(1).upper()])
+        elif m := re.match(r"\$OUT\[(\d+)\]\s*=\s*(TRUE|FALSE)", line, re.IGNORECASE):
+            state["out"] = m.group(2).upper() == "TRUE"
+        elif m := re.match(r"(PTP|LIN)\s+(\w+)(\s+C_DIS)?", line, re.IGNORECASE):
+            target = state["base"] @ _krl_frame(decls[m.group(2).upper()])
+            motions.append(
+                Motion(
+                    "lin" if m.group(1).upper() == "LIN" else "joint",
+                    target,
+                    state["vel"] if m.group(1).upper() == "LIN" else None,
+                    m.group(3) is None,
+                    None,
+                    state["out"],
+                    state["tool"],
+                )
+            )
+    return motions
+
+
+# ---- URScript ---------------------------------------------------------------------------------
+
+
+def _ur_pose(text: str) -> np.ndarray:
+    x, y, z, rx, ry, rz = (float(v) for v in text.split(","))
+    return _T(Rotation.from_rotvec([rx, ry, rz]).as_matrix(), [x, y, z])
+
+
+def interpret_urscript(text: str) -> list[Motion]:
+    motions, tool, out = [], None, False
+    for line in text.splitlines():
+        line = line.split("#")[0].strip()
+        if m := re.match(r"set_tcp\(p\[([^\]]*)\]\)", line):
+            tool = _ur_pose(m.group(1))
+        elif m := re.match(r"set_digital_out\((\d+),\s*(True|False)\)", line):
+            out = m.group(2) == "True"
+        elif m := re.match(r"movel\(p\[([^\]]*)\],\s*a=([^,]+),\s*v=([^,]+),\s*r=([^)]+)\)", line):
+            r = float(m.group(4))
+            motions.append(Motion("lin", _ur_pose(m.group(1)), float(m.group(3)), r == 0.0, r, out, tool))
+        elif line.startswith("movej("):
+            motions.append(Motion("joint", None, None, True, None, out, tool))
+    return motions
+
+
+# ---- the plans --------------------------------------------------------------------------------
+
+
+def planned(robot, problem: Problem, q0_deg, q1_deg, n: int) -> Trajectory:
+    """A joint path from q0 to q1 whose planned speed alternates 40 / 110 mm/s waypoint by waypoint.
+
+    The times follow from the speeds: each segment takes its chord over the mean of its end speeds,
+    so "the speed of a segment" has one right value, chord / time, and either end's speed is wrong
+    by 35 mm/s.
+    """
+    u = np.linspace(0.0, 1.0, n)[:, None]
+    q = np.radians(q0_deg) + np.radians(np.subtract(q1_deg, q0_deg)) * u
+    poses = np.array([problem.robot.base_in_world @ robot.fk(qk) @ problem.tool.tcp_in_flange for qk in q])
+    chords = np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1)
+    speed = np.where(np.arange(n) % 2 == 0, 0.04, 0.11)
+    t = np.concatenate([[0.0], np.cumsum(chords / (0.5 * (speed[1:] + speed[:-1])))])
+    s = np.concatenate([[0.0], np.cumsum(chords)])
+    return Trajectory(t, s, q, poses[:, :3, 3].copy(), poses, poses[:, :3, :3].copy(), speed)
+
+
+def _problem(name, model, base, tcp, output) -> Problem:
+    return Problem(
+        name=name,
+        root=Path("."),
+        robot=RobotSettings(model=model, base_in_world=transform_from_xyz_rpy(*base)),
+        tool=ToolSettings(
+            name="gun", tcp_in_flange=transform_from_xyz_rpy(*tcp), mass_kg=3.0, cog_in_flange_m=(0.01, -0.02, 0.1)
+        ),
+        cad=CadSettings(file=Path("part.csv")),
+        demonstration=DemoSettings(file=Path("demo.txt")),
+        process=ProcessSettings(kind="glue", output=output),
+    )
+
+
+CASES = {
+    "rapid": (
+        "abb_irb4600_60_205",
+        ([0.4, -0.3, 0.25], [5.0, -3.0, 30.0]),
+        ([0.02, -0.01, 0.25], [10.0, 20.0, 35.0]),
+        "doGlue",
+        ([-20.0, 10.0, -15.0, 40.0, 50.0, -60.0], [35.0, 30.0, 5.0, -70.0, -35.0, 120.0]),
+    ),
+    "krl": (
+        "kuka_iiwa14_r820",
+        ([0.3, -0.2, 0.75], [0.0, 4.0, -40.0]),
+        ([0.0, 0.015, 0.21], [-8.0, 25.0, 60.0]),
+        "doArc",
+        ([-30.0, 35.0, -40.0, -75.0, 20.0, 60.0, -10.0], [25.0, 55.0, 30.0, -40.0, -35.0, -20.0, 80.0]),
+    ),
+    "urscript": (
+        "ur10e",
+        ([-0.5, 0.4, 0.9], [0.0, -6.0, 135.0]),
+        ([0.005, 0.01, 0.18], [0.0, 15.0, -25.0]),
+        "DO3",
+        ([20.0, -100.0, 110.0, -100.0, -90.0, -150.0], [50.0, -80.0, 90.0, -120.0, -70.0, 150.0]),
+    ),
+}
+
+
+@pytest.fixture(scope="module", params=sorted(CASES))
+def program(request, tmp_path_factory):
+    """(language, robot, problem, trajectory, motions, extra) for each program language."""
+    lang = request.param
+    model, base, tcp, output, (q0, q1) = CASES[lang]
+    robot = load_robot(model)
+    problem = _problem(f"bead {lang}", model, base, tcp, output)
+    tr = planned(robot, problem, q0, q1, 25)
+    out = tmp_path_factory.mktemp(lang)
+    extra: dict = {}
+    if lang == "rapid":
+        path = write_rapid(out / "bead.mod", tr, problem, robot, zone="z5")
+        motions, extra = interpret_rapid(path.read_text())
+    elif lang == "krl":
+        src, dat = write_krl(out / "bead.src", tr, problem, robot)
+        motions = interpret_krl(src.read_text(), dat.read_text())
+    else:
+        path = write_urscript(out / "bead.script", tr, problem, robot, blend_m=0.004)
+        motions = interpret_urscript(path.read_text())
+    return lang, robot, problem, tr, motions, extra
+
+
+def _path_motions(motions: list[Motion], n: int) -> list[Motion]:
+    """The n motions through the path targets: the one onto the first target and the n - 1 after it."""
+    lin = [m for m in motions if m.kind == "lin" and m.T_base_tcp is not None]
+    assert len(lin) == n + 1, f"expected approach-onto-first + {n - 1} path + retract moves, got {len(lin)}"
+    return lin[:n]
+
+
+def test_every_target_with_the_program_tool_puts_the_flange_where_the_planned_joints_do(program):
+    lang, robot, problem, tr, motions, _ = program
+    path = _path_motions(motions, len(tr))
+    for k, m in enumerate(path):
+        flange = m.T_base_tcp @ _inv(m.T_flange_tcp)
+        fk = robot.fk(tr.q[k])
+        np.testing.assert_allclose(flange[:3, 3], fk[:3, 3], atol=2e-6, err_msg=f"{lang} target {k}")
+        angle = Rotation.from_matrix(flange[:3, :3].T @ fk[:3, :3]).magnitude()
+        assert np.degrees(angle) < 1e-5, (lang, k)
+
+
+def test_the_program_tool_is_the_problem_tool(program):
+    lang, _, problem, _, motions, extra = program
+    tools = {m.T_flange_tcp.tobytes() for m in motions if m.T_flange_tcp is not None}
+    assert len(tools) == 1, f"{lang}: one tool for the whole program"
+    T = next(m.T_flange_tcp for m in motions if m.T_flange_tcp is not None)
+    np.testing.assert_allclose(T[:3, 3], problem.tool.tcp_in_flange[:3, 3], atol=1e-7)
+    angle = Rotation.from_matrix(T[:3, :3].T @ problem.tool.tcp_in_flange[:3, :3]).magnitude()
+    assert np.degrees(angle) < 1e-6, lang
+    if lang == "rapid":  # the payload: [mass kg, cog mm, ...]
+        (load,) = (t[2] for t in extra["tools"].values())
+        assert load[0] == pytest.approx(problem.tool.mass_kg)
+        np.testing.assert_allclose(load[1], np.array(problem.tool.cog_in_flange_m) * 1000.0, atol=1e-3)
+
+
+def test_each_path_motion_runs_at_its_target_spacing_over_the_planned_time(program):
+    lang, _, _, tr, motions, _ = program
+    path = _path_motions(motions, len(tr))
+    for k in range(1, len(tr)):
+        spacing = np.linalg.norm(path[k].T_base_tcp[:3, 3] - path[k - 1].T_base_tcp[:3, 3])
+        expected = spacing / (tr.t[k] - tr.t[k - 1])
+        assert path[k].speed_m_s == pytest.approx(expected, abs=0.5 * RESOLUTION_M_S + 1e-7), (lang, k)
+
+
+def test_the_process_is_on_from_the_first_path_target_to_the_last(program):
+    lang, _, _, tr, motions, _ = program
+    lin = [m for m in motions if m.kind == "lin"]
+    # onto the first target with the process off, every path motion with it on, the retract off
+    assert [m.output_on for m in lin] == [False] + [True] * (len(tr) - 1) + [False], lang
+    assert not any(m.output_on for m in motions if m.kind == "joint")
+
+
+def test_the_path_is_approximated_inside_and_stops_exactly_at_its_ends(program):
+    lang, _, _, tr, motions, _ = program
+    path = _path_motions(motions, len(tr))
+    assert path[0].exact and path[-1].exact, lang
+    assert not any(m.exact for m in path[1:-1]), lang
+    if lang == "rapid":  # the zone asked for, z5, between the path targets
+        assert {m.zone for m in path[1:-1]} == {"z5"}
+    if lang == "urscript":  # blends: at most the asked 4 mm, never overlapping the next one
+        r = np.array([m.blend_m for m in path])
+        gaps = np.linalg.norm(np.diff([m.T_base_tcp[:3, 3] for m in path], axis=0), axis=1)
+        assert np.all(r <= 0.004 + 1e-12) and np.all(r[:-1] + r[1:] <= gaps + 1e-9)
+
+
+def test_approach_and_retract_are_on_the_tool_axis_behind_the_first_and_last_targets(program):
+    lang, _, _, tr, motions, _ = program
+    lin = [m for m in motions if m.kind == "lin" and m.T_base_tcp is not None]
+    first, last, retract = lin[0].T_base_tcp, lin[len(tr) - 1].T_base_tcp, lin[-1].T_base_tcp
+    np.testing.assert_allclose(retract[:3, 3], last[:3, 3] - RETRACT_M * last[:3, 2], atol=1e-6, err_msg=lang)
+    approach = [m for m in motions if m.T_base_tcp is not None and m is not lin[0]][0]
+    if lang == "rapid":  # the MoveJ to the approach point is a pose target there
+        np.testing.assert_allclose(approach.T_base_tcp[:3, 3], first[:3, 3] - RETRACT_M * first[:3, 2], atol=1e-6)
+
+
+def test_targets_are_the_planned_poses_in_the_robot_base_frame(program):
+    """The work object / base frame carries {F} into the robot base frame: inv(base_in_world)."""
+    lang, _, problem, tr, motions, _ = program
+    path = _path_motions(motions, len(tr))
+    expected = np.linalg.inv(problem.robot.base_in_world) @ tr.poses
+    np.testing.assert_allclose(np.array([m.T_base_tcp for m in path]), expected, atol=2e-6, err_msg=lang)
+
+
+def test_a_plan_at_a_different_speed_changes_every_path_speed(program, tmp_path):
+    """Speeds come from the plan: the same path planned twice as fast is written twice as fast."""
+    lang, robot, problem, tr, _, _ = program
+    fast = replace(tr, t=tr.t / 2.0, speed=tr.speed * 2.0)
+    tmp = tmp_path
+    if lang == "rapid":
+        motions, _ = interpret_rapid(write_rapid(tmp / "b.mod", fast, problem, robot).read_text())
+    elif lang == "krl":
+        src, dat = write_krl(tmp / "b.src", fast, problem, robot)
+        motions = interpret_krl(src.read_text(), dat.read_text())
+    else:
+        motions = interpret_urscript(write_urscript(tmp / "b.script", fast, problem, robot).read_text())
+    path = _path_motions(motions, len(tr))
+    for k in range(1, len(tr)):
+        spacing = np.linalg.norm(path[k].T_base_tcp[:3, 3] - path[k - 1].T_base_tcp[:3, 3])
+        assert path[k].speed_m_s == pytest.approx(spacing / (fast.t[k] - fast.t[k - 1]), abs=1e-4), (lang, k)
+
+
+# ---- PathML -----------------------------------------------------------------------------------
+
+FIXED_AXIS = {"rx": 0, "ry": 1, "rz": 2}
+"""Frame angle label -> the fixed (extrinsic) axis x, y, z it turns about (AutomationML Frame)."""
+
+
+def test_pathml_frames_are_the_planned_poses_in_fixed_axis_angles(tmp_path):
+    """Each point's Frame, read with lxml and turned back with scipy's extrinsic x-y-z, is the pose."""
+    model, base, tcp, output, (q0, q1) = CASES["rapid"]
+    robot = load_robot(model)
+    problem = _problem("bead pathml", model, base, tcp, output)
+    tr = planned(robot, problem, q0, q1, 25)
+    doc = etree.parse(str(write_pathml(tmp_path / "bead.aml", tr, problem)))
+    frames = [
+        el
+        for el in doc.iter()
+        if etree.QName(el).localname == "Attribute"
+        and el.get("Name") == "Frame"
+        and etree.QName(el.getparent()).localname == "InternalElement"  # a point, not a library's type
+    ]
+    assert len(frames) == len(tr)
+    for k, frame in enumerate(frames):
+        values = {
+            sub.get("Name"): (float(next(v for v in sub if etree.QName(v).localname == "Value").text), sub.get("Unit"))
+            for sub in frame
+            if etree.QName(sub).localname == "Attribute"
+        }
+        assert {values[a][1] for a in "xyz"} == {"m"} and {values[a][1] for a in FIXED_AXIS} == {"deg"}
+        np.testing.assert_allclose([values[a][0] for a in "xyz"], tr.poses[k, :3, 3], atol=1e-12)
+        angles = np.zeros(3)
+        for label, axis in FIXED_AXIS.items():
+            angles[axis] = values[label][0]
+        R = Rotation.from_euler("xyz", angles, degrees=True).as_matrix()  # lower case: fixed axes
+        angle = Rotation.from_matrix(R.T @ tr.poses[k, :3, :3]).magnitude()
+        assert np.degrees(angle) < 1e-9, k
