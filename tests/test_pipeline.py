@@ -172,8 +172,12 @@ def test_a_pathml_document_is_a_problem_input_of_its_own(glass, tmp_path):
     text = source.read_text(encoding="utf-8")
     cad = text[text.index("[cad]") : text.index("[demonstration]")]
     demo = text[text.index("[demonstration]") : text.index("[tolerances]")]
-    text = text.replace(cad, '[cad]\nfile = "input.aml"\nformat = "pathml"\nspacing_m = 0.005\n\n').replace(demo, "")
-    (tmp_path / "problem.toml").write_text(text.replace('name = "glass_adhesive"', 'name = "glass_from_pathml"'))
+    text = text.replace(cad, '[cad]\nfile = "input.aml"\nformat = "pathml"\nspacing_m = 0.005\n\n').replace(
+        demo, ""
+    )
+    (tmp_path / "problem.toml").write_text(
+        text.replace('name = "glass_adhesive"', 'name = "glass_from_pathml"')
+    )
     (tmp_path / "input.aml").write_bytes((out / "glass_adhesive.aml").read_bytes())
     again = run(load_problem(tmp_path), tmp_path / "out", report=False)
     assert again.status == "ok", again.refinement.reason
@@ -181,3 +185,43 @@ def test_a_pathml_document_is_a_problem_input_of_its_own(glass, tmp_path):
     # the input's orientations are the first run's reached poses: the second run keeps them
     assert again.refinement.check.orientation_deviation_deg.max() < 0.5
     assert abs(again.fused.s[-1] - result.fused.s[-1]) < 1e-3
+
+
+IRB4600_SPEED_DEG_S = np.array([175.0, 175.0, 175.0, 250.0, 250.0, 360.0])
+"""Data-sheet joint speeds of the IRB 4600-60/2.05 (shared/ROBOTS.md)."""
+
+
+@pytest.fixture(scope="module")
+def glass_at_a_tenth():
+    """The glass bead planned with ``robot.velocity_scale = 0.1``; per segment, each joint's mean
+    speed (joint change over planned time) as a fraction of its data-sheet speed."""
+    from dataclasses import replace
+
+    from refine.pipeline import solve_problem
+
+    problem = load_problem(ROOT / "problems" / "glass_adhesive")
+    assert problem.robot.model == "abb_irb4600_60_205"
+    slow = replace(problem, robot=replace(problem.robot, velocity_scale=0.1))
+    tr = solve_problem(slow).passes[0].trajectory
+    rate = np.degrees(np.abs(np.diff(tr.q, axis=0)) / np.diff(tr.t)[:, None])
+    return rate / IRB4600_SPEED_DEG_S
+
+
+def test_velocity_scale_slows_the_plan_to_its_fraction_of_the_data_sheet(glass_at_a_tenth):
+    """At full speed the glass bead needs 17 % of joint 6's rated speed; at a 10 % scale it must slow
+    down to about 10 %, and reach it (the cap binds somewhere).
+
+    The limits are imposed at the waypoints; between two waypoints where a joint's path derivative
+    changes fast the mean over the segment can run a few per cent over (see the next test).
+    """
+    ratio = glass_at_a_tenth.max()
+    assert 0.09 <= ratio <= 0.1 * 1.05
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="joint speed limits are imposed at the waypoints only: joint 6 runs 3.9 % over its scaled "
+    "limit on average over one segment of the glass bead at velocity_scale 0.1",
+)
+def test_no_joint_exceeds_its_scaled_speed_even_on_average_between_waypoints(glass_at_a_tenth):
+    assert glass_at_a_tenth.max() <= 0.1 + 1e-6

@@ -28,9 +28,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
-
 from lxml import etree
+from scipy.spatial.transform import Rotation
 
 from refine.export.krl import write_krl
 from refine.export.pathml import write_pathml
@@ -95,7 +94,9 @@ def interpret_rapid(text: str) -> tuple[list[Motion], dict]:
             info["outputs"].add(m.group(1))
             output = m.group(2) == "1"
             continue
-        m = re.match(r"Move([LJ])\s+(RelTool\((\w+)\s*,([^)]*)\)|\w+)\s*,\s*(\w+)\s*,\s*(\w+)\s*,\s*(\w+)(.*);", line)
+        m = re.match(
+            r"Move([LJ])\s+(RelTool\((\w+)\s*,([^)]*)\)|\w+)\s*,\s*(\w+)\s*,\s*(\w+)\s*,\s*(\w+)(.*);", line
+        )
         if not m:
             continue
         lj, _, rel_name, rel_args, speed, zone, tool, rest = m.groups()
@@ -141,7 +142,9 @@ def _krl_frame(f: dict[str, float]) -> np.ndarray:
 def interpret_krl(src: str, dat: str) -> list[Motion]:
     decls = {
         m.group(2).upper(): _krl_fields(m.group(3))
-        for m in re.finditer(r"DECL\s+(E6POS|FRAME|POS|E6AXIS)\s+(\w+)\s*=\s*\{([^{}]*)\}", dat, re.IGNORECASE)
+        for m in re.finditer(
+            r"DECL\s+(E6POS|FRAME|POS|E6AXIS)\s+(\w+)\s*=\s*\{([^{}]*)\}", dat, re.IGNORECASE
+        )
     }
     motions, state = [], {"vel": None, "base": None, "tool": None, "out": False}
     for raw in src.splitlines():
@@ -220,7 +223,10 @@ def _problem(name, model, base, tcp, output) -> Problem:
         root=Path("."),
         robot=RobotSettings(model=model, base_in_world=transform_from_xyz_rpy(*base)),
         tool=ToolSettings(
-            name="gun", tcp_in_flange=transform_from_xyz_rpy(*tcp), mass_kg=3.0, cog_in_flange_m=(0.01, -0.02, 0.1)
+            name="gun",
+            tcp_in_flange=transform_from_xyz_rpy(*tcp),
+            mass_kg=3.0,
+            cog_in_flange_m=(0.01, -0.02, 0.1),
         ),
         cad=CadSettings(file=Path("part.csv")),
         demonstration=DemoSettings(file=Path("demo.txt")),
@@ -344,7 +350,9 @@ def test_approach_and_retract_are_on_the_tool_axis_behind_the_first_and_last_tar
     np.testing.assert_allclose(retract[:3, 3], last[:3, 3] - RETRACT_M * last[:3, 2], atol=1e-6, err_msg=lang)
     approach = [m for m in motions if m.T_base_tcp is not None and m is not lin[0]][0]
     if lang == "rapid":  # the MoveJ to the approach point is a pose target there
-        np.testing.assert_allclose(approach.T_base_tcp[:3, 3], first[:3, 3] - RETRACT_M * first[:3, 2], atol=1e-6)
+        np.testing.assert_allclose(
+            approach.T_base_tcp[:3, 3], first[:3, 3] - RETRACT_M * first[:3, 2], atol=1e-6
+        )
 
 
 def test_targets_are_the_planned_poses_in_the_robot_base_frame(program):
@@ -396,7 +404,10 @@ def test_pathml_frames_are_the_planned_poses_in_fixed_axis_angles(tmp_path):
     assert len(frames) == len(tr)
     for k, frame in enumerate(frames):
         values = {
-            sub.get("Name"): (float(next(v for v in sub if etree.QName(v).localname == "Value").text), sub.get("Unit"))
+            sub.get("Name"): (
+                float(next(v for v in sub if etree.QName(v).localname == "Value").text),
+                sub.get("Unit"),
+            )
             for sub in frame
             if etree.QName(sub).localname == "Attribute"
         }
