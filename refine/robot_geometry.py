@@ -1,7 +1,10 @@
 """Collision geometry of a robot, read from the ``<collision>`` elements of its URDF.
 
-Only primitives are accepted (``<cylinder>``, ``<box>``, ``<sphere>``) so that FCL distance
-queries stay in the microsecond range; a ``<mesh>`` is an error. URDF cylinders and FCL
+Primitives (``<cylinder>``, ``<box>``, ``<sphere>``) become FCL primitives. A ``<mesh>`` (STL,
+OBJ, PLY; path relative to the URDF, ``scale`` honoured) becomes the ``fcl.Convex`` of its
+convex hull: FCL distance queries stay in the microsecond range and have a depth when they
+overlap. The registry's robots hold convex pieces computed from their makers' meshes (see
+:mod:`refine.convex`), so the hull of each file is the file. URDF cylinders and FCL
 cylinders share a convention (axis along the local z, centred on the origin), so a URDF
 ``<origin>`` is the shape pose in its link frame as it stands.
 """
@@ -13,13 +16,15 @@ from pathlib import Path
 
 import fcl
 import numpy as np
+import trimesh
 from lxml import etree
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
+from refine.convex import ConvexPiece
 from refine.errors import InputError
 from refine.frames import make_transform, matrix_from_fixed_xyz
 
-SUPPORTED_GEOMETRY = ("box", "cylinder", "sphere")
+SUPPORTED_GEOMETRY = ("box", "cylinder", "sphere", "mesh")
 
 
 @dataclass(frozen=True, eq=False)
@@ -29,14 +34,17 @@ class CollisionShape:
     Attributes:
         link: name of the link (URDF ``<link name>``) the shape moves with.
         name: the ``<collision name>`` or ``"<link>_<index>"`` when unnamed; unique per link.
-        geometry: the FCL primitive (``fcl.Box``, ``fcl.Cylinder`` or ``fcl.Sphere``) [m].
+        geometry: the FCL geometry (``fcl.Box``, ``fcl.Cylinder``, ``fcl.Sphere`` or ``fcl.Convex``) [m].
         link_T_shape: pose of the shape in the link frame, (4, 4).
+        convex: for a mesh, its convex hull in the shape frame [m] (the corners FCL's ``Convex``
+            holds); None for primitives.
     """
 
     link: str
     name: str
     geometry: fcl.CollisionGeometry
     link_T_shape: NDArray[np.float64]
+    convex: ConvexPiece | None = None
 
     def collision_object(self, T_world_link: NDArray[np.float64]) -> fcl.CollisionObject:
         """FCL object for this shape placed at a link pose (4, 4) in the world [m]."""
@@ -57,11 +65,61 @@ def _floats(element: etree._Element, attribute: str, n: int, where: str) -> list
     return values
 
 
-def _geometry(element: etree._Element, where: str) -> fcl.CollisionGeometry:
+def fcl_convex(piece: ConvexPiece) -> fcl.Convex:
+    """The ``fcl.Convex`` of a convex polytope (its triangles as faces)."""
+    faces = np.hstack([np.full((len(piece.faces), 1), 3), piece.faces]).ravel()
+    return fcl.Convex(np.ascontiguousarray(piece.vertices), len(piece.faces), faces)
+
+
+def read_mesh(path: Path, where: str) -> trimesh.Trimesh:
+    """A mesh file's triangles as they stand in the file (no unit scaling).
+
+    Raises:
+        InputError: starting with ``where``, if the file is missing, unreadable or holds no triangles.
+    """
+    if not path.is_file():
+        raise InputError(f"{where}: mesh file {path} not found")
+    try:
+        mesh = trimesh.load(str(path), force="mesh")
+    except Exception as e:  # trimesh raises many kinds for bad files
+        raise InputError(f"{where}: cannot read mesh {path}: {e}") from e
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise InputError(f"{where}: mesh {path} holds no triangles")
+    return mesh
+
+
+def mesh_hull(path: str | Path, scale: ArrayLike = (1.0, 1.0, 1.0), where: str = "") -> ConvexPiece:
+    """The convex hull [m] of a mesh file's vertices times ``scale`` (per axis).
+
+    Raises:
+        InputError: naming the file if it cannot be read, holds no triangles or has no volume.
+    """
+    mesh = read_mesh(Path(path), where)
+    try:
+        return ConvexPiece.hull_of(np.asarray(mesh.vertices) * np.asarray(scale, dtype=float))
+    except InputError as e:
+        raise InputError(f"{where}: mesh {path}: {e}") from e
+
+
+def _geometry(
+    element: etree._Element, where: str, folder: Path
+) -> tuple[fcl.CollisionGeometry, ConvexPiece | None]:
     children = [c for c in element if isinstance(c.tag, str)]
     if len(children) != 1:
         raise InputError(f"{where}: <geometry> must hold exactly one shape, got {len(children)}")
     shape = children[0]
+    if shape.tag == "mesh":
+        filename = shape.get("filename")
+        if not filename:
+            raise InputError(f"{where}: <mesh> has no 'filename' attribute")
+        if "://" in filename:
+            raise InputError(
+                f"{where}: mesh {filename!r}: only paths relative to the URDF's folder are supported "
+                f"(no package:// or file:// URLs)"
+            )
+        scale = _floats(shape, "scale", 3, where) if shape.get("scale") else [1.0] * 3
+        piece = mesh_hull(folder / filename, scale, where)
+        return fcl_convex(piece), piece
     if shape.tag == "box":
         dims = _floats(shape, "size", 3, where)
     elif shape.tag == "cylinder":
@@ -76,10 +134,10 @@ def _geometry(element: etree._Element, where: str) -> fcl.CollisionGeometry:
     if min(dims) <= 0.0:
         raise InputError(f"{where}: <{shape.tag}> dimensions must be positive, got {dims}")
     if shape.tag == "box":
-        return fcl.Box(*dims)
+        return fcl.Box(*dims), None
     if shape.tag == "cylinder":
-        return fcl.Cylinder(dims[0], dims[1])
-    return fcl.Sphere(dims[0])
+        return fcl.Cylinder(dims[0], dims[1]), None
+    return fcl.Sphere(dims[0]), None
 
 
 def collision_shapes_from_urdf(urdf: str | Path) -> list[CollisionShape]:
@@ -117,5 +175,6 @@ def collision_shapes_from_urdf(urdf: str | Path) -> list[CollisionShape]:
                 rpy = _floats(origin, "rpy", 3, where) if origin.get("rpy") else [0.0] * 3
                 T = make_transform(matrix_from_fixed_xyz(rpy, degrees=False), xyz)
             T.setflags(write=False)
-            shapes.append(CollisionShape(link_name, name, _geometry(geometry, where), T))
+            fcl_geometry, convex = _geometry(geometry, where, Path(urdf).parent)
+            shapes.append(CollisionShape(link_name, name, fcl_geometry, T, convex))
     return shapes

@@ -7,6 +7,7 @@ import shutil
 import fcl
 import numpy as np
 import pytest
+import trimesh
 
 from refine.errors import InputError
 from refine.frames import make_transform, rotation_about
@@ -304,16 +305,36 @@ def test_non_adjacent_links_are_clear_at_zero(robots, name):
             assert d > 0.0, (a.link, a.name, b.link, b.name)
 
 
-def test_mesh_collision_geometry_is_rejected(tmp_path):
+def test_unknown_collision_geometry_is_rejected(tmp_path):
     urdf = tmp_path / "r.urdf"
     urdf.write_text('<robot name="r"><link name="a"><collision><geometry>'
-                    '<mesh filename="a.stl"/></geometry></collision></link></robot>')
-    with pytest.raises(InputError, match="<mesh> is not supported; allowed: box, cylinder, sphere"):
+                    '<capsule radius="0.1" length="0.2"/></geometry></collision></link></robot>')
+    with pytest.raises(InputError, match="<capsule> is not supported; allowed: box, cylinder, sphere, mesh"):
         collision_shapes_from_urdf(urdf)
 
 
-def test_collision_origin_rpy_is_applied(robots):
-    forearm = [s for s in robots["abb_irb4600_60_205"].collision_shapes() if s.link == "link_4"][0]
-    # the cylinder's local z (its axis) lies along the forearm, the link's x
-    np.testing.assert_allclose(forearm.link_T_shape[:3, 2], [1.0, 0.0, 0.0], atol=1e-15)
-    assert forearm.link_T_shape[0, 3] == pytest.approx(0.475)
+def test_missing_mesh_file_is_an_input_error(tmp_path):
+    urdf = tmp_path / "r.urdf"
+    urdf.write_text('<robot name="r"><link name="a"><collision><geometry>'
+                    '<mesh filename="a.stl"/></geometry></collision></link></robot>')
+    with pytest.raises(InputError, match="mesh file .*a.stl not found"):
+        collision_shapes_from_urdf(urdf)
+
+
+def test_mesh_collision_is_its_convex_hull_scaled_and_placed(tmp_path):
+    # an L-shaped (concave) solid in millimetres: its hull adds the corner at (40, 40, *)
+    box_a = trimesh.creation.box([40.0, 10.0, 10.0])
+    box_a.apply_translation([20.0, 5.0, 5.0])
+    box_b = trimesh.creation.box([10.0, 40.0, 10.0])
+    box_b.apply_translation([5.0, 20.0, 5.0])
+    trimesh.util.concatenate([box_a, box_b]).export(tmp_path / "l.stl")
+    urdf = tmp_path / "r.urdf"
+    urdf.write_text('<robot name="r"><link name="a"><collision><origin xyz="1 0 0" rpy="0 0 1.5707963267948966"/>'
+                    '<geometry><mesh filename="l.stl" scale="0.001 0.001 0.001"/></geometry></collision></link></robot>')
+    (shape,) = collision_shapes_from_urdf(urdf)
+    assert isinstance(shape.geometry, fcl.Convex)
+    assert shape.convex.mesh.volume == pytest.approx(0.04 * 0.04 * 0.01 - 0.5 * 0.03 * 0.03 * 0.01)
+    # placed at the origin turned 90 deg about z: shape x is link y
+    obj = shape.collision_object(np.eye(4))
+    probe = fcl.CollisionObject(fcl.Sphere(0.001), fcl.Transform(np.array([1.0, 0.1, 0.005])))
+    assert fcl.distance(obj, probe, fcl.DistanceRequest(), fcl.DistanceResult()) == pytest.approx(0.059, abs=1e-5)  # GJK

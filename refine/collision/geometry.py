@@ -21,8 +21,9 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
+from refine.convex import ConvexPiece
 from refine.errors import InputError
-from refine.robot_geometry import CollisionShape
+from refine.robot_geometry import CollisionShape, fcl_convex, read_mesh
 from refine.settings import Shape
 
 log = logging.getLogger(__name__)
@@ -48,7 +49,8 @@ class Body:
         geometry: the FCL geometry, in the shape frame [m].
         obj: the FCL object placed in the world.
         kind_params: ``("box", half sizes)``, ``("cylinder", radius, half length)``,
-            ``("sphere", radius)`` or ``("mesh",)``.
+            ``("sphere", radius)``, ``("convex", corners (C, 3))`` (an ``fcl.Convex``, measured
+            like the primitives) or ``("mesh",)``.
         half_extent: half sizes of a box bounding the shape, centred on ``centre`` [m], (3,).
         centre: centre of that box in the shape frame [m], (3,).
         vertices: mesh vertices in the shape frame [m], (V, 3), or None.
@@ -60,6 +62,7 @@ class Body:
         workpiece: a cell object the process touches by design (the tool is not checked against it).
         triangles: single world-frame triangles of a cell mesh as (FCL object, geometry, corners),
             built on demand.
+        convex_piece: the polytope of a ``"convex"`` body, in the shape frame; None otherwise.
     """
 
     name: str
@@ -82,6 +85,7 @@ class Body:
     hull_vertices: Array | None = None
     workpiece: bool = False
     triangles: dict[int, tuple] = field(default_factory=dict)
+    convex_piece: ConvexPiece | None = None
 
     @property
     def label(self) -> str:
@@ -110,6 +114,8 @@ class Body:
         if tag == "cylinder":
             radial = max(float(np.hypot(x[0], x[1])) - self.kind_params[1], 0.0)
             return float(np.hypot(radial, max(abs(float(x[2])) - self.kind_params[2], 0.0)))
+        if tag == "convex" and self.convex_piece is not None and self.convex_piece.outside(x)[0] <= 0.0:
+            return 0.0
         probe = fcl.CollisionObject(fcl.Sphere(1e-9), fcl.Transform(np.eye(3), np.asarray(point, float)))
         return max(float(fcl.distance(probe, self.obj, fcl.DistanceRequest())), 0.0)
 
@@ -118,8 +124,10 @@ class Body:
         base = float(direction @ T[:3, 3])
         if self.vertices is not None:
             return base + float(np.max(self.vertices @ (direction @ T[:3, :3])))
-        ux, uy, uz = (direction @ T[:3, :3]).tolist()  # the direction in the shape frame
         tag, *dims = self.kind_params
+        if tag == "convex":
+            return base + float(np.max(dims[0] @ (direction @ T[:3, :3])))
+        ux, uy, uz = (direction @ T[:3, :3]).tolist()  # the direction in the shape frame
         if tag == "sphere":
             return base + dims[0] * math.sqrt(ux * ux + uy * uy + uz * uz)
         if tag == "box":
@@ -143,6 +151,9 @@ class Body:
             if radial > 1e-12:
                 local[:2] = radius * u[:2] / radial
             return c + R @ local
+        if tag == "convex":
+            corners = self.kind_params[1]
+            return c + R @ corners[int(np.argmax(corners @ u))]
         assert self.vertices is not None
         return c + R @ self.vertices[int(np.argmax(self.vertices @ u))]
 
@@ -178,9 +189,25 @@ def primitive_from_fcl(geometry: fcl.CollisionGeometry, where: str) -> tuple[tup
     raise InputError(f"{where}: collision geometry {type(geometry).__name__} is not supported")
 
 
+def convex_parts(piece: ConvexPiece, geometry: fcl.Convex | None = None) -> dict:
+    """Support parameters, bounding box and FCL geometry of a convex :class:`Body`."""
+    lo, hi = piece.vertices.min(axis=0), piece.vertices.max(axis=0)
+    return {
+        "geometry": fcl_convex(piece) if geometry is None else geometry,
+        "kind_params": ("convex", piece.vertices),
+        "half_extent": (hi - lo) / 2.0,
+        "centre": (hi + lo) / 2.0,
+        "convex_piece": piece,
+    }
+
+
 def link_body(shape: CollisionShape, frame_id: int, joint: int, where: str) -> Body:
-    """A :class:`Body` for a robot link primitive from the URDF (its FCL geometry is shared)."""
-    params, half = primitive_from_fcl(shape.geometry, f"{where} link {shape.link!r}")
+    """A :class:`Body` for a robot link shape from the URDF (its FCL geometry is shared)."""
+    if shape.convex is not None:
+        parts = convex_parts(shape.convex, shape.geometry)
+    else:
+        params, half = primitive_from_fcl(shape.geometry, f"{where} link {shape.link!r}")
+        parts = {"geometry": shape.geometry, "kind_params": params, "half_extent": half, "centre": np.zeros(3)}
     return Body(
         name=shape.link,
         shape=shape.name,
@@ -189,11 +216,8 @@ def link_body(shape: CollisionShape, frame_id: int, joint: int, where: str) -> B
         frame_id=frame_id,
         joint=joint,
         link_T_shape=np.array(shape.link_T_shape),
-        geometry=shape.geometry,
         obj=fcl.CollisionObject(shape.geometry),
-        kind_params=params,
-        half_extent=half,
-        centre=np.zeros(3),
+        **parts,
     )
 
 
@@ -204,14 +228,9 @@ def load_mesh(shape: Shape) -> trimesh.Trimesh:
         InputError: naming the shape and file if it cannot be read or holds no triangles.
     """
     path = Path(shape.file) if shape.file is not None else None
-    if path is None or not path.is_file():
-        raise InputError(f"shape {shape.name!r}: mesh file {path} not found")
-    try:
-        mesh = trimesh.load(str(path), force="mesh")
-    except Exception as e:  # trimesh raises many kinds for bad files
-        raise InputError(f"shape {shape.name!r}: cannot read mesh {path}: {e}") from e
-    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        raise InputError(f"shape {shape.name!r}: mesh {path} holds no triangles")
+    if path is None:
+        raise InputError(f"shape {shape.name!r}: mesh file None not found")
+    mesh = read_mesh(path, f"shape {shape.name!r}")
     mesh.apply_scale(UNIT_SCALE[shape.units])
     if mesh.is_watertight and mesh.volume < 0.0:
         mesh.invert()
