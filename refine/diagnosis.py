@@ -10,9 +10,23 @@ entries are what ``result.json`` reports under ``diagnosis`` (schema in
 
 from __future__ import annotations
 
+import functools
+import math
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+import pinocchio as pin
+import scipy.optimize
+from numpy.typing import NDArray
+
+from refine.optimise.seed import TcpKinematics, solve_ik
+from refine.optimise.verify import runs, singularity_measures
+from refine.paths import FusedPath
+from refine.problem import Tolerances
+from refine.robot import Robot
+
+Array = NDArray[np.float64]
 
 
 def closest_pair_text(clearance: Any, cell_names: set[str], margin_m: float, self_margin_m: float) -> str:
@@ -38,3 +52,591 @@ def closest_pair_text(clearance: Any, cell_names: set[str], margin_m: float, sel
         kind, margin = "self pair, self margin", self_margin_m
     distance = float(clearance.segment_clearance_m[k]) + margin  # that pair's own distance
     return f"least clearance {body} vs {other} ({kind} {margin * 1e3:g} mm) at {distance * 1e3:.1f} mm"
+
+
+# ---- reach -------------------------------------------------------------------------------------
+
+WRIST_TOLERANCE_M = 1e-4
+"""The last three joint axes meet within this distance for the wrist to count as spherical [m]."""
+
+
+@dataclass(frozen=True)
+class ReachModel:
+    """Where a robot can put its wrist centre (or TCP), measured from its shoulder.
+
+    For a robot whose last three axes meet (a spherical wrist), the wrist centre's distance from the
+    shoulder depends only on the arm joints (the elbow), so a pose is out of reach, whatever the
+    arm does, when that distance leaves ``[r_min_m, r_max_m]``. The shoulder is the point of axis 2
+    closest to axis 1; it turns with axis 1.
+
+    Attributes:
+        spherical: the last three axes meet; else the TCP stands in for the wrist centre.
+        point_in_flange: the wrist centre in the flange frame [m], (3,) (zeros when not spherical).
+        axis1: (unit direction, point) of axis 1 in the robot base frame.
+        shoulder_ref: the shoulder point with axis 1 at 0, base frame [m], (3,).
+        wrist_ref: the wrist centre with axis 1 at 0 (its azimuth sets the arm plane), base frame [m].
+        r_min_m, r_max_m: the range of the wrist-centre distance from the shoulder inside the
+            joint limits less the margin [m].
+    """
+
+    spherical: bool
+    point_in_flange: Array
+    axis1: tuple[Array, Array]
+    shoulder_ref: Array
+    wrist_ref: Array
+    r_min_m: float
+    r_max_m: float
+
+    def _azimuth(self, x: Array) -> Array:
+        w, p = self.axis1
+        e1 = np.cross(w, [1.0, 0.0, 0.0] if abs(w[0]) < 0.9 else [0.0, 1.0, 0.0])
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(w, e1)
+        d = np.atleast_2d(x) - p
+        return np.arctan2(d @ e2, d @ e1)
+
+    def shoulders(self, points: Array) -> tuple[Array, Array]:
+        """The shoulder for each base-frame point (N, 3), arm turned towards it and away from it."""
+        w, p = self.axis1
+        theta = self._azimuth(points) - self._azimuth(self.wrist_ref)
+        out = []
+        for t in (theta, theta + math.pi):
+            R = _rotations_about(w, t)
+            out.append(p + np.einsum("nij,j->ni", R, self.shoulder_ref - p))
+        return out[0], out[1]
+
+    def distance(self, points: Array) -> Array:
+        """Distance from the shoulder [m] for base-frame points (N, 3).
+
+        The arm is turned towards the point, or away from it when that is closer to the range.
+        """
+        front, back = self.shoulders(points)
+        d = [np.linalg.norm(points - s, axis=1) for s in (front, back)]
+        out = [np.maximum(self.r_min_m - x, 0.0) + np.maximum(x - self.r_max_m, 0.0) for x in d]
+        return np.where(out[0] <= out[1], d[0], d[1])
+
+
+def _rotations_about(w: Array, angles: Array) -> Array:
+    """Rotation matrices (N, 3, 3) about the unit axis ``w`` by ``angles`` [rad]."""
+    K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+    a = np.asarray(angles, dtype=float)[:, None, None]
+    return np.eye(3) + np.sin(a) * K + (1.0 - np.cos(a)) * (K @ K)
+
+
+def _axes(robot: Robot, q: Array) -> list[tuple[Array, Array]]:
+    """Every joint's axis (unit direction, a point on it) in the base frame at joints ``q``."""
+    model, data = robot.model, robot.model.createData()
+    pin.computeJointJacobians(model, data, q)
+    out = []
+    for j in range(1, model.njoints):
+        v, w = data.J[:3, model.joints[j].idx_v], data.J[3:, model.joints[j].idx_v]
+        w = w / np.linalg.norm(w)
+        out.append((w, np.cross(w, v)))  # v = p x w for p on the axis (WORLD convention)
+    return out
+
+
+def _meeting_point(lines: list[tuple[Array, Array]]) -> tuple[Array, float]:
+    """The point closest to every line (least squares) and its largest distance to one [m]."""
+    A = sum(np.eye(3) - np.outer(w, w) for w, _ in lines)
+    b = sum((np.eye(3) - np.outer(w, w)) @ p for w, p in lines)
+    x = np.linalg.lstsq(A, b, rcond=None)[0]
+    return x, max(float(np.linalg.norm((np.eye(3) - np.outer(w, w)) @ (x - p))) for w, p in lines)
+
+
+@functools.lru_cache(maxsize=16)
+def _reach_model(robot: Robot, joint_margin_rad: float, samples: int = 3000) -> ReachModel:
+    n = robot.nq
+    lower, upper = robot.spec.lower + joint_margin_rad, robot.spec.upper - joint_margin_rad
+    rng = np.random.default_rng(1)
+    q_ref = 0.5 * (np.clip(lower, -math.pi, math.pi) + np.clip(upper, -math.pi, math.pi))
+    q_ref[0] = 0.0 if lower[0] <= 0.0 <= upper[0] else q_ref[0]
+    axes = _axes(robot, q_ref + 0.3)  # away from aligned axes
+    wc, spread = _meeting_point(axes[-3:]) if n >= 6 else (np.zeros(3), np.inf)
+    spherical = spread < WRIST_TOLERANCE_M
+    flange = robot.fk(q_ref + 0.3)
+    point_in_flange = (np.linalg.inv(flange) @ np.append(wc, 1.0))[:3] if spherical else np.zeros(3)
+    axes = _axes(robot, q_ref)
+    (w1, p1), (w2, p2) = axes[0], axes[1]
+    # the point of axis 2 closest to axis 1
+    c = np.cross(w1, w2)
+    if np.linalg.norm(c) < 1e-9:
+        shoulder = p2
+    else:
+        t = np.dot(np.cross(p1 - p2, w1), c) / np.dot(c, c)
+        shoulder = p2 + t * w2
+
+    def point(q: Array) -> Array:
+        T = robot.fk(q)
+        return (T @ np.append(point_in_flange, 1.0))[:3]
+
+    def distance_from_shoulder(q: Array) -> float:
+        # the shoulder turns with axis 1: measured with axis 1 at q_ref's value
+        qq = np.array(q, dtype=float)
+        qq[0] = q_ref[0]
+        return float(np.linalg.norm(point(qq) - shoulder))
+
+    arm = slice(1, n - 3) if spherical else slice(1, n)
+    lo, hi = np.clip(lower, -math.pi, math.pi), np.clip(upper, -math.pi, math.pi)
+    qs = np.tile(q_ref, (samples, 1))
+    qs[:, arm] = lo[arm] + rng.random((samples, len(range(n)[arm]))) * (hi - lo)[arm]
+    d = np.array([distance_from_shoulder(q) for q in qs])
+    r = []
+    for sign, k in ((1.0, int(np.argmin(d))), (-1.0, int(np.argmax(d)))):
+        res = scipy.optimize.minimize(
+            lambda x, s=sign: (
+                s * distance_from_shoulder(np.concatenate([q_ref[: arm.start], x, q_ref[arm.stop :]]))
+            ),
+            qs[k, arm],
+            bounds=list(zip(lo[arm], hi[arm], strict=True)),
+            method="L-BFGS-B",
+        )
+        r.append(min(sign * d[k], float(res.fun)) * sign)
+    return ReachModel(spherical, point_in_flange, (w1, p1), shoulder, point(q_ref), r[0], r[1])
+
+
+# ---- findings ----------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Cause:
+    """One thing that keeps a segment from the demonstrated orientation, with its figure.
+
+    Attributes:
+        cause: ``"reach"``, ``"joint limit"``, ``"joint wrap"``, ``"singularity"``, ``"collision"``
+            (robot or tool against the cell), ``"self-collision"`` (robot and tool among
+            themselves) or ``"orientation"`` (none of these measured: the cone with the joint-step
+            bound and the other tolerances together).
+        figure: the worst value the demonstration asks for inside the segment, in ``unit``: the
+            wrist-centre (or TCP) distance from the shoulder, the joint angle, the scaled
+            manipulability, the signed distance of the pair (negative: depth).
+        limit: the bound it breaks, in ``unit``: the reach, the joint limit less the margin, the
+            singularity margin, the pair's clearance margin.
+        unit: ``"m"``, ``"deg"`` or ``"-"``.
+        objects: the pair's two bodies (collision), else empty.
+        joint: 1-based joint number (joint limit, joint wrap), else None.
+        explains_deg: the orientation change this cause alone asks for [deg] (inf when no change
+            of orientation is enough), the measure the causes are ordered by.
+        suggestion: what would fix it, in words with figures.
+    """
+
+    cause: str
+    figure: float
+    limit: float
+    unit: str
+    objects: tuple[str, ...] = ()
+    joint: int | None = None
+    explains_deg: float = 0.0
+    suggestion: str = ""
+
+    @property
+    def label(self) -> str:
+        """The cause as the repair reasons write it: ``"joint limit (joint 5)"``, ``"collision"``."""
+        return f"{self.cause} (joint {self.joint})" if self.joint is not None else self.cause
+
+    def as_json(self) -> dict[str, Any]:
+        """Plain values for ``result.json``."""
+        return {
+            "cause": self.cause,
+            "figure": _finite(self.figure),
+            "limit": _finite(self.limit),
+            "unit": self.unit,
+            "objects": list(self.objects),
+            "joint": self.joint,
+            "explains_deg": _finite(self.explains_deg),
+            "suggestion": self.suggestion,
+        }
+
+
+@dataclass(frozen=True)
+class Finding:
+    """A segment that needed extra orientation slack or has no answer, and why.
+
+    Attributes:
+        status: ``"repaired"`` (verified with ``slack_deg``) or ``"infeasible"``.
+        index_start, index_end: first and last waypoint (inclusive).
+        s_start_m, s_end_m: their arc lengths [m].
+        causes: every cause measured there, the one that explains most first.
+        slack_deg: the largest extra orientation slack used inside [deg] (repaired), else None.
+    """
+
+    status: str
+    index_start: int
+    index_end: int
+    s_start_m: float
+    s_end_m: float
+    causes: tuple[Cause, ...]
+    slack_deg: float | None = None
+
+    @property
+    def cause(self) -> Cause:
+        """The cause that explains most."""
+        return self.causes[0]
+
+    def describe(self) -> str:
+        """One line for messages and reports."""
+        head = (
+            f"waypoints {self.index_start}-{self.index_end} (s = {self.s_start_m:.3f}-{self.s_end_m:.3f} m): "
+        )
+        if self.slack_deg is not None:
+            head += f"{self.slack_deg:.2f} deg extra orientation slack, "
+        c = self.cause
+        objs = f" ({', '.join(c.objects)})" if c.objects else ""
+        return head + c.label + objs + (f": {c.suggestion}" if c.suggestion else "")
+
+    def as_json(self) -> dict[str, Any]:
+        """The ``diagnosis`` entry of ``result.json`` (docs/diagnosis.schema.json)."""
+        c = self.cause
+        return {
+            "status": self.status,
+            "index_start": self.index_start,
+            "index_end": self.index_end,
+            "s_start_m": self.s_start_m,
+            "s_end_m": self.s_end_m,
+            "cause": c.cause,
+            "figure": _finite(c.figure),
+            "limit": _finite(c.limit),
+            "unit": c.unit,
+            "objects": list(c.objects),
+            "joint": c.joint,
+            "slack_deg": self.slack_deg,
+            "suggestion": c.suggestion,
+            "causes": [x.as_json() for x in self.causes],
+        }
+
+
+def _finite(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
+def segments(mask: Array, gap: int = 2) -> list[tuple[int, int]]:
+    """Runs of True in ``mask`` (first, last inclusive), runs closer than ``gap`` waypoints merged."""
+    out: list[tuple[int, int]] = []
+    for a, b in runs(np.asarray(mask, dtype=bool)):
+        if out and a - out[-1][1] <= gap:
+            out[-1] = (out[-1][0], b)
+        else:
+            out.append((a, b))
+    return out
+
+
+@dataclass
+class Diagnoser:
+    """Measures the causes of the segments of one problem (robot, tool, path, tolerances, cell).
+
+    Attributes:
+        kin: TCP kinematics.
+        fused: the fused path (CAD positions, demonstrated orientations, arc length).
+        tolerances: the strict tolerances.
+        axisymmetric: only the tool axis counts (the spin about it is free).
+        model: the collision model, or None without collision checking.
+    """
+
+    kin: TcpKinematics
+    fused: FusedPath
+    tolerances: Tolerances
+    axisymmetric: bool
+    model: Any = None
+
+    def __post_init__(self) -> None:
+        spec = self.kin.robot.spec
+        self.margin = math.radians(self.tolerances.joint_margin_deg)
+        self.lower, self.upper = spec.lower + self.margin, spec.upper - self.margin
+        self.reach = _reach_model(self.kin.robot, self.margin)
+        self.cell = set() if self.model is None else {b.name for b in self.model.bodies if b.kind == "cell"}
+
+    # -- the demonstrated pose and configuration -------------------------------------------------
+
+    def target(self, k: int, qk: Array) -> Array:
+        """The demonstrated TCP pose at waypoint ``k``.
+
+        For an axisymmetric tool: the reached pose ``qk`` turned the least that puts its axis on the
+        demonstrated one (the spin about the axis is free).
+        """
+        T = np.eye(4)
+        T[:3, 3] = self.fused.positions[k]
+        R_demo = self.fused.rotations[k]
+        if not self.axisymmetric:
+            T[:3, :3] = R_demo
+            return T
+        R = self.kin.pose(qk)[:3, :3]
+        z0, z1 = R[:, 2], R_demo[:, 2]
+        axis = np.cross(z0, z1)
+        angle = math.atan2(np.linalg.norm(axis), float(z0 @ z1))
+        if np.linalg.norm(axis) < 1e-12:
+            T[:3, :3] = R if angle < 1.0 else R_demo
+            return T
+        T[:3, :3] = _rotations_about(axis / np.linalg.norm(axis), np.array([angle]))[0] @ R
+        return T
+
+    def _orientation_jacobian(self, q: Array) -> tuple[Array, Array]:
+        J = self.kin.jacobian(q)
+        Jw = J[3:]
+        if self.axisymmetric:
+            z = self.kin.pose(q)[:3, 2]
+            Jw = (np.eye(3) - np.outer(z, z)) @ Jw
+        return J[:3], Jw
+
+    def orientation_needed_deg(self, q: Array, row: Array, delta: float) -> float:
+        """The least change of tool orientation [deg] that moves ``row · q`` by ``delta``.
+
+        The TCP position is held; linearised at ``q``; 0 when a redundant arm can do it in its null
+        space. The change is a least-squares problem with two equality rows, solved by its KKT system.
+        """
+        Jp, Jw = self._orientation_jacobian(q)
+        n = len(q)
+        H = Jw.T @ Jw + 1e-6 * np.eye(n)
+        A = np.vstack([Jp, row])
+        b = np.concatenate([np.zeros(3), [delta]])
+        K = np.block([[H, A.T], [A, np.zeros((4, 4))]])
+        try:
+            dq = np.linalg.solve(K, np.concatenate([np.zeros(n), b]))[:n]
+        except np.linalg.LinAlgError:
+            return math.inf
+        return math.degrees(float(np.linalg.norm(Jw @ dq)))
+
+    # -- each cause, per waypoint ----------------------------------------------------------------
+
+    def reach_at(self, T: Array) -> tuple[float, float, float, float]:
+        """Wrist-centre distance from the shoulder at the demonstrated pose ``T``, and the tilt that fixes it.
+
+        Returns:
+            the distance [m], the tilt of the tool towards (or away from) the shoulder that brings it
+            inside the reachable range [deg] (0 when inside, inf when no tilt does), the distance
+            after tilting by the cone [m] and the closest any tilt comes to the range [m].
+        """
+        T_base = np.linalg.inv(self.kin.base_in_world) @ T
+        p, R = T_base[:3, 3], T_base[:3, :3]
+        v = (np.linalg.inv(self.kin.tcp_in_flange) @ np.append(self.reach.point_in_flange, 1.0))[:3]
+        wc = p + R @ v
+        d0 = float(self.reach.distance(wc[None])[0])
+        L = float(np.linalg.norm(v))
+        if self.reach.r_min_m <= d0 <= self.reach.r_max_m or L < 1e-9:
+            return d0, 0.0, d0, d0
+        front, back = self.reach.shoulders(wc[None])
+        s = (
+            front[0]
+            if abs(np.linalg.norm(wc - front[0]) - d0) < abs(np.linalg.norm(wc - back[0]) - d0)
+            else back[0]
+        )
+        u = (wc - p) / L
+        e = s - p
+        e = e / np.linalg.norm(e) * (1.0 if d0 > self.reach.r_max_m else -1.0)  # towards or away
+        axis = np.cross(u, e)
+        if np.linalg.norm(axis) < 1e-12:
+            axis = np.cross(u, [1.0, 0.0, 0.0] if abs(u[0]) < 0.9 else [0.0, 1.0, 0.0])
+        axis /= np.linalg.norm(axis)
+        betas = np.radians(np.arange(0.0, 180.01, 0.1))
+        points = p + L * np.einsum("nij,j->ni", _rotations_about(axis, betas), u)
+        d = self.reach.distance(points)
+        inside = np.flatnonzero((d >= self.reach.r_min_m - 1e-9) & (d <= self.reach.r_max_m + 1e-9))
+        cone = int(round(self.tolerances.orientation_deg / 0.1))
+        tilt = math.degrees(betas[inside[0]]) if inside.size else math.inf
+        return (
+            d0,
+            tilt,
+            float(d[min(cone, len(d) - 1)]),
+            float(d.min() if d0 > self.reach.r_max_m else d.max()),
+        )
+
+    def configuration(self, T: Array, q0: Array) -> tuple[Array, bool]:
+        """Joints that reach the demonstrated pose ``T`` from ``q0``, ignoring the joint limits."""
+        free = np.full(len(q0), 100.0)  # [rad]: no limit, and no pull to mid-range on a redundant arm
+        q, err = solve_ik(self.kin, T, q0, -free, free, max_iterations=200)
+        return q, err < 1e-6
+
+    def joint_causes(self, q: Array) -> list[Cause]:
+        """Joints of ``q`` beyond their limits less the margin.
+
+        A joint that turns less than a full turn may take ``q ± 2π``; a multi-turn joint must take
+        its value (the path is continuous).
+        """
+        out = []
+        for j in range(len(q)):
+            lo, hi = self.lower[j], self.upper[j]
+            multi = hi - lo > 2 * math.pi
+            values = [q[j]] if multi else [q[j] + 2 * math.pi * t for t in (-2, -1, 0, 1, 2)]
+            excess = [max(lo - v, v - hi, 0.0) for v in values]
+            i = int(np.argmin(excess))
+            if excess[i] <= 1e-6:
+                continue
+            v = values[i]
+            bound = lo if v < lo else hi
+            row = np.zeros(len(q))
+            row[j] = 1.0
+            needed = self.orientation_needed_deg(q, row, bound - v)
+            kind = "joint wrap" if multi else "joint limit"
+            out.append(
+                Cause(
+                    kind,
+                    math.degrees(v),
+                    math.degrees(bound),
+                    "deg",
+                    joint=j + 1,
+                    explains_deg=needed,
+                    suggestion=(
+                        f"joint {j + 1} would need {math.degrees(v):.1f} deg, {math.degrees(abs(v - bound)):.1f} deg "
+                        f"beyond {math.degrees(bound):.1f} deg (its limit less the {self.tolerances.joint_margin_deg:g} "
+                        f"deg margin); about {needed:.1f} deg of tool orientation change brings it back"
+                        + (", or start the path with the tool turned the other way" if multi else "")
+                    ),
+                )
+            )
+        return out
+
+    def singularity_cause(self, q: Array) -> Cause | None:
+        """The scaled manipulability at ``q`` when below the margin."""
+        margin = self.tolerances.singularity_margin
+        w, _ = singularity_measures(self.kin, q[None])
+        if margin <= 0 or w[0] >= margin:
+            return None
+        h = 1e-6
+        grad = np.array(
+            [(singularity_measures(self.kin, (q + h * e)[None])[0][0] - w[0]) / h for e in np.eye(len(q))]
+        )
+        needed = (
+            self.orientation_needed_deg(q, grad, margin - w[0]) if np.linalg.norm(grad) > 1e-9 else math.inf
+        )
+        return Cause(
+            "singularity",
+            float(w[0]),
+            margin,
+            "-",
+            explains_deg=needed,
+            suggestion=(
+                f"scaled manipulability {w[0]:.4f} below the margin {margin:g}; about {needed:.1f} deg of tool "
+                "orientation change away from the singular direction keeps the margin"
+            ),
+        )
+
+    def collision_causes(self, q: Array) -> list[Cause]:
+        """The pairs closer than their margin at ``q``."""
+        if self.model is None:
+            return []
+        reach = max(self.model.margin_m, self.model.self_margin_m)
+        contacts = [c for c in self.model.contacts(q, reach) if c.distance_m < c.margin_m]
+        if not contacts:
+            return []
+        grads = self.model.distance_gradients(q, contacts)
+        out = []
+        for c, g in zip(contacts, grads, strict=True):
+            needed = (
+                self.orientation_needed_deg(q, g, c.margin_m - c.distance_m)
+                if np.linalg.norm(g) > 1e-9
+                else math.inf
+            )
+            own_self = c.other not in self.cell
+            where = "self margin" if own_self else "cell margin"
+            out.append(
+                Cause(
+                    "self-collision" if own_self else "collision",
+                    c.distance_m,
+                    c.margin_m,
+                    "m",
+                    objects=(c.body, c.other),
+                    explains_deg=needed,
+                    suggestion=(
+                        f"{c.body} and {c.other} at {c.distance_m * 1e3:.1f} mm "
+                        f"({(c.margin_m - c.distance_m) * 1e3:.1f} mm inside the {where} {c.margin_m * 1e3:g} mm); "
+                        f"about {needed:.1f} deg of tool orientation change clears it"
+                        + ("" if own_self else f", or move {c.other}")
+                    ),
+                )
+            )
+        return out
+
+    # -- a segment -------------------------------------------------------------------------------
+
+    def segment(self, status: str, a: int, b: int, q: Array, slack_deg: float | None = None) -> Finding:
+        """The causes of waypoints ``a``..``b`` (inclusive) of the answer ``q`` (N, n) [rad]."""
+        found: dict[tuple, Cause] = {}
+
+        def keep(c: Cause) -> None:
+            # per cause: the worst figure (farthest beyond its limit) and the most it explains
+            key = (c.cause, c.joint, c.objects)
+            old = found.get(key)
+            if old is None:
+                found[key] = c
+                return
+            worst = c if abs(c.figure - c.limit) > abs(old.figure - old.limit) else old
+            most = c if c.explains_deg > old.explains_deg else old
+            found[key] = replace(worst, explains_deg=most.explains_deg, suggestion=most.suggestion)
+
+        q_prev = None
+        reach_rows = []
+        for k in range(a, b + 1):
+            T = self.target(k, q[k])
+            if self.reach.spherical:
+                d, tilt, d_cone, d_best = self.reach_at(T)
+                if tilt > 0.0:  # out of reach as demonstrated: no configuration to measure the rest at
+                    reach_rows.append((d, tilt, d_cone, d_best))
+                    q_prev = None
+                    continue
+            start = q[k] if q_prev is None else q_prev
+            qd, ok = self.configuration(T, start)
+            if not ok and q_prev is not None:
+                qd, ok = self.configuration(T, q[k])
+            if not ok:
+                if not self.reach.spherical or not reach_rows:
+                    miss = float(np.linalg.norm(self.kin.pose(qd)[:3, 3] - T[:3, 3]))
+                    reach_rows.append((miss,))
+                q_prev = None
+                continue
+            q_prev = qd
+            sc = self.singularity_cause(qd)
+            for c in [*self.joint_causes(qd), *([sc] if sc else []), *self.collision_causes(qd)]:
+                keep(c)
+        causes = list(found.values())
+        if reach_rows:
+            causes.append(self._reach_cause(reach_rows))
+        causes.sort(key=lambda c: -c.explains_deg)
+        if not causes:
+            causes = [
+                Cause(
+                    "orientation",
+                    math.nan,
+                    self.tolerances.orientation_deg,
+                    "deg",
+                    suggestion="no single limit measured at the demonstrated orientation; the cone together "
+                    "with the joint-step bound and the other tolerances forced it",
+                )
+            ]
+        s = self.fused.s
+        return Finding(status, a, b, float(s[a]), float(s[b]), tuple(causes), slack_deg)
+
+    def _reach_cause(self, rows: list[tuple]) -> Cause:
+        if all(len(r) == 4 for r in rows):
+            d = np.array([r[0] for r in rows])
+            tilt = max(r[1] for r in rows)
+            d_cone = np.array([r[2] for r in rows])
+            d_best = np.array([r[3] for r in rows])
+            far = bool(np.max(d) > self.reach.r_max_m)
+            worst = float(d.max() if far else d.min())
+            limit = self.reach.r_max_m if far else self.reach.r_min_m
+            # the shift that keeps the demonstrated orientation (to the cone), and the least at any tilt
+            move = float(np.max(np.abs(d_cone - limit)))
+            least = float(np.max(np.abs(d_best - limit))) if not math.isfinite(tilt) else 0.0
+            cone = self.tolerances.orientation_deg
+            text = (
+                f"the wrist centre is {d.min():.3f}-{d.max():.3f} m from the shoulder (axis 2) at the demonstrated "
+                f"orientation and {d_cone.min():.3f}-{d_cone.max():.3f} m within the {cone:g} deg cone; the arm "
+                f"reaches {self.reach.r_min_m:.3f}-{self.reach.r_max_m:.3f} m: "
+                + (
+                    f"tilting the tool {tilt:.1f} deg {'towards' if far else 'away from'} the robot brings it in"
+                    if math.isfinite(tilt)
+                    else "no tilt of the tool brings it in"
+                )
+                + f"; or move the part {move:.3f} m {'closer to' if far else 'away from'} the robot to keep the "
+                "demonstrated orientation"
+                + (f" (at least {least:.3f} m whatever the orientation)" if least > 0 else "")
+            )
+            return Cause("reach", worst, limit, "m", explains_deg=tilt, suggestion=text)
+        miss = max(r[0] for r in rows if len(r) == 1)
+        return Cause(
+            "reach",
+            miss,
+            0.0,
+            "m",
+            explains_deg=math.inf,
+            suggestion=f"the demonstrated pose is out of reach inside the joint limits: the TCP misses it by "
+            f"{miss:.4f} m; move the part closer to the robot",
+        )

@@ -22,6 +22,7 @@ CAD_FORMATS = ("csv", "dxf", "gcode", "mesh", "pathml")
 DEMO_FORMATS = ("liberty_ascii", "liberty_binary", "csv")
 PROGRAM_FORMATS = ("rapid", "krl", "urscript")
 SHAPES = ("box", "cylinder", "sphere", "mesh")
+CAUSES = ("reach", "joint limit", "joint wrap", "singularity", "collision", "self-collision", "orientation")
 
 # ---- documented ranges that bound the work (docs/problem-file.md, "Ranges and limits")
 MIN_SPACING_M = 1e-4
@@ -461,12 +462,18 @@ class ExpectedOutcome:
         reason: a text the repair or infeasibility reason must contain (e.g. ``"joint limit"``).
         max_slack_deg: for a repaired problem, the largest slack it may use [deg].
         s_range_m: arc-length range [m] the reported segment must overlap, or None.
+        cause: the cause the diagnosis must name first for that segment (``"reach"``,
+            ``"joint limit"``, ``"joint wrap"``, ``"singularity"``, ``"collision"``,
+            ``"self-collision"``, ``"orientation"``), or ``""`` for no check.
     """
 
     status: str
     reason: str = ""
     max_slack_deg: float | None = None
     s_range_m: tuple[float, float] | None = None
+    cause: str = ""
 
     def __post_init__(self) -> None:
         _one_of("expected", "status", self.status, ("ok", "repaired", "infeasible"))
+        if self.cause:
+            _one_of("expected", "cause", self.cause, CAUSES)

@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
+import scipy.optimize
 
 from refine.cli import exit_status, main
 from refine.collision import CollisionModel
-from refine.diagnosis import closest_pair_text
+from refine.diagnosis import Diagnoser, _reach_model, closest_pair_text
 from refine.frames import make_transform
 from refine.optimise.clearance import ClearanceSource
 from refine.optimise.seed import TcpKinematics
@@ -63,3 +65,44 @@ def test_the_clearance_line_says_when_the_closest_pair_is_a_self_pair(tool_in_fo
     body, other = tool_in_forearm.clearance(q).segment_pair[0]
     text = closest_pair_text(tool_in_forearm.clearance(q), {"cabinet", other}, 0.01, 0.005)
     assert "cell pair, margin 10 mm" in text
+
+
+def test_the_reach_model_matches_the_data_sheet_arm_lengths():
+    """Wrist-centre range from the shoulder: iiwa 14 0.42 + 0.40 m links (axis 4 within 120 - 2 deg),
+    IRB 4600-60/2.05 upper arm 0.90 m and forearm 0.96 m with the 0.175 m elbow offset."""
+    iiwa = _reach_model(load_robot("kuka_iiwa14_r820"), math.radians(2.0))
+    assert iiwa.spherical
+    assert iiwa.r_max_m == pytest.approx(0.82, abs=1e-4)
+    bent = math.radians(180.0 - 118.0)  # the angle between the links at the elbow
+    assert iiwa.r_min_m == pytest.approx(
+        math.sqrt(0.42**2 + 0.40**2 - 2 * 0.42 * 0.40 * math.cos(bent)), abs=1e-3
+    )
+    irb = _reach_model(load_robot("abb_irb4600_60_205"), math.radians(2.0))
+    assert irb.spherical and irb.r_max_m == pytest.approx(0.90 + math.hypot(0.175, 0.96), abs=1e-4)
+    assert not _reach_model(load_robot("ur10e"), math.radians(2.0)).spherical  # offset wrist
+
+
+def test_the_tilt_that_brings_the_wrist_centre_into_reach_matches_the_geometry():
+    """iiwa 14, 0.20 m tool pointing down and leaning 30 deg back: the wrist centre sits 0.326 m up
+    the tool axis from the TCP (0.126 m flange + 0.20 m tool); the needed tilt is found here with
+    brentq on the plane geometry, independently of the diagnosis code."""
+    robot = load_robot("kuka_iiwa14_r820")
+    tcp = make_transform(p=[0.0, 0.0, 0.20])
+    kin = TcpKinematics(robot, np.eye(4), tcp)
+    shoulder = np.array([0.0, 0.0, 0.36])
+    lean, x, z, arm = math.radians(30.0), 0.70, 0.10, 0.326
+
+    def wrist(a):  # tool axis (pointing from flange to tip) leaning a back towards the robot
+        return np.array([x + arm * math.sin(a), 0.0, z + arm * math.cos(a)])
+
+    a_in = scipy.optimize.brentq(lambda a: np.linalg.norm(wrist(a) - shoulder) - 0.82, 0.0, lean)
+    axis = np.array([-math.sin(lean), 0.0, -math.cos(lean)])
+    x_axis = np.array([math.cos(lean), 0.0, -math.sin(lean)])
+    R = np.column_stack([x_axis, np.cross(axis, x_axis), axis])
+    path = SimpleNamespace(s=np.zeros(1), positions=np.array([[x, 0.0, z]]), rotations=R[None])
+    tol = SimpleNamespace(orientation_deg=3.0, joint_margin_deg=2.0, singularity_margin=0.02)
+    d0, tilt, d_cone, _ = Diagnoser(kin, path, tol, True).reach_at(make_transform(R, [x, 0.0, z]))
+    assert d0 == pytest.approx(np.linalg.norm(wrist(lean) - shoulder), abs=1e-6)
+    assert d0 > 0.82
+    assert tilt == pytest.approx(math.degrees(lean - a_in), abs=0.15)  # searched in 0.1 deg steps
+    assert d_cone == pytest.approx(np.linalg.norm(wrist(lean - math.radians(3.0)) - shoulder), abs=1e-3)

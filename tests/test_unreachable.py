@@ -11,12 +11,14 @@ them, it never skips them.
 from __future__ import annotations
 
 import importlib
+import json
 import math
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from refine.export.result_json import result_dict
 from refine.frames import rotation_angle_deg
 from refine.optimise.seed import TcpKinematics
 from refine.pipeline import solve_problem
@@ -27,7 +29,15 @@ pytestmark = pytest.mark.slow
 FOLDER = Path(__file__).resolve().parents[1] / "problems" / "unreachable"
 CASES = sorted(p.parent.name for p in FOLDER.glob("*/problem.toml"))
 
-REPAIR_REASONS = ("joint limit (joint", "joint wrap (joint", "singularity", "collision", "orientation")
+REPAIR_REASONS = (
+    "joint limit (joint",
+    "joint wrap (joint",
+    "reach",
+    "singularity",
+    "collision",
+    "self-collision",
+    "orientation",
+)
 """What ``Repair.reason`` may say (docs/outputs.md)."""
 
 KNOWN_GAPS: dict[tuple[str, str], str] = {}
@@ -178,3 +188,34 @@ def test_a_repaired_path_in_a_cell_keeps_at_least_the_margin_everywhere(run):
     for p in result.passes:
         assert p.clearance is not None and p.clearance.ok
         assert p.clearance.min_clearance_m >= 0.0, p.clearance.summary()
+
+
+def test_the_diagnosis_names_the_cause_built_into_the_case(run):
+    """The segment over the defect names, first, the cause the case was built with."""
+    problem, result = run
+    e = problem.expected
+    if not e.cause:
+        pytest.skip("no expected cause")
+    findings = [f for f in result.refinement.diagnosis if _overlaps(f.s_start_m, f.s_end_m, e.s_range_m)]
+    assert findings, f"no diagnosis entry over s = {e.s_range_m}: {result.refinement.diagnosis}"
+    assert all(f.status == result.refinement.status for f in findings)
+    named = [f.cause.cause for f in findings]
+    assert e.cause in named, f"expected {e.cause!r} first, got {[f.describe() for f in findings]}"
+
+
+def test_result_json_diagnosis_follows_its_schema_and_repairs_follow_from_it(run):
+    jsonschema = pytest.importorskip("jsonschema")
+    _, result = run
+    schema = json.loads((FOLDER.parents[1] / "docs" / "diagnosis.schema.json").read_text())
+    doc = json.loads(json.dumps(result_dict(result)))  # through JSON, as a caller reads it
+    jsonschema.validate(doc["diagnosis"], schema)
+    assert doc["diagnosis"], "a repaired or infeasible result must have diagnosis entries"
+    repaired = [d for d in doc["diagnosis"] if d["status"] == "repaired"]
+    assert [(r["index_start"], r["index_end"], r["slack_deg"]) for r in doc["repairs"]] == [
+        (d["index_start"], d["index_end"], d["slack_deg"]) for d in repaired
+    ]
+    for d in doc["diagnosis"]:
+        assert (d["slack_deg"] is not None) == (d["status"] == "repaired")
+        explains = [c["explains_deg"] for c in d["causes"]]
+        order = [math.inf if x is None else x for x in explains]
+        assert order == sorted(order, reverse=True), explains

@@ -20,6 +20,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from refine.diagnosis import Diagnoser, Finding, segments
 from refine.errors import SolverError
 from refine.optimise.problem import ActiveSet, LinearRow, RefinementNLP
 from refine.optimise.seed import TcpKinematics, alternative_seeds, ik_chain, reach_shortfall, start_candidates
@@ -104,8 +105,10 @@ class Refinement:
         outer_iterations: solve -> verify rounds.
         active: the constraints added by the outer loop in the last round.
         slack_deg: extra orientation slack used per waypoint [deg], (N,) (zeros unless repaired).
-        repairs: the repaired segments.
+        repairs: the repaired segments (derived from ``diagnosis``).
         timings_s: ``seed``, ``solve``, ``verify``, ``build`` (rebuilds) wall times [s].
+        diagnosis: every segment that needed slack or has no answer, with its measured causes
+            (:mod:`refine.diagnosis`); empty when ok.
     """
 
     status: str
@@ -120,6 +123,7 @@ class Refinement:
     slack_deg: Array = field(default_factory=lambda: np.zeros(0))
     repairs: tuple[Repair, ...] = ()
     timings_s: dict[str, float] = field(default_factory=dict)
+    diagnosis: tuple[Finding, ...] = ()
 
 
 # ---- seed ----------------------------------------------------------------------------------------
@@ -300,7 +304,13 @@ def solve_refinement(
     kin = _kin(problem)
     if unreachable:
         check = check_path(kin, q_seed, problem.fused, problem.tolerances, problem.axisymmetric)
-        reason = "; ".join(v.describe() for v in unreachable)
+        t0 = time.perf_counter()
+        mask = np.zeros(problem.n_waypoints, dtype=bool)
+        for v in unreachable:
+            mask[v.index_start : v.index_end + 1] = True
+        findings = _findings(problem, sources, "infeasible", q_seed, mask)
+        timings["diagnose"] = time.perf_counter() - t0
+        reason = "; ".join([f.describe() for f in findings] + [v.describe() for v in unreachable])
         log.info("refinement infeasible before solving: %s", reason)
         return Refinement(
             "infeasible",
@@ -312,6 +322,7 @@ def solve_refinement(
             0,
             0,
             timings_s=timings,
+            diagnosis=findings,
         )
 
     attempt = _attempt(problem, q_seed, sources, repair_max_slack_deg, max_rounds, timings)
@@ -386,19 +397,9 @@ def _attempt(
         q = loop.problem.joints(x)
         if check.ok:
             status = "repaired"
-            repairs = _diagnose(loop.problem, q, slack, sources)
         else:
             log.info("repair within %.1f deg failed: %s", repair_max_slack_deg, _describe(check, stats))
-            # name what held the orientation back where even the largest slack was not enough
-            at_limit = np.where(slack >= repair_max_slack_deg - 1e-3, repair_max_slack_deg, 0.0)
-            binding = "; ".join(
-                f"s = {r.s_start_m:.3f}-{r.s_end_m:.3f} m limited by {r.reason}"
-                + (f" ({', '.join(r.objects)})" if r.objects else "")
-                for r in _diagnose(loop.problem, q, at_limit, sources)
-            )
-            note = f"no repair within {repair_max_slack_deg:g} deg of extra slack" + (
-                f": {binding}" if binding else ""
-            )
+            note = f"no repair within {repair_max_slack_deg:g} deg of extra slack"
             stats = {
                 **stats,
                 "return_status": f"{stats.get('return_status')}; {note} (strict: {strict_reason})",
@@ -407,12 +408,34 @@ def _attempt(
     solver_status = str(stats.get("return_status", "unknown"))
     if status == "ok" and not stats.get("success", False):
         log.warning("IPOPT returned %s but the verified path meets every tolerance", solver_status)
+    t0 = time.perf_counter()
+    findings: tuple[Finding, ...] = ()
+    if status == "repaired":
+        findings = _findings(problem, sources, status, q, slack > 1e-3, slack)
+        repairs = tuple(
+            Repair(
+                f.index_start,
+                f.index_end,
+                f.s_start_m,
+                f.s_end_m,
+                float(f.slack_deg or 0.0),
+                f.cause.label,
+                f.cause.objects,
+            )
+            for f in findings
+        )
+    elif status == "infeasible":
+        mask = np.zeros(problem.n_waypoints, dtype=bool)
+        for v in check.violations:
+            mask[v.index_start : v.index_end + 1] = True
+        findings = _findings(problem, sources, status, q, mask)
+    timings["diagnose"] = timings.get("diagnose", 0.0) + time.perf_counter() - t0
     reason = (
         ""
         if status == "ok"
-        else _describe(check, stats)
+        else "; ".join(f.describe() for f in findings) + f" ({_describe(check, stats)})"
         if status == "infeasible"
-        else "; ".join(r.describe() for r in repairs)
+        else "; ".join(f.describe() for f in findings)
     )
     return Refinement(
         status=status,
@@ -427,6 +450,7 @@ def _attempt(
         slack_deg=slack if status == "repaired" else np.zeros(problem.n_waypoints),
         repairs=repairs,
         timings_s=timings,
+        diagnosis=findings,
     )
 
 
@@ -445,37 +469,20 @@ def _describe(check: PathCheck, stats: dict) -> str:
     return text
 
 
-def _diagnose(
-    problem: RefinementNLP, q: Array, slack: Array, sources: tuple[ConstraintSource, ...]
-) -> tuple[Repair, ...]:
-    """Group waypoints that used slack into segments and name the constraint active there."""
-    kin = _kin(problem)
-    lower, upper = _bounds(problem)
-    w, _ = singularity_measures(kin, q)
-    margin = problem.tolerances.singularity_margin
-    s = problem.fused.s
-    out = []
-    for a, b in runs(slack > 1e-3):
-        seg = slice(max(a - 2, 0), b + 3)
-        reason, objects = "orientation", ()
-        at_bound = (np.abs(q[seg] - lower) < 1e-4) | (np.abs(q[seg] - upper) < 1e-4)
-        near_rows = [r for r in problem.active.linear_rows if a - 2 <= r.k <= b + 2]
-        if near_rows and _rows_active(near_rows, q):
-            reason, objects = "collision", tuple(sorted({r.label for r in _rows_active(near_rows, q)}))
-        elif at_bound.any():
-            j = int(np.flatnonzero(at_bound.any(axis=0))[0])
-            wraps = upper[j] - lower[j] > 2 * math.pi
-            reason = f"joint {'wrap' if wraps else 'limit'} (joint {j + 1})"
-        elif margin > 0 and w[seg].min() < 1.05 * margin:
-            reason = "singularity"
-        out.append(Repair(a, b, float(s[a]), float(s[b]), float(slack[a : b + 1].max()), reason, objects))
-    return tuple(out)
-
-
-def _rows_active(rows: list[LinearRow], q: Array, tol: float = 1e-5) -> list[LinearRow]:
-    out = []
-    for r in rows:
-        qk = q[r.k] if r.f == 0.0 else (1 - r.f) * q[r.k] + r.f * q[min(r.k + 1, len(q) - 1)]
-        if float(r.gradient @ qk) - r.lower < tol:
-            out.append(r)
-    return out
+def _findings(
+    problem: RefinementNLP,
+    sources: tuple[ConstraintSource, ...],
+    status: str,
+    q: Array,
+    mask: Array,
+    slack: Array | None = None,
+) -> tuple[Finding, ...]:
+    """The diagnosis of every run of ``mask`` (waypoints that needed slack or break a tolerance)."""
+    model = next((getattr(src, "model", None) for src in sources if hasattr(src, "model")), None)
+    diagnoser = Diagnoser(_kin(problem), problem.fused, problem.tolerances, problem.axisymmetric, model)
+    return tuple(
+        diagnoser.segment(
+            status, a, b, q, None if slack is None else float(np.max(slack[a : b + 1]))
+        )
+        for a, b in segments(mask)
+    )
