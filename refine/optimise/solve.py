@@ -310,7 +310,7 @@ def solve_refinement(
             mask[v.index_start : v.index_end + 1] = True
         findings = _findings(problem, sources, "infeasible", q_seed, mask)
         timings["diagnose"] = time.perf_counter() - t0
-        reason = "; ".join([f.describe() for f in findings] + [v.describe() for v in unreachable])
+        reason = "; ".join([v.describe() for v in unreachable] + [f.describe() for f in findings])
         log.info("refinement infeasible before solving: %s", reason)
         return Refinement(
             "infeasible",
