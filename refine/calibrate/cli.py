@@ -74,10 +74,70 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     rec.add_argument("--threshold-m", type=float, default=None, help="largest residual of a good point [m]")
 
+    trace = kinds.add_parser(
+        "receiver-path", help="source_in_world from a demonstration traced along the problem's CAD path (ICP)"
+    )
+    _log_options(trace)
+    _output_options(trace)
+    trace.add_argument(
+        "--problem",
+        type=Path,
+        required=True,
+        help="the problem: its CAD path, its tool's tip and its source_in_world as the first guess",
+    )
+
+    tcp = kinds.add_parser("tcp", help="tcp_in_flange by the four-point (or six-point) method")
+    tcp.add_argument(
+        "readings", type=Path, help="CSV of robot readings: j1..jn [deg] or flange poses x,y,z,qw,qx,qy,qz"
+    )
+    _robot_options(tcp)
+    tcp.add_argument(
+        "--six-point", action="store_true", help="the last two readings are the +z and +x axis readings"
+    )
+
+    work = kinds.add_parser("workpiece", help="cad_in_world from the robot's TCP touched onto CAD points")
+    work.add_argument(
+        "readings",
+        type=Path,
+        help="CSV of robot readings: j1..jn [deg] or TCP poses x,y,z,qw,qx,qy,qz (base frame)",
+    )
+    work.add_argument(
+        "points", type=Path, help="CSV of the touched points, x,y,z [m] in the CAD frame, in order"
+    )
+    _robot_options(work)
+    work.add_argument(
+        "--tcp-in-flange",
+        type=float,
+        nargs=3,
+        metavar=("X", "Y", "Z"),
+        help="TCP offset [m] (else the problem's)",
+    )
+
+
+def _robot_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--robot", default=None, help="robot model of the registry (else the problem's)")
+    p.add_argument(
+        "--problem", type=Path, default=None, help="take the robot, its base and its tool from this problem"
+    )
+    p.add_argument(
+        "--units", default="m", choices=("m", "mm"), help="position unit of pose readings (default m)"
+    )
+    p.add_argument("--threshold-m", type=float, default=None, help="largest residual of a good reading [m]")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of the summary")
+    p.add_argument(
+        "--write", type=Path, default=None, metavar="PROBLEM", help="update this problem file in place"
+    )
+
 
 def run(args: argparse.Namespace) -> int:
     """Run ``refine calibrate``; returns the exit status (errors raise RefineError)."""
-    handler = {"pivot": _pivot, "receiver": _receiver}[args.kind]
+    handler = {
+        "pivot": _pivot,
+        "receiver": _receiver,
+        "receiver-path": _receiver_path,
+        "tcp": _tcp,
+        "workpiece": _workpiece,
+    }[args.kind]
     cal, table, key, T, comment = handler(args)
     if args.write is not None:
         from refine.calibrate.files import update_problem
@@ -187,3 +247,94 @@ def _receiver(args: argparse.Namespace) -> tuple[Calibration, str, str, np.ndarr
     )
     T = cal.values["source_in_world"]
     return cal, "frames", "source_in_world", T, f"receiver registered on {len(points)} touched points"
+
+
+def _receiver_path(args: argparse.Namespace) -> tuple[Calibration, str, str, np.ndarray, str]:
+    from refine.cad import read_cad_path
+    from refine.calibrate.receiver import register_receiver_to_path
+    from refine.frames import invert_transform
+    from refine.problem import load_problem
+
+    problem = load_problem(args.problem)
+    cad = read_cad_path(problem.cad, problem.frames.cad_in_world)
+    tip = invert_transform(problem.tool.sensor_in_tcp)[:3, 3]
+    cal = register_receiver_to_path(
+        _read_log(args), tip, cad.positions, problem.frames.source_in_world, fit_z=not args.no_z_model
+    )
+    T = cal.values["source_in_world"]
+    return cal, "frames", "source_in_world", T, "receiver registered on a trace along the CAD path"
+
+
+def _robot_and_problem(args: argparse.Namespace):  # noqa: ANN202 - (Robot | None, Problem | None)
+    from refine.robot import load_robot
+
+    problem = None
+    if args.problem is not None:
+        from refine.problem import load_problem
+
+        problem = load_problem(args.problem)
+    model = args.robot or (problem.robot.model if problem is not None else None)
+    return (load_robot(model) if model else None), problem
+
+
+def _flange_or_tcp_poses(args: argparse.Namespace) -> tuple[str, np.ndarray, object]:
+    """("joints" | "poses", poses (N, 4, 4) [m], problem); joints go through the robot's FK."""
+    from refine.calibrate.files import read_robot_readings
+
+    kind, data = read_robot_readings(args.readings, args.units)
+    robot, problem = _robot_and_problem(args)
+    if kind == "poses":
+        return kind, data, problem
+    if robot is None:
+        raise InputError(
+            f"{args.readings}: joint readings need the robot model: --robot MODEL or --problem DIR"
+        )
+    if data.shape[1] != robot.nq:
+        raise InputError(
+            f"{args.readings}: {data.shape[1]} joint columns but robot {robot.spec.name!r} has {robot.nq} joints"
+        )
+    return kind, robot.fk_many(data), problem
+
+
+def _tcp(args: argparse.Namespace) -> tuple[Calibration, str, str, np.ndarray, str]:
+    from refine.calibrate.robot_touch import ROBOT_THRESHOLD_M, calibrate_tcp
+
+    _, flange, problem = _flange_or_tcp_poses(args)
+    threshold = ROBOT_THRESHOLD_M if args.threshold_m is None else args.threshold_m
+    cal = calibrate_tcp(flange, six_point=args.six_point, threshold_m=threshold)
+    T = cal.values["tcp_in_flange"].copy()
+    comment = "tcp_in_flange by the six-point method"
+    if not args.six_point:
+        source = problem
+        if source is None and args.write is not None:
+            from refine.problem import load_problem
+
+            source = load_problem(args.write)
+        if source is not None:
+            T[:3, :3] = source.tool.tcp_in_flange[:3, :3]
+            comment = "TCP position by the four-point method; orientation kept from the problem"
+        else:
+            comment = "TCP position by the four-point method; orientation not measured (identity)"
+    return cal, "tool", "tcp_in_flange", T, comment
+
+
+def _workpiece(args: argparse.Namespace) -> tuple[Calibration, str, str, np.ndarray, str]:
+    from refine.calibrate.files import read_points_csv
+    from refine.calibrate.robot_touch import ROBOT_THRESHOLD_M, register_workpiece, tcp_positions_world
+    from refine.frames import make_transform
+
+    kind, poses, problem = _flange_or_tcp_poses(args)
+    points, names = read_points_csv(args.points)
+    base = problem.robot.base_in_world if problem is not None else np.eye(4)
+    if kind == "poses":
+        tcp = np.eye(4)  # the controller reports the TCP itself
+    elif args.tcp_in_flange is not None:
+        tcp = make_transform(None, np.asarray(args.tcp_in_flange, dtype=float))
+    elif problem is not None:
+        tcp = problem.tool.tcp_in_flange
+    else:
+        raise InputError("joint readings need the TCP: --tcp-in-flange X Y Z [m] or --problem DIR")
+    threshold = ROBOT_THRESHOLD_M if args.threshold_m is None else args.threshold_m
+    cal = register_workpiece(tcp_positions_world(poses, base, tcp), points, threshold, labels=names)
+    T = cal.values["cad_in_world"]
+    return cal, "frames", "cad_in_world", T, f"workpiece registered on {len(points)} robot touches"

@@ -54,6 +54,19 @@ def swing_spread_deg(rotations: ArrayLike) -> tuple[float, float]:
     return math.degrees(math.sqrt(max(eig[0], 0.0))), math.degrees(math.sqrt(max(eig[1], 0.0)))
 
 
+def fixed_point_lstsq(positions: ArrayLike, rotations: ArrayLike) -> tuple[Array, Array, Array]:
+    """Linear least-squares solution of ``p_k + R_k t = c``: ``t`` (3,), ``c`` (3,), residuals (M,) [m].
+
+    The stacked system ``[R_k  -I] [t; c] = -p_k`` is solved by ``scipy.linalg.lstsq``.
+    """
+    p = np.asarray(positions, dtype=float)
+    R = np.asarray(rotations, dtype=float)
+    A = np.concatenate([R, np.broadcast_to(-np.eye(3), R.shape)], axis=2).reshape(-1, 6)
+    x = lstsq(A, -p.ravel())[0]
+    t, c = x[:3], x[3:]
+    return t, c, np.linalg.norm(p + R @ t - c, axis=1)
+
+
 def _residuals(x: Array, positions: Array, rotations: Array, fit_z: bool) -> Array:
     t, c = x[:3], x[3:6]
     coeffs = x[6:8] if fit_z else np.zeros(zfield.N_COEFFS)
@@ -104,8 +117,7 @@ def solve_pivot(
         )
 
     # ---- linear least squares: [R_k  -I] [t; c] = -p_k
-    A = np.concatenate([R, np.broadcast_to(-np.eye(3), R.shape)], axis=2).reshape(-1, 6)
-    x_lin = lstsq(A, -p.ravel())[0]
+    x_lin = np.concatenate(fixed_point_lstsq(p, R)[:2])
 
     # ---- robust nonlinear fit with the z error, then without the outliers
     x0 = np.concatenate([x_lin, np.zeros(zfield.N_COEFFS if fit_z else 0)])

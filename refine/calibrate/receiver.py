@@ -254,16 +254,18 @@ def register_receiver_to_path(
     initial_source_in_world: ArrayLike,
     fit_z: bool = True,
     spacing_m: float = 0.0005,
-    max_iterations: int = 40,
+    max_iterations: int = 60,
     threshold_m: float = 0.01,
-    stride: int = 4,
+    stride: int = 8,
+    max_rms_m: float = 0.004,
 ) -> Calibration:
     """Solve ``source_in_world`` from a demonstration traced with the tip along the CAD path (ICP).
 
     Each iteration matches every tip position (every ``stride``-th sample, spikes removed) to its
     nearest point of the path resampled every ``spacing_m``, then refits the transform and the z
-    error with a robust (soft-L1) least squares; it stops when the transform moves less than a
-    micrometre. Tip positions farther than ``threshold_m`` from the path at the end are outliers.
+    error with a robust (soft-L1) least squares on the distances across the path (point to line:
+    the component along the path's tangent is free, so the trace slides along the path); it stops when the transform moves less than a
+    hundredth of a millimetre. Tip positions farther than ``threshold_m`` from the path at the end are outliers.
 
     Args:
         log: the tracker log of the trace.
@@ -275,10 +277,12 @@ def register_receiver_to_path(
         max_iterations: ICP iterations at most.
         threshold_m: distance from the path beyond which a sample is an outlier [m].
         stride: use every ``stride``-th sample.
+        max_rms_m: largest RMS distance of the kept samples from the path that counts as a fit [m].
 
     Raises:
         InputError: a log beyond the tracker's range, or a fit that leaves most samples off the
-            path (a bad first guess or the wrong path).
+            path or the rest more than ``max_rms_m`` RMS off it (a bad first guess, a symmetric
+            path fitted turned over, or the wrong path).
     """
     check_tracker_range(log)
     tip = np.asarray(tip_in_sensor, dtype=float)
@@ -291,7 +295,13 @@ def register_receiver_to_path(
     s = np.concatenate([[0.0], np.cumsum(seg)])
     s_dense = np.arange(0.0, s[-1], spacing_m)
     dense = np.column_stack([np.interp(s_dense, s, path[:, j]) for j in range(3)])
+    tangents = np.gradient(dense, axis=0)
+    tangents /= np.linalg.norm(tangents, axis=1, keepdims=True)
     tree = cKDTree(dense)
+
+    def off_path(tips: Array, target: Array, tangent: Array) -> Array:
+        r = tips - target
+        return r - np.sum(r * tangent, axis=1, keepdims=True) * tangent
 
     def tips_world(x: Array) -> Array:
         T, coeffs = _unpack(x)
@@ -303,28 +313,32 @@ def register_receiver_to_path(
     iterations = 0
     for iterations in range(1, max_iterations + 1):  # noqa: B007 - the count is reported
         _, nearest = tree.query(tips_world(x))
-        target = dense[nearest]
+        target, tangent = dense[nearest], tangents[nearest]
         sol = least_squares(
-            lambda y, target=target: (tips_world(y) - target).ravel(),
+            lambda y, target=target, tangent=tangent: off_path(tips_world(y), target, tangent).ravel(),
             x,
             loss="soft_l1",
             f_scale=0.002,
             x_scale="jac",
+            max_nfev=20,
         )
         T_old, _ = _unpack(x)
         T_new, _ = _unpack(sol.x)
         x = sol.x
         moved_m = float(np.linalg.norm(T_new[:3, 3] - T_old[:3, 3]))
         turned_rad = float(np.radians(rotation_angle_deg(T_old[:3, :3], T_new[:3, :3])))
-        if moved_m + turned_rad < 1e-6:
+        if moved_m + turned_rad < 1e-5:
             break
     dist, _ = tree.query(tips_world(x))
     outliers = np.flatnonzero(dist > threshold_m)
-    if len(outliers) > 0.5 * len(dist):
+    kept = dist[dist <= threshold_m]
+    rms = float(np.sqrt(np.mean(kept**2))) if kept.size else float("inf")
+    if len(outliers) > 0.5 * len(dist) or rms > max_rms_m:
         raise InputError(
             f"path registration: {len(outliers)} of {len(dist)} tip positions stay more than "
-            f"{threshold_m * 1000:.0f} mm from the CAD path; the first guess of source_in_world is "
-            f"too far off, or the log does not trace this path"
+            f"{threshold_m * 1000:.0f} mm from the CAD path and the others are {rms * 1000:.1f} mm RMS "
+            f"off it (at most {max_rms_m * 1000:.0f} mm allowed); the first guess of source_in_world is "
+            f"too far off (a symmetric path also fits turned over), or the log does not trace this path"
         )
     T_F_S, coeffs = _unpack(x)
     if not fit_z:

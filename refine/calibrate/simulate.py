@@ -21,6 +21,7 @@ from refine.demo.simulate import TrackerModel, corrupt_sensor_poses
 from refine.errors import InputError
 from refine.frames import make_transform
 from refine.paths import TrackerLog
+from refine.robot import Robot
 
 Array = NDArray[np.float64]
 
@@ -223,3 +224,139 @@ def simulate_touches(
     T_S_E = make_transform(R_S_E, tip_source - R_S_E @ tip)
     log, outliers = _log(t, T_S_E, model, station, "touches")
     return SimulatedTouches(log=log, touched_world=P, dwell_ranges=tuple(ranges), outlier_indices=outliers)
+
+
+# ---- robot readings -----------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SimulatedReadings:
+    """Simulated robot readings and their truth.
+
+    Attributes:
+        joints: the joint readings [rad], shape (N, n), with reading noise.
+        flange_poses: the true flange poses T_base_flange reached, shape (N, 4, 4).
+    """
+
+    joints: Array
+    flange_poses: Array
+
+
+def _reach(robot: Robot, targets: Array, tcp_in_flange: Array, rng: np.random.Generator) -> Array:
+    """Joints [rad] (N, n) reaching TCP poses T_base_TCP (N, 4, 4), by damped least-squares IK."""
+    from refine.optimise.seed import TcpKinematics, solve_ik
+
+    kin = TcpKinematics(robot, np.eye(4), tcp_in_flange)
+    lo, hi = robot.spec.lower, robot.spec.upper
+    mid = 0.5 * (lo + hi)
+    out = []
+    for T in targets:
+        for attempt in range(20):
+            q0 = mid if attempt == 0 else rng.uniform(lo, hi)
+            q, err = solve_ik(kin, T, q0, lo, hi, max_iterations=300, tol=1e-10)
+            if err < 1e-8:
+                break
+        else:
+            raise InputError(f"simulated robot readings: the robot cannot reach the pose at {T[:3, 3]} m")
+        out.append(q)
+    return np.array(out)
+
+
+def _readings(
+    robot: Robot,
+    targets: Array,
+    tcp_in_flange: Array,
+    repeatability_m: float,
+    joint_noise_deg: float,
+    seed: int,
+) -> SimulatedReadings:
+    rng = np.random.default_rng(seed)
+    reached = np.array(targets, dtype=float)
+    reached[:, :3, 3] += rng.normal(scale=repeatability_m, size=(len(reached), 3))
+    q = _reach(robot, reached, tcp_in_flange, rng)
+    flange = robot.fk_many(q)
+    noisy = q + rng.normal(scale=math.radians(joint_noise_deg), size=q.shape)
+    return SimulatedReadings(joints=noisy, flange_poses=flange)
+
+
+def _tilted_down(n: int, tilt_deg: float, spin_deg: float = 0.0) -> list[Rotation]:
+    """``n`` tool orientations: tool z pointing down the base -z, tilted ``tilt_deg`` all round."""
+    down = Rotation.from_rotvec([math.pi, 0.0, 0.0])
+    out = []
+    for k in range(n):
+        azimuth = 2.0 * math.pi * k / n
+        axis = np.array([math.cos(azimuth), math.sin(azimuth), 0.0])
+        spin = Rotation.from_rotvec([0.0, 0.0, math.radians(spin_deg) * (k - (n - 1) / 2)])
+        out.append(Rotation.from_rotvec(math.radians(tilt_deg) * axis) * down * spin)
+    return out
+
+
+def simulate_tcp_readings(
+    robot: Robot,
+    tcp_in_flange: ArrayLike,
+    reference_point_in_base: ArrayLike,
+    n_points: int = 4,
+    tilt_deg: float = 30.0,
+    six_point: bool = False,
+    axis_move_m: float = 0.1,
+    repeatability_m: float = 5e-5,
+    joint_noise_deg: float = 0.0,
+    seed: int = 0,
+) -> SimulatedReadings:
+    """Simulate the readings of a four- (or six-) point TCP calibration.
+
+    The TCP is brought to the reference point with the tool tilted ``tilt_deg`` from the vertical
+    in ``n_points`` directions all round (and turned 20 deg about its axis between readings);
+    with ``six_point`` two more readings keep the last orientation and move the TCP
+    ``axis_move_m`` along the true tool +z and +x axes. Every reached pose misses its target by a
+    normal error of ``repeatability_m`` per axis; the joint readings get ``joint_noise_deg``.
+    """
+    T_fl_tcp = np.asarray(tcp_in_flange, dtype=float)
+    c = np.asarray(reference_point_in_base, dtype=float)
+    targets = [make_transform(r.as_matrix(), c) for r in _tilted_down(n_points, tilt_deg, 20.0)]
+    if six_point:
+        R4 = targets[-1][:3, :3]
+        targets += [
+            make_transform(R4, c + axis_move_m * R4[:, 2]),
+            make_transform(R4, c + axis_move_m * R4[:, 0]),
+        ]
+    return _readings(robot, np.array(targets), T_fl_tcp, repeatability_m, joint_noise_deg, seed)
+
+
+def simulate_workpiece_readings(
+    robot: Robot,
+    base_in_world: ArrayLike,
+    tcp_in_flange: ArrayLike,
+    cad_in_world: ArrayLike,
+    points_cad: ArrayLike,
+    wrong: dict[int, ArrayLike] | None = None,
+    tilt_deg: float = 15.0,
+    repeatability_m: float = 5e-5,
+    joint_noise_deg: float = 0.0,
+    seed: int = 0,
+) -> SimulatedReadings:
+    """Simulate the robot's TCP touched onto reference points of the workpiece.
+
+    Args:
+        robot: the robot model.
+        base_in_world: true T_F_R (4, 4).
+        tcp_in_flange: true T_flange_TCP (4, 4).
+        cad_in_world: true T_F_CAD (4, 4).
+        points_cad: the points in the CAD frame [m], shape (N, 3).
+        wrong: offsets [m] (CAD frame) of wrongly touched points, by index.
+        tilt_deg: tilt of the tool from the vertical, all round [deg].
+        repeatability_m: positioning error per axis, 1 sigma [m].
+        joint_noise_deg: joint-reading noise, 1 sigma [deg].
+        seed: seed of the errors.
+    """
+    P = np.array(points_cad, dtype=float)
+    for k, offset in (wrong or {}).items():
+        P[k] += np.asarray(offset, dtype=float)
+    T_R_F = np.linalg.inv(np.asarray(base_in_world, dtype=float))
+    T_R_cad = T_R_F @ np.asarray(cad_in_world, dtype=float)
+    in_base = P @ T_R_cad[:3, :3].T + T_R_cad[:3, 3]
+    rots = _tilted_down(len(P), tilt_deg)
+    targets = np.array([make_transform(r.as_matrix(), p) for r, p in zip(rots, in_base, strict=True)])
+    return _readings(
+        robot, targets, np.asarray(tcp_in_flange, dtype=float), repeatability_m, joint_noise_deg, seed
+    )

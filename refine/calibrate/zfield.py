@@ -22,11 +22,14 @@ Array = NDArray[np.float64]
 
 #: Number of coefficients of the model, ``(c2, c3)``.
 N_COEFFS = 2
+#: Distances are clipped here [m]: no tracker of this kind reads farther, and it keeps the
+#: fixed-point inversion bounded while a fit tries large coefficients.
+MAX_DISTANCE_M = 3.0
 
 
 def z_error(positions: ArrayLike, coeffs: ArrayLike) -> Array:
     """Z error [m] at true sensor positions in {S} [m], shape (..., 3) -> (...)."""
-    d = np.linalg.norm(np.asarray(positions, dtype=float), axis=-1)
+    d = np.minimum(np.linalg.norm(np.asarray(positions, dtype=float), axis=-1), MAX_DISTANCE_M)
     c2, c3 = np.asarray(coeffs, dtype=float)
     if c2 * c3 < 0.0:
         d = np.minimum(d, -2.0 * c2 / (3.0 * c3))

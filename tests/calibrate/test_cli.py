@@ -8,7 +8,7 @@ import pytest
 from refine.calibrate.simulate import calibration_tracker_model, simulate_pivot, simulate_touches
 from refine.cli import main
 from refine.demo import write_liberty_ascii
-from refine.frames import invert_transform, rotation_angle_deg
+from refine.frames import invert_transform, rotation_angle_deg, transform_from_xyz_rpy
 from refine.problem import load_problem
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -133,3 +133,113 @@ def test_receiver_without_a_tip_exits_2(touch_files, capsys):
     log, points = touch_files
     assert main(["calibrate", "receiver", str(log), str(points)]) == 2
     assert "--tip-in-sensor" in capsys.readouterr().err
+
+
+def _joints_csv(path, joints):
+    n = joints.shape[1]
+    rows = [",".join(f"j{k + 1}" for k in range(n))]
+    rows += [",".join(f"{v:.6f}" for v in np.degrees(q)) for q in joints]
+    path.write_text("\n".join(rows) + "\n")
+
+
+@pytest.fixture(scope="module")
+def tcp_readings(tmp_path_factory):
+    from refine.calibrate.simulate import simulate_tcp_readings
+    from refine.robot import load_robot
+
+    robot = load_robot("abb_irb4600_60_205")
+    tcp = transform_from_xyz_rpy([0.01, -0.02, 0.35], [0.0, 10.0, 30.0])
+    sim = simulate_tcp_readings(robot, tcp, [1.2, 0.2, 0.6], six_point=True, repeatability_m=5e-5, seed=0)
+    path = tmp_path_factory.mktemp("tcp") / "tcp.csv"
+    _joints_csv(path, sim.joints)
+    return path, tcp
+
+
+def test_tcp_six_point_json(tcp_readings, capsys):
+    path, tcp = tcp_readings
+    assert (
+        main(["calibrate", "tcp", str(path), "--robot", "abb_irb4600_60_205", "--six-point", "--json"]) == 0
+    )
+    out = json.loads(capsys.readouterr().out)
+    T = np.array(out["tcp_in_flange"])
+    assert np.linalg.norm(T[:3, 3] - tcp[:3, 3]) < 0.3e-3
+    assert rotation_angle_deg(T[:3, :3], tcp[:3, :3]) < 0.15
+    assert out["outliers"] == [] and out["max_residual_m"] < 0.3e-3
+
+
+def test_tcp_four_point_write_keeps_the_problem_orientation(tcp_readings, tmp_path, capsys):
+    path, tcp = tcp_readings
+    problem = tmp_path / "glass"
+    shutil.copytree(GLASS, problem)
+    lines = path.read_text().splitlines()
+    four = tmp_path / "four.csv"
+    four.write_text("\n".join(lines[:5]) + "\n")
+    assert main(["calibrate", "tcp", str(four), "--write", str(problem), "--problem", str(problem)]) == 0
+    T = load_problem(problem).tool.tcp_in_flange
+    assert np.linalg.norm(T[:3, 3] - tcp[:3, 3]) < 0.3e-3
+    assert rotation_angle_deg(T[:3, :3], np.eye(3)) < 1e-6  # the glass gun is straight
+
+
+def test_joint_readings_without_a_robot_exit_2(tcp_readings, capsys):
+    path, _ = tcp_readings
+    assert main(["calibrate", "tcp", str(path)]) == 2
+    assert "--robot" in capsys.readouterr().err
+
+
+def test_tcp_with_too_few_readings_exits_2(tcp_readings, tmp_path, capsys):
+    path, _ = tcp_readings
+    three = tmp_path / "three.csv"
+    three.write_text("\n".join(path.read_text().splitlines()[:4]) + "\n")
+    assert main(["calibrate", "tcp", str(three), "--robot", "abb_irb4600_60_205"]) == 2
+    assert "at least 4" in capsys.readouterr().err
+
+
+def test_workpiece_from_controller_positions_in_mm(tmp_path, capsys):
+    cad = transform_from_xyz_rpy([1.30, 0.0, 0.60], [0.0, 0.0, 90.0])
+    points = np.array([[-0.55, -0.2, 0.0], [0.55, -0.2, 0.01], [0.55, 0.2, 0.02], [-0.55, 0.2, 0.0]])
+    world = points @ cad[:3, :3].T + cad[:3, 3]
+    rows = ["x,y,z,qw,qx,qy,qz"] + [f"{p[0] * 1000},{p[1] * 1000},{p[2] * 1000},0,1,0,0" for p in world]
+    (tmp_path / "touch.csv").write_text("\n".join(rows) + "\n")
+    (tmp_path / "points.csv").write_text("x,y,z\n" + "\n".join(",".join(map(str, p)) for p in points) + "\n")
+    args = [
+        "calibrate",
+        "workpiece",
+        str(tmp_path / "touch.csv"),
+        str(tmp_path / "points.csv"),
+        "--units",
+        "mm",
+    ]
+    assert main([*args, "--json"]) == 0
+    T = np.array(json.loads(capsys.readouterr().out)["cad_in_world"])
+    np.testing.assert_allclose(T, cad, atol=1e-9)
+    # the same positions read as metres are 1000 times too far
+    assert main(args[:-2]) == 2
+    assert "units" in capsys.readouterr().err
+
+
+def test_workpiece_collinear_points_exit_2(tmp_path, capsys):
+    rows = ["x,y,z,qw,qx,qy,qz"] + [f"{1.0 + 0.1 * k},0,0.5,1,0,0,0" for k in range(4)]
+    (tmp_path / "touch.csv").write_text("\n".join(rows) + "\n")
+    (tmp_path / "points.csv").write_text("x,y,z\n" + "\n".join(f"{0.1 * k},0,0" for k in range(4)) + "\n")
+    assert main(["calibrate", "workpiece", str(tmp_path / "touch.csv"), str(tmp_path / "points.csv")]) == 2
+    assert "one line" in capsys.readouterr().err
+
+
+def test_receiver_path_moves_a_wrong_source_back_onto_the_path(tmp_path, capsys):
+    """The glass demo (full tracker error model) re-registers a receiver set 4 cm and 2.5 deg off."""
+    from refine.calibrate.files import update_problem
+
+    problem = tmp_path / "glass"
+    shutil.copytree(GLASS, problem)
+    truth = load_problem(problem).frames.source_in_world
+    update_problem(
+        problem, "frames", "source_in_world", truth @ transform_from_xyz_rpy([0.02, -0.03, 0.01], [1, -1, 2])
+    )
+    log = problem / "demo.liberty"
+    assert (
+        main(["calibrate", "receiver-path", str(log), "--problem", str(problem), "--write", str(problem)])
+        == 0
+    )
+    T = load_problem(problem).frames.source_in_world
+    assert np.linalg.norm(T[:3, 3] - truth[:3, 3]) < 5e-3
+    assert rotation_angle_deg(T[:3, :3], truth[:3, :3]) < 0.2
