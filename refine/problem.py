@@ -11,7 +11,7 @@ import logging
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -35,6 +35,9 @@ from refine.settings import (
     Tolerances,
     ToolSettings,
 )
+
+if TYPE_CHECKING:
+    from refine.calibrate.cost import CalibrationSettings
 
 try:  # Python 3.11+
     import tomllib
@@ -77,6 +80,7 @@ class Problem:
         cell: ``[[cell.objects]]``: the cell's collision objects in the world frame.
         multipass: ``[multipass]``: the passes of a multi-layer weld, or None for one pass.
         expected: ``[expected]``: the outcome a test problem is built to produce, or None.
+        calibration: ``[calibration]``: the frames' standard deviations, or None.
         description: free text.
         source: the problem file it was loaded from, for messages (None when built in code).
     """
@@ -97,6 +101,7 @@ class Problem:
     repair: RepairSettings = field(default_factory=RepairSettings)
     multipass: MultipassSettings | None = None
     expected: ExpectedOutcome | None = None
+    calibration: CalibrationSettings | None = None
     description: str = ""
     source: Path | None = None
 
@@ -166,6 +171,7 @@ def load_problem(path: str | Path, *, allow_outside: bool = False) -> Problem:
             repair=_build(RepairSettings, _table(data, "repair"), "repair", path),
             multipass=_multipass(_table(data, "multipass"), path) if "multipass" in data else None,
             expected=_expected(_table(data, "expected"), path) if "expected" in data else None,
+            calibration=_calibration(_table(data, "calibration")) if "calibration" in data else None,
             source=path,
         )
     except InputError as e:
@@ -213,6 +219,7 @@ def _name(value: Any) -> str:
     return name
 
 _TOP_KEYS = {
+    "calibration",
     "cell",
     "collision",
     "optimise",
@@ -230,6 +237,12 @@ _TOP_KEYS = {
     "process",
     "output",
 }
+
+
+def _calibration(t: dict[str, Any]) -> CalibrationSettings:
+    from refine.calibrate.cost import calibration_settings
+
+    return calibration_settings(t)
 
 
 def _table(data: dict[str, Any], key: str) -> dict[str, Any]:

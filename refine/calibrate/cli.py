@@ -113,6 +113,20 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="TCP offset [m] (else the problem's)",
     )
 
+    cost = kinds.add_parser(
+        "cost", help="propagate the [calibration] standard deviations of a problem's frames to its TCP path"
+    )
+    cost.add_argument(
+        "problem", type=Path, help="problem folder or its problem.toml, with a [calibration] table"
+    )
+    cost.add_argument(
+        "--trajectory",
+        type=Path,
+        default=None,
+        help="trajectory.csv of a run: its TCP poses are the path (default: the fused CAD path and demonstration)",
+    )
+    cost.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
+
 
 def _robot_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--robot", default=None, help="robot model of the registry (else the problem's)")
@@ -131,6 +145,8 @@ def _robot_options(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run ``refine calibrate``; returns the exit status (errors raise RefineError)."""
+    if args.kind == "cost":
+        return _cost(args)
     handler = {
         "pivot": _pivot,
         "receiver": _receiver,
@@ -338,3 +354,36 @@ def _workpiece(args: argparse.Namespace) -> tuple[Calibration, str, str, np.ndar
     cal = register_workpiece(tcp_positions_world(poses, base, tcp), points, threshold, labels=names)
     T = cal.values["cad_in_world"]
     return cal, "frames", "cad_in_world", T, f"workpiece registered on {len(points)} robot touches"
+
+
+def _cost(args: argparse.Namespace) -> int:
+    from refine.calibrate.cost import calibration_cost, nominal_frames, tcp_poses_from_trajectory
+    from refine.frames import make_transform
+    from refine.problem import load_problem
+
+    problem = load_problem(args.problem)
+    if problem.calibration is None:
+        raise InputError(
+            f"{problem.source or args.problem}: no [calibration] table; give each frame's standard deviations, "
+            f"e.g. cad_in_world = {{ xyz_m = 0.0005, rpy_deg = 0.05 }}"
+        )
+    if args.trajectory is not None:
+        poses = tcp_poses_from_trajectory(args.trajectory)
+    else:
+        from refine.pipeline import fused_path
+
+        fused = fused_path(problem)
+        poses = make_transform(fused.rotations, fused.positions)
+    costs = calibration_cost(poses, nominal_frames(problem), problem.calibration)
+    if args.json:
+        print(json.dumps({"waypoints": len(poses), "frames": [c.__dict__ for c in costs]}, indent=2))
+        return 0
+    print(f"calibration cost on {len(poses)} waypoints, {problem.calibration.samples} samples per frame")
+    print(f"{'frame':16s} {'mean pos':>10s} {'worst pos':>10s} {'mean ori':>10s} {'worst ori':>10s}")
+    for c in costs:
+        print(
+            f"{c.frame:16s} {c.mean_position_error_m * 1000:7.3f} mm {c.worst_position_error_m * 1000:7.3f} mm "
+            f"{c.mean_orientation_error_deg:6.3f} deg {c.worst_orientation_error_deg:6.3f} deg"
+        )
+    print("worst: the 95th percentile over the samples of the largest error along the path")
+    return 0
