@@ -125,6 +125,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="trajectory.csv of a run: its TCP poses are the path (default: the fused CAD path and demonstration)",
     )
+    cost.add_argument(
+        "--truth",
+        type=Path,
+        default=None,
+        help="a problem holding the true frames (a simulation's): also report the error the actual "
+        "calibration error causes",
+    )
     cost.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
 
 
@@ -375,15 +382,28 @@ def _cost(args: argparse.Namespace) -> int:
         fused = fused_path(problem)
         poses = make_transform(fused.rotations, fused.positions)
     costs = calibration_cost(poses, nominal_frames(problem), problem.calibration)
+    if args.truth is not None:
+        from refine.calibrate.cost import FRAMES, PathCost, deltas_between, path_errors
+
+        deltas = deltas_between(nominal_frames(problem), nominal_frames(load_problem(args.truth)))
+        for name in FRAMES:
+            costs.append(
+                PathCost.from_errors(
+                    f"actual {name}", *path_errors(poses, nominal_frames(problem), {name: deltas[name]})
+                )
+            )
+        costs.append(PathCost.from_errors("actual all", *path_errors(poses, nominal_frames(problem), deltas)))
     if args.json:
         print(json.dumps({"waypoints": len(poses), "frames": [c.__dict__ for c in costs]}, indent=2))
         return 0
     print(f"calibration cost on {len(poses)} waypoints, {problem.calibration.samples} samples per frame")
-    print(f"{'frame':16s} {'mean pos':>10s} {'worst pos':>10s} {'mean ori':>10s} {'worst ori':>10s}")
+    print(f"{'frame':24s} {'mean pos':>10s} {'worst pos':>10s} {'mean ori':>10s} {'worst ori':>10s}")
     for c in costs:
         print(
-            f"{c.frame:16s} {c.mean_position_error_m * 1000:7.3f} mm {c.worst_position_error_m * 1000:7.3f} mm "
+            f"{c.frame:24s} {c.mean_position_error_m * 1000:7.3f} mm {c.worst_position_error_m * 1000:7.3f} mm "
             f"{c.mean_orientation_error_deg:6.3f} deg {c.worst_orientation_error_deg:6.3f} deg"
         )
     print("worst: the 95th percentile over the samples of the largest error along the path")
+    if args.truth is not None:
+        print("actual: the error the frames' difference from the truth causes (worst = the largest)")
     return 0

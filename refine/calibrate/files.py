@@ -250,6 +250,7 @@ def update_problem(problem: str | Path, table: str, key: str, T: ArrayLike) -> P
     fd, tmp = tempfile.mkstemp(prefix=".problem-", suffix=".toml", dir=path.parent)
     with os.fdopen(fd, "w", encoding="utf-8") as f:
         f.write("\n".join(lines) + "\n")
+    os.chmod(tmp, path.stat().st_mode & 0o777)  # mkstemp makes it private; keep the file's mode
     try:
         load_problem(tmp)
     except InputError as e:

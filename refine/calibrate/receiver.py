@@ -37,9 +37,11 @@ logger = logging.getLogger(__name__)
 Array = NDArray[np.float64]
 
 #: Tip speed under which the tool counts as resting on a point [m/s].
-DWELL_SPEED_M_S = 0.01
+DWELL_SPEED_M_S = 0.02
+#: Still runs separated by less than this are one dwell [s] (noise lifts the speed for a moment).
+DWELL_GAP_S = 0.15
 #: Smoothing of the tip track before its speed is taken [s].
-DWELL_SMOOTHING_S = 0.1
+DWELL_SMOOTHING_S = 0.05
 #: Default inlier threshold of the point registration [m].
 RECEIVER_THRESHOLD_M = 0.002
 #: Farthest a Liberty-class tracker reads [m]; farther positions mean wrong units.
@@ -78,21 +80,27 @@ def check_tracker_range(log: TrackerLog) -> None:
 def find_dwells(log: TrackerLog, tip_in_sensor: ArrayLike, min_dwell_s: float = 0.5) -> list[Dwell]:
     """The rests of the tool tip in a log, in time order.
 
-    The tip track ``p + R t`` is cleaned of spikes (Hampel filter), smoothed over
+    The tip track ``p + R t`` is cleaned of spikes in position or orientation (Hampel filter on the
+    tip), smoothed over
     :data:`DWELL_SMOOTHING_S` and differentiated; runs where the tip moves slower than
-    :data:`DWELL_SPEED_M_S` for at least ``min_dwell_s`` are dwells. Each dwell's sensor pose is
-    the median position and the mean orientation of its middle 80 %.
+    :data:`DWELL_SPEED_M_S` (joined across gaps shorter than :data:`DWELL_GAP_S`) for at least
+    ``min_dwell_s`` (less twice the smoothing, which shortens a rest at both ends) are dwells.
+    Each dwell's sensor pose is the median position and the mean orientation of the spike-free
+    samples of its middle 80 %.
     """
     t = np.asarray(tip_in_sensor, dtype=float)
-    cleaned, spikes = hampel(log.positions, 7, 4.0, min_deviation=0.003)
-    tip = cleaned + log.rotations @ t
+    tip, spikes = hampel(log.positions + log.rotations @ t, 7, 4.0, min_deviation=0.003)
     speed = speed_along_track(log.t, smooth_positions(log.t, tip, DWELL_SMOOTHING_S))
     still = speed < DWELL_SPEED_M_S
+    moving_runs = np.flatnonzero(np.diff(np.concatenate([[1], still.astype(int), [1]])))
+    for a, b in zip(moving_runs[::2], moving_runs[1::2], strict=True):
+        if 0 < a and b < len(still) and log.t[b - 1] - log.t[a] < DWELL_GAP_S:
+            still[a:b] = True
     edges = np.flatnonzero(np.diff(np.concatenate([[0], still.astype(int), [0]])))
     dwells = []
     for start, stop in zip(edges[::2], edges[1::2], strict=True):
         duration = float(log.t[stop - 1] - log.t[start])
-        if duration < min_dwell_s:
+        if duration < min_dwell_s - 2.0 * DWELL_SMOOTHING_S:  # the smoothing shortens a rest at both ends
             continue
         trim = (stop - start) // 10
         a, b = start + trim, stop - trim
@@ -102,7 +110,7 @@ def find_dwells(log: TrackerLog, tip_in_sensor: ArrayLike, min_dwell_s: float = 
             Dwell(
                 start=int(start),
                 stop=int(stop),
-                sensor_position=np.median(cleaned[a:b][good], axis=0),
+                sensor_position=np.median(log.positions[a:b][good], axis=0),
                 sensor_rotation=rot.as_matrix(),
                 duration_s=duration,
             )
@@ -286,10 +294,10 @@ def register_receiver_to_path(
     """
     check_tracker_range(log)
     tip = np.asarray(tip_in_sensor, dtype=float)
-    cleaned, spikes = hampel(log.positions, 7, 4.0, min_deviation=0.003)
+    _, spikes = hampel(log.positions + log.rotations @ tip, 7, 4.0, min_deviation=0.003)
     keep = ~spikes.any(axis=1)
     keep[np.arange(len(keep)) % stride != 0] = False
-    p, R = cleaned[keep], log.rotations[keep]
+    p, R = log.positions[keep], log.rotations[keep]
     path = np.asarray(path_world, dtype=float)
     seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
     s = np.concatenate([[0.0], np.cumsum(seg)])

@@ -73,3 +73,12 @@ def test_too_few_points(cell):
     )
     with pytest.raises(InputError, match="at least 4"):
         register_receiver_from_log(sim.log, cell.tip, cell.points[:3])
+
+
+@pytest.mark.parametrize("rate_hz", [60.0, 240.0])
+def test_half_second_rests_count_and_shorter_ones_do_not(cell, rate_hz):
+    model = calibration_tracker_model(seed=3, rate_hz=rate_hz)
+    sim = simulate_touches(cell.points, cell.source_in_world, cell.tip, dwell_s=0.5, model=model)
+    assert len(find_dwells(sim.log, cell.tip, min_dwell_s=0.5)) == 6
+    short = simulate_touches(cell.points, cell.source_in_world, cell.tip, dwell_s=0.25, model=model)
+    assert len(find_dwells(short.log, cell.tip, min_dwell_s=0.5)) == 0
