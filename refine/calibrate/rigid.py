@@ -124,7 +124,8 @@ def ransac(
     if best is None or best_model is None or best[0] < sample_size:
         raise InputError(
             f"no {sample_size} of the {n} measurements agree within {threshold_m * 1000:.1f} mm: "
-            f"check the order of the points, the units and the tool offset"
+            f"check the order of the points, the units and the tool offset; a tracker with large "
+            f"position-dependent errors may need a larger threshold (--threshold-m)"
         )
     model = best_model
     mask = residuals(model) < threshold_m
