@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 from refine.check import add_safety_options, check_command
+from refine.interrupt import stoppable
 
 
 def _seconds_since_process_start() -> float | None:
@@ -80,10 +81,14 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         from refine.problem import load_problem
 
-        problem = load_problem(args.problem, allow_outside=args.allow_outside)
-        if args.command == "check":
-            return check_command(args, problem)
-        return _run(args, problem)
+        with stoppable():
+            problem = load_problem(args.problem, allow_outside=args.allow_outside)
+            if args.command == "check":
+                return check_command(args, problem)
+            return _run(args, problem)
+    except KeyboardInterrupt:
+        print("refine: interrupted; the output folder keeps its previous complete set", file=sys.stderr)
+        return 130
     except RefineError as e:
         from refine.names import message_text
 
@@ -96,7 +101,7 @@ def _run(args: argparse.Namespace, problem) -> int:  # noqa: ANN001 - Problem, i
     from refine.pipeline import run
     from refine.result import summary_lines
 
-    out = args.out or Path("out") / problem.name
+    out = args.out or Path("out") / problem.file_stem
     from refine.preflight import parse_programs
 
     programs = parse_programs(args.programs, problem)

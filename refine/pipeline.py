@@ -203,20 +203,23 @@ def run(
     """
     from refine.export.result_json import write_result_json
     from refine.export.writers import write_outputs
+    from refine.outputs import StagedOutputs
     from refine.preflight import preflight
 
     preflight(problem, out_dir, programs, report=report)
     result = solve_problem(problem)
     t0 = time.perf_counter()
-    out_dir.mkdir(parents=True, exist_ok=True)
-    result.outputs.update(write_outputs(result, out_dir, programs or problem.output.programs))
-    result.timings_s["export"] = time.perf_counter() - t0
-    if report:
-        from refine.report.html import write_report
+    protected = (*problem.input_files, *([problem.source] if problem.source else []))
+    with StagedOutputs(out_dir, protected) as stage:  # all or nothing: see refine.outputs
+        result.outputs.update(write_outputs(result, stage.dir, programs or problem.output.programs))
+        result.timings_s["export"] = time.perf_counter() - t0
+        if report:
+            from refine.report.html import write_report
 
-        t0 = time.perf_counter()
-        result.outputs["report"] = write_report(out_dir / "report.html", result)
-        result.timings_s["report"] = time.perf_counter() - t0
-    result.outputs["result"] = out_dir / "result.json"
-    write_result_json(result.outputs["result"], result)
+            t0 = time.perf_counter()
+            result.outputs["report"] = write_report(stage.dir / "report.html", result)
+            result.timings_s["report"] = time.perf_counter() - t0
+        result.outputs["result"] = stage.dir / "result.json"
+        final = stage.commit(result.outputs, lambda path: write_result_json(path, result))
+    result.outputs.update(final)
     return result

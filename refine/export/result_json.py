@@ -10,6 +10,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from refine.outputs import describe_files
+
 if TYPE_CHECKING:
     from refine.result import PassResult, RunResult
 
@@ -143,11 +145,15 @@ def result_dict(result: RunResult) -> dict[str, Any]:
         "truth": None if result.truth is None else result.truth.as_json(),
         "timings_s": {k: round(v, 6) for k, v in result.timings_s.items()},
         "outputs": {k: p.name for k, p in result.outputs.items()},
+        "files": describe_files(result.outputs),
     }
     return doc
 
 
 def write_result_json(path: Path, result: RunResult) -> Path:
-    """Write ``result.json`` for ``result`` to ``path``."""
-    path.write_text(json.dumps(result_dict(result), indent=2) + "\n", encoding="utf-8")
+    """Write ``result.json`` for ``result`` to ``path``, atomically (a temporary file, then a rename)."""
+    text = json.dumps(result_dict(result), indent=2) + "\n"
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, path)
     return path
