@@ -206,12 +206,12 @@ def run(
     from refine.outputs import StagedOutputs
     from refine.preflight import preflight
 
-    preflight(problem, out_dir, programs, report=report)
+    checked = preflight(problem, out_dir, programs, report=report)
     result = solve_problem(problem)
     t0 = time.perf_counter()
     protected = (*problem.input_files, *([problem.source] if problem.source else []))
     with StagedOutputs(out_dir, protected) as stage:  # all or nothing: see refine.outputs
-        result.outputs.update(write_outputs(result, stage.dir, programs or problem.output.programs))
+        result.outputs.update(write_outputs(result, stage.dir, checked.programs))
         result.timings_s["export"] = time.perf_counter() - t0
         if report:
             from refine.report.html import write_report

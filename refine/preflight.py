@@ -45,10 +45,10 @@ class Preflight:
     outputs: tuple[str, ...]
 
 
-def parse_programs(text: str | None, problem: Problem) -> tuple[str, ...]:
-    """The program formats from ``--programs`` (comma-separated) or the problem's ``[output]``."""
+def parse_programs(text: str | None, problem: Problem) -> tuple[str, ...] | None:
+    """The program formats of ``--programs`` (comma-separated), or None when it was not given."""
     if text is None:
-        return problem.output.programs
+        return None
     programs = tuple(p.strip() for p in text.split(",") if p.strip())
     for kind in programs:
         if kind not in PROGRAM_FORMATS:
