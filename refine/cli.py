@@ -79,21 +79,36 @@ def main(argv: list[str] | None = None) -> int:
                 axes = len(spec.joint_names)
                 print(f"{name:24s} {spec.maker}, {axes} axes, reach {spec.reach_m:.2f} m, urdf {spec.urdf}")
             return 0
-        from refine.problem import load_problem
-
         with stoppable():
+            from refine.problem import load_problem
+
             problem = load_problem(args.problem, allow_outside=args.allow_outside)
             if args.command == "check":
                 return check_command(args, problem)
             return _run(args, problem)
     except KeyboardInterrupt:
         print("refine: interrupted; the output folder keeps its previous complete set", file=sys.stderr)
-        return 130
+        return _exit_now(130)
     except RefineError as e:
         from refine.names import message_text
 
         print(f"refine: error: {message_text(e)}", file=sys.stderr)
         return 2
+
+
+def _exit_now(status: int) -> int:
+    """As the ``refine`` program, exit at once (tearing down CasADi and Pinocchio takes seconds).
+
+    Nothing is left to finish: the staging folder is gone and the output folder is complete. When
+    ``main`` is called from Python (tests, scripts), the status is returned instead.
+    """
+    top = sys.modules.get("__main__")
+    spec = getattr(top, "__spec__", None)
+    if (spec is not None and spec.name == "refine.cli") or Path(getattr(top, "__file__", "") or "").name == "refine":
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(status)
+    return status
 
 
 def _run(args: argparse.Namespace, problem) -> int:  # noqa: ANN001 - Problem, imported lazily
