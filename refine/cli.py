@@ -121,7 +121,7 @@ def _run(args: argparse.Namespace, problem) -> int:  # noqa: ANN001 - Problem, i
 
     programs = parse_programs(args.programs, problem)
     t0 = time.perf_counter()
-    result = run(problem, out, programs, report=not args.no_report)
+    result = run(problem, out, programs, report=not args.no_report, accept_frame_error=args.accept_frame_error)
     since_start = _seconds_since_process_start()
     result.timings_s["run"] = time.perf_counter() - t0
     result.timings_s["total"] = since_start if since_start is not None else result.timings_s["run"]

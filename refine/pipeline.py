@@ -10,6 +10,7 @@ from __future__ import annotations
 import logging
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -48,12 +49,16 @@ class _Stopwatch:
 
 
 def fused_path(
-    problem: Problem, watch: _Stopwatch | None = None, *, accept_frame_error: bool = False
+    problem: Problem,
+    watch: _Stopwatch | None = None,
+    *,
+    accept_frame_error: bool = False,
+    qualities: list[Any] | None = None,
 ) -> FusedPath:
     """The fused path of ``problem``: CAD path + cleaned, aligned demonstration, or a PathML path.
 
     ``accept_frame_error`` turns the quality gate's stop on a tracker frame that looks wrong into a
-    warning (see :mod:`refine.demo.quality`).
+    warning (see :mod:`refine.demo.quality`); the gate's figures are appended to ``qualities``.
     """
     watch = watch or _Stopwatch()
     if problem.cad.format == "pathml":
@@ -65,15 +70,23 @@ def fused_path(
         return fused
     from refine.cad import read_cad_path
     from refine.demo import clean_demonstration, read_tracker_log
+    from refine.demo.quality import gate_dropouts, gate_frame
     from refine.fuse import fuse
 
     assert problem.demonstration is not None  # Problem checks this
     cad = read_cad_path(problem.cad, problem.frames.cad_in_world)
     watch.lap("cad")
-    demo = clean_demonstration(read_tracker_log(problem.demonstration), problem.demonstration)
+    raw, quality = gate_dropouts(read_tracker_log(problem.demonstration))
+    demo = clean_demonstration(raw, problem.demonstration)
     watch.lap("demo")
-    fused = fuse(cad, demo, problem.frames.source_in_world, problem.tool.sensor_in_tcp)
+    frames = problem.frames
+    fused = fuse(cad, demo, frames.source_in_world, problem.tool.sensor_in_tcp)
+    quality = gate_frame(
+        quality, demo, fused, frames.source_in_world, problem.tool.sensor_in_tcp, accept=accept_frame_error
+    )
     watch.lap("fuse")
+    if qualities is not None:
+        qualities.append(quality)
     return fused
 
 
@@ -154,12 +167,13 @@ def refine_pass(
     return PassResult(name, layer, index, fused, refinement, timing, trajectory, clearance)
 
 
-def solve_problem(problem: Problem) -> RunResult:
+def solve_problem(problem: Problem, *, accept_frame_error: bool = False) -> RunResult:
     """Run every stage up to the timed trajectories, without writing files."""
     watch = _Stopwatch()
     robot = load_robot(problem.robot.model)
     watch.lap("load")
-    fused = fused_path(problem, watch)
+    qualities: list[Any] = []
+    fused = fused_path(problem, watch, accept_frame_error=accept_frame_error, qualities=qualities)
     sources = constraint_sources(problem, robot)
     watch.lap("load")
     passes = [refine_pass(problem, robot, fused, watch, sources=sources)]
@@ -184,11 +198,16 @@ def solve_problem(problem: Problem) -> RunResult:
             axisymmetric=problem.tool.axisymmetric,
         )
         watch.lap("truth")
-    return RunResult(problem, robot, tuple(passes), truth, watch.times)
+    return RunResult(problem, robot, tuple(passes), truth, watch.times, demo_quality=qualities[0] if qualities else None)
 
 
 def run(
-    problem: Problem, out_dir: Path, programs: tuple[str, ...] | None = None, *, report: bool = True
+    problem: Problem,
+    out_dir: Path,
+    programs: tuple[str, ...] | None = None,
+    *,
+    report: bool = True,
+    accept_frame_error: bool = False,
 ) -> RunResult:
     """Solve ``problem`` and write every output into ``out_dir``.
 
@@ -197,6 +216,7 @@ def run(
         out_dir: folder for ``result.json``, ``trajectory.csv``, ``<name>.aml`` and programs.
         programs: program formats overriding ``[output] programs``.
         report: also write ``report.html``.
+        accept_frame_error: warn instead of stopping when the tracker frame looks wrong.
 
     Returns:
         The run's result, with ``outputs`` naming the files written.
@@ -207,7 +227,7 @@ def run(
     from refine.preflight import preflight
 
     checked = preflight(problem, out_dir, programs, report=report)
-    result = solve_problem(problem)
+    result = solve_problem(problem, accept_frame_error=accept_frame_error)
     t0 = time.perf_counter()
     protected = (*problem.input_files, *([problem.source] if problem.source else []))
     with StagedOutputs(out_dir, protected) as stage:  # all or nothing: see refine.outputs

@@ -56,6 +56,8 @@ class RunResult:
         truth: comparison of the first pass with the simulator's truth, when there is one.
         timings_s: wall time per stage [s], summed over passes.
         outputs: kind -> file written.
+        demo_quality: the demonstration quality gate's figures (``refine.demo.quality.DemoQuality``),
+            None for a path without a demonstration.
     """
 
     problem: Problem
@@ -64,6 +66,7 @@ class RunResult:
     truth: TruthComparison | None
     timings_s: dict[str, float] = field(default_factory=dict)
     outputs: dict[str, Path] = field(default_factory=dict)
+    demo_quality: Any = None
 
     @property
     def first(self) -> PassResult:

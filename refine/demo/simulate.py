@@ -382,6 +382,41 @@ def simulate_demonstration(
     )
 
 
+# ---- dropouts ------------------------------------------------------------------------------------
+
+DROPOUT_KINDS = ("zero", "frozen", "flip", "gap")
+
+
+def inject_dropout(log: TrackerLog, first: int, count: int, kind: str = "zero") -> TrackerLog:
+    """A copy of ``log`` with a dropout of ``count`` samples from sample ``first``.
+
+    Kinds: ``"zero"``: the samples read (0, 0, 0) and no rotation, as a Liberty reports a lost
+    sensor; ``"frozen"``: they repeat sample ``first - 1``; ``"flip"``: their positions are
+    mirrored through the receiver (the hemisphere ambiguity of a magnetic tracker); ``"gap"``:
+    they are missing (times jump).
+
+    Raises:
+        InputError: an unknown kind, or a dropout not strictly inside the log.
+    """
+    if kind not in DROPOUT_KINDS:
+        raise InputError(f"dropout kind {kind!r} is not one of {', '.join(DROPOUT_KINDS)}")
+    if not (1 <= first and count >= 1 and first + count < len(log.t)):
+        raise InputError(f"dropout {first}..{first + count - 1} must lie inside the {len(log.t)} samples")
+    t, p, R = log.t.copy(), log.positions.copy(), log.rotations.copy()
+    k = slice(first, first + count)
+    if kind == "gap":
+        keep = np.ones(len(t), dtype=bool)
+        keep[k] = False
+        return replace(log, t=t[keep], positions=p[keep], rotations=R[keep])
+    if kind == "zero":
+        p[k], R[k] = 0.0, np.eye(3)
+    elif kind == "frozen":
+        p[k], R[k] = p[first - 1], R[first - 1]
+    else:
+        p[k] = -p[k]
+    return replace(log, positions=p, rotations=R)
+
+
 # ---- truth.csv ----------------------------------------------------------------------------------
 
 
