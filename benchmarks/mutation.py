@@ -47,7 +47,11 @@ GROUPS: dict[str, tuple[list[str], list[str]]] = {
     ),
     "problem": (
         ["refine/optimise/problem.py"],
-        ["tests/optimise/test_problem.py", "tests/optimise/test_solve.py"],
+        [
+            "tests/optimise/test_nlp_values.py",
+            "tests/optimise/test_problem.py",
+            "tests/optimise/test_solve.py",
+        ],
     ),
     "timing": (["refine/timing.py"], ["tests/test_timing.py"]),
     "export": (

@@ -1,0 +1,204 @@
+"""The refinement NLP evaluated at known joints: every row, bound and cost term against its definition.
+
+Targets are put at known offsets and turns from the poses Pinocchio gives (an implementation
+separate from the CasADi kinematics inside the NLP); bounds come from the data-sheet limits; the
+orientation cost from its documented formula ``mean 2(1 - cos θ)·(180/π)²``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import casadi as ca
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from refine.optimise.problem import ActiveSet, Weights, build_refinement
+from refine.paths import FusedPath
+from refine.problem import Tolerances
+
+LOWER_DEG = np.array([-180.0, -90.0, -180.0, -400.0, -125.0, -400.0])  # IRB 4600 data sheet
+UPPER_DEG = np.array([180.0, 150.0, 75.0, 400.0, 120.0, 400.0])
+REACH_M = 2.05
+N = 5
+
+
+@pytest.fixture(scope="module")
+def q():
+    base = np.radians([10.0, 20.0, -30.0, 40.0, 50.0, 60.0])
+    return base + np.radians(np.arange(N)[:, None] * np.array([1.0, -0.5, 0.8, 2.0, -1.5, 3.0]))
+
+
+def _fused(kin, q, offsets, turns, s_scale=1.0):
+    poses = kin.poses(q)
+    positions = poses[:, :3, 3] + offsets
+    s = s_scale * np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(positions, axis=0), axis=1))])
+    return FusedPath(
+        s, positions, poses[:, :3, :3] @ turns, np.full(N, 0.1), np.arange(N, dtype=float), np.zeros(N)
+    )
+
+
+def _turns(angles_deg, seed=0, axes=None):
+    axes = np.random.default_rng(seed).normal(size=(N, 3)) if axes is None else np.asarray(axes, dtype=float)
+    axes = axes / np.linalg.norm(axes, axis=1)[:, None]
+    return Rotation.from_rotvec(axes * np.radians(angles_deg)[:, None]).as_matrix()
+
+
+def _evaluate(nlp, x):
+    fg = ca.Function("fg", [nlp.nlp["x"], nlp.nlp["p"]], [nlp.nlp["f"], nlp.nlp["g"]])
+    f, g = fg(x, nlp.params)
+    return float(f), np.asarray(g).ravel()
+
+
+ANGLES = np.array([0.0, 1.0, 2.5, 4.0, 0.3])
+OFFSETS = np.array(
+    [[0.0, 0.0, 0.0], [1e-3, 0.0, 0.0], [0.0, -2e-3, 0.0], [0.0, 0.0, 3e-3], [1e-3, 1e-3, -1e-3]]
+)
+
+
+def test_rows_are_the_position_error_the_cone_cosine_and_the_joint_steps(irb4600, straight_tool, kin, q):
+    fused = _fused(kin, q, OFFSETS, _turns(ANGLES))
+    nlp = build_refinement(irb4600, fused, np.eye(4), straight_tool, Tolerances())
+    _, g = _evaluate(nlp, q.ravel())
+    per_waypoint = g[: 4 * N].reshape(N, 4)
+    np.testing.assert_allclose(per_waypoint[:, :3], -OFFSETS, atol=1e-12)  # reached minus target
+    np.testing.assert_allclose(per_waypoint[:, 3], np.cos(np.radians(ANGLES)), atol=1e-12)
+    steps = g[4 * N : 4 * N + 6 * (N - 1)].reshape(N - 1, 6)
+    np.testing.assert_allclose(steps, np.diff(q, axis=0), atol=1e-15)
+    assert len(g) == 4 * N + 6 * (N - 1)
+
+
+def test_row_bounds_are_equality_on_position_the_cone_and_the_step_limit(irb4600, straight_tool, kin, q):
+    tol = Tolerances(orientation_deg=4.5, joint_step_deg=12.0)
+    nlp = build_refinement(irb4600, _fused(kin, q, OFFSETS, _turns(ANGLES)), np.eye(4), straight_tool, tol)
+    lbg, ubg = nlp.lbg[: 4 * N].reshape(N, 4), nlp.ubg[: 4 * N].reshape(N, 4)
+    np.testing.assert_array_equal(lbg[:, :3], 0.0)
+    np.testing.assert_array_equal(ubg[:, :3], 0.0)
+    np.testing.assert_allclose(lbg[:, 3], math.cos(math.radians(4.5)), rtol=1e-15)
+    assert np.all(ubg[:, 3] >= 1.0) and np.all(ubg[:, 3] < 1.0 + 1e-6)
+    np.testing.assert_allclose(nlp.lbg[4 * N :], -math.radians(12.0), rtol=1e-15)
+    np.testing.assert_allclose(nlp.ubg[4 * N :], math.radians(12.0), rtol=1e-15)
+
+
+def test_variable_bounds_are_the_data_sheet_limits_less_the_margin(irb4600, straight_tool, kin, q):
+    nlp = build_refinement(
+        irb4600,
+        _fused(kin, q, OFFSETS, _turns(ANGLES)),
+        np.eye(4),
+        straight_tool,
+        Tolerances(joint_margin_deg=3.5),
+    )
+    np.testing.assert_allclose(nlp.lbx, np.tile(np.radians(LOWER_DEG + 3.5), N), atol=1e-12)
+    np.testing.assert_allclose(nlp.ubx, np.tile(np.radians(UPPER_DEG - 3.5), N), atol=1e-12)
+
+
+def test_an_axisymmetric_cone_row_is_the_cosine_of_the_tool_axis_tilt(irb4600, straight_tool, kin, q):
+    tilt = np.array([0.5, 1.5, 2.0, 3.0, 0.0])
+    spin = Rotation.from_euler("z", 50.0, degrees=True).as_matrix()
+    turns = spin @ _turns(tilt, axes=[[1, 0, 0], [0, 1, 0], [1, 1, 0], [1, -2, 0], [0, 1, 0]])
+    nlp = build_refinement(
+        irb4600,
+        _fused(kin, q, 0.0 * OFFSETS, turns),
+        np.eye(4),
+        straight_tool,
+        Tolerances(),
+        axisymmetric=True,
+    )
+    _, g = _evaluate(nlp, q.ravel())
+    np.testing.assert_allclose(g[: 4 * N].reshape(N, 4)[:, 3], np.cos(np.radians(tilt)), atol=1e-12)
+
+
+def test_the_orientation_cost_is_the_mean_of_two_one_minus_cos_in_squared_degrees(
+    irb4600, straight_tool, kin, q
+):
+    weights = Weights(orientation=1.7, velocity=0.0, acceleration=0.0)
+    nlp = build_refinement(
+        irb4600,
+        _fused(kin, q, OFFSETS, _turns(ANGLES)),
+        np.eye(4),
+        straight_tool,
+        Tolerances(),
+        weights=weights,
+    )
+    f, _ = _evaluate(nlp, q.ravel())
+    expected = 1.7 * np.mean(2.0 * (1.0 - np.cos(np.radians(ANGLES)))) * (180.0 / math.pi) ** 2
+    assert f == pytest.approx(expected, rel=1e-12)
+    assert f == pytest.approx(1.7 * np.mean(ANGLES**2), rel=1e-3)  # about the squared angle in degrees
+
+
+def _smoothness(irb4600, straight_tool, kin, q, x_rows, s_scale=1.0, **w):
+    fused = _fused(kin, q, OFFSETS, _turns(0.0 * ANGLES), s_scale)
+    nlp = build_refinement(
+        irb4600, fused, np.eye(4), straight_tool, Tolerances(), weights=Weights(orientation=0.0, **w)
+    )
+    return _evaluate(nlp, np.asarray(x_rows).ravel())[0]
+
+
+def test_the_velocity_term_is_a_weighted_square_of_the_joint_step_per_metre(irb4600, straight_tool, kin, q):
+    """Zero for joints that do not move; 4x for steps twice as large, weight times, 1/4 on twice the path."""
+    q0, step = q[0], np.radians([0.5, -0.2, 0.3, 1.0, -0.7, 0.4])
+    ramp = q0 + np.arange(N)[:, None] * step
+    ramp2 = q0 + np.arange(N)[:, None] * 2.0 * step
+    f = _smoothness(irb4600, straight_tool, kin, q, ramp, velocity=1e-3, acceleration=0.0)
+    assert f > 0.0
+    assert _smoothness(
+        irb4600, straight_tool, kin, q, np.tile(q0, (N, 1)), velocity=1e-3, acceleration=0.0
+    ) == (pytest.approx(0.0, abs=1e-15))
+    assert _smoothness(
+        irb4600, straight_tool, kin, q, ramp2, velocity=1e-3, acceleration=0.0
+    ) == pytest.approx(4.0 * f, rel=1e-12)
+    assert _smoothness(
+        irb4600, straight_tool, kin, q, ramp, velocity=3e-3, acceleration=0.0
+    ) == pytest.approx(3.0 * f, rel=1e-12)
+    assert _smoothness(
+        irb4600, straight_tool, kin, q, ramp, 2.0, velocity=1e-3, acceleration=0.0
+    ) == pytest.approx(0.25 * f, rel=1e-12)
+
+
+def test_the_acceleration_term_vanishes_on_a_constant_step_and_not_on_a_bend(irb4600, straight_tool, kin, q):
+    q0, step = q[0], np.radians([0.5, -0.2, 0.3, 1.0, -0.7, 0.4])
+    ramp = q0 + np.arange(N)[:, None] * step
+    bend = q0 + (np.arange(N)[:, None] ** 2) * step
+    kw = dict(velocity=0.0, acceleration=1e-6)
+    assert _smoothness(irb4600, straight_tool, kin, q, ramp, **kw) == pytest.approx(0.0, abs=1e-12)
+    f = _smoothness(irb4600, straight_tool, kin, q, bend, **kw)
+    assert f > 0.0
+    # second differences per metre squared: twice the path length is 1/16 of the cost
+    assert _smoothness(irb4600, straight_tool, kin, q, bend, 2.0, **kw) == pytest.approx(f / 16.0, rel=1e-12)
+
+
+def test_singularity_rows_are_the_scaled_manipulability_at_waypoints_and_inside_segments(
+    irb4600, straight_tool, kin, q
+):
+    active = ActiveSet(singular_waypoints=(1, 3), singular_segments=((2, 0.25),))
+    tol = Tolerances(singularity_margin=0.013)
+    nlp = build_refinement(
+        irb4600, _fused(kin, q, OFFSETS, _turns(ANGLES)), np.eye(4), straight_tool, tol, active=active
+    )
+    _, g = _evaluate(nlp, q.ravel())
+    scale = np.diag([1.0 / REACH_M] * 3 + [1.0] * 3)
+    points = [q[1], q[3], 0.75 * q[2] + 0.25 * q[3]]
+    expected = [abs(np.linalg.det(scale @ kin.jacobian(p))) for p in points]
+    np.testing.assert_allclose(g[4 * N + 6 * (N - 1) :], expected, rtol=1e-9)
+    np.testing.assert_allclose(nlp.lbg[4 * N + 6 * (N - 1) :], 0.013)
+    assert np.all(np.isinf(nlp.ubg[4 * N + 6 * (N - 1) :]))
+
+
+def test_the_elastic_problem_bounds_each_slack_by_the_extra_cone_it_may_open(irb4600, straight_tool, kin, q):
+    nlp = build_refinement(
+        irb4600,
+        _fused(kin, q, OFFSETS, _turns(ANGLES)),
+        np.eye(4),
+        straight_tool,
+        Tolerances(orientation_deg=3.0),
+        elastic_deg=2.0,
+    )
+    slack_lo, slack_hi = nlp.lbx[6 * N :], nlp.ubx[6 * N :]
+    np.testing.assert_array_equal(slack_lo, 0.0)
+    np.testing.assert_allclose(
+        slack_hi, math.cos(math.radians(3.0)) - math.cos(math.radians(5.0)), rtol=1e-12
+    )
+    sigma = np.linspace(0.0, 1e-3, N)
+    _, g = _evaluate(nlp, np.concatenate([q.ravel(), sigma]))
+    np.testing.assert_allclose(g[: 4 * N].reshape(N, 4)[:, 3], np.cos(np.radians(ANGLES)) + sigma, atol=1e-12)
