@@ -176,3 +176,72 @@ def test_bad_tolerance_and_too_few_waypoints_raise_input_error():
         time_parameterise(
             **{**GOOD, "s": GOOD["s"][:2], "q": GOOD["q"][:2], "speed_cap": GOOD["speed_cap"][:2]}
         )
+
+
+def _straight(slope, n_pts=401):
+    s = np.linspace(0.0, 1.0, n_pts)
+    return s, s[:, None] * np.asarray(slope)
+
+
+def test_a_path_held_back_by_a_joint_speed_is_ramp_limit_ramp_in_contiguous_pieces():
+    """Straight in joint space with joint 2 at 2 rad/m and 0.2 rad/s: 0.1 m/s, half the 0.2 m/s cap.
+
+    Every waypoint is slow: the run splits into the ramp up (until joint 2 binds), the stretch
+    held by joint 2's speed limit, and the ramp down; the pieces touch without gap or overlap.
+    """
+    s, q = _straight([0.5, 2.0, -1.0])
+    vlim, alim = np.array([3.0, 0.2, 3.0]), np.full(3, 0.5)
+    tm = time_parameterise(s, q, np.full(len(s), 0.2), vlim, alim)
+    reasons = [seg.reason for seg in tm.slow_segments]
+    assert reasons == [RAMP, "joint velocity (joint 2)", RAMP]
+    first, middle, last = tm.slow_segments
+    assert first.index_start == 0 and last.index_end == len(s) - 1
+    assert middle.index_start == first.index_end + 1 and last.index_start == middle.index_end + 1
+    # the ramp reaches 0.1 m/s at the path acceleration joint 2 allows, 0.5 / 2 = 0.25 m/s^2
+    ramp_m = 0.1**2 / (2 * 0.25)
+    assert s[first.index_end] == pytest.approx(ramp_m, abs=0.01)
+    assert s[last.index_start] == pytest.approx(1.0 - ramp_m, abs=0.01)
+    assert middle.min_ratio == pytest.approx(0.5, rel=1e-3)
+    assert np.all(np.abs(tm.qd) <= vlim * (1 + 1e-6))
+
+
+def test_an_unexplained_slowdown_names_the_closest_limit(monkeypatch):
+    """A slowdown no limit accounts for (planted here) is reported as such, naming the joint nearest
+    its speed limit: joint 3, whose |q3'| = 3 s rises to 1.8 rad/m in the slowed stretch (joint 2 is
+    at 1.3 rad/m throughout, so it would be the answer if the least use counted)."""
+    s, q = _straight([0.5, -1.3, 0.0])
+    q[:, 2] = 1.5 * s**2
+    real = timing._solve_path_speed
+
+    def dip(*args):
+        speed = real(*args)
+        return speed * np.where((s > 0.4) & (s < 0.6), 0.5, 1.0)
+
+    monkeypatch.setattr(timing, "_solve_path_speed", dip)
+    tm = time_parameterise(s, q, np.full(len(s), 0.1), np.ones(3), np.full(3, 1e3))
+    (unexplained,) = [seg for seg in tm.slow_segments if not seg.explained]
+    assert unexplained.reason.startswith("not explained by limits (closest: joint velocity (joint 3)")
+    assert 0.4 < unexplained.s_start_m < unexplained.s_end_m < 0.6
+    assert tm.speed_tracking_error_rel == pytest.approx(0.5, abs=1e-6)
+
+
+def test_a_toppra_failure_is_a_solver_error(monkeypatch):
+    s, q = _straight([1.0, 0.5])
+
+    def broken(*_args, **_kwargs):
+        raise RuntimeError("planted")
+
+    instance_type = timing._toppra()[0].algorithm.TOPPRA
+    monkeypatch.setattr(instance_type, "compute_parameterization", broken)
+    with pytest.raises(SolverError, match="TOPPRA failed: planted"):
+        time_parameterise(s, q, np.full(len(s), 0.1), np.ones(2), np.ones(2))
+
+
+def test_without_start_stop_the_start_speed_is_the_first_waypoints_own_cap():
+    """The first waypoint's cap is 30 mm/s, the rest 60 mm/s: the path starts at 30 mm/s."""
+    s, q = _straight([1.0, 0.5])
+    cap = np.full(len(s), 0.06)
+    cap[0] = 0.03
+    tm = time_parameterise(s, q, cap, np.full(2, 3.0), np.full(2, 0.5), start_stop=False)
+    assert tm.speed[0] == pytest.approx(0.03, rel=1e-4)
+    assert tm.speed[-1] == pytest.approx(0.06, rel=1e-4)
