@@ -31,13 +31,16 @@ import pytest
 from lxml import etree
 from scipy.spatial.transform import Rotation
 
+from refine.errors import InputError
 from refine.export.krl import write_krl
 from refine.export.pathml import write_pathml
 from refine.export.rapid import write_rapid
 from refine.export.urscript import write_urscript
+from refine.export.writers import write_outputs
 from refine.frames import transform_from_xyz_rpy
 from refine.paths import Trajectory
 from refine.problem import CadSettings, DemoSettings, Problem, ProcessSettings, RobotSettings, ToolSettings
+from refine.result import PassResult, RunResult
 from refine.robot import load_robot
 
 RESOLUTION_M_S = 1e-4  # the writers' documented default speed rounding step
@@ -56,6 +59,7 @@ class Motion:
     output_on: bool
     T_flange_tcp: np.ndarray | None  # the tool active for the motion
     zone: str | None = None  # RAPID zonedata name
+    fields: dict | None = None  # KRL: the E6POS fields of the target (S, T, E1, ...)
 
 
 def _T(R, p) -> np.ndarray:
@@ -168,6 +172,7 @@ def interpret_krl(src: str, dat: str) -> list[Motion]:
                     None,
                     state["out"],
                     state["tool"],
+                    fields=decls[m.group(2).upper()],
                 )
             )
     return motions
@@ -419,3 +424,93 @@ def test_pathml_frames_are_the_planned_poses_in_fixed_axis_angles(tmp_path):
         R = Rotation.from_euler("xyz", angles, degrees=True).as_matrix()  # lower case: fixed axes
         angle = Rotation.from_matrix(R.T @ tr.poses[k, :3, :3]).magnitude()
         assert np.degrees(angle) < 1e-9, k
+
+
+# ---- what gets written for a run ----------------------------------------------------------------
+
+SUFFIXES = {
+    "rapid": {"rapid": ".mod"},
+    "krl": {"krl_src": ".src", "krl_dat": ".dat"},
+    "urscript": {"urscript": ".script"},
+}
+
+
+@pytest.mark.parametrize("lang", sorted(CASES))
+def test_a_run_writes_the_program_asked_for_and_its_interpretation_is_the_plan(lang, tmp_path):
+    model, base, tcp, output, (q0, q1) = CASES[lang]
+    robot = load_robot(model)
+    problem = _problem(f"bead {lang}", model, base, tcp, output)
+    tr = planned(robot, problem, q0, q1, 12)
+    result = RunResult(problem, robot, (PassResult("pass 1", 1, 1, None, None, None, tr),), None)
+    outputs = write_outputs(result, tmp_path, (lang,))
+    assert {k: v.suffix for k, v in outputs.items() if k in SUFFIXES[lang]} == SUFFIXES[lang]
+    assert {"trajectory", "pathml"} <= set(outputs)
+    assert not set(outputs) - {"trajectory", "pathml"} - set(SUFFIXES[lang])  # only the program asked for
+    if lang == "rapid":
+        motions, _ = interpret_rapid(outputs["rapid"].read_text())
+    elif lang == "krl":
+        motions = interpret_krl(outputs["krl_src"].read_text(), outputs["krl_dat"].read_text())
+    else:
+        motions = interpret_urscript(outputs["urscript"].read_text())
+    path = _path_motions(motions, len(tr))
+    expected = np.linalg.inv(problem.robot.base_in_world) @ tr.poses
+    np.testing.assert_allclose(np.array([m.T_base_tcp for m in path]), expected, atol=2e-6)
+
+
+def test_a_run_with_an_infeasible_pass_writes_nothing(tmp_path):
+    model, base, tcp, output, (q0, q1) = CASES["rapid"]
+    robot = load_robot(model)
+    problem = _problem("bead", model, base, tcp, output)
+    tr = planned(robot, problem, q0, q1, 12)
+    passes = (
+        PassResult("layer 1 pass 1", 1, 1, None, None, None, tr),
+        PassResult("layer 2 pass 1", 2, 1, None, None, None, None),
+    )
+    assert write_outputs(RunResult(problem, robot, passes, None), tmp_path, ("rapid",)) == {}
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_unknown_program_format_is_refused_naming_the_known_ones(tmp_path):
+    model, base, tcp, output, (q0, q1) = CASES["rapid"]
+    robot = load_robot(model)
+    problem = _problem("bead", model, base, tcp, output)
+    result = RunResult(
+        problem,
+        robot,
+        (PassResult("pass 1", 1, 1, None, None, None, planned(robot, problem, q0, q1, 5)),),
+        None,
+    )
+    with pytest.raises(InputError, match="'karel' is not one of .*rapid"):
+        write_outputs(result, tmp_path, ("karel",))
+
+
+def test_krl_turn_has_a_bit_set_for_each_negative_axis(tmp_path):
+    """KUKA Turn: bit i is set when axis i + 1 is negative (KSS manual, E6POS), from the planned joints."""
+    model, base, tcp, output, (q0, q1) = CASES["krl"]
+    robot = load_robot(model)
+    problem = _problem("bead", model, base, tcp, output)
+    tr = planned(robot, problem, q0, q1, 25)
+    src, dat = write_krl(tmp_path / "b.src", tr, problem, robot)
+    path = _path_motions(interpret_krl(src.read_text(), dat.read_text()), len(tr))
+    expected = [sum(1 << i for i, qi in enumerate(qk) if qi < 0.0) for qk in tr.q]
+    assert [int(m.fields["T"]) for m in path] == expected
+    assert len(set(expected)) > 1  # the path crosses zero on some axis
+
+
+def test_the_rapid_module_is_named_after_the_problem(tmp_path):
+    model, base, tcp, output, (q0, q1) = CASES["rapid"]
+    robot = load_robot(model)
+    problem = _problem("bead 7-a", model, base, tcp, output)
+    text = write_rapid(tmp_path / "b.mod", planned(robot, problem, q0, q1, 2), problem, robot).read_text()
+    assert re.search(r"^MODULE bead_7_a$", text, re.MULTILINE)
+    motions, _ = interpret_rapid(text)
+    assert len(_path_motions(motions, 2)) == 2  # two waypoints are enough for a program
+
+
+def test_reading_back_a_script_without_a_pass_says_so(tmp_path):
+    from refine.export.urscript import parse_urscript
+
+    path = tmp_path / "empty.script"
+    path.write_text("def empty():\n  set_tcp(p[0,0,0.1,0,0,0])\nend\n")
+    with pytest.raises(InputError, match="no pass"):
+        parse_urscript(path)

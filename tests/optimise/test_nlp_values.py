@@ -202,3 +202,13 @@ def test_the_elastic_problem_bounds_each_slack_by_the_extra_cone_it_may_open(irb
     sigma = np.linspace(0.0, 1e-3, N)
     _, g = _evaluate(nlp, np.concatenate([q.ravel(), sigma]))
     np.testing.assert_allclose(g[: 4 * N].reshape(N, 4)[:, 3], np.cos(np.radians(ANGLES)) + sigma, atol=1e-12)
+
+
+def test_slack_in_degrees_is_the_cone_widening_the_cosine_slack_buys(irb4600, straight_tool, kin, q):
+    fused = _fused(kin, q, OFFSETS, _turns(ANGLES))
+    strict = build_refinement(irb4600, fused, np.eye(4), straight_tool, Tolerances(orientation_deg=3.0))
+    np.testing.assert_array_equal(strict.slack_deg(q.ravel()), np.zeros(N))
+    elastic = strict.rebuilt(elastic_deg=2.0)
+    widened = np.array([0.0, 0.5, 1.0, 2.0, 0.1])  # extra cone [deg]
+    sigma = np.cos(np.radians(3.0)) - np.cos(np.radians(3.0 + widened))
+    np.testing.assert_allclose(elastic.slack_deg(np.concatenate([q.ravel(), sigma])), widened, atol=1e-9)
