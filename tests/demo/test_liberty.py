@@ -54,9 +54,7 @@ def test_frame_counts_give_the_time_from_the_first_frame(tmp_path):
 
 def test_other_stations_and_blank_lines_are_skipped(tmp_path):
     f = tmp_path / "demo.txt"
-    f.write_text(
-        "01 0 0 0 0 0 0\n\n02 1 1 1 0 0 0\n01 1 0 0 0 0 0\n02 2 2 2 0 0 0\n02 3 3 3 0 0 0\n"
-    )
+    f.write_text("01 0 0 0 0 0 0\n\n02 1 1 1 0 0 0\n01 1 0 0 0 0 0\n02 2 2 2 0 0 0\n02 3 3 3 0 0 0\n")
     log = read_liberty_ascii(f, station=2, rate_hz=10.0)
     np.testing.assert_allclose(log.positions[:, 0], np.array([1, 2, 3]) * 0.0254)
     np.testing.assert_allclose(log.t, [0.0, 0.1, 0.2])
@@ -93,3 +91,52 @@ def test_read_tracker_log_uses_the_settings(tmp_path, log):
     settings = DemoSettings(file=f, format="liberty_ascii", units="cm", station=2, rate_hz=60.0)
     back = read_tracker_log(settings)
     np.testing.assert_allclose(back.t, log.t, atol=1e-12)  # the header's 240 Hz wins
+
+
+def test_an_unknown_unit_is_refused_on_writing_and_reading(tmp_path, log):
+    f = tmp_path / "demo.txt"
+    with pytest.raises(InputError, match="unknown Liberty unit 'mm'; use 'in' or 'cm'"):
+        write_liberty_ascii(f, log, units="mm")
+    write_liberty_ascii(f, log, units="cm")
+    f.write_text("".join(line for line in f.read_text().splitlines(True) if "units" not in line))
+    with pytest.raises(InputError, match="unknown Liberty unit 'mm'"):
+        read_liberty_ascii(f, units="mm", station=log.station)
+
+
+def test_a_non_finite_value_is_an_error_naming_the_line(tmp_path, log):
+    f = tmp_path / "demo.txt"
+    write_liberty_ascii(f, log, units="in")
+    lines = f.read_text().splitlines()
+    lines[5] = lines[5].rsplit(" ", 1)[0] + " nan"  # roll of the third record
+    f.write_text("\n".join(lines) + "\n")
+    with pytest.raises(InputError, match="non-finite value"):
+        read_liberty_ascii(f, station=log.station)
+
+
+def test_times_that_the_format_cannot_hold_are_warned_about(tmp_path, log, caplog):
+    """Without a frame count the file keeps only the rate: uneven sample times are lost, and said so."""
+    uneven = TrackerLog(
+        t=log.t + np.where(np.arange(len(log.t)) == 10, 1e-3, 0.0),
+        positions=log.positions,
+        rotations=log.rotations,
+        station=log.station,
+    )
+    with caplog.at_level("WARNING", logger="refine.demo.liberty"):
+        write_liberty_ascii(tmp_path / "even.txt", log, units="in", rate_hz=240.0)
+        assert not caplog.records
+        write_liberty_ascii(
+            tmp_path / "counted.txt", uneven, units="in", rate_hz=240.0, with_frame_count=True
+        )
+        assert not caplog.records
+        write_liberty_ascii(tmp_path / "uneven.txt", uneven, units="in", rate_hz=240.0)
+    assert len(caplog.records) == 1 and "times will be lost" in caplog.records[0].getMessage()
+
+
+def test_a_position_that_rounds_to_zero_is_written_without_a_sign(tmp_path, log):
+    tiny = TrackerLog(
+        t=log.t[:2], positions=np.array([[-1e-9, 0.1, -0.2], [0.0, -1e-9, 0.3]]), rotations=log.rotations[:2]
+    )
+    f = tmp_path / "demo.txt"
+    write_liberty_ascii(f, tiny, units="in")
+    assert "-0.0000" not in f.read_text()
+    assert "0.0000" in f.read_text()

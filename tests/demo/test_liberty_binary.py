@@ -156,3 +156,31 @@ def test_wrapped_timestamps_and_replies_to_commands_are_handled(tmp_path):
     f.write_bytes(reply + bytes(data))
     got = read_liberty_binary(f)
     np.testing.assert_allclose(got.t, 0.004 * np.arange(6))
+
+
+@pytest.mark.parametrize("rate", [0.0, -240.0, float("nan")])
+def test_a_rate_that_is_not_positive_is_refused(tmp_path, rate):
+    f = tmp_path / "demo.lyb"
+    write_liberty_binary(f, _log(n=5))
+    with pytest.raises(InputError, match="rate_hz must be a number > 0 Hz"):
+        read_liberty_binary(f, rate_hz=rate)
+
+
+def test_records_of_one_station_with_different_sizes_are_an_error(tmp_path):
+    a, b = tmp_path / "a.lyb", tmp_path / "b.lyb"
+    write_liberty_binary(a, _log(n=4))
+    write_liberty_binary(b, _log(n=4), output_list=(8, 2, 7))
+    f = tmp_path / "mixed.lyb"
+    f.write_bytes(a.read_bytes() + b.read_bytes())
+    size_a = len(a.read_bytes()) // 4 - 8  # payload bytes of one record of the first file
+    with pytest.raises(
+        InputError, match=rf"byte offset {4 * (size_a + 8)} has \d+ payload bytes, the first record"
+    ):
+        read_liberty_binary(f)
+
+
+def test_an_output_list_that_does_not_match_the_record_size_is_an_error(tmp_path):
+    f = tmp_path / "demo.lyb"
+    write_liberty_binary(f, _log(n=4))
+    with pytest.raises(InputError, match=r"output list \[8, 2, 7\] needs \d+ bytes, the records hold"):
+        read_liberty_binary(f, output_list=(8, 2, 7))
