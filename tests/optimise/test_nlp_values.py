@@ -212,3 +212,13 @@ def test_slack_in_degrees_is_the_cone_widening_the_cosine_slack_buys(irb4600, st
     widened = np.array([0.0, 0.5, 1.0, 2.0, 0.1])  # extra cone [deg]
     sigma = np.cos(np.radians(3.0)) - np.cos(np.radians(3.0 + widened))
     np.testing.assert_allclose(elastic.slack_deg(np.concatenate([q.ravel(), sigma])), widened, atol=1e-9)
+
+
+def test_the_inspection_singularity_function_is_the_scaled_manipulability(irb4600, straight_tool, kin, q):
+    from refine.optimise.problem import singularity_function
+
+    f = singularity_function(irb4600, np.eye(4), straight_tool)
+    scale = np.diag([1.0 / REACH_M] * 3 + [1.0] * 3)
+    for qk in q:
+        expected = abs(np.linalg.det(scale @ kin.jacobian(qk)))
+        assert float(f(qk)) == pytest.approx(expected, rel=1e-9, abs=1e-6)
