@@ -31,6 +31,7 @@ import json
 import os
 import random
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -360,6 +361,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=Path("mutation-report"), help="report folder")
     ap.add_argument("--list", action="store_true", help="only print the number of sites per group")
     args = ap.parse_args(argv)
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(1))  # leave no temporary copy behind
     args.out.mkdir(parents=True, exist_ok=True)
     report: dict[str, dict] = {}
     with tempfile.TemporaryDirectory(prefix="refine-mutation-") as tmp:
