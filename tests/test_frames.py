@@ -677,6 +677,13 @@ def test_check_rotation_rejects_non_orthonormal_matrices_naming_the_field(bad):
         check_rotation(bad, name="frames.cad_in_world")
 
 
+def test_check_rotation_tolerates_rounding_up_to_its_default_of_one_millionth():
+    """|RᵀR - I| = 2e + e² for a diagonal scaled by 1 + e: 4e-7 passes, 4e-6 does not."""
+    check_rotation(np.diag([1.0, 1.0, 1.0 + 2e-7]))
+    with pytest.raises(InputError, match=r"orthonormal \(max \|R\^T R - I\| = 4\.00e-06 > 1e-06\)"):
+        check_rotation(np.diag([1.0, 1.0, 1.0 + 2e-6]))
+
+
 def test_check_rotation_rejects_one_bad_matrix_in_a_stack():
     stack = np.stack([np.eye(3), np.eye(3), np.diag([1.0, -1.0, 1.0])])
     with pytest.raises(InputError, match="R"):
