@@ -51,6 +51,13 @@ def _evaluate(nlp, x):
     return float(f), np.asarray(g).ravel()
 
 
+def _standard(robot, tool, kin, q, tolerances, **options):
+    """The NLP on targets at OFFSETS and turned by ANGLES from the poses of ``q``."""
+    return build_refinement(
+        robot, _fused(kin, q, OFFSETS, _turns(ANGLES)), np.eye(4), tool, tolerances, **options
+    )
+
+
 ANGLES = np.array([0.0, 1.0, 2.5, 4.0, 0.3])
 OFFSETS = np.array(
     [[0.0, 0.0, 0.0], [1e-3, 0.0, 0.0], [0.0, -2e-3, 0.0], [0.0, 0.0, 3e-3], [1e-3, 1e-3, -1e-3]]
@@ -82,13 +89,7 @@ def test_row_bounds_are_equality_on_position_the_cone_and_the_step_limit(irb4600
 
 
 def test_variable_bounds_are_the_data_sheet_limits_less_the_margin(irb4600, straight_tool, kin, q):
-    nlp = build_refinement(
-        irb4600,
-        _fused(kin, q, OFFSETS, _turns(ANGLES)),
-        np.eye(4),
-        straight_tool,
-        Tolerances(joint_margin_deg=3.5),
-    )
+    nlp = _standard(irb4600, straight_tool, kin, q, Tolerances(joint_margin_deg=3.5))
     np.testing.assert_allclose(nlp.lbx, np.tile(np.radians(LOWER_DEG + 3.5), N), atol=1e-12)
     np.testing.assert_allclose(nlp.ubx, np.tile(np.radians(UPPER_DEG - 3.5), N), atol=1e-12)
 
@@ -186,14 +187,7 @@ def test_singularity_rows_are_the_scaled_manipulability_at_waypoints_and_inside_
 
 
 def test_the_elastic_problem_bounds_each_slack_by_the_extra_cone_it_may_open(irb4600, straight_tool, kin, q):
-    nlp = build_refinement(
-        irb4600,
-        _fused(kin, q, OFFSETS, _turns(ANGLES)),
-        np.eye(4),
-        straight_tool,
-        Tolerances(orientation_deg=3.0),
-        elastic_deg=2.0,
-    )
+    nlp = _standard(irb4600, straight_tool, kin, q, Tolerances(orientation_deg=3.0), elastic_deg=2.0)
     slack_lo, slack_hi = nlp.lbx[6 * N :], nlp.ubx[6 * N :]
     np.testing.assert_array_equal(slack_lo, 0.0)
     np.testing.assert_allclose(
