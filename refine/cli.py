@@ -131,6 +131,10 @@ def _run(args: argparse.Namespace, problem) -> int:  # noqa: ANN001 - Problem, i
     else:
         print("\n".join(summary_lines(result)))
         print(f"outputs      {out}/: " + ", ".join(p.name for p in result.outputs.values()))
+        if problem.calibration is not None:
+            from refine.calibrate.cost import run_cost_lines
+
+            print("\n".join(run_cost_lines(result)))
     return exit_status(result.status)
 
 

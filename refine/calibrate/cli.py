@@ -396,14 +396,9 @@ def _cost(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps({"waypoints": len(poses), "frames": [c.__dict__ for c in costs]}, indent=2))
         return 0
-    print(f"calibration cost on {len(poses)} waypoints, {problem.calibration.samples} samples per frame")
-    print(f"{'frame':24s} {'mean pos':>10s} {'worst pos':>10s} {'mean ori':>10s} {'worst ori':>10s}")
-    for c in costs:
-        print(
-            f"{c.frame:24s} {c.mean_position_error_m * 1000:7.3f} mm {c.worst_position_error_m * 1000:7.3f} mm "
-            f"{c.mean_orientation_error_deg:6.3f} deg {c.worst_orientation_error_deg:6.3f} deg"
-        )
-    print("worst: the 95th percentile over the samples of the largest error along the path")
+    from refine.calibrate.cost import cost_lines
+
+    print("\n".join(cost_lines(costs, len(poses), problem.calibration.samples)))
     if args.truth is not None:
         print("actual: the error the frames' difference from the truth causes (worst = the largest)")
     return 0

@@ -198,6 +198,18 @@ class PathCost:
         )
 
 
+def _chunked_errors(
+    tcp_poses: ArrayLike, nominal: dict[str, ArrayLike], deltas: dict[str, Array], chunk: int = 64
+) -> tuple[Array, Array]:
+    """:func:`path_errors` over the samples in chunks, so memory stays at chunk x waypoints poses."""
+    m = len(next(iter(deltas.values())))
+    parts = [
+        path_errors(tcp_poses, nominal, {k: d[i : i + chunk] for k, d in deltas.items()})
+        for i in range(0, m, chunk)
+    ]
+    return np.concatenate([q[0] for q in parts]), np.concatenate([q[1] for q in parts])
+
+
 def calibration_cost(
     tcp_poses: ArrayLike, nominal: dict[str, ArrayLike], settings: CalibrationSettings
 ) -> list[PathCost]:
@@ -209,10 +221,10 @@ def calibration_cost(
             continue
         deltas = sample_deltas(settings.frames[name], settings.samples, rng)
         all_deltas[name] = deltas
-        out.append(PathCost.from_errors(name, *path_errors(tcp_poses, nominal, {name: deltas})))
+        out.append(PathCost.from_errors(name, *_chunked_errors(tcp_poses, nominal, {name: deltas})))
     if not out:
         raise InputError("[calibration] gives no frame's uncertainty; nothing to propagate")
-    out.append(PathCost.from_errors("all", *path_errors(tcp_poses, nominal, all_deltas)))
+    out.append(PathCost.from_errors("all", *_chunked_errors(tcp_poses, nominal, all_deltas)))
     return out
 
 
@@ -245,3 +257,36 @@ def deltas_between(nominal: dict[str, ArrayLike], true: dict[str, ArrayLike]) ->
         name: invert_transform(np.asarray(nominal[name], dtype=float)) @ np.asarray(true[name], dtype=float)
         for name in FRAMES
     }
+
+
+# ---- the table ----------------------------------------------------------------------------------
+
+
+def cost_lines(costs: list[PathCost], n_waypoints: int, samples: int) -> list[str]:
+    """The cost table: one line per frame (mean and worst position and orientation error)."""
+    lines = [
+        f"calibration cost on {n_waypoints} waypoints, {samples} samples per frame",
+        f"{'frame':24s} {'mean pos':>10s} {'worst pos':>10s} {'mean ori':>10s} {'worst ori':>10s}",
+    ]
+    for c in costs:
+        lines.append(
+            f"{c.frame:24s} {c.mean_position_error_m * 1000:7.3f} mm {c.worst_position_error_m * 1000:7.3f} mm "
+            f"{c.mean_orientation_error_deg:6.3f} deg {c.worst_orientation_error_deg:6.3f} deg"
+        )
+    lines.append("worst: the 95th percentile over the samples of the largest error along the path")
+    return lines
+
+
+def run_cost_lines(result) -> list[str]:  # noqa: ANN001 - RunResult, imported lazily
+    """The cost table of a run's problem ``[calibration]`` on its refined TCP poses (all passes)."""
+    problem = result.problem
+    poses = np.concatenate(
+        [
+            p.trajectory.poses
+            if p.trajectory is not None
+            else make_transform(p.fused.rotations, p.fused.positions)
+            for p in result.passes
+        ]
+    )
+    costs = calibration_cost(poses, nominal_frames(problem), problem.calibration)
+    return ["", *cost_lines(costs, len(poses), problem.calibration.samples)]

@@ -111,3 +111,24 @@ def test_cost_cli_prints_a_row_per_frame(tmp_path, capsys):
     assert main(["calibrate", "cost", str(problem)]) == 0
     out = capsys.readouterr().out
     assert "tcp_in_flange" in out and "sensor_in_tcp" in out and "all" in out
+
+
+def test_a_run_of_a_problem_with_calibration_prints_the_table_for_its_refined_poses():
+    from types import SimpleNamespace
+
+    from refine.calibrate.cost import run_cost_lines
+
+    problem = load_problem(Path(__file__).resolve().parents[2] / "problems" / "glass_calibrated")
+    poses = _path(30)
+    result = SimpleNamespace(
+        problem=problem, passes=[SimpleNamespace(trajectory=SimpleNamespace(poses=poses))]
+    )
+    lines = run_cost_lines(result)
+    assert "on 30 waypoints" in lines[1]
+    assert [line.split()[0] for line in lines[3:8]] == [
+        "tcp_in_flange",
+        "cad_in_world",
+        "source_in_world",
+        "sensor_in_tcp",
+        "all",
+    ]
