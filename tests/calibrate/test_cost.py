@@ -132,3 +132,10 @@ def test_a_run_of_a_problem_with_calibration_prints_the_table_for_its_refined_po
         "sensor_in_tcp",
         "all",
     ]
+
+
+def test_a_tcp_rotation_turns_the_tool_about_its_tip_and_leaves_the_tip_in_place():
+    delta = transform_from_xyz_rpy([0.0, 0.0, 0.0], [0.0, 0.4, 0.0])
+    pos, ang = path_errors(_path(), _nominal(), {"tcp_in_flange": delta})
+    assert pos.max() < 1e-12
+    np.testing.assert_allclose(ang, 0.4, rtol=1e-9)
