@@ -10,9 +10,65 @@ The pipeline (one module per stage, see ``docs/design.md``)::
     optimise/  the joint-path NLP (CasADi + IPOPT)
     timing TOPPRA time parameterisation
     export/    PathML, robot programs, trajectory CSV, result JSON
+
+The library API (``docs/api.md``): :func:`load_problem`, :func:`solve`, :func:`refine_path`,
+:class:`Result`, :class:`Robot`. They are imported on first use, so ``import refine`` stays light.
 """
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
 
 from refine.errors import InfeasibleError, InputError, RefineError, SolverError
 
-__all__ = ["InfeasibleError", "InputError", "RefineError", "SolverError"]
+if TYPE_CHECKING:
+    from refine.api import PassArrays, Result, refine_path, solve
+    from refine.problem import Problem, load_problem
+    from refine.robot import Robot
+    from refine.settings import CollisionSettings, Shape, Tolerances
+
+_LAZY = {
+    "load_problem": "refine.problem",
+    "Problem": "refine.problem",
+    "solve": "refine.api",
+    "refine_path": "refine.api",
+    "Result": "refine.api",
+    "PassArrays": "refine.api",
+    "Robot": "refine.robot",
+    "Shape": "refine.settings",
+    "Tolerances": "refine.settings",
+    "CollisionSettings": "refine.settings",
+}
+
+__all__ = [
+    "CollisionSettings",
+    "InfeasibleError",
+    "InputError",
+    "PassArrays",
+    "Problem",
+    "RefineError",
+    "Result",
+    "Robot",
+    "Shape",
+    "SolverError",
+    "Tolerances",
+    "load_problem",
+    "refine_path",
+    "solve",
+]
 __version__ = "0.1.0"
+
+
+def __getattr__(name: str) -> Any:
+    """Import the public names of the API on first use (PEP 562)."""
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'refine' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))

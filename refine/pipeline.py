@@ -14,8 +14,9 @@ from typing import Any
 
 import numpy as np
 
+from refine.errors import InputError
 from refine.evaluate import compare_with_truth
-from refine.optimise.problem import Weights, build_refinement
+from refine.optimise.problem import RefinementNLP, Weights, build_refinement
 from refine.optimise.solve import ConstraintSource, solve_refinement
 from refine.paths import FusedPath, Trajectory
 from refine.problem import Problem
@@ -61,6 +62,8 @@ def fused_path(
     warning (see :mod:`refine.demo.quality`); the gate's figures are appended to ``qualities``.
     """
     watch = watch or _Stopwatch()
+    if problem.cad is None:
+        raise InputError(f"problem {problem.name!r} has no [cad] file: its path must be given in memory")
     if problem.cad.format == "pathml":
         from refine.cad.pathml_ import fused_from_pathml
 
@@ -119,21 +122,39 @@ def refine_pass(
     layer: int = 1,
     index: int = 1,
     sources: tuple[ConstraintSource, ...] = (),
+    *,
+    nlp: RefinementNLP | None = None,
+    q0: np.ndarray | None = None,
 ) -> PassResult:
-    """Refine, verify and time one pass."""
-    nlp = build_refinement(
-        robot,
-        fused,
-        problem.robot.base_in_world,
-        problem.tool.tcp_in_flange,
-        problem.tolerances,
-        axisymmetric=problem.tool.axisymmetric,
-        weights=weights_for(problem, robot),
-    )
+    """Refine, verify and time one pass.
+
+    Args:
+        problem: the problem's settings.
+        robot: the loaded robot.
+        fused: the pass's path.
+        watch: collects the stage times.
+        name: the pass's name.
+        layer: its 1-based layer.
+        index: its 1-based number in the layer.
+        sources: collision constraint sources.
+        nlp: a problem already built for this pass (re-solving); None to build it.
+        q0: initial joints (N, n) [rad] instead of the IK seed (warm start); None for the seed.
+    """
+    if nlp is None:
+        nlp = build_refinement(
+            robot,
+            fused,
+            problem.robot.base_in_world,
+            problem.tool.tcp_in_flange,
+            problem.tolerances,
+            axisymmetric=problem.tool.axisymmetric,
+            weights=weights_for(problem, robot),
+        )
     watch.lap("build")
     home = None if problem.robot.home_deg is None else np.radians(problem.robot.home_deg)
     refinement = solve_refinement(
         nlp,
+        q0,
         home=home,
         sources=sources,
         repair_max_slack_deg=problem.repair.max_slack_deg if problem.repair.enabled else None,
@@ -164,19 +185,39 @@ def refine_pass(
     clearance = None
     for source in sources:
         clearance = source.clearance(refinement.q)  # the dense check's figures, for the report
-    return PassResult(name, layer, index, fused, refinement, timing, trajectory, clearance)
+    return PassResult(name, layer, index, fused, refinement, timing, trajectory, clearance, nlp)
 
 
-def solve_problem(problem: Problem, *, accept_frame_error: bool = False) -> RunResult:
-    """Run every stage up to the timed trajectories, without writing files."""
+def solve_problem(
+    problem: Problem,
+    *,
+    accept_frame_error: bool = False,
+    robot: Robot | None = None,
+    fused: FusedPath | None = None,
+    nlp: RefinementNLP | None = None,
+    q0: np.ndarray | None = None,
+) -> RunResult:
+    """Run every stage up to the timed trajectories, without writing files.
+
+    Args:
+        problem: the problem.
+        accept_frame_error: warn instead of stopping when the tracker frame looks wrong.
+        robot: the robot, when the caller holds it already; None to load ``problem.robot``.
+        fused: the first pass's path, when the caller holds it; None to read and fuse the
+            problem's files.
+        nlp: the first pass's problem, already built (re-solving); None to build it.
+        q0: initial joints (N, n) [rad] of the first pass (warm start); None for the IK seed.
+    """
     watch = _Stopwatch()
-    robot = load_robot(problem.robot.model)
+    if robot is None:
+        robot = load_robot(problem.robot.model)
     watch.lap("load")
     qualities: list[Any] = []
-    fused = fused_path(problem, watch, accept_frame_error=accept_frame_error, qualities=qualities)
+    if fused is None:
+        fused = fused_path(problem, watch, accept_frame_error=accept_frame_error, qualities=qualities)
     sources = constraint_sources(problem, robot)
     watch.lap("load")
-    passes = [refine_pass(problem, robot, fused, watch, sources=sources)]
+    passes = [refine_pass(problem, robot, fused, watch, sources=sources, nlp=nlp, q0=q0)]
     if problem.multipass is not None and problem.multipass.layers > 1:
         from refine.multipass import generate_passes
 
@@ -221,13 +262,35 @@ def run(
     Returns:
         The run's result, with ``outputs`` naming the files written.
     """
+    from refine.preflight import preflight
+
+    preflight(problem, out_dir, programs, report=report)  # refuse before spending time on the solve
+    return write_run(
+        solve_problem(problem, accept_frame_error=accept_frame_error), out_dir, programs, report=report
+    )
+
+
+def write_run(
+    result: RunResult, out_dir: Path, programs: tuple[str, ...] | None = None, *, report: bool = True
+) -> RunResult:
+    """Write every output of a solved run into ``out_dir`` (what :func:`run` does after solving).
+
+    Args:
+        result: the solved run.
+        out_dir: folder for ``result.json``, ``trajectory.csv``, ``<name>.aml`` and programs.
+        programs: program formats overriding ``[output] programs``.
+        report: also write ``report.html``.
+
+    Returns:
+        ``result``, with ``outputs`` naming the files written.
+    """
     from refine.export.result_json import write_result_json
     from refine.export.writers import write_outputs
     from refine.outputs import StagedOutputs
     from refine.preflight import preflight
 
-    checked = preflight(problem, out_dir, programs, report=report)
-    result = solve_problem(problem, accept_frame_error=accept_frame_error)
+    problem = result.problem
+    checked = preflight(problem, out_dir, programs, report=report, robot=result.robot)
     t0 = time.perf_counter()
     protected = (*problem.input_files, *([problem.source] if problem.source else []))
     with StagedOutputs(out_dir, protected) as stage:  # all or nothing: see refine.outputs

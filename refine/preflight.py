@@ -18,11 +18,15 @@ import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from refine.errors import InputError
 from refine.names import identifier
 from refine.problem import Problem
 from refine.settings import PROGRAM_FORMATS
+
+if TYPE_CHECKING:
+    from refine.robot import Robot
 
 CONTROLLER_OF_FORMAT = {"rapid": "abb", "krl": "kuka", "urscript": "ur"}
 """The controller family each program format runs on."""
@@ -161,6 +165,7 @@ def preflight(
     programs: tuple[str, ...] | None = None,
     *,
     report: bool = True,
+    robot: Robot | None = None,
 ) -> Preflight:
     """Run every check that needs the robot or the output folder (module docstring).
 
@@ -169,6 +174,7 @@ def preflight(
         out_dir: the output folder, or None to skip the folder checks.
         programs: program formats overriding ``[output] programs``.
         report: whether ``report.html`` will be written.
+        robot: the robot, when the caller holds it; None to load ``problem.robot`` from the registry.
 
     Raises:
         InputError: the first failed check, naming the key or the option.
@@ -180,7 +186,8 @@ def preflight(
         programs = problem.output.programs
     else:
         where = "--programs: "
-    robot = load_robot(problem.robot.model)
+    if robot is None:
+        robot = load_robot(problem.robot.model)
     try:
         check_programs(problem, robot.spec.controller, robot.spec.name, programs)
     except InputError as e:

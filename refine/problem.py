@@ -75,6 +75,7 @@ class Problem:
     Attributes:
         name: problem name (defaults to the folder name).
         root: folder of the problem file; relative paths are resolved against it.
+        cad: the CAD/CAM path file; None when the path is given in memory (``refine.refine_path``).
         demonstration: the tracker log settings; None when the path and its orientations and
             speeds come from a PathML document.
         cell: ``[[cell.objects]]``: the cell's collision objects in the world frame.
@@ -89,7 +90,7 @@ class Problem:
     root: Path
     robot: RobotSettings
     tool: ToolSettings
-    cad: CadSettings
+    cad: CadSettings | None
     demonstration: DemoSettings | None
     frames: FrameSettings = field(default_factory=FrameSettings)
     tolerances: Tolerances = field(default_factory=Tolerances)
@@ -106,7 +107,7 @@ class Problem:
     source: Path | None = None
 
     def __post_init__(self) -> None:
-        if self.demonstration is None and self.cad.format != "pathml":
+        if self.demonstration is None and self.cad is not None and self.cad.format != "pathml":
             raise InputError(
                 'missing required table [demonstration] (only a PathML path, [cad] format = "pathml", may go without)'
             )
@@ -119,7 +120,7 @@ class Problem:
     @property
     def input_files(self) -> tuple[Path, ...]:
         """Every data file the problem reads (resolved paths), for the outputs-never-overwrite check."""
-        files = [self.cad.file]
+        files = [self.cad.file] if self.cad is not None else []
         if self.demonstration is not None:
             files += [self.demonstration.file, *([self.demonstration.truth] if self.demonstration.truth else [])]
         files += [s.file for s in (*self.cell, *self.tool.collision) if s.file is not None]

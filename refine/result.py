@@ -33,6 +33,8 @@ class PassResult:
         timing: the time parameterisation (None when the refinement was infeasible).
         trajectory: the timed path the exporters read (None when infeasible).
         clearance: the dense clearance check of the refined path (None without collision).
+        nlp: the pass's refinement problem as built (a ``RefinementNLP``), for re-solving it
+            after a small change; None when not kept.
     """
 
     name: str
@@ -43,6 +45,7 @@ class PassResult:
     timing: Timing | None
     trajectory: Trajectory | None
     clearance: Any = None
+    nlp: Any = None
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import casadi as ca
@@ -301,12 +301,7 @@ def build_refinement(
     if N < 3:
         raise InputError(f"refinement needs at least 3 waypoints, got {N}")
     spec = robot.spec
-    margin = math.radians(tolerances.joint_margin_deg)
-    lower, upper = spec.lower + margin, spec.upper - margin
-    if np.any(lower >= upper):
-        raise InputError(
-            f"tolerances.joint_margin_deg = {tolerances.joint_margin_deg} deg leaves no joint range"
-        )
+    lower, upper = joint_bounds(robot, tolerances)
     _check_active(active, N, n)
 
     # ---- decision variables and parameters
@@ -324,10 +319,7 @@ def build_refinement(
     if elastic:
         G = ca.vertcat(G[:3, :], G[3, :] + sigma.T)  # cos θ_k + σ_k >= cos α
     rows, lbg_extra, ubg_extra = [ca.vec(G)], [], []
-    step = math.radians(tolerances.joint_step_deg)
     rows.append(ca.vec(Q[:, 1:] - Q[:, :-1]))  # continuity: every joint moves at most `step` per waypoint
-    lbg_extra.append(np.full(n * (N - 1), -step))
-    ubg_extra.append(np.full(n * (N - 1), step))
 
     def at(k_idx: list[int], f: list[float]) -> ca.MX:
         Qa, Qb = Q[:, k_idx], Q[:, [min(k + 1, N - 1) for k in k_idx]]
@@ -362,16 +354,12 @@ def build_refinement(
 
     # ---- bounds
     alpha = math.radians(tolerances.orientation_deg)
-    lbg_k = np.array([0.0, 0.0, 0.0, math.cos(alpha)])
-    ubg_k = np.array([0.0, 0.0, 0.0, 1.0 + 1e-9 if elastic_deg is None else np.inf])
+    lbg_path, ubg_path = path_row_bounds(tolerances, N, n, elastic=elastic_deg is not None)
     lbx, ubx = np.tile(lower, N), np.tile(upper, N)
     if elastic_deg is not None:
         sigma_max = math.cos(alpha) - math.cos(min(alpha + math.radians(elastic_deg), math.pi))
         lbx, ubx = np.concatenate([lbx, np.zeros(N)]), np.concatenate([ubx, np.full(N, sigma_max)])
-    # CasADi vectorises column-major: Q[:, k] is x[k*n:(k+1)*n] and R_demo[:, k] is R_k column-major.
-    params = np.concatenate(
-        [fused.positions.ravel(), np.transpose(fused.rotations, (0, 2, 1)).reshape(N, 9).ravel()]
-    )
+    params = path_params(fused)
     nlp = {"x": x, "p": p, "f": f, "g": g}
     derivatives = derivative_functions(
         kernels,
@@ -396,8 +384,8 @@ def build_refinement(
         params=params,
         lbx=lbx,
         ubx=ubx,
-        lbg=np.concatenate([np.tile(lbg_k, N), *lbg_extra]),
-        ubg=np.concatenate([np.tile(ubg_k, N), *ubg_extra]),
+        lbg=np.concatenate([lbg_path, *lbg_extra]),
+        ubg=np.concatenate([ubg_path, *ubg_extra]),
         n_waypoints=N,
         dof=n,
         row_names=ROW_NAMES,
@@ -413,6 +401,74 @@ def build_refinement(
         elastic_deg=elastic_deg,
         build_time_s=time.perf_counter() - t0,
         derivatives=derivatives,
+    )
+
+
+def joint_bounds(robot: Robot, tolerances: Tolerances) -> tuple[Array, Array]:
+    """The joint limits shrunk by ``tolerances.joint_margin_deg``: lower, upper (n,) [rad]."""
+    margin = math.radians(tolerances.joint_margin_deg)
+    lower, upper = robot.spec.lower + margin, robot.spec.upper - margin
+    if np.any(lower >= upper):
+        raise InputError(
+            f"tolerances.joint_margin_deg = {tolerances.joint_margin_deg} deg leaves no joint range"
+        )
+    return lower, upper
+
+
+def path_row_bounds(tolerances: Tolerances, N: int, n: int, *, elastic: bool = False) -> tuple[Array, Array]:
+    """Bounds of the per-waypoint rows (position, cone) and the joint-step rows, in row order."""
+    lbg_k = np.array([0.0, 0.0, 0.0, math.cos(math.radians(tolerances.orientation_deg))])
+    ubg_k = np.array([0.0, 0.0, 0.0, np.inf if elastic else 1.0 + 1e-9])
+    step = math.radians(tolerances.joint_step_deg)
+    return (
+        np.concatenate([np.tile(lbg_k, N), np.full(n * (N - 1), -step)]),
+        np.concatenate([np.tile(ubg_k, N), np.full(n * (N - 1), step)]),
+    )
+
+
+def path_params(fused: FusedPath) -> Array:
+    """The numeric value of the problem's parameters: CAD points, then demonstrated rotations."""
+    N = len(fused)
+    # CasADi vectorises column-major: Q[:, k] is x[k*n:(k+1)*n] and R_demo[:, k] is R_k column-major.
+    return np.concatenate(
+        [fused.positions.ravel(), np.transpose(fused.rotations, (0, 2, 1)).reshape(N, 9).ravel()]
+    )
+
+
+SPACING_REUSE_REL = 1e-3
+"""A built problem is reused for a new path when the mean waypoint spacing changed by less than this
+fraction: the smoothness weights keep the built spacing (a relative change under 0.4 %)."""
+
+
+def reuse_for(problem: RefinementNLP, fused: FusedPath, tolerances: Tolerances) -> RefinementNLP | None:
+    """``problem`` with a new path and tolerances, without rebuilding it; None where it cannot be.
+
+    The solver is kept and only the parameters (CAD points, demonstrated orientations) and the
+    bounds (joint margin, cone, joint step) change. That needs the strict problem with no active
+    set, the same number of waypoints, and a mean waypoint spacing within
+    :data:`SPACING_REUSE_REL` of the built one (the spacing scales the smoothness cost).
+    """
+    N = problem.n_waypoints
+    a = problem.active
+    if problem.elastic_deg is not None or a.singular_waypoints or a.singular_segments or a.linear_rows:
+        return None
+    if len(fused) != N:
+        return None
+    h_old, h_new = float(np.mean(np.diff(problem.fused.s))), float(np.mean(np.diff(fused.s)))
+    if abs(h_new / h_old - 1.0) > SPACING_REUSE_REL:
+        return None
+    lower, upper = joint_bounds(problem.robot, tolerances)
+    lbg, ubg = path_row_bounds(tolerances, N, problem.dof)
+    return replace(
+        problem,
+        params=path_params(fused),
+        lbx=np.tile(lower, N),
+        ubx=np.tile(upper, N),
+        lbg=lbg,
+        ubg=ubg,
+        fused=fused,
+        tolerances=tolerances,
+        build_time_s=0.0,
     )
 
 

@@ -1,0 +1,438 @@
+"""The library API: refine a path from Python, from a problem folder or straight from arrays.
+
+Three calls cover an offline-programming step that holds its path in memory:
+
+* :func:`load_problem` reads a problem folder, :func:`solve` runs it without writing files;
+* :func:`refine_path` refines positions and orientations given as NumPy arrays, with the same
+  engine, verification and diagnosis as ``refine run``;
+* :meth:`Result.write` writes the files ``refine run`` writes, whenever the caller wants them.
+
+A :class:`Result` exposes the refined joints, the TCP poses, the timing and the verified figures
+as NumPy arrays and plain values; :meth:`Result.to_dict` is the ``result.json`` document. A second
+call can start from a previous answer: ``initial_joints=`` warm-starts the solver, and
+``previous=`` also reuses the built problem when only the path or the tolerances changed a little
+(see :func:`refine.optimise.problem.reuse_for`). Every name here is documented in ``docs/api.md``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from refine.errors import InputError
+from refine.problem import Problem, load_problem
+from refine.settings import (
+    CollisionSettings,
+    OptimiseSettings,
+    OutputSettings,
+    ProcessSettings,
+    RepairSettings,
+    RobotSettings,
+    Shape,
+    Tolerances,
+    ToolSettings,
+)
+
+if TYPE_CHECKING:
+    from refine.result import PassResult, RunResult
+    from refine.robot import Robot
+
+Array = NDArray[np.float64]
+
+__all__ = ["PassArrays", "Result", "load_problem", "refine_path", "solve"]
+
+PROGRAM_FOR_CONTROLLER = {"abb": "rapid", "kuka": "krl", "ur": "urscript"}
+"""The robot program each controller family runs, written by :meth:`Result.write` by default."""
+
+SPEED_CAP_WITHOUT_DEMO_M_S = 5.0
+"""TCP speed cap [m/s] when :func:`refine_path` gets no speeds: above what industrial arms reach
+along a process path, so the joint speed and acceleration limits alone set the timing. The
+``slow_segments`` of such a result compare against this cap."""
+
+
+@dataclass(frozen=True)
+class PassArrays:
+    """One pass of a result as arrays (SI units, world frame {F}).
+
+    Attributes:
+        name: ``"pass 1"``, or ``"layer 2 pass 1"`` in a multi-pass weld.
+        status: ``"ok"``, ``"repaired"`` or ``"infeasible"``.
+        reason: empty when ok; otherwise what was repaired or why it is infeasible.
+        joints: joint angles per waypoint [rad], shape (N, n).
+        poses: TCP pose reached per waypoint, T_F_TCP, shape (N, 4, 4) [m].
+        times: time of each waypoint [s], shape (N,); None when infeasible (no timing).
+        speeds: planned TCP speed [m/s], shape (N,); None when infeasible.
+        arc_length: arc length along the path [m], shape (N,).
+        metrics: the pass's verified figures, as in ``result.json``'s ``passes[].metrics``.
+    """
+
+    name: str
+    status: str
+    reason: str
+    joints: Array
+    poses: Array
+    times: Array | None
+    speeds: Array | None
+    arc_length: Array
+    metrics: dict[str, Any]
+
+
+class Result:
+    """What a refinement produced, in memory.
+
+    The arrays of the first (demonstrated) pass are attributes of the result itself; every pass is
+    in :attr:`passes`. Nothing is written until :meth:`write` is called.
+
+    Attributes:
+        run: the underlying :class:`refine.result.RunResult` (problem, robot, per-pass details).
+    """
+
+    def __init__(self, run: RunResult) -> None:
+        self.run = run
+        self._doc: dict[str, Any] | None = None
+
+    def __repr__(self) -> str:
+        return (
+            f"Result(status={self.status!r}, problem={self.run.problem.name!r}, "
+            f"waypoints={len(self.run.first.fused)}, passes={len(self.run.passes)})"
+        )
+
+    @property
+    def status(self) -> str:
+        """``"ok"``, ``"repaired"`` (within the repair slack) or ``"infeasible"``."""
+        return self.run.status
+
+    @property
+    def passes(self) -> tuple[PassArrays, ...]:
+        """Every pass as arrays, in order (one for a single-pass path)."""
+        doc = self.to_dict()["passes"]
+        return tuple(_pass_arrays(p, d["metrics"]) for p, d in zip(self.run.passes, doc, strict=True))
+
+    @property
+    def joints(self) -> Array:
+        """Joint angles of the first pass [rad], shape (N, n)."""
+        return self.run.first.refinement.q.copy()
+
+    @property
+    def poses(self) -> Array:
+        """TCP poses T_F_TCP of the first pass in the world frame, shape (N, 4, 4) [m]."""
+        return self.run.first.refinement.check.poses.copy()
+
+    @property
+    def times(self) -> Array | None:
+        """Time of each waypoint of the first pass [s], shape (N,); None when infeasible."""
+        timing = self.run.first.timing
+        return None if timing is None else timing.t.copy()
+
+    @property
+    def speeds(self) -> Array | None:
+        """Planned TCP speed of the first pass [m/s], shape (N,); None when infeasible."""
+        timing = self.run.first.timing
+        return None if timing is None else timing.speed.copy()
+
+    @property
+    def metrics(self) -> dict[str, Any]:
+        """The verified figures over all passes (``result.json``'s ``metrics``)."""
+        return dict(self.to_dict()["metrics"])
+
+    @property
+    def diagnosis(self) -> dict[str, Any]:
+        """Where and why the path deviates or slows down.
+
+        ``result.json``'s ``diagnosis`` when it has one, else its ``reason``, ``violations``,
+        ``repairs`` and ``slow_segments``.
+        """
+        doc = self.to_dict()
+        if doc.get("diagnosis") is not None:
+            return doc["diagnosis"]
+        return {k: doc[k] for k in ("reason", "violations", "repairs", "slow_segments")}
+
+    def to_dict(self) -> dict[str, Any]:
+        """The ``result.json`` document of this result, as plain Python values."""
+        from refine.export.result_json import result_dict
+
+        return result_dict(self.run)
+
+    def write(
+        self, out_dir: str | Path, programs: Sequence[str] | None = None, *, report: bool = True
+    ) -> dict[str, Path]:
+        """Write the outputs of ``refine run`` into ``out_dir``.
+
+        Args:
+            out_dir: the folder (created if missing).
+            programs: program formats (``"rapid"``, ``"krl"``, ``"urscript"``); None for the
+                problem's ``[output] programs``.
+            report: also write ``report.html``.
+
+        Returns:
+            kind -> path of every file written (``result``, ``trajectory``, ``pathml``, ...).
+        """
+        from refine.pipeline import write_run
+
+        write_run(self.run, Path(out_dir), tuple(programs) if programs is not None else None, report=report)
+        return dict(self.run.outputs)
+
+
+def _pass_arrays(p: PassResult, metrics: dict[str, Any]) -> PassArrays:
+    return PassArrays(
+        name=p.name,
+        status=p.refinement.status,
+        reason=p.refinement.reason,
+        joints=p.refinement.q.copy(),
+        poses=p.refinement.check.poses.copy(),
+        times=None if p.timing is None else p.timing.t.copy(),
+        speeds=None if p.timing is None else p.timing.speed.copy(),
+        arc_length=p.fused.s.copy(),
+        metrics=dict(metrics),
+    )
+
+
+def solve(
+    problem: Problem | str | Path,
+    *,
+    initial_joints: ArrayLike | None = None,
+    previous: Result | None = None,
+) -> Result:
+    """Run a problem through every stage up to the verified, timed path, writing no file.
+
+    Args:
+        problem: a loaded :class:`~refine.problem.Problem`, or the path of its folder or file.
+        initial_joints: joints (N, n) [rad] to start the first pass from instead of the IK seed.
+        previous: an earlier result of the same problem with a small change (tolerances, weights):
+            its built problem is reused where it can be and its joints are the start.
+
+    Returns:
+        The result; ``result.write(out_dir)`` writes the files ``refine run`` writes.
+    """
+    from refine.pipeline import fused_path, solve_problem
+
+    if not isinstance(problem, Problem):
+        problem = load_problem(problem)
+    if previous is None:
+        q0 = _joints(initial_joints, None, None)
+        return Result(solve_problem(problem, q0=q0))
+    fused = fused_path(problem)
+    return _solve_again(problem, previous.run.robot, fused, previous, initial_joints)
+
+
+def _solve_again(
+    problem: Problem, robot: Robot, fused: Any, previous: Result | None, initial_joints: ArrayLike | None
+) -> Result:
+    from refine.optimise.problem import reuse_for
+    from refine.pipeline import solve_problem, weights_for
+
+    nlp = None
+    n = robot.nq
+    q0 = _joints(initial_joints, len(fused), n)
+    if previous is not None:
+        old = previous.run.first.nlp
+        same = (
+            old is not None
+            and previous.run.robot is robot
+            and np.array_equal(old.base_in_world, problem.robot.base_in_world)
+            and np.array_equal(old.tcp_in_flange, problem.tool.tcp_in_flange)
+            and old.axisymmetric == problem.tool.axisymmetric
+            and old.weights == weights_for(problem, robot)
+        )
+        nlp = reuse_for(old, fused, problem.tolerances) if same else None
+        if q0 is None and previous.run.first.refinement.q.shape == (len(fused), n):
+            q0 = previous.run.first.refinement.q
+    return Result(solve_problem(problem, robot=robot, fused=fused, nlp=nlp, q0=q0))
+
+
+def _joints(q: ArrayLike | None, N: int | None, n: int | None) -> Array | None:
+    if q is None:
+        return None
+    q = np.asarray(q, dtype=float)
+    if q.ndim != 2 or (N is not None and q.shape != (N, n)):
+        want = f"({N}, {n})" if N is not None else "(N, n)"
+        raise InputError(f"initial_joints: expected shape {want} [rad], got {q.shape}")
+    if not np.all(np.isfinite(q)):
+        raise InputError("initial_joints: contains NaN or infinite values [rad]")
+    return q
+
+
+def refine_path(
+    robot: Robot | str,
+    positions: ArrayLike,
+    orientations: ArrayLike,
+    *,
+    speeds: ArrayLike | float | None = None,
+    arc_length: ArrayLike | None = None,
+    tcp_in_flange: ArrayLike | None = None,
+    base_in_world: ArrayLike | None = None,
+    tolerances: Tolerances | Mapping[str, float] | None = None,
+    cell: Sequence[Shape] = (),
+    tool_shapes: Sequence[Shape] = (),
+    axisymmetric: bool = False,
+    initial_joints: ArrayLike | None = None,
+    previous: Result | None = None,
+    name: str = "path",
+    tool_name: str = "tool",
+    home_deg: Sequence[float] | None = None,
+    collision: CollisionSettings | None = None,
+    optimise: OptimiseSettings | None = None,
+    repair: RepairSettings | None = None,
+    process: ProcessSettings | None = None,
+    programs: Sequence[str] | None = None,
+) -> Result:
+    """Refine a path given as arrays, with the engine, verification and diagnosis of ``refine run``.
+
+    The TCP follows ``positions`` exactly while its orientation stays within the tolerance cone
+    around ``orientations``.
+
+    Args:
+        robot: a :class:`refine.robot.Robot` (e.g. from ``Robot.from_urdf``) or a registry name.
+        positions: TCP targets in the world frame {F} [m], shape (N, 3), N >= 3.
+        orientations: demonstrated TCP orientations R_F_TCP: (N, 4) unit quaternions, scalar first
+            (qw, qx, qy, qz) as in ``trajectory.csv``, or (N, 3, 3) rotation matrices.
+        speeds: demonstrated TCP speed [m/s], (N,) or one number; None for no cap but the robot's
+            limits (:data:`SPEED_CAP_WITHOUT_DEMO_M_S`).
+        arc_length: arc length of each waypoint along the path [m], (N,), strictly increasing;
+            None for the cumulative distance between consecutive positions.
+        tcp_in_flange: T_flange_TCP (4, 4); None for the identity.
+        base_in_world: T_F_R, the robot base in the world (4, 4); None for the identity.
+        tolerances: a :class:`refine.settings.Tolerances` or a mapping of its fields
+            (``{"orientation_deg": 5.0}``); None for the defaults.
+        cell: the cell's collision objects (:class:`refine.settings.Shape`, world frame).
+        tool_shapes: the tool's collision shapes (poses in the flange frame).
+        axisymmetric: the spin about the TCP z axis is free.
+        initial_joints: joints (N, n) [rad] to start from instead of the IK seed (warm start).
+        previous: an earlier result for the same robot, tool and number of waypoints: its built
+            problem is reused when the path and tolerances changed only a little, and its joints
+            are the start unless ``initial_joints`` is given.
+        name: the problem name (output file names, program module name).
+        tool_name: the tool's name in programs.
+        home_deg: preferred first configuration [deg] for the IK seed.
+        collision: ``[collision]`` settings (margins); None for the defaults.
+        optimise: ``[optimise]`` cost weights; None for the defaults.
+        repair: ``[repair]`` settings; None for the defaults.
+        process: ``[process]`` settings (output name, parameters); None for the defaults.
+        programs: programs :meth:`Result.write` writes by default; None for the one of the robot's
+            controller family (:data:`PROGRAM_FOR_CONTROLLER`).
+
+    Returns:
+        The verified, timed result (no file written).
+
+    Raises:
+        InputError: a shape, a non-finite value, a non-rotation, a non-increasing arc length;
+            the message names the argument and the unit.
+    """
+    from refine.paths import FusedPath
+    from refine.robot import Robot, load_robot
+
+    if isinstance(robot, str):
+        robot = load_robot(robot)
+    elif not isinstance(robot, Robot):
+        raise InputError(f"robot: expected a refine.Robot or a registry name, got {type(robot).__name__}")
+    p = _finite(positions, "positions", "m")
+    if p.ndim != 2 or p.shape[1] != 3 or len(p) < 3:
+        raise InputError(f"positions: expected shape (N, 3) [m] with N >= 3, got {p.shape}")
+    N = len(p)
+    R = _rotations(orientations, N)
+    s = _arc_length(p, arc_length)
+    v = _speeds(speeds, N)
+    dt = np.diff(s) * 0.5 * (1.0 / v[1:] + 1.0 / v[:-1])
+    fused = FusedPath(s, p, R, v, np.concatenate([[0.0], np.cumsum(dt)]), np.zeros(N))
+    if not isinstance(tolerances, Tolerances):
+        tolerances = Tolerances(**dict(tolerances or {}))
+    controller = robot.spec.controller
+    problem = Problem(
+        name=name,
+        root=Path.cwd(),
+        robot=RobotSettings(
+            model=robot.spec.name,
+            base_in_world=_transform(base_in_world, "base_in_world"),
+            home_deg=None if home_deg is None else tuple(float(a) for a in home_deg),
+        ),
+        tool=ToolSettings(
+            name=tool_name,
+            tcp_in_flange=_transform(tcp_in_flange, "tcp_in_flange"),
+            axisymmetric=bool(axisymmetric),
+            collision=tuple(tool_shapes),
+        ),
+        cad=None,
+        demonstration=None,
+        tolerances=tolerances,
+        process=process or ProcessSettings(),
+        output=OutputSettings(
+            programs=tuple(programs) if programs is not None else (PROGRAM_FOR_CONTROLLER[controller],)
+        ),
+        cell=tuple(cell),
+        collision=collision or CollisionSettings(),
+        optimise=optimise or OptimiseSettings(),
+        repair=repair or RepairSettings(),
+    )
+    return _solve_again(problem, robot, fused, previous, initial_joints)
+
+
+def _finite(a: ArrayLike, name: str, unit: str) -> Array:
+    try:
+        arr = np.asarray(a, dtype=float)
+    except (TypeError, ValueError) as e:
+        raise InputError(f"{name}: not an array of numbers [{unit}]: {e}") from e
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"{name}: contains NaN or infinite values [{unit}]")
+    return arr
+
+
+def _rotations(orientations: ArrayLike, N: int) -> Array:
+    from refine.frames import check_rotation, matrix_from_quaternion
+
+    o = _finite(orientations, "orientations", "-")
+    if o.shape == (N, 4):
+        norms = np.linalg.norm(o, axis=1)
+        if np.any(np.abs(norms - 1.0) > 1e-3):
+            k = int(np.argmax(np.abs(norms - 1.0)))
+            raise InputError(
+                f"orientations: quaternion {k} has length {norms[k]:.6f}; expected unit quaternions "
+                "(qw, qx, qy, qz)"
+            )
+        return matrix_from_quaternion(o)
+    if o.shape == (N, 3, 3):
+        return check_rotation(o, "orientations").copy()
+    raise InputError(
+        f"orientations: expected (N, 4) quaternions (qw, qx, qy, qz) or (N, 3, 3) rotation matrices "
+        f"with N = {N} (the number of positions), got {o.shape}"
+    )
+
+
+def _arc_length(p: Array, arc_length: ArrayLike | None) -> Array:
+    if arc_length is None:
+        steps = np.linalg.norm(np.diff(p, axis=0), axis=1)
+        if np.any(steps <= 0.0):
+            k = int(np.flatnonzero(steps <= 0.0)[0])
+            raise InputError(f"positions: waypoints {k} and {k + 1} coincide; the path must move [m]")
+        return np.concatenate([[0.0], np.cumsum(steps)])
+    s = _finite(arc_length, "arc_length", "m")
+    if s.shape != (len(p),):
+        raise InputError(f"arc_length: expected shape ({len(p)},) [m], got {s.shape}")
+    if np.any(np.diff(s) <= 0.0):
+        raise InputError("arc_length: must strictly increase along the path [m]")
+    return s - s[0]
+
+
+def _speeds(speeds: ArrayLike | float | None, N: int) -> Array:
+    if speeds is None:
+        return np.full(N, SPEED_CAP_WITHOUT_DEMO_M_S)
+    v = _finite(speeds, "speeds", "m/s")
+    if v.ndim == 0:
+        v = np.full(N, float(v))
+    if v.shape != (N,):
+        raise InputError(f"speeds: expected shape ({N},) or one number [m/s], got {v.shape}")
+    if np.any(v <= 0.0):
+        raise InputError(f"speeds: every speed must be > 0 m/s, got min {v.min():g} m/s")
+    return v
+
+
+def _transform(T: ArrayLike | None, name: str) -> Array:
+    from refine.frames import check_transform
+
+    if T is None:
+        return np.eye(4)
+    return check_transform(_finite(T, name, "m"), name).copy()

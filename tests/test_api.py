@@ -1,0 +1,181 @@
+"""The library API: arrays in, the CLI's engine out; validation; warm start and reuse."""
+
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+import refine
+from refine.cli import main
+from refine.optimise.problem import build_refinement, reuse_for
+from refine.pipeline import fused_path
+
+ROOT = Path(__file__).resolve().parents[1]
+GLASS = ROOT / "problems" / "glass_adhesive"
+
+N = 25
+DOWN = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])
+
+
+def line(n=N, z=0.3):
+    positions = np.column_stack([np.full(n, 0.6), np.linspace(-0.15, 0.15, n), np.full(n, z)])
+    # the tool tilted about x along the way, up to 10 deg
+    tilt = Rotation.from_euler("x", np.linspace(0.0, 10.0, n)[:, None], degrees=True).as_matrix()
+    return positions, DOWN @ tilt
+
+
+def test_import_refine_loads_no_numerical_library():
+    code = (
+        "import sys, refine; print(sorted(m for m in ('numpy', 'casadi', 'pinocchio') if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    assert out.stdout.strip() == "[]"
+    assert refine.refine_path.__module__ == "refine.api"
+    with pytest.raises(AttributeError):
+        refine.no_such_name  # noqa: B018
+
+
+@pytest.mark.slow
+def test_refine_path_on_the_glass_cell_arrays_gives_the_joints_of_refine_run(tmp_path):
+    assert main(["run", str(GLASS), "--out", str(tmp_path), "--no-report"]) == 0
+    table = np.genfromtxt(tmp_path / "trajectory.csv", delimiter=",", names=True)
+    q_cli = np.column_stack([table[f"q{j}"] for j in range(1, 7)])
+
+    p = refine.load_problem(GLASS)
+    f = fused_path(p)
+    result = refine.refine_path(
+        "abb_irb4600_60_205",
+        f.positions,
+        Rotation.from_matrix(f.rotations).as_quat(scalar_first=True),  # as quaternions
+        speeds=f.speed,
+        arc_length=f.s,
+        tcp_in_flange=p.tool.tcp_in_flange,
+        base_in_world=p.robot.base_in_world,
+        tolerances=p.tolerances,
+        cell=p.cell,
+        tool_shapes=p.tool.collision,
+        collision=p.collision,
+        name=p.name,
+    )
+    assert result.status == "ok"
+    assert result.joints.shape == q_cli.shape
+    assert np.abs(result.joints - q_cli).max() < 1e-9
+    assert np.allclose(result.times, table["t"], rtol=0, atol=1e-9)
+    assert np.allclose(result.speeds, table["speed"], rtol=0, atol=1e-9)
+    cli_doc = json.loads((tmp_path / "result.json").read_text())
+    assert result.metrics["min_clearance_m"] == pytest.approx(
+        cli_doc["metrics"]["min_clearance_m"], abs=1e-12
+    )
+
+
+def test_quaternions_and_matrices_give_the_same_path():
+    positions, R = line()
+    q_xyzw = Rotation.from_matrix(R).as_quat()
+    wxyz = np.column_stack([q_xyzw[:, 3], q_xyzw[:, :3]])
+    a = refine.refine_path("ur10e", positions, R, speeds=0.1)
+    b = refine.refine_path("ur10e", positions, wxyz, speeds=0.1)
+    assert a.status == b.status == "ok"
+    assert np.abs(a.joints - b.joints).max() < 1e-9
+    # the poses are the robot's forward kinematics of the joints, and on the path
+    robot = refine.Robot
+    assert robot is a.run.robot.__class__
+    fk = a.run.robot.fk_many(a.joints)
+    assert np.allclose(fk, a.poses, atol=1e-12)  # identity base and tool
+    assert np.abs(a.poses[:, :3, 3] - positions).max() < 1e-6
+    # the orientation stays inside the 3 deg cone of the demonstration
+    angle = Rotation.from_matrix(np.einsum("nji,njk->nik", R, a.poses[:, :3, :3])).magnitude()
+    assert np.degrees(angle).max() <= 3.0 + 1e-6
+    assert a.times[0] == 0.0 and np.all(np.diff(a.times) > 0)
+    assert len(a.passes) == 1 and a.passes[0].joints.shape == (N, 6)
+
+
+def test_to_dict_is_the_written_result_json(tmp_path):
+    positions, R = line()
+    result = refine.refine_path("ur10e", positions, R, speeds=0.1, name="line")
+    files = result.write(tmp_path, report=False)
+    assert set(files) == {"result", "trajectory", "pathml", "urscript"}  # the UR's own language
+    written = json.loads(files["result"].read_text())
+    doc = json.loads(json.dumps(result.to_dict()))
+    assert written == doc
+    assert written["status"] == "ok" and written["n_waypoints"] == N and written["dof"] == 6
+    assert written["metrics"] == result.metrics
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"positions": np.zeros((2, 3))}, "N >= 3"),
+        ({"orientations": np.ones((N, 4))}, "unit quaternions"),
+        ({"orientations": np.ones((N, 3))}, "(N, 4) quaternions"),
+        ({"orientations": np.repeat(np.diag([1.0, 1.0, -1.0])[None], N, 0)}, "reflection"),
+        ({"speeds": -0.1}, "> 0 m/s"),
+        ({"speeds": np.ones(N - 1)}, f"({N},)"),
+        ({"arc_length": np.zeros(N)}, "strictly increase"),
+        ({"initial_joints": np.zeros((N, 5))}, f"({N}, 6) [rad]"),
+        ({"base_in_world": np.ones((4, 4))}, "base_in_world"),
+    ],
+)
+def test_bad_arrays_are_refused_with_the_argument_named(kwargs, message):
+    positions, R = line()
+    args = {"positions": positions, "orientations": R, **kwargs}
+    with pytest.raises(refine.InputError, match=re.escape(message)):
+        refine.refine_path("ur10e", args.pop("positions"), args.pop("orientations"), **args)
+
+
+def test_positions_with_nan_are_refused():
+    positions, R = line()
+    positions[3, 1] = np.nan
+    with pytest.raises(refine.InputError, match=r"positions: contains NaN.*\[m\]"):
+        refine.refine_path("ur10e", positions, R)
+
+
+def test_a_reused_problem_equals_a_fresh_build_for_the_new_path_and_tolerances():
+    positions, R = line()
+    first = refine.refine_path("ur10e", positions, R, speeds=0.1)
+    old = first.run.first.nlp
+    moved = fused_path_like(old.fused, dz=0.001)
+    tol = refine.Tolerances(orientation_deg=2.0, joint_margin_deg=5.0, joint_step_deg=10.0)
+    reused = reuse_for(old, moved, tol)
+    fresh = build_refinement(old.robot, moved, old.base_in_world, old.tcp_in_flange, tol, weights=old.weights)
+    assert reused is not None and reused.solver is old.solver
+    for name in ("params", "lbx", "ubx", "lbg", "ubg"):
+        assert np.array_equal(getattr(reused, name), getattr(fresh, name)), name
+    # not reusable: another waypoint count, a spacing changed by 1 %
+    assert reuse_for(old, fused_path_like(old.fused, n=N - 1), tol) is None
+    assert reuse_for(old, fused_path_like(old.fused, stretch=1.01), tol) is None
+
+
+def fused_path_like(f, dz=0.0, n=None, stretch=1.0):
+    from refine.paths import FusedPath
+
+    n = n or len(f)
+    p = f.positions[:n] + [0.0, 0.0, dz]
+    return FusedPath(f.s[:n] * stretch, p, f.rotations[:n], f.speed[:n], f.t_demo[:n], f.residual[:n])
+
+
+def test_solving_again_from_the_previous_result_gives_the_cold_answer():
+    positions, R = line()
+    first = refine.refine_path("ur10e", positions, R, speeds=0.1)
+    tol = {"orientation_deg": 1.5}
+    again = refine.refine_path("ur10e", positions, R, speeds=0.1, tolerances=tol, previous=first)
+    cold = refine.refine_path("ur10e", positions, R, speeds=0.1, tolerances=tol)
+    assert again.status == cold.status == "ok"
+    assert again.run.timings_s["build"] < 1e-3  # nothing built: the previous problem was reused
+    assert again.run.timings_s["seed"] < cold.run.timings_s["seed"]  # no IK chain
+    assert np.abs(again.joints - cold.joints).max() < 1e-5
+    assert again.metrics["max_orientation_deviation_deg"] <= 1.5 + 1e-6
+
+
+def test_solve_takes_a_folder_and_warm_starts_from_given_joints():
+    problem = refine.load_problem(ROOT / "problems" / "unreachable" / "out_of_reach")
+    result = refine.solve(problem)
+    assert result.status == "infeasible"
+    assert result.times is None and result.speeds is None
+    assert "out of reach" in result.diagnosis["reason"]
+    with pytest.raises(refine.InputError, match=r"initial_joints: expected shape \(N, n\)"):
+        refine.solve(problem, initial_joints=np.zeros(6))
