@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from refine.errors import InputError
+from refine.preflight import CONTROLLER_OF_FORMAT
 from refine.problem import Problem, load_problem
 from refine.settings import (
     CollisionSettings,
@@ -46,7 +47,7 @@ Array = NDArray[np.float64]
 
 __all__ = ["PassArrays", "Result", "load_problem", "refine_path", "solve"]
 
-PROGRAM_FOR_CONTROLLER = {"abb": "rapid", "kuka": "krl", "ur": "urscript"}
+PROGRAM_FOR_CONTROLLER = {controller: kind for kind, controller in CONTROLLER_OF_FORMAT.items()}
 """The robot program each controller family runs, written by :meth:`Result.write` by default."""
 
 SPEED_CAP_WITHOUT_DEMO_M_S = 5.0
