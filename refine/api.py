@@ -142,16 +142,14 @@ class Result:
         return dict(self.to_dict()["metrics"])
 
     @property
-    def diagnosis(self) -> dict[str, Any]:
-        """Where and why the path deviates or slows down.
+    def diagnosis(self) -> list[dict[str, Any]]:
+        """Where and why the path had to deviate: ``result.json``'s ``diagnosis``.
 
-        ``result.json``'s ``diagnosis`` when it has one, else its ``reason``, ``violations``,
-        ``repairs`` and ``slow_segments``.
+        One entry per repaired or infeasible segment (pass, waypoints, arc lengths, the cause with
+        its figure, limit and unit, and a suggestion); empty when every pass is ok. The schema is in
+        ``docs/outputs.md``.
         """
-        doc = self.to_dict()
-        if doc.get("diagnosis") is not None:
-            return doc["diagnosis"]
-        return {k: doc[k] for k in ("reason", "violations", "repairs", "slow_segments")}
+        return list(self.to_dict()["diagnosis"])
 
     def to_dict(self) -> dict[str, Any]:
         """The ``result.json`` document of this result, as plain Python values."""

@@ -176,6 +176,7 @@ def test_solve_takes_a_folder_and_warm_starts_from_given_joints():
     result = refine.solve(problem)
     assert result.status == "infeasible"
     assert result.times is None and result.speeds is None
-    assert "out of reach" in result.diagnosis["reason"]
+    assert result.diagnosis and result.diagnosis[0]["status"] == "infeasible"
+    assert result.diagnosis == result.to_dict()["diagnosis"]
     with pytest.raises(refine.InputError, match=r"initial_joints: expected shape \(N, n\)"):
         refine.solve(problem, initial_joints=np.zeros(6))
