@@ -55,6 +55,9 @@ def _parser() -> argparse.ArgumentParser:
     from refine.calibrate.cli import add_parser as add_calibrate
 
     add_calibrate(sub)
+    from refine.batch import add_parser as add_batch
+
+    add_batch(sub)
     return p
 
 
@@ -67,6 +70,8 @@ def main(argv: list[str] | None = None) -> int:
     from refine.errors import RefineError
 
     try:
+        if getattr(args, "handler", None) is not None:  # subcommands that bring their own handler
+            return args.handler(args)
         if args.command == "calibrate":
             from refine.calibrate.cli import run as run_calibrate
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -313,3 +314,93 @@ def reachability_report(
         max_step_deg=float(steps.max()),
         clearance=clearance,
     )
+
+
+# ---- small problem folders for batches ------------------------------------------------------------
+
+
+def write_line_problem(
+    folder: str | Path,
+    *,
+    start: Sequence[float] = (0.6, -0.1, 0.3),
+    end: Sequence[float] = (0.6, 0.1, 0.3),
+    tilt_deg: float = 10.0,
+    speed_m_s: float = 0.1,
+    robot: str = "ur10e",
+    program: str = "urscript",
+    spacing_m: float = 0.005,
+    rate_hz: float = 100.0,
+) -> Path:
+    """Write a small problem folder: a straight bead with a clean, noise-free demonstration.
+
+    The CAD path is ``path.csv`` (two points, mm); the demonstration ``demo.csv`` is the TCP itself
+    (tracker receiver at the world origin, sensor at the TCP) moving along the line at
+    ``speed_m_s`` after a 0.5 s pause, the tool pointing down and tilting about the travel
+    direction from 0 to ``tilt_deg``. For batch runs, sweeps and tests that need many problems
+    quickly (a few dozen waypoints each).
+
+    Args:
+        folder: the problem folder (created).
+        start: first point of the line in the world [m].
+        end: last point [m].
+        tilt_deg: tilt of the tool about the travel direction at the end of the line [deg].
+        speed_m_s: the worker's speed along the line [m/s].
+        robot: registry robot.
+        program: the program format the problem asks for (the robot controller's language).
+        spacing_m: waypoint spacing after resampling [m].
+        rate_hz: tracker sample rate [Hz].
+
+    Returns:
+        The problem file.
+    """
+    from refine.frames import tracker_angles_from_matrix
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    a, b = np.asarray(start, dtype=float), np.asarray(end, dtype=float)
+    length = float(np.linalg.norm(b - a))
+    travel = (b - a) / length
+    pause_s = 0.5
+    t = np.arange(0.0, pause_s + length / speed_m_s + 1e-9, 1.0 / rate_hz)
+    s = np.clip((t - pause_s) * speed_m_s, 0.0, length)
+    positions = a + s[:, None] * travel
+    down = np.column_stack([travel, np.cross([0.0, 0.0, -1.0], travel), [0.0, 0.0, -1.0]])
+    rotations = np.stack([down @ rotation_about("x", math.radians(tilt_deg) * u) for u in s / length])
+    angles = tracker_angles_from_matrix(rotations)
+    rows = np.column_stack([t, positions, angles])
+    (folder / "demo.csv").write_text(
+        "t,x,y,z,azimuth,elevation,roll\n" + "\n".join(",".join(f"{v:.9g}" for v in r) for r in rows) + "\n"
+    )
+    (folder / "path.csv").write_text(
+        "x,y,z\n" + "\n".join(",".join(f"{v * 1e3:.6f}" for v in p) for p in (a, b)) + "\n"
+    )
+    problem = folder / "problem.toml"
+    problem.write_text(
+        f"""name = "{folder.name}"
+description = "Straight bead, {length * 1e3:.0f} mm, tool tilting to {tilt_deg:g} deg (generated)."
+
+[robot]
+model = "{robot}"
+
+[tool]
+name = "nozzle"
+tcp_in_flange = {{ xyz = [0.0, 0.0, 0.15], rpy_deg = [0.0, 0.0, 0.0] }}
+axisymmetric = false
+
+[cad]
+file = "path.csv"
+units = "mm"
+spacing_m = {spacing_m}
+
+[demonstration]
+file = "demo.csv"
+format = "csv"
+units = "m"
+rate_hz = {rate_hz}
+
+[output]
+programs = ["{program}"]
+""",
+        encoding="utf-8",
+    )
+    return problem
