@@ -21,7 +21,8 @@ from refine.optimise.solve import ConstraintSource, solve_refinement
 from refine.paths import FusedPath, Trajectory
 from refine.problem import Problem
 from refine.result import PassResult, RunResult
-from refine.robot import Robot, load_robot
+from refine.robot import Robot
+from refine.robot_urdf import robot_for
 from refine.timing import time_parameterise
 
 log = logging.getLogger(__name__)
@@ -210,7 +211,7 @@ def solve_problem(
     """
     watch = _Stopwatch()
     if robot is None:
-        robot = load_robot(problem.robot.model)
+        robot = robot_for(problem.robot)
     watch.lap("load")
     qualities: list[Any] = []
     if fused is None:

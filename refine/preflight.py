@@ -179,7 +179,7 @@ def preflight(
     Raises:
         InputError: the first failed check, naming the key or the option.
     """
-    from refine.robot import load_robot
+    from refine.robot_urdf import robot_for
 
     where = f"{problem.source}: " if problem.source is not None else ""
     if programs is None:
@@ -187,7 +187,7 @@ def preflight(
     else:
         where = "--programs: "
     if robot is None:
-        robot = load_robot(problem.robot.model)
+        robot = robot_for(problem.robot)
     try:
         check_programs(problem, robot.spec.controller, robot.spec.name, programs)
     except InputError as e:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -124,6 +125,7 @@ class Problem:
         if self.demonstration is not None:
             files += [self.demonstration.file, *([self.demonstration.truth] if self.demonstration.truth else [])]
         files += [s.file for s in (*self.cell, *self.tool.collision) if s.file is not None]
+        files += [self.robot.urdf] if self.robot.urdf is not None else []
         return tuple(files)
 
 
@@ -156,7 +158,7 @@ def load_problem(path: str | Path, *, allow_outside: bool = False) -> Problem:
             name=_name(data.get("name", root.name)),
             root=root,
             description=comment_text(_string(data.get("description", ""), "description"), 2000),
-            robot=_robot(_table(data, "robot"), path),
+            robot=_robot(_table(data, "robot"), path, inside),
             tool=_tool(_table(data, "tool"), path),
             frames=_frames(_table(data, "frames"), path),
             cad=_cad(_table(data, "cad"), root, path, inside),
@@ -350,11 +352,33 @@ def _build(cls: type, table: dict[str, Any], where: str, path: Path, **overrides
         raise InputError(f"[{where}] {e}") from e
 
 
-def _robot(t: dict[str, Any], path: Path) -> RobotSettings:
+def _robot(t: dict[str, Any], path: Path, inside: Path | None = None) -> RobotSettings:
     _check_keys(t, "robot", _fields(RobotSettings), path)
-    if "model" not in t:
-        raise InputError("[robot] missing required key 'model'")
-    out: dict[str, Any] = {"model": _robot_model(t["model"])}
+    out: dict[str, Any] = {}
+    if "urdf" in t:
+        out["urdf"] = _file(path.parent.resolve(), t["urdf"], "robot.urdf", inside)
+        from refine.robot_urdf import urdf_robot_name
+
+        out["model"] = _string(t["model"], "robot.model") if "model" in t else urdf_robot_name(out["urdf"])
+        if not re.fullmatch(r"[A-Za-z0-9_.-]{1,64}", out["model"]):
+            raise InputError(
+                f"robot.model = {out['model']!r}: a robot's name is 1 to 64 letters, digits, '_', '.' or '-'"
+            )
+        for key in ("flange_frame", "controller"):
+            if key in t:
+                out[key] = _string(t[key], f"robot.{key}")
+        if "reach_m" in t:
+            out["reach_m"] = _number(t["reach_m"], "robot.reach_m")
+    elif "model" not in t:
+        raise InputError("[robot] missing required key 'model' (a registry robot) or 'urdf' (a URDF file)")
+    else:
+        out["model"] = _robot_model(t["model"])
+        extra = sorted({"flange_frame", "controller", "reach_m"} & set(t))
+        if extra:
+            raise InputError(f"[robot] {', '.join(extra)} go with urdf; robot {t['model']!r} of the registry has its own")
+    for key in ("joint_lower_deg", "joint_upper_deg", "joint_velocity_deg_s"):
+        if key in t:
+            out[key] = _numbers(t[key], f"robot.{key}")
     if "base_in_world" in t:
         out["base_in_world"] = _pose(t["base_in_world"], "robot.base_in_world")
     for key in ("joint_acceleration_deg_s2", "home_deg"):

@@ -120,6 +120,23 @@ class Robot:
     def __repr__(self) -> str:
         return f"Robot({self.spec.name!r}, nq={self.nq})"
 
+    @classmethod
+    def from_urdf(
+        cls, urdf: str | Path, *, controller: str, flange_frame: str = "tool0", **options: Any
+    ) -> Robot:
+        """A robot from its URDF file instead of the registry (:func:`refine.robot_urdf.robot_from_urdf`).
+
+        Args:
+            urdf: the URDF file (collision meshes relative to its folder).
+            controller: the controller family (``"abb"``, ``"kuka"``, ``"ur"``): the program language.
+            flange_frame: the frame the tool is mounted on.
+            **options: ``name``, ``maker``, ``model``, ``reach_m``, ``joint_acceleration_deg_s2``,
+                ``joint_lower_deg``, ``joint_upper_deg``, ``joint_velocity_deg_s``.
+        """
+        from refine.robot_urdf import robot_from_urdf
+
+        return robot_from_urdf(urdf, controller=controller, flange_frame=flange_frame, **options)
+
     def frame_id(self, frame_name: str) -> int:
         """Pinocchio frame index of ``frame_name``; InputError listing the frames if unknown."""
         if not self.model.existFrame(frame_name):

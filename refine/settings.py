@@ -65,21 +65,47 @@ class RobotSettings:
     """``[robot]``: which robot, where it stands, optional limit overrides.
 
     Attributes:
-        model: registry name, a folder of ``robots/`` (e.g. ``"abb_irb4600_60_205"``).
+        model: registry name, a folder of ``robots/`` (e.g. ``"abb_irb4600_60_205"``); with
+            ``urdf``, the robot's name in outputs (default: the URDF's robot name).
         base_in_world: T_F_R, the robot base in the world frame {F}, (4, 4).
         joint_acceleration_deg_s2: per-joint acceleration limits [deg/s^2] overriding the
             robot's default, or None.
         velocity_scale: fraction of the data-sheet joint speeds the plan may use, in (0, 1].
         home_deg: a preferred joint configuration [deg] to start the IK seed from, or None.
+        urdf: a robot outside the registry: its URDF file (absolute path), or None.
+        flange_frame: with ``urdf``: the frame the tool is mounted on.
+        controller: with ``urdf``: the controller family (``"abb"``, ``"kuka"``, ``"ur"``).
+        reach_m: with ``urdf``: the reach [m] scaling the singularity measure (default: the
+            chain from the second joint to the flange, stretched).
+        joint_lower_deg: per-joint lower limits [deg] in place of the robot's, or None.
+        joint_upper_deg: per-joint upper limits [deg] in place of the robot's, or None.
+        joint_velocity_deg_s: per-joint speed limits [deg/s] in place of the robot's, or None.
     """
 
-    model: str
+    model: str = ""
     base_in_world: Matrix4 = field(default_factory=lambda: np.eye(4))
     joint_acceleration_deg_s2: tuple[float, ...] | None = None
     velocity_scale: float = 1.0
     home_deg: tuple[float, ...] | None = None
+    urdf: Path | None = None
+    flange_frame: str = "tool0"
+    controller: str | None = None
+    reach_m: float | None = None
+    joint_lower_deg: tuple[float, ...] | None = None
+    joint_upper_deg: tuple[float, ...] | None = None
+    joint_velocity_deg_s: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
+        if self.urdf is None and not self.model:
+            raise InputError("[robot] needs model (a registry robot) or urdf (a robot's URDF file)")
+        if self.urdf is not None and self.controller is None:
+            raise InputError('[robot] a robot from its URDF needs controller ("abb", "kuka" or "ur")')
+        if self.urdf is None and (self.controller is not None or self.reach_m is not None):
+            raise InputError("[robot] controller and reach_m go with urdf (a registry robot has its own)")
+        if self.reach_m is not None:
+            _positive("robot", "reach_m", self.reach_m)
+        for a in self.joint_velocity_deg_s or ():
+            _positive("robot", "joint_velocity_deg_s[]", a)
         check_transform(self.base_in_world, "robot.base_in_world")
         if not (math.isfinite(self.velocity_scale) and 0.0 < self.velocity_scale <= 1.0):
             raise InputError(f"robot.velocity_scale must be in (0, 1], got {self.velocity_scale}")
