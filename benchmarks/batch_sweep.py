@@ -4,7 +4,8 @@ Generates ``--n`` small problems (a UR10e following a 0.2 m straight bead, 41 wa
 its own position and tool tilt; :func:`refine.synthetic.write_line_problem`), then:
 
 1. runs them all on a ``dask.distributed.LocalCluster`` with 1 worker, then with 2 workers
-   (one thread each, worker processes started before the clock starts), and prints the wall times;
+   (one thread each, worker processes started and refine imported in them before the clock
+   starts), and prints the wall times;
 2. interrupts a fresh 2-worker batch after ``--stop-after`` problems have finished (as Ctrl-C
    would) and resumes it with ``resume=True``, printing how many were skipped and run.
 
@@ -34,6 +35,12 @@ def generate(folder: Path, n: int) -> Path:
     return folder
 
 
+def _warm_up() -> None:
+    import refine.export.result_json  # noqa: F401
+    import refine.pipeline  # noqa: F401
+    import refine.report.html  # noqa: F401
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, default=50)
@@ -45,6 +52,8 @@ def main() -> int:
     print(f"{args.n} problems generated in {problems}")
     for workers in (1, 2):
         with LocalCluster(n_workers=workers, threads_per_worker=1, dashboard_address=None) as cluster:
+            with Client(cluster) as client:  # imports paid before the clock starts, in every worker
+                client.run(_warm_up)
             out = args.dir / f"out_{workers}"
             summary = run_batch(
                 [problems], out, scheduler=cluster.scheduler_address, report=False, progress=False
