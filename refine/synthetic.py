@@ -330,10 +330,14 @@ def write_line_problem(
     program: str = "urscript",
     spacing_m: float = 0.005,
     rate_hz: float = 100.0,
+    noise_m: float = 2e-5,
+    noise_deg: float = 0.005,
+    seed: int = 0,
 ) -> Path:
-    """Write a small problem folder: a straight bead with a clean, noise-free demonstration.
+    """Write a small problem folder: a straight bead with a clean demonstration.
 
     The CAD path is ``path.csv`` (two points, mm); the demonstration ``demo.csv`` is the TCP itself
+    with a little tracker noise
     (tracker receiver at the world origin, sensor at the TCP) moving along the line at
     ``speed_m_s`` after a 0.5 s pause, the tool pointing down and tilting about the travel
     direction from 0 to ``tilt_deg``. For batch runs, sweeps and tests that need many problems
@@ -349,6 +353,10 @@ def write_line_problem(
         program: the program format the problem asks for (the robot controller's language).
         spacing_m: waypoint spacing after resampling [m].
         rate_hz: tracker sample rate [Hz].
+        noise_m: standard deviation of the tracker's position noise [m] (a still sensor's samples
+            are never identical; a frozen log reads as a lost sensor).
+        noise_deg: standard deviation of the tracker's angle noise [deg].
+        seed: seed of the noise.
 
     Returns:
         The problem file.
@@ -366,8 +374,9 @@ def write_line_problem(
     positions = a + s[:, None] * travel
     down = np.column_stack([travel, np.cross([0.0, 0.0, -1.0], travel), [0.0, 0.0, -1.0]])
     rotations = np.stack([down @ rotation_about("x", math.radians(tilt_deg) * u) for u in s / length])
-    angles = tracker_angles_from_matrix(rotations)
-    rows = np.column_stack([t, positions, angles])
+    rng = np.random.default_rng(seed)
+    angles = tracker_angles_from_matrix(rotations) + rng.normal(0.0, noise_deg, (len(t), 3))
+    rows = np.column_stack([t, positions + rng.normal(0.0, noise_m, positions.shape), angles])
     (folder / "demo.csv").write_text(
         "t,x,y,z,azimuth,elevation,roll\n" + "\n".join(",".join(f"{v:.9g}" for v in r) for r in rows) + "\n"
     )
