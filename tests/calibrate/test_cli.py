@@ -243,3 +243,38 @@ def test_receiver_path_moves_a_wrong_source_back_onto_the_path(tmp_path, capsys)
     T = load_problem(problem).frames.source_in_world
     assert np.linalg.norm(T[:3, 3] - truth[:3, 3]) < 5e-3
     assert rotation_angle_deg(T[:3, :3], truth[:3, :3]) < 0.2
+
+
+def test_pivot_from_binary_and_csv_logs(tmp_path, capsys, cell):
+    """The same swing read from Liberty binary (cm) and from CSV (mm) gives the tip."""
+    from refine.demo import write_liberty_binary
+    from refine.frames import tracker_angles_from_matrix
+
+    sim = simulate_pivot(cell.tip, cell.pivot, model=calibration_tracker_model(seed=2))
+    binary = tmp_path / "pivot.lyb"
+    write_liberty_binary(binary, sim.log, units="cm")
+    assert (
+        main(["calibrate", "pivot", str(binary), "--format", "liberty_binary", "--units", "cm", "--json"])
+        == 0
+    )
+    assert (
+        np.linalg.norm(np.array(json.loads(capsys.readouterr().out)["tip_in_sensor_m"]) - cell.tip) < 0.5e-3
+    )
+
+    angles = tracker_angles_from_matrix(sim.log.rotations, degrees=True)
+    rows = ["t,x,y,z,azimuth,elevation,roll"] + [
+        f"{t:.5f},{p[0] * 1000:.4f},{p[1] * 1000:.4f},{p[2] * 1000:.4f},{a[0]:.5f},{a[1]:.5f},{a[2]:.5f}"
+        for t, p, a in zip(sim.log.t, sim.log.positions, angles, strict=True)
+    ]
+    csv = tmp_path / "pivot.csv"
+    csv.write_text("\n".join(rows) + "\n")
+    assert main(["calibrate", "pivot", str(csv), "--format", "csv", "--units", "mm", "--json"]) == 0
+    assert (
+        np.linalg.norm(np.array(json.loads(capsys.readouterr().out)["tip_in_sensor_m"]) - cell.tip) < 0.5e-3
+    )
+    # millimetres read as metres: the positions are beyond any tracker's range
+    assert main(["calibrate", "pivot", str(csv), "--format", "csv"]) == 2
+    assert "--units" in capsys.readouterr().err
+    # a CSV log has one station
+    assert main(["calibrate", "pivot", str(csv), "--format", "csv", "--units", "mm", "--station", "2"]) == 2
+    assert "one station" in capsys.readouterr().err
