@@ -194,6 +194,25 @@ def _reach_model(robot: Robot, joint_margin_rad: float, samples: int = 3000) -> 
     return ReachModel(spherical, point_in_flange, (w1, p1), shoulder, point(q_ref), r[0], r[1])
 
 
+def reach_gap(kin: TcpKinematics, positions: Array, joint_margin_deg: float) -> Array:
+    """How far each TCP position (N, 3) in {F} is out of reach at any tool orientation [m].
+
+    The wrist centre lies on a sphere of fixed radius around the TCP; the gap is how far the closest
+    (or farthest) point of that sphere stays outside the wrist centre's range from the shoulder.
+    Zeros for a robot without a spherical wrist (nothing certain to say).
+    """
+    reach = _reach_model(kin.robot, math.radians(joint_margin_deg))
+    out = np.zeros(len(positions))
+    if not reach.spherical:
+        return out
+    T_inv = np.linalg.inv(kin.base_in_world)
+    p = positions @ T_inv[:3, :3].T + T_inv[:3, 3]
+    L = float(np.linalg.norm((np.linalg.inv(kin.tcp_in_flange) @ np.append(reach.point_in_flange, 1.0))[:3]))
+    front, back = reach.shoulders(p)
+    d = np.minimum(np.linalg.norm(p - front, axis=1), np.linalg.norm(p - back, axis=1))
+    return np.maximum(np.maximum(d - L - reach.r_max_m, reach.r_min_m - d - L), 0.0)
+
+
 # ---- findings ----------------------------------------------------------------------------------
 
 

@@ -150,6 +150,7 @@ def refine_pass(
             problem.tolerances,
             axisymmetric=problem.tool.axisymmetric,
             weights=weights_for(problem, robot),
+            solver_options={"ipopt.max_wall_time": problem.repair.time_limit_s},
         )
     watch.lap("build")
     home = None if problem.robot.home_deg is None else np.radians(problem.robot.home_deg)
@@ -159,6 +160,7 @@ def refine_pass(
         home=home,
         sources=sources,
         repair_max_slack_deg=problem.repair.max_slack_deg if problem.repair.enabled else None,
+        time_limit_s=problem.repair.time_limit_s,
         **({"max_rounds": problem.collision.max_outer_iterations} if sources else {}),
     )
     watch.lap("refine")

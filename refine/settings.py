@@ -435,13 +435,17 @@ class RepairSettings:
     Attributes:
         enabled: look for the smallest extra orientation slack per waypoint that makes it feasible.
         max_slack_deg: the largest extra slack [deg] on top of the orientation tolerance.
+        time_limit_s: wall-time budget of one pass's refinement (IK seed, solves, repair) [s];
+            when it runs out before a verdict the pass is ``infeasible`` and says so.
     """
 
     enabled: bool = True
     max_slack_deg: float = 15.0
+    time_limit_s: float = 120.0
 
     def __post_init__(self) -> None:
         _in_range("repair", "max_slack_deg", self.max_slack_deg, 0.0, 90.0, "deg")
+        _in_range("repair", "time_limit_s", self.time_limit_s, 0.1, 86400.0, "s")
 
 
 @dataclass(frozen=True)

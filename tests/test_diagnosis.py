@@ -106,3 +106,22 @@ def test_the_tilt_that_brings_the_wrist_centre_into_reach_matches_the_geometry()
     assert d0 > 0.82
     assert tilt == pytest.approx(math.degrees(lean - a_in), abs=0.15)  # searched in 0.1 deg steps
     assert d_cone == pytest.approx(np.linalg.norm(wrist(lean - math.radians(3.0)) - shoulder), abs=1e-3)
+
+
+@pytest.mark.slow
+def test_a_run_out_of_time_says_so_and_is_not_a_verdict():
+    """wrist_flip needs well over 0.5 s of IPOPT; with that budget the pass stops, saying why."""
+    import dataclasses
+
+    from refine.export.result_json import result_dict
+    from refine.pipeline import solve_problem
+    from refine.problem import load_problem
+
+    problem = load_problem(UNREACHABLE / "wrist_flip")
+    problem = dataclasses.replace(problem, repair=dataclasses.replace(problem.repair, time_limit_s=0.5))
+    result = solve_problem(problem)
+    refinement = result.refinement
+    assert refinement.time_limit_reached and refinement.status == "infeasible"
+    assert "time limit of 0.5 s" in refinement.reason and refinement.solver_status == "time limit reached"
+    assert result_dict(result)["solver"]["time_limit_reached"] is True
+    assert exit_status(result.status) == 1

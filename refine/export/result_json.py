@@ -105,6 +105,7 @@ def result_dict(result: RunResult) -> dict[str, Any]:
             "status": first.refinement.solver_status,
             "iterations": sum(p.refinement.iterations for p in result.passes),
             "outer_iterations": sum(p.refinement.outer_iterations for p in result.passes),
+            "time_limit_reached": any(p.refinement.time_limit_reached for p in result.passes),
         },
         "violations": [v.describe() for p in result.passes for v in p.refinement.check.violations],
         "slow_segments": [

@@ -20,7 +20,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from refine.diagnosis import Diagnoser, Finding, segments
+from refine.diagnosis import Diagnoser, Finding, reach_gap, segments
 from refine.errors import SolverError
 from refine.optimise.problem import ActiveSet, LinearRow, RefinementNLP
 from refine.optimise.seed import TcpKinematics, alternative_seeds, ik_chain, reach_shortfall, start_candidates
@@ -109,6 +109,7 @@ class Refinement:
         timings_s: ``seed``, ``solve``, ``verify``, ``build`` (rebuilds) wall times [s].
         diagnosis: every segment that needed slack or has no answer, with its measured causes
             (:mod:`refine.diagnosis`); empty when ok.
+        time_limit_reached: the time budget ran out before a verdict (status ``infeasible``).
     """
 
     status: str
@@ -124,6 +125,7 @@ class Refinement:
     repairs: tuple[Repair, ...] = ()
     timings_s: dict[str, float] = field(default_factory=dict)
     diagnosis: tuple[Finding, ...] = ()
+    time_limit_reached: bool = False
 
 
 # ---- seed ----------------------------------------------------------------------------------------
@@ -161,10 +163,16 @@ def _out_of_reach(problem: RefinementNLP, q_seed: Array, home: Array | None) -> 
     if not missed.any():
         return []
     lower, upper = _bounds(problem)
-    idx = np.flatnonzero(missed)
     shortfall = np.zeros(problem.n_waypoints)
-    starts = start_candidates(lower, upper, home)
-    shortfall[idx] = reach_shortfall(kin, _targets(problem)[idx], lower, upper, starts)
+    # points the wrist centre cannot bring into the arm's range at any orientation are out of reach
+    # for certain (refine.diagnosis.ReachModel); IK measures the rest
+    certain = reach_gap(kin, problem.fused.positions, problem.tolerances.joint_margin_deg)
+    sure = missed & (certain > REACH_TOLERANCE_M)  # a lower bound: the wrist joints' limits ignored
+    shortfall[sure] = certain[sure]
+    idx = np.flatnonzero(missed & ~sure)
+    if idx.size:
+        starts = start_candidates(lower, upper, home)
+        shortfall[idx] = reach_shortfall(kin, _targets(problem)[idx], lower, upper, starts)
     s = problem.fused.s
     return [
         Violation(
@@ -197,6 +205,10 @@ def _new_singular(kin: TcpKinematics, q: Array, margin: float, active: ActiveSet
     return ActiveSet(waypoints, tuple(sorted(points - set(active.singular_segments))))
 
 
+class TimeLimitReached(Exception):
+    """The refinement's wall-time budget ran out before a verdict (internal to this module)."""
+
+
 @dataclass
 class _Loop:
     problem: RefinementNLP
@@ -204,9 +216,12 @@ class _Loop:
     iterations: int = 0
     outer: int = 0
     max_rounds: int = MAX_OUTER_ITERATIONS
+    deadline: float = math.inf
 
     def solve(self, x0: Array) -> tuple[Array, dict]:
         t0 = time.perf_counter()
+        if t0 >= self.deadline:
+            raise TimeLimitReached
         p = self.problem
         try:
             sol = p.solver(x0=x0, p=p.params, lbx=p.lbx, ubx=p.ubx, lbg=p.lbg, ubg=p.ubg)
@@ -216,6 +231,9 @@ class _Loop:
         status = str(stats.get("return_status", "unknown"))
         if status in {"Invalid_Option", "Invalid_Problem_Definition", "Insufficient_Memory"}:
             raise SolverError(f"IPOPT could not solve the refinement: {status}")
+        if status == "Maximum_WallTime_Exceeded" or time.perf_counter() >= self.deadline:
+            self.timings["solve"] = self.timings.get("solve", 0.0) + time.perf_counter() - t0
+            raise TimeLimitReached
         self.iterations += int(stats.get("iter_count", 0))
         self.timings["solve"] = self.timings.get("solve", 0.0) + time.perf_counter() - t0
         return np.asarray(sol["x"]).ravel(), stats
@@ -277,6 +295,7 @@ def solve_refinement(
     repair_max_slack_deg: float | None = None,
     max_rounds: int = MAX_OUTER_ITERATIONS,
     max_branches: int = 3,
+    time_limit_s: float | None = None,
 ) -> Refinement:
     """Solve ``problem`` with IPOPT from ``q0`` (or the IK seed), verify, and repair if asked.
 
@@ -292,6 +311,10 @@ def solve_refinement(
             slack [deg] the elastic problem may use; None for no repair.
         max_rounds: solve -> verify -> add constraints rounds at most.
         max_branches: IK branches of the first waypoint to try (only when ``q0`` is None).
+        time_limit_s: wall-time budget [s] of the solves; when it runs out before any verdict the
+            result is ``infeasible`` with ``time_limit_reached`` set and a reason saying so; when it
+            runs out while other IK branches are tried, the first branch's verdict stands. Build
+            the problem with ``ipopt.max_wall_time`` at most this so one solve cannot overrun it.
 
     Raises:
         SolverError: IPOPT itself failed (not an infeasibility): the message names its status.
@@ -325,8 +348,12 @@ def solve_refinement(
             diagnosis=findings,
         )
 
-    attempt = _attempt(problem, q_seed, sources, repair_max_slack_deg, max_rounds, timings)
-    if attempt.status == "infeasible" and q0 is None and max_branches > 1:
+    deadline = t0 + time_limit_s if time_limit_s is not None else math.inf
+    try:
+        attempt = _attempt(problem, q_seed, sources, repair_max_slack_deg, max_rounds, timings, deadline)
+    except TimeLimitReached:
+        return _timed_out(problem, q_seed, time_limit_s, timings)
+    if attempt.status == "infeasible" and q0 is None and max_branches > 1 and time.perf_counter() < deadline:
         # the first IK branch may be the wrong one: try the first waypoint's other branches
         t0 = time.perf_counter()
         lower, upper = _bounds(problem)
@@ -341,7 +368,14 @@ def solve_refinement(
         )
         timings["seed"] += time.perf_counter() - t0
         for k, q_other in enumerate(others, start=2):
-            other = _attempt(problem, q_other, sources, repair_max_slack_deg, max_rounds, timings)
+            try:
+                other = _attempt(
+                    problem, q_other, sources, repair_max_slack_deg, max_rounds, timings, deadline
+                )
+            except TimeLimitReached:
+                note = f"IK branches after the first {k - 1} not tried: time limit {time_limit_s:g} s reached"
+                attempt = replace(attempt, reason=f"{attempt.reason} ({note})")
+                break
             log.info("IK branch %d: %s", k, other.status)
             if other.status != "infeasible":
                 attempt = replace(other, iterations=attempt.iterations + other.iterations)
@@ -365,10 +399,11 @@ def _attempt(
     repair_max_slack_deg: float | None,
     max_rounds: int,
     timings: dict[str, float],
+    deadline: float = math.inf,
 ) -> Refinement:
     """Strict solve from ``q_seed``, then the elastic repair when the strict problem fails."""
     kin = _kin(problem)
-    loop = _Loop(problem, timings, max_rounds=max_rounds)
+    loop = _Loop(problem, timings, max_rounds=max_rounds, deadline=deadline)
     initial = _new_singular(kin, q_seed, problem.tolerances.singularity_margin, problem.active)
     seed_rows = tuple(r for src in sources for r in src.rows(problem, q_seed))
     if initial.singular_waypoints or initial.singular_segments or seed_rows:
@@ -451,6 +486,31 @@ def _attempt(
         repairs=repairs,
         timings_s=timings,
         diagnosis=findings,
+    )
+
+
+def _timed_out(
+    problem: RefinementNLP, q_seed: Array, time_limit_s: float | None, timings: dict[str, float]
+) -> Refinement:
+    """The answer when the time budget ran out before any verdict: infeasible, saying so."""
+    check = check_path(_kin(problem), q_seed, problem.fused, problem.tolerances, problem.axisymmetric)
+    reason = (
+        f"time limit of {time_limit_s:g} s ([repair] time_limit_s) reached before a verdict: neither an "
+        "answer nor a proof of infeasibility was found; raise the limit to let the solver finish"
+    )
+    log.warning("refinement stopped: %s", reason)
+    return Refinement(
+        "infeasible",
+        reason,
+        q_seed,
+        q_seed,
+        check,
+        "time limit reached",
+        0,
+        0,
+        slack_deg=np.zeros(problem.n_waypoints),
+        timings_s=timings,
+        time_limit_reached=True,
     )
 
 
