@@ -213,6 +213,36 @@ def reach_gap(kin: TcpKinematics, positions: Array, joint_margin_deg: float) -> 
     return np.maximum(np.maximum(d - L - reach.r_max_m, reach.r_min_m - d - L), 0.0)
 
 
+def reach_tilts(
+    kin: TcpKinematics, fused: FusedPath, tolerances: Tolerances, axisymmetric: bool, inset_m: float = 0.0
+) -> tuple[Array, Array]:
+    """The tilt of the tool each demonstrated pose needs for its wrist centre to be in reach.
+
+    Args:
+        kin: TCP kinematics.
+        fused: the fused path (demonstrated poses).
+        tolerances: the strict tolerances (joint margin, cone).
+        axisymmetric: only the tool axis counts.
+        inset_m: narrow the reachable range by this much at both ends [m] (keeps the elbow off
+            its stretched singularity).
+
+    Returns:
+        tilt per waypoint [deg] (0: in reach as demonstrated, inf: no tilt brings it in; all
+        zeros for a robot without a spherical wrist), and the demonstrated rotations tilted that
+        much (N, 3, 3).
+    """
+    d = Diagnoser(kin, fused, tolerances, axisymmetric)
+    tilts = np.zeros(len(fused.s))
+    rotations = np.array(fused.rotations, dtype=float)
+    if not d.reach.spherical:
+        return tilts, rotations
+    for k in range(len(tilts)):
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = fused.rotations[k], fused.positions[k]
+        _, tilts[k], _, _, rotations[k] = d.reach_at(T, inset_m)
+    return tilts, rotations
+
+
 # ---- findings ----------------------------------------------------------------------------------
 
 
@@ -415,13 +445,15 @@ class Diagnoser:
 
     # -- each cause, per waypoint ----------------------------------------------------------------
 
-    def reach_at(self, T: Array) -> tuple[float, float, float, float]:
+    def reach_at(self, T: Array, inset_m: float = 0.0) -> tuple[float, float, float, float, Array]:
         """Wrist-centre distance from the shoulder at the demonstrated pose ``T``, and the tilt that fixes it.
 
         Returns:
             the distance [m], the tilt of the tool towards (or away from) the shoulder that brings it
             inside the reachable range [deg] (0 when inside, inf when no tilt does), the distance
-            after tilting by the cone [m] and the closest any tilt comes to the range [m].
+            after tilting by the cone [m], the closest any tilt comes to the range [m], and the
+            tool orientation tilted that much (3, 3) in {F} (the demonstrated one when no tilt does).
+            With ``inset_m`` the range is narrowed by that much at both ends.
         """
         T_base = np.linalg.inv(self.kin.base_in_world) @ T
         p, R = T_base[:3, 3], T_base[:3, :3]
@@ -429,8 +461,9 @@ class Diagnoser:
         wc = p + R @ v
         d0 = float(self.reach.distance(wc[None])[0])
         L = float(np.linalg.norm(v))
-        if self.reach.r_min_m <= d0 <= self.reach.r_max_m or L < 1e-9:
-            return d0, 0.0, d0, d0
+        lo, hi = self.reach.r_min_m + inset_m, self.reach.r_max_m - inset_m
+        if lo <= d0 <= hi or L < 1e-9:
+            return d0, 0.0, d0, d0, T[:3, :3]
         front, back = self.reach.shoulders(wc[None])
         s = (
             front[0]
@@ -439,7 +472,7 @@ class Diagnoser:
         )
         u = (wc - p) / L
         e = s - p
-        e = e / np.linalg.norm(e) * (1.0 if d0 > self.reach.r_max_m else -1.0)  # towards or away
+        e = e / np.linalg.norm(e) * (1.0 if d0 > hi else -1.0)  # towards or away
         axis = np.cross(u, e)
         if np.linalg.norm(axis) < 1e-12:
             axis = np.cross(u, [1.0, 0.0, 0.0] if abs(u[0]) < 0.9 else [0.0, 1.0, 0.0])
@@ -447,15 +480,14 @@ class Diagnoser:
         betas = np.radians(np.arange(0.0, 180.01, 0.1))
         points = p + L * np.einsum("nij,j->ni", _rotations_about(axis, betas), u)
         d = self.reach.distance(points)
-        inside = np.flatnonzero((d >= self.reach.r_min_m - 1e-9) & (d <= self.reach.r_max_m + 1e-9))
+        inside = np.flatnonzero((d >= lo - 1e-9) & (d <= hi + 1e-9))
         cone = int(round(self.tolerances.orientation_deg / 0.1))
         tilt = math.degrees(betas[inside[0]]) if inside.size else math.inf
-        return (
-            d0,
-            tilt,
-            float(d[min(cone, len(d) - 1)]),
-            float(d.min() if d0 > self.reach.r_max_m else d.max()),
-        )
+        R_in = T[:3, :3]
+        if inside.size:
+            axis_world = self.kin.base_in_world[:3, :3] @ axis
+            R_in = _rotations_about(axis_world, betas[inside[:1]])[0] @ T[:3, :3]
+        return d0, tilt, float(d[min(cone, len(d) - 1)]), float(d.min() if d0 > hi else d.max()), R_in
 
     def configuration(self, T: Array, q0: Array) -> tuple[Array, bool]:
         """Joints that reach the demonstrated pose ``T`` from ``q0``, ignoring the joint limits."""
@@ -585,7 +617,7 @@ class Diagnoser:
         for k in range(a, b + 1):
             T = self.target(k, q[k])
             if self.reach.spherical:
-                d, tilt, d_cone, d_best = self.reach_at(T)
+                d, tilt, d_cone, d_best, _ = self.reach_at(T)
                 if tilt > 0.0:  # out of reach as demonstrated: no configuration to measure the rest at
                     reach_rows.append((d, tilt, d_cone, d_best))
                     q_prev = None

@@ -101,7 +101,7 @@ def test_the_tilt_that_brings_the_wrist_centre_into_reach_matches_the_geometry()
     R = np.column_stack([x_axis, np.cross(axis, x_axis), axis])
     path = SimpleNamespace(s=np.zeros(1), positions=np.array([[x, 0.0, z]]), rotations=R[None])
     tol = SimpleNamespace(orientation_deg=3.0, joint_margin_deg=2.0, singularity_margin=0.02)
-    d0, tilt, d_cone, _ = Diagnoser(kin, path, tol, True).reach_at(make_transform(R, [x, 0.0, z]))
+    d0, tilt, d_cone, _, _ = Diagnoser(kin, path, tol, True).reach_at(make_transform(R, [x, 0.0, z]))
     assert d0 == pytest.approx(np.linalg.norm(wrist(lean) - shoulder), abs=1e-6)
     assert d0 > 0.82
     assert tilt == pytest.approx(math.degrees(lean - a_in), abs=0.15)  # searched in 0.1 deg steps

@@ -29,8 +29,15 @@ import numpy as np
 
 from refine.collision.geometry import fcl_geometry
 from refine.demo.liberty import write_liberty_ascii
+from refine.demo.liberty_binary import write_liberty_binary
 from refine.demo.simulate import TrackerModel, simulate_demonstration, write_truth_csv
-from refine.frames import invert_transform, make_transform, matrix_from_rotvec, transform_points
+from refine.frames import (
+    invert_transform,
+    make_transform,
+    matrix_from_rotvec,
+    tracker_angles_from_matrix,
+    transform_points,
+)
 from refine.optimise.seed import TcpKinematics, solve_ik
 from refine.problem import load_problem
 from refine.robot import load_robot
@@ -161,11 +168,25 @@ def write_case(case: Case, demo: Demo, seed: int) -> None:
         s, demo.positions, demo.rotations, demo.speed, case.source_in_world, case.sensor_in_tcp, model
     )
     write_liberty_ascii(folder / "demo.liberty", sim.log, units="in", rate_hz=RATE_HZ)
+    if case.name in ALL_FORMATS:
+        write_liberty_binary(folder / "demo.lbin", sim.log, with_timestamp=True, units="in", rate_hz=RATE_HZ)
+        write_demo_csv(folder / "demo.csv", sim.log)
     write_truth_csv(folder / "truth.csv", sim.s, sim.quaternions, sim.speed)
     print(
         f"{case.name}: path {s[-1]:.3f} m ({len(s)} vertices), demo {len(sim.log.t)} samples "
         f"({sim.duration_s:.1f} s at {RATE_HZ:g} Hz)"
     )
+
+
+def write_demo_csv(path: Path, log) -> None:
+    """The tracker log as a demonstration CSV (``refine.demo.csv_``): t [s], x, y, z [mm], angles [deg]."""
+    angles = np.array([tracker_angles_from_matrix(R) for R in log.rotations])
+    rows = np.column_stack([log.t, log.positions * 1000.0, angles])
+    with path.open("w", encoding="utf-8") as f:
+        f.write(
+            "# demonstration written by ../generate.py; positions in mm\nt,x,y,z,azimuth,elevation,roll\n"
+        )
+        np.savetxt(f, rows, delimiter=",", fmt=["%.4f", "%.3f", "%.3f", "%.3f", "%.3f", "%.3f", "%.3f"])
 
 
 # ---- the cases ----------------------------------------------------------------------------------
@@ -332,6 +353,55 @@ def out_of_reach(case: Case) -> Demo:
     return Demo(positions, frame_from_z_x(z, travel), worker_speed(arc_length(positions), 0.04))
 
 
+REACH_RADIUS_M = 0.707  # horizontal distance of the reach cases' arc from axis 1 [m]
+REACH_HEIGHT_M = 0.10  # its height above the iiwa's mounting surface [m]
+
+
+def leaning_arc(lean_deg: tuple[float, float], half_angle_deg: float = 12.0) -> Demo:
+    """An arc around axis 1 at ``REACH_RADIUS_M``; the gun leans back towards the robot.
+
+    The gun axis points down, its top leaning away from the robot (the tip towards it) by
+    ``lean_deg[0]`` at the ends and ``lean_deg[1]`` on the middle third, smoothly between. The
+    wrist centre sits 0.326 m up the gun axis (0.20 m gun + 0.126 m flange), so the lean pushes it
+    outwards: at 0.707 m and 10 deg it is 0.766 m from the shoulder (axis 2, 0.36 m up), at 30 deg
+    0.870 m, beyond the 0.42 + 0.40 m of the iiwa's two arm links; 20 deg (0.820 m) is the most
+    that stays in reach.
+    """
+    theta = np.radians(
+        np.linspace(
+            -half_angle_deg,
+            half_angle_deg,
+            int(math.ceil(math.radians(2 * half_angle_deg) * REACH_RADIUS_M / POINT_SPACING)) + 1,
+        )
+    )
+    radial = np.column_stack([np.cos(theta), np.sin(theta), 0 * theta])
+    positions = REACH_RADIUS_M * radial + [0.0, 0.0, REACH_HEIGHT_M]
+    s = arc_length(positions)
+    third = s[-1] / 3.0
+    rise = smoothstep((s - 0.25 * third) / (0.75 * third)) * smoothstep(
+        (s[-1] - 0.25 * third - s) / (0.75 * third)
+    )
+    lean = np.radians(lean_deg[0] + (lean_deg[1] - lean_deg[0]) * rise)
+    z = -np.cos(lean)[:, None] * [0.0, 0.0, 1.0] - np.sin(lean)[:, None] * radial
+    travel = np.column_stack([-np.sin(theta), np.cos(theta), 0 * theta])
+    return Demo(positions, frame_from_z_x(z, travel), worker_speed(s, 0.04))
+
+
+def reach_tilt(case: Case) -> Demo:
+    """Arc leaning 10 -> 30 deg: the wrist centre 0.870 m out in the middle; tilting in repairs it."""
+    return leaning_arc((10.0, 25.0))
+
+
+def reach_beyond_slack(case: Case) -> Demo:
+    """Arc leaning 10 -> 45 deg: 25 deg of tilt would be needed, more than the cone and the slack."""
+    return leaning_arc((10.0, 45.0))
+
+
+def reach_near_post(case: Case) -> Demo:
+    """As ``reach_tilt``, with a post just inside the arc's middle that the gun passes closely."""
+    return leaning_arc((10.0, 25.0))
+
+
 CASES: dict[str, Callable[[Case], Demo]] = {
     "wrist_flip": wrist_flip,
     "joint_limit": joint_limit,
@@ -340,7 +410,13 @@ CASES: dict[str, Callable[[Case], Demo]] = {
     "tool_through_fixture": tool_through_fixture,
     "elbow_through_table": elbow_through_table,
     "out_of_reach": out_of_reach,
+    "reach_tilt": reach_tilt,
+    "reach_beyond_slack": reach_beyond_slack,
+    "reach_near_post": reach_near_post,
 }
+
+ALL_FORMATS = ("reach_tilt",)
+"""Cases whose demonstration is also written as Liberty binary (``demo.lbin``) and CSV (``demo.csv``)."""
 
 
 # ---- clearance check (design aid for the collision cases) --------------------------------------

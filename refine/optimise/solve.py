@@ -20,7 +20,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from refine.diagnosis import Diagnoser, Finding, reach_gap, segments
+from refine.diagnosis import Diagnoser, Finding, reach_gap, reach_tilts, segments
 from refine.errors import SolverError
 from refine.optimise.problem import ActiveSet, LinearRow, RefinementNLP
 from refine.optimise.seed import TcpKinematics, alternative_seeds, ik_chain, reach_shortfall, start_candidates
@@ -39,6 +39,14 @@ Array = NDArray[np.float64]
 
 REACH_TOLERANCE_M = 1e-3
 """A CAD point the best position-only IK misses by more than this is reported out of reach [m]."""
+
+SEED_INSET_M = 0.05
+"""The IK seed tilts a pose out of reach until its wrist centre is this far inside the arm's range
+[m]: off the stretched elbow, which is a singularity."""
+
+TILT_TOLERANCE_DEG = 0.1
+"""A reach tilt counts as beyond the cone (or the cone + slack) by more than this [deg] (the tilt is
+searched in 0.1 deg steps)."""
 
 MAX_OUTER_ITERATIONS = 8
 """Rounds of solve -> verify -> add constraints before giving up on adding more."""
@@ -148,11 +156,18 @@ def _bounds(problem: RefinementNLP) -> tuple[Array, Array]:
     return problem.lbx[:n], problem.ubx[:n]
 
 
-def initial_guess(problem: RefinementNLP, home: Array | None = None) -> Array:
-    """IK seed (N, n) [rad] chained along the path, from the best of several first-waypoint starts."""
+def initial_guess(problem: RefinementNLP, home: Array | None = None, rotations: Array | None = None) -> Array:
+    """IK seed (N, n) [rad] chained along the path, from the best of several first-waypoint starts.
+
+    ``rotations`` (N, 3, 3) replaces the demonstrated tool orientations as IK targets (e.g. tilted
+    into reach, :func:`refine.diagnosis.reach_tilts`).
+    """
     lower, upper = _bounds(problem)
     starts = start_candidates(lower, upper, home)
-    qs, _ = ik_chain(_kin(problem), _targets(problem), lower, upper, starts, prefer_first=home is not None)
+    targets = _targets(problem)
+    if rotations is not None:
+        targets[:, :3, :3] = rotations
+    qs, _ = ik_chain(_kin(problem), targets, lower, upper, starts, prefer_first=home is not None)
     return qs
 
 
@@ -321,10 +336,43 @@ def solve_refinement(
     """
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    q_seed = initial_guess(problem, home) if q0 is None else np.asarray(q0, dtype=float)
+    # the tilt each demonstrated pose needs for the wrist centre to be in reach: a seed tilted into
+    # reach (off the stretched elbow) converges where the demonstrated one cannot, and a tilt beyond
+    # the cone (or cone + slack) proves the strict (or repaired) problem infeasible without a solve
+    tilts, _ = reach_tilts(kin := _kin(problem), problem.fused, problem.tolerances, problem.axisymmetric)
+    certain = _tilt_is_a_bound(problem)
+    rotations = None
+    if tilts.max() > 0.0:
+        _, rotations = reach_tilts(kin, problem.fused, problem.tolerances, problem.axisymmetric, SEED_INSET_M)
+    q_seed = initial_guess(problem, home, rotations) if q0 is None else np.asarray(q0, dtype=float)
     unreachable = _out_of_reach(problem, q_seed, home)
     timings["seed"] = time.perf_counter() - t0
-    kin = _kin(problem)
+    cone = problem.tolerances.orientation_deg
+    slack_max = repair_max_slack_deg if repair_max_slack_deg is not None else 0.0
+    beyond = certain & (tilts > cone + slack_max + TILT_TOLERANCE_DEG)
+    if not unreachable and beyond.any():
+        check = check_path(kin, q_seed, problem.fused, problem.tolerances, problem.axisymmetric)
+        t1 = time.perf_counter()
+        findings = _findings(problem, sources, "infeasible", q_seed, beyond)
+        timings["diagnose"] = time.perf_counter() - t1
+        reason = (
+            f"no repair within {slack_max:g} deg of extra slack: " if slack_max > 0 else "out of reach as demonstrated: "
+        ) + "; ".join(f.describe() for f in findings)
+        log.info("refinement infeasible before solving: %s", reason)
+        return Refinement(
+            "infeasible",
+            reason,
+            q_seed,
+            q_seed,
+            check,
+            "not run (orientation out of reach beyond the slack)",
+            0,
+            0,
+            slack_deg=np.zeros(problem.n_waypoints),
+            timings_s=timings,
+            diagnosis=findings,
+        )
+    skip_strict = bool((certain & (tilts > cone + TILT_TOLERANCE_DEG)).any())
     if unreachable:
         check = check_path(kin, q_seed, problem.fused, problem.tolerances, problem.axisymmetric)
         t0 = time.perf_counter()
@@ -350,7 +398,9 @@ def solve_refinement(
 
     deadline = t0 + time_limit_s if time_limit_s is not None else math.inf
     try:
-        attempt = _attempt(problem, q_seed, sources, repair_max_slack_deg, max_rounds, timings, deadline)
+        attempt = _attempt(
+            problem, q_seed, sources, repair_max_slack_deg, max_rounds, timings, deadline, skip_strict
+        )
     except TimeLimitReached:
         return _timed_out(problem, q_seed, time_limit_s, timings)
     if attempt.status == "infeasible" and q0 is None and max_branches > 1 and time.perf_counter() < deadline:
@@ -370,7 +420,7 @@ def solve_refinement(
         for k, q_other in enumerate(others, start=2):
             try:
                 other = _attempt(
-                    problem, q_other, sources, repair_max_slack_deg, max_rounds, timings, deadline
+                    problem, q_other, sources, repair_max_slack_deg, max_rounds, timings, deadline, skip_strict
                 )
             except TimeLimitReached:
                 note = f"IK branches after the first {k - 1} not tried: time limit {time_limit_s:g} s reached"
@@ -400,8 +450,12 @@ def _attempt(
     max_rounds: int,
     timings: dict[str, float],
     deadline: float = math.inf,
+    skip_strict: bool = False,
 ) -> Refinement:
-    """Strict solve from ``q_seed``, then the elastic repair when the strict problem fails."""
+    """Strict solve from ``q_seed``, then the elastic repair when the strict problem fails.
+
+    With ``skip_strict`` (the strict problem is known to be infeasible) the repair starts at once.
+    """
     kin = _kin(problem)
     loop = _Loop(problem, timings, max_rounds=max_rounds, deadline=deadline)
     initial = _new_singular(kin, q_seed, problem.tolerances.singularity_margin, problem.active)
@@ -412,13 +466,20 @@ def _attempt(
                 ActiveSet(initial.singular_waypoints, initial.singular_segments, seed_rows)
             )
         )
-    x, stats, check, slack = _run_rounds(loop, q_seed.ravel(), sources)
-    q = loop.problem.joints(x)
-    status = "ok" if check.ok else "infeasible"
+    if skip_strict:
+        q = q_seed
+        slack = np.zeros(problem.n_waypoints)
+        check = check_path(kin, q, problem.fused, problem.tolerances, problem.axisymmetric)
+        stats = {"return_status": "not run (the demonstrated orientation is out of reach beyond the cone)"}
+        strict_reason = stats["return_status"]
+    else:
+        x, stats, check, slack = _run_rounds(loop, q_seed.ravel(), sources)
+        q = loop.problem.joints(x)
+        strict_reason = _describe(check, stats)
+    status = "ok" if check.ok and not skip_strict else "infeasible"
     repairs: tuple[Repair, ...] = ()
 
     if status == "infeasible" and repair_max_slack_deg is not None and repair_max_slack_deg > 0:
-        strict_reason = _describe(check, stats)
         loop.rebuild(active=loop.problem.active, elastic_deg=repair_max_slack_deg)
         # start from the seed (on the path, orientation off only where the limits clamped it), with
         # each slack at what that start needs, so IPOPT begins feasible wherever it can
@@ -487,6 +548,21 @@ def _attempt(
         timings_s=timings,
         diagnosis=findings,
     )
+
+
+def _tilt_is_a_bound(problem: RefinementNLP) -> bool:
+    """Whether the reach tilt bounds the orientation deviation from below for this tool.
+
+    Always for a tool whose whole orientation counts; for an axisymmetric tool only when the wrist
+    centre lies on the tool axis (the free spin about the axis then cannot move it).
+    """
+    if not problem.axisymmetric:
+        return True
+    from refine.diagnosis import _reach_model
+
+    reach = _reach_model(problem.robot, math.radians(problem.tolerances.joint_margin_deg))
+    v = (np.linalg.inv(problem.tcp_in_flange) @ np.append(reach.point_in_flange, 1.0))[:3]
+    return bool(np.linalg.norm(np.cross(v, [0.0, 0.0, 1.0])) <= 1e-6 * max(np.linalg.norm(v), 1e-9))
 
 
 def _timed_out(
