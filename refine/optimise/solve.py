@@ -351,7 +351,6 @@ def solve_refinement(
     slack_max = repair_max_slack_deg if repair_max_slack_deg is not None else 0.0
     beyond = certain & (tilts > cone + slack_max + TILT_TOLERANCE_DEG)
     if not unreachable and beyond.any():
-        check = check_path(kin, q_seed, problem.fused, problem.tolerances, problem.axisymmetric)
         t1 = time.perf_counter()
         findings = _findings(problem, sources, "infeasible", q_seed, beyond)
         timings["diagnose"] = time.perf_counter() - t1
@@ -359,18 +358,8 @@ def solve_refinement(
             f"no repair within {slack_max:g} deg of extra slack: " if slack_max > 0 else "out of reach as demonstrated: "
         ) + "; ".join(f.describe() for f in findings)
         log.info("refinement infeasible before solving: %s", reason)
-        return Refinement(
-            "infeasible",
-            reason,
-            q_seed,
-            q_seed,
-            check,
-            "not run (orientation out of reach beyond the slack)",
-            0,
-            0,
-            slack_deg=np.zeros(problem.n_waypoints),
-            timings_s=timings,
-            diagnosis=findings,
+        return _unsolved(
+            problem, q_seed, reason, "not run (orientation out of reach beyond the slack)", timings, findings
         )
     skip_strict = bool((certain & (tilts > cone + TILT_TOLERANCE_DEG)).any())
     if unreachable:
@@ -569,24 +558,38 @@ def _timed_out(
     problem: RefinementNLP, q_seed: Array, time_limit_s: float | None, timings: dict[str, float]
 ) -> Refinement:
     """The answer when the time budget ran out before any verdict: infeasible, saying so."""
-    check = check_path(_kin(problem), q_seed, problem.fused, problem.tolerances, problem.axisymmetric)
     reason = (
         f"time limit of {time_limit_s:g} s ([repair] time_limit_s) reached before a verdict: neither an "
         "answer nor a proof of infeasibility was found; raise the limit to let the solver finish"
     )
     log.warning("refinement stopped: %s", reason)
+    return _unsolved(problem, q_seed, reason, "time limit reached", timings, time_limit_reached=True)
+
+
+def _unsolved(
+    problem: RefinementNLP,
+    q_seed: Array,
+    reason: str,
+    solver_status: str,
+    timings: dict[str, float],
+    findings: tuple[Finding, ...] = (),
+    time_limit_reached: bool = False,
+) -> Refinement:
+    """An infeasible answer without a solve: the seed, checked, with the reason and diagnosis."""
+    check = check_path(_kin(problem), q_seed, problem.fused, problem.tolerances, problem.axisymmetric)
     return Refinement(
         "infeasible",
         reason,
         q_seed,
         q_seed,
         check,
-        "time limit reached",
+        solver_status,
         0,
         0,
         slack_deg=np.zeros(problem.n_waypoints),
         timings_s=timings,
-        time_limit_reached=True,
+        diagnosis=findings,
+        time_limit_reached=time_limit_reached,
     )
 
 
