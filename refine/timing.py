@@ -16,6 +16,13 @@ Discretisation: the TOPPRA gridpoints are the waypoints. Between two gridpoints 
 ``sddot`` is constant (so ``sdot^2`` is linear in ``s``). The acceleration limits use TOPPRA's
 interpolation scheme: they hold at both ends of every segment with that segment's ``sddot``. Inside
 a segment they can be exceeded only by a second-order term in the segment length.
+
+Joint speeds between waypoints: a controller moves from one target to the next in the planned time,
+so each joint's mean speed over a segment, ``|q[k+1] - q[k]| / (t[k+1] - t[k])``, must respect its
+limit too, not only the speeds at the waypoints; so must the spline's speed inside the segment, which
+is bounded exactly (:func:`_between_waypoint_speed_ratio`). Where either exceeds a limit, the path speed at both
+ends of that segment is capped lower by the excess and TOPPRA runs again (joint speeds scale with
+``sdot``, so one round settles a segment; a few rounds settle their neighbours).
 """
 
 from __future__ import annotations
@@ -40,6 +47,8 @@ _ACCELERATION_SLACK_REL = 1e-3
 """Relative slack of the final check on joint accelerations. TOPPRA shaves 0.01 % off ``sdot^2``
 after choosing each ``sddot``; recomputing ``sddot`` from the shaved speeds, as the timing does,
 moves the accelerations by that order."""
+_BETWEEN_ROUNDS = 6
+"""TOPPRA runs at most this often while joint speeds between waypoints are brought within limits."""
 _BINDING_REL = 0.01
 """A limit explains a slowdown when a joint uses at least 99 % of it."""
 RAMP = "start/stop ramp"
@@ -247,6 +256,45 @@ def _solve_path_speed(instance, sd_start: float, sd_end: float) -> Array:
     return np.asarray(sd, dtype=float)
 
 
+def _segment_times(s: Array, speed: Array) -> tuple[Array, Array, Array]:
+    """``x = sdot^2`` at the waypoints, the constant ``sddot`` of each segment and the waypoint times."""
+    x = speed**2
+    ds = np.diff(s)
+    sdd = (x[1:] - x[:-1]) / (2.0 * ds)
+    mean_speed = 0.5 * (speed[1:] + speed[:-1])
+    if np.any(mean_speed <= 0.0):
+        i = int(np.flatnonzero(mean_speed <= 0.0)[0])
+        raise SolverError(f"TOPPRA stopped the path at s = {s[i]:.4f} m: the timing never ends")
+    t = np.concatenate([[0.0], np.cumsum(ds / mean_speed)])
+    return x, sdd, t
+
+
+def _between_waypoint_speed_ratio(path, s: Array, q: Array, x: Array, sdd: Array, t: Array, vlim: Array):
+    """Per segment and joint, a bound on the joint speed between the waypoints over its limit [-].
+
+    The larger of the mean speed over the segment, ``|q[k+1] - q[k]| / (t[k+1] - t[k])`` (what a
+    controller moving target to target needs), and a bound on the spline's speed ``|q'(s)| sdot(s)``
+    inside it: ``q'`` is quadratic on a cubic segment, so its largest magnitude is at an end or where
+    ``q''`` (linear) crosses zero; ``sdot^2`` is linear in ``s``, so ``sdot`` is largest at an end.
+
+    Returns:
+        Shape (N - 1, n).
+    """
+    del sdd  # sdot is monotone on a segment: its ends bound it
+    mean = np.abs(np.diff(q, axis=0)) / np.diff(t)[:, None]
+    n_seg, n = len(s) - 1, q.shape[1]
+    dq, ddq = np.asarray(path(s, 1)), np.asarray(path(s, 2))
+    a, b = ddq[:-1], ddq[1:]
+    turns = a * b < 0.0  # q'' changes sign inside: q' has an extremum there
+    with np.errstate(divide="ignore", invalid="ignore"):
+        frac = np.where(turns, a / (a - b), 0.0)
+    s_turn = s[:-1, None] + np.diff(s)[:, None] * np.clip(frac, 0.0, 1.0)  # (N - 1, n)
+    dq_turn = np.asarray(path(s_turn.ravel(), 1)).reshape(n_seg, n, n)[:, np.arange(n), np.arange(n)]
+    dq_max = np.maximum(np.maximum(np.abs(dq[:-1]), np.abs(dq[1:])), np.where(turns, np.abs(dq_turn), 0.0))
+    sd_max = np.sqrt(np.maximum(x[:-1], x[1:]))
+    return np.maximum(mean, dq_max * sd_max[:, None]) / vlim
+
+
 def _verify(s: Array, checks) -> None:
     """Raise SolverError at the worst breach among ``(what, unit, values (N, k), limits, slack)``."""
     for what, unit, values, limits, slack in checks:
@@ -341,7 +389,7 @@ def time_parameterise(
             cap and the limits allow.
 
     Returns:
-        The timing, verified against the limits at every waypoint.
+        The timing, verified against the limits at every waypoint; joint speeds also between them.
 
     Raises:
         InputError: a shape, a non-increasing ``s`` or a non-positive cap or limit.
@@ -353,26 +401,28 @@ def time_parameterise(
     checked = _check_inputs(s, q, speed_cap, velocity_limits, acceleration_limits, tolerance_rel, n_min)
     s, q, cap, vlim, alim = checked
 
-    # ---- TOPPRA on the spline through the waypoints
-    instance = build_toppra(s, q, cap, vlim, alim, free_end=not start_stop)
-    dq, ddq = instance.path(s, 1), instance.path(s, 2)
-    if start_stop:
-        sd_start = sd_end = 0.0
-    else:
-        with np.errstate(divide="ignore"):
-            sd_bound = np.min(vlim / np.abs(dq[[0, -1]]), axis=1)
-        sd_start, sd_end = np.minimum(cap[[0, -1]], sd_bound)
-    speed = _solve_path_speed(instance, float(sd_start), float(sd_end))
-
-    # ---- times, with sddot constant on each segment
-    x = speed**2
-    ds = np.diff(s)
-    sdd = (x[1:] - x[:-1]) / (2.0 * ds)
-    mean_speed = 0.5 * (speed[1:] + speed[:-1])
-    if np.any(mean_speed <= 0.0):
-        i = int(np.flatnonzero(mean_speed <= 0.0)[0])
-        raise SolverError(f"TOPPRA stopped the path at s = {s[i]:.4f} m: the timing never ends")
-    t = np.concatenate([[0.0], np.cumsum(ds / mean_speed)])
+    # ---- TOPPRA on the spline through the waypoints, again where joints run too fast in between
+    between_cap = np.full(len(s), np.inf)
+    for _ in range(_BETWEEN_ROUNDS):
+        instance = build_toppra(s, q, np.minimum(cap, between_cap), vlim, alim, free_end=not start_stop)
+        dq, ddq = instance.path(s, 1), instance.path(s, 2)
+        if start_stop:
+            sd_start = sd_end = 0.0
+        else:
+            with np.errstate(divide="ignore"):
+                sd_bound = np.min(vlim / np.abs(dq[[0, -1]]), axis=1)
+            sd_start, sd_end = np.minimum(np.minimum(cap, between_cap)[[0, -1]], sd_bound)
+        speed = _solve_path_speed(instance, float(sd_start), float(sd_end))
+        x, sdd, t = _segment_times(s, speed)
+        between = _between_waypoint_speed_ratio(instance.path, s, q, x, sdd, t, vlim)
+        excess = between.max(axis=1)
+        over = np.flatnonzero(excess > 1.0 + _VELOCITY_SLACK_REL)
+        if over.size == 0:
+            break
+        # joint speeds in a segment scale with sdot: lower both ends by the excess (and a hair)
+        factor = 1.0 / (excess[over] * (1.0 + 10 * _VELOCITY_SLACK_REL))
+        between_cap[over] = np.minimum(between_cap[over], speed[over] * factor)
+        between_cap[over + 1] = np.minimum(between_cap[over + 1], speed[over + 1] * factor)
 
     # ---- joint velocities and one-sided accelerations
     qd = dq * speed[:, None]
@@ -385,12 +435,15 @@ def time_parameterise(
             ("joint {} acceleration", "rad/s^2", qdd, alim, _ACCELERATION_SLACK_REL),
             ("joint {} acceleration", "rad/s^2", qdd_left, alim, _ACCELERATION_SLACK_REL),
             ("TCP speed", "m/s", speed[:, None], cap[:, None], _VELOCITY_SLACK_REL),
+            ("joint {} velocity between waypoints", "rad/s", between * vlim, vlim, _VELOCITY_SLACK_REL),
         ],
     )
 
     # ---- where and why the plan is slower than the demonstration
     ratio = speed / cap
     vel_ratio = np.abs(qd) / vlim
+    faster_end = np.arange(len(s) - 1) + (speed[1:] > speed[:-1])  # a segment's bound counts there
+    np.maximum.at(vel_ratio, faster_end, between)
     acc_ratio = np.abs(qdd) / alim
     acc_ratio[1:] = np.maximum(acc_ratio[1:], np.abs(qdd_left) / alim)
     slow = ratio < 1.0 - tolerance_rel

@@ -245,3 +245,21 @@ def test_without_start_stop_the_start_speed_is_the_first_waypoints_own_cap():
     tm = time_parameterise(s, q, cap, np.full(2, 3.0), np.full(2, 0.5), start_stop=False)
     assert tm.speed[0] == pytest.approx(0.03, rel=1e-4)
     assert tm.speed[-1] == pytest.approx(0.06, rel=1e-4)
+
+
+def test_joints_keep_their_speed_limit_on_average_between_waypoints_on_a_staircase():
+    """A staircase joint path (1 rad rises between flat steps, 0.1 m apart) has a small spline slope
+    at the waypoints but a chord slope of 10 rad/m on each rise: at 3 rad/s the mean speed over a
+    rise allows at most 0.3 m/s there, whatever the speeds at the waypoints say."""
+    s = np.linspace(0.0, 2.0, 21)
+    stairs = np.floor(np.arange(21) / 2.0)  # 0 0 1 1 2 2 ... : a rise every other segment
+    q = np.column_stack([stairs, 0.1 * s])
+    vlim = np.array([3.0, 3.0])
+    tm = time_parameterise(s, q, np.full(len(s), 2.0), vlim, np.full(2, 1e3))
+    mean = np.abs(np.diff(q, axis=0)) / np.diff(tm.t)[:, None]
+    assert np.all(mean <= vlim * (1 + 1e-6))
+    # inside a rise the spline is steeper than its chord: it too keeps the limit
+    qd_dense, _ = dense_joint_motion(s, q, tm, per_segment=41)
+    assert np.max(np.abs(qd_dense[:, 0])) <= 3.0 * (1 + 1e-6)
+    assert np.max(np.abs(qd_dense[:, 0])) >= 3.0 * 0.95  # and it binds
+    assert any(seg.reason == "joint velocity (joint 1)" for seg in tm.slow_segments)
