@@ -49,11 +49,16 @@ def cache_dir() -> Path:
 
 def compiler() -> str | None:
     """Path of the C compiler to use, or None when compilation is off or none is installed."""
-    if os.environ.get(COMPILE_ENV, "1").strip().lower() in {"0", "no", "false", "off"}:
+    return _find_compiler(os.environ.get(COMPILE_ENV, "1"), os.environ.get("CC"), os.environ.get("PATH"))
+
+
+@functools.cache
+def _find_compiler(switch: str, cc: str | None, path: str | None) -> str | None:
+    if switch.strip().lower() in {"0", "no", "false", "off"}:
         return None
-    for name in (os.environ.get("CC"), "cc", "gcc", "clang"):
-        if name and (path := shutil.which(name)):
-            return path
+    for name in (cc, "cc", "gcc", "clang"):
+        if name and (found := shutil.which(name, path=path)):
+            return found
     return None
 
 

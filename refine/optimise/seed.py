@@ -16,7 +16,9 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
 
+from refine.optimise.derivatives import tcp_kernel
 from refine.robot import Robot
 
 log = logging.getLogger(__name__)
@@ -51,6 +53,20 @@ class TcpKinematics:
     def poses(self, qs: Array) -> Array:
         """T_F_TCP for joint rows ``qs`` (N, n), shape (N, 4, 4)."""
         return self.base_in_world @ self.robot.fk_many(qs) @ self.tcp_in_flange
+
+    def batch(self, qs: Array) -> tuple[Array, Array, Array]:
+        """TCP positions (M, 3), rotations (M, 3, 3) and Jacobians (M, 6, n) for joint rows ``qs`` (M, n).
+
+        One call of the compiled kinematics kernel for all rows; the Jacobian as :meth:`jacobian`.
+        """
+        qs = np.atleast_2d(np.asarray(qs, dtype=float))
+        m, n = qs.shape
+        p, R, J = tcp_kernel(self.robot, self.base_in_world, self.tcp_in_flange)(qs.T)
+        return (
+            np.asarray(p).T,
+            np.asarray(R).reshape(3, m, 3).transpose(1, 0, 2),
+            np.asarray(J).reshape(6, m, n).transpose(1, 0, 2),
+        )
 
     def jacobian(self, q: Array) -> Array:
         """Geometric Jacobian (6, n) of the TCP, world-aligned axes, linear rows first."""
@@ -117,7 +133,147 @@ def solve_ik(
     return q, float(np.linalg.norm(err))
 
 
+def solve_ik_batch(
+    kin: TcpKinematics,
+    targets: Array,
+    q0: Array,
+    lower: Array,
+    upper: Array,
+    *,
+    max_iterations: int = 100,
+    damping: float = 1e-3,
+    tol: float = CONVERGED,
+    position_only: bool = False,
+) -> tuple[Array, Array]:
+    """:func:`solve_ik` for many independent poses at once, vectorised over them.
+
+    Args:
+        kin: TCP kinematics.
+        targets: wanted T_F_TCP, shape (M, 4, 4).
+        q0: start joints per pose [rad], shape (M, n).
+        lower: lower joint bounds [rad], shape (n,).
+        upper: upper joint bounds [rad], shape (n,).
+        max_iterations: iteration cap.
+        damping: DLS damping λ [-].
+        tol: a pose is done when its error norm is below this [m and rad stacked].
+        position_only: solve for the TCP positions alone (orientation free).
+
+    Returns:
+        joints [rad] (M, n) and the remaining pose error norm per pose (M,).
+    """
+    rows = 3 if position_only else 6
+    q = np.clip(np.array(q0, dtype=float), lower, upper)
+    m, n = q.shape
+    err = np.zeros(m)
+    active = np.arange(m)
+    with np.errstate(invalid="ignore"):  # unbounded (multi-turn) joints have no mid-range
+        mid, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
+    finite = np.isfinite(half)
+    for it in range(max_iterations + 1):
+        if not active.size:
+            break
+        p, R, J = kin.batch(q[active])
+        T = targets[active]
+        e = T[:, :3, 3] - p
+        if not position_only:
+            e = np.concatenate([e, rotation_vectors(T[:, :3, :3] @ np.transpose(R, (0, 2, 1)))], axis=1)
+        J = J[:, :rows]
+        norm = np.linalg.norm(e, axis=1)
+        err[active] = norm
+        going = norm * norm >= tol * tol
+        if it == max_iterations:
+            break
+        active, J, e = active[going], J[going], e[going]
+        if not active.size:
+            break
+        A = J @ np.transpose(J, (0, 2, 1)) + damping**2 * np.eye(rows)
+        dq = np.einsum("kji,kj->ki", J, np.linalg.solve(A, e[:, :, None])[:, :, 0])
+        if n > rows:  # redundant: drift toward mid-range in the null space of the task
+            pull = np.where(finite, (mid - q[active]) / np.where(finite, half, 1.0) ** 2, 0.0)
+            Jp = np.einsum("kij,kj->ki", J, pull)
+            dq += NULLSPACE_GAIN * (
+                pull - np.einsum("kji,kj->ki", J, np.linalg.solve(A, Jp[:, :, None])[:, :, 0])
+            )
+        step = np.max(np.abs(dq), axis=1)
+        dq *= np.where(step > 0.3, 0.3 / np.maximum(step, 1e-300), 1.0)[:, None]
+        q[active] = np.clip(q[active] + dq, lower, upper)
+    return q, err
+
+
+def rotation_vectors(R: Array) -> Array:
+    """Rotation vectors (M, 3) [rad] of rotation matrices (M, 3, 3): the vectorised ``log3``."""
+    cos = np.clip((np.trace(R, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
+    theta = np.arccos(cos)
+    vee = 0.5 * np.stack([R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], axis=1)
+    sin = np.sin(theta)
+    small = theta < 1e-6
+    scale = np.where(small, 1.0 + theta**2 / 6.0, theta / np.where(small, 1.0, sin))
+    out = vee * scale[:, None]
+    near_pi = theta > np.pi - 1e-3  # the skew part vanishes there: take the axis from R + Rᵀ
+    if near_pi.any():
+        out[near_pi] = Rotation.from_matrix(R[near_pi]).as_rotvec()
+    return out
+
+
+COARSE_STEP_M = 0.02
+COARSE_STEP_RAD = 0.05
+"""Largest TCP travel [m] and turn [rad] between the waypoints chained one by one; the waypoints
+between them start from the joints interpolated between their neighbours and are solved together."""
+
+
+def _coarse(targets: Array) -> Array:
+    """Indices of the waypoints to chain one by one: the first, the last, and enough between."""
+    dp = np.linalg.norm(np.diff(targets[:, :3, 3], axis=0), axis=1)
+    R = targets[:, :3, :3]
+    cos = (np.einsum("kij,kij->k", R[1:], R[:-1]) - 1.0) / 2.0
+    dtheta = np.arccos(np.clip(cos, -1.0, 1.0))
+    travel = np.concatenate([[0.0], np.cumsum(np.maximum(dp / COARSE_STEP_M, dtheta / COARSE_STEP_RAD))])
+    # a new chained waypoint wherever the travel since the last one would exceed one step
+    idx = [0]
+    for k in range(1, len(targets)):
+        if travel[k] - travel[idx[-1]] > 1.0:
+            idx.append(k - 1 if k - 1 > idx[-1] else k)
+    if idx[-1] != len(targets) - 1:
+        idx.append(len(targets) - 1)
+    return np.array(idx)
+
+
 def _chain(
+    kin: TcpKinematics, targets: Array, q_first: Array, lower: Array, upper: Array
+) -> tuple[Array, Array]:
+    """IK chained along ``targets`` from ``q_first``.
+
+    Waypoints a coarse step apart (:data:`COARSE_STEP_M`, :data:`COARSE_STEP_RAD`) are chained one
+    by one; those between are solved together (:func:`solve_ik_batch`) from the joints
+    interpolated between their chained neighbours. A span whose waypoints do not all converge
+    close to the interpolation, or a coarse chain that does not converge everywhere, is chained
+    one waypoint at a time instead, so the answer stays on the branch a full chain would follow.
+    """
+    coarse = _coarse(targets)
+    if len(coarse) >= 0.5 * len(targets):
+        return _chain_each(kin, targets, q_first, lower, upper)
+    qs_c, err_c = _chain_each(kin, targets[coarse], q_first, lower, upper)
+    if float(err_c.max()) > CONVERGED:
+        return _chain_each(kin, targets, q_first, lower, upper)
+    N = len(targets)
+    qs, errors = np.empty((N, len(q_first))), np.zeros(N)
+    qs[coarse], errors[coarse] = qs_c, err_c
+    inner = np.setdiff1d(np.arange(N), coarse)
+    seg = np.searchsorted(coarse, inner) - 1  # inner waypoint -> its coarse span
+    a, b = coarse[seg], coarse[seg + 1]
+    t = ((inner - a) / (b - a))[:, None]
+    guess = qs[a] + t * (qs[b] - qs[a])
+    qs[inner], errors[inner] = solve_ik_batch(kin, targets[inner], guess, lower, upper)
+    span = np.abs(qs_c[1:] - qs_c[:-1]).max(axis=1)  # per coarse span
+    off = np.abs(qs[inner] - guess).max(axis=1)
+    bad = (errors[inner] > CONVERGED) | (off > np.maximum(span[seg], 0.05))
+    for j in np.unique(seg[bad]):
+        lo, hi = coarse[j], coarse[j + 1]
+        qs[lo : hi + 1], errors[lo : hi + 1] = _chain_each(kin, targets[lo : hi + 1], qs[lo], lower, upper)
+    return qs, errors
+
+
+def _chain_each(
     kin: TcpKinematics, targets: Array, q_first: Array, lower: Array, upper: Array
 ) -> tuple[Array, Array]:
     qs = np.empty((len(targets), len(q_first)))
@@ -205,8 +361,15 @@ def first_solutions(
     wraps = upper - lower > 2 * np.pi
     free_lower, free_upper = np.where(wraps, -np.inf, lower), np.where(wraps, np.inf, upper)
     found: list[tuple[float, Array]] = []
-    for i, q_start in enumerate(starts):
-        q, err = solve_ik(kin, T_first, q_start, free_lower, free_upper, max_iterations=300)
+    solutions, errors = solve_ik_batch(
+        kin,
+        np.repeat(np.asarray(T_first)[None], len(starts), axis=0),
+        np.array(starts),
+        free_lower,
+        free_upper,
+        max_iterations=300,
+    )
+    for i, (q, err) in enumerate(zip(solutions, errors, strict=True)):
         if err > CONVERGED:
             continue
         key = np.where(wraps, np.mod(q, 2 * np.pi), q)

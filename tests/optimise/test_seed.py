@@ -39,7 +39,9 @@ def test_chained_seed_follows_a_full_turn_of_the_tool_without_leaving_the_limits
     theta = np.linspace(0, 2 * np.pi, n)
     positions = np.column_stack([1.3 + 0.2 * np.cos(theta), 0.2 * np.sin(theta), np.full(n, 0.6)])
     heading = theta + np.pi / 2
-    R = np.stack([np.array([[np.cos(a), np.sin(a), 0], [np.sin(a), -np.cos(a), 0], [0, 0, -1]]) for a in heading])
+    R = np.stack(
+        [np.array([[np.cos(a), np.sin(a), 0], [np.sin(a), -np.cos(a), 0], [0, 0, -1]]) for a in heading]
+    )
     targets = np.tile(np.eye(4), (n, 1, 1))
     targets[:, :3, :3], targets[:, :3, 3] = R, positions
     spec = kin.robot.spec
@@ -48,3 +50,47 @@ def test_chained_seed_follows_a_full_turn_of_the_tool_without_leaving_the_limits
     assert errors.max() < 1e-5
     assert np.all(qs >= lower - 1e-9) and np.all(qs <= upper + 1e-9)
     assert np.degrees(np.abs(np.diff(qs, axis=0)).max()) < 20.0  # continuous: no branch jumps
+
+
+def test_batched_ik_solves_each_pose_as_the_single_pose_ik_does(kin):
+    from refine.optimise.seed import solve_ik, solve_ik_batch
+
+    rng = np.random.default_rng(4)
+    lower, upper = kin.robot.spec.lower, kin.robot.spec.upper
+    q_true = rng.uniform(0.6 * lower, 0.6 * upper, size=(12, 6))
+    targets = kin.poses(q_true)  # reachable poses from Pinocchio's forward kinematics
+    starts = q_true + rng.normal(scale=0.05, size=q_true.shape)
+    q_batch, err_batch = solve_ik_batch(kin, targets, starts, lower, upper)
+    for k in range(len(targets)):
+        q_one, err_one = solve_ik(kin, targets[k], starts[k], lower, upper)
+        np.testing.assert_allclose(q_batch[k], q_one, atol=1e-6)
+        assert err_batch[k] < 1e-6 and err_one < 1e-6
+    np.testing.assert_allclose(kin.poses(q_batch), targets, atol=1e-6)
+
+
+def test_coarse_chain_with_batched_fill_follows_the_one_by_one_chain(kin, straight_tool):
+    from refine.optimise.seed import _chain, _chain_each, _coarse
+    from refine.synthetic import wave_path
+
+    fused = wave_path(800, length_m=1.0)
+    targets = np.zeros((800, 4, 4))
+    targets[:, :3, :3], targets[:, :3, 3], targets[:, 3, 3] = fused.rotations, fused.positions, 1.0
+    assert len(_coarse(targets)) < 200  # most waypoints are filled in by the batch
+    lower, upper = kin.robot.spec.lower, kin.robot.spec.upper
+    q0, _ = _chain_each(kin, targets[:1], np.zeros(6) + [0, 0.3, 0.3, 0, 0.8, 0], lower, upper)
+    qs, errors = _chain(kin, targets, q0[0], lower, upper)
+    qs_ref, _ = _chain_each(kin, targets, q0[0], lower, upper)
+    assert errors.max() < 1e-6
+    np.testing.assert_allclose(qs, qs_ref, atol=1e-5)  # the same IK branch everywhere
+    np.testing.assert_allclose(kin.poses(qs)[:, :3, 3], fused.positions, atol=1e-6)
+
+
+def test_rotation_vectors_match_scipy_including_near_zero_and_half_turns():
+    from scipy.spatial.transform import Rotation
+
+    from refine.optimise.seed import rotation_vectors
+
+    rv = Rotation.random(500, random_state=2).as_rotvec()
+    rv[:5] *= 1e-9
+    rv[5:10] *= (np.pi - 1e-5) / np.linalg.norm(rv[5:10], axis=1)[:, None]
+    np.testing.assert_allclose(rotation_vectors(Rotation.from_rotvec(rv).as_matrix()), rv, atol=1e-8)
