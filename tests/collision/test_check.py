@@ -77,7 +77,7 @@ def test_a_single_waypoint_in_collision_is_one_run(pillar_model, kin):
 
 def test_sub_steps_bound_the_tcp_step_and_every_link_point_step(pillar_model, kin):
     q = np.array([[0.3, 0.2, -0.1, 0.5, 0.4, 0.0], [0.35, 0.25, -0.05, 0.6, 0.5, 2.0]])
-    result = check_path_clearance(pillar_model, q, kin, step_m=0.004, link_step_m=0.005)
+    result = check_path_clearance(pillar_model, q, kin, step_m=0.004, link_step_m=0.005, method="sample")
     sweep = np.abs(q[1] - q[0]) @ joint_reach(pillar_model)
     assert result.segment_samples[0] >= sweep / 0.005
 
@@ -86,7 +86,7 @@ def test_the_tcp_moves_at_most_one_step_between_checks_on_a_curved_segment(pilla
     """A 60 deg swing of joint 1 moves the TCP on an arc 5 % longer than its chord."""
     q = _swing(-120.0, -60.0)
     step = 0.01
-    result = check_path_clearance(pillar_model, q, kin, step_m=step, link_step_m=10.0)
+    result = check_path_clearance(pillar_model, q, kin, step_m=step, link_step_m=10.0, method="sample")
     m = int(result.segment_samples[0])
     chord = np.linalg.norm(np.diff(kin.poses(q)[:, :3, 3], axis=0))
     assert m > chord / step
@@ -98,9 +98,41 @@ def test_a_wrist_flip_with_the_tcp_still_is_sampled_by_the_joint_bound(pillar_mo
     """Joint 6 turns the tool about its own axis: the TCP stays put but the check still sub-steps."""
     q = np.zeros((2, 6))
     q[1, 5] = np.pi
-    result = check_path_clearance(pillar_model, q, kin, step_m=0.001)
+    result = check_path_clearance(pillar_model, q, kin, step_m=0.001, method="sample")
     chord = np.linalg.norm(np.diff(kin.poses(q)[:, :3, 3], axis=0))
     assert chord < 1e-9 and result.segment_samples[0] > 10
+
+
+def test_the_motion_bound_certifies_clear_segments_with_few_queries(pillar_model, kin):
+    q = _swing(-80.0, -45.0, 8)
+    bound = check_path_clearance(pillar_model, q, kin, step_m=0.001, method="bound")
+    dense = check_path_clearance(pillar_model, q, kin, step_m=0.001, method="sample")
+    assert bound.ok and dense.ok
+    assert bound.certified_segments == 7 and dense.certified_segments == 0
+    assert bound.queries < dense.queries / 5
+    # the densely sampled least distance is never below the bound's figure minus twice the largest
+    # body motion between the bound's samples (here, it is simply no lower than the margin)
+    assert dense.min_clearance_m >= -1e-4
+
+
+@pytest.mark.parametrize("offset", [0.04, 0.05, 0.06, 0.08, 0.11])
+def test_the_bound_and_dense_sampling_agree_on_near_misses(offset, irb4600, nozzle, make_model, kin):
+    """Joint 1 swings the nozzle past a 3 cm cube set ``offset`` beyond the nozzle's mid-swing axis.
+
+    Contact needs an offset under 3 cm (nozzle radius) + 1.5 cm (half the cube) + 1 cm (margin), so
+    the offsets straddle it: the motion bound's verdict equals that of sampling every 2 mm.
+    """
+    q = np.radians([[-50.0, 10, 10, 0, 60, 0], [50.0, 10, 10, 0, 60, 0]])
+    T = kin.pose(q.mean(axis=0))
+    centre = T[:3, 3] - 0.2 * T[:3, 2]  # on the nozzle axis, 0.15 m from the flange
+    radial = np.array([centre[0], centre[1], 0.0]) / np.linalg.norm(centre[:2])
+    cube = Shape("cube", "box", pose=make_transform(p=centre + offset * radial), size_m=(0.03, 0.03, 0.03))
+    model = make_model(irb4600, (cube,), (nozzle,))
+    bound = check_path_clearance(model, q, kin, step_m=0.1, method="bound")
+    dense = check_path_clearance(model, q, kin, step_m=0.1, link_step_m=0.002, method="sample")
+    assert bound.ok == dense.ok == (offset > 0.055)
+    if offset > 0.065:
+        assert bound.certified_segments == 1 and bound.queries < dense.queries / 3
 
 
 def test_joint_reach_bounds_the_motion_of_every_body_point(pillar_model, irb4600):
@@ -128,6 +160,8 @@ def test_bad_paths_are_rejected_naming_the_value(pillar_model, kin):
         check_path_clearance(pillar_model, np.zeros((3, 5)), kin, step_m=0.01)
     with pytest.raises(InputError, match="step_m"):
         check_path_clearance(pillar_model, np.zeros((3, 6)), kin, step_m=0.0)
+    with pytest.raises(InputError, match="method"):
+        check_path_clearance(pillar_model, np.zeros((3, 6)), kin, step_m=0.01, method="fast")
     other_tool = TcpKinematics(kin.robot, kin.base_in_world, make_transform(p=[0.0, 0.0, 0.2]))
     with pytest.raises(InputError, match="tcp_in_flange"):
         check_path_clearance(pillar_model, np.zeros((3, 6)), other_tool, step_m=0.01)
