@@ -58,6 +58,9 @@ def _parser() -> argparse.ArgumentParser:
     from refine.batch import add_parser as add_batch
 
     add_batch(sub)
+    from refine.bench.cli import add_parser as add_bench
+
+    add_bench(sub)
     return p
 
 
@@ -76,6 +79,10 @@ def main(argv: list[str] | None = None) -> int:
             from refine.calibrate.cli import run as run_calibrate
 
             return run_calibrate(args)
+        if args.command == "bench":
+            from refine.bench.cli import run as run_bench
+
+            return run_bench(args)
         if args.command == "robots":
             from refine.robot import available_robots, load_robot
 

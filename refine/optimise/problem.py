@@ -91,7 +91,8 @@ class RefinementNLP:
         active: the singularity bounds and linearised rows beyond the per-waypoint ones.
         elastic_deg: None for the strict problem, else the largest extra cone slack [deg].
         derivatives: the ``grad_f``, ``jac_g`` and ``hess_lag`` functions the solver was given
-            (:func:`refine.optimise.derivatives.derivative_functions`).
+            (:func:`refine.optimise.derivatives.derivative_functions`); empty in ``"casadi"`` mode.
+        derivative_mode: how the derivatives are made (see :func:`build_refinement`).
         robot, base_in_world, tcp_in_flange, fused, tolerances: what it was built from.
         build_time_s: wall time of the build [s].
     """
@@ -119,6 +120,7 @@ class RefinementNLP:
     elastic_deg: float | None = None
     build_time_s: float = 0.0
     derivatives: dict[str, ca.Function] = field(default_factory=dict)
+    derivative_mode: str = "assembled"
 
     def rebuilt(self, *, active: ActiveSet | None = None, elastic_deg: float | None = None) -> RefinementNLP:
         """The same problem with another active set or elastic setting (rebuilt, not solved)."""
@@ -133,6 +135,7 @@ class RefinementNLP:
             active=self.active if active is None else active,
             elastic_deg=elastic_deg,
             solver_options=self.solver_options,
+            derivative_mode=self.derivative_mode,
         )
 
     def joints(self, x: Array) -> Array:
@@ -274,6 +277,7 @@ def build_refinement(
     active: ActiveSet | None = None,
     elastic_deg: float | None = None,
     solver_options: dict[str, Any] | None = None,
+    derivative_mode: str = "assembled",
 ) -> RefinementNLP:
     """Build the refinement NLP for ``fused`` on ``robot`` (no solve).
 
@@ -290,6 +294,10 @@ def build_refinement(
             per waypoint [deg]: each cone row gets a slack variable σ_k >= 0 (in cosine units) with
             an L1 penalty, so the answer uses the least slack where it must (repair).
         solver_options: CasADi/IPOPT options overriding :data:`IPOPT_DEFAULTS`.
+        derivative_mode: ``"assembled"`` (compiled per-waypoint kernels, derivatives assembled from
+            their blocks: :mod:`refine.optimise.derivatives`) or ``"casadi"`` (the per-waypoint
+            functions in CasADi's virtual machine, CasADi differentiating the whole problem; slower
+            to build and evaluate, kept for comparison).
 
     Returns:
         The problem with bounds and parameters filled in.
@@ -314,7 +322,15 @@ def build_refinement(
     sigma = x[N * n :]
 
     # ---- path constraints and orientation cost, mapped over the waypoints (compiled kernels)
-    kernels = waypoint_kernels(robot, base_in_world, tcp_in_flange, axisymmetric)
+    if derivative_mode not in ("assembled", "casadi"):
+        raise InputError(f"derivative_mode must be 'assembled' or 'casadi', got {derivative_mode!r}")
+    if derivative_mode == "assembled":
+        kernels = waypoint_kernels(robot, base_in_world, tcp_in_flange, axisymmetric)
+    else:
+        kernels = {
+            "waypoint": waypoint_function(robot, base_in_world, tcp_in_flange, axisymmetric),
+            "singularity": singularity_function(robot, base_in_world, tcp_in_flange),
+        }
     G, cost = kernels["waypoint"].map(N)(Q, P_ref, R_demo)
     if elastic:
         G = ca.vertcat(G[:3, :], G[3, :] + sigma.T)  # cos θ_k + σ_k >= cos α
@@ -361,20 +377,24 @@ def build_refinement(
         lbx, ubx = np.concatenate([lbx, np.zeros(N)]), np.concatenate([ubx, np.full(N, sigma_max)])
     params = path_params(fused)
     nlp = {"x": x, "p": p, "f": f, "g": g}
-    derivatives = derivative_functions(
-        kernels,
-        N=N,
-        n=n,
-        x=x,
-        p=p,
-        f=f,
-        g=g,
-        orientation_coef=coef,
-        K=K,
-        b=b,
-        elastic_weight=ELASTIC_WEIGHT if elastic else None,
-        singular_points=points,
-        linear_rows=[(r.k, r.f, np.asarray(r.gradient, dtype=float)) for r in active.linear_rows],
+    derivatives = (
+        {}
+        if derivative_mode == "casadi"
+        else derivative_functions(
+            kernels,
+            N=N,
+            n=n,
+            x=x,
+            p=p,
+            f=f,
+            g=g,
+            orientation_coef=coef,
+            K=K,
+            b=b,
+            elastic_weight=ELASTIC_WEIGHT if elastic else None,
+            singular_points=points,
+            linear_rows=[(r.k, r.f, np.asarray(r.gradient, dtype=float)) for r in active.linear_rows],
+        )
     )
     options = {**IPOPT_DEFAULTS, **(solver_options or {})}
     return RefinementNLP(
@@ -401,6 +421,7 @@ def build_refinement(
         elastic_deg=elastic_deg,
         build_time_s=time.perf_counter() - t0,
         derivatives=derivatives,
+        derivative_mode=derivative_mode,
     )
 
 

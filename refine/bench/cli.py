@@ -1,0 +1,65 @@
+"""``refine bench``: run benchmark suites (``run``), list them (``list``), write the report (``report``)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from refine.bench.suites import DEFAULT_SUITES
+
+DEFAULT_CSV = Path("out") / "bench" / "bench.csv"
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    """Add the ``bench`` subcommand and its own subcommands."""
+    bench = sub.add_parser("bench", help="benchmark refine against other methods on named suites")
+    actions = bench.add_subparsers(dest="bench_command", required=True)
+    run = actions.add_parser(
+        "run", help="run contenders on suites and append one CSV row per problem and contender"
+    )
+    run.add_argument("--suite", action="append", default=None, help="suite name (repeatable; default: quick)")
+    run.add_argument(
+        "--contender",
+        action="append",
+        default=None,
+        help="contender (repeatable; default: all): refine, refine-casadi-ad, greedy-ik, drake-ik",
+    )
+    run.add_argument("--repeat", type=int, default=1, help="runs per problem and contender (median, minimum)")
+    run.add_argument(
+        "--csv", type=Path, default=DEFAULT_CSV, help=f"CSV to append to (default {DEFAULT_CSV})"
+    )
+    run.add_argument("--suites-file", type=Path, default=DEFAULT_SUITES, help="the suites' TOML file")
+    listing = actions.add_parser("list", help="list the suites and contenders")
+    listing.add_argument("--suites-file", type=Path, default=DEFAULT_SUITES)
+    report = actions.add_parser("report", help="write report.md with tables and log-log plots from a CSV")
+    report.add_argument("csv", type=Path, nargs="?", default=DEFAULT_CSV)
+    report.add_argument("--out", type=Path, default=None, help="folder for report.md (default: the CSV's)")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Carry out ``refine bench ...``; returns the exit status."""
+    from refine.bench.contenders import CONTENDERS
+    from refine.bench.suites import describe, load_suites
+
+    if args.bench_command == "list":
+        for line in describe(load_suites(args.suites_file)):
+            print(line)
+        print("contenders: " + ", ".join(CONTENDERS))
+        return 0
+    if args.bench_command == "report":
+        from refine.bench.report import write_report
+
+        path = write_report(args.csv, args.out or args.csv.parent)
+        print(f"wrote {path}")
+        return 0
+    from refine.bench.runner import run_suites
+
+    rows = run_suites(
+        args.suite or ["quick"],
+        args.contender or list(CONTENDERS),
+        args.csv,
+        suites_file=args.suites_file,
+        repeat=args.repeat,
+    )
+    print(f"{len(rows)} row(s) appended to {args.csv}")
+    return 0

@@ -1,0 +1,206 @@
+"""``refine bench report``: a Markdown report with tables and log-log plots, from the CSV alone."""
+
+from __future__ import annotations
+
+import csv
+import math
+import statistics
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+from refine.bench.suites import growth_exponent
+from refine.errors import InputError
+
+Row = dict[str, str]
+
+
+def read_rows(csv_path: Path) -> list[Row]:
+    """The rows of a benchmark CSV (as strings)."""
+    try:
+        with Path(csv_path).open(newline="") as f:
+            rows = list(csv.DictReader(f))
+    except OSError as e:
+        raise InputError(f"benchmark CSV {csv_path}: {e}") from e
+    if not rows:
+        raise InputError(f"benchmark CSV {csv_path} has no rows")
+    missing = {"suite", "problem", "contender", "total_s", "n_waypoints"} - set(rows[0])
+    if missing:
+        raise InputError(f"benchmark CSV {csv_path}: missing columns {sorted(missing)}")
+    return rows
+
+
+def _f(row: Row, key: str) -> float:
+    try:
+        return float(row.get(key, "") or "nan")
+    except ValueError:
+        return math.nan
+
+
+def _yes(row: Row, key: str) -> bool:
+    return row.get(key, "") == "True"
+
+
+def _fmt(x: float, digits: int = 3) -> str:
+    return "–" if math.isnan(x) else f"{x:.{digits}f}"
+
+
+def _latest(rows: list[Row]) -> list[Row]:
+    """The last row of each (suite, problem, contender): a CSV may hold several runs appended."""
+    last: dict[tuple[str, str, str], Row] = {}
+    for row in rows:
+        last[(row["suite"], row["problem"], row["contender"])] = row
+    return list(last.values())
+
+
+def targets(rows: list[Row]) -> list[str]:
+    """The figures the benchmark is judged by, as Markdown lines (those the CSV has data for)."""
+    by = {(r["problem"], r["contender"]): r for r in rows}
+    lines = []
+    glass = by.get(("glass_adhesive", "refine"))
+    if glass:
+        total = _f(glass, "total_s")
+        line = (
+            f"- Glass cell, refine build + seed + solve: {_fmt(total)} s wall ({_fmt(_f(glass, 'cpu_s'))} s CPU), "
+            f"verified {'yes' if _yes(glass, 'verified') else 'no'}, largest deviation "
+            f"{_fmt(_f(glass, 'max_orientation_deviation_deg'), 2)} deg"
+        )
+        for other in ("drake-ik", "greedy-ik", "refine-casadi-ad"):
+            peer = by.get(("glass_adhesive", other))
+            if peer:
+                line += (
+                    f"; {other} {_fmt(_f(peer, 'total_s'))} s (ratio refine / {other} "
+                    f"{_fmt(total / _f(peer, 'total_s'), 2)}, deviation {_fmt(_f(peer, 'max_orientation_deviation_deg'), 2)} "
+                    f"deg, verified {'yes' if _yes(peer, 'verified') else 'no'})"
+                )
+        lines.append(line)
+    families: dict[str, list[Row]] = defaultdict(list)
+    for r in rows:
+        if r["contender"] == "refine" and "-" in r["problem"] and r["suite"] != "unreachable":
+            families[r["problem"].rsplit("-", 1)[0]].append(r)
+    for family, rs in sorted(families.items()):
+        rs.sort(key=lambda r: int(r["n_waypoints"]))
+        n = np.array([int(r["n_waypoints"]) for r in rs])
+        t = np.array([_f(r, "total_s") for r in rs])
+        c = np.array([_f(r, "cpu_s") for r in rs])
+        at = {int(r["n_waypoints"]): r for r in rs}
+        parts = [
+            f"- {family}: growth exponent of build + seed + solve {_fmt(growth_exponent(n, t), 2)} (wall), "
+            f"{_fmt(growth_exponent(n, c), 2)} (CPU) over {n.min()}-{n.max()} waypoints"
+        ]
+        if 6400 in at:
+            parts.append(
+                f"; 6,400 waypoints {_fmt(_f(at[6400], 'total_s'))} s wall, {_fmt(_f(at[6400], 'cpu_s'))} s CPU"
+            )
+        verified = sum(_yes(r, "verified") for r in rs)
+        parts.append(f"; {verified}/{len(rs)} verified")
+        lines.append("".join(parts))
+    unreachable = [r for r in rows if r["suite"] == "unreachable"]
+    if unreachable:
+        score: dict[str, list[int]] = defaultdict(lambda: [0, 0])
+        for r in unreachable:
+            score[r["contender"]][0] += _yes(r, "success")
+            score[r["contender"]][1] += 1
+        lines.append(
+            "- Unreachable family, success: "
+            + ", ".join(f"{c} {s}/{n}" for c, (s, n) in sorted(score.items()))
+        )
+    return lines
+
+
+def _plot(rows: list[Row], family: str, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax_wall, ax_cpu) = plt.subplots(1, 2, figsize=(9, 3.6))
+    contenders = sorted({r["contender"] for r in rows})
+    for contender in contenders:
+        rs = sorted((r for r in rows if r["contender"] == contender), key=lambda r: int(r["n_waypoints"]))
+        n = [int(r["n_waypoints"]) for r in rs]
+        for ax, key in ((ax_wall, "total_s"), (ax_cpu, "cpu_s")):
+            ax.loglog(n, [_f(r, key) for r in rs], "o-", label=contender)
+    for ax, title in ((ax_wall, "wall time [s]"), (ax_cpu, "CPU time [s]")):
+        ax.set_xlabel("waypoints")
+        ax.set_title(f"{family}: {title}")
+        ax.grid(True, which="both", alpha=0.3)
+    ax_wall.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def write_report(csv_path: Path, out_dir: Path) -> Path:
+    """Write ``report.md`` (and its plots) into ``out_dir`` from the CSV; returns the report's path."""
+    rows = _latest(read_rows(csv_path))
+    out_dir.mkdir(parents=True, exist_ok=True)
+    first = rows[0]
+    dates = sorted(r.get("date", "") for r in rows)
+    lines = [
+        "# refine benchmark",
+        "",
+        f"From `{Path(csv_path).name}`: {len(rows)} rows, {dates[0]} to {dates[-1]}.",
+        "",
+        f"Machine: {first.get('machine', '?')}, {first.get('cpu', '?')}, {first.get('cores', '?')} cores. "
+        f"Python {first.get('python', '?')}, refine {first.get('refine', '?')}, CasADi {first.get('casadi', '?')}, "
+        f"Pinocchio {first.get('pinocchio', '?')}, Drake {first.get('drake') or 'not installed'}.",
+        "",
+        "Times are build + seed + solve of each contender (verification excluded, the same for all); "
+        "wall time is the median over repeats, CPU time the process's. Every answer is verified by the "
+        "same check: TCP position, orientation cone, joint limits, singularity margin, and clearance "
+        "(dense check) where the problem has a cell.",
+        "",
+        "## Targets",
+        "",
+        *targets(rows),
+        "",
+        "## Summary",
+        "",
+        "| suite | contender | problems | success | verified | median wall s | median CPU s |",
+        "|---|---|---:|---:|---:|---:|---:|",
+    ]
+    groups: dict[tuple[str, str], list[Row]] = defaultdict(list)
+    for r in rows:
+        groups[(r["suite"], r["contender"])].append(r)
+    for (suite, contender), rs in sorted(groups.items()):
+        lines.append(
+            f"| {suite} | {contender} | {len(rs)} | {sum(_yes(r, 'success') for r in rs)} | "
+            f"{sum(_yes(r, 'verified') for r in rs)} | {_fmt(statistics.median(_f(r, 'total_s') for r in rs))} | "
+            f"{_fmt(statistics.median(_f(r, 'cpu_s') for r in rs))} |"
+        )
+    for suite in sorted({r["suite"] for r in rows}):
+        srows = sorted(
+            (r for r in rows if r["suite"] == suite),
+            key=lambda r: (r["problem"].rsplit("-", 1)[0], int(r["n_waypoints"]), r["contender"]),
+        )
+        lines += [
+            "",
+            f"## Suite `{suite}`",
+            "",
+            "| problem | N | contender | status | verified | success | build s | seed s | solve s | total s | "
+            "CPU s | iter | max dev deg | min clearance mm | peak RSS MB | note |",
+            "|---|---:|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+        ]
+        for r in srows:
+            clearance = _f(r, "min_clearance_m") * 1e3
+            lines.append(
+                f"| {r['problem']} | {r['n_waypoints']} | {r['contender']} | {r['status']} | "
+                f"{'yes' if _yes(r, 'verified') else 'no'} | {'yes' if _yes(r, 'success') else 'no'} | "
+                f"{_fmt(_f(r, 'build_s'))} | {_fmt(_f(r, 'seed_s'))} | {_fmt(_f(r, 'solve_s'))} | "
+                f"{_fmt(_f(r, 'total_s'))} | {_fmt(_f(r, 'cpu_s'))} | {r.get('iterations', '')} | "
+                f"{_fmt(_f(r, 'max_orientation_deviation_deg'), 2)} | {_fmt(clearance, 1)} | "
+                f"{_fmt(_f(r, 'peak_rss_mb'), 0)} | {(r.get('reason') or r.get('note', ''))[:60]} |"
+            )
+        families = sorted({r["problem"].rsplit("-", 1)[0] for r in srows if "-" in r["problem"]})
+        for family in families:
+            frows = [r for r in srows if r["problem"].rsplit("-", 1)[0] == family]
+            if len({r["n_waypoints"] for r in frows}) < 2:
+                continue
+            png = out_dir / f"{suite}-{family}.png"
+            _plot(frows, family, png)
+            lines += ["", f"![{family}: time against waypoints, log-log]({png.name})"]
+    report = out_dir / "report.md"
+    report.write_text("\n".join(lines) + "\n")
+    return report

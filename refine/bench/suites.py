@@ -1,0 +1,217 @@
+"""Benchmark suites: named lists of problems, read from a TOML data file.
+
+A suite names bundled problem folders (``problems``) and generated path families (``generated``,
+built at each of ``sizes`` waypoints). A generated family is a horizontal sine wave
+(:func:`refine.synthetic.wave_path`) in front of a robot with the tool pointing down, optionally
+with boxes beside the path that are checked for clearance like a cell. Every problem becomes a
+:class:`BenchProblem`: everything a contender needs and the verification all contenders share.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from refine.errors import InputError
+from refine.paths import FusedPath
+from refine.settings import Tolerances
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib  # type: ignore[no-redef]
+
+Array = NDArray[np.float64]
+
+ROOT = Path(__file__).resolve().parents[2]
+DEFAULT_SUITES = ROOT / "benchmarks" / "suites.toml"
+"""The suites file of the repository."""
+
+
+@dataclass
+class BenchProblem:
+    """One benchmark problem, as every contender sees it.
+
+    Attributes:
+        suite: the suite it came from.
+        name: unique name in the suite, e.g. ``glass_adhesive`` or ``irb4600_obstacles-1600``.
+        robot: the loaded robot.
+        fused: CAD points with demonstrated orientations.
+        base_in_world: T_F_R (4, 4).
+        tcp_in_flange: T_flange_TCP (4, 4).
+        tolerances: the problem's tolerances.
+        axisymmetric: only the tool axis is constrained.
+        home: preferred first configuration [rad], or None.
+        sources: constraint sources (clearance) for refine and for the verification.
+        repair_max_slack_deg: the problem's repair setting (None: no repair).
+        max_rounds: outer rounds of the refinement.
+        weights: refine's cost weights for the problem.
+        expected: for the unreachable family, the outcome the problem states (else empty).
+    """
+
+    suite: str
+    name: str
+    robot: Any
+    fused: FusedPath
+    base_in_world: Array
+    tcp_in_flange: Array
+    tolerances: Tolerances
+    axisymmetric: bool
+    home: Array | None = None
+    sources: tuple = ()
+    repair_max_slack_deg: float | None = None
+    max_rounds: int = 8
+    weights: Any = None
+    expected: str = ""
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def n_waypoints(self) -> int:
+        """Number of waypoints."""
+        return len(self.fused)
+
+
+def load_suites(path: Path = DEFAULT_SUITES) -> dict[str, Any]:
+    """The parsed suites file, checked for the keys the runner uses."""
+    try:
+        data = tomllib.loads(Path(path).read_text())
+    except (OSError, tomllib.TOMLDecodeError) as e:
+        raise InputError(f"suites file {path}: {e}") from e
+    suites, generated = data.get("suite", {}), data.get("generated", {})
+    for name, suite in suites.items():
+        unknown = set(suite) - {"problems", "generated", "sizes"}
+        if unknown:
+            raise InputError(f"suites file {path}: [suite.{name}] has unknown keys {sorted(unknown)}")
+        for family in suite.get("generated", []):
+            if family not in generated:
+                raise InputError(
+                    f"suites file {path}: [suite.{name}] names [generated.{family}], not defined"
+                )
+        if suite.get("generated") and not suite.get("sizes"):
+            raise InputError(f"suites file {path}: [suite.{name}] has generated paths but no sizes")
+    return data
+
+
+def problems(data: dict[str, Any], suite: str, *, root: Path = ROOT) -> Iterator[BenchProblem]:
+    """The problems of ``suite``, built one at a time (large paths cost memory)."""
+    if suite not in data.get("suite", {}):
+        raise InputError(f"no suite {suite!r}; suites: {', '.join(sorted(data.get('suite', {})))}")
+    spec = data["suite"][suite]
+    for folder in spec.get("problems", []):
+        yield bundled_problem(suite, root / folder)
+    for family in spec.get("generated", []):
+        for n in spec["sizes"]:
+            yield generated_problem(suite, family, data["generated"][family], int(n))
+
+
+def bundled_problem(suite: str, folder: Path) -> BenchProblem:
+    """A problem folder as the pipeline would refine it (its first pass)."""
+    from refine.pipeline import constraint_sources, fused_path, weights_for
+    from refine.problem import load_problem
+    from refine.robot import load_robot
+
+    problem = load_problem(folder)
+    robot = load_robot(problem.robot.model)
+    toml_file = folder / "problem.toml" if folder.is_dir() else folder
+    expected = str(tomllib.loads(toml_file.read_text()).get("expected", {}).get("status", ""))
+    return BenchProblem(
+        suite=suite,
+        name=problem.name,
+        robot=robot,
+        fused=fused_path(problem),
+        base_in_world=problem.robot.base_in_world,
+        tcp_in_flange=problem.tool.tcp_in_flange,
+        tolerances=problem.tolerances,
+        axisymmetric=problem.tool.axisymmetric,
+        home=None if problem.robot.home_deg is None else np.radians(problem.robot.home_deg),
+        sources=constraint_sources(problem, robot),
+        repair_max_slack_deg=problem.repair.max_slack_deg if problem.repair.enabled else None,
+        max_rounds=problem.collision.max_outer_iterations,
+        weights=weights_for(problem, robot),
+        expected=expected,
+    )
+
+
+def generated_problem(suite: str, family: str, spec: dict[str, Any], n: int) -> BenchProblem:
+    """A sine wave of ``n`` waypoints in front of the family's robot, with its boxes if any."""
+    from refine.collision import CollisionModel
+    from refine.frames import make_transform
+    from refine.optimise.clearance import ClearanceSource
+    from refine.optimise.seed import TcpKinematics
+    from refine.robot import load_robot
+    from refine.settings import CollisionSettings, Shape
+    from refine.synthetic import wave_path
+
+    robot = load_robot(spec["robot"])
+    tool = float(spec.get("tool_length_m", 0.3))
+    tcp = make_transform(p=[0.0, 0.0, tool])
+    fused = wave_path(n, length_m=float(spec.get("length_m", 1.0)), centre=tuple(spec["centre_m"]))
+    sources: tuple = ()
+    boxes = spec.get("boxes", [])
+    if boxes:
+        settings = CollisionSettings()
+        nozzle = Shape(
+            "nozzle",
+            "cylinder",
+            pose=make_transform(p=[0.0, 0.0, 0.5 * (tool - 0.02)]),
+            radius_m=0.02,
+            length_m=tool - 0.02,
+        )
+        cell = tuple(
+            Shape(b["name"], "box", pose=make_transform(p=b["centre_m"]), size_m=tuple(b["size_m"]))
+            for b in boxes
+        )
+        model = CollisionModel(
+            robot,
+            np.eye(4),
+            tcp,
+            (nozzle,),
+            cell,
+            margin_m=settings.margin_m,
+            self_margin_m=settings.self_margin_m,
+        )
+        sources = (ClearanceSource(model, TcpKinematics(robot, np.eye(4), tcp), settings.check_step_m),)
+    return BenchProblem(
+        suite=suite,
+        name=f"{family}-{n}",
+        robot=robot,
+        fused=fused,
+        base_in_world=np.eye(4),
+        tcp_in_flange=tcp,
+        tolerances=Tolerances(),
+        axisymmetric=False,
+        sources=sources,
+        repair_max_slack_deg=None,
+        extra={"family": family, "length_m": float(spec.get("length_m", 1.0)), "obstacles": bool(boxes)},
+    )
+
+
+def describe(data: dict[str, Any]) -> list[str]:
+    """One line per suite: its problems and generated families."""
+    lines = []
+    for name, suite in sorted(data.get("suite", {}).items()):
+        count = len(suite.get("problems", [])) + len(suite.get("generated", [])) * len(suite.get("sizes", []))
+        parts = [f"{len(suite.get('problems', []))} problem folder(s)"]
+        if suite.get("generated"):
+            sizes = suite["sizes"]
+            parts.append(
+                f"{len(suite['generated'])} generated famil{'y' if len(suite['generated']) == 1 else 'ies'} "
+                f"at {sizes[0]}-{sizes[-1]} waypoints"
+            )
+        lines.append(f"{name:12s} {count:3d} problems: {', '.join(parts)}")
+    return lines
+
+
+def growth_exponent(n: Array, t: Array) -> float:
+    """Slope of log t against log n (least squares): 1 for time linear in n."""
+    n, t = np.asarray(n, float), np.asarray(t, float)
+    ok = (n > 0) & (t > 0)
+    if ok.sum() < 2:
+        return math.nan
+    return float(np.polyfit(np.log(n[ok]), np.log(t[ok]), 1)[0])

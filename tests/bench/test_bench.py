@@ -1,0 +1,147 @@
+"""refine bench: suites from data, one CSV row per problem and contender, the report from the CSV."""
+
+from __future__ import annotations
+
+import csv
+
+import numpy as np
+import pytest
+
+from refine.bench import contenders as contenders_module
+from refine.bench.contenders import Answer, Unavailable, verify
+from refine.bench.report import write_report
+from refine.bench.runner import COLUMNS, run_suites, success
+from refine.bench.suites import generated_problem, growth_exponent, load_suites, problems
+from refine.cli import main
+from refine.errors import InputError
+
+SUITES = """
+[suite.tiny]
+generated = ["wave", "wave_box"]
+sizes = [20, 40]
+
+[generated.wave]
+robot = "abb_irb4600_60_205"
+centre_m = [1.3, 0.0, 0.6]
+length_m = 0.3
+tool_length_m = 0.35
+
+[generated.wave_box]
+robot = "abb_irb4600_60_205"
+centre_m = [1.3, 0.0, 0.6]
+length_m = 0.3
+tool_length_m = 0.35
+boxes = [{ name = "post", centre_m = [1.5, 0.0, 0.55], size_m = [0.1, 0.1, 0.3] }]
+"""
+
+
+@pytest.fixture
+def suites_file(tmp_path):
+    path = tmp_path / "suites.toml"
+    path.write_text(SUITES)
+    return path
+
+
+def test_suites_are_data_and_build_their_problems(suites_file):
+    data = load_suites(suites_file)
+    built = list(problems(data, "tiny"))
+    assert [p.name for p in built] == ["wave-20", "wave-40", "wave_box-20", "wave_box-40"]
+    assert [p.n_waypoints for p in built] == [20, 40, 20, 40]
+    assert not built[0].sources and built[2].sources  # the boxes become a clearance check
+    with pytest.raises(InputError, match="no suite 'huge'"):
+        list(problems(data, "huge"))
+
+
+def test_the_repository_suites_name_existing_problems():
+    data = load_suites()
+    assert {"bundled", "scaling", "unreachable", "quick"} <= set(data["suite"])
+    assert data["suite"]["scaling"]["sizes"][0] == 100 and data["suite"]["scaling"]["sizes"][-1] == 10000
+    from refine.bench.suites import ROOT
+
+    for suite in data["suite"].values():
+        for folder in suite.get("problems", []):
+            assert (ROOT / folder / "problem.toml").exists(), folder
+
+
+def test_run_writes_one_row_per_problem_and_contender_and_the_report_reads_the_csv_alone(
+    suites_file, tmp_path, monkeypatch
+):
+    def missing(problem):
+        raise Unavailable("not installed here")
+
+    monkeypatch.setitem(contenders_module.CONTENDERS, "drake-ik", missing)
+    messages = []
+    out = tmp_path / "bench.csv"
+    rows = run_suites(
+        ["tiny"], ["refine", "greedy-ik", "drake-ik"], out, suites_file=suites_file, echo=messages.append
+    )
+    assert len(rows) == 8  # 4 problems x 2 contenders; the missing one is skipped with a message
+    assert any("skipping drake-ik: not installed here" in m for m in messages)
+    with out.open() as f:
+        table = list(csv.DictReader(f))
+    assert list(table[0]) == COLUMNS and len(table) == 8
+    for row in table:
+        assert row["verified"] == "True" and row["success"] == "True", row
+        assert float(row["total_s"]) > 0 and float(row["cpu_s"]) > 0 and row["casadi"]
+        assert float(row["max_position_error_m"]) <= 1e-6
+    refine_rows = [r for r in table if r["contender"] == "refine"]
+    assert all(int(r["iterations"]) > 0 for r in refine_rows)
+    assert all(float(r["max_orientation_deviation_deg"]) <= 3.0 for r in refine_rows)
+    assert all(r["min_clearance_m"] for r in table if r["obstacles"] == "True")
+
+    report = write_report(out, tmp_path / "report")
+    text = report.read_text()
+    assert "| tiny | refine | 4 | 4 | 4 |" in text and "| tiny | greedy-ik | 4 | 4 | 4 |" in text
+    assert "growth exponent" in text and "Machine:" in text
+    assert (tmp_path / "report" / "tiny-wave.png").stat().st_size > 1000
+
+
+def test_success_rules_per_expected_outcome(suites_file):
+    problem = next(problems(load_suites(suites_file), "tiny"))
+    ok = Answer("ok", np.zeros((20, 6)))
+    infeasible = Answer("infeasible", None)
+    repaired = Answer("repaired", np.zeros((20, 6)))
+    assert success(problem, ok, True, False) and not success(problem, ok, False, False)
+    problem.expected = "infeasible"
+    assert success(problem, infeasible, False, False) and not success(problem, ok, False, False)
+    problem.expected = "repaired"
+    assert success(problem, repaired, False, True) and not success(problem, repaired, False, False)
+    assert success(problem, ok, True, False)
+
+
+def test_verification_rejects_an_answer_off_the_path(suites_file):
+    data = load_suites(suites_file)
+    problem = generated_problem("tiny", "wave", data["generated"]["wave"], 20)
+    answer = contenders_module.greedy_ik(problem)
+    assert verify(problem, answer.q).verified
+    moved = answer.q.copy()
+    moved[5, 1] += 0.01  # 10 mrad on the shoulder moves the TCP by centimetres
+    verdict = verify(problem, moved)
+    assert not verdict.verified and verdict.max_position_error_m > 1e-3 and "position" in verdict.reason
+    assert not verify(problem, None).verified
+
+
+def test_growth_exponent_of_a_power_law():
+    n = np.array([100.0, 400.0, 1600.0, 6400.0])
+    assert growth_exponent(n, 3e-4 * n**1.2) == pytest.approx(1.2, abs=1e-9)
+    assert growth_exponent(n, np.full(4, 2.0)) == pytest.approx(0.0, abs=1e-9)
+
+
+def test_bench_command_lists_suites_and_rejects_unknown_contenders(capsys, tmp_path, suites_file):
+    assert main(["bench", "list", "--suites-file", str(suites_file)]) == 0
+    assert "tiny" in capsys.readouterr().out
+    code = main(
+        [
+            "bench",
+            "run",
+            "--suite",
+            "tiny",
+            "--contender",
+            "nope",
+            "--csv",
+            str(tmp_path / "x.csv"),
+            "--suites-file",
+            str(suites_file),
+        ]
+    )
+    assert code == 2 and "unknown contender" in capsys.readouterr().err
