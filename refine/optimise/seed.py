@@ -158,6 +158,8 @@ def solve_ik_batch(
         tol: a pose is done when its error norm is below this [m and rad stacked].
         position_only: solve for the TCP positions alone (orientation free).
 
+    A pose whose error stalls (:data:`STALL_ITERATIONS`) is given up before ``max_iterations``.
+
     Returns:
         joints [rad] (M, n) and the remaining pose error norm per pose (M,).
     """
@@ -169,6 +171,7 @@ def solve_ik_batch(
     with np.errstate(invalid="ignore"):  # unbounded (multi-turn) joints have no mid-range
         mid, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
     finite = np.isfinite(half)
+    best, last_gain = np.full(m, np.inf), np.zeros(m, dtype=int)
     for it in range(max_iterations + 1):
         if not active.size:
             break
@@ -180,7 +183,11 @@ def solve_ik_batch(
         J = J[:, :rows]
         norm = np.linalg.norm(e, axis=1)
         err[active] = norm
-        going = norm * norm >= tol * tol
+        improved = norm < (1.0 - STALL_FRACTION) * best[active]
+        best[active] = np.where(improved, norm, best[active])
+        last_gain[active] = np.where(improved, it, last_gain[active])
+        stalled = it - last_gain[active] >= STALL_ITERATIONS
+        going = (norm * norm >= tol * tol) & ~stalled
         if it == max_iterations:
             break
         active, J, e = active[going], J[going], e[going]
@@ -198,6 +205,12 @@ def solve_ik_batch(
         dq *= np.where(step > 0.3, 0.3 / np.maximum(step, 1e-300), 1.0)[:, None]
         q[active] = np.clip(q[active] + dq, lower, upper)
     return q, err
+
+
+STALL_ITERATIONS = 30
+STALL_FRACTION = 0.01
+"""A pose of :func:`solve_ik_batch` whose error has not fallen by 1 % in 30 iterations is given up
+(a start that leads nowhere, e.g. against a joint limit); its last joints and error are returned."""
 
 
 def rotation_vectors(R: Array) -> Array:
