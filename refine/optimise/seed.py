@@ -68,6 +68,19 @@ class TcpKinematics:
             np.asarray(J).reshape(6, m, n).transpose(1, 0, 2),
         )
 
+    def jacobians(self, qs: Array) -> Array:
+        """:meth:`jacobian` for joint rows ``qs`` (N, n), shape (N, 6, n).
+
+        Pinocchio per row; the change of reference point to the TCP is done for all rows at once.
+        """
+        qs = np.atleast_2d(np.asarray(qs, dtype=float))
+        R_wb = self.base_in_world[:3, :3]
+        J = np.array([self.robot.jacobian(q) for q in qs])
+        Jv, Jw = R_wb @ J[:, :3], R_wb @ J[:, 3:]
+        T_wf = self.base_in_world @ self.robot.fk_many(qs)
+        r = T_wf[:, :3, :3] @ self.tcp_in_flange[:3, 3]  # flange origin -> TCP, world axes (N, 3)
+        return np.concatenate([Jv - np.cross(r[:, :, None], Jw, axis=1), Jw], axis=1)
+
     def jacobian(self, q: Array) -> Array:
         """Geometric Jacobian (6, n) of the TCP, world-aligned axes, linear rows first."""
         R_wb = self.base_in_world[:3, :3]
@@ -147,18 +160,9 @@ def solve_ik_batch(
 ) -> tuple[Array, Array]:
     """:func:`solve_ik` for many independent poses at once, vectorised over them.
 
-    Args:
-        kin: TCP kinematics.
-        targets: wanted T_F_TCP, shape (M, 4, 4).
-        q0: start joints per pose [rad], shape (M, n).
-        lower: lower joint bounds [rad], shape (n,).
-        upper: upper joint bounds [rad], shape (n,).
-        max_iterations: iteration cap.
-        damping: DLS damping λ [-].
-        tol: a pose is done when its error norm is below this [m and rad stacked].
-        position_only: solve for the TCP positions alone (orientation free).
-
-    A pose whose error stalls (:data:`STALL_ITERATIONS`) is given up before ``max_iterations``.
+    The arguments are :func:`solve_ik`'s, with ``targets`` (M, 4, 4) and ``q0`` (M, n) holding one
+    pose and start per row. A pose whose error stalls (:data:`STALL_ITERATIONS`) is given up before
+    ``max_iterations``.
 
     Returns:
         joints [rad] (M, n) and the remaining pose error norm per pose (M,).

@@ -106,7 +106,7 @@ def singularity_measures(kin: TcpKinematics, q: Array) -> tuple[Array, Array]:
         (0 for a robot with fewer than 6 joints).
     """
     scale = np.array([1.0 / kin.robot.spec.reach_m] * 3 + [1.0] * 3)[:, None]
-    Js = np.stack([scale * kin.jacobian(qk) for qk in np.atleast_2d(q)])
+    Js = scale * kin.jacobians(q)
     sv = np.linalg.svd(Js, compute_uv=False)
     w = np.sqrt(np.clip(np.linalg.det(Js @ np.swapaxes(Js, 1, 2)), 0.0, None))
     smin = sv[:, -1] if Js.shape[2] >= 6 else np.zeros(len(Js))

@@ -94,3 +94,19 @@ def test_rotation_vectors_match_scipy_including_near_zero_and_half_turns():
     rv[:5] *= 1e-9
     rv[5:10] *= (np.pi - 1e-5) / np.linalg.norm(rv[5:10], axis=1)[:, None]
     np.testing.assert_allclose(rotation_vectors(Rotation.from_rotvec(rv).as_matrix()), rv, atol=1e-8)
+
+
+def test_jacobians_of_many_rows_equal_the_jacobian_of_each_and_finite_differences(kin):
+    rng = np.random.default_rng(5)
+    qs = rng.uniform(-1.0, 1.0, size=(7, 6))
+    J = kin.jacobians(qs)
+    assert J.shape == (7, 6, 6)
+    for k, q in enumerate(qs):
+        np.testing.assert_allclose(J[k], kin.jacobian(q), atol=1e-12)
+    # linear rows against central differences of the TCP position (Pinocchio forward kinematics)
+    h = 1e-6
+    q = qs[0]
+    fd = np.column_stack(
+        [(kin.pose(q + h * e)[:3, 3] - kin.pose(q - h * e)[:3, 3]) / (2 * h) for e in np.eye(6)]
+    )
+    np.testing.assert_allclose(J[0, :3], fd, atol=1e-6)
