@@ -10,6 +10,7 @@ them, it never skips them.
 
 from __future__ import annotations
 
+import functools
 import importlib
 import json
 import math
@@ -50,24 +51,43 @@ def _known_gap(request, name: str, check: str) -> None:
 
 
 def _same_status(problem, result) -> None:
-    if result.status != problem.expected.status:
-        pytest.skip(
-            f"status {result.status}, not {problem.expected.status} (see test_status_is_the_expected_one)"
-        )
+    assert result.status == problem.expected.status, (
+        f"status {result.status}, not {problem.expected.status}: {result.refinement.reason}"
+    )
 
 
 def _uses_collision(problem) -> bool:
     return problem.collision.enabled and bool(problem.cell or problem.tool.collision)
 
 
-@pytest.fixture(scope="module", params=CASES)
-def run(request):
-    """The problem and its result, solved once per case."""
-    problem = load_problem(FOLDER / request.param)
+PROBLEMS = {name: load_problem(FOLDER / name) for name in CASES}
+
+
+def _cases(applies) -> list[str]:
+    """The cases a check applies to, so that no case is collected only to be skipped."""
+    return [name for name in CASES if applies(PROBLEMS[name])]
+
+
+COLLISION_CASES = _cases(lambda p: "collision" in p.expected.reason)
+REPAIR_CASES = _cases(lambda p: p.expected.status == "repaired")
+REPAIRED_IN_A_CELL = _cases(lambda p: p.expected.status == "repaired" and _uses_collision(p))
+CAUSE_CASES = _cases(lambda p: bool(p.expected.cause))
+
+
+@functools.cache
+def _solved(name: str):
+    """The problem and its result, solved once per case for the whole module."""
+    problem = PROBLEMS[name]
     if _uses_collision(problem):
         # part of the package, not optional: an ImportError here is an error of every case, never a skip
         importlib.import_module("refine.optimise.clearance")
     return problem, solve_problem(problem)
+
+
+@pytest.fixture(params=CASES)
+def run(request):
+    """The problem and its result; a test that applies to some cases only narrows ``params``."""
+    return _solved(request.param)
 
 
 def _overlaps(a: float, b: float, lo_hi: tuple[float, float]) -> bool:
@@ -105,11 +125,10 @@ def test_reason_names_the_constraint_that_forced_it(run, request):
         assert e.reason in refinement.reason, refinement.reason
 
 
+@pytest.mark.parametrize("run", COLLISION_CASES, indirect=True)
 def test_a_collision_names_the_object(run):
     """A collision repair or infeasibility names the cell object it is about."""
     problem, result = run
-    if "collision" not in problem.expected.reason:
-        pytest.skip("not a collision case")
     _same_status(problem, result)
     names = [o.name for o in problem.cell if not o.workpiece]
     refinement = result.refinement
@@ -120,11 +139,10 @@ def test_a_collision_names_the_object(run):
     assert any(n in objects for n in names), f"none of {names} named in {objects!r}"
 
 
+@pytest.mark.parametrize("run", REPAIR_CASES, indirect=True)
 def test_a_repair_stays_within_its_slack_and_the_path_is_verified(run):
     """Repaired means: verified against the widened tolerances, with no more slack than allowed."""
     problem, result = run
-    if problem.expected.status != "repaired":
-        pytest.skip("not a repair case")
     _same_status(problem, result)
     refinement, tol = result.refinement, problem.tolerances
     assert refinement.check.ok, [v.describe() for v in refinement.check.violations]
@@ -180,22 +198,21 @@ def test_nothing_fails_silently(run):
             assert r.slack_deg > 0 and r.index_start <= r.index_end and r.s_start_m <= r.s_end_m
 
 
+@pytest.mark.parametrize("run", REPAIRED_IN_A_CELL, indirect=True)
 def test_a_repaired_path_in_a_cell_keeps_at_least_the_margin_everywhere(run):
     """Checked densely between waypoints: the smallest distance to the cell is at least the margin."""
     problem, result = run
-    if result.status != "repaired" or not _uses_collision(problem):
-        pytest.skip("not a repaired problem with a cell")
+    _same_status(problem, result)
     for p in result.passes:
         assert p.clearance is not None and p.clearance.ok
         assert p.clearance.min_clearance_m >= 0.0, p.clearance.summary()
 
 
+@pytest.mark.parametrize("run", CAUSE_CASES, indirect=True)
 def test_the_diagnosis_names_the_cause_built_into_the_case(run):
     """The segment over the defect names, first, the cause the case was built with."""
     problem, result = run
     e = problem.expected
-    if not e.cause:
-        pytest.skip("no expected cause")
     findings = [f for f in result.refinement.diagnosis if _overlaps(f.s_start_m, f.s_end_m, e.s_range_m)]
     assert findings, f"no diagnosis entry over s = {e.s_range_m}: {result.refinement.diagnosis}"
     assert all(f.status == result.refinement.status for f in findings)
@@ -203,8 +220,8 @@ def test_the_diagnosis_names_the_cause_built_into_the_case(run):
     assert e.cause in named, f"expected {e.cause!r} first, got {[f.describe() for f in findings]}"
 
 
-def test_result_json_diagnosis_follows_its_schema_and_repairs_follow_from_it(run):
-    jsonschema = pytest.importorskip("jsonschema")
+def test_result_json_diagnosis_follows_its_schema_and_repairs_follow_from_it(run, require):
+    jsonschema = require.module("jsonschema")
     _, result = run
     schema = json.loads((FOLDER.parents[1] / "docs" / "diagnosis.schema.json").read_text())
     doc = json.loads(json.dumps(result_dict(result)))  # through JSON, as a caller reads it
