@@ -41,6 +41,12 @@ def _parser() -> argparse.ArgumentParser:
         default=None,
         help="comma-separated program formats overriding [output] programs (available: rapid)",
     )
+    run.add_argument(
+        "--urscript-mode",
+        choices=("program", "script_node"),
+        default=None,
+        help="URScript as a program calling its function (default) or as a PolyScope Script node body",
+    )
     run.add_argument("--json", action="store_true", help="print result.json instead of the summary")
     run.add_argument("--no-report", action="store_true", help="do not write report.html")
     check = sub.add_parser(
@@ -129,6 +135,11 @@ def _run(args: argparse.Namespace, problem) -> int:  # noqa: ANN001 - Problem, i
     from refine.result import summary_lines
 
     out = args.out or Path("out") / problem.file_stem
+    if args.urscript_mode:
+        import dataclasses
+
+        output = dataclasses.replace(problem.output, urscript_mode=args.urscript_mode)
+        problem = dataclasses.replace(problem, output=output)
     from refine.preflight import parse_programs
 
     programs = parse_programs(args.programs, problem)

@@ -404,7 +404,9 @@ def _tool(t: dict[str, Any], path: Path) -> ToolSettings:
         if key not in t:
             raise InputError(f"[tool] missing required key {key!r}")
     _check_types(
-        ToolSettings, {k: v for k, v in t.items() if k in ("name", "axisymmetric", "mass_kg")}, "tool"
+        ToolSettings,
+        {k: v for k, v in t.items() if k in ("name", "axisymmetric", "mass_kg", "number")},
+        "tool",
     )
     out: dict[str, Any] = dict(t)
     out["tcp_in_flange"] = _pose(t["tcp_in_flange"], "tool.tcp_in_flange")
@@ -422,7 +424,8 @@ def _tool(t: dict[str, Any], path: Path) -> ToolSettings:
 
 def _frames(t: dict[str, Any], path: Path) -> FrameSettings:
     _check_keys(t, "frames", _fields(FrameSettings), path)
-    return FrameSettings(**{k: _pose(v, f"frames.{k}") for k, v in t.items()})
+    _check_types(FrameSettings, {k: v for k, v in t.items() if k == "base_number"}, "frames")
+    return FrameSettings(**{k: v if k == "base_number" else _pose(v, f"frames.{k}") for k, v in t.items()})
 
 
 def _cad(t: dict[str, Any], root: Path, path: Path, inside: Path | None) -> CadSettings:
@@ -533,10 +536,12 @@ def _process(t: dict[str, Any], path: Path) -> ProcessSettings:
         value = _number(p["value"], f"process.parameters[{i}].value")
         params.append(ProcessParameter(p["name"], value, p["unit"]))
     _check_types(ProcessSettings, {k: v for k, v in t.items() if k != "parameters"}, "process")
+    scalars = {k: v for k, v in t.items() if k not in ("kind", "output", "parameters")}
     return ProcessSettings(
         kind=t.get("kind", "other"),
         output=t.get("output", "doProcess"),
         parameters=tuple(params),
+        **scalars,
     )
 
 
@@ -546,5 +551,8 @@ def _output(t: dict[str, Any], path: Path) -> OutputSettings:
         programs = t["programs"]
         if not isinstance(programs, list) or not all(isinstance(p, str) for p in programs):
             raise InputError(f'output.programs must be a list of strings such as ["rapid"], got {programs!r}')
-        return OutputSettings(programs=tuple(programs))
-    return OutputSettings()
+    rest = {k: v for k, v in t.items() if k != "programs"}
+    _check_types(OutputSettings, rest, "output")
+    if "programs" in t:
+        rest["programs"] = tuple(t["programs"])
+    return OutputSettings(**rest)

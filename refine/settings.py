@@ -21,6 +21,7 @@ Matrix4 = np.ndarray
 CAD_FORMATS = ("csv", "dxf", "gcode", "mesh", "pathml")
 DEMO_FORMATS = ("liberty_ascii", "liberty_binary", "csv")
 PROGRAM_FORMATS = ("rapid", "krl", "urscript")
+URSCRIPT_MODES = ("program", "script_node")
 SHAPES = ("box", "cylinder", "sphere", "mesh")
 CAUSES = ("reach", "joint limit", "joint wrap", "singularity", "collision", "self-collision", "orientation")
 
@@ -53,6 +54,11 @@ def _in_range(owner: str, name: str, value: float, lo: float, hi: float, unit: s
     if not (ok and lo <= value <= hi):
         u = f" {unit}" if unit else ""
         raise InputError(f"{owner}.{name} must be a finite number in [{lo:g}, {hi:g}]{u}, got {value!r}")
+
+
+def _integer_in(owner: str, name: str, value: int, low: int, high: int) -> None:
+    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+        raise InputError(f"{owner}.{name} must be an integer in {low}..{high}, got {value!r}")
 
 
 def _one_of(owner: str, name: str, value: str, allowed: tuple[str, ...]) -> None:
@@ -129,6 +135,8 @@ class ToolSettings:
         mass_kg: tool mass [kg] for the program's tooldata.
         cog_in_flange_m: tool centre of gravity in the flange frame [m].
         collision: the tool's collision shapes, poses in the flange frame.
+        number: the tool's number on controllers that number their tools (KRL ``TOOL_DATA[n]``,
+            1..16).
     """
 
     name: str
@@ -138,6 +146,7 @@ class ToolSettings:
     mass_kg: float = 5.0
     cog_in_flange_m: tuple[float, float, float] = (0.0, 0.0, 0.1)
     collision: tuple[Shape, ...] = ()
+    number: int = 1
 
     def __post_init__(self) -> None:
         check_transform(self.tcp_in_flange, "tool.tcp_in_flange")
@@ -146,6 +155,7 @@ class ToolSettings:
         _in_range("tool", "mass_kg", self.mass_kg, 0.0, 2000.0, "kg")
         for v in self.cog_in_flange_m:
             _in_range("tool", "cog_in_flange_m[]", v, -5.0, 5.0, "m")
+        _integer_in("tool", "number", self.number, 1, 16)
 
 
 @dataclass(frozen=True)
@@ -155,14 +165,18 @@ class FrameSettings:
     Attributes:
         source_in_world: T_F_S, the tracker receiver (source) in {F}.
         cad_in_world: T_F_CAD, the frame the CAD/CAM coordinates are given in.
+        base_number: the number under which the world {F} is calibrated as a base on controllers
+            that number their bases (KRL ``BASE_DATA[n]``, 1..32).
     """
 
     source_in_world: Matrix4 = field(default_factory=lambda: np.eye(4))
     cad_in_world: Matrix4 = field(default_factory=lambda: np.eye(4))
+    base_number: int = 1
 
     def __post_init__(self) -> None:
         check_transform(self.source_in_world, "frames.source_in_world")
         check_transform(self.cad_in_world, "frames.cad_in_world")
+        _integer_in("frames", "base_number", self.base_number, 1, 32)
 
 
 @dataclass(frozen=True)
@@ -298,18 +312,44 @@ class ProcessSettings:
 
     Attributes:
         kind: ``"glue"``, ``"weld"``, ``"seal"`` or ``"other"``.
-        output: name of the digital output that switches the process on and off.
+        output: name of the digital output that switches the process on and off (the arc of a weld).
         parameters: process values (flow rate, current, ...), written to PathML and programs.
+        lead_s: the output switches this long before the robot reaches the first and the last
+            path point, on the move [s] (the dispenser's opening and closing delay).
+        lead_m: instead of ``lead_s``, this distance before those points [m].
+        gas_output: weld: the shielding-gas valve output.
+        arc_ok_input: weld: the power source's "arc established" input.
+        preflow_s: weld: gas pre-flow before the arc is started [s].
+        arc_timeout_s: weld: how long to wait for the arc signal before stopping with an error [s].
+        crater_fill_s: weld: dwell with the arc on at the end point, filling the crater [s].
+        postflow_s: weld: gas post-flow after the arc is off [s].
     """
 
     kind: str = "other"
     output: str = "doProcess"
     parameters: tuple[ProcessParameter, ...] = ()
+    lead_s: float = 0.0
+    lead_m: float | None = None
+    gas_output: str = "doGas"
+    arc_ok_input: str = "diArcOk"
+    preflow_s: float = 0.5
+    arc_timeout_s: float = 2.0
+    crater_fill_s: float = 0.5
+    postflow_s: float = 3.0
 
     def __post_init__(self) -> None:
         _one_of("process", "kind", self.kind, ("glue", "weld", "seal", "other"))
         for i, p in enumerate(self.parameters):
             _in_range(f"process.parameters[{i}]", "value", p.value, -1e9, 1e9, p.unit)
+        for name in ("lead_s", "preflow_s", "crater_fill_s", "postflow_s"):
+            _non_negative("process", name, getattr(self, name))
+        _positive("process", "arc_timeout_s", self.arc_timeout_s)
+        if self.lead_m is not None:
+            _non_negative("process", "lead_m", self.lead_m)
+            if self.lead_s:
+                raise InputError(
+                    f"process: give lead_s ({self.lead_s} s) or lead_m ({self.lead_m} m), not both"
+                )
 
 
 @dataclass(frozen=True)
@@ -318,13 +358,23 @@ class OutputSettings:
 
     Attributes:
         programs: program formats, from :data:`PROGRAM_FORMATS`.
+        urscript_mode: ``"program"`` (a ``def`` ... ``end`` function called at the end of the file)
+            or ``"script_node"`` (the body alone, for a PolyScope Script node).
+        speed_levels: RAPID: at most this many ``speeddata`` for the path moves.
+        moves_per_routine: RAPID: path moves per ``PROC`` (longer paths are split into several).
     """
 
     programs: tuple[str, ...] = ("rapid",)
+    urscript_mode: str = "program"
+    speed_levels: int = 5
+    moves_per_routine: int = 500
 
     def __post_init__(self) -> None:
         for p in self.programs:
             _one_of("output", "programs[]", p, PROGRAM_FORMATS)
+        _one_of("output", "urscript_mode", self.urscript_mode, URSCRIPT_MODES)
+        _integer_in("output", "speed_levels", self.speed_levels, 1, 100)
+        _integer_in("output", "moves_per_routine", self.moves_per_routine, 10, 100000)
 
 
 @dataclass(frozen=True)

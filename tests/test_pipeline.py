@@ -90,7 +90,9 @@ def test_rapid_module_targets_and_configurations_match_the_refined_joints(glass)
     assert rotation_angle_deg(matrix_from_quaternion(quaternions), traj.poses[:, :3, :3]).max() < 1e-4
     np.testing.assert_array_equal(confs, abb_confdata(load_robot("abb_irb4600_60_205"), traj.q))
     text = (out / "glass_adhesive.mod").read_text()
-    assert text.count("SetDO doGlueGun, 1;") == 1 and text.count("SetDO doGlueGun, 0;") == 1
+    assert "SetDO" not in text  # switched on the move, 80 ms ahead of the first and the last target
+    assert text.count("TriggIO trOn, 0.08 \\Time \\DOp:=doGlueGun, 1;") == 1
+    assert text.count("TriggIO trOff, ") == 1 and text.count(", trOff, ") == 1
 
 
 # ---- the welding and sealing cells -------------------------------------------------------------

@@ -48,6 +48,7 @@ from numpy.typing import NDArray
 
 from refine import __version__
 from refine.errors import InputError
+from refine.export.program import as_passes, header_notes, home_joints, lead_point, singular_runs
 from refine.export.rapid import segment_speeds
 from refine.frames import invert_transform, kuka_abc_from_matrix, make_transform, matrix_from_kuka_abc
 from refine.names import comment_text, identifier
@@ -121,6 +122,21 @@ def kuka_status_turn(robot: Any, q: Array) -> tuple[NDArray[np.int64], NDArray[n
     return (status[0], turn[0]) if q.ndim == 1 else (status, turn)
 
 
+def krl_io_number(name: str, kind: str, default: int) -> tuple[int, str]:
+    """The number of a KRL ``$OUT``/``$IN`` named ``"$OUT[n]"``/``"$IN[n]"`` or ``"n"``, else ``default``.
+
+    Returns:
+        the number and a note for the program's comments.
+    """
+    m = re.fullmatch(rf"\s*(?:\${kind}\[\s*(\d+)\s*\]|(\d+))\s*", name, re.IGNORECASE)
+    if m is None:
+        return default, f"{name!r} mapped to ${kind}[{default}] (refine default)"
+    number = int(m.group(1) or m.group(2))
+    if not 1 <= number <= 4096:
+        raise InputError(f"process I/O {name!r}: KRL has ${kind}[1]..${kind}[4096]")
+    return number, f"{name!r} is ${kind}[{number}]"
+
+
 def _declarations(names: list[str], tr: Trajectory, robot: Any, back: Array) -> list[str]:
     """``DECL E6POS`` of the approach point, every waypoint and the retract point of one pass."""
     n = len(tr)
@@ -136,16 +152,92 @@ def _declarations(names: list[str], tr: Trajectory, robot: Any, back: Array) -> 
     ]
 
 
-def _moves(names: list[str], tr: Trajectory, output: tuple[int, str], air: str, step: float) -> list[str]:
-    """The motion of one pass: approach, output on, the seam, output off, retract."""
-    (number, signal), path, current = output, names[1:-1], None
-    lines = [f"$VEL.CP = {air}", f"PTP {names[0]}", f"LIN {path[0]}", f"$OUT[{number}]=TRUE ; on ({signal})"]
+def _e6axis(q: Array) -> str:
+    """``A1 .. A6`` [deg] and ``E1`` (the seventh axis of an LBR, else 0) of a joint vector."""
+    deg = [_real(v, 4) for v in np.degrees(q)]
+    axes = [f"A{i + 1} {v}" for i, v in enumerate(deg[:6])]
+    ext = [f"E1 {deg[6] if len(deg) > 6 else '0.0'}"] + [f"E{i} 0.0" for i in range(2, 7)]
+    return ",".join(axes + ext)
+
+
+@dataclass(frozen=True)
+class _Io:
+    """The I/O numbers of a program: process output, and for a weld gas output and arc-ok input."""
+
+    out: int
+    gas: int
+    arc_ok: int
+
+
+def _weld_start(io: _Io, problem: Problem) -> list[str]:
+    pr = problem.process
+    timeout_ms = int(round(pr.arc_timeout_s * 1000.0))
+    return [
+        f"$OUT[{io.gas}]=TRUE ; gas pre-flow",
+        f"WAIT SEC {_real(pr.preflow_s, 3)}",
+        f"$OUT[{io.out}]=TRUE ; arc on",
+        f"$TIMER[1]=-{timeout_ms} ; arc start timeout [ms]",
+        "$TIMER_STOP[1]=FALSE",
+        f"WAIT FOR $IN[{io.arc_ok}] OR $TIMER_FLAG[1]",
+        "$TIMER_STOP[1]=TRUE",
+        f"IF NOT $IN[{io.arc_ok}] THEN",
+        f"  $OUT[{io.out}]=FALSE",
+        f"  $OUT[{io.gas}]=FALSE",
+        f"  HALT ; no arc signal within {_real(pr.arc_timeout_s, 3)} s",
+        "ENDIF",
+    ]
+
+
+def _weld_end(io: _Io, problem: Problem) -> list[str]:
+    pr = problem.process
+    return [
+        f"WAIT SEC {_real(pr.crater_fill_s, 3)} ; crater fill",
+        f"$OUT[{io.out}]=FALSE ; arc off",
+        f"WAIT SEC {_real(pr.postflow_s, 3)} ; gas post-flow",
+        f"$OUT[{io.gas}]=FALSE",
+    ]
+
+
+def _trigger(problem: Problem, io: _Io, value: str, lead: float) -> str:
+    """``TRIGGER WHEN`` for the move that follows: ``lead`` [s or m] before its end point."""
+    if problem.process.lead_m is None:
+        return f"TRIGGER WHEN DISTANCE=1 DELAY=-{int(round(lead * 1000.0))} DO $OUT[{io.out}]={value}"
+    return f"TRIGGER WHEN PATH=-{_real(lead * 1000.0, 3)} DELAY=0 DO $OUT[{io.out}]={value}"
+
+
+def _moves(
+    names: list[str], tr: Trajectory, robot: Any, problem: Problem, io: _Io, air: str, step: float
+) -> list[str]:
+    """The motion of one pass: approach, process on, the seam, process off, retract."""
+    path, current, weld = names[1:-1], None, problem.process.kind == "weld"
+    by_time = problem.process.lead_m is None
+    lead = problem.process.lead_s if by_time else float(problem.process.lead_m)
+    along = tr.t if by_time else np.concatenate([[0.0], np.cumsum(_lengths(tr))])
+    off_k, off_lead = lead_point(along, lead)
+    lines = [f"$VEL.CP = {air}", f"PTP {names[0]}"]
+    if weld:
+        lines += [f"LIN {path[0]}", *_weld_start(io, problem)]
+    else:
+        lines += [_trigger(problem, io, "TRUE", lead), f"LIN {path[0]} C_DIS"]
+    sing_on, sing_off = {}, {}
+    for a, b in singular_runs(robot, tr.q):
+        sing_on[max(a, 1)] = f"$ORI_TYPE = #JOINT ; near the wrist singularity at points {a + 1}-{b + 1}"
+        sing_off[min(b + 1, len(tr) - 1)] = "$ORI_TYPE = #VAR"
     for k, v in enumerate(segment_speeds(tr), start=1):
         text = _real(max(round(v / step), 1) * step, 6)
         lines += [f"$VEL.CP = {text}"] if text != current else []
         current = text
-        lines.append(f"LIN {path[k]}" + (" C_DIS" if k < len(path) - 1 else ""))
-    return lines + [f"$OUT[{number}]=FALSE ; off ({signal})", f"$VEL.CP = {air}", f"LIN {names[-1]}"]
+        lines += [sing_on[k]] if k in sing_on else []
+        lines += [_trigger(problem, io, "FALSE", off_lead)] if k == off_k and not weld else []
+        exact = k == len(path) - 1 and weld
+        lines.append(f"LIN {path[k]}" + ("" if exact else " C_DIS"))
+        lines += [sing_off[k]] if k in sing_off else []
+    lines += _weld_end(io, problem) if weld else []
+    return lines + [f"$VEL.CP = {air}", f"LIN {names[-1]}"]
+
+
+def _lengths(tr: Trajectory) -> Array:
+    return np.linalg.norm(np.diff(tr.poses[:, :3, 3], axis=0), axis=1)
 
 
 def write_krl(
@@ -154,7 +246,8 @@ def write_krl(
     problem: Problem,
     robot: Any,
     *,
-    passes: list[tuple[str, Trajectory]] | None = None,
+    passes: list[Any] | None = None,
+    repairs: tuple[Any, ...] = (),
     approximation_m: float = 0.001,
     approach_speed_m_s: float = 0.25,
     retract_m: float = 0.1,
@@ -166,14 +259,16 @@ def write_krl(
     Args:
         path_src: output ``.src`` file; its stem, made a KRL name, names the program and both files.
         trajectory: the refined, timed path (poses in {F}, joints for Status, Turn and E1).
-        problem: tool, robot base, process output.
+        problem: tool and base numbers, home, process output and switching.
         robot: the :class:`refine.robot.Robot` the joints belong to (controller ``"kuka"``).
-        passes: several passes of a multi-pass weld as ``(name, trajectory)`` in order, the root pass
-            included; when given, ``trajectory`` is not written. One fold per pass.
+        passes: several passes of a multi-pass weld as :class:`refine.export.program.ProgramPass`
+            or ``(name, trajectory)`` in order, the root pass included; when given, ``trajectory``
+            is not written. One fold per pass.
+        repairs: the repaired segments of ``trajectory`` (when ``passes`` is not given).
         approximation_m: ``$APO.CDIS`` approximation distance between path points [m].
         approach_speed_m_s: ``$VEL.CP`` of the moves onto the first point and to the retract [m/s].
         retract_m: approach and retract distance along the tool z axis [m].
-        ptp_percent: axis speed of the ``PTP`` approach [% of the maximum].
+        ptp_percent: axis speed of the ``PTP`` moves [% of the maximum].
         speed_resolution_m_s: ``$VEL.CP`` is rounded to this step [m/s].
 
     Returns:
@@ -181,43 +276,74 @@ def write_krl(
     """
     if getattr(robot.spec, "controller", "") != "kuka":
         raise InputError(f"KRL is for KUKA robots; {robot.spec.name!r} is for {robot.spec.controller}")
-    runs = [(problem.name, trajectory)] if passes is None else list(passes)
-    if not runs or any(len(tr) < 2 or tr.q.shape[1] != robot.nq for _, tr in runs):
+    runs = as_passes(problem.name, trajectory, passes, repairs)
+    if any(len(p.trajectory) < 2 or p.trajectory.q.shape[1] != robot.nq for p in runs):
         raise InputError(f"KRL export: needs passes of >= 2 waypoints of {robot.nq} joints, got {len(runs)}")
     if not (speed_resolution_m_s > 0.0 and approach_speed_m_s > 0.0 and approximation_m >= 0.0):
         raise InputError("KRL export: speeds must be > 0 and approximation_m >= 0")
     prog = _name(Path(path_src).stem, "prog")
     src, dat = (Path(path_src).with_name(prog + ext) for ext in (".src", ".dat"))
-    tool, load = _name(f"TOOL_{problem.tool.name}", "TOOL"), _name(f"LOAD_{problem.tool.name}", "LOAD")
-    number = krl_output_number(signal := problem.process.output) or DEFAULT_OUTPUT
-    mapped = "" if krl_output_number(signal) else "mapped to "
-    note = f"process output {signal!r} is {mapped}$OUT[{number}]" + (" (refine default)" if mapped else "")
+    pr, weld = problem.process, problem.process.kind == "weld"
+    out, out_note = krl_io_number(pr.output, "OUT", DEFAULT_OUTPUT)
+    gas, gas_note = krl_io_number(pr.gas_output, "OUT", DEFAULT_OUTPUT + 1)
+    arc_ok, ok_note = krl_io_number(pr.arc_ok_input, "IN", 1)
+    io = _Io(out, gas, arc_ok)
+    tool_n, base_n = problem.tool.number, problem.frames.base_number
     cog = [_real(v * 1000.0, 4) for v in problem.tool.cog_in_flange_m]
     header = f"; Written by refine {__version__} for problem '{comment_text(problem.name)}', robot {problem.robot.model}."
     dat_lines = [
         *("&ACCESS RVP", "&REL 1", f"DEFDAT {prog}", header),
-        "; E6POS: TCP in {F} ($BASE = BASE_WORLD), X Y Z [mm], A B C [deg], S T (E1 = A3 [deg] on an LBR)",
-        f"DECL FRAME {tool}={{{_xyzabc(problem.tool.tcp_in_flange)}}}",
-        f"DECL FRAME BASE_WORLD={{{_xyzabc(invert_transform(problem.robot.base_in_world))}}}",
-        f"DECL LOAD {load}={{M {_real(problem.tool.mass_kg, 4)},CM {{X {cog[0]},Y {cog[1]},Z {cog[2]},"
-        "A 0.0,B 0.0,C 0.0},J {X 0.0,Y 0.0,Z 0.0}}",
+        f"; E6POS: TCP in {{F}} ($BASE = BASE_DATA[{base_n}]), X Y Z [mm], A B C [deg], S T "
+        "(E1 = A3 [deg] on an LBR)",
+        f"; TOOL_DATA[{tool_n}] ({problem.tool.name}) must be {{{_xyzabc(problem.tool.tcp_in_flange)}}}",
+        f"; BASE_DATA[{base_n}] (world {{F}}) must be "
+        f"{{{_xyzabc(invert_transform(problem.robot.base_in_world))}}}",
+        f"; LOAD_DATA[{tool_n}] must be {{M {_real(problem.tool.mass_kg, 4)},CM {{X {cog[0]},Y {cog[1]},"
+        f"Z {cog[2]},A 0.0,B 0.0,C 0.0}},J {{X 0.0,Y 0.0,Z 0.0}}}}",
+        f"DECL E6AXIS XHOMEPOS={{{_e6axis(home_joints(problem, robot, runs[0].trajectory.q[0]))}}}",
     ]
-    src_lines = [*("&ACCESS RVP", "&REL 1", f"DEF {prog}( )"), *_INI, header, f"; {note}"]
-    src_lines += ["$BASE = BASE_WORLD", f"$TOOL = {tool}", f"$LOAD = {load}"]
+    how = f"{_real(pr.lead_s, 4)} s" if pr.lead_m is None else f"{_real(pr.lead_m * 1000.0, 3)} mm"
+    process_lines = (
+        [
+            f"; weld: gas {gas_note} pre-flow {_real(pr.preflow_s, 3)} s, arc {out_note}, wait for "
+            f"{ok_note} up to {_real(pr.arc_timeout_s, 3)} s, crater fill {_real(pr.crater_fill_s, 3)} s, "
+            f"post-flow {_real(pr.postflow_s, 3)} s"
+        ]
+        if weld
+        else [
+            f"; {pr.kind}: {out_note}, switched on the move by TRIGGER, {how} before the first and last point"
+        ]
+    )
+    notes = [line for p in runs for line in header_notes(p, robot)]
+    src_lines = [*("&ACCESS RVP", "&REL 1", f"DEF {prog}( )"), *_INI, header]
+    src_lines += [
+        f"; process output {pr.output!r} -> $OUT[{out}]",
+        *process_lines,
+        *(f"; {n}" for n in notes),
+    ]
+    src_lines += [
+        f"$BASE = BASE_DATA[{base_n}]",
+        f"$TOOL = TOOL_DATA[{tool_n}]",
+        f"$LOAD = LOAD_DATA[{tool_n}]",
+    ]
     src_lines += [f"$APO.CDIS = {_real(approximation_m * 1000.0, 4)}", f"BAS (#VEL_PTP,{int(ptp_percent)} )"]
+    src_lines.append("PTP XHOMEPOS")
     air, back = _real(approach_speed_m_s, 6), make_transform(p=[0.0, 0.0, -retract_m])
-    for i, (pass_name, tr) in enumerate(runs, start=1):
+    for i, p in enumerate(runs, start=1):
+        tr = p.trajectory
         points = [f"XP{k}" if len(runs) == 1 else f"XP{i}_{k}" for k in range(1, len(tr) + 1)]
         names = [f"XAPP{i}", *points, f"XRET{i}"]
         dat_lines += _declarations(names, tr, robot, back)
-        head = f"pass {i} of {len(runs)}: " + comment_text(str(pass_name)).replace(";", ",")
+        head = f"pass {i} of {len(runs)}: " + comment_text(str(p.name)).replace(";", ",")
         src_lines += [f";FOLD {head}", f"  ; {head}, {len(tr)} points, {float(tr.t[-1]):.3f} s planned"]
-        src_lines += [f"  {line}" for line in _moves(names, tr, (number, signal), air, speed_resolution_m_s)]
+        moves = _moves(names, tr, robot, problem, io, air, speed_resolution_m_s)
+        src_lines += [f"  {line}" for line in moves]
         src_lines.append(";ENDFOLD")
+    src_lines.append("PTP XHOMEPOS")
     src.parent.mkdir(parents=True, exist_ok=True)
     src.write_text("\n".join([*src_lines, "END"]) + "\n", encoding="utf-8")
     dat.write_text("\n".join([*dat_lines, "ENDDAT"]) + "\n", encoding="utf-8")
-    log.info("wrote KRL program %s (+ .dat): %d pass(es), $OUT[%d]", src, len(runs), number)
+    log.info("wrote KRL program %s (+ .dat): %d pass(es), $OUT[%d]", src, len(runs), out)
     return src, dat
 
 
@@ -261,39 +387,49 @@ def _fields(body: str, where: str) -> dict[str, float]:
 def parse_krl(path_src: str | Path, path_dat: str | Path) -> list[KrlPass]:
     """Read back the passes of a program written by :func:`write_krl`.
 
+    A pass runs from a ``PTP`` to an approach point to the last ``LIN`` before the next pass; its
+    path points are the moves from the one the process output switches on at (a ``TRIGGER`` belongs
+    to the move after it, an assignment to the move before it) to the one before the retract.
+
     Raises:
         InputError: no pass found, a point used but not declared, or a malformed declaration.
     """
     decls = _DECL_RE.finditer(Path(path_dat).read_text(encoding="utf-8"))
     points = {m.group(1).upper(): _fields(m.group(2), m.group(1)) for m in decls}
+    text = Path(path_src).read_text(encoding="utf-8")
+    head = re.search(r"^;\s*process output .* -> \$OUT\[(\d+)\]", text, re.IGNORECASE | re.MULTILINE)
+    out = int(head.group(1)) if head else DEFAULT_OUTPUT
     passes: list[dict[str, Any]] = []
     label, speed = "", float("nan")
-    for raw in Path(path_src).read_text(encoding="utf-8").splitlines():
+    for raw in text.splitlines():
         if fold := _FOLD_RE.match(raw.strip()):
             label = fold.group(1).strip()
         code = raw.split(";", 1)[0].strip()
+        switch = re.search(rf"\$OUT\[{out}\]\s*=\s*(TRUE|FALSE)", code, re.IGNORECASE)
         if m := re.fullmatch(r"\$VEL\.CP\s*=\s*(\S+)", code, re.IGNORECASE):
             speed = float(m.group(1))
-        elif re.match(r"PTP\s", code, re.IGNORECASE):
-            passes.append({"name": label, "moves": [], "on": None, "off": None, "out": 0})
+        elif m := re.fullmatch(r"PTP\s+(\w+)", code, re.IGNORECASE):
+            if m.group(1).upper() in points:
+                passes.append({"name": label, "moves": [], "on": None, "off": None})
         elif re.match(r"LIN\s", code, re.IGNORECASE) and passes:
             if not (m := re.fullmatch(r"LIN\s+(\w+)(\s+C_DIS)?", code, re.IGNORECASE)):
                 raise InputError(f"KRL {path_src}: cannot read {code!r}")
             if m.group(1).upper() not in points:
                 raise InputError(f"KRL {path_src}: point {m.group(1)} is not declared in {path_dat}")
             passes[-1]["moves"].append((m.group(1).upper(), speed))
-        elif (m := re.fullmatch(r"\$OUT\[(\d+)\]\s*=\s*(TRUE|FALSE)", code, re.IGNORECASE)) and passes:
-            key = "on" if m.group(2).upper() == "TRUE" else "off"
-            passes[-1][key], passes[-1]["out"] = len(passes[-1]["moves"]), int(m.group(1))
+        elif switch and passes:
+            key = "on" if switch.group(1).upper() == "TRUE" else "off"
+            after = 0 if code.upper().startswith("TRIGGER") else -1  # a TRIGGER acts on the next move
+            passes[-1][key] = len(passes[-1]["moves"]) + after
     result = []
     for p in passes:
-        if not p["on"] or p["off"] is None:
-            raise InputError(f"KRL {path_src}: pass {p['name']!r} does not switch its output on and off")
-        moves = p["moves"][p["on"] - 1 : p["off"]]
+        if p["on"] is None or p["off"] is None or p["on"] < 0:
+            raise InputError(f"KRL {path_src}: pass {p['name']!r} does not switch $OUT[{out}] on and off")
+        moves = p["moves"][p["on"] : -1]
         v = np.array([[points[name][k] for k in "X Y Z A B C S T E1".split()] for name, _ in moves])
         names, speeds = tuple(name for name, _ in moves), np.array([s for _, s in moves])
         S, T, R = v[:, 6].astype(np.int64), v[:, 7].astype(np.int64), matrix_from_kuka_abc(v[:, 3:6])
-        result.append(KrlPass(p["name"], names, v[:, :3] / 1000.0, R, S, T, v[:, 8], speeds, p["out"]))
+        result.append(KrlPass(p["name"], names, v[:, :3] / 1000.0, R, S, T, v[:, 8], speeds, out))
     if not result:
         raise InputError(f"KRL {path_src}: no pass (PTP approach followed by LIN moves) found")
     return result

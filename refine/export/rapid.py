@@ -39,6 +39,14 @@ from numpy.typing import NDArray
 
 from refine import __version__
 from refine.errors import InputError
+from refine.export.program import (
+    ProgramPass,
+    header_notes,
+    home_joints,
+    lead_point,
+    singular_runs,
+    speed_levels,
+)
 from refine.frames import continuous_quaternions, invert_transform, quaternion_from_matrix
 from refine.names import comment_text, identifier
 from refine.paths import Array, Trajectory
@@ -47,6 +55,8 @@ from refine.problem import Problem
 log = logging.getLogger(__name__)
 
 _EXTAX = "[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]"
+RAPID_MAX_TIME_LEAD_S = 0.5
+"""``TriggIO \\Time`` is meant for short times before the end point (RAPID reference: below 0.5 s)."""
 _SPEED_TAIL = "500,5000,1000"  # v_ori [deg/s], v_leax [mm/s], v_reax [deg/s]
 
 
@@ -109,12 +119,46 @@ def segment_speeds(trajectory: Trajectory) -> Array:
     return 0.5 * (trajectory.speed[:-1] + trajectory.speed[1:])
 
 
+def _trigg_io(name: str, lead: float, by_time: bool, output: str, value: int) -> str:
+    unit = " \\Time" if by_time else ""
+    amount = _num(lead, 4) if by_time else _num(lead * 1000.0, 3)
+    return f"TriggIO {name}, {amount}{unit} \\DOp:={output}, {value};"
+
+
+def _weld_start(problem: Problem, output: str) -> list[str]:
+    pr = problem.process
+    return [
+        f"SetDO {pr.gas_output}, 1;  ! gas pre-flow",
+        f"WaitTime {_num(pr.preflow_s, 3)};",
+        f"SetDO {output}, 1;  ! arc on",
+        f"WaitDI {pr.arc_ok_input}, 1 \\MaxTime:={_num(pr.arc_timeout_s, 3)} \\TimeFlag:=arcTimeout;",
+        "IF arcTimeout THEN",
+        f"    SetDO {output}, 0;",
+        f"    SetDO {pr.gas_output}, 0;",
+        f'    ErrWrite "Arc start failed", "no {pr.arc_ok_input} within {_num(pr.arc_timeout_s, 3)} s";',
+        "    EXIT;",
+        "ENDIF",
+    ]
+
+
+def _weld_end(problem: Problem, output: str) -> list[str]:
+    pr = problem.process
+    return [
+        f"WaitTime {_num(pr.crater_fill_s, 3)};  ! crater fill",
+        f"SetDO {output}, 0;  ! arc off",
+        f"WaitTime {_num(pr.postflow_s, 3)};  ! gas post-flow",
+        f"SetDO {pr.gas_output}, 0;",
+    ]
+
+
 def write_rapid(
     path: str | Path,
     trajectory: Trajectory,
     problem: Problem,
     robot: Any,
     *,
+    repairs: tuple[Any, ...] = (),
+    pass_name: str = "pass 1",
     zone: str = "z1",
     approach_speed_m_s: float = 0.25,
     retract_m: float = 0.1,
@@ -125,13 +169,15 @@ def write_rapid(
     Args:
         path: output file; the module is named after the problem.
         trajectory: the refined, timed path (poses in {F}, joints for the configuration data).
-        problem: tool data, robot base, process output.
+        problem: tool data, robot base, home, process output and switching, ``[output]``
+            ``speed_levels`` and ``moves_per_routine``.
         robot: the :class:`refine.robot.Robot` the joints belong to (six-axis ABB).
-        zone: zone between path targets (``"z0"``, ``"z1"``, ...); the last target is ``fine``.
+        repairs: the repaired segments of this path (listed in the header).
+        pass_name: the pass's name in the header.
+        zone: zone between path targets (``"z0"``, ``"z1"``, ...).
         approach_speed_m_s: TCP speed of the approach and retract moves [m/s].
         retract_m: approach and retract distance along the tool z axis [m].
-        speed_resolution_m_s: segment speeds are rounded to this step [m/s] (0.1 mm/s by
-            default); equal rounded speeds share one ``speeddata``.
+        speed_resolution_m_s: speed levels are multiples of this step [m/s] (0.1 mm/s by default).
 
     Returns:
         The path written.
@@ -146,14 +192,19 @@ def write_rapid(
         )
     if not re.fullmatch(r"z\d+", zone):
         raise InputError(f"RAPID zone must be z0, z1, z5, ..., got {zone!r}")
+    if not speed_resolution_m_s > 0.0:
+        raise InputError(f"speed_resolution_m_s must be > 0, got {speed_resolution_m_s}")
     module = _identifier(problem.name, "m")
     tool = _identifier(problem.tool.name, "t")
     wobj = "wobjWorld"
-    output = problem.process.output
-    if not re.fullmatch(r"[A-Za-z]\w{0,31}", output):
-        raise InputError(
-            f"process.output {output!r} is not a RAPID signal name (letter, then letters, digits, _)"
-        )
+    pr, weld = problem.process, problem.process.kind == "weld"
+    signals = [pr.output] + ([pr.gas_output, pr.arc_ok_input] if weld else [])
+    for signal in signals:
+        if not re.fullmatch(r"[A-Za-z]\w{0,31}", signal):
+            raise InputError(
+                f"process signal {signal!r} is not a RAPID signal name (letter, then letters, digits, _)"
+            )
+    output = pr.output
     tool_t = problem.tool
     cog = ",".join(_num(v * 1000.0, 4) for v in tool_t.cog_in_flange_m)
 
@@ -162,57 +213,116 @@ def write_rapid(
     width = max(4, len(str(n - 1)))
     names = [f"p{k:0{width}d}" for k in range(n)]
 
-    if not speed_resolution_m_s > 0.0:
-        raise InputError(f"speed_resolution_m_s must be > 0, got {speed_resolution_m_s}")
-    step = speed_resolution_m_s
-    speed_names: dict[str, str] = {}
-    seg_speed = []
-    for v in segment_speeds(trajectory):
-        text = _num(max(round(v / step), 1) * step * 1000.0, 6)
-        seg_speed.append(speed_names.setdefault(text, f"vPath{len(speed_names) + 1}"))
+    # ---- speeds: a few levels, none above the planned speed
+    lengths = np.linalg.norm(np.diff(trajectory.poses[:, :3, 3], axis=0), axis=1)
+    planned = segment_speeds(trajectory)
+    levels, level_of = speed_levels(planned, lengths, problem.output.speed_levels, speed_resolution_m_s)
+    extra_s = float(np.sum(lengths / levels[level_of]) - np.sum(lengths / planned))
+    speed_name = [f"vPath{i + 1}" for i in range(len(levels))]
     retract_mm = _num(retract_m * 1000.0, 3)
 
+    # ---- process switching on the move (not weld: the arc starts and ends standing still)
+    by_time = pr.lead_m is None
+    lead = pr.lead_s if by_time else float(pr.lead_m)
+    approach = retract_m / approach_speed_m_s if by_time else retract_m
+    if by_time and lead > RAPID_MAX_TIME_LEAD_S:
+        raise InputError(
+            f"process.lead_s = {lead:g} s: RAPID TriggIO \\Time allows at most {RAPID_MAX_TIME_LEAD_S} s; "
+            "give lead_m instead"
+        )
+    if not weld and lead > approach:
+        unit = "s" if by_time else "m"
+        raise InputError(
+            f"process lead {lead:g} {unit} is longer than the approach move ({approach:g} {unit})"
+        )
+    off_k, off_lead = lead_point(
+        trajectory.t if by_time else np.concatenate([[0.0], np.cumsum(lengths)]), lead
+    )
+    how = f"{_num(lead, 4)} s" if by_time else f"{_num(lead * 1000.0, 3)} mm"
+
+    move_tail = f"{tool} \\WObj:={wobj};"
+    notes = header_notes(ProgramPass(pass_name, trajectory, tuple(repairs)), robot)
+    process_note = (
+        f"weld: gas {pr.gas_output} pre-flow {_num(pr.preflow_s, 3)} s, arc {output}, wait for "
+        f"{pr.arc_ok_input} up to {_num(pr.arc_timeout_s, 3)} s, crater fill {_num(pr.crater_fill_s, 3)} s, "
+        f"post-flow {_num(pr.postflow_s, 3)} s"
+        if weld
+        else f"{pr.kind}: {output} switched on the move by TriggIO, {how} before the first and the last target"
+    )
     lines = [
         f"MODULE {module}",
         f"    ! Written by refine {__version__} for problem '{comment_text(problem.name)}', robot "
         f"{problem.robot.model}, {n} targets, {float(trajectory.t[-1]):.3f} s planned.",
         f"    ! Targets: TCP poses in the world frame {{F}} ({wobj}); trans [mm], "
         "rot [q1,q2,q3,q4], robconf [cf1,cf4,cf6,cfx] of the refined joints.",
+        f"    ! Process: {process_note}.",
+        f"    ! Speeds: {len(levels)} speeddata levels, each segment at the fastest level not above its "
+        f"planned speed: {extra_s:+.3f} s on the planned path.",
+        *(f"    ! {line}" for line in notes),
         f"    PERS tooldata {tool}:=[TRUE,{_pose(tool_t.tcp_in_flange)},"
         f"[{_num(tool_t.mass_kg, 3)},[{cog}],[1,0,0,0],0,0,0]];",
         f'    PERS wobjdata {wobj}:=[FALSE,TRUE,"",'
         f"{_pose(invert_transform(problem.robot.base_in_world))},[[0,0,0],[1,0,0,0]]];",
+        f"    CONST jointtarget jHome:=[[{','.join(_num(v, 4) for v in np.degrees(home_joints(problem, robot, trajectory.q[0])))}],{_EXTAX}];",
         f"    CONST speeddata vAir:=[{_num(approach_speed_m_s * 1000.0, 3)},{_SPEED_TAIL}];",
     ]
-    lines += [f"    CONST speeddata {name}:=[{text},{_SPEED_TAIL}];" for text, name in speed_names.items()]
+    lines += [
+        f"    CONST speeddata {name}:=[{_num(v * 1000.0, 6)},{_SPEED_TAIL}];"
+        for name, v in zip(speed_name, levels, strict=True)
+    ]
+    lines += ["    VAR bool arcTimeout;"] if weld else ["    VAR triggdata trOn;", "    VAR triggdata trOff;"]
     for k in range(n):
         trans = ",".join(_num(v * 1000.0, 4) for v in trajectory.poses[k, :3, 3])
         rot = ",".join(_num(v, 9) for v in quats[k])
         cf = ",".join(str(int(c)) for c in conf[k])
         lines.append(f"    CONST robtarget {names[k]}:=[[{trans}],[{rot}],[{cf}],{_EXTAX}];")
 
-    move_tail = f"{tool} \\WObj:={wobj};"
-    lines += [
-        "",
-        "    PROC main()",
-        "        ConfJ \\On;",
-        "        ConfL \\On;",
-        f"        MoveJ RelTool({names[0]}, 0, 0, -{retract_mm}), vAir, z10, {move_tail}",
-        f"        MoveL {names[0]}, vAir, fine, {move_tail}",
-        f"        SetDO {output}, 1;",
-    ]
+    # ---- path moves, with the wrist singularity handling around the runs near it
+    sing_on, sing_off = {}, {}
+    for a, b in singular_runs(robot, trajectory.q):
+        sing_on[max(a, 1)] = f"SingArea \\Wrist;  ! near the wrist singularity at targets {a}-{b}"
+        sing_off[min(b + 1, n - 1)] = "SingArea \\Off;"
+    moves = []
     for k in range(1, n):
-        z = "fine" if k == n - 1 else zone
-        lines.append(f"        MoveL {names[k]}, {seg_speed[k - 1]}, {z}, {move_tail}")
-    lines += [
-        f"        SetDO {output}, 0;",
-        f"        MoveL RelTool({names[-1]}, 0, 0, -{retract_mm}), vAir, z10, {move_tail}",
-        "    ENDPROC",
-        "ENDMODULE",
+        if k in sing_on:
+            moves.append(sing_on[k])
+        z = "fine" if k == n - 1 and weld else zone
+        v = speed_name[level_of[k - 1]]
+        if k == off_k and not weld:
+            moves.append(f"TriggL {names[k]}, {v}, trOff, {z}, {move_tail}")
+        else:
+            moves.append(f"MoveL {names[k]}, {v}, {z}, {move_tail}")
+        if k in sing_off:
+            moves.append(sing_off[k])
+    size = problem.output.moves_per_routine
+    chunks = [moves[i : i + size] for i in range(0, len(moves), size)]
+    routines = [f"path_{i + 1}" for i in range(len(chunks))]
+
+    main = ["ConfJ \\On;", "ConfL \\On;", f"MoveAbsJ jHome\\NoEOffs, vAir, fine, {tool};"]
+    main.append(f"MoveJ RelTool({names[0]}, 0, 0, -{retract_mm}), vAir, z10, {move_tail}")
+    if weld:
+        main += [f"MoveL {names[0]}, vAir, fine, {move_tail}", *_weld_start(problem, output)]
+    else:
+        main += [
+            _trigg_io("trOn", lead, by_time, output, 1),
+            _trigg_io("trOff", off_lead, by_time, output, 0),
+            f"TriggL {names[0]}, vAir, trOn, {zone}, {move_tail}",
+        ]
+    main += [f"{r};" for r in routines]
+    main += _weld_end(problem, output) if weld else []
+    main += [
+        f"MoveL RelTool({names[-1]}, 0, 0, -{retract_mm}), vAir, z10, {move_tail}",
+        f"MoveAbsJ jHome\\NoEOffs, vAir, fine, {tool};",
     ]
+    lines += ["", "    PROC main()", *(f"        {ln}" for ln in main), "    ENDPROC"]
+    for r, chunk in zip(routines, chunks, strict=True):
+        lines += ["", f"    PROC {r}()", *(f"        {ln}" for ln in chunk), "    ENDPROC"]
+    lines.append("ENDMODULE")
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    log.info("wrote RAPID module %s: %d targets, %d speeddata", path, n, len(speed_names))
+    log.info(
+        "wrote RAPID module %s: %d targets, %d speeddata, %d routines", path, n, len(levels), len(routines)
+    )
     return path
 
 
@@ -222,7 +332,7 @@ _TARGET_RE = re.compile(
     rf"{_NUMS}\s*,\s*{_NUMS}\s*\]\s*;"
 )
 _SPEED_RE = re.compile(rf"CONST\s+speeddata\s+(\w+)\s*:=\s*{_NUMS}\s*;")
-_MOVE_RE = re.compile(r"\bMove[LJ]\s+(\w+)\s*,\s*(\w+)\s*,")
+_MOVE_RE = re.compile(r"\b(?:Move[LJ]|TriggL)\s+(\w+)\s*,\s*(\w+)\s*,")
 
 
 def _floats(text: str, count: int, where: str) -> list[float]:

@@ -37,6 +37,7 @@ import numpy as np
 
 from refine import __version__
 from refine.errors import InputError, SolverError
+from refine.export.program import as_passes, header_notes, home_joints
 from refine.export.rapid import segment_speeds
 from refine.frames import invert_transform, make_transform, matrix_from_rotvec, rotvec_from_matrix
 from refine.names import comment_text, identifier
@@ -109,13 +110,85 @@ def _approach_joints(robot: Any, q0: Array, T_base_flange: Array, label: str) ->
     return q
 
 
+def _io_number(name: str, kind: str, default: int) -> tuple[int, str]:
+    """A UR standard digital output or input (``"3"``, ``"DO3"`` / ``"DI3"``), else ``default``."""
+    word = "input" if kind == "DI" else "output"
+    m = re.fullmatch(rf"\s*(?:{kind}\s*)?(\d+)\s*", name, re.IGNORECASE)
+    if m is None:
+        return default, f"{name!r} mapped to digital {word} {default} (refine default)"
+    if not 0 <= int(m.group(1)) <= 7:
+        raise InputError(f"process I/O {name!r}: UR standard digital {word}s are 0..7")
+    return int(m.group(1)), f"{name!r} is digital {word} {int(m.group(1))}"
+
+
+def _lead_m(problem: Problem, tr: Trajectory, approach_speed_m_s: float) -> tuple[float, float]:
+    """The process lead as distances [m] before the first point (on) and the last point (off).
+
+    ``lead_m`` is used as it is; ``lead_s`` becomes a distance with the approach speed before the
+    first point and with the planned timing along the path before the last one.
+    """
+    pr = problem.process
+    if pr.lead_m is not None:
+        return float(pr.lead_m), float(pr.lead_m)
+    t_at = max(float(tr.t[-1]) - pr.lead_s, 0.0)
+    return pr.lead_s * approach_speed_m_s, float(tr.s[-1] - np.interp(t_at, tr.t, tr.s))
+
+
+def _switch_threads(out: int) -> list[str]:
+    """Two threads that switch the process output when the TCP comes within a distance of a pose."""
+    lines = ["global on_target = p[0,0,0,0,0,0]", "global on_lead = 0.0"]
+    lines += ["global off_target = p[0,0,0,0,0,0]", "global off_lead = 0.0"]
+    for name, value in (("on", "True"), ("off", "False")):
+        lines += [
+            f"thread process_{name}():",
+            f"  while point_dist(get_actual_tcp_pose(), {name}_target) > {name}_lead:",
+            "    sync()",
+            "  end",
+            f"  set_digital_out({out}, {value})",
+            "end",
+        ]
+    return lines
+
+
+def _weld_start(out: int, gas: int, ok: int, problem: Problem) -> list[str]:
+    pr = problem.process
+    return [
+        f"set_digital_out({gas}, True)  # gas pre-flow",
+        f"sleep({_num(pr.preflow_s, 3)})",
+        f"set_digital_out({out}, True)  # arc on",
+        "arc_wait = 0.0",
+        f"while not get_standard_digital_in({ok}) and arc_wait < {_num(pr.arc_timeout_s, 3)}:",
+        "  sync()",
+        "  arc_wait = arc_wait + get_steptime()",
+        "end",
+        f"if not get_standard_digital_in({ok}):",
+        f"  set_digital_out({out}, False)",
+        f"  set_digital_out({gas}, False)",
+        f'  popup("no arc signal within {_num(pr.arc_timeout_s, 3)} s", "Arc start failed", error=True)',
+        "  halt",
+        "end",
+    ]
+
+
+def _weld_end(out: int, gas: int, problem: Problem) -> list[str]:
+    pr = problem.process
+    return [
+        f"sleep({_num(pr.crater_fill_s, 3)})  # crater fill",
+        f"set_digital_out({out}, False)  # arc off",
+        f"sleep({_num(pr.postflow_s, 3)})  # gas post-flow",
+        f"set_digital_out({gas}, False)",
+    ]
+
+
 def write_urscript(
     path: str | Path,
     trajectory: Trajectory,
     problem: Problem,
     robot: Any,
     *,
-    passes: list[tuple[str, Trajectory]] | None = None,
+    passes: list[Any] | None = None,
+    repairs: tuple[Any, ...] = (),
+    mode: str | None = None,
     acceleration_m_s2: float = 1.2,
     approach_speed_m_s: float = 0.25,
     retract_m: float = 0.1,
@@ -129,16 +202,20 @@ def write_urscript(
     Args:
         path: output file; the program is named after the problem.
         trajectory: the refined, timed path (poses in {F}, joints for the approach).
-        problem: tool, robot base, process output.
+        problem: tool, robot base, home, process output and switching.
         robot: the :class:`refine.robot.Robot` the joints belong to (controller ``"ur"``).
-        passes: several passes of a multi-pass weld as ``(name, trajectory)`` in order, the root pass
-            included; when given, ``trajectory`` is not written. One block per pass.
+        passes: several passes of a multi-pass weld as :class:`refine.export.program.ProgramPass`
+            or ``(name, trajectory)`` in order, the root pass included; when given, ``trajectory``
+            is not written. One block per pass.
+        repairs: the repaired segments of ``trajectory`` (when ``passes`` is not given).
+        mode: ``"program"`` (a function called at the end of the file) or ``"script_node"`` (the
+            body alone, for a PolyScope Script node); ``[output] urscript_mode`` when None.
         acceleration_m_s2: tool acceleration ``a`` of every ``movel`` [m/s^2].
         approach_speed_m_s: tool speed of the moves onto the first waypoint and the retract [m/s].
         retract_m: approach and retract distance along the tool z axis [m].
-        blend_m: blend radius between waypoints [m] (capped, 0 at the ends).
-        joint_speed_rad_s: joint speed of the approach ``movej`` [rad/s].
-        joint_acceleration_rad_s2: joint acceleration of the approach ``movej`` [rad/s^2].
+        blend_m: blend radius between waypoints [m] (capped; 0 at a weld's ends).
+        joint_speed_rad_s: joint speed of the ``movej`` moves [rad/s].
+        joint_acceleration_rad_s2: joint acceleration of the ``movej`` moves [rad/s^2].
         speed_resolution_m_s: segment speeds are rounded to this step [m/s].
 
     Returns:
@@ -148,40 +225,54 @@ def write_urscript(
         raise InputError(
             f"URScript is for UR robots; {robot.spec.name!r} has controller {robot.spec.controller!r}"
         )
-    runs = [(problem.name, trajectory)] if passes is None else list(passes)
-    if not runs:
-        raise InputError("URScript export: passes is empty; give at least one (name, trajectory)")
-    for name, tr in runs:
-        if len(tr) < 2 or tr.q.shape[1] != robot.nq:
+    mode = problem.output.urscript_mode if mode is None else mode
+    if mode not in ("program", "script_node"):
+        raise InputError(f"URScript mode must be 'program' or 'script_node', got {mode!r}")
+    runs = as_passes(problem.name, trajectory, passes, repairs)
+    for p in runs:
+        if len(p.trajectory) < 2 or p.trajectory.q.shape[1] != robot.nq:
             raise InputError(
-                f"URScript pass {name!r}: needs >= 2 waypoints of {robot.nq} joints, got q {tr.q.shape}"
+                f"URScript pass {p.name!r}: needs >= 2 waypoints of {robot.nq} joints, got q {p.trajectory.q.shape}"
             )
     if not (speed_resolution_m_s > 0.0 and approach_speed_m_s > 0.0 and blend_m >= 0.0):
         raise InputError("URScript export: speeds must be > 0 and blend_m >= 0")
     path = Path(path)
     prog = identifier(problem.name, "p", 63)
-    signal = problem.process.output
-    number = ur_output_number(signal)
-    note = f"process output {signal!r} is digital output {number}"
-    if number is None:
-        number = DEFAULT_OUTPUT
-        note = f"process output {signal!r} mapped to digital output {number} (refine default)"
+    pr, weld = problem.process, problem.process.kind == "weld"
+    out, note = _io_number(pr.output, "DO", DEFAULT_OUTPUT)
+    gas, gas_note = _io_number(pr.gas_output, "DO", DEFAULT_OUTPUT + 1)
+    ok, ok_note = _io_number(pr.arc_ok_input, "DI", 0)
     tool = problem.tool
     T_base_world = invert_transform(problem.robot.base_in_world)
     back = make_transform(p=[0.0, 0.0, -retract_m])
     a, air, step = _num(acceleration_m_s2, 6), _num(approach_speed_m_s, 6), speed_resolution_m_s
-    lines = [
-        f"def {prog}():",
-        f"  # Written by refine {__version__} for problem '{comment_text(problem.name)}', robot {problem.robot.model}, "
+    jmove = f"a={_num(joint_acceleration_rad_s2, 6)}, v={_num(joint_speed_rad_s, 6)}"
+    home = home_joints(problem, robot, runs[0].trajectory.q[0])
+    how = f"{_num(pr.lead_s, 4)} s" if pr.lead_m is None else f"{_num(pr.lead_m * 1000.0, 3)} mm"
+    process = (
+        f"weld: gas {gas_note} pre-flow {_num(pr.preflow_s, 3)} s, arc {note}, wait for {ok_note} up to "
+        f"{_num(pr.arc_timeout_s, 3)} s, crater fill {_num(pr.crater_fill_s, 3)} s, post-flow "
+        f"{_num(pr.postflow_s, 3)} s"
+        if weld
+        else f"{pr.kind}: switched on the move by a thread watching the TCP, {how} before the first and "
+        "last waypoint"
+    )
+    body = [
+        f"# Written by refine {__version__} for problem '{comment_text(problem.name)}', robot {problem.robot.model}, "
         f"{len(runs)} pass(es).",
-        "  # Poses: TCP in the robot base frame, p[x, y, z [m], rx, ry, rz (rotation vector) [rad]].",
-        f"  # {note}",
-        f"  set_tcp({_pose(tool.tcp_in_flange)})",
-        f"  set_payload({_num(tool.mass_kg, 4)}, [{', '.join(_num(v, 6) for v in tool.cog_in_flange_m)}])",
+        "# Poses: TCP in the robot base frame, p[x, y, z [m], rx, ry, rz (rotation vector) [rad]].",
+        f"# process output {pr.output!r} -> digital output {out}",
+        f"# {process}",
+        *(f"# {line}" for p in runs for line in header_notes(p, robot)),
+        f"set_tcp({_pose(tool.tcp_in_flange)})",
+        f"set_payload({_num(tool.mass_kg, 4)}, [{', '.join(_num(v, 6) for v in tool.cog_in_flange_m)}])",
+        *([] if weld else _switch_threads(out)),
+        f"movej([{','.join(_num(v, 9) for v in home)}], {jmove})  # home",
     ]
     previous = None
-    for i, (pass_name, tr) in enumerate(runs, start=1):
-        n, label = len(tr), comment_text(str(pass_name))
+    for i, p in enumerate(runs, start=1):
+        tr = p.trajectory
+        n, label = len(tr), comment_text(str(p.name))
         poses = np.concatenate([T_base_world @ tr.poses, [T_base_world @ tr.poses[-1] @ back]])
         q_app = _approach_joints(
             robot, tr.q[0], poses[0] @ back @ invert_transform(tool.tcp_in_flange), label
@@ -191,24 +282,46 @@ def write_urscript(
         gaps = np.linalg.norm(np.diff(poses[:n, :3, 3], axis=0), axis=1)
         blends = np.zeros(n)
         blends[1:-1] = np.minimum(blend_m, 0.4 * np.minimum(gaps[:-1], gaps[1:]))
-        lines += [
-            f"  # pass {i} of {len(runs)}: {label}, {n} waypoints, {float(tr.t[-1]):.3f} s planned",
-            f"  movej([{','.join(_num(v, 9) for v in q_app)}], a={_num(joint_acceleration_rad_s2, 6)}, "
-            f"v={_num(joint_speed_rad_s, 6)})",
-            f"  movel({_pose(poses[0], rv[0])}, a={a}, v={air}, r=0)",
-            f"  set_digital_out({number}, True)",
+        if not weld:  # fly into and out of the path
+            blends[0] = min(blend_m, 0.4 * gaps[0], 0.4 * retract_m)
+            blends[-1] = min(blend_m, 0.4 * gaps[-1], 0.4 * retract_m)
+        on_lead, off_lead = _lead_m(problem, tr, approach_speed_m_s)
+        if on_lead > retract_m:
+            raise InputError(f"process lead {on_lead:g} m is longer than the approach move ({retract_m:g} m)")
+        s_end = np.concatenate([[0.0], np.cumsum(gaps)])
+        off_k = max(int(np.flatnonzero(s_end[-1] - s_end <= off_lead + 1e-12)[0]), 1)
+        body += [
+            f"# pass {i} of {len(runs)}: {label}, {n} waypoints, {float(tr.t[-1]):.3f} s planned",
+            f"movej([{','.join(_num(v, 9) for v in q_app)}], {jmove})",
         ]
+        if weld:
+            body += [
+                f"movel({_pose(poses[0], rv[0])}, a={a}, v={air}, r=0)",
+                *_weld_start(out, gas, ok, problem),
+            ]
+        else:
+            body += [
+                f"on_target = {_pose(poses[0], rv[0])}",
+                f"on_lead = {_num(on_lead, 6)}",
+                "run process_on()",
+                f"movel({_pose(poses[0], rv[0])}, a={a}, v={air}, r={_num(blends[0], 6)})",
+            ]
         for k, v in enumerate(segment_speeds(tr), start=1):
+            if k == off_k and not weld:
+                body += [f"off_target = {_pose(poses[n - 1], rv[n - 1])}", f"off_lead = {_num(off_lead, 6)}"]
+                body.append("run process_off()")
             speed = _num(max(round(v / step), 1) * step, 6)
-            lines.append(f"  movel({_pose(poses[k], rv[k])}, a={a}, v={speed}, r={_num(blends[k], 6)})")
-        lines += [
-            f"  set_digital_out({number}, False)",
-            f"  movel({_pose(poses[n], rv[n])}, a={a}, v={air}, r=0)",
-        ]
-    lines.append("end")
+            body.append(f"movel({_pose(poses[k], rv[k])}, a={a}, v={speed}, r={_num(blends[k], 6)})")
+        body += _weld_end(out, gas, problem) if weld else []
+        body.append(f"movel({_pose(poses[n], rv[n])}, a={a}, v={air}, r=0)")
+    body.append(f"movej([{','.join(_num(v, 9) for v in home)}], {jmove})  # home")
+    if mode == "program":
+        lines = [f"def {prog}():", *(f"  {ln}" for ln in body), "end", f"{prog}()"]
+    else:
+        lines = [f"# PolyScope Script node: {prog}", *body]
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    log.info("wrote URScript %s: %d pass(es), digital output %d", path, len(runs), number)
+    log.info("wrote URScript %s (%s): %d pass(es), digital output %d", path, mode, len(runs), out)
     return path
 
 
@@ -257,38 +370,46 @@ def _transform(text: str, where: str) -> Array:
 
 
 def parse_urscript(path: str | Path) -> list[UrPass]:
-    """Read back the passes of a program written by :func:`write_urscript`.
+    """Read back the passes of a program written by :func:`write_urscript` (either mode).
+
+    A pass starts at its ``# pass i of n`` comment; its first ``movej`` is the approach. Its
+    waypoints are the ``movel`` moves from the one the process output switches on at (a started
+    ``process_on`` thread belongs to the move after it, ``set_digital_out`` to the move before it)
+    to the one before the retract.
 
     Raises:
         InputError: no pass found, a pass that does not switch its output, or a malformed pose.
     """
-    tcp, label = np.eye(4), ""
+    text = Path(path).read_text(encoding="utf-8")
+    head = re.search(r"#\s*process output .* -> digital output (\d+)", text)
+    out = int(head.group(1)) if head else DEFAULT_OUTPUT
+    tcp = np.eye(4)
     passes: list[dict[str, Any]] = []
-    for raw in Path(path).read_text(encoding="utf-8").splitlines():
+    for raw in text.splitlines():
         line = raw.strip()
         if m := re.match(r"#\s*pass\s+\d+\s+of\s+\d+:\s*(.*?)(?:, \d+ waypoints,.*)?$", line):
-            label = m.group(1)
+            passes.append({"name": m.group(1), "q": None, "moves": [], "on": None, "off": None})
         elif m := re.fullmatch(rf"set_tcp\(p{_NUMS}\)", line):
             tcp = _transform(m.group(1), "set_tcp")
-        elif m := re.match(rf"movej\({_NUMS}", line):
-            q = _vector(m.group(1), None, "movej")
-            passes.append({"name": label, "q": q, "moves": [], "on": None, "off": None, "out": -1})
+        elif (m := re.match(rf"movej\({_NUMS}", line)) and passes and passes[-1]["q"] is None:
+            passes[-1]["q"] = _vector(m.group(1), None, "movej")
         elif line.startswith("movel(") and passes:
             if not (m := _MOVEL_RE.fullmatch(line)):
                 raise InputError(f"URScript {path}: cannot read {line!r}")
             passes[-1]["moves"].append((m.group(1), float(m.group(3)), float(m.group(4))))
-        elif (m := re.fullmatch(r"set_digital_out\((\d+),\s*(True|False)\)", line)) and passes:
-            key = "on" if m.group(2) == "True" else "off"
-            passes[-1][key], passes[-1]["out"] = len(passes[-1]["moves"]), int(m.group(1))
+        elif (m := re.fullmatch(r"run process_(on|off)\(\)", line)) and passes:
+            passes[-1][m.group(1)] = len(passes[-1]["moves"])
+        elif (m := re.match(rf"set_digital_out\({out},\s*(True|False)\)", line)) and passes:
+            passes[-1]["on" if m.group(1) == "True" else "off"] = len(passes[-1]["moves"]) - 1
     result = []
     for p in passes:
-        if not p["on"] or p["off"] is None:
+        if p["on"] is None or p["off"] is None or p["on"] < 0 or p["q"] is None:
             raise InputError(f"URScript {path}: pass {p['name']!r} does not switch its output on and off")
-        moves = p["moves"][p["on"] - 1 : p["off"]]
+        moves = p["moves"][p["on"] : -1]
         poses = np.array([_transform(text, "movel") for text, _, _ in moves])
         rotvecs = np.array([_vector(text, 6, "movel")[3:] for text, _, _ in moves])
         speeds, radii = np.array([v for _, v, _ in moves]), np.array([r for _, _, r in moves])
-        result.append(UrPass(p["name"], poses, rotvecs, speeds, radii, p["q"], p["out"], tcp))
+        result.append(UrPass(p["name"], poses, rotvecs, speeds, radii, p["q"], out, tcp))
     if not result:
         raise InputError(f"URScript {path}: no pass (movej approach followed by movel moves) found")
     return result

@@ -85,19 +85,26 @@ def write_outputs(result: RunResult, out_dir: Path, programs: tuple[str, ...]) -
         outputs["pathml"] = write_pathml(
             out_dir / f"{name}.aml", concatenate(trajectories), problem, layers=_pathml_layers(done, problem)
         )
-    named = [(p.name, t) for p, t in zip(done, trajectories, strict=True)]
+    from refine.export.program import ProgramPass
+
+    named = [ProgramPass(p.name, t, p.refinement.repairs) for p, t in zip(done, trajectories, strict=True)]
     for kind in programs:
         if kind == "rapid":
             from refine.export import write_rapid
 
             if len(named) == 1:
                 outputs["rapid"] = write_rapid(
-                    out_dir / f"{name}.mod", trajectories[0], problem, result.robot
+                    out_dir / f"{name}.mod", trajectories[0], problem, result.robot, repairs=named[0].repairs
                 )
             for k, (p, t) in enumerate(zip(done, trajectories, strict=True), start=1):
                 if len(named) > 1:
                     outputs[f"rapid_{k}"] = write_rapid(
-                        out_dir / f"{name}_L{p.layer}P{p.index}.mod", t, problem, result.robot
+                        out_dir / f"{name}_L{p.layer}P{p.index}.mod",
+                        t,
+                        problem,
+                        result.robot,
+                        repairs=p.refinement.repairs,
+                        pass_name=p.name,
                     )
         elif kind == "krl":
             from refine.export.krl import write_krl
@@ -107,7 +114,7 @@ def write_outputs(result: RunResult, out_dir: Path, programs: tuple[str, ...]) -
                 trajectories[0],
                 problem,
                 result.robot,
-                passes=named if len(named) > 1 else None,
+                passes=named,
             )
             outputs["krl_src"], outputs["krl_dat"] = src, dat
         elif kind == "urscript":
@@ -118,6 +125,6 @@ def write_outputs(result: RunResult, out_dir: Path, programs: tuple[str, ...]) -
                 trajectories[0],
                 problem,
                 result.robot,
-                passes=named if len(named) > 1 else None,
+                passes=named,
             )
     return outputs

@@ -119,7 +119,9 @@ def test_status_turn_and_e1_written_are_those_of_the_refined_joints(program, sea
     assert len(set(run.turn)) > 1, "the seam should cross axis sign changes"
 
 
-def test_a_status_change_along_a_pass_is_reported_as_a_singularity(tmp_path, seam, iiwa_problem, iiwa, caplog):
+def test_a_status_change_along_a_pass_is_reported_as_a_singularity(
+    tmp_path, seam, iiwa_problem, iiwa, caplog
+):
     """A LIN motion keeps its start Status; the seam's A6 crosses 0 (a wrist singularity) mid-pass."""
     with caplog.at_level(logging.WARNING, logger="refine.export.krl"):
         write_krl(tmp_path / "w.src", seam, iiwa_problem, iiwa)
@@ -132,12 +134,15 @@ def test_a_status_change_along_a_pass_is_reported_as_a_singularity(tmp_path, sea
 
 
 def test_tool_base_and_points_chain_to_the_flange_pose(program, seam, iiwa_problem, iiwa):
-    """$BASE · E6POS == base-frame TCP == fk(q) · $TOOL, with both frames read from the .dat."""
+    """$BASE · E6POS == base-frame TCP == fk(q) · $TOOL, both frames as the .dat says to calibrate them."""
     src, dat = program
-    frames = {m[0]: _frame(m[1]) for m in re.findall(r"DECL FRAME (\w+)=\{([^}]*)\}", dat.read_text())}
+    frames = {
+        m[0]: _frame(m[1])
+        for m in re.findall(r"; ((?:TOOL|BASE)_DATA\[\d+\]) .*must be \{([^}]*)\}", dat.read_text())
+    }
     text = src.read_text()
-    tool = frames[re.search(r"\$TOOL = (\w+)", text)[1]]
-    base = frames[re.search(r"\$BASE = (\w+)", text)[1]]
+    tool = frames[re.search(r"\$TOOL = (\w+\[\d+\])", text)[1]]
+    base = frames[re.search(r"\$BASE = (\w+\[\d+\])", text)[1]]
     np.testing.assert_allclose(tool, iiwa_problem.tool.tcp_in_flange, atol=1e-6)
     np.testing.assert_allclose(base, invert_transform(iiwa_problem.robot.base_in_world), atol=1e-6)
     (run,) = parse_krl(src, dat)
@@ -160,13 +165,17 @@ def test_program_is_structurally_sane(program, seam):
     assert dat_lines[2].startswith("DEFDAT ") and dat_lines[-1] == "ENDDAT"
     declared = re.findall(r"^DECL E6POS (\w+)=", dat.read_text(), re.M)
     used = re.findall(r"^\s*(?:PTP|LIN) (\w+)", src.read_text(), re.M)
+    assert used[0] == used[-1] == "XHOMEPOS" and "DECL E6AXIS XHOMEPOS={A1 " in dat.read_text()
+    used = used[1:-1]
     assert len(declared) == len(set(declared)) == len(seam) + 2
     assert set(used) == set(declared) and len(used) == len(declared)
     lin = re.findall(r"^\s*LIN (XP\d+)( C_DIS)?$", src.read_text(), re.M)
     assert [bool(c) for _, c in lin] == [False] + [True] * (len(seam) - 2) + [False]
     body = src.read_text()
     assert body.index("LIN XP1\n") < body.index("$OUT[1]=TRUE") < body.index("LIN XP2 ")
-    assert body.index(f"LIN XP{len(seam)}\n") < body.index("$OUT[1]=FALSE") < body.index("LIN XRET1")
+    assert (
+        body.index(f"LIN XP{len(seam)}\n") < body.index("$OUT[1]=FALSE ; arc off") < body.index("LIN XRET1")
+    )
     assert "doArc" in body and "mapped to $OUT[1]" in body
 
 

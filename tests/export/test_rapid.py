@@ -25,10 +25,13 @@ def test_round_trip_recovers_positions_and_orientations(module, trajectory):
     assert np.all(np.sum(quats[1:] * quats[:-1], axis=1) > 0.0), "quaternion signs jump"
 
 
-def test_each_target_is_reached_at_its_segment_speed(module, trajectory):
+def test_each_target_is_reached_at_a_few_speed_levels_never_above_its_planned_speed(module, trajectory):
     _, _, _, speeds = parse_rapid_targets(module)
     assert speeds[0] == pytest.approx(0.25)  # the approach onto the first target
-    np.testing.assert_allclose(speeds[1:], segment_speeds(trajectory), rtol=0, atol=0.5e-4 + 1e-12)
+    planned = segment_speeds(trajectory)
+    assert np.all(speeds[1:] <= planned + 1e-12)
+    assert np.all(speeds[1:] >= 0.8 * planned), "a level far below the planned speed"
+    assert len(set(speeds[1:].tolist())) <= 5 == len(re.findall(r"speeddata vPath", module.read_text()))
 
 
 def test_written_confdata_is_that_of_the_refined_joints(module, trajectory, irb4600):
@@ -58,10 +61,13 @@ def test_module_is_syntactically_sane(module, trajectory, problem):
     lines = [ln.strip() for ln in text.splitlines()]
     assert lines[0].startswith("MODULE ") and lines[-1] == "ENDMODULE"
     assert sum(ln.startswith("MODULE ") for ln in lines) == 1
-    assert sum(ln.startswith("PROC ") for ln in lines) == sum(ln == "ENDPROC" for ln in lines) == 1
+    procs = [ln for ln in lines if ln.startswith("PROC ")]
+    assert len(procs) == sum(ln == "ENDPROC" for ln in lines) >= 2
     code = [ln for ln in lines if ln and not ln.startswith("!")]
     assert all(
-        ln.endswith(";") for ln in code if not ln.startswith(("MODULE", "ENDMODULE", "PROC", "ENDPROC"))
+        ln.split("!")[0].strip().endswith(";")
+        for ln in code
+        if not ln.startswith(("MODULE", "ENDMODULE", "PROC", "ENDPROC"))
     )
     assert all(ln.count("[") == ln.count("]") and ln.count("(") == ln.count(")") for ln in code)
     targets = re.findall(r"CONST robtarget (\w+):=", text)
@@ -69,16 +75,14 @@ def test_module_is_syntactically_sane(module, trajectory, problem):
     body = text.split("PROC main()")[1]
     for name in targets:
         assert re.search(rf"\b{name}\b", body), f"robtarget {name} never used"
-    speeds = re.findall(r"CONST speeddata (\w+):=", text)
-    assert all(re.search(rf"\b{name}\b", body) for name in speeds)
-    moves = re.findall(r"^\s*MoveL (p\d+), \w+, (\w+),", body, re.M)
+    moves = re.findall(r"^\s*(?:MoveL|TriggL) (p\d+), \w+, (?:trO\w+, )?(\w+),", body, re.M)
     assert [m[0] for m in moves] == targets
-    zones = [m[1] for m in moves]
-    assert zones[0] == "fine" and zones[-1] == "fine" and set(zones[1:-1]) == {"z1"}
-    on = body.index(f"SetDO {problem.process.output}, 1;")
-    off = body.index(f"SetDO {problem.process.output}, 0;")
-    assert body.index(f"MoveL {targets[0]},") < on < body.index(f"MoveL {targets[1]},")
-    assert body.index(f"MoveL {targets[-1]},") < off < body.index("ENDPROC")
+    assert {m[1] for m in moves} == {"z1"}, "a glue path flies through, also at its ends"
+    main = body.split("ENDPROC")[0]
+    assert main.count("MoveAbsJ jHome") == 2 and "CONST jointtarget jHome:=" in text
+    on = f"TriggIO trOn, 0 \\Time \\DOp:={problem.process.output}, 1;"
+    assert main.index(on) < main.index(f"TriggL {targets[0]}, vAir, trOn,")
+    assert "SetDO" not in body
     assert "PERS tooldata glue_gun:=[TRUE,[[10,0,220]," in text
     assert "[4.5,[0,10,80],[1,0,0,0],0,0,0]]" in text
 

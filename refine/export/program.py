@@ -1,0 +1,181 @@
+r"""What every robot program writer shares: passes with their repairs, home, singular runs, speeds.
+
+* :class:`ProgramPass`: one pass to write, its timed trajectory and the segments a repair changed
+  (their waypoint range, arc length, extra orientation slack and cause); a program's header lists
+  them so the programmer sees what differs from the demonstration.
+* :func:`home_joints`: the home joint position a program starts and ends at: ``[robot] home_deg``
+  when the problem gives one, else the refined joints at the first waypoint.
+* :func:`singular_runs`: the waypoints near the wrist singularity, where the wrist axis (axis 5 of
+  a six-axis arm, axis 6 of a seven-axis LBR) is within :data:`WRIST_SINGULAR_DEG` of 0 or ±180 deg
+  (there the axes before and after it line up). Programs hand these segments to the controller's
+  wrist-singularity handling (RAPID ``SingArea \Wrist``, KRL ``$ORI_TYPE = #JOINT``) with a
+  comment.
+* :func:`speed_levels`: a few speeds for many segments: each segment runs at the fastest level
+  not above its planned speed, and the levels are chosen (exact dynamic programme over the
+  distinct rounded speeds) to add the least time to the path.
+* :func:`lead_point`: where on the path a switch ``lead`` before its end falls.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from refine.errors import InputError
+from refine.optimise.verify import runs
+from refine.paths import Array, Trajectory
+from refine.problem import Problem
+
+WRIST_SINGULAR_DEG = 10.0
+"""A waypoint is near the wrist singularity when the wrist axis is this close to 0 or ±180 deg."""
+
+
+@dataclass(frozen=True)
+class ProgramPass:
+    """One pass a program writes.
+
+    Attributes:
+        name: pass name (``"pass 1"``, ``"layer 2 pass 1"``).
+        trajectory: the timed path.
+        repairs: the segments a repair gave extra orientation slack, as
+            :class:`refine.optimise.solve.Repair` (waypoint indices of this pass).
+    """
+
+    name: str
+    trajectory: Trajectory
+    repairs: tuple[Any, ...] = ()
+
+
+def as_passes(
+    name: str, trajectory: Trajectory, passes: list[Any] | None, repairs: tuple[Any, ...] = ()
+) -> list[ProgramPass]:
+    """The passes to write: ``passes`` (``ProgramPass`` or ``(name, trajectory)``) or the one trajectory."""
+    if passes is None:
+        return [ProgramPass(name, trajectory, tuple(repairs))]
+    out = [p if isinstance(p, ProgramPass) else ProgramPass(str(p[0]), p[1]) for p in passes]
+    if not out:
+        raise InputError("program export: passes is empty; give at least one (name, trajectory)")
+    return out
+
+
+def home_joints(problem: Problem, robot: Any, q_first: Array) -> Array:
+    """The home joint position [rad], shape (n,): ``[robot] home_deg`` or the first waypoint's joints."""
+    home = problem.robot.home_deg
+    if home is None:
+        return np.asarray(q_first, dtype=float).copy()
+    if len(home) != robot.nq:
+        raise InputError(f"robot.home_deg has {len(home)} values; {robot.spec.name!r} has {robot.nq} joints")
+    return np.radians(np.asarray(home, dtype=float))
+
+
+def wrist_axis(robot: Any) -> int:
+    """0-based index of the wrist axis whose zero is the wrist singularity (5th of 6, 6th of 7)."""
+    if robot.nq == 6:
+        return 4
+    if robot.nq == 7:
+        return 5
+    raise InputError(f"wrist singularity: no rule for {robot.spec.name!r} with {robot.nq} joints")
+
+
+def singular_runs(robot: Any, q: Array, threshold_deg: float = WRIST_SINGULAR_DEG) -> list[tuple[int, int]]:
+    """First and last waypoint (inclusive) of each run near the wrist singularity.
+
+    Args:
+        robot: the :class:`refine.robot.Robot`.
+        q: joints [rad], shape (N, n).
+        threshold_deg: how close to 0 or ±180 deg the wrist axis must come [deg].
+    """
+    w = np.asarray(q, dtype=float)[:, wrist_axis(robot)]
+    return [(int(a), int(b)) for a, b in runs(np.abs(np.sin(w)) < math.sin(math.radians(threshold_deg)))]
+
+
+def lead_point(along: Array, lead: float) -> tuple[int, float]:
+    """Where a switch ``lead`` before the path's end falls.
+
+    Args:
+        along: time [s] or arc length [m] at each waypoint, shape (N,).
+        lead: how long or how far before the last waypoint, in the unit of ``along``.
+
+    Returns:
+        the waypoint k whose move (from k-1 to k) holds the switching point, and the lead from
+        waypoint k to it.
+    """
+    to_end = along[-1] - along
+    k = int(np.flatnonzero(to_end <= lead + 1e-12)[0])
+    if k == 0:
+        raise InputError(f"process lead {lead:g} is longer than the path ({to_end[0]:g})")
+    return k, lead - float(to_end[k])
+
+
+def header_notes(p: ProgramPass, robot: Any) -> list[str]:
+    """Comment lines (without the comment marker) on what a pass's program differs in, and why."""
+    lines = []
+    for r in p.repairs:
+        objs = f" ({', '.join(r.objects)})" if getattr(r, "objects", ()) else ""
+        lines.append(
+            f"REPAIRED {p.name}: waypoints {r.index_start}-{r.index_end} "
+            f"(s = {r.s_start_m * 1e3:.1f}-{r.s_end_m * 1e3:.1f} mm): {r.slack_deg:.2f} deg extra "
+            f"orientation slack, cause: {r.reason}{objs}"
+        )
+    axis = wrist_axis(robot) + 1
+    for a, b in singular_runs(robot, p.trajectory.q):
+        w = np.degrees(p.trajectory.q[a : b + 1, axis - 1])
+        lines.append(
+            f"NEAR WRIST SINGULARITY {p.name}: waypoints {a}-{b}, axis {axis} at "
+            f"{w.min():.1f}..{w.max():.1f} deg (within {WRIST_SINGULAR_DEG:g} deg of 0 or 180)"
+        )
+    return lines
+
+
+def speed_levels(
+    speeds_m_s: Array, lengths_m: Array, count: int, resolution_m_s: float = 1e-3
+) -> tuple[Array, Array]:
+    """At most ``count`` speed levels for segments, adding the least time.
+
+    Each segment runs at the fastest level not above its planned speed (rounded down to
+    ``resolution_m_s``), so no segment runs faster than planned.
+
+    Args:
+        speeds_m_s: planned speed of each segment [m/s], shape (M,).
+        lengths_m: length of each segment [m], shape (M,).
+        count: largest number of levels.
+        resolution_m_s: levels are multiples of this [m/s].
+
+    Returns:
+        the levels [m/s], ascending, shape (K,) with K <= count; and each segment's level index,
+        shape (M,).
+    """
+    v = np.maximum(np.floor(np.asarray(speeds_m_s, dtype=float) / resolution_m_s), 1.0) * resolution_m_s
+    length = np.asarray(lengths_m, dtype=float)
+    if count < 1:
+        raise InputError(f"speed_levels: count must be >= 1, got {count}")
+    cand, inverse = np.unique(v, return_inverse=True)
+    w = np.bincount(inverse, weights=length, minlength=len(cand))  # length at each distinct speed
+    m = len(cand)
+    k_max = min(count, m)
+    # cost[i, j]: time of the candidates i..j-1 all run at level cand[i]
+    cum_w = np.concatenate([[0.0], np.cumsum(w)])
+    best = np.full((k_max + 1, m + 1), np.inf)
+    choice = np.zeros((k_max + 1, m + 1), dtype=int)
+    # best[k, j]: least time of candidates j..m-1 with k levels, the first level at cand[j]
+    best[0, m] = 0.0
+    for k in range(1, k_max + 1):
+        for j in range(m - 1, -1, -1):
+            # the level at cand[j] covers j..i-1; the next level starts at i (or nothing after when i == m)
+            i = np.arange(j + 1, m + 1)
+            here = (cum_w[i] - cum_w[j]) / cand[j]
+            rest = best[k - 1, i]
+            total = here + rest
+            pick = int(np.argmin(total))
+            best[k, j], choice[k, j] = total[pick], int(i[pick])
+    k = int(np.argmin(best[1:, 0])) + 1
+    levels, j = [], 0
+    while j < m:
+        levels.append(cand[j])
+        j, k = choice[k, j], k - 1
+    levels_arr = np.array(levels)
+    index = np.searchsorted(levels_arr, v, side="right") - 1
+    return levels_arr, index
