@@ -130,7 +130,7 @@ def krl_io_number(name: str, kind: str, default: int) -> tuple[int, str]:
     """
     m = re.fullmatch(rf"\s*(?:\${kind}\[\s*(\d+)\s*\]|(\d+))\s*", name, re.IGNORECASE)
     if m is None:
-        return default, f"{name!r} mapped to ${kind}[{default}] (refine default)"
+        return default, f"{comment_text(repr(name))} mapped to ${kind}[{default}] (refine default)"
     number = int(m.group(1) or m.group(2))
     if not 1 <= number <= 4096:
         raise InputError(f"process I/O {name!r}: KRL has ${kind}[1]..${kind}[4096]")
@@ -295,7 +295,7 @@ def write_krl(
         *("&ACCESS RVP", "&REL 1", f"DEFDAT {prog}", header),
         f"; E6POS: TCP in {{F}} ($BASE = BASE_DATA[{base_n}]), X Y Z [mm], A B C [deg], S T "
         "(E1 = A3 [deg] on an LBR)",
-        f"; TOOL_DATA[{tool_n}] ({problem.tool.name}) must be {{{_xyzabc(problem.tool.tcp_in_flange)}}}",
+        f"; TOOL_DATA[{tool_n}] ({comment_text(problem.tool.name)}) must be {{{_xyzabc(problem.tool.tcp_in_flange)}}}",
         f"; BASE_DATA[{base_n}] (world {{F}}) must be "
         f"{{{_xyzabc(invert_transform(problem.robot.base_in_world))}}}",
         f"; LOAD_DATA[{tool_n}] must be {{M {_real(problem.tool.mass_kg, 4)},CM {{X {cog[0]},Y {cog[1]},"
@@ -317,7 +317,7 @@ def write_krl(
     notes = [line for p in runs for line in header_notes(p, robot)]
     src_lines = [*("&ACCESS RVP", "&REL 1", f"DEF {prog}( )"), *_INI, header]
     src_lines += [
-        f"; process output {pr.output!r} -> $OUT[{out}]",
+        f"; process output {comment_text(repr(pr.output))} -> $OUT[{out}]",
         *process_lines,
         *(f"; {n}" for n in notes),
     ]

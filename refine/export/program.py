@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from refine.errors import InputError
+from refine.names import comment_text
 from refine.optimise.verify import runs
 from refine.paths import Array, Trajectory
 from refine.problem import Problem
@@ -112,11 +113,11 @@ def lead_point(along: Array, lead: float) -> tuple[int, float]:
 
 def header_notes(p: ProgramPass, robot: Any) -> list[str]:
     """Comment lines (without the comment marker) on what a pass's program differs in, and why."""
-    lines = []
+    lines, name = [], comment_text(p.name)
     for r in p.repairs:
-        objs = f" ({', '.join(r.objects)})" if getattr(r, "objects", ()) else ""
+        objs = f" ({comment_text(', '.join(r.objects))})" if getattr(r, "objects", ()) else ""
         lines.append(
-            f"REPAIRED {p.name}: waypoints {r.index_start}-{r.index_end} "
+            f"REPAIRED {name}: waypoints {r.index_start}-{r.index_end} "
             f"(s = {r.s_start_m * 1e3:.1f}-{r.s_end_m * 1e3:.1f} mm): {r.slack_deg:.2f} deg extra "
             f"orientation slack, cause: {r.reason}{objs}"
         )
@@ -124,7 +125,7 @@ def header_notes(p: ProgramPass, robot: Any) -> list[str]:
     for a, b in singular_runs(robot, p.trajectory.q):
         w = np.degrees(p.trajectory.q[a : b + 1, axis - 1])
         lines.append(
-            f"NEAR WRIST SINGULARITY {p.name}: waypoints {a}-{b}, axis {axis} at "
+            f"NEAR WRIST SINGULARITY {name}: waypoints {a}-{b}, axis {axis} at "
             f"{w.min():.1f}..{w.max():.1f} deg (within {WRIST_SINGULAR_DEG:g} deg of 0 or 180)"
         )
     return lines

@@ -115,7 +115,7 @@ def _io_number(name: str, kind: str, default: int) -> tuple[int, str]:
     word = "input" if kind == "DI" else "output"
     m = re.fullmatch(rf"\s*(?:{kind}\s*)?(\d+)\s*", name, re.IGNORECASE)
     if m is None:
-        return default, f"{name!r} mapped to digital {word} {default} (refine default)"
+        return default, f"{comment_text(repr(name))} mapped to digital {word} {default} (refine default)"
     if not 0 <= int(m.group(1)) <= 7:
         raise InputError(f"process I/O {name!r}: UR standard digital {word}s are 0..7")
     return int(m.group(1)), f"{name!r} is digital {word} {int(m.group(1))}"
@@ -261,7 +261,7 @@ def write_urscript(
         f"# Written by refine {__version__} for problem '{comment_text(problem.name)}', robot {problem.robot.model}, "
         f"{len(runs)} pass(es).",
         "# Poses: TCP in the robot base frame, p[x, y, z [m], rx, ry, rz (rotation vector) [rad]].",
-        f"# process output {pr.output!r} -> digital output {out}",
+        f"# process output {comment_text(repr(pr.output))} -> digital output {out}",
         f"# {process}",
         *(f"# {line}" for p in runs for line in header_notes(p, robot)),
         f"set_tcp({_pose(tool.tcp_in_flange)})",
