@@ -97,7 +97,11 @@ def _robot_parts(result: RunResult) -> list[tuple[str, str, trimesh.Trimesh, Any
     parts = []
     robot = result.robot
     for shape in robot.collision_shapes():
-        mesh = mesh_of_geometry(shape.geometry)
+        convex = getattr(shape, "convex", None)
+        if convex is not None:
+            mesh = trimesh.Trimesh(vertices=convex.vertices, faces=convex.faces, process=False)
+        else:
+            mesh = mesh_of_geometry(shape.geometry)
         if mesh is None:
             log.info("report: link shape %s/%s has no drawable geometry", shape.link, shape.name)
             continue
