@@ -8,6 +8,8 @@ the panels along the path for a chosen pass (:mod:`refine.report.panels`); then 
 and where the plan is slower than the demonstration. The data travels as one JSON block and
 ``report.js`` draws it with Plotly; Plotly's JavaScript is embedded, so the page works offline.
 
+The address ``report.html#scene-only`` shows the 3D view alone, filling the window.
+
 A small script at the top of the page records uncaught errors and ``console.error`` calls into
 ``#js-errors`` (hidden while empty) so that a broken page says so, also to a headless browser.
 """
@@ -61,6 +63,7 @@ ul.segments li{margin:.3em 0;max-width:70em} #js-errors{color:#c0392b}
 .controls input[type=range]{width:28em} #frame-label{font-family:monospace;min-width:16em}
 .panels{display:grid;grid-template-columns:repeat(auto-fill,minmax(560px,1fr));gap:.5em}
 pre{background:#f4f4f4;padding:.6em;white-space:pre-wrap}
+body.scene-only>section:not(#scene-section){display:none} body.scene-only #scene-section>p{display:none}
 """
 
 

@@ -4,6 +4,7 @@
 (function () {
   "use strict";
   document.body.dataset.scriptStartMs = String(Math.round(performance.now()));  // Plotly parsed by now
+  if (window.location.hash === "#scene-only") { document.body.classList.add("scene-only"); }
   var DATA = JSON.parse(document.getElementById("report-data").textContent);
   var CONFIG = { responsive: true, displaylogo: false };
   var pending = [];
@@ -85,7 +86,8 @@
   });
 
   var layout3d = {
-    margin: { l: 0, r: 0, t: 0, b: 0 }, height: 640, uirevision: "keep",
+    margin: { l: 0, r: 0, t: 0, b: 0 }, uirevision: "keep",
+    height: document.body.classList.contains("scene-only") ? Math.max(500, window.innerHeight - 90) : 640,
     legend: { x: 0, y: 1, bgcolor: "rgba(255,255,255,0.7)" },
     scene: {
       aspectmode: "data",

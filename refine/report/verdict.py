@@ -120,8 +120,8 @@ def segment_lines(result: RunResult) -> list[str]:
             for v in p.refinement.check.violations:
                 lines.append(
                     f"{head}waypoints {v.index_start}-{v.index_end} (s = {v.s_start_m * 1e3:.0f}-"
-                    f"{v.s_end_m * 1e3:.0f} mm): {v.reason} out of tolerance, worst {v.worst:.4g} {v.unit} "
-                    f"against {v.limit:.4g} {v.unit}"
+                    f"{v.s_end_m * 1e3:.0f} mm): {v.reason}, worst {v.worst:.4g} {v.unit} where "
+                    f"{v.limit:.4g} {v.unit} is allowed"
                 )
     return lines
 

@@ -98,7 +98,7 @@ def main(argv: list[str]) -> int:
         f"{page}: {page.stat().st_size / 1e6:.2f} MB, drawn in {body.get('data-render-ms')} ms after navigation"
     )
     print(f"console messages: {len(check.console)}", *check.console, sep="\n  ")
-    for name, anchor in (("first-screen", ""), ("3d", "scene-section")):
+    for name, anchor in (("first-screen", ""), ("3d", "scene-only")):
         print(screenshot(page, folder / f"{page.parent.name}-{name}.png", anchor))
     return 0
 

@@ -101,7 +101,7 @@ def test_the_first_screen_states_the_verdict_and_is_kept_as_a_screenshot(report)
         assert segments and "fail" in classes
     written = [a.get("href") for a in verdict.xpath(".//ul[@class='files']//a")]
     assert set(p.name for p in result.outputs.values() if p.name != "result.json") <= set(written)
-    for name, anchor in (("first-screen", ""), ("3d", "scene-section")):
+    for name, anchor in (("first-screen", ""), ("3d", "scene-only")):
         png = browser.screenshot(page, ARTIFACTS / f"report-{case}-{name}.png", anchor)
         assert png.stat().st_size > 10_000
         print(f"screenshot {png}")
