@@ -28,7 +28,7 @@ from refine.settings import PROGRAM_FORMATS
 if TYPE_CHECKING:
     from refine.robot import Robot
 
-CONTROLLER_OF_FORMAT = {"rapid": "abb", "krl": "kuka", "urscript": "ur"}
+CONTROLLER_OF_FORMAT = {"rapid": "abb", "krl": "kuka", "urscript": "ur", "sunrise": "kuka"}
 """The controller family each program format runs on."""
 
 _RAPID_SIGNAL = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,31}")
@@ -94,6 +94,10 @@ def check_output_signal(kind: str, output: str) -> None:
         from refine.export.urscript import ur_output_number
 
         ur_output_number(output)  # raises outside 0..7; a name maps to the default
+    if kind == "sunrise":
+        from refine.export.sunrise import sunrise_signal
+
+        sunrise_signal(output)  # raises unless "<I/O group>.<signal>"
 
 
 def check_joint_lists(problem: Problem, n_joints: int, robot_name: str) -> None:
@@ -125,6 +129,10 @@ def planned_outputs(problem: Problem, programs: tuple[str, ...], report: bool = 
             names += [f"{prog}.src", f"{prog}.dat"]
         elif kind == "urscript":
             names.append(f"{stem}.script")
+        elif kind == "sunrise":
+            from refine.export.sunrise import class_name
+
+            names.append(f"{class_name(problem.name)}.java")
     return tuple(names)
 
 

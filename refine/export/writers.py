@@ -127,4 +127,10 @@ def write_outputs(result: RunResult, out_dir: Path, programs: tuple[str, ...]) -
                 result.robot,
                 passes=named,
             )
+        elif kind == "sunrise":
+            from refine.export.sunrise import write_sunrise
+
+            outputs["sunrise"] = write_sunrise(
+                out_dir / f"{name}.java", trajectories[0], problem, result.robot, passes=named
+            )
     return outputs

@@ -259,6 +259,55 @@ def read_urscript(path: Path, base_in_world: np.ndarray) -> ParsedProgram:
     return ParsedProgram("urscript", (path.name,), parsed, statements, {})
 
 
+# ---- Sunrise (Java) -----------------------------------------------------------------------------
+
+
+def _java_number(node) -> float:
+    if node.data == "neg":
+        return -_java_number(node.children[0])
+    if node.data == "number":
+        return float(str(node.children[0]).rstrip("dDfFlL"))
+    raise AssertionError(f"not a number literal: {node.data}")
+
+
+def read_sunrise(path: Path, base_in_world: np.ndarray) -> ParsedProgram:
+    """Parse a Sunrise application; each pass's rows (in ``run()`` order) as TCP poses in {F}.
+
+    Rows ``{x, y, z, a, b, c, e1, status, turn, v}`` come from the ``new double[][] {...}`` returned
+    by the methods that ``run()`` hands to ``runPass``; x y z [mm] and a b c [rad] about z, y', x''
+    are in the robot base frame.
+    """
+    tree = parser("java").parse(path.read_text(encoding="utf-8"))
+    methods = {}
+    for m in tree.find_data("method"):
+        name = next(c for c in m.children if isinstance(c, Token) and c.type == "NAME")
+        methods[str(name)] = m
+    rows_of = {}
+    for name, m in methods.items():
+        inits = list(m.find_data("new_array_init"))
+        if inits and name.startswith("pass"):
+            table = inits[0].children[-1]
+            rows_of[name] = [[_java_number(v) for v in row.children] for row in table.children]
+    run_calls = [t for t in methods["run"].iter_subtrees_topdown() if t.data == "call"]
+    statements = [str(c.children[0]) for c in run_calls]
+    passes = []
+    for c in run_calls:
+        if str(c.children[0]) != "runPass":
+            continue
+        join_call = c.children[1].children[0]
+        parts = [str(p.children[0]) for p in join_call.children[1].children]
+        rows = [r for part in parts for r in rows_of[part]]
+        poses = []
+        for r in rows:
+            T = np.eye(4)
+            T[:3, :3] = Rotation.from_euler("ZYX", r[3:6]).as_matrix()
+            T[:3, 3] = np.array(r[:3]) / 1000.0
+            poses.append(base_in_world @ T)
+        passes.append(ParsedPass(poses))
+    facts = {"methods": sorted(methods), "rows": {k: len(v) for k, v in rows_of.items()}}
+    return ParsedProgram("sunrise", (path.name,), passes, statements, facts)
+
+
 # ---- against trajectory.csv ---------------------------------------------------------------------
 
 
@@ -302,6 +351,8 @@ def read_programs(out: Path) -> list[tuple[ParsedProgram, list[tuple[float, floa
             programs.append(read_krl(f, out / outputs["krl_dat"]))
         elif kind == "urscript":
             programs.append(read_urscript(f, base))
+        elif kind == "sunrise":
+            programs.append(read_sunrise(f, base))
     results = []
     rapid_k = 0
     for prog in programs:
