@@ -48,7 +48,14 @@ from numpy.typing import NDArray
 
 from refine import __version__
 from refine.errors import InputError
-from refine.export.program import as_passes, header_notes, home_joints, lead_point, singular_runs
+from refine.export.program import (
+    as_passes,
+    header_notes,
+    home_joints,
+    lead_point,
+    process_summary,
+    singular_runs,
+)
 from refine.export.rapid import segment_speeds
 from refine.frames import invert_transform, kuka_abc_from_matrix, make_transform, matrix_from_kuka_abc
 from refine.names import comment_text, identifier
@@ -283,7 +290,7 @@ def write_krl(
         raise InputError("KRL export: speeds must be > 0 and approximation_m >= 0")
     prog = _name(Path(path_src).stem, "prog")
     src, dat = (Path(path_src).with_name(prog + ext) for ext in (".src", ".dat"))
-    pr, weld = problem.process, problem.process.kind == "weld"
+    pr = problem.process
     out, out_note = krl_io_number(pr.output, "OUT", DEFAULT_OUTPUT)
     gas, gas_note = krl_io_number(pr.gas_output, "OUT", DEFAULT_OUTPUT + 1)
     arc_ok, ok_note = krl_io_number(pr.arc_ok_input, "IN", 1)
@@ -302,18 +309,7 @@ def write_krl(
         f"Z {cog[2]},A 0.0,B 0.0,C 0.0}},J {{X 0.0,Y 0.0,Z 0.0}}}}",
         f"DECL E6AXIS XHOMEPOS={{{_e6axis(home_joints(problem, robot, runs[0].trajectory.q[0]))}}}",
     ]
-    how = f"{_real(pr.lead_s, 4)} s" if pr.lead_m is None else f"{_real(pr.lead_m * 1000.0, 3)} mm"
-    process_lines = (
-        [
-            f"; weld: gas {gas_note} pre-flow {_real(pr.preflow_s, 3)} s, arc {out_note}, wait for "
-            f"{ok_note} up to {_real(pr.arc_timeout_s, 3)} s, crater fill {_real(pr.crater_fill_s, 3)} s, "
-            f"post-flow {_real(pr.postflow_s, 3)} s"
-        ]
-        if weld
-        else [
-            f"; {pr.kind}: {out_note}, switched on the move by TRIGGER, {how} before the first and last point"
-        ]
-    )
+    process_lines = [f"; {process_summary(problem, 'TRIGGER', out_note, gas_note, ok_note)}"]
     notes = [line for p in runs for line in header_notes(p, robot)]
     src_lines = [*("&ACCESS RVP", "&REL 1", f"DEF {prog}( )"), *_INI, header]
     src_lines += [

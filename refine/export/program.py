@@ -131,6 +131,20 @@ def header_notes(p: ProgramPass, robot: Any) -> list[str]:
     return lines
 
 
+def process_summary(problem: Problem, mechanism: str, out: str, gas: str = "", ok: str = "") -> str:
+    """One comment line on how a program switches the process (``out``/``gas``/``ok``: the I/O as named there)."""
+    pr = problem.process
+    if pr.kind == "weld":
+        text = (
+            f"weld: gas {gas} pre-flow {pr.preflow_s:g} s, arc {out}, wait for {ok} up to {pr.arc_timeout_s:g} s "
+            f"(else arc and gas off, stop), crater fill {pr.crater_fill_s:g} s, post-flow {pr.postflow_s:g} s"
+        )
+    else:
+        how = f"{pr.lead_s:g} s" if pr.lead_m is None else f"{pr.lead_m * 1000.0:g} mm"
+        text = f"{pr.kind}: {out} switched on the move by {mechanism}, {how} before the first and the last path point"
+    return comment_text(text)
+
+
 def speed_levels(
     speeds_m_s: Array, lengths_m: Array, count: int, resolution_m_s: float = 1e-3
 ) -> tuple[Array, Array]:

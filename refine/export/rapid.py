@@ -44,6 +44,7 @@ from refine.export.program import (
     header_notes,
     home_joints,
     lead_point,
+    process_summary,
     singular_runs,
     speed_levels,
 )
@@ -238,17 +239,10 @@ def write_rapid(
     off_k, off_lead = lead_point(
         trajectory.t if by_time else np.concatenate([[0.0], np.cumsum(lengths)]), lead
     )
-    how = f"{_num(lead, 4)} s" if by_time else f"{_num(lead * 1000.0, 3)} mm"
 
     move_tail = f"{tool} \\WObj:={wobj};"
     notes = header_notes(ProgramPass(pass_name, trajectory, tuple(repairs)), robot)
-    process_note = (
-        f"weld: gas {pr.gas_output} pre-flow {_num(pr.preflow_s, 3)} s, arc {output}, wait for "
-        f"{pr.arc_ok_input} up to {_num(pr.arc_timeout_s, 3)} s, crater fill {_num(pr.crater_fill_s, 3)} s, "
-        f"post-flow {_num(pr.postflow_s, 3)} s"
-        if weld
-        else f"{pr.kind}: {output} switched on the move by TriggIO, {how} before the first and the last target"
-    )
+    process_note = process_summary(problem, "TriggIO", output, pr.gas_output, pr.arc_ok_input)
     lines = [
         f"MODULE {module}",
         f"    ! Written by refine {__version__} for problem '{comment_text(problem.name)}', robot "

@@ -45,7 +45,7 @@ import numpy as np
 from refine import __version__
 from refine.errors import InputError
 from refine.export.krl import kuka_status_turn
-from refine.export.program import as_passes, header_notes, home_joints, lead_point
+from refine.export.program import as_passes, header_notes, home_joints, lead_point, process_summary
 from refine.export.rapid import segment_speeds
 from refine.frames import invert_transform, kuka_abc_from_matrix, matrix_from_kuka_abc
 from refine.names import comment_text
@@ -197,13 +197,10 @@ def write_sunrise(
     cog = [_num(c * 1000.0, 4) for c in tool.cog_in_flange_m]
     home = home_joints(problem, robot, runs[0].trajectory.q[0])
     air = _num(approach_speed_m_s * 1000.0, 3)
-    how = f"{_num(pr.lead_s, 4)} s" if pr.lead_m is None else f"{_num(pr.lead_m * 1000.0, 3)} mm"
     io_note = ", ".join(f"{role} {g}.{s}" for role, (g, s) in io.items())
-    process = (
-        f"weld: gas pre-flow {_num(pr.preflow_s, 3)} s, arc on, wait for the arc input up to "
-        f"{_num(pr.arc_timeout_s, 3)} s, crater fill {_num(pr.crater_fill_s, 3)} s, post-flow {_num(pr.postflow_s, 3)} s"
-        if weld
-        else f"{pr.kind}: switched on the move by path triggers, {how} before the first and the last point"
+    names = {role: f"{g}.{s}" for role, (g, s) in io.items()}
+    process = process_summary(
+        problem, "path triggers", names["out"], names.get("gas", ""), names.get("ok", "")
     )
     head = [
         f"// Written by refine {__version__} for problem '{comment_text(problem.name)}', robot "

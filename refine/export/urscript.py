@@ -37,7 +37,7 @@ import numpy as np
 
 from refine import __version__
 from refine.errors import InputError, SolverError
-from refine.export.program import as_passes, header_notes, home_joints
+from refine.export.program import as_passes, header_notes, home_joints, process_summary
 from refine.export.rapid import segment_speeds
 from refine.frames import invert_transform, make_transform, matrix_from_rotvec, rotvec_from_matrix
 from refine.names import comment_text, identifier
@@ -248,15 +248,7 @@ def write_urscript(
     a, air, step = _num(acceleration_m_s2, 6), _num(approach_speed_m_s, 6), speed_resolution_m_s
     jmove = f"a={_num(joint_acceleration_rad_s2, 6)}, v={_num(joint_speed_rad_s, 6)}"
     home = home_joints(problem, robot, runs[0].trajectory.q[0])
-    how = f"{_num(pr.lead_s, 4)} s" if pr.lead_m is None else f"{_num(pr.lead_m * 1000.0, 3)} mm"
-    process = (
-        f"weld: gas {gas_note} pre-flow {_num(pr.preflow_s, 3)} s, arc {note}, wait for {ok_note} up to "
-        f"{_num(pr.arc_timeout_s, 3)} s, crater fill {_num(pr.crater_fill_s, 3)} s, post-flow "
-        f"{_num(pr.postflow_s, 3)} s"
-        if weld
-        else f"{pr.kind}: switched on the move by a thread watching the TCP, {how} before the first and "
-        "last waypoint"
-    )
+    process = process_summary(problem, "a thread watching the TCP", note, gas_note, ok_note)
     body = [
         f"# Written by refine {__version__} for problem '{comment_text(problem.name)}', robot {problem.robot.model}, "
         f"{len(runs)} pass(es).",
