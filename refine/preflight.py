@@ -198,6 +198,11 @@ def preflight(
         robot = robot_for(problem.robot)
     try:
         check_programs(problem, robot.spec.controller, robot.spec.name, programs)
+        if "sunrise" in programs and robot.nq != 7:
+            raise InputError(
+                f"program format 'sunrise' is for the seven-axis KUKA LBR, but robot {robot.spec.name!r} has "
+                f"{robot.nq} axes; use krl"
+            )
     except InputError as e:
         raise InputError(f"{where}{e}") from e
     try:
