@@ -87,7 +87,10 @@ def write_outputs(result: RunResult, out_dir: Path, programs: tuple[str, ...]) -
         )
     from refine.export.program import ProgramPass
 
-    named = [ProgramPass(p.name, t, p.refinement.repairs) for p, t in zip(done, trajectories, strict=True)]
+    named = [
+        ProgramPass(p.name, t, getattr(p.refinement, "repairs", ()))  # no refinement: written from a plan
+        for p, t in zip(done, trajectories, strict=True)
+    ]
     for kind in programs:
         if kind == "rapid":
             from refine.export import write_rapid
@@ -103,7 +106,7 @@ def write_outputs(result: RunResult, out_dir: Path, programs: tuple[str, ...]) -
                         t,
                         problem,
                         result.robot,
-                        repairs=p.refinement.repairs,
+                        repairs=getattr(p.refinement, "repairs", ()),
                         pass_name=p.name,
                     )
         elif kind == "krl":
