@@ -28,8 +28,9 @@ from refine.settings import PROGRAM_FORMATS
 if TYPE_CHECKING:
     from refine.robot import Robot
 
-CONTROLLER_OF_FORMAT = {"rapid": "abb", "krl": "kuka", "urscript": "ur", "sunrise": "kuka"}
-"""The controller family each program format runs on."""
+CONTROLLER_OF_FORMAT = {"rapid": "abb", "sunrise": "kuka", "krl": "kuka", "urscript": "ur"}
+"""The controller family each program format runs on (the last format of a family is its default:
+KRL for KUKA; Sunrise only for the seven-axis LBR)."""
 
 _RAPID_SIGNAL = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,31}")
 
