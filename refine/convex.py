@@ -258,14 +258,15 @@ def convex_cover(
     """
     vertices = np.asarray(mesh.vertices, dtype=float)
     proxy = _Proxy(mesh)
-    best = [vertices]
-    best_gap = proxy.overshoot(vertices)
-    if best_gap > max_overshoot_m and max_pieces > 1:
+    candidates = [[vertices]]
+    if proxy.overshoot(vertices) > max_overshoot_m and max_pieces > 1:
         axes = np.linalg.svd(vertices - vertices.mean(axis=0), full_matrices=False)[2]
         for direction in [*axes, *np.eye(3)]:
-            slabs, gap = _split(mesh, proxy, direction, max_overshoot_m, max_pieces, cuts)
-            if gap < best_gap - 1e-4 or (gap <= max_overshoot_m and len(slabs) < len(best)):
-                best, best_gap = slabs, gap
+            candidates.append(_split(mesh, proxy, direction, max_overshoot_m, max_pieces, cuts)[0])
+    # the proxy ranks cuts; the exact measure picks among the directions' answers (fewest pieces on ties)
+    exact = [overshoot([ConvexPiece.hull_of(p) for p in slabs], mesh, samples=500) for slabs in candidates]
+    pick = min(range(len(candidates)), key=lambda k: (max(exact[k], max_overshoot_m), len(candidates[k])))
+    best, best_gap = candidates[pick], exact[pick]
     log.debug("convex cover: %d slab(s), hulls %.1f mm beyond the mesh", len(best), best_gap * 1e3)
     return [outer_polytope(points, tolerance_m=tolerance_m, max_planes=max_planes) for points in best]
 

@@ -159,7 +159,7 @@ def load_problem(path: str | Path, *, allow_outside: bool = False) -> Problem:
             root=root,
             description=comment_text(_string(data.get("description", ""), "description"), 2000),
             robot=_robot(_table(data, "robot"), path, inside),
-            tool=_tool(_table(data, "tool"), path),
+            tool=_tool(_table(data, "tool"), path, root, inside),
             frames=_frames(_table(data, "frames"), path),
             cad=_cad(_table(data, "cad"), root, path, inside),
             demonstration=_demo(_table(data, "demonstration"), root, path, inside)
@@ -398,7 +398,7 @@ def _robot_model(value: Any) -> str:
     return value
 
 
-def _tool(t: dict[str, Any], path: Path) -> ToolSettings:
+def _tool(t: dict[str, Any], path: Path, root: Path, inside: Path | None) -> ToolSettings:
     _check_keys(t, "tool", _fields(ToolSettings), path)
     for key in ("name", "tcp_in_flange"):
         if key not in t:
@@ -416,7 +416,7 @@ def _tool(t: dict[str, Any], path: Path) -> ToolSettings:
         out["cog_in_flange_m"] = _numbers(t["cog_in_flange_m"], "tool.cog_in_flange_m", 3)
     if "collision" in t:
         out["collision"] = tuple(
-            _shape(item, f"tool.collision[{i}]", None, path)
+            _shape(item, f"tool.collision[{i}]", root, path, inside)
             for i, item in enumerate(_list(t["collision"], "tool.collision"))
         )
     return ToolSettings(**out)
@@ -460,7 +460,7 @@ def _list(value: Any, key: str) -> list[Any]:
     return value
 
 
-def _shape(t: Any, key: str, root: Path | None, path: Path, inside: Path | None = None) -> Shape:
+def _shape(t: Any, key: str, root: Path, path: Path, inside: Path | None = None) -> Shape:
     if not isinstance(t, dict):
         raise InputError(f"{key} must be a table, got {t!r}")
     _check_keys(t, key, _fields(Shape), path)
@@ -470,8 +470,6 @@ def _shape(t: Any, key: str, root: Path | None, path: Path, inside: Path | None 
     if "size_m" in t:
         out["size_m"] = _numbers(t["size_m"], f"{key}.size_m", 3)
     if "file" in t:
-        if root is None:
-            raise InputError(f"{key}: mesh files are for cell objects only")
         out["file"] = _file(root, t["file"], f"{key}.file", inside)
     _check_types(Shape, {k: v for k, v in t.items() if k in ("name", "shape", "units", "workpiece")}, key)
     for k in ("radius_m", "length_m"):

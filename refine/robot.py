@@ -30,6 +30,8 @@ except ModuleNotFoundError:  # Python 3.10
 logger = logging.getLogger(__name__)
 
 CONTROLLERS = ("abb", "kuka", "ur")
+SELF_COLLISION_FILE = "self_collision.toml"
+"""The sampled self-collision matrix beside a robot's URDF."""
 _TOML_KEYS = frozenset(
     {"maker", "model", "urdf", "flange_frame", "reach_m", "controller", "acceleration_rule",
      "joint_acceleration_deg_s2"}
@@ -116,6 +118,7 @@ class Robot:
         self.nq = int(self.model.nq)
         self.flange_id = self.frame_id(spec.flange_frame)
         self._shapes: tuple[CollisionShape, ...] | None = None
+        self._matrix: dict[frozenset[str], str] | None = None
 
     def __repr__(self) -> str:
         return f"Robot({self.spec.name!r}, nq={self.nq})"
@@ -199,6 +202,20 @@ class Robot:
         if self._shapes is None:
             self._shapes = tuple(collision_shapes_from_urdf(self.spec.urdf))
         return list(self._shapes)
+
+    def self_collision(self) -> dict[frozenset[str], str] | None:
+        """The link pairs never checked against each other, ``{frozenset({a, b}): reason}``.
+
+        Read from ``self_collision.toml`` beside the URDF (the sampled matrix, see
+        :mod:`refine.collision.self_collision`); None when the robot has none, and then the
+        kinematic rules of :mod:`refine.collision.pairs` decide.
+        """
+        path = Path(self.spec.urdf).parent / SELF_COLLISION_FILE
+        if self._matrix is None and path.is_file():
+            from refine.collision.self_collision import read_matrix  # the collision package imports us
+
+            self._matrix = read_matrix(path)
+        return None if self._matrix is None else dict(self._matrix)
 
 
 def robots_dir() -> Path:

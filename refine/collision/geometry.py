@@ -280,10 +280,28 @@ def _hull(mesh: trimesh.Trimesh) -> dict:
     }
 
 
+def tool_hull(shape: Shape) -> ConvexPiece:
+    """The convex hull [m] of a tool shape's mesh file, in the shape frame.
+
+    Raises:
+        InputError: naming the shape if the file is missing, unreadable, or flat.
+    """
+    where = f"tool shape {shape.name!r}"
+    if shape.file is None:
+        raise InputError(f"{where}: a mesh shape needs a file")
+    mesh = read_mesh(Path(shape.file), where)
+    try:
+        return ConvexPiece.hull_of(np.asarray(mesh.vertices) * UNIT_SCALE[shape.units])
+    except InputError as e:
+        raise InputError(f"{where}: {e}") from e
+
+
 def shape_body(shape: Shape, *, name: str, kind: str, link: str | None, frame_id: int, joint: int) -> Body:
     """A :class:`Body` for a tool shape (pose in the flange frame) or a cell object (world)."""
     pose = np.array(shape.pose, dtype=float)
-    if shape.shape == "mesh":
+    if shape.shape == "mesh" and kind == "tool":  # a torch or gun model: its hull, measured like a primitive
+        parts = convex_parts(tool_hull(shape))
+    elif shape.shape == "mesh":
         parts = mesh_body_parts(load_mesh(shape))
     else:
         geometry, params, half = _primitive(shape)

@@ -127,13 +127,16 @@ class CollisionModel:
     def _select_pairs(self) -> None:
         self._place_all(pin.neutral(self._model))
         axes = joint_axes(self._model, self.base_in_world)
+        matrix = self.robot.self_collision()
         kept: list[tuple[int, int]] = []
         excluded: list[tuple[str, str, str]] = []
         for i in range(self._n_moving):
             for j in range(i + 1, len(self.bodies)):
                 a, b = self._order(i, j)
                 A, B = self.bodies[a], self.bodies[b]
-                why = exclusion(A, B, self._poses[a], self._poses[b], self._model, axes, self.self_margin_m)
+                why = exclusion(
+                    A, B, self._poses[a], self._poses[b], self._model, axes, self.self_margin_m, matrix
+                )
                 if why is None:
                     kept.append((a, b))
                     continue

@@ -26,6 +26,11 @@ to touch at some sampled configuration: every rule below is a fact of the kinema
    Such a pair can neither break its margin by moving nor be repaired; it is logged, with a warning
    when it is closer than ``self_margin_m``.
 
+For a robot with a sampled self-collision matrix (:mod:`refine.collision.self_collision`), two
+links of the robot are checked exactly when the matrix enables them (reasons ``"matrix: adjacent"``,
+``"matrix: always"``, ``"matrix: never"``), in place of rules 5 to 7; those rules still decide the
+tool's shapes against the links.
+
 Rules 6 and 7 are tested once, at the neutral configuration; both hold at every configuration
 (joint axes that meet keep meeting, and the relative pose of the two bodies is a product of
 rotations about the neutral axes).
@@ -51,7 +56,14 @@ _TOL = 1e-7
 
 
 def exclusion(
-    a: Body, b: Body, T_a: Array, T_b: Array, model: pin.Model, axes: Axes, self_margin_m: float
+    a: Body,
+    b: Body,
+    T_a: Array,
+    T_b: Array,
+    model: pin.Model,
+    axes: Axes,
+    self_margin_m: float,
+    matrix: dict[frozenset[str], str] | None = None,
 ) -> str | None:
     """Why the pair (a, b) is not checked (one of the reasons above), or None when it is.
 
@@ -64,6 +76,7 @@ def exclusion(
         axes: per joint index, its axis at the neutral configuration as (unit direction, point)
             in the world, or None for a joint that is not revolute (see :func:`joint_axes`).
         self_margin_m: the clearance kept between the robot's own bodies [m].
+        matrix: the robot's sampled self-collision matrix (disabled link pairs and why), or None.
     """
     if a.kind == "cell" and b.kind == "cell":
         return "static"
@@ -76,6 +89,9 @@ def exclusion(
         return None
     if a.joint == b.joint:
         return "same body"
+    if matrix is not None and a.kind == "link" and b.kind == "link":
+        why = matrix.get(frozenset((str(a.link), str(b.link))))
+        return None if why is None else f"matrix: {why}"
     if model.parents[a.joint] == b.joint or model.parents[b.joint] == a.joint:
         return "adjacent"
     joints = joints_between(model, a.joint, b.joint)

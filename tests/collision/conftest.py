@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 import numpy as np
 import pytest
 import trimesh
@@ -13,9 +16,31 @@ from refine.robot import load_robot
 from refine.settings import Shape
 
 
+PRIMITIVE_ROBOTS = Path(__file__).resolve().parent / "primitive_robots"
+
+
+def load_primitive_robot(name):
+    """A registry robot with hand-sized primitive shapes and no self-collision matrix (see the README)."""
+    old = os.environ.get("REFINE_ROBOTS_DIR")
+    os.environ["REFINE_ROBOTS_DIR"] = str(PRIMITIVE_ROBOTS)
+    try:
+        return load_robot(name)
+    finally:
+        if old is None:
+            del os.environ["REFINE_ROBOTS_DIR"]
+        else:
+            os.environ["REFINE_ROBOTS_DIR"] = old
+
+
+@pytest.fixture(scope="session")
+def primitive_robot():
+    """Factory: a registry robot with hand-sized primitive shapes (see primitive_robots/README.md)."""
+    return load_primitive_robot
+
+
 @pytest.fixture(scope="session")
 def irb4600():
-    return load_robot("abb_irb4600_60_205")
+    return load_primitive_robot("abb_irb4600_60_205")
 
 
 @pytest.fixture(scope="session")

@@ -107,10 +107,10 @@ def test_always_close_pairs_follow_the_axes_rule(irb4600, make_model):
     assert ("tool:sleeve", "link_4/forearm", "always close") in wide.excluded
 
 
-def test_a_constant_distance_pair_is_skipped_with_its_reason():
+def test_a_constant_distance_pair_is_skipped_with_its_reason(primitive_robot):
     """The UR10e's shoulder housing turns about its own axis above its round base: 0.7 mm at every
     configuration, so it can neither be kept 5 mm clear nor be changed by the optimiser."""
-    ur10e = load_robot("ur10e")
+    ur10e = primitive_robot("ur10e")
     model = CollisionModel(ur10e, np.eye(4), np.eye(4), (), (), margin_m=0.01, self_margin_m=0.005)
     assert ("link_2/shoulder_housing", "base_link/base", "constant distance") in model.excluded
     shapes = {(s.link, s.name): s for s in ur10e.collision_shapes()}

@@ -1,0 +1,164 @@
+"""A robot's self-collision matrix: which pairs of its links are never checked against each other.
+
+As robot set-up tools do, the matrix comes from sampling: at many random configurations within the
+joint limits every pair of links is measured, and a pair is disabled when it is
+
+* ``"adjacent"``: the two links are moved by the same joint or by a joint and its parent (they meet
+  at that joint, and their collision meshes overlap there by design);
+* ``"always"``: in contact at every sample (a housing around a joint that is not adjacent in the
+  tree, e.g. a wrist's first and last links; no motion can separate them);
+* ``"never"``: never closer than ``never_m`` at any sample.
+
+Every other pair is checked. The matrix is written per robot as ``self_collision.toml`` next to its
+URDF (:func:`write_matrix`) by ``robots/make_self_collision.py``, and read by
+:meth:`refine.robot.Robot.self_collision`.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import fcl
+import numpy as np
+import pinocchio as pin
+
+from refine.errors import InputError
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib  # type: ignore[no-redef]
+
+log = logging.getLogger(__name__)
+
+REASONS = ("adjacent", "always", "never")
+NEVER_M = 0.01
+"""A pair is disabled as ``"never"`` when no sample brings it closer than this [m]."""
+
+
+@dataclass(frozen=True)
+class PairStats:
+    """What the samples showed of one link pair.
+
+    Attributes:
+        links: the two link names, sorted.
+        reason: why the pair is disabled (one of :data:`REASONS`), or ``""`` when it is checked.
+        min_distance_m: the least distance over the samples [m] (negative: in contact).
+        contact_fraction: share of the samples with the two in contact.
+    """
+
+    links: tuple[str, str]
+    reason: str
+    min_distance_m: float
+    contact_fraction: float
+
+
+def adjacent(model: pin.Model, joint_a: int, joint_b: int) -> bool:
+    """Whether two bodies' joints are the same or one is the other's parent."""
+    return joint_a == joint_b or model.parents[joint_a] == joint_b or model.parents[joint_b] == joint_a
+
+
+def sample_matrix(robot, samples: int, seed: int, never_m: float = NEVER_M) -> list[PairStats]:  # noqa: ANN001
+    """Measure every pair of the robot's links at ``samples`` random configurations.
+
+    Args:
+        robot: a :class:`refine.robot.Robot` with collision shapes.
+        samples: random configurations, uniform within the joint limits.
+        seed: seed of the random generator.
+        never_m: the distance a pair must always keep to be disabled as ``"never"`` [m].
+
+    Returns:
+        One entry per pair of links with shapes, in link order.
+    """
+    if samples < 1:
+        raise InputError(f"self-collision matrix: samples must be >= 1, got {samples}")
+    shapes = robot.collision_shapes()
+    links = list(dict.fromkeys(s.link for s in shapes))
+    joint = {link: int(robot.model.frames[robot.frame_id(link)].parentJoint) for link in links}
+    objects = {link: [(s, fcl.CollisionObject(s.geometry)) for s in shapes if s.link == link] for link in links}
+    pairs = [(a, b) for a, b in itertools.combinations(links, 2) if not adjacent(robot.model, joint[a], joint[b])]
+    least = dict.fromkeys(pairs, np.inf)
+    contacts = dict.fromkeys(pairs, 0)
+    rng = np.random.default_rng(seed)
+    request = fcl.CollisionRequest()
+    for q in rng.uniform(robot.spec.lower, robot.spec.upper, size=(samples, robot.nq)):
+        poses = robot.link_poses(q)
+        for link, items in objects.items():
+            for s, obj in items:
+                T = poses[link] @ s.link_T_shape
+                obj.setTransform(fcl.Transform(T[:3, :3], T[:3, 3]))
+        for a, b in pairs:
+            touching = any(
+                fcl.collide(oa, ob, request, fcl.CollisionResult()) for _, oa in objects[a] for _, ob in objects[b]
+            )
+            if touching:
+                contacts[(a, b)] += 1
+                least[(a, b)] = min(least[(a, b)], 0.0)
+            elif least[(a, b)] > never_m:  # only a pair that may still be "never" needs its distance
+                d = min(
+                    fcl.distance(oa, ob, fcl.DistanceRequest(), fcl.DistanceResult())
+                    for _, oa in objects[a]
+                    for _, ob in objects[b]
+                )
+                least[(a, b)] = min(least[(a, b)], float(d))
+    out = []
+    for a, b in itertools.combinations(links, 2):
+        if (a, b) not in least:
+            out.append(PairStats((a, b), "adjacent", -np.inf, 1.0))
+            continue
+        fraction = contacts[(a, b)] / samples
+        reason = "always" if contacts[(a, b)] == samples else "never" if least[(a, b)] > never_m else ""
+        out.append(PairStats((a, b), reason, float(least[(a, b)]), fraction))
+    return out
+
+
+def write_matrix(path: str | Path, stats: list[PairStats], *, samples: int, seed: int, never_m: float) -> None:
+    """Write the matrix as TOML: the sampling settings and one ``[[pair]]`` per pair of links."""
+    lines = [
+        "# Self-collision matrix: which link pairs are checked. Written by robots/make_self_collision.py",
+        "# from random configurations within the joint limits; see refine/collision/self_collision.py.",
+        "# reason: adjacent (joint neighbours), always (in contact at every sample), never (never closer",
+        "# than never_m), or \"\" (checked).",
+        f"samples = {samples}",
+        f"seed = {seed}",
+        f"never_m = {never_m}",
+        "",
+    ]
+    for s in stats:
+        lines += [
+            "[[pair]]",
+            f'links = ["{s.links[0]}", "{s.links[1]}"]',
+            f'reason = "{s.reason}"',
+        ]
+        if np.isfinite(s.min_distance_m):
+            lines += [
+                f"min_distance_mm = {s.min_distance_m * 1e3:.1f}",
+                f"contact_fraction = {s.contact_fraction:.4f}",
+            ]
+        lines.append("")
+    Path(path).write_text("\n".join(lines), encoding="utf-8")
+
+
+def read_matrix(path: str | Path) -> dict[frozenset[str], str]:
+    """The disabled pairs of a matrix file: ``{frozenset({link_a, link_b}): reason}``.
+
+    Raises:
+        InputError: naming the file if it cannot be read or a pair is malformed.
+    """
+    try:
+        data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, tomllib.TOMLDecodeError) as e:
+        raise InputError(f"cannot read self-collision matrix {path}: {e}") from e
+    disabled: dict[frozenset[str], str] = {}
+    for k, pair in enumerate(data.get("pair", [])):
+        links, reason = pair.get("links"), pair.get("reason")
+        if not (isinstance(links, list) and len(links) == 2 and all(isinstance(x, str) for x in links)):
+            raise InputError(f"{path}: pair {k + 1}: links must be two link names, got {links!r}")
+        if reason not in (*REASONS, ""):
+            raise InputError(f"{path}: pair {k + 1}: reason {reason!r} is not one of {', '.join(REASONS)} or \"\"")
+        if reason:
+            disabled[frozenset(links)] = reason
+    return disabled

@@ -1,0 +1,141 @@
+"""Compute the registry robots' collision shapes from their makers' reference collision meshes.
+
+For every link, the reference mesh (``../shared/robot-meshes/<robot>/``, loaded with Pinocchio from
+its ``reference.urdf``) is carried into the frame of the same link of ``robots/<robot>/robot.urdf``
+(the two descriptions agree kinematically but lay out their link frames differently; the mesh is
+moved through the world at the zero configuration, and the shapes test checks the match at random
+configurations), covered by a few convex polytopes (:func:`refine.convex.convex_cover`), and
+written as ``robots/<robot>/collision/<link>_<k>.obj``. The ``<collision>`` and ``<visual>``
+elements of the robot's URDF are rewritten to name these files; nothing else in the URDF changes.
+
+    python3 robots/make_shapes.py [--robots ur10e ...] [--meshes ../shared/robot-meshes]
+
+Needs ``rtree`` (the ``test`` extra) for the overshoot measurement. Prints, per link, the pieces,
+their faces and how far they reach beyond the reference mesh.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import trimesh
+from lxml import etree
+
+from refine.convex import convex_cover, overshoot
+
+HERE = Path(__file__).resolve().parent
+ROBOTS = ("abb_irb4600_60_205", "kuka_iiwa14_r820", "ur10e")
+REFERENCE_FLANGE = {"kuka_iiwa14_r820": "lbr_link_ee"}
+"""The reference's flange frame where it is not ``tool0``."""
+SETTINGS = {"max_overshoot_m": 0.015, "max_pieces": 4, "tolerance_m": 0.006, "max_planes": 48}
+"""Slab hulls at most 15 mm beyond the mesh, each simplified to <= 48 planes within 6 mm of its hull."""
+ROBOT_SETTINGS = {"kuka_iiwa14_r820": {"max_overshoot_m": 0.010, "tolerance_m": 0.005}}
+"""Tighter for the iiwa, whose round housings leave hulls loose in the waist between them."""
+
+
+def joint_links(urdf: Path) -> dict[str, str]:
+    """The link each joint moves (child of the joint), and the root link under ``"universe"``."""
+    root = etree.parse(str(urdf)).getroot()
+    children = {j.find("child").get("link"): j.get("name") for j in root.iter("joint")}
+    links = [link.get("name") for link in root.iter("link")]
+    out = {"universe": next(name for name in links if name not in children)}
+    for joint in root.iter("joint"):
+        if joint.get("type") in ("revolute", "continuous", "prismatic"):
+            out[joint.get("name")] = joint.find("child").get("link")
+    return out
+
+
+def reference_meshes(robot: str, meshes: Path) -> dict[str, trimesh.Trimesh]:
+    """Each reference collision mesh in the frame of the project's link moved by the same joint [m]."""
+    folder = meshes / robot
+    ref, ref_geometry, _ = pin.buildModelsFromUrdf(str(folder / "reference.urdf"), package_dirs=[str(folder)])
+    urdf = HERE / robot / "robot.urdf"
+    own = pin.buildModelFromUrdf(str(urdf))
+    if ref.nq != own.nq:
+        raise SystemExit(f"{robot}: the reference has {ref.nq} joints, the project's model {own.nq}")
+    links = joint_links(urdf)
+    ref_data, own_data = ref.createData(), own.createData()
+    pin.forwardKinematics(ref, ref_data, pin.neutral(ref))
+    pin.forwardKinematics(own, own_data, pin.neutral(own))
+    pin.updateFramePlacements(own, own_data)
+    pin.updateFramePlacements(ref, ref_data)
+    # the references' world may differ from the project's base (UR: ROS base_link is the controller's
+    # Base turned 180 deg about z); the flanges agree, so they give the one from the other
+    T_own_ref = (
+        own_data.oMf[own.getFrameId("tool0")].homogeneous
+        @ np.linalg.inv(ref_data.oMf[ref.getFrameId(REFERENCE_FLANGE.get(robot, "tool0"))].homogeneous)
+    )
+    out: dict[str, trimesh.Trimesh] = {}
+    for g in ref_geometry.geometryObjects:
+        own_joint = own.names[g.parentJoint]  # joints in the same order in both descriptions
+        link = links[own_joint]
+        T_world_link = own_data.oMf[own.getFrameId(link)].homogeneous
+        T_world_mesh = T_own_ref @ ref_data.oMi[g.parentJoint].homogeneous @ g.placement.homogeneous
+        mesh = trimesh.load(g.meshPath, force="mesh")
+        mesh.vertices = mesh.vertices * np.asarray(g.meshScale)
+        mesh.apply_transform(np.linalg.inv(T_world_link) @ T_world_mesh)
+        if link in out:
+            out[link] = trimesh.util.concatenate([out[link], mesh])
+        else:
+            out[link] = mesh
+    return out
+
+
+def rewrite_urdf(urdf: Path, files: dict[str, list[str]]) -> None:
+    """Replace every link's ``<visual>`` and ``<collision>`` by meshes naming ``files[link]``."""
+    tree = etree.parse(str(urdf))
+    for link in tree.getroot().iter("link"):
+        name = link.get("name")
+        for old in link.findall("visual") + link.findall("collision"):
+            link.remove(old)
+        for tag in ("visual", "collision"):
+            for path in files.get(name, []):
+                element = etree.SubElement(link, tag, name=Path(path).stem)
+                geometry = etree.SubElement(element, "geometry")
+                etree.SubElement(geometry, "mesh", filename=path)
+    etree.indent(tree, space="  ")
+    text = etree.tostring(tree, xml_declaration=True, encoding="utf-8").decode("utf-8")
+    urdf.write_text(text.replace("--><robot", "-->\n<robot") + "\n", encoding="utf-8")
+
+
+def make(robot: str, meshes: Path) -> None:
+    """Write one robot's shapes and rewrite its URDF; print what they are."""
+    out_dir = HERE / robot / "collision"
+    out_dir.mkdir(exist_ok=True)
+    for old in out_dir.glob("*.obj"):
+        old.unlink()
+    files: dict[str, list[str]] = {}
+    print(f"{robot}:")
+    for link, mesh in reference_meshes(robot, meshes).items():
+        pieces = convex_cover(mesh, **{**SETTINGS, **ROBOT_SETTINGS.get(robot, {})})
+        reach = overshoot(pieces, mesh, samples=3000)
+        for k, piece in enumerate(pieces):
+            path = f"collision/{link}_{k}.obj"
+            piece.write_obj(
+                HERE / robot / path,
+                f"{robot} {link}: convex piece {k + 1} of {len(pieces)}, link frame, metres.\n"
+                f"Computed by robots/make_shapes.py from the reference collision mesh; see README.md.",
+            )
+            files.setdefault(link, []).append(path)
+        faces = ", ".join(f"{p.plane_count} faces/{len(p.faces)} triangles" for p in pieces)
+        print(f"  {link:12} {len(pieces)} piece(s): {faces}; {reach * 1e3:.1f} mm beyond the mesh at most")
+    rewrite_urdf(HERE / robot / "robot.urdf", files)
+
+
+def main() -> None:
+    """Make the chosen robots' shapes."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--robots", nargs="+", default=list(ROBOTS))
+    parser.add_argument("--meshes", type=Path, default=HERE.parent.parent / "shared" / "robot-meshes")
+    args = parser.parse_args()
+    logging.basicConfig(level=logging.WARNING)
+    for robot in args.robots:
+        make(robot, args.meshes)
+
+
+if __name__ == "__main__":
+    main()
