@@ -154,6 +154,8 @@ class CollisionModel:
         self._hulled = np.array(
             [self.bodies[b].hull is not None and self.bodies[b].kind == "cell" for b in self._pb]
         )
+        self._normals = np.full((len(kept), 3), np.nan)  # last witness normal per pair, world
+        self._bounded = np.array([not (self.bodies[a].is_mesh or self.bodies[b].is_mesh) for a, b in kept])
         self.pairs = tuple((self.bodies[a].label, self.bodies[b].label) for a, b in kept)
         self.excluded = tuple(excluded)
 
@@ -212,6 +214,7 @@ class CollisionModel:
         A, B = self.bodies[a], self.bodies[b]
         d, p_a, p_b, n = signed_distance(A, self._poses[a], B, self._poses[b])
         self.queries += 1
+        self._normals[k] = n
         return Contact(
             body=A.name,
             other=B.name,
@@ -245,6 +248,19 @@ class CollisionModel:
         found = [c for c in (self._pair(k) for k in near) if c.distance_m < query_distance_m]
         return sorted(found, key=lambda c: c.distance_m)
 
+    def _plane_bound(self, k: int) -> float:
+        """A lower bound [m] on pair k's distance from the last witness normal it had.
+
+        For any unit n, two bodies are at least as far apart as the gap between them along n
+        (``-reach_A(-n) - reach_B(n)``); between close samples the last normal keeps that gap near
+        the distance, so a far pair needs no FCL call. ``-inf`` for meshes and unqueried pairs.
+        """
+        n = self._normals[k]
+        if not self._bounded[k] or np.isnan(n[0]):
+            return -math.inf
+        a, b = int(self._pa[k]), int(self._pb[k])
+        return -self.bodies[a].reach(self._poses[a], -n) - self.bodies[b].reach(self._poses[b], n)
+
     def _hull_bound(self, k: int) -> float:
         a, b = int(self._pa[k]), int(self._pb[k])
         self._ensure_placed(a)
@@ -276,8 +292,10 @@ class CollisionModel:
         for k in np.argsort(gaps):
             if hopeless(bound[k], top_margin):
                 break  # visited by bound: no pair left can beat either answer
-            if hopeless(bound[k], self._margin[k]) or (
-                self._hulled[k] and hopeless(self._hull_bound(int(k)), self._margin[k])
+            if (
+                hopeless(bound[k], self._margin[k])
+                or (self._hulled[k] and hopeless(self._hull_bound(int(k)), self._margin[k]))
+                or hopeless(self._plane_bound(int(k)), self._margin[k])
             ):
                 continue
             c = self._pair(int(k))
