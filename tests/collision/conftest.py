@@ -15,7 +15,6 @@ from refine.optimise.seed import TcpKinematics
 from refine.robot import load_robot
 from refine.settings import Shape
 
-
 PRIMITIVE_ROBOTS = Path(__file__).resolve().parent / "primitive_robots"
 
 

@@ -71,7 +71,7 @@ def test_a_fresh_sample_agrees_with_the_matrix(name):
         for s in shapes:
             objects.setdefault(s.link, []).append(s.collision_object(poses[s.link]))
 
-        def touching(a, b):
+        def touching(a, b, objects=objects):
             return any(fcl.collide(x, y, fcl.CollisionRequest(), fcl.CollisionResult())
                        for x in objects[a] for y in objects[b])
 
