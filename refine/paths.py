@@ -72,6 +72,8 @@ class TrackerLog:
         rotations: sensor orientation R_S_E, shape (M, 3, 3).
         station: tracker station (sensor) number the samples belong to.
         source: file name, for messages.
+        device_error: the device's error indicator per sample (character code, 0 for none),
+            shape (M,), or None when the device reported no error.
     """
 
     t: Array
@@ -79,6 +81,7 @@ class TrackerLog:
     rotations: Array
     station: int = 1
     source: str = ""
+    device_error: NDArray[np.int16] | None = None
 
     def __post_init__(self) -> None:
         m = len(self.t)
@@ -87,6 +90,8 @@ class TrackerLog:
         _check_rows("TrackerLog.t", self.t, m, ())
         _check_rows("TrackerLog.positions", self.positions, m, (3,))
         _check_rows("TrackerLog.rotations", self.rotations, m, (3, 3))
+        if self.device_error is not None and np.shape(self.device_error) != (m,):
+            raise InputError(f"TrackerLog.device_error: expected shape ({m},), got {np.shape(self.device_error)}")
 
 
 @dataclass(frozen=True)

@@ -79,6 +79,7 @@ def fused_path(
 
     assert problem.demonstration is not None  # Problem checks this
     cad = read_cad_path(problem.cad, problem.frames.cad_in_world)
+    check_dense_steps(problem, cad.length)
     watch.lap("cad")
     raw, quality = gate_dropouts(read_tracker_log(problem.demonstration))
     demo = clean_demonstration(raw, problem.demonstration)
@@ -92,6 +93,19 @@ def fused_path(
     if qualities is not None:
         qualities.append(quality)
     return fused
+
+
+def check_dense_steps(problem: Problem, length_m: float) -> None:
+    """Refuse a dense collision check of more than ``MAX_CHECK_STEPS`` poses before solving."""
+    from refine.settings import MAX_CHECK_STEPS
+
+    c = problem.collision
+    if c.enabled and (problem.cell or problem.tool.collision) and length_m / c.check_step_m > MAX_CHECK_STEPS:
+        raise InputError(
+            f"{problem.source or 'problem'}: collision.check_step_m = {c.check_step_m:g} m on a {length_m:.3f} m "
+            f"path means more than {length_m / c.check_step_m:.0f} collision checks (limit {MAX_CHECK_STEPS}); "
+            f"use at least {length_m / MAX_CHECK_STEPS:.2g} m"
+        )
 
 
 def weights_for(problem: Problem, robot: Robot) -> Weights:

@@ -32,6 +32,12 @@ MAX_HAMPEL_WINDOW = 50
 """Widest Hampel half-window [samples]: 0.2 s at 240 Hz; wider windows only blur real motion."""
 MAX_SMOOTHING_S = 1.0
 """Heaviest demonstration smoothing [s]: more would flatten every bend of a hand-held path."""
+MAX_WAYPOINTS = 20_000
+"""Most waypoints a path may be resampled to (path length / ``cad.spacing_m``): the refinement's
+memory and time grow linearly with it (docs/problem-file.md, "Ranges and limits")."""
+MAX_CHECK_STEPS = 2_000_000
+"""Most poses of the dense collision check, counted as path length / ``collision.check_step_m``
+(a lower bound: joint sweeps add more)."""
 MIN_CHECK_STEP_M = 1e-4
 """Finest step of the dense collision check [m]."""
 MIN_ORIENTATION_DEG = 0.01
@@ -46,6 +52,17 @@ def _positive(owner: str, name: str, value: float) -> None:
 def _non_negative(owner: str, name: str, value: float) -> None:
     if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
         raise InputError(f"{owner}.{name} must be a finite number >= 0, got {value!r}")
+
+
+def check_waypoint_count(length_m: float, spacing_m: float, where: str) -> None:
+    """Refuse a path that would be resampled to more than :data:`MAX_WAYPOINTS` waypoints."""
+    count = length_m / spacing_m
+    if not math.isfinite(count) or count > MAX_WAYPOINTS:
+        raise InputError(
+            f"{where}: a {length_m:.3f} m path at cad.spacing_m = {spacing_m:g} m gives {count:.0f} "
+            f"waypoints, more than the limit of {MAX_WAYPOINTS}; use a larger spacing "
+            f"(at least {length_m / MAX_WAYPOINTS:.2g} m)"
+        )
 
 
 def _in_range(owner: str, name: str, value: float, lo: float, hi: float, unit: str = "") -> None:

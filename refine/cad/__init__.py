@@ -24,6 +24,7 @@ from refine.errors import InputError
 from refine.frames import check_transform, transform_points
 from refine.paths import CadPath
 from refine.problem import CadSettings
+from refine.settings import check_waypoint_count
 
 __all__ = [
     "CLOSED_TOLERANCE_M",
@@ -96,6 +97,8 @@ def read_cad_path(settings: CadSettings, cad_in_world: NDArray) -> CadPath:
     if settings.reverse:
         points = points[::-1].copy()
     points_world = transform_points(T_world_cad, points)
+    length = float(np.sum(np.linalg.norm(np.diff(points_world, axis=0), axis=1)))
+    check_waypoint_count(length, settings.spacing_m, f"cad.file {Path(settings.file).name!r}")
     s, positions = resample_by_arc_length(points_world, settings.spacing_m, closed=closed)
     source = Path(settings.file).name + (f" (layer {settings.layer})" if settings.layer else "")
     return CadPath(s=s, positions=positions, closed=closed, source=source)

@@ -28,6 +28,7 @@ from refine.cad.resample import DUPLICATE_TOLERANCE_M, resample_by_arc_length
 from refine.errors import InputError
 from refine.export.pathml_read import PathMLTrack, read_pathml
 from refine.paths import FusedPath
+from refine.settings import check_waypoint_count
 
 logger = logging.getLogger(__name__)
 
@@ -92,6 +93,9 @@ def fused_from_pathml(path: str | Path, spacing_m: float, track: str | None = No
         raise InputError(f"PathML {path}: track {tr.name!r} needs at least 2 distinct points")
     s_points = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
 
+    check_waypoint_count(
+        float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1))), spacing_m, f"cad.file {Path(path).name!r}"
+    )
     s, positions = resample_by_arc_length(points, spacing_m)
     s = np.clip(s, 0.0, s_points[-1])
     R = Slerp(s_points, Rotation.from_matrix(rotations))(s).as_matrix()

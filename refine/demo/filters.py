@@ -66,18 +66,35 @@ def _robust_odd_extension(x: NDArray, h: int) -> NDArray:
     return np.concatenate([head, x, tail])
 
 
-def _detrended_windows(x: NDArray, h: int) -> tuple[NDArray, NDArray]:
-    """Windows ``k ± h`` of ``x`` (M, k) with their local slope removed, and their medians.
+_CHUNK_ELEMENTS = 1 << 21
+"""Window elements processed at once by the running statistics (2 M floats, 16 MB per array):
+memory stays linear in the number of samples whatever the window."""
 
-    The slope at ``k`` is the median of ``(x[j+h] - x[j]) / h`` over the ``h + 1`` pairs inside
-    the window: a few outliers do not tilt it, and the long baseline keeps noise from tilting it.
-    Returns ``(D, m)``: ``D[k, c, i] = x[k+i-h, c] - slope[k, c] (i - h)``, shape (M, k, 2h+1),
-    and ``m = median(D, axis=-1)``, shape (M, k).
+
+def _window_stats(x: NDArray, h: int, mad: bool = True) -> tuple[NDArray, NDArray | None]:
+    """Medians of the detrended windows ``k ± h`` of ``x`` (M, k), and their MADs.
+
+    The window of sample ``k`` is ``D[k, c, i] = x[k+i-h, c] - slope[k, c] (i - h)``: its local slope
+    (the median of ``(x[j+h] - x[j]) / h`` over the ``h + 1`` pairs inside the window: a few
+    outliers do not tilt it, and the long baseline keeps noise from tilting it) removed. Returns
+    ``median(D, axis=-1)`` and ``median(|D - median|, axis=-1)``, each of shape (M, k), computed in
+    blocks of samples so that memory stays linear in M.
     """
-    windows = sliding_window_view(_robust_odd_extension(x, h), 2 * h + 1, axis=0)
-    slope = np.median(windows[..., h:] - windows[..., : h + 1], axis=-1) / h
-    detrended = windows - slope[..., None] * np.arange(-h, h + 1)
-    return detrended, np.median(detrended, axis=-1)
+    padded = _robust_odd_extension(x, h)
+    m, k = x.shape
+    med = np.empty((m, k))
+    spread = np.empty((m, k)) if mad else None
+    ramp = np.arange(-h, h + 1)
+    step = max(64, _CHUNK_ELEMENTS // (k * (2 * h + 1)))
+    for a in range(0, m, step):
+        b = min(m, a + step)
+        windows = sliding_window_view(padded[a : b + 2 * h], 2 * h + 1, axis=0)
+        slope = np.median(windows[..., h:] - windows[..., : h + 1], axis=-1) / h
+        detrended = windows - slope[..., None] * ramp
+        med[a:b] = np.median(detrended, axis=-1)
+        if spread is not None:
+            spread[a:b] = np.median(np.abs(detrended - med[a:b, :, None]), axis=-1)
+    return med, spread
 
 
 def running_median(x: ArrayLike, half_window: int) -> NDArray:
@@ -90,7 +107,7 @@ def running_median(x: ArrayLike, half_window: int) -> NDArray:
     reflection.
     """
     x = np.asarray(x, dtype=float)
-    _, med = _detrended_windows(x.reshape(len(x), -1), int(half_window))
+    med, _ = _window_stats(x.reshape(len(x), -1), int(half_window), mad=False)
     return med.reshape(x.shape)
 
 
@@ -132,9 +149,9 @@ def hampel(
     if int(half_window) < 1 or not n_sigmas > 0.0:
         raise InputError(f"hampel: need half_window >= 1 and n_sigmas > 0, got {half_window}, {n_sigmas}")
     x2 = x.reshape(len(x), -1)
-    detrended, med = _detrended_windows(x2, int(half_window))
-    n = detrended.shape[-1]  # small-sample correction of the MAD (Croux & Rousseeuw, 1992)
-    sigma = MAD_TO_SIGMA * n / (n - 0.8) * np.median(np.abs(detrended - med[..., None]), axis=-1)
+    med, spread = _window_stats(x2, int(half_window))
+    n = 2 * int(half_window) + 1  # small-sample correction of the MAD (Croux & Rousseeuw, 1992)
+    sigma = MAD_TO_SIGMA * n / (n - 0.8) * spread
     sigma = np.maximum(sigma, np.median(sigma, axis=0))
     mask = np.abs(x2 - med) > np.maximum(n_sigmas * sigma, min_deviation)
     filtered = np.where(mask, med, x2)

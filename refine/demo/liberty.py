@@ -10,9 +10,17 @@ The format, as the Liberty prints it in ASCII mode and as refine reads and write
 
 * Blank lines are ignored; comments are ignored except ``# units: ...`` and ``# rate_hz: ...``
   (``:`` or ``=``, any case), which set the position unit and sample rate for the whole file.
-* A data line is whitespace separated: the station number (an integer, leading zero allowed,
-  ``01``), then either six values ``x y z azimuth elevation roll`` or seven values
-  ``frame_count x y z azimuth elevation roll``. All lines of one station use the same layout.
+* A data line is whitespace separated: the record header, then either six values
+  ``x y z azimuth elevation roll`` or seven values ``frame_count x y z azimuth elevation roll``.
+  All lines of one station use the same layout.
+* The record header is the one the Liberty puts before every ASCII record: the station number
+  (two digits, ``01``..``16``), then the initiating command (one letter, e.g. ``P`` for a single
+  record; blank in continuous mode) and the error indicator (one character, blank when there is
+  no error), all without spaces: ``01``, ``01P`` or ``01PE`` (PiMgr and the PDI samples save the
+  records as the device sends them). A non-blank error indicator is kept per sample
+  (``TrackerLog.device_error``) and such samples are treated as dropouts by the quality gate
+  (:mod:`refine.demo.quality`); they are never silently dropped.
+* At most :data:`MAX_SAMPLES` samples of the station are read.
 * Positions are in inches (default) or centimetres, angles in degrees; the orientation is
   ``R = Rz(azimuth)·Ry(elevation)·Rx(roll)`` (:func:`refine.frames.matrix_from_tracker_angles`).
 * Time: with frame counts ``t = (frame - first_frame) / rate_hz`` (counts must increase); without,
@@ -26,6 +34,7 @@ from __future__ import annotations
 
 import logging
 import re
+from array import array
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +45,10 @@ from refine.paths import TrackerLog
 
 logger = logging.getLogger(__name__)
 
+MAX_SAMPLES = 4_000_000
+"""Most samples of one station read from a log (4.6 hours at 240 Hz)."""
+BYTES_PER_SAMPLE = 600
+"""Peak memory per sample of the demonstration stage, measured (docs/problem-file.md, "Limits")."""
 #: Length of one Liberty position unit [m].
 METRES_PER_UNIT = {"in": 0.0254, "cm": 0.01}
 _HEADER = re.compile(r"^#\s*(units|rate_hz)\s*[:=]\s*(\S+)\s*$", re.IGNORECASE)
@@ -57,10 +70,81 @@ def _parse_rate(text: str, where: str) -> float:
     return rate
 
 
+_RECORD_HEADER = re.compile(r"(\d{1,2})([A-Za-z])?([!-~])?")
+_CHUNK_LINES = 65536  # lines parsed at once: memory stays linear in the samples kept
+
+
+def _parse_header(token: str, where: str, line: str) -> tuple[int, str]:
+    """Station and error indicator of a record's first token (module docstring)."""
+    m = _RECORD_HEADER.fullmatch(token)
+    if m is None:
+        raise InputError(
+            f"{where}: a record must start with the station number (optionally followed by the "
+            f"initiating command letter and the error indicator, as in '01P'), got {message_line(line)}"
+        )
+    return int(m.group(1)), m.group(3) or ""
+
+
+def message_line(line: str) -> str:
+    """A line quoted in an error message: at most 80 characters, escapes for the unprintable."""
+    return repr(line[:80] + ("..." if len(line) > 80 else ""))
+
+
+class _Rows:
+    """The kept records of one station, parsed to numbers a chunk of lines at a time."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.tokens: list[list[str]] = []
+        self.linenos: list[int] = []
+        self.lines: list[str] = []
+        self.blocks: list[np.ndarray] = []
+        self.errors: list[str] = []
+        self.all_linenos = array("l")
+        self.count = 0
+
+    def add(self, tokens: list[str], lineno: int, line: str, error: str) -> None:
+        self.tokens.append(tokens)
+        self.linenos.append(lineno)
+        self.lines.append(line)
+        self.errors.append(error)
+        self.count += 1
+        if self.count > MAX_SAMPLES:
+            raise InputError(
+                f"{self.path}:{lineno}: more than {MAX_SAMPLES} samples of this station; cut the log "
+                f"(the limit keeps memory under about {MAX_SAMPLES * BYTES_PER_SAMPLE / 1e9:.1f} GB)"
+            )
+        if len(self.tokens) >= _CHUNK_LINES:
+            self.flush()
+
+    def flush(self) -> None:
+        if not self.tokens:
+            return
+        try:
+            block = np.array(self.tokens, dtype=float)
+        except ValueError:
+            for tokens, lineno, line in zip(self.tokens, self.linenos, self.lines, strict=True):
+                try:
+                    [float(v) for v in tokens]
+                except ValueError as e:
+                    raise InputError(f"{self.path}:{lineno}: not a number in {message_line(line)} ({e})") from e
+            raise
+        bad = np.flatnonzero(~np.all(np.isfinite(block), axis=1))
+        if bad.size:
+            k = int(bad[0])
+            raise InputError(f"{self.path}:{self.linenos[k]}: non-finite value in {message_line(self.lines[k])}")
+        self.blocks.append(block)
+        self.all_linenos.extend(self.linenos)
+        self.tokens, self.linenos, self.lines = [], [], []
+
+
 def read_liberty_ascii(
     path: str | Path, units: str | None = "in", station: int = 1, rate_hz: float = 240.0
 ) -> TrackerLog:
     """Read one station's samples from a Liberty ASCII log (format in the module docstring).
+
+    The file is read line by line and parsed a block of lines at a time, so memory grows with the
+    samples kept (about :data:`BYTES_PER_SAMPLE` each), not with the file.
 
     Args:
         path: the log file.
@@ -70,63 +154,63 @@ def read_liberty_ascii(
         rate_hz: sample rate [Hz], unless the file's ``# rate_hz:`` header says otherwise.
 
     Returns:
-        The station's samples: times [s] from 0, positions [m], rotations R_S_E.
+        The station's samples: times [s] from 0, positions [m], rotations R_S_E, and the
+        device's error indicator per sample (``device_error``, 0 where there is none).
 
     Raises:
-        InputError: unreadable file; a header unit differing from ``units`` (naming both); a
-            malformed line (naming file, line number and text); frame counts that do not
-            increase; no samples of ``station`` (listing the stations found).
+        InputError: unreadable or non-UTF-8 file; a header unit differing from ``units`` (naming
+            both); a malformed line (naming file, line number and text); frame counts that do not
+            increase; more than :data:`MAX_SAMPLES` samples; no samples of ``station`` (listing
+            the stations found).
     """
     path = Path(path)
-    try:
-        lines = path.read_text(encoding="utf-8-sig", errors="strict").splitlines()
-    except (OSError, UnicodeDecodeError) as e:
-        raise InputError(f"tracker log {str(path)!r} cannot be read: {e}") from e
     file_units: str | None = None
-    rows: list[list[float]] = []
-    frames: list[int] = []
-    linenos: list[int] = []
+    rows = _Rows(path)
     layout: int | None = None
     stations: set[int] = set()
-    for lineno, raw in enumerate(lines, start=1):
-        line = raw.strip()
-        where = f"{path}:{lineno}"
-        if not line:
-            continue
-        if line.startswith("#"):
-            m = _HEADER.match(line)
-            if m and m.group(1).lower() == "units":
-                file_units = m.group(2).lower()
-                _unit_scale(file_units, where)
-            elif m:
-                rate_hz = _parse_rate(m.group(2), where)
-            continue
-        tokens = line.split()
+    headers: dict[str, tuple[int, str]] = {}
+    try:
+        f = open(path, encoding="utf-8-sig", errors="strict", newline=None)  # noqa: SIM115
+    except OSError as e:
+        raise InputError(f"tracker log {str(path)!r} cannot be read: {e.strerror}") from e
+    with f:
+        lineno = 0
         try:
-            st = int(tokens[0])
-        except ValueError as e:
-            raise InputError(f"{where}: station number must be an integer, got {line!r}") from e
-        stations.add(st)
-        if st != station:
-            continue
-        n = len(tokens) - 1
-        if n not in (6, 7) or (layout is not None and n != layout):
-            expected = "6 or 7" if layout is None else str(layout)
-            raise InputError(
-                f"{where}: expected {expected} values after the station number "
-                f"([frame_count] x y z azimuth elevation roll), got {n}: {line!r}"
-            )
-        layout = n
-        try:
-            if n == 7:
-                frames.append(int(tokens[1]))
-            values = [float(v) for v in tokens[n - 5 :]]
-        except ValueError as e:
-            raise InputError(f"{where}: not a number in {line!r} ({e})") from e
-        if not np.all(np.isfinite(values)):
-            raise InputError(f"{where}: non-finite value in {line!r}")
-        rows.append(values)
-        linenos.append(lineno)
+            for raw in f:
+                lineno += 1
+                line = raw.strip()
+                if not line:
+                    continue
+                if line[0] == "#":
+                    where = f"{path}:{lineno}"
+                    m = _HEADER.match(line)
+                    if m and m.group(1).lower() == "units":
+                        file_units = m.group(2).lower()
+                        _unit_scale(file_units, where)
+                    elif m:
+                        rate_hz = _parse_rate(m.group(2), where)
+                    continue
+                tokens = line.split()
+                head = headers.get(tokens[0])
+                if head is None:
+                    head = headers[tokens[0]] = _parse_header(tokens[0], f"{path}:{lineno}", line)
+                st, error = head
+                stations.add(st)
+                if st != station:
+                    continue
+                n = len(tokens) - 1
+                if n != layout and (layout is not None or n not in (6, 7)):
+                    where = f"{path}:{lineno}"
+                    expected = "6 or 7" if layout is None else str(layout)
+                    raise InputError(
+                        f"{where}: expected {expected} values after the station number "
+                        f"([frame_count] x y z azimuth elevation roll), got {n}: {message_line(line)}"
+                    )
+                layout = n
+                rows.add(tokens[1:], lineno, line, error)
+        except UnicodeDecodeError as e:
+            raise InputError(f"{path}:{lineno + 1}: not UTF-8 text ({e.reason})") from e
+    rows.flush()
 
     if units is not None and file_units is not None and units != file_units:
         raise InputError(
@@ -134,25 +218,42 @@ def read_liberty_ascii(
             f"say units = {units!r}"
         )
     scale = _unit_scale(file_units or units or "in", str(path))
-    if not rows:
+    if not rows.blocks:
         found = ", ".join(str(s) for s in sorted(stations)) or "none"
         raise InputError(
             f"tracker log {str(path)!r}: no samples of station {station}; stations found: {found}"
         )
-    data = np.asarray(rows, dtype=float)
+    data = rows.blocks[0] if len(rows.blocks) == 1 else np.concatenate(rows.blocks)
+    rows.blocks = []
     if layout == 7:
-        f = np.asarray(frames, dtype=np.int64)
-        bad = np.flatnonzero(np.diff(f) <= 0)
+        f_count = data[:, 0]
+        if np.any(f_count != np.round(f_count)):
+            k = int(np.flatnonzero(f_count != np.round(f_count))[0])
+            raise InputError(f"{path}:{rows.all_linenos[k]}: frame count {f_count[k]} is not an integer")
+        bad = np.flatnonzero(np.diff(f_count) <= 0)
         if bad.size:
             k = int(bad[0]) + 1
             raise InputError(
-                f"{path}:{linenos[k]}: frame count {f[k]} does not increase after {f[k - 1]} "
-                f"(line {linenos[k - 1]})"
+                f"{path}:{rows.all_linenos[k]}: frame count {int(f_count[k])} does not increase after "
+                f"{int(f_count[k - 1])} (line {rows.all_linenos[k - 1]})"
             )
-        t = (f - f[0]) / rate_hz
+        t = (f_count - f_count[0]) / rate_hz
+        data = data[:, 1:]
     else:
         t = np.arange(len(data)) / rate_hz
-    rotations = matrix_from_tracker_angles(data[:, 3], data[:, 4], data[:, 5], degrees=True)
+    rotations = np.empty((len(data), 3, 3))
+    for a in range(0, len(data), _CHUNK_LINES):  # in blocks: the conversion's temporaries stay small
+        rows_ = data[a : a + _CHUNK_LINES]
+        rotations[a : a + _CHUNK_LINES] = matrix_from_tracker_angles(rows_[:, 3], rows_[:, 4], rows_[:, 5], degrees=True)
+    device_error = np.array([ord(e) if e else 0 for e in rows.errors], dtype=np.int16)
+    if device_error.any():
+        logger.warning(
+            "%s: the device flagged %d of %d samples with an error indicator (%s)",
+            path,
+            int(np.count_nonzero(device_error)),
+            len(t),
+            ", ".join(sorted({chr(c) for c in device_error if c})),
+        )
     logger.debug("%s: %d samples of station %d at %g Hz", path, len(t), station, rate_hz)
     return TrackerLog(
         t=t.astype(float),
@@ -160,6 +261,7 @@ def read_liberty_ascii(
         rotations=rotations,
         station=station,
         source=str(path),
+        device_error=device_error if device_error.any() else None,
     )
 
 

@@ -10,6 +10,7 @@ Two checks stand between the tracker log and the optimiser; their figures go to 
 * *frozen*: it repeats the previous sample exactly, in all six values, in a run of at least
   :data:`FROZEN_MIN_SAMPLES` (the device re-sent an old record; live readings always differ in
   the last digit);
+* flagged by the device: its record carries an error indicator (Liberty ASCII header);
 * a *jump*: it cannot be reached from the last good sample by a hand: farther than
   :data:`MAX_HAND_SPEED_M_S` times the time between them plus :data:`JUMP_TOLERANCE_M`, or turned
   faster than :data:`MAX_HAND_RATE_DEG_S` plus :data:`JUMP_TOLERANCE_DEG`;
@@ -147,13 +148,23 @@ class FrameEstimate:
 
 @dataclass(frozen=True)
 class DemoQuality:
-    """The gate's figures, as written to ``result.json`` (``demo_quality``)."""
+    """The gate's figures, as written to ``result.json`` (``demo_quality``).
+
+    Attributes:
+        n_samples: samples in the raw log.
+        sample_step_s: median time step [s].
+        bad_runs: dropouts and gaps found, with what was done about each.
+        frame: the tracker frame estimate (None before alignment).
+        warnings: what the run should be told.
+        device_errors: samples the device flagged (``n_flagged``, ``by_indicator``).
+    """
 
     n_samples: int
     sample_step_s: float
     bad_runs: tuple[BadRun, ...] = ()
     frame: FrameEstimate | None = None
     warnings: tuple[str, ...] = ()
+    device_errors: dict[str, Any] | None = None
 
     def as_json(self) -> dict[str, Any]:
         """Plain values for ``result.json``."""
@@ -170,6 +181,7 @@ class DemoQuality:
             "frame_significance_sigmas": SIGNIFICANCE,
             "frame_stop_deg": FRAME_STOP_DEG,
             "warnings": list(self.warnings),
+            "device_errors": self.device_errors,
         }
 
 
@@ -183,11 +195,13 @@ def _runs(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
 
 
 def _bad_samples(log: TrackerLog) -> tuple[NDArray[np.bool_], NDArray[np.int8]]:
-    """Mask of bad samples and their kind code (1 zero, 2 frozen, 3 jump)."""
+    """Mask of bad samples and their kind code (1 zero, 2 frozen, 3 jump, 4 device error)."""
     p, R, t = log.positions, log.rotations, log.t
     m = len(t)
     kind = np.zeros(m, dtype=np.int8)
     kind[np.all(p == 0.0, axis=1)] = 1
+    if log.device_error is not None:
+        kind[(log.device_error != 0) & (kind == 0)] = 4
     same = np.concatenate([[False], np.all(p[1:] == p[:-1], axis=1) & np.all(R[1:] == R[:-1], axis=(1, 2))])
     for a, b in _runs(same):  # a..b repeat their predecessor; the run holds b - a + 2 samples
         if b - a + 2 >= FROZEN_MIN_SAMPLES:
@@ -267,7 +281,7 @@ def find_bad_runs(log: TrackerLog) -> list[BadRun]:
     t = log.t
     mask, kind = _bad_samples(log)
     dt = float(np.median(np.diff(t)))
-    names = {1: "zero", 2: "frozen", 3: "jump"}
+    names = {1: "zero", 2: "frozen", 3: "jump", 4: "device-error"}
     runs = []
     for a, b in _runs(mask):
         if a == 0 or b == len(t) - 1:
@@ -312,6 +326,12 @@ def gate_dropouts(log: TrackerLog) -> tuple[TrackerLog, DemoQuality]:
             + (f" ({len(refused)} such dropouts)" if len(refused) > 1 else "")
             + "; record the demonstration again or cut the log"
         )
+    if log.device_error is not None:
+        codes = log.device_error[log.device_error != 0]
+        counts = {chr(int(c)): int(n) for c, n in zip(*np.unique(codes, return_counts=True), strict=True)}
+        device = {"n_flagged": int(codes.size), "by_indicator": counts}
+    else:
+        device = {"n_flagged": 0, "by_indicator": {}}
     mask = np.zeros(len(log.t), dtype=bool)
     for r in runs:
         if r.kind != "gap":
@@ -325,10 +345,10 @@ def gate_dropouts(log: TrackerLog) -> tuple[TrackerLog, DemoQuality]:
     positions = fill_positions(log.t, log.positions, mask)
     rotations = fill_rotations(log.t, log.rotations, mask)
     t = log.t[keep]
-    cleaned = replace(log, t=t - t[0], positions=positions[keep], rotations=rotations[keep])
+    cleaned = replace(log, t=t - t[0], positions=positions[keep], rotations=rotations[keep], device_error=None)
     if runs:
         logger.info("%s: %s", where, "; ".join(f"{r.action} {r.describe()}" for r in runs))
-    quality = DemoQuality(len(log.t), float(np.median(np.diff(log.t))), tuple(runs))
+    quality = DemoQuality(len(log.t), float(np.median(np.diff(log.t))), tuple(runs), device_errors=device)
     return cleaned, quality
 
 
