@@ -34,7 +34,7 @@ from refine.problem import load_problem
 
 ROOT = Path(__file__).resolve().parents[1]
 GLASS = ROOT / "problems" / "glass_adhesive"
-EXAMPLES = int(os.environ.get("FUZZ_EXAMPLES", "25"))
+EXAMPLES = int(os.environ.get("FUZZ_EXAMPLES", "20"))
 FUZZ = settings(
     max_examples=EXAMPLES,
     deadline=None,

@@ -93,7 +93,7 @@ def test_the_glass_demo_with_40_zero_samples_is_refused_by_check(tmp_path, capsy
     assert "40 zero sample(s) 1500..1539" in err and "171 ms" in err and "Traceback" not in err
 
 
-@pytest.mark.parametrize("axis", [0, 2])
+@pytest.mark.parametrize("axis", [pytest.param(0, marks=pytest.mark.slow), 2])
 def test_a_tracker_frame_rotated_5_degrees_stops_the_run_naming_the_angle(tmp_path, capsys, axis):
     problem = _glass_copy(tmp_path)
     toml = problem / "problem.toml"
