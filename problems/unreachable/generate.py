@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from refine.collision.geometry import fcl_geometry
+from refine.demo.csv_ import write_demo_csv
 from refine.demo.liberty import write_liberty_ascii
 from refine.demo.liberty_binary import write_liberty_binary
 from refine.demo.simulate import TrackerModel, simulate_demonstration, write_truth_csv
@@ -35,7 +36,6 @@ from refine.frames import (
     invert_transform,
     make_transform,
     matrix_from_rotvec,
-    tracker_angles_from_matrix,
     transform_points,
 )
 from refine.optimise.seed import TcpKinematics, solve_ik
@@ -170,23 +170,12 @@ def write_case(case: Case, demo: Demo, seed: int) -> None:
     write_liberty_ascii(folder / "demo.liberty", sim.log, units="in", rate_hz=RATE_HZ)
     if case.name in ALL_FORMATS:
         write_liberty_binary(folder / "demo.lbin", sim.log, with_timestamp=True, units="in", rate_hz=RATE_HZ)
-        write_demo_csv(folder / "demo.csv", sim.log)
+        write_demo_csv(folder / "demo.csv", sim.log, units="mm")
     write_truth_csv(folder / "truth.csv", sim.s, sim.quaternions, sim.speed)
     print(
         f"{case.name}: path {s[-1]:.3f} m ({len(s)} vertices), demo {len(sim.log.t)} samples "
         f"({sim.duration_s:.1f} s at {RATE_HZ:g} Hz)"
     )
-
-
-def write_demo_csv(path: Path, log) -> None:
-    """The tracker log as a demonstration CSV (``refine.demo.csv_``): t [s], x, y, z [mm], angles [deg]."""
-    angles = np.array([tracker_angles_from_matrix(R) for R in log.rotations])
-    rows = np.column_stack([log.t, log.positions * 1000.0, angles])
-    with path.open("w", encoding="utf-8") as f:
-        f.write(
-            "# demonstration written by ../generate.py; positions in mm\nt,x,y,z,azimuth,elevation,roll\n"
-        )
-        np.savetxt(f, rows, delimiter=",", fmt=["%.4f", "%.3f", "%.3f", "%.3f", "%.3f", "%.3f", "%.3f"])
 
 
 # ---- the cases ----------------------------------------------------------------------------------

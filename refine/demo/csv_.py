@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from refine.errors import InputError
-from refine.frames import matrix_from_tracker_angles
+from refine.frames import matrix_from_tracker_angles, tracker_angles_from_matrix
 from refine.paths import TrackerLog
 
 logger = logging.getLogger(__name__)
@@ -104,3 +104,23 @@ def read_demo_csv(path: str | Path, units: str = "m") -> TrackerLog:
         rotations=matrix_from_tracker_angles(data[:, 4], data[:, 5], data[:, 6], degrees=True),
         source=str(path),
     )
+
+
+def write_demo_csv(path: str | Path, log: TrackerLog, units: str = "mm") -> None:
+    """Write a tracker log as a demonstration CSV that :func:`read_demo_csv` reads.
+
+    Args:
+        path: the file to write.
+        log: samples; positions [m], rotations R_S_E.
+        units: position unit in the file: ``"m"``, ``"mm"``, ``"cm"`` or ``"in"``.
+
+    Raises:
+        InputError: an unknown unit.
+    """
+    if units not in METRES_PER_UNIT:
+        raise InputError(f"write_demo_csv: unknown position unit {units!r}; use one of {', '.join(METRES_PER_UNIT)}")
+    angles = tracker_angles_from_matrix(log.rotations)
+    rows = np.column_stack([log.t, np.asarray(log.positions) / METRES_PER_UNIT[units], angles])
+    with Path(path).open("w", encoding="utf-8") as f:
+        f.write(f"# positions in {units}, angles in deg\nt,x,y,z,azimuth,elevation,roll\n")
+        np.savetxt(f, rows, delimiter=",", fmt="%.6f")

@@ -473,3 +473,17 @@ def read_truth_csv(path: str | Path) -> Truth:
     if data.shape[1] != 6 or len(data) == 0:
         raise InputError(f"{path}: expected rows of 6 values, got shape {data.shape}")
     return Truth(s=data[:, 0], quaternions=data[:, 1:5], speed=data[:, 5])
+
+
+def perturb_log(log: TrackerLog, model: TrackerModel, seed: int) -> TrackerLog:
+    """``log`` with white noise of ``model``'s size added to every sample (a re-recording's noise).
+
+    Positions get ``position_noise_m`` per axis; rotations a random turn whose angle has the RMS
+    ``orientation_noise_deg`` (each of the three rotation-vector components ``sigma / sqrt(3)``).
+    """
+    rng = np.random.default_rng(seed)
+    n = len(log.t)
+    dp = rng.normal(0.0, model.position_noise_m, (n, 3))
+    vec = rng.normal(0.0, math.radians(model.orientation_noise_deg) / math.sqrt(3.0), (n, 3))
+    R = matrix_from_rotvec(vec) @ np.asarray(log.rotations)
+    return replace(log, positions=np.asarray(log.positions) + dp, rotations=R)
