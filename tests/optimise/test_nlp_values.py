@@ -216,3 +216,40 @@ def test_the_inspection_singularity_function_is_the_scaled_manipulability(irb460
     for qk in q:
         expected = abs(np.linalg.det(scale @ kin.jacobian(qk)))
         assert float(f(qk)) == pytest.approx(expected, rel=1e-9, abs=1e-6)
+
+
+def test_smoothness_and_mid_range_terms_have_their_documented_values(irb4600, straight_tool, kin, q):
+    """velocity · |Δq/Δs|², acceleration · |Δ²q/Δs²|² (weights carry the deg² conversion) and
+    mid_range · ((q - mid) / half range)², each summed over the path and averaged per waypoint."""
+    fused = _fused(kin, q, OFFSETS, _turns(0.0 * ANGLES))
+    h = np.mean(np.diff(fused.s))
+    bend = q[0] + (np.arange(N)[:, None] ** 2) * np.radians([0.5, -0.2, 0.3, 1.0, -0.7, 0.4])
+    mid, half = np.radians(LOWER_DEG + UPPER_DEG) / 2.0, np.radians(UPPER_DEG - LOWER_DEG) / 2.0
+    expected = {
+        "velocity": 2e-3 * np.sum((np.diff(bend, axis=0) / h) ** 2) / N,
+        "acceleration": 3e-7 * np.sum((np.diff(bend, 2, axis=0) / h**2) ** 2) / N,
+        "mid_range": 0.4 * np.sum(((bend - mid) / half) ** 2) / N,
+    }
+    weights = {"velocity": 2e-3, "acceleration": 3e-7, "mid_range": 0.4}
+    for term, value in expected.items():
+        w = {k: (weights[k] if k == term else 0.0) for k in weights}
+        nlp = build_refinement(
+            irb4600, fused, np.eye(4), straight_tool, Tolerances(), weights=Weights(orientation=0.0, **w)
+        )
+        assert _evaluate(nlp, bend.ravel())[0] == pytest.approx(value, rel=1e-9), term
+
+
+def test_linearised_rows_are_their_gradient_times_the_interpolated_joints(irb4600, straight_tool, kin, q):
+    from refine.optimise.problem import LinearRow
+
+    gradient = np.array([0.3, -0.1, 0.2, 0.0, 0.05, -0.4])
+    rows = (
+        LinearRow(1, 0.0, gradient, 0.02, "link_3 / table"),
+        LinearRow(2, 0.4, -gradient, -0.1, "tool / part"),
+    )
+    nlp = _standard(irb4600, straight_tool, kin, q, Tolerances(), active=ActiveSet(linear_rows=rows))
+    _, g = _evaluate(nlp, q.ravel())
+    tail = g[4 * N + 6 * (N - 1) :]
+    np.testing.assert_allclose(tail, [gradient @ q[1], -gradient @ (0.6 * q[2] + 0.4 * q[3])], atol=1e-12)
+    np.testing.assert_allclose(nlp.lbg[4 * N + 6 * (N - 1) :], [0.02, -0.1])
+    assert np.all(np.isinf(nlp.ubg[4 * N + 6 * (N - 1) :]))
