@@ -253,3 +253,42 @@ def test_linearised_rows_are_their_gradient_times_the_interpolated_joints(irb460
     np.testing.assert_allclose(tail, [gradient @ q[1], -gradient @ (0.6 * q[2] + 0.4 * q[3])], atol=1e-12)
     np.testing.assert_allclose(nlp.lbg[4 * N + 6 * (N - 1) :], [0.02, -0.1])
     assert np.all(np.isinf(nlp.ubg[4 * N + 6 * (N - 1) :]))
+
+
+@pytest.mark.parametrize(
+    ("active", "message"),
+    [
+        (ActiveSet(singular_waypoints=(N,)), rf"singular waypoint {N} outside \[0, {N}\)"),
+        (ActiveSet(singular_waypoints=(-1,)), "singular waypoint -1"),
+        (ActiveSet(singular_segments=((N - 1, 0.5),)), "singular segment point"),
+        (ActiveSet(singular_segments=((0, 0.0),)), "singular segment point"),
+        (ActiveSet(singular_segments=((0, 1.0),)), "singular segment point"),
+    ],
+)
+def test_an_active_set_outside_the_path_is_refused(irb4600, straight_tool, kin, q, active, message):
+    from refine.errors import InputError
+
+    with pytest.raises(InputError, match=message):
+        _standard(irb4600, straight_tool, kin, q, Tolerances(), active=active)
+
+
+@pytest.mark.parametrize(
+    ("k", "f", "size"), [(N, 0.0, 6), (-1, 0.0, 6), (0, 1.0, 6), (0, -0.1, 6), (0, 0.0, 5)]
+)
+def test_a_linear_row_outside_the_path_or_of_the_wrong_size_is_refused(
+    irb4600, straight_tool, kin, q, k, f, size
+):
+    from refine.errors import InputError
+    from refine.optimise.problem import LinearRow
+
+    row = LinearRow(k, f, np.ones(size), 0.0, "probe")
+    with pytest.raises(InputError, match="linear row 'probe'"):
+        _standard(irb4600, straight_tool, kin, q, Tolerances(), active=ActiveSet(linear_rows=(row,)))
+
+
+def test_the_first_and_last_waypoints_may_carry_active_rows(irb4600, straight_tool, kin, q):
+    from refine.optimise.problem import LinearRow
+
+    active = ActiveSet((0, N - 1), ((0, 0.5), (N - 2, 0.99)), (LinearRow(0, 0.0, np.ones(6), -10.0),))
+    nlp = _standard(irb4600, straight_tool, kin, q, Tolerances(), active=active)
+    assert len(nlp.lbg) == 4 * N + 6 * (N - 1) + 4 + 1
