@@ -237,14 +237,14 @@ def test_a_toppra_failure_is_a_solver_error(monkeypatch):
         time_parameterise(s, q, np.full(len(s), 0.1), np.ones(2), np.ones(2))
 
 
-def test_without_start_stop_the_start_speed_is_the_first_waypoints_own_cap():
-    """The first waypoint's cap is 30 mm/s, the rest 60 mm/s: the path starts at 30 mm/s."""
+def test_without_start_stop_the_ends_run_at_their_own_caps():
+    """The first waypoint's cap is 30 mm/s, the last's 45 mm/s, the rest 60 mm/s."""
     s, q = _straight([1.0, 0.5])
     cap = np.full(len(s), 0.06)
-    cap[0] = 0.03
+    cap[0], cap[-1] = 0.03, 0.045
     tm = time_parameterise(s, q, cap, np.full(2, 3.0), np.full(2, 0.5), start_stop=False)
     assert tm.speed[0] == pytest.approx(0.03, rel=1e-4)
-    assert tm.speed[-1] == pytest.approx(0.06, rel=1e-4)
+    assert tm.speed[-1] == pytest.approx(0.045, rel=1e-4)
 
 
 def test_joints_keep_their_speed_limit_on_average_between_waypoints_on_a_staircase():
@@ -263,3 +263,23 @@ def test_joints_keep_their_speed_limit_on_average_between_waypoints_on_a_stairca
     assert np.max(np.abs(qd_dense[:, 0])) <= 3.0 * (1 + 1e-6)
     assert np.max(np.abs(qd_dense[:, 0])) >= 3.0 * 0.95  # and it binds
     assert any(seg.reason == "joint velocity (joint 1)" for seg in tm.slow_segments)
+
+
+@pytest.mark.parametrize(
+    ("name", "bad", "message"),
+    [
+        ("q", (5, 1), "q: contains NaN or infinite values"),
+        ("speed_cap", (3,), "speed_cap: contains NaN or infinite values"),
+    ],
+)
+def test_one_non_finite_entry_is_enough_to_refuse_the_input(name, bad, message):
+    value = GOOD[name].copy()
+    value[bad] = np.inf if name == "speed_cap" else np.nan
+    with pytest.raises(InputError, match=message):
+        time_parameterise(**{**GOOD, name: value})
+
+
+def test_a_repeated_arc_length_is_named_by_its_index():
+    s = np.r_[0.0, 0.1, 0.2, 0.2, np.linspace(0.3, 1.0, 7)]
+    with pytest.raises(InputError, match=r"s\[2\] = 0.2 m, s\[3\] = 0.2 m"):
+        time_parameterise(**{**GOOD, "s": s})
