@@ -283,3 +283,17 @@ def test_a_repeated_arc_length_is_named_by_its_index():
     s = np.r_[0.0, 0.1, 0.2, 0.2, np.linspace(0.3, 1.0, 7)]
     with pytest.raises(InputError, match=r"s\[2\] = 0.2 m, s\[3\] = 0.2 m"):
         time_parameterise(**{**GOOD, "s": s})
+
+
+def test_the_last_waypoints_acceleration_is_that_of_the_last_segment():
+    """Straight in joint space (q'' = 0), so qdd = q' · sddot, sddot = Δ(speed²) / (2 Δs) on the segment
+    ending at the last waypoint: here the only one that slows down (50 -> 45 mm/s)."""
+    slope = np.array([1.0, 0.5])
+    s, q = _straight(slope, n_pts=101)
+    cap = np.full(len(s), 0.05)
+    cap[-1] = 0.045
+    tm = time_parameterise(s, q, cap, np.full(2, 3.0), np.full(2, 50.0), start_stop=False)
+    sdd_last = (tm.speed[-1] ** 2 - tm.speed[-2] ** 2) / (2.0 * (s[-1] - s[-2]))
+    assert sdd_last < -0.01
+    np.testing.assert_allclose(tm.qdd[-1], slope * sdd_last, rtol=1e-6)
+    np.testing.assert_allclose(tm.qdd[-2], slope * sdd_last, rtol=1e-6)  # one-sided: the same segment
