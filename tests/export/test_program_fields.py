@@ -611,3 +611,48 @@ def test_reading_back_a_script_without_a_pass_says_so(tmp_path):
     path.write_text("def empty():\n  set_tcp(p[0,0,0.1,0,0,0])\nend\n")
     with pytest.raises(InputError, match="no pass"):
         parse_urscript(path)
+
+
+def _case(lang, n=6, **settings):
+    model, base, tcp, output, (q0, q1) = CASES[lang]
+    robot = load_robot(model)
+    problem = _problem("bead", model, base, tcp, settings.get("output", output))
+    return robot, problem, planned(robot, problem, q0, q1, n)
+
+
+def test_the_krl_load_is_the_tool_mass_and_centre_of_mass_in_millimetres(tmp_path):
+    robot, problem, tr = _case("krl")
+    _, dat = write_krl(tmp_path / "b.src", tr, problem, robot)
+    m = re.search(r"DECL\s+LOAD\s+\w+\s*=\s*\{M\s+([-\d.]+)\s*,\s*CM\s*\{([^{}]*)\}", dat.read_text())
+    assert float(m.group(1)) == pytest.approx(problem.tool.mass_kg)
+    cm = _krl_fields(m.group(2))
+    np.testing.assert_allclose([cm["X"], cm["Y"], cm["Z"]], np.array(problem.tool.cog_in_flange_m) * 1000.0)
+
+
+@pytest.mark.parametrize(
+    ("output", "ok"), [("$OUT[4096]", True), ("$OUT[4097]", False), ("0", False), ("1", True)]
+)
+def test_krl_process_outputs_are_out_1_to_4096(tmp_path, output, ok):
+    robot, problem, tr = _case("krl", output=output)
+    if ok:
+        src, _ = write_krl(tmp_path / "b.src", tr, problem, robot)
+        number = int(re.sub(r"\D", "", output))
+        assert f"$OUT[{number}]=TRUE" in src.read_text()
+    else:
+        with pytest.raises(InputError, match=r"\$OUT\[1\]..\$OUT\[4096\]"):
+            write_krl(tmp_path / "b.src", tr, problem, robot)
+
+
+@pytest.mark.parametrize(
+    "options", [{"approach_speed_m_s": 0.0}, {"speed_resolution_m_s": -1e-4}, {"approximation_m": -0.001}]
+)
+def test_krl_refuses_speeds_and_approximation_out_of_range(tmp_path, options):
+    robot, problem, tr = _case("krl")
+    with pytest.raises(InputError, match="speeds must be > 0 and approximation_m >= 0"):
+        write_krl(tmp_path / "b.src", tr, problem, robot, **options)
+
+
+def test_pathml_needs_at_least_one_layer(tmp_path):
+    _, problem, tr = _case("rapid")
+    with pytest.raises(InputError, match="at least one layer"):
+        write_pathml(tmp_path / "b.aml", tr, problem, layers=[])
