@@ -656,3 +656,10 @@ def test_pathml_needs_at_least_one_layer(tmp_path):
     _, problem, tr = _case("rapid")
     with pytest.raises(InputError, match="at least one layer"):
         write_pathml(tmp_path / "b.aml", tr, problem, layers=[])
+
+
+@pytest.mark.parametrize("output", ["1doGlue", "do-glue", "x" * 33, "$OUT[3]"])
+def test_a_rapid_output_that_is_not_a_signal_name_is_refused(tmp_path, output):
+    robot, problem, tr = _case("rapid", output=output)
+    with pytest.raises(InputError, match="is not a RAPID signal name"):
+        write_rapid(tmp_path / "b.mod", tr, problem, robot)
