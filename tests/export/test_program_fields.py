@@ -663,3 +663,14 @@ def test_a_rapid_output_that_is_not_a_signal_name_is_refused(tmp_path, output):
     robot, problem, tr = _case("rapid", output=output)
     with pytest.raises(InputError, match="is not a RAPID signal name"):
         write_rapid(tmp_path / "b.mod", tr, problem, robot)
+
+
+@pytest.mark.parametrize(("output", "number"), [("DO0", 0), ("DO7", 7), ("DO8", None)])
+def test_ur_standard_outputs_are_0_to_7(tmp_path, output, number):
+    robot, problem, tr = _case("urscript", output=output)
+    if number is None:
+        with pytest.raises(InputError, match="UR standard digital outputs are 0..7"):
+            write_urscript(tmp_path / "b.script", tr, problem, robot)
+    else:
+        text = write_urscript(tmp_path / "b.script", tr, problem, robot).read_text()
+        assert f"set_digital_out({number}, True)" in text
