@@ -297,3 +297,29 @@ def test_the_last_waypoints_acceleration_is_that_of_the_last_segment():
     assert sdd_last < -0.01
     np.testing.assert_allclose(tm.qdd[-1], slope * sdd_last, rtol=1e-6)
     np.testing.assert_allclose(tm.qdd[-2], slope * sdd_last, rtol=1e-6)  # one-sided: the same segment
+
+
+def test_slow_segments_and_timings_check_their_own_shape():
+    from refine.timing import SlowSegment, Timing
+
+    SlowSegment(2, 2, 0.1, 0.1, 0.5, RAMP)
+    for start, end in ((3, 2), (-1, 0)):
+        with pytest.raises(InputError, match="index_start <= index_end"):
+            SlowSegment(start, end, 0.0, 0.0, 0.5, RAMP)
+    t = np.arange(4.0)
+    with pytest.raises(InputError, match=r"Timing.qd, qdd: expected shape \(4, n\)"):
+        Timing(t, t, t, np.zeros((3, 2)), np.zeros((3, 2)), 3.0, (), 0.0, 0.0, 0.0)
+
+
+def test_a_plan_that_stops_on_the_path_names_where(monkeypatch):
+    s, q = _straight([1.0, 0.5], n_pts=101)
+    real = timing._solve_path_speed
+
+    def stall(*args):
+        speed = real(*args)
+        speed[40:42] = 0.0  # standing still over the segment from s[40] to s[41]
+        return speed
+
+    monkeypatch.setattr(timing, "_solve_path_speed", stall)
+    with pytest.raises(SolverError, match=rf"stopped the path at s = {s[40]:.4f} m"):
+        time_parameterise(s, q, np.full(len(s), 0.1), np.ones(2), np.ones(2))
