@@ -623,7 +623,8 @@ def _case(lang, n=6, **settings):
 def test_the_krl_load_is_the_tool_mass_and_centre_of_mass_in_millimetres(tmp_path):
     robot, problem, tr = _case("krl")
     _, dat = write_krl(tmp_path / "b.src", tr, problem, robot)
-    m = re.search(r"DECL\s+LOAD\s+\w+\s*=\s*\{M\s+([-\d.]+)\s*,\s*CM\s*\{([^{}]*)\}", dat.read_text())
+    # the controller's LOAD_DATA entry the program selects, as the .dat states it must be set
+    m = re.search(r"LOAD_DATA\[\d+\] must be \{M\s+([-\d.]+)\s*,\s*CM\s*\{([^{}]*)\}", dat.read_text())
     assert float(m.group(1)) == pytest.approx(problem.tool.mass_kg)
     cm = _krl_fields(m.group(2))
     np.testing.assert_allclose([cm["X"], cm["Y"], cm["Z"]], np.array(problem.tool.cog_in_flange_m) * 1000.0)
