@@ -152,15 +152,13 @@ def test_only_a_seven_axis_lbr_gets_a_sunrise_application(tmp_path, weld_problem
         write_sunrise(tmp_path / "x.java", tr, weld_problem, ur)
 
 
-def test_a_run_refuses_sunrise_for_a_six_axis_kuka_before_solving(monkeypatch, weld_problem):
-    import refine.robot
+def test_a_run_refuses_sunrise_for_a_six_axis_kuka_before_solving(weld_problem):
     from refine.preflight import preflight
     from refine.robot import Robot
 
     abb = load_robot("abb_irb4600_60_205")
     kuka6 = Robot(dataclasses.replace(abb.spec, controller="kuka"), abb.model)  # a six-axis KUKA arm
-    monkeypatch.setattr(refine.robot, "load_robot", lambda name: kuka6)
     problem = dataclasses.replace(weld_problem, robot=dataclasses.replace(weld_problem.robot, home_deg=None))
     with pytest.raises(InputError, match="seven-axis KUKA LBR"):
-        preflight(problem, None, ("sunrise",))
-    preflight(problem, None, ("krl",))  # the same arm may run KRL
+        preflight(problem, None, ("sunrise",), robot=kuka6)
+    preflight(problem, None, ("krl",), robot=kuka6)  # the same arm may run KRL
