@@ -71,7 +71,19 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``refine`` command; returns the exit status."""
+    """Entry point of the ``refine`` command; returns the exit status.
+
+    A Ctrl-C while the command line is read and the subcommands are imported (before a run has
+    touched any file) exits with status 130 too, without a traceback.
+    """
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        print("refine: interrupted before any file was written", file=sys.stderr)
+        return _exit_now(130)
+
+
+def _main(argv: list[str] | None) -> int:
     args = _parser().parse_args(argv)
     level = [logging.WARNING, logging.INFO, logging.DEBUG][min(args.verbose, 2)]
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")

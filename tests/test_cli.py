@@ -66,3 +66,15 @@ def test_run_writes_every_output_and_a_result_with_the_documented_keys(tmp_path,
     assert times["run"] <= wall_s
     assert (ROOT / doc["robot"]["urdf"]).is_file()
     assert set(doc["outputs"].values()) <= names
+
+
+def test_ctrl_c_while_the_command_line_is_read_exits_130_without_a_traceback(monkeypatch, capsys):
+    import refine.cli
+
+    def interrupted():
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(refine.cli, "_parser", interrupted)
+    assert refine.cli.main(["robots"]) == 130
+    err = capsys.readouterr().err
+    assert "interrupted" in err and "Traceback" not in err
