@@ -675,3 +675,30 @@ def test_ur_standard_outputs_are_0_to_7(tmp_path, output, number):
     else:
         text = write_urscript(tmp_path / "b.script", tr, problem, robot).read_text()
         assert f"set_digital_out({number}, True)" in text
+
+
+def test_a_run_asking_for_sunrise_writes_a_java_application_with_one_frame_per_target(tmp_path):
+    """The iiwa's Sunrise program is written by the run: one row (X Y Z A B C E1 Status Turn speed) a target."""
+    model, base, tcp, _, (q0, q1) = CASES["krl"]
+    robot = load_robot(model)
+    problem = _problem("bead", model, base, tcp, "MediaFlange.OutputX3Pin1")
+    tr = planned(robot, problem, q0, q1, 12)
+    result = RunResult(problem, robot, (PassResult("pass 1", 1, 1, None, None, None, tr),), None)
+    outputs = write_outputs(result, tmp_path, ("sunrise",))
+    assert outputs["sunrise"].suffix == ".java" and outputs["sunrise"].is_file()
+    text = outputs["sunrise"].read_text()
+    assert "extends RoboticsAPIApplication" in text
+    number = r"-?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?"
+    rows = re.findall(r"\{\s*" + number + r"(?:\s*,\s*" + number + r"){9}\s*\}", text)  # X Y Z A B C E1 S T v
+    assert len(rows) >= len(tr)
+
+
+def test_rapid_refuses_a_path_of_one_waypoint(tmp_path):
+    model, base, tcp, output, (q0, q1) = CASES["rapid"]
+    robot = load_robot(model)
+    problem = _problem("bead", model, base, tcp, output)
+    tr = planned(robot, problem, q0, q1, 12)
+    one = Trajectory(**{f: getattr(tr, f)[:1] for f in Trajectory.__dataclass_fields__})
+    with pytest.raises(InputError, match="at least 2 waypoints, got 1"):
+        write_rapid(tmp_path / "one.mod", one, problem, robot)
+    assert not (tmp_path / "one.mod").exists()
