@@ -41,6 +41,7 @@ from refine.export.program import as_passes, header_notes, home_joints, process_
 from refine.export.rapid import segment_speeds
 from refine.frames import invert_transform, make_transform, matrix_from_rotvec, rotvec_from_matrix
 from refine.names import comment_text, identifier
+from refine.optimise.seed import TcpKinematics, solve_ik
 from refine.paths import Array, Trajectory
 from refine.problem import Problem
 
@@ -90,23 +91,16 @@ def continuous_rotvecs(R: Array, previous: Array | None = None) -> Array:
 
 
 def _approach_joints(robot: Any, q0: Array, T_base_flange: Array, label: str) -> Array:
-    """Joints [rad] reaching ``T_base_flange``, by damped least squares from ``q0``."""
-    q = np.array(q0, dtype=float)
-    for _ in range(100):
-        T = robot.fk(q)
-        err = np.concatenate(
-            [T_base_flange[:3, 3] - T[:3, 3], rotvec_from_matrix(T_base_flange[:3, :3] @ T[:3, :3].T)]
-        )
-        if np.linalg.norm(err) < 1e-11:
-            break
-        J = robot.jacobian(q)
-        q = q + J.T @ np.linalg.solve(J @ J.T + 1e-10 * np.eye(6), err)
-    else:
+    """Joints [rad] within the limits reaching ``T_base_flange``, by damped least squares from ``q0``."""
+    kin = TcpKinematics(robot, np.eye(4), np.eye(4))
+    q, residual = solve_ik(
+        kin, T_base_flange, q0, robot.spec.lower, robot.spec.upper, damping=1e-5, tol=1e-10
+    )
+    if residual > 1e-9:
         raise SolverError(
-            f"URScript pass {label!r}: no joints reach the approach pose (residual {np.linalg.norm(err):.1e})"
+            f"URScript pass {label!r}: no joints within the limits reach the approach pose "
+            f"(residual {residual:.1e}, position [m] and angle [rad] stacked)"
         )
-    if np.any(q < robot.spec.lower) or np.any(q > robot.spec.upper):
-        raise SolverError(f"URScript pass {label!r}: the approach pose needs joints outside their limits")
     return q
 
 
