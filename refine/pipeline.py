@@ -256,7 +256,21 @@ def solve_problem(
             axisymmetric=problem.tool.axisymmetric,
         )
         watch.lap("truth")
-    return RunResult(problem, robot, tuple(passes), truth, watch.times, demo_quality=qualities[0] if qualities else None)
+    placement = None
+    if problem.repair.placement is not None:  # the workpiece move as a second repair (refine.placement)
+        from refine.placement import placement_repair
+
+        placement = placement_repair(problem, robot, passes)
+        watch.add({"placement": sum(placement.timings_s.values())})
+    return RunResult(
+        problem,
+        robot,
+        tuple(passes),
+        truth,
+        watch.times,
+        demo_quality=qualities[0] if qualities else None,
+        placement=placement,
+    )
 
 
 def run(

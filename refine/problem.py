@@ -28,6 +28,7 @@ from refine.settings import (
     MultipassSettings,
     OptimiseSettings,
     OutputSettings,
+    PlacementSettings,
     ProcessParameter,
     ProcessSettings,
     RepairSettings,
@@ -171,7 +172,7 @@ def load_problem(path: str | Path, *, allow_outside: bool = False) -> Problem:
             cell=_cell(_table(data, "cell"), root, path, inside),
             collision=_build(CollisionSettings, _table(data, "collision"), "collision", path),
             optimise=_build(OptimiseSettings, _table(data, "optimise"), "optimise", path),
-            repair=_build(RepairSettings, _table(data, "repair"), "repair", path),
+            repair=_repair(_table(data, "repair"), path),
             multipass=_multipass(_table(data, "multipass"), path) if "multipass" in data else None,
             expected=_expected(_table(data, "expected"), path) if "expected" in data else None,
             calibration=_calibration(_table(data, "calibration")) if "calibration" in data else None,
@@ -487,6 +488,18 @@ def _cell(t: dict[str, Any], root: Path, path: Path, inside: Path | None) -> tup
         _shape(o, f"cell.objects[{i}]", root, path, inside)
         for i, o in enumerate(_list(t.get("objects", []), "cell.objects"))
     )
+
+
+def _repair(t: dict[str, Any], path: Path) -> RepairSettings:
+    if "placement" not in t:
+        return _build(RepairSettings, t, "repair", path)
+    p = t["placement"]
+    form = "repair.placement must be a table { translate_m = m, rotate_deg = deg }"
+    if not isinstance(p, dict):
+        raise InputError(f"{form}, got {p!r}")
+    _check_keys(p, "repair.placement", _fields(PlacementSettings), path)
+    values = {k: _number(v, f"repair.placement.{k}") for k, v in p.items()}
+    return _build(RepairSettings, t, "repair", path, placement=PlacementSettings(**values))
 
 
 def _multipass(t: dict[str, Any], path: Path) -> MultipassSettings:

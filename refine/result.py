@@ -61,6 +61,8 @@ class RunResult:
         outputs: kind -> file written.
         demo_quality: the demonstration quality gate's figures (``refine.demo.quality.DemoQuality``),
             None for a path without a demonstration.
+        placement: the placement repair (``refine.placement.PlacementRepair``) when ``[repair]
+            placement`` is set, else None.
     """
 
     problem: Problem
@@ -70,6 +72,7 @@ class RunResult:
     timings_s: dict[str, float] = field(default_factory=dict)
     outputs: dict[str, Path] = field(default_factory=dict)
     demo_quality: Any = None
+    placement: Any = None
 
     @property
     def first(self) -> PassResult:
@@ -140,6 +143,8 @@ def summary_lines(result: RunResult) -> list[str]:
                 f"timing       cycle {p.timing.cycle_time_s:.2f} s, "
                 f"{len(p.timing.slow_segments)} segment(s) slower than the demo"
             )
+    if result.placement is not None:
+        lines.append(f"placement    {result.placement.describe()}")
     if result.truth is not None:
         lines.append(f"truth        {result.truth.describe()}")
     total = result.timings_s.get("total")

@@ -495,6 +495,39 @@ class OptimiseSettings:
             _in_range("optimise", "mid_range_weight", self.mid_range_weight, 0.0, 1e6)
 
 
+MAX_PLACEMENT_TRANSLATE_M = 1.0
+"""Largest workpiece shift the placement repair may search [m]: beyond it the cell is laid out anew."""
+MAX_PLACEMENT_ROTATE_DEG = 45.0
+"""Largest workpiece turn the placement repair may search [deg]."""
+
+
+@dataclass(frozen=True)
+class PlacementSettings:
+    """``[repair] placement``: the bounds of the workpiece move the placement repair may propose.
+
+    The move is a rigid transform of the workpiece (the CAD frame, the demonstration recorded on it
+    and the cell objects marked ``workpiece``): a turn about the path's centroid and a shift, both
+    in the world frame {F}. The smallest move is the one with the least
+    ``sqrt((|t| / translate_m)² + (angle / rotate_deg)²)`` (see :mod:`refine.placement`).
+
+    Attributes:
+        translate_m: largest shift of the workpiece [m] (0: no shift).
+        rotate_deg: largest turn of the workpiece about the path's centroid [deg] (0: no turn).
+    """
+
+    translate_m: float = 0.0
+    rotate_deg: float = 0.0
+
+    def __post_init__(self) -> None:
+        _in_range("repair.placement", "translate_m", self.translate_m, 0.0, MAX_PLACEMENT_TRANSLATE_M, "m")
+        _in_range("repair.placement", "rotate_deg", self.rotate_deg, 0.0, MAX_PLACEMENT_ROTATE_DEG, "deg")
+        if self.translate_m == 0.0 and self.rotate_deg == 0.0:
+            raise InputError(
+                "repair.placement needs translate_m > 0 m or rotate_deg > 0 deg "
+                "(leave placement out to search no workpiece move)"
+            )
+
+
 @dataclass(frozen=True)
 class RepairSettings:
     """``[repair]``: what to do when the strict problem is infeasible.
@@ -504,11 +537,14 @@ class RepairSettings:
         max_slack_deg: the largest extra slack [deg] on top of the orientation tolerance.
         time_limit_s: wall-time budget of one pass's refinement (IK seed, solves, repair) [s];
             when it runs out before a verdict the pass is ``infeasible`` and says so.
+        placement: the bounds of a workpiece move to search when the strict problem has no
+            answer (:mod:`refine.placement`), or None for no placement search.
     """
 
     enabled: bool = True
     max_slack_deg: float = 15.0
     time_limit_s: float = 120.0
+    placement: PlacementSettings | None = None
 
     def __post_init__(self) -> None:
         _in_range("repair", "max_slack_deg", self.max_slack_deg, 0.0, 90.0, "deg")

@@ -391,6 +391,19 @@ def reach_near_post(case: Case) -> Demo:
     return leaning_arc((10.0, 25.0))
 
 
+PLACEMENT_LINE_X_M = 0.85  # the bead of placement_reach runs along y at this distance from axis 1 [m]
+
+
+def placement_reach(case: Case) -> Demo:
+    """Straight bead along y at 0.85 m from axis 1, 0.10 m up, the gun upright: the wrist centre
+    (0.326 m above the TCP) is 0.853-0.858 m from the shoulder, beyond the arm's 0.82 m; 0.15 m
+    nearer it is 0.703-0.710 m."""
+    positions = line((PLACEMENT_LINE_X_M, -0.10, REACH_HEIGHT_M), (PLACEMENT_LINE_X_M, 0.10, REACH_HEIGHT_M))
+    travel = np.tile([0.0, 1.0, 0.0], (len(positions), 1))
+    down = np.tile([0.0, 0.0, -1.0], (len(positions), 1))
+    return Demo(positions, frame_from_z_x(down, travel), worker_speed(arc_length(positions), 0.04))
+
+
 CASES: dict[str, Callable[[Case], Demo]] = {
     "wrist_flip": wrist_flip,
     "joint_limit": joint_limit,
@@ -402,6 +415,7 @@ CASES: dict[str, Callable[[Case], Demo]] = {
     "reach_tilt": reach_tilt,
     "reach_beyond_slack": reach_beyond_slack,
     "reach_near_post": reach_near_post,
+    "placement_reach": placement_reach,
 }
 
 ALL_FORMATS = ("reach_tilt",)

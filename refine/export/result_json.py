@@ -145,6 +145,7 @@ def result_dict(result: RunResult) -> dict[str, Any]:
         ],
         "truth": None if result.truth is None else result.truth.as_json(),
         "demo_quality": None if result.demo_quality is None else result.demo_quality.as_json(),
+        "placement": None if result.placement is None else result.placement.as_json(),
         "timings_s": {k: round(v, 6) for k, v in result.timings_s.items()},
         "outputs": {k: p.name for k, p in result.outputs.items()},
         "files": describe_files(result.outputs),

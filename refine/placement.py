@@ -1,0 +1,540 @@
+"""Placement repair: the smallest move of the workpiece that makes the strict problem feasible.
+
+When the demonstration cannot be executed within the strict tolerances, bending the worker's
+orientation (the slack repair of :mod:`refine.optimise.solve`) is one answer; moving the part is
+often the honest other. With ``[repair] placement = { translate_m, rotate_deg }`` the engine also
+searches for the smallest rigid move of the workpiece that makes the strict problem feasible, and
+reports it beside the slack repair.
+
+What moves: the CAD frame (``[frames] cad_in_world``), the demonstration recorded on the part
+(``[frames] source_in_world``: the worker's tool orientations are relative to the part, so they
+turn with it) and every cell object marked ``workpiece = true`` (the part and its fixture). The
+robot and the other cell objects stay.
+
+The move: a turn ``R`` (rotation vector ``r``) about ``c``, the centroid of the CAD path's
+waypoints in the world frame {F} before the move, then a shift ``t`` of that point, both in {F}:
+``x' = c + R (x - c) + t``. Its size is the weighted norm
+``sqrt((|t| / translate_m)² + (angle(R) / rotate_deg)²)``, each part measured against its bound;
+"smallest" means the least such norm, with ``|t| <= translate_m`` and ``angle(R) <= rotate_deg``.
+
+How it is found: one CasADi/IPOPT problem over the joints at every waypoint and the six
+placement parameters together (:func:`search_placement`): the CAD points and the demonstrated
+orientations become functions of the placement; the constraints are the strict ones (TCP on the
+moved CAD point, the orientation cone around the moved demonstration, joint limits less the
+margin, the joint step, the singularity measure at every waypoint), each kept a little inside
+its bound (:data:`INSET_DEG`, :data:`SINGULARITY_INSET`); the cost is the squared norm plus a
+small multiple of the usual path cost (orientation and joint smoothness). Clearance is not part
+of this search.
+
+How it is verified (:func:`repair_by_placement`): the placement problem's answer is never the
+verdict. The problem is moved by the placement found and run through the ordinary strict
+pipeline (:func:`refine.pipeline.solve_problem` without repair: IK seed, solve, verification,
+clearance rows and the dense clearance check); only an ``ok`` there makes the placement ``ok``.
+When it is not, the move is enlarged along the same direction (:data:`ENLARGE`, within the bounds)
+and verified again; the first enlargement that verifies is reported, with its factor.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import casadi as ca
+import numpy as np
+from numpy.typing import NDArray
+
+from refine.frames import fixed_xyz_from_matrix, matrix_from_rotvec
+from refine.paths import FusedPath
+from refine.settings import PlacementSettings
+
+if TYPE_CHECKING:
+    from refine.problem import Problem
+    from refine.result import PassResult, RunResult
+    from refine.robot import Robot
+
+log = logging.getLogger(__name__)
+
+Array = NDArray[np.float64]
+
+INSET_DEG = 0.05
+"""The placement search keeps the orientation cone and the joint limits this far inside their
+bounds [deg], so that the strict re-solve of the moved problem does not start on a bound's edge."""
+
+SINGULARITY_INSET = 1.05
+"""The placement search bounds the singularity measure by this factor times the margin."""
+
+PATH_COST_WEIGHT = 1e-3
+"""Weight of the usual path cost (orientation deviation in deg², joint smoothness) against the
+squared placement norm: it settles the joints (a redundant arm's elbow) without moving the optimum
+of the placement by more than about 1e-3 of its bounds."""
+
+ENLARGE = (1.0, 1.1, 1.25, 1.5)
+"""Factors by which the move found is scaled, in turn, until the strict pipeline verifies it."""
+
+
+@dataclass(frozen=True)
+class Placement:
+    """A rigid move of the workpiece in the world frame {F}: ``x' = c + R (x - c) + t``.
+
+    Attributes:
+        centre_m: ``c``, the point the workpiece turns about (the CAD path's centroid) [m], (3,).
+        translation_m: ``t``, the shift of ``c`` [m], (3,), in {F}.
+        rotvec_rad: the turn ``R`` as a rotation vector (axis times angle) [rad], (3,), in {F}.
+    """
+
+    centre_m: Array
+    translation_m: Array
+    rotvec_rad: Array
+
+    @property
+    def rotation(self) -> Array:
+        """The turn R (3, 3)."""
+        return matrix_from_rotvec(self.rotvec_rad)
+
+    @property
+    def angle_deg(self) -> float:
+        """The angle of the turn [deg]."""
+        return math.degrees(float(np.linalg.norm(self.rotvec_rad)))
+
+    @property
+    def distance_m(self) -> float:
+        """The length of the shift [m]."""
+        return float(np.linalg.norm(self.translation_m))
+
+    @property
+    def transform(self) -> Array:
+        """The move as a world transform Δ (4, 4): a point x of the workpiece goes to Δ·x."""
+        T = np.eye(4)
+        R = self.rotation
+        T[:3, :3] = R
+        T[:3, 3] = self.centre_m + self.translation_m - R @ self.centre_m
+        return T
+
+    def norm(self, bounds: PlacementSettings) -> float:
+        """``sqrt((|t| / translate_m)² + (angle / rotate_deg)²)``; a part with a zero bound must be 0."""
+        terms = []
+        for value, bound in ((self.distance_m, bounds.translate_m), (self.angle_deg, bounds.rotate_deg)):
+            terms.append(value / bound if bound > 0 else (0.0 if value < 1e-12 else math.inf))
+        return math.hypot(*terms)
+
+    def scaled(self, factor: float) -> Placement:
+        """The same move scaled by ``factor`` (shift and turn angle alike)."""
+        return Placement(self.centre_m, factor * self.translation_m, factor * self.rotvec_rad)
+
+    def as_json(self) -> dict[str, Any]:
+        """The move's figures for ``result.json`` (world frame {F})."""
+        angle = self.angle_deg
+        axis = self.rotvec_rad / np.linalg.norm(self.rotvec_rad) if angle > 0 else np.array([0.0, 0.0, 1.0])
+        return {
+            "frame": "world",
+            "about_m": [float(v) for v in self.centre_m],
+            "translation_m": [float(v) for v in self.translation_m],
+            "distance_m": self.distance_m,
+            "rotation": {
+                "axis": [float(v) for v in axis],
+                "angle_deg": angle,
+                "rotvec_deg": [math.degrees(float(v)) for v in self.rotvec_rad],
+                "rpy_deg": [float(v) for v in fixed_xyz_from_matrix(self.rotation)],
+            },
+            "transform_in_world": self.transform.tolist(),
+        }
+
+
+@dataclass(frozen=True)
+class PlacementRepair:
+    """The outcome of the placement search and its verification.
+
+    Attributes:
+        status: ``"ok"`` (a move verified by the strict pipeline), ``"infeasible"`` (no move
+            within the bounds found or verified) or ``"not needed"`` (every pass is ok as placed).
+        bounds: the ``[repair] placement`` bounds.
+        placement: the move reported (the verified one when ok; the search's best otherwise), or
+            None when there is none.
+        scale: the factor of :data:`ENLARGE` the verified move is of the search's answer.
+        reason: why it is not ok (empty when ok).
+        result: the strict run of the moved problem (the last one tried), or None.
+        solver_status: IPOPT's status of the placement search.
+        iterations: IPOPT iterations of the search.
+        timings_s: ``search`` and ``verify`` wall times [s].
+    """
+
+    status: str
+    bounds: PlacementSettings
+    placement: Placement | None = None
+    scale: float = 1.0
+    reason: str = ""
+    result: RunResult | None = None
+    solver_status: str = ""
+    iterations: int = 0
+    timings_s: dict[str, float] = field(default_factory=dict)
+    moved_frames: dict[str, Array] = field(default_factory=dict)
+    moved_objects: tuple[str, ...] = ()
+
+    def describe(self) -> str:
+        """One line for the command line's summary."""
+        if self.status == "not needed":
+            return "not needed: the strict problem is ok as placed"
+        head = f"{self.status}: " if self.status != "ok" else "ok (verified by the strict run): "
+        if self.placement is None:
+            return head + self.reason
+        p = self.placement
+        move = (
+            f"move the workpiece {p.distance_m * 1e3:.1f} mm by "
+            f"[{', '.join(f'{v * 1e3:.1f}' for v in p.translation_m)}] mm (world) and turn it "
+            f"{p.angle_deg:.2f} deg about [{', '.join(f'{v:.3f}' for v in p.as_json()['rotation']['axis'])}] "
+            f"through [{', '.join(f'{v:.3f}' for v in p.centre_m)}] m "
+            f"(norm {p.norm(self.bounds):.3f} of the bounds {self.bounds.translate_m:g} m, {self.bounds.rotate_deg:g} deg)"
+        )
+        if self.status == "ok" and self.result is not None:
+            c = self.result.refinement.check
+            move += (
+                f"; then max orientation deviation {c.orientation_deviation_deg.max():.3f} deg, "
+                f"min scaled manipulability {c.singularity.min():.4f}"
+            )
+            clearance = self.result.first.clearance
+            if clearance is not None:
+                move += f", min clearance {clearance.min_distance_m * 1e3:.1f} mm"
+        return head + move + (f" ({self.reason})" if self.reason else "")
+
+    def as_json(self) -> dict[str, Any]:
+        """The ``placement`` entry of ``result.json`` (schema: ``docs/placement.schema.json``)."""
+        from refine.export.result_json import _aggregate, _pass_metrics
+
+        move = self.placement.as_json() if self.placement is not None else None
+        verified = self.result
+        return {
+            "status": self.status,
+            "reason": self.reason,
+            "bounds": {"translate_m": self.bounds.translate_m, "rotate_deg": self.bounds.rotate_deg},
+            "frame": "world",
+            "about_m": None if move is None else move["about_m"],
+            "translation_m": None if move is None else move["translation_m"],
+            "distance_m": None if move is None else move["distance_m"],
+            "rotation": None if move is None else move["rotation"],
+            "transform_in_world": None if move is None else move["transform_in_world"],
+            "norm": None if self.placement is None else self.placement.norm(self.bounds),
+            "scale": self.scale,
+            "moved_frames": {name: _pose_json(T) for name, T in self.moved_frames.items()},
+            "moved_objects": list(self.moved_objects),
+            "strict_status": None if verified is None else verified.status,
+            "metrics": None if verified is None else _aggregate([_pass_metrics(p) for p in verified.passes]),
+            "solver": {"name": "ipopt", "status": self.solver_status, "iterations": self.iterations},
+            "timings_s": {k: round(v, 6) for k, v in self.timings_s.items()},
+        }
+
+
+def _pose_json(T: Array) -> dict[str, list[float]]:
+    """A pose as the problem file writes it: ``xyz`` [m] and fixed-axis X-Y-Z ``rpy_deg``."""
+    return {
+        "xyz": [float(v) for v in T[:3, 3]],
+        "rpy_deg": [float(v) for v in fixed_xyz_from_matrix(T[:3, :3])],
+    }
+
+
+# ---- the moved problem ---------------------------------------------------------------------------
+
+
+def moved_problem(problem: Problem, transform: Array) -> Problem:
+    """``problem`` with its workpiece moved by ``transform`` (Δ, world frame).
+
+    What moves: the CAD frame, the tracker receiver (the demonstration was recorded on the part)
+    and the cell objects marked ``workpiece``; the placement search is switched off in the copy.
+    """
+    D = np.asarray(transform, dtype=float)
+    frames = dataclasses.replace(
+        problem.frames,
+        cad_in_world=D @ problem.frames.cad_in_world,
+        source_in_world=D @ problem.frames.source_in_world,
+    )
+    cell = tuple(dataclasses.replace(o, pose=D @ o.pose) if o.workpiece else o for o in problem.cell)
+    return dataclasses.replace(
+        problem, frames=frames, cell=cell, repair=dataclasses.replace(problem.repair, placement=None)
+    )
+
+
+def moved_path(fused: FusedPath, transform: Array) -> FusedPath:
+    """The fused path moved rigidly by ``transform`` (Δ): positions and orientations in {F}."""
+    D = np.asarray(transform, dtype=float)
+    return dataclasses.replace(
+        fused,
+        positions=fused.positions @ D[:3, :3].T + D[:3, 3],
+        rotations=np.einsum("ij,njk->nik", D[:3, :3], fused.rotations),
+    )
+
+
+# ---- the search ----------------------------------------------------------------------------------
+
+
+def _rotation(r: ca.MX) -> ca.MX:
+    """Rodrigues' rotation of the rotation vector ``r`` (3,), smooth at 0 (half-angle form)."""
+    theta = ca.sqrt(ca.dot(r, r) + 1e-14)
+    K = ca.skew(r)
+    half = theta / 2.0
+    return ca.DM.eye(3) + (ca.sin(theta) / theta) * K + 0.5 * (ca.sin(half) / half) ** 2 * ca.mtimes(K, K)
+
+
+@dataclass(frozen=True)
+class SearchResult:
+    """The placement problem's answer (not yet verified).
+
+    Attributes:
+        placement: the move found.
+        q: joints at every waypoint on the moved path [rad], (N, n).
+        success: IPOPT reported success.
+        solver_status: IPOPT's return status.
+        iterations: IPOPT iterations.
+        time_s: wall time of build and solve [s].
+    """
+
+    placement: Placement
+    q: Array
+    success: bool
+    solver_status: str
+    iterations: int
+    time_s: float
+
+
+def search_placement(
+    robot: Robot,
+    fused: FusedPath,
+    base_in_world: Array,
+    tcp_in_flange: Array,
+    tolerances: Any,
+    bounds: PlacementSettings,
+    q0: Array,
+    *,
+    axisymmetric: bool = False,
+    weights: Any = None,
+    time_limit_s: float = 120.0,
+) -> SearchResult:
+    """The smallest move of the workpiece for which the joints meet the strict constraints.
+
+    Args:
+        robot: the robot.
+        fused: the path as placed (N waypoints).
+        base_in_world: T_F_R (4, 4).
+        tcp_in_flange: T_flange_TCP (4, 4).
+        tolerances: the strict tolerances (:class:`refine.settings.Tolerances`).
+        bounds: the largest shift [m] and turn [deg].
+        q0: joints to start from (N, n) [rad], e.g. the slack repair's or the IK seed.
+        axisymmetric: only the tool axis counts in the cone.
+        weights: the path cost weights (:class:`refine.optimise.problem.Weights`), or None.
+        time_limit_s: IPOPT's wall-time limit [s].
+    """
+    from refine.optimise.derivatives import smoothness_matrix
+    from refine.optimise.problem import Weights, joint_bounds, singularity_function, waypoint_function
+
+    t0 = time.perf_counter()
+    weights = weights or Weights()
+    N, n = len(fused), robot.nq
+    centre = fused.positions.mean(axis=0)
+    T_max, A_max = bounds.translate_m, math.radians(bounds.rotate_deg)
+
+    # decision variables: joints, then the shift and the rotation vector scaled by their bounds
+    x = ca.MX.sym("x", N * n + 6)
+    Q = ca.reshape(x[: N * n], n, N)
+    u, v = x[N * n : N * n + 3], x[N * n + 3 :]
+    t, r = T_max * u, A_max * v
+    R = _rotation(r)
+    P = ca.DM(fused.positions.T)  # (3, N)
+    c = ca.DM(centre)
+    P_moved = ca.mtimes(R, P - ca.repmat(c, 1, N)) + ca.repmat(c + t, 1, N)
+    R_demo = ca.DM(np.concatenate(list(fused.rotations), axis=1))  # (3, 3N): R_0 | R_1 | ...
+    R_moved = ca.reshape(ca.mtimes(R, R_demo), 9, N)  # column k: R·R_k, column-major
+
+    G, cost = waypoint_function(robot, base_in_world, tcp_in_flange, axisymmetric).map(N)(Q, P_moved, R_moved)
+    rows = [ca.vec(G), ca.vec(Q[:, 1:] - Q[:, :-1])]
+    inset = math.radians(INSET_DEG)
+    step = math.radians(tolerances.joint_step_deg)
+    lbg = [np.tile([0.0, 0.0, 0.0, math.cos(math.radians(tolerances.orientation_deg) - inset)], N)]
+    ubg = [np.tile([0.0, 0.0, 0.0, np.inf], N)]
+    lbg.append(np.full(n * (N - 1), -step + inset))
+    ubg.append(np.full(n * (N - 1), step - inset))
+    if tolerances.singularity_margin > 0:
+        rows.append(ca.vec(singularity_function(robot, base_in_world, tcp_in_flange).map(N)(Q)))
+        lbg.append(np.full(N, SINGULARITY_INSET * tolerances.singularity_margin))
+        ubg.append(np.full(N, np.inf))
+    rows.append(ca.vertcat(ca.dot(u, u), ca.dot(v, v)))
+    lbg.append(np.array([-np.inf, -np.inf]))
+    ubg.append(np.array([1.0, 1.0]))
+
+    spec = robot.spec
+    h = float(np.mean(np.diff(fused.s)))
+    half = 0.5 * (spec.upper - spec.lower)
+    K = smoothness_matrix(n, N, h, weights.velocity, weights.acceleration, 0.0, half) / N
+    qv = x[: N * n]
+    path_cost = weights.orientation * (180.0 / math.pi) ** 2 * 2.0 * ca.sum2(cost) / N + 0.5 * ca.dot(
+        qv, ca.mtimes(ca.DM(K), qv)
+    )
+    f = ca.dot(u, u) + ca.dot(v, v) + PATH_COST_WEIGHT * path_cost
+
+    lower, upper = joint_bounds(robot, tolerances)
+    lower, upper = lower + inset, upper - inset
+    free_t, free_r = float(T_max > 0), float(A_max > 0)  # a part with a zero bound stays at 0
+    lbx = np.concatenate([np.tile(lower, N), np.full(3, -free_t), np.full(3, -free_r)])
+    ubx = np.concatenate([np.tile(upper, N), np.full(3, free_t), np.full(3, free_r)])
+    options = {
+        "ipopt.print_level": 0,
+        "ipopt.sb": "yes",
+        "print_time": False,
+        "ipopt.tol": 1e-8,
+        "ipopt.constr_viol_tol": 1e-9,
+        "ipopt.max_iter": 500,
+        "ipopt.mu_strategy": "adaptive",
+        "ipopt.max_wall_time": float(time_limit_s),
+    }
+    solver = ca.nlpsol("placement", "ipopt", {"x": x, "f": f, "g": ca.vertcat(*rows)}, options)
+    x0 = np.concatenate([np.clip(np.asarray(q0, dtype=float), lower, upper).ravel(), np.zeros(6)])
+    sol = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=np.concatenate(lbg), ubg=np.concatenate(ubg))
+    stats = solver.stats()
+    xs = np.asarray(sol["x"]).ravel()
+    placement = Placement(centre, T_max * xs[N * n : N * n + 3], A_max * xs[N * n + 3 :])
+    return SearchResult(
+        placement,
+        xs[: N * n].reshape(N, n),
+        bool(stats.get("success", False)),
+        str(stats.get("return_status", "unknown")),
+        int(stats.get("iter_count", 0)),
+        time.perf_counter() - t0,
+    )
+
+
+# ---- search and verification ---------------------------------------------------------------------
+
+
+def placement_repair(
+    problem: Problem, robot: Robot, passes: tuple[PassResult, ...] | list[PassResult]
+) -> PlacementRepair:
+    """The placement repair of a run.
+
+    ``not needed`` when every pass is ok as placed, else :func:`repair_by_placement` on the first
+    (demonstrated) pass; its verification runs every pass.
+    """
+    bounds = problem.repair.placement
+    assert bounds is not None
+    if all(p.refinement.status == "ok" for p in passes):
+        return PlacementRepair("not needed", bounds)
+    return repair_by_placement(problem, robot, passes[0])
+
+
+def verify_placement(problem: Problem, robot: Robot, fused: FusedPath, placement: Placement) -> RunResult:
+    """The ordinary strict pipeline on ``problem`` with its workpiece moved by ``placement``.
+
+    The slack repair is off, so the run is ``ok`` only when the strict tolerances hold (clearance
+    included, checked densely); ``fused`` is the problem's fused path as placed, moved rigidly (the
+    same as fusing the moved problem's files: fusion depends only on the CAD path and the
+    demonstration relative to each other).
+    """
+    from refine.pipeline import solve_problem
+
+    moved = moved_problem(problem, placement.transform)
+    strict = dataclasses.replace(moved, repair=dataclasses.replace(moved.repair, enabled=False))
+    return solve_problem(strict, robot=robot, fused=moved_path(fused, placement.transform))
+
+
+def repair_by_placement(problem: Problem, robot: Robot, first: PassResult) -> PlacementRepair:
+    """Search the smallest workpiece move that makes the strict problem feasible, and verify it.
+
+    Args:
+        problem: the problem as placed, with ``[repair] placement``.
+        robot: the robot.
+        first: the first pass's result as placed (its path, and its joints as the search's start).
+
+    Returns:
+        The outcome; ``status`` is ``ok`` only when the moved problem's strict run is ``ok``.
+    """
+    from refine.pipeline import weights_for
+
+    bounds = problem.repair.placement
+    assert bounds is not None
+    timings: dict[str, float] = {}
+    fused = first.fused
+    found = search_placement(
+        robot,
+        fused,
+        problem.robot.base_in_world,
+        problem.tool.tcp_in_flange,
+        problem.tolerances,
+        bounds,
+        first.refinement.q,
+        axisymmetric=problem.tool.axisymmetric,
+        weights=weights_for(problem, robot),
+        time_limit_s=problem.repair.time_limit_s,
+    )
+    timings["search"] = found.time_s
+    log.info(
+        "placement search: %s after %d iterations, shift %.4f m, turn %.3f deg",
+        found.solver_status,
+        found.iterations,
+        found.placement.distance_m,
+        found.placement.angle_deg,
+    )
+    common = {"bounds": bounds, "solver_status": found.solver_status, "iterations": found.iterations}
+    if not found.success:
+        return PlacementRepair(
+            "infeasible",
+            reason=(
+                f"no workpiece move within {bounds.translate_m:g} m and {bounds.rotate_deg:g} deg found "
+                f"that keeps the strict tolerances (placement search: IPOPT {found.solver_status})"
+            ),
+            timings_s=timings,
+            **common,
+        )
+    t0 = time.perf_counter()
+    result = None
+    tried = []
+    base_norm = found.placement.norm(bounds)
+    for factor in ENLARGE:
+        if factor > 1.0 and base_norm > 0 and not _within(found.placement.scaled(factor), bounds):
+            break
+        candidate = found.placement.scaled(factor)
+        result = verify_placement(problem, robot, fused, candidate)
+        tried.append(f"x{factor:g}: {result.status}")
+        if result.status == "ok":
+            timings["verify"] = time.perf_counter() - t0
+            return PlacementRepair(
+                "ok",
+                placement=candidate,
+                scale=factor,
+                result=result,
+                timings_s=timings,
+                **common,
+                **_moved(problem, candidate),
+            )
+    timings["verify"] = time.perf_counter() - t0
+    why = result.refinement.reason if result is not None else ""
+    return PlacementRepair(
+        "infeasible",
+        placement=found.placement,
+        reason=(
+            f"the move found (shift {found.placement.distance_m:.4f} m, turn {found.placement.angle_deg:.3f} deg) "
+            f"and its enlargements within the bounds are not verified by the strict run "
+            f"({', '.join(tried)}): {why}"
+        ),
+        result=result,
+        timings_s=timings,
+        **common,
+        **_moved(problem, found.placement),
+    )
+
+
+def _moved(problem: Problem, placement: Placement) -> dict[str, Any]:
+    """The moved frames (``cad_in_world``, ``source_in_world``) and the names of the objects moved."""
+    moved = moved_problem(problem, placement.transform)
+    return {
+        "moved_frames": {
+            "cad_in_world": moved.frames.cad_in_world,
+            "source_in_world": moved.frames.source_in_world,
+        },
+        "moved_objects": tuple(o.name for o in problem.cell if o.workpiece),
+    }
+
+
+def _within(placement: Placement, bounds: PlacementSettings) -> bool:
+    return (
+        placement.distance_m <= bounds.translate_m + 1e-12 and placement.angle_deg <= bounds.rotate_deg + 1e-9
+    )
