@@ -702,3 +702,79 @@ def test_rapid_refuses_a_path_of_one_waypoint(tmp_path):
     with pytest.raises(InputError, match="at least 2 waypoints, got 1"):
         write_rapid(tmp_path / "one.mod", one, problem, robot)
     assert not (tmp_path / "one.mod").exists()
+
+
+def test_rapid_refuses_a_robot_that_is_not_an_abb(tmp_path):
+    """A RAPID module for a UR arm would be loaded by nobody: the writer refuses it, naming the controller."""
+    robot, problem, tr = _case("urscript")
+    with pytest.raises(InputError, match="RAPID is for ABB robots.*controller 'ur'"):
+        write_rapid(tmp_path / "b.mod", tr, problem, robot)
+    assert not (tmp_path / "b.mod").exists()
+
+
+def test_urscript_refuses_an_approach_pose_out_of_reach(tmp_path):
+    """A retract of 3 m puts the approach pose beyond the UR10e's 1.3 m reach: no joints reach it."""
+    from refine.errors import SolverError
+
+    robot, problem, tr = _case("urscript")
+    with pytest.raises(SolverError, match="no joints reach the approach pose"):
+        write_urscript(tmp_path / "b.script", tr, problem, robot, retract_m=3.0)
+
+
+@pytest.mark.parametrize(
+    ("options", "ok"),
+    [
+        ({"approach_speed_m_s": 0.0}, False),
+        ({"approach_speed_m_s": 1e-3}, True),
+        ({"joint_velocity_rel": 0.0}, False),
+        ({"joint_velocity_rel": 1.0}, True),
+        ({"joint_velocity_rel": 1.01}, False),
+        ({"speed_resolution_m_s": 0.0}, False),
+    ],
+)
+def test_sunrise_speeds_must_be_positive_and_the_joint_velocity_at_most_one(tmp_path, options, ok):
+    from refine.export.sunrise import write_sunrise
+
+    robot, problem, tr = _case("krl", output="MediaFlange.OutputX3Pin1")
+    if ok:
+        assert write_sunrise(tmp_path / "b.java", tr, problem, robot, **options).is_file()
+    else:
+        with pytest.raises(InputError, match=r"joint_velocity_rel must be in \(0, 1\] and speeds > 0"):
+            write_sunrise(tmp_path / "b.java", tr, problem, robot, **options)
+
+
+def test_each_pathml_track_of_a_multipass_weld_states_its_lateral_offset_and_layer_height(tmp_path):
+    """Layer L sits (L - 1) layer heights above the root; each track carries its pass's lateral offset."""
+    from refine.paths import FusedPath
+    from refine.settings import MultipassSettings
+
+    model, base, tcp, output, (q0, q1) = CASES["krl"]
+    robot = load_robot(model)
+    offsets = ((0.0,), (-0.0015, 0.0015))
+    problem = replace(
+        _problem("bead", model, base, tcp, output),
+        multipass=MultipassSettings(layers=2, layer_height_m=0.002, lateral_offsets_m=offsets),
+    )
+    passes = []
+    for layer, index, n in ((1, 1, 5), (2, 1, 6), (2, 2, 7)):
+        tr = planned(robot, problem, q0, q1, n)
+        fused = FusedPath(tr.s, tr.positions_ref, tr.rotations_demo, tr.speed, tr.t, np.zeros(n))
+        passes.append(PassResult(f"layer {layer} pass {index}", layer, index, fused, None, None, tr))
+    outputs = write_outputs(RunResult(problem, robot, tuple(passes), None), tmp_path, ())
+    root = etree.parse(str(outputs["pathml"])).getroot()
+    ns = {"c": root.nsmap[None]}
+    found = {}
+    for layer in root.iterfind(".//c:InternalElement", ns):
+        for track in layer.iterfind("c:InternalElement", ns):
+            if track.find("c:RoleRequirements", ns).get("RefBaseRoleClassPath").endswith("/Track"):
+                attrs = {a.get("Name"): a for a in track.iterfind("c:Attribute", ns)}
+                found[(layer.get("Name"), track.get("Name"))] = {
+                    k: (float(attrs[k].findtext("c:Value", namespaces=ns)), attrs[k].get("Unit"))
+                    for k in ("lateral_offset", "layer_height")
+                }
+                assert len(track.findall("c:InternalElement", ns)) == len(passes[len(found) - 1].fused)
+    assert found == {
+        ("Layer1", "Track1"): {"lateral_offset": (0.0, "m"), "layer_height": (0.0, "m")},
+        ("Layer2", "Track1"): {"lateral_offset": (-0.0015, "m"), "layer_height": (0.002, "m")},
+        ("Layer2", "Track2"): {"lateral_offset": (0.0015, "m"), "layer_height": (0.002, "m")},
+    }
