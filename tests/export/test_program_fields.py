@@ -717,7 +717,7 @@ def test_urscript_refuses_an_approach_pose_out_of_reach(tmp_path):
     from refine.errors import SolverError
 
     robot, problem, tr = _case("urscript")
-    with pytest.raises(SolverError, match="no joints reach the approach pose"):
+    with pytest.raises(SolverError, match="reach the approach pose"):
         write_urscript(tmp_path / "b.script", tr, problem, robot, retract_m=3.0)
 
 
