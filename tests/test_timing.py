@@ -323,3 +323,18 @@ def test_a_plan_that_stops_on_the_path_names_where(monkeypatch):
     monkeypatch.setattr(timing, "_solve_path_speed", stall)
     with pytest.raises(SolverError, match=rf"stopped the path at s = {s[40]:.4f} m"):
         time_parameterise(s, q, np.full(len(s), 0.1), np.ones(2), np.ones(2))
+
+
+def test_a_free_start_runs_at_its_own_cap_when_the_next_waypoints_cap_is_lower():
+    """Straight in joint space (|q'| <= 1 rad/m) with generous limits: starting at the first cap,
+    80 mm/s, and slowing to 50 mm/s over the first 10 mm takes sddot = (0.05² - 0.08²) / (2·0.01)
+    = -0.195 m/s², joint accelerations under 0.2 rad/s² against a limit of 50, so nothing but the
+    cap bounds the start."""
+    slope = np.array([1.0, 0.5])
+    s, q = _straight(slope, n_pts=101)
+    cap = np.full(len(s), 0.05)
+    cap[0] = 0.08
+    tm = time_parameterise(s, q, cap, np.full(2, 3.0), np.full(2, 50.0), start_stop=False)
+    assert tm.speed[0] == pytest.approx(0.08, rel=1e-4)
+    assert tm.speed[1] == pytest.approx(0.05, rel=1e-4)
+    assert tm.t[1] == pytest.approx((s[1] - s[0]) / 0.065, rel=1e-4)  # constant sddot: the mean speed
