@@ -174,12 +174,16 @@ def _check_inputs(s, q, speed_cap, velocity_limits, acceleration_limits, toleran
 def _toppra():
     """The toppra package and this module's two subclasses of it, imported on first use.
 
-    toppra imports matplotlib's pyplot when it is imported, a large part of a run's start-up, so
-    it is imported only by a run that times a path.
+    toppra imports matplotlib's pyplot when it is imported, for plotting helpers a run never
+    calls and at more CPU time than the rest of the timing stage: pyplot is deferred until toppra
+    reads from it (:mod:`refine.lazy`), and toppra itself is imported only by a run that times a path.
     """
-    import toppra
-    import toppra.algorithm
-    import toppra.constraint
+    from refine.lazy import deferred_modules
+
+    with deferred_modules("matplotlib", "matplotlib.pyplot"):
+        import toppra
+        import toppra.algorithm
+        import toppra.constraint
 
     class _PathSpeedConstraint(toppra.constraint.LinearConstraint):
         """TOPPRA constraint ``sdot <= cap(s)``: a bound on ``x = sdot^2`` at every gridpoint."""

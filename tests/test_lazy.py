@@ -1,0 +1,65 @@
+"""Deferred imports (refine.lazy): a stand-in until first use, the real module afterwards."""
+
+import subprocess
+import sys
+import textwrap
+
+from refine.lazy import deferred_modules
+
+
+def _package(tmp_path, name):
+    """A package ``name`` with a submodule ``heavy`` that appends to a log file when it is loaded."""
+    log = tmp_path / f"{name}.log"
+    pkg = tmp_path / name
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text(f"open({str(log)!r}, 'a').write('pkg\\n')\n")
+    (pkg / "heavy.py").write_text(f"open({str(log)!r}, 'a').write('heavy\\n')\nANSWER = 42\n")
+    return log
+
+
+def test_import_inside_the_block_loads_nothing_until_an_attribute_is_read(tmp_path, monkeypatch):
+    log = _package(tmp_path, "deferred_pkg_a")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    with deferred_modules("deferred_pkg_a", "deferred_pkg_a.heavy"):
+        import deferred_pkg_a.heavy as heavy
+    assert not log.exists()  # neither the package nor its submodule ran
+    assert "deferred_pkg_a.heavy" not in sys.modules  # the stand-ins are gone after the block
+    assert heavy.ANSWER == 42  # first read: the real module is imported
+    assert log.read_text().splitlines() == ["pkg", "heavy"]
+    import deferred_pkg_a.heavy as real
+
+    assert real is sys.modules["deferred_pkg_a.heavy"] and real is not heavy
+    assert real.ANSWER == 42 and log.read_text().splitlines() == ["pkg", "heavy"]  # loaded once
+
+
+def test_modules_already_imported_or_missing_are_left_alone(tmp_path, monkeypatch):
+    log = _package(tmp_path, "deferred_pkg_b")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    import deferred_pkg_b.heavy as before
+
+    with deferred_modules("deferred_pkg_b", "deferred_pkg_b.heavy", "no_such_module_anywhere"):
+        import deferred_pkg_b.heavy as inside
+
+        assert "no_such_module_anywhere" not in sys.modules
+    assert inside is before
+    assert log.read_text().splitlines() == ["pkg", "heavy"]
+
+
+def test_toppra_is_imported_without_pyplot_and_still_works():
+    code = textwrap.dedent(
+        """
+        import sys
+        import numpy as np
+        from refine.timing import time_parameterise
+        s = np.linspace(0.0, 1.0, 50)
+        q = np.column_stack([np.sin(s), np.cos(s)])
+        t = time_parameterise(s, q, np.full(50, 0.5), np.array([1.0, 1.0]), np.array([2.0, 2.0]))
+        assert t.t[-1] > 0
+        print("matplotlib.pyplot" in sys.modules)
+        import toppra.algorithm.algorithm as a
+        a.plt.figure  # toppra's plotting helpers still reach pyplot
+        print("matplotlib.pyplot" in sys.modules)
+        """
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.split() == ["False", "True"]
