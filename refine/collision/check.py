@@ -1,20 +1,37 @@
 """The dense final clearance check of a joint path, between waypoints too.
 
-The robot moves between two waypoints with its joints interpolated linearly, so a link can sweep
-through an obstacle that neither waypoint touches.
+The robot moves between two waypoints with its joints interpolated linearly,
+``q(t) = q_k + t (q_{k+1} - q_k)`` for t in [0, 1], so a link can sweep through an obstacle that
+neither waypoint touches.
 
-**Bounded motion (the default, ``method="bound"``).** A point turning about joint j moves at most
-``|dq_j| * R_j``, with ``R_j`` the largest distance any body downstream of joint j can have from it
-(:func:`joint_reach`: link offsets plus shape extents, a constant of the robot and tool, whatever
-the shapes are). Along a segment no point of any link or tool shape moves more than
-``S = Σ_j |Δq_j| R_j``, so between parameters t and t' two bodies approach each other by at most
-``2 S |t' - t|`` (one of them may be the fixed cell). With the least clearance ``c`` over all pairs
-at a sample (distance minus the pair's margin), no pair can break its margin within ``c / (2S)`` of
-it. Samples are placed by this conservative advancement from the segment's start until the
-certified spans from both ends meet; a segment whose clearance is too small for the bound to pay
-(an advance shorter than ``link_step_m / 2``) or where a sample breaks a margin is sampled densely
-as below. Guarantee: on a certified segment every checked pair keeps its margin (to
-``tolerance_m``) along the whole continuous motion, not only at the samples.
+**What is proved (``method="bound"``, the default).** For every segment counted in
+``certified_segments`` and every checked pair p (link or tool against a cell object, or two of
+the robot's own bodies) with margin ``m_p``:
+
+    d_p(q(t)) >= m_p - tolerance_m   for every t in [0, 1],
+
+where ``d_p`` is the distance between the pair's two convex shapes (the robot's link pieces, the
+tool shapes, the cell objects as given). It holds for the continuous motion, not only at the
+samples, provided ``m_p >= tolerance_m`` (the distances the proof uses are then non-negative),
+and up to the accuracy of FCL's distances (checked against a separating plane, see
+:mod:`refine.collision.distance`). Segments not certified are sampled densely (below) and reported
+as such by ``certified_segments``: that happens only where a margin is broken (the path then fails
+the check anyway) or where one pair needs more than :data:`MAX_ADVANCE` samples inside one segment.
+
+**How.** Per pair, a motion bound (:mod:`refine.collision.motion`): along a segment neither body
+of pair p moves relative to the other further than ``S_p = Σ_j |Δq_j| R_pj``, summed only over the
+joints between the two bodies (for link i against link j of an arm, the joints i+1..j; for a cell
+object against link j, joints 1..j), with ``R_pj`` the largest distance of the moving body's shape
+from joint j's axis. The distance of two bodies changes no faster than their relative motion, so
+from a parameter where the pair's budget ``b = d_p - m_p + tolerance_m`` is known, the next
+``b / S_p`` of the segment is certified. A pair is certified over a segment when the budgets at its
+two ends add up to ``S_p`` at least; lower bounds on ``d_p`` serve where they suffice (the gap
+between world-aligned boxes around the two bodies, or the distance to a cell mesh's convex hull),
+so far pairs cost no FCL query. A pair that falls short is measured exactly at the ends, and then
+advanced from the start by conservative advancement, one FCL query of that pair per step, until
+the span certified from the end is reached. At every waypoint the pair with the least clearance
+and the pair with the least distance are measured exactly (:meth:`CollisionModel.nearest_pairs`),
+for the figures and the runs.
 
 **Dense sampling (``method="sample"``, and the fallback).** Each segment is cut into enough
 sub-steps that
@@ -23,12 +40,14 @@ sub-steps that
   segment's chord sets a first count, raised while the TCP curve makes a sub-step longer), and
 * no point of any link or tool shape moves more than ``link_step_m``. That bound is taken from the
   joints: a point turning about joint j moves at most ``|dq_j| * R_j``, with ``R_j`` the largest
-  distance any body downstream of joint j can have from it (link offsets plus shape extents, a
-  constant of the robot and tool), so a wrist flip with the TCP nearly still is sampled too.
+  distance any body downstream of joint j can have from it (:func:`joint_reach`: link offsets plus
+  shape extents, a constant of the robot and tool), so a wrist flip with the TCP nearly still is
+  sampled too.
 
 At every sample the pair with the least clearance (distance minus its margin) and the pair with the
 least distance are found with :meth:`CollisionModel.nearest_pairs`; where a margin is broken, every
-pair below its margin is named.
+pair below its margin is named. Dense sampling proves nothing between its samples; it finds and
+names the pairs of a broken segment.
 """
 
 from __future__ import annotations
@@ -52,6 +71,9 @@ Array = NDArray[np.float64]
 
 LINK_STEP_M = 0.005
 """Default largest motion of any link point between two checks [m]."""
+
+MAX_ADVANCE = 200
+"""Samples one pair may take inside one segment before the segment is sampled densely instead."""
 
 
 @dataclass(frozen=True)
@@ -93,13 +115,14 @@ class PathClearance:
         segment_distance_m: least distance per segment, waypoints and sub-steps [m], (N-1,).
         segment_clearance_m: least clearance per segment [m], (N-1,).
         segment_pair: per segment, (body, other) of the pair with the least clearance.
-        segment_samples: sub-steps used per segment, (N-1,).
+        segment_samples: sub-steps per segment: one more than the configurations sampled inside
+            it (by the advancement of any pair, or densely), (N-1,).
         runs: runs of segments below the margin, with the objects involved.
         queries: FCL pair queries made by the check.
         time_s: wall time of the check [s].
         tolerance_m: a clearance counts as broken below ``-tolerance_m`` [m].
-        certified_segments: segments cleared by the motion bound (``method="bound"``), the rest
-            were sampled densely.
+        certified_segments: segments proved clear along their whole motion by the per-pair
+            motion bound (``method="bound"``; see the module notes); the rest were sampled densely.
     """
 
     waypoint_distance_m: Array
@@ -135,7 +158,8 @@ class PathClearance:
             f"clearance check: {len(self.waypoint_distance_m)} waypoints, "
             f"{int(self.segment_samples.sum())} sub-steps, {self.queries} distance queries in "
             f"{self.time_s:.3f} s; least distance {self.min_distance_m * 1e3:.1f} mm, least clearance "
-            f"{self.min_clearance_m * 1e3:.1f} mm"
+            f"{self.min_clearance_m * 1e3:.1f} mm; {self.certified_segments} of "
+            f"{len(self.segment_samples)} segments proved clear by the motion bound"
         )
         if self.ok:
             return head + "; every margin kept"
@@ -215,8 +239,8 @@ def check_path_clearance(
         step_m: largest TCP motion between two checks [m] (``collision.check_step_m``).
         link_step_m: largest motion of any link or tool point between two checks [m].
         tolerance_m: clearances down to ``-tolerance_m`` still count as kept [m].
-        method: ``"bound"`` to certify segments by the motion bound where the clearance allows
-            and sample the rest densely, ``"sample"`` to sample every segment densely.
+        method: ``"bound"`` to certify every segment pair by pair by the motion bound and sample
+            densely only segments with a broken margin, ``"sample"`` to sample every segment densely.
 
     Returns:
         The per-waypoint and per-segment figures and the runs below the margin.
@@ -242,8 +266,8 @@ def check_path_clearance(
     start, queries = time.perf_counter(), model.queries
     top_margin = max(model.margin_m, model.self_margin_m)
 
-    def sample(q: Array) -> _Sample:
-        by_distance, by_clearance = model.nearest_pairs(q)
+    def sample(q: Array, poses: Array | None = None) -> _Sample:
+        by_distance, by_clearance = model.nearest_pairs(q, poses)
         if by_distance is None or by_clearance is None:
             return _Sample(math.inf, math.inf, ("", ""), math.inf, frozenset())
         names: set[str] = set()
@@ -256,17 +280,28 @@ def check_path_clearance(
             by_distance.distance_m, by_clearance.clearance_m, pair, by_clearance.distance_m, frozenset(names)
         )
 
-    points = [sample(q) for q in q_path]
+    poses = model.moving_poses(q_path)
+    bounds = model.box_bounds(poses)  # lower bounds on each pair's distance per waypoint (N, P) [m]
+    exact = np.zeros(bounds.shape, dtype=bool)
+    need = np.zeros(bounds.shape, dtype=bool)  # pairs to measure at each waypoint
+    if method == "bound" and len(q_path) > 1:
+        short = _short(bounds - model.pair_margins + tolerance_m, _pair_motion(model, q_path))
+        need[:-1] |= short
+        need[1:] |= short
+    points = []
+    for k, q in enumerate(q_path):
+        for p in np.flatnonzero(need[k]):
+            bounds[k, p], exact[k, p] = model.pair_bound(q, int(p), poses[k])
+        points.append(sample(q, poses[k]))
+        for p, d in model.measured().items():
+            bounds[k, p], exact[k, p] = d, True
     wp_dist = np.array([p.distance for p in points])
     wp_clear = np.array([p.clearance for p in points])
-    reach = joint_reach(model)
-    sweep = np.abs(np.diff(q_path, axis=0)) @ reach  # largest motion of any body point per segment [m]
+    sweep = np.abs(np.diff(q_path, axis=0)) @ joint_reach(model)  # any body point's motion per segment [m]
     found_by_segment: list[list[_Sample] | None] = [None] * len(sweep)
+    inner: list[list[_Sample]] = [[] for _ in sweep]
     if method == "bound":
-        for k, S in enumerate(sweep):
-            found_by_segment[k] = _advance(
-                sample, q_path[k], q_path[k + 1], points[k], points[k + 1], S, tolerance_m, link_step_m
-            )
+        _advance_pairs(model, q_path, poses, bounds, exact, inner, found_by_segment, tolerance_m)
     dense = [k for k, found in enumerate(found_by_segment) if found is None]
     steps = np.ones(len(sweep), dtype=np.int64)
     if dense:
@@ -281,11 +316,11 @@ def check_path_clearance(
             found_by_segment[k] = [sample(q) for q in _interpolate(q_path[k], q_path[k + 1], int(steps[k]))]
     worst: list[_Sample] = []
     seg_dist = np.empty(len(sweep))
-    for k, inner in enumerate(found_by_segment):
-        assert inner is not None
+    for k, found_inside in enumerate(found_by_segment):
+        assert found_inside is not None
         if k not in dense:
-            steps[k] = len(inner) + 1
-        found = [points[k], points[k + 1], *inner]
+            steps[k] = len(found_inside) + 1
+        found = [points[k], points[k + 1], *found_inside, *inner[k]]
         seg_dist[k] = min(s.distance for s in found)
         worst.append(
             min(found, key=lambda s: s.clearance)._replace(below=frozenset().union(*(s.below for s in found)))
@@ -309,40 +344,72 @@ def check_path_clearance(
     return result
 
 
-def _advance(
-    sample,
-    q0: Array,
-    q1: Array,
-    first: _Sample,
-    last: _Sample,
-    sweep_m: float,
+def _advance_pairs(
+    model: CollisionModel,
+    q_path: Array,
+    poses: Array,
+    bounds: Array,
+    exact: NDArray[np.bool_],
+    inner: list[list[_Sample]],
+    found_by_segment: list[list[_Sample] | None],
     tolerance_m: float,
-    link_step_m: float,
-) -> list[_Sample] | None:
-    """Samples inside one segment placed by conservative advancement, or None to sample it densely.
+) -> None:
+    """Certify every segment pair by pair by conservative advancement on the pair's motion bound.
 
-    From the start, each sample's least clearance ``c`` (plus the tolerance) certifies the next
-    ``c / (2 sweep_m)`` of the segment; the end certifies the last ``c_end / (2 sweep_m)``. None when
-    a clearance is broken (the dense sampling then finds and names the pairs) or too small for an
-    advance of at least ``link_step_m / 2``.
+    ``bounds`` (N, P) holds lower bounds on each pair's distance at the waypoints (``exact`` where
+    FCL measured it), ``poses`` the moving bodies' poses there (N, M, 4, 4). A pair keeps its margin over segment k when its budgets (distance minus
+    margin plus tolerance) at the two ends add up to at least the pair's motion bound ``S`` over
+    the segment: each end certifies ``budget / S`` of the segment. A pair that falls short is
+    measured exactly at the ends, then advanced from the start: each sample's budget certifies the
+    next ``budget / S``, until the span certified from the end is reached. Samples taken go to
+    ``inner[k]``; ``found_by_segment[k]`` becomes ``[]`` for a certified segment and stays None for
+    one to sample densely (a broken margin, or more than :data:`MAX_ADVANCE` samples for a pair).
     """
-    if sweep_m <= 0.0:
-        return [] if min(first.clearance, last.clearance) >= -tolerance_m else None
-    end = 1.0 - (last.clearance + tolerance_m) / (2.0 * sweep_m)
-    t, c = 0.0, first.clearance + tolerance_m
-    found: list[_Sample] = []
-    while True:
-        if c < 0.0 or last.clearance + tolerance_m < 0.0:
-            return None
-        advance = c / (2.0 * sweep_m)
-        if t + advance >= end:
-            return found
-        if advance * sweep_m < 0.5 * link_step_m:
-            return None
-        t += advance
-        s = sample(q0 + t * (q1 - q0))
-        found.append(s)
-        c = s.clearance + tolerance_m
+    names = model.pairs
+    margin = model.pair_margins
+    motion = _pair_motion(model, q_path)
+    budget = bounds - margin + tolerance_m
+    need = _short(budget, motion)
+    for k in np.flatnonzero(need.any(axis=1)):  # measure the pairs that fall short at the ends
+        for end in (k, k + 1):
+            for p in np.flatnonzero(need[k] & ~exact[end]):
+                bounds[end, p] = model.pair_distance(q_path[end], int(p), poses[end])
+                exact[end, p] = True
+    budget = bounds - margin + tolerance_m
+    need = _short(budget, motion)
+    broken = np.zeros(len(motion), dtype=bool)
+    for k, p in zip(*np.nonzero(need), strict=True):
+        if broken[k]:
+            continue
+        b0, b1, S = budget[k, p], budget[k + 1, p], motion[k, p]
+        if b0 < 0.0 or b1 < 0.0:
+            broken[k] = True
+            continue
+        end = 1.0 - b1 / S
+        t, c = 0.0, b0
+        for _ in range(MAX_ADVANCE):
+            t += c / S
+            if t >= end:
+                break
+            d = model.pair_distance(q_path[k] + t * (q_path[k + 1] - q_path[k]), int(p))
+            inner[k].append(_Sample(d, d - margin[p], names[p], d, frozenset()))
+            c = d - margin[p] + tolerance_m
+            if c < 0.0:
+                break
+        if t < end:  # a margin broken inside, or the advance stalled: sample the segment densely
+            broken[k] = True
+    for k in np.flatnonzero(~broken):
+        found_by_segment[k] = []
+
+
+def _pair_motion(model: CollisionModel, q_path: Array) -> Array:
+    """Per segment and pair, the most a point of one body moves relative to the other [m], (N-1, P)."""
+    return np.abs(np.diff(q_path, axis=0)) @ model.pair_motion.T
+
+
+def _short(budget: Array, motion: Array) -> NDArray[np.bool_]:
+    """Segment pairs (N-1, P) whose end budgets (N, P) [m] do not certify the whole segment."""
+    return (budget[:-1] < 0.0) | (budget[1:] < 0.0) | (budget[:-1] + budget[1:] < motion)
 
 
 def _runs(worst: list[_Sample], tolerance_m: float, *, single: bool) -> tuple[ClearanceRun, ...]:

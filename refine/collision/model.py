@@ -88,6 +88,8 @@ class CollisionModel:
         self._select_pairs()
         self.queries = 0
         self._q: Array | None = None
+        self._exact: dict[int, Contact] = {}  # pairs measured at the current configuration
+        self._motion: Array | None = None
 
     # ---- building ----------------------------------------------------------------------------
 
@@ -176,19 +178,41 @@ class CollisionModel:
             raise InputError(f"collision model: q must be {self.robot.nq} finite joint values [rad], got {q}")
         return q
 
-    def _update(self, q: ArrayLike) -> None:
+    def _update(self, q: ArrayLike, poses: Array | None = None) -> None:
         q = self._check_q(q)
         if self._q is not None and np.array_equal(q, self._q):
             return
-        pin.forwardKinematics(self._model, self._data, q)
-        oMi = self._data.oMi
-        T_joint = self.base_in_world @ np.array([oMi[j].homogeneous for j in self._joints])
         n = self._n_moving
-        self._poses[:n] = T_joint[self._joint_slot] @ self._joint_T_shape
+        self._poses[:n] = self.moving_poses(q[None])[0] if poses is None else poses
         self._aabb_c[:n], self._aabb_h[:n] = world_aabb(self._poses[:n], self._centre[:n], self._half[:n])
         self._placed = np.zeros(len(self.bodies), dtype=bool)
         self._placed[n:] = True
         self._q = q.copy()
+        self._exact = {}
+
+    def moving_poses(self, qs: ArrayLike) -> Array:
+        """World poses (N, M, 4, 4) of the M moving bodies' shape frames for joint rows qs (N, n)."""
+        qs = np.asarray(qs, dtype=float)
+        T_joint = np.empty((len(qs), len(self._joints), 4, 4))
+        for k, q in enumerate(qs):
+            pin.forwardKinematics(self._model, self._data, q)
+            oMi = self._data.oMi
+            T_joint[k] = [oMi[j].homogeneous for j in self._joints]
+        return self.base_in_world @ T_joint[:, self._joint_slot] @ self._joint_T_shape
+
+    def box_bounds(self, poses: Array) -> Array:
+        """Per row of moving-body poses (N, M, 4, 4), lower bounds [m] on every pair's distance, (N, P).
+
+        The gap between the world-aligned boxes of the two bodies; ``-inf`` where they overlap
+        (the bodies may then penetrate).
+        """
+        c, h = world_aabb(poses, self._centre[: self._n_moving], self._half[: self._n_moving])
+        cells = np.broadcast_to(self._aabb_c[self._n_moving :], (len(poses), *self._aabb_c[self._n_moving :].shape))
+        c = np.concatenate([c, cells], axis=1)
+        h = np.concatenate([h, np.broadcast_to(self._aabb_h[self._n_moving :], cells.shape)], axis=1)
+        d = np.maximum(np.abs(c[:, self._pa] - c[:, self._pb]) - h[:, self._pa] - h[:, self._pb], 0.0)
+        gaps = np.sqrt(np.einsum("nij,nij->ni", d, d))
+        return np.where(gaps > 0.0, gaps, -np.inf)
 
     def _place_all(self, q: Array) -> None:
         self._q = None
@@ -208,6 +232,8 @@ class CollisionModel:
         return np.sqrt(np.einsum("ij,ij->i", d, d))
 
     def _pair(self, k: int) -> Contact:
+        if k in self._exact:  # measured at this configuration already
+            return self._exact[k]
         a, b = int(self._pa[k]), int(self._pb[k])
         self._ensure_placed(a)
         self._ensure_placed(b)
@@ -215,7 +241,7 @@ class CollisionModel:
         d, p_a, p_b, n = signed_distance(A, self._poses[a], B, self._poses[b])
         self.queries += 1
         self._normals[k] = n
-        return Contact(
+        self._exact[k] = Contact(
             body=A.name,
             other=B.name,
             distance_m=d,
@@ -229,6 +255,57 @@ class CollisionModel:
             body_shape=A.shape,
             other_shape=B.shape,
         )
+        return self._exact[k]
+
+    # ---- per-pair figures (the dense check's conservative advancement) ------------------------
+
+    @property
+    def pair_margins(self) -> Array:
+        """The margin [m] of every checked pair, in the order of :attr:`pairs`, (P,)."""
+        return self._margin.copy()
+
+    @property
+    def pair_motion(self) -> Array:
+        """Per checked pair and joint, the motion bound R [m/rad], (P, n): see :mod:`refine.collision.motion`.
+
+        Along a joint segment ``dq`` no point of either body of pair p moves further relative to
+        the other body than ``|dq| @ pair_motion[p]``.
+        """
+        if self._motion is None:
+            from refine.collision.motion import pair_reach
+
+            pairs = [(self.bodies[a], self.bodies[b]) for a, b in zip(self._pa, self._pb, strict=True)]
+            self._motion = pair_reach(self._model, pairs)
+        return self._motion
+
+    def pair_bound(self, q: ArrayLike, k: int, poses: Array | None = None) -> tuple[float, bool]:
+        """A lower bound [m] on pair k's signed distance at joints q, and whether it is the distance.
+
+        A pair against a cell mesh is first bounded by the distance to the mesh's convex hull (a
+        fraction of the cost of the mesh query); any other pair, or a body that may touch the
+        hull, is measured.
+        """
+        self._update(q, poses)
+        if k not in self._exact and self._hulled[k]:
+            bound = self._hull_bound(k)
+            if bound > 0.0:
+                return bound, False
+        return self._pair(k).distance_m, True
+
+    def measured(self) -> dict[int, float]:
+        """Signed distances [m] of the pairs measured at the current configuration, by pair index."""
+        return {k: c.distance_m for k, c in self._exact.items()}
+
+    def pair_distance(self, q: ArrayLike, k: int, poses: Array | None = None) -> float:
+        """The signed distance [m] of checked pair k (index into :attr:`pairs`) at joints q.
+
+        Args:
+            q: joints [rad], (n,).
+            k: the pair.
+            poses: the moving bodies' poses at q from :meth:`moving_poses`, (M, 4, 4), or None.
+        """
+        self._update(q, poses)
+        return self._pair(k).distance_m
 
     # ---- queries -----------------------------------------------------------------------------
 
@@ -266,20 +343,28 @@ class CollisionModel:
         self._ensure_placed(a)
         return hull_bound(self.bodies[a], self._poses[a], self.bodies[b], self._poses[b])
 
-    def nearest_pairs(self, q: ArrayLike) -> tuple[Contact | None, Contact | None]:
+    def nearest_pairs(
+        self, q: ArrayLike, poses: Array | None = None
+    ) -> tuple[Contact | None, Contact | None]:
         """The pair with the least distance and the pair with the least clearance at joints q.
 
         Pairs are visited by their broad-phase lower bound, and the search stops once no bound left
-        could beat either answer, so far pairs cost no FCL call. None, None when nothing is checked.
+        could beat either answer, so far pairs cost no FCL call; pairs already measured at q are
+        not measured again. None, None when nothing is checked.
+
+        Args:
+            q: joints [rad], (n,).
+            poses: the moving bodies' poses at q from :meth:`moving_poses`, (M, 4, 4), or None.
         """
-        self._update(q)
+        self._update(q, poses)
         if len(self._pa) == 0:
             return None, None
         gaps = self._gaps()
         bound = np.where(gaps > 0.0, gaps, -np.inf)  # boxes that overlap bound nothing: may penetrate
         top_margin = float(self._margin.max())
-        by_distance: Contact | None = None
-        by_clearance: Contact | None = None
+        known = list(self._exact.values())
+        by_distance = min(known, key=lambda c: c.distance_m, default=None)
+        by_clearance = min(known, key=lambda c: c.clearance_m, default=None)
 
         def hopeless(lower: float, margin: float) -> bool:
             return (
@@ -292,6 +377,8 @@ class CollisionModel:
         for k in np.argsort(gaps):
             if hopeless(bound[k], top_margin):
                 break  # visited by bound: no pair left can beat either answer
+            if k in self._exact:
+                continue
             if (
                 hopeless(bound[k], self._margin[k])
                 or (self._hulled[k] and hopeless(self._hull_bound(int(k)), self._margin[k]))

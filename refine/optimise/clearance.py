@@ -32,6 +32,9 @@ Array = NDArray[np.float64]
 LOOK_AHEAD_M = 0.03
 """Pairs within margin + this distance get a row, so the next solve cannot push them in [m]."""
 
+RECENT_CHECKS = 8
+"""Dense checks kept for reuse, by joint path."""
+
 BACK_OFF_M = 0.0005
 """Each row asks for this much more than the margin [m]: the distance is curved where the row is
 flat, and without it the rounds end a fraction of a millimetre inside the margin."""
@@ -53,7 +56,7 @@ class ClearanceSource:
     kin: TcpKinematics
     check_step_m: float
     last: PathClearance | None = None
-    _last_q: Array | None = None
+    _recent: dict[tuple, PathClearance] = field(default_factory=dict)
     stats: dict[str, float] = field(
         default_factory=lambda: {"rounds": 0, "rows": 0, "check_s": 0.0, "rows_s": 0.0}
     )
@@ -76,18 +79,23 @@ class ClearanceSource:
     # ---- the ConstraintSource protocol ------------------------------------------------------
 
     def clearance(self, q: Array) -> PathClearance:
-        """The dense check of joints ``q`` (N, n), reused when ``q`` is the last one checked."""
-        if (
-            self.last is None
-            or self._last_q is None
-            or self._last_q.shape != q.shape
-            or not np.array_equal(self._last_q, q)
-        ):
+        """The dense check of joints ``q`` (N, n), reused when ``q`` is one of the last checked.
+
+        The solver checks several candidate paths (rounds, repair branches) and may return an
+        earlier one; the report's figures then come from the check already made.
+        """
+        q = np.asarray(q, dtype=float)
+        key = (q.shape, q.tobytes())
+        found = self._recent.pop(key, None)
+        if found is None:
             t0 = time.perf_counter()
-            self.last = check_path_clearance(self.model, q, self.kin, self.check_step_m)
-            self._last_q = np.array(q)
+            found = check_path_clearance(self.model, q, self.kin, self.check_step_m)
             self.stats["check_s"] += time.perf_counter() - t0
-        return self.last
+        self._recent[key] = found  # most recent last
+        while len(self._recent) > RECENT_CHECKS:
+            del self._recent[next(iter(self._recent))]
+        self.last = found
+        return found
 
     def violations(self, problem: RefinementNLP, q: Array) -> list[Violation]:
         """Runs of segments below the margin, as violations naming the objects [m]."""

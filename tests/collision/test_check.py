@@ -165,3 +165,18 @@ def test_bad_paths_are_rejected_naming_the_value(pillar_model, kin):
     other_tool = TcpKinematics(kin.robot, kin.base_in_world, make_transform(p=[0.0, 0.0, 0.2]))
     with pytest.raises(InputError, match="tcp_in_flange"):
         check_path_clearance(pillar_model, np.zeros((3, 6)), other_tool, step_m=0.01)
+
+
+def test_the_clearance_source_reuses_an_earlier_check_of_the_same_path(pillar_model, kin):
+    """The solver may return a path it checked before another one; the report's figures then
+    come from that check, without checking again."""
+    from refine.optimise.clearance import ClearanceSource
+
+    source = ClearanceSource(pillar_model, kin, 0.01)
+    first, second = _swing(-80.0, -45.0, 5), _swing(-70.0, -40.0, 5)
+    a = source.clearance(first)
+    b = source.clearance(second)
+    queries = pillar_model.queries
+    assert source.clearance(first.copy()) is a and source.clearance(second) is b
+    assert pillar_model.queries == queries and source.last is b
+    assert source.clearance(_swing(-80.0, -45.0, 6)) is not a  # another path is checked
