@@ -292,3 +292,18 @@ def test_the_part_put_back_by_the_known_move_is_ok_and_needs_no_placement(tmp_pa
     doc = json.loads(json.dumps(result_dict(run)))["placement"]
     jsonschema.validate(doc, json.loads(SCHEMA.read_text()))
     assert doc["translation_m"] is None and doc["strict_status"] is None
+
+
+@pytest.mark.slow
+def test_the_summary_and_the_report_offer_the_move_beside_the_slack_repair(tmp_path):
+    from refine.report.html import write_report
+    from refine.result import summary_lines
+
+    _, result = _solved()
+    doc = result_dict(result)["placement"]
+    shift = f"{doc['distance_m'] * 1e3:.1f} mm"
+    line = next(s for s in summary_lines(result) if s.startswith("placement"))
+    assert "ok (verified by the strict run)" in line and shift in line, line
+    assert f"{doc['rotation']['angle_deg']:.2f} deg" in line, line
+    page = write_report(tmp_path / "report.html", result).read_text()
+    assert "Or move the workpiece" in page and shift in page

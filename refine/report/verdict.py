@@ -145,6 +145,11 @@ def verdict_html(result: RunResult, doc: dict[str, Any]) -> str:
         )
     else:
         seg_html = "<p class='nosegments'>No segment needed a repair.</p>" if status == "ok" else ""
+    if result.placement is not None and result.placement.status != "not needed":
+        seg_html += (
+            "<h2>Or move the workpiece</h2>"
+            f"<p class='placement'>{html.escape(result.placement.describe())}</p>"
+        )
     passes = ""
     if len(result.passes) > 1:
         passes = (
