@@ -24,7 +24,8 @@ moved CAD point, the orientation cone around the moved demonstration, joint limi
 margin, the joint step, the singularity measure at every waypoint), each kept a little inside
 its bound (:data:`INSET_DEG`, :data:`SINGULARITY_INSET`); the cost is the squared norm plus a
 small multiple of the usual path cost (orientation and joint smoothness). Clearance is not part
-of this search.
+of this search. IPOPT gets CasADi's exact Hessian except the singularity rows' curvature
+(:data:`SKIP_SINGULARITY_CURVATURE`): a few more iterations, each a fraction of the cost.
 
 How it is verified (:func:`repair_by_placement`): the placement problem's answer is never the
 verdict. The problem is moved by the placement found and run through the ordinary strict
@@ -71,6 +72,10 @@ PATH_COST_WEIGHT = 1e-3
 """Weight of the usual path cost (orientation deviation in deg², joint smoothness) against the
 squared placement norm: it settles the joints (a redundant arm's elbow) without moving the optimum
 of the placement by more than about 1e-3 of its bounds."""
+
+SKIP_SINGULARITY_CURVATURE = True
+"""Leave the singularity rows' second derivatives out of the Hessian IPOPT is given: they cost
+about 30 times the rest of it (a 6x6 determinant differentiated twice at every waypoint)."""
 
 ENLARGE = (1.0, 1.1, 1.25, 1.5)
 """Factors by which the move found is scaled, in turn, until the strict pipeline verifies it."""
@@ -387,10 +392,22 @@ def search_placement(
         "ipopt.mu_strategy": "adaptive",
         "ipopt.max_wall_time": float(time_limit_s),
     }
-    solver = ca.nlpsol("placement", "ipopt", {"x": x, "f": f, "g": ca.vertcat(*rows)}, options)
+    g = ca.vertcat(*rows)
+    if SKIP_SINGULARITY_CURVATURE and tolerances.singularity_margin > 0:
+        # the Hessian of the Lagrangian without the singularity rows' curvature (their λ·∇²w)
+        lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", g.size1())
+        first = 4 * N + n * (N - 1)
+        keep = ca.vertcat(lam_g[:first], ca.MX(N, 1), lam_g[first + N :])
+        H = ca.triu(ca.hessian(lam_f * f + ca.dot(keep, g), x)[0])
+        p_empty = ca.MX.sym("p", 0)
+        options["hess_lag"] = ca.Function(
+            "hess_lag", [x, p_empty, lam_f, lam_g], [H], ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"]
+        )
+    solver = ca.nlpsol("placement", "ipopt", {"x": x, "f": f, "g": g}, options)
     x0 = np.concatenate([np.clip(np.asarray(q0, dtype=float), lower, upper).ravel(), np.zeros(6)])
     sol = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=np.concatenate(lbg), ubg=np.concatenate(ubg))
     stats = solver.stats()
+    log.debug("placement search timings: %s", {k: v for k, v in stats.items() if k.startswith("t_wall")})
     xs = np.asarray(sol["x"]).ravel()
     placement = Placement(centre, T_max * xs[N * n : N * n + 3], A_max * xs[N * n + 3 :])
     return SearchResult(
