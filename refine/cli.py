@@ -73,14 +73,36 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``refine`` command; returns the exit status.
 
-    A Ctrl-C while the command line is read and the subcommands are imported (before a run has
-    touched any file) exits with status 130 too, without a traceback.
+    Ctrl-C (SIGINT, or SIGTERM) before a run's new output set is in place exits with status 130
+    and leaves the previous set; once the new set is in place the run ends as it would have, with
+    its own status (0 ``ok``/``repaired``, 1 ``infeasible``): see :mod:`refine.interrupt`. As the
+    ``refine`` program, signals are held back from the moment the command is done until the
+    process ends, so a late Ctrl-C never turns into a traceback or a death by signal.
     """
+    program = _is_program()
     try:
-        return _main(argv)
+        try:
+            status = _main(argv)
+        finally:
+            if program:
+                from refine.interrupt import hold_signals
+
+                hold_signals()
     except KeyboardInterrupt:
-        print("refine: interrupted before any file was written", file=sys.stderr)
-        return _exit_now(130)
+        status = _interrupted()
+    return _exit_now(status) if program else status
+
+
+def _interrupted() -> int:
+    """Say what an interrupt left in the output folder; the exit status (module ``main``)."""
+    from refine.interrupt import completed_status
+
+    done = completed_status()
+    if done is not None:
+        print("refine: interrupted after the new outputs were complete; result.json describes them", file=sys.stderr)
+        return exit_status(done)
+    print("refine: interrupted; the output folder keeps its previous complete set", file=sys.stderr)
+    return 130
 
 
 def _main(argv: list[str] | None) -> int:
@@ -117,8 +139,7 @@ def _main(argv: list[str] | None) -> int:
                 return check_command(args, problem)
             return _run(args, problem)
     except KeyboardInterrupt:
-        print("refine: interrupted; the output folder keeps its previous complete set", file=sys.stderr)
-        return _exit_now(130)
+        return _interrupted()
     except RefineError as e:
         from refine.names import message_text
 
@@ -126,17 +147,23 @@ def _main(argv: list[str] | None) -> int:
         return 2
 
 
+def _is_program() -> bool:
+    """Whether this process is the ``refine`` program (not ``main`` called from Python)."""
+    top = sys.modules.get("__main__")
+    spec = getattr(top, "__spec__", None)
+    return (spec is not None and spec.name == "refine.cli") or Path(getattr(top, "__file__", "") or "").name == "refine"
+
+
 def _exit_now(status: int) -> int:
     """As the ``refine`` program, exit at once (tearing down CasADi and Pinocchio takes seconds).
 
-    Nothing is left to finish: the staging folder is gone and the output folder is complete. When
-    ``main`` is called from Python (tests, scripts), the status is returned instead.
+    Nothing is left to finish: the output folder holds a complete set and no staging folder.
+    When ``main`` is called from Python (tests, scripts), the status is returned instead.
     """
-    top = sys.modules.get("__main__")
-    spec = getattr(top, "__spec__", None)
-    if (spec is not None and spec.name == "refine.cli") or Path(getattr(top, "__file__", "") or "").name == "refine":
+    if _is_program():
         sys.stdout.flush()
         sys.stderr.flush()
+        logging.shutdown()
         os._exit(status)
     return status
 

@@ -7,6 +7,13 @@ and the run would go on as if nothing happened. :func:`stoppable` therefore make
 handler raises ``KeyboardInterrupt`` again, until one lands in plain Python code and unwinds the
 run. The CLI catches it and exits with status 130 (128 + SIGINT).
 
+Once the new output set is in place (:func:`outputs_complete`, called by
+:meth:`refine.outputs.StagedOutputs.commit`), there is nothing left to stop: later signals inside
+:func:`stoppable` are recorded but raise nothing, the run ends as it would have (the summary is
+printed) and exits with its own status (0 ``ok``/``repaired``, 1 ``infeasible``).
+:func:`completed_status` gives that status to a caller that catches a ``KeyboardInterrupt`` which
+slipped in after the commit anyway (outside :func:`stoppable`).
+
 :func:`deferred` blocks both signals around a section that must finish once started (moving the
 finished outputs into place, removing a staging folder); a signal that arrives meanwhile is
 delivered as soon as the section ends.
@@ -23,7 +30,7 @@ REPEAT_S = 0.05
 """Interval of the repeated ``KeyboardInterrupt`` after the first signal [s]."""
 
 _SIGNALS = (signal.SIGINT, signal.SIGTERM)
-_state = {"requested": False}
+_state: dict = {"requested": False, "complete": None}
 
 
 def requested() -> bool:
@@ -31,14 +38,32 @@ def requested() -> bool:
     return _state["requested"]
 
 
+def outputs_complete(status: str) -> None:
+    """Record that the run's new output set is in place, with its ``status``; stop the repeat timer.
+
+    From here on a signal inside :func:`stoppable` raises nothing (module docstring).
+    """
+    _state["complete"] = status
+    _state["requested"] = False
+    if threading.current_thread() is threading.main_thread():
+        signal.setitimer(signal.ITIMER_REAL, 0.0, 0.0)
+
+
+def completed_status() -> str | None:
+    """The status of the run whose outputs are complete, or None while they are not."""
+    return _state["complete"]
+
+
 def _on_signal(signum: int, frame: object) -> None:
+    if _state["complete"] is not None:
+        return  # the outputs are complete: nothing to stop
     _state["requested"] = True
     signal.setitimer(signal.ITIMER_REAL, REPEAT_S, REPEAT_S)
     raise KeyboardInterrupt
 
 
 def _on_alarm(signum: int, frame: object) -> None:
-    if _state["requested"]:
+    if _state["requested"] and _state["complete"] is None:
         raise KeyboardInterrupt
 
 
@@ -57,6 +82,7 @@ def stoppable() -> Iterator[None]:
             signal.signal(sig, _on_signal)
     signal.signal(signal.SIGALRM, _on_alarm)
     _state["requested"] = False
+    _state["complete"] = None
     try:
         yield
     finally:
@@ -69,15 +95,44 @@ def stoppable() -> Iterator[None]:
         signal.signal(signal.SIGALRM, old[signal.SIGALRM] or signal.SIG_DFL)
 
 
+def hold_signals() -> None:
+    """Ignore SIGINT and SIGTERM for the rest of the process (main thread only; else nothing).
+
+    For a program about to exit: a signal that arrives now can no longer cut anything short, nor
+    turn the exit into a traceback or a death by signal.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        return
+    signal.setitimer(signal.ITIMER_REAL, 0.0, 0.0)
+    for sig in (*_SIGNALS, signal.SIGALRM):
+        signal.signal(sig, signal.SIG_IGN)
+
+
 @contextmanager
 def deferred() -> Iterator[None]:
-    """Hold SIGINT, SIGTERM and SIGALRM back while the block runs; deliver them afterwards."""
+    """Hold SIGINT, SIGTERM and SIGALRM back while the block runs; deliver them afterwards.
+
+    The signals' Python handlers are replaced by ones that only take note, and the first signal
+    noted is raised again once the old handlers are back. (Blocking the signals in the main
+    thread alone would not do: the kernel then hands them to another thread, and CPython may run
+    the handler late or not at all.)
+    """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    held = {*_SIGNALS, signal.SIGALRM}
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    noted: list[int] = []
+
+    def note(signum: int, frame: object) -> None:
+        noted.append(signum)
+
+    old = {sig: signal.getsignal(sig) for sig in (*_SIGNALS, signal.SIGALRM)}
+    for sig, handler in old.items():
+        if handler is not signal.SIG_IGN:
+            signal.signal(sig, note)
     try:
         yield
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        for sig, handler in old.items():
+            signal.signal(sig, handler if handler is not None else signal.SIG_DFL)
+        if noted:
+            signal.raise_signal(noted[0])

@@ -14,10 +14,13 @@ How a set is committed (:meth:`StagedOutputs.commit`), with SIGINT/SIGTERM held 
 4. each new file is moved into place with ``os.replace`` (atomic per file);
 5. the new ``result.json`` is moved into place, then ``.refine-previous.json`` is deleted.
 
+Then :func:`refine.interrupt.outputs_complete` records that the run is complete: a Ctrl-C from
+here on stops nothing (the command exits with the run's own status).
+
 A run that fails or is interrupted before step 2 leaves the previous set untouched and its staging
 folder removed. A process killed outright (SIGKILL) may leave a staging folder; the next run in the
-same folder removes those of processes that no longer run, and cleans the files listed by a
-leftover ``.refine-previous.json``.
+same folder removes those of processes that no longer run (and their ``.result.json.<pid>.tmp``),
+and cleans the files listed by a leftover ``.refine-previous.json``.
 """
 
 from __future__ import annotations
@@ -34,7 +37,7 @@ from pathlib import Path
 from types import TracebackType
 
 from refine.errors import InputError
-from refine.interrupt import deferred
+from refine.interrupt import deferred, outputs_complete
 
 log = logging.getLogger(__name__)
 
@@ -78,6 +81,15 @@ def _claimed_names(doc_path: Path) -> set[str]:
     }
 
 
+def _status_of(text: bytes) -> str:
+    """The ``status`` a ``result.json`` text states ("" when it states none)."""
+    try:
+        doc = json.loads(text)
+    except ValueError:
+        return ""
+    return str(doc.get("status", "")) if isinstance(doc, dict) else ""
+
+
 def _fsync_dir(path: Path) -> None:
     with contextlib.suppress(OSError):
         fd = os.open(path, os.O_RDONLY)
@@ -106,6 +118,13 @@ def remove_stale(out_dir: Path) -> None:
             continue
         if d.is_dir() and not d.is_symlink() and not _pid_alive(pid):
             shutil.rmtree(d, ignore_errors=True)
+    for f in out_dir.glob(f".{RESULT}.*.tmp"):  # a result.json rewrite cut short (refine.export.result_json)
+        try:
+            pid = int(f.name.split(".")[-2])
+        except ValueError:
+            continue
+        if f.is_file() and not f.is_symlink() and not _pid_alive(pid):
+            f.unlink()
     previous = out_dir / PREVIOUS
     if previous.is_file() and not (out_dir / RESULT).exists():
         for name in _claimed_names(previous):
@@ -176,6 +195,8 @@ class StagedOutputs:
             write_result(staged["result"])
             with open(staged["result"], "rb") as f:
                 os.fsync(f.fileno())
+                f.seek(0)
+                status = _status_of(f.read())
             old = _claimed_names(out / RESULT) | _claimed_names(out / PREVIOUS)
             if (out / RESULT).exists():
                 os.replace(out / RESULT, out / PREVIOUS)
@@ -194,5 +215,6 @@ class StagedOutputs:
             with contextlib.suppress(FileNotFoundError):
                 (out / PREVIOUS).unlink()
             self.committed = True
+            outputs_complete(status)  # from here on an interrupt has nothing left to stop
         log.info("moved %d file(s) into %s", len(staged), out)
         return {kind: out / p.name for kind, p in staged.items()}
