@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 from refine.check import add_safety_options, check_command
-from refine.interrupt import stoppable
+from refine.interrupt import forget_completion, stoppable
 
 
 def _seconds_since_process_start() -> float | None:
@@ -80,6 +80,7 @@ def main(argv: list[str] | None = None) -> int:
     process ends, so a late Ctrl-C never turns into a traceback or a death by signal.
     """
     program = _is_program()
+    forget_completion()
     try:
         try:
             status = _main(argv)

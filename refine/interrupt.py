@@ -49,6 +49,11 @@ def outputs_complete(status: str) -> None:
         signal.setitimer(signal.ITIMER_REAL, 0.0, 0.0)
 
 
+def forget_completion() -> None:
+    """Start a new command: no output set of it is complete yet."""
+    _state["complete"] = None
+
+
 def completed_status() -> str | None:
     """The status of the run whose outputs are complete, or None while they are not."""
     return _state["complete"]
