@@ -3,8 +3,9 @@
 The output folder first receives one complete set. Then ``--tries`` runs of each signal (SIGINT,
 SIGKILL) are started into the same folder, alternately with and without ``--no-report`` (so an old
 and a new set differ in their file names as well as their contents), and each is sent the signal
-after a random delay: half drawn uniformly over the whole run time, half over its last 15 % (the
-writing and the move into place). After each try the folder is checked on its own terms:
+at a random moment: half drawn uniformly over the time of a complete run, half within 1 s after
+the run starts writing its outputs (its staging folder appears: the writing, the move into place,
+the summary and the exit). After each try the folder is checked on its own terms:
 
 * if ``result.json`` exists, every file its ``files`` lists exists with that size and SHA-256, and
   no other output-like file (``.csv .aml .mod .src .dat .script .html``) lies beside it;
@@ -84,10 +85,16 @@ def main() -> None:
     for sig in (signal.SIGINT, signal.SIGKILL):
         for k in range(args.tries):
             before = (args.out / "result.json").read_bytes() if (args.out / "result.json").exists() else None
-            delay = rng.uniform(0.0, run_s) if k % 2 == 0 else rng.uniform(0.85 * run_s, 1.05 * run_s)
             p = start(args.problem, args.out, no_report=k % 2 == 1)
-            time.sleep(delay)
+            begun = time.perf_counter()
+            if k % 2 == 0:
+                time.sleep(rng.uniform(0.0, run_s))
+            else:  # late: once the outputs are being written (a staging folder appears), within 1 s
+                while p.poll() is None and not any(args.out.glob(f".refine-staging-{p.pid}-*")):
+                    time.sleep(0.002)
+                time.sleep(rng.uniform(0.0, 1.0))
             sent = time.perf_counter()
+            delay = sent - begun
             p.send_signal(sig)
             rc = p.wait()
             waited = time.perf_counter() - sent
