@@ -22,8 +22,10 @@ placement parameters together (:func:`search_placement`): the CAD points and the
 orientations become functions of the placement; the constraints are the strict ones (TCP on the
 moved CAD point, the orientation cone around the moved demonstration, joint limits less the
 margin, the joint step, the singularity measure at every waypoint), each kept a little inside
-its bound (:data:`INSET_DEG`, :data:`SINGULARITY_INSET`); the cost is the squared norm plus a
-small multiple of the usual path cost (orientation and joint smoothness). Clearance is not part
+its bound (:data:`INSET_DEG`, :data:`SINGULARITY_INSET`), the cone elastic (a slack per waypoint
+with an exact L1 penalty, :data:`ELASTIC_WEIGHT`, so the problem always has an answer and an
+infeasible one says how far beyond the cone the best move leaves the path); the cost is the squared
+norm plus a small multiple of the usual path cost (orientation and joint smoothness). Clearance is not part
 of this search. IPOPT gets CasADi's exact Hessian except the singularity rows' curvature
 (:data:`SKIP_SINGULARITY_CURVATURE`): a few more iterations, each a fraction of the cost.
 
@@ -72,6 +74,14 @@ PATH_COST_WEIGHT = 1e-3
 """Weight of the usual path cost (orientation deviation in deg², joint smoothness) against the
 squared placement norm: it settles the joints (a redundant arm's elbow) without moving the optimum
 of the placement by more than about 1e-3 of its bounds."""
+
+ELASTIC_WEIGHT = 1e4
+"""Cost per unit of elastic cone slack (cosine units) in the placement search: 0.1 deg beyond a
+3 deg cone costs about 0.9, 1 deg about 9, against a squared norm of at most 2 for the largest
+move, so slack is used only where no move within the bounds avoids it (an exact L1 penalty)."""
+
+SLACK_TOLERANCE_DEG = 1e-3
+"""A placement search answer whose elastic slack stays below this everywhere is a feasible move [deg]."""
 
 SKIP_SINGULARITY_CURVATURE = True
 """Leave the singularity rows' second derivatives out of the Hessian IPOPT is given: they cost
@@ -293,6 +303,8 @@ class SearchResult:
         solver_status: IPOPT's return status.
         iterations: IPOPT iterations.
         time_s: wall time of build and solve [s].
+        slack_deg: the orientation beyond the (inset) cone each waypoint still needs with this
+            move [deg], (N,); all zero (below :data:`SLACK_TOLERANCE_DEG`) when the move is feasible.
     """
 
     placement: Placement
@@ -301,6 +313,7 @@ class SearchResult:
     solver_status: str
     iterations: int
     time_s: float
+    slack_deg: Array = field(default_factory=lambda: np.zeros(0))
 
 
 def search_placement(
@@ -339,10 +352,13 @@ def search_placement(
     centre = fused.positions.mean(axis=0)
     T_max, A_max = bounds.translate_m, math.radians(bounds.rotate_deg)
 
-    # decision variables: joints, then the shift and the rotation vector scaled by their bounds
-    x = ca.MX.sym("x", N * n + 6)
+    # decision variables: joints, the shift and the rotation vector scaled by their bounds, and an
+    # elastic slack per waypoint on the cone (cosine units), so that the problem always has an
+    # answer: with the slack zero the move is feasible; otherwise it says how far from it the largest
+    # move within the bounds leaves the path
+    x = ca.MX.sym("x", N * n + 6 + N)
     Q = ca.reshape(x[: N * n], n, N)
-    u, v = x[N * n : N * n + 3], x[N * n + 3 :]
+    u, v, sigma = x[N * n : N * n + 3], x[N * n + 3 : N * n + 6], x[N * n + 6 :]
     t, r = T_max * u, A_max * v
     R = _rotation(r)
     P = ca.DM(fused.positions.T)  # (3, N)
@@ -352,10 +368,12 @@ def search_placement(
     R_moved = ca.reshape(ca.mtimes(R, R_demo), 9, N)  # column k: R·R_k, column-major
 
     G, cost = waypoint_function(robot, base_in_world, tcp_in_flange, axisymmetric).map(N)(Q, P_moved, R_moved)
-    rows = [ca.vec(G), ca.vec(Q[:, 1:] - Q[:, :-1])]
+    cos_theta = G[3, :]
+    rows = [ca.vec(ca.vertcat(G[:3, :], cos_theta + sigma.T)), ca.vec(Q[:, 1:] - Q[:, :-1])]
     inset = math.radians(INSET_DEG)
+    cone = math.radians(tolerances.orientation_deg) - inset
     step = math.radians(tolerances.joint_step_deg)
-    lbg = [np.tile([0.0, 0.0, 0.0, math.cos(math.radians(tolerances.orientation_deg) - inset)], N)]
+    lbg = [np.tile([0.0, 0.0, 0.0, math.cos(cone)], N)]
     ubg = [np.tile([0.0, 0.0, 0.0, np.inf], N)]
     lbg.append(np.full(n * (N - 1), -step + inset))
     ubg.append(np.full(n * (N - 1), step - inset))
@@ -375,20 +393,20 @@ def search_placement(
     path_cost = weights.orientation * (180.0 / math.pi) ** 2 * 2.0 * ca.sum2(cost) / N + 0.5 * ca.dot(
         qv, ca.mtimes(ca.DM(K), qv)
     )
-    f = ca.dot(u, u) + ca.dot(v, v) + PATH_COST_WEIGHT * path_cost
+    f = ca.dot(u, u) + ca.dot(v, v) + PATH_COST_WEIGHT * path_cost + ELASTIC_WEIGHT * ca.sum1(sigma)
 
     lower, upper = joint_bounds(robot, tolerances)
     lower, upper = lower + inset, upper - inset
     free_t, free_r = float(T_max > 0), float(A_max > 0)  # a part with a zero bound stays at 0
-    lbx = np.concatenate([np.tile(lower, N), np.full(3, -free_t), np.full(3, -free_r)])
-    ubx = np.concatenate([np.tile(upper, N), np.full(3, free_t), np.full(3, free_r)])
+    lbx = np.concatenate([np.tile(lower, N), np.full(3, -free_t), np.full(3, -free_r), np.zeros(N)])
+    ubx = np.concatenate([np.tile(upper, N), np.full(3, free_t), np.full(3, free_r), np.full(N, 2.0)])
     options = {
         "ipopt.print_level": 0,
         "ipopt.sb": "yes",
         "print_time": False,
         "ipopt.tol": 1e-8,
         "ipopt.constr_viol_tol": 1e-9,
-        "ipopt.max_iter": 500,
+        "ipopt.max_iter": 300,
         "ipopt.mu_strategy": "adaptive",
         "ipopt.max_wall_time": float(time_limit_s),
     }
@@ -404,19 +422,25 @@ def search_placement(
             "hess_lag", [x, p_empty, lam_f, lam_g], [H], ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"]
         )
     solver = ca.nlpsol("placement", "ipopt", {"x": x, "f": f, "g": g}, options)
-    x0 = np.concatenate([np.clip(np.asarray(q0, dtype=float), lower, upper).ravel(), np.zeros(6)])
+    q_start = np.clip(np.asarray(q0, dtype=float), lower, upper).ravel()
+    start_cos = ca.Function("cos_theta", [x], [cos_theta])(np.concatenate([q_start, np.zeros(6 + N)]))
+    sigma0 = np.clip(math.cos(cone) - np.asarray(start_cos).ravel(), 0.0, 2.0)  # what the start needs
+    x0 = np.concatenate([q_start, np.zeros(6), sigma0])
     sol = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=np.concatenate(lbg), ubg=np.concatenate(ubg))
     stats = solver.stats()
     log.debug("placement search timings: %s", {k: v for k, v in stats.items() if k.startswith("t_wall")})
     xs = np.asarray(sol["x"]).ravel()
-    placement = Placement(centre, T_max * xs[N * n : N * n + 3], A_max * xs[N * n + 3 :])
+    placement = Placement(centre, T_max * xs[N * n : N * n + 3], A_max * xs[N * n + 3 : N * n + 6])
+    slack = np.clip(xs[N * n + 6 :], 0.0, None)
+    slack_deg = np.degrees(np.arccos(np.clip(math.cos(cone) - slack, -1.0, 1.0)) - cone)
     return SearchResult(
         placement,
         xs[: N * n].reshape(N, n),
-        bool(stats.get("success", False)),
+        bool(stats.get("success", False)) and float(slack_deg.max()) <= SLACK_TOLERANCE_DEG,
         str(stats.get("return_status", "unknown")),
         int(stats.get("iter_count", 0)),
         time.perf_counter() - t0,
+        slack_deg,
     )
 
 
@@ -492,11 +516,25 @@ def repair_by_placement(problem: Problem, robot: Robot, first: PassResult) -> Pl
     )
     common = {"bounds": bounds, "solver_status": found.solver_status, "iterations": found.iterations}
     if not found.success:
+        short = ""
+        if found.slack_deg.size and found.slack_deg.max() > SLACK_TOLERANCE_DEG:
+            worst = int(np.argmax(found.slack_deg))
+            s = fused.s
+            short = (
+                f": the best move (shift {found.placement.distance_m:.4f} m, turn "
+                f"{found.placement.angle_deg:.3f} deg) still leaves the orientation up to "
+                f"{found.slack_deg.max():.2f} deg beyond the cone, at waypoint {worst} (s = {s[worst]:.3f} m)"
+            )
+        solver = (
+            ""
+            if found.solver_status == "Solve_Succeeded"
+            else f" (placement search: IPOPT {found.solver_status})"
+        )
         return PlacementRepair(
             "infeasible",
             reason=(
                 f"no workpiece move within {bounds.translate_m:g} m and {bounds.rotate_deg:g} deg found "
-                f"that keeps the strict tolerances (placement search: IPOPT {found.solver_status})"
+                f"that keeps the strict tolerances{solver}{short}"
             ),
             timings_s=timings,
             **common,

@@ -7,6 +7,7 @@ can need from the KUKA LBR iiwa 14 R820's data-sheet dimensions.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 import math
@@ -307,3 +308,21 @@ def test_the_summary_and_the_report_offer_the_move_beside_the_slack_repair(tmp_p
     assert f"{doc['rotation']['angle_deg']:.2f} deg" in line, line
     page = write_report(tmp_path / "report.html", result).read_text()
     assert "Or move the workpiece" in page and shift in page
+
+
+@pytest.mark.slow
+def test_bounds_too_small_for_reach_give_an_infeasible_placement_saying_how_far_off():
+    """5 mm and 0.5 deg: the data-sheet bound says no such move can bring the wrist centres in."""
+    from refine.placement import repair_by_placement
+
+    problem, result = _solved()
+    small = PlacementSettings(translate_m=0.005, rotate_deg=0.5)
+    # the largest move within the bounds has norm sqrt(2) (both parts at their bounds)
+    assert smallest_possible_norm(small, problem.tolerances.orientation_deg) > math.sqrt(2.0)
+    narrow = dataclasses.replace(problem, repair=dataclasses.replace(problem.repair, placement=small))
+    outcome = repair_by_placement(narrow, result.robot, result.first)
+    assert outcome.status == "infeasible"
+    assert "no workpiece move within 0.005 m and 0.5 deg" in outcome.reason
+    assert "beyond the cone" in outcome.reason, outcome.reason
+    doc = outcome.as_json()
+    assert doc["strict_status"] is None and doc["metrics"] is None
