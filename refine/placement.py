@@ -80,6 +80,11 @@ ELASTIC_WEIGHT = 1e4
 3 deg cone costs about 0.9, 1 deg about 9, against a squared norm of at most 2 for the largest
 move, so slack is used only where no move within the bounds avoids it (an exact L1 penalty)."""
 
+ZERO_MOVE = 1e-3
+"""A move whose norm (against the bounds) is below this is no move at all: it is within what the
+small path cost (:data:`PATH_COST_WEIGHT`) may pull the answer by (0.2 mm and 0.015 deg of bounds
+of 0.2 m and 15 deg)."""
+
 SLACK_TOLERANCE_DEG = 1e-3
 """A placement search answer whose elastic slack stays below this everywhere is a feasible move [deg]."""
 
@@ -193,9 +198,9 @@ class PlacementRepair:
         """One line for the command line's summary."""
         if self.status == "not needed":
             return "not needed: the strict problem is ok as placed"
-        head = f"{self.status}: " if self.status != "ok" else "ok (verified by the strict run): "
-        if self.placement is None:
-            return head + self.reason
+        if self.status != "ok" or self.placement is None:
+            return f"{self.status}: {self.reason}"
+        head = "ok (verified by the strict run): "
         p = self.placement
         move = (
             f"move the workpiece {p.distance_m * 1e3:.1f} mm by "
@@ -213,7 +218,7 @@ class PlacementRepair:
             clearance = self.result.first.clearance
             if clearance is not None:
                 move += f", min clearance {clearance.min_distance_m * 1e3:.1f} mm"
-        return head + move + (f" ({self.reason})" if self.reason else "")
+        return head + move
 
     def as_json(self) -> dict[str, Any]:
         """The ``placement`` entry of ``result.json`` (schema: ``docs/placement.schema.json``)."""
@@ -257,7 +262,8 @@ def moved_problem(problem: Problem, transform: Array) -> Problem:
     """``problem`` with its workpiece moved by ``transform`` (Δ, world frame).
 
     What moves: the CAD frame, the tracker receiver (the demonstration was recorded on the part)
-    and the cell objects marked ``workpiece``; the placement search is switched off in the copy.
+    and the cell objects marked ``workpiece``; the placement search is switched off in the copy, and
+    a simulated demonstration's truth (given in {F} as placed) is left out.
     """
     D = np.asarray(transform, dtype=float)
     frames = dataclasses.replace(
@@ -266,8 +272,15 @@ def moved_problem(problem: Problem, transform: Array) -> Problem:
         source_in_world=D @ problem.frames.source_in_world,
     )
     cell = tuple(dataclasses.replace(o, pose=D @ o.pose) if o.workpiece else o for o in problem.cell)
+    demo = problem.demonstration
+    if demo is not None and demo.truth is not None:  # a simulator's truth is in {F} as placed
+        demo = dataclasses.replace(demo, truth=None)
     return dataclasses.replace(
-        problem, frames=frames, cell=cell, repair=dataclasses.replace(problem.repair, placement=None)
+        problem,
+        frames=frames,
+        cell=cell,
+        demonstration=demo,
+        repair=dataclasses.replace(problem.repair, placement=None),
     )
 
 
@@ -539,12 +552,23 @@ def repair_by_placement(problem: Problem, robot: Robot, first: PassResult) -> Pl
             timings_s=timings,
             **common,
         )
+    base_norm = found.placement.norm(bounds)
+    if base_norm < ZERO_MOVE:
+        return PlacementRepair(
+            "infeasible",
+            reason=(
+                "the placement search meets the strict tolerances without moving the workpiece, so what "
+                "fails as placed is what it leaves out: clearance to the cell (or an IK branch the strict "
+                "solve did not find); no workpiece move is proposed (see the diagnosis)"
+            ),
+            timings_s=timings,
+            **common,
+        )
     t0 = time.perf_counter()
     result = None
     tried = []
-    base_norm = found.placement.norm(bounds)
     for factor in ENLARGE:
-        if factor > 1.0 and base_norm > 0 and not _within(found.placement.scaled(factor), bounds):
+        if factor > 1.0 and not _within(found.placement.scaled(factor), bounds):
             break
         candidate = found.placement.scaled(factor)
         result = verify_placement(problem, robot, fused, candidate)
@@ -568,7 +592,7 @@ def repair_by_placement(problem: Problem, robot: Robot, first: PassResult) -> Pl
         reason=(
             f"the move found (shift {found.placement.distance_m:.4f} m, turn {found.placement.angle_deg:.3f} deg) "
             f"and its enlargements within the bounds are not verified by the strict run "
-            f"({', '.join(tried)}): {why}"
+            f"({', '.join(tried)}; the placement search leaves clearance out): {why}"
         ),
         result=result,
         timings_s=timings,

@@ -122,6 +122,8 @@ def test_moving_the_workpiece_moves_cad_demonstration_and_marked_objects_only(tm
     for before, after in zip(p.cell, m.cell, strict=True):
         assert np.allclose(after.pose, D @ before.pose if before.workpiece else before.pose), before.name
     assert m.robot is p.robot and m.repair.placement is None
+    assert p.demonstration.truth is not None and m.demonstration.truth is None  # truth is in {F} as placed
+    assert m.demonstration.file == p.demonstration.file
 
 
 def test_fusing_the_moved_problem_gives_the_path_moved(tmp_path):
@@ -293,6 +295,12 @@ def test_the_part_put_back_by_the_known_move_is_ok_and_needs_no_placement(tmp_pa
     doc = json.loads(json.dumps(result_dict(run)))["placement"]
     jsonschema.validate(doc, json.loads(SCHEMA.read_text()))
     assert doc["translation_m"] is None and doc["strict_status"] is None
+    # asked anyway, the search finds no move to make and proposes none
+    from refine.placement import repair_by_placement
+
+    asked = repair_by_placement(problem, run.robot, run.first)
+    assert asked.status == "infeasible" and asked.placement is None
+    assert "without moving the workpiece" in asked.reason and "clearance" in asked.reason
 
 
 @pytest.mark.slow
