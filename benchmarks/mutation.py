@@ -70,7 +70,12 @@ GROUPS: dict[str, tuple[list[str], list[str]]] = {
     ),
     "liberty": (
         ["refine/demo/liberty.py", "refine/demo/liberty_binary.py"],
-        ["tests/demo/test_liberty.py", "tests/demo/test_liberty_binary.py"],
+        [
+            "tests/demo/test_liberty.py",
+            "tests/demo/test_liberty_binary.py",
+            "tests/demo/test_liberty_records.py",
+            "tests/demo/test_limits.py",
+        ],
     ),
     "frames": (["refine/frames.py"], ["tests/test_frames.py"]),
 }
