@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from refine.errors import InputError
 from refine.optimise.problem import ActiveSet, Weights, build_refinement
 from refine.paths import FusedPath
 from refine.problem import Tolerances
@@ -292,3 +293,17 @@ def test_the_first_and_last_waypoints_may_carry_active_rows(irb4600, straight_to
     active = ActiveSet((0, N - 1), ((0, 0.5), (N - 2, 0.99)), (LinearRow(0, 0.0, np.ones(6), -10.0),))
     nlp = _standard(irb4600, straight_tool, kin, q, Tolerances(), active=active)
     assert len(nlp.lbg) == 4 * N + 6 * (N - 1) + 4 + 1
+
+
+def test_three_waypoints_are_enough_for_a_problem_and_two_are_not(irb4600, straight_tool, kin, q):
+    """The documented minimum: 3 waypoints (one second difference of the smoothness term)."""
+    poses = kin.poses(q[:3])
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1))])
+    fused = FusedPath(s, poses[:, :3, 3], poses[:, :3, :3], np.full(3, 0.1), np.arange(3.0), np.zeros(3))
+    nlp = build_refinement(irb4600, fused, np.eye(4), straight_tool, Tolerances())
+    assert nlp.nlp["x"].numel() == 3 * 6
+    _, g = _evaluate(nlp, q[:3].ravel())
+    np.testing.assert_allclose(g[: 4 * 3].reshape(3, 4)[:, :3], 0.0, atol=1e-12)  # on the targets
+    two = FusedPath(s[:2], poses[:2, :3, 3], poses[:2, :3, :3], np.full(2, 0.1), np.arange(2.0), np.zeros(2))
+    with pytest.raises(InputError, match="at least 3 waypoints, got 2"):
+        build_refinement(irb4600, two, np.eye(4), straight_tool, Tolerances())
