@@ -307,3 +307,19 @@ def test_three_waypoints_are_enough_for_a_problem_and_two_are_not(irb4600, strai
     two = FusedPath(s[:2], poses[:2, :3, 3], poses[:2, :3, :3], np.full(2, 0.1), np.arange(2.0), np.zeros(2))
     with pytest.raises(InputError, match="at least 3 waypoints, got 2"):
         build_refinement(irb4600, two, np.eye(4), straight_tool, Tolerances())
+
+
+def test_the_elastic_cost_charges_every_waypoint_s_slack_alike_and_linearly(irb4600, straight_tool, kin, q):
+    """The repair's L1 penalty: slack costs the same per unit at every waypoint, twice the slack twice
+    the cost, so the answer uses the least total slack (the joints, hence the other terms, held fixed)."""
+    nlp = _standard(irb4600, straight_tool, kin, q, Tolerances(orientation_deg=3.0), elastic_deg=2.0)
+    f0, _ = _evaluate(nlp, np.concatenate([q.ravel(), np.zeros(N)]))
+    delta = 1e-4
+    unit = []
+    for k in range(N):
+        one, _ = _evaluate(nlp, np.concatenate([q.ravel(), delta * np.eye(N)[k]]))
+        two, _ = _evaluate(nlp, np.concatenate([q.ravel(), 2.0 * delta * np.eye(N)[k]]))
+        assert two - f0 == pytest.approx(2.0 * (one - f0), rel=1e-9)
+        unit.append((one - f0) / delta)
+    assert min(unit) > 0.0
+    np.testing.assert_allclose(unit, unit[0], rtol=1e-9)
