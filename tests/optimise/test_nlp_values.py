@@ -323,3 +323,7 @@ def test_the_elastic_cost_charges_every_waypoint_s_slack_alike_and_linearly(irb4
         unit.append((one - f0) / delta)
     assert min(unit) > 0.0
     np.testing.assert_allclose(unit, unit[0], rtol=1e-9)
+    # as documented: one degree of slack at one waypoint of a 3° cone costs about 11 (deg² units),
+    # more than the whole orientation cost of a good path
+    one_degree = unit[0] * (math.cos(math.radians(3.0)) - math.cos(math.radians(4.0)))
+    assert one_degree == pytest.approx(11.0, rel=0.1)
