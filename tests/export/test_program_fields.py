@@ -778,3 +778,25 @@ def test_each_pathml_track_of_a_multipass_weld_states_its_lateral_offset_and_lay
         ("Layer2", "Track1"): {"lateral_offset": (-0.0015, "m"), "layer_height": (0.002, "m")},
         ("Layer2", "Track2"): {"lateral_offset": (0.0015, "m"), "layer_height": (0.002, "m")},
     }
+
+
+@pytest.mark.parametrize(
+    ("kind", "output", "message"),
+    [
+        ("krl", "$OUT[4096]", None),
+        ("krl", "1", None),
+        ("krl", "doGlue", None),  # a name: the program's default output, stated in its comments
+        ("krl", "$OUT[4097]", r"KRL outputs are \$OUT\[1\]..\$OUT\[4096\]"),
+        ("krl", "0", r"KRL outputs are \$OUT\[1\]..\$OUT\[4096\]"),
+        ("urscript", "DO7", None),
+        ("urscript", "DO8", "UR standard digital outputs are 0..7"),
+    ],
+)
+def test_a_run_checks_the_process_output_against_the_controller_s_range_before_solving(kind, output, message):
+    from refine.preflight import check_output_signal
+
+    if message is None:
+        check_output_signal(kind, output)
+    else:
+        with pytest.raises(InputError, match=message):
+            check_output_signal(kind, output)
