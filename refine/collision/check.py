@@ -56,6 +56,7 @@ import logging
 import math
 import time
 from dataclasses import dataclass
+from functools import partial
 from typing import NamedTuple
 
 import numpy as np
@@ -71,6 +72,9 @@ Array = NDArray[np.float64]
 
 LINK_STEP_M = 0.005
 """Default largest motion of any link point between two checks [m]."""
+
+REACH_AHEAD = 0.75
+"""Conservative advancement places its next sample this many budgets beyond the certified edge."""
 
 MAX_ADVANCE = 200
 """Samples one pair may take inside one segment before the segment is sampled densely instead."""
@@ -266,8 +270,8 @@ def check_path_clearance(
     start, queries = time.perf_counter(), model.queries
     top_margin = max(model.margin_m, model.self_margin_m)
 
-    def sample(q: Array, poses: Array | None = None) -> _Sample:
-        by_distance, by_clearance = model.nearest_pairs(q, poses)
+    def sample(q: Array, poses: Array | None = None, bounds: Array | None = None) -> _Sample:
+        by_distance, by_clearance = model.nearest_pairs(q, poses, bounds)
         if by_distance is None or by_clearance is None:
             return _Sample(math.inf, math.inf, ("", ""), math.inf, frozenset())
         names: set[str] = set()
@@ -281,7 +285,8 @@ def check_path_clearance(
         )
 
     poses = model.moving_poses(q_path)
-    bounds = model.box_bounds(poses)  # lower bounds on each pair's distance per waypoint (N, P) [m]
+    boxes = model.box_bounds(poses)  # lower bounds on each pair's distance per waypoint (N, P) [m]
+    bounds = boxes.copy()  # and the better bounds and distances found
     exact = np.zeros(bounds.shape, dtype=bool)
     need = np.zeros(bounds.shape, dtype=bool)  # pairs to measure at each waypoint
     if method == "bound" and len(q_path) > 1:
@@ -292,7 +297,7 @@ def check_path_clearance(
     for k, q in enumerate(q_path):
         for p in np.flatnonzero(need[k]):
             bounds[k, p], exact[k, p] = model.pair_bound(q, int(p), poses[k])
-        points.append(sample(q, poses[k]))
+        points.append(sample(q, poses[k], boxes[k]))
         for p, d in model.measured().items():
             bounds[k, p], exact[k, p] = d, True
     wp_dist = np.array([p.distance for p in points])
@@ -319,7 +324,7 @@ def check_path_clearance(
     for k, found_inside in enumerate(found_by_segment):
         assert found_inside is not None
         if k not in dense:
-            steps[k] = len(found_inside) + 1
+            steps[k] = len(inner[k]) + 1
         found = [points[k], points[k + 1], *found_inside, *inner[k]]
         seg_dist[k] = min(s.distance for s in found)
         worst.append(
@@ -357,11 +362,12 @@ def _advance_pairs(
     """Certify every segment pair by pair by conservative advancement on the pair's motion bound.
 
     ``bounds`` (N, P) holds lower bounds on each pair's distance at the waypoints (``exact`` where
-    FCL measured it), ``poses`` the moving bodies' poses there (N, M, 4, 4). A pair keeps its margin over segment k when its budgets (distance minus
-    margin plus tolerance) at the two ends add up to at least the pair's motion bound ``S`` over
-    the segment: each end certifies ``budget / S`` of the segment. A pair that falls short is
-    measured exactly at the ends, then advanced from the start: each sample's budget certifies the
-    next ``budget / S``, until the span certified from the end is reached. Samples taken go to
+    FCL measured it), ``poses`` the moving bodies' poses there (N, M, 4, 4). A pair keeps its
+    margin over segment k when its budgets (distance minus margin plus tolerance) at the two ends
+    add up to at least the pair's motion bound ``S`` over the segment: each end certifies
+    ``budget / S`` of the segment. A pair that falls short is measured exactly at the ends, then
+    advanced from the start (:func:`_advance`) until the span certified from the end is reached.
+    Samples taken go to
     ``inner[k]``; ``found_by_segment[k]`` becomes ``[]`` for a certified segment and stays None for
     one to sample densely (a broken margin, or more than :data:`MAX_ADVANCE` samples for a pair).
     """
@@ -378,6 +384,12 @@ def _advance_pairs(
     budget = bounds - margin + tolerance_m
     need = _short(budget, motion)
     broken = np.zeros(len(motion), dtype=bool)
+
+    def _measure(k: int, p: int, t: float) -> float:
+        d = model.pair_distance(q_path[k] + t * (q_path[k + 1] - q_path[k]), int(p))
+        inner[k].append(_Sample(d, d - margin[p], names[p], d, frozenset()))
+        return d - margin[p] + tolerance_m
+
     for k, p in zip(*np.nonzero(need), strict=True):
         if broken[k]:
             continue
@@ -385,21 +397,43 @@ def _advance_pairs(
         if b0 < 0.0 or b1 < 0.0:
             broken[k] = True
             continue
-        end = 1.0 - b1 / S
-        t, c = 0.0, b0
-        for _ in range(MAX_ADVANCE):
-            t += c / S
-            if t >= end:
-                break
-            d = model.pair_distance(q_path[k] + t * (q_path[k + 1] - q_path[k]), int(p))
-            inner[k].append(_Sample(d, d - margin[p], names[p], d, frozenset()))
-            c = d - margin[p] + tolerance_m
-            if c < 0.0:
-                break
-        if t < end:  # a margin broken inside, or the advance stalled: sample the segment densely
-            broken[k] = True
+        if not _advance(partial(_measure, k, p), b0, b1, S):
+            broken[k] = True  # a margin broken inside, or the advance stalled: sample the segment densely
     for k in np.flatnonzero(~broken):
         found_by_segment[k] = []
+
+
+def _advance(budget_at, b0: float, b1: float, S: float) -> bool:
+    """Conservative advancement of one pair over one segment; True when [0, 1] is certified.
+
+    A sample at t with budget c (distance minus margin plus tolerance) certifies the window
+    ``[t - c/S, t + c/S]``. The start certifies ``[0, b0/S]``, the end ``[1 - b1/S, 1]``. The next
+    sample is placed :data:`REACH_AHEAD` budgets beyond the certified edge, where its window reaches
+    back to the edge unless the clearance there is smaller than that share of the edge's; when it
+    does not, a sample at the edge itself is taken, whose window always joins. False when a budget
+    is negative (a margin broken) or after :data:`MAX_ADVANCE` samples.
+
+    Args:
+        budget_at: the pair's budget [m] at segment parameter t (one FCL query).
+        b0: budget at t = 0 [m], >= 0.
+        b1: budget at t = 1 [m], >= 0.
+        S: the pair's motion bound over the segment [m], > 0.
+    """
+    edge, c_edge, end = b0 / S, b0, 1.0 - b1 / S
+    for _ in range(MAX_ADVANCE):
+        if edge >= end:
+            return True
+        t = min(edge + REACH_AHEAD * c_edge / S, end)
+        c = budget_at(t)
+        if c < 0.0:
+            return False
+        if t - c / S > edge:  # the window does not reach back: step from the edge itself
+            t = edge
+            c = budget_at(t)
+            if c < 0.0:
+                return False
+        edge, c_edge = t + c / S, c
+    return edge >= end
 
 
 def _pair_motion(model: CollisionModel, q_path: Array) -> Array:

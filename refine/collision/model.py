@@ -179,12 +179,13 @@ class CollisionModel:
         return q
 
     def _update(self, q: ArrayLike, poses: Array | None = None) -> None:
+        q = np.asarray(q, dtype=float)
+        if self._q is not None and q.shape == self._q.shape and bool((q == self._q).all()):
+            return  # checked when it was set
         q = self._check_q(q)
-        if self._q is not None and np.array_equal(q, self._q):
-            return
         n = self._n_moving
         self._poses[:n] = self.moving_poses(q[None])[0] if poses is None else poses
-        self._aabb_c[:n], self._aabb_h[:n] = world_aabb(self._poses[:n], self._centre[:n], self._half[:n])
+        self._boxed = False  # the moving bodies' world-aligned boxes, placed when needed
         self._placed = np.zeros(len(self.bodies), dtype=bool)
         self._placed[n:] = True
         self._q = q.copy()
@@ -227,6 +228,10 @@ class CollisionModel:
 
     def _gaps(self) -> Array:
         """Lower bounds [m] on the distance of every checked pair, from the world-aligned boxes."""
+        if not self._boxed:
+            n = self._n_moving
+            self._aabb_c[:n], self._aabb_h[:n] = world_aabb(self._poses[:n], self._centre[:n], self._half[:n])
+            self._boxed = True
         c, h = self._aabb_c, self._aabb_h
         d = np.maximum(np.abs(c[self._pa] - c[self._pb]) - h[self._pa] - h[self._pb], 0.0)
         return np.sqrt(np.einsum("ij,ij->i", d, d))
@@ -344,7 +349,7 @@ class CollisionModel:
         return hull_bound(self.bodies[a], self._poses[a], self.bodies[b], self._poses[b])
 
     def nearest_pairs(
-        self, q: ArrayLike, poses: Array | None = None
+        self, q: ArrayLike, poses: Array | None = None, bounds: Array | None = None
     ) -> tuple[Contact | None, Contact | None]:
         """The pair with the least distance and the pair with the least clearance at joints q.
 
@@ -355,11 +360,12 @@ class CollisionModel:
         Args:
             q: joints [rad], (n,).
             poses: the moving bodies' poses at q from :meth:`moving_poses`, (M, 4, 4), or None.
+            bounds: the pairs' box bounds at q from :meth:`box_bounds` (P,), or None.
         """
         self._update(q, poses)
         if len(self._pa) == 0:
             return None, None
-        gaps = self._gaps()
+        gaps = self._gaps() if bounds is None else np.maximum(bounds, 0.0)
         bound = np.where(gaps > 0.0, gaps, -np.inf)  # boxes that overlap bound nothing: may penetrate
         top_margin = float(self._margin.max())
         known = list(self._exact.values())

@@ -212,3 +212,33 @@ def test_one_joint_swinging_the_torch_tip_through_a_ball_is_found(robot_name, jo
     )
     assert np.all(result.waypoint_clearance_m > 0.0)
     assert not result.ok and "ball" in result.runs[0].objects
+
+
+def test_advancement_never_certifies_a_segment_where_some_motion_within_the_bound_breaks_the_margin():
+    """The budget f(t) = slope |t - t*| - depth, slope <= S, changes no faster than S, as a pair's
+    budget does, and dips below zero only around t*. Whatever t* and the depth, advancement must not certify
+    [0, 1]; with the dip lifted above zero it must, within its sample limit."""
+    from refine.collision.check import MAX_ADVANCE, _advance
+
+    rng = np.random.default_rng(5)
+    for _ in range(2000):
+        S = rng.uniform(0.001, 0.1)
+        t_star = rng.uniform(0.0, 1.0)
+        depth = S * 10.0 ** rng.uniform(-4.0, -1.0)
+        slope = S * rng.uniform(0.3, 1.0)
+        calls = []
+
+        def dip(t, slope=slope, t_star=t_star, depth=depth, calls=calls):
+            calls.append(t)
+            return slope * abs(t - t_star) - depth
+
+        b0, b1 = dip(0.0), dip(1.0)
+        if min(b0, b1) < 0.0:
+            continue
+        assert not _advance(dip, b0, b1, S), (S, t_star, depth, calls)
+
+        def lifted(t, slope=slope, t_star=t_star, S=S):
+            return slope * abs(t - t_star) + 0.3 * S
+
+        assert _advance(lifted, lifted(0.0), lifted(1.0), S)
+        assert len(calls) <= 2 + 2 * MAX_ADVANCE
