@@ -93,6 +93,7 @@ class RefinementNLP:
         derivatives: the ``grad_f``, ``jac_g`` and ``hess_lag`` functions the solver was given
             (:func:`refine.optimise.derivatives.derivative_functions`); empty in ``"casadi"`` mode.
         derivative_mode: how the derivatives are made (see :func:`build_refinement`).
+        singularity_hessian: whether the Hessian includes the singularity rows' second derivatives.
         robot, base_in_world, tcp_in_flange, fused, tolerances: what it was built from.
         build_time_s: wall time of the build [s].
     """
@@ -121,6 +122,7 @@ class RefinementNLP:
     build_time_s: float = 0.0
     derivatives: dict[str, ca.Function] = field(default_factory=dict)
     derivative_mode: str = "assembled"
+    singularity_hessian: bool = False
 
     def rebuilt(self, *, active: ActiveSet | None = None, elastic_deg: float | None = None) -> RefinementNLP:
         """The same problem with another active set or elastic setting (rebuilt, not solved)."""
@@ -136,6 +138,7 @@ class RefinementNLP:
             elastic_deg=elastic_deg,
             solver_options=self.solver_options,
             derivative_mode=self.derivative_mode,
+            singularity_hessian=self.singularity_hessian,
         )
 
     def joints(self, x: Array) -> Array:
@@ -278,6 +281,7 @@ def build_refinement(
     elastic_deg: float | None = None,
     solver_options: dict[str, Any] | None = None,
     derivative_mode: str = "assembled",
+    singularity_hessian: bool = False,
 ) -> RefinementNLP:
     """Build the refinement NLP for ``fused`` on ``robot`` (no solve).
 
@@ -298,6 +302,8 @@ def build_refinement(
             their blocks: :mod:`refine.optimise.derivatives`) or ``"casadi"`` (the per-waypoint
             functions in CasADi's virtual machine, CasADi differentiating the whole problem; slower
             to build and evaluate, kept for comparison).
+        singularity_hessian: give IPOPT the singularity rows' second derivatives too (``"assembled"``
+            mode; see :func:`refine.optimise.derivatives.derivative_functions`); off by default.
 
     Returns:
         The problem with bounds and parameters filled in.
@@ -394,6 +400,7 @@ def build_refinement(
             elastic_weight=ELASTIC_WEIGHT if elastic else None,
             singular_points=points,
             linear_rows=[(r.k, r.f, np.asarray(r.gradient, dtype=float)) for r in active.linear_rows],
+            singularity_hessian=singularity_hessian,
         )
     )
     options = {**IPOPT_DEFAULTS, **(solver_options or {})}
@@ -422,6 +429,7 @@ def build_refinement(
         build_time_s=time.perf_counter() - t0,
         derivatives=derivatives,
         derivative_mode=derivative_mode,
+        singularity_hessian=singularity_hessian,
     )
 
 

@@ -13,7 +13,7 @@ from refine.problem import Tolerances
 from refine.synthetic import wave_path
 
 
-def _problem(robot, tool, *, elastic: bool):
+def _problem(robot, tool, *, elastic: bool, singularity_hessian: bool = True):
     rng = np.random.default_rng(3)
     N = 12
     active = ActiveSet(
@@ -34,14 +34,20 @@ def _problem(robot, tool, *, elastic: bool):
         weights=Weights(mid_range=0.3, acceleration=1e-3),
         active=active,
         elastic_deg=2.0 if elastic else None,
+        singularity_hessian=singularity_hessian,
     )
 
 
 @pytest.mark.parametrize("elastic", [False, True])
-def test_assembled_derivatives_equal_casadi_differentiation(irb4600, straight_tool, monkeypatch, elastic):
+@pytest.mark.parametrize("singularity_hessian", [True, False])
+def test_assembled_derivatives_equal_casadi_differentiation(
+    irb4600, straight_tool, monkeypatch, elastic, singularity_hessian
+):
+    """Exact everywhere; without the singularity Hessian, the Hessian is the exact one of a Lagrangian
+    whose singularity rows have zero multipliers."""
     # in the virtual machine, CasADi can differentiate the symbolic problem twice itself
     monkeypatch.setenv("REFINE_COMPILE", "0")
-    nlp = _problem(irb4600, straight_tool, elastic=elastic)
+    nlp = _problem(irb4600, straight_tool, elastic=elastic, singularity_hessian=singularity_hessian)
     x, p, f, g = (nlp.nlp[k] for k in ("x", "p", "f", "g"))
     lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", g.shape[0])
     reference = ca.Function(
@@ -60,6 +66,14 @@ def test_assembled_derivatives_equal_casadi_differentiation(irb4600, straight_to
     f_ref, grad_ref, g_ref, jac_ref, hess_ref = (
         np.array(ca.densify(v)) for v in reference(xv, nlp.params, lf, lg)
     )
+    if not singularity_hessian:
+        # the 4 singularity rows (2 waypoints, 2 segment points) follow the path and step rows
+        first = 4 * nlp.n_waypoints + 6 * (nlp.n_waypoints - 1)
+        lg_no_singular = lg.copy()
+        lg_no_singular[first : first + 4] = 0.0
+        hess_exact = np.array(ca.densify(reference(xv, nlp.params, lf, lg)[4]))
+        hess_ref = np.array(ca.densify(reference(xv, nlp.params, lf, lg_no_singular)[4]))
+        assert np.abs(hess_exact - hess_ref).max() > 1e-3  # the singularity rows do add curvature
     f_val, grad = nlp.derivatives["grad_f"](xv, nlp.params)
     g_val, jac = nlp.derivatives["jac_g"](xv, nlp.params)
     hess = nlp.derivatives["hess_lag"](xv, nlp.params, lf, lg)
