@@ -10,16 +10,24 @@ The format, as the Liberty prints it in ASCII mode and as refine reads and write
 
 * Blank lines are ignored; comments are ignored except ``# units: ...`` and ``# rate_hz: ...``
   (``:`` or ``=``, any case), which set the position unit and sample rate for the whole file.
-* A data line is whitespace separated: the record header, then either six values
-  ``x y z azimuth elevation roll`` or seven values ``frame_count x y z azimuth elevation roll``.
-  All lines of one station use the same layout.
-* The record header is the one the Liberty puts before every ASCII record: the station number
-  (two digits, ``01``..``16``), then the initiating command (one letter, e.g. ``P`` for a single
-  record; blank in continuous mode) and the error indicator (one character, blank when there is
-  no error), all without spaces: ``01``, ``01P`` or ``01PE`` (PiMgr and the PDI samples save the
-  records as the device sends them). A non-blank error indicator is kept per sample
-  (``TrackerLog.device_error``) and such samples are treated as dropouts by the quality gate
-  (:mod:`refine.demo.quality`); they are never silently dropped.
+* A data line is a record: the record header, then the values, whitespace separated, in one of
+  these layouts (all lines of one station alike): ``x y z azimuth elevation roll`` (the Liberty's
+  default output list ``2,4,1``), ``frame_count x y z azimuth elevation roll`` (list ``9,2,4,1``),
+  or ``x y z qw qx qy qz`` (list ``2,7``; told from the frame-count layout by its unit
+  quaternions; 7 values that fit both are refused).
+* The record header is the one the Liberty puts before every record (User Manual URM03PH156
+  Rev. H, section 2, "Response format", Table 2-1 for ASCII and Table 2-2 for binary; the fields
+  as Polhemus's PDI SDK declares them in ``PDItracker.h``): the station number (two digits,
+  ``01``..``16``), the initiating command (one letter: ``P`` a single record, ``C`` continuous
+  output) and the error indicator (one byte, a space when there is no error). Accepted: ``01``
+  alone (no command, no indicator), ``01P``/``01C`` followed by a blank indicator, ``01Cu``
+  with an indicator, and a value written straight after the indicator (``01Cu-1.2345``).
+  Records captured as the device sends them (a serial or USB terminal log) therefore read
+  unchanged; a file in any other layout (column titles, other output items) is refused with its
+  line named, never guessed. A non-blank indicator is kept per sample
+  (``TrackerLog.device_error``); the quality gate treats such samples as dropouts and reports
+  them (``demo_quality.device_errors``: counts, sample runs and the SDK's meaning per
+  indicator); they are never silently dropped.
 * At most :data:`MAX_SAMPLES` samples of the station are read.
 * Positions are in inches (default) or centimetres, angles in degrees; the orientation is
   ``R = Rz(azimuth)·Ry(elevation)·Rx(roll)`` (:func:`refine.frames.matrix_from_tracker_angles`).
@@ -40,7 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from refine.errors import InputError
-from refine.frames import matrix_from_tracker_angles, tracker_angles_from_matrix
+from refine.frames import matrix_from_quaternion, matrix_from_tracker_angles, tracker_angles_from_matrix
 from refine.paths import TrackerLog
 
 logger = logging.getLogger(__name__)
@@ -71,6 +79,9 @@ def _parse_rate(text: str, where: str) -> float:
 
 
 _RECORD_HEADER = re.compile(r"(\d{1,2})([A-Za-z])?([!-~])?")
+# the header with the first value glued on (no blank error byte between): station, command, an
+# error indicator that cannot start a number, then the value
+_GLUED = re.compile(r"(\d{1,2})([A-Za-z])([!-*,/:-~])?([-+.0-9]\S*)")
 _CHUNK_LINES = 65536  # lines parsed at once: memory stays linear in the samples kept
 
 
@@ -83,6 +94,30 @@ def _parse_header(token: str, where: str, line: str) -> tuple[int, str]:
             f"initiating command letter and the error indicator, as in '01P'), got {message_line(line)}"
         )
     return int(m.group(1)), m.group(3) or ""
+
+
+def _quaternion_layout(data: np.ndarray, path: Path, linenos: array) -> bool:
+    """Whether 7-value records are ``x y z qw qx qy qz`` (output list 2,7), not with a frame count.
+
+    They are when the last four values of every record are a unit quaternion (to the printed 4
+    decimals); ``frame_count x y z azimuth elevation roll`` needs an increasing integer first.
+
+    Raises:
+        InputError: both readings fit (naming the file), so the layout cannot be told.
+    """
+    q = data[:, 3:7]
+    unit = bool(np.all(np.abs(np.linalg.norm(q, axis=1) - 1.0) < 2e-3) and np.all(np.abs(q) <= 1.0 + 1e-4))
+    if not unit:
+        return False
+    f = data[:, 0]
+    counts = bool(np.all(f == np.round(f)) and np.all(np.diff(f) > 0))
+    if counts:
+        raise InputError(
+            f"{path}:{linenos[0]}: 7 values per record read both as a frame count with Euler angles "
+            "and as a position with a unit quaternion; write the records with 6 values "
+            "(x y z azimuth elevation roll) or a different output list"
+        )
+    return True
 
 
 def message_line(line: str) -> str:
@@ -193,7 +228,12 @@ def read_liberty_ascii(
                 tokens = line.split()
                 head = headers.get(tokens[0])
                 if head is None:
-                    head = headers[tokens[0]] = _parse_header(tokens[0], f"{path}:{lineno}", line)
+                    glued = _GLUED.fullmatch(tokens[0])
+                    if glued:  # "01Cu-12.3456": the first value right after the error indicator
+                        head = (int(glued[1]), glued[3] or "")
+                        tokens = [tokens[0][: glued.start(4)], glued[4], *tokens[1:]]
+                    else:
+                        head = headers[tokens[0]] = _parse_header(tokens[0], f"{path}:{lineno}", line)
                 st, error = head
                 stations.add(st)
                 if st != station:
@@ -203,8 +243,9 @@ def read_liberty_ascii(
                     where = f"{path}:{lineno}"
                     expected = "6 or 7" if layout is None else str(layout)
                     raise InputError(
-                        f"{where}: expected {expected} values after the station number "
-                        f"([frame_count] x y z azimuth elevation roll), got {n}: {message_line(line)}"
+                        f"{where}: expected {expected} values after the record header "
+                        f"(x y z azimuth elevation roll, frame_count x y z azimuth elevation roll, or "
+                        f"x y z qw qx qy qz), got {n}: {message_line(line)}"
                     )
                 layout = n
                 rows.add(tokens[1:], lineno, line, error)
@@ -225,7 +266,8 @@ def read_liberty_ascii(
         )
     data = rows.blocks[0] if len(rows.blocks) == 1 else np.concatenate(rows.blocks)
     rows.blocks = []
-    if layout == 7:
+    quaternions = layout == 7 and _quaternion_layout(data, path, rows.all_linenos)
+    if layout == 7 and not quaternions:
         f_count = data[:, 0]
         if np.any(f_count != np.round(f_count)):
             k = int(np.flatnonzero(f_count != np.round(f_count))[0])
@@ -244,7 +286,12 @@ def read_liberty_ascii(
     rotations = np.empty((len(data), 3, 3))
     for a in range(0, len(data), _CHUNK_LINES):  # in blocks: the conversion's temporaries stay small
         rows_ = data[a : a + _CHUNK_LINES]
-        rotations[a : a + _CHUNK_LINES] = matrix_from_tracker_angles(rows_[:, 3], rows_[:, 4], rows_[:, 5], degrees=True)
+        if quaternions:
+            rotations[a : a + _CHUNK_LINES] = matrix_from_quaternion(rows_[:, 3:7])
+        else:
+            rotations[a : a + _CHUNK_LINES] = matrix_from_tracker_angles(
+                rows_[:, 3], rows_[:, 4], rows_[:, 5], degrees=True
+            )
     device_error = np.array([ord(e) if e else 0 for e in rows.errors], dtype=np.int16)
     if device_error.any():
         logger.warning(

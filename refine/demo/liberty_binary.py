@@ -13,25 +13,33 @@ A log is the byte stream the Liberty sends, one record per station and frame. Ea
     8       n     payload: the items of the station's output list, in the order of the list
 
 Output list items (Liberty ``O`` command) that refine reads, with their binary sizes:
-``2``/``3`` position x, y, z (3 x float32, inches, or centimetres after ``U1``), ``7`` orientation
-quaternion w, x, y, z (4 x float32), ``8`` timestamp [ms] (uint32), ``9`` frame count (uint32),
-``11`` distortion level (4 bytes, skipped), ``0`` a space (1 byte), ``1`` CR LF (2 bytes).
+``2``/``3`` position x, y, z (3 x float32, inches, or centimetres after ``U1``), ``4``/``5`` Euler
+angles azimuth, elevation, roll (3 x float32, degrees; ``R = Rz(az)·Ry(el)·Rx(roll)``), ``7``
+orientation quaternion w, x, y, z (4 x float32), ``8`` timestamp [ms] (uint32), ``9`` frame count
+(uint32), ``11`` distortion level (4 bytes, skipped), ``0`` a space (1 byte), ``1`` CR LF (2 bytes).
+The Liberty's own default output list is ``2,4,1`` (position, Euler angles, CR LF).
 Sources: the binary header structs of Polhemus' PDI SDK (``PDItracker.h``: preamble 0x594C "LY",
 station, cmd, err, reserved, length) and of the TUM/IAS ``polhemus_ros_driver``
 (``liberty_protocol.h``: header, then ``O*,8,9,11,3,7`` as timestamp, frame count, distortion,
-x y z, quaternion w x y z); VRPN's ``vrpn_Tracker_Liberty`` requests ``O*,2,7,8,0`` and reads
-x y z, w x y z, the uint32 millisecond timestamp and a space.
+x y z, quaternion w x y z; its default frame ``O*,2,4,1`` as x y z, azimuth elevation roll, CR LF;
+the continuous-mode command byte 67, 'C'); VRPN's ``vrpn_Tracker_Liberty`` requests ``O*,2,7,8,0``
+and reads x y z, w x y z, the uint32 millisecond timestamp and a space, taking an error byte other
+than a space as a flag.
 
 The record carries no position unit (the reserved byte is 0 on the Liberty), so the caller names
 it: ``units`` ``"in"`` (the Liberty's default) or ``"cm"``. Without ``output_list`` the reader
-recognises position + quaternion with an optional uint32 timestamp first or last and an optional
-trailing space or CR LF, by the response size and by the quaternions being unit length (a
-millisecond timestamp read as a float32 is a tiny denormal for the first 2.3 hours after the
-tracker's clock was reset, so the wrong layout fails that test).
+recognises position + quaternion or Euler angles, with an optional uint32 timestamp first or last
+and an optional trailing space or CR LF, by the response size and by the values being what they
+must be: unit quaternions, angles within ±180/±90/±180 deg, no denormal position (a millisecond
+timestamp read as a float32 is a tiny denormal for the first 2.3 hours after the tracker's clock
+was reset), timestamps that mostly step forward by at most 10 s (float bits read as a timestamp jump
+by days). Layouts that still fit alike are an error asking for ``output_list``.
 
 Records of other stations, and records a command other than ``C``/``P`` initiated (replies to
-configuration commands), are skipped. An error indicator other than 0 or a space is counted and
-logged as a warning; the sample is kept (the outlier filter deals with disturbed samples).
+configuration commands), are skipped. An error indicator other than 0 or a space is kept per
+sample (``TrackerLog.device_error``, the byte's value: the Liberty's real-time indicators are the
+letters listed in :data:`refine.demo.quality.DEVICE_ERROR_MEANINGS`); the quality gate treats
+those samples as a dropout and reports them (``demo_quality.device_errors``).
 
 Time: from timestamps ``t = (ms - ms[0]) / 1000``; from frame counts ``(f - f[0]) / rate_hz``
 (both uint32 counters, unwrapped); without either, sample ``k`` is at ``t = k / rate_hz``.
@@ -48,7 +56,12 @@ import numpy as np
 
 from refine.demo.liberty import METRES_PER_UNIT
 from refine.errors import InputError
-from refine.frames import matrix_from_quaternion, quaternion_from_matrix
+from refine.frames import (
+    matrix_from_quaternion,
+    matrix_from_tracker_angles,
+    quaternion_from_matrix,
+    tracker_angles_from_matrix,
+)
 from refine.paths import TrackerLog
 
 logger = logging.getLogger(__name__)
@@ -61,6 +74,8 @@ ITEMS = {
     1: ("2s", "crlf", 1),
     2: ("3f", "position", 3),
     3: ("3f", "position", 3),
+    4: ("3f", "euler", 3),
+    5: ("3f", "euler", 3),
     7: ("4f", "quaternion", 4),
     8: ("I", "timestamp", 1),
     9: ("I", "frame", 1),
@@ -69,7 +84,8 @@ ITEMS = {
 _FILL = {"space": b" ", "crlf": b"\r\n", "distortion": bytes(4)}
 #: Layouts tried, in this order, when no output list is given.
 AUTO_LAYOUTS = tuple(
-    (*ts_first, 2, 7, *ts_last, *end)
+    (*ts_first, 2, ori, *ts_last, *end)
+    for ori in (7, 4)
     for ts_first, ts_last in (((), ()), ((8,), ()), ((), (8,)))
     for end in ((), (0,), (1,))
 )
@@ -79,10 +95,12 @@ _NO_ERROR = {0, 0x20}
 
 def _item_format(output_list: Sequence[int], where: str) -> struct.Struct:
     unknown = [i for i in output_list if i not in ITEMS]
-    if unknown or 7 not in output_list or not {2, 3} & set(output_list):
+    items = set(output_list)
+    if unknown or len(items & {4, 5, 7}) != 1 or len(items & {2, 3}) != 1 or len(items) != len(output_list):
         raise InputError(
-            f"{where}: output list {list(output_list)} must hold a position (2 or 3) and the "
-            f"quaternion (7), from items {sorted(ITEMS)}; unsupported: {unknown}"
+            f"{where}: output list {list(output_list)} must hold one position (2 or 3) and one "
+            f"orientation (Euler angles 4 or 5, or the quaternion 7), each once, from items "
+            f"{sorted(ITEMS)}; unsupported: {unknown}"
         )
     return struct.Struct("<" + "".join(ITEMS[i][0] for i in output_list))
 
@@ -107,8 +125,22 @@ def _fits(output_list: Sequence[int], payloads: list[bytes]) -> bool:
     for name in ("space", "crlf"):
         if name in fields and any(v[0] != _FILL[name] for v in fields[name]):
             return False
-    q = np.array(fields["quaternion"], dtype=float)
-    return bool(np.all(np.abs(np.linalg.norm(q, axis=1) - 1.0) < 1e-3))
+    p = np.array(fields["position"], dtype=float)
+    if not np.all(np.isfinite(p)) or np.any((p != 0.0) & (np.abs(p) < 1e-30)):
+        return False
+    if "quaternion" in fields:
+        q = np.array(fields["quaternion"], dtype=float)
+        if not np.all(np.abs(np.linalg.norm(q, axis=1) - 1.0) < 1e-3):
+            return False
+    else:
+        a = np.array(fields["euler"], dtype=float)
+        if not (np.all(np.isfinite(a)) and np.all(np.abs(a) <= np.array([180.0, 90.0, 180.0]) + 1e-3)):
+            return False
+    if "timestamp" in fields and len(payloads) > 1:
+        steps = np.diff(np.array(fields["timestamp"], dtype=np.int64)[:, 0]) % 2**32
+        if np.mean((steps > 0) & (steps <= 10_000)) < 0.5:  # most steps (a bad one is reported later)
+            return False
+    return True
 
 
 def read_liberty_binary(
@@ -150,7 +182,7 @@ def read_liberty_binary(
     payloads: list[bytes] = []
     offsets: list[int] = []
     stations: set[int] = set()
-    n_errors = 0
+    errors: list[int] = []
     offset = 0
     while offset < len(data):
         if len(data) - offset < HEADER.size:
@@ -176,7 +208,7 @@ def read_liberty_binary(
                     f"{path}: record at byte offset {offset} has {size} payload bytes, the first "
                     f"record of station {station} (offset {offsets[0]}) has {len(payloads[0])}"
                 )
-            n_errors += err not in _NO_ERROR
+            errors.append(0 if err in _NO_ERROR else err)
             payloads.append(data[offset + HEADER.size : end])
             offsets.append(offset)
         offset = end
@@ -199,17 +231,37 @@ def read_liberty_binary(
             f"bytes, the records hold {len(payloads[0])}"
         )
     fields = {k: np.array(v) for k, v in _decode(output_list, payloads, str(path)).items()}
-    positions, quats = fields["position"].astype(float), fields["quaternion"].astype(float)
-    norms = np.linalg.norm(quats, axis=1)
-    bad = np.flatnonzero(~np.isfinite(positions).all(axis=1) | ~(np.abs(norms - 1.0) < 0.01))
-    if bad.size:
-        k = int(bad[0])
-        raise InputError(
-            f"{path}: record at byte offset {offsets[k]}: position {positions[k].tolist()} {units} "
-            f"or quaternion {quats[k].tolist()} (norm {norms[k]:.4g}, expected 1) is invalid"
+    positions = fields["position"].astype(float)
+    if "quaternion" in fields:
+        quats = fields["quaternion"].astype(float)
+        norms = np.linalg.norm(quats, axis=1)
+        bad = np.flatnonzero(~np.isfinite(positions).all(axis=1) | ~(np.abs(norms - 1.0) < 0.01))
+        if bad.size:
+            k = int(bad[0])
+            raise InputError(
+                f"{path}: record at byte offset {offsets[k]}: position {positions[k].tolist()} {units} "
+                f"or quaternion {quats[k].tolist()} (norm {norms[k]:.4g}, expected 1) is invalid"
+            )
+        rotations = matrix_from_quaternion(quats)
+    else:
+        angles = fields["euler"].astype(float)
+        bad = np.flatnonzero(~np.isfinite(positions).all(axis=1) | ~np.isfinite(angles).all(axis=1))
+        if bad.size:
+            k = int(bad[0])
+            raise InputError(
+                f"{path}: record at byte offset {offsets[k]}: position {positions[k].tolist()} {units} "
+                f"or Euler angles {angles[k].tolist()} deg are not finite"
+            )
+        rotations = matrix_from_tracker_angles(angles[:, 0], angles[:, 1], angles[:, 2], degrees=True)
+    device_error = np.array(errors, dtype=np.int16)
+    if device_error.any():
+        logger.warning(
+            "%s: the device flagged %d of %d record(s) of station %d with an error indicator",
+            path,
+            int(np.count_nonzero(device_error)),
+            len(device_error),
+            station,
         )
-    if n_errors:
-        logger.warning("%s: %d record(s) of station %d flag an error", path, n_errors, station)
     counter = fields.get("timestamp", fields.get("frame"))
     if counter is not None:
         steps = np.diff(counter[:, 0].astype(np.int64))
@@ -229,9 +281,10 @@ def read_liberty_binary(
     return TrackerLog(
         t=t,
         positions=positions * METRES_PER_UNIT[units],
-        rotations=matrix_from_quaternion(quats),
+        rotations=rotations,
         station=station,
         source=str(path),
+        device_error=device_error if device_error.any() else None,
     )
 
 
@@ -271,7 +324,13 @@ def write_liberty_binary(
     quats = quaternion_from_matrix(log.rotations)
     ms = np.rint((log.t - log.t[0]) * 1000.0).astype(np.int64)
     frames = np.rint((log.t - log.t[0]) * rate_hz).astype(np.int64)
-    columns = {"position": positions, "quaternion": quats, "timestamp": ms[:, None], "frame": frames[:, None]}
+    columns = {
+        "position": positions,
+        "quaternion": quats,
+        "euler": tracker_angles_from_matrix(log.rotations, degrees=True),
+        "timestamp": ms[:, None],
+        "frame": frames[:, None],
+    }
     out = bytearray()
     for k in range(len(log.t)):
         values: list = []

@@ -188,7 +188,7 @@ class DemoQuality:
         bad_runs: dropouts and gaps found, with what was done about each.
         frame: the tracker frame estimate (None before alignment).
         warnings: what the run should be told.
-        device_errors: samples the device flagged (``n_flagged``, ``by_indicator``).
+        device_errors: samples the device flagged (:func:`device_error_summary`).
     """
 
     n_samples: int
@@ -337,6 +337,44 @@ def find_bad_runs(log: TrackerLog) -> list[BadRun]:
     return sorted(runs, key=lambda r: r.t_start_s)
 
 
+#: The Liberty's real-time error indicators (Polhemus PDI SDK, ``PDItracker.h``, ``ePiDevError``).
+DEVICE_ERROR_MEANINGS = {
+    **{c: f"source failure, axes {axes}" for c, axes in zip("abcdefg", ("X", "Y", "XY", "Z", "XZ", "YZ", "XYZ"), strict=True)},
+    **{c: f"source failure, axes {axes}" for c, axes in zip("ABCDEFG", ("X", "Y", "XY", "Z", "XZ", "YZ", "XYZ"), strict=True)},
+    "u": "out of map",
+    "I": "built-in test error",
+}
+MAX_LISTED_RUNS = 50
+"""Runs of flagged samples listed per indicator in ``demo_quality.device_errors.samples``."""
+
+
+def device_error_summary(codes: NDArray[np.int16] | None) -> dict[str, Any]:
+    """What the device flagged, for ``demo_quality.device_errors``.
+
+    Args:
+        codes: the error indicator per sample (character code, 0 for none), or None.
+
+    Returns:
+        ``n_flagged`` (samples), ``by_indicator`` (indicator -> samples), ``samples`` (indicator
+        -> ``[first, last]`` runs of flagged samples, the first :data:`MAX_LISTED_RUNS`),
+        ``n_runs`` (indicator -> runs) and ``meaning`` (indicator -> what the Liberty means by it,
+        "unknown" for an indicator the SDK does not list).
+    """
+    out: dict[str, Any] = {"n_flagged": 0, "by_indicator": {}, "samples": {}, "n_runs": {}, "meaning": {}}
+    if codes is None:
+        return out
+    flagged = codes[codes != 0]
+    out["n_flagged"] = int(flagged.size)
+    for c in np.unique(flagged):
+        key = chr(int(c))
+        runs = _runs(codes == c)
+        out["by_indicator"][key] = int(np.count_nonzero(codes == c))
+        out["samples"][key] = [[a, b] for a, b in runs[:MAX_LISTED_RUNS]]
+        out["n_runs"][key] = len(runs)
+        out["meaning"][key] = DEVICE_ERROR_MEANINGS.get(key, "unknown")
+    return out
+
+
 def gate_dropouts(log: TrackerLog) -> tuple[TrackerLog, DemoQuality]:
     """Bridge short dropouts, trim bad ends, refuse long dropouts (module docstring).
 
@@ -360,12 +398,7 @@ def gate_dropouts(log: TrackerLog) -> tuple[TrackerLog, DemoQuality]:
             + (f" ({len(refused)} such dropouts)" if len(refused) > 1 else "")
             + "; record the demonstration again or cut the log"
         )
-    if log.device_error is not None:
-        codes = log.device_error[log.device_error != 0]
-        counts = {chr(int(c)): int(n) for c, n in zip(*np.unique(codes, return_counts=True), strict=True)}
-        device = {"n_flagged": int(codes.size), "by_indicator": counts}
-    else:
-        device = {"n_flagged": 0, "by_indicator": {}}
+    device = device_error_summary(log.device_error)
     mask = np.zeros(len(log.t), dtype=bool)
     for r in runs:
         if r.kind != "gap":
@@ -566,6 +599,7 @@ def gate_frame(
 __all__ = [
     "BadRun",
     "DemoQuality",
+    "device_error_summary",
     "FrameEstimate",
     "estimate_frame_error",
     "find_bad_runs",

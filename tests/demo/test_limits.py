@@ -28,7 +28,13 @@ def test_the_liberty_record_header_with_command_and_error_indicator_is_read(tmp_
     np.testing.assert_array_equal(log.device_error, [0, 0, 0, ord("E"), 0, 0, 0, 0, 0, 0])
     np.testing.assert_allclose(log.positions[:, 0], 0.01 * np.arange(10) * 0.0254)
     fixed, quality = gate_dropouts(log)
-    assert quality.device_errors == {"n_flagged": 1, "by_indicator": {"E": 1}}
+    assert quality.device_errors == {
+        "n_flagged": 1,
+        "by_indicator": {"E": 1},
+        "samples": {"E": [[3, 3]]},
+        "n_runs": {"E": 1},
+        "meaning": {"E": "source failure, axes XZ"},  # PDItracker.h: PI_DEVERR_RT_SRC_FAIL_E_XZ
+    }
     (run,) = quality.bad_runs
     assert (run.kind, run.first, run.last, run.action) == ("device-error", 3, 3, "bridged")
 
