@@ -236,7 +236,14 @@ def reach_tilts(
     rotations = np.array(fused.rotations, dtype=float)
     if not d.reach.spherical:
         return tilts, rotations
-    for k in range(len(tilts)):
+    # the wrist centre of every demonstrated pose at once; only the poses out of range need a tilt
+    T_base = np.linalg.inv(kin.base_in_world)
+    R_base = T_base[:3, :3] @ np.asarray(fused.rotations, dtype=float)
+    p_base = np.asarray(fused.positions, dtype=float) @ T_base[:3, :3].T + T_base[:3, 3]
+    v = (np.linalg.inv(kin.tcp_in_flange) @ np.append(d.reach.point_in_flange, 1.0))[:3]
+    distance = d.reach.distance(p_base + R_base @ v)
+    lo, hi = d.reach.r_min_m + inset_m, d.reach.r_max_m - inset_m
+    for k in np.flatnonzero((distance < lo) | (distance > hi)):
         T = np.eye(4)
         T[:3, :3], T[:3, 3] = fused.rotations[k], fused.positions[k]
         _, tilts[k], _, _, rotations[k] = d.reach_at(T, inset_m)

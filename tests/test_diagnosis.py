@@ -12,7 +12,7 @@ import scipy.optimize
 
 from refine.cli import exit_status, main
 from refine.collision import CollisionModel
-from refine.diagnosis import Diagnoser, _reach_model, closest_pair_text
+from refine.diagnosis import Diagnoser, _reach_model, closest_pair_text, reach_tilts
 from refine.frames import make_transform
 from refine.optimise.clearance import ClearanceSource
 from refine.optimise.seed import TcpKinematics
@@ -106,6 +106,41 @@ def test_the_tilt_that_brings_the_wrist_centre_into_reach_matches_the_geometry()
     assert d0 > 0.82
     assert tilt == pytest.approx(math.degrees(lean - a_in), abs=0.15)  # searched in 0.1 deg steps
     assert d_cone == pytest.approx(np.linalg.norm(wrist(lean - math.radians(3.0)) - shoulder), abs=1e-3)
+
+
+def test_reach_tilts_along_a_path_tilts_only_the_poses_out_of_reach():
+    """The geometry of the test above along a line of TCP points, x from 0.50 to 0.80 m: a pose
+    whose wrist centre is within 0.82 m of the shoulder needs no tilt and keeps its orientation;
+    the others need the tilt brentq finds on the plane geometry."""
+    robot = load_robot("kuka_iiwa14_r820")
+    kin = TcpKinematics(robot, np.eye(4), make_transform(p=[0.0, 0.0, 0.20]))
+    shoulder = np.array([0.0, 0.0, 0.36])
+    lean, z, arm = math.radians(30.0), 0.10, 0.326
+    axis = np.array([-math.sin(lean), 0.0, -math.cos(lean)])
+    x_axis = np.array([math.cos(lean), 0.0, -math.sin(lean)])
+    R = np.column_stack([x_axis, np.cross(axis, x_axis), axis])
+    xs = np.linspace(0.50, 0.80, 31)
+    path = SimpleNamespace(
+        s=xs - xs[0], positions=np.column_stack([xs, 0 * xs, 0 * xs + z]), rotations=np.repeat(R[None], 31, 0)
+    )
+    tol = SimpleNamespace(orientation_deg=3.0, joint_margin_deg=2.0, singularity_margin=0.02)
+    tilts, rotations = reach_tilts(kin, path, tol, True)
+    for k, x in enumerate(xs):
+
+        def gap(a, x=x):  # wrist-centre distance beyond 0.82 m with the tool leaning a back
+            return np.linalg.norm([x + arm * math.sin(a), 0.0, z + arm * math.cos(a) - shoulder[2]]) - 0.82
+
+        if gap(lean) <= 0.0:
+            assert tilts[k] == 0.0 and np.array_equal(rotations[k], R)
+        else:
+            a_in = scipy.optimize.brentq(gap, 0.0, lean) if gap(0.0) < 0 else None
+            if a_in is None:  # even upright it is out of reach: more tilt than the lean
+                assert tilts[k] > math.degrees(lean)
+            else:
+                assert tilts[k] == pytest.approx(math.degrees(lean - a_in), abs=0.15)
+                angle = math.degrees(math.acos(np.clip(rotations[k][:, 2] @ R[:, 2], -1, 1)))
+                assert angle == pytest.approx(tilts[k], abs=1e-6)
+    assert (tilts == 0).sum() >= 3 and (tilts > 0).sum() >= 3  # both kinds on this line
 
 
 @pytest.mark.slow
