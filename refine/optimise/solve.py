@@ -215,7 +215,7 @@ def _new_singular(kin: TcpKinematics, q: Array, margin: float, active: ActiveSet
     """Waypoints and segment points near the singularity not yet bounded in ``active``."""
     if margin <= 0:
         return ActiveSet()
-    w, _ = singularity_measures(kin, q)
+    w, _ = singularity_measures(kin, q, smallest=False)
     near = np.flatnonzero(w < 1.5 * margin)
     widened = np.unique(np.clip(near[:, None] + np.arange(-2, 3), 0, len(q) - 1)) if near.size else near
     waypoints = tuple(sorted(set(widened.tolist()) - set(active.singular_waypoints)))

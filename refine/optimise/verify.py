@@ -96,10 +96,12 @@ def runs(mask: Array) -> list[tuple[int, int]]:
     return list(zip(starts.tolist(), ends.tolist(), strict=True))
 
 
-def singularity_measures(kin: TcpKinematics, q: Array) -> tuple[Array, Array]:
+def singularity_measures(kin: TcpKinematics, q: Array, *, smallest: bool = True) -> tuple[Array, Array]:
     """Scaled manipulability and smallest singular value of the scaled TCP Jacobian per row of ``q``.
 
     The Jacobian's linear rows are divided by the robot's reach so both halves are unitless.
+    ``smallest=False`` skips the singular values (most of the cost) for callers that only need the
+    manipulability; the second array is then NaN.
 
     Returns:
         ``sqrt(det(Js Jsᵀ))`` (N,) and the smallest singular value of ``Js`` (N,) [-]
@@ -107,9 +109,10 @@ def singularity_measures(kin: TcpKinematics, q: Array) -> tuple[Array, Array]:
     """
     scale = np.array([1.0 / kin.robot.spec.reach_m] * 3 + [1.0] * 3)[:, None]
     Js = scale * kin.jacobians(q)
-    sv = np.linalg.svd(Js, compute_uv=False)
     w = np.sqrt(np.clip(np.linalg.det(Js @ np.swapaxes(Js, 1, 2)), 0.0, None))
-    smin = sv[:, -1] if Js.shape[2] >= 6 else np.zeros(len(Js))
+    if not smallest:
+        return w, np.full(len(Js), np.nan)
+    smin = np.linalg.svd(Js, compute_uv=False)[:, -1] if Js.shape[2] >= 6 else np.zeros(len(Js))
     return w, smin
 
 
@@ -128,7 +131,7 @@ def segment_singularity(kin: TcpKinematics, q: Array, max_step_deg: float = 1.0)
     n_sub = np.maximum(2, np.ceil(np.degrees(np.abs(dq).max(axis=1)) / max_step_deg)).astype(int)
     seg = np.repeat(np.arange(len(dq)), n_sub - 1)
     frac = np.concatenate([np.arange(1, m) / m for m in n_sub])
-    w, _ = singularity_measures(kin, q[seg] + frac[:, None] * dq[seg])
+    w, _ = singularity_measures(kin, q[seg] + frac[:, None] * dq[seg], smallest=False)
     order = np.lexsort((w, seg))  # by segment, then by measure: the first of each segment is its minimum
     first = order[np.searchsorted(seg[order], np.arange(len(dq)))]
     return w[first], frac[first]

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from refine.optimise.verify import check_path, runs
+from refine.optimise.verify import check_path, runs, singularity_measures
 from refine.paths import FusedPath
 from refine.problem import Tolerances
 
@@ -242,6 +242,13 @@ def test_the_singularity_figures_are_the_scaled_manipulability_and_smallest_sing
     np.testing.assert_allclose(check.singularity, [manipulability(qk) for qk in q], rtol=1e-9)
     smallest = [np.linalg.svd(scaled_jacobian(qk), compute_uv=False)[-1] for qk in q]
     np.testing.assert_allclose(check.sigma_min, smallest, rtol=1e-9)
+
+
+def test_the_manipulability_alone_skips_the_singular_values(kin):
+    q = path([Q0_DEG, [0.0, 100.0, -150.0, 0.0, 40.0, 0.0], [10.0, 20.0, -30.0, 40.0, 5.0, 60.0]])
+    w, smin = singularity_measures(kin, q, smallest=False)
+    np.testing.assert_allclose(w, [manipulability(qk) for qk in q], rtol=1e-9)
+    assert np.isnan(smin).all() and smin.shape == (3,)
 
 
 def test_a_wrist_just_below_the_singularity_margin_is_reported_with_its_measure(kin):
