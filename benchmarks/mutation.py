@@ -17,6 +17,8 @@ Usage::
     nice -n 10 python3 benchmarks/mutation.py --sample 40 --seed 1 --out /tmp/mutation
     python3 benchmarks/mutation.py --group verify --sample 10        # one group
     python3 benchmarks/mutation.py --tests-ref <commit> ...         # the tests of an older commit
+    python3 benchmarks/mutation.py --recheck /tmp/mutation/report.json --out /tmp/recheck
+                                  # only that run's survivors, against the tests as they are now
 
 The report (``report.md`` and ``report.json`` in ``--out``) gives per group the mutants run, killed,
 the score, and every survivor with its file, line and change.
@@ -359,6 +361,30 @@ def make_copy(work: Path, tests_ref: str | None) -> Path:
     return root
 
 
+def _earlier_survivors(
+    earlier: dict, files: list[str], sites: list[Site], root: Path
+) -> tuple[list[Site], int]:
+    """The survivors of an earlier run as sites of the current sources, and that run's kill count.
+
+    Raises:
+        SystemExit: a survivor is no longer a site of the current source, or a mutated file changed
+            its number of sites (the earlier sample is then not the same set of mutants).
+    """
+    if sorted(earlier["files"]) != sorted(files) or earlier["sites"] != len(sites):
+        raise SystemExit(
+            f"{files}: the sources changed since the earlier run ({earlier['sites']} sites, now {len(sites)})"
+        )
+    current = {(s.file, s.node_index, s.kind, s.option): s for s in sites}
+    out = []
+    for d in earlier.get("survivors", []):
+        site = current.get((d["file"], d["node_index"], d["kind"], d["option"]))
+        line = (root / d["file"]).read_text().splitlines()[d["line"] - 1].strip() if d["line"] else ""
+        if site is None or site.description != d["description"] or line != d["source"]:
+            raise SystemExit(f"{d['file']}:{d['line']} {d['description']}: not a site of the current source")
+        out.append(site)
+    return out, int(earlier["killed"])
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--group", action="append", choices=sorted(GROUPS), help="groups to run (default: all)")
@@ -367,25 +393,39 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tests-ref", help="take tests/ from this git commit (a before/after comparison)")
     ap.add_argument("--out", type=Path, default=Path("mutation-report"), help="report folder")
     ap.add_argument("--list", action="store_true", help="only print the number of sites per group")
+    ap.add_argument(
+        "--recheck",
+        type=Path,
+        help="run only the survivors of this earlier report.json against the current tests; the "
+        "score counts its killed mutants and the survivors killed now (the sources must not have changed)",
+    )
     args = ap.parse_args(argv)
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(1))  # leave no temporary copy behind
     args.out.mkdir(parents=True, exist_ok=True)
     report: dict[str, dict] = {}
+    previous = json.loads(args.recheck.read_text()) if args.recheck else None
     with tempfile.TemporaryDirectory(prefix="refine-mutation-") as tmp:
         root = make_copy(Path(tmp), args.tests_ref)
         preload()
-        for group in args.group or list(GROUPS):
+        for group in args.group or (list(previous) if previous else list(GROUPS)):
             files, tests = GROUPS[group]
             files = [f for f in files if (root / f).is_file()]
             tests = [t for t in tests if (root / t.split("::")[0]).exists()]
             sites = [s for f in files for s in sites_of(f, (root / f).read_text())]
-            sample = (
-                sites
-                if not args.sample or args.sample >= len(sites)
-                else random.Random(f"{args.seed}:{group}").sample(sites, args.sample)
-            )
+            if previous is not None:
+                sample, earlier_killed = _earlier_survivors(previous[group], files, sites, root)
+            else:
+                sample, earlier_killed = (
+                    (
+                        sites
+                        if not args.sample or args.sample >= len(sites)
+                        else random.Random(f"{args.seed}:{group}").sample(sites, args.sample)
+                    ),
+                    0,
+                )
             print(
-                f"{group}: {len(sites)} sites in {len(files)} files, {len(sample)} sampled; tests {tests}",
+                f"{group}: {len(sites)} sites in {len(files)} files, {len(sample)} "
+                f"{'survivors of the earlier run' if previous else 'sampled'}; tests {tests}",
                 flush=True,
             )
             if args.list:
@@ -421,14 +461,17 @@ def main(argv: list[str] | None = None) -> int:
                     f"  [{k + 1}/{len(sample)}] {verdict:7s} {dt:5.1f} s  {site.file}:{site.line} {site.description}",
                     flush=True,
                 )
+            if previous is not None:  # the earlier run's sample, its kills and the survivors killed now
+                entry.update(rechecked=len(sample), sampled=previous[group]["sampled"])
+                killed += earlier_killed
             entry.update(
                 killed=killed,
                 timeouts=timeouts,
-                score=round(100.0 * killed / max(1, len(sample)), 1),
+                score=round(100.0 * killed / max(1, entry["sampled"]), 1),
                 survivors=survivors,
             )
             print(
-                f"{group}: {killed}/{len(sample)} killed ({entry['score']} %), {timeouts} by timeout",
+                f"{group}: {killed}/{entry['sampled']} killed ({entry['score']} %), {timeouts} by timeout",
                 flush=True,
             )
     (args.out / "report.json").write_text(json.dumps(report, indent=2))

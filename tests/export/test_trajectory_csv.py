@@ -65,3 +65,34 @@ def test_a_short_row_is_rejected(csv_path):
     csv_path.write_text("\n".join(lines) + "\n")
     with pytest.raises(InputError, match="values"):
         read_trajectory_csv(csv_path)
+
+
+def test_a_demo_quaternion_starts_on_the_reached_one_s_side_also_across_180_degrees(tmp_path, trajectory):
+    """Reached: 170 deg about x; demonstrated 20 deg further, 190 deg about x. As unit quaternions
+    (cos 85°, sin 85°, 0, 0) and (cos 95°, sin 95°, 0, 0): dot cos 10° > 0, while the other sign of
+    the same demonstrated rotation, (cos 85°, -sin 85°, 0, 0), has dot -cos 10°."""
+    from scipy.spatial.transform import Rotation
+
+    n = len(trajectory)
+    reached = Rotation.from_rotvec(np.tile([np.radians(170.0), 0.0, 0.0], (n, 1))).as_matrix()
+    demo = Rotation.from_rotvec(np.tile([np.radians(190.0), 0.0, 0.0], (n, 1))).as_matrix()
+    poses = trajectory.poses.copy()
+    poses[:, :3, :3] = reached
+    tr = Trajectory(trajectory.t, trajectory.s, trajectory.q, trajectory.positions_ref, poses, demo, trajectory.speed)
+    data = np.loadtxt(write_trajectory_csv(tmp_path / "flip.csv", tr), delimiter=",", skiprows=1)
+    quat, qdemo = data[:, 14:18], data[:, 18:22]
+    c85, s85 = np.cos(np.radians(85.0)), np.sin(np.radians(85.0))
+    np.testing.assert_allclose(np.abs(quat), np.tile([c85, s85, 0.0, 0.0], (n, 1)), atol=1e-12)
+    np.testing.assert_allclose(np.abs(qdemo), np.tile([c85, s85, 0.0, 0.0], (n, 1)), atol=1e-12)
+    np.testing.assert_allclose(np.sum(quat * qdemo, axis=1), np.cos(np.radians(10.0)), atol=1e-12)
+
+
+def test_a_trajectory_of_a_single_axis_reads_back(tmp_path):
+    """The header names q1..qn for any n >= 1: one joint column is a valid file."""
+    header = HEADER.replace("q1,q2,q3,q4,q5,q6", "q1")
+    rows = ["0,0,0.5,0,0,0,0,0,0,1,0,0,0,1,0,0,0,0.1", "1,0.1,0.6,0.1,0,0,0.1,0,0,1,0,0,0,1,0,0,0,0.1"]
+    path = tmp_path / "one.csv"
+    path.write_text("\n".join([header, *rows]) + "\n")
+    back = read_trajectory_csv(path)
+    np.testing.assert_array_equal(back.q, [[0.5], [0.6]])
+    np.testing.assert_array_equal(back.t, [0.0, 1.0])
