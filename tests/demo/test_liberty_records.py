@@ -72,3 +72,60 @@ def test_a_cr_lf_inside_the_output_list_is_two_bytes_and_one_item(tmp_path):
     expected = Rotation.from_quat(quats.astype(np.float32)).as_matrix()
     np.testing.assert_allclose(log.rotations, expected, atol=1e-6)
     np.testing.assert_allclose(log.t, np.arange(4) / 240.0)
+
+
+@pytest.mark.parametrize("rate", ["0", "-240", "fast"])
+def test_an_ascii_log_s_rate_header_must_be_a_positive_number(tmp_path, rate):
+    f = tmp_path / "rate.txt"
+    f.write_text(f"# rate_hz: {rate}\n01 1.0 2.0 3.0 10.0 20.0 30.0\n01 1.0 2.0 3.0 10.0 20.0 30.0\n")
+    with pytest.raises(InputError, match=rf"rate\.txt:1: rate_hz must be a number > 0 Hz, got '{rate}'"):
+        read_liberty_ascii(f)
+
+
+def test_an_ascii_log_that_is_not_utf8_is_refused_naming_the_line(tmp_path):
+    f = tmp_path / "latin1.txt"
+    f.write_bytes(b"01 1.0 2.0 3.0 10.0 20.0 30.0\n# op\xe9rateur\n01 1.0 2.0 3.0 10.0 20.0 30.0\n")
+    with pytest.raises(InputError, match="not UTF-8 text"):
+        read_liberty_ascii(f)
+
+
+def test_one_flagged_ascii_record_is_warned_about(tmp_path, caplog):
+    f = tmp_path / "flagged.txt"
+    f.write_text("".join(f"01P{'E' if k == 2 else ''} {k}.0 2.0 3.0 10.0 20.0 30.0\n" for k in range(5)))
+    with caplog.at_level("WARNING", logger="refine.demo.liberty"):
+        read_liberty_ascii(f)
+    assert len(caplog.records) == 1 and "1 of 5 samples" in caplog.records[0].getMessage()
+
+
+def test_an_angle_that_rounds_to_zero_is_written_without_a_sign(tmp_path):
+    """A roll of -0.0001 deg prints as 0.000 at the format's 3 decimals, not -0.000."""
+    R = Rotation.from_euler("ZYX", [0.0, 0.0, -1e-4], degrees=True).as_matrix()
+    log = TrackerLog(t=np.arange(2) / 240.0, positions=np.zeros((2, 3)), rotations=np.stack([R, R]))
+    f = tmp_path / "zero.txt"
+    write_liberty_ascii(f, log, units="in", rate_hz=240.0)
+    records = [line.split() for line in f.read_text().splitlines() if not line.startswith("#")]
+    assert all(r[4:7] == ["0.000", "0.000", "0.000"] for r in records), records
+
+
+def _binary_records(errors: list[int]) -> bytes:
+    """Records of station 1, output list 2, 7 (identity quaternion), with the given error bytes."""
+    data = bytearray()
+    for k, err in enumerate(errors):
+        body = struct.pack("<3f", float(k), 0.0, 0.0) + struct.pack("<4f", 1.0, 0.0, 0.0, 0.0)
+        data += struct.pack("<2sBBBBH", b"LY", 1, ord("C"), err, 0, len(body)) + body
+    return bytes(data)
+
+
+@pytest.mark.parametrize(("errors", "flagged"), [([0, 0x20, 0, 0x20], 0), ([0, ord("E"), 0x20, ord("D")], 2)])
+def test_binary_records_flagged_by_their_error_byte_are_counted_in_a_warning(tmp_path, caplog, errors, flagged):
+    """0 and an ASCII space mean no error (Liberty manual); anything else flags the record."""
+    f = tmp_path / "err.bin"
+    f.write_bytes(_binary_records(errors))
+    with caplog.at_level("WARNING", logger="refine.demo.liberty_binary"):
+        log = read_liberty_binary(f, output_list=(2, 7))
+    np.testing.assert_allclose(log.positions[:, 0], np.arange(4) * INCH_M)  # every sample kept
+    warnings = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    if flagged:
+        assert len(warnings) == 1 and f"{flagged} record(s)" in warnings[0]
+    else:
+        assert warnings == []
