@@ -7,6 +7,7 @@ records ``station x y z azimuth elevation roll`` in inches and degrees, binary r
 
 from __future__ import annotations
 
+import re
 import struct
 
 import numpy as np
@@ -118,7 +119,8 @@ def _binary_records(errors: list[int]) -> bytes:
 
 @pytest.mark.parametrize(("errors", "flagged"), [([0, 0x20, 0, 0x20], 0), ([0, ord("E"), 0x20, ord("D")], 2)])
 def test_binary_records_flagged_by_their_error_byte_are_counted_in_a_warning(tmp_path, caplog, errors, flagged):
-    """0 and an ASCII space mean no error (Liberty manual); anything else flags the record."""
+    """0 and an ASCII space mean no error (Liberty manual); anything else flags the record, which is
+    kept with its indicator (``TrackerLog.device_error``, 0 for none) and counted in one warning."""
     f = tmp_path / "err.bin"
     f.write_bytes(_binary_records(errors))
     with caplog.at_level("WARNING", logger="refine.demo.liberty_binary"):
@@ -126,6 +128,8 @@ def test_binary_records_flagged_by_their_error_byte_are_counted_in_a_warning(tmp
     np.testing.assert_allclose(log.positions[:, 0], np.arange(4) * INCH_M)  # every sample kept
     warnings = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
     if flagged:
-        assert len(warnings) == 1 and f"{flagged} record(s)" in warnings[0]
+        assert len(warnings) == 1 and re.search(rf"\b{flagged} of 4\b", warnings[0]), warnings
+        np.testing.assert_array_equal(log.device_error, [0 if e in (0, 0x20) else e for e in errors])
     else:
         assert warnings == []
+        assert log.device_error is None or not np.any(log.device_error)
