@@ -52,6 +52,10 @@ WARM_MU_INIT = 1e-4
 """IPOPT's initial barrier parameter when a round starts from the last round's answer and
 multipliers (its default, 0.1, pushes a warm start off the constraints it had found active)."""
 
+BRANCH_CANDIDATES = 2
+"""Other IK branches chained per branch tried when the first gives no answer; the best are tried
+(:func:`_rank_chains`)."""
+
 MAX_OUTER_ITERATIONS = 8
 """Rounds of solve -> verify -> add constraints before giving up on adding more."""
 
@@ -400,7 +404,9 @@ def solve_refinement(
     rotations = None
     stretched = np.zeros(problem.n_waypoints, dtype=bool)
     if tilts.max() > 0.0:
-        inset, rotations = reach_tilts(kin, problem.fused, problem.tolerances, problem.axisymmetric, SEED_INSET_M)
+        inset, rotations = reach_tilts(
+            kin, problem.fused, problem.tolerances, problem.axisymmetric, SEED_INSET_M
+        )
         stretched = inset > 0.0
     q_seed = initial_guess(problem, home, rotations) if q0 is None else np.asarray(q0, dtype=float)
     unreachable = _out_of_reach(problem, q_seed, home)
@@ -413,7 +419,9 @@ def solve_refinement(
         findings = _findings(problem, sources, "infeasible", q_seed, beyond)
         timings["diagnose"] = time.perf_counter() - t1
         reason = (
-            f"no repair within {slack_max:g} deg of extra slack: " if slack_max > 0 else "out of reach as demonstrated: "
+            f"no repair within {slack_max:g} deg of extra slack: "
+            if slack_max > 0
+            else "out of reach as demonstrated: "
         ) + "; ".join(f.describe() for f in findings)
         log.info("refinement infeasible before solving: %s", reason)
         return _unsolved(
@@ -446,7 +454,15 @@ def solve_refinement(
     deadline = t0 + time_limit_s if time_limit_s is not None else math.inf
     try:
         attempt = _attempt(
-            problem, q_seed, sources, repair_max_slack_deg, max_rounds, timings, deadline, skip_strict, stretched
+            problem,
+            q_seed,
+            sources,
+            repair_max_slack_deg,
+            max_rounds,
+            timings,
+            deadline,
+            skip_strict,
+            stretched,
         )
     except TimeLimitReached:
         return _timed_out(problem, q_seed, time_limit_s, timings)
@@ -454,20 +470,34 @@ def solve_refinement(
         # the first IK branch may be the wrong one: try the first waypoint's other branches
         t0 = time.perf_counter()
         lower, upper = _bounds(problem)
-        others = alternative_seeds(
+        # chained towards the same poses as the first seed (tilted into reach), more than will be
+        # tried, and tried best chain first
+        targets = _targets(problem)
+        if rotations is not None:
+            targets[:, :3, :3] = rotations
+        chains = alternative_seeds(
             kin,
-            _targets(problem),
+            targets,
             lower,
             upper,
             start_candidates(lower, upper, home),
             skip=q_seed,
-            count=max_branches - 1,
+            count=BRANCH_CANDIDATES * (max_branches - 1),
         )
+        others = _rank_chains(kin, targets, lower, upper, chains)[: max_branches - 1]
         timings["seed"] += time.perf_counter() - t0
         for k, q_other in enumerate(others, start=2):
             try:
                 other = _attempt(
-                    problem, q_other, sources, repair_max_slack_deg, max_rounds, timings, deadline, skip_strict, stretched
+                    problem,
+                    q_other,
+                    sources,
+                    repair_max_slack_deg,
+                    max_rounds,
+                    timings,
+                    deadline,
+                    skip_strict,
+                    stretched,
                 )
             except TimeLimitReached:
                 note = f"IK branches after the first {k - 1} not tried: time limit {time_limit_s:g} s reached"
@@ -604,6 +634,28 @@ def _attempt(
     )
 
 
+def _rank_chains(
+    kin: TcpKinematics, targets: Array, lower: Array, upper: Array, chains: list[Array]
+) -> list[Array]:
+    """IK chains (N, n) best first: those on the targets (N, 4, 4) everywhere, then by joint margin.
+
+    A chain reaches every target within :data:`REACH_TOLERANCE_M` (position [m] plus rotation
+    [rad]) or it does not; among either kind, the larger the smallest distance to a joint limit
+    along the whole path, the better. A branch judged by its first pose alone can run into a joint
+    limit further on, and its repair then needs the orientation it cannot reach there.
+    """
+
+    def key(qs: Array) -> tuple[bool, float]:
+        poses = kin.poses(qs)
+        position = np.linalg.norm(poses[:, :3, 3] - targets[:, :3, 3], axis=1)
+        cos = (np.einsum("kij,kij->k", poses[:, :3, :3], targets[:, :3, :3]) - 1.0) / 2.0
+        error = position + np.arccos(np.clip(cos, -1.0, 1.0))
+        margin = float(np.min(np.minimum(qs - lower, upper - qs)))
+        return bool(error.max() > REACH_TOLERANCE_M), -margin
+
+    return sorted(chains, key=key)
+
+
 def _tilt_is_a_bound(problem: RefinementNLP) -> bool:
     """Whether the reach tilt bounds the orientation deviation from below for this tool.
 
@@ -685,8 +737,6 @@ def _findings(
     model = next((getattr(src, "model", None) for src in sources if hasattr(src, "model")), None)
     diagnoser = Diagnoser(_kin(problem), problem.fused, problem.tolerances, problem.axisymmetric, model)
     return tuple(
-        diagnoser.segment(
-            status, a, b, q, None if slack is None else float(np.max(slack[a : b + 1]))
-        )
+        diagnoser.segment(status, a, b, q, None if slack is None else float(np.max(slack[a : b + 1])))
         for a, b in segments(mask)
     )
