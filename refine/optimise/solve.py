@@ -452,10 +452,11 @@ def solve_refinement(
         )
 
     deadline = t0 + time_limit_s if time_limit_s is not None else math.inf
-    try:
-        attempt = _attempt(
+
+    def attempt_from(seed: Array) -> Refinement:
+        return _attempt(
             problem,
-            q_seed,
+            seed,
             sources,
             repair_max_slack_deg,
             max_rounds,
@@ -464,6 +465,9 @@ def solve_refinement(
             skip_strict,
             stretched,
         )
+
+    try:
+        attempt = attempt_from(q_seed)
     except TimeLimitReached:
         return _timed_out(problem, q_seed, time_limit_s, timings)
     if attempt.status == "infeasible" and q0 is None and max_branches > 1 and time.perf_counter() < deadline:
@@ -488,17 +492,7 @@ def solve_refinement(
         timings["seed"] += time.perf_counter() - t0
         for k, q_other in enumerate(others, start=2):
             try:
-                other = _attempt(
-                    problem,
-                    q_other,
-                    sources,
-                    repair_max_slack_deg,
-                    max_rounds,
-                    timings,
-                    deadline,
-                    skip_strict,
-                    stretched,
-                )
+                other = attempt_from(q_other)
             except TimeLimitReached:
                 note = f"IK branches after the first {k - 1} not tried: time limit {time_limit_s:g} s reached"
                 attempt = replace(attempt, reason=f"{attempt.reason} ({note})")
