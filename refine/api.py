@@ -25,7 +25,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from refine.errors import InputError
-from refine.preflight import CONTROLLER_OF_FORMAT
 from refine.problem import Problem, load_problem
 from refine.settings import (
     CollisionSettings,
@@ -47,8 +46,6 @@ Array = NDArray[np.float64]
 
 __all__ = ["PassArrays", "Result", "load_problem", "refine_path", "solve"]
 
-PROGRAM_FOR_CONTROLLER = {controller: kind for kind, controller in CONTROLLER_OF_FORMAT.items()}
-"""The robot program each controller family runs, written by :meth:`Result.write` by default."""
 
 SPEED_CAP_WITHOUT_DEMO_M_S = 5.0
 """TCP speed cap [m/s] when :func:`refine_path` gets no speeds: above what industrial arms reach
@@ -313,7 +310,7 @@ def refine_path(
         repair: ``[repair]`` settings; None for the defaults.
         process: ``[process]`` settings (output name, parameters); None for the defaults.
         programs: programs :meth:`Result.write` writes by default; None for the one of the robot's
-            controller family (:data:`PROGRAM_FOR_CONTROLLER`).
+            controller (``robot.spec.program``: KRL for the KR arms, Sunrise for the LBR iiwa).
 
     Returns:
         The verified, timed result (no file written).
@@ -340,7 +337,6 @@ def refine_path(
     fused = FusedPath(s, p, R, v, np.concatenate([[0.0], np.cumsum(dt)]), np.zeros(N))
     if not isinstance(tolerances, Tolerances):
         tolerances = Tolerances(**dict(tolerances or {}))
-    controller = robot.spec.controller
     problem = Problem(
         name=name,
         root=Path.cwd(),
@@ -360,7 +356,7 @@ def refine_path(
         tolerances=tolerances,
         process=process or ProcessSettings(),
         output=OutputSettings(
-            programs=tuple(programs) if programs is not None else (PROGRAM_FOR_CONTROLLER[controller],)
+            programs=tuple(programs) if programs is not None else (robot.spec.program,)
         ),
         cell=tuple(cell),
         collision=collision or CollisionSettings(),

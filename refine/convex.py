@@ -37,6 +37,9 @@ Array = NDArray[np.float64]
 
 PAD_M = 1e-6
 """Every supporting half-space is pushed out by this much [m], so rounding never uncovers a vertex."""
+MERGE_M = 1e-7
+"""Corners of a simplified piece closer than this are one [m]; dropping one moves no face by more than
+this, far less than :data:`PAD_M`."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -164,11 +167,22 @@ def outer_polytope(points: ArrayLike, *, tolerance_m: float = 0.005, max_planes:
         closest = trimesh.triangles.closest_point(tri, np.repeat(vertices[worst : worst + 1], len(tri), axis=0))
         nearest = closest[np.argmin(np.linalg.norm(closest - vertices[worst], axis=1))]
         normals.append((vertices[worst] - nearest) / gaps[worst])
+    vertices = _merge_close(vertices)
     result = ConvexHull(vertices)
     piece = ConvexPiece.hull_of(vertices[result.vertices])
     log.debug("outer polytope: %d corners, %d faces, %.1f mm beyond the hull", len(piece.vertices),
               piece.plane_count, gaps[worst] * 1e3)
     return piece
+
+
+def _merge_close(points: Array) -> Array:
+    """``points`` without the later of any two closer than :data:`MERGE_M`.
+
+    Qhull would leave a sliver face between two such corners, and the hull read back from the file
+    would not be closed.
+    """
+    drop = {j for _, j in cKDTree(points).query_pairs(MERGE_M)}
+    return points[[k for k in range(len(points)) if k not in drop]]
 
 
 def overshoot(pieces: list[ConvexPiece], mesh: trimesh.Trimesh, *, samples: int = 2000, seed: int = 0) -> float:
@@ -236,6 +250,7 @@ def convex_cover(
     tolerance_m: float = 0.005,
     max_planes: int = 40,
     cuts: int = 12,
+    mixed: bool = False,
 ) -> list[ConvexPiece]:
     """Few convex polytopes that together contain a link's mesh, each simplified to few faces.
 
@@ -252,6 +267,9 @@ def convex_cover(
             (see :func:`outer_polytope`).
         max_planes: most faces of each simplified piece.
         cuts: candidate cut positions tried per slab (evenly spread quantiles).
+        mixed: also try cells cut along a different direction each (:func:`_split_cells`, ranked
+            by the exact overshoot: slower), for coarse meshes with large faces, where the fast
+            estimate is poor, and for links whose concavities no family of parallel slabs separates.
 
     Returns:
         The simplified pieces; every mesh vertex lies inside at least one of them.
@@ -263,6 +281,8 @@ def convex_cover(
         axes = np.linalg.svd(vertices - vertices.mean(axis=0), full_matrices=False)[2]
         for direction in [*axes, *np.eye(3)]:
             candidates.append(_split(mesh, proxy, direction, max_overshoot_m, max_pieces, cuts)[0])
+        if mixed:
+            candidates.append(_split_cells(mesh, max_overshoot_m, max_pieces, cuts))
     # the proxy ranks cuts; the exact measure picks among the directions' answers (fewest pieces on ties)
     exact = [overshoot([ConvexPiece.hull_of(p) for p in slabs], mesh, samples=500) for slabs in candidates]
     pick = min(range(len(candidates)), key=lambda k: (max(exact[k], max_overshoot_m), len(candidates[k])))
@@ -298,3 +318,80 @@ def _split(
         gaps[k : k + 1] = [choice[1], choice[2]]
     slabs = [_slab(mesh, direction, bounds[i], bounds[i + 1]) for i in range(len(gaps))]
     return slabs, max(gaps)
+
+
+def _clip(triangles: Array, normal: Array, offset: float) -> Array:
+    """The parts of triangles (T, 3, 3) [m] on the side ``normal . x <= offset``, as triangles."""
+    if len(triangles) == 0:
+        return triangles
+    d = triangles @ normal - offset  # (T, 3): <= 0 inside
+    inside = d <= 0.0
+    count = inside.sum(axis=1)
+    out = [triangles[count == 3]]
+    for n_in in (1, 2):
+        sel = count == n_in
+        if not np.any(sel):
+            continue
+        tri, dd, ins = triangles[sel], d[sel], inside[sel]
+        # rotate each triangle so that its lone vertex (the one inside for 1, outside for 2) comes first
+        lone = np.argmax(ins if n_in == 1 else ~ins, axis=1)
+        order = (lone[:, None] + np.arange(3)[None, :]) % 3
+        rows = np.arange(len(tri))[:, None]
+        tri, dd = tri[rows, order], dd[rows, order]
+        a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+        ab = a + (dd[:, 0] / (dd[:, 0] - dd[:, 1]))[:, None] * (b - a)
+        ac = a + (dd[:, 0] / (dd[:, 0] - dd[:, 2]))[:, None] * (c - a)
+        if n_in == 1:
+            out.append(np.stack([a, ab, ac], axis=1))
+        else:  # the quad ab, b, c, ac
+            out.append(np.stack([ab, b, c], axis=1))
+            out.append(np.stack([ab, c, ac], axis=1))
+    return np.concatenate(out, axis=0)
+
+
+def _cell_gap(mesh: trimesh.Trimesh, points: Array) -> float:
+    """How far [m] the hull of ``points`` reaches beyond the mesh (300 surface samples)."""
+    return overshoot([ConvexPiece.hull_of(points)], mesh, samples=300)
+
+
+def _split_cells(mesh: trimesh.Trimesh, max_overshoot_m: float, max_pieces: int, cuts: int) -> list[Array]:
+    """Convex cells of the mesh surface, each cut along its own best direction; their corners.
+
+    The loosest cell is cut in two by the plane (its principal axes and the frame axes, ``cuts``
+    quantile positions each) that leaves the smaller of the two hulls' overshoots, until
+    every cell is within ``max_overshoot_m``, ``max_pieces`` is reached or no cut helps. A cell
+    holds the surface triangles clipped to it (Sutherland-Hodgman), so the hull of its corners
+    holds every point of the solid inside the cell: a segment through such a point, clipped to
+    the cell, ends on the clipped surface or on a cut face whose outline is clipped surface.
+    """
+    triangles = np.asarray(mesh.triangles, dtype=float)
+    cells = [triangles]
+    gaps = [_cell_gap(mesh, triangles.reshape(-1, 3))]
+    done = [False]
+    while len(cells) < max_pieces:
+        open_cells = [k for k in range(len(cells)) if not done[k] and gaps[k] > max_overshoot_m]
+        if not open_cells:
+            break
+        k = max(open_cells, key=lambda i: gaps[i])
+        tri = cells[k]
+        points = tri.reshape(-1, 3)
+        axes = np.linalg.svd(points - points.mean(axis=0), full_matrices=False)[2]
+        best: tuple[list[float], Array, Array] | None = None
+        for direction in [*axes, *np.eye(3)]:
+            t = points @ direction
+            for cut in np.quantile(t, np.linspace(0.0, 1.0, cuts + 2)[1:-1]):
+                parts = [_clip(tri, direction, cut), _clip(tri, -direction, -cut)]
+                halves = [p.reshape(-1, 3) for p in parts]
+                if any(len(h) < 4 or np.linalg.matrix_rank(h - h.mean(axis=0), tol=1e-6) < 3 for h in halves):
+                    continue
+                pair = sorted((_cell_gap(mesh, h) for h in halves), reverse=True)  # larger gap first
+                if best is None or pair < best[0]:
+                    best = (pair, parts[0], parts[1])
+        # a cut that only tightens one half may still free the other for the next cut
+        if best is None or best[0][1] >= gaps[k]:
+            done[k] = True
+            continue
+        cells[k : k + 1] = [best[1], best[2]]
+        gaps[k : k + 1] = [_cell_gap(mesh, best[1].reshape(-1, 3)), _cell_gap(mesh, best[2].reshape(-1, 3))]
+        done[k : k + 1] = [False, False]
+    return [np.unique(c.reshape(-1, 3), axis=0) for c in cells]

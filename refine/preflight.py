@@ -29,8 +29,8 @@ if TYPE_CHECKING:
     from refine.robot import Robot
 
 CONTROLLER_OF_FORMAT = {"rapid": "abb", "sunrise": "kuka", "krl": "kuka", "urscript": "ur"}
-"""The controller family each program format runs on (the last format of a family is its default:
-KRL for KUKA; Sunrise only for the seven-axis LBR)."""
+"""The controller family each program format runs on (which one a robot runs by default is its own
+``program``, :attr:`refine.robot.RobotSpec.program`: KRL for the KR arms, Sunrise for the LBR iiwa)."""
 
 _RAPID_SIGNAL = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,31}")
 

@@ -1,7 +1,7 @@
 """Robot models: the registry of ``robots/`` and their Pinocchio kinematics.
 
 Each robot is a folder ``robots/<name>/`` holding ``robot.urdf``, ``robot.toml`` (maker, model,
-flange frame, reach, controller family, default joint accelerations) and a ``README.md``.
+flange frame, reach, controller family and, optionally, the program it runs, default joint accelerations) and a ``README.md``.
 ``load_robot(name)`` reads one into a :class:`Robot`; joint limits and speeds come from the URDF,
 accelerations from the TOML.
 """
@@ -30,12 +30,18 @@ except ModuleNotFoundError:  # Python 3.10
 logger = logging.getLogger(__name__)
 
 CONTROLLERS = ("abb", "kuka", "ur")
+DEFAULT_PROGRAM = {"abb": "rapid", "kuka": "krl", "ur": "urscript"}
+"""The program format a controller family runs unless the robot names another (``program`` in
+``robot.toml``): KUKA's KR C controllers run KRL, the LBR iiwa's Sunrise cabinet runs Sunrise Java."""
+PROGRAMS = {"abb": ("rapid",), "kuka": ("krl", "sunrise"), "ur": ("urscript",)}
+"""The program formats a controller family can run."""
 SELF_COLLISION_FILE = "self_collision.toml"
 """The sampled self-collision matrix beside a robot's URDF."""
 _TOML_KEYS = frozenset(
     {"maker", "model", "urdf", "flange_frame", "reach_m", "controller", "acceleration_rule",
      "joint_acceleration_deg_s2"}
 )
+_TOML_OPTIONAL = frozenset({"program"})
 
 
 @dataclass(frozen=True, eq=False)
@@ -55,6 +61,8 @@ class RobotSpec:
         reach_m: the maker's nominal reach [m].
         controller: program dialect, one of ``CONTROLLERS``.
         model: the maker's model designation, e.g. ``"IRB 4600-60/2.05"``.
+        program: the program format the robot's controller runs, written when a problem names
+            none; ``""`` for the controller family's :data:`DEFAULT_PROGRAM`.
     """
 
     name: str
@@ -69,6 +77,7 @@ class RobotSpec:
     reach_m: float
     controller: str
     model: str = ""
+    program: str = ""
 
     def __post_init__(self) -> None:
         n = len(self.joint_names)
@@ -92,6 +101,13 @@ class RobotSpec:
             raise InputError(
                 f"robot {self.name!r}: controller {self.controller!r} is not one of "
                 f"{', '.join(CONTROLLERS)}"
+            )
+        if not self.program:
+            object.__setattr__(self, "program", DEFAULT_PROGRAM[self.controller])
+        if self.program not in PROGRAMS[self.controller]:
+            raise InputError(
+                f"robot {self.name!r}: program {self.program!r} does not run on a {self.controller} "
+                f"controller; use one of {', '.join(PROGRAMS[self.controller])}"
             )
 
     @property
@@ -267,6 +283,7 @@ def _load_robot(name: str, root: str) -> Robot:
         reach_m=float(meta["reach_m"]),
         controller=str(meta["controller"]),
         model=str(meta["model"]),
+        program=str(meta.get("program", "")),
     )
     if model.nq != spec.dof:
         raise InputError(
@@ -282,12 +299,12 @@ def _read_toml(path: Path) -> dict[str, Any]:
         meta = tomllib.loads(path.read_text(encoding="utf-8"))
     except (OSError, tomllib.TOMLDecodeError) as e:
         raise InputError(f"cannot read {path}: {e}") from e
-    unknown = sorted(set(meta) - _TOML_KEYS)
+    unknown = sorted(set(meta) - _TOML_KEYS - _TOML_OPTIONAL)
     missing = sorted(_TOML_KEYS - set(meta))
     if unknown or missing:
         raise InputError(
             f"{path}: unknown keys {unknown} / missing keys {missing}; "
-            f"allowed keys: {', '.join(sorted(_TOML_KEYS))}"
+            f"allowed keys: {', '.join(sorted(_TOML_KEYS | _TOML_OPTIONAL))}"
         )
     return meta
 

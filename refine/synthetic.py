@@ -316,6 +316,38 @@ def reachability_report(
     )
 
 
+def problem_reachability(problem, targets: ArrayLike, seed: int) -> tuple[Reachability, bool]:  # noqa: ANN001
+    """:func:`reachability_report` of a loaded problem's robot, tool and cell along target TCP poses.
+
+    The chain starts from :func:`refine.optimise.seed.start_candidates` around ``robot.home_deg``;
+    the problem's joint margin, singularity margin and cell margin decide whether it is reachable.
+
+    Args:
+        problem: a :class:`refine.problem.Problem` with a registry robot.
+        targets: wanted T_F_TCP per target, (N, 4, 4).
+        seed: seed of the start candidates.
+
+    Returns:
+        The report, and whether every target is reached within all the problem's margins.
+    """
+    from refine.collision import CollisionModel
+    from refine.optimise.seed import start_candidates
+    from refine.robot import load_robot
+
+    robot = load_robot(problem.robot.model)
+    kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange)
+    margin = math.radians(problem.tolerances.joint_margin_deg)
+    collision = CollisionModel(robot, kin.base_in_world, kin.tcp_in_flange, problem.tool.collision, problem.cell,
+                               margin_m=problem.collision.margin_m, self_margin_m=problem.collision.self_margin_m)
+    starts = start_candidates(robot.spec.lower + margin, robot.spec.upper - margin,
+                              np.radians(problem.robot.home_deg), seed=seed)
+    report = reachability_report(kin, targets, joint_margin_rad=margin, starts=starts, collision=collision)
+    ok = bool(report.errors.max() < 1e-6 and report.joint_margins.min() > margin
+              and report.manipulability.min() > problem.tolerances.singularity_margin
+              and min(d for d, _ in (report.clearance or {}).values()) > problem.collision.margin_m)
+    return report, ok
+
+
 # ---- small problem folders for batches ------------------------------------------------------------
 
 

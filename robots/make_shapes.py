@@ -28,13 +28,18 @@ from lxml import etree
 from refine.convex import convex_cover, overshoot
 
 HERE = Path(__file__).resolve().parent
-ROBOTS = ("abb_irb4600_60_205", "kuka_iiwa14_r820", "ur10e")
+ROBOTS = ("abb_irb4600_60_205", "kuka_iiwa14_r820", "kuka_kr8_r1440_2_arc_hw", "ur10e")
 REFERENCE_FLANGE = {"kuka_iiwa14_r820": "lbr_link_ee"}
 """The reference's flange frame where it is not ``tool0``."""
 SETTINGS = {"max_overshoot_m": 0.015, "max_pieces": 4, "tolerance_m": 0.006, "max_planes": 48}
 """Slab hulls at most 15 mm beyond the mesh, each simplified to <= 48 planes within 6 mm of its hull."""
-ROBOT_SETTINGS = {"kuka_iiwa14_r820": {"max_overshoot_m": 0.010, "tolerance_m": 0.005}}
-"""Tighter for the iiwa, whose round housings leave hulls loose in the waist between them."""
+ROBOT_SETTINGS = {
+    "kuka_iiwa14_r820": {"max_overshoot_m": 0.010, "tolerance_m": 0.005},
+    "kuka_kr8_r1440_2_arc_hw": {"max_pieces": 5, "tolerance_m": 0.004, "mixed": True, "cuts": 8},
+}
+"""Tighter for the iiwa, whose round housings leave hulls loose in the waist between them. The KR 8's
+reference meshes are coarse (faces up to tens of mm, many separate shells), which the fast overshoot
+estimate handles poorly: its cuts are ranked by the exact measure and may differ in direction."""
 
 
 def joint_links(urdf: Path) -> dict[str, str]:

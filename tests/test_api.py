@@ -180,3 +180,16 @@ def test_solve_takes_a_folder_and_warm_starts_from_given_joints():
     assert result.diagnosis == result.to_dict()["diagnosis"]
     with pytest.raises(refine.InputError, match=r"initial_joints: expected shape \(N, n\)"):
         refine.solve(problem, initial_joints=np.zeros(6))
+
+
+def test_a_result_writes_the_program_of_the_robots_controller_by_default():
+    """The KR arm's result asks for KRL, the LBR iiwa's for Sunrise: the robot says which, not the family."""
+    from refine.robot import load_robot
+
+    for name, program in (("kuka_kr8_r1440_2_arc_hw", "krl"), ("kuka_iiwa14_r820", "sunrise")):
+        robot = load_robot(name)
+        home = np.radians([0, -80, 100, 0, 60, 0]) if robot.nq == 6 else np.radians([0, 40, 0, -80, 0, 60, 0])
+        T = robot.fk(home)
+        positions = T[:3, 3] + np.outer(np.linspace(0.0, 0.05, 6), [0.0, 1.0, 0.0])
+        result = refine.refine_path(robot, positions, np.repeat(T[None, :3, :3], 6, axis=0), speeds=0.05)
+        assert result.run.problem.output.programs == (program,), name

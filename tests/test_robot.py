@@ -26,7 +26,7 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
-NAMES = ["abb_irb4600_60_205", "kuka_iiwa14_r820", "ur10e"]
+NAMES = ["abb_irb4600_60_205", "kuka_iiwa14_r820", "kuka_kr8_r1440_2_arc_hw", "ur10e"]
 
 # data-sheet limits from shared/ROBOTS.md: (lower, upper, speed) [deg, deg, deg/s]
 DATA_SHEET = {
@@ -34,6 +34,9 @@ DATA_SHEET = {
                            (-400, 400, 250), (-125, 120, 250), (-400, 400, 360)],
     "kuka_iiwa14_r820": [(-170, 170, 85), (-120, 120, 85), (-170, 170, 100), (-120, 120, 75),
                          (-170, 170, 130), (-120, 120, 135), (-175, 175, 135)],
+    # KUKA's own description of the arm (axis ranges and speeds marked verified by KUKA)
+    "kuka_kr8_r1440_2_arc_hw": [(-170, 170, 220), (-185, 65, 210), (-119, 181, 270), (-165, 165, 430),
+                                (-115, 140, 430), (-350, 350, 4400 / 7)],
     "ur10e": [(-360, 360, 120), (-360, 360, 120), (-360, 360, 180), (-360, 360, 180),
               (-360, 360, 180), (-360, 360, 180)],
 }
@@ -55,7 +58,7 @@ def _from_deg(*angles: float) -> np.ndarray:
 # ---- registry and folder layout ---------------------------------------------------------------
 
 
-def test_registry_lists_the_three_robots():
+def test_registry_lists_the_four_robots():
     assert available_robots() == NAMES
 
 
@@ -340,3 +343,14 @@ def test_mesh_collision_is_its_convex_hull_scaled_and_placed(tmp_path):
     obj = shape.collision_object(np.eye(4))
     probe = fcl.CollisionObject(fcl.Sphere(0.001), fcl.Transform(np.array([1.0, 0.1, 0.005])))
     assert fcl.distance(obj, probe, fcl.DistanceRequest(), fcl.DistanceResult()) == pytest.approx(0.059, abs=1e-5)  # GJK
+
+
+def test_each_robot_names_the_program_its_controller_runs(robots):
+    """KUKA's KR arms run KRL on a KR C controller, the LBR iiwa Sunrise Java on its cabinet."""
+    programs = {name: robots[name].spec.program for name in NAMES}
+    assert programs == {"abb_irb4600_60_205": "rapid", "kuka_iiwa14_r820": "sunrise",
+                        "kuka_kr8_r1440_2_arc_hw": "krl", "ur10e": "urscript"}
+    spec = robots["kuka_kr8_r1440_2_arc_hw"].spec
+    with pytest.raises(InputError, match="program 'rapid' does not run on a kuka controller"):
+        RobotSpec(**{**spec.__dict__, "program": "rapid"})
+    assert RobotSpec(**{**spec.__dict__, "program": ""}).program == "krl"  # the family's default

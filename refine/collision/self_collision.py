@@ -7,7 +7,11 @@ joint limits every pair of links is measured, and a pair is disabled when it is
   at that joint, and their collision meshes overlap there by design);
 * ``"always"``: in contact at every sample (a housing around a joint that is not adjacent in the
   tree, e.g. a wrist's first and last links; no motion can separate them);
-* ``"never"``: never closer than ``never_m`` at any sample.
+* ``"never"``: never closer than ``never_m`` at any sample;
+* ``"maker"``: in contact on the maker's own collision meshes at a sizeable share of the samples
+  (``robots/make_self_collision.py`` measures it on the reference meshes): the meshes overlap where
+  the real parts pass each other (a hollow wrist's flange beside the A4 housing), so a contact
+  between them says nothing.
 
 Every other pair is checked. The matrix is written per robot as ``self_collision.toml`` next to its
 URDF (:func:`write_matrix`) by ``robots/make_self_collision.py``, and read by
@@ -34,7 +38,7 @@ except ModuleNotFoundError:  # Python 3.10
 
 log = logging.getLogger(__name__)
 
-REASONS = ("adjacent", "always", "never")
+REASONS = ("adjacent", "always", "never", "maker")
 NEVER_M = 0.01
 """A pair is disabled as ``"never"`` when no sample brings it closer than this [m]."""
 
@@ -121,7 +125,8 @@ def write_matrix(path: str | Path, stats: list[PairStats], *, samples: int, seed
         "# Self-collision matrix: which link pairs are checked. Written by robots/make_self_collision.py",
         "# from random configurations within the joint limits; see refine/collision/self_collision.py.",
         "# reason: adjacent (joint neighbours), always (in contact at every sample), never (never closer",
-        "# than never_m), or \"\" (checked).",
+        "# than never_m), maker (in contact on the maker's own meshes at a sizeable share of samples),",
+        "# or \"\" (checked).",
         f"samples = {samples}",
         f"seed = {seed}",
         f"never_m = {never_m}",

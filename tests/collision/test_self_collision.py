@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import itertools
+from pathlib import Path
 
 import fcl
 import numpy as np
+import pinocchio as pin
 import pytest
+import trimesh
 from lxml import etree
 
 from refine.collision import CollisionModel
@@ -81,6 +84,46 @@ def test_a_fresh_sample_agrees_with_the_matrix(name):
             assert touching(a, b), f"{name}: 'always' pair {a}, {b} apart at q = {q}"
 
 
+MESHES = Path(__file__).resolve().parents[2].parent / "shared" / "robot-meshes"
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_maker_pairs_touch_on_the_makers_own_meshes(name):
+    """A pair disabled as 'maker' is in contact on the maker's reference meshes at >= 20 % of 300
+    fresh random configurations (the link of a reference mesh: the one its joint moves)."""
+    robot = load_robot(name)
+    maker = [tuple(sorted(p)) for p, why in robot.self_collision().items() if why == "maker"]
+    if not maker:
+        return
+    folder = MESHES / name
+    if not (folder / "reference.urdf").is_file():
+        pytest.skip(f"reference meshes not found at {folder}")
+    ref, geometry, _ = pin.buildModelsFromUrdf(str(folder / "reference.urdf"), package_dirs=[str(folder)])
+    link_of_joint = {int(robot.model.frames[robot.frame_id(s.link)].parentJoint): s.link for s in robot.collision_shapes()}
+    bodies = {}
+    for k, g in enumerate(geometry.geometryObjects):
+        mesh = trimesh.load(g.meshPath, force="mesh")
+        bvh = fcl.BVHModel()
+        bvh.beginModel(len(mesh.vertices), len(mesh.faces))
+        bvh.addSubModel(np.asarray(mesh.vertices), np.asarray(mesh.faces))
+        bvh.endModel()
+        bodies[link_of_joint[g.parentJoint]] = (k, bvh)
+    data, gdata = ref.createData(), geometry.createData()
+    hits = dict.fromkeys(maker, 0)
+    for q in np.random.default_rng(99).uniform(robot.spec.lower, robot.spec.upper, size=(300, robot.nq)):
+        pin.forwardKinematics(ref, data, q)
+        pin.updateGeometryPlacements(ref, data, geometry, gdata)
+
+        def placed(link, gdata=gdata):
+            k, bvh = bodies[link]
+            return fcl.CollisionObject(bvh, fcl.Transform(gdata.oMg[k].rotation, gdata.oMg[k].translation))
+
+        for a, b in maker:
+            hits[(a, b)] += fcl.collide(placed(a), placed(b), fcl.CollisionRequest(), fcl.CollisionResult())
+    for pair, n in hits.items():
+        assert n >= 60, f"{name}: 'maker' pair {pair} touches on the maker's meshes at only {n} of 300 samples"
+
+
 def test_the_model_checks_exactly_the_pairs_the_matrix_enables():
     robot = load_robot("abb_irb4600_60_205")
     model = CollisionModel(robot, np.eye(4), np.eye(4), (), (), margin_m=0.01, self_margin_m=0.005)
@@ -90,7 +133,7 @@ def test_the_model_checks_exactly_the_pairs_the_matrix_enables():
     enabled = {frozenset(p) for p in itertools.combinations(links, 2) if frozenset(p) not in matrix}
     assert checked == enabled
     reasons = {why for *_, why in model.excluded}
-    assert reasons <= {"same body", "matrix: adjacent", "matrix: always", "matrix: never"}
+    assert reasons <= {"same body", "matrix: adjacent", "matrix: always", "matrix: never", "matrix: maker"}
 
 
 @pytest.mark.parametrize("a6_deg", [115.0, -115.0])
@@ -117,5 +160,5 @@ def test_the_iiwa_bends_its_wrist_to_115_deg_without_self_contact(a6_deg):
 def test_a_bad_reason_is_an_input_error(tmp_path):
     path = tmp_path / SELF_COLLISION_FILE
     path.write_text('[[pair]]\nlinks = ["a", "b"]\nreason = "sometimes"\n')
-    with pytest.raises(InputError, match="reason 'sometimes' is not one of adjacent, always, never"):
+    with pytest.raises(InputError, match="reason 'sometimes' is not one of adjacent, always, never, maker"):
         read_matrix(path)

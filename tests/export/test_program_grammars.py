@@ -116,7 +116,7 @@ def test_the_grammars_reject_broken_programs(grammar, text):
 
 # ---- every bundled problem ----------------------------------------------------------------------
 
-BUNDLED = ["glass_adhesive", "tig_weld", "ur10e_sealing"]
+BUNDLED = ["glass_adhesive", "tig_weld", "ur10e_sealing", "kr8_arc_weld"]
 
 
 @pytest.fixture(scope="module", params=BUNDLED)
