@@ -310,7 +310,7 @@ def refine_path(
         repair: ``[repair]`` settings; None for the defaults.
         process: ``[process]`` settings (output name, parameters); None for the defaults.
         programs: programs :meth:`Result.write` writes by default; None for the one of the robot's
-            controller (``robot.spec.program``: KRL for the KR arms, Sunrise for the LBR iiwa).
+            controller (``robot.spec.default_program``: KRL for the KR arms, Sunrise for the LBR iiwa).
 
     Returns:
         The verified, timed result (no file written).
@@ -356,7 +356,7 @@ def refine_path(
         tolerances=tolerances,
         process=process or ProcessSettings(),
         output=OutputSettings(
-            programs=tuple(programs) if programs is not None else (robot.spec.program,)
+            programs=tuple(programs) if programs is not None else (robot.spec.default_program,)
         ),
         cell=tuple(cell),
         collision=collision or CollisionSettings(),

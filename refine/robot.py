@@ -61,8 +61,8 @@ class RobotSpec:
         reach_m: the maker's nominal reach [m].
         controller: program dialect, one of ``CONTROLLERS``.
         model: the maker's model designation, e.g. ``"IRB 4600-60/2.05"``.
-        program: the program format the robot's controller runs, written when a problem names
-            none; ``""`` for the controller family's :data:`DEFAULT_PROGRAM`.
+        program: the program format the robot's controller runs (``robot.toml``); ``""`` for the
+            controller family's :data:`DEFAULT_PROGRAM` (see :attr:`default_program`).
     """
 
     name: str
@@ -102,13 +102,16 @@ class RobotSpec:
                 f"robot {self.name!r}: controller {self.controller!r} is not one of "
                 f"{', '.join(CONTROLLERS)}"
             )
-        if not self.program:
-            object.__setattr__(self, "program", DEFAULT_PROGRAM[self.controller])
-        if self.program not in PROGRAMS[self.controller]:
+        if self.program and self.program not in PROGRAMS[self.controller]:
             raise InputError(
                 f"robot {self.name!r}: program {self.program!r} does not run on a {self.controller} "
                 f"controller; use one of {', '.join(PROGRAMS[self.controller])}"
             )
+
+    @property
+    def default_program(self) -> str:
+        """The program format written when a problem names none: ``program``, else the family's."""
+        return self.program or DEFAULT_PROGRAM[self.controller]
 
     @property
     def dof(self) -> int:

@@ -58,7 +58,7 @@ def test_the_ranges_and_speeds_are_kukas_and_hold_the_home_position(kr8):
     np.testing.assert_allclose(np.degrees(kr8.spec.velocity), SPEEDS_DEG_S, atol=1e-3)
     home = np.radians(HOME_DEG)
     assert np.all((kr8.spec.lower < home) & (home < kr8.spec.upper))
-    assert kr8.spec.controller == "kuka" and kr8.spec.program == "krl"
+    assert kr8.spec.controller == "kuka" and kr8.spec.default_program == "krl"
 
 
 def test_at_home_the_lower_arm_is_upright_the_forearm_level_and_the_flange_forward(kr8):

@@ -347,10 +347,12 @@ def test_mesh_collision_is_its_convex_hull_scaled_and_placed(tmp_path):
 
 def test_each_robot_names_the_program_its_controller_runs(robots):
     """KUKA's KR arms run KRL on a KR C controller, the LBR iiwa Sunrise Java on its cabinet."""
-    programs = {name: robots[name].spec.program for name in NAMES}
+    programs = {name: robots[name].spec.default_program for name in NAMES}
     assert programs == {"abb_irb4600_60_205": "rapid", "kuka_iiwa14_r820": "sunrise",
                         "kuka_kr8_r1440_2_arc_hw": "krl", "ur10e": "urscript"}
     spec = robots["kuka_kr8_r1440_2_arc_hw"].spec
     with pytest.raises(InputError, match="program 'rapid' does not run on a kuka controller"):
         RobotSpec(**{**spec.__dict__, "program": "rapid"})
-    assert RobotSpec(**{**spec.__dict__, "program": ""}).program == "krl"  # the family's default
+    assert RobotSpec(**{**spec.__dict__, "program": ""}).default_program == "krl"  # the family's default
+    abb = robots["abb_irb4600_60_205"].spec
+    assert RobotSpec(**{**abb.__dict__, "controller": "kuka"}).default_program == "krl"
