@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import resource
 import statistics
 import subprocess
@@ -51,7 +52,7 @@ def main() -> int:
 
     first = results[0]
     print(f"{first['problem']}: {first['n_waypoints']} waypoints, status {first['status']}, "
-          f"{args.repeat} runs")
+          f"{args.repeat} runs, load average {os.getloadavg()[0]:.1f} (1 min) after them")
     print(f"wall time (outside the process)   median {statistics.median(walls):.2f} s, "
           f"max {max(walls):.2f} s")
     print(f"CPU time of the process (user+sys)  median {statistics.median(cpus):.2f} s, "
