@@ -178,7 +178,8 @@ def _separation(a: _Part, b: _Part) -> tuple[float, Array, Array]:
         p_a, p_b = (p2, p1) if first is b else (p1, p2)
         if d <= 0.0:
             return d, p_a, p_b
-        n = (p_a - p_b) / max(float(np.linalg.norm(p_a - p_b)), _EPS)
+        offset = p_a - p_b
+        n = offset / max(math.sqrt(float(offset @ offset)), _EPS)
         gap = d + a.reach(-n) + b.reach(n)  # d minus the width of the gap along n
         if best is None or d < best[0]:
             best = (d, p_a, p_b)

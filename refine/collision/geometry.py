@@ -123,10 +123,10 @@ class Body:
         """Largest ``direction . x`` [m] over the points x of the body placed at T (4, 4)."""
         base = float(direction @ T[:3, 3])
         if self.vertices is not None:
-            return base + float(np.max(self.vertices @ (direction @ T[:3, :3])))
+            return base + float((self.vertices @ (direction @ T[:3, :3])).max())
         tag, *dims = self.kind_params
         if tag == "convex":
-            return base + float(np.max(dims[0] @ (direction @ T[:3, :3])))
+            return base + float((dims[0] @ (direction @ T[:3, :3])).max())
         ux, uy, uz = (direction @ T[:3, :3]).tolist()  # the direction in the shape frame
         if tag == "sphere":
             return base + dims[0] * math.sqrt(ux * ux + uy * uy + uz * uz)
