@@ -76,6 +76,7 @@ GROUPS: dict[str, tuple[list[str], list[str]]] = {
         [
             "tests/demo/test_liberty.py",
             "tests/demo/test_liberty_binary.py",
+            "tests/demo/test_liberty_device_records.py",
             "tests/demo/test_liberty_records.py",
             "tests/demo/test_limits.py",
         ],
