@@ -319,3 +319,38 @@ def test_runs_are_the_inclusive_bounds_of_each_stretch_of_true():
     assert runs(mask) == [(0, 1), (3, 3), (6, 8)]
     assert runs(np.zeros(4, dtype=bool)) == []
     assert runs(np.ones(3, dtype=bool)) == [(0, 2)]
+
+
+def test_the_worst_of_a_run_is_its_own_worst_waypoint(kin):
+    """Joint 5 at 1.5 then 1.0 deg from its upper limit (margin 2 deg): one run, worst 1.0 deg, the
+    closest; the next waypoint, 3 deg away, is outside the run and does not count."""
+    rows = np.tile(Q0_DEG, (4, 1))
+    rows[1:, 4] = UPPER_DEG[4] - np.array([1.5, 1.0, 3.0])
+    q = path(rows)
+    check = check_path(kin, q, fused_on(q), Tolerances(**{**LOOSE, "joint_margin_deg": 2.0}), False)
+    assert reasons(check) == [("joint limit (joint 5)", 1, 2)]
+    assert check.violations[0].worst == pytest.approx(math.radians(1.0), abs=1e-12)
+
+
+def test_a_repaired_waypoint_after_a_run_does_not_count_in_the_run_s_worst(kin):
+    """Deviations 3.2, 3.1, 3.4 deg against a 3 deg cone, the third widened by 0.5 deg of slack:
+    the run is waypoints 0-1, worst 3.2 deg, though the waypoint after it deviates more (allowed)."""
+    q = near_q0(4)
+    angles = np.array([3.2, 3.1, 3.4, 0.0])
+    turns = _turns(np.random.default_rng(11).normal(size=(4, 3)), angles)
+    tol = Tolerances(**{**LOOSE, "orientation_deg": 3.0})
+    slack = np.array([0.0, 0.0, 0.5, 0.0])
+    check = check_path(kin, q, fused_on(q, turns=turns), tol, False, slack_deg=slack)
+    assert reasons(check) == [("orientation", 0, 1)]
+    assert check.violations[0].worst == pytest.approx(3.2, abs=1e-6)
+
+
+def test_a_tool_axis_on_its_demonstrated_axis_to_round_off_deviates_by_zero(kin):
+    """Demonstrated rotations orthonormal only to 1e-12 (as any measured rotation is): the cosine
+    of the axis tilt comes out as 1 + 1e-12 and must read as 0 deg, not as an undefined angle."""
+    q = near_q0(3)
+    fused = fused_on(q)
+    rough = FusedPath(fused.s, fused.positions, fused.rotations * (1.0 + 1e-12), fused.speed, fused.t_demo, fused.residual)
+    check = check_path(kin, q, rough, Tolerances(**{**LOOSE, "orientation_deg": 3.0}), axisymmetric=True)
+    np.testing.assert_allclose(check.orientation_deviation_deg, 0.0, atol=1e-4)
+    assert check.ok
