@@ -338,3 +338,33 @@ def test_a_free_start_runs_at_its_own_cap_when_the_next_waypoints_cap_is_lower()
     assert tm.speed[0] == pytest.approx(0.08, rel=1e-4)
     assert tm.speed[1] == pytest.approx(0.05, rel=1e-4)
     assert tm.t[1] == pytest.approx((s[1] - s[0]) / 0.065, rel=1e-4)  # constant sddot: the mean speed
+
+
+def test_a_free_start_above_what_the_path_ahead_allows_starts_at_the_most_it_allows():
+    """Straight in joint space, joint 1 at 1 rad/m with 0.5 rad/s² (path deceleration 0.5 m/s²); the
+    cap is 1 m/s at the start and 50 mm/s from the next waypoint, 10 mm on. The fastest start that
+    can still slow down in time: v0² = 0.05² + 2·0.5·0.01, v0 = 0.1118 m/s."""
+    slope = np.array([1.0, 0.5])
+    s, q = _straight(slope, n_pts=101)
+    cap = np.full(len(s), 0.05)
+    cap[0] = 1.0
+    tm = time_parameterise(s, q, cap, np.full(2, 3.0), np.full(2, 0.5), start_stop=False)
+    assert tm.speed[0] == pytest.approx(np.sqrt(0.05**2 + 2 * 0.5 * 0.01), rel=1e-3)
+    assert tm.speed[1] == pytest.approx(0.05, rel=1e-4)
+
+
+def test_a_timing_that_breaks_a_joint_speed_is_refused_naming_the_joint_and_where(monkeypatch):
+    """The plan is checked against the limits after TOPPRA: a path speed 30 % over what joint 2
+    allows at s = 0.5 m only (2 rad/m there, 0.2 rad/s: 0.1 m/s allowed, 0.13 m/s planned) is refused."""
+    slope = np.array([1.0, 2.0])
+    s, q = _straight(slope, n_pts=101)
+    solve = timing._solve_path_speed
+
+    def too_fast(instance, sd_start, sd_end):
+        sd = solve(instance, sd_start, sd_end)
+        sd[50] *= 1.3
+        return sd
+
+    monkeypatch.setattr(timing, "_solve_path_speed", too_fast)
+    with pytest.raises(SolverError, match=r"joint 2 velocity 0\.2(599\d*|6) rad/s exceeds its limit 0\.2 rad/s at s = 0\.5000 m"):
+        time_parameterise(s, q, np.full(len(s), 0.2), np.array([3.0, 0.2]), np.full(2, 50.0), start_stop=False)
