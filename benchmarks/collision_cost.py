@@ -101,7 +101,9 @@ def dense(names: list[str], repeat: int) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
-        "--problems", nargs="+", default=["glass_adhesive", "glass_calibrated", "tig_weld", "ur10e_sealing", "unreachable/tool_through_fixture"]
+        "--problems",
+        nargs="+",
+        default=["glass_adhesive", "glass_calibrated", "tig_weld", "ur10e_sealing", "kr8_arc_weld", "unreachable/tool_through_fixture"],
     )
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--dense", action="store_true", help="time the dense clearance check alone")
