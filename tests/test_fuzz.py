@@ -4,7 +4,8 @@ Hypothesis builds inputs from valid material with random damage (lines dropped, 
 truncated, bytes flipped, values replaced by NaN, huge numbers, words) and from random text. For
 each example the reader must either return finite data of the right shape or raise ``InputError``
 whose message names the file; any other exception (a traceback for the user) fails the test.
-Example counts are modest so the suite stays fast; ``FUZZ_EXAMPLES`` (environment) raises them.
+Example counts are modest so the suite stays fast; ``FUZZ_EXAMPLES`` (environment) raises them,
+and ``FUZZ_DEADLINE_S`` fails any example that takes longer than that (a hang).
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import math
 import os
 import re
 import shutil
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -35,9 +37,10 @@ from refine.problem import load_problem
 ROOT = Path(__file__).resolve().parents[1]
 GLASS = ROOT / "problems" / "glass_adhesive"
 EXAMPLES = int(os.environ.get("FUZZ_EXAMPLES", "20"))
+DEADLINE_S = os.environ.get("FUZZ_DEADLINE_S")
 FUZZ = settings(
     max_examples=EXAMPLES,
-    deadline=None,
+    deadline=None if DEADLINE_S is None else float(DEADLINE_S) * 1000.0,
     suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow, HealthCheck.data_too_large],
 )
 COUNT = {"examples": 0}
@@ -114,6 +117,29 @@ def test_fuzz_liberty_ascii(tmp_path_factory, data):
             assert "demo.liberty" in str(e)
 
 
+# records as the Liberty sends them: station, command, error indicator (blank or a letter), values;
+# some with the first value right after the indicator
+DEVICE_LIBERTY = [
+    f"01C{' ' if k % 7 else 'u'}{10 + 0.01 * k:.4f} {2.0:10.4f} {3 + 0.002 * k:10.4f} {5.0:9.3f} {k * 0.1:9.3f} {1.0:9.3f}"
+    for k in range(40)
+]
+
+
+@FUZZ
+@given(data=st.data())
+def test_fuzz_liberty_ascii_device_records(tmp_path_factory, data):
+    f = tmp_path_factory.mktemp("libd") / "demo.liberty"
+    _write(f, data, DEVICE_LIBERTY)
+    log = _expect(lambda: read_liberty_ascii(f, units=None), f)
+    if log is not None:
+        assert np.all(np.isfinite(log.positions)) and log.rotations.shape == (len(log.t), 3, 3)
+        assert log.device_error is None or log.device_error.shape == log.t.shape
+        try:
+            gate_dropouts(log)
+        except InputError as e:
+            assert "demo.liberty" in str(e)
+
+
 @FUZZ
 @given(data=st.data())
 def test_fuzz_demo_csv(tmp_path_factory, data):
@@ -168,7 +194,16 @@ def test_fuzz_dxf(tmp_path_factory, data):
 @given(data=st.data())
 def test_fuzz_liberty_binary(tmp_path_factory, data):
     f = tmp_path_factory.mktemp("lyb") / "demo.lyb"
-    raw = bytearray((ROOT / "tests" / "data" / "demo.lyb").read_bytes()[:4000])
+    if data.draw(st.booleans()):
+        raw = bytearray((ROOT / "tests" / "data" / "demo.lyb").read_bytes()[:4000])
+    else:  # the Liberty's default output list 2,4,1: position, Euler angles, CR LF; some flagged
+        raw = bytearray(
+            b"".join(
+                b"LY" + bytes([1, ord("C"), ord("u") if k % 9 == 0 else 0x20, 0]) + struct.pack("<H", 26)
+                + struct.pack("<6f", 10 + 0.01 * k, 2.0, 3.0, 5.0, 0.1 * k, 1.0) + b"\r\n"
+                for k in range(100)
+            )
+        )
     for _ in range(data.draw(st.integers(0, 8))):
         k = data.draw(st.integers(0, len(raw) - 1))
         raw[k] = data.draw(st.integers(0, 255))
