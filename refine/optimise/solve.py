@@ -52,6 +52,10 @@ WARM_MU_INIT = 1e-4
 """IPOPT's initial barrier parameter when a round starts from the last round's answer and
 multipliers (its default, 0.1, pushes a warm start off the constraints it had found active)."""
 
+ELASTIC_ONLY = "not run (the elastic problem answers it: another IK branch, after the first failed)"
+"""Why the strict solve is skipped on the IK branches tried after the first: with repair on, the
+elastic problem's answer without slack is the strict problem's, so one solve does for both."""
+
 BRANCH_CANDIDATES = 2
 """Other IK branches chained per branch tried when the first gives no answer; the best are tried
 (:func:`_rank_chains`)."""
@@ -427,7 +431,11 @@ def solve_refinement(
         return _unsolved(
             problem, q_seed, reason, "not run (orientation out of reach beyond the slack)", timings, findings
         )
-    skip_strict = bool((certain & (tilts > cone + TILT_TOLERANCE_DEG)).any())
+    skip_strict = (
+        "not run (the demonstrated orientation is out of reach beyond the cone)"
+        if (certain & (tilts > cone + TILT_TOLERANCE_DEG)).any()
+        else ""
+    )
     if unreachable:
         check = check_path(kin, q_seed, problem.fused, problem.tolerances, problem.axisymmetric)
         t0 = time.perf_counter()
@@ -453,7 +461,9 @@ def solve_refinement(
 
     deadline = t0 + time_limit_s if time_limit_s is not None else math.inf
 
-    def attempt_from(seed: Array) -> Refinement:
+    repairing = repair_max_slack_deg is not None and repair_max_slack_deg > 0
+
+    def attempt_from(seed: Array, skip: str = skip_strict) -> Refinement:
         return _attempt(
             problem,
             seed,
@@ -462,7 +472,7 @@ def solve_refinement(
             max_rounds,
             timings,
             deadline,
-            skip_strict,
+            skip,
             stretched,
         )
 
@@ -492,7 +502,9 @@ def solve_refinement(
         timings["seed"] += time.perf_counter() - t0
         for k, q_other in enumerate(others, start=2):
             try:
-                other = attempt_from(q_other)
+                # the elastic problem alone: its answer without slack is the strict one, and the
+                # strict solve already failed on the first branch
+                other = attempt_from(q_other, skip_strict or (ELASTIC_ONLY if repairing else ""))
             except TimeLimitReached:
                 note = f"IK branches after the first {k - 1} not tried: time limit {time_limit_s:g} s reached"
                 attempt = replace(attempt, reason=f"{attempt.reason} ({note})")
@@ -521,12 +533,14 @@ def _attempt(
     max_rounds: int,
     timings: dict[str, float],
     deadline: float = math.inf,
-    skip_strict: bool = False,
+    skip_strict: str = "",
     stretched: Array | None = None,
 ) -> Refinement:
     """Strict solve from ``q_seed``, then the elastic repair when the strict problem fails.
 
-    With ``skip_strict`` (the strict problem is known to be infeasible) the repair starts at once.
+    With ``skip_strict`` (why the strict solve is not run: it is known to be infeasible, or the
+    elastic problem answers it) the repair starts at once; an elastic answer that verifies without
+    any slack is then ``ok``.
     ``stretched`` (N,) marks the waypoints whose wrist centre the demonstration puts near or beyond
     the end of the arm's range: the singularity bound holds there from the first solve (at and
     between the waypoints), so the elbow cannot pass through its stretched singularity while the
@@ -548,8 +562,8 @@ def _attempt(
         q = q_seed
         slack = np.zeros(problem.n_waypoints)
         check = check_path(kin, q, problem.fused, problem.tolerances, problem.axisymmetric)
-        stats = {"return_status": "not run (the demonstrated orientation is out of reach beyond the cone)"}
-        strict_reason = stats["return_status"]
+        stats = {"return_status": skip_strict}
+        strict_reason = skip_strict
     else:
         x, stats, check, slack = _run_rounds(loop, q_seed.ravel(), sources)
         q = loop.problem.joints(x)
@@ -571,6 +585,12 @@ def _attempt(
         q = loop.problem.joints(x)
         if check.ok:
             status = "repaired"
+            if skip_strict == ELASTIC_ONLY and slack.max() <= 1e-3:
+                # the elastic problem found an answer without slack: ok if it verifies strictly
+                strict = check_path(kin, q, problem.fused, problem.tolerances, problem.axisymmetric)
+                extra = tuple(v for src in sources for v in src.violations(loop.problem, q))
+                if strict.ok and not extra:
+                    status, check, slack = "ok", strict, np.zeros(problem.n_waypoints)
         else:
             log.info("repair within %.1f deg failed: %s", repair_max_slack_deg, _describe(check, stats))
             note = f"no repair within {repair_max_slack_deg:g} deg of extra slack"
