@@ -2,8 +2,9 @@
 
 import numpy as np
 
+from refine.frames import rotation_angle_deg
 from refine.optimise.problem import ActiveSet, LinearRow, build_refinement
-from refine.optimise.solve import _rank_chains, _row_keys
+from refine.optimise.solve import ELASTIC_ONLY, _attempt, _rank_chains, _row_keys, initial_guess
 from refine.problem import Tolerances
 from refine.synthetic import wave_path
 
@@ -48,3 +49,16 @@ def test_row_names_follow_each_row_when_the_active_set_grows(irb4600, straight_t
     where = {k: i for i, k in enumerate(keys[1])}
     for i, k in enumerate(keys[0]):
         assert built[0].lbg[i] == built[1].lbg[where[k]]
+
+
+def test_the_elastic_problem_alone_gives_ok_where_the_strict_problem_is_feasible(irb4600, straight_tool, kin):
+    """Another IK branch solves the elastic problem only: an answer without slack is the strict answer."""
+    nlp = build_refinement(irb4600, wave_path(60), np.eye(4), straight_tool, Tolerances())
+    q_seed = initial_guess(nlp)
+    result = _attempt(nlp, q_seed, (), 15.0, 8, {}, skip_strict=ELASTIC_ONLY)
+    assert result.status == "ok", result.reason
+    assert not result.repairs and not result.slack_deg.any()
+    # recomputed here: on the CAD path, inside the strict cone
+    poses = kin.poses(result.q)
+    assert np.linalg.norm(poses[:, :3, 3] - nlp.fused.positions, axis=1).max() < 1e-6
+    assert rotation_angle_deg(poses[:, :3, :3], nlp.fused.rotations).max() <= 3.0 + 1e-6
