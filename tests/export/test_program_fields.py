@@ -800,3 +800,27 @@ def test_a_run_checks_the_process_output_against_the_controller_s_range_before_s
     else:
         with pytest.raises(InputError, match=message):
             check_output_signal(kind, output)
+
+
+@pytest.mark.parametrize(("options", "ok"), [({"speed_resolution_m_s": 0.0}, False), ({"approximation_m": 0.0}, True)])
+def test_krl_speed_rounding_must_be_positive_and_an_exact_path_is_allowed(tmp_path, options, ok):
+    """A 0 m/s rounding step cannot round anything; approximation 0 m is exact stops (C_DIS off)."""
+    robot, problem, tr = _case("krl")
+    if ok:
+        src, _ = write_krl(tmp_path / "b.src", tr, problem, robot, **options)
+        assert src.is_file()
+    else:
+        with pytest.raises(InputError, match="speeds must be > 0 and approximation_m >= 0"):
+            write_krl(tmp_path / "b.src", tr, problem, robot, **options)
+
+
+def test_reading_back_a_krl_point_that_is_not_numbers_says_which(tmp_path):
+    from refine.export.krl import parse_krl
+
+    robot, problem, tr = _case("krl")
+    src, dat = write_krl(tmp_path / "b.src", tr, problem, robot)
+    text = dat.read_text()
+    m = re.search(r"DECL E6POS (\w+)=\{X ([-\d.]+)", text)
+    dat.write_text(text.replace(f"{m.group(1)}={{X {m.group(2)}", f"{m.group(1)}={{X abc", 1))
+    with pytest.raises(InputError, match=rf"KRL {m.group(1)}: malformed E6POS"):
+        parse_krl(src, dat)
