@@ -824,3 +824,26 @@ def test_reading_back_a_krl_point_that_is_not_numbers_says_which(tmp_path):
     dat.write_text(text.replace(f"{m.group(1)}={{X {m.group(2)}", f"{m.group(1)}={{X abc", 1))
     with pytest.raises(InputError, match=rf"KRL {m.group(1)}: malformed E6POS"):
         parse_krl(src, dat)
+
+
+@pytest.mark.parametrize(("lead_m", "ok"), [(RETRACT_M, True), (RETRACT_M + 1e-4, False)])
+def test_a_rapid_process_lead_may_be_as_long_as_the_approach_move(tmp_path, lead_m, ok):
+    """The gun may open at the very start of the 0.1 m approach move, not before it."""
+    robot, problem, tr = _case("rapid")
+    problem = replace(problem, process=replace(problem.process, lead_m=lead_m))
+    if ok:
+        assert write_rapid(tmp_path / "b.mod", tr, problem, robot).is_file()
+    else:
+        with pytest.raises(InputError, match="longer than the approach move"):
+            write_rapid(tmp_path / "b.mod", tr, problem, robot)
+
+
+def test_a_weld_script_read_back_gives_the_pass_between_the_arc_on_and_off(tmp_path):
+    from refine.export.urscript import parse_urscript
+
+    robot, problem, tr = _case("urscript", n=8)
+    weld = replace(problem, process=replace(problem.process, kind="weld", lead_m=None))
+    script = write_urscript(tmp_path / "w.script", tr, weld, robot)
+    (back,) = parse_urscript(script)
+    T_base_world = np.linalg.inv(weld.robot.base_in_world)
+    np.testing.assert_allclose(back.poses[:, :3, 3], (T_base_world @ tr.poses)[:, :3, 3], atol=1e-6)
