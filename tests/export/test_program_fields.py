@@ -847,3 +847,19 @@ def test_a_weld_script_read_back_gives_the_pass_between_the_arc_on_and_off(tmp_p
     (back,) = parse_urscript(script)
     T_base_world = np.linalg.inv(weld.robot.base_in_world)
     np.testing.assert_allclose(back.poses[:, :3, 3], (T_base_world @ tr.poses)[:, :3, 3], atol=1e-6)
+
+
+def test_a_pathml_point_without_a_speed_is_read_with_its_frame_and_no_speed(tmp_path):
+    """Speed, time and arc length are optional point values (another tool may give only the Frame)."""
+    from refine.export.pathml_read import read_pathml
+
+    _, problem, tr = _case("rapid")
+    path = write_pathml(tmp_path / "b.aml", tr, problem)
+    root = etree.parse(str(path))
+    ns = {"c": root.getroot().nsmap[None]}
+    point = root.find(".//c:InternalElement[@Name='P0002']", ns)
+    point.remove(next(a for a in point.iterfind("c:Attribute", ns) if a.get("Name") == "speed"))
+    root.write(str(path))
+    (track,) = read_pathml(path).layers[0].tracks
+    assert np.isnan(track.speed[2]) and np.isfinite(np.delete(track.speed, 2)).all()
+    np.testing.assert_allclose(track.positions[2], tr.poses[2, :3, 3], atol=1e-12)
