@@ -145,7 +145,7 @@ def test_reach_tilts_along_a_path_tilts_only_the_poses_out_of_reach():
 
 @pytest.mark.slow
 def test_a_run_out_of_time_says_so_and_is_not_a_verdict():
-    """wrist_flip needs well over 0.5 s of IPOPT; with that budget the pass stops, saying why."""
+    """wrist_flip needs well over 0.1 s of IPOPT; with that budget the pass stops, saying why."""
     import dataclasses
 
     from refine.export.result_json import result_dict
@@ -153,10 +153,10 @@ def test_a_run_out_of_time_says_so_and_is_not_a_verdict():
     from refine.problem import load_problem
 
     problem = load_problem(UNREACHABLE / "wrist_flip")
-    problem = dataclasses.replace(problem, repair=dataclasses.replace(problem.repair, time_limit_s=0.5))
+    problem = dataclasses.replace(problem, repair=dataclasses.replace(problem.repair, time_limit_s=0.1))
     result = solve_problem(problem)
     refinement = result.refinement
     assert refinement.time_limit_reached and refinement.status == "infeasible"
-    assert "time limit of 0.5 s" in refinement.reason and refinement.solver_status == "time limit reached"
+    assert "time limit of 0.1 s" in refinement.reason and refinement.solver_status == "time limit reached"
     assert result_dict(result)["solver"]["time_limit_reached"] is True
     assert exit_status(result.status) == 1
