@@ -61,8 +61,7 @@ def measure_log(path: str) -> dict:
 
 
 def measure_path(n: int) -> dict:
-    from refine.optimise.problem import build_refinement
-    from refine.pipeline import fused_path, weights_for
+    from refine.pipeline import fused_path, refinement_for
     from refine.problem import load_problem
     from refine.robot import load_robot
 
@@ -72,15 +71,7 @@ def measure_path(n: int) -> dict:
     problem = dataclasses.replace(problem, cad=dataclasses.replace(problem.cad, spacing_m=3.0807 / n))
     t0 = time.perf_counter()
     fused = fused_path(problem)
-    build_refinement(
-        robot,
-        fused,
-        problem.robot.base_in_world,
-        problem.tool.tcp_in_flange,
-        problem.tolerances,
-        axisymmetric=problem.tool.axisymmetric,
-        weights=weights_for(problem, robot),
-    )
+    refinement_for(problem, robot, fused)
     return {"n": len(fused), "base_mb": base, "peak_mb": _rss_mb(), "time_s": time.perf_counter() - t0}
 
 

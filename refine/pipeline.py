@@ -108,6 +108,20 @@ def check_dense_steps(problem: Problem, length_m: float) -> None:
         )
 
 
+def refinement_for(problem: Problem, robot: Robot, fused: FusedPath) -> RefinementNLP:
+    """The refinement NLP of one pass: the problem's placement, tool, tolerances, weights and time limit."""
+    return build_refinement(
+        robot,
+        fused,
+        problem.robot.base_in_world,
+        problem.tool.tcp_in_flange,
+        problem.tolerances,
+        axisymmetric=problem.tool.axisymmetric,
+        weights=weights_for(problem, robot),
+        solver_options={"ipopt.max_wall_time": problem.repair.time_limit_s},
+    )
+
+
 def weights_for(problem: Problem, robot: Robot) -> Weights:
     """Cost weights from ``[optimise]``; a redundant arm gets a mid-range cost by default."""
     o = problem.optimise
@@ -156,16 +170,7 @@ def refine_pass(
         q0: initial joints (N, n) [rad] instead of the IK seed (warm start); None for the seed.
     """
     if nlp is None:
-        nlp = build_refinement(
-            robot,
-            fused,
-            problem.robot.base_in_world,
-            problem.tool.tcp_in_flange,
-            problem.tolerances,
-            axisymmetric=problem.tool.axisymmetric,
-            weights=weights_for(problem, robot),
-            solver_options={"ipopt.max_wall_time": problem.repair.time_limit_s},
-        )
+        nlp = refinement_for(problem, robot, fused)
     watch.lap("build")
     home = None if problem.robot.home_deg is None else np.radians(problem.robot.home_deg)
     refinement = solve_refinement(
