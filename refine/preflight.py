@@ -191,12 +191,14 @@ def preflight(
     from refine.robot_urdf import robot_for
 
     where = f"{problem.source}: " if problem.source is not None else ""
-    if programs is None:
-        programs = problem.output.programs
-    else:
-        where = "--programs: "
     if robot is None:
         robot = robot_for(problem.robot)
+    if programs is None:
+        programs = problem.output.programs
+        if programs is None:
+            programs = (robot.spec.default_program,)
+    else:
+        where = "--programs: "
     try:
         check_programs(problem, robot.spec.controller, robot.spec.name, programs)
         if "sunrise" in programs and robot.nq != 7:

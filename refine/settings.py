@@ -374,20 +374,22 @@ class OutputSettings:
     """``[output]``: which programs to write.
 
     Attributes:
-        programs: program formats, from :data:`PROGRAM_FORMATS`.
+        programs: program formats, from :data:`PROGRAM_FORMATS`; None (the default) for the one the
+            robot's controller runs (``RobotSpec.default_program``: RAPID for ABB, KRL for the KR arms,
+            Sunrise for the LBR iiwa, URScript for UR); an empty tuple for none.
         urscript_mode: ``"program"`` (a ``def`` ... ``end`` function called at the end of the file)
             or ``"script_node"`` (the body alone, for a PolyScope Script node).
         speed_levels: RAPID: at most this many ``speeddata`` for the path moves.
         moves_per_routine: RAPID: path moves per ``PROC`` (longer paths are split into several).
     """
 
-    programs: tuple[str, ...] = ("rapid",)
+    programs: tuple[str, ...] | None = None
     urscript_mode: str = "program"
     speed_levels: int = 5
     moves_per_routine: int = 500
 
     def __post_init__(self) -> None:
-        for p in self.programs:
+        for p in self.programs or ():
             _one_of("output", "programs[]", p, PROGRAM_FORMATS)
         _one_of("output", "urscript_mode", self.urscript_mode, URSCRIPT_MODES)
         _integer_in("output", "speed_levels", self.speed_levels, 1, 100)

@@ -232,7 +232,7 @@ def test_defaults_apply_when_optional_tables_are_absent(problem_toml):
         2.0,
         0.02,
     )
-    assert p.output.programs == ("rapid",)
+    assert p.output.programs is None  # the robot's own language, chosen at preflight
     np.testing.assert_array_equal(p.frames.source_in_world, np.eye(4))
     np.testing.assert_array_equal(p.frames.cad_in_world, np.eye(4))
 
@@ -482,3 +482,19 @@ def test_programs_given_as_a_string_is_reported_with_the_value_written(problem_t
     edit(problem_toml, 'programs = ["rapid"]', 'programs = "rapid"')
     message = load_error(problem_toml)
     assert "output.programs" in message and "'rapid'" in message
+
+
+# The language each arm's controller runs, from the makers' documentation: ABB IRC5 runs RAPID, the
+# KUKA KR C4 runs KRL, the LBR iiwa's Sunrise cabinet runs Sunrise Java, a UR e-Series runs URScript.
+@pytest.mark.parametrize(
+    ("bundled", "language"),
+    [("glass_adhesive", "rapid"), ("kr8_arc_weld", "krl"), ("tig_weld", "sunrise"), ("ur10e_sealing", "urscript")],
+)
+def test_without_an_output_table_the_robot_gets_the_program_its_controller_runs(tmp_path, bundled, language):
+    from refine.preflight import preflight
+
+    folder = tmp_path / bundled
+    shutil.copytree(BUNDLED.parent / bundled, folder, ignore=shutil.ignore_patterns("__pycache__"))
+    remove_table(folder / "problem.toml", "output")
+    problem = load_problem(folder / "problem.toml")
+    assert preflight(problem, tmp_path / "out", report=False).programs == (language,)
