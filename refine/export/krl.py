@@ -49,12 +49,17 @@ from numpy.typing import NDArray
 from refine import __version__
 from refine.errors import InputError
 from refine.export.program import (
+    Switch,
+    Wait,
+    arc_abort,
     as_passes,
     header_notes,
     home_joints,
     lead_point,
     process_summary,
     singular_runs,
+    weld_end,
+    weld_start,
 )
 from refine.export.rapid import segment_speeds
 from refine.frames import invert_transform, kuka_abc_from_matrix, make_transform, matrix_from_kuka_abc
@@ -176,33 +181,36 @@ class _Io:
     arc_ok: int
 
 
+def _weld_io(io: _Io) -> tuple[Wait, Switch]:
+    signals = {"out": io.out, "gas": io.gas}
+
+    def wait(seconds: float, comment: str) -> str:
+        return f"WAIT SEC {_real(seconds, 3)}" + (f" ; {comment}" if comment else "")
+
+    def switch(role: str, on: bool, comment: str) -> str:
+        return f"$OUT[{signals[role]}]={'TRUE' if on else 'FALSE'}" + (f" ; {comment}" if comment else "")
+
+    return wait, switch
+
+
 def _weld_start(io: _Io, problem: Problem) -> list[str]:
     pr = problem.process
+    wait, switch = _weld_io(io)
     timeout_ms = int(round(pr.arc_timeout_s * 1000.0))
-    return [
-        f"$OUT[{io.gas}]=TRUE ; gas pre-flow",
-        f"WAIT SEC {_real(pr.preflow_s, 3)}",
-        f"$OUT[{io.out}]=TRUE ; arc on",
+    return weld_start(problem, wait, switch, [
         f"$TIMER[1]=-{timeout_ms} ; arc start timeout [ms]",
         "$TIMER_STOP[1]=FALSE",
         f"WAIT FOR $IN[{io.arc_ok}] OR $TIMER_FLAG[1]",
         "$TIMER_STOP[1]=TRUE",
         f"IF NOT $IN[{io.arc_ok}] THEN",
-        f"  $OUT[{io.out}]=FALSE",
-        f"  $OUT[{io.gas}]=FALSE",
+        *arc_abort(switch, "  "),
         f"  HALT ; no arc signal within {_real(pr.arc_timeout_s, 3)} s",
         "ENDIF",
-    ]
+    ])
 
 
 def _weld_end(io: _Io, problem: Problem) -> list[str]:
-    pr = problem.process
-    return [
-        f"WAIT SEC {_real(pr.crater_fill_s, 3)} ; crater fill",
-        f"$OUT[{io.out}]=FALSE ; arc off",
-        f"WAIT SEC {_real(pr.postflow_s, 3)} ; gas post-flow",
-        f"$OUT[{io.gas}]=FALSE",
-    ]
+    return weld_end(problem, *_weld_io(io))
 
 
 def _trigger(problem: Problem, io: _Io, value: str, lead: float) -> str:

@@ -14,11 +14,15 @@ r"""What every robot program writer shares: passes with their repairs, home, sin
   not above its planned speed, and the levels are chosen (exact dynamic programme over the
   distinct rounded speeds) to add the least time to the path.
 * :func:`lead_point`: where on the path a switch ``lead`` before its end falls.
+* :func:`weld_start` and :func:`weld_end`: the arc start and end in the order every dialect writes
+  them (gas pre-flow, arc on, wait for the arc; crater fill, arc off, gas post-flow, gas off), each
+  step rendered by the dialect's own ``wait`` and ``switch``.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -194,3 +198,39 @@ def speed_levels(
     levels_arr = np.array(levels)
     index = np.searchsorted(levels_arr, v, side="right") - 1
     return levels_arr, index
+
+
+Wait = Callable[[float, str], str]
+"""A dialect's pause: ``wait(seconds, comment)`` is one program line (``comment`` may be empty)."""
+Switch = Callable[[str, bool, str], str]
+"""A dialect's digital output: ``switch(role, on, comment)``, ``role`` ``"out"`` (arc) or ``"gas"``."""
+
+
+def weld_start(problem: Problem, wait: Wait, switch: Switch, arc_wait: list[str]) -> list[str]:
+    """The arc start: gas on, pre-flow, arc on, then ``arc_wait``.
+
+    ``arc_wait`` is the dialect's wait for the arc-ok input; it switches off with :func:`arc_abort`
+    and stops the program when the arc does not come within ``process.arc_timeout_s``.
+    """
+    return [
+        switch("gas", True, "gas pre-flow"),
+        wait(problem.process.preflow_s, ""),
+        switch("out", True, "arc on"),
+        *arc_wait,
+    ]
+
+
+def arc_abort(switch: Switch, indent: str) -> list[str]:
+    """What a failed arc start switches off before the program stops: the arc, then the gas."""
+    return [indent + switch("out", False, ""), indent + switch("gas", False, "")]
+
+
+def weld_end(problem: Problem, wait: Wait, switch: Switch) -> list[str]:
+    """The arc end: crater fill, arc off, gas post-flow, gas off."""
+    pr = problem.process
+    return [
+        wait(pr.crater_fill_s, "crater fill"),
+        switch("out", False, "arc off"),
+        wait(pr.postflow_s, "gas post-flow"),
+        switch("gas", False, ""),
+    ]

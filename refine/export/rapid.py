@@ -41,12 +41,17 @@ from refine import __version__
 from refine.errors import InputError
 from refine.export.program import (
     ProgramPass,
+    Switch,
+    Wait,
+    arc_abort,
     header_notes,
     home_joints,
     lead_point,
     process_summary,
     singular_runs,
     speed_levels,
+    weld_end,
+    weld_start,
 )
 from refine.frames import continuous_quaternions, invert_transform, quaternion_from_matrix
 from refine.names import comment_text, identifier
@@ -126,30 +131,34 @@ def _trigg_io(name: str, lead: float, by_time: bool, output: str, value: int) ->
     return f"TriggIO {name}, {amount}{unit} \\DOp:={output}, {value};"
 
 
+def _weld_io(problem: Problem, output: str) -> tuple[Wait, Switch]:
+    signals = {"out": output, "gas": problem.process.gas_output}
+
+    def wait(seconds: float, comment: str) -> str:
+        return f"WaitTime {_num(seconds, 3)};" + (f"  ! {comment}" if comment else "")
+
+    def switch(role: str, on: bool, comment: str) -> str:
+        return f"SetDO {signals[role]}, {int(on)};" + (f"  ! {comment}" if comment else "")
+
+    return wait, switch
+
+
 def _weld_start(problem: Problem, output: str) -> list[str]:
     pr = problem.process
-    return [
-        f"SetDO {pr.gas_output}, 1;  ! gas pre-flow",
-        f"WaitTime {_num(pr.preflow_s, 3)};",
-        f"SetDO {output}, 1;  ! arc on",
-        f"WaitDI {pr.arc_ok_input}, 1 \\MaxTime:={_num(pr.arc_timeout_s, 3)} \\TimeFlag:=arcTimeout;",
+    wait, switch = _weld_io(problem, output)
+    timeout = _num(pr.arc_timeout_s, 3)
+    return weld_start(problem, wait, switch, [
+        f"WaitDI {pr.arc_ok_input}, 1 \\MaxTime:={timeout} \\TimeFlag:=arcTimeout;",
         "IF arcTimeout THEN",
-        f"    SetDO {output}, 0;",
-        f"    SetDO {pr.gas_output}, 0;",
-        f'    ErrWrite "Arc start failed", "no {pr.arc_ok_input} within {_num(pr.arc_timeout_s, 3)} s";',
+        *arc_abort(switch, "    "),
+        f'    ErrWrite "Arc start failed", "no {pr.arc_ok_input} within {timeout} s";',
         "    EXIT;",
         "ENDIF",
-    ]
+    ])
 
 
 def _weld_end(problem: Problem, output: str) -> list[str]:
-    pr = problem.process
-    return [
-        f"WaitTime {_num(pr.crater_fill_s, 3)};  ! crater fill",
-        f"SetDO {output}, 0;  ! arc off",
-        f"WaitTime {_num(pr.postflow_s, 3)};  ! gas post-flow",
-        f"SetDO {pr.gas_output}, 0;",
-    ]
+    return weld_end(problem, *_weld_io(problem, output))
 
 
 def write_rapid(

@@ -45,7 +45,18 @@ import numpy as np
 from refine import __version__
 from refine.errors import InputError
 from refine.export.krl import kuka_status_turn
-from refine.export.program import as_passes, header_notes, home_joints, lead_point, process_summary
+from refine.export.program import (
+    Switch,
+    Wait,
+    arc_abort,
+    as_passes,
+    header_notes,
+    home_joints,
+    lead_point,
+    process_summary,
+    weld_end,
+    weld_start,
+)
 from refine.export.rapid import segment_speeds
 from refine.frames import invert_transform, kuka_abc_from_matrix, matrix_from_kuka_abc
 from refine.names import comment_text
@@ -106,35 +117,36 @@ def _io_calls(problem: Problem) -> dict[str, tuple[str, str]]:
     return roles
 
 
+def _weld_io(io: dict[str, tuple[str, str]]) -> tuple[Wait, Switch]:
+    def wait(seconds: float, comment: str) -> str:
+        return f"ThreadUtil.milliSleep({int(round(seconds * 1000.0))});" + (f" // {comment}" if comment else "")
+
+    def switch(role: str, on: bool, comment: str) -> str:
+        group, signal = io[role]
+        return f"{_field(group)}.set{signal}({'true' if on else 'false'});" + (f" // {comment}" if comment else "")
+
+    return wait, switch
+
+
 def _weld_start(io: dict[str, tuple[str, str]], problem: Problem) -> list[str]:
     pr = problem.process
-    (gg, gs), (og, os_), (kg, ks) = io["gas"], io["out"], io["ok"]
+    wait, switch = _weld_io(io)
+    ok_group, ok_signal = io["ok"]
     timeout_ms = int(round(pr.arc_timeout_s * 1000.0))
-    return [
-        f"{_field(gg)}.set{gs}(true); // gas pre-flow",
-        f"ThreadUtil.milliSleep({int(round(pr.preflow_s * 1000.0))});",
-        f"{_field(og)}.set{os_}(true); // arc on",
+    return weld_start(problem, wait, switch, [
         "long arcWait = System.currentTimeMillis();",
-        f"while (!{_field(kg)}.get{ks}()) {{",
+        f"while (!{_field(ok_group)}.get{ok_signal}()) {{",
         f"    if (System.currentTimeMillis() - arcWait > {timeout_ms}) {{",
-        f"        {_field(og)}.set{os_}(false);",
-        f"        {_field(gg)}.set{gs}(false);",
-        f'        throw new IllegalStateException("Arc start failed: no {ks} within {_num(pr.arc_timeout_s, 3)} s");',
+        *arc_abort(switch, "        "),
+        f'        throw new IllegalStateException("Arc start failed: no {ok_signal} within {_num(pr.arc_timeout_s, 3)} s");',
         "    }",
         "    ThreadUtil.milliSleep(10);",
         "}",
-    ]
+    ])
 
 
 def _weld_end(io: dict[str, tuple[str, str]], problem: Problem) -> list[str]:
-    pr = problem.process
-    (gg, gs), (og, os_) = io["gas"], io["out"]
-    return [
-        f"ThreadUtil.milliSleep({int(round(pr.crater_fill_s * 1000.0))}); // crater fill",
-        f"{_field(og)}.set{os_}(false); // arc off",
-        f"ThreadUtil.milliSleep({int(round(pr.postflow_s * 1000.0))}); // gas post-flow",
-        f"{_field(gg)}.set{gs}(false);",
-    ]
+    return weld_end(problem, *_weld_io(io))
 
 
 def _condition(problem: Problem, lead: float) -> str:

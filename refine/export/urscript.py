@@ -37,7 +37,17 @@ import numpy as np
 
 from refine import __version__
 from refine.errors import InputError, SolverError
-from refine.export.program import as_passes, header_notes, home_joints, process_summary
+from refine.export.program import (
+    Switch,
+    Wait,
+    arc_abort,
+    as_passes,
+    header_notes,
+    home_joints,
+    process_summary,
+    weld_end,
+    weld_start,
+)
 from refine.export.rapid import segment_speeds
 from refine.frames import invert_transform, make_transform, matrix_from_rotvec, rotvec_from_matrix
 from refine.names import comment_text, identifier
@@ -144,34 +154,38 @@ def _switch_threads(out: int) -> list[str]:
     return lines
 
 
+def _weld_io(out: int, gas: int) -> tuple[Wait, Switch]:
+    signals = {"out": out, "gas": gas}
+
+    def wait(seconds: float, comment: str) -> str:
+        return f"sleep({_num(seconds, 3)})" + (f"  # {comment}" if comment else "")
+
+    def switch(role: str, on: bool, comment: str) -> str:
+        return f"set_digital_out({signals[role]}, {on})" + (f"  # {comment}" if comment else "")
+
+    return wait, switch
+
+
 def _weld_start(out: int, gas: int, ok: int, problem: Problem) -> list[str]:
     pr = problem.process
-    return [
-        f"set_digital_out({gas}, True)  # gas pre-flow",
-        f"sleep({_num(pr.preflow_s, 3)})",
-        f"set_digital_out({out}, True)  # arc on",
+    wait, switch = _weld_io(out, gas)
+    timeout = _num(pr.arc_timeout_s, 3)
+    return weld_start(problem, wait, switch, [
         "arc_wait = 0.0",
-        f"while not get_standard_digital_in({ok}) and arc_wait < {_num(pr.arc_timeout_s, 3)}:",
+        f"while not get_standard_digital_in({ok}) and arc_wait < {timeout}:",
         "  sync()",
         "  arc_wait = arc_wait + get_steptime()",
         "end",
         f"if not get_standard_digital_in({ok}):",
-        f"  set_digital_out({out}, False)",
-        f"  set_digital_out({gas}, False)",
-        f'  popup("no arc signal within {_num(pr.arc_timeout_s, 3)} s", "Arc start failed", error=True)',
+        *arc_abort(switch, "  "),
+        f'  popup("no arc signal within {timeout} s", "Arc start failed", error=True)',
         "  halt",
         "end",
-    ]
+    ])
 
 
 def _weld_end(out: int, gas: int, problem: Problem) -> list[str]:
-    pr = problem.process
-    return [
-        f"sleep({_num(pr.crater_fill_s, 3)})  # crater fill",
-        f"set_digital_out({out}, False)  # arc off",
-        f"sleep({_num(pr.postflow_s, 3)})  # gas post-flow",
-        f"set_digital_out({gas}, False)",
-    ]
+    return weld_end(problem, *_weld_io(out, gas))
 
 
 def write_urscript(
