@@ -148,6 +148,18 @@ class Result:
         """
         return list(self.to_dict()["diagnosis"])
 
+    @property
+    def placement(self) -> dict[str, Any] | None:
+        """The workpiece move of ``[repair] placement``: ``result.json``'s ``placement``.
+
+        Its status (``"ok"`` when a move was found and verified by the strict pipeline, ``"not
+        needed"`` or ``"infeasible"``), the move (translation [m], rotation axis and angle [deg]
+        in the world frame), the moved objects and the strict run's metrics; the schema is
+        ``docs/placement.schema.json``. None when the problem does not ask for a placement search.
+        """
+        doc = self.to_dict()["placement"]
+        return None if doc is None else dict(doc)
+
     def to_dict(self) -> dict[str, Any]:
         """The ``result.json`` document of this result, as plain Python values."""
         from refine.export.result_json import result_dict

@@ -178,6 +178,7 @@ def test_solve_takes_a_folder_and_warm_starts_from_given_joints():
     assert result.times is None and result.speeds is None
     assert result.diagnosis and result.diagnosis[0]["status"] == "infeasible"
     assert result.diagnosis == result.to_dict()["diagnosis"]
+    assert result.placement is None  # the problem asks for no placement search
     with pytest.raises(refine.InputError, match=r"initial_joints: expected shape \(N, n\)"):
         refine.solve(problem, initial_joints=np.zeros(6))
 

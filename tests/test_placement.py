@@ -197,6 +197,11 @@ def test_the_case_is_repaired_by_slack_and_by_a_verified_placement():
     assert placement.status == "ok", placement.reason
     assert placement.result.status == "ok"  # the moved problem's strict run
     assert placement.result.refinement.slack_deg.max() == 0.0
+    from refine.api import Result
+
+    public = Result(result).placement  # the library's view is the written document's
+    assert public == result_dict(result)["placement"]
+    assert public["status"] == "ok" and public["moved_objects"] == ["plate", "fixture"]
 
 
 @pytest.mark.slow
