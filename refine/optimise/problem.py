@@ -37,6 +37,7 @@ from refine.optimise.derivatives import (
     waypoint_kernels,
 )
 from refine.optimise.kinematics import fk_function, jacobian_function
+from refine.optimise.threads import limit_solver_threads
 from refine.paths import FusedPath
 from refine.problem import Tolerances
 from refine.robot import Robot
@@ -404,6 +405,7 @@ def build_refinement(
         )
     )
     options = {**IPOPT_DEFAULTS, **(solver_options or {})}
+    limit_solver_threads()
     return RefinementNLP(
         nlp=nlp,
         solver=ca.nlpsol("refine", "ipopt", nlp, {**derivatives, **options}),
