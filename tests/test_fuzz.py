@@ -31,6 +31,7 @@ from refine.demo.liberty_binary import read_liberty_binary
 from refine.demo.quality import gate_dropouts
 from refine.errors import InputError
 from refine.export.pathml_read import read_pathml
+from refine.plausible import CAD_COORDINATE_LIMIT_M, DEMO_POSITION_LIMIT_M
 from refine.preflight import preflight
 from refine.problem import load_problem
 
@@ -45,7 +46,7 @@ FUZZ = settings(
 )
 COUNT = {"examples": 0}
 
-NASTY = ["nan", "inf", "-inf", "1e308", "1e-320", "-0", "0x10", "1,5", "", "é", "\x00", "\x1b[2J", "99999999999999999999"]
+NASTY = ["nan", "inf", "-inf", "1e308", "-1e300", "4e5", "1e-320", "-0", "0x10", "1,5", "", "é", "\x00", "\x1b[2J", "99999999999999999999"]
 
 
 def _damage(data, lines: list[str]) -> list[str]:
@@ -84,6 +85,12 @@ def _write(path: Path, data, lines: list[str]) -> None:
     path.write_bytes(raw)
 
 
+def _plausible_log(log) -> None:
+    """A log that was read holds only values within the readers' plausibility ranges."""
+    assert np.all(np.abs(log.positions) <= DEMO_POSITION_LIMIT_M)
+    assert np.all(np.diff(log.t) > 0) and log.t[-1] - log.t[0] <= 86_400.0
+
+
 def _expect(read, path: Path):
     """Run ``read``; the result is returned, or InputError naming the file; nothing else."""
     COUNT["examples"] += 1
@@ -110,7 +117,7 @@ def test_fuzz_liberty_ascii(tmp_path_factory, data):
     log = _expect(lambda: read_liberty_ascii(f, units=None), f)
     if log is not None:
         assert np.all(np.isfinite(log.positions)) and log.rotations.shape == (len(log.t), 3, 3)
-        assert np.all(np.diff(log.t) > 0)
+        _plausible_log(log)
         try:
             gate_dropouts(log)
         except InputError as e:
@@ -134,6 +141,7 @@ def test_fuzz_liberty_ascii_device_records(tmp_path_factory, data):
     if log is not None:
         assert np.all(np.isfinite(log.positions)) and log.rotations.shape == (len(log.t), 3, 3)
         assert log.device_error is None or log.device_error.shape == log.t.shape
+        _plausible_log(log)
         try:
             gate_dropouts(log)
         except InputError as e:
@@ -144,11 +152,12 @@ def test_fuzz_liberty_ascii_device_records(tmp_path_factory, data):
 @given(data=st.data())
 def test_fuzz_demo_csv(tmp_path_factory, data):
     f = tmp_path_factory.mktemp("csv") / "demo.csv"
-    rows = ["t,x,y,z,qw,qx,qy,qz"] + [f"{k / 240:.6f},{0.1 * k:.4f},0.2,0.3,1,0,0,0" for k in range(30)]
+    rows = ["t,x,y,z,azimuth,elevation,roll"] + [f"{k / 240:.6f},{0.1 * k:.4f},0.2,0.3,10,{k},-5" for k in range(30)]
     _write(f, data, rows)
     log = _expect(lambda: read_demo_csv(f, units="mm"), f)
     if log is not None:
         assert np.all(np.isfinite(log.positions)) and np.all(np.isfinite(log.rotations))
+        _plausible_log(log)
 
 
 @FUZZ
@@ -158,7 +167,7 @@ def test_fuzz_cad_csv(tmp_path_factory, data):
     _write(f, data, ["x,y,z"] + [f"{k * 10.0},{math.sin(k) * 5:.3f},0" for k in range(30)])
     points = _expect(lambda: points_from_csv(f, units="mm"), f)
     if points is not None:
-        assert points.ndim == 2 and points.shape[1] == 3 and np.all(np.isfinite(points))
+        assert points.ndim == 2 and points.shape[1] == 3 and np.all(np.abs(points) <= CAD_COORDINATE_LIMIT_M)
 
 
 @FUZZ
@@ -170,6 +179,7 @@ def test_fuzz_gcode(tmp_path_factory, data):
     points = _expect(lambda: points_from_gcode(f, units="mm"), f)
     if points is not None:
         assert points.shape[1] == 3 and np.all(np.isfinite(points))
+        assert np.all(np.abs(points) <= CAD_COORDINATE_LIMIT_M)
 
 
 DXF_LINES = [
@@ -187,7 +197,7 @@ def test_fuzz_dxf(tmp_path_factory, data):
     _write(f, data, DXF_LINES)
     points = _expect(lambda: points_from_dxf(f, units="mm"), f)
     if points is not None:
-        assert points.shape[1] == 3 and np.all(np.isfinite(points))
+        assert points.shape[1] == 3 and np.all(np.abs(points) <= CAD_COORDINATE_LIMIT_M)
 
 
 @FUZZ
@@ -212,6 +222,7 @@ def test_fuzz_liberty_binary(tmp_path_factory, data):
     log = _expect(lambda: read_liberty_binary(f, units="in"), f)
     if log is not None:
         assert np.all(np.isfinite(log.positions))
+        _plausible_log(log)
 
 
 @FUZZ

@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from refine.errors import InputError
+from refine.plausible import CAD_COORDINATE_LIMIT_M, check_point
 
 #: Length of one file unit [m], for the units CAD/CAM files use.
 METRES_PER_UNIT = {"m": 1.0, "mm": 1e-3, "in": 0.0254}
@@ -111,6 +112,7 @@ def points_from_csv(path: str | Path, units: str = "mm") -> NDArray:
             raise InputError(f"{where}: not a number in {line!r} ({e})") from e
         if not all(np.isfinite(xyz)):
             raise InputError(f"{where}: non-finite coordinate in {line!r}")
+        check_point([c * scale for c in xyz], CAD_COORDINATE_LIMIT_M, where, "coordinate")
         rows.append(xyz)  # type: ignore[arg-type]
     if len(rows) < 2:
         raise InputError(f"CAD file {str(path)!r}: needs at least 2 points, found {len(rows)}")

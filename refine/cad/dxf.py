@@ -37,6 +37,7 @@ from numpy.typing import NDArray
 
 from refine.cad.csv_ import metres_per_unit
 from refine.errors import InputError
+from refine.plausible import CAD_COORDINATE_LIMIT_M
 
 logger = logging.getLogger(__name__)
 
@@ -71,6 +72,34 @@ def _bulged_polyline(xyb: NDArray, elevation: float, ocs, closed: bool, tol: flo
     xy = np.vstack(pts)
     ocs_pts = np.column_stack([xy, np.full(len(xy), elevation)])
     return np.array([tuple(v) for v in ocs.points_to_wcs(ocs_pts.tolist())], dtype=float)
+
+
+def _defining_values(e) -> NDArray:
+    """The numbers that place an entity (points, radius, elevation) in drawing units, flat."""
+    kind = e.dxftype()
+    if kind == "LINE":
+        values = [*e.dxf.start, *e.dxf.end]
+    elif kind == "ARC":
+        values = [*e.dxf.center, e.dxf.radius]
+    elif kind == "SPLINE":
+        values = [c for v in (*e.control_points, *e.fit_points) for c in v]
+    elif kind == "LWPOLYLINE":
+        values = [c for v in e.get_points("xy") for c in v] + [e.dxf.elevation]
+    else:
+        values = [c for v in e.vertices for c in v.dxf.location]
+    return np.asarray(values, dtype=float)
+
+
+def _check_extent(e, scale: float, units: str, source: str) -> None:
+    """Stop before flattening an entity whose defining numbers are beyond the plausible range."""
+    values = _defining_values(e)
+    bad = np.flatnonzero(~(np.abs(values * scale) <= CAD_COORDINATE_LIMIT_M))
+    if bad.size:
+        v = values[bad[0]]
+        raise InputError(
+            f"{source}: {_label(e)} has the value {v:.6g} {units} ({v * scale:.6g} m), outside the "
+            f"plausible range ±{CAD_COORDINATE_LIMIT_M:g} m (a value in the wrong unit, or garbage)"
+        )
 
 
 def _entity_points(e, tol: float) -> tuple[NDArray, bool]:
@@ -189,6 +218,7 @@ def points_from_dxf(
     tol = flatten_tolerance_m / scale
     pieces, labels, closed = [], [], []
     for e in chosen:
+        _check_extent(e, scale, units, source)
         pts, is_closed = _entity_points(e, tol)
         if len(pts) < 2:
             raise InputError(f"{source}: {_label(e)} has fewer than 2 points")

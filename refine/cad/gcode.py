@@ -38,8 +38,12 @@ from numpy.typing import NDArray
 
 from refine.cad.csv_ import METRES_PER_UNIT, metres_per_unit
 from refine.errors import InputError
+from refine.plausible import CAD_COORDINATE_LIMIT_M, check_coordinates, check_point
 
 logger = logging.getLogger(__name__)
+
+#: Most full turns of one helical arc (the P word of G2/G3) [-].
+MAX_ARC_TURNS = 1000
 
 #: Largest distance between an arc and its chords [m].
 ARC_TOLERANCE_M = 1e-5
@@ -224,7 +228,9 @@ def points_from_gcode(
             elif letter == "R":
                 radius = value
             elif letter == "P" and motion in (2, 3):
-                turns = max(1, int(value))
+                if not 1 <= value <= MAX_ARC_TURNS:
+                    raise InputError(f"{where}: P{value:g}: an arc's turns must be 1..{MAX_ARC_TURNS}")
+                turns = int(value)
             elif letter not in _IGNORED_LETTERS:
                 raise InputError(f"{where}: unsupported word {letter}{value:g} in {text!r}")
         if not target:
@@ -234,6 +240,7 @@ def points_from_gcode(
         end = pos.copy()
         for axis, value in target.items():
             end[axis] = value * scale + (pos[axis] if not absolute else 0.0)
+        check_point(end.tolist(), CAD_COORDINATE_LIMIT_M, where, "end point")
         if motion == 0:
             if np.linalg.norm(end - pos) > 1e-12:
                 current = None
@@ -251,7 +258,9 @@ def points_from_gcode(
                 centre = (c[plane[0]], c[plane[1]])
             else:
                 raise InputError(f"{where}: arc G{motion} needs I/J/K or R: {text!r}")
+            check_point(centre, CAD_COORDINATE_LIMIT_M, where, "arc centre")
             new = _arc_points(pos, end, centre, plane, ccw, turns, arc_tolerance_m, where)
+            check_coordinates(new, CAD_COORDINATE_LIMIT_M, lambda _k, at=where: at, "arc point")
         if np.linalg.norm(new[-1] - pos) <= 1e-12 and len(new) == 1:
             continue
         if current is None:

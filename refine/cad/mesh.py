@@ -33,6 +33,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from refine.cad.csv_ import metres_per_unit
 from refine.errors import InputError
+from refine.plausible import CAD_COORDINATE_LIMIT_M, check_coordinates
 
 logger = logging.getLogger(__name__)
 
@@ -185,6 +186,7 @@ def points_from_mesh(
     near = None if start_near is None else _vector(start_near, "start_near", source) * scale
     mesh = _load(path, source)
     vertices = np.asarray(mesh.vertices, dtype=float) * scale
+    check_coordinates(vertices, CAD_COORDINATE_LIMIT_M, lambda k: f"{source}: vertex {k}", "coordinate")
     mesh = trimesh.Trimesh(vertices=vertices, faces=mesh.faces, process=False)
     size = float(np.ptp(vertices, axis=0).max()) or 1.0
     tol = CLOSED_RELATIVE_TOLERANCE * max(size, 1.0)

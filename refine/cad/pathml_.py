@@ -28,6 +28,7 @@ from refine.cad.resample import DUPLICATE_TOLERANCE_M, resample_by_arc_length
 from refine.errors import InputError
 from refine.export.pathml_read import PathMLTrack, read_pathml
 from refine.paths import FusedPath
+from refine.plausible import CAD_COORDINATE_LIMIT_M, CAD_SPEED_LIMIT_M_S, check_coordinates
 from refine.settings import check_waypoint_count
 
 logger = logging.getLogger(__name__)
@@ -81,6 +82,17 @@ def fused_from_pathml(path: str | Path, spacing_m: float, track: str | None = No
     if not np.all(np.isfinite(tr.speed)):
         k = int(np.flatnonzero(~np.isfinite(tr.speed))[0])
         raise InputError(f"PathML {path}: track {tr.name!r} point {k} has no valid speed [m/s]")
+
+    def where(k: int) -> str:
+        return f"PathML {path}: track {tr.name!r} point {k}"
+
+    check_coordinates(tr.positions, CAD_COORDINATE_LIMIT_M, where, "position")
+    fast = np.flatnonzero(~(np.abs(tr.speed) <= CAD_SPEED_LIMIT_M_S))
+    if fast.size:
+        k = int(fast[0])
+        raise InputError(
+            f"{where(k)}: speed {tr.speed[k]:.6g} m/s is outside the plausible range 0..{CAD_SPEED_LIMIT_M_S:g} m/s"
+        )
 
     keep = np.zeros(len(tr.positions), dtype=bool)
     keep[0] = True

@@ -25,6 +25,13 @@ import numpy as np
 from refine.errors import InputError
 from refine.frames import matrix_from_tracker_angles, tracker_angles_from_matrix
 from refine.paths import TrackerLog
+from refine.plausible import (
+    CSV_ANGLE_LIMIT_DEG,
+    DEMO_POSITION_LIMIT_M,
+    check_angles,
+    check_coordinates,
+    check_times,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -97,10 +104,18 @@ def read_demo_csv(path: str | Path, units: str = "m") -> TrackerLog:
             f"{path}:{linenos[k]}: t = {data[k, 0]} s does not increase after "
             f"t = {data[k - 1, 0]} s (line {linenos[k - 1]})"
         )
+
+    def where(k: int) -> str:
+        return f"{path}:{linenos[k]}"
+
+    check_times(data[:, 0], where)
+    positions = data[:, 1:4] * METRES_PER_UNIT[units]
+    check_coordinates(positions, DEMO_POSITION_LIMIT_M, where, "position")
+    check_angles(data[:, 4:7], [CSV_ANGLE_LIMIT_DEG] * 3, where, COLUMNS[4:7])
     logger.debug("%s: %d samples over %.3f s", path, len(data), data[-1, 0] - data[0, 0])
     return TrackerLog(
         t=data[:, 0] - data[0, 0],
-        positions=data[:, 1:4] * METRES_PER_UNIT[units],
+        positions=positions,
         rotations=matrix_from_tracker_angles(data[:, 4], data[:, 5], data[:, 6], degrees=True),
         source=str(path),
     )

@@ -50,6 +50,13 @@ import numpy as np
 from refine.errors import InputError
 from refine.frames import matrix_from_quaternion, matrix_from_tracker_angles, tracker_angles_from_matrix
 from refine.paths import TrackerLog
+from refine.plausible import (
+    DEMO_POSITION_LIMIT_M,
+    check_coordinates,
+    check_euler,
+    check_quaternions,
+    check_times,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -59,6 +66,8 @@ BYTES_PER_SAMPLE = 600
 """Peak memory per sample of the demonstration stage, measured (docs/problem-file.md, "Limits")."""
 #: Length of one Liberty position unit [m].
 METRES_PER_UNIT = {"in": 0.0254, "cm": 0.01}
+#: The sample rates accepted [Hz] (the same range as ``demonstration.rate_hz``).
+MIN_RATE_HZ, MAX_RATE_HZ = 1.0, 10_000.0
 _HEADER = re.compile(r"^#\s*(units|rate_hz)\s*[:=]\s*(\S+)\s*$", re.IGNORECASE)
 
 
@@ -73,8 +82,10 @@ def _parse_rate(text: str, where: str) -> float:
         rate = float(text)
     except ValueError:
         rate = float("nan")
-    if not (np.isfinite(rate) and rate > 0.0):
-        raise InputError(f"{where}: rate_hz must be a number > 0 Hz, got {text!r}")
+    if not (np.isfinite(rate) and MIN_RATE_HZ <= rate <= MAX_RATE_HZ):
+        raise InputError(
+            f"{where}: rate_hz must be a number in [{MIN_RATE_HZ:g}, {MAX_RATE_HZ:g}] Hz, got {text!r}"
+        )
     return rate
 
 
@@ -279,10 +290,20 @@ def read_liberty_ascii(
                 f"{path}:{rows.all_linenos[k]}: frame count {int(f_count[k])} does not increase after "
                 f"{int(f_count[k - 1])} (line {rows.all_linenos[k - 1]})"
             )
-        t = (f_count - f_count[0]) / rate_hz
+        t = (f_count - f_count[0]) / rate_hz  # increasing counts: steps of 1 / rate_hz or more
         data = data[:, 1:]
     else:
         t = np.arange(len(data)) / rate_hz
+    def where(k: int) -> str:
+        return f"{path}:{rows.all_linenos[k]}"
+
+    positions = data[:, :3] * scale
+    check_coordinates(positions, DEMO_POSITION_LIMIT_M, where, "position")
+    if quaternions:
+        check_quaternions(data[:, 3:7], where)
+    else:
+        check_euler(data[:, 3:6], where)
+    check_times(t, where)
     rotations = np.empty((len(data), 3, 3))
     for a in range(0, len(data), _CHUNK_LINES):  # in blocks: the conversion's temporaries stay small
         rows_ = data[a : a + _CHUNK_LINES]
@@ -304,7 +325,7 @@ def read_liberty_ascii(
     logger.debug("%s: %d samples of station %d at %g Hz", path, len(t), station, rate_hz)
     return TrackerLog(
         t=t.astype(float),
-        positions=data[:, :3] * scale,
+        positions=positions,
         rotations=rotations,
         station=station,
         source=str(path),

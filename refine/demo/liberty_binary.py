@@ -63,6 +63,7 @@ from refine.frames import (
     tracker_angles_from_matrix,
 )
 from refine.paths import TrackerLog
+from refine.plausible import DEMO_POSITION_LIMIT_M, check_coordinates, check_euler, check_times
 
 logger = logging.getLogger(__name__)
 
@@ -232,6 +233,11 @@ def read_liberty_binary(
         )
     fields = {k: np.array(v) for k, v in _decode(output_list, payloads, str(path)).items()}
     positions = fields["position"].astype(float)
+
+    def where(k: int) -> str:
+        return f"{path}: record at byte offset {offsets[k]}"
+
+    check_coordinates(positions * METRES_PER_UNIT[units], DEMO_POSITION_LIMIT_M, where, "position")
     if "quaternion" in fields:
         quats = fields["quaternion"].astype(float)
         norms = np.linalg.norm(quats, axis=1)
@@ -252,6 +258,7 @@ def read_liberty_binary(
                 f"{path}: record at byte offset {offsets[k]}: position {positions[k].tolist()} {units} "
                 f"or Euler angles {angles[k].tolist()} deg are not finite"
             )
+        check_euler(angles, where)
         rotations = matrix_from_tracker_angles(angles[:, 0], angles[:, 1], angles[:, 2], degrees=True)
     device_error = np.array(errors, dtype=np.int16)
     if device_error.any():
@@ -277,6 +284,7 @@ def read_liberty_binary(
             f"{path}: record at byte offset {offsets[k]}: time {t[k]:.3f} s does not increase "
             f"after {t[k - 1]:.3f} s (offset {offsets[k - 1]})"
         )
+    check_times(t, where)
     logger.debug("%s: %d records of station %d, output list %s", path, len(t), station, output_list)
     return TrackerLog(
         t=t,

@@ -1,0 +1,167 @@
+"""Plausibility ranges for the numbers the readers take from input files.
+
+A finite number can still be absurd: ``1e308`` in a tracker log, a CAD coordinate in the wrong
+unit, a sample time in microseconds read as seconds. Every reader checks its values against these
+ranges and stops (:class:`~refine.errors.InputError`, exit 2) naming the file and the line, record
+or entity, the value and the range, so nothing absurd reaches the optimisation.
+
+The ranges, with their reasons (docs/problem-file.md, "Plausibility ranges"):
+
+* :data:`DEMO_POSITION_LIMIT_M`: a tracker sample's coordinate [m]; a magnetic tracker's field
+  reaches a few metres from its source, and an optical one's volume is a room.
+* :data:`EULER_LIMITS_DEG`: a Polhemus record's azimuth, elevation and roll [deg], the ranges the
+  device prints (azimuth and roll within ±180 deg, elevation within ±90 deg), plus
+  :data:`ANGLE_TOLERANCE_DEG` for the printed rounding; :data:`CSV_ANGLE_LIMIT_DEG` for angles
+  written by other software.
+* :data:`QUATERNION_NORM_TOLERANCE`: how far a quaternion's norm may be from 1 [-].
+* :data:`MAX_DURATION_S`, :data:`MIN_STEP_S`, :data:`MAX_ABS_TIME_S`: a demonstration lasts at
+  most a day, its samples are at least a microsecond apart (no tracker samples at 1 MHz), and an
+  absolute time stamp [s] is below 1e10 s (Unix time in the year 2286).
+* :data:`CAD_COORDINATE_LIMIT_M`: a CAD/CAM coordinate after its unit conversion [m]; no robot
+  cell spans a kilometre, while a unit slip of a thousand or a million still shows.
+* :data:`CAD_SPEED_LIMIT_M_S`: a PathML point's speed [m/s]; industrial robots move their tool at
+  a few metres per second.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from refine.errors import InputError
+
+DEMO_POSITION_LIMIT_M = 10.0
+"""Largest accepted |x|, |y| or |z| of a demonstration sample [m]."""
+EULER_LIMITS_DEG = (180.0, 90.0, 180.0)
+"""Largest |azimuth|, |elevation|, |roll| of a Polhemus record [deg]."""
+ANGLE_TOLERANCE_DEG = 0.01
+"""Allowance on :data:`EULER_LIMITS_DEG` for the device's printed rounding [deg]."""
+CSV_ANGLE_LIMIT_DEG = 360.0
+"""Largest |angle| in a demonstration CSV [deg]."""
+QUATERNION_NORM_TOLERANCE = 0.01
+"""Largest | |q| - 1 | of an orientation quaternion [-]."""
+MAX_DURATION_S = 86_400.0
+"""Longest demonstration, first to last sample [s] (a day)."""
+MIN_STEP_S = 1e-6
+"""Shortest time between two samples [s]."""
+MAX_ABS_TIME_S = 1e10
+"""Largest |t| of a sample time stamp [s]."""
+CAD_COORDINATE_LIMIT_M = 1_000.0
+"""Largest accepted |x|, |y| or |z| of a CAD/CAM point, in metres after the unit conversion."""
+CAD_SPEED_LIMIT_M_S = 10.0
+"""Largest accepted speed of a PathML point [m/s]."""
+
+Where = Callable[[int], str]
+"""Names the location of sample ``k`` for an error message, e.g. ``"log.txt:17"``."""
+
+
+def _first_beyond(values: np.ndarray, limits: np.ndarray) -> tuple[int, int] | None:
+    """(row, column) of the first value whose magnitude exceeds its column's limit, or None."""
+    bad = ~(np.abs(values) <= limits)  # NaN counts as beyond
+    if not bad.any():
+        return None
+    k, j = np.argwhere(bad)[0]
+    return int(k), int(j)
+
+
+def check_coordinates(points: ArrayLike, limit_m: float, where: Where, what: str) -> None:
+    """Stop at the first point with a coordinate beyond ±``limit_m``.
+
+    Args:
+        points: coordinates [m], shape (K, 3).
+        limit_m: the range [m] (:data:`DEMO_POSITION_LIMIT_M` or :data:`CAD_COORDINATE_LIMIT_M`).
+        where: names point ``k``'s file and line (or record, entity).
+        what: what the points are, e.g. ``"position"``.
+
+    Raises:
+        InputError: naming the location, the coordinate [m] and the range.
+    """
+    p = np.asarray(points, dtype=float).reshape(-1, 3)
+    hit = _first_beyond(p, np.full(3, limit_m))
+    if hit is not None:
+        k, j = hit
+        raise InputError(
+            f"{where(k)}: {what} {'xyz'[j]} = {p[k, j]:.6g} m is outside the plausible range "
+            f"±{limit_m:g} m (a value in the wrong unit, or garbage)"
+        )
+
+
+def check_point(xyz: Sequence[float], limit_m: float, where: str, what: str) -> None:
+    """:func:`check_coordinates` for one point [m] at ``where`` (plain Python: cheap per line)."""
+    for j, c in enumerate(xyz):
+        if not abs(c) <= limit_m:
+            raise InputError(
+                f"{where}: {what} {'xyz'[j]} = {c:.6g} m is outside the plausible range "
+                f"±{limit_m:g} m (a value in the wrong unit, or garbage)"
+            )
+
+
+def check_angles(angles_deg: ArrayLike, limits_deg: Sequence[float], where: Where, names: Sequence[str]) -> None:
+    """Stop at the first angle beyond its range (each column ``j`` within ±``limits_deg[j]``).
+
+    Raises:
+        InputError: naming the location, the angle [deg] and its range.
+    """
+    a = np.asarray(angles_deg, dtype=float)
+    lim = np.asarray(limits_deg, dtype=float)
+    hit = _first_beyond(a, lim)
+    if hit is not None:
+        k, j = hit
+        raise InputError(
+            f"{where(k)}: {names[j]} {a[k, j]:.6g} deg is outside the plausible range ±{lim[j]:g} deg"
+        )
+
+
+def check_euler(angles_deg: ArrayLike, where: Where) -> None:
+    """Polhemus Euler angles (azimuth, elevation, roll) [deg] within :data:`EULER_LIMITS_DEG`."""
+    lim = np.asarray(EULER_LIMITS_DEG) + ANGLE_TOLERANCE_DEG
+    check_angles(angles_deg, lim, where, ("azimuth", "elevation", "roll"))
+
+
+def check_quaternions(quats: ArrayLike, where: Where) -> None:
+    """Quaternions (K, 4) of norm 1 within :data:`QUATERNION_NORM_TOLERANCE`.
+
+    Raises:
+        InputError: naming the location, the quaternion and its norm.
+    """
+    q = np.asarray(quats, dtype=float)
+    norm = np.linalg.norm(q, axis=1)
+    bad = np.flatnonzero(~(np.abs(norm - 1.0) <= QUATERNION_NORM_TOLERANCE))
+    if bad.size:
+        k = int(bad[0])
+        raise InputError(
+            f"{where(k)}: quaternion {np.round(q[k], 6).tolist()} has norm {norm[k]:.6g}; a rotation "
+            f"needs 1 ± {QUATERNION_NORM_TOLERANCE:g}"
+        )
+
+
+def check_times(t: ArrayLike, where: Where) -> None:
+    """Check sample times [s] against :data:`MAX_ABS_TIME_S`, :data:`MIN_STEP_S`, :data:`MAX_DURATION_S`.
+
+    |t| must stay below the first, times must increase by at least the second, and the last
+    sample lie at most the third after the first.
+
+    Raises:
+        InputError: naming the location and the time [s].
+    """
+    t = np.asarray(t, dtype=float)
+    big = np.flatnonzero(~(np.abs(t) <= MAX_ABS_TIME_S))
+    if big.size:
+        k = int(big[0])
+        raise InputError(f"{where(k)}: time {t[k]:.6g} s is outside the plausible range ±{MAX_ABS_TIME_S:g} s")
+    steps = np.diff(t)
+    short = np.flatnonzero(~(steps >= MIN_STEP_S))
+    if short.size:
+        k = int(short[0]) + 1
+        raise InputError(
+            f"{where(k)}: time {t[k]:.9g} s is {steps[k - 1]:.3g} s after the sample before; samples "
+            f"must be at least {MIN_STEP_S:g} s apart and in order"
+        )
+    if len(t) and t[-1] - t[0] > MAX_DURATION_S:
+        k = int(np.flatnonzero(t - t[0] > MAX_DURATION_S)[0])
+        raise InputError(
+            f"{where(k)}: time {t[k] - t[0]:.6g} s after the first sample; a demonstration lasts at "
+            f"most {MAX_DURATION_S:g} s"
+        )
