@@ -66,7 +66,7 @@ def _first_beyond(values: np.ndarray, limits: np.ndarray) -> tuple[int, int] | N
     return int(k), int(j)
 
 
-def check_coordinates(points: ArrayLike, limit_m: float, where: Where, what: str) -> None:
+def check_coordinates(points: ArrayLike, limit_m: float, where: Where, what: str, units: str | None = None) -> None:
     """Stop at the first point with a coordinate beyond ±``limit_m``.
 
     Args:
@@ -74,6 +74,7 @@ def check_coordinates(points: ArrayLike, limit_m: float, where: Where, what: str
         limit_m: the range [m] (:data:`DEMO_POSITION_LIMIT_M` or :data:`CAD_COORDINATE_LIMIT_M`).
         where: names point ``k``'s file and line (or record, entity).
         what: what the points are, e.g. ``"position"``.
+        units: the unit the file was read in, named in the message (a unit slip is the usual cause).
 
     Raises:
         InputError: naming the location, the coordinate [m] and the range.
@@ -82,9 +83,9 @@ def check_coordinates(points: ArrayLike, limit_m: float, where: Where, what: str
     hit = _first_beyond(p, np.full(3, limit_m))
     if hit is not None:
         k, j = hit
+        cause = f"read as {units!r}: are the units right?" if units else "a value in the wrong unit, or garbage"
         raise InputError(
-            f"{where(k)}: {what} {'xyz'[j]} = {p[k, j]:.6g} m is outside the plausible range "
-            f"±{limit_m:g} m (a value in the wrong unit, or garbage)"
+            f"{where(k)}: {what} {'xyz'[j]} = {p[k, j]:.6g} m is outside the plausible range ±{limit_m:g} m ({cause})"
         )
 
 

@@ -110,7 +110,7 @@ def read_demo_csv(path: str | Path, units: str = "m") -> TrackerLog:
 
     check_times(data[:, 0], where)
     positions = data[:, 1:4] * METRES_PER_UNIT[units]
-    check_coordinates(positions, DEMO_POSITION_LIMIT_M, where, "position")
+    check_coordinates(positions, DEMO_POSITION_LIMIT_M, where, "position", units)
     check_angles(data[:, 4:7], [CSV_ANGLE_LIMIT_DEG] * 3, where, COLUMNS[4:7])
     logger.debug("%s: %d samples over %.3f s", path, len(data), data[-1, 0] - data[0, 0])
     return TrackerLog(

@@ -28,7 +28,23 @@ The format, as the Liberty prints it in ASCII mode and as refine reads and write
   (``TrackerLog.device_error``); the quality gate treats such samples as dropouts and reports
   them (``demo_quality.device_errors``: counts, sample runs and the SDK's meaning per
   indicator); they are never silently dropped.
+* Records of the station that another command initiated (the device's replies to configuration
+  commands, e.g. ``01B`` for the boresight) are refused with their line: one with six numbers
+  would otherwise read as a sample. Other stations' lines are skipped whatever they hold.
+* Files saved by Polhemus's own software: Polhemus Tracker Terminal (PiTerm 1.0.3, its "Capture
+  Data" switch) appends the bytes the device sends to the capture file unchanged, with no header
+  line, time column or separators of its own, so its captures are read as above (or by
+  :mod:`refine.demo.liberty_binary` after ``F1``). Switched on or off while the device is
+  sending, it leaves a partial record as the first or last line: a first line that is not a
+  record, or a last line without a line end shorter than the record before it, is refused with
+  a message saying so. Sessions appended to one file restart the frame count: refused (the count
+  does not increase). For PiMgr (Windows) and the PDI SDK no description or example of a saved
+  file was found (the SDK's ``CPDIdev`` offers raw P&O export over a pipe, TCP or UDP, which is
+  this record stream, and an I/O trace log ``PICMDIF.LOG``, hex by default): such files are read
+  only when they hold the device's records, and refused with the line named otherwise.
 * At most :data:`MAX_SAMPLES` samples of the station are read.
+* Every value is checked against :mod:`refine.plausible`: positions within ±10 m, azimuth and roll
+  within ±180 deg, elevation within ±90 deg, unit quaternions, times within a day.
 * Positions are in inches (default) or centimetres, angles in degrees; the orientation is
   ``R = Rz(azimuth)·Ry(elevation)·Rx(roll)`` (:func:`refine.frames.matrix_from_tracker_angles`).
 * Time: with frame counts ``t = (frame - first_frame) / rate_hz`` (counts must increase); without,
@@ -96,15 +112,24 @@ _GLUED = re.compile(r"(\d{1,2})([A-Za-z])([!-*,/:-~])?([-+.0-9]\S*)")
 _CHUNK_LINES = 65536  # lines parsed at once: memory stays linear in the samples kept
 
 
-def _parse_header(token: str, where: str, line: str) -> tuple[int, str]:
-    """Station and error indicator of a record's first token (module docstring)."""
+_PARTIAL = (
+    " (a capture switched on or off while the device was sending leaves a partial record as the "
+    "file's first or last line: delete that line)"
+)
+#: Initiating commands of position and orientation records: single record and continuous output.
+P_AND_O_COMMANDS = frozenset("PCpc")
+
+
+def _parse_header(token: str, where: str, line: str, hint: str) -> tuple[int, str, str]:
+    """Station, error indicator and initiating command of a record's first token (module docstring)."""
     m = _RECORD_HEADER.fullmatch(token)
     if m is None:
         raise InputError(
             f"{where}: a record must start with the station number (optionally followed by the "
             f"initiating command letter and the error indicator, as in '01P'), got {message_line(line)}"
+            + hint
         )
-    return int(m.group(1)), m.group(3) or ""
+    return int(m.group(1)), m.group(3) or "", m.group(2) or ""
 
 
 def _quaternion_layout(data: np.ndarray, path: Path, linenos: array) -> bool:
@@ -214,7 +239,9 @@ def read_liberty_ascii(
     rows = _Rows(path)
     layout: int | None = None
     stations: set[int] = set()
-    headers: dict[str, tuple[int, str]] = {}
+    headers: dict[str, tuple[int, str, str]] = {}
+    first_line: int | None = None  # the file's first data line
+    previous_length: int | None = None  # characters of the station's record before
     try:
         f = open(path, encoding="utf-8-sig", errors="strict", newline=None)  # noqa: SIM115
     except OSError as e:
@@ -236,19 +263,28 @@ def read_liberty_ascii(
                     elif m:
                         rate_hz = _parse_rate(m.group(2), where)
                     continue
+                first_line = first_line or lineno
+                terminated = raw.endswith("\n")
+                hint = _PARTIAL if lineno == first_line or not terminated else ""
                 tokens = line.split()
                 head = headers.get(tokens[0])
                 if head is None:
                     glued = _GLUED.fullmatch(tokens[0])
                     if glued:  # "01Cu-12.3456": the first value right after the error indicator
-                        head = (int(glued[1]), glued[3] or "")
+                        head = (int(glued[1]), glued[3] or "", glued[2])
                         tokens = [tokens[0][: glued.start(4)], glued[4], *tokens[1:]]
                     else:
-                        head = headers[tokens[0]] = _parse_header(tokens[0], f"{path}:{lineno}", line)
-                st, error = head
+                        head = headers[tokens[0]] = _parse_header(tokens[0], f"{path}:{lineno}", line, hint)
+                st, error, command = head
                 stations.add(st)
                 if st != station:
                     continue
+                if command and command not in P_AND_O_COMMANDS:
+                    raise InputError(
+                        f"{path}:{lineno}: the device's reply to the '{command}' command, not a position "
+                        f"and orientation record (initiating command P or C): {message_line(line)}; "
+                        "delete the replies to commands sent while recording"
+                    )
                 n = len(tokens) - 1
                 if n != layout and (layout is not None or n not in (6, 7)):
                     where = f"{path}:{lineno}"
@@ -256,8 +292,14 @@ def read_liberty_ascii(
                     raise InputError(
                         f"{where}: expected {expected} values after the record header "
                         f"(x y z azimuth elevation roll, frame_count x y z azimuth elevation roll, or "
-                        f"x y z qw qx qy qz), got {n}: {message_line(line)}"
+                        f"x y z qw qx qy qz), got {n}: {message_line(line)}" + hint
                     )
+                if not terminated and previous_length is not None and len(line) < previous_length:
+                    raise InputError(
+                        f"{path}:{lineno}: the last record has {len(line)} characters and no line end, "
+                        f"the one before {previous_length}: {message_line(line)}" + _PARTIAL
+                    )
+                previous_length = len(line)
                 layout = n
                 rows.add(tokens[1:], lineno, line, error)
         except UnicodeDecodeError as e:
@@ -298,7 +340,7 @@ def read_liberty_ascii(
         return f"{path}:{rows.all_linenos[k]}"
 
     positions = data[:, :3] * scale
-    check_coordinates(positions, DEMO_POSITION_LIMIT_M, where, "position")
+    check_coordinates(positions, DEMO_POSITION_LIMIT_M, where, "position", file_units or units or "in")
     if quaternions:
         check_quaternions(data[:, 3:7], where)
     else:

@@ -237,7 +237,7 @@ def read_liberty_binary(
     def where(k: int) -> str:
         return f"{path}: record at byte offset {offsets[k]}"
 
-    check_coordinates(positions * METRES_PER_UNIT[units], DEMO_POSITION_LIMIT_M, where, "position")
+    check_coordinates(positions * METRES_PER_UNIT[units], DEMO_POSITION_LIMIT_M, where, "position", units)
     if "quaternion" in fields:
         quats = fields["quaternion"].astype(float)
         norms = np.linalg.norm(quats, axis=1)

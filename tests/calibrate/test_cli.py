@@ -274,7 +274,7 @@ def test_pivot_from_binary_and_csv_logs(tmp_path, capsys, cell):
     )
     # millimetres read as metres: the positions are beyond any tracker's range
     assert main(["calibrate", "pivot", str(csv), "--format", "csv"]) == 2
-    assert "--units" in capsys.readouterr().err
+    assert "read as 'm': are the units right?" in capsys.readouterr().err
     # a CSV log has one station
     assert main(["calibrate", "pivot", str(csv), "--format", "csv", "--units", "mm", "--station", "2"]) == 2
     assert "one station" in capsys.readouterr().err

@@ -1,0 +1,76 @@
+"""Files captured with Polhemus's own Tracker Terminal (PiTerm): the device's bytes, unchanged.
+
+Evidence: the source of Polhemus Tracker Terminal (PiTerm) 1.0.3 (Copyright 2009-2011 Polhemus,
+GPL v3; "Capture Data" On/Off with a capture file) opens the capture file with ``fopen(filename,
+"a")`` and, for every block read from the tracker, writes the block as read (``fwrite(buf, 1, len,
+f)``) beside showing it: no header line, no time column, no separators of its own, sessions
+appended to the same file, and blocks cut wherever a USB or serial read ended. So a capture holds
+the device's records (ASCII or binary) plus whatever else the device sent while capturing (its
+replies to commands typed meanwhile), and may start or stop inside a record.
+
+No real example file was found; the records below are built from the record layout the readers
+document (station, initiating command, error indicator, then x y z [in] and azimuth, elevation,
+roll [deg] in fixed-width fields, CR LF). Expected values: inches x 0.0254 and
+``Rz(az)·Ry(el)·Rx(roll)`` from scipy.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from refine.demo.liberty import read_liberty_ascii
+from refine.errors import InputError
+
+POSES = [((12.3456, -4.5678, 9.8765), (-12.345, 45.678, 170.123)), ((12.3556, -4.5578, 9.8665), (-12.300, 45.600, 170.000))]
+
+
+def _record(k: int, command: str = "C") -> str:
+    (x, y, z), (a, e, r) = POSES[k % 2]
+    return f"01{command} {x:10.4f}{y:10.4f}{z:10.4f}{a:10.3f}{e:10.3f}{r:10.3f}\r\n"
+
+
+def test_a_capture_of_continuous_records_is_read(tmp_path):
+    f = tmp_path / "capture.txt"
+    f.write_bytes("".join(_record(k) for k in range(6)).encode())
+    log = read_liberty_ascii(f)
+    pos = np.array([POSES[k % 2][0] for k in range(6)]) * 0.0254
+    rot = Rotation.from_euler("ZYX", [POSES[k % 2][1] for k in range(6)], degrees=True).as_matrix()
+    np.testing.assert_allclose(log.positions, pos, atol=1e-12)
+    np.testing.assert_allclose(log.rotations, rot, atol=1e-12)
+    np.testing.assert_allclose(log.t, np.arange(6) / 240.0)
+
+
+def test_a_reply_to_another_command_inside_a_capture_is_refused_with_its_line(tmp_path):
+    # a reply with six numbers would otherwise be read as a sample
+    f = tmp_path / "capture.txt"
+    text = _record(0) + _record(1) + "01B     1.0000    2.0000    3.0000    4.0000    5.0000    6.0000\r\n" + _record(0)
+    f.write_bytes(text.encode())
+    with pytest.raises(InputError, match=r"capture\.txt:3: the device's reply to the 'B' command, not a position"):
+        read_liberty_ascii(f)
+
+
+def test_another_station_s_reply_does_not_stop_the_read(tmp_path):
+    f = tmp_path / "capture.txt"
+    text = _record(0) + "02O 2,4,1\r\n" + _record(1)
+    f.write_bytes(text.encode())
+    assert len(read_liberty_ascii(f).t) == 2
+
+
+def test_a_capture_stopped_mid_record_is_refused_naming_the_last_line(tmp_path):
+    f = tmp_path / "capture.txt"
+    # the last record (4 + 6 x 10 characters, CR LF) cut by 5 bytes: 61 characters, roll "170." instead of 170.123
+    text = _record(0) + _record(1) + _record(0)[:-5]
+    f.write_bytes(text.encode())
+    with pytest.raises(InputError, match=r"capture\.txt:3: the last record has 61 characters and no line end, "
+                                         r"the one before 64: .*partial record"):
+        read_liberty_ascii(f)
+
+
+def test_a_capture_started_mid_record_is_refused_naming_the_first_line(tmp_path):
+    f = tmp_path / "capture.txt"
+    text = _record(1)[30:] + _record(0) + _record(1)
+    f.write_bytes(text.encode())
+    with pytest.raises(InputError, match=r"capture\.txt:1: a record must start with the station number.*partial record"):
+        read_liberty_ascii(f)
