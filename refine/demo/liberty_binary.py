@@ -92,6 +92,10 @@ AUTO_LAYOUTS = tuple(
 )
 _COMMANDS = {ord(c) for c in "CcPp"}
 _NO_ERROR = {0, 0x20}
+_PARTIAL = (
+    " (a capture switched on or off while the device was sending, as Polhemus Tracker Terminal's "
+    "capture does, starts or ends inside a record: cut the file at a record boundary)"
+)
 
 
 def _item_format(output_list: Sequence[int], where: str) -> struct.Struct:
@@ -189,18 +193,19 @@ def read_liberty_binary(
         if len(data) - offset < HEADER.size:
             raise InputError(
                 f"{path}: truncated record header at byte offset {offset} "
-                f"({len(data) - offset} of {HEADER.size} bytes)"
+                f"({len(data) - offset} of {HEADER.size} bytes)" + _PARTIAL
             )
         preamble, st, cmd, err, _, size = HEADER.unpack_from(data, offset)
         if preamble != PREAMBLE:
             raise InputError(
                 f"{path}: bad record header at byte offset {offset}: expected b'LY', got {preamble!r}"
+                + (_PARTIAL if offset == 0 else "")
             )
         end = offset + HEADER.size + size
         if end > len(data):
             raise InputError(
                 f"{path}: truncated record at byte offset {offset}: station {st}, response size "
-                f"{size} bytes, only {len(data) - offset - HEADER.size} left"
+                f"{size} bytes, only {len(data) - offset - HEADER.size} left" + _PARTIAL
             )
         stations.add(st)
         if st == station and cmd in _COMMANDS:

@@ -16,11 +16,14 @@ roll [deg] in fixed-width fields, CR LF). Expected values: inches x 0.0254 and
 
 from __future__ import annotations
 
+import struct
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
 from refine.demo.liberty import read_liberty_ascii
+from refine.demo.liberty_binary import read_liberty_binary
 from refine.errors import InputError
 
 POSES = [((12.3456, -4.5678, 9.8765), (-12.345, 45.678, 170.123)), ((12.3556, -4.5578, 9.8665), (-12.300, 45.600, 170.000))]
@@ -74,3 +77,25 @@ def test_a_capture_started_mid_record_is_refused_naming_the_first_line(tmp_path)
     f.write_bytes(text.encode())
     with pytest.raises(InputError, match=r"capture\.txt:1: a record must start with the station number.*partial record"):
         read_liberty_ascii(f)
+
+
+def _binary(k: int) -> bytes:
+    (x, y, z), (a, e, r) = POSES[k % 2]
+    # "LY", station 1, 'C', no error, reserved, 26 payload bytes: 6 float32 and CR LF
+    return b"LY\x01C \x00" + struct.pack("<H", 26) + struct.pack("<6f", x, y, z, a, e, r) + b"\r\n"
+
+
+def test_a_binary_capture_started_mid_record_is_refused_saying_so(tmp_path):
+    f = tmp_path / "capture.lyb"
+    f.write_bytes(_binary(0)[5:] + _binary(1) + _binary(0))
+    with pytest.raises(InputError, match=r"bad record header at byte offset 0: expected b'LY'.*inside a record"):
+        read_liberty_binary(f)
+
+
+def test_a_binary_capture_stopped_mid_record_is_refused_saying_so(tmp_path):
+    f = tmp_path / "capture.lyb"
+    # records of 8 + 26 = 34 bytes: the third starts at 68 and keeps 20 of its 26 payload bytes
+    f.write_bytes(_binary(0) + _binary(1) + _binary(0)[:28])
+    with pytest.raises(InputError, match=r"truncated record at byte offset 68: station 1, response size 26 bytes, "
+                                         r"only 20 left.*inside a record"):
+        read_liberty_binary(f)
