@@ -30,7 +30,6 @@ import sys
 import time
 import traceback
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -211,6 +210,8 @@ def _failed(key: str, reason: str, wall_s: float | None = None) -> dict[str, Any
 
 def _local(workers: int, items: list[BatchItem], task: Callable[[BatchItem], tuple]) -> Iterator[tuple]:
     """Run on a process pool; yields (item, row) as each finishes."""
+    from concurrent.futures import Future, ProcessPoolExecutor, as_completed  # only a batch needs a pool
+
     with ProcessPoolExecutor(max_workers=workers) as pool:
         futures: dict[Future, BatchItem] = {pool.submit(run_one, *task(it)): it for it in items}
         try:

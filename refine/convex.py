@@ -25,11 +25,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import trimesh
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import ConvexHull, HalfspaceIntersection, cKDTree
 
 from refine.errors import InputError
+from refine.lazy import lean_imports
+
+with lean_imports():
+    import trimesh
 
 log = logging.getLogger(__name__)
 

@@ -28,9 +28,12 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial.transform import Rotation
 
 from refine.errors import InputError
+from refine.lazy import lean_imports
+
+with lean_imports():  # often the first import of SciPy
+    from scipy.spatial.transform import Rotation
 
 _GIMBAL_EPS = 1e-9
 

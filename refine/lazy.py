@@ -1,11 +1,19 @@
 """Deferred imports: let a library import a module it only needs for something a run never does.
 
-toppra imports ``matplotlib.pyplot`` at import time for its plotting helpers, which ``refine``
-never calls; loading pyplot costs more CPU time than the rest of the timing stage. While
-:func:`deferred_modules` is active, an ``import`` of the named modules binds a stand-in; the
-stand-in imports the real module the first time one of its attributes is read, so a library
-that does plot still works. The stand-ins leave ``sys.modules`` when the block ends, so every
-later ``import`` gets the real module.
+Some libraries import, when they are imported, modules that ``refine`` never uses:
+
+* toppra imports ``matplotlib.pyplot`` for its plotting helpers; loading pyplot costs more CPU
+  time than the rest of the timing stage;
+* trimesh imports ``networkx`` (about 60 ms) for graph algorithms on meshes that ``refine``'s
+  convex pieces and report shapes never call;
+* SciPy, the first time any of its subpackages is imported, copies NumPy's namespace, which
+  imports ``numpy.f2py`` (the Fortran wrapper generator) and ``numpy.testing`` (about 45 ms).
+
+While :func:`deferred_modules` is active, an ``import`` of the named modules binds a stand-in; the
+stand-in imports the real module the first time one of its attributes is read, so a library that
+does plot or walk a graph still works. The stand-ins leave ``sys.modules`` (and the attributes of
+already imported parents) when the block ends, so every later ``import`` gets the real module.
+:func:`lean_imports` is the block ``refine`` wraps around its imports of these libraries.
 """
 
 from __future__ import annotations
@@ -16,6 +24,9 @@ import sys
 import types
 from collections.abc import Iterator
 from contextlib import contextmanager
+
+#: Modules the libraries ``refine`` uses import at their own import time and a run never uses.
+UNUSED_AT_IMPORT = ("matplotlib", "matplotlib.pyplot", "networkx", "numpy.f2py", "numpy.testing")
 
 
 class _Deferred(types.ModuleType):
@@ -32,9 +43,12 @@ class _Deferred(types.ModuleType):
 def deferred_modules(*names: str) -> Iterator[None]:
     """Inside the block, ``import`` of any of ``names`` (dotted, parents first) binds a stand-in.
 
-    Modules already imported, or not installed, are left alone.
+    Modules already imported, or not installed, are left alone. A stand-in whose parent is already
+    imported is also bound as the parent's attribute for the duration of the block (NumPy reaches
+    its submodules through a module ``__getattr__`` that would otherwise import the real one).
     """
     added: dict[str, _Deferred] = {}
+    bound: list[tuple[types.ModuleType, str, _Deferred]] = []
     for name in names:
         if name in sys.modules:
             continue
@@ -53,6 +67,9 @@ def deferred_modules(*names: str) -> Iterator[None]:
         added[name] = stand_in
         if parent in added:
             setattr(added[parent], child, stand_in)
+        elif parent and child not in vars(sys.modules[parent]):
+            setattr(sys.modules[parent], child, stand_in)
+            bound.append((sys.modules[parent], child, stand_in))
     sys.modules.update(added)
     try:
         yield
@@ -60,6 +77,24 @@ def deferred_modules(*names: str) -> Iterator[None]:
         for name, stand_in in added.items():
             if sys.modules.get(name) is stand_in:
                 del sys.modules[name]
+        for module, child, stand_in in bound:
+            if vars(module).get(child) is stand_in:
+                delattr(module, child)
+
+
+@contextmanager
+def lean_imports() -> Iterator[None]:
+    """Inside the block, the modules of :data:`UNUSED_AT_IMPORT` are deferred.
+
+    Wrap the first import of toppra, trimesh or SciPy in it::
+
+        with lean_imports():
+            import trimesh
+    """
+    import numpy  # noqa: F401  (imported first so its submodules can be deferred)
+
+    with deferred_modules(*UNUSED_AT_IMPORT):
+        yield
 
 
 def _has_submodule(parent: str, child: str) -> bool:

@@ -16,13 +16,16 @@ from pathlib import Path
 
 import fcl
 import numpy as np
-import trimesh
 from lxml import etree
 from numpy.typing import ArrayLike, NDArray
 
 from refine.convex import ConvexPiece
 from refine.errors import InputError
 from refine.frames import make_transform, matrix_from_fixed_xyz
+from refine.lazy import lean_imports
+
+with lean_imports():
+    import trimesh
 
 SUPPORTED_GEOMETRY = ("box", "cylinder", "sphere", "mesh")
 

@@ -178,9 +178,9 @@ def _toppra():
     calls and at more CPU time than the rest of the timing stage: pyplot is deferred until toppra
     reads from it (:mod:`refine.lazy`), and toppra itself is imported only by a run that times a path.
     """
-    from refine.lazy import deferred_modules
+    from refine.lazy import lean_imports
 
-    with deferred_modules("matplotlib", "matplotlib.pyplot"):
+    with lean_imports():
         import toppra
         import toppra.algorithm
         import toppra.constraint

@@ -63,3 +63,46 @@ def test_toppra_is_imported_without_pyplot_and_still_works():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.split() == ["False", "True"]
+
+
+def test_a_submodule_reached_through_the_parents_getattr_is_deferred(tmp_path, monkeypatch):
+    """NumPy's way: ``import pkg.sub as sub`` inside the parent's module ``__getattr__``."""
+    log = tmp_path / "deferred_pkg_c.log"
+    pkg = tmp_path / "deferred_pkg_c"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text(
+        "__all__ = ['heavy']\n"
+        "def __getattr__(name):\n"
+        "    if name == 'heavy':\n"
+        "        import deferred_pkg_c.heavy as heavy\n"
+        "        return heavy\n"
+        "    raise AttributeError(name)\n"
+    )
+    (pkg / "heavy.py").write_text(f"open({str(log)!r}, 'a').write('heavy\\n')\nANSWER = 42\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    import deferred_pkg_c
+
+    namespace: dict = {}
+    with deferred_modules("deferred_pkg_c.heavy"):
+        exec("from deferred_pkg_c import *", namespace)  # what SciPy does to NumPy
+    assert not log.exists()
+    assert "heavy" not in vars(deferred_pkg_c)  # the parent is as it was
+    assert namespace["heavy"].ANSWER == 42  # the copy still reaches the real module
+    assert deferred_pkg_c.heavy.ANSWER == 42
+    assert log.read_text().splitlines() == ["heavy"]
+
+
+def test_a_run_does_not_load_what_its_libraries_import_for_nothing():
+    code = textwrap.dedent(
+        """
+        import sys
+        import refine.frames, refine.robot_geometry, refine.report.scene
+        print(sorted(m for m in ("networkx", "numpy.f2py", "numpy.testing") if m in sys.modules))
+        import trimesh.graph
+        print(trimesh.graph.nx.Graph.__name__)  # trimesh's graph helpers still reach networkx
+        import scipy._lib.array_api_compat.numpy as compat
+        print(compat.testing.assert_allclose.__name__)
+        """
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.split() == ["[]", "Graph", "assert_allclose"]

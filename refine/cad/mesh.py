@@ -28,12 +28,15 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-import trimesh
 from numpy.typing import ArrayLike, NDArray
 
 from refine.cad.csv_ import metres_per_unit
 from refine.errors import InputError
+from refine.lazy import lean_imports
 from refine.plausible import CAD_COORDINATE_LIMIT_M, check_coordinates
+
+with lean_imports():
+    import trimesh
 
 logger = logging.getLogger(__name__)
 

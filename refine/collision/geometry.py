@@ -18,13 +18,16 @@ from pathlib import Path
 
 import fcl
 import numpy as np
-import trimesh
 from numpy.typing import NDArray
 
 from refine.convex import ConvexPiece
 from refine.errors import InputError
+from refine.lazy import lean_imports
 from refine.robot_geometry import CollisionShape, fcl_convex, read_mesh
 from refine.settings import Shape
+
+with lean_imports():
+    import trimesh
 
 log = logging.getLogger(__name__)
 

@@ -17,7 +17,11 @@ from typing import TYPE_CHECKING, Any
 
 import fcl
 import numpy as np
-import trimesh
+
+from refine.lazy import lean_imports
+
+with lean_imports():
+    import trimesh
 
 if TYPE_CHECKING:
     from refine.result import RunResult
