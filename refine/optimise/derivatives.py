@@ -267,6 +267,7 @@ def derivative_functions(
     singular_points: list[tuple[int, float]],
     linear_rows: list[tuple[int, float, Array]],
     singularity_hessian: bool = False,
+    step_rows: Index | None = None,
 ) -> dict[str, ca.Function]:
     """``grad_f``, ``jac_g`` and ``hess_lag`` of the refinement NLP, in CasADi's nlpsol signatures.
 
@@ -289,6 +290,8 @@ def derivative_functions(
             0.24 ms per row and iteration, ten times the rest of an iteration at a hundred rows,
             while leaving them out (an inexact Newton step; the Jacobian stays exact, so the
             answer meets the same KKT conditions) costs about 1.4 times the iterations.
+        step_rows: the joint-step rows the problem holds, as indices ``k·n + j`` in row order;
+            None for all ``n·(N-1)``.
     """
     nq = N * n
     ns = N if elastic_weight is not None else 0
@@ -316,10 +319,10 @@ def derivative_functions(
     # The per-waypoint blocks side by side, in CasADi's column-major order, are the nonzeros of the
     # block-diagonal matrix in its own order, so they are placed without a permutation.
     D1, _ = difference_matrices(N)
-    blocks = [
-        ca.sparsity_cast(ca.vec(Jg), ca.kron(ca.DM.eye(N), ca.DM.ones(4, n)).sparsity()),
-        ca.kron(D1, ca.DM.eye(n)),
-    ]
+    steps = ca.kron(D1, ca.DM.eye(n))
+    if step_rows is not None and len(step_rows) < n * (N - 1):
+        steps = steps[np.asarray(step_rows).tolist(), :] if len(step_rows) else ca.DM(0, nq)
+    blocks = [ca.sparsity_cast(ca.vec(Jg), ca.kron(ca.DM.eye(N), ca.DM.ones(4, n)).sparsity()), steps]
     if S:
         _, grad_w = kernels["singularity_d"].map(S)(Qs)
         rows = _entries()
@@ -347,7 +350,7 @@ def derivative_functions(
     diagonal = ca.kron(ca.DM.eye(N), ca.DM.ones(n, n)).sparsity()
     hess = ca.triu(ca.sparsity_cast(ca.vec(Hwp), diagonal)) + lam_f * ca.triu(K)
     if S and singularity_hessian:
-        first = 4 * N + n * (N - 1)
+        first = 4 * N + steps.shape[0]
         Hs = kernels["singularity_h"].map(S)(Qs, lam_g[first : first + S].T)
         terms = _entries()
         iu, ju = np.triu_indices(n)

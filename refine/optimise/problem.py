@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -84,7 +85,8 @@ class RefinementNLP:
         solver_options: the options it was built with.
         params: numeric value of ``p`` (CAD points and demonstrated orientations).
         lbx, ubx: variable bounds: joint limits minus margin [rad] (n·N), then the slacks (N) when elastic.
-        lbg, ubg: constraint bounds: 4 rows per waypoint, n per segment, then the active set's rows.
+        lbg, ubg: constraint bounds: 4 rows per waypoint, the joint-step rows (n per segment, or those
+            of ``joint_steps``), then the active set's rows.
         n_waypoints, dof: sizes.
         row_names: names of the 4 constraint rows of each waypoint, in order; then the joint
             steps (n per segment), then the active set's rows (singularity points, linear rows).
@@ -95,6 +97,8 @@ class RefinementNLP:
             (:func:`refine.optimise.derivatives.derivative_functions`); empty in ``"casadi"`` mode.
         derivative_mode: how the derivatives are made (see :func:`build_refinement`).
         singularity_hessian: whether the Hessian includes the singularity rows' second derivatives.
+        joint_steps: ``"all"``, or the joint-step rows the problem holds, as indices ``k·n + j``
+            (segment k, joint j) in increasing order (see :func:`build_refinement`).
         robot, base_in_world, tcp_in_flange, fused, tolerances: what it was built from.
         build_time_s: wall time of the build [s].
     """
@@ -124,9 +128,16 @@ class RefinementNLP:
     derivatives: dict[str, ca.Function] = field(default_factory=dict)
     derivative_mode: str = "assembled"
     singularity_hessian: bool = False
+    joint_steps: str | tuple[int, ...] = "all"
 
-    def rebuilt(self, *, active: ActiveSet | None = None, elastic_deg: float | None = None) -> RefinementNLP:
-        """The same problem with another active set or elastic setting (rebuilt, not solved)."""
+    def rebuilt(
+        self,
+        *,
+        active: ActiveSet | None = None,
+        elastic_deg: float | None = None,
+        joint_steps: str | tuple[int, ...] | None = None,
+    ) -> RefinementNLP:
+        """The same problem with another active set, elastic setting or joint-step rows (rebuilt, not solved)."""
         return build_refinement(
             self.robot,
             self.fused,
@@ -140,7 +151,12 @@ class RefinementNLP:
             solver_options=self.solver_options,
             derivative_mode=self.derivative_mode,
             singularity_hessian=self.singularity_hessian,
+            joint_steps=self.joint_steps if joint_steps is None else joint_steps,
         )
+
+    def step_rows(self) -> Array:
+        """Indices ``k·n + j`` of the joint-step rows the problem holds, in row order, (S,)."""
+        return step_rows(self.joint_steps, self.n_waypoints, self.dof)
 
     def joints(self, x: Array) -> Array:
         """The joints (N, n) [rad] in a solution vector ``x``."""
@@ -283,6 +299,7 @@ def build_refinement(
     solver_options: dict[str, Any] | None = None,
     derivative_mode: str = "assembled",
     singularity_hessian: bool = False,
+    joint_steps: str | Sequence[int] = "all",
 ) -> RefinementNLP:
     """Build the refinement NLP for ``fused`` on ``robot`` (no solve).
 
@@ -305,6 +322,12 @@ def build_refinement(
             to build and evaluate, kept for comparison).
         singularity_hessian: give IPOPT the singularity rows' second derivatives too (``"assembled"``
             mode; see :func:`refine.optimise.derivatives.derivative_functions`); off by default.
+        joint_steps: which joint-step rows ``-step <= q_{k+1,j} - q_{k,j} <= step`` the problem
+            holds: ``"all"`` (the complete problem), or the indices ``k·n + j`` of some of them. A
+            step far inside its bound does not change the answer, and the rows are most of the
+            problem's rows, so :func:`refine.optimise.solve.solve_refinement` solves a problem built
+            with only some of them by adding those where the seed or an answer comes near the bound
+            (:data:`refine.optimise.solve.STEP_NEAR`) and solving again until none is left out.
 
     Returns:
         The problem with bounds and parameters filled in.
@@ -342,7 +365,12 @@ def build_refinement(
     if elastic:
         G = ca.vertcat(G[:3, :], G[3, :] + sigma.T)  # cos θ_k + σ_k >= cos α
     rows, lbg_extra, ubg_extra = [ca.vec(G)], [], []
-    rows.append(ca.vec(Q[:, 1:] - Q[:, :-1]))  # continuity: every joint moves at most `step` per waypoint
+    steps = step_rows(joint_steps, N, n)
+    steps_list = steps.tolist()
+    if len(steps_list) == n * (N - 1):
+        rows.append(ca.vec(Q[:, 1:] - Q[:, :-1]))  # continuity: every joint moves at most `step` per waypoint
+    elif steps_list:
+        rows.append(x[[i + n for i in steps_list]] - x[steps_list])
 
     def at(k_idx: list[int], f: list[float]) -> ca.MX:
         Qa, Qb = Q[:, k_idx], Q[:, [min(k + 1, N - 1) for k in k_idx]]
@@ -377,7 +405,7 @@ def build_refinement(
 
     # ---- bounds
     alpha = math.radians(tolerances.orientation_deg)
-    lbg_path, ubg_path = path_row_bounds(tolerances, N, n, elastic=elastic_deg is not None)
+    lbg_path, ubg_path = path_row_bounds(tolerances, N, n, elastic=elastic_deg is not None, steps=steps)
     lbx, ubx = np.tile(lower, N), np.tile(upper, N)
     if elastic_deg is not None:
         sigma_max = math.cos(alpha) - math.cos(min(alpha + math.radians(elastic_deg), math.pi))
@@ -402,6 +430,7 @@ def build_refinement(
             singular_points=points,
             linear_rows=[(r.k, r.f, np.asarray(r.gradient, dtype=float)) for r in active.linear_rows],
             singularity_hessian=singularity_hessian,
+            step_rows=steps,
         )
     )
     options = {**IPOPT_DEFAULTS, **(solver_options or {})}
@@ -432,7 +461,23 @@ def build_refinement(
         derivatives=derivatives,
         derivative_mode=derivative_mode,
         singularity_hessian=singularity_hessian,
+        joint_steps="all" if len(steps_list) == n * (N - 1) else tuple(steps_list),
     )
+
+
+def step_rows(joint_steps: str | Sequence[int], N: int, n: int) -> Array:
+    """The joint-step rows ``joint_steps`` names (``"all"`` or indices ``k·n + j``), sorted, (S,) int."""
+    if isinstance(joint_steps, str):
+        if joint_steps != "all":
+            raise InputError(f"joint_steps must be 'all' or row indices k*n + j, got {joint_steps!r}")
+        return np.arange(n * (N - 1))
+    rows = np.unique(np.asarray(list(joint_steps), dtype=np.int64))
+    if rows.size and not (0 <= rows[0] and rows[-1] < n * (N - 1)):
+        raise InputError(
+            f"joint-step rows must lie in [0, {n * (N - 1)}) for {N} waypoints of {n} joints, "
+            f"got {rows[0]}..{rows[-1]}"
+        )
+    return rows
 
 
 def joint_bounds(robot: Robot, tolerances: Tolerances) -> tuple[Array, Array]:
@@ -446,14 +491,20 @@ def joint_bounds(robot: Robot, tolerances: Tolerances) -> tuple[Array, Array]:
     return lower, upper
 
 
-def path_row_bounds(tolerances: Tolerances, N: int, n: int, *, elastic: bool = False) -> tuple[Array, Array]:
-    """Bounds of the per-waypoint rows (position, cone) and the joint-step rows, in row order."""
+def path_row_bounds(
+    tolerances: Tolerances, N: int, n: int, *, elastic: bool = False, steps: Array | None = None
+) -> tuple[Array, Array]:
+    """Bounds of the per-waypoint rows (position, cone) and the joint-step rows, in row order.
+
+    ``steps``: the joint-step rows held (:func:`step_rows`); None for all of them.
+    """
     lbg_k = np.array([0.0, 0.0, 0.0, math.cos(math.radians(tolerances.orientation_deg))])
     ubg_k = np.array([0.0, 0.0, 0.0, np.inf if elastic else 1.0 + 1e-9])
     step = math.radians(tolerances.joint_step_deg)
+    S = n * (N - 1) if steps is None else len(steps)
     return (
-        np.concatenate([np.tile(lbg_k, N), np.full(n * (N - 1), -step)]),
-        np.concatenate([np.tile(ubg_k, N), np.full(n * (N - 1), step)]),
+        np.concatenate([np.tile(lbg_k, N), np.full(S, -step)]),
+        np.concatenate([np.tile(ubg_k, N), np.full(S, step)]),
     )
 
 
@@ -489,7 +540,7 @@ def reuse_for(problem: RefinementNLP, fused: FusedPath, tolerances: Tolerances) 
     if abs(h_new / h_old - 1.0) > SPACING_REUSE_REL:
         return None
     lower, upper = joint_bounds(problem.robot, tolerances)
-    lbg, ubg = path_row_bounds(tolerances, N, problem.dof)
+    lbg, ubg = path_row_bounds(tolerances, N, problem.dof, steps=problem.step_rows())
     return replace(
         problem,
         params=path_params(fused),

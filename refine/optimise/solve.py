@@ -61,6 +61,12 @@ BRANCH_CANDIDATES = 2
 (:func:`_rank_chains`)."""
 
 MAX_OUTER_ITERATIONS = 8
+
+STEP_NEAR = 0.5
+"""A problem built with only some joint-step rows gets the row of every joint step larger than
+this fraction of the bound, in the seed and in each answer; an answer with a step that large
+outside the rows is solved again with them. Steps under the bound do not bind, so the answer is the
+complete problem's."""
 """Rounds of solve -> verify -> add constraints before giving up on adding more."""
 
 
@@ -126,7 +132,8 @@ class Refinement:
         active: the constraints added by the outer loop in the last round.
         slack_deg: extra orientation slack used per waypoint [deg], (N,) (zeros unless repaired).
         repairs: the repaired segments (derived from ``diagnosis``).
-        timings_s: ``seed``, ``solve``, ``verify``, ``build`` (rebuilds) wall times [s].
+        timings_s: ``seed``, ``solve``, ``verify``, ``build`` (rebuilds) wall times [s]; a
+            :class:`StageTimes`, whose ``cpu`` holds the process CPU time of the same stages.
         diagnosis: every segment that needed slack or has no answer, with its measured causes
             (:mod:`refine.diagnosis`); empty when ok.
         time_limit_reached: the time budget ran out before a verdict (status ``infeasible``).
@@ -232,12 +239,44 @@ def _new_singular(kin: TcpKinematics, q: Array, margin: float, active: ActiveSet
     return ActiveSet(waypoints, tuple(sorted(points - set(active.singular_segments))))
 
 
+def _new_steps(problem: RefinementNLP, q: Array) -> tuple[int, ...]:
+    """Joint-step rows ``k·n + j`` near their bound in ``q`` (N, n) that ``problem`` does not hold."""
+    if problem.joint_steps == "all":
+        return ()
+    step = math.radians(problem.tolerances.joint_step_deg)
+    near = np.flatnonzero(np.abs(np.diff(q, axis=0)).ravel() > min(STEP_NEAR, 1.0) * step)
+    return tuple(sorted(set(near.tolist()) - set(problem.joint_steps)))
+
+
+def _with_steps(problem: RefinementNLP, more: tuple[int, ...]) -> tuple[int, ...] | None:
+    """The joint-step rows of ``problem`` and ``more``, or None when nothing is added."""
+    return tuple(sorted(set(problem.joint_steps) | set(more))) if more else None
+
+
 def _singular_around(mask: Array, widen: int = 2) -> ActiveSet:
     """Singularity bounds at the waypoints of ``mask`` (N,) widened by ``widen``, and mid-segment."""
     N = len(mask)
     idx = np.flatnonzero(mask)
     idx = np.unique(np.clip(idx[:, None] + np.arange(-widen, widen + 1), 0, N - 1))
     return ActiveSet(tuple(int(k) for k in idx), tuple((int(k), 0.5) for k in idx if k < N - 1))
+
+
+class StageTimes(dict):
+    """Wall time per stage [s] (the dict itself), with the process CPU time of the same stages in ``cpu``."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.cpu: dict[str, float] = {}
+
+    @staticmethod
+    def clock() -> tuple[float, float]:
+        """The wall and CPU clocks now, to pass to :meth:`add`."""
+        return time.perf_counter(), time.process_time()
+
+    def add(self, key: str, start: tuple[float, float]) -> None:
+        """Add the wall and CPU time since ``start`` (from :meth:`clock`) to stage ``key``."""
+        self[key] = self.get(key, 0.0) + time.perf_counter() - start[0]
+        self.cpu[key] = self.cpu.get(key, 0.0) + time.process_time() - start[1]
 
 
 class TimeLimitReached(Exception):
@@ -257,9 +296,10 @@ monotone decrease converges in about 40 (the same answer where both converge).""
 
 def _row_keys(problem: RefinementNLP) -> list[tuple]:
     """A name for every constraint row of ``problem``, stable when the active set grows."""
-    N, n, a = problem.n_waypoints, problem.dof, problem.active
+    N, a = problem.n_waypoints, problem.active
     return (
-        [("path", i) for i in range(4 * N + n * (N - 1))]
+        [("path", i) for i in range(4 * N)]
+        + [("step", i) for i in problem.step_rows().tolist()]
         + [("singular", k, 0.0) for k in a.singular_waypoints]
         + [("singular", k, f) for k, f in a.singular_segments]
         + [("row", r.k, r.f, r.label) for r in a.linear_rows]
@@ -269,7 +309,7 @@ def _row_keys(problem: RefinementNLP) -> list[tuple]:
 @dataclass
 class _Loop:
     problem: RefinementNLP
-    timings: dict[str, float]
+    timings: StageTimes
     iterations: int = 0
     outer: int = 0
     max_rounds: int = MAX_OUTER_ITERATIONS
@@ -279,8 +319,8 @@ class _Loop:
 
     def solve(self, x0: Array, warm: bool = False) -> tuple[Array, dict]:
         """Solve from ``x0``; ``warm``: with the last solve's multipliers, row by row."""
-        t0 = time.perf_counter()
-        if t0 >= self.deadline:
+        start = StageTimes.clock()
+        if start[0] >= self.deadline:
             raise TimeLimitReached
         p = self.problem
         extra = {}
@@ -302,15 +342,15 @@ class _Loop:
         if status in {"Invalid_Option", "Invalid_Problem_Definition", "Insufficient_Memory"}:
             raise SolverError(f"IPOPT could not solve the refinement: {status}")
         if status == "Maximum_WallTime_Exceeded" or time.perf_counter() >= self.deadline:
-            self.timings["solve"] = self.timings.get("solve", 0.0) + time.perf_counter() - t0
+            self.timings.add("solve", start)
             raise TimeLimitReached
         self.iterations += int(stats.get("iter_count", 0))
-        self.timings["solve"] = self.timings.get("solve", 0.0) + time.perf_counter() - t0
+        self.timings.add("solve", start)
         return np.asarray(sol["x"]).ravel(), stats
 
     def rebuild(self, warm: bool = False, **changes) -> None:
         """Rebuild with ``changes``; ``warm``: for a solve that starts at the last answer."""
-        t0 = time.perf_counter()
+        start = StageTimes.clock()
         if self.base_options is None:
             self.base_options = dict(self.problem.solver_options)
         options = dict(self.base_options)
@@ -319,7 +359,7 @@ class _Loop:
         if warm:
             options.update(WARM_START_OPTIONS)
         self.problem = replace(self.problem, solver_options=options).rebuilt(**changes)
-        self.timings["build"] = self.timings.get("build", 0.0) + time.perf_counter() - t0
+        self.timings.add("build", start)
 
 
 def _run_rounds(
@@ -334,26 +374,28 @@ def _run_rounds(
         x, stats = loop.solve(x0, warm)
         p = loop.problem
         q, slack = p.joints(x), p.slack_deg(x)
-        t0 = time.perf_counter()
+        start = StageTimes.clock()
         check = check_path(
             kin, q, p.fused, p.tolerances, p.axisymmetric, slack if p.elastic_deg is not None else None
         )
         extra = [v for src in sources for v in src.violations(p, q)]
         if extra:
             check = replace(check, violations=check.violations + tuple(extra))
-        loop.timings["verify"] = loop.timings.get("verify", 0.0) + time.perf_counter() - t0
+        loop.timings.add("verify", start)
         if not stats.get("success", False) or loop.outer >= loop.max_rounds:
             return x, stats, check, slack
         more = _new_singular(kin, q, margin, p.active)
         rows = tuple(r for src in sources for r in src.rows(p, q))
-        if not (more.singular_waypoints or more.singular_segments or rows):
+        steps = _new_steps(p, q)
+        if not (more.singular_waypoints or more.singular_segments or rows or steps):
             return x, stats, check, slack
         log.info(
-            "outer round %d: +%d singular waypoints, +%d segment points, %d linear rows",
+            "outer round %d: +%d singular waypoints, +%d segment points, %d linear rows, +%d joint steps",
             loop.outer,
             len(more.singular_waypoints),
             len(more.singular_segments),
             len(rows),
+            len(steps),
         )
         # rows accumulate, a pair's fresh linearisation at the same point replacing its old one:
         # replacing whole rounds lets the path swing between two sides of an obstacle
@@ -361,7 +403,7 @@ def _run_rounds(
         active = ActiveSet(
             grown.singular_waypoints, grown.singular_segments, _merge_rows(p.active.linear_rows, rows)
         )
-        loop.rebuild(warm=True, active=active, elastic_deg=p.elastic_deg)
+        loop.rebuild(warm=True, active=active, elastic_deg=p.elastic_deg, joint_steps=_with_steps(p, steps))
         x0, warm = (x if p.elastic_deg is not None else q.ravel()), True
 
 
@@ -398,8 +440,9 @@ def solve_refinement(
     Raises:
         SolverError: IPOPT itself failed (not an infeasibility): the message names its status.
     """
-    timings: dict[str, float] = {}
-    t0 = time.perf_counter()
+    timings = StageTimes()
+    start = StageTimes.clock()
+    t0 = start[0]
     # the tilt each demonstrated pose needs for the wrist centre to be in reach: a seed tilted into
     # reach (off the stretched elbow) converges where the demonstrated one cannot, and a tilt beyond
     # the cone (or cone + slack) proves the strict (or repaired) problem infeasible without a solve
@@ -414,7 +457,7 @@ def solve_refinement(
         stretched = inset > 0.0
     q_seed = initial_guess(problem, home, rotations) if q0 is None else np.asarray(q0, dtype=float)
     unreachable = _out_of_reach(problem, q_seed, home)
-    timings["seed"] = time.perf_counter() - t0
+    timings.add("seed", start)
     cone = problem.tolerances.orientation_deg
     slack_max = repair_max_slack_deg if repair_max_slack_deg is not None else 0.0
     beyond = certain & (tilts > cone + slack_max + TILT_TOLERANCE_DEG)
@@ -482,7 +525,7 @@ def solve_refinement(
         return _timed_out(problem, q_seed, time_limit_s, timings)
     if attempt.status == "infeasible" and q0 is None and max_branches > 1 and time.perf_counter() < deadline:
         # the first IK branch may be the wrong one: try the first waypoint's other branches
-        t0 = time.perf_counter()
+        start = StageTimes.clock()
         lower, upper = _bounds(problem)
         # chained towards the same poses as the first seed (tilted into reach), more than will be
         # tried, and tried best chain first
@@ -499,7 +542,7 @@ def solve_refinement(
             count=BRANCH_CANDIDATES * (max_branches - 1),
         )
         others = _rank_chains(kin, targets, lower, upper, chains)[: max_branches - 1]
-        timings["seed"] += time.perf_counter() - t0
+        timings.add("seed", start)
         for k, q_other in enumerate(others, start=2):
             try:
                 # the elastic problem alone: its answer without slack is the strict one, and the
@@ -531,7 +574,7 @@ def _attempt(
     sources: tuple[ConstraintSource, ...],
     repair_max_slack_deg: float | None,
     max_rounds: int,
-    timings: dict[str, float],
+    timings: StageTimes,
     deadline: float = math.inf,
     skip_strict: str = "",
     stretched: Array | None = None,
@@ -552,11 +595,13 @@ def _attempt(
     if stretched is not None and stretched.any() and problem.tolerances.singularity_margin > 0:
         initial = initial.union(_singular_around(stretched))
     seed_rows = tuple(r for src in sources for r in src.rows(problem, q_seed))
-    if initial.singular_waypoints or initial.singular_segments or seed_rows:
+    seed_steps = _new_steps(problem, q_seed)
+    if initial.singular_waypoints or initial.singular_segments or seed_rows or seed_steps:
         loop.rebuild(
             active=problem.active.union(
                 ActiveSet(initial.singular_waypoints, initial.singular_segments, seed_rows)
-            )
+            ),
+            joint_steps=_with_steps(problem, seed_steps),
         )
     if skip_strict:
         q = q_seed

@@ -13,7 +13,7 @@ from refine.problem import Tolerances
 from refine.synthetic import wave_path
 
 
-def _problem(robot, tool, *, elastic: bool, singularity_hessian: bool = True):
+def _problem(robot, tool, *, elastic: bool, singularity_hessian: bool = True, joint_steps="all"):
     rng = np.random.default_rng(3)
     N = 12
     active = ActiveSet(
@@ -35,19 +35,24 @@ def _problem(robot, tool, *, elastic: bool, singularity_hessian: bool = True):
         active=active,
         elastic_deg=2.0 if elastic else None,
         singularity_hessian=singularity_hessian,
+        joint_steps=joint_steps,
     )
 
 
 @pytest.mark.parametrize("elastic", [False, True])
 @pytest.mark.parametrize("singularity_hessian", [True, False])
+@pytest.mark.parametrize("joint_steps", ["all", (0, 7, 20, 65), ()])
 def test_assembled_derivatives_equal_casadi_differentiation(
-    irb4600, straight_tool, monkeypatch, elastic, singularity_hessian
+    irb4600, straight_tool, monkeypatch, elastic, singularity_hessian, joint_steps
 ):
-    """Exact everywhere; without the singularity Hessian, the Hessian is the exact one of a Lagrangian
-    whose singularity rows have zero multipliers."""
+    """Exact everywhere, with all, some or none of the joint-step rows; without the singularity
+    Hessian, the Hessian is the exact one of a Lagrangian whose singularity rows have zero multipliers."""
     # in the virtual machine, CasADi can differentiate the symbolic problem twice itself
     monkeypatch.setenv("REFINE_COMPILE", "0")
-    nlp = _problem(irb4600, straight_tool, elastic=elastic, singularity_hessian=singularity_hessian)
+    nlp = _problem(
+        irb4600, straight_tool, elastic=elastic, singularity_hessian=singularity_hessian, joint_steps=joint_steps
+    )
+    assert nlp.nlp["g"].shape[0] == 4 * 12 + (6 * 11 if joint_steps == "all" else len(joint_steps)) + 4 + 3
     x, p, f, g = (nlp.nlp[k] for k in ("x", "p", "f", "g"))
     lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", g.shape[0])
     reference = ca.Function(
@@ -68,7 +73,7 @@ def test_assembled_derivatives_equal_casadi_differentiation(
     )
     if not singularity_hessian:
         # the 4 singularity rows (2 waypoints, 2 segment points) follow the path and step rows
-        first = 4 * nlp.n_waypoints + 6 * (nlp.n_waypoints - 1)
+        first = 4 * nlp.n_waypoints + (6 * (nlp.n_waypoints - 1) if joint_steps == "all" else len(joint_steps))
         lg_no_singular = lg.copy()
         lg_no_singular[first : first + 4] = 0.0
         hess_exact = np.array(ca.densify(reference(xv, nlp.params, lf, lg)[4]))

@@ -130,3 +130,53 @@ def test_an_infeasible_answer_is_retried_from_other_ik_branches_and_says_so(irb4
     assert result.status == "infeasible"
     assert "no repair within 15 deg" in result.reason
     assert "IK branch(es) tried" in result.reason
+
+
+# ---- a problem built with only some joint-step rows ----------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def steep_wave(irb4600, straight_tool):
+    """40 waypoints on 1 m: axis 6 turns 12.9 deg between two of them where no bound holds it."""
+    fused = wave_path(40, length_m=1.0)
+    start = solve_refinement(
+        build_refinement(irb4600, fused, np.eye(4), straight_tool, Tolerances(joint_step_deg=12.4))
+    )
+    assert start.status == "ok", start.reason
+    return fused, start.q  # every step within 12.4 deg
+
+
+def test_a_problem_with_some_joint_step_rows_is_solved_with_those_that_bind(
+    steep_wave, irb4600, straight_tool, monkeypatch
+):
+    """No row from the seed; the first answer steps past the bound, so the rows are added and it is
+    solved again: the answer is the complete problem's, on the bound and not past it."""
+    import refine.optimise.solve as solve_module
+
+    fused, q0 = steep_wave
+    tol = Tolerances(joint_step_deg=12.5)
+    complete = solve_refinement(build_refinement(irb4600, fused, np.eye(4), straight_tool, tol), q0)
+    monkeypatch.setattr(solve_module, "STEP_NEAR", 10.0)  # rows only for steps past the bound
+    lazy = solve_refinement(build_refinement(irb4600, fused, np.eye(4), straight_tool, tol, joint_steps=()), q0)
+    assert complete.status == lazy.status == "ok"
+    assert complete.outer_iterations == 1 and lazy.outer_iterations == 2
+    steps = np.degrees(np.abs(np.diff(lazy.q, axis=0)))
+    assert steps.max() <= 12.5 + 1e-7 and steps.max() >= 12.5 - 1e-4  # the bound binds
+    np.testing.assert_allclose(lazy.q, complete.q, atol=1e-6)
+
+
+def test_joint_step_rows_near_their_bound_in_the_seed_are_there_from_the_first_solve(
+    steep_wave, irb4600, straight_tool
+):
+    fused, q0 = steep_wave
+    tol = Tolerances(joint_step_deg=12.5)
+    lazy = solve_refinement(build_refinement(irb4600, fused, np.eye(4), straight_tool, tol, joint_steps=()), q0)
+    assert lazy.status == "ok" and lazy.outer_iterations == 1
+    assert np.degrees(np.abs(np.diff(lazy.q, axis=0))).max() <= 12.5 + 1e-7
+
+
+def test_joint_step_rows_outside_the_path_are_refused(irb4600, straight_tool):
+    from refine.errors import InputError
+
+    with pytest.raises(InputError, match=r"joint-step rows must lie in \[0, 54\)"):
+        build_refinement(irb4600, wave_path(10), np.eye(4), straight_tool, Tolerances(), joint_steps=(54,))
