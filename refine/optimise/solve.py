@@ -270,13 +270,19 @@ class StageTimes(dict):
 
     @staticmethod
     def clock() -> tuple[float, float]:
-        """The wall and CPU clocks now, to pass to :meth:`add`."""
+        """The wall and CPU clocks now."""
         return time.perf_counter(), time.process_time()
 
-    def add(self, key: str, start: tuple[float, float]) -> None:
-        """Add the wall and CPU time since ``start`` (from :meth:`clock`) to stage ``key``."""
-        self[key] = self.get(key, 0.0) + time.perf_counter() - start[0]
-        self.cpu[key] = self.cpu.get(key, 0.0) + time.process_time() - start[1]
+
+
+def _add(timings: dict[str, float], key: str, start: tuple[float, float]) -> None:
+    """Add the wall time since ``start`` (:meth:`StageTimes.clock`) to stage ``key`` of ``timings``.
+
+    The CPU time goes to ``timings.cpu`` where ``timings`` is a :class:`StageTimes`.
+    """
+    timings[key] = timings.get(key, 0.0) + time.perf_counter() - start[0]
+    if isinstance(timings, StageTimes):
+        timings.cpu[key] = timings.cpu.get(key, 0.0) + time.process_time() - start[1]
 
 
 class TimeLimitReached(Exception):
@@ -309,7 +315,7 @@ def _row_keys(problem: RefinementNLP) -> list[tuple]:
 @dataclass
 class _Loop:
     problem: RefinementNLP
-    timings: StageTimes
+    timings: dict[str, float]
     iterations: int = 0
     outer: int = 0
     max_rounds: int = MAX_OUTER_ITERATIONS
@@ -342,10 +348,10 @@ class _Loop:
         if status in {"Invalid_Option", "Invalid_Problem_Definition", "Insufficient_Memory"}:
             raise SolverError(f"IPOPT could not solve the refinement: {status}")
         if status == "Maximum_WallTime_Exceeded" or time.perf_counter() >= self.deadline:
-            self.timings.add("solve", start)
+            _add(self.timings, "solve", start)
             raise TimeLimitReached
         self.iterations += int(stats.get("iter_count", 0))
-        self.timings.add("solve", start)
+        _add(self.timings, "solve", start)
         return np.asarray(sol["x"]).ravel(), stats
 
     def rebuild(self, warm: bool = False, **changes) -> None:
@@ -359,7 +365,7 @@ class _Loop:
         if warm:
             options.update(WARM_START_OPTIONS)
         self.problem = replace(self.problem, solver_options=options).rebuilt(**changes)
-        self.timings.add("build", start)
+        _add(self.timings, "build", start)
 
 
 def _run_rounds(
@@ -381,7 +387,7 @@ def _run_rounds(
         extra = [v for src in sources for v in src.violations(p, q)]
         if extra:
             check = replace(check, violations=check.violations + tuple(extra))
-        loop.timings.add("verify", start)
+        _add(loop.timings, "verify", start)
         if not stats.get("success", False) or loop.outer >= loop.max_rounds:
             return x, stats, check, slack
         more = _new_singular(kin, q, margin, p.active)
@@ -457,7 +463,7 @@ def solve_refinement(
         stretched = inset > 0.0
     q_seed = initial_guess(problem, home, rotations) if q0 is None else np.asarray(q0, dtype=float)
     unreachable = _out_of_reach(problem, q_seed, home)
-    timings.add("seed", start)
+    _add(timings, "seed", start)
     cone = problem.tolerances.orientation_deg
     slack_max = repair_max_slack_deg if repair_max_slack_deg is not None else 0.0
     beyond = certain & (tilts > cone + slack_max + TILT_TOLERANCE_DEG)
@@ -542,7 +548,7 @@ def solve_refinement(
             count=BRANCH_CANDIDATES * (max_branches - 1),
         )
         others = _rank_chains(kin, targets, lower, upper, chains)[: max_branches - 1]
-        timings.add("seed", start)
+        _add(timings, "seed", start)
         for k, q_other in enumerate(others, start=2):
             try:
                 # the elastic problem alone: its answer without slack is the strict one, and the
@@ -574,7 +580,7 @@ def _attempt(
     sources: tuple[ConstraintSource, ...],
     repair_max_slack_deg: float | None,
     max_rounds: int,
-    timings: StageTimes,
+    timings: dict[str, float],
     deadline: float = math.inf,
     skip_strict: str = "",
     stretched: Array | None = None,
