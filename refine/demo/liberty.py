@@ -298,6 +298,7 @@ def read_liberty_ascii(
                     raise InputError(
                         f"{path}:{lineno}: the last record has {len(line)} characters and no line end, "
                         f"the one before {previous_length}: {message_line(line)}" + _PARTIAL
+                        + "; if the record is whole, end the file with a line break"
                     )
                 previous_length = len(line)
                 layout = n

@@ -16,10 +16,13 @@ roll [deg] in fixed-width fields, CR LF). Expected values: inches x 0.0254 and
 
 from __future__ import annotations
 
+import os
 import struct
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from refine.demo.liberty import read_liberty_ascii
@@ -99,3 +102,67 @@ def test_a_binary_capture_stopped_mid_record_is_refused_saying_so(tmp_path):
     with pytest.raises(InputError, match=r"truncated record at byte offset 68: station 1, response size 26 bytes, "
                                          r"only 20 left.*inside a record"):
         read_liberty_binary(f)
+
+
+# ---- a capture switched on and off anywhere -------------------------------------------------------
+
+CAPTURE_EXAMPLES = int(os.environ.get("FUZZ_EXAMPLES", "40"))
+_STREAM_POSES = [
+    ((10.0 + 0.0137 * k, -4.5 + 0.0211 * k, 9.25 - 0.0101 * k), (-12.345 + 0.5 * k, 45.678 - 0.25 * k, 170.1 - k))
+    for k in range(12)
+]
+
+
+def _stream_record(k: int, station: int = 1) -> str:
+    (x, y, z), (a, e, r) = _STREAM_POSES[k]
+    return f"{station:02d}C {x:10.4f}{y:10.4f}{z:10.4f}{a:10.3f}{e:10.3f}{r:10.3f}\r\n"
+
+
+@settings(max_examples=CAPTURE_EXAMPLES, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_a_capture_cut_anywhere_gives_whole_records_or_a_named_error(tmp_path, data):
+    """Cut the device's stream at two random bytes, as a capture switched on and off would.
+
+    Whatever is read must be a run of the records as sent, value for value (inches x 0.0254);
+    anything else must be refused naming the file. Station 2's records are interleaved.
+    """
+    records = [_stream_record(k) + (_stream_record(k, 2) if k % 3 == 0 else "") for k in range(12)]
+    stream = "".join(records).encode()
+    bounds = np.cumsum([0] + [len(r) for r in records]).tolist()  # where station 1's records start
+    # cuts anywhere, and cuts at a record's start or a few bytes before a record's end (in the roll,
+    # the last value), where a cut record still holds six numbers
+    a = data.draw(st.sampled_from(bounds[:-1]) | st.integers(0, len(stream) - 1))
+    near_end = st.tuples(st.sampled_from(bounds[1:]), st.integers(0, 12)).map(lambda e: e[0] - e[1])
+    b = data.draw((near_end | st.integers(a + 1, len(stream))).filter(lambda b: b > a))
+    f = tmp_path / "cut.txt"
+    f.write_bytes(stream[a:b])
+    try:
+        log = read_liberty_ascii(f)
+    except InputError as e:
+        assert "cut.txt" in str(e) or "tracker log" in str(e)
+        return
+    sent = np.array([p for p, _ in _STREAM_POSES]) * 0.0254
+    first = int(np.argmin(np.abs(sent[:, 0] - log.positions[0, 0])))
+    np.testing.assert_array_equal(log.positions, sent[first : first + len(log.t)])
+    angles = np.array([o for _, o in _STREAM_POSES])[first : first + len(log.t)]
+    np.testing.assert_allclose(log.rotations, Rotation.from_euler("ZYX", angles, degrees=True).as_matrix(), atol=1e-12)
+
+
+def test_a_capture_stopped_at_any_byte_gives_whole_records_or_a_named_error(tmp_path):
+    """Every cut of the first records (started at a record): a run of whole records, or refused."""
+    stream = "".join(_stream_record(k) + (_stream_record(k, 2) if k % 3 == 0 else "") for k in range(4)).encode()
+    sent = np.array([p for p, _ in _STREAM_POSES]) * 0.0254
+    turns = Rotation.from_euler("ZYX", [o for _, o in _STREAM_POSES], degrees=True).as_matrix()
+    f = tmp_path / "cut.txt"
+    read = 0
+    for b in range(1, len(stream) + 1):
+        f.write_bytes(stream[:b])
+        try:
+            log = read_liberty_ascii(f)
+        except InputError as e:
+            assert "cut.txt" in str(e)
+            continue
+        read += 1
+        np.testing.assert_array_equal(log.positions, sent[: len(log.t)])
+        np.testing.assert_allclose(log.rotations, turns[: len(log.t)], atol=1e-12)
+    assert read >= 4  # at least each whole record's end (before or after its CR LF)
