@@ -166,3 +166,27 @@ def test_a_capture_stopped_at_any_byte_gives_whole_records_or_a_named_error(tmp_
         np.testing.assert_array_equal(log.positions, sent[: len(log.t)])
         np.testing.assert_allclose(log.rotations, turns[: len(log.t)], atol=1e-12)
     assert read >= 4  # at least each whole record's end (before or after its CR LF)
+
+
+def test_a_binary_capture_cut_at_any_byte_gives_whole_records_or_a_named_error(tmp_path):
+    """Every start and every end cut of eight binary records: whole records (float32), or refused."""
+    def record(k: int) -> bytes:
+        (x, y, z), (az, el, ro) = _STREAM_POSES[k]
+        return b"LY\x01C \x00" + struct.pack("<H", 26) + struct.pack("<6f", x, y, z, az, el, ro) + b"\r\n"
+
+    stream = b"".join(record(k) for k in range(8))
+    sent = np.array([struct.unpack("<3f", struct.pack("<3f", *p)) for p, _ in _STREAM_POSES[:8]]) * 0.0254
+    f = tmp_path / "cut.lyb"
+    read = 0
+    for a, b in [(a, len(stream)) for a in range(len(stream))] + [(0, b) for b in range(1, len(stream))]:
+        f.write_bytes(stream[a:b])
+        try:
+            log = read_liberty_binary(f, output_list=(2, 4, 1))
+        except InputError as e:
+            assert "cut.lyb" in str(e) or "tracker log" in str(e)
+            continue
+        read += 1
+        first = a // 34  # 34 bytes a record: only a cut at a record's start may be read
+        assert a % 34 == 0
+        np.testing.assert_array_equal(log.positions, sent[first : first + len(log.t)])
+    assert read >= 8
