@@ -202,11 +202,20 @@ def matrix_from_quaternion(q: ArrayLike) -> NDArray[np.float64]:
 
 
 def continuous_quaternions(q: ArrayLike) -> NDArray[np.float64]:
-    """Flip signs along a sequence (N, 4) so consecutive quaternions have a positive dot product."""
+    """Flip signs along a sequence (N, 4) so consecutive quaternions have a positive dot product.
+
+    Walking the sequence, ``q[k]`` is negated when its dot product with the (possibly negated)
+    ``q[k - 1]`` is negative. Done at once: the sign of ``q[k]`` flips with every negative dot
+    product of the unflipped neighbours since the last zero (or NaN) one, where it restarts at +.
+    """
     q = np.array(q, dtype=float)
-    for k in range(1, len(q)):
-        if np.dot(q[k], q[k - 1]) < 0.0:
-            q[k] = -q[k]
+    if len(q) < 2:
+        return q
+    dots = np.einsum("ij,ij->i", q[1:], q[:-1])
+    flips = np.concatenate([[0], np.cumsum(dots < 0.0)])
+    restart = np.concatenate([[True], ~((dots < 0.0) | (dots > 0.0))])
+    last = np.maximum.accumulate(np.where(restart, np.arange(len(q)), 0))
+    q[(flips - flips[last]) % 2 == 1] *= -1.0
     return q
 
 

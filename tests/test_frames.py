@@ -713,3 +713,35 @@ def test_matrix_from_quaternion_rejects_a_zero_quaternion(q):
 def test_matrix_from_quaternion_rejects_three_components():
     with pytest.raises(InputError, match=r"\(\.\.\., 4\).*\(3,\)"):
         matrix_from_quaternion([1.0, 0.0, 0.0])
+
+
+def _continuous_by_walking(q):
+    """The definition, one step at a time: negate q[k] when it points away from the (fixed) q[k-1]."""
+    q = np.array(q, dtype=float)
+    for k in range(1, len(q)):
+        if float(q[k] @ q[k - 1]) < 0.0:
+            q[k] = -q[k]
+    return q
+
+
+@PROPERTY
+@given(
+    signs=st.lists(st.sampled_from([-1.0, 1.0]), min_size=0, max_size=40),
+    kinds=st.lists(st.sampled_from(["near", "far", "perpendicular", "nan"]), min_size=40, max_size=40),
+)
+def test_continuous_quaternions_agree_with_walking_the_sequence(signs, kinds):
+    rng = np.random.default_rng(len(signs))
+    q = np.empty((len(signs), 4))
+    for k, sign in enumerate(signs):
+        if k == 0 or kinds[k] == "far":
+            q[k] = rng.normal(size=4)
+        elif kinds[k] == "near":
+            q[k] = q[k - 1] + 0.1 * rng.normal(size=4)
+        elif kinds[k] == "perpendicular":  # an exactly zero dot product with the previous one
+            q[k - 1] = np.round(4.0 * q[k - 1])  # small integers: every product and sum is exact
+            a = q[k - 1]
+            q[k] = [-a[1], a[0], -a[3], a[2]]
+        else:
+            q[k] = [np.nan, 0.0, 0.0, 0.0]
+        q[k] *= sign
+    np.testing.assert_array_equal(continuous_quaternions(q), _continuous_by_walking(q))

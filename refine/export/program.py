@@ -181,15 +181,14 @@ def speed_levels(
     choice = np.zeros((k_max + 1, m + 1), dtype=int)
     # best[k, j]: least time of candidates j..m-1 with k levels, the first level at cand[j]
     best[0, m] = 0.0
+    # here[j, i]: the level at cand[j] covers j..i-1 (i > j); the next level starts at i (none when i == m)
+    j_all, i_all = np.arange(m)[:, None], np.arange(m + 1)[None, :]
+    here = np.where(i_all > j_all, (cum_w[i_all] - cum_w[j_all]) / cand[:, None], np.inf)
     for k in range(1, k_max + 1):
-        for j in range(m - 1, -1, -1):
-            # the level at cand[j] covers j..i-1; the next level starts at i (or nothing after when i == m)
-            i = np.arange(j + 1, m + 1)
-            here = (cum_w[i] - cum_w[j]) / cand[j]
-            rest = best[k - 1, i]
-            total = here + rest
-            pick = int(np.argmin(total))
-            best[k, j], choice[k, j] = total[pick], int(i[pick])
+        total = here + best[k - 1]  # every j at once; best[k - 1] depends on the previous k only
+        pick = np.argmin(total, axis=1)  # the first i of the least time, as a scan of i upwards finds
+        best[k, :m] = total[np.arange(m), pick]
+        choice[k, :m] = np.where(np.isinf(best[k, :m]), np.arange(1, m + 1), pick)  # none: the first i
     k = int(np.argmin(best[1:, 0])) + 1
     levels, j = [], 0
     while j < m:

@@ -109,14 +109,20 @@ def abb_confdata(robot: Any, q: Array) -> NDArray[np.int64]:
     conf = np.zeros((len(qs), 4), dtype=np.int64)
     conf[:, :3] = np.floor(np.degrees(qs[:, [0, 3, 5]]) / 90.0)
     model, data = robot.model, robot.data
+    to_wrist = np.empty((len(qs), 3))  # wrist centre - joint 2
+    arm = np.empty((len(qs), 3))  # joint 3 - joint 2
+    axis2 = np.empty((len(qs), 3))
+    behind_axis1 = np.empty(len(qs), dtype=bool)
     for k, qk in enumerate(qs):
         pin.computeJointJacobians(model, data, qk)
         p2, p3 = data.oMi[2].translation, data.oMi[3].translation
         wrist = data.oMi[5].translation
-        axis2 = pin.getJointJacobian(model, data, 2, pin.LOCAL_WORLD_ALIGNED)[3:, 1]
-        behind_axis1 = (data.oMi[1].rotation.T @ (wrist - data.oMi[1].translation))[0] < 0.0
-        behind_lower_arm = float(np.dot(wrist - p2, np.cross(axis2, p3 - p2))) < 0.0
-        conf[k, 3] = 4 * int(behind_axis1) + 2 * int(behind_lower_arm) + int(qk[4] < 0.0)
+        axis2[k] = pin.getJointJacobian(model, data, 2, pin.LOCAL_WORLD_ALIGNED)[3:, 1]
+        behind_axis1[k] = (data.oMi[1].rotation.T @ (wrist - data.oMi[1].translation))[0] < 0.0
+        to_wrist[k], arm[k] = wrist - p2, p3 - p2
+    normal = np.cross(axis2, arm)  # all at once: one call instead of one per waypoint
+    behind_lower_arm = np.array([float(np.dot(w, n)) < 0.0 for w, n in zip(to_wrist, normal, strict=True)])
+    conf[:, 3] = 4 * behind_axis1 + 2 * behind_lower_arm + (qs[:, 4] < 0.0)
     return conf[0] if single else conf
 
 
