@@ -3,6 +3,9 @@
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
+
+import pytest
 
 from refine.lazy import deferred_modules
 
@@ -106,3 +109,22 @@ def test_a_run_does_not_load_what_its_libraries_import_for_nothing():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.split() == ["[]", "Graph", "assert_allclose"]
+
+
+@pytest.mark.slow
+def test_a_whole_run_loads_none_of_the_modules_it_never_uses(tmp_path):
+    """The glass cell's run in a fresh process: what libraries import for nothing stays out."""
+    root = Path(__file__).resolve().parents[1]
+    code = textwrap.dedent(
+        f"""
+        import sys
+        from refine.problem import load_problem
+        from refine.pipeline import run
+        result = run(load_problem({str(root / "problems" / "glass_adhesive")!r}), {str(tmp_path / "out")!r})
+        assert result.status == "ok", result.status
+        never = ("networkx", "numpy.f2py", "numpy.testing", "matplotlib.pyplot", "scipy.stats")
+        print(sorted(m for m in never if m in sys.modules))
+        """
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.split() == ["[]"]

@@ -618,13 +618,13 @@ def frame_error_significant(est: FrameEstimate) -> bool:
     uncertainties cut off one axis (two-sided, 4.55 %), for as many degrees of freedom as the path
     shows axes: 4.0 for one, 6.2 for two, 8.0 for three.
     """
-    from scipy.stats import chi2, norm
+    from scipy.special import chdtri, ndtr  # what scipy.stats' norm.sf and chi2.isf call, without its import
 
     k = 3 - len(est.not_observable)
     if k <= 0:
         return False
-    tail = 2.0 * float(norm.sf(SIGNIFICANCE))
-    return est.observable_chi2 > float(chi2.isf(tail, k))
+    tail = 2.0 * float(ndtr(-SIGNIFICANCE))
+    return est.observable_chi2 > float(chdtri(k, tail))
 
 
 def gate_frame(
