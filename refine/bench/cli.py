@@ -26,6 +26,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     run.add_argument("--repeat", type=int, default=1, help="runs per problem and contender (median, minimum)")
     run.add_argument(
+        "--warmup",
+        type=int,
+        default=1,
+        help="untimed runs per problem and contender before the timed ones (default 1)",
+    )
+    run.add_argument(
         "--csv", type=Path, default=DEFAULT_CSV, help=f"CSV to append to (default {DEFAULT_CSV})"
     )
     run.add_argument("--suites-file", type=Path, default=DEFAULT_SUITES, help="the suites' TOML file")
@@ -60,6 +66,7 @@ def run(args: argparse.Namespace) -> int:
         args.csv,
         suites_file=args.suites_file,
         repeat=args.repeat,
+        warmup=args.warmup,
     )
     print(f"{len(rows)} row(s) appended to {args.csv}")
     return 0

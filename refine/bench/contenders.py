@@ -123,49 +123,44 @@ def drake_chained_ik(problem: BenchProblem) -> Answer:
 
     Constraints as refine's: the TCP on the CAD point, the orientation inside the cone (the tool
     axis only for an axisymmetric tool), the joints inside their limits minus the margin; cost: the
-    squared joint change from the previous waypoint. It starts from the greedy chain's first
-    configuration (not timed). Raises :class:`Unavailable` without pydrake.
+    squared joint change from the previous waypoint, which is also the initial guess. SNOPT is
+    called directly (no solver selection per waypoint).
+
+    Timed, as refine's build + seed + solve: making each waypoint's program (``build``) and
+    solving it (``solve``). Not timed, as refine's robot loading is not: the plant, parsed from the
+    robot's URDF once per problem and kept (:func:`_drake_plant`), and the start configuration, the
+    first configuration of the greedy chain along the whole path (:func:`greedy_ik`), so both
+    start on the same IK branch. Raises :class:`Unavailable` without pydrake or SNOPT.
     """
     try:
-        from pydrake.math import RigidTransform, RotationMatrix
+        from pydrake.math import RotationMatrix
         from pydrake.multibody.inverse_kinematics import InverseKinematics
-        from pydrake.multibody.parsing import Parser
-        from pydrake.multibody.plant import MultibodyPlant
-        from pydrake.solvers import Solve
+        from pydrake.solvers import SnoptSolver
     except ImportError as e:
         raise Unavailable(f"pydrake is not installed ({e}); pip install '.[bench]'") from e
+    snopt = SnoptSolver()
+    if not snopt.available():
+        raise Unavailable("pydrake has no SNOPT here")
 
-    w0, c0 = time.perf_counter(), time.process_time()
+    plant, context, order, flange = _drake_plant(problem)
     robot = problem.robot
-    plant = MultibodyPlant(time_step=0.0)  # no SceneGraph: geometry (meshes) is not loaded
-    parser = Parser(plant)
-    parser.package_map().PopulateFromFolder(str(robot.spec.urdf.parent))
-    (instance,) = parser.AddModels(str(robot.spec.urdf))
-    root = plant.GetBodyIndices(instance)[0]
-    plant.WeldFrames(
-        plant.world_frame(), plant.get_body(root).body_frame(), RigidTransform(problem.base_in_world)
-    )
-    plant.Finalize()
-    names = list(robot.spec.joint_names)
-    order = np.array([plant.GetJointByName(j).position_start() for j in names])
-    flange = plant.GetFrameByName(robot.spec.flange_frame)
-    context = plant.CreateDefaultContext()
     margin = np.radians(problem.tolerances.joint_margin_deg)
     lower, upper = robot.spec.lower + margin, robot.spec.upper - margin
+    lo, hi = np.full(plant.num_positions(), -np.inf), np.full(plant.num_positions(), np.inf)
+    lo[order], hi[order] = lower, upper
     # SNOPT meets a bound to its feasibility tolerance, about 1e-6 relative; an answer on the cone's
     # edge must still pass the shared check, so Drake gets the cone less a thousandth of a degree
     cone = np.radians(problem.tolerances.orientation_deg - DRAKE_CONE_BACKOFF_DEG)
     tcp = problem.tcp_in_flange
-    build = time.perf_counter() - w0
-
-    # the start: the first configuration of the greedy chain along the whole path, whose multi-turn
-    # joints are shifted to fit the limits over the whole path (untimed: both start on one branch)
     q_prev = greedy_ik(problem).q[0]
-    seed = 0.0
-    t2 = time.perf_counter()
+
+    c0 = time.process_time()
+    build = solve = 0.0
     out = np.empty((problem.n_waypoints, robot.nq))
     failed = 0
+    guess = np.zeros(plant.num_positions())
     for k in range(problem.n_waypoints):
+        t0 = time.perf_counter()
         ik = InverseKinematics(plant, context, with_joint_limits=False)
         qv = ik.q()
         p_target = problem.fused.positions[k]
@@ -180,29 +175,54 @@ def drake_chained_ik(problem: BenchProblem) -> Answer:
                 plant.world_frame(), RotationMatrix(R_demo), flange, RotationMatrix(tcp[:3, :3]), cone
             )
         prog = ik.get_mutable_prog()
-        lo, hi = np.full(plant.num_positions(), -np.inf), np.full(plant.num_positions(), np.inf)
-        lo[order], hi[order] = lower, upper
         prog.AddBoundingBoxConstraint(lo, hi, qv)
-        guess = np.zeros(plant.num_positions())
         guess[order] = q_prev
         prog.AddQuadraticErrorCost(np.eye(len(guess)), guess, qv)
-        prog.SetInitialGuess(qv, guess)
-        result = Solve(prog)
+        t1 = time.perf_counter()
+        result = snopt.Solve(prog, guess)
+        t2 = time.perf_counter()
+        build, solve = build + t1 - t0, solve + t2 - t1
         if not result.is_success():
             failed += 1
             log.debug("drake-ik: waypoint %d: %s", k, result.get_solution_result())
         q_prev = result.GetSolution(qv)[order]
         out[k] = q_prev
-    solve = time.perf_counter() - t2
     status = "ok" if failed == 0 else "infeasible"
     return Answer(
         status,
         out,
-        {"build": build, "seed": seed, "solve": solve},
+        {"build": build, "seed": 0.0, "solve": solve},
         time.process_time() - c0,
         0,
         f"{failed} waypoint(s) failed" if failed else "",
     )
+
+
+def _drake_plant(problem: BenchProblem):
+    """Drake's plant of the problem's robot, welded at its base, with a context; made once per problem.
+
+    Returns:
+        plant, context, the plant's position index of each of refine's joints, the flange frame.
+    """
+    if "drake_plant" not in problem.extra:
+        from pydrake.math import RigidTransform
+        from pydrake.multibody.parsing import Parser
+        from pydrake.multibody.plant import MultibodyPlant
+
+        robot = problem.robot
+        plant = MultibodyPlant(time_step=0.0)  # no SceneGraph: geometry (meshes) is not loaded
+        parser = Parser(plant)
+        parser.package_map().PopulateFromFolder(str(robot.spec.urdf.parent))
+        (instance,) = parser.AddModels(str(robot.spec.urdf))
+        root = plant.GetBodyIndices(instance)[0]
+        plant.WeldFrames(
+            plant.world_frame(), plant.get_body(root).body_frame(), RigidTransform(problem.base_in_world)
+        )
+        plant.Finalize()
+        order = np.array([plant.GetJointByName(j).position_start() for j in robot.spec.joint_names])
+        flange = plant.GetFrameByName(robot.spec.flange_frame)
+        problem.extra["drake_plant"] = (plant, plant.CreateDefaultContext(), order, flange)
+    return problem.extra["drake_plant"]
 
 
 DRAKE_CONE_BACKOFF_DEG = 1e-3

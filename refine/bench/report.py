@@ -70,10 +70,14 @@ def targets(rows: list[Row]) -> list[str]:
             peer = by.get(("glass_adhesive", other))
             if peer:
                 line += (
-                    f"; {other} {_fmt(_f(peer, 'total_s'))} s (ratio refine / {other} "
-                    f"{_fmt(total / _f(peer, 'total_s'), 2)}, deviation {_fmt(_f(peer, 'max_orientation_deviation_deg'), 2)} "
-                    f"deg, verified {'yes' if _yes(peer, 'verified') else 'no'})"
+                    f"; {other} {_fmt(_f(peer, 'total_s'))} s wall ({_fmt(_f(peer, 'cpu_s'))} s CPU), ratio refine / "
+                    f"{other} {_fmt(total / _f(peer, 'total_s'), 2)} (wall), "
+                    f"{_fmt(_f(glass, 'cpu_s') / _f(peer, 'cpu_s'), 2)} (CPU), deviation "
+                    f"{_fmt(_f(peer, 'max_orientation_deviation_deg'), 2)} deg, verified "
+                    f"{'yes' if _yes(peer, 'verified') else 'no'}"
                 )
+        if glass.get("load_1min"):
+            line += f" (medians of {glass.get('repeats', '?')} turns, load average {glass['load_1min']})"
         lines.append(line)
     families: dict[str, list[Row]] = defaultdict(list)
     for r in rows:

@@ -81,6 +81,20 @@ class TcpKinematics:
         r = T_wf[:, :3, :3] @ self.tcp_in_flange[:3, 3]  # flange origin -> TCP, world axes (N, 3)
         return np.concatenate([Jv - np.cross(r[:, :, None], Jw, axis=1), Jw], axis=1)
 
+    def pose_jacobian(self, q: Array) -> tuple[Array, Array]:
+        """:meth:`pose` (4, 4) and :meth:`jacobian` (6, n) at once: one pass of Pinocchio for both."""
+        robot = self.robot
+        J = pin.computeFrameJacobian(
+            robot.model, robot.data, np.asarray(q, dtype=float), robot.flange_id, pin.LOCAL_WORLD_ALIGNED
+        )
+        T_wf = self.base_in_world @ robot.data.oMf[robot.flange_id].homogeneous
+        R_wb = self.base_in_world[:3, :3]
+        Jv, Jw = R_wb @ J[:3], R_wb @ J[3:]
+        rx, ry, rz = T_wf[:3, :3] @ self.tcp_in_flange[:3, 3]  # flange origin -> TCP, world axes
+        # v_TCP = v_flange + ω × r = v_flange - [r]ₓ ω
+        skew = np.array([[0.0, -rz, ry], [rz, 0.0, -rx], [-ry, rx, 0.0]])
+        return T_wf @ self.tcp_in_flange, np.vstack([Jv - skew @ Jw, Jw])
+
     def jacobian(self, q: Array) -> Array:
         """Geometric Jacobian (6, n) of the TCP, world-aligned axes, linear rows first."""
         R_wb = self.base_in_world[:3, :3]
@@ -127,11 +141,12 @@ def solve_ik(
     """
     rows = slice(0, 3) if position_only else slice(0, 6)
     q = np.clip(np.asarray(q0, dtype=float), lower, upper)
-    err = _pose_error(kin.pose(q), T_target)[rows]
+    T, J = kin.pose_jacobian(q)
+    err = _pose_error(T, T_target)[rows]
     for _ in range(max_iterations):
         if float(err @ err) < tol * tol:
             break
-        J = kin.jacobian(q)[rows]
+        J = J[rows]
         JJt_inv = np.linalg.inv(J @ J.T + damping**2 * np.eye(len(err)))
         dq = J.T @ JJt_inv @ err
         if J.shape[1] > J.shape[0]:  # redundant: drift toward mid-range in the null space of the task
@@ -142,7 +157,8 @@ def solve_ik(
         if step > 0.3:  # keep steps small so the chain does not jump branches
             dq *= 0.3 / step
         q = np.clip(q + dq, lower, upper)
-        err = _pose_error(kin.pose(q), T_target)[rows]
+        T, J = kin.pose_jacobian(q)
+        err = _pose_error(T, T_target)[rows]
     return q, float(np.linalg.norm(err))
 
 

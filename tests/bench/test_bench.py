@@ -10,7 +10,7 @@ import pytest
 from refine.bench import contenders as contenders_module
 from refine.bench.contenders import Answer, Unavailable, verify
 from refine.bench.report import write_report
-from refine.bench.runner import COLUMNS, run_suites, success
+from refine.bench.runner import COLUMNS, run_suites, run_turns, success
 from refine.bench.suites import generated_problem, growth_exponent, load_suites, problems
 from refine.cli import main
 from refine.errors import InputError
@@ -54,7 +54,7 @@ def test_suites_are_data_and_build_their_problems(suites_file):
 
 def test_the_repository_suites_name_existing_problems():
     data = load_suites()
-    assert {"bundled", "scaling", "unreachable", "quick"} <= set(data["suite"])
+    assert {"bundled", "scaling", "unreachable", "quick", "glass", "growth"} <= set(data["suite"])
     assert data["suite"]["scaling"]["sizes"][0] == 100 and data["suite"]["scaling"]["sizes"][-1] == 10000
     from refine.bench.suites import ROOT
 
@@ -94,6 +94,36 @@ def test_run_writes_one_row_per_problem_and_contender_and_the_report_reads_the_c
     assert "| tiny | refine | 4 | 4 | 4 |" in text and "| tiny | greedy-ik | 4 | 4 | 4 |" in text
     assert "growth exponent" in text and "Machine:" in text
     assert (tmp_path / "report" / "tiny-wave.png").stat().st_size > 1000
+
+
+def test_contenders_take_turns_after_their_untimed_warm_up_runs(suites_file):
+    """Warm-up runs first, each contender alike; then the timed runs alternate; a contender missing
+    here is left out with a message and the others still get their rows."""
+    problem = next(problems(load_suites(suites_file), "tiny"))
+    calls = []
+
+    def contender(name):
+        def run(p):
+            calls.append(name)
+            return Answer("ok", contenders_module.greedy_ik(p).q, {"solve": 0.01 * len(calls)}, 0.001 * len(calls))
+
+        return run
+
+    def missing(p):
+        raise Unavailable("not here")
+
+    messages = []
+    rows = run_turns(
+        problem, {"a": contender("a"), "gone": missing, "b": contender("b")}, 3, 2, echo=messages.append
+    )
+    assert calls == ["a", "a", "b", "b", "a", "b", "a", "b", "a", "b"]
+    assert set(rows) == {"a", "b"} and messages == ["skipping gone: not here"]
+    a = rows["a"]
+    assert (a["repeats"], a["warmup"]) == (3, 2)
+    # the timed runs of "a" were calls 5, 7 and 9: medians and minima of those alone
+    assert a["total_s"] == pytest.approx(0.07) and a["min_total_s"] == pytest.approx(0.05)
+    assert a["cpu_s"] == pytest.approx(0.007) and a["min_cpu_s"] == pytest.approx(0.005)
+    assert a["verified"] and a["load_1min"].count("-") >= 1
 
 
 def test_success_rules_per_expected_outcome(suites_file):
