@@ -84,7 +84,15 @@ def _refine(problem: BenchProblem, mode: str) -> Answer:
 
 
 def refine_assembled(problem: BenchProblem) -> Answer:
-    """The refine pipeline as it runs: compiled per-waypoint kernels, assembled derivatives, IPOPT."""
+    """The refine pipeline as it runs: compiled per-waypoint kernels, assembled derivatives, IPOPT.
+
+    Timed: building the problem (``build``, with any rebuild of the outer loop), seeding it (reach
+    tilts, chained IK, the constraints the seed shows to be needed: ``seed``) and solving it (every
+    IPOPT round and what each round adds: ``solve``). Not timed: the robot's loading (done once per
+    problem, as Drake's plant) and refine's own verification of each round's answer and diagnosis
+    of a repair (``verify`` and ``diagnose`` of :class:`refine.optimise.solve.StageTimes`); the
+    per-waypoint kernels are compiled and cached on disk before the timed runs (the warm-up run).
+    """
     return _refine(problem, "assembled")
 
 

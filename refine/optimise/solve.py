@@ -390,9 +390,11 @@ def _run_rounds(
         _add(loop.timings, "verify", start)
         if not stats.get("success", False) or loop.outer >= loop.max_rounds:
             return x, stats, check, slack
+        start = StageTimes.clock()  # finding what the next round adds is the outer loop's solving
         more = _new_singular(kin, q, margin, p.active)
         rows = tuple(r for src in sources for r in src.rows(p, q))
         steps = _new_steps(p, q)
+        _add(loop.timings, "solve", start)
         if not (more.singular_waypoints or more.singular_segments or rows or steps):
             return x, stats, check, slack
         log.info(
@@ -468,9 +470,9 @@ def solve_refinement(
     slack_max = repair_max_slack_deg if repair_max_slack_deg is not None else 0.0
     beyond = certain & (tilts > cone + slack_max + TILT_TOLERANCE_DEG)
     if not unreachable and beyond.any():
-        t1 = time.perf_counter()
+        t1, c1 = StageTimes.clock()
         findings = _findings(problem, sources, "infeasible", q_seed, beyond)
-        timings["diagnose"] = time.perf_counter() - t1
+        _add(timings, "diagnose", (t1, c1))
         reason = (
             f"no repair within {slack_max:g} deg of extra slack: "
             if slack_max > 0
@@ -487,12 +489,12 @@ def solve_refinement(
     )
     if unreachable:
         check = check_path(kin, q_seed, problem.fused, problem.tolerances, problem.axisymmetric)
-        t0 = time.perf_counter()
+        t0, c0 = StageTimes.clock()
         mask = np.zeros(problem.n_waypoints, dtype=bool)
         for v in unreachable:
             mask[v.index_start : v.index_end + 1] = True
         findings = _findings(problem, sources, "infeasible", q_seed, mask)
-        timings["diagnose"] = time.perf_counter() - t0
+        _add(timings, "diagnose", (t0, c0))
         reason = "; ".join([v.describe() for v in unreachable] + [f.describe() for f in findings])
         log.info("refinement infeasible before solving: %s", reason)
         return Refinement(
@@ -597,11 +599,13 @@ def _attempt(
     """
     kin = _kin(problem)
     loop = _Loop(problem, timings, max_rounds=max_rounds, deadline=deadline)
+    start = StageTimes.clock()  # the constraints the seed shows to be needed count as seeding
     initial = _new_singular(kin, q_seed, problem.tolerances.singularity_margin, problem.active)
     if stretched is not None and stretched.any() and problem.tolerances.singularity_margin > 0:
         initial = initial.union(_singular_around(stretched))
     seed_rows = tuple(r for src in sources for r in src.rows(problem, q_seed))
     seed_steps = _new_steps(problem, q_seed)
+    _add(timings, "seed", start)
     if initial.singular_waypoints or initial.singular_segments or seed_rows or seed_steps:
         loop.rebuild(
             active=problem.active.union(
@@ -627,11 +631,13 @@ def _attempt(
         # start from the seed (on the path, orientation off only where the limits clamped it), with
         # each slack at what that start needs, so IPOPT begins feasible wherever it can
         q_start = q_seed
+        clock = StageTimes.clock()
         start = check_path(kin, q_start, problem.fused, problem.tolerances, problem.axisymmetric)
         cos_needed = math.cos(math.radians(problem.tolerances.orientation_deg)) - np.cos(
             np.radians(start.orientation_deviation_deg)
         )
         sigma0 = np.clip(cos_needed, 0.0, loop.problem.ubx[problem.n_waypoints * problem.dof :])
+        _add(timings, "solve", clock)
         x, stats, check, slack = _run_rounds(loop, np.concatenate([q_start.ravel(), sigma0]), sources)
         q = loop.problem.joints(x)
         if check.ok:
@@ -653,7 +659,7 @@ def _attempt(
     solver_status = str(stats.get("return_status", "unknown"))
     if status == "ok" and not stats.get("success", False):
         log.warning("IPOPT returned %s but the verified path meets every tolerance", solver_status)
-    t0 = time.perf_counter()
+    t0, c0 = StageTimes.clock()
     findings: tuple[Finding, ...] = ()
     if status == "repaired":
         findings = _findings(problem, sources, status, q, slack > 1e-3, slack)
@@ -674,7 +680,7 @@ def _attempt(
         for v in check.violations:
             mask[v.index_start : v.index_end + 1] = True
         findings = _findings(problem, sources, status, q, mask)
-    timings["diagnose"] = timings.get("diagnose", 0.0) + time.perf_counter() - t0
+    _add(timings, "diagnose", (t0, c0))
     reason = (
         ""
         if status == "ok"

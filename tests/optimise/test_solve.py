@@ -26,6 +26,13 @@ def test_refined_path_is_verified_on_the_cad_path_within_tolerances(wave_result,
     assert np.all(result.q >= spec.lower + margin - 1e-9) and np.all(result.q <= spec.upper - margin + 1e-9)
 
 
+def test_every_stage_timed_on_the_wall_clock_is_timed_on_the_cpu_clock_too(wave_result):
+    _, result = wave_result
+    wall, cpu = result.timings_s, result.timings_s.cpu
+    assert {"seed", "solve", "verify"} <= set(wall) and set(cpu) == set(wall)
+    assert all(v >= 0.0 for v in cpu.values()) and cpu["solve"] > 0.0
+
+
 def test_refining_a_reachable_smooth_demo_stays_close_to_it(wave_result):
     """The demo is exactly reachable and smooth: the refinement follows it to a fraction of a degree."""
     _, result = wave_result
