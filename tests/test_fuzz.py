@@ -201,6 +201,28 @@ def test_fuzz_dxf(tmp_path_factory, data):
 
 
 @FUZZ
+@given(
+    vertices=st.lists(
+        st.tuples(st.floats(-2e6, 2e6), st.floats(-2e6, 2e6), st.floats(allow_nan=True, allow_infinity=True)),
+        min_size=2,
+        max_size=5,
+    ),
+    closed=st.booleans(),
+)
+def test_fuzz_dxf_polyline_bulges(tmp_path_factory, vertices, closed):
+    """Any vertices and bulges (0, tiny, huge, NaN, inf) of an LWPOLYLINE: read, or refused naming the file."""
+    import ezdxf
+
+    f = tmp_path_factory.mktemp("dxfb") / "bulge.dxf"
+    doc = ezdxf.new()
+    doc.modelspace().add_lwpolyline(vertices, format="xyb", close=closed)
+    doc.saveas(f)
+    points = _expect(lambda: points_from_dxf(f, units="mm"), f)
+    if points is not None:
+        assert points.shape[1] == 3 and np.all(np.abs(points) <= CAD_COORDINATE_LIMIT_M)
+
+
+@FUZZ
 @given(data=st.data())
 def test_fuzz_liberty_binary(tmp_path_factory, data):
     f = tmp_path_factory.mktemp("lyb") / "demo.lyb"

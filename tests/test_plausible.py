@@ -163,3 +163,32 @@ def test_a_mesh_vertex_beyond_the_range_is_refused(tmp_path):
     mesh.export(f)
     with pytest.raises(InputError, match=r"part\.stl.*: vertex \d+: coordinate z = 2000 m is outside"):
         points_from_mesh(f, units="mm", boundary=True)
+
+
+def _bulged(tmp_path, bulge):
+    doc = ezdxf.new()
+    pl = doc.modelspace().add_lwpolyline([(0, 0, bulge), (100, 0, 0), (100, 50, 0)], format="xyb")
+    f = tmp_path / "bulge.dxf"
+    doc.saveas(f)
+    return f, pl.dxf.handle
+
+
+@pytest.mark.parametrize("bulge", [1e-300, 1e-12])
+def test_a_dxf_bulge_too_small_to_leave_its_chord_is_a_straight_segment(tmp_path, bulge):
+    # sagitta = bulge x chord / 2 = 5e-11 mm at most, far inside the flattening tolerance
+    f, _ = _bulged(tmp_path, bulge)
+    np.testing.assert_allclose(points_from_dxf(f, units="mm"), [[0, 0, 0], [0.1, 0, 0], [0.1, 0.05, 0]], atol=1e-15)
+
+
+def test_a_dxf_bulge_of_1e300_is_refused_naming_the_entity_and_vertex(tmp_path):
+    # radius = chord / 4 x (1 / bulge + bulge) = 100 mm / 4 x 1e300 = 2.5e301 mm = 2.5e298 m
+    f, handle = _bulged(tmp_path, 1e300)
+    with pytest.raises(InputError, match=rf"LWPOLYLINE #{handle} .* vertex 0: the bulge 1e\+300 makes an arc of "
+                                         r"radius 2\.5e\+298 m, outside the plausible range 1000 m"):
+        points_from_dxf(f, units="mm")
+
+
+def test_a_dxf_bulge_that_is_not_a_number_is_refused(tmp_path):
+    f, handle = _bulged(tmp_path, float("nan"))
+    with pytest.raises(InputError, match=rf"LWPOLYLINE #{handle} .* vertex 0 has the bulge nan"):
+        points_from_dxf(f, units="mm")

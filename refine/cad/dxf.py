@@ -57,14 +57,15 @@ def _bulged_polyline(xyb: NDArray, elevation: float, ocs, closed: bool, tol: flo
     pts: list[NDArray] = [xyb[:1, :2]]
     for i in range(n - 1 + int(closed)):
         a, b, bulge = xyb[i, :2], xyb[(i + 1) % n, :2], xyb[i, 2]
-        if bulge == 0.0 or np.allclose(a, b):
+        # the bulge is tan(sweep / 4), 2 * sagitta / chord: an arc within tol of its chord is the chord
+        if bulge == 0.0 or np.allclose(a, b) or abs(bulge) * float(np.linalg.norm(b - a)) / 2.0 <= tol:
             pts.append(b[None])
             continue
         c = np.asarray(bulge_center(tuple(a), tuple(b), bulge))
         r = float(np.linalg.norm(a - c))
         sweep = 4.0 * math.atan(bulge)  # signed: positive is counter-clockwise
         step = 2.0 * math.acos(max(-1.0, 1.0 - tol / r)) if tol < r else math.pi / 2
-        k = max(2, math.ceil(abs(sweep) / step))
+        k = max(2, math.ceil(abs(sweep) / step)) if step > 0.0 else 2
         ang = math.atan2(a[1] - c[1], a[0] - c[0]) + np.linspace(0.0, sweep, k + 1)[1:]
         arc = c + r * np.column_stack([np.cos(ang), np.sin(ang)])
         arc[-1] = b
@@ -90,8 +91,21 @@ def _defining_values(e) -> NDArray:
     return np.asarray(values, dtype=float)
 
 
-def _check_extent(e, scale: float, units: str, source: str) -> None:
-    """Stop before flattening an entity whose defining numbers are beyond the plausible range."""
+def _xyb(e) -> NDArray | None:
+    """Vertices (x, y, bulge) in the OCS of a 2D polyline, shape (K, 3); None for other entities."""
+    if e.dxftype() == "LWPOLYLINE":
+        return np.array(e.get_points("xyb"), dtype=float).reshape(-1, 3)
+    if e.dxftype() == "POLYLINE" and not e.is_3d_polyline:
+        return np.array([(*v.dxf.location.xy, v.dxf.bulge) for v in e.vertices], dtype=float).reshape(-1, 3)
+    return None
+
+
+def _check_extent(e, scale: float, units: str, source: str, tol: float) -> None:
+    """Stop before flattening an entity whose defining numbers are beyond the plausible range.
+
+    The numbers are its points, radius and elevation, and for a 2D polyline the radius of each arc
+    segment that leaves its chord by more than ``tol`` [drawing units] (from the bulge).
+    """
     values = _defining_values(e)
     bad = np.flatnonzero(~(np.abs(values * scale) <= CAD_COORDINATE_LIMIT_M))
     if bad.size:
@@ -100,6 +114,27 @@ def _check_extent(e, scale: float, units: str, source: str) -> None:
             f"{source}: {_label(e)} has the value {v:.6g} {units} ({v * scale:.6g} m), outside the "
             f"plausible range ±{CAD_COORDINATE_LIMIT_M:g} m (a value in the wrong unit, or garbage)"
         )
+    xyb = _xyb(e)
+    if xyb is None or len(xyb) < 2:
+        return
+    n = len(xyb)
+    for i in range(n - 1 + int(_is_closed(e))):
+        bulge = float(xyb[i, 2])
+        if not math.isfinite(bulge):
+            raise InputError(f"{source}: {_label(e)} vertex {i} has the bulge {bulge!r}; a bulge is a finite number")
+        chord = float(np.linalg.norm(xyb[(i + 1) % n, :2] - xyb[i, :2]))
+        if bulge == 0.0 or abs(bulge) * chord / 2.0 <= tol:
+            continue
+        radius = chord / 4.0 * (1.0 / abs(bulge) + abs(bulge))
+        if not radius * scale <= CAD_COORDINATE_LIMIT_M:
+            raise InputError(
+                f"{source}: {_label(e)} vertex {i}: the bulge {bulge:.6g} makes an arc of radius "
+                f"{radius * scale:.6g} m, outside the plausible range {CAD_COORDINATE_LIMIT_M:g} m"
+            )
+
+
+def _is_closed(e) -> bool:
+    return bool(e.closed) if e.dxftype() == "LWPOLYLINE" else bool(e.is_closed)
 
 
 def _entity_points(e, tol: float) -> tuple[NDArray, bool]:
@@ -113,14 +148,12 @@ def _entity_points(e, tol: float) -> tuple[NDArray, bool]:
         pts = np.array([tuple(v) for v in e.flattening(tol)], dtype=float)
         return pts, bool(e.closed)
     if kind == "LWPOLYLINE":
-        xyb = np.array(e.get_points("xyb"), dtype=float).reshape(-1, 3)
-        return _bulged_polyline(xyb, e.dxf.elevation, e.ocs(), e.closed, tol), bool(e.closed)
+        return _bulged_polyline(_xyb(e), e.dxf.elevation, e.ocs(), e.closed, tol), bool(e.closed)
     # POLYLINE
     if e.is_3d_polyline:
         return np.array([tuple(v) for v in e.points_in_wcs()], dtype=float), bool(e.is_closed)
-    xyb = np.array([(*v.dxf.location.xy, v.dxf.bulge) for v in e.vertices], dtype=float)
     elevation = e.dxf.elevation.z
-    return _bulged_polyline(xyb, elevation, e.ocs(), e.is_closed, tol), bool(e.is_closed)
+    return _bulged_polyline(_xyb(e), elevation, e.ocs(), e.is_closed, tol), bool(e.is_closed)
 
 
 def _chain(pieces: list[NDArray], labels: list[str], tol: float, source: str) -> NDArray:
@@ -218,7 +251,7 @@ def points_from_dxf(
     tol = flatten_tolerance_m / scale
     pieces, labels, closed = [], [], []
     for e in chosen:
-        _check_extent(e, scale, units, source)
+        _check_extent(e, scale, units, source, tol)
         pts, is_closed = _entity_points(e, tol)
         if len(pts) < 2:
             raise InputError(f"{source}: {_label(e)} has fewer than 2 points")
