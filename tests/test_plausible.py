@@ -192,3 +192,10 @@ def test_a_dxf_bulge_that_is_not_a_number_is_refused(tmp_path):
     f, handle = _bulged(tmp_path, float("nan"))
     with pytest.raises(InputError, match=rf"LWPOLYLINE #{handle} .* vertex 0 has the bulge nan"):
         points_from_dxf(f, units="mm")
+
+
+def test_a_gcode_arc_radius_of_a_googol_millimetres_is_refused(tmp_path):
+    f = tmp_path / "seam.nc"
+    f.write_text("G21 G90\nG1 X0 Y0 Z0 F100\nG1 X10\nG2 X20 Y0 R1" + "0" * 100 + "\n")
+    with pytest.raises(InputError, match=r"seam\.nc:4: arc radius R = 1e\+97 m is outside the plausible range 1000 m"):
+        points_from_gcode(f, units="mm")

@@ -251,6 +251,11 @@ def points_from_gcode(
         else:
             ccw = motion == 3
             if radius is not None:
+                if not abs(radius * scale) <= CAD_COORDINATE_LIMIT_M:
+                    raise InputError(
+                        f"{where}: arc radius R = {radius * scale:.6g} m is outside the plausible range "
+                        f"{CAD_COORDINATE_LIMIT_M:g} m: {text!r}"
+                    )
                 centre = _centre_from_radius(pos, end, plane, radius * scale, ccw, where)
             elif offsets:
                 c = np.array([offsets.get(i, 0.0) * scale for i in range(3)])
