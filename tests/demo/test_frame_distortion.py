@@ -11,6 +11,7 @@ instead of stopping.
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 
@@ -162,3 +163,23 @@ def test_frame_estimate_fields_reach_demo_quality(tig):
     np.testing.assert_allclose(cov, cov.T, rtol=1e-9, atol=1e-12)
     assert np.all(np.linalg.eigvalsh(cov) > 0.0)
     assert frame["observable_chi2"] >= 0.0
+
+
+@pytest.mark.slow
+def test_an_accepted_frame_error_is_named_in_result_json(tmp_path, capsys):
+    problem = tmp_path / "glass"
+    glass = ROOT / "problems" / "glass_adhesive"
+    shutil.copytree(glass, problem, ignore=shutil.ignore_patterns("generate.py", "README.md"))
+    toml = problem / "problem.toml"
+    old = "source_in_world = { xyz = [1.30, -0.82, 0.72], rpy_deg = [0.0, 0.0, 90.0] }"
+    text = toml.read_text()
+    assert text.count(old) == 1
+    toml.write_text(text.replace(old, old.replace("90.0", "95.0")))  # 5 deg about the world z axis
+    out = tmp_path / "out"
+    assert main(["run", str(problem), "--out", str(out), "--no-report"]) == 2  # stopped, nothing written
+    assert not (out / "result.json").exists()
+    assert main(["run", str(problem), "--out", str(out), "--no-report", "--accept-frame-error"]) == 0
+    q = json.loads((out / "result.json").read_text())["demo_quality"]
+    (warning,) = [w for w in q["warnings"] if "source_in_world may be off" in w]
+    assert abs(float(warning.split("rotated by ")[1].split(" ")[0]) - 5.0) < 1.0
+    assert abs(q["frame"]["observable_rotation_deg"] - 5.0) < 1.0 and q["frame_stop_deg"] < 5.0
