@@ -183,3 +183,29 @@ def test_an_accepted_frame_error_is_named_in_result_json(tmp_path, capsys):
     (warning,) = [w for w in q["warnings"] if "source_in_world may be off" in w]
     assert abs(float(warning.split("rotated by ")[1].split(" ")[0]) - 5.0) < 1.0
     assert abs(q["frame"]["observable_rotation_deg"] - 5.0) < 1.0 and q["frame_stop_deg"] < 5.0
+
+
+@pytest.mark.parametrize(
+    ("sigmas_deg", "n_hidden"),
+    [
+        ((1.0, 1.5, 1000.0), 1),  # a straight seam: its own direction (ratio rule)
+        ((1.0, 3.0, 4.0), 0),  # all within the weak-check limit of 5 deg, ratio 4
+        ((1.0, 6.0, 7.0), 2),  # beyond 5 deg each: a 10 deg rotation about them stays within 2 sigma
+        ((6.0, 7.0, 8.0), 3),  # nothing shown
+    ],
+)
+def test_an_axis_is_not_observable_by_ratio_or_above_the_weak_check_limit(sigmas_deg, n_hidden):
+    from refine.demo.quality import _observable_part
+
+    V = Rotation.from_rotvec([0.3, -0.2, 0.5]).as_matrix()  # principal axes, columns
+    cov = V @ np.diag(np.radians(sigmas_deg) ** 2) @ V.T
+    rv = np.radians(2.0) * V[:, 0]  # 2 deg about the best-determined axis
+    points = np.column_stack([np.linspace(0.3, 0.6, 50), np.zeros(50), np.zeros(50)])
+    obs, obs_sigma, chi2, hidden = _observable_part(rv, cov, points)
+    assert len(hidden) == n_hidden
+    assert np.isfinite(obs_sigma)
+    if n_hidden < 3:
+        assert obs == pytest.approx(2.0) and obs_sigma == pytest.approx(sigmas_deg[0])
+        assert chi2 == pytest.approx((2.0 / sigmas_deg[0]) ** 2)
+    else:
+        assert obs == 0.0 and chi2 == 0.0 and obs_sigma == pytest.approx(min(sigmas_deg))
