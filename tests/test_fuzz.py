@@ -25,6 +25,7 @@ from hypothesis import strategies as st
 from refine.cad.csv_ import points_from_csv
 from refine.cad.dxf import points_from_dxf
 from refine.cad.gcode import points_from_gcode
+from refine.cad.mesh import points_from_mesh
 from refine.demo.csv_ import read_demo_csv
 from refine.demo.liberty import read_liberty_ascii
 from refine.demo.liberty_binary import read_liberty_binary
@@ -218,6 +219,28 @@ def test_fuzz_dxf_polyline_bulges(tmp_path_factory, vertices, closed):
     doc.modelspace().add_lwpolyline(vertices, format="xyb", close=closed)
     doc.saveas(f)
     points = _expect(lambda: points_from_dxf(f, units="mm"), f)
+    if points is not None:
+        assert points.shape[1] == 3 and np.all(np.abs(points) <= CAD_COORDINATE_LIMIT_M)
+
+
+@FUZZ
+@given(
+    vertices=st.lists(
+        st.tuples(*[st.floats(allow_nan=True, allow_infinity=True, width=32)] * 3), min_size=3, max_size=6
+    ),
+    boundary=st.booleans(),
+)
+def test_fuzz_mesh_vertices(tmp_path_factory, vertices, boundary):
+    """Any vertex values (huge, NaN, inf) of a small STL: a path within range, or refused naming the file."""
+    import trimesh
+
+    f = tmp_path_factory.mktemp("stl") / "part.stl"
+    n = len(vertices)
+    faces = [[0, k, k + 1] for k in range(1, n - 1)]
+    with np.errstate(all="ignore"):  # the writer's normals of NaN triangles
+        trimesh.Trimesh(vertices=np.array(vertices, dtype=float), faces=faces, process=False).export(f)
+    kwargs = {"boundary": True} if boundary else {"section_origin": (0, 0, 0), "section_normal": (0, 0, 1)}
+    points = _expect(lambda: points_from_mesh(f, units="mm", **kwargs), f)
     if points is not None:
         assert points.shape[1] == 3 and np.all(np.abs(points) <= CAD_COORDINATE_LIMIT_M)
 

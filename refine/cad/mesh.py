@@ -48,7 +48,8 @@ def _load(path: Path, source: str) -> trimesh.Trimesh:
     if not path.is_file():
         raise InputError(f"{source}: file not found")
     try:
-        mesh = trimesh.load(path, force="mesh")
+        with np.errstate(all="ignore"):  # NaN or huge vertices are reported by the range check after
+            mesh = trimesh.load(path, force="mesh")
     except Exception as e:  # trimesh raises many kinds for bad files
         raise InputError(f"{source} cannot be read as a mesh: {e}") from e
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
