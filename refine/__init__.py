@@ -17,10 +17,10 @@ The library API (``docs/api.md``): :func:`load_problem`, :func:`solve`, :func:`r
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from refine.errors import InfeasibleError, InputError, RefineError, SolverError
+from refine.lazy import lazy_names
 
 if TYPE_CHECKING:
     from refine.api import PassArrays, Result, refine_path, solve
@@ -60,15 +60,4 @@ __all__ = [
 __version__ = "0.1.0"
 
 
-def __getattr__(name: str) -> Any:
-    """Import the public names of the API on first use (PEP 562)."""
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module 'refine' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_LAZY))
+__getattr__, __dir__ = lazy_names("refine", _LAZY, globals())  # the API's names, imported on first use

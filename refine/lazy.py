@@ -22,8 +22,9 @@ import importlib
 import importlib.util
 import sys
 import types
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from typing import Any
 
 #: Modules the libraries ``refine`` uses import at their own import time and a run never uses.
 UNUSED_AT_IMPORT = ("matplotlib", "matplotlib.pyplot", "networkx", "numpy.f2py", "numpy.testing")
@@ -105,3 +106,28 @@ def _has_submodule(parent: str, child: str) -> bool:
     from importlib.machinery import PathFinder
 
     return PathFinder.find_spec(f"{parent}.{child}", list(spec.submodule_search_locations)) is not None
+
+
+def lazy_names(
+    package: str, names: dict[str, str], namespace: dict[str, Any]
+) -> tuple[Callable[[str], Any], Callable[[], list[str]]]:
+    """A package's ``__getattr__`` and ``__dir__`` (PEP 562) that import its public names on first use.
+
+    Args:
+        package: the package's name, for the error message.
+        names: public name -> module that defines it.
+        namespace: the package's ``globals()``; a name read once is stored there.
+    """
+
+    def __getattr__(name: str) -> Any:
+        module = names.get(name)
+        if module is None:
+            raise AttributeError(f"module {package!r} has no attribute {name!r}")
+        value = getattr(importlib.import_module(module), name)
+        namespace[name] = value
+        return value
+
+    def __dir__() -> list[str]:
+        return sorted(set(namespace) | set(names))
+
+    return __getattr__, __dir__

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from refine.lazy import deferred_modules
+from refine.lazy import deferred_modules, lazy_names
 
 
 def _package(tmp_path, name):
@@ -128,3 +128,31 @@ def test_a_whole_run_loads_none_of_the_modules_it_never_uses(tmp_path):
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.split() == ["[]"]
+
+
+def test_the_cad_stage_imports_only_its_own_format_s_reader(tmp_path):
+    csv = tmp_path / "path.csv"
+    csv.write_text("x,y,z\n0,0,0\n100,0,0\n100,50,0\n")
+    code = textwrap.dedent(
+        f"""
+        import sys
+        import refine.cad
+        from refine.cad.csv_ import points_from_csv
+        points = points_from_csv({str(csv)!r}, "mm")
+        print(len(points), "ezdxf" in sys.modules)
+        from refine.cad import points_from_dxf  # the package's names still reach every reader
+        print(points_from_dxf.__module__, "ezdxf" in sys.modules)
+        """
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.split() == ["3", "False", "refine.cad.dxf", "True"]
+
+
+def test_lazy_names_import_a_name_on_first_read_and_keep_it():
+    namespace: dict = {"already": 1}
+    getattr_, dir_ = lazy_names("pkg", {"dedent": "textwrap"}, namespace)
+    assert "dedent" in dir_() and "already" in dir_()
+    assert getattr_("dedent") is textwrap.dedent
+    assert namespace["dedent"] is textwrap.dedent  # stored: the next read does not come here
+    with pytest.raises(AttributeError, match="module 'pkg' has no attribute 'missing'"):
+        getattr_("missing")

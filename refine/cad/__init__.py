@@ -10,21 +10,35 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
-from refine.cad.csv_ import points_from_csv
-from refine.cad.dxf import points_from_dxf
-from refine.cad.gcode import points_from_gcode
-from refine.cad.mesh import points_from_mesh
-from refine.cad.pathml_ import fused_from_pathml
 from refine.cad.resample import resample_by_arc_length
 from refine.errors import InputError
 from refine.frames import check_transform, transform_points
+from refine.lazy import lazy_names
 from refine.paths import CadPath
 from refine.problem import CadSettings
 from refine.settings import check_waypoint_count
+
+if TYPE_CHECKING:
+    from refine.cad.csv_ import points_from_csv
+    from refine.cad.dxf import points_from_dxf
+    from refine.cad.gcode import points_from_gcode
+    from refine.cad.mesh import points_from_mesh
+    from refine.cad.pathml_ import fused_from_pathml
+
+#: The readers, each imported on first use: a run imports only its own format's library
+#: (ezdxf for DXF, trimesh for meshes).
+_LAZY = {
+    "points_from_csv": "refine.cad.csv_",
+    "points_from_dxf": "refine.cad.dxf",
+    "points_from_gcode": "refine.cad.gcode",
+    "points_from_mesh": "refine.cad.mesh",
+    "fused_from_pathml": "refine.cad.pathml_",
+}
 
 __all__ = [
     "CLOSED_TOLERANCE_M",
@@ -41,10 +55,10 @@ __all__ = [
 CLOSED_TOLERANCE_M = 1e-6
 
 _READERS: dict[str, Callable[[CadSettings], NDArray]] = {
-    "csv": lambda c: points_from_csv(c.file, c.units),
-    "dxf": lambda c: points_from_dxf(c.file, c.units, layer=c.layer),
-    "gcode": lambda c: points_from_gcode(c.file, c.units, program=c.track),
-    "mesh": lambda c: points_from_mesh(
+    "csv": lambda c: __getattr__("points_from_csv")(c.file, c.units),
+    "dxf": lambda c: __getattr__("points_from_dxf")(c.file, c.units, layer=c.layer),
+    "gcode": lambda c: __getattr__("points_from_gcode")(c.file, c.units, program=c.track),
+    "mesh": lambda c: __getattr__("points_from_mesh")(
         c.file,
         c.units,
         section_origin=c.section_origin,
@@ -53,6 +67,8 @@ _READERS: dict[str, Callable[[CadSettings], NDArray]] = {
         start_near=c.start_near,
     ),
 }
+
+__getattr__, __dir__ = lazy_names("refine.cad", _LAZY, globals())
 
 
 def read_cad_path(settings: CadSettings, cad_in_world: NDArray) -> CadPath:
