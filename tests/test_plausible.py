@@ -199,3 +199,10 @@ def test_a_gcode_arc_radius_of_a_googol_millimetres_is_refused(tmp_path):
     f.write_text("G21 G90\nG1 X0 Y0 Z0 F100\nG1 X10\nG2 X20 Y0 R1" + "0" * 100 + "\n")
     with pytest.raises(InputError, match=r"seam\.nc:4: arc radius R = 1e\+97 m is outside the plausible range 1000 m"):
         points_from_gcode(f, units="mm")
+
+
+def test_a_gcode_number_in_exponent_notation_is_refused_saying_why(tmp_path):
+    f = tmp_path / "seam.nc"
+    f.write_text("G21 G90\nG1 X0 Y0 Z0 F100\nG1 X1e308\n")
+    with pytest.raises(InputError, match=r"seam\.nc:3: unsupported word E308 .*exponent notation such as 1e3 are not G-code"):
+        points_from_gcode(f, units="mm")

@@ -232,7 +232,13 @@ def points_from_gcode(
                     raise InputError(f"{where}: P{value:g}: an arc's turns must be 1..{MAX_ARC_TURNS}")
                 turns = int(value)
             elif letter not in _IGNORED_LETTERS:
-                raise InputError(f"{where}: unsupported word {letter}{value:g} in {text!r}")
+                why = (
+                    " (numbers in exponent notation such as 1e3 are not G-code, and E, a 3D printer's "
+                    "extruder axis, is not read)"
+                    if letter == "E"
+                    else ""
+                )
+                raise InputError(f"{where}: unsupported word {letter}{value:g} in {text!r}{why}")
         if not target:
             continue
         if motion is None:
