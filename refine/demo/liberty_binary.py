@@ -36,7 +36,7 @@ was reset), timestamps that mostly step forward by at most 10 s (float bits read
 by days). Layouts that still fit alike are an error asking for ``output_list``.
 
 Records of other stations, and records a command other than ``C``/``P`` initiated (replies to
-configuration commands), are skipped. An error indicator other than 0 or a space is kept per
+configuration commands), are skipped (the station's are counted in a warning). An error indicator other than 0 or a space is kept per
 sample (``TrackerLog.device_error``, the byte's value: the Liberty's real-time indicators are the
 letters listed in :data:`refine.demo.quality.DEVICE_ERROR_MEANINGS`); the quality gate treats
 those samples as a dropout and reports them (``demo_quality.device_errors``).
@@ -188,6 +188,7 @@ def read_liberty_binary(
     offsets: list[int] = []
     stations: set[int] = set()
     errors: list[int] = []
+    replies: dict[int, int] = {}  # command byte -> records of the station it initiated
     offset = 0
     while offset < len(data):
         if len(data) - offset < HEADER.size:
@@ -208,6 +209,8 @@ def read_liberty_binary(
                 f"{size} bytes, only {len(data) - offset - HEADER.size} left" + _PARTIAL
             )
         stations.add(st)
+        if st == station and cmd not in _COMMANDS:
+            replies[cmd] = replies.get(cmd, 0) + 1
         if st == station and cmd in _COMMANDS:
             if payloads and size != len(payloads[0]):
                 raise InputError(
@@ -218,6 +221,14 @@ def read_liberty_binary(
             payloads.append(data[offset + HEADER.size : end])
             offsets.append(offset)
         offset = end
+    if replies:
+        logger.warning(
+            "%s: skipped %d record(s) of station %d that other commands initiated (replies, not P&O): %s",
+            path,
+            sum(replies.values()),
+            station,
+            ", ".join(f"{chr(c) if 32 < c < 127 else hex(c)} x{n}" for c, n in sorted(replies.items())),
+        )
     if not payloads:
         found = ", ".join(str(s) for s in sorted(stations)) or "none"
         raise InputError(

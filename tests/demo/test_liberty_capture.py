@@ -190,3 +190,14 @@ def test_a_binary_capture_cut_at_any_byte_gives_whole_records_or_a_named_error(t
         assert a % 34 == 0
         np.testing.assert_array_equal(log.positions, sent[first : first + len(log.t)])
     assert read >= 8
+
+
+def test_binary_replies_of_the_station_are_skipped_with_a_warning_that_counts_them(tmp_path, caplog):
+    # a reply initiated by ^U (0x15): the header, then detected and active station maps as two uint16
+    # (TUM/IAS liberty_protocol.h, active_station_state_response_t), between two P&O records
+    f = tmp_path / "capture.lyb"
+    reply = b"LY\x01\x15 \x00" + struct.pack("<H", 4) + struct.pack("<HH", 1, 1)
+    f.write_bytes(_binary(0) + reply + _binary(1))
+    log = read_liberty_binary(f)
+    assert len(log.t) == 2
+    assert "skipped 1 record(s) of station 1 that other commands initiated (replies, not P&O): 0x15 x1" in caplog.text
