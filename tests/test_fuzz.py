@@ -102,6 +102,13 @@ def _expect(read, path: Path):
         return None
 
 
+def _expect_cad_points(read, path: Path) -> None:
+    """:func:`_expect` for a CAD reader: points (K, 3) within the plausible range, or InputError."""
+    points = _expect(read, path)
+    if points is not None:
+        assert points.ndim == 2 and points.shape[1] == 3 and np.all(np.abs(points) <= CAD_COORDINATE_LIMIT_M)
+
+
 LIBERTY = [
     "# Polhemus Liberty ASCII",
     "# units: in",
@@ -166,9 +173,7 @@ def test_fuzz_demo_csv(tmp_path_factory, data):
 def test_fuzz_cad_csv(tmp_path_factory, data):
     f = tmp_path_factory.mktemp("cad") / "path.csv"
     _write(f, data, ["x,y,z"] + [f"{k * 10.0},{math.sin(k) * 5:.3f},0" for k in range(30)])
-    points = _expect(lambda: points_from_csv(f, units="mm"), f)
-    if points is not None:
-        assert points.ndim == 2 and points.shape[1] == 3 and np.all(np.abs(points) <= CAD_COORDINATE_LIMIT_M)
+    _expect_cad_points(lambda: points_from_csv(f, units="mm"), f)
 
 
 @FUZZ
@@ -196,9 +201,7 @@ DXF_LINES = [
 def test_fuzz_dxf(tmp_path_factory, data):
     f = tmp_path_factory.mktemp("dxf") / "path.dxf"
     _write(f, data, DXF_LINES)
-    points = _expect(lambda: points_from_dxf(f, units="mm"), f)
-    if points is not None:
-        assert points.shape[1] == 3 and np.all(np.abs(points) <= CAD_COORDINATE_LIMIT_M)
+    _expect_cad_points(lambda: points_from_dxf(f, units="mm"), f)
 
 
 @FUZZ
@@ -218,9 +221,7 @@ def test_fuzz_dxf_polyline_bulges(tmp_path_factory, vertices, closed):
     doc = ezdxf.new()
     doc.modelspace().add_lwpolyline(vertices, format="xyb", close=closed)
     doc.saveas(f)
-    points = _expect(lambda: points_from_dxf(f, units="mm"), f)
-    if points is not None:
-        assert points.shape[1] == 3 and np.all(np.abs(points) <= CAD_COORDINATE_LIMIT_M)
+    _expect_cad_points(lambda: points_from_dxf(f, units="mm"), f)
 
 
 @FUZZ
@@ -240,9 +241,7 @@ def test_fuzz_mesh_vertices(tmp_path_factory, vertices, boundary):
     with np.errstate(all="ignore"):  # the writer's normals of NaN triangles
         trimesh.Trimesh(vertices=np.array(vertices, dtype=float), faces=faces, process=False).export(f)
     kwargs = {"boundary": True} if boundary else {"section_origin": (0, 0, 0), "section_normal": (0, 0, 1)}
-    points = _expect(lambda: points_from_mesh(f, units="mm", **kwargs), f)
-    if points is not None:
-        assert points.shape[1] == 3 and np.all(np.abs(points) <= CAD_COORDINATE_LIMIT_M)
+    _expect_cad_points(lambda: points_from_mesh(f, units="mm", **kwargs), f)
 
 
 @FUZZ

@@ -52,9 +52,8 @@ def _trajectory(n_per_leg=30):
     )
 
 
-@pytest.fixture(scope="module")
-def aml(tmp_path_factory) -> Path:
-    problem = Problem(
+def _problem() -> Problem:
+    return Problem(
         name="pathml input",
         root=Path("."),
         robot=RobotSettings(model="abb_irb4600_60_205"),
@@ -62,6 +61,11 @@ def aml(tmp_path_factory) -> Path:
         cad=CadSettings(file=Path("x.aml"), format="pathml"),
         demonstration=None,
     )
+
+
+@pytest.fixture(scope="module")
+def aml(tmp_path_factory) -> Path:
+    problem = _problem()
     traj = _trajectory()
     layers = [
         LayerLayout("Root", (TrackLayout("Seam", 0, len(traj)),)),
@@ -113,15 +117,7 @@ def test_read_cad_path_points_pathml_to_fused_from_pathml(aml):
 
 
 def _written(tmp_path, traj) -> Path:
-    problem = Problem(
-        name="pathml input",
-        root=Path("."),
-        robot=RobotSettings(model="abb_irb4600_60_205"),
-        tool=ToolSettings(name="nozzle", tcp_in_flange=np.eye(4)),
-        cad=CadSettings(file=Path("x.aml"), format="pathml"),
-        demonstration=None,
-    )
-    return write_pathml(tmp_path / "wild.aml", traj, problem)
+    return write_pathml(tmp_path / "wild.aml", traj, _problem())
 
 
 def test_a_point_two_kilometres_away_is_refused_naming_the_track_and_point(tmp_path):
