@@ -18,6 +18,7 @@ import pinocchio as pin
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
+from refine.errors import InputError
 from refine.optimise.derivatives import tcp_kernel
 from refine.robot import Robot
 
@@ -74,11 +75,18 @@ class TcpKinematics:
         Pinocchio per row; the change of reference point to the TCP is done for all rows at once.
         """
         qs = np.atleast_2d(np.asarray(qs, dtype=float))
+        robot = self.robot
+        model, data, fid = robot.model, robot.data, robot.flange_id
+        if qs.shape[1:] != (robot.nq,):
+            raise InputError(f"qs: expected shape (N, {robot.nq}) [rad], got {qs.shape}")
+        J = np.empty((len(qs), 6, robot.nq))
+        R_bf = np.empty((len(qs), 3, 3))
+        for k, q in enumerate(qs):  # one pass per row gives the Jacobian and the flange's placement
+            J[k] = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
+            R_bf[k] = data.oMf[fid].rotation
         R_wb = self.base_in_world[:3, :3]
-        J = np.array([self.robot.jacobian(q) for q in qs])
         Jv, Jw = R_wb @ J[:, :3], R_wb @ J[:, 3:]
-        T_wf = self.base_in_world @ self.robot.fk_many(qs)
-        r = T_wf[:, :3, :3] @ self.tcp_in_flange[:3, 3]  # flange origin -> TCP, world axes (N, 3)
+        r = (R_wb @ R_bf) @ self.tcp_in_flange[:3, 3]  # flange origin -> TCP, world axes (N, 3)
         return np.concatenate([Jv - np.cross(r[:, :, None], Jw, axis=1), Jw], axis=1)
 
     def pose_jacobian(self, q: Array) -> tuple[Array, Array]:
