@@ -72,33 +72,6 @@ def waypoint_kernels(
     return kernels
 
 
-def tcp_kernel(robot, base_in_world: Array, tcp_in_flange: Array) -> ca.Function:
-    """``tcp(q) -> (p (3,), R (3, 3), J (6, n))``: TCP position, rotation and geometric Jacobian.
-
-    In the world frame, the Jacobian's linear rows first (as
-    :func:`refine.optimise.kinematics.jacobian_function`); compiled like the waypoint kernels.
-    Called with joints side by side (n, M), it returns the M results side by side.
-    """
-    key = (
-        id(robot),
-        np.asarray(base_in_world, float).tobytes(),
-        np.asarray(tcp_in_flange, float).tobytes(),
-        "tcp",
-        compiler(),
-    )
-    if key not in _kernel_cache:
-
-        def make() -> list[ca.Function]:
-            q = ca.SX.sym("q", robot.nq)
-            p, R = fk_function(robot, base_in_world, tcp_in_flange)(q)
-            J = jacobian_function(robot, base_in_world, tcp_in_flange)(q)
-            return [ca.Function("tcp", [q], [p, R, ca.densify(J)], ["q"], ["p", "R", "J"])]
-
-        functions = compiled("refine_tcp", _kernel_key(robot, base_in_world, tcp_in_flange, "tcp"), make)
-        _kernel_cache[key] = (robot, functions)
-    return _kernel_cache[key][1]["tcp"]
-
-
 def _kernel_key(robot, base_in_world: Array, tcp_in_flange: Array, axisymmetric: bool | str) -> str:
     """Everything the kernels are made from: the code making them and the numbers of the chain."""
     model = robot.model

@@ -19,7 +19,6 @@ from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from refine.errors import InputError
-from refine.optimise.derivatives import tcp_kernel
 from refine.robot import Robot
 
 log = logging.getLogger(__name__)
@@ -58,36 +57,29 @@ class TcpKinematics:
     def batch(self, qs: Array) -> tuple[Array, Array, Array]:
         """TCP positions (M, 3), rotations (M, 3, 3) and Jacobians (M, 6, n) for joint rows ``qs`` (M, n).
 
-        One call of the compiled kinematics kernel for all rows; the Jacobian as :meth:`jacobian`.
-        """
-        qs = np.atleast_2d(np.asarray(qs, dtype=float))
-        m, n = qs.shape
-        p, R, J = tcp_kernel(self.robot, self.base_in_world, self.tcp_in_flange)(qs.T)
-        return (
-            np.asarray(p).T,
-            np.asarray(R).reshape(3, m, 3).transpose(1, 0, 2),
-            np.asarray(J).reshape(6, m, n).transpose(1, 0, 2),
-        )
-
-    def jacobians(self, qs: Array) -> Array:
-        """:meth:`jacobian` for joint rows ``qs`` (N, n), shape (N, 6, n).
-
-        Pinocchio per row; the change of reference point to the TCP is done for all rows at once.
+        One pass of Pinocchio per row gives the flange's placement with its Jacobian; the change to
+        the base placement and the TCP is done for all rows at once. The Jacobian as :meth:`jacobian`.
         """
         qs = np.atleast_2d(np.asarray(qs, dtype=float))
         robot = self.robot
         model, data, fid = robot.model, robot.data, robot.flange_id
-        if qs.shape[1:] != (robot.nq,):
-            raise InputError(f"qs: expected shape (N, {robot.nq}) [rad], got {qs.shape}")
+        if qs.ndim != 2 or qs.shape[1] != robot.nq:
+            raise InputError(f"qs: expected shape (M, {robot.nq}) [rad], got {qs.shape}")
         J = np.empty((len(qs), 6, robot.nq))
-        R_bf = np.empty((len(qs), 3, 3))
-        for k, q in enumerate(qs):  # one pass per row gives the Jacobian and the flange's placement
+        T_bf = np.empty((len(qs), 4, 4))
+        for k, q in enumerate(qs):
             J[k] = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
-            R_bf[k] = data.oMf[fid].rotation
+            T_bf[k] = data.oMf[fid].homogeneous
+        T_wf = self.base_in_world @ T_bf
         R_wb = self.base_in_world[:3, :3]
         Jv, Jw = R_wb @ J[:, :3], R_wb @ J[:, 3:]
-        r = (R_wb @ R_bf) @ self.tcp_in_flange[:3, 3]  # flange origin -> TCP, world axes (N, 3)
-        return np.concatenate([Jv - np.cross(r[:, :, None], Jw, axis=1), Jw], axis=1)
+        r = T_wf[:, :3, :3] @ self.tcp_in_flange[:3, 3]  # flange origin -> TCP, world axes (M, 3)
+        T = T_wf @ self.tcp_in_flange
+        return T[:, :3, 3], T[:, :3, :3], np.concatenate([Jv - np.cross(r[:, :, None], Jw, axis=1), Jw], axis=1)
+
+    def jacobians(self, qs: Array) -> Array:
+        """:meth:`jacobian` for joint rows ``qs`` (N, n), shape (N, 6, n) (see :meth:`batch`)."""
+        return self.batch(qs)[2]
 
     def pose_jacobian(self, q: Array) -> tuple[Array, Array]:
         """:meth:`pose` (4, 4) and :meth:`jacobian` (6, n) at once: one pass of Pinocchio for both."""

@@ -130,7 +130,8 @@ def segment_singularity(kin: TcpKinematics, q: Array, max_step_deg: float = 1.0)
     dq = np.diff(q, axis=0)
     n_sub = np.maximum(2, np.ceil(np.degrees(np.abs(dq).max(axis=1)) / max_step_deg)).astype(int)
     seg = np.repeat(np.arange(len(dq)), n_sub - 1)
-    frac = np.concatenate([np.arange(1, m) / m for m in n_sub])
+    start = np.concatenate([[0], np.cumsum(n_sub - 1)[:-1]])  # each segment's first sample
+    frac = (np.arange(len(seg)) - start[seg] + 1) / n_sub[seg]  # 1/m, ..., (m-1)/m per segment
     w, _ = singularity_measures(kin, q[seg] + frac[:, None] * dq[seg], smallest=False)
     order = np.lexsort((w, seg))  # by segment, then by measure: the first of each segment is its minimum
     first = order[np.searchsorted(seg[order], np.arange(len(dq)))]

@@ -23,7 +23,7 @@ def test_tcp_jacobian_matches_finite_differences(kin):
 
 
 def test_pose_and_jacobian_in_one_pass_match_pinocchio_at_a_tcp_frame_and_finite_differences(irb4600):
-    """Checked against a TCP frame added to a copy of the model (Pinocchio's own Jacobian there) and
+    """One pose and many rows at once (``batch``), checked against a TCP frame added to a copy of the model (Pinocchio's own Jacobian there) and
     against central differences of the TCP position and orientation, with a base turned and moved."""
     import pinocchio as pin
 
@@ -42,8 +42,12 @@ def test_pose_and_jacobian_in_one_pass_match_pinocchio_at_a_tcp_frame_and_finite
     rng = np.random.default_rng(5)
     for q in rng.uniform(-1.5, 1.5, size=(5, 6)):
         T, J = kin.pose_jacobian(q)
+        p_b, R_b, J_b = (v[0] for v in kin.batch(q[None]))
         J_ref = pin.computeFrameJacobian(model, data, q, tcp, pin.LOCAL_WORLD_ALIGNED)
         np.testing.assert_allclose(T, base @ data.oMf[tcp].homogeneous, atol=1e-12)
+        np.testing.assert_allclose(p_b, T[:3, 3], atol=1e-12)
+        np.testing.assert_allclose(R_b, T[:3, :3], atol=1e-12)
+        np.testing.assert_allclose(J_b, J, atol=1e-12)
         np.testing.assert_allclose(J, np.vstack([base[:3, :3] @ J_ref[:3], base[:3, :3] @ J_ref[3:]]), atol=1e-12)
         h = 1e-6
         for j in range(6):
@@ -53,6 +57,13 @@ def test_pose_and_jacobian_in_one_pass_match_pinocchio_at_a_tcp_frame_and_finite
             np.testing.assert_allclose(J[:3, j], (Tp[:3, 3] - Tm[:3, 3]) / (2 * h), atol=1e-7)
             omega = pin.log3(Tp[:3, :3] @ Tm[:3, :3].T) / (2 * h)
             np.testing.assert_allclose(J[3:, j], omega, atol=1e-7)
+    qs = rng.uniform(-1.5, 1.5, size=(7, 6))
+    p_all, R_all, J_all = kin.batch(qs)
+    for k, q in enumerate(qs):  # row k of the batch is the pose and Jacobian of row k alone
+        T, J = kin.pose_jacobian(q)
+        np.testing.assert_allclose(p_all[k], T[:3, 3], atol=1e-12)
+        np.testing.assert_allclose(R_all[k], T[:3, :3], atol=1e-12)
+        np.testing.assert_allclose(J_all[k], J, atol=1e-12)
 
 
 def test_shift_turns_moves_a_wrapped_joint_by_whole_turns_into_its_limits():

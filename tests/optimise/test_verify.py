@@ -354,3 +354,16 @@ def test_a_tool_axis_on_its_demonstrated_axis_to_round_off_deviates_by_zero(kin)
     check = check_path(kin, q, rough, Tolerances(**{**LOOSE, "orientation_deg": 3.0}), axisymmetric=True)
     np.testing.assert_allclose(check.orientation_deviation_deg, 0.0, atol=1e-4)
     assert check.ok
+
+
+def test_segment_samples_are_at_whole_fractions_of_each_segment(kin):
+    """A segment whose largest joint move is 2.5 deg is sampled at 1/3 and 2/3 (steps <= 1 deg would
+    need 3 steps), one of 0.4 deg at its middle; the minimum of each is found among those samples."""
+    from refine.optimise.verify import segment_singularity
+
+    q = np.zeros((3, 6))
+    q[:, 4] = np.radians([30.0, 27.5, 27.9])  # the wrist bends: the measure falls as q5 falls
+    w, frac = segment_singularity(kin, q)
+    np.testing.assert_allclose(frac, [2 / 3, 0.5])
+    expected = singularity_measures(kin, np.array([q[0] + 2 / 3 * (q[1] - q[0]), 0.5 * (q[1] + q[2])]))[0]
+    np.testing.assert_allclose(w, expected, rtol=1e-12)
