@@ -139,7 +139,7 @@ def verdict(case: Case, log, T_F_S: np.ndarray, planted_s_deg: np.ndarray) -> tu
         q = gate_frame(quality, demo, fused, T_F_S, case.sensor_in_tcp, accept=True)
         kind = "stop"
     f = q.frame
-    frame_warnings = [w for w in q.warnings if "frame" in w and "offset" not in w]
+    frame_warnings = [w for w in q.warnings if "frame" in w]  # a rotation or an offset
     if kind == "ok" and frame_warnings:
         kind = "weak" if any("cannot be checked well" in w for w in frame_warnings) else "warn"
     hidden = ",".join(h["about"].replace("the path direction", "path").replace("receiver axis ", "S")

@@ -63,7 +63,10 @@ direction"), as a fact of the path's shape, not a warning; ``frame.detectable_de
 (:data:`SIGNIFICANCE` uncertainties of the observable part) is the least rotation the check can
 tell from noise there. A path whose observable part is not significant but whose
 ``detectable_deg`` is above :data:`WEAK_CHECK_DEG` gets a warning that the frame cannot be checked
-well (e.g. a spiral 60 mm across: a rotation of twice the stop limit could pass unseen).
+well (e.g. a spiral 60 mm across: a rotation of twice the stop limit could pass unseen). The
+offset is judged the same way: a warning when it exceeds :data:`OFFSET_WARN_M` and its χ² against
+its covariance (which includes what a weakly determined rotation moves the path's centre by) is
+significant with 3 degrees of freedom.
 """
 
 from __future__ import annotations
@@ -118,7 +121,8 @@ well [deg] (twice :data:`FRAME_STOP_DEG`: a rotation of twice the limit could pa
 whose own uncertainty exceeds it is not observable (a rotation of this size about it stays within
 one standard uncertainty)."""
 OFFSET_WARN_M = 0.025
-"""Rigid tracker frame offset above which ``demo_quality`` carries a warning [m]."""
+"""Rigid tracker frame offset above which ``demo_quality`` carries a warning [m], when it is also
+significant (its χ² against its covariance, as for the rotation, with 3 degrees of freedom)."""
 _DISTANCE_SCALE_M = 1.0  # distances are divided by this in the distortion basis
 CORRELATION_LENGTH_M = 0.05
 """Size of the cells of space within which the fit's residuals are taken as one observation [m]
@@ -193,6 +197,9 @@ class FrameEstimate:
             distance from no rotation), what :func:`frame_error_significant` tests.
         rotation_vector_deg: the whole estimate as a rotation vector in {S} [deg].
         covariance_deg2: its covariance, 3 x 3 in {S} [deg²].
+        offset_sigma_m: the offset's standard uncertainty along it [m] (large where the rotation
+            is weakly determined: the offset takes up what it moves the path's centre by).
+        offset_chi2: the offset's χ² against its covariance (3 degrees of freedom).
     """
 
     rotation_deg: float
@@ -209,6 +216,8 @@ class FrameEstimate:
     observable_chi2: float = 0.0
     rotation_vector_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
     covariance_deg2: tuple[tuple[float, float, float], ...] = ()
+    offset_sigma_m: float = 0.0
+    offset_chi2: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -530,7 +539,18 @@ def estimate_frame_error(
         # residual variance per coordinate across the path (two per waypoint)
         var = max(float(np.sum(w * resid**2) / max(np.sum(w) * 2 - nk, 1)), 1e-12)
     distortion = np.einsum("nik,k->ni", basis, coef[6:])
-    cov = np.linalg.inv(N)[:3, :3] + _systematic_covariance(A[:, :, :3], w)
+    posterior = np.linalg.inv(N)
+    cov_sys = _systematic_covariance(A[:, :, :3], w)
+    cov = posterior[:3, :3] + cov_sys
+    # the offset takes up what a wrongly estimated rotation moves the path's centre by (c̄ x δω)
+    centre = _skew_rows((np.sum(w[:, None] * (c @ R.T), axis=0) / max(float(np.sum(w)), 1e-12))[None])[0]
+    offset = coef[3:6]
+    cov_offset = posterior[3:6, 3:6] + centre @ cov_sys @ centre.T + SYSTEMATIC_ERROR_M**2 * np.eye(3)
+    ev_o, V_o = np.linalg.eigh(0.5 * (cov_offset + cov_offset.T))
+    offset_chi2 = float(np.sum((V_o.T @ offset) ** 2 / np.clip(ev_o, 1e-30, None)))
+    offset_len = float(np.linalg.norm(offset))
+    u_o = offset / offset_len if offset_len > 0 else V_o[:, 0]
+    offset_sigma = float(np.sqrt(max(u_o @ cov_offset @ u_o, 0.0)))
     sigma = float(np.degrees(np.sqrt(np.trace(cov) / 3.0)))
     rv = rotvec_from_matrix(R)
     angle = float(np.degrees(np.linalg.norm(rv)))
@@ -543,7 +563,7 @@ def estimate_frame_error(
         rotation_deg=angle,
         sigma_deg=sigma,
         axis_in_source=axis,  # type: ignore[arg-type]
-        offset_m=float(np.linalg.norm(coef[3:6])),
+        offset_m=offset_len,
         max_distortion_m=float(np.linalg.norm(distortion, axis=1).max()),
         rms_after_m=float(np.sqrt(np.mean(resid**2))),
         n_points=n,
@@ -554,6 +574,8 @@ def estimate_frame_error(
         observable_chi2=obs_chi2,
         rotation_vector_deg=tuple(float(v) for v in np.degrees(rv)),  # type: ignore[arg-type]
         covariance_deg2=tuple(tuple(float(v) for v in row) for row in np.degrees(np.degrees(cov))),  # type: ignore[arg-type]
+        offset_sigma_m=offset_sigma,
+        offset_chi2=offset_chi2,
     )
 
 
@@ -621,13 +643,15 @@ def frame_error_significant(est: FrameEstimate) -> bool:
     uncertainties cut off one axis (two-sided, 4.55 %), for as many degrees of freedom as the path
     shows axes: 4.0 for one, 6.2 for two, 8.0 for three.
     """
+    k = 3 - len(est.not_observable)
+    return k > 0 and est.observable_chi2 > _chi2_threshold(k)
+
+
+def _chi2_threshold(dof: int) -> float:
+    """The χ² with ``dof`` degrees of freedom exceeded as rarely as :data:`SIGNIFICANCE` sigmas on one axis."""
     from scipy.special import chdtri, ndtr  # what scipy.stats' norm.sf and chi2.isf call, without its import
 
-    k = 3 - len(est.not_observable)
-    if k <= 0:
-        return False
-    tail = 2.0 * float(ndtr(-SIGNIFICANCE))
-    return est.observable_chi2 > float(chdtri(k, tail))
+    return float(chdtri(dof, 2.0 * float(ndtr(-SIGNIFICANCE))))
 
 
 def gate_frame(
@@ -678,8 +702,11 @@ def gate_frame(
         logger.info(
             "tracker frame rotation not observable %s; the other axes to ± %.1f deg", hidden, est.observable_sigma_deg
         )
-    if est.offset_m > OFFSET_WARN_M:
-        warnings.append(f"tracker frame offset {est.offset_m * 1e3:.0f} mm (warning above {OFFSET_WARN_M * 1e3:.0f} mm)")
+    if est.offset_m > OFFSET_WARN_M and est.offset_chi2 > _chi2_threshold(3):
+        warnings.append(
+            f"tracker frame offset {est.offset_m * 1e3:.0f} mm, significant (warning above {OFFSET_WARN_M * 1e3:.0f} mm): "
+            "frames.source_in_world's position may be off"
+        )
     for w in warnings[len(quality.warnings) :]:
         logger.warning("%s", w)
     return replace(quality, frame=est, warnings=tuple(warnings))

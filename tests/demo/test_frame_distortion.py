@@ -50,8 +50,9 @@ def tig():
     return _cell(TIG)
 
 
-def _gate(cell, world_axis=(0.0, 0.0, 1.0), angle_deg=0.0, seed=None):
-    """The frame gate with source_in_world turned by angle_deg about world_axis through the receiver."""
+def _gate(cell, world_axis=(0.0, 0.0, 1.0), angle_deg=0.0, seed=None, shift_m=(0.0, 0.0, 0.0)):
+    """The frame gate with source_in_world turned by angle_deg about world_axis through the receiver
+    (and moved by shift_m in the world)."""
     problem, cad, log = cell
     if seed is not None:
         log = perturb_log(log, TrackerModel(), seed)
@@ -59,6 +60,7 @@ def _gate(cell, world_axis=(0.0, 0.0, 1.0), angle_deg=0.0, seed=None):
     demo = clean_demonstration(raw, problem.demonstration)
     T = np.array(problem.frames.source_in_world, dtype=float)
     T[:3, :3] = Rotation.from_rotvec(np.radians(angle_deg) * np.asarray(world_axis)).as_matrix() @ T[:3, :3]
+    T[:3, 3] += shift_m
     fused = fuse(cad, demo, T, problem.tool.sensor_in_tcp)
     return gate_frame(quality, demo, fused, T, problem.tool.sensor_in_tcp)
 
@@ -89,7 +91,7 @@ def test_a_tig_frame_turned_10_degrees_about_z_stops_the_run(tig):
 @pytest.mark.parametrize("seed", [None, 11, 12])
 def test_the_tig_cell_with_its_own_frame_passes_without_a_frame_warning(tig, seed):
     quality = _gate(tig, seed=seed)  # no InputError: the frame is right
-    assert _frame_warnings(quality) == []
+    assert quality.warnings == ()  # neither a rotation nor an offset
     frame = quality.as_json()["frame"]
     assert frame["observable_rotation_deg"] < FRAME_WARN_DEG  # the truth is 0
     assert not frame["not_observable"]  # the seam's bends show every axis
@@ -115,9 +117,17 @@ def test_with_accept_the_tig_rotation_is_a_warning_naming_the_angle(tig):
 @pytest.mark.parametrize("seed", [None, 21])
 def test_a_small_spiral_with_its_own_frame_is_not_stopped_but_said_to_be_weakly_checked(seed):
     quality = _gate(_cell(SPIRAL), seed=seed)  # no InputError
-    warnings = _frame_warnings(quality)
-    assert all("cannot be checked well" in w for w in warnings)
-    assert not any("may be off" in w for w in warnings)
+    assert quality.warnings  # the spiral is 60 mm across: it cannot show the frame well
+    assert all("cannot be checked well" in w for w in quality.warnings)  # neither rotation nor offset "off"
+
+
+@pytest.mark.parametrize("shift_m", [(0.04, 0.0, 0.0), (0.0, 0.0, 0.04)], ids=["along x", "along z"])
+def test_a_tig_receiver_moved_40_mm_is_warned_about_as_an_offset(tig, shift_m):
+    quality = _gate(tig, shift_m=shift_m)  # a shift does not stop the run
+    (warning,) = [w for w in quality.warnings if "offset" in w]
+    assert "position may be off" in warning
+    assert abs(quality.frame.offset_m - 0.04) < 0.005  # the truth is 40 mm
+    assert quality.frame.observable_rotation_deg < FRAME_WARN_DEG
 
 
 def _estimate(chi2: float, n_hidden: int) -> FrameEstimate:
