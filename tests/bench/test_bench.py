@@ -175,3 +175,19 @@ def test_bench_command_lists_suites_and_rejects_unknown_contenders(capsys, tmp_p
         ]
     )
     assert code == 2 and "unknown contender" in capsys.readouterr().err
+
+
+def test_drake_chains_its_ik_on_a_plant_made_once_per_problem(suites_file):
+    """Drake's answer passes the shared verification; its plant is kept on the problem and reused,
+    and its stage times are the programs' making and SNOPT's solving."""
+    pytest.importorskip("pydrake")
+    problem = generated_problem("tiny", "wave", load_suites(suites_file)["generated"]["wave"], 20)
+    first = contenders_module.drake_chained_ik(problem)
+    plant = problem.extra["drake_plant"]
+    second = contenders_module.drake_chained_ik(problem)
+    assert problem.extra["drake_plant"] is plant
+    for answer in (first, second):
+        assert answer.status == "ok", answer.note
+        assert verify(problem, answer.q).verified
+        assert answer.times_s["build"] > 0 and answer.times_s["solve"] > 0 and answer.times_s["seed"] == 0
+    np.testing.assert_allclose(first.q, second.q, atol=1e-9)
