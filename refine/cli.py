@@ -170,7 +170,7 @@ def _exit_now(status: int) -> int:
 
 
 def _run(args: argparse.Namespace, problem) -> int:  # noqa: ANN001 - Problem, imported lazily
-    from refine.export.result_json import result_dict, write_result_json
+    from refine.export.result_json import result_dict, write_timings
     from refine.pipeline import run
     from refine.result import summary_lines
 
@@ -188,7 +188,7 @@ def _run(args: argparse.Namespace, problem) -> int:  # noqa: ANN001 - Problem, i
     since_start = _seconds_since_process_start()
     result.timings_s["run"] = time.perf_counter() - t0
     result.timings_s["total"] = since_start if since_start is not None else result.timings_s["run"]
-    write_result_json(result.outputs["result"], result)  # again, now with the total time
+    write_timings(result.outputs["result"], result)  # again, now with the total time
     if args.json:
         print(json.dumps(result_dict(result), indent=2))
     else:

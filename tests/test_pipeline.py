@@ -221,3 +221,19 @@ def test_velocity_scale_slows_the_plan_to_its_fraction_of_the_data_sheet(glass_a
 
 def test_no_joint_exceeds_its_scaled_speed_even_on_average_between_waypoints(glass_at_a_tenth):
     assert glass_at_a_tenth.max() <= 0.1 + 1e-6
+
+
+def test_result_json_rewritten_with_the_total_time_is_the_whole_document_written_again(glass, tmp_path):
+    import dataclasses
+    import shutil
+
+    from refine.export.result_json import write_result_json, write_timings
+
+    result, out = glass
+    later = dataclasses.replace(result, timings_s={**result.timings_s, "run": 1.2345678, "total": 2.5})
+    shutil.copy(out / "result.json", tmp_path / "rewritten.json")
+    write_timings(tmp_path / "rewritten.json", later)
+    write_result_json(tmp_path / "whole.json", later)
+    rewritten = (tmp_path / "rewritten.json").read_text()
+    assert rewritten == (tmp_path / "whole.json").read_text()
+    assert json.loads(rewritten)["timings_s"]["total"] == 2.5

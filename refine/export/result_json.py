@@ -146,16 +146,35 @@ def result_dict(result: RunResult) -> dict[str, Any]:
         "truth": None if result.truth is None else result.truth.as_json(),
         "demo_quality": None if result.demo_quality is None else result.demo_quality.as_json(),
         "placement": None if result.placement is None else result.placement.as_json(),
-        "timings_s": {k: round(v, 6) for k, v in result.timings_s.items()},
+        "timings_s": _timings(result),
         "outputs": {k: p.name for k, p in result.outputs.items()},
         "files": describe_files(result.outputs),
     }
     return doc
 
 
+def _timings(result: RunResult) -> dict[str, float]:
+    return {k: round(v, 6) for k, v in result.timings_s.items()}
+
+
 def write_result_json(path: Path, result: RunResult) -> Path:
     """Write ``result.json`` for ``result`` to ``path``, atomically (a temporary file, then a rename)."""
-    text = json.dumps(result_dict(result), indent=2) + "\n"
+    return _write(path, result_dict(result))
+
+
+def write_timings(path: Path, result: RunResult) -> Path:
+    """Rewrite only ``timings_s`` of the ``result.json`` at ``path`` written for ``result`` (atomically).
+
+    For the times known only once the files are in place (the run's total): the rest of the
+    document, its files' sizes and SHA-256 among them, stands as written and is not computed again.
+    """
+    doc = json.loads(path.read_text(encoding="utf-8"))
+    doc["timings_s"] = _timings(result)
+    return _write(path, doc)
+
+
+def _write(path: Path, doc: dict[str, Any]) -> Path:
+    text = json.dumps(doc, indent=2) + "\n"
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     tmp.write_text(text, encoding="utf-8")
     os.replace(tmp, path)
