@@ -72,9 +72,10 @@ def _frame_warnings(quality):
 @pytest.mark.parametrize(
     "world_axis", [(0.0, 0.0, 1.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0)], ids=["about z", "about x", "about y"]
 )
-def test_a_tig_frame_turned_5_degrees_stops_the_run_naming_the_angle(tig, world_axis):
+@pytest.mark.parametrize("seed", [None, 7001], ids=["as recorded", "with noise"])
+def test_a_tig_frame_turned_5_degrees_stops_the_run_naming_the_angle(tig, world_axis, seed):
     with pytest.raises(InputError) as e:
-        _gate(tig, world_axis, 5.0)
+        _gate(tig, world_axis, 5.0, seed=seed)
     msg = str(e.value)
     assert "source_in_world looks wrong" in msg and "--accept-frame-error" in msg
     angle = float(msg.split("rotated by ")[1].split(" ")[0])
