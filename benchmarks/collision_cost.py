@@ -35,7 +35,9 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def refine_once(problem, robot, fused, collision: bool) -> dict[str, float]:
-    problem = dataclasses.replace(problem, collision=dataclasses.replace(problem.collision, enabled=collision))
+    problem = dataclasses.replace(
+        problem, collision=dataclasses.replace(problem.collision, enabled=collision)
+    )
     sources = constraint_sources(problem, robot)
     watch = _Stopwatch()
     t0 = time.perf_counter()
@@ -81,7 +83,9 @@ def dense_once(source, q) -> dict[str, float]:
 def dense(names: list[str], repeat: int) -> None:
     """Print the dense check's median wall and CPU time and queries on each problem's refined pass."""
     print(f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
-    print(f"{'problem':32} {'waypoints':>9} {'wall s':>8} {'cpu s':>8} {'queries':>8} {'min clear mm':>12} ok")
+    print(
+        f"{'problem':32} {'waypoints':>9} {'wall s':>8} {'cpu s':>8} {'queries':>8} {'min clear mm':>12} ok"
+    )
     for name in names:
         problem = load_problem(ROOT / "problems" / name)
         robot = load_robot(problem.robot.model)
@@ -93,8 +97,10 @@ def dense(names: list[str], repeat: int) -> None:
         q = refine_pass(problem, robot, fused, _Stopwatch(), sources=sources).refinement.q
         runs = [dense_once(sources[0], q) for _ in range(repeat)]
         m = {k: statistics.median(r[k] for r in runs) for k in runs[0]}
-        print(f"{name:32} {len(q):9d} {m['wall_s']:8.3f} {m['cpu_s']:8.3f} {int(m['queries']):8d} "
-              f"{m['min_clearance_mm']:12.2f} {'yes' if m['ok'] else 'NO'}")
+        print(
+            f"{name:32} {len(q):9d} {m['wall_s']:8.3f} {m['cpu_s']:8.3f} {int(m['queries']):8d} "
+            f"{m['min_clearance_mm']:12.2f} {'yes' if m['ok'] else 'NO'}"
+        )
     print(f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
 
 
@@ -103,7 +109,14 @@ def main() -> None:
     parser.add_argument(
         "--problems",
         nargs="+",
-        default=["glass_adhesive", "glass_calibrated", "tig_weld", "ur10e_sealing", "kr8_arc_weld", "unreachable/tool_through_fixture"],
+        default=[
+            "glass_adhesive",
+            "glass_calibrated",
+            "tig_weld",
+            "ur10e_sealing",
+            "kr8_arc_weld",
+            "unreachable/tool_through_fixture",
+        ],
     )
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--dense", action="store_true", help="time the dense clearance check alone")
@@ -111,8 +124,10 @@ def main() -> None:
     if args.dense:
         dense(args.problems, args.repeat)
         return
-    print(f"{'problem':16} {'collision':9} {'refine s':>9} {'outer':>5} {'IPOPT it':>8} {'rows':>5} "
-          f"{'check s':>8} {'rows s':>7} {'queries':>8} {'min dist mm':>11} ok")
+    print(
+        f"{'problem':16} {'collision':9} {'refine s':>9} {'outer':>5} {'IPOPT it':>8} {'rows':>5} "
+        f"{'check s':>8} {'rows s':>7} {'queries':>8} {'min dist mm':>11} ok"
+    )
     for name in args.problems:
         problem = load_problem(ROOT / "problems" / name)
         robot = load_robot(problem.robot.model)
@@ -120,9 +135,11 @@ def main() -> None:
         for collision in (False, True):
             runs = [refine_once(problem, robot, fused, collision) for _ in range(args.repeat)]
             m = {k: statistics.median(r[k] for r in runs) for k in runs[0]}
-            print(f"{name:16} {'on' if collision else 'off':9} {m['refine_s']:9.3f} {int(m['outer']):5d} "
-                  f"{int(m['ipopt_iterations']):8d} {int(m['rows']):5d} {m['check_s']:8.3f} {m['rows_s']:7.3f} "
-                  f"{int(m['queries']):8d} {m['min_distance_mm']:11.1f} {'yes' if m['status_ok'] else 'NO'}")
+            print(
+                f"{name:16} {'on' if collision else 'off':9} {m['refine_s']:9.3f} {int(m['outer']):5d} "
+                f"{int(m['ipopt_iterations']):8d} {int(m['rows']):5d} {m['check_s']:8.3f} {m['rows_s']:7.3f} "
+                f"{int(m['queries']):8d} {m['min_distance_mm']:11.1f} {'yes' if m['status_ok'] else 'NO'}"
+            )
 
 
 if __name__ == "__main__":

@@ -142,28 +142,38 @@ def verdict(case: Case, log, T_F_S: np.ndarray, planted_s_deg: np.ndarray) -> tu
     frame_warnings = [w for w in q.warnings if "frame" in w]  # a rotation or an offset
     if kind == "ok" and frame_warnings:
         kind = "weak" if any("cannot be checked well" in w for w in frame_warnings) else "warn"
-    hidden = ",".join(h["about"].replace("the path direction", "path").replace("receiver axis ", "S")
-                      for h in f.not_observable)
+    hidden = ",".join(
+        h["about"].replace("the path direction", "path").replace("receiver axis ", "S")
+        for h in f.not_observable
+    )
     planted = np.asarray(planted_s_deg, float)
     for h in f.not_observable:
         a = np.asarray(h["axis_in_source"])
         planted = planted - (planted @ a) * a
-    text = f"{f.observable_rotation_deg:5.1f} ± {f.observable_sigma_deg:4.1f}" + (f" (hidden {hidden})" if hidden else "")
+    text = f"{f.observable_rotation_deg:5.1f} ± {f.observable_sigma_deg:4.1f}" + (
+        f" (hidden {hidden})" if hidden else ""
+    )
     return kind, text, float(np.linalg.norm(planted))
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("cases", nargs="*", help="problem folder names, e.g. tig_weld joint_wrap straight_seam")
+    parser.add_argument(
+        "cases", nargs="*", help="problem folder names, e.g. tig_weld joint_wrap straight_seam"
+    )
     parser.add_argument("--angles", nargs="+", type=float, default=[0.0, 2.0, 5.0, 10.0], help="[deg]")
     parser.add_argument("--axes", nargs="+", default=["x", "y", "z"], choices=list(AXES))
     parser.add_argument("--seeds", type=int, default=3, help="perturbed copies of each right-frame log")
-    parser.add_argument("--rotated-seeds", type=int, default=1, help="perturbed copies of each rotated-frame log")
+    parser.add_argument(
+        "--rotated-seeds", type=int, default=1, help="perturbed copies of each rotated-frame log"
+    )
     args = parser.parse_args(argv)
     logging.disable(logging.WARNING)
     cases = bundled(args.cases or None) + straight_seams(args.cases or None)
     print(f"frame gate: warn above {FRAME_WARN_DEG} deg, stop above {FRAME_STOP_DEG} deg")
-    print(f"{'case':34s} {'axis':>4s} {'deg':>5s} {'noise':>6s} {'shown':>5s}  {'estimate [deg]':34s} verdict")
+    print(
+        f"{'case':34s} {'axis':>4s} {'deg':>5s} {'noise':>6s} {'shown':>5s}  {'estimate [deg]':34s} verdict"
+    )
     bad = weak = 0
     z_scores = []
     summary: dict[tuple[str, str, float], list[str]] = {}

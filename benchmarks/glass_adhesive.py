@@ -46,7 +46,9 @@ def _environment(tmp: Path, first_run: bool) -> tuple[dict[str, str], Path]:
     package_root = ROOT
     if first_run:  # run from the copy's folder: ``-m`` puts the working folder first on the path
         package_root = tmp / "fresh"
-        shutil.copytree(ROOT / "refine", package_root / "refine", ignore=shutil.ignore_patterns("__pycache__"))
+        shutil.copytree(
+            ROOT / "refine", package_root / "refine", ignore=shutil.ignore_patterns("__pycache__")
+        )
         (package_root / "robots").symlink_to(ROOT / "robots")  # the registry sits beside the package
         env["PYTHONDONTWRITEBYTECODE"] = "1"
     env["PYTHONPATH"] = os.pathsep.join([str(package_root), *filter(None, [env.get("PYTHONPATH")])])
@@ -105,18 +107,26 @@ def main() -> int:
 
     cpus = [u + s for u, s in zip(users, systems, strict=True)]
     first = results[0]
-    print(f"{first['problem']}: {first['n_waypoints']} waypoints, status {first['status']}, "
-          f"{args.repeat} runs ({'first run: refine compiled each time' if args.first_run else 'bytecode cached'}), "
-          f"load average (1 min) {load_before:.2f} before, {load_after:.2f} after")
-    print(f"wall time (outside the process)   median {statistics.median(walls):.2f} s, "
-          f"min {min(walls):.2f} s, max {max(walls):.2f} s")
-    print(f"CPU time of the process (user+sys)  median {statistics.median(cpus):.2f} s, "
-          f"min {min(cpus):.2f} s (user median {statistics.median(users):.2f} s, "
-          f"sys {statistics.median(systems):.2f} s)")
+    print(
+        f"{first['problem']}: {first['n_waypoints']} waypoints, status {first['status']}, "
+        f"{args.repeat} runs ({'first run: refine compiled each time' if args.first_run else 'bytecode cached'}), "
+        f"load average (1 min) {load_before:.2f} before, {load_after:.2f} after"
+    )
+    print(
+        f"wall time (outside the process)   median {statistics.median(walls):.2f} s, "
+        f"min {min(walls):.2f} s, max {max(walls):.2f} s"
+    )
+    print(
+        f"CPU time of the process (user+sys)  median {statistics.median(cpus):.2f} s, "
+        f"min {min(cpus):.2f} s (user median {statistics.median(users):.2f} s, "
+        f"sys {statistics.median(systems):.2f} s)"
+    )
     totals = [r["timings_s"]["total"] for r in results]
-    print(f"total (process start -> files)    median {statistics.median(totals):.2f} s, "
-          f"max {max(totals):.2f} s   target < {TARGET_S:g} s: "
-          f"{'met' if max(totals) < TARGET_S else 'MISSED'}")
+    print(
+        f"total (process start -> files)    median {statistics.median(totals):.2f} s, "
+        f"max {max(totals):.2f} s   target < {TARGET_S:g} s: "
+        f"{'met' if max(totals) < TARGET_S else 'MISSED'}"
+    )
     stages = [k for k in first["timings_s"] if k not in ("total", "run")]
     for k in stages:
         print(f"  {k:14s} {statistics.median(r['timings_s'][k] for r in results):7.3f} s")

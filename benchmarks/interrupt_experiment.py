@@ -47,7 +47,9 @@ def disagreements(out: Path) -> list[str]:
         f = out / name
         if not f.is_file():
             problems.append(f"{name} listed but missing")
-        elif hashlib.sha256(f.read_bytes()).hexdigest() != meta["sha256"] or f.stat().st_size != meta["bytes"]:
+        elif (
+            hashlib.sha256(f.read_bytes()).hexdigest() != meta["sha256"] or f.stat().st_size != meta["bytes"]
+        ):
             problems.append(f"{name} differs from its listed SHA-256")
     listed = set(doc["files"]) | {"result.json"}
     for f in out.iterdir():

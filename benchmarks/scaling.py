@@ -69,16 +69,20 @@ def main() -> None:
         rows.append(row)
 
     print(f"refinement of a {1.0:.1f} m-wide wave path, IRB 4600, median of {args.repeat} runs")
-    print(f"{'N':>6} {'build s':>9} {'seed s':>8} {'solve s':>8} {'iter':>5} {'verify s':>9} "
-          f"{'build+solve':>12} {'growth':>7} {'max pos err m':>14} {'max dev deg':>12} ok")
+    print(
+        f"{'N':>6} {'build s':>9} {'seed s':>8} {'solve s':>8} {'iter':>5} {'verify s':>9} "
+        f"{'build+solve':>12} {'growth':>7} {'max pos err m':>14} {'max dev deg':>12} ok"
+    )
     prev = None
     for row in rows:
         total = row["build_s"] + row["solve_s"]
         growth = "" if prev is None else f"{total / prev:7.2f}"
-        print(f"{row['n']:>6} {row['build_s']:9.3f} {row['seed_s']:8.3f} {row['solve_s']:8.3f} "
-              f"{int(row['iterations']):>5} {row['verify_s']:9.3f} {total:12.3f} {growth:>7} "
-              f"{row['max_position_error_m']:14.2e} {row['max_orientation_deviation_deg']:12.3f} "
-              f"{'yes' if row['status_ok'] else 'NO'}")
+        print(
+            f"{row['n']:>6} {row['build_s']:9.3f} {row['seed_s']:8.3f} {row['solve_s']:8.3f} "
+            f"{int(row['iterations']):>5} {row['verify_s']:9.3f} {total:12.3f} {growth:>7} "
+            f"{row['max_position_error_m']:14.2e} {row['max_orientation_deviation_deg']:12.3f} "
+            f"{'yes' if row['status_ok'] else 'NO'}"
+        )
         prev = total
     ns = np.array([r["n"] for r in rows], dtype=float)
     totals = np.array([r["build_s"] + r["solve_s"] for r in rows])
@@ -94,8 +98,15 @@ def main() -> None:
             writer.writeheader()
         stamp = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
         for row in rows:
-            writer.writerow({"date": stamp, "machine": platform.node(), "casadi": casadi.__version__,
-                             "pinocchio": pinocchio.__version__, **row})
+            writer.writerow(
+                {
+                    "date": stamp,
+                    "machine": platform.node(),
+                    "casadi": casadi.__version__,
+                    "pinocchio": pinocchio.__version__,
+                    **row,
+                }
+            )
 
 
 if __name__ == "__main__":

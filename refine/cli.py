@@ -100,7 +100,10 @@ def _interrupted() -> int:
 
     done = completed_status()
     if done is not None:
-        print("refine: interrupted after the new outputs were complete; result.json describes them", file=sys.stderr)
+        print(
+            "refine: interrupted after the new outputs were complete; result.json describes them",
+            file=sys.stderr,
+        )
         return exit_status(done)
     print("refine: interrupted; the output folder keeps its previous complete set", file=sys.stderr)
     return 130
@@ -152,7 +155,9 @@ def _is_program() -> bool:
     """Whether this process is the ``refine`` program (not ``main`` called from Python)."""
     top = sys.modules.get("__main__")
     spec = getattr(top, "__spec__", None)
-    return (spec is not None and spec.name == "refine.cli") or Path(getattr(top, "__file__", "") or "").name == "refine"
+    return (spec is not None and spec.name == "refine.cli") or Path(
+        getattr(top, "__file__", "") or ""
+    ).name == "refine"
 
 
 def _exit_now(status: int) -> int:
@@ -184,7 +189,9 @@ def _run(args: argparse.Namespace, problem) -> int:  # noqa: ANN001 - Problem, i
 
     programs = parse_programs(args.programs, problem)
     t0 = time.perf_counter()
-    result = run(problem, out, programs, report=not args.no_report, accept_frame_error=args.accept_frame_error)
+    result = run(
+        problem, out, programs, report=not args.no_report, accept_frame_error=args.accept_frame_error
+    )
     since_start = _seconds_since_process_start()
     result.timings_s["run"] = time.perf_counter() - t0
     result.timings_s["total"] = since_start if since_start is not None else result.timings_s["run"]

@@ -167,14 +167,20 @@ def outer_polytope(points: ArrayLike, *, tolerance_m: float = 0.005, max_planes:
             break
         # the supporting plane facing the farthest corner from its nearest point on the hull cuts it off
         tri = hull.triangles[hull.area_faces > 1e-14]
-        closest = trimesh.triangles.closest_point(tri, np.repeat(vertices[worst : worst + 1], len(tri), axis=0))
+        closest = trimesh.triangles.closest_point(
+            tri, np.repeat(vertices[worst : worst + 1], len(tri), axis=0)
+        )
         nearest = closest[np.argmin(np.linalg.norm(closest - vertices[worst], axis=1))]
         normals.append((vertices[worst] - nearest) / gaps[worst])
     vertices = _merge_close(vertices)
     result = ConvexHull(vertices)
     piece = ConvexPiece.hull_of(vertices[result.vertices])
-    log.debug("outer polytope: %d corners, %d faces, %.1f mm beyond the hull", len(piece.vertices),
-              piece.plane_count, gaps[worst] * 1e3)
+    log.debug(
+        "outer polytope: %d corners, %d faces, %.1f mm beyond the hull",
+        len(piece.vertices),
+        piece.plane_count,
+        gaps[worst] * 1e3,
+    )
     return piece
 
 
@@ -188,7 +194,9 @@ def _merge_close(points: Array) -> Array:
     return points[[k for k in range(len(points)) if k not in drop]]
 
 
-def overshoot(pieces: list[ConvexPiece], mesh: trimesh.Trimesh, *, samples: int = 2000, seed: int = 0) -> float:
+def overshoot(
+    pieces: list[ConvexPiece], mesh: trimesh.Trimesh, *, samples: int = 2000, seed: int = 0
+) -> float:
     """How far [m] the pieces reach beyond a closed mesh.
 
     The largest distance outside the mesh of their corners and of ``samples`` random points on each

@@ -22,7 +22,14 @@ import unicodedata
 MAX_STEM = 64
 """Longest output file stem [characters]; leaves room for suffixes within every file system's 255."""
 
-_WINDOWS_DEVICES = {"con", "prn", "aux", "nul", *(f"com{i}" for i in range(10)), *(f"lpt{i}" for i in range(10))}
+_WINDOWS_DEVICES = {
+    "con",
+    "prn",
+    "aux",
+    "nul",
+    *(f"com{i}" for i in range(10)),
+    *(f"lpt{i}" for i in range(10)),
+}
 _UNSAFE_STEM = re.compile(r"[^A-Za-z0-9_.\-]+")
 _UNSAFE_IDENT = re.compile(r"[^A-Za-z0-9_]+")
 
@@ -83,7 +90,6 @@ def comment_text(text: str, max_len: int = 120) -> str:
     return line if len(line) <= max_len else line[: max_len - 3] + "..."
 
 
-
 def message_text(text: str, max_len: int = 2000) -> str:
     """An error message fit for a terminal.
 
@@ -92,6 +98,7 @@ def message_text(text: str, max_len: int = 2000) -> str:
     nor flood it.
     """
     out = "".join(
-        c if c == "\n" or (c.isprintable() and not 0xD800 <= ord(c) <= 0xDFFF) else repr(c)[1:-1] for c in str(text)
+        c if c == "\n" or (c.isprintable() and not 0xD800 <= ord(c) <= 0xDFFF) else repr(c)[1:-1]
+        for c in str(text)
     )
     return out if len(out) <= max_len else out[: max_len - 25] + f" ... ({len(out)} characters)"

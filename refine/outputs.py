@@ -73,11 +73,17 @@ def _claimed_names(doc_path: Path) -> set[str]:
     names = set()
     for group in (doc.get("outputs"), doc.get("files")):
         if isinstance(group, dict):
-            names |= {v for v in group.values() if isinstance(v, str)} | {k for k in group if isinstance(k, str)}
+            names |= {v for v in group.values() if isinstance(v, str)} | {
+                k for k in group if isinstance(k, str)
+            }
     return {
         n
         for n in names
-        if "/" not in n and "\\" not in n and not n.startswith(".") and n != RESULT and n.endswith(OUTPUT_SUFFIXES)
+        if "/" not in n
+        and "\\" not in n
+        and not n.startswith(".")
+        and n != RESULT
+        and n.endswith(OUTPUT_SUFFIXES)
     }
 
 
@@ -189,8 +195,14 @@ class StagedOutputs:
             if path.parent != self.dir:
                 raise InputError(f"output {path} was not written into the staging folder")
             target = out / path.name
-            if target.resolve() in self.protected or target.is_symlink() or (target.exists() and not target.is_file()):
-                raise InputError(f"output {path.name!r} would replace {target.resolve()}; nothing was written")
+            if (
+                target.resolve() in self.protected
+                or target.is_symlink()
+                or (target.exists() and not target.is_file())
+            ):
+                raise InputError(
+                    f"output {path.name!r} would replace {target.resolve()}; nothing was written"
+                )
         with deferred():
             write_result(staged["result"])
             with open(staged["result"], "rb") as f:

@@ -91,7 +91,9 @@ class TrackerLog:
         _check_rows("TrackerLog.positions", self.positions, m, (3,))
         _check_rows("TrackerLog.rotations", self.rotations, m, (3, 3))
         if self.device_error is not None and np.shape(self.device_error) != (m,):
-            raise InputError(f"TrackerLog.device_error: expected shape ({m},), got {np.shape(self.device_error)}")
+            raise InputError(
+                f"TrackerLog.device_error: expected shape ({m},), got {np.shape(self.device_error)}"
+            )
 
 
 @dataclass(frozen=True)

@@ -66,7 +66,9 @@ def _first_beyond(values: np.ndarray, limits: np.ndarray) -> tuple[int, int] | N
     return int(k), int(j)
 
 
-def check_coordinates(points: ArrayLike, limit_m: float, where: Where, what: str, units: str | None = None) -> None:
+def check_coordinates(
+    points: ArrayLike, limit_m: float, where: Where, what: str, units: str | None = None
+) -> None:
     """Stop at the first point with a coordinate beyond ±``limit_m``.
 
     Args:
@@ -83,7 +85,9 @@ def check_coordinates(points: ArrayLike, limit_m: float, where: Where, what: str
     hit = _first_beyond(p, np.full(3, limit_m))
     if hit is not None:
         k, j = hit
-        cause = f"read as {units!r}: are the units right?" if units else "a value in the wrong unit, or garbage"
+        cause = (
+            f"read as {units!r}: are the units right?" if units else "a value in the wrong unit, or garbage"
+        )
         raise InputError(
             f"{where(k)}: {what} {'xyz'[j]} = {p[k, j]:.6g} m is outside the plausible range ±{limit_m:g} m ({cause})"
         )
@@ -99,7 +103,9 @@ def check_point(xyz: Sequence[float], limit_m: float, where: str, what: str) -> 
             )
 
 
-def check_angles(angles_deg: ArrayLike, limits_deg: Sequence[float], where: Where, names: Sequence[str]) -> None:
+def check_angles(
+    angles_deg: ArrayLike, limits_deg: Sequence[float], where: Where, names: Sequence[str]
+) -> None:
     """Stop at the first angle beyond its range (each column ``j`` within ±``limits_deg[j]``).
 
     Raises:
@@ -151,7 +157,9 @@ def check_times(t: ArrayLike, where: Where) -> None:
     big = np.flatnonzero(~(np.abs(t) <= MAX_ABS_TIME_S))
     if big.size:
         k = int(big[0])
-        raise InputError(f"{where(k)}: time {t[k]:.6g} s is outside the plausible range ±{MAX_ABS_TIME_S:g} s")
+        raise InputError(
+            f"{where(k)}: time {t[k]:.6g} s is outside the plausible range ±{MAX_ABS_TIME_S:g} s"
+        )
     steps = np.diff(t)
     short = np.flatnonzero(~(steps >= MIN_STEP_S))
     if short.size:

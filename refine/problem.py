@@ -124,7 +124,10 @@ class Problem:
         """Every data file the problem reads (resolved paths), for the outputs-never-overwrite check."""
         files = [self.cad.file] if self.cad is not None else []
         if self.demonstration is not None:
-            files += [self.demonstration.file, *([self.demonstration.truth] if self.demonstration.truth else [])]
+            files += [
+                self.demonstration.file,
+                *([self.demonstration.truth] if self.demonstration.truth else []),
+            ]
         files += [s.file for s in (*self.cell, *self.tool.collision) if s.file is not None]
         files += [self.robot.urdf] if self.robot.urdf is not None else []
         return tuple(files)
@@ -200,7 +203,9 @@ def _read_toml(path: Path) -> dict[str, Any]:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as e:
         line = raw[: e.start].count(b"\n") + 1
-        raise InputError(f"{path}:{line}: not UTF-8 text (byte 0x{raw[e.start]:02x} at offset {e.start})") from e
+        raise InputError(
+            f"{path}:{line}: not UTF-8 text (byte 0x{raw[e.start]:02x} at offset {e.start})"
+        ) from e
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
@@ -221,6 +226,7 @@ def _name(value: Any) -> str:
     if not name.strip("._- "):
         raise InputError(f"name must have at least one letter or digit, got {value!r}")
     return name
+
 
 _TOP_KEYS = {
     "calibration",
@@ -291,7 +297,9 @@ def _pose(value: Any, key: str) -> Matrix4:
     xyz = _numbers(value.get("xyz", [0.0, 0.0, 0.0]), f"{key}.xyz", 3)
     rpy = _numbers(value.get("rpy_deg", [0.0, 0.0, 0.0]), f"{key}.rpy_deg", 3)
     if max(abs(v) for v in xyz) > MAX_POSE_M or max(abs(v) for v in rpy) > 720.0:
-        raise InputError(f"{key}: xyz must lie within ±{MAX_POSE_M:g} m and rpy_deg within ±720 deg, got {value!r}")
+        raise InputError(
+            f"{key}: xyz must lie within ±{MAX_POSE_M:g} m and rpy_deg within ±720 deg, got {value!r}"
+        )
     return transform_from_xyz_rpy(xyz, rpy)
 
 
@@ -376,7 +384,9 @@ def _robot(t: dict[str, Any], path: Path, inside: Path | None = None) -> RobotSe
         out["model"] = _robot_model(t["model"])
         extra = sorted({"flange_frame", "controller", "reach_m"} & set(t))
         if extra:
-            raise InputError(f"[robot] {', '.join(extra)} go with urdf; robot {t['model']!r} of the registry has its own")
+            raise InputError(
+                f"[robot] {', '.join(extra)} go with urdf; robot {t['model']!r} of the registry has its own"
+            )
     for key in ("joint_lower_deg", "joint_upper_deg", "joint_velocity_deg_s"):
         if key in t:
             out[key] = _numbers(t[key], f"robot.{key}")
@@ -395,7 +405,9 @@ def _robot_model(value: Any) -> str:
 
     known = available_robots()
     if not isinstance(value, str) or value not in known:
-        raise InputError(f"robot.model = {value!r} is not a robot of the registry; available: {', '.join(known)}")
+        raise InputError(
+            f"robot.model = {value!r} is not a robot of the registry; available: {', '.join(known)}"
+        )
     return value
 
 

@@ -38,8 +38,16 @@ PROGRAMS = {"abb": ("rapid",), "kuka": ("krl", "sunrise"), "ur": ("urscript",)}
 SELF_COLLISION_FILE = "self_collision.toml"
 """The sampled self-collision matrix beside a robot's URDF."""
 _TOML_KEYS = frozenset(
-    {"maker", "model", "urdf", "flange_frame", "reach_m", "controller", "acceleration_rule",
-     "joint_acceleration_deg_s2"}
+    {
+        "maker",
+        "model",
+        "urdf",
+        "flange_frame",
+        "reach_m",
+        "controller",
+        "acceleration_rule",
+        "joint_acceleration_deg_s2",
+    }
 )
 _TOML_OPTIONAL = frozenset({"program"})
 
@@ -99,8 +107,7 @@ class RobotSpec:
             raise InputError(f"robot {self.name!r}: reach_m must be positive, got {self.reach_m}")
         if self.controller not in CONTROLLERS:
             raise InputError(
-                f"robot {self.name!r}: controller {self.controller!r} is not one of "
-                f"{', '.join(CONTROLLERS)}"
+                f"robot {self.name!r}: controller {self.controller!r} is not one of {', '.join(CONTROLLERS)}"
             )
         if self.program and self.program not in PROGRAMS[self.controller]:
             raise InputError(
@@ -290,8 +297,7 @@ def _load_robot(name: str, root: str) -> Robot:
     )
     if model.nq != spec.dof:
         raise InputError(
-            f"robot {name!r}: only 1-DoF joints are supported, but nq = {model.nq} for "
-            f"{spec.dof} joints"
+            f"robot {name!r}: only 1-DoF joints are supported, but nq = {model.nq} for {spec.dof} joints"
         )
     logger.debug("loaded robot %s (%d joints) from %s", name, spec.dof, urdf)
     return Robot(spec, model)

@@ -337,14 +337,25 @@ def problem_reachability(problem, targets: ArrayLike, seed: int) -> tuple[Reacha
     robot = load_robot(problem.robot.model)
     kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange)
     margin = math.radians(problem.tolerances.joint_margin_deg)
-    collision = CollisionModel(robot, kin.base_in_world, kin.tcp_in_flange, problem.tool.collision, problem.cell,
-                               margin_m=problem.collision.margin_m, self_margin_m=problem.collision.self_margin_m)
-    starts = start_candidates(robot.spec.lower + margin, robot.spec.upper - margin,
-                              np.radians(problem.robot.home_deg), seed=seed)
+    collision = CollisionModel(
+        robot,
+        kin.base_in_world,
+        kin.tcp_in_flange,
+        problem.tool.collision,
+        problem.cell,
+        margin_m=problem.collision.margin_m,
+        self_margin_m=problem.collision.self_margin_m,
+    )
+    starts = start_candidates(
+        robot.spec.lower + margin, robot.spec.upper - margin, np.radians(problem.robot.home_deg), seed=seed
+    )
     report = reachability_report(kin, targets, joint_margin_rad=margin, starts=starts, collision=collision)
-    ok = bool(report.errors.max() < 1e-6 and report.joint_margins.min() > margin
-              and report.manipulability.min() > problem.tolerances.singularity_margin
-              and min(d for d, _ in (report.clearance or {}).values()) > problem.collision.margin_m)
+    ok = bool(
+        report.errors.max() < 1e-6
+        and report.joint_margins.min() > margin
+        and report.manipulability.min() > problem.tolerances.singularity_margin
+        and min(d for d, _ in (report.clearance or {}).values()) > problem.collision.margin_m
+    )
     return report, ok
 
 

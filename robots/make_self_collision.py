@@ -49,15 +49,20 @@ def maker_contacts(robot, folder: Path, samples: int, seed: int) -> dict[frozens
         models.append(bvh)
     data, gdata = ref.createData(), geometry.createData()
     count: dict[frozenset[str], int] = {}
-    for q in np.random.default_rng(seed).uniform(robot.spec.lower, robot.spec.upper, size=(samples, robot.nq)):
+    for q in np.random.default_rng(seed).uniform(
+        robot.spec.lower, robot.spec.upper, size=(samples, robot.nq)
+    ):
         pin.forwardKinematics(ref, data, q)
         pin.updateGeometryPlacements(ref, data, geometry, gdata)
-        objects = [fcl.CollisionObject(m, fcl.Transform(gdata.oMg[k].rotation, gdata.oMg[k].translation))
-                   for k, m in enumerate(models)]
+        objects = [
+            fcl.CollisionObject(m, fcl.Transform(gdata.oMg[k].rotation, gdata.oMg[k].translation))
+            for k, m in enumerate(models)
+        ]
         for a in range(len(models)):
             for b in range(a + 1, len(models)):
-                if link_of[a] != link_of[b] and fcl.collide(objects[a], objects[b], fcl.CollisionRequest(),
-                                                            fcl.CollisionResult()):
+                if link_of[a] != link_of[b] and fcl.collide(
+                    objects[a], objects[b], fcl.CollisionRequest(), fcl.CollisionResult()
+                ):
                     pair = frozenset((link_of[a], link_of[b]))
                     count[pair] = count.get(pair, 0) + 1
     return {pair: n / samples for pair, n in count.items()}
@@ -78,16 +83,27 @@ def main() -> None:
         maker = {}
         if (args.meshes / name / "reference.urdf").is_file():
             maker = maker_contacts(robot, args.meshes / name, args.samples // 10, args.seed)
-        stats = [dataclasses.replace(s, reason="maker")
-                 if not s.reason and maker.get(frozenset(s.links), 0.0) >= MAKER_FRACTION else s for s in stats]
-        write_matrix(robots_dir() / name / SELF_COLLISION_FILE, stats, samples=args.samples, seed=args.seed,
-                     never_m=NEVER_M)
+        stats = [
+            dataclasses.replace(s, reason="maker")
+            if not s.reason and maker.get(frozenset(s.links), 0.0) >= MAKER_FRACTION
+            else s
+            for s in stats
+        ]
+        write_matrix(
+            robots_dir() / name / SELF_COLLISION_FILE,
+            stats,
+            samples=args.samples,
+            seed=args.seed,
+            never_m=NEVER_M,
+        )
         print(f"{name}: {args.samples} samples in {time.perf_counter() - t0:.0f} s")
         for s in stats:
             share = maker.get(frozenset(s.links))
-            print(f"  {s.links[0]:10} {s.links[1]:10} {s.reason or 'checked':9} "
-                  f"least {s.min_distance_m * 1e3:8.1f} mm  in contact {s.contact_fraction:7.2%}"
-                  + (f"  (maker's meshes {share:.1%})" if share is not None else ""))
+            print(
+                f"  {s.links[0]:10} {s.links[1]:10} {s.reason or 'checked':9} "
+                f"least {s.min_distance_m * 1e3:8.1f} mm  in contact {s.contact_fraction:7.2%}"
+                + (f"  (maker's meshes {share:.1%})" if share is not None else "")
+            )
 
 
 if __name__ == "__main__":

@@ -70,9 +70,8 @@ def reference_meshes(robot: str, meshes: Path) -> dict[str, trimesh.Trimesh]:
     pin.updateFramePlacements(ref, ref_data)
     # the references' world may differ from the project's base (UR: ROS base_link is the controller's
     # Base turned 180 deg about z); the flanges agree, so they give the one from the other
-    T_own_ref = (
-        own_data.oMf[own.getFrameId("tool0")].homogeneous
-        @ np.linalg.inv(ref_data.oMf[ref.getFrameId(REFERENCE_FLANGE.get(robot, "tool0"))].homogeneous)
+    T_own_ref = own_data.oMf[own.getFrameId("tool0")].homogeneous @ np.linalg.inv(
+        ref_data.oMf[ref.getFrameId(REFERENCE_FLANGE.get(robot, "tool0"))].homogeneous
     )
     out: dict[str, trimesh.Trimesh] = {}
     for g in ref_geometry.geometryObjects:

@@ -142,7 +142,13 @@ def test_a_reused_problem_equals_a_fresh_build_for_the_new_path_and_tolerances()
     tol = refine.Tolerances(orientation_deg=2.0, joint_margin_deg=5.0, joint_step_deg=10.0)
     reused = reuse_for(old, moved, tol)
     fresh = build_refinement(
-        old.robot, moved, old.base_in_world, old.tcp_in_flange, tol, weights=old.weights, joint_steps=old.joint_steps
+        old.robot,
+        moved,
+        old.base_in_world,
+        old.tcp_in_flange,
+        tol,
+        weights=old.weights,
+        joint_steps=old.joint_steps,
     )
     assert reused is not None and reused.solver is old.solver
     for name in ("params", "lbx", "ubx", "lbg", "ubg"):

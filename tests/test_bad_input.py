@@ -30,34 +30,89 @@ def _sub(old: str, new: str):
 
 # (case id, edit of problem.toml text, words the message must contain)
 TOML_CASES = [
-    ("nan-in-pose", _sub("xyz = [1.30, -0.82, 0.72]", "xyz = [nan, -0.82, 0.72]"), ["source_in_world", "finite"]),
-    ("inf-in-rpy", _sub("rpy_deg = [180.0, 0.0, 30.0]", "rpy_deg = [180.0, inf, 30.0]"), ["sensor_in_tcp", "finite"]),
+    (
+        "nan-in-pose",
+        _sub("xyz = [1.30, -0.82, 0.72]", "xyz = [nan, -0.82, 0.72]"),
+        ["source_in_world", "finite"],
+    ),
+    (
+        "inf-in-rpy",
+        _sub("rpy_deg = [180.0, 0.0, 30.0]", "rpy_deg = [180.0, inf, 30.0]"),
+        ["sensor_in_tcp", "finite"],
+    ),
     ("huge-pose", _sub("xyz = [0.0, 0.0, 0.35]", "xyz = [0.0, 0.0, 1e300]"), ["tcp_in_flange", "100 m"]),
     ("nan-mass", _sub("mass_kg = 6.5", "mass_kg = nan"), ["mass_kg", "finite"]),
-    ("nan-home", _sub('model = "abb_irb4600_60_205"', 'model = "abb_irb4600_60_205"\nhome_deg = [0, 0, 0, 0, nan, 0]'), ["home_deg", "finite"]),
-    ("short-home", _sub('model = "abb_irb4600_60_205"', 'model = "abb_irb4600_60_205"\nhome_deg = [0, 10, 20]'), ["home_deg", "3 values", "6 joints"]),
-    ("short-accel", _sub('model = "abb_irb4600_60_205"', 'model = "abb_irb4600_60_205"\njoint_acceleration_deg_s2 = [100, 100]'), ["joint_acceleration_deg_s2", "2 values"]),
-    ("nan-velocity-scale", _sub('model = "abb_irb4600_60_205"', 'model = "abb_irb4600_60_205"\nvelocity_scale = nan'), ["velocity_scale"]),
-    ("unknown-robot", _sub('model = "abb_irb4600_60_205"', 'model = "abb_irb9999"'), ["robot.model", "available"]),
-    ("parameters-not-tables", _sub('output = "doGlueGun"', 'output = "doGlueGun"\nparameters = [1, 2]'), ["process.parameters[0]", "table"]),
+    (
+        "nan-home",
+        _sub('model = "abb_irb4600_60_205"', 'model = "abb_irb4600_60_205"\nhome_deg = [0, 0, 0, 0, nan, 0]'),
+        ["home_deg", "finite"],
+    ),
+    (
+        "short-home",
+        _sub('model = "abb_irb4600_60_205"', 'model = "abb_irb4600_60_205"\nhome_deg = [0, 10, 20]'),
+        ["home_deg", "3 values", "6 joints"],
+    ),
+    (
+        "short-accel",
+        _sub(
+            'model = "abb_irb4600_60_205"',
+            'model = "abb_irb4600_60_205"\njoint_acceleration_deg_s2 = [100, 100]',
+        ),
+        ["joint_acceleration_deg_s2", "2 values"],
+    ),
+    (
+        "nan-velocity-scale",
+        _sub('model = "abb_irb4600_60_205"', 'model = "abb_irb4600_60_205"\nvelocity_scale = nan'),
+        ["velocity_scale"],
+    ),
+    (
+        "unknown-robot",
+        _sub('model = "abb_irb4600_60_205"', 'model = "abb_irb9999"'),
+        ["robot.model", "available"],
+    ),
+    (
+        "parameters-not-tables",
+        _sub('output = "doGlueGun"', 'output = "doGlueGun"\nparameters = [1, 2]'),
+        ["process.parameters[0]", "table"],
+    ),
     ("nan-parameter", _sub("value = 4.0", "value = nan"), ["process.parameters[0].value", "finite"]),
     ("tiny-spacing", _sub("spacing_m = 0.005", "spacing_m = 1e-7"), ["cad.spacing_m", "0.0001"]),
-    ("huge-hampel", _sub("smoothing_s = 0.03", "smoothing_s = 0.03\nhampel_window = 100000000"), ["hampel_window", "samples"]),
+    (
+        "huge-hampel",
+        _sub("smoothing_s = 0.03", "smoothing_s = 0.03\nhampel_window = 100000000"),
+        ["hampel_window", "samples"],
+    ),
     ("huge-smoothing", _sub("smoothing_s = 0.03", "smoothing_s = 1e6"), ["smoothing_s", " s"]),
-    ("tiny-check-step", _sub("self_margin_m = 0.005", "self_margin_m = 0.005\ncheck_step_m = 1e-7"), ["check_step_m"]),
+    (
+        "tiny-check-step",
+        _sub("self_margin_m = 0.005", "self_margin_m = 0.005\ncheck_step_m = 1e-7"),
+        ["check_step_m"],
+    ),
     ("tiny-cone", _sub("orientation_deg = 3.0", "orientation_deg = 1e-4"), ["orientation_deg", "0.01"]),
     ("empty-name", _sub('name = "glass_adhesive"', 'name = ""'), ["name"]),
     ("name-not-string", _sub('name = "glass_adhesive"', "name = 5"), ["name", "string"]),
     ("tool-name-newline", _sub('name = "caulk_gun"', 'name = "gun\\nPROC x()"'), ["tool.name", "printable"]),
     ("output-newline", _sub('output = "doGlueGun"', 'output = "do\\nSetDO x, 1;"'), ["process.output"]),
-    ("bad-rapid-signal", _sub('output = "doGlueGun"', 'output = "do glue!"'), ["process.output", "RAPID signal"]),
+    (
+        "bad-rapid-signal",
+        _sub('output = "doGlueGun"', 'output = "do glue!"'),
+        ["process.output", "RAPID signal"],
+    ),
     ("krl-on-abb", _sub('programs = ["rapid"]', 'programs = ["krl"]'), ["krl", "abb"]),
     ("unknown-language", _sub('programs = ["rapid"]', 'programs = ["gcode"]'), ["gcode", "rapid"]),
-    ("passwd", _sub('file = "bead.dxf"', 'file = "../../../../../../../etc/passwd"'), ["cad.file", "outside the problem folder"]),
+    (
+        "passwd",
+        _sub('file = "bead.dxf"', 'file = "../../../../../../../etc/passwd"'),
+        ["cad.file", "outside the problem folder"],
+    ),
     ("absolute", _sub('file = "demo.liberty"', 'file = "/etc/hostname"'), ["demonstration.file", "outside"]),
     ("missing-file", _sub('file = "bead.dxf"', 'file = "nope.dxf"'), ["cad.file", "nope.dxf"]),
     ("dev-zero", _sub('file = "demo.liberty"', 'file = "/dev/zero"'), ["demonstration.file"]),
-    ("description-table", _sub('name = "glass_adhesive"', 'name = "glass_adhesive"\n[description]\nx = 1'), ["description"]),
+    (
+        "description-table",
+        _sub('name = "glass_adhesive"', 'name = "glass_adhesive"\n[description]\nx = 1'),
+        ["description"],
+    ),
     ("bad-toml", _sub("[robot]", "[robot"), ["not valid TOML", "line"]),
 ]
 
@@ -101,11 +156,18 @@ def test_non_utf8_and_binary_problem_files_name_the_line(tmp_path, capsys, comma
     problem = _copy(GLASS, tmp_path)
     toml = problem / "problem.toml"
     toml.write_bytes(toml.read_bytes().replace(b'"caulk_gun"', b'"caulk_\xe9gun"'))
-    err = _expect_refused([command, str(problem), "--out", str(tmp_path / "o")], tmp_path / "o", capsys, ["UTF-8"])
-    line = toml.read_bytes().split(b"\n").index(next(x for x in toml.read_bytes().split(b"\n") if b"\xe9" in x)) + 1
+    err = _expect_refused(
+        [command, str(problem), "--out", str(tmp_path / "o")], tmp_path / "o", capsys, ["UTF-8"]
+    )
+    line = (
+        toml.read_bytes().split(b"\n").index(next(x for x in toml.read_bytes().split(b"\n") if b"\xe9" in x))
+        + 1
+    )
     assert f"problem.toml:{line}:" in err
     toml.write_bytes(os.urandom(4096))
-    _expect_refused([command, str(problem), "--out", str(tmp_path / "o")], tmp_path / "o", capsys, ["problem.toml"])
+    _expect_refused(
+        [command, str(problem), "--out", str(tmp_path / "o")], tmp_path / "o", capsys, ["problem.toml"]
+    )
 
 
 @pytest.mark.parametrize("command", ["check", "run"])
@@ -121,9 +183,15 @@ def test_out_that_is_a_file_is_refused_before_solving(tmp_path, capsys, command)
 @pytest.mark.parametrize("command", ["check", "run"])
 def test_programs_option_for_another_controller_is_refused(tmp_path, capsys, command):
     out = tmp_path / "o"
-    _expect_refused([command, str(GLASS), "--out", str(out), "--programs", "urscript"], out, capsys, ["urscript", "abb"])
-    _expect_refused([command, str(GLASS), "--out", str(out), "--programs", "gcode"], out, capsys, ["--programs", "gcode"])
-    _expect_refused([command, str(SEALING), "--out", str(out), "--programs", "rapid"], out, capsys, ["rapid", "ur10e"])
+    _expect_refused(
+        [command, str(GLASS), "--out", str(out), "--programs", "urscript"], out, capsys, ["urscript", "abb"]
+    )
+    _expect_refused(
+        [command, str(GLASS), "--out", str(out), "--programs", "gcode"], out, capsys, ["--programs", "gcode"]
+    )
+    _expect_refused(
+        [command, str(SEALING), "--out", str(out), "--programs", "rapid"], out, capsys, ["rapid", "ur10e"]
+    )
 
 
 @pytest.mark.parametrize("command", ["check", "run"])

@@ -48,13 +48,31 @@ def test_run_writes_every_output_and_a_result_with_the_documented_keys(tmp_path,
     names = {p.name for p in out.iterdir()}
     assert {"result.json", "trajectory.csv", "glass_adhesive.aml", "glass_adhesive.mod"} <= names
     doc = json.loads((out / "result.json").read_text())
-    for key in ("status", "problem", "n_waypoints", "dof", "robot", "tool", "tolerances", "metrics",
-                "timings_s", "repairs", "outputs"):
+    for key in (
+        "status",
+        "problem",
+        "n_waypoints",
+        "dof",
+        "robot",
+        "tool",
+        "tolerances",
+        "metrics",
+        "timings_s",
+        "repairs",
+        "outputs",
+    ):
         assert key in doc
     assert set(doc["robot"]) >= {"urdf", "flange_frame", "base_in_world"}
     assert set(doc["tool"]) >= {"tcp_in_flange", "axisymmetric"}
-    for key in ("max_position_error_m", "max_orientation_deviation_deg", "min_joint_margin_rad",
-                "min_singularity_measure", "min_clearance_m", "cycle_time_s", "speed_tracking_error_rel"):
+    for key in (
+        "max_position_error_m",
+        "max_orientation_deviation_deg",
+        "min_joint_margin_rad",
+        "min_singularity_measure",
+        "min_clearance_m",
+        "cycle_time_s",
+        "speed_tracking_error_rel",
+    ):
         assert key in doc["metrics"]
     stages = ("cad", "demo", "fuse", "build", "seed", "solve", "verify", "timing", "export")
     times = doc["timings_s"]

@@ -70,8 +70,17 @@ def test_degenerate_points_are_an_input_error():
 
 def _convex_body(piece: ConvexPiece, name: str) -> Body:
     parts = convex_parts(piece)
-    return Body(name=name, shape=name, kind="link", link=name, frame_id=0, joint=1, link_T_shape=np.eye(4),
-                obj=fcl.CollisionObject(parts["geometry"]), **parts)
+    return Body(
+        name=name,
+        shape=name,
+        kind="link",
+        link=name,
+        frame_id=0,
+        joint=1,
+        link_T_shape=np.eye(4),
+        obj=fcl.CollisionObject(parts["geometry"]),
+        **parts,
+    )
 
 
 def test_convex_bodies_give_true_distances_and_surface_witness_points():

@@ -43,11 +43,31 @@ DEADLINE_S = os.environ.get("FUZZ_DEADLINE_S")
 FUZZ = settings(
     max_examples=EXAMPLES,
     deadline=None if DEADLINE_S is None else float(DEADLINE_S) * 1000.0,
-    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow, HealthCheck.data_too_large],
+    suppress_health_check=[
+        HealthCheck.function_scoped_fixture,
+        HealthCheck.too_slow,
+        HealthCheck.data_too_large,
+    ],
 )
 COUNT = {"examples": 0}
 
-NASTY = ["nan", "inf", "-inf", "1e308", "-1e300", "4e5", "1e-320", "-0", "0x10", "1,5", "", "é", "\x00", "\x1b[2J", "99999999999999999999"]
+NASTY = [
+    "nan",
+    "inf",
+    "-inf",
+    "1e308",
+    "-1e300",
+    "4e5",
+    "1e-320",
+    "-0",
+    "0x10",
+    "1,5",
+    "",
+    "é",
+    "\x00",
+    "\x1b[2J",
+    "99999999999999999999",
+]
 
 
 def _damage(data, lines: list[str]) -> list[str]:
@@ -113,7 +133,10 @@ LIBERTY = [
     "# Polhemus Liberty ASCII",
     "# units: in",
     "# rate_hz: 240",
-    *(f"01P {k:9d} {10 + 0.01 * k:10.4f} {2.0:10.4f} {3 + 0.002 * k:10.4f} {5.0:9.3f} {k * 0.1:9.3f} {1.0:9.3f}" for k in range(40)),
+    *(
+        f"01P {k:9d} {10 + 0.01 * k:10.4f} {2.0:10.4f} {3 + 0.002 * k:10.4f} {5.0:9.3f} {k * 0.1:9.3f} {1.0:9.3f}"
+        for k in range(40)
+    ),
 ]
 
 
@@ -160,7 +183,9 @@ def test_fuzz_liberty_ascii_device_records(tmp_path_factory, data):
 @given(data=st.data())
 def test_fuzz_demo_csv(tmp_path_factory, data):
     f = tmp_path_factory.mktemp("csv") / "demo.csv"
-    rows = ["t,x,y,z,azimuth,elevation,roll"] + [f"{k / 240:.6f},{0.1 * k:.4f},0.2,0.3,10,{k},-5" for k in range(30)]
+    rows = ["t,x,y,z,azimuth,elevation,roll"] + [
+        f"{k / 240:.6f},{0.1 * k:.4f},0.2,0.3,10,{k},-5" for k in range(30)
+    ]
     _write(f, data, rows)
     log = _expect(lambda: read_demo_csv(f, units="mm"), f)
     if log is not None:
@@ -189,10 +214,46 @@ def test_fuzz_gcode(tmp_path_factory, data):
 
 
 DXF_LINES = [
-    "0", "SECTION", "2", "ENTITIES",
-    "0", "LINE", "8", "0", "10", "0.0", "20", "0.0", "30", "0.0", "11", "100.0", "21", "0.0", "31", "0.0",
-    "0", "LINE", "8", "0", "10", "100.0", "20", "0.0", "30", "0.0", "11", "100.0", "21", "50.0", "31", "0.0",
-    "0", "ENDSEC", "0", "EOF",
+    "0",
+    "SECTION",
+    "2",
+    "ENTITIES",
+    "0",
+    "LINE",
+    "8",
+    "0",
+    "10",
+    "0.0",
+    "20",
+    "0.0",
+    "30",
+    "0.0",
+    "11",
+    "100.0",
+    "21",
+    "0.0",
+    "31",
+    "0.0",
+    "0",
+    "LINE",
+    "8",
+    "0",
+    "10",
+    "100.0",
+    "20",
+    "0.0",
+    "30",
+    "0.0",
+    "11",
+    "100.0",
+    "21",
+    "50.0",
+    "31",
+    "0.0",
+    "0",
+    "ENDSEC",
+    "0",
+    "EOF",
 ]
 
 
@@ -253,8 +314,11 @@ def test_fuzz_liberty_binary(tmp_path_factory, data):
     else:  # the Liberty's default output list 2,4,1: position, Euler angles, CR LF; some flagged
         raw = bytearray(
             b"".join(
-                b"LY" + bytes([1, ord("C"), ord("u") if k % 9 == 0 else 0x20, 0]) + struct.pack("<H", 26)
-                + struct.pack("<6f", 10 + 0.01 * k, 2.0, 3.0, 5.0, 0.1 * k, 1.0) + b"\r\n"
+                b"LY"
+                + bytes([1, ord("C"), ord("u") if k % 9 == 0 else 0x20, 0])
+                + struct.pack("<H", 26)
+                + struct.pack("<6f", 10 + 0.01 * k, 2.0, 3.0, 5.0, 0.1 * k, 1.0)
+                + b"\r\n"
                 for k in range(100)
             )
         )
@@ -277,7 +341,7 @@ def test_fuzz_pathml(tmp_path_factory, data):
     lines = [
         '<?xml version="1.0" encoding="UTF-8"?>',
         '<CAEXFile xmlns="http://www.dke.de/CAEX" SchemaVersion="3.0" FileName="path.aml">',
-        "<InstanceHierarchy Name=\"x\"></InstanceHierarchy>",
+        '<InstanceHierarchy Name="x"></InstanceHierarchy>',
         "</CAEXFile>",
     ]
     del src
@@ -288,15 +352,35 @@ def test_fuzz_pathml(tmp_path_factory, data):
 # ---- the problem file ---------------------------------------------------------------------------
 
 TOML_VALUES = st.sampled_from(
-    ["nan", "inf", "-inf", "1e308", "-1", "0", "true", '""', '"../../etc/passwd"', "[]", "[1, 2]", "{}",
-     '"x\\ny"', "1e-300", "99999999999999999999", '"rapid"', "[nan, 0, 0]", "{ xyz = [1, 2] }"]
+    [
+        "nan",
+        "inf",
+        "-inf",
+        "1e308",
+        "-1",
+        "0",
+        "true",
+        '""',
+        '"../../etc/passwd"',
+        "[]",
+        "[1, 2]",
+        "{}",
+        '"x\\ny"',
+        "1e-300",
+        "99999999999999999999",
+        '"rapid"',
+        "[nan, 0, 0]",
+        "{ xyz = [1, 2] }",
+    ]
 )
 
 
 @pytest.fixture(scope="module")
 def glass_copy(tmp_path_factory):
     dst = tmp_path_factory.mktemp("fuzzproblem") / "glass"
-    shutil.copytree(GLASS, dst, ignore=shutil.ignore_patterns("generate.py", "README.md", "*.liberty", "*.dxf"))
+    shutil.copytree(
+        GLASS, dst, ignore=shutil.ignore_patterns("generate.py", "README.md", "*.liberty", "*.dxf")
+    )
     for name in ("demo.liberty", "bead.dxf"):
         (dst / name).symlink_to(GLASS / name)
     return dst

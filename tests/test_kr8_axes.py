@@ -37,7 +37,14 @@ HOME_DEG = [0.0, -90.0, 90.0, 0.0, 0.0, 0.0]
 RANGES_DEG = [(-170, 170), (-185, 65), (-119, 181), (-165, 165), (-115, 140), (-350, 350)]
 SPEEDS_DEG_S = [220, 210, 270, 430, 430, 628.5714]
 # dimensions [m]
-A2_HEIGHT, A2_FORWARD, LOWER_ARM, FOREARM_OFFSET, A3_TO_WRIST, WRIST_TO_FLANGE = 0.425, 0.170, 0.610, 0.210, 0.627, 0.080
+A2_HEIGHT, A2_FORWARD, LOWER_ARM, FOREARM_OFFSET, A3_TO_WRIST, WRIST_TO_FLANGE = (
+    0.425,
+    0.170,
+    0.610,
+    0.210,
+    0.627,
+    0.080,
+)
 REFERENCE = Path(__file__).resolve().parents[1].parent / "shared" / "robot-meshes" / NAME / "reference.urdf"
 
 
@@ -67,7 +74,9 @@ def test_at_home_the_lower_arm_is_upright_the_forearm_level_and_the_flange_forwa
     np.testing.assert_allclose(T[:3, 3], expected, atol=1e-6)  # 0.877, 0, 1.245
     np.testing.assert_allclose(T[:3, 2], [1.0, 0.0, 0.0], atol=1e-9)  # tool direction: forward
     # KUKA's flange frame at home reads A 0, B 90, C 0 (x down, y to the left)
-    np.testing.assert_allclose(T[:3, :3], Rotation.from_euler("ZYX", [0.0, 90.0, 0.0], degrees=True).as_matrix(), atol=1e-9)
+    np.testing.assert_allclose(
+        T[:3, :3], Rotation.from_euler("ZYX", [0.0, 90.0, 0.0], degrees=True).as_matrix(), atol=1e-9
+    )
     a3 = kr8.frame_pose(np.radians(HOME_DEG), "link_3")[:3, 3]
     np.testing.assert_allclose(a3, [A2_FORWARD, 0.0, A2_HEIGHT + LOWER_ARM], atol=1e-9)
 
@@ -104,7 +113,9 @@ def test_motions_from_home_go_where_a_kuka_operator_expects(kr8):
 def test_the_nominal_reach_is_the_wrist_points_largest_distance_from_a1(kr8):
     a3 = np.linspace(-60.0, 60.0, 2401)
     radius = [np.hypot(*_wrist(kr8, [0, 0, a, 0, 0, 0])[:2]) for a in a3]
-    assert max(radius) == pytest.approx(A2_FORWARD + LOWER_ARM + np.hypot(A3_TO_WRIST, FOREARM_OFFSET), abs=1e-5)
+    assert max(radius) == pytest.approx(
+        A2_FORWARD + LOWER_ARM + np.hypot(A3_TO_WRIST, FOREARM_OFFSET), abs=1e-5
+    )
     assert max(radius) == pytest.approx(1.440, abs=0.002)
     assert kr8.spec.reach_m == pytest.approx(1.44)
 

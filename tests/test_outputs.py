@@ -21,7 +21,11 @@ def _write_result(outputs: dict[str, Path]):
     def write(path: Path) -> None:
         from refine.outputs import describe_files
 
-        doc = {"schema_version": 1, "outputs": {k: p.name for k, p in outputs.items()}, "files": describe_files(outputs)}
+        doc = {
+            "schema_version": 1,
+            "outputs": {k: p.name for k, p in outputs.items()},
+            "files": describe_files(outputs),
+        }
         path.write_text(json.dumps(doc))
 
     return write
@@ -38,7 +42,9 @@ def _commit(out: Path, files: dict[str, str], protected=()) -> dict[str, Path]:
 
 def _claims_hold(out: Path) -> bool:
     doc = json.loads((out / "result.json").read_text())
-    return all(hashlib.sha256((out / n).read_bytes()).hexdigest() == m["sha256"] for n, m in doc["files"].items())
+    return all(
+        hashlib.sha256((out / n).read_bytes()).hexdigest() == m["sha256"] for n, m in doc["files"].items()
+    )
 
 
 def test_a_set_lands_whole_with_result_json_describing_it(tmp_path):
@@ -88,7 +94,9 @@ def test_leftovers_of_a_killed_run_are_cleaned_by_the_next(tmp_path):
     _commit(out, {"trajectory.csv": "a", "p.mod": "b"})
     # a run killed between renaming the old result.json and moving the new one in
     os.replace(out / "result.json", out / PREVIOUS)
-    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    dead = subprocess.run(
+        [sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True
+    )
     stale = out / f".refine-staging-{int(dead.stdout)}-abcd"
     stale.mkdir()
     (stale / "x.csv").write_text("partial")
@@ -126,7 +134,11 @@ def test_ctrl_c_during_ipopt_stops_the_program(tmp_path):
     script.write_text(CHILD)
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
     p = subprocess.Popen(
-        [sys.executable, str(script)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+        [sys.executable, str(script)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     assert p.stdout.readline().strip() == "solving"

@@ -68,16 +68,27 @@ def test_liberty_angles_beyond_the_devices_range_are_refused(tmp_path, angles, n
 
 
 def test_liberty_angles_at_the_ends_of_the_range_are_read(tmp_path):
-    f = _liberty(tmp_path, ["01 1.0 2.0 3.0 180.000 90.000 -180.000", "01 1.0 2.0 3.0 -180.000 -90.000 180.000"])
+    f = _liberty(
+        tmp_path, ["01 1.0 2.0 3.0 180.000 90.000 -180.000", "01 1.0 2.0 3.0 -180.000 -90.000 180.000"]
+    )
     assert len(read_liberty_ascii(f).t) == 2
 
 
 def test_a_frame_count_jump_of_years_is_refused(tmp_path):
     # frames 0, 1, 10^12: at 240 Hz the third sample is 10^12 / 240 = 4.17e9 s after the first
-    f = _liberty(tmp_path, ["01 0 1.0 2.0 3.0 10.0 20.0 30.0", "01 1 1.0 2.0 3.0 10.0 20.0 30.0",
-                            "01 1000000000000 1.0 2.0 3.0 10.0 20.0 30.0"])
-    with pytest.raises(InputError, match=r"log\.txt:3: time 4\.16667e\+09 s after the first sample; a "
-                                         r"demonstration lasts at most 86400 s"):
+    f = _liberty(
+        tmp_path,
+        [
+            "01 0 1.0 2.0 3.0 10.0 20.0 30.0",
+            "01 1 1.0 2.0 3.0 10.0 20.0 30.0",
+            "01 1000000000000 1.0 2.0 3.0 10.0 20.0 30.0",
+        ],
+    )
+    with pytest.raises(
+        InputError,
+        match=r"log\.txt:3: time 4\.16667e\+09 s after the first sample; a "
+        r"demonstration lasts at most 86400 s",
+    ):
         read_liberty_ascii(f)
 
 
@@ -88,7 +99,9 @@ def _binary_record(values, station=1, size=24):
 def test_an_absurd_binary_position_is_refused_with_its_byte_offset(tmp_path):
     f = tmp_path / "demo.lyb"
     # each record: 8-byte header + 6 float32 = 32 bytes, so the third starts at byte 64
-    recs = [_binary_record((1.0, 2.0, 3.0, 10.0, 20.0, 30.0))] * 2 + [_binary_record((1e30, 2.0, 3.0, 10.0, 20.0, 30.0))]
+    recs = [_binary_record((1.0, 2.0, 3.0, 10.0, 20.0, 30.0))] * 2 + [
+        _binary_record((1e30, 2.0, 3.0, 10.0, 20.0, 30.0))
+    ]
     f.write_bytes(b"".join(recs))
     with pytest.raises(InputError, match=r"demo\.lyb: record at byte offset 64: position x = 2\.54e\+28 m"):
         read_liberty_binary(f, output_list=(2, 4))
@@ -96,7 +109,10 @@ def test_an_absurd_binary_position_is_refused_with_its_byte_offset(tmp_path):
 
 def test_binary_euler_angles_beyond_the_range_are_refused(tmp_path):
     f = tmp_path / "demo.lyb"
-    recs = [_binary_record((1.0, 2.0, 3.0, 10.0, 20.0, 30.0)), _binary_record((1.0, 2.0, 3.0, 10.0, 120.0, 30.0))]
+    recs = [
+        _binary_record((1.0, 2.0, 3.0, 10.0, 20.0, 30.0)),
+        _binary_record((1.0, 2.0, 3.0, 10.0, 120.0, 30.0)),
+    ]
     f.write_bytes(b"".join(recs))
     with pytest.raises(InputError, match=r"record at byte offset 32: elevation 120 deg is outside"):
         read_liberty_binary(f, output_list=(2, 4))
@@ -127,10 +143,10 @@ def test_absurd_demo_csv_values_are_refused_with_their_line(tmp_path, row, messa
 def test_a_cad_csv_coordinate_of_1e308_is_refused_with_its_line(tmp_path):
     f = tmp_path / "path.csv"
     f.write_text("x,y,z\n0,0,0\n10,0,0\n0,1e308,0\n")
-    with pytest.raises(InputError, match=r"path\.csv:4: coordinate y = 1e\+305 m is outside the plausible range ±1000 m"):
+    with pytest.raises(
+        InputError, match=r"path\.csv:4: coordinate y = 1e\+305 m is outside the plausible range ±1000 m"
+    ):
         points_from_csv(f, units="mm")
-
-
 
 
 def test_a_dxf_arc_of_a_million_kilometres_is_refused_before_it_is_flattened(tmp_path):
@@ -140,7 +156,9 @@ def test_a_dxf_arc_of_a_million_kilometres_is_refused_before_it_is_flattened(tmp
     arc = msp.add_arc((100, 1e12, 0), radius=1e12, start_angle=270, end_angle=280)
     f = tmp_path / "path.dxf"
     doc.saveas(f)
-    with pytest.raises(InputError, match=rf"path\.dxf.*ARC #{arc.dxf.handle} .* value 1e\+12 mm \(1e\+09 m\), outside"):
+    with pytest.raises(
+        InputError, match=rf"path\.dxf.*ARC #{arc.dxf.handle} .* value 1e\+12 mm \(1e\+09 m\), outside"
+    ):
         points_from_dxf(f, units="mm")
 
 
@@ -165,14 +183,19 @@ def _bulged(tmp_path, bulge):
 def test_a_dxf_bulge_too_small_to_leave_its_chord_is_a_straight_segment(tmp_path, bulge):
     # sagitta = bulge x chord / 2 = 5e-11 mm at most, far inside the flattening tolerance
     f, _ = _bulged(tmp_path, bulge)
-    np.testing.assert_allclose(points_from_dxf(f, units="mm"), [[0, 0, 0], [0.1, 0, 0], [0.1, 0.05, 0]], atol=1e-15)
+    np.testing.assert_allclose(
+        points_from_dxf(f, units="mm"), [[0, 0, 0], [0.1, 0, 0], [0.1, 0.05, 0]], atol=1e-15
+    )
 
 
 def test_a_dxf_bulge_of_1e300_is_refused_naming_the_entity_and_vertex(tmp_path):
     # radius = chord / 4 x (1 / bulge + bulge) = 100 mm / 4 x 1e300 = 2.5e301 mm = 2.5e298 m
     f, handle = _bulged(tmp_path, 1e300)
-    with pytest.raises(InputError, match=rf"LWPOLYLINE #{handle} .* vertex 0: the bulge 1e\+300 makes an arc of "
-                                         r"radius 2\.5e\+298 m, outside the plausible range 1000 m"):
+    with pytest.raises(
+        InputError,
+        match=rf"LWPOLYLINE #{handle} .* vertex 0: the bulge 1e\+300 makes an arc of "
+        r"radius 2\.5e\+298 m, outside the plausible range 1000 m",
+    ):
         points_from_dxf(f, units="mm")
 
 
@@ -187,7 +210,10 @@ def test_a_dxf_bulge_that_is_not_a_number_is_refused(tmp_path):
     [
         ("G1 X2000000", r"seam\.nc:4: end point x = 2000 m is outside"),  # 2,000,000 mm
         ("G3 X10 Y0 Z5 I-10 J0 P1000000000", r"seam\.nc:4: P1e\+09: an arc's turns must be 1\.\.1000"),
-        ("G2 X20 Y0 R1" + "0" * 100, r"seam\.nc:4: arc radius R = 1e\+97 m is outside the plausible range 1000 m"),
+        (
+            "G2 X20 Y0 R1" + "0" * 100,
+            r"seam\.nc:4: arc radius R = 1e\+97 m is outside the plausible range 1000 m",
+        ),
         ("G1 X1e308", r"seam\.nc:4: unsupported word E308 .*exponent notation such as 1e3 are not G-code"),
     ],
     ids=["end point 2 km away", "a billion helix turns", "radius of a googol mm", "exponent notation"],

@@ -488,7 +488,12 @@ def test_programs_given_as_a_string_is_reported_with_the_value_written(problem_t
 # KUKA KR C4 runs KRL, the LBR iiwa's Sunrise cabinet runs Sunrise Java, a UR e-Series runs URScript.
 @pytest.mark.parametrize(
     ("bundled", "language"),
-    [("glass_adhesive", "rapid"), ("kr8_arc_weld", "krl"), ("tig_weld", "sunrise"), ("ur10e_sealing", "urscript")],
+    [
+        ("glass_adhesive", "rapid"),
+        ("kr8_arc_weld", "krl"),
+        ("tig_weld", "sunrise"),
+        ("ur10e_sealing", "urscript"),
+    ],
 )
 def test_without_an_output_table_the_robot_gets_the_program_its_controller_runs(tmp_path, bundled, language):
     from refine.preflight import preflight

@@ -30,15 +30,40 @@ NAMES = ["abb_irb4600_60_205", "kuka_iiwa14_r820", "kuka_kr8_r1440_2_arc_hw", "u
 
 # data-sheet limits from shared/ROBOTS.md: (lower, upper, speed) [deg, deg, deg/s]
 DATA_SHEET = {
-    "abb_irb4600_60_205": [(-180, 180, 175), (-90, 150, 175), (-180, 75, 175),
-                           (-400, 400, 250), (-125, 120, 250), (-400, 400, 360)],
-    "kuka_iiwa14_r820": [(-170, 170, 85), (-120, 120, 85), (-170, 170, 100), (-120, 120, 75),
-                         (-170, 170, 130), (-120, 120, 135), (-175, 175, 135)],
+    "abb_irb4600_60_205": [
+        (-180, 180, 175),
+        (-90, 150, 175),
+        (-180, 75, 175),
+        (-400, 400, 250),
+        (-125, 120, 250),
+        (-400, 400, 360),
+    ],
+    "kuka_iiwa14_r820": [
+        (-170, 170, 85),
+        (-120, 120, 85),
+        (-170, 170, 100),
+        (-120, 120, 75),
+        (-170, 170, 130),
+        (-120, 120, 135),
+        (-175, 175, 135),
+    ],
     # KUKA's own description of the arm (axis ranges and speeds marked verified by KUKA)
-    "kuka_kr8_r1440_2_arc_hw": [(-170, 170, 220), (-185, 65, 210), (-119, 181, 270), (-165, 165, 430),
-                                (-115, 140, 430), (-350, 350, 4400 / 7)],
-    "ur10e": [(-360, 360, 120), (-360, 360, 120), (-360, 360, 180), (-360, 360, 180),
-              (-360, 360, 180), (-360, 360, 180)],
+    "kuka_kr8_r1440_2_arc_hw": [
+        (-170, 170, 220),
+        (-185, 65, 210),
+        (-119, 181, 270),
+        (-165, 165, 430),
+        (-115, 140, 430),
+        (-350, 350, 4400 / 7),
+    ],
+    "ur10e": [
+        (-360, 360, 120),
+        (-360, 360, 120),
+        (-360, 360, 180),
+        (-360, 360, 180),
+        (-360, 360, 180),
+        (-360, 360, 180),
+    ],
 }
 
 UR_A = [0.0, -0.6127, -0.57155, 0.0, 0.0, 0.0]
@@ -163,26 +188,31 @@ def test_irb4600_hand_computed_poses(robots, q_deg, position, tool_z):
 
 def test_iiwa_flange_at_zero_is_1306_above_the_base(robots):
     T = robots["kuka_iiwa14_r820"].fk(np.zeros(7))
-    np.testing.assert_allclose(T, make_transform(p=[0.0, 0.0, 0.36 + 0.42 + 0.40 + 0.126]),
-                               atol=1e-15)
+    np.testing.assert_allclose(T, make_transform(p=[0.0, 0.0, 0.36 + 0.42 + 0.40 + 0.126]), atol=1e-15)
 
 
 def test_iiwa_axis_4_turns_opposite_to_axis_2(robots):
     iiwa = robots["kuka_iiwa14_r820"]
-    np.testing.assert_allclose(iiwa.fk(_from_deg(0, 90, 0, 0, 0, 0, 0))[:3, 3], [0.946, 0.0, 0.36],
-                               atol=1e-12)
-    np.testing.assert_allclose(iiwa.fk(_from_deg(0, 0, 0, 90, 0, 0, 0))[:3, 3], [-0.526, 0.0, 0.78],
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        iiwa.fk(_from_deg(0, 90, 0, 0, 0, 0, 0))[:3, 3], [0.946, 0.0, 0.36], atol=1e-12
+    )
+    np.testing.assert_allclose(
+        iiwa.fk(_from_deg(0, 0, 0, 90, 0, 0, 0))[:3, 3], [-0.526, 0.0, 0.78], atol=1e-12
+    )
 
 
 def _dh_product(q: np.ndarray) -> np.ndarray:
     T = np.eye(4)
     for theta, d, a, alpha in zip(q, UR_D, UR_A, UR_ALPHA, strict=True):
         ct, st, ca, sa = np.cos(theta), np.sin(theta), np.cos(alpha), np.sin(alpha)
-        T = T @ np.array([[ct, -st * ca, st * sa, a * ct],
-                          [st, ct * ca, -ct * sa, a * st],
-                          [0.0, sa, ca, d],
-                          [0.0, 0.0, 0.0, 1.0]])
+        T = T @ np.array(
+            [
+                [ct, -st * ca, st * sa, a * ct],
+                [st, ct * ca, -ct * sa, a * st],
+                [0.0, sa, ca, d],
+                [0.0, 0.0, 0.0, 1.0],
+            ]
+        )
     return T
 
 
@@ -286,12 +316,17 @@ def test_fcl_distance_from_the_flange_shape_to_a_box(robots, name):
     tip = robot.fk(q)[:3, 3]
     box = fcl.CollisionObject(fcl.Box(0.2, 0.2, 0.2), fcl.Transform(tip + [0.0, 0.0, 1.1]))
     result = fcl.DistanceResult()
-    d = fcl.distance(flange_shape.collision_object(poses[flange_shape.link]), box,
-                     fcl.DistanceRequest(), result)
+    d = fcl.distance(
+        flange_shape.collision_object(poses[flange_shape.link]), box, fcl.DistanceRequest(), result
+    )
     assert 0.0 < d < 1.0
     far = fcl.CollisionObject(fcl.Box(0.2, 0.2, 0.2), fcl.Transform(tip + [0.0, 0.0, 3.1]))
-    assert fcl.distance(flange_shape.collision_object(poses[flange_shape.link]), far,
-                        fcl.DistanceRequest(), fcl.DistanceResult()) == pytest.approx(d + 2.0)
+    assert fcl.distance(
+        flange_shape.collision_object(poses[flange_shape.link]),
+        far,
+        fcl.DistanceRequest(),
+        fcl.DistanceResult(),
+    ) == pytest.approx(d + 2.0)
 
 
 @pytest.mark.parametrize("name", NAMES)
@@ -302,26 +337,34 @@ def test_checked_link_pairs_are_clear_at_zero(robots, name):
     disabled = robot.self_collision()
     shapes = robot.collision_shapes()
     for i, a in enumerate(shapes):
-        for b in shapes[i + 1:]:
+        for b in shapes[i + 1 :]:
             if a.link == b.link or frozenset((a.link, b.link)) in disabled:
                 continue
-            d = fcl.distance(a.collision_object(poses[a.link]), b.collision_object(poses[b.link]),
-                             fcl.DistanceRequest(), fcl.DistanceResult())
+            d = fcl.distance(
+                a.collision_object(poses[a.link]),
+                b.collision_object(poses[b.link]),
+                fcl.DistanceRequest(),
+                fcl.DistanceResult(),
+            )
             assert d > 0.0, (a.link, a.name, b.link, b.name)
 
 
 def test_unknown_collision_geometry_is_rejected(tmp_path):
     urdf = tmp_path / "r.urdf"
-    urdf.write_text('<robot name="r"><link name="a"><collision><geometry>'
-                    '<capsule radius="0.1" length="0.2"/></geometry></collision></link></robot>')
+    urdf.write_text(
+        '<robot name="r"><link name="a"><collision><geometry>'
+        '<capsule radius="0.1" length="0.2"/></geometry></collision></link></robot>'
+    )
     with pytest.raises(InputError, match="<capsule> is not supported; allowed: box, cylinder, sphere, mesh"):
         collision_shapes_from_urdf(urdf)
 
 
 def test_missing_mesh_file_is_an_input_error(tmp_path):
     urdf = tmp_path / "r.urdf"
-    urdf.write_text('<robot name="r"><link name="a"><collision><geometry>'
-                    '<mesh filename="a.stl"/></geometry></collision></link></robot>')
+    urdf.write_text(
+        '<robot name="r"><link name="a"><collision><geometry>'
+        '<mesh filename="a.stl"/></geometry></collision></link></robot>'
+    )
     with pytest.raises(InputError, match="mesh file .*a.stl not found"):
         collision_shapes_from_urdf(urdf)
 
@@ -334,22 +377,30 @@ def test_mesh_collision_is_its_convex_hull_scaled_and_placed(tmp_path):
     box_b.apply_translation([5.0, 20.0, 5.0])
     trimesh.util.concatenate([box_a, box_b]).export(tmp_path / "l.stl")
     urdf = tmp_path / "r.urdf"
-    urdf.write_text('<robot name="r"><link name="a"><collision><origin xyz="1 0 0" rpy="0 0 1.5707963267948966"/>'
-                    '<geometry><mesh filename="l.stl" scale="0.001 0.001 0.001"/></geometry></collision></link></robot>')
+    urdf.write_text(
+        '<robot name="r"><link name="a"><collision><origin xyz="1 0 0" rpy="0 0 1.5707963267948966"/>'
+        '<geometry><mesh filename="l.stl" scale="0.001 0.001 0.001"/></geometry></collision></link></robot>'
+    )
     (shape,) = collision_shapes_from_urdf(urdf)
     assert isinstance(shape.geometry, fcl.Convex)
     assert shape.convex.mesh.volume == pytest.approx(0.04 * 0.04 * 0.01 - 0.5 * 0.03 * 0.03 * 0.01)
     # placed at the origin turned 90 deg about z: shape x is link y
     obj = shape.collision_object(np.eye(4))
     probe = fcl.CollisionObject(fcl.Sphere(0.001), fcl.Transform(np.array([1.0, 0.1, 0.005])))
-    assert fcl.distance(obj, probe, fcl.DistanceRequest(), fcl.DistanceResult()) == pytest.approx(0.059, abs=1e-5)  # GJK
+    assert fcl.distance(obj, probe, fcl.DistanceRequest(), fcl.DistanceResult()) == pytest.approx(
+        0.059, abs=1e-5
+    )  # GJK
 
 
 def test_each_robot_names_the_program_its_controller_runs(robots):
     """KUKA's KR arms run KRL on a KR C controller, the LBR iiwa Sunrise Java on its cabinet."""
     programs = {name: robots[name].spec.default_program for name in NAMES}
-    assert programs == {"abb_irb4600_60_205": "rapid", "kuka_iiwa14_r820": "sunrise",
-                        "kuka_kr8_r1440_2_arc_hw": "krl", "ur10e": "urscript"}
+    assert programs == {
+        "abb_irb4600_60_205": "rapid",
+        "kuka_iiwa14_r820": "sunrise",
+        "kuka_kr8_r1440_2_arc_hw": "krl",
+        "ur10e": "urscript",
+    }
     spec = robots["kuka_kr8_r1440_2_arc_hw"].spec
     with pytest.raises(InputError, match="program 'rapid' does not run on a kuka controller"):
         RobotSpec(**{**spec.__dict__, "program": "rapid"})

@@ -53,11 +53,15 @@ def _placed(name, q):
     pin.updateGeometryPlacements(model, data, geometry, gdata)
     # the reference's world is not always the project's base (UR: turned 180 deg about z); the
     # flanges agree, so the flange pose at zero gives it (random poses then test it)
-    T_ref_flange = pin.updateFramePlacement(model, data, model.getFrameId(REFERENCE_FLANGE.get(name, "tool0")))
+    T_ref_flange = pin.updateFramePlacement(
+        model, data, model.getFrameId(REFERENCE_FLANGE.get(name, "tool0"))
+    )
     zero = model.createData()
     pin.forwardKinematics(model, zero, np.zeros(model.nq))
     T_own_ref = robot.fk(np.zeros(robot.nq)) @ np.linalg.inv(
-        pin.updateFramePlacement(model, zero, model.getFrameId(REFERENCE_FLANGE.get(name, "tool0"))).homogeneous
+        pin.updateFramePlacement(
+            model, zero, model.getFrameId(REFERENCE_FLANGE.get(name, "tool0"))
+        ).homogeneous
     )
     np.testing.assert_allclose(T_own_ref @ T_ref_flange.homogeneous, robot.fk(q), atol=1e-9)
     reference: dict[int, list[trimesh.Trimesh]] = {}

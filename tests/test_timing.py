@@ -366,5 +366,10 @@ def test_a_timing_that_breaks_a_joint_speed_is_refused_naming_the_joint_and_wher
         return sd
 
     monkeypatch.setattr(timing, "_solve_path_speed", too_fast)
-    with pytest.raises(SolverError, match=r"joint 2 velocity 0\.2(599\d*|6) rad/s exceeds its limit 0\.2 rad/s at s = 0\.5000 m"):
-        time_parameterise(s, q, np.full(len(s), 0.2), np.array([3.0, 0.2]), np.full(2, 50.0), start_stop=False)
+    with pytest.raises(
+        SolverError,
+        match=r"joint 2 velocity 0\.2(599\d*|6) rad/s exceeds its limit 0\.2 rad/s at s = 0\.5000 m",
+    ):
+        time_parameterise(
+            s, q, np.full(len(s), 0.2), np.array([3.0, 0.2]), np.full(2, 50.0), start_stop=False
+        )

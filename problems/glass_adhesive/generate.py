@@ -176,15 +176,23 @@ def check_reachability(problem: Problem, positions, rotations, step: int = 10) -
     qs = np.degrees(np.array([r[5] for r in rows]))
     singular = problem.tolerances.singularity_margin
     ok = bool(e_p.max() < 1e-6 and e_r.max() < 1e-4 and jm.min() > margin and manip.min() > singular)
-    print(f"reachability: {len(rows)} IK targets (every {step}th point), chained from q0 [deg] = "
-          f"{np.round(qs[0], 1).tolist()}")
+    print(
+        f"reachability: {len(rows)} IK targets (every {step}th point), chained from q0 [deg] = "
+        f"{np.round(qs[0], 1).tolist()}"
+    )
     print(f"  worst position error {e_p.max():.2e} m, worst orientation error {e_r.max():.2e} rad")
-    print(f"  smallest joint-limit margin {math.degrees(jm.min()):.1f} deg "
-          f"(required {math.degrees(margin):.1f} deg)")
-    print(f"  smallest singular value of the scaled TCP Jacobian {smin.min():.3f}, "
-          f"smallest scaled manipulability {manip.min():.3f} (required {singular})")
-    print("  joint ranges [deg]: " + ", ".join(
-        f"q{j + 1} {qs[:, j].min():.0f}..{qs[:, j].max():.0f}" for j in range(qs.shape[1])))
+    print(
+        f"  smallest joint-limit margin {math.degrees(jm.min()):.1f} deg "
+        f"(required {math.degrees(margin):.1f} deg)"
+    )
+    print(
+        f"  smallest singular value of the scaled TCP Jacobian {smin.min():.3f}, "
+        f"smallest scaled manipulability {manip.min():.3f} (required {singular})"
+    )
+    print(
+        "  joint ranges [deg]: "
+        + ", ".join(f"q{j + 1} {qs[:, j].min():.0f}..{qs[:, j].max():.0f}" for j in range(qs.shape[1]))
+    )
     print(f"  reachable: {ok}")
     return ok
 
@@ -240,20 +248,31 @@ def main(argv: list[str] | None = None) -> int:
     sensor = demo.sensor_in_source[:, :3, 3]
     dist = np.linalg.norm(sensor, axis=1)
     dz = demo.log.positions[:, 2] - sensor[:, 2]
-    print(f"window {WINDOW_LENGTH * 1000:.0f} x {WINDOW_WIDTH * 1000:.0f} mm, corner radius "
-          f"{CORNER_RADIUS * 1000:.0f} mm, cylinder radius {CYLINDER_RADIUS} m")
-    print(f"bead: {n} points, {s[-1]:.4f} m, spacing {s[-1] / n * 1000:.2f} mm, offset "
-          f"{BEAD_OFFSET * 1000:.0f} mm, corner radius {r_bead * 1000:.0f} mm")
+    print(
+        f"window {WINDOW_LENGTH * 1000:.0f} x {WINDOW_WIDTH * 1000:.0f} mm, corner radius "
+        f"{CORNER_RADIUS * 1000:.0f} mm, cylinder radius {CYLINDER_RADIUS} m"
+    )
+    print(
+        f"bead: {n} points, {s[-1]:.4f} m, spacing {s[-1] / n * 1000:.2f} mm, offset "
+        f"{BEAD_OFFSET * 1000:.0f} mm, corner radius {r_bead * 1000:.0f} mm"
+    )
     lo, hi = positions.min(axis=0), positions.max(axis=0)
-    print(f"bead in world: x {lo[0]:.3f}..{hi[0]:.3f}, y {lo[1]:.3f}..{hi[1]:.3f}, "
-          f"z {lo[2]:.3f}..{hi[2]:.3f} m")
-    print(f"drag angle {drag_deg.min():.1f}..{drag_deg.max():.1f} deg, speed "
-          f"{speed.min() * 1000:.1f}..{speed.max() * 1000:.1f} mm/s")
-    print(f"demo: {len(demo.log.t)} samples at {model.rate_hz:g} Hz, {demo.duration_s:.2f} s "
-          f"({model.pause_s:g} s pause), outliers at samples {list(demo.outlier_indices)}")
-    print(f"sensor to receiver {dist.min():.2f}..{dist.max():.2f} m; z error (median) near "
-          f"{np.median(dz[dist < dist.min() + 0.1]) * 1000:.1f} mm, far "
-          f"{np.median(dz[dist > dist.max() - 0.1]) * 1000:.1f} mm")
+    print(
+        f"bead in world: x {lo[0]:.3f}..{hi[0]:.3f}, y {lo[1]:.3f}..{hi[1]:.3f}, z {lo[2]:.3f}..{hi[2]:.3f} m"
+    )
+    print(
+        f"drag angle {drag_deg.min():.1f}..{drag_deg.max():.1f} deg, speed "
+        f"{speed.min() * 1000:.1f}..{speed.max() * 1000:.1f} mm/s"
+    )
+    print(
+        f"demo: {len(demo.log.t)} samples at {model.rate_hz:g} Hz, {demo.duration_s:.2f} s "
+        f"({model.pause_s:g} s pause), outliers at samples {list(demo.outlier_indices)}"
+    )
+    print(
+        f"sensor to receiver {dist.min():.2f}..{dist.max():.2f} m; z error (median) near "
+        f"{np.median(dz[dist < dist.min() + 0.1]) * 1000:.1f} mm, far "
+        f"{np.median(dz[dist > dist.max() - 0.1]) * 1000:.1f} mm"
+    )
     print(f"wrote {', '.join(p for p in ('bead.dxf', 'demo.liberty', 'truth.csv'))} in {HERE}")
 
     if not args.no_check:

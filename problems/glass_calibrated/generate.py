@@ -52,7 +52,14 @@ REPEATS = 8  # seeds for the repeatability of each calibration
 
 PIVOT_IN_SOURCE = np.array([0.30, 0.20, -0.27])  # a divot on the table next to the receiver [m]
 FIXTURE_POINTS = np.array(  # reference points on the fixture and the table, world frame [m]
-    [[1.00, -0.55, 0.45], [1.70, -0.35, 0.60], [1.05, -0.05, 0.80], [1.75, 0.15, 0.45], [0.90, 0.40, 0.60], [1.55, 0.60, 0.95]]
+    [
+        [1.00, -0.55, 0.45],
+        [1.70, -0.35, 0.60],
+        [1.05, -0.05, 0.80],
+        [1.75, 0.15, 0.45],
+        [0.90, 0.40, 0.60],
+        [1.55, 0.60, 0.95],
+    ]
 )
 WRONG_TOUCH = {3: [0.0, 0.02, 0.0]}  # the worker rested the tip 20 mm off the fourth point
 REFERENCE_IN_BASE = np.array([1.2, 0.5, 0.55])  # the TCP calibration spike, base frame [m]
@@ -71,7 +78,9 @@ def glass_points() -> np.ndarray:
 
 
 def write_points(path: Path, points: np.ndarray, prefix: str) -> None:
-    rows = ["name,x,y,z"] + [f"{prefix}{k + 1},{p[0]:.6f},{p[1]:.6f},{p[2]:.6f}" for k, p in enumerate(points)]
+    rows = ["name,x,y,z"] + [
+        f"{prefix}{k + 1},{p[0]:.6f},{p[1]:.6f},{p[2]:.6f}" for k, p in enumerate(points)
+    ]
     path.write_text("\n".join(rows) + "\n")
 
 
@@ -88,21 +97,39 @@ def simulate(truth, robot, seed: int) -> dict:
     cad = truth.frames.cad_in_world
     return {
         "pivot": simulate_pivot(tip, PIVOT_IN_SOURCE, duration_s=10.0, model=model),
-        "touch": simulate_touches(FIXTURE_POINTS, truth.frames.source_in_world, tip, WRONG_TOUCH, model=model, seed=seed),
+        "touch": simulate_touches(
+            FIXTURE_POINTS, truth.frames.source_in_world, tip, WRONG_TOUCH, model=model, seed=seed
+        ),
         "tcp": simulate_tcp_readings(
-            robot, truth.tool.tcp_in_flange, REFERENCE_IN_BASE, six_point=True,
-            repeatability_m=REPEATABILITY_M, joint_noise_deg=JOINT_NOISE_DEG, seed=seed,
+            robot,
+            truth.tool.tcp_in_flange,
+            REFERENCE_IN_BASE,
+            six_point=True,
+            repeatability_m=REPEATABILITY_M,
+            joint_noise_deg=JOINT_NOISE_DEG,
+            seed=seed,
         ),
         "workpiece": simulate_workpiece_readings(
-            robot, truth.robot.base_in_world, truth.tool.tcp_in_flange, cad, glass_points(),
-            repeatability_m=REPEATABILITY_M, joint_noise_deg=JOINT_NOISE_DEG, seed=seed,
+            robot,
+            truth.robot.base_in_world,
+            truth.tool.tcp_in_flange,
+            cad,
+            glass_points(),
+            repeatability_m=REPEATABILITY_M,
+            joint_noise_deg=JOINT_NOISE_DEG,
+            seed=seed,
         ),
     }
 
 
 def repeatability(truth, robot) -> dict[str, tuple[float, float]]:
     """Spread (RMS per axis) of each calibrated frame over REPEATS seeds: (translation [m], angle [deg])."""
-    errors: dict[str, list[np.ndarray]] = {"sensor_in_tcp": [], "source_in_world": [], "tcp_in_flange": [], "cad_in_world": []}
+    errors: dict[str, list[np.ndarray]] = {
+        "sensor_in_tcp": [],
+        "source_in_world": [],
+        "tcp_in_flange": [],
+        "cad_in_world": [],
+    }
     for seed in range(100, 100 + REPEATS):
         sims = simulate(truth, robot, seed)
         tip = solve_pivot(sims["pivot"].log.positions, sims["pivot"].log.rotations).values["tip_in_sensor_m"]
@@ -123,7 +150,10 @@ def repeatability(truth, robot) -> dict[str, tuple[float, float]]:
     out = {}
     for name, rows in errors.items():
         e = np.array(rows)
-        out[name] = (float(np.sqrt(np.mean(e[:, :3] ** 2))), float(np.degrees(np.sqrt(np.mean(e[:, 3:] ** 2)))))
+        out[name] = (
+            float(np.sqrt(np.mean(e[:, :3] ** 2))),
+            float(np.degrees(np.sqrt(np.mean(e[:, 3:] ** 2)))),
+        )
     return out
 
 
@@ -168,8 +198,27 @@ def main() -> int:
     commands = [
         ["calibrate", "pivot", f"{m}/pivot.liberty", *rate, "--write", p],
         ["calibrate", "tcp", f"{m}/tcp.csv", "--six-point", "--problem", p, "--write", p],
-        ["calibrate", "receiver", f"{m}/touch.liberty", f"{m}/fixture_points.csv", *rate, "--problem", p, "--write", p],
-        ["calibrate", "workpiece", f"{m}/workpiece.csv", f"{m}/glass_points.csv", "--problem", p, "--write", p],
+        [
+            "calibrate",
+            "receiver",
+            f"{m}/touch.liberty",
+            f"{m}/fixture_points.csv",
+            *rate,
+            "--problem",
+            p,
+            "--write",
+            p,
+        ],
+        [
+            "calibrate",
+            "workpiece",
+            f"{m}/workpiece.csv",
+            f"{m}/glass_points.csv",
+            "--problem",
+            p,
+            "--write",
+            p,
+        ],
     ]
     for args in commands:
         print("$ refine " + " ".join(a.replace(str(HERE.parents[1]) + "/", "") for a in args))
@@ -178,7 +227,11 @@ def main() -> int:
 
     # ---- the procedure's repeatability as the [calibration] table
     spread = repeatability(truth, robot)
-    lines = ["", "# the spread of each calibration over 8 repeats (simulated, generate.py): 1 sigma per axis", "[calibration]"]
+    lines = [
+        "",
+        "# the spread of each calibration over 8 repeats (simulated, generate.py): 1 sigma per axis",
+        "[calibration]",
+    ]
     for name, (xyz, ang) in spread.items():
         if name == "sensor_in_tcp":  # a pivot measures the tip, not the orientation: assume the drawing's
             lines.append("# sensor_in_tcp: rotation not measured (the mounting drawing's), 0.5 deg assumed")

@@ -111,11 +111,21 @@ def write_dxf(path: Path) -> None:
         bulge = math.tan(-math.pi / 8.0)  # a quarter circle turning clockwise seen from +z
         mm = 1000.0
         msp.add_lwpolyline(
-            [(0.0, 0.0, 0.0), (0.0, LEG_1 * mm, bulge), (BEND_RADIUS * mm, (LEG_1 + BEND_RADIUS) * mm, 0.0),
-             ((BEND_RADIUS + LEG_2) * mm, (LEG_1 + BEND_RADIUS) * mm, 0.0)],
-            format="xyb", dxfattribs={"layer": "SEAM"},
+            [
+                (0.0, 0.0, 0.0),
+                (0.0, LEG_1 * mm, bulge),
+                (BEND_RADIUS * mm, (LEG_1 + BEND_RADIUS) * mm, 0.0),
+                ((BEND_RADIUS + LEG_2) * mm, (LEG_1 + BEND_RADIUS) * mm, 0.0),
+            ],
+            format="xyb",
+            dxfattribs={"layer": "SEAM"},
         )
-        corners = [(BASE_X[0], BASE_Y[0]), (BASE_X[1], BASE_Y[0]), (BASE_X[1], BASE_Y[1]), (BASE_X[0], BASE_Y[1])]
+        corners = [
+            (BASE_X[0], BASE_Y[0]),
+            (BASE_X[1], BASE_Y[0]),
+            (BASE_X[1], BASE_Y[1]),
+            (BASE_X[0], BASE_Y[1]),
+        ]
         msp.add_lwpolyline([(x * mm, y * mm) for x, y in corners], close=True, dxfattribs={"layer": "BASE"})
         doc.classes.add_required_classes(doc.dxfversion)
         doc.classes.classes = dict(sorted(doc.classes.classes.items()))
@@ -129,19 +139,29 @@ def check_cell(problem: Problem) -> None:
     T = problem.frames.cad_in_world
     w, h = WEB_THICKNESS, WEB_HEIGHT
     expected = {  # CAD centre, size
-        "base_plate": ([sum(BASE_X) / 2, sum(BASE_Y) / 2, -BASE_THICKNESS / 2],
-                       [BASE_X[1] - BASE_X[0], BASE_Y[1] - BASE_Y[0], BASE_THICKNESS]),
+        "base_plate": (
+            [sum(BASE_X) / 2, sum(BASE_Y) / 2, -BASE_THICKNESS / 2],
+            [BASE_X[1] - BASE_X[0], BASE_Y[1] - BASE_Y[0], BASE_THICKNESS],
+        ),
         "web_leg_1": ([-w / 2, (LEG_1 - 0.01) / 2, h / 2], [w, LEG_1 + 0.01, h]),
-        "web_leg_2": ([BEND_RADIUS + (LEG_2 + 0.01) / 2, LEG_1 + BEND_RADIUS + w / 2, h / 2], [LEG_2 + 0.01, w, h]),
+        "web_leg_2": (
+            [BEND_RADIUS + (LEG_2 + 0.01) / 2, LEG_1 + BEND_RADIUS + w / 2, h / 2],
+            [LEG_2 + 0.01, w, h],
+        ),
     }
     objects = {o.name: o for o in problem.cell}
     for name, (centre, size) in expected.items():
         o = objects[name]
         centre_world = transform_points(T, np.array([centre]))[0]
         size_world = np.abs(T[:3, :3]) @ np.array(size)
-        if not (np.allclose(o.pose[:3, 3], centre_world, atol=1e-6) and np.allclose(o.size_m, size_world, atol=1e-6)):
-            raise SystemExit(f"cell object {name}: problem.toml has centre {o.pose[:3, 3]}, size {o.size_m}; "
-                             f"the geometry gives {np.round(centre_world, 6)}, {np.round(size_world, 6)}")
+        if not (
+            np.allclose(o.pose[:3, 3], centre_world, atol=1e-6)
+            and np.allclose(o.size_m, size_world, atol=1e-6)
+        ):
+            raise SystemExit(
+                f"cell object {name}: problem.toml has centre {o.pose[:3, 3]}, size {o.size_m}; "
+                f"the geometry gives {np.round(centre_world, 6)}, {np.round(size_world, 6)}"
+            )
 
 
 def check_reachability(problem: Problem, positions: np.ndarray, rotations: np.ndarray) -> bool:
@@ -149,13 +169,22 @@ def check_reachability(problem: Problem, positions: np.ndarray, rotations: np.nd
     targets = make_transform(rotations, positions)[::CHECK_STEP]
     report, ok = problem_reachability(problem, targets, SEED)
     qd = np.degrees(report.qs)
-    print(f"reachability: {len(qd)} IK targets, from A1..A6 [deg] = {np.round(qd[0], 1).tolist()}; worst pose "
-          f"error {report.errors.max():.2e}, smallest joint margin {math.degrees(report.joint_margins.min()):.1f} "
-          f"deg (A{report.worst_joint}), smallest scaled manipulability {report.manipulability.min():.4f}")
-    print("  smallest clearance: " + ", ".join(f"{k} {d * 1000:.0f} mm ({who})"
-                                               for k, (d, who) in (report.clearance or {}).items()))
-    print("  axis ranges [deg]: " + ", ".join(f"A{j + 1} {lo:.0f}..{hi:.0f}"
-                                              for j, (lo, hi) in enumerate(zip(qd.min(0), qd.max(0), strict=True))))
+    print(
+        f"reachability: {len(qd)} IK targets, from A1..A6 [deg] = {np.round(qd[0], 1).tolist()}; worst pose "
+        f"error {report.errors.max():.2e}, smallest joint margin {math.degrees(report.joint_margins.min()):.1f} "
+        f"deg (A{report.worst_joint}), smallest scaled manipulability {report.manipulability.min():.4f}"
+    )
+    print(
+        "  smallest clearance: "
+        + ", ".join(f"{k} {d * 1000:.0f} mm ({who})" for k, (d, who) in (report.clearance or {}).items())
+    )
+    print(
+        "  axis ranges [deg]: "
+        + ", ".join(
+            f"A{j + 1} {lo:.0f}..{hi:.0f}"
+            for j, (lo, hi) in enumerate(zip(qd.min(0), qd.max(0), strict=True))
+        )
+    )
     print(f"  reachable: {ok}")
     return ok
 
@@ -181,7 +210,9 @@ def main(argv: list[str] | None = None) -> int:
     work = gaussian_filter1d(rng.standard_normal(len(s)), 0.04 / POINT_SPACING)  # smooth over ~40 mm
     work *= np.radians(WORK_WANDER_DEG) / np.abs(work).max()
     push = PUSH_DEG + PUSH_WANDER_DEG * np.sin(2.0 * math.pi * s / s[-1] + rng.uniform(0, 2 * math.pi))
-    normals = Rotation.from_rotvec(t * work[:, None]).apply(bisector)  # the work-angle wander about the travel
+    normals = Rotation.from_rotvec(t * work[:, None]).apply(
+        bisector
+    )  # the work-angle wander about the travel
     rotations = tool_rotations(t @ R.T, normals @ R.T, -np.radians(push), project=True)
     slow = gaussian_filter1d(bend.astype(float), BEND_BLEND / POINT_SPACING)
     speed = SPEED - (SPEED - SPEED_BEND) * slow / slow.max()
@@ -190,14 +221,17 @@ def main(argv: list[str] | None = None) -> int:
 
     # ---- the tracker log
     model = TrackerModel(seed=SEED)
-    demo = simulate_demonstration(s, positions, rotations, speed, problem.frames.source_in_world,
-                                  problem.tool.sensor_in_tcp, model)
+    demo = simulate_demonstration(
+        s, positions, rotations, speed, problem.frames.source_in_world, problem.tool.sensor_in_tcp, model
+    )
     write_liberty_ascii(HERE / "demo.liberty", demo.log, units="in", rate_hz=model.rate_hz)
     write_truth_csv(HERE / "truth.csv", demo.s, demo.quaternions, demo.speed)
     lo, hi = positions.min(axis=0), positions.max(axis=0)
-    print(f"seam {s[-1]:.4f} m ({len(s)} points), world x {lo[0]:.3f}..{hi[0]:.3f}, y {lo[1]:.3f}..{hi[1]:.3f}, "
-          f"z {lo[2]:.3f} m; push {push.min():.1f}..{push.max():.1f} deg, work-angle wander "
-          f"{np.degrees(np.abs(work).max()):.1f} deg, speed {speed.min() * 1000:.1f}..{speed.max() * 1000:.1f} mm/s")
+    print(
+        f"seam {s[-1]:.4f} m ({len(s)} points), world x {lo[0]:.3f}..{hi[0]:.3f}, y {lo[1]:.3f}..{hi[1]:.3f}, "
+        f"z {lo[2]:.3f} m; push {push.min():.1f}..{push.max():.1f} deg, work-angle wander "
+        f"{np.degrees(np.abs(work).max()):.1f} deg, speed {speed.min() * 1000:.1f}..{speed.max() * 1000:.1f} mm/s"
+    )
     print(f"demo: {len(demo.log.t)} samples at {model.rate_hz:g} Hz, {demo.duration_s:.1f} s")
     if not args.no_check:
         logging.getLogger("refine.collision").setLevel(logging.ERROR)

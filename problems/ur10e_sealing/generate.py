@@ -206,18 +206,32 @@ def check_reachability(problem: Problem, positions, rotations) -> bool:
         and min(d for d, _ in gaps.values()) > collision_margin
     )
     qd = np.degrees(report.qs)
-    print(f"reachability: {len(qd)} IK targets (every {CHECK_STEP}th point), chained from q0 [deg] = "
-          f"{np.round(qd[0], 1).tolist()}")
-    print(f"  worst pose error {report.errors.max():.2e} (m and rad stacked), largest joint step between "
-          f"targets {report.max_step_deg:.1f} deg")
-    print(f"  smallest joint-limit margin {math.degrees(report.joint_margins.min()):.1f} deg "
-          f"(joint {report.worst_joint}; required {math.degrees(margin):.1f} deg)")
-    print(f"  smallest singular value of the scaled TCP Jacobian {report.sigma_min.min():.3f}, "
-          f"smallest scaled manipulability {report.manipulability.min():.4f} (required {singular})")
-    print(f"  smallest clearance (required {collision_margin * 1000:.0f} mm): " + ", ".join(
-        f"{name} {d * 1000:.0f} mm ({who.replace('tool:', 'tool/')})" for name, (d, who) in gaps.items()))
-    print("  joint ranges [deg]: " + ", ".join(
-        f"q{j + 1} {qd[:, j].min():.0f}..{qd[:, j].max():.0f}" for j in range(qd.shape[1])))
+    print(
+        f"reachability: {len(qd)} IK targets (every {CHECK_STEP}th point), chained from q0 [deg] = "
+        f"{np.round(qd[0], 1).tolist()}"
+    )
+    print(
+        f"  worst pose error {report.errors.max():.2e} (m and rad stacked), largest joint step between "
+        f"targets {report.max_step_deg:.1f} deg"
+    )
+    print(
+        f"  smallest joint-limit margin {math.degrees(report.joint_margins.min()):.1f} deg "
+        f"(joint {report.worst_joint}; required {math.degrees(margin):.1f} deg)"
+    )
+    print(
+        f"  smallest singular value of the scaled TCP Jacobian {report.sigma_min.min():.3f}, "
+        f"smallest scaled manipulability {report.manipulability.min():.4f} (required {singular})"
+    )
+    print(
+        f"  smallest clearance (required {collision_margin * 1000:.0f} mm): "
+        + ", ".join(
+            f"{name} {d * 1000:.0f} mm ({who.replace('tool:', 'tool/')})" for name, (d, who) in gaps.items()
+        )
+    )
+    print(
+        "  joint ranges [deg]: "
+        + ", ".join(f"q{j + 1} {qd[:, j].min():.0f}..{qd[:, j].max():.0f}" for j in range(qd.shape[1]))
+    )
     print(f"  reachable: {ok}")
     return ok
 
@@ -274,26 +288,41 @@ def main(argv: list[str] | None = None) -> int:
     tilt = np.degrees(np.arccos(np.clip(-rotations[:, 2, 2], -1.0, 1.0)))
     normal_tilt = np.degrees(np.arccos(np.clip(normals[:, 2], -1.0, 1.0)))
     size_kb = (HERE / MESH_FILE).stat().st_size / 1024
-    print(f"panel {PANEL_LENGTH * 1000:.0f} x {PANEL_WIDTH * 1000:.0f} mm, corner radius "
-          f"{CORNER_RADIUS * 1000:.0f} mm, saddle radii {RADIUS_LONG} m (along) / "
-          f"{RADIUS_ACROSS} m (across); footprint perimeter {footprint_perimeter:.4f} m")
-    print(f"mesh {MESH_FILE}: {len(written.vertices)} vertices, {len(written.faces)} faces, "
-          f"{size_kb:.0f} KiB, area {written.area / 1e6:.4f} m^2, watertight {written.is_watertight}")
-    print(f"bead (mesh boundary): {len(bead_cad) - 1} vertices, {perimeter:.4f} m, spacing "
-          f"{perimeter / (len(bead_cad) - 1) * 1000:.2f} mm, CAD z {bead_cad[:, 2].min() * 1000:.1f}.."
-          f"{bead_cad[:, 2].max() * 1000:.1f} mm, starts at CAD {np.round(bead_cad[0] * 1000, 1).tolist()} mm")
+    print(
+        f"panel {PANEL_LENGTH * 1000:.0f} x {PANEL_WIDTH * 1000:.0f} mm, corner radius "
+        f"{CORNER_RADIUS * 1000:.0f} mm, saddle radii {RADIUS_LONG} m (along) / "
+        f"{RADIUS_ACROSS} m (across); footprint perimeter {footprint_perimeter:.4f} m"
+    )
+    print(
+        f"mesh {MESH_FILE}: {len(written.vertices)} vertices, {len(written.faces)} faces, "
+        f"{size_kb:.0f} KiB, area {written.area / 1e6:.4f} m^2, watertight {written.is_watertight}"
+    )
+    print(
+        f"bead (mesh boundary): {len(bead_cad) - 1} vertices, {perimeter:.4f} m, spacing "
+        f"{perimeter / (len(bead_cad) - 1) * 1000:.2f} mm, CAD z {bead_cad[:, 2].min() * 1000:.1f}.."
+        f"{bead_cad[:, 2].max() * 1000:.1f} mm, starts at CAD {np.round(bead_cad[0] * 1000, 1).tolist()} mm"
+    )
     lo, hi = positions.min(axis=0), positions.max(axis=0)
-    print(f"bead in world: x {lo[0]:.3f}..{hi[0]:.3f}, y {lo[1]:.3f}..{hi[1]:.3f}, "
-          f"z {lo[2]:.3f}..{hi[2]:.3f} m")
-    print(f"surface normal {normal_tilt.min():.1f}..{normal_tilt.max():.1f} deg from vertical, "
-          f"tool axis {tilt.min():.1f}..{tilt.max():.1f} deg from vertical")
-    print(f"drag angle {drag_deg.min():.1f}..{drag_deg.max():.1f} deg, speed "
-          f"{speed.min() * 1000:.1f}..{speed.max() * 1000:.1f} mm/s")
-    print(f"demo: {len(demo.log.t)} samples at {model.rate_hz:g} Hz, {demo.duration_s:.2f} s "
-          f"({model.pause_s:g} s pause), outliers at samples {list(demo.outlier_indices)}")
-    print(f"sensor to receiver {dist.min():.2f}..{dist.max():.2f} m; z error (median) near "
-          f"{np.median(dz[dist < dist.min() + 0.1]) * 1000:.1f} mm, far "
-          f"{np.median(dz[dist > dist.max() - 0.1]) * 1000:.1f} mm")
+    print(
+        f"bead in world: x {lo[0]:.3f}..{hi[0]:.3f}, y {lo[1]:.3f}..{hi[1]:.3f}, z {lo[2]:.3f}..{hi[2]:.3f} m"
+    )
+    print(
+        f"surface normal {normal_tilt.min():.1f}..{normal_tilt.max():.1f} deg from vertical, "
+        f"tool axis {tilt.min():.1f}..{tilt.max():.1f} deg from vertical"
+    )
+    print(
+        f"drag angle {drag_deg.min():.1f}..{drag_deg.max():.1f} deg, speed "
+        f"{speed.min() * 1000:.1f}..{speed.max() * 1000:.1f} mm/s"
+    )
+    print(
+        f"demo: {len(demo.log.t)} samples at {model.rate_hz:g} Hz, {demo.duration_s:.2f} s "
+        f"({model.pause_s:g} s pause), outliers at samples {list(demo.outlier_indices)}"
+    )
+    print(
+        f"sensor to receiver {dist.min():.2f}..{dist.max():.2f} m; z error (median) near "
+        f"{np.median(dz[dist < dist.min() + 0.1]) * 1000:.1f} mm, far "
+        f"{np.median(dz[dist > dist.max() - 0.1]) * 1000:.1f} mm"
+    )
     print(f"wrote {MESH_FILE}, demo.liberty, truth.csv in {HERE}")
 
     if not args.no_check:

@@ -101,7 +101,11 @@ def _call(problem: BenchProblem, contender: str, function: Callable[[BenchProble
 
 
 def run_problem(
-    problem: BenchProblem, contender: str, function: Callable[[BenchProblem], Answer], repeat: int, warmup: int = 0
+    problem: BenchProblem,
+    contender: str,
+    function: Callable[[BenchProblem], Answer],
+    repeat: int,
+    warmup: int = 0,
 ) -> dict[str, Any] | None:
     """One row for ``contender`` on ``problem`` after ``warmup`` untimed runs (see :func:`run_turns`)."""
     return run_turns(problem, {contender: function}, repeat, warmup)[contender]
@@ -138,9 +142,7 @@ def run_turns(
                 echo(f"skipping {name}: {e}")
                 del functions[name], answers[name]
     load = f"{load0:.2f}-{_load():.2f}"
-    return {
-        name: _row(problem, name, runs, warmup, load, peak0) for name, runs in answers.items() if runs
-    }
+    return {name: _row(problem, name, runs, warmup, load, peak0) for name, runs in answers.items() if runs}
 
 
 def _load() -> float:

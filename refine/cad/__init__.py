@@ -103,13 +103,9 @@ def read_cad_path(settings: CadSettings, cad_in_world: NDArray) -> CadPath:
             "refine.cad.fused_from_pathml(file, spacing_m, track), not read_cad_path"
         )
     if reader is None:
-        raise InputError(
-            f"cad.format = {settings.format!r} is not one of {', '.join(sorted(_READERS))}"
-        )
+        raise InputError(f"cad.format = {settings.format!r} is not one of {', '.join(sorted(_READERS))}")
     points = reader(settings)
-    closed = bool(
-        len(points) > 2 and np.linalg.norm(points[-1] - points[0]) <= CLOSED_TOLERANCE_M
-    )
+    closed = bool(len(points) > 2 and np.linalg.norm(points[-1] - points[0]) <= CLOSED_TOLERANCE_M)
     if settings.reverse:
         points = points[::-1].copy()
     points_world = transform_points(T_world_cad, points)

@@ -38,9 +38,7 @@ def metres_per_unit(units: str, source: str) -> float:
         InputError: an unknown unit, naming the file and the units allowed.
     """
     if units not in METRES_PER_UNIT:
-        raise InputError(
-            f"{source}: unknown length unit {units!r}; use one of {', '.join(METRES_PER_UNIT)}"
-        )
+        raise InputError(f"{source}: unknown length unit {units!r}; use one of {', '.join(METRES_PER_UNIT)}")
     return METRES_PER_UNIT[units]
 
 
@@ -64,8 +62,7 @@ def _header_columns(cells: list[str], where: str) -> tuple[int, int, int] | None
     missing = [k for k in ("x", "y", "z") if k not in names]
     if missing:
         raise InputError(
-            f"{where}: header {', '.join(names)} lacks column(s) {', '.join(missing)} "
-            "(expected x, y, z)"
+            f"{where}: header {', '.join(names)} lacks column(s) {', '.join(missing)} (expected x, y, z)"
         )
     return names.index("x"), names.index("y"), names.index("z")
 

@@ -121,7 +121,9 @@ def _check_extent(e, scale: float, units: str, source: str, tol: float) -> None:
     for i in range(n - 1 + int(_is_closed(e))):
         bulge = float(xyb[i, 2])
         if not math.isfinite(bulge):
-            raise InputError(f"{source}: {_label(e)} vertex {i} has the bulge {bulge!r}; a bulge is a finite number")
+            raise InputError(
+                f"{source}: {_label(e)} vertex {i} has the bulge {bulge!r}; a bulge is a finite number"
+            )
         chord = float(np.linalg.norm(xyb[(i + 1) % n, :2] - xyb[i, :2]))
         if bulge == 0.0 or abs(bulge) * chord / 2.0 <= tol:
             continue

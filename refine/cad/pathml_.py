@@ -106,7 +106,9 @@ def fused_from_pathml(path: str | Path, spacing_m: float, track: str | None = No
     s_points = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
 
     check_waypoint_count(
-        float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1))), spacing_m, f"cad.file {Path(path).name!r}"
+        float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1))),
+        spacing_m,
+        f"cad.file {Path(path).name!r}",
     )
     s, positions = resample_by_arc_length(points, spacing_m)
     s = np.clip(s, 0.0, s_points[-1])

@@ -210,7 +210,12 @@ def link_body(shape: CollisionShape, frame_id: int, joint: int, where: str) -> B
         parts = convex_parts(shape.convex, shape.geometry)
     else:
         params, half = primitive_from_fcl(shape.geometry, f"{where} link {shape.link!r}")
-        parts = {"geometry": shape.geometry, "kind_params": params, "half_extent": half, "centre": np.zeros(3)}
+        parts = {
+            "geometry": shape.geometry,
+            "kind_params": params,
+            "half_extent": half,
+            "centre": np.zeros(3),
+        }
     return Body(
         name=shape.link,
         shape=shape.name,

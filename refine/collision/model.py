@@ -208,7 +208,9 @@ class CollisionModel:
         (the bodies may then penetrate).
         """
         c, h = world_aabb(poses, self._centre[: self._n_moving], self._half[: self._n_moving])
-        cells = np.broadcast_to(self._aabb_c[self._n_moving :], (len(poses), *self._aabb_c[self._n_moving :].shape))
+        cells = np.broadcast_to(
+            self._aabb_c[self._n_moving :], (len(poses), *self._aabb_c[self._n_moving :].shape)
+        )
         c = np.concatenate([c, cells], axis=1)
         h = np.concatenate([h, np.broadcast_to(self._aabb_h[self._n_moving :], cells.shape)], axis=1)
         d = np.maximum(np.abs(c[:, self._pa] - c[:, self._pb]) - h[:, self._pa] - h[:, self._pb], 0.0)

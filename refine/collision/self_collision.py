@@ -82,8 +82,12 @@ def sample_matrix(robot, samples: int, seed: int, never_m: float = NEVER_M) -> l
     shapes = robot.collision_shapes()
     links = list(dict.fromkeys(s.link for s in shapes))
     joint = {link: int(robot.model.frames[robot.frame_id(link)].parentJoint) for link in links}
-    objects = {link: [(s, fcl.CollisionObject(s.geometry)) for s in shapes if s.link == link] for link in links}
-    pairs = [(a, b) for a, b in itertools.combinations(links, 2) if not adjacent(robot.model, joint[a], joint[b])]
+    objects = {
+        link: [(s, fcl.CollisionObject(s.geometry)) for s in shapes if s.link == link] for link in links
+    }
+    pairs = [
+        (a, b) for a, b in itertools.combinations(links, 2) if not adjacent(robot.model, joint[a], joint[b])
+    ]
     least = dict.fromkeys(pairs, np.inf)
     contacts = dict.fromkeys(pairs, 0)
     rng = np.random.default_rng(seed)
@@ -96,7 +100,9 @@ def sample_matrix(robot, samples: int, seed: int, never_m: float = NEVER_M) -> l
                 obj.setTransform(fcl.Transform(T[:3, :3], T[:3, 3]))
         for a, b in pairs:
             touching = any(
-                fcl.collide(oa, ob, request, fcl.CollisionResult()) for _, oa in objects[a] for _, ob in objects[b]
+                fcl.collide(oa, ob, request, fcl.CollisionResult())
+                for _, oa in objects[a]
+                for _, ob in objects[b]
             )
             if touching:
                 contacts[(a, b)] += 1
@@ -119,14 +125,16 @@ def sample_matrix(robot, samples: int, seed: int, never_m: float = NEVER_M) -> l
     return out
 
 
-def write_matrix(path: str | Path, stats: list[PairStats], *, samples: int, seed: int, never_m: float) -> None:
+def write_matrix(
+    path: str | Path, stats: list[PairStats], *, samples: int, seed: int, never_m: float
+) -> None:
     """Write the matrix as TOML: the sampling settings and one ``[[pair]]`` per pair of links."""
     lines = [
         "# Self-collision matrix: which link pairs are checked. Written by robots/make_self_collision.py",
         "# from random configurations within the joint limits; see refine/collision/self_collision.py.",
         "# reason: adjacent (joint neighbours), always (in contact at every sample), never (never closer",
         "# than never_m), maker (in contact on the maker's own meshes at a sizeable share of samples),",
-        "# or \"\" (checked).",
+        '# or "" (checked).',
         f"samples = {samples}",
         f"seed = {seed}",
         f"never_m = {never_m}",
@@ -163,7 +171,9 @@ def read_matrix(path: str | Path) -> dict[frozenset[str], str]:
         if not (isinstance(links, list) and len(links) == 2 and all(isinstance(x, str) for x in links)):
             raise InputError(f"{path}: pair {k + 1}: links must be two link names, got {links!r}")
         if reason not in (*REASONS, ""):
-            raise InputError(f"{path}: pair {k + 1}: reason {reason!r} is not one of {', '.join(REASONS)} or \"\"")
+            raise InputError(
+                f'{path}: pair {k + 1}: reason {reason!r} is not one of {", ".join(REASONS)} or ""'
+            )
         if reason:
             disabled[frozenset(links)] = reason
     return disabled

@@ -56,9 +56,7 @@ def read_demo_csv(path: str | Path, units: str = "m") -> TrackerLog:
     """
     path = Path(path)
     if units not in METRES_PER_UNIT:
-        raise InputError(
-            f"{path}: unknown position unit {units!r}; use one of {', '.join(METRES_PER_UNIT)}"
-        )
+        raise InputError(f"{path}: unknown position unit {units!r}; use one of {', '.join(METRES_PER_UNIT)}")
     try:
         lines = path.read_text(encoding="utf-8-sig").splitlines()
     except (OSError, UnicodeDecodeError) as e:
@@ -133,7 +131,9 @@ def write_demo_csv(path: str | Path, log: TrackerLog, units: str = "mm") -> None
         InputError: an unknown unit.
     """
     if units not in METRES_PER_UNIT:
-        raise InputError(f"write_demo_csv: unknown position unit {units!r}; use one of {', '.join(METRES_PER_UNIT)}")
+        raise InputError(
+            f"write_demo_csv: unknown position unit {units!r}; use one of {', '.join(METRES_PER_UNIT)}"
+        )
     angles = tracker_angles_from_matrix(log.rotations)
     rows = np.column_stack([log.t, np.asarray(log.positions) / METRES_PER_UNIT[units], angles])
     with Path(path).open("w", encoding="utf-8") as f:

@@ -198,12 +198,16 @@ class _Rows:
                 try:
                     [float(v) for v in tokens]
                 except ValueError as e:
-                    raise InputError(f"{self.path}:{lineno}: not a number in {message_line(line)} ({e})") from e
+                    raise InputError(
+                        f"{self.path}:{lineno}: not a number in {message_line(line)} ({e})"
+                    ) from e
             raise
         bad = np.flatnonzero(~np.all(np.isfinite(block), axis=1))
         if bad.size:
             k = int(bad[0])
-            raise InputError(f"{self.path}:{self.linenos[k]}: non-finite value in {message_line(self.lines[k])}")
+            raise InputError(
+                f"{self.path}:{self.linenos[k]}: non-finite value in {message_line(self.lines[k])}"
+            )
         self.blocks.append(block)
         self.all_linenos.extend(self.linenos)
         self.tokens, self.linenos, self.lines = [], [], []
@@ -297,7 +301,8 @@ def read_liberty_ascii(
                 if not terminated and previous_length is not None and len(line) < previous_length:
                     raise InputError(
                         f"{path}:{lineno}: the last record has {len(line)} characters and no line end, "
-                        f"the one before {previous_length}: {message_line(line)}" + _PARTIAL
+                        f"the one before {previous_length}: {message_line(line)}"
+                        + _PARTIAL
                         + "; if the record is whole, end the file with a line break"
                     )
                 previous_length = len(line)
@@ -337,6 +342,7 @@ def read_liberty_ascii(
         data = data[:, 1:]
     else:
         t = np.arange(len(data)) / rate_hz
+
     def where(k: int) -> str:
         return f"{path}:{rows.all_linenos[k]}"
 

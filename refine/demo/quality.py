@@ -167,7 +167,9 @@ class BadRun:
     def describe(self) -> str:
         """One line for messages."""
         n = max(self.last - self.first + 1, 0)
-        what = f"{n} {self.kind} sample(s) {self.first}..{self.last}" if n else f"a gap after sample {self.last}"
+        what = (
+            f"{n} {self.kind} sample(s) {self.first}..{self.last}" if n else f"a gap after sample {self.last}"
+        )
         return f"{what}, t = {self.t_start_s:.3f}..{self.t_end_s:.3f} s ({self.duration_s * 1e3:.0f} ms)"
 
 
@@ -248,7 +250,9 @@ class DemoQuality:
             "max_bridge_s": MAX_BRIDGE_S,
             "n_bridged": sum(r.action == "bridged" for r in self.bad_runs),
             "n_trimmed": sum(r.action == "trimmed" for r in self.bad_runs),
-            "longest_bridged_s": max((r.duration_s for r in self.bad_runs if r.action == "bridged"), default=0.0),
+            "longest_bridged_s": max(
+                (r.duration_s for r in self.bad_runs if r.action == "bridged"), default=0.0
+            ),
             "bad_runs": [{**asdict(r), "duration_s": r.duration_s} for r in self.bad_runs],
             "frame": None if self.frame is None else asdict(self.frame),
             "frame_warn_deg": FRAME_WARN_DEG,
@@ -366,7 +370,7 @@ def find_bad_runs(log: TrackerLog) -> list[BadRun]:
         else:
             t0, t1 = t[a - 1], t[b + 1]
             action = "bridged" if t1 - t0 <= MAX_BRIDGE_S + 1e-9 else "refused"
-        runs.append(BadRun(names[int(kind[a:b + 1].max())], a, b, float(t0), float(t1), action))
+        runs.append(BadRun(names[int(kind[a : b + 1].max())], a, b, float(t0), float(t1), action))
     good = np.flatnonzero(~mask)
     if good.size > 1:
         steps = np.diff(t[good])
@@ -381,8 +385,14 @@ def find_bad_runs(log: TrackerLog) -> list[BadRun]:
 
 #: The Liberty's real-time error indicators (Polhemus PDI SDK, ``PDItracker.h``, ``ePiDevError``).
 DEVICE_ERROR_MEANINGS = {
-    **{c: f"source failure, axes {axes}" for c, axes in zip("abcdefg", ("X", "Y", "XY", "Z", "XZ", "YZ", "XYZ"), strict=True)},
-    **{c: f"source failure, axes {axes}" for c, axes in zip("ABCDEFG", ("X", "Y", "XY", "Z", "XZ", "YZ", "XYZ"), strict=True)},
+    **{
+        c: f"source failure, axes {axes}"
+        for c, axes in zip("abcdefg", ("X", "Y", "XY", "Z", "XZ", "YZ", "XYZ"), strict=True)
+    },
+    **{
+        c: f"source failure, axes {axes}"
+        for c, axes in zip("ABCDEFG", ("X", "Y", "XY", "Z", "XZ", "YZ", "XYZ"), strict=True)
+    },
     "u": "out of map",
     "I": "built-in test error",
 }
@@ -454,7 +464,9 @@ def gate_dropouts(log: TrackerLog) -> tuple[TrackerLog, DemoQuality]:
     positions = fill_positions(log.t, log.positions, mask)
     rotations = fill_rotations(log.t, log.rotations, mask)
     t = log.t[keep]
-    cleaned = replace(log, t=t - t[0], positions=positions[keep], rotations=rotations[keep], device_error=None)
+    cleaned = replace(
+        log, t=t - t[0], positions=positions[keep], rotations=rotations[keep], device_error=None
+    )
     if runs:
         logger.info("%s: %s", where, "; ".join(f"{r.action} {r.describe()}" for r in runs))
     quality = DemoQuality(len(log.t), float(np.median(np.diff(log.t))), tuple(runs), device_errors=device)
@@ -468,7 +480,11 @@ def _skew_rows(c: Array) -> Array:
     """Rows of d(ω × c)/dω = -[c]x, shape (N, 3, 3)."""
     z = np.zeros(len(c))
     return -np.stack(
-        [np.stack([z, -c[:, 2], c[:, 1]], 1), np.stack([c[:, 2], z, -c[:, 0]], 1), np.stack([-c[:, 1], c[:, 0], z], 1)],
+        [
+            np.stack([z, -c[:, 2], c[:, 1]], 1),
+            np.stack([c[:, 2], z, -c[:, 0]], 1),
+            np.stack([-c[:, 1], c[:, 0], z], 1),
+        ],
         axis=1,
     )
 
@@ -700,7 +716,9 @@ def gate_frame(
         )
     elif est.not_observable:  # a fact of the path's shape, stated once in demo_quality, not a warning
         logger.info(
-            "tracker frame rotation not observable %s; the other axes to ± %.1f deg", hidden, est.observable_sigma_deg
+            "tracker frame rotation not observable %s; the other axes to ± %.1f deg",
+            hidden,
+            est.observable_sigma_deg,
         )
     if est.offset_m > OFFSET_WARN_M and est.offset_chi2 > _chi2_threshold(3):
         warnings.append(

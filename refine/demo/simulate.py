@@ -117,8 +117,7 @@ class TrackerModel:
             )
         if not isinstance(self.n_outliers, int) or not isinstance(self.seed, int):
             raise InputError(
-                f"TrackerModel.n_outliers and seed must be integers, got "
-                f"{self.n_outliers!r}, {self.seed!r}"
+                f"TrackerModel.n_outliers and seed must be integers, got {self.n_outliers!r}, {self.seed!r}"
             )
 
     def without_errors(self) -> TrackerModel:
@@ -259,9 +258,7 @@ def corrupt_sensor_poses(
     if model.n_outliers > 0:
         outliers = _pick_outliers(rng, first_outlier, m - 5, model.n_outliers)
     idx = np.array(outliers, dtype=int)
-    spike_p = _random_directions(rng, len(idx)) * rng.uniform(
-        *model.outlier_position_m, size=(len(idx), 1)
-    )
+    spike_p = _random_directions(rng, len(idx)) * rng.uniform(*model.outlier_position_m, size=(len(idx), 1))
     spike_r = _random_directions(rng, len(idx)) * np.radians(
         rng.uniform(*model.outlier_orientation_deg, size=(len(idx), 1))
     )
@@ -272,9 +269,7 @@ def corrupt_sensor_poses(
     p[:, :2] += (model.xy_error_max_m / math.sqrt(2.0)) * xy_field(p_true)
     p += noise_p
     p[idx] += spike_p
-    rot_dist = (np.radians(model.orientation_distortion_max_deg) / math.sqrt(3.0)) * rot_field(
-        p_true
-    )
+    rot_dist = (np.radians(model.orientation_distortion_max_deg) / math.sqrt(3.0)) * rot_field(p_true)
     R = matrix_from_rotvec(noise_r) @ matrix_from_rotvec(rot_dist) @ matrix_from_rotvec(tremor_r)
     R = R @ R_true
     R[idx] = matrix_from_rotvec(spike_r) @ R[idx]
@@ -359,9 +354,7 @@ def simulate_demonstration(
     p, R, outliers = corrupt_sensor_poses(t, T_S_E, model, first_outlier=n_pause + 5)
     m = len(t)
 
-    log = TrackerLog(
-        t=t, positions=p, rotations=R, station=station, source=f"simulated (seed {model.seed})"
-    )
+    log = TrackerLog(t=t, positions=p, rotations=R, station=station, source=f"simulated (seed {model.seed})")
     logger.info(
         "simulated %d samples (%.1f s pause, %.1f s motion) with %d outliers",
         m,
@@ -448,8 +441,7 @@ def write_truth_csv(path: str | Path, s: ArrayLike, quaternions: ArrayLike, spee
     v = np.asarray(speed, dtype=float)
     if s.ndim != 1 or q.shape != (len(s), 4) or v.shape != s.shape:
         raise InputError(
-            f"truth: expected s (N,), quaternions (N, 4), speed (N,), got "
-            f"{s.shape}, {q.shape}, {v.shape}"
+            f"truth: expected s (N,), quaternions (N, 4), speed (N,), got {s.shape}, {q.shape}, {v.shape}"
         )
     rows = np.column_stack([s, q, v])
     np.savetxt(path, rows, delimiter=",", header=_TRUTH_HEADER, comments="", fmt="%.10g")

@@ -197,16 +197,21 @@ def _weld_start(io: _Io, problem: Problem) -> list[str]:
     pr = problem.process
     wait, switch = _weld_io(io)
     timeout_ms = int(round(pr.arc_timeout_s * 1000.0))
-    return weld_start(problem, wait, switch, [
-        f"$TIMER[1]=-{timeout_ms} ; arc start timeout [ms]",
-        "$TIMER_STOP[1]=FALSE",
-        f"WAIT FOR $IN[{io.arc_ok}] OR $TIMER_FLAG[1]",
-        "$TIMER_STOP[1]=TRUE",
-        f"IF NOT $IN[{io.arc_ok}] THEN",
-        *arc_abort(switch, "  "),
-        f"  HALT ; no arc signal within {_real(pr.arc_timeout_s, 3)} s",
-        "ENDIF",
-    ])
+    return weld_start(
+        problem,
+        wait,
+        switch,
+        [
+            f"$TIMER[1]=-{timeout_ms} ; arc start timeout [ms]",
+            "$TIMER_STOP[1]=FALSE",
+            f"WAIT FOR $IN[{io.arc_ok}] OR $TIMER_FLAG[1]",
+            "$TIMER_STOP[1]=TRUE",
+            f"IF NOT $IN[{io.arc_ok}] THEN",
+            *arc_abort(switch, "  "),
+            f"  HALT ; no arc signal within {_real(pr.arc_timeout_s, 3)} s",
+            "ENDIF",
+        ],
+    )
 
 
 def _weld_end(io: _Io, problem: Problem) -> list[str]:

@@ -153,14 +153,19 @@ def _weld_start(problem: Problem, output: str) -> list[str]:
     pr = problem.process
     wait, switch = _weld_io(problem, output)
     timeout = _num(pr.arc_timeout_s, 3)
-    return weld_start(problem, wait, switch, [
-        f"WaitDI {pr.arc_ok_input}, 1 \\MaxTime:={timeout} \\TimeFlag:=arcTimeout;",
-        "IF arcTimeout THEN",
-        *arc_abort(switch, "    "),
-        f'    ErrWrite "Arc start failed", "no {pr.arc_ok_input} within {timeout} s";',
-        "    EXIT;",
-        "ENDIF",
-    ])
+    return weld_start(
+        problem,
+        wait,
+        switch,
+        [
+            f"WaitDI {pr.arc_ok_input}, 1 \\MaxTime:={timeout} \\TimeFlag:=arcTimeout;",
+            "IF arcTimeout THEN",
+            *arc_abort(switch, "    "),
+            f'    ErrWrite "Arc start failed", "no {pr.arc_ok_input} within {timeout} s";',
+            "    EXIT;",
+            "ENDIF",
+        ],
+    )
 
 
 def _weld_end(problem: Problem, output: str) -> list[str]:

@@ -122,9 +122,7 @@ def result_dict(result: RunResult) -> dict[str, Any]:
             if p.timing is not None
             for seg in p.timing.slow_segments
         ],
-        "diagnosis": [
-            {"pass": p.name, **f.as_json()} for p in result.passes for f in p.refinement.diagnosis
-        ],
+        "diagnosis": [{"pass": p.name, **f.as_json()} for p in result.passes for f in p.refinement.diagnosis],
         "repairs": [
             {
                 "pass": p.name,

@@ -119,11 +119,15 @@ def _io_calls(problem: Problem) -> dict[str, tuple[str, str]]:
 
 def _weld_io(io: dict[str, tuple[str, str]]) -> tuple[Wait, Switch]:
     def wait(seconds: float, comment: str) -> str:
-        return f"ThreadUtil.milliSleep({int(round(seconds * 1000.0))});" + (f" // {comment}" if comment else "")
+        return f"ThreadUtil.milliSleep({int(round(seconds * 1000.0))});" + (
+            f" // {comment}" if comment else ""
+        )
 
     def switch(role: str, on: bool, comment: str) -> str:
         group, signal = io[role]
-        return f"{_field(group)}.set{signal}({'true' if on else 'false'});" + (f" // {comment}" if comment else "")
+        return f"{_field(group)}.set{signal}({'true' if on else 'false'});" + (
+            f" // {comment}" if comment else ""
+        )
 
     return wait, switch
 
@@ -133,16 +137,21 @@ def _weld_start(io: dict[str, tuple[str, str]], problem: Problem) -> list[str]:
     wait, switch = _weld_io(io)
     ok_group, ok_signal = io["ok"]
     timeout_ms = int(round(pr.arc_timeout_s * 1000.0))
-    return weld_start(problem, wait, switch, [
-        "long arcWait = System.currentTimeMillis();",
-        f"while (!{_field(ok_group)}.get{ok_signal}()) {{",
-        f"    if (System.currentTimeMillis() - arcWait > {timeout_ms}) {{",
-        *arc_abort(switch, "        "),
-        f'        throw new IllegalStateException("Arc start failed: no {ok_signal} within {_num(pr.arc_timeout_s, 3)} s");',
-        "    }",
-        "    ThreadUtil.milliSleep(10);",
-        "}",
-    ])
+    return weld_start(
+        problem,
+        wait,
+        switch,
+        [
+            "long arcWait = System.currentTimeMillis();",
+            f"while (!{_field(ok_group)}.get{ok_signal}()) {{",
+            f"    if (System.currentTimeMillis() - arcWait > {timeout_ms}) {{",
+            *arc_abort(switch, "        "),
+            f'        throw new IllegalStateException("Arc start failed: no {ok_signal} within {_num(pr.arc_timeout_s, 3)} s");',
+            "    }",
+            "    ThreadUtil.milliSleep(10);",
+            "}",
+        ],
+    )
 
 
 def _weld_end(io: dict[str, tuple[str, str]], problem: Problem) -> list[str]:

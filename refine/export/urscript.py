@@ -170,18 +170,23 @@ def _weld_start(out: int, gas: int, ok: int, problem: Problem) -> list[str]:
     pr = problem.process
     wait, switch = _weld_io(out, gas)
     timeout = _num(pr.arc_timeout_s, 3)
-    return weld_start(problem, wait, switch, [
-        "arc_wait = 0.0",
-        f"while not get_standard_digital_in({ok}) and arc_wait < {timeout}:",
-        "  sync()",
-        "  arc_wait = arc_wait + get_steptime()",
-        "end",
-        f"if not get_standard_digital_in({ok}):",
-        *arc_abort(switch, "  "),
-        f'  popup("no arc signal within {timeout} s", "Arc start failed", error=True)',
-        "  halt",
-        "end",
-    ])
+    return weld_start(
+        problem,
+        wait,
+        switch,
+        [
+            "arc_wait = 0.0",
+            f"while not get_standard_digital_in({ok}) and arc_wait < {timeout}:",
+            "  sync()",
+            "  arc_wait = arc_wait + get_steptime()",
+            "end",
+            f"if not get_standard_digital_in({ok}):",
+            *arc_abort(switch, "  "),
+            f'  popup("no arc signal within {timeout} s", "Arc start failed", error=True)',
+            "  halt",
+            "end",
+        ],
+    )
 
 
 def _weld_end(out: int, gas: int, problem: Problem) -> list[str]:

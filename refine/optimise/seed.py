@@ -75,7 +75,11 @@ class TcpKinematics:
         Jv, Jw = R_wb @ J[:, :3], R_wb @ J[:, 3:]
         r = T_wf[:, :3, :3] @ self.tcp_in_flange[:3, 3]  # flange origin -> TCP, world axes (M, 3)
         T = T_wf @ self.tcp_in_flange
-        return T[:, :3, 3], T[:, :3, :3], np.concatenate([Jv - np.cross(r[:, :, None], Jw, axis=1), Jw], axis=1)
+        return (
+            T[:, :3, 3],
+            T[:, :3, :3],
+            np.concatenate([Jv - np.cross(r[:, :, None], Jw, axis=1), Jw], axis=1),
+        )
 
     def jacobians(self, qs: Array) -> Array:
         """:meth:`jacobian` for joint rows ``qs`` (N, n), shape (N, 6, n) (see :meth:`batch`)."""

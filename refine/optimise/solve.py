@@ -274,7 +274,6 @@ class StageTimes(dict):
         return time.perf_counter(), time.process_time()
 
 
-
 def _add(timings: dict[str, float], key: str, start: tuple[float, float]) -> None:
     """Add the wall time since ``start`` (:meth:`StageTimes.clock`) to stage ``key`` of ``timings``.
 

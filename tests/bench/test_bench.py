@@ -105,7 +105,9 @@ def test_contenders_take_turns_after_their_untimed_warm_up_runs(suites_file):
     def contender(name):
         def run(p):
             calls.append(name)
-            return Answer("ok", contenders_module.greedy_ik(p).q, {"solve": 0.01 * len(calls)}, 0.001 * len(calls))
+            return Answer(
+                "ok", contenders_module.greedy_ik(p).q, {"solve": 0.01 * len(calls)}, 0.001 * len(calls)
+            )
 
         return run
 

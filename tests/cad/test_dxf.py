@@ -35,9 +35,7 @@ def test_closed_3d_polyline_repeats_its_first_point_last(tmp_path):
 def test_lwpolyline_bulge_becomes_an_arc_at_the_elevation(tmp_path):
     # (0,0) -> (10,0) straight, then a half circle (bulge 1) to (10,10), centre (10,5), r 5
     def build(msp):
-        msp.add_lwpolyline(
-            [(0, 0, 0), (10, 0, 1), (10, 10, 0)], format="xyb", dxfattribs={"elevation": 5.0}
-        )
+        msp.add_lwpolyline([(0, 0, 0), (10, 0, 1), (10, 10, 0)], format="xyb", dxfattribs={"elevation": 5.0})
 
     pts = points_from_dxf(_save(tmp_path, build), "mm", flatten_tolerance_m=1e-7) * 1000.0
     np.testing.assert_allclose(pts[:, 2], 5.0)
@@ -145,7 +143,9 @@ def test_read_cad_path_reads_a_closed_dxf_loop_on_a_layer(tmp_path):
         msp.add_line((0, 0, 0), (1, 1, 0), dxfattribs={"layer": "NOTES"})
 
     f = _save(tmp_path, build)
-    path = read_cad_path(CadSettings(file=f, format="dxf", units="mm", layer="PANE", spacing_m=0.007), np.eye(4))
+    path = read_cad_path(
+        CadSettings(file=f, format="dxf", units="mm", layer="PANE", spacing_m=0.007), np.eye(4)
+    )
     assert path.closed and path.length == pytest.approx(0.3)
     assert np.array_equal(path.positions[0], path.positions[-1])
     assert np.all(np.diff(path.s) <= 0.007)

@@ -124,12 +124,16 @@ def test_a_point_two_kilometres_away_is_refused_naming_the_track_and_point(tmp_p
     traj = _trajectory()
     traj.positions_ref[7, 1] = 2000.0
     traj.poses[7, 1, 3] = 2000.0
-    with pytest.raises(InputError, match=r"wild\.aml: track .* point 7: position y = 2000 m is outside the plausible range"):
+    with pytest.raises(
+        InputError, match=r"wild\.aml: track .* point 7: position y = 2000 m is outside the plausible range"
+    ):
         fused_from_pathml(_written(tmp_path, traj), 0.004)
 
 
 def test_a_speed_of_a_kilometre_a_second_is_refused(tmp_path):
     traj = _trajectory()
     traj.speed[5] = 1000.0
-    with pytest.raises(InputError, match=r"point 5: speed 1000 m/s is outside the plausible range 0\.\.10 m/s"):
+    with pytest.raises(
+        InputError, match=r"point 5: speed 1000 m/s is outside the plausible range 0\.\.10 m/s"
+    ):
         fused_from_pathml(_written(tmp_path, traj), 0.004)

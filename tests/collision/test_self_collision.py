@@ -27,7 +27,9 @@ def _links_with_shapes(robot):
 def _urdf_neighbours(robot):
     """Link pairs joined by one URDF joint, or by a chain of fixed joints plus at most one moving one."""
     root = etree.parse(str(robot.spec.urdf)).getroot()
-    parent = {j.find("child").get("link"): (j.find("parent").get("link"), j.get("type")) for j in root.iter("joint")}
+    parent = {
+        j.find("child").get("link"): (j.find("parent").get("link"), j.get("type")) for j in root.iter("joint")
+    }
 
     def body(link):  # the link's rigid body: climb fixed joints
         while link in parent and parent[link][1] == "fixed":
@@ -75,8 +77,11 @@ def test_a_fresh_sample_agrees_with_the_matrix(name):
             objects.setdefault(s.link, []).append(s.collision_object(poses[s.link]))
 
         def touching(a, b, objects=objects):
-            return any(fcl.collide(x, y, fcl.CollisionRequest(), fcl.CollisionResult())
-                       for x in objects[a] for y in objects[b])
+            return any(
+                fcl.collide(x, y, fcl.CollisionRequest(), fcl.CollisionResult())
+                for x in objects[a]
+                for y in objects[b]
+            )
 
         for a, b in never:
             assert not touching(a, b), f"{name}: 'never' pair {a}, {b} in contact at q = {q}"
@@ -99,7 +104,9 @@ def test_maker_pairs_touch_on_the_makers_own_meshes(name):
     if not (folder / "reference.urdf").is_file():
         pytest.skip(f"reference meshes not found at {folder}")
     ref, geometry, _ = pin.buildModelsFromUrdf(str(folder / "reference.urdf"), package_dirs=[str(folder)])
-    link_of_joint = {int(robot.model.frames[robot.frame_id(s.link)].parentJoint): s.link for s in robot.collision_shapes()}
+    link_of_joint = {
+        int(robot.model.frames[robot.frame_id(s.link)].parentJoint): s.link for s in robot.collision_shapes()
+    }
     bodies = {}
     for k, g in enumerate(geometry.geometryObjects):
         mesh = trimesh.load(g.meshPath, force="mesh")
@@ -121,7 +128,9 @@ def test_maker_pairs_touch_on_the_makers_own_meshes(name):
         for a, b in maker:
             hits[(a, b)] += fcl.collide(placed(a), placed(b), fcl.CollisionRequest(), fcl.CollisionResult())
     for pair, n in hits.items():
-        assert n >= 60, f"{name}: 'maker' pair {pair} touches on the maker's meshes at only {n} of 300 samples"
+        assert n >= 60, (
+            f"{name}: 'maker' pair {pair} touches on the maker's meshes at only {n} of 300 samples"
+        )
 
 
 def test_the_model_checks_exactly_the_pairs_the_matrix_enables():
@@ -151,7 +160,9 @@ def test_the_iiwa_bends_its_wrist_to_115_deg_without_self_contact(a6_deg):
         poses = robot.link_poses(q)
         five = [s.collision_object(poses[s.link]) for s in shapes if s.link == "link_5"]
         seven = [s.collision_object(poses[s.link]) for s in shapes if s.link == "link_7"]
-        gap = min(fcl.distance(x, y, fcl.DistanceRequest(), fcl.DistanceResult()) for x in five for y in seven)
+        gap = min(
+            fcl.distance(x, y, fcl.DistanceRequest(), fcl.DistanceResult()) for x in five for y in seven
+        )
         assert gap > 0.01, f"link_5 and link_7 only {gap * 1e3:.1f} mm apart at q = {q}"
         for c in model.contacts(q, 0.0):
             assert not ({c.body, c.other} <= wrist), f"{c.body} vs {c.other} at {c.distance_m * 1e3:.1f} mm"

@@ -29,7 +29,9 @@ def _torch(path: Path) -> None:
 
 def test_a_tool_mesh_is_measured_as_its_convex_hull(irb4600, tmp_path):
     _torch(tmp_path / "torch.stl")
-    torch = Shape("torch", "mesh", pose=make_transform(p=[0.0, 0.0, 0.01]), file=tmp_path / "torch.stl", units="mm")
+    torch = Shape(
+        "torch", "mesh", pose=make_transform(p=[0.0, 0.0, 0.01]), file=tmp_path / "torch.stl", units="mm"
+    )
     q = np.zeros(6)
     flange = irb4600.fk(q)
     # the hull's slanted face runs from the neck's foot (x 10, z 0 mm) to the arm's lower far corner
@@ -47,7 +49,9 @@ def test_a_tool_mesh_is_measured_as_its_convex_hull(irb4600, tmp_path):
     edge = (b - a) / np.linalg.norm(b - a)
     normal = np.array([edge[2], 0.0, -edge[0]])  # in the x-z plane, pointing away from the torch
     point = (a + b) / 2 + 0.03 * normal + [0.0, 0.0, 0.01]
-    ball = Shape("ball", "sphere", pose=make_transform(p=(flange @ np.append(point, 1.0))[:3]), radius_m=0.005)
+    ball = Shape(
+        "ball", "sphere", pose=make_transform(p=(flange @ np.append(point, 1.0))[:3]), radius_m=0.005
+    )
     model = CollisionModel(irb4600, np.eye(4), np.eye(4), (torch,), (ball,), margin_m=0.0, self_margin_m=0.0)
     (contact,) = [c for c in model.contacts(q, np.inf) if c.body == "tool:torch" and c.other == "ball"]
     assert contact.distance_m == pytest.approx(0.025, abs=1e-5)

@@ -132,8 +132,12 @@ def test_a_tig_receiver_moved_40_mm_is_warned_about_as_an_offset(tig, shift_m):
 
 
 def _estimate(chi2: float, n_hidden: int) -> FrameEstimate:
-    hidden = tuple({"axis_in_source": [1.0, 0.0, 0.0], "sigma_deg": 100.0, "about": "x"} for _ in range(n_hidden))
-    return FrameEstimate(5.0, 1.0, (0.0, 0.0, 1.0), 0.0, 0.0, 0.0, 10, 5.0, 1.0, 2.0, hidden, observable_chi2=chi2)
+    hidden = tuple(
+        {"axis_in_source": [1.0, 0.0, 0.0], "sigma_deg": 100.0, "about": "x"} for _ in range(n_hidden)
+    )
+    return FrameEstimate(
+        5.0, 1.0, (0.0, 0.0, 1.0), 0.0, 0.0, 0.0, 10, 5.0, 1.0, 2.0, hidden, observable_chi2=chi2
+    )
 
 
 @pytest.mark.parametrize(

@@ -46,7 +46,9 @@ def _check(seam, world_axis, angle_deg):
     """The frame gate with source_in_world turned by angle_deg about world_axis (through the receiver)."""
     demo, cad = seam
     T = T_F_S.copy()
-    T[:3, :3] = Rotation.from_rotvec(np.radians(angle_deg) * np.asarray(world_axis, float)).as_matrix() @ T[:3, :3]
+    T[:3, :3] = (
+        Rotation.from_rotvec(np.radians(angle_deg) * np.asarray(world_axis, float)).as_matrix() @ T[:3, :3]
+    )
     fused = fuse(cad, demo, T, T_TCP_E)
     return gate_frame(DemoQuality(n_samples=len(demo.t), sample_step_s=1 / 240), demo, fused, T, T_TCP_E)
 

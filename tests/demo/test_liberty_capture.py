@@ -29,7 +29,10 @@ from refine.demo.liberty import read_liberty_ascii
 from refine.demo.liberty_binary import read_liberty_binary
 from refine.errors import InputError
 
-POSES = [((12.3456, -4.5678, 9.8765), (-12.345, 45.678, 170.123)), ((12.3556, -4.5578, 9.8665), (-12.300, 45.600, 170.000))]
+POSES = [
+    ((12.3456, -4.5678, 9.8765), (-12.345, 45.678, 170.123)),
+    ((12.3556, -4.5578, 9.8665), (-12.300, 45.600, 170.000)),
+]
 
 
 def _record(k: int, command: str = "C") -> str:
@@ -51,9 +54,16 @@ def test_a_capture_of_continuous_records_is_read(tmp_path):
 def test_a_reply_to_another_command_inside_a_capture_is_refused_with_its_line(tmp_path):
     # a reply with six numbers would otherwise be read as a sample
     f = tmp_path / "capture.txt"
-    text = _record(0) + _record(1) + "01B     1.0000    2.0000    3.0000    4.0000    5.0000    6.0000\r\n" + _record(0)
+    text = (
+        _record(0)
+        + _record(1)
+        + "01B     1.0000    2.0000    3.0000    4.0000    5.0000    6.0000\r\n"
+        + _record(0)
+    )
     f.write_bytes(text.encode())
-    with pytest.raises(InputError, match=r"capture\.txt:3: the device's reply to the 'B' command, not a position"):
+    with pytest.raises(
+        InputError, match=r"capture\.txt:3: the device's reply to the 'B' command, not a position"
+    ):
         read_liberty_ascii(f)
 
 
@@ -69,8 +79,11 @@ def test_a_capture_stopped_mid_record_is_refused_naming_the_last_line(tmp_path):
     # the last record (4 + 6 x 10 characters, CR LF) cut by 5 bytes: 61 characters, roll "170." instead of 170.123
     text = _record(0) + _record(1) + _record(0)[:-5]
     f.write_bytes(text.encode())
-    with pytest.raises(InputError, match=r"capture\.txt:3: the last record has 61 characters and no line end, "
-                                         r"the one before 64: .*partial record"):
+    with pytest.raises(
+        InputError,
+        match=r"capture\.txt:3: the last record has 61 characters and no line end, "
+        r"the one before 64: .*partial record",
+    ):
         read_liberty_ascii(f)
 
 
@@ -78,7 +91,9 @@ def test_a_capture_started_mid_record_is_refused_naming_the_first_line(tmp_path)
     f = tmp_path / "capture.txt"
     text = _record(1)[30:] + _record(0) + _record(1)
     f.write_bytes(text.encode())
-    with pytest.raises(InputError, match=r"capture\.txt:1: a record must start with the station number.*partial record"):
+    with pytest.raises(
+        InputError, match=r"capture\.txt:1: a record must start with the station number.*partial record"
+    ):
         read_liberty_ascii(f)
 
 
@@ -91,7 +106,9 @@ def _binary(k: int) -> bytes:
 def test_a_binary_capture_started_mid_record_is_refused_saying_so(tmp_path):
     f = tmp_path / "capture.lyb"
     f.write_bytes(_binary(0)[5:] + _binary(1) + _binary(0))
-    with pytest.raises(InputError, match=r"bad record header at byte offset 0: expected b'LY'.*inside a record"):
+    with pytest.raises(
+        InputError, match=r"bad record header at byte offset 0: expected b'LY'.*inside a record"
+    ):
         read_liberty_binary(f)
 
 
@@ -99,8 +116,11 @@ def test_a_binary_capture_stopped_mid_record_is_refused_saying_so(tmp_path):
     f = tmp_path / "capture.lyb"
     # records of 8 + 26 = 34 bytes: the third starts at 68 and keeps 20 of its 26 payload bytes
     f.write_bytes(_binary(0) + _binary(1) + _binary(0)[:28])
-    with pytest.raises(InputError, match=r"truncated record at byte offset 68: station 1, response size 26 bytes, "
-                                         r"only 20 left.*inside a record"):
+    with pytest.raises(
+        InputError,
+        match=r"truncated record at byte offset 68: station 1, response size 26 bytes, "
+        r"only 20 left.*inside a record",
+    ):
         read_liberty_binary(f)
 
 
@@ -108,7 +128,10 @@ def test_a_binary_capture_stopped_mid_record_is_refused_saying_so(tmp_path):
 
 CAPTURE_EXAMPLES = int(os.environ.get("FUZZ_EXAMPLES", "40"))
 _STREAM_POSES = [
-    ((10.0 + 0.0137 * k, -4.5 + 0.0211 * k, 9.25 - 0.0101 * k), (-12.345 + 0.5 * k, 45.678 - 0.25 * k, 170.1 - k))
+    (
+        (10.0 + 0.0137 * k, -4.5 + 0.0211 * k, 9.25 - 0.0101 * k),
+        (-12.345 + 0.5 * k, 45.678 - 0.25 * k, 170.1 - k),
+    )
     for k in range(12)
 ]
 
@@ -118,7 +141,9 @@ def _stream_record(k: int, station: int = 1) -> str:
     return f"{station:02d}C {x:10.4f}{y:10.4f}{z:10.4f}{a:10.3f}{e:10.3f}{r:10.3f}\r\n"
 
 
-@settings(max_examples=CAPTURE_EXAMPLES, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=CAPTURE_EXAMPLES, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
 @given(data=st.data())
 def test_a_capture_cut_anywhere_gives_whole_records_or_a_named_error(tmp_path, data):
     """Cut the device's stream at two random bytes, as a capture switched on and off would.
@@ -145,12 +170,16 @@ def test_a_capture_cut_anywhere_gives_whole_records_or_a_named_error(tmp_path, d
     first = int(np.argmin(np.abs(sent[:, 0] - log.positions[0, 0])))
     np.testing.assert_array_equal(log.positions, sent[first : first + len(log.t)])
     angles = np.array([o for _, o in _STREAM_POSES])[first : first + len(log.t)]
-    np.testing.assert_allclose(log.rotations, Rotation.from_euler("ZYX", angles, degrees=True).as_matrix(), atol=1e-12)
+    np.testing.assert_allclose(
+        log.rotations, Rotation.from_euler("ZYX", angles, degrees=True).as_matrix(), atol=1e-12
+    )
 
 
 def test_a_capture_stopped_at_any_byte_gives_whole_records_or_a_named_error(tmp_path):
     """Every cut of the first records (started at a record): a run of whole records, or refused."""
-    stream = "".join(_stream_record(k) + (_stream_record(k, 2) if k % 3 == 0 else "") for k in range(4)).encode()
+    stream = "".join(
+        _stream_record(k) + (_stream_record(k, 2) if k % 3 == 0 else "") for k in range(4)
+    ).encode()
     sent = np.array([p for p, _ in _STREAM_POSES]) * 0.0254
     turns = Rotation.from_euler("ZYX", [o for _, o in _STREAM_POSES], degrees=True).as_matrix()
     f = tmp_path / "cut.txt"
@@ -170,6 +199,7 @@ def test_a_capture_stopped_at_any_byte_gives_whole_records_or_a_named_error(tmp_
 
 def test_a_binary_capture_cut_at_any_byte_gives_whole_records_or_a_named_error(tmp_path):
     """Every start and every end cut of eight binary records: whole records (float32), or refused."""
+
     def record(k: int) -> bytes:
         (x, y, z), (az, el, ro) = _STREAM_POSES[k]
         return b"LY\x01C \x00" + struct.pack("<H", 26) + struct.pack("<6f", x, y, z, az, el, ro) + b"\r\n"
@@ -200,4 +230,7 @@ def test_binary_replies_of_the_station_are_skipped_with_a_warning_that_counts_th
     f.write_bytes(_binary(0) + reply + _binary(1))
     log = read_liberty_binary(f)
     assert len(log.t) == 2
-    assert "skipped 1 record(s) of station 1 that other commands initiated (replies, not P&O): 0x15 x1" in caplog.text
+    assert (
+        "skipped 1 record(s) of station 1 that other commands initiated (replies, not P&O): 0x15 x1"
+        in caplog.text
+    )

@@ -77,7 +77,10 @@ def test_ascii_records_with_the_devices_header_are_read(tmp_path, header):
 
 def test_a_value_right_after_the_error_indicator_is_read(tmp_path):
     f = tmp_path / "liberty.txt"
-    lines = [f"01Cu{-1.2345:.4f} 2.0000 3.0000 10.000 20.000 30.000", "01C  1.0000 2.0000 3.0000 10.000 20.000 30.000"]
+    lines = [
+        f"01Cu{-1.2345:.4f} 2.0000 3.0000 10.000 20.000 30.000",
+        "01C  1.0000 2.0000 3.0000 10.000 20.000 30.000",
+    ]
     f.write_text("\n".join(lines) + "\n")
     log = read_liberty_ascii(f)
     np.testing.assert_allclose(log.positions[:, 0], [-1.2345 * IN, 1.0 * IN])
@@ -88,13 +91,22 @@ def test_ascii_records_of_position_and_quaternion_are_read(tmp_path):
     q = Rotation.from_euler("ZYX", [30.0, -20.0, 10.0], degrees=True).as_quat()  # x y z w
     w, x, y, z = (round(v, 4) for v in (q[3], q[0], q[1], q[2]))
     f = tmp_path / "liberty.txt"
-    f.write_text("".join(f"01C {1.1 + 0.25 * k:10.4f}{2.0:10.4f}{3.0:10.4f}{w:8.4f}{x:8.4f}{y:8.4f}{z:8.4f}\n" for k in range(5)))
+    f.write_text(
+        "".join(
+            f"01C {1.1 + 0.25 * k:10.4f}{2.0:10.4f}{3.0:10.4f}{w:8.4f}{x:8.4f}{y:8.4f}{z:8.4f}\n"
+            for k in range(5)
+        )
+    )
     log = read_liberty_ascii(f)
     np.testing.assert_allclose(log.positions[:, 0], (1.1 + 0.25 * np.arange(5)) * IN)
     expected = Rotation.from_quat([x, y, z, w]).as_matrix()
     np.testing.assert_allclose(log.rotations, np.repeat(expected[None], 5, axis=0), atol=1e-12)
     # x = 1, 2, 3, ... in whole inches also reads as increasing frame counts: refused, not guessed
-    f.write_text("".join(f"01C {1.0 + k:10.4f}{2.0:10.4f}{3.0:10.4f}{w:8.4f}{x:8.4f}{y:8.4f}{z:8.4f}\n" for k in range(5)))
+    f.write_text(
+        "".join(
+            f"01C {1.0 + k:10.4f}{2.0:10.4f}{3.0:10.4f}{w:8.4f}{x:8.4f}{y:8.4f}{z:8.4f}\n" for k in range(5)
+        )
+    )
     with pytest.raises(InputError, match="read both as a frame count"):
         read_liberty_ascii(f)
 
@@ -104,7 +116,10 @@ def test_the_devices_error_indicators_are_reported_per_sample(tmp_path):
     n = 40
     flagged = {10: "u", 11: "u", 25: "I"}
     f.write_text(
-        "".join(f"01C{flagged.get(k, ' ')}{0.1 * k:10.4f}{2.0:10.4f}{3.0:10.4f}{10.0:10.3f}{20.0:10.3f}{30.0:10.3f}\n" for k in range(n))
+        "".join(
+            f"01C{flagged.get(k, ' ')}{0.1 * k:10.4f}{2.0:10.4f}{3.0:10.4f}{10.0:10.3f}{20.0:10.3f}{30.0:10.3f}\n"
+            for k in range(n)
+        )
     )
     _, quality = gate_dropouts(read_liberty_ascii(f))
     d = quality.as_json()["device_errors"]

@@ -51,7 +51,9 @@ def test_a_written_frame_count_column_keeps_a_dropped_sample_s_gap(tmp_path):
 
 
 def test_a_binary_writer_refuses_an_unknown_unit(tmp_path):
-    log = TrackerLog(t=np.arange(3) / 240.0, positions=np.zeros((3, 3)), rotations=np.tile(np.eye(3), (3, 1, 1)))
+    log = TrackerLog(
+        t=np.arange(3) / 240.0, positions=np.zeros((3, 3)), rotations=np.tile(np.eye(3), (3, 1, 1))
+    )
     with pytest.raises(InputError, match="unknown Liberty unit 'mm'; use 'in' or 'cm'"):
         write_liberty_binary(tmp_path / "x.bin", log, units="mm")
     assert not (tmp_path / "x.bin").exists()
@@ -79,7 +81,9 @@ def test_a_cr_lf_inside_the_output_list_is_two_bytes_and_one_item(tmp_path):
 def test_an_ascii_log_s_rate_header_must_be_a_plausible_rate(tmp_path, rate):
     f = tmp_path / "rate.txt"
     f.write_text(f"# rate_hz: {rate}\n01 1.0 2.0 3.0 10.0 20.0 30.0\n01 1.0 2.0 3.0 10.0 20.0 30.0\n")
-    with pytest.raises(InputError, match=rf"rate\.txt:1: rate_hz must be a number in \[1, 10000\] Hz, got '{rate}'"):
+    with pytest.raises(
+        InputError, match=rf"rate\.txt:1: rate_hz must be a number in \[1, 10000\] Hz, got '{rate}'"
+    ):
         read_liberty_ascii(f)
 
 
@@ -118,7 +122,9 @@ def _binary_records(errors: list[int]) -> bytes:
 
 
 @pytest.mark.parametrize(("errors", "flagged"), [([0, 0x20, 0, 0x20], 0), ([0, ord("E"), 0x20, ord("D")], 2)])
-def test_binary_records_flagged_by_their_error_byte_are_counted_in_a_warning(tmp_path, caplog, errors, flagged):
+def test_binary_records_flagged_by_their_error_byte_are_counted_in_a_warning(
+    tmp_path, caplog, errors, flagged
+):
     """0 and an ASCII space mean no error (Liberty manual); anything else flags the record, which is
     kept with its indicator (``TrackerLog.device_error``, 0 for none) and counted in one warning."""
     f = tmp_path / "err.bin"

@@ -28,7 +28,9 @@ def log():
     s = np.linspace(0.0, 0.8, 161)
     positions = np.column_stack([0.95 + 0.6 * s, -0.25 + 0.8 * s, 0.35 + 0.05 * np.sin(4 * s)])
     rotations = np.repeat(np.diag([1.0, -1.0, -1.0])[None], len(s), axis=0)
-    demo = simulate_demonstration(s, positions, rotations, np.full(len(s), 0.1), T_F_S, T_TCP_E, TrackerModel(seed=3))
+    demo = simulate_demonstration(
+        s, positions, rotations, np.full(len(s), 0.1), T_F_S, T_TCP_E, TrackerModel(seed=3)
+    )
     return demo.log
 
 
@@ -63,7 +65,9 @@ def test_a_short_dropout_is_bridged_by_interpolation(log, kind):
     if kind != "gap":
         # the bridge lies on the straight line between the good neighbours (linear in time)
         u = np.arange(1, count + 1) / (count + 1)
-        expected = log.positions[first - 1] + u[:, None] * (log.positions[first + count] - log.positions[first - 1])
+        expected = log.positions[first - 1] + u[:, None] * (
+            log.positions[first + count] - log.positions[first - 1]
+        )
         np.testing.assert_allclose(fixed.positions[first : first + count], expected, atol=1e-12)
 
 

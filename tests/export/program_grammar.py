@@ -317,7 +317,9 @@ def trajectory_poses(path: Path) -> np.ndarray:
         rows = list(csv.DictReader(f))
     return np.array(
         [
-            _transform([float(r[k]) for k in ("x", "y", "z")], [float(r[k]) for k in ("qw", "qx", "qy", "qz")])
+            _transform(
+                [float(r[k]) for k in ("x", "y", "z")], [float(r[k]) for k in ("qw", "qx", "qy", "qz")]
+            )
             for r in rows
         ]
     )

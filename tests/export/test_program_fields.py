@@ -124,7 +124,9 @@ def interpret_rapid(text: str) -> tuple[list[Motion], dict]:
             info["outputs"].add(m.group(1))
             output = m.group(2) == "1"
             continue
-        if m := re.match(r"TriggIO\s+(\w+)\s*,\s*([-\d.eE+]+)\s*(\\Time)?\s*\\DOp:=(\w+)\s*,\s*(\d)\s*;", line):
+        if m := re.match(
+            r"TriggIO\s+(\w+)\s*,\s*([-\d.eE+]+)\s*(\\Time)?\s*\\DOp:=(\w+)\s*,\s*(\d)\s*;", line
+        ):
             lead = float(m.group(2)) if m.group(3) else float(m.group(2)) / 1000.0  # s, or mm -> m
             triggers[m.group(1)] = (m.group(5) == "1", lead, "s" if m.group(3) else "m")
             info["outputs"].add(m.group(4))
@@ -272,7 +274,9 @@ def interpret_urscript(text: str) -> list[Motion]:
             fired = None
             if pending is not None and pending[3] == f"p[{m.group(1)}]":  # the thread's target: it fires here
                 fired, pending = pending[:3], None
-            motions.append(Motion("lin", _ur_pose(m.group(1)), float(m.group(3)), r == 0.0, r, out, tool, switch=fired))
+            motions.append(
+                Motion("lin", _ur_pose(m.group(1)), float(m.group(3)), r == 0.0, r, out, tool, switch=fired)
+            )
             if fired is not None:
                 out = fired[0]
         elif line.startswith("movej("):
@@ -478,9 +482,15 @@ def test_a_plan_at_a_different_speed_changes_every_path_speed(program, tmp_path)
     for k in range(1, len(tr)):
         spacing = np.linalg.norm(path[k].T_base_tcp[:3, 3] - path[k - 1].T_base_tcp[:3, 3])
         if lang == "rapid":  # the speed levels scale with the plan
-            assert path[k].speed_m_s == pytest.approx(2.0 * slow[k].speed_m_s, abs=2 * RESOLUTION_M_S), (lang, k)
+            assert path[k].speed_m_s == pytest.approx(2.0 * slow[k].speed_m_s, abs=2 * RESOLUTION_M_S), (
+                lang,
+                k,
+            )
         else:
-            assert path[k].speed_m_s == pytest.approx(spacing / (fast.t[k] - fast.t[k - 1]), abs=1e-4), (lang, k)
+            assert path[k].speed_m_s == pytest.approx(spacing / (fast.t[k] - fast.t[k - 1]), abs=1e-4), (
+                lang,
+                k,
+            )
 
 
 # ---- PathML -----------------------------------------------------------------------------------
@@ -802,7 +812,9 @@ def test_a_run_checks_the_process_output_against_the_controller_s_range_before_s
             check_output_signal(kind, output)
 
 
-@pytest.mark.parametrize(("options", "ok"), [({"speed_resolution_m_s": 0.0}, False), ({"approximation_m": 0.0}, True)])
+@pytest.mark.parametrize(
+    ("options", "ok"), [({"speed_resolution_m_s": 0.0}, False), ({"approximation_m": 0.0}, True)]
+)
 def test_krl_speed_rounding_must_be_positive_and_an_exact_path_is_allowed(tmp_path, options, ok):
     """A 0 m/s rounding step cannot round anything; approximation 0 m is exact stops (C_DIS off)."""
     robot, problem, tr = _case("krl")

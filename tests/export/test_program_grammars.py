@@ -23,7 +23,9 @@ from refine.problem import ProcessSettings, load_problem  # noqa: E402
 from refine.robot import Robot, load_robot  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
-_spec = importlib.util.spec_from_file_location("program_grammar", Path(__file__).with_name("program_grammar.py"))
+_spec = importlib.util.spec_from_file_location(
+    "program_grammar", Path(__file__).with_name("program_grammar.py")
+)
 pg = importlib.util.module_from_spec(_spec)
 sys.modules["program_grammar"] = pg
 _spec.loader.exec_module(pg)
@@ -46,7 +48,8 @@ def test_rapid_glue_module_parses_and_its_targets_are_the_trajectory(tmp_path, t
 
 def test_rapid_weld_module_has_the_start_and_end_sequence(tmp_path, trajectory, problem, irb4600):
     weld = dataclasses.replace(
-        problem, process=ProcessSettings(kind="weld", output="doArc", gas_output="doGas", arc_ok_input="diArc")
+        problem,
+        process=ProcessSettings(kind="weld", output="doArc", gas_output="doGas", arc_ok_input="diArc"),
     )
     prog = pg.read_rapid(write_rapid(tmp_path / "w.mod", trajectory, weld, irb4600), weld.robot.base_in_world)
     st = prog.statements

@@ -78,7 +78,9 @@ def test_a_demo_quaternion_starts_on_the_reached_one_s_side_also_across_180_degr
     demo = Rotation.from_rotvec(np.tile([np.radians(190.0), 0.0, 0.0], (n, 1))).as_matrix()
     poses = trajectory.poses.copy()
     poses[:, :3, :3] = reached
-    tr = Trajectory(trajectory.t, trajectory.s, trajectory.q, trajectory.positions_ref, poses, demo, trajectory.speed)
+    tr = Trajectory(
+        trajectory.t, trajectory.s, trajectory.q, trajectory.positions_ref, poses, demo, trajectory.speed
+    )
     data = np.loadtxt(write_trajectory_csv(tmp_path / "flip.csv", tr), delimiter=",", skiprows=1)
     quat, qdemo = data[:, 14:18], data[:, 18:22]
     c85, s85 = np.cos(np.radians(85.0)), np.sin(np.radians(85.0))

@@ -50,7 +50,11 @@ def test_assembled_derivatives_equal_casadi_differentiation(
     # in the virtual machine, CasADi can differentiate the symbolic problem twice itself
     monkeypatch.setenv("REFINE_COMPILE", "0")
     nlp = _problem(
-        irb4600, straight_tool, elastic=elastic, singularity_hessian=singularity_hessian, joint_steps=joint_steps
+        irb4600,
+        straight_tool,
+        elastic=elastic,
+        singularity_hessian=singularity_hessian,
+        joint_steps=joint_steps,
     )
     assert nlp.nlp["g"].shape[0] == 4 * 12 + (6 * 11 if joint_steps == "all" else len(joint_steps)) + 4 + 3
     x, p, f, g = (nlp.nlp[k] for k in ("x", "p", "f", "g"))
@@ -73,7 +77,9 @@ def test_assembled_derivatives_equal_casadi_differentiation(
     )
     if not singularity_hessian:
         # the 4 singularity rows (2 waypoints, 2 segment points) follow the path and step rows
-        first = 4 * nlp.n_waypoints + (6 * (nlp.n_waypoints - 1) if joint_steps == "all" else len(joint_steps))
+        first = 4 * nlp.n_waypoints + (
+            6 * (nlp.n_waypoints - 1) if joint_steps == "all" else len(joint_steps)
+        )
         lg_no_singular = lg.copy()
         lg_no_singular[first : first + 4] = 0.0
         hess_exact = np.array(ca.densify(reference(xv, nlp.params, lf, lg)[4]))

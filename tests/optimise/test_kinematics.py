@@ -29,8 +29,10 @@ def robots() -> dict[str, Robot]:
 @pytest.fixture(scope="session")
 def functions(robots) -> dict[str, tuple[ca.Function, ca.Function]]:
     return {
-        name: (fk_function(r, BASE_IN_WORLD, TCP_IN_FLANGE),
-               jacobian_function(r, BASE_IN_WORLD, TCP_IN_FLANGE))
+        name: (
+            fk_function(r, BASE_IN_WORLD, TCP_IN_FLANGE),
+            jacobian_function(r, BASE_IN_WORLD, TCP_IN_FLANGE),
+        )
         for name, r in robots.items()
     }
 
@@ -43,8 +45,15 @@ def _tcp_jacobian_pinocchio(robot: Robot, q: np.ndarray) -> np.ndarray:
     """Pinocchio's own Jacobian at a TCP frame added to a copy of the model, in world axes."""
     model = pin.Model(robot.model)
     flange = model.frames[robot.flange_id]
-    tcp = model.addFrame(pin.Frame("tcp", flange.parentJoint, robot.flange_id,
-                                   flange.placement * pin.SE3(TCP_IN_FLANGE), pin.OP_FRAME))
+    tcp = model.addFrame(
+        pin.Frame(
+            "tcp",
+            flange.parentJoint,
+            robot.flange_id,
+            flange.placement * pin.SE3(TCP_IN_FLANGE),
+            pin.OP_FRAME,
+        )
+    )
     J = pin.computeFrameJacobian(model, model.createData(), q, tcp, pin.LOCAL_WORLD_ALIGNED)
     R = BASE_IN_WORLD[:3, :3]
     return np.vstack([R @ J[:3], R @ J[3:]])
@@ -64,8 +73,7 @@ def test_fk_matches_pinocchio_on_50_random_configurations(robots, functions, nam
 def test_jacobian_matches_pinocchio_frame_jacobian(robots, functions, name):
     robot, (_, jac) = robots[name], functions[name]
     for q in _configurations(robot, 20, seed=2):
-        np.testing.assert_allclose(np.asarray(jac(q)), _tcp_jacobian_pinocchio(robot, q),
-                                   rtol=0, atol=1e-12)
+        np.testing.assert_allclose(np.asarray(jac(q)), _tcp_jacobian_pinocchio(robot, q), rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize("name", NAMES)
@@ -110,11 +118,21 @@ def _toy_robot(joint_models: list) -> Robot:
     for k, joint in enumerate(joint_models):
         placement = pin.SE3(matrix_from_fixed_xyz(rng.uniform(-90, 90, 3)), rng.uniform(-1, 1, 3))
         parent = model.addJoint(parent, joint, placement, f"j{k}")
-    model.addFrame(pin.Frame("tool0", parent, 0, pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.1])),
-                             pin.OP_FRAME))
+    model.addFrame(pin.Frame("tool0", parent, 0, pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.1])), pin.OP_FRAME))
     n = model.nq
-    spec = RobotSpec("toy", "none", Path("toy.urdf"), "tool0", tuple(f"j{k}" for k in range(n)),
-                     -np.pi * np.ones(n), np.pi * np.ones(n), np.ones(n), np.ones(n), 1.0, "ur")
+    spec = RobotSpec(
+        "toy",
+        "none",
+        Path("toy.urdf"),
+        "tool0",
+        tuple(f"j{k}" for k in range(n)),
+        -np.pi * np.ones(n),
+        np.pi * np.ones(n),
+        np.ones(n),
+        np.ones(n),
+        1.0,
+        "ur",
+    )
     return Robot(spec, model)
 
 
@@ -129,8 +147,7 @@ def test_unaligned_axes_and_rotated_placements_match_pinocchio():
         p, R = fk(q)
         np.testing.assert_allclose(np.asarray(p).ravel(), T[:3, 3], atol=1e-12)
         np.testing.assert_allclose(np.asarray(R), T[:3, :3], atol=1e-12)
-        np.testing.assert_allclose(np.asarray(jac(q)), _tcp_jacobian_pinocchio(robot, q),
-                                   atol=1e-12)
+        np.testing.assert_allclose(np.asarray(jac(q)), _tcp_jacobian_pinocchio(robot, q), atol=1e-12)
 
 
 def test_unsupported_joint_type_is_named():

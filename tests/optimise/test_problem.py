@@ -40,7 +40,9 @@ def test_waypoint_function_cone_measure_is_the_cosine_of_the_deviation(irb4600, 
     q = np.array([0.1, 0.2, -0.1, 0.3, -0.8, 0.4])
     T = kin.pose(q)
     tilt = np.radians(5.0)
-    R_demo = T[:3, :3] @ np.array([[1, 0, 0], [0, np.cos(tilt), -np.sin(tilt)], [0, np.sin(tilt), np.cos(tilt)]])
+    R_demo = T[:3, :3] @ np.array(
+        [[1, 0, 0], [0, np.cos(tilt), -np.sin(tilt)], [0, np.sin(tilt), np.cos(tilt)]]
+    )
     g, cost = f(q, T[:3, 3], R_demo.ravel(order="F"))
     assert float(g[3]) == pytest.approx(np.cos(tilt), abs=1e-12)
     assert float(cost) == pytest.approx(1 - np.cos(tilt), abs=1e-12)
@@ -51,7 +53,9 @@ def test_axisymmetric_tool_ignores_spin_about_the_tool_axis(irb4600, straight_to
     q = np.array([0.1, 0.2, -0.1, 0.3, -0.8, 0.4])
     T = kin.pose(q)
     spin = np.radians(40.0)
-    R_demo = T[:3, :3] @ np.array([[np.cos(spin), -np.sin(spin), 0], [np.sin(spin), np.cos(spin), 0], [0, 0, 1]])
+    R_demo = T[:3, :3] @ np.array(
+        [[np.cos(spin), -np.sin(spin), 0], [np.sin(spin), np.cos(spin), 0], [0, 0, 1]]
+    )
     g, _ = f(q, T[:3, 3], R_demo.ravel(order="F"))
     assert float(g[3]) == pytest.approx(1.0, abs=1e-12)
 
@@ -67,15 +71,30 @@ def test_problem_size_grows_linearly_with_the_number_of_waypoints(irb4600, strai
 
 def test_bad_settings_are_rejected_with_the_field_named(irb4600, straight_tool):
     with pytest.raises(InputError, match="at least 3 waypoints"):
-        build_refinement(irb4600, wave_path(3).__class__(
-            s=np.array([0.0, 0.1]), positions=np.zeros((2, 3)), rotations=np.stack([np.eye(3)] * 2),
-            speed=np.ones(2), t_demo=np.array([0.0, 1.0]), residual=np.zeros(2)),
-            np.eye(4), straight_tool, Tolerances())
+        build_refinement(
+            irb4600,
+            wave_path(3).__class__(
+                s=np.array([0.0, 0.1]),
+                positions=np.zeros((2, 3)),
+                rotations=np.stack([np.eye(3)] * 2),
+                speed=np.ones(2),
+                t_demo=np.array([0.0, 1.0]),
+                residual=np.zeros(2),
+            ),
+            np.eye(4),
+            straight_tool,
+            Tolerances(),
+        )
     with pytest.raises(InputError, match="joint_margin_deg"):
         build_refinement(irb4600, wave_path(10), np.eye(4), straight_tool, Tolerances(joint_margin_deg=500))
     with pytest.raises(InputError, match="Weights.velocity"):
         Weights(velocity=-1.0)
     with pytest.raises(InputError, match="singular segment point"):
         build_refinement(
-            irb4600, wave_path(10), np.eye(4), straight_tool, Tolerances(), active=ActiveSet(singular_segments=((3, 1.5),))
+            irb4600,
+            wave_path(10),
+            np.eye(4),
+            straight_tool,
+            Tolerances(),
+            active=ActiveSet(singular_segments=((3, 1.5),)),
         )

@@ -15,7 +15,9 @@ def test_chains_on_the_targets_everywhere_come_first_then_the_larger_margin_over
     good_wide = lower + (upper - lower) * (0.5 + 0.02 * np.sin(3.0 * t))  # mid-range
     targets = kin.poses(good_wide)
     good_narrow = good_wide.copy()
-    good_narrow[6:, 3] += 2.0 * np.pi  # axis 4 a whole turn on (+-400 deg): the same poses, 24 deg from its limit
+    good_narrow[6:, 3] += (
+        2.0 * np.pi
+    )  # axis 4 a whole turn on (+-400 deg): the same poses, 24 deg from its limit
     assert np.all(good_narrow <= upper)
     off = good_wide.copy()
     off[7, 0] += 0.01  # 0.01 rad off at one waypoint: misses its target by about 2 cm

@@ -36,7 +36,9 @@ def test_pose_and_jacobian_in_one_pass_match_pinocchio_at_a_tcp_frame_and_finite
     model = pin.Model(irb4600.model)
     flange = model.frames[irb4600.flange_id]
     tcp = model.addFrame(
-        pin.Frame("tcp", flange.parentJoint, irb4600.flange_id, flange.placement * pin.SE3(tool), pin.OP_FRAME)
+        pin.Frame(
+            "tcp", flange.parentJoint, irb4600.flange_id, flange.placement * pin.SE3(tool), pin.OP_FRAME
+        )
     )
     data = model.createData()
     rng = np.random.default_rng(5)
@@ -48,7 +50,9 @@ def test_pose_and_jacobian_in_one_pass_match_pinocchio_at_a_tcp_frame_and_finite
         np.testing.assert_allclose(p_b, T[:3, 3], atol=1e-12)
         np.testing.assert_allclose(R_b, T[:3, :3], atol=1e-12)
         np.testing.assert_allclose(J_b, J, atol=1e-12)
-        np.testing.assert_allclose(J, np.vstack([base[:3, :3] @ J_ref[:3], base[:3, :3] @ J_ref[3:]]), atol=1e-12)
+        np.testing.assert_allclose(
+            J, np.vstack([base[:3, :3] @ J_ref[:3], base[:3, :3] @ J_ref[3:]]), atol=1e-12
+        )
         h = 1e-6
         for j in range(6):
             dq = np.zeros(6)

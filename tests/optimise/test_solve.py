@@ -45,8 +45,14 @@ def test_orientation_cone_holds_when_smoothness_pulls_away_from_a_wavy_demo(irb4
     wobble = np.radians(8.0) * np.sin(np.linspace(0, 6 * np.pi, 80))
     rotations = base.rotations @ rotation_about("x", wobble)
     fused = FusedPath(base.s, base.positions, rotations, base.speed, base.t_demo, base.residual)
-    nlp = build_refinement(irb4600, fused, np.eye(4), straight_tool, Tolerances(orientation_deg=3.0),
-                           weights=Weights(velocity=50.0, acceleration=0.05))
+    nlp = build_refinement(
+        irb4600,
+        fused,
+        np.eye(4),
+        straight_tool,
+        Tolerances(orientation_deg=3.0),
+        weights=Weights(velocity=50.0, acceleration=0.05),
+    )
     result = solve_refinement(nlp)
     assert result.status == "ok", result.reason
     dev = result.check.orientation_deviation_deg
@@ -68,7 +74,9 @@ def test_unreachable_points_are_reported_infeasible_with_the_segment(irb4600, st
     assert result.iterations == 0  # diagnosed without running IPOPT
 
 
-def test_singularity_margin_is_kept_at_and_between_waypoints_when_the_demo_grazes_it(irb4600, straight_tool, kin):
+def test_singularity_margin_is_kept_at_and_between_waypoints_when_the_demo_grazes_it(
+    irb4600, straight_tool, kin
+):
     """A demo that brings the wrist close to q5 = 0 in the middle of the path: the refined path keeps
     the scaled manipulability above the margin everywhere, bounds added only where needed."""
     n = 60
@@ -79,8 +87,9 @@ def test_singularity_margin_is_kept_at_and_between_waypoints_when_the_demo_graze
     T = kin.poses(q)
     s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(T[:, :3, 3], axis=0), axis=1))])
     fused = FusedPath(s, T[:, :3, 3], T[:, :3, :3], np.full(n, 0.1), s / 0.1, np.zeros(n))
-    nlp = build_refinement(irb4600, fused, np.eye(4), straight_tool,
-                           Tolerances(orientation_deg=10.0, singularity_margin=0.02))
+    nlp = build_refinement(
+        irb4600, fused, np.eye(4), straight_tool, Tolerances(orientation_deg=10.0, singularity_margin=0.02)
+    )
     result = solve_refinement(nlp)
     assert result.status == "ok", result.reason
     assert result.check.singularity.min() >= 0.02 - 1e-6
@@ -102,7 +111,9 @@ def iiwa_wave():
 def test_redundant_arm_keeps_its_joints_away_from_the_limits_with_the_mid_range_cost(iiwa_wave):
     robot, tcp, fused = iiwa_wave
     plain = solve_refinement(build_refinement(robot, fused, np.eye(4), tcp, Tolerances()))
-    mid = solve_refinement(build_refinement(robot, fused, np.eye(4), tcp, Tolerances(), weights=Weights(mid_range=2.0)))
+    mid = solve_refinement(
+        build_refinement(robot, fused, np.eye(4), tcp, Tolerances(), weights=Weights(mid_range=2.0))
+    )
     assert plain.status == mid.status == "ok"
     assert np.degrees(mid.check.joint_margin_rad.min()) > 10.0
     assert mid.check.joint_margin_rad.min() > plain.check.joint_margin_rad.min()
@@ -164,7 +175,9 @@ def test_a_problem_with_some_joint_step_rows_is_solved_with_those_that_bind(
     tol = Tolerances(joint_step_deg=12.5)
     complete = solve_refinement(build_refinement(irb4600, fused, np.eye(4), straight_tool, tol), q0)
     monkeypatch.setattr(solve_module, "STEP_NEAR", 10.0)  # rows only for steps past the bound
-    lazy = solve_refinement(build_refinement(irb4600, fused, np.eye(4), straight_tool, tol, joint_steps=()), q0)
+    lazy = solve_refinement(
+        build_refinement(irb4600, fused, np.eye(4), straight_tool, tol, joint_steps=()), q0
+    )
     assert complete.status == lazy.status == "ok"
     assert complete.outer_iterations == 1 and lazy.outer_iterations == 2
     steps = np.degrees(np.abs(np.diff(lazy.q, axis=0)))
@@ -177,7 +190,9 @@ def test_joint_step_rows_near_their_bound_in_the_seed_are_there_from_the_first_s
 ):
     fused, q0 = steep_wave
     tol = Tolerances(joint_step_deg=12.5)
-    lazy = solve_refinement(build_refinement(irb4600, fused, np.eye(4), straight_tool, tol, joint_steps=()), q0)
+    lazy = solve_refinement(
+        build_refinement(irb4600, fused, np.eye(4), straight_tool, tol, joint_steps=()), q0
+    )
     assert lazy.status == "ok" and lazy.outer_iterations == 1
     assert np.degrees(np.abs(np.diff(lazy.q, axis=0))).max() <= 12.5 + 1e-7
 

@@ -350,7 +350,9 @@ def test_a_tool_axis_on_its_demonstrated_axis_to_round_off_deviates_by_zero(kin)
     of the axis tilt comes out as 1 + 1e-12 and must read as 0 deg, not as an undefined angle."""
     q = near_q0(3)
     fused = fused_on(q)
-    rough = FusedPath(fused.s, fused.positions, fused.rotations * (1.0 + 1e-12), fused.speed, fused.t_demo, fused.residual)
+    rough = FusedPath(
+        fused.s, fused.positions, fused.rotations * (1.0 + 1e-12), fused.speed, fused.t_demo, fused.residual
+    )
     check = check_path(kin, q, rough, Tolerances(**{**LOOSE, "orientation_deg": 3.0}), axisymmetric=True)
     np.testing.assert_allclose(check.orientation_deviation_deg, 0.0, atol=1e-4)
     assert check.ok
