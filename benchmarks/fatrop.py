@@ -31,7 +31,7 @@ import numpy as np
 
 from refine.bench.suites import generated_problem, load_suites
 from refine.optimise.derivatives import orientation_factor
-from refine.optimise.problem import IPOPT_DEFAULTS, Weights, build_refinement, joint_bounds, waypoint_function
+from refine.optimise.problem import IPOPT_DEFAULTS, Weights, joint_bounds, waypoint_function
 from refine.optimise.solve import solve_refinement
 
 FATROP_OPTIONS = {"print_level": 0, "tol": 1e-9, "mu_init": 1e-6, "bound_push": 1e-9, "max_iter": 300}
@@ -116,15 +116,7 @@ def main() -> int:
     for N in args.sizes:
         problem = generated_problem("fatrop", args.family, data["generated"][args.family], N)
         weights = problem.weights or Weights()
-        ref = build_refinement(
-            problem.robot,
-            problem.fused,
-            problem.base_in_world,
-            problem.tcp_in_flange,
-            problem.tolerances,
-            axisymmetric=problem.axisymmetric,
-            weights=weights,
-        )
+        ref = problem.refinement()
         c0 = time.process_time()
         answer = solve_refinement(ref, home=problem.home)
         q_seed = answer.q_seed

@@ -51,21 +51,10 @@ class Answer:
 
 
 def _refine(problem: BenchProblem, mode: str) -> Answer:
-    from refine.optimise.problem import build_refinement
     from refine.optimise.solve import solve_refinement
 
     w0, c0 = time.perf_counter(), time.process_time()
-    nlp = build_refinement(
-        problem.robot,
-        problem.fused,
-        problem.base_in_world,
-        problem.tcp_in_flange,
-        problem.tolerances,
-        axisymmetric=problem.axisymmetric,
-        weights=problem.weights,
-        derivative_mode=mode,
-        joint_steps=(),  # as the pipeline: the solve adds the joint-step rows near their bound
-    )
+    nlp = problem.refinement(mode)
     build = time.perf_counter() - w0
     build_cpu = time.process_time() - c0
     result = solve_refinement(

@@ -76,6 +76,25 @@ class BenchProblem:
         """Number of waypoints."""
         return len(self.fused)
 
+    def refinement(self, derivative_mode: str = "assembled") -> Any:
+        """The refinement NLP of this problem, built as the pipeline builds it.
+
+        No joint-step rows at first: the solve adds those near their bound, as in ``refine run``.
+        """
+        from refine.optimise.problem import build_refinement
+
+        return build_refinement(
+            self.robot,
+            self.fused,
+            self.base_in_world,
+            self.tcp_in_flange,
+            self.tolerances,
+            axisymmetric=self.axisymmetric,
+            weights=self.weights,
+            derivative_mode=derivative_mode,
+            joint_steps=(),
+        )
+
 
 def load_suites(path: Path = DEFAULT_SUITES) -> dict[str, Any]:
     """The parsed suites file, checked for the keys the runner uses."""
