@@ -177,12 +177,15 @@ def solve_ik_batch(
     damping: float = 1e-3,
     tol: float = CONVERGED,
     position_only: bool = False,
+    nullspace_gain: float = NULLSPACE_GAIN,
 ) -> tuple[Array, Array]:
     """:func:`solve_ik` for many independent poses at once, vectorised over them.
 
     The arguments are :func:`solve_ik`'s, with ``targets`` (M, 4, 4) and ``q0`` (M, n) holding one
     pose and start per row. A pose whose error stalls (:data:`STALL_ITERATIONS`) is given up before
-    ``max_iterations``.
+    ``max_iterations``. ``nullspace_gain``: a redundant arm's step toward mid-range in the task's
+    null space per iteration [rad·rad]; 0 to keep the start's redundancy (a projection onto the
+    poses that moves the joints the least).
 
     Returns:
         joints [rad] (M, n) and the remaining pose error norm per pose (M,).
@@ -219,10 +222,10 @@ def solve_ik_batch(
             break
         A = J @ np.transpose(J, (0, 2, 1)) + damping**2 * np.eye(rows)
         dq = np.einsum("kji,kj->ki", J, np.linalg.solve(A, e[:, :, None])[:, :, 0])
-        if n > rows:  # redundant: drift toward mid-range in the null space of the task
+        if n > rows and nullspace_gain > 0.0:  # redundant: drift toward mid-range in the task's null space
             pull = np.where(finite, (mid - q[active]) / np.where(finite, half, 1.0) ** 2, 0.0)
             Jp = np.einsum("kij,kj->ki", J, pull)
-            dq += NULLSPACE_GAIN * (
+            dq += nullspace_gain * (
                 pull - np.einsum("kji,kj->ki", J, np.linalg.solve(A, Jp[:, :, None])[:, :, 0])
             )
         step = np.max(np.abs(dq), axis=1)
