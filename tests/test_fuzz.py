@@ -129,6 +129,17 @@ def _expect_cad_points(read, path: Path) -> None:
         assert points.ndim == 2 and points.shape[1] == 3 and np.all(np.abs(points) <= CAD_COORDINATE_LIMIT_M)
 
 
+def _read_damaged_liberty(tmp_path_factory, data, lines: list[str]):
+    """A damaged copy of ``lines`` read as a Liberty ASCII log: the file and the log (None if refused)."""
+    f = tmp_path_factory.mktemp("lib") / "demo.liberty"
+    _write(f, data, lines)
+    log = _expect(lambda: read_liberty_ascii(f, units=None), f)
+    if log is not None:
+        assert np.all(np.isfinite(log.positions)) and log.rotations.shape == (len(log.t), 3, 3)
+        _plausible_log(log)
+    return f, log
+
+
 LIBERTY = [
     "# Polhemus Liberty ASCII",
     "# units: in",
@@ -143,12 +154,8 @@ LIBERTY = [
 @FUZZ
 @given(data=st.data())
 def test_fuzz_liberty_ascii(tmp_path_factory, data):
-    f = tmp_path_factory.mktemp("lib") / "demo.liberty"
-    _write(f, data, LIBERTY)
-    log = _expect(lambda: read_liberty_ascii(f, units=None), f)
+    _, log = _read_damaged_liberty(tmp_path_factory, data, LIBERTY)
     if log is not None:
-        assert np.all(np.isfinite(log.positions)) and log.rotations.shape == (len(log.t), 3, 3)
-        _plausible_log(log)
         try:
             gate_dropouts(log)
         except InputError as e:
@@ -166,13 +173,9 @@ DEVICE_LIBERTY = [
 @FUZZ
 @given(data=st.data())
 def test_fuzz_liberty_ascii_device_records(tmp_path_factory, data):
-    f = tmp_path_factory.mktemp("libd") / "demo.liberty"
-    _write(f, data, DEVICE_LIBERTY)
-    log = _expect(lambda: read_liberty_ascii(f, units=None), f)
+    _, log = _read_damaged_liberty(tmp_path_factory, data, DEVICE_LIBERTY)
     if log is not None:
-        assert np.all(np.isfinite(log.positions)) and log.rotations.shape == (len(log.t), 3, 3)
         assert log.device_error is None or log.device_error.shape == log.t.shape
-        _plausible_log(log)
         try:
             gate_dropouts(log)
         except InputError as e:

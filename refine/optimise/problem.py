@@ -136,14 +136,20 @@ class RefinementNLP:
         active: ActiveSet | None = None,
         elastic_deg: float | None = None,
         joint_steps: str | tuple[int, ...] | None = None,
+        fused: FusedPath | None = None,
+        tolerances: Tolerances | None = None,
     ) -> RefinementNLP:
-        """The same problem with another active set, elastic setting or joint-step rows (rebuilt, not solved)."""
+        """The same problem with other settings, rebuilt (not solved).
+
+        Any of the active set, elastic setting, joint-step rows, path and tolerances may change; a
+        new path needs an active set of its own waypoints.
+        """
         return build_refinement(
             self.robot,
-            self.fused,
+            self.fused if fused is None else fused,
             self.base_in_world,
             self.tcp_in_flange,
-            self.tolerances,
+            self.tolerances if tolerances is None else tolerances,
             axisymmetric=self.axisymmetric,
             weights=self.weights,
             active=self.active if active is None else active,

@@ -220,7 +220,6 @@ def coarse_seed(problem: RefinementNLP, q_seed: Array) -> Array | None:
     solve next to its answer. None for a non-redundant arm, a short path, a coarse refinement
     that is not ``ok`` or a projection that misses a pose.
     """
-    from refine.optimise.problem import build_refinement
     from refine.paths import FusedPath
 
     N = problem.n_waypoints
@@ -235,18 +234,7 @@ def coarse_seed(problem: RefinementNLP, q_seed: Array) -> Array | None:
     spread = float(np.diff(idx).max())  # waypoint steps per coarse step
     step = min(problem.tolerances.joint_step_deg * spread, 360.0)  # 360 deg: no bound at all
     tolerances = replace(problem.tolerances, joint_step_deg=step)
-    coarse = build_refinement(
-        problem.robot,
-        coarse_path,
-        problem.base_in_world,
-        problem.tcp_in_flange,
-        tolerances,
-        axisymmetric=problem.axisymmetric,
-        weights=problem.weights,
-        derivative_mode=problem.derivative_mode,
-        joint_steps=(),
-        solver_options=problem.solver_options,
-    )
+    coarse = problem.rebuilt(fused=coarse_path, tolerances=tolerances, active=ActiveSet(), joint_steps=())
     answer = solve_refinement(coarse, q_seed[idx])
     if answer.status != "ok":
         log.info(
