@@ -198,13 +198,24 @@ def initial_guess(problem: RefinementNLP, home: Array | None = None, rotations: 
     return qs
 
 
-COARSE_SEED_WAYPOINTS = 40
-"""A redundant arm's seed on a path of at least three times this many waypoints comes from the
-refinement of every :data:`COARSE_SEED_STRIDE`-th waypoint, and at least this many
-(:func:`coarse_seed`)."""
+COARSE_SEED_MIN_PATH = 40
+"""A redundant arm's seed on a path of at least this many waypoints comes from a coarse refinement
+(:func:`coarse_seed`). Shorter paths keep the chained seed: there the coarse copy holds half the
+waypoints or more and saves little or nothing (generated iiwa wave without mid-range cost, CPU of
+the solve [s], chained / coarse seed: 30 waypoints 0.141 / 0.104, 36: 0.129 / 0.128, 40: 0.136 /
+0.105; with the pipeline's mid-range cost 30: 0.047 / 0.050)."""
+COARSE_SEED_WAYPOINTS = 16
+"""The coarse refinement holds every :data:`COARSE_SEED_STRIDE`-th waypoint, and at least this many.
+Without a mid-range cost its solve needs about as many iterations as the full one from the chained
+seed (120-220 on the LBR iiwa, whatever the length), so the fewer waypoints it has the cheaper the
+seed, down to where it misses the path's shape and the full solve's iterations grow again: 6-10
+coarse waypoints leave the full solve 6 to 155 iterations, and on the bends of the TIG seam (237
+waypoints, mid-range cost) 12 leave it 11 where 16-40 leave 5 (CPU 0.095 s against 0.077-0.080
+s). On the wave without mid-range cost, chained / 40 / 16 coarse waypoints: 100 waypoints 0.257 /
+- / 0.124 s, 120: - / 0.175 / 0.121 s, 400: - / 0.198 / 0.163 s."""
 COARSE_SEED_STRIDE = 40
-"""Waypoints per coarse step: wider steps leave the interpolated seed too far from the answer
-(LBR iiwa, 6,400 waypoints: 40 coarse waypoints, 164 apart, 175 iterations; 160, 40 apart, 21)."""
+"""Waypoints per coarse step on long paths: wider steps leave the interpolated seed too far from the
+answer (LBR iiwa, 6,400 waypoints: 40 coarse waypoints, 164 apart, 175 iterations; 160, 40 apart, 21)."""
 
 
 def coarse_seed(problem: RefinementNLP, q_seed: Array) -> Array | None:
@@ -212,18 +223,19 @@ def coarse_seed(problem: RefinementNLP, q_seed: Array) -> Array | None:
 
     The chained IK leaves a redundant arm's elbow where the mid-range pull puts it, waypoint by
     waypoint, while the refined path puts it where the whole path's joint motion is least: IPOPT
-    then needs 150-300 iterations to move it there (LBR iiwa). The same refinement over evenly
-    spaced waypoints (every :data:`COARSE_SEED_STRIDE`-th, its own seed made the same way when it
-    is long; the joint-step bound scaled by the spacing, at most 360 deg; no clearance rows)
-    finds that elbow cheaply. Its joints, interpolated along the arc length and projected onto
-    every waypoint's exact pose by least-squares IK without null-space drift, start the full
-    solve next to its answer. None for a non-redundant arm, a short path, a coarse refinement
+    then needs 150-300 iterations to move it there (LBR iiwa without a mid-range cost). The same
+    refinement over evenly spaced waypoints (every :data:`COARSE_SEED_STRIDE`-th, at least
+    :data:`COARSE_SEED_WAYPOINTS`; seeded with the chained joints there; the joint-step bound
+    scaled by the spacing, at most 360 deg; no clearance rows) finds that elbow cheaply. Its
+    joints, interpolated along the arc length and projected onto every waypoint's exact pose by
+    least-squares IK without null-space drift, start the full solve next to its answer. None for
+    a non-redundant arm, a path shorter than :data:`COARSE_SEED_MIN_PATH`, a coarse refinement
     that is not ``ok`` or a projection that misses a pose.
     """
     from refine.paths import FusedPath
 
     N = problem.n_waypoints
-    if problem.dof <= 6 or N < 3 * COARSE_SEED_WAYPOINTS:
+    if problem.dof <= 6 or N < COARSE_SEED_MIN_PATH:
         return None
     count = max(COARSE_SEED_WAYPOINTS, N // COARSE_SEED_STRIDE)
     idx = np.unique(np.linspace(0, N - 1, count).round().astype(int))
@@ -243,6 +255,7 @@ def coarse_seed(problem: RefinementNLP, q_seed: Array) -> Array | None:
             answer.status,
         )
         return None
+    log.info("coarse seed: %d waypoints refined in %d IPOPT iterations", len(idx), answer.iterations)
     q = np.column_stack([np.interp(f.s, f.s[idx], answer.q[:, j]) for j in range(problem.dof)])
     lower, upper = _bounds(problem)
     q, err = solve_ik_batch(_kin(problem), _targets(problem), q, lower, upper, nullspace_gain=0.0)
