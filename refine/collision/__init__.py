@@ -6,10 +6,17 @@
   linear constraint on the joints.
 * Which pairs are checked: ``pairs.py``. One pair's signed distance and witness points, with
   python-fcl's mesh pitfalls worked around: ``distance.py``. Bodies and bounds: ``geometry.py``.
-* :func:`check_path_clearance` (``check.py``): the dense final check between waypoints.
+* :func:`check_path_clearance` (``check.py``): the dense final check between waypoints;
+  :func:`margins_proved` its proof alone, without the figures.
 """
 
-from refine.collision.check import ClearanceRun, PathClearance, check_path_clearance, joint_reach
+from refine.collision.check import (
+    ClearanceRun,
+    PathClearance,
+    check_path_clearance,
+    joint_reach,
+    margins_proved,
+)
 from refine.collision.contact import Contact, linearised_distance
 from refine.collision.model import CollisionModel
 
@@ -21,4 +28,5 @@ __all__ = [
     "check_path_clearance",
     "joint_reach",
     "linearised_distance",
+    "margins_proved",
 ]

@@ -48,6 +48,10 @@ At every sample the pair with the least clearance (distance minus its margin) an
 least distance are found with :meth:`CollisionModel.nearest_pairs`; where a margin is broken, every
 pair below its margin is named. Dense sampling proves nothing between its samples; it finds and
 names the pairs of a broken segment.
+
+**The proof alone** (:func:`margins_proved`): the same certification without the figures (no
+least-distance pair looked up at each waypoint), for a path that needs only the verdict "every
+margin kept", such as the optimiser's seed.
 """
 
 from __future__ import annotations
@@ -55,6 +59,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
 from typing import NamedTuple
@@ -284,22 +289,14 @@ def check_path_clearance(
             by_distance.distance_m, by_clearance.clearance_m, pair, by_clearance.distance_m, frozenset(names)
         )
 
-    poses = model.moving_poses(q_path)
-    boxes = model.box_bounds(poses)  # lower bounds on each pair's distance per waypoint (N, P) [m]
-    bounds = boxes.copy()  # and the better bounds and distances found
-    exact = np.zeros(bounds.shape, dtype=bool)
-    need = np.zeros(bounds.shape, dtype=bool)  # pairs to measure at each waypoint
-    if method == "bound" and len(q_path) > 1:
-        short = _short(bounds - model.pair_margins + tolerance_m, _pair_motion(model, q_path))
-        need[:-1] |= short
-        need[1:] |= short
-    points = []
-    for k, q in enumerate(q_path):
-        for p in np.flatnonzero(need[k]):
-            bounds[k, p], exact[k, p] = model.pair_bound(q, int(p), poses[k])
-        points.append(sample(q, poses[k], boxes[k]))
-        for p, d in model.measured().items():
-            bounds[k, p], exact[k, p] = d, True
+    points: list[_Sample] = []
+    poses, boxes, bounds, exact = _waypoint_bounds(
+        model,
+        q_path,
+        tolerance_m,
+        method == "bound",
+        lambda q, poses, boxes: points.append(sample(q, poses, boxes)),
+    )
     wp_dist = np.array([p.distance for p in points])
     wp_clear = np.array([p.clearance for p in points])
     sweep = np.abs(np.diff(q_path, axis=0)) @ joint_reach(model)  # any body point's motion per segment [m]
@@ -347,6 +344,71 @@ def check_path_clearance(
     )
     log.info("%s", result.summary())
     return result
+
+
+def margins_proved(model: CollisionModel, q_path: ArrayLike, *, tolerance_m: float = 1e-4) -> bool:
+    """True when the motion bound proves that the joint path keeps every pair's margin.
+
+    The certification of :func:`check_path_clearance` (``method="bound"``) without its figures:
+    the least-distance and least-clearance pairs are not looked up at every waypoint, so a path that
+    is clear costs only the FCL queries of the pairs whose bounds fall short. True implies that the
+    check finds every margin kept (``ok``): it certifies every segment with the same bounds and
+    distances, and a certified segment's ends keep their margins. False (a margin broken, a segment
+    needing dense sampling, or a path of one waypoint) decides nothing: run the check.
+
+    Args:
+        model: the collision model (robot, tool, cell, margins).
+        q_path: joints per waypoint [rad], shape (N, n).
+        tolerance_m: clearances down to ``-tolerance_m`` still count as kept [m].
+    """
+    q_path = np.asarray(q_path, dtype=float)
+    if q_path.ndim != 2 or q_path.shape[1] != model.robot.nq or not np.all(np.isfinite(q_path)):
+        raise InputError(
+            f"margins_proved: q_path must be (N, {model.robot.nq}) finite joints [rad], got {q_path.shape}"
+        )
+    if len(q_path) < 2:
+        return False
+    poses, _, bounds, exact = _waypoint_bounds(model, q_path, tolerance_m, True)
+    found_by_segment: list[list[_Sample] | None] = [None] * (len(q_path) - 1)
+    inner: list[list[_Sample]] = [[] for _ in found_by_segment]
+    _advance_pairs(model, q_path, poses, bounds, exact, inner, found_by_segment, tolerance_m)
+    return all(found is not None for found in found_by_segment)
+
+
+def _waypoint_bounds(
+    model: CollisionModel,
+    q_path: Array,
+    tolerance_m: float,
+    by_bound: bool,
+    at_waypoint: Callable[[Array, Array, Array], None] | None = None,
+) -> tuple[Array, Array, Array, NDArray[np.bool_]]:
+    """The moving bodies' poses and each pair's distance bounds at every waypoint.
+
+    With ``by_bound``, the pairs whose box bounds do not certify a segment next to a waypoint are
+    bounded better there (:meth:`CollisionModel.pair_bound`). ``at_waypoint(q, poses, boxes)``
+    runs at each waypoint with the model placed there; the pairs it measures improve the bounds.
+
+    Returns:
+        poses (N, M, 4, 4), box bounds (N, P) [m], the better bounds (N, P) [m], and which of
+        those are exact distances (N, P).
+    """
+    poses = model.moving_poses(q_path)
+    boxes = model.box_bounds(poses)  # lower bounds on each pair's distance per waypoint (N, P) [m]
+    bounds = boxes.copy()  # and the better bounds and distances found
+    exact = np.zeros(bounds.shape, dtype=bool)
+    need = np.zeros(bounds.shape, dtype=bool)  # pairs to measure at each waypoint
+    if by_bound and len(q_path) > 1:
+        short = _short(bounds - model.pair_margins + tolerance_m, _pair_motion(model, q_path))
+        need[:-1] |= short
+        need[1:] |= short
+    for k, q in enumerate(q_path):
+        for p in np.flatnonzero(need[k]):
+            bounds[k, p], exact[k, p] = model.pair_bound(q, int(p), poses[k])
+        if at_waypoint is not None:
+            at_waypoint(q, poses[k], boxes[k])
+            for p, d in model.measured().items():
+                bounds[k, p], exact[k, p] = d, True
+    return poses, boxes, bounds, exact
 
 
 def _advance_pairs(

@@ -6,7 +6,9 @@ waypoint (and inside every segment the dense check found too close) the pairs cl
 margin plus a look-ahead give one row each, the signed distance linearised at the witness points,
 ``d(q) ≈ d0 + g·(q - q0) >= margin``. The rows replace the previous round's; the loop ends when the
 dense check (:func:`refine.collision.check_path_clearance`, between waypoints at the problem's
-``check_step_m`` of TCP travel) finds every margin kept.
+``check_step_m`` of TCP travel) finds every margin kept. A path not checked yet (the seed) that the
+motion bound alone proves clear (:func:`refine.collision.margins_proved`) gets no rows without the
+dense check's figures.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from refine.collision import CollisionModel, Contact, PathClearance, check_path_clearance
+from refine.collision import CollisionModel, Contact, PathClearance, check_path_clearance, margins_proved
 from refine.optimise.problem import LinearRow, RefinementNLP
 from refine.optimise.seed import TcpKinematics
 from refine.optimise.verify import Violation
@@ -85,7 +87,7 @@ class ClearanceSource:
         earlier one; the report's figures then come from the check already made.
         """
         q = np.asarray(q, dtype=float)
-        key = (q.shape, q.tobytes())
+        key = self._key(q)
         found = self._recent.pop(key, None)
         if found is None:
             t0 = time.perf_counter()
@@ -96,6 +98,10 @@ class ClearanceSource:
             del self._recent[next(iter(self._recent))]
         self.last = found
         return found
+
+    @staticmethod
+    def _key(q: Array) -> tuple:
+        return (q.shape, q.tobytes())
 
     def violations(self, problem: RefinementNLP, q: Array) -> list[Violation]:
         """Runs of segments below the margin, as violations naming the objects [m]."""
@@ -121,7 +127,19 @@ class ClearanceSource:
         return out
 
     def rows(self, problem: RefinementNLP, q: Array) -> tuple[LinearRow, ...]:
-        """Fresh rows for every close pair along ``q``; empty when the dense check passes."""
+        """Fresh rows for every close pair along ``q``; empty when the dense check passes.
+
+        A path not checked yet (the seed) is first put to the motion bound's proof alone
+        (:func:`refine.collision.margins_proved`): a path it proves clear needs no rows, and the
+        check's figures are not needed for it.
+        """
+        q = np.asarray(q, dtype=float)
+        if self._key(q) not in self._recent:
+            t0 = time.perf_counter()
+            proved = margins_proved(self.model, q)
+            self.stats["check_s"] += time.perf_counter() - t0
+            if proved:
+                return ()
         if self.clearance(q).ok:
             return ()
         t0 = time.perf_counter()

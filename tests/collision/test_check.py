@@ -8,7 +8,7 @@ import time
 import numpy as np
 import pytest
 
-from refine.collision import check_path_clearance, joint_reach
+from refine.collision import check_path_clearance, joint_reach, margins_proved
 from refine.errors import InputError
 from refine.frames import make_transform
 from refine.optimise.seed import TcpKinematics
@@ -180,3 +180,38 @@ def test_the_clearance_source_reuses_an_earlier_check_of_the_same_path(pillar_mo
     assert source.clearance(first.copy()) is a and source.clearance(second) is b
     assert pillar_model.queries == queries and source.last is b
     assert source.clearance(_swing(-80.0, -45.0, 6)) is not a  # another path is checked
+
+
+def test_the_proof_alone_proves_a_clear_swing_and_not_one_through_the_pillar(pillar_model, kin):
+    """The pillar (x 0.9-1.1 m, |y| <= 0.1 m) subtends about 6 deg from the base: a swing of joint 1
+    from -80 to -45 deg keeps the arm well away, a swing from -45 to 45 deg sweeps it through."""
+    assert margins_proved(pillar_model, _swing(-80.0, -45.0, 8))
+    assert not margins_proved(pillar_model, _swing(-45.0, 45.0))  # both waypoints clear, not between
+    assert not margins_proved(pillar_model, _swing(-80.0, 45.0, 3))  # a clear segment, then through
+    assert not margins_proved(pillar_model, _swing(0.0, 0.0, 1))  # one waypoint: decides nothing
+    with pytest.raises(InputError, match=r"q_path must be \(N, 6\)"):
+        margins_proved(pillar_model, np.zeros((3, 5)))
+
+
+@pytest.mark.parametrize(("offset", "proved"), [(0.04, False), (0.05, False), (0.08, True), (0.11, True)])
+def test_the_proof_alone_follows_the_near_miss_geometry(offset, proved, irb4600, nozzle, make_model, kin):
+    """The nozzle (radius 3 cm) swings past a 3 cm cube: the margin of 1 cm breaks below 5.5 cm."""
+    q = np.radians([[-50.0, 10, 10, 0, 60, 0], [50.0, 10, 10, 0, 60, 0]])
+    T = kin.pose(q.mean(axis=0))
+    centre = T[:3, 3] - 0.2 * T[:3, 2]
+    radial = np.array([centre[0], centre[1], 0.0]) / np.linalg.norm(centre[:2])
+    cube = Shape("cube", "box", pose=make_transform(p=centre + offset * radial), size_m=(0.03, 0.03, 0.03))
+    assert margins_proved(make_model(irb4600, (cube,), (nozzle,)), q) is proved
+
+
+def test_the_clearance_source_needs_no_dense_check_for_a_clear_seed(pillar_model, kin):
+    """A seed proved clear gets no rows and no dense check; a seed that swings through the pillar
+    between two clear waypoints gets a row inside that segment, as from the dense check."""
+    from refine.optimise.clearance import ClearanceSource
+
+    source = ClearanceSource(pillar_model, kin, 0.01)
+    assert source.rows(None, _swing(-80.0, -45.0, 5)) == ()
+    assert source.last is None  # proved without the dense check's figures
+    rows = source.rows(None, _swing(-45.0, 45.0))
+    assert source.last is not None and not source.last.ok
+    assert any(r.k == 0 and r.f == 0.5 and "pillar" in r.label for r in rows)
