@@ -177,14 +177,16 @@ def run_one(
     t0 = time.perf_counter()
     try:
         (Path(out_dir) / "error.txt").unlink(missing_ok=True)  # from an earlier failed attempt
-        from refine.export.result_json import result_dict, write_result_json
+        from refine.export.result_json import write_timings
         from refine.pipeline import run
         from refine.problem import load_problem
 
         result = run(load_problem(problem), Path(out_dir), programs, report=report)
         result.timings_s["run"] = time.perf_counter() - t0
-        write_result_json(result.outputs["result"], result)  # again, with the run's wall time
-        return _row(key, result_dict(result), result.timings_s["run"], "this batch")
+        # the run's wall time is known only now: rewrite timings_s alone (atomically), the rest of
+        # the document and its files' SHA-256 standing as written
+        path = write_timings(result.outputs["result"], result)
+        return _row(key, json.loads(path.read_text(encoding="utf-8")), result.timings_s["run"], "this batch")
     except BaseException as e:  # noqa: BLE001 - one problem's failure must not stop the batch
         if isinstance(e, KeyboardInterrupt):
             raise

@@ -107,3 +107,30 @@ def test_problems_are_collected_from_folders_and_clashing_names_refused(tmp_path
     with pytest.raises(InputError, match="no such problem folder"):
         collect([tmp_path / "nowhere"], tmp_path / "out")
     assert main(["batch", str(tmp_path / "nowhere"), "--out", str(tmp_path / "o")]) == 2
+
+
+def test_a_problem_s_result_json_is_computed_once_and_holds_the_run_s_wall_time(tmp_path, monkeypatch):
+    """The run's wall time is added to the written result.json without computing it again: the
+    files are hashed once, and the document still lists them with their true size and SHA-256."""
+    import hashlib
+
+    import refine.export.result_json as result_json
+    from refine.batch import run_one
+
+    problems = make_problems(tmp_path, 1)
+    hashed = []
+    describe = result_json.describe_files
+    monkeypatch.setattr(result_json, "describe_files", lambda outputs: hashed.append(1) or describe(outputs))
+    out = tmp_path / "out" / "line_00"
+    row = run_one("line_00", str(problems / "line_00"), str(out), None, False)
+    with open(out / "result.json", encoding="utf-8") as f:
+        doc = json.load(f)
+    assert len(hashed) == 1
+    assert row["status"] == doc["status"] == "ok" and row["n_waypoints"] == doc["n_waypoints"] == WAYPOINTS
+    assert row["min_clearance_m"] == doc["metrics"]["min_clearance_m"]
+    assert list(doc["timings_s"])[-1] == "run" and doc["timings_s"]["run"] == round(row["wall_s"], 6)
+    assert doc["timings_s"]["run"] >= sum(v for k, v in doc["timings_s"].items() if k != "run") - 1e-3
+    assert set(doc["files"]) == {p.name for p in out.iterdir()} - {"result.json"}
+    for name, entry in doc["files"].items():
+        data = (out / name).read_bytes()
+        assert entry == {"bytes": len(data), "sha256": hashlib.sha256(data).hexdigest()}
