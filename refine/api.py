@@ -16,6 +16,7 @@ call can start from a previous answer: ``initial_joints=`` warm-starts the solve
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -86,6 +87,11 @@ class Result:
     The arrays of the first (demonstrated) pass are attributes of the result itself; every pass is
     in :attr:`passes`. Nothing is written until :meth:`write` is called.
 
+    The figures :attr:`metrics`, :attr:`passes`, :attr:`diagnosis` and :attr:`placement` read
+    from ``result.json``'s document are computed once, on first use: they come from the solved
+    passes, which a run never changes (frozen). :meth:`to_dict` is computed anew on each call:
+    :meth:`write` adds the files written (``outputs``, ``files``) and their times (``timings_s``).
+
     Attributes:
         run: the underlying :class:`refine.result.RunResult` (problem, robot, per-pass details).
     """
@@ -93,6 +99,12 @@ class Result:
     def __init__(self, run: RunResult) -> None:
         self.run = run
         self._doc: dict[str, Any] | None = None
+
+    def _figures(self) -> dict[str, Any]:
+        """``result.json``'s document as first computed, for the figures of the solved passes."""
+        if self._doc is None:
+            self._doc = self.to_dict()
+        return self._doc
 
     def __repr__(self) -> str:
         return (
@@ -108,7 +120,7 @@ class Result:
     @property
     def passes(self) -> tuple[PassArrays, ...]:
         """Every pass as arrays, in order (one for a single-pass path)."""
-        doc = self.to_dict()["passes"]
+        doc = self._figures()["passes"]
         return tuple(_pass_arrays(p, d["metrics"]) for p, d in zip(self.run.passes, doc, strict=True))
 
     @property
@@ -136,7 +148,7 @@ class Result:
     @property
     def metrics(self) -> dict[str, Any]:
         """The verified figures over all passes (``result.json``'s ``metrics``)."""
-        return dict(self.to_dict()["metrics"])
+        return dict(self._figures()["metrics"])
 
     @property
     def diagnosis(self) -> list[dict[str, Any]]:
@@ -146,7 +158,7 @@ class Result:
         its figure, limit and unit, and a suggestion); empty when every pass is ok. The schema is in
         ``docs/outputs.md``.
         """
-        return list(self.to_dict()["diagnosis"])
+        return copy.deepcopy(self._figures()["diagnosis"])
 
     @property
     def placement(self) -> dict[str, Any] | None:
@@ -157,8 +169,7 @@ class Result:
         in the world frame), the moved objects and the strict run's metrics; the schema is
         ``docs/placement.schema.json``. None when the problem does not ask for a placement search.
         """
-        doc = self.to_dict()["placement"]
-        return None if doc is None else dict(doc)
+        return copy.deepcopy(self._figures()["placement"])
 
     def to_dict(self) -> dict[str, Any]:
         """The ``result.json`` document of this result, as plain Python values."""

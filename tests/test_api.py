@@ -202,3 +202,36 @@ def test_a_result_writes_the_program_of_the_robots_controller_by_default():
         positions = T[:3, 3] + np.outer(np.linspace(0.0, 0.05, 6), [0.0, 1.0, 0.0])
         result = refine.refine_path(robot, positions, np.repeat(T[None, :3, :3], 6, axis=0), speeds=0.05)
         assert result.run.problem.output.programs == (program,), name
+
+
+def _figures(result):
+    """What a caller reads from a result's properties, as JSON values (tuples become lists)."""
+    passes = [{"name": p.name, "status": p.status, "metrics": p.metrics} for p in result.passes]
+    return json.loads(json.dumps([result.metrics, passes, result.diagnosis, result.placement]))
+
+
+def _written_figures(path):
+    with open(path, encoding="utf-8") as f:
+        doc = json.load(f)
+    passes = [{k: p[k] for k in ("name", "status", "metrics")} for p in doc["passes"]]
+    return [doc["metrics"], passes, doc["diagnosis"], doc["placement"]]
+
+
+def test_the_figures_of_a_result_are_those_of_its_written_result_json(tmp_path):
+    """Read before and after the write, each result's properties are its own result.json's, however
+    a caller edits what they returned."""
+    infeasible = refine.solve(refine.load_problem(ROOT / "problems" / "unreachable" / "out_of_reach"))
+    positions, R = line()
+    ok = refine.refine_path("ur10e", positions, R, speeds=0.1, name="line")
+    read_first = [_figures(infeasible), _figures(ok)]
+    for result in (infeasible, ok):  # a caller's edits of the values it got
+        result.metrics["max_orientation_deviation_deg"] = -1.0
+        result.passes[0].metrics["max_slack_deg"] = -1.0
+        for d in result.diagnosis:
+            d["status"] = "edited"
+    for result, name, first in zip((infeasible, ok), ("infeasible", "ok"), read_first, strict=True):
+        written = _written_figures(result.write(tmp_path / name, report=False)["result"])
+        assert first == written
+        assert _figures(result) == written
+    assert read_first[0][2] and read_first[0][2][0]["status"] == "infeasible"  # a diagnosis to compare
+    assert read_first[1][0] != read_first[0][0]
