@@ -22,7 +22,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--contender",
         action="append",
         default=None,
-        help="contender (repeatable; default: all): refine, refine-casadi-ad, greedy-ik, drake-ik",
+        help="contender (repeatable; default: all): refine, refine-casadi-ad, refine-fatrop, greedy-ik, drake-ik",
     )
     run.add_argument("--repeat", type=int, default=1, help="runs per problem and contender (median, minimum)")
     run.add_argument(

@@ -1,4 +1,4 @@
-"""The contenders of ``refine bench``: refine with each derivative mode, greedy IK, and Drake.
+"""The contenders of ``refine bench``: refine with each derivative mode and solver, greedy IK, and Drake.
 
 Each contender turns a :class:`~refine.bench.suites.BenchProblem` into joints per waypoint and its
 stage times; :func:`verify` then checks every answer the same way (TCP position, orientation cone,
@@ -50,11 +50,18 @@ class Answer:
     slack_deg: Array | None = None
 
 
-def _refine(problem: BenchProblem, mode: str) -> Answer:
+def _refine(problem: BenchProblem, mode: str, solver: str = "ipopt") -> Answer:
     from refine.optimise.solve import solve_refinement
+    from refine.optimise.stagewise import MAX_FATROP_WAYPOINTS
 
+    if solver == "fatrop" and problem.n_waypoints > MAX_FATROP_WAYPOINTS:
+        return Answer(
+            "failed",
+            None,
+            note=f"not run: fatrop takes at most {MAX_FATROP_WAYPOINTS} waypoints, the path has {problem.n_waypoints}",
+        )
     w0, c0 = time.perf_counter(), time.process_time()
-    nlp = problem.refinement(mode)
+    nlp = problem.refinement(mode, solver)
     build = time.perf_counter() - w0
     build_cpu = time.process_time() - c0
     result = solve_refinement(
@@ -88,6 +95,16 @@ def refine_assembled(problem: BenchProblem) -> Answer:
 def refine_casadi_ad(problem: BenchProblem) -> Answer:
     """The refinement with CasADi differentiating the whole problem (the virtual machine, no compiled kernels)."""
     return _refine(problem, "casadi")
+
+
+def refine_fatrop(problem: BenchProblem) -> Answer:
+    """The refinement solved by fatrop on its stage-wise form (:mod:`refine.optimise.stagewise`).
+
+    Timed as :func:`refine_assembled`; the build includes CasADi's set-up of fatrop's stage blocks.
+    Paths over :data:`refine.optimise.stagewise.MAX_FATROP_WAYPOINTS` waypoints are not run (status
+    ``failed``, saying why).
+    """
+    return _refine(problem, "assembled", "fatrop")
 
 
 def greedy_ik(problem: BenchProblem) -> Answer:
@@ -228,6 +245,7 @@ DRAKE_CONE_BACKOFF_DEG = 1e-3
 CONTENDERS: dict[str, Callable[[BenchProblem], Answer]] = {
     "refine": refine_assembled,
     "refine-casadi-ad": refine_casadi_ad,
+    "refine-fatrop": refine_fatrop,
     "greedy-ik": greedy_ik,
     "drake-ik": drake_chained_ik,
 }

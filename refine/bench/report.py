@@ -66,7 +66,7 @@ def targets(rows: list[Row]) -> list[str]:
             f"verified {'yes' if _yes(glass, 'verified') else 'no'}, largest deviation "
             f"{_fmt(_f(glass, 'max_orientation_deviation_deg'), 2)} deg"
         )
-        for other in ("drake-ik", "greedy-ik", "refine-casadi-ad"):
+        for other in ("drake-ik", "greedy-ik", "refine-casadi-ad", "refine-fatrop"):
             peer = by.get(("glass_adhesive", other))
             if peer:
                 line += (

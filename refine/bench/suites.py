@@ -76,8 +76,8 @@ class BenchProblem:
         """Number of waypoints."""
         return len(self.fused)
 
-    def refinement(self, derivative_mode: str = "assembled") -> Any:
-        """The refinement NLP of this problem, built as the pipeline builds it.
+    def refinement(self, derivative_mode: str = "assembled", solver: str = "ipopt") -> Any:
+        """The refinement NLP of this problem, built as the pipeline builds it, for ``solver``.
 
         No joint-step rows at first: the solve adds those near their bound, as in ``refine run``.
         """
@@ -93,6 +93,7 @@ class BenchProblem:
             weights=self.weights,
             derivative_mode=derivative_mode,
             joint_steps=(),
+            solver=solver,
         )
 
 

@@ -38,6 +38,7 @@ from refine.optimise.derivatives import (
     waypoint_kernels,
 )
 from refine.optimise.kinematics import fk_function, jacobian_function
+from refine.optimise.stagewise import StagewiseSolver, check_solver, fatrop_options, stage_rows
 from refine.optimise.threads import limit_solver_threads
 from refine.paths import FusedPath
 from refine.problem import Tolerances
@@ -81,8 +82,10 @@ class RefinementNLP:
 
     Attributes:
         nlp: the CasADi problem dict (``x``, ``p``, ``f``, ``g``).
-        solver: the IPOPT solver CasADi built for it (derivatives included).
+        solver: the solver built for it: CasADi's IPOPT solver (derivatives included), or a
+            :class:`refine.optimise.stagewise.StagewiseSolver` (fatrop), called the same way.
         solver_options: the options it was built with.
+        solver_name: ``"ipopt"`` or ``"fatrop"`` (see :func:`build_refinement`).
         params: numeric value of ``p`` (CAD points and demonstrated orientations).
         lbx, ubx: variable bounds: joint limits minus margin [rad] (n·N), then the slacks (N) when elastic.
         lbg, ubg: constraint bounds: 4 rows per waypoint, the joint-step rows (n per segment, or those
@@ -129,6 +132,7 @@ class RefinementNLP:
     derivative_mode: str = "assembled"
     singularity_hessian: bool = False
     joint_steps: str | tuple[int, ...] = "all"
+    solver_name: str = "ipopt"
 
     def rebuilt(
         self,
@@ -158,6 +162,7 @@ class RefinementNLP:
             derivative_mode=self.derivative_mode,
             singularity_hessian=self.singularity_hessian,
             joint_steps=self.joint_steps if joint_steps is None else joint_steps,
+            solver=self.solver_name,
         )
 
     def step_rows(self) -> Array:
@@ -306,6 +311,7 @@ def build_refinement(
     derivative_mode: str = "assembled",
     singularity_hessian: bool = False,
     joint_steps: str | Sequence[int] = "all",
+    solver: str = "ipopt",
 ) -> RefinementNLP:
     """Build the refinement NLP for ``fused`` on ``robot`` (no solve).
 
@@ -334,11 +340,17 @@ def build_refinement(
             problem's rows, so :func:`refine.optimise.solve.solve_refinement` solves a problem built
             with only some of them by adding those where the seed or an answer comes near the bound
             (:data:`refine.optimise.solve.STEP_NEAR`) and solving again until none is left out.
+        solver: ``"ipopt"`` (default: the faster by measurement, benchmarks/SPEED.md) or ``"fatrop"``
+            (the same problem posed stage by stage for CasADi's structure-exploiting solver:
+            :mod:`refine.optimise.stagewise`; at most
+            :data:`refine.optimise.stagewise.MAX_FATROP_WAYPOINTS` waypoints). Options for fatrop
+            in ``solver_options`` carry the prefix ``"fatrop."``; IPOPT's (``"ipopt."``) are then ignored.
 
     Returns:
         The problem with bounds and parameters filled in.
     """
     t0 = time.perf_counter()
+    check_solver(solver)
     weights = weights or Weights()
     active = active or ActiveSet()
     N, n = len(fused), robot.nq
@@ -420,7 +432,7 @@ def build_refinement(
     nlp = {"x": x, "p": p, "f": f, "g": g}
     derivatives = (
         {}
-        if derivative_mode == "casadi"
+        if derivative_mode == "casadi" or solver == "fatrop"
         else derivative_functions(
             kernels,
             N=N,
@@ -439,11 +451,33 @@ def build_refinement(
             step_rows=steps,
         )
     )
-    options = {**IPOPT_DEFAULTS, **(solver_options or {})}
     limit_solver_threads()
+    if solver == "fatrop":
+        options = dict(solver_options or {})
+        built: Any = StagewiseSolver(
+            waypoint_function(robot, base_in_world, tcp_in_flange, axisymmetric),
+            singularity_function(robot, base_in_world, tcp_in_flange),
+            N=N,
+            n=n,
+            params=params,
+            orientation_coef=coef,
+            velocity=weights.velocity,
+            acceleration=weights.acceleration,
+            mid_range=weights.mid_range,
+            h=h,
+            mid=mid,
+            half=half,
+            elastic_weight=ELASTIC_WEIGHT if elastic else None,
+            rows=stage_rows(steps, N, n, points, list(active.linear_rows), 4 * N + len(steps_list)),
+            n_rows=4 * N + len(steps_list) + len(points) + len(active.linear_rows),
+            options=fatrop_options(options),
+        )
+    else:
+        options = {**IPOPT_DEFAULTS, **(solver_options or {})}
+        built = ca.nlpsol("refine", "ipopt", nlp, {**derivatives, **options})
     return RefinementNLP(
         nlp=nlp,
-        solver=ca.nlpsol("refine", "ipopt", nlp, {**derivatives, **options}),
+        solver=built,
         solver_options=options,
         params=params,
         lbx=lbx,
@@ -468,6 +502,7 @@ def build_refinement(
         derivative_mode=derivative_mode,
         singularity_hessian=singularity_hessian,
         joint_steps="all" if len(steps_list) == n * (N - 1) else tuple(steps_list),
+        solver_name=solver,
     )
 
 
