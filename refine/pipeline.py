@@ -120,6 +120,7 @@ def refinement_for(problem: Problem, robot: Robot, fused: FusedPath) -> Refineme
         weights=weights_for(problem, robot),
         solver_options={"ipopt.max_wall_time": problem.repair.time_limit_s},
         joint_steps=(),  # the solve adds the joint-step rows that come near their bound
+        solver=problem.optimise.solver,
     )
 
 

@@ -65,6 +65,17 @@ def check_waypoint_count(length_m: float, spacing_m: float, where: str) -> None:
         )
 
 
+SOLVERS = ("ipopt", "fatrop")
+"""The NLP solvers a refinement can be built for (``[optimise] solver``)."""
+
+
+def check_solver(name: str) -> str:
+    """``name`` if it is one of :data:`SOLVERS`, else an :class:`InputError` listing them."""
+    if name not in SOLVERS:
+        raise InputError(f"optimise.solver must be one of {', '.join(map(repr, SOLVERS))}, got {name!r}")
+    return name
+
+
 def _in_range(owner: str, name: str, value: float, lo: float, hi: float, unit: str = "") -> None:
     """Reject a value that is not a finite number in [lo, hi] (the documented range)."""
     ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
@@ -474,7 +485,7 @@ class CollisionSettings:
 
 @dataclass(frozen=True)
 class OptimiseSettings:
-    """``[optimise]``: cost weights of the refinement (see ``refine.optimise.problem.Weights``).
+    """``[optimise]``: cost weights of the refinement (see ``refine.optimise.problem.Weights``) and its solver.
 
     Attributes:
         orientation_weight: weight of the squared deviation from the demonstration.
@@ -483,14 +494,19 @@ class OptimiseSettings:
         mid_range_weight: weight of the squared distance of each joint from the middle of its range
             (normalised by the range); the secondary cost that resolves a redundant arm's extra
             freedom. Default: 0 for 6-axis arms, 2.0 when the robot has more than 6 joints.
+        solver: the NLP solver, ``"ipopt"`` (default, the faster by measurement) or ``"fatrop"``
+            (the problem posed stage by stage; at most 2,000 waypoints per pass; see
+            ``refine.optimise.stagewise``).
     """
 
     orientation_weight: float = 1.0
     velocity_weight: float = 5e-3
     acceleration_weight: float = 5e-8
     mid_range_weight: float | None = None
+    solver: str = "ipopt"
 
     def __post_init__(self) -> None:
+        check_solver(self.solver)
         for key in ("orientation_weight", "velocity_weight", "acceleration_weight"):
             _in_range("optimise", key, getattr(self, key), 0.0, 1e6)
         if self.mid_range_weight is not None:

@@ -101,7 +101,7 @@ def result_dict(result: RunResult) -> dict[str, Any]:
         },
         "metrics": _aggregate(per_pass),
         "solver": {
-            "name": "ipopt",
+            "name": problem.optimise.solver,
             "status": first.refinement.solver_status,
             "iterations": sum(p.refinement.iterations for p in result.passes),
             "outer_iterations": sum(p.refinement.outer_iterations for p in result.passes),

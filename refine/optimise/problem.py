@@ -38,11 +38,12 @@ from refine.optimise.derivatives import (
     waypoint_kernels,
 )
 from refine.optimise.kinematics import fk_function, jacobian_function
-from refine.optimise.stagewise import StagewiseSolver, check_solver, fatrop_options, stage_rows
+from refine.optimise.stagewise import StagewiseSolver, check_size, fatrop_options, stage_rows
 from refine.optimise.threads import limit_solver_threads
 from refine.paths import FusedPath
 from refine.problem import Tolerances
 from refine.robot import Robot
+from refine.settings import check_solver
 
 Array = NDArray[np.float64]
 
@@ -356,6 +357,8 @@ def build_refinement(
     N, n = len(fused), robot.nq
     if N < 3:
         raise InputError(f"refinement needs at least 3 waypoints, got {N}")
+    if solver == "fatrop":
+        check_size(N)
     spec = robot.spec
     lower, upper = joint_bounds(robot, tolerances)
     _check_active(active, N, n)
@@ -459,7 +462,6 @@ def build_refinement(
             singularity_function(robot, base_in_world, tcp_in_flange),
             N=N,
             n=n,
-            params=params,
             orientation_coef=coef,
             velocity=weights.velocity,
             acceleration=weights.acceleration,

@@ -1,4 +1,4 @@
-"""Solve a built refinement NLP with IPOPT, verify the answer, and repair it when it is infeasible.
+"""Solve a built refinement NLP with its solver (IPOPT, or fatrop), verify the answer, and repair it when it is infeasible.
 
 The loop: chain IK for a seed (reporting points out of reach at once), solve, verify with plain
 Pinocchio (:mod:`refine.optimise.verify`), add the constraints that only bind in places (the
@@ -59,6 +59,9 @@ searched in 0.1 deg steps)."""
 WARM_MU_INIT = 1e-4
 """IPOPT's initial barrier parameter when a round starts from the last round's answer and
 multipliers (its default, 0.1, pushes a warm start off the constraints it had found active)."""
+
+SOLVER_LABELS = {"ipopt": "IPOPT", "fatrop": "fatrop"}
+"""How messages name each solver of :data:`refine.settings.SOLVERS`."""
 
 ELASTIC_ONLY = "not run (the elastic problem answers it: another IK branch, after the first failed)"
 """Why the strict solve is skipped on the IK branches tried after the first: with repair on, the
@@ -134,8 +137,8 @@ class Refinement:
         q: joints per waypoint [rad], shape (N, n).
         q_seed: the IK seed the solver started from [rad], shape (N, n).
         check: the numeric verification of ``q``.
-        solver_status: IPOPT's return status (of the last solve).
-        iterations: IPOPT iterations, summed over all solves.
+        solver_status: the solver's return status (of the last solve).
+        iterations: the solver's iterations, summed over all solves.
         outer_iterations: solve -> verify rounds.
         active: the constraints added by the outer loop in the last round.
         slack_deg: extra orientation slack used per waypoint [deg], (N,) (zeros unless repaired).
@@ -412,18 +415,19 @@ class _Loop:
             extra["lam_g0"] = np.array([lam_g.get(key, 0.0) for key in _row_keys(p)])
             if len(lam_x) == len(p.lbx):
                 extra["lam_x0"] = lam_x
+        name = SOLVER_LABELS[p.solver_name]
         try:
             sol = p.solver(x0=x0, p=p.params, lbx=p.lbx, ubx=p.ubx, lbg=p.lbg, ubg=p.ubg, **extra)
         except RuntimeError as e:
-            raise SolverError(f"IPOPT failed to run: {e}") from e
-        stats = p.solver.stats()
+            raise SolverError(f"{name} failed to run: {e}") from e
+        stats = {**p.solver.stats(), "solver": name}
         self.multipliers = (
             dict(zip(_row_keys(p), np.asarray(sol["lam_g"]).ravel().tolist(), strict=True)),
             np.asarray(sol["lam_x"]).ravel(),
         )
         status = str(stats.get("return_status", "unknown"))
         if status in {"Invalid_Option", "Invalid_Problem_Definition", "Insufficient_Memory"}:
-            raise SolverError(f"IPOPT could not solve the refinement: {status}")
+            raise SolverError(f"{name} could not solve the refinement: {status}")
         if status == "Maximum_WallTime_Exceeded" or time.perf_counter() >= self.deadline:
             _add(self.timings, "solve", start)
             raise TimeLimitReached
@@ -503,7 +507,7 @@ def solve_refinement(
     max_branches: int = 3,
     time_limit_s: float | None = None,
 ) -> Refinement:
-    """Solve ``problem`` with IPOPT from ``q0`` (or the IK seed), verify, and repair if asked.
+    """Solve ``problem`` with its solver from ``q0`` (or the IK seed), verify, and repair if asked.
 
     When the answer from the seed's IK branch is infeasible (even repaired), the first waypoint's
     other IK branches are chained and tried in turn, up to ``max_branches`` in all.
@@ -523,7 +527,7 @@ def solve_refinement(
             the problem with ``ipopt.max_wall_time`` at most this so one solve cannot overrun it.
 
     Raises:
-        SolverError: IPOPT itself failed (not an infeasibility): the message names its status.
+        SolverError: the solver itself failed (not an infeasibility): the message names its status.
     """
     timings = StageTimes()
     start = StageTimes.clock()
@@ -651,7 +655,7 @@ def solve_refinement(
             tried = f"{1 + len(others)} IK branch(es) tried"
             attempt = replace(attempt, reason=f"{attempt.reason} ({tried})" if others else attempt.reason)
     log.info(
-        "refinement %s after %d IPOPT iterations in %d rounds",
+        "refinement %s after %d solver iterations in %d rounds",
         attempt.status,
         attempt.iterations,
         attempt.outer_iterations,
@@ -741,7 +745,11 @@ def _attempt(
 
     solver_status = str(stats.get("return_status", "unknown"))
     if status == "ok" and not stats.get("success", False):
-        log.warning("IPOPT returned %s but the verified path meets every tolerance", solver_status)
+        log.warning(
+            "%s returned %s but the verified path meets every tolerance",
+            SOLVER_LABELS[problem.solver_name],
+            solver_status,
+        )
     t0, c0 = StageTimes.clock()
     findings: tuple[Finding, ...] = ()
     if status == "repaired":
@@ -871,7 +879,7 @@ def _merge_rows(old: tuple[LinearRow, ...], new: tuple[LinearRow, ...]) -> tuple
 
 
 def _describe(check: PathCheck, stats: dict) -> str:
-    text = f"IPOPT: {stats.get('return_status', 'unknown')}; " + "; ".join(
+    text = f"{stats.get('solver', 'IPOPT')}: {stats.get('return_status', 'unknown')}; " + "; ".join(
         v.describe() for v in check.violations[:10]
     )
     if len(check.violations) > 10:

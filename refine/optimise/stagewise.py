@@ -42,9 +42,6 @@ from refine.errors import InputError
 Array = NDArray[np.float64]
 Index = NDArray[np.int64]
 
-SOLVERS = ("ipopt", "fatrop")
-"""The NLP solvers a refinement can be built for (``[optimise] solver``)."""
-
 MAX_FATROP_WAYPOINTS = 2000
 """The most waypoints a problem may have for fatrop: CasADi's fatrop interface takes time growing
 with the square of the stages to set the problem up (1,600 waypoints: 12 s of the solver's
@@ -181,7 +178,6 @@ class StagewiseSolver:
         *,
         N: int,
         n: int,
-        params: Array,
         orientation_coef: float,
         velocity: float,
         acceleration: float,
@@ -194,12 +190,6 @@ class StagewiseSolver:
         n_rows: int,
         options: dict[str, Any],
     ) -> None:
-        if N > MAX_FATROP_WAYPOINTS:
-            raise InputError(
-                f"[optimise] solver = 'fatrop' takes at most {MAX_FATROP_WAYPOINTS} waypoints, the path has {N}: "
-                "CasADi's fatrop interface needs time growing with the square of the waypoints to set up "
-                "(1,600 waypoints: 12 s); use solver = 'ipopt'"
-            )
         elastic = elastic_weight is not None
         lay = stage_layout(N, n, elastic)
         self.layout, self.rows, self.n_rows = lay, rows, n_rows
@@ -207,8 +197,9 @@ class StagewiseSolver:
         Q = ca.reshape(z[lay.q_index.ravel().tolist()], n, N)
         D = ca.reshape(z[lay.d_index[:-1].ravel().tolist()], n, N - 1)
         DP = ca.reshape(z[lay.dp_index[1:].ravel().tolist()], n, N - 1)  # d_{k-1} held by stage k
-        P_ref = ca.DM(params[: 3 * N].reshape(N, 3).T)
-        R_demo = ca.DM(params[3 * N :].reshape(N, 9).T)
+        pp = ca.MX.sym("p", 12 * N)
+        P_ref = ca.reshape(pp[: 3 * N], 3, N)
+        R_demo = ca.reshape(pp[3 * N :], 9, N)
         G, cost = waypoint.map(N)(Q, P_ref, R_demo)
         if elastic:
             G = ca.vertcat(G[:3, :], G[3, :] + z[lay.sigma_index.tolist()].T)
@@ -253,7 +244,7 @@ class StagewiseSolver:
         self.solver = ca.nlpsol(
             "refine_fatrop",
             "fatrop",
-            {"x": z, "f": f, "g": ca.vertcat(*g_parts)},
+            {"x": z, "p": pp, "f": f, "g": ca.vertcat(*g_parts)},
             {
                 "structure_detection": "manual",
                 "N": N - 1,
@@ -269,11 +260,11 @@ class StagewiseSolver:
         self.step_vars = np.array([lay.d_index[k, j] for _, k, j in rows.steps], dtype=np.int64)
         self.options = fatrop
 
-    def __call__(self, *, x0, lbx, ubx, lbg, ubg, p=None, lam_g0=None, lam_x0=None) -> dict[str, Array]:
+    def __call__(self, *, x0, p, lbx, ubx, lbg, ubg, lam_g0=None, lam_x0=None) -> dict[str, Array]:
         """Solve from ``x0`` with the refinement's bounds; the answer in the refinement's variables.
 
-        The parameters ``p`` are the ones the solver was built with (the stage-wise problem holds
-        them as constants) and the multipliers' start is fatrop's own.
+        ``p`` holds the CAD points and demonstrated rotations, as the refinement's parameters; the
+        multipliers' start is fatrop's own.
         """
         lay = self.layout
         std = lay.standard()
@@ -286,7 +277,7 @@ class StagewiseSolver:
         lbz, ubz = _inset(lbz, ubz)
         lbs, ubs = _inset(lbs, ubs)
         z0 = np.clip(lay.pack(x0), lbz, ubz)
-        sol = self.solver(x0=z0, lbx=lbz, ubx=ubz, lbg=lbs, ubg=ubs)
+        sol = self.solver(x0=z0, p=p, lbx=lbz, ubx=ubz, lbg=lbs, ubg=ubs)
         z = np.asarray(sol["x"]).ravel()
         lam_z = np.asarray(sol["lam_x"]).ravel()
         lam_s = np.asarray(sol["lam_g"]).ravel()
@@ -303,9 +294,19 @@ class StagewiseSolver:
         stats = dict(self.solver.stats())
         flag = stats.get("fatrop", {}).get("return_flag", stats.get("return_status"))
         success = bool(stats.get("success", False))
-        stats["return_status"] = "fatrop: solved" if success else f"fatrop: not solved (return flag {flag})"
+        stats["return_status"] = "solved" if success else f"not solved (return flag {flag})"
         stats["iter_count"] = int(stats.get("iter_count", 0))
         return stats
+
+
+def check_size(N: int) -> None:
+    """Refuse a path too long for fatrop (:data:`MAX_FATROP_WAYPOINTS`)."""
+    if N > MAX_FATROP_WAYPOINTS:
+        raise InputError(
+            f"[optimise] solver = 'fatrop' takes at most {MAX_FATROP_WAYPOINTS} waypoints, the path has {N}: "
+            "CasADi's fatrop interface needs time growing with the square of the waypoints to set up "
+            "(1,600 waypoints: 12 s); use solver = 'ipopt'"
+        )
 
 
 def _inset(lower: Array, upper: Array) -> tuple[Array, Array]:
@@ -323,13 +324,6 @@ def _inset(lower: Array, upper: Array) -> tuple[Array, Array]:
 def fatrop_options(options: dict[str, Any]) -> dict[str, Any]:
     """The fatrop settings among ``options`` (``"fatrop.NAME"`` keys, prefix removed)."""
     return {k[len(FATROP_PREFIX) :]: v for k, v in options.items() if k.startswith(FATROP_PREFIX)}
-
-
-def check_solver(name: str) -> str:
-    """``name`` if it is a known solver, else an :class:`InputError` listing them."""
-    if name not in SOLVERS:
-        raise InputError(f"[optimise] solver must be one of {', '.join(map(repr, SOLVERS))}, got {name!r}")
-    return name
 
 
 def stage_rows(

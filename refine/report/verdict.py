@@ -162,7 +162,7 @@ def verdict_html(result: RunResult, doc: dict[str, Any]) -> str:
         )
     details = (
         f"<details><summary>Solver details</summary><p>{html.escape(doc['reason'])}</p>"
-        f"<p>IPOPT status {html.escape(str(doc['solver']['status']))}, {doc['solver']['iterations']} iterations</p>"
+        f"<p>{html.escape(str(doc['solver']['name']))} status {html.escape(str(doc['solver']['status']))}, {doc['solver']['iterations']} iterations</p>"
         "</details>"
         if doc["reason"]
         else ""
