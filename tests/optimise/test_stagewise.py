@@ -151,3 +151,37 @@ def test_an_unknown_solver_and_too_long_a_path_are_refused():
         OptimiseSettings(solver="snopt")
     with pytest.raises(InputError, match=f"at most {MAX_FATROP_WAYPOINTS} waypoints, the path has 2001"):
         _build(_generated("irb4600", MAX_FATROP_WAYPOINTS + 1), "fatrop")
+
+
+def test_a_path_refined_with_fatrop_says_so_and_matches_ipopts(tmp_path):
+    import json
+
+    import refine
+
+    N = 41
+    positions = np.column_stack([np.full(N, 0.6), np.linspace(-0.2, 0.2, N), np.full(N, 0.3)])  # [m]
+    down = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])
+    orientations = np.array([down @ _about_y(a) for a in np.radians(np.linspace(-10.0, 10.0, N))])
+    results = {
+        solver: refine.refine_path(
+            "ur10e",
+            positions,
+            orientations,
+            speeds=0.1,
+            tcp_in_flange=np.eye(4),
+            optimise=OptimiseSettings(solver=solver),
+        )
+        for solver in ("ipopt", "fatrop")
+    }
+    assert results["ipopt"].status == results["fatrop"].status == "ok"
+    np.testing.assert_allclose(results["fatrop"].joints, results["ipopt"].joints, atol=1e-6)
+    results["fatrop"].write(tmp_path, programs=(), report=True)
+    doc = json.loads((tmp_path / "result.json").read_text())
+    assert doc["solver"]["name"] == "fatrop"
+    assert doc["solver"]["status"] == "solved"
+
+
+def _about_y(angle: float) -> np.ndarray:
+    """The rotation by ``angle`` [rad] about y."""
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
