@@ -7,7 +7,7 @@ The pipeline (one module per stage, see ``docs/design.md``)::
     fuse   align the demonstration to the CAD path
     frames SE(3) helpers and every orientation convention
     robot  robot models (Pinocchio) and the registry of robots/
-    optimise/  the joint-path NLP (CasADi + IPOPT)
+    optimise/  the joint-path NLP (CasADi; IPOPT, or fatrop stage by stage)
     timing TOPPRA time parameterisation
     export/    PathML, robot programs, trajectory CSV, result JSON
 

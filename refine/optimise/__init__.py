@@ -1,1 +1,1 @@
-"""The joint-path NLP: symbolic kinematics, constraints and the IPOPT solve (CasADi)."""
+"""The joint-path NLP: symbolic kinematics, constraints and the solve (CasADi; IPOPT, or fatrop)."""

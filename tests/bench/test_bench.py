@@ -193,3 +193,21 @@ def test_drake_chains_its_ik_on_a_plant_made_once_per_problem(suites_file):
         assert verify(problem, answer.q).verified
         assert answer.times_s["build"] > 0 and answer.times_s["solve"] > 0 and answer.times_s["seed"] == 0
     np.testing.assert_allclose(first.q, second.q, atol=1e-9)
+
+
+def test_the_fatrop_contender_is_verified_as_the_others_and_refuses_long_paths(suites_file):
+    from refine.optimise.stagewise import MAX_FATROP_WAYPOINTS
+
+    data = load_suites(suites_file)
+    problem = generated_problem("tiny", "wave", data["generated"]["wave"], 30)
+    answer = contenders_module.refine_fatrop(problem)
+    assert answer.status == "ok" and answer.iterations > 0 and answer.cpu_s > 0
+    assert verify(problem, answer.q).verified
+    reference = contenders_module.refine_assembled(problem)
+    np.testing.assert_allclose(answer.q, reference.q, atol=1e-6)
+    long = generated_problem("tiny", "wave", data["generated"]["wave"], MAX_FATROP_WAYPOINTS + 1)
+    refused = contenders_module.refine_fatrop(long)
+    assert refused.status == "failed" and refused.q is None
+    assert (
+        f"at most {MAX_FATROP_WAYPOINTS} waypoints, the path has {MAX_FATROP_WAYPOINTS + 1}" in refused.note
+    )
