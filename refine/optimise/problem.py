@@ -38,7 +38,7 @@ from refine.optimise.derivatives import (
     waypoint_kernels,
 )
 from refine.optimise.kinematics import fk_function, jacobian_function
-from refine.optimise.stagewise import StagewiseSolver, check_size, fatrop_options, stage_rows
+from refine.optimise.stagewise import FATROP_PREFIX, StagewiseSolver, check_size, fatrop_options, stage_rows
 from refine.optimise.threads import limit_solver_threads
 from refine.paths import FusedPath
 from refine.problem import Tolerances
@@ -476,7 +476,8 @@ def build_refinement(
         )
     else:
         options = {**IPOPT_DEFAULTS, **(solver_options or {})}
-        built = ca.nlpsol("refine", "ipopt", nlp, {**derivatives, **options})
+        ipopt = {k: v for k, v in options.items() if not k.startswith(FATROP_PREFIX)}
+        built = ca.nlpsol("refine", "ipopt", nlp, {**derivatives, **ipopt})
     return RefinementNLP(
         nlp=nlp,
         solver=built,

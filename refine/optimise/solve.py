@@ -60,6 +60,10 @@ WARM_MU_INIT = 1e-4
 """IPOPT's initial barrier parameter when a round starts from the last round's answer and
 multipliers (its default, 0.1, pushes a warm start off the constraints it had found active)."""
 
+FATROP_REPAIR_MU_INIT = 1e-6
+"""fatrop's initial barrier parameter in a round after the first and in the repair (see
+:data:`refine.optimise.stagewise.FATROP_DEFAULTS`)."""
+
 SOLVER_LABELS = {"ipopt": "IPOPT", "fatrop": "fatrop"}
 """How messages name each solver of :data:`refine.settings.SOLVERS`."""
 
@@ -369,11 +373,11 @@ class TimeLimitReached(Exception):
     """The refinement's wall-time budget ran out before a verdict (internal to this module)."""
 
 
-WARM_START_OPTIONS = {"ipopt.mu_init": WARM_MU_INIT}
-"""IPOPT options of a round that starts from the last round's answer and multipliers."""
+WARM_START_OPTIONS = {"ipopt.mu_init": WARM_MU_INIT, "fatrop.mu_init": FATROP_REPAIR_MU_INIT}
+"""Solver options of a round that starts from the last round's answer (and, for IPOPT, multipliers)."""
 
-ELASTIC_OPTIONS = {"ipopt.mu_strategy": "monotone"}
-"""IPOPT options of the elastic (repair) problem. Its start is far from the answer (the seed needs
+ELASTIC_OPTIONS = {"ipopt.mu_strategy": "monotone", "fatrop.mu_init": FATROP_REPAIR_MU_INIT}
+"""Solver options of the elastic (repair) problem (IPOPT's reasons below). Its start is far from the answer (the seed needs
 several degrees more slack than the repair) and near the stretched elbow or a wrist singularity;
 the adaptive barrier strategy drops the barrier to 1e-6 within ten iterations there and then crawls
 (300 iterations without convergence on 2 of 20 noisy copies of ``reach_tilt``), while Fiacco-McCormick's
