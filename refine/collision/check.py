@@ -350,11 +350,12 @@ def margins_proved(model: CollisionModel, q_path: ArrayLike, *, tolerance_m: flo
     """True when the motion bound proves that the joint path keeps every pair's margin.
 
     The certification of :func:`check_path_clearance` (``method="bound"``) without its figures:
-    the least-distance and least-clearance pairs are not looked up at every waypoint, so a path that
-    is clear costs only the FCL queries of the pairs whose bounds fall short. True implies that the
-    check finds every margin kept (``ok``): it certifies every segment with the same bounds and
-    distances, and a certified segment's ends keep their margins. False (a margin broken, a segment
-    needing dense sampling, or a path of one waypoint) decides nothing: run the check.
+    the least-distance and least-clearance pairs are not looked up at every waypoint, and a pair
+    whose box bounds fall short is first bounded by the gap along its last witness normal, so a
+    clear path costs few FCL queries. True implies that the check finds every margin kept (``ok``):
+    a segment certified from lower bounds on the distances is certified from the distances
+    themselves, and a certified segment's ends keep their margins. False (a margin broken, a
+    segment needing dense sampling, or a path of one waypoint) decides nothing: run the check.
 
     Args:
         model: the collision model (robot, tool, cell, margins).
@@ -368,7 +369,7 @@ def margins_proved(model: CollisionModel, q_path: ArrayLike, *, tolerance_m: flo
         )
     if len(q_path) < 2:
         return False
-    poses, _, bounds, exact = _waypoint_bounds(model, q_path, tolerance_m, True)
+    poses, _, bounds, exact = _waypoint_bounds(model, q_path, tolerance_m, True, plane=True)
     found_by_segment: list[list[_Sample] | None] = [None] * (len(q_path) - 1)
     inner: list[list[_Sample]] = [[] for _ in found_by_segment]
     _advance_pairs(model, q_path, poses, bounds, exact, inner, found_by_segment, tolerance_m)
@@ -381,12 +382,15 @@ def _waypoint_bounds(
     tolerance_m: float,
     by_bound: bool,
     at_waypoint: Callable[[Array, Array, Array], None] | None = None,
+    *,
+    plane: bool = False,
 ) -> tuple[Array, Array, Array, NDArray[np.bool_]]:
     """The moving bodies' poses and each pair's distance bounds at every waypoint.
 
     With ``by_bound``, the pairs whose box bounds do not certify a segment next to a waypoint are
-    bounded better there (:meth:`CollisionModel.pair_bound`). ``at_waypoint(q, poses, boxes)``
-    runs at each waypoint with the model placed there; the pairs it measures improve the bounds.
+    bounded better there (:meth:`CollisionModel.pair_bound`, with ``plane`` the gap along the last
+    witness normal before an FCL query). ``at_waypoint(q, poses, boxes)`` runs at each waypoint
+    with the model placed there; the pairs it measures improve the bounds.
 
     Returns:
         poses (N, M, 4, 4), box bounds (N, P) [m], the better bounds (N, P) [m], and which of
@@ -403,7 +407,7 @@ def _waypoint_bounds(
         need[1:] |= short
     for k, q in enumerate(q_path):
         for p in np.flatnonzero(need[k]):
-            bounds[k, p], exact[k, p] = model.pair_bound(q, int(p), poses[k])
+            bounds[k, p], exact[k, p] = model.pair_bound(q, int(p), poses[k], plane=plane)
         if at_waypoint is not None:
             at_waypoint(q, poses[k], boxes[k])
             for p, d in model.measured().items():

@@ -285,16 +285,21 @@ class CollisionModel:
             self._motion = pair_reach(self._model, pairs)
         return self._motion
 
-    def pair_bound(self, q: ArrayLike, k: int, poses: Array | None = None) -> tuple[float, bool]:
+    def pair_bound(
+        self, q: ArrayLike, k: int, poses: Array | None = None, *, plane: bool = False
+    ) -> tuple[float, bool]:
         """A lower bound [m] on pair k's signed distance at joints q, and whether it is the distance.
 
         A pair against a cell mesh is first bounded by the distance to the mesh's convex hull (a
-        fraction of the cost of the mesh query); any other pair, or a body that may touch the
-        hull, is measured.
+        fraction of the cost of the mesh query); with ``plane``, a pair of primitives by the gap
+        along the last witness normal it had (no FCL call). Any other pair, or one whose bound is
+        not positive, is measured.
         """
         self._update(q, poses)
-        if k not in self._exact and self._hulled[k]:
-            bound = self._hull_bound(k)
+        if k not in self._exact:
+            bound = self._hull_bound(k) if self._hulled[k] else -math.inf
+            if bound <= 0.0 and plane:
+                bound = self._plane_bound(k)
             if bound > 0.0:
                 return bound, False
         return self._pair(k).distance_m, True
