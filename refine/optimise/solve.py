@@ -142,7 +142,8 @@ class Refinement:
         q_seed: the IK seed the solver started from [rad], shape (N, n).
         check: the numeric verification of ``q``.
         solver_status: the solver's return status (of the last solve).
-        iterations: the solver's iterations, summed over all solves.
+        iterations: the solver's iterations, summed over all solves (with a redundant arm's coarse
+            seed's, :func:`coarse_seed`).
         outer_iterations: solve -> verify rounds.
         active: the constraints added by the outer loop in the last round.
         slack_deg: extra orientation slack used per waypoint [deg], (N,) (zeros unless repaired).
@@ -225,8 +226,11 @@ COARSE_SEED_STRIDE = 40
 answer (LBR iiwa, 6,400 waypoints: 40 coarse waypoints, 164 apart, 175 iterations; 160, 40 apart, 21)."""
 
 
-def coarse_seed(problem: RefinementNLP, q_seed: Array) -> Array | None:
-    """A redundant arm's seed from the refinement of a coarse copy of the path; None where there is none.
+def coarse_seed(problem: RefinementNLP, q_seed: Array) -> tuple[Array | None, int]:
+    """A redundant arm's seed from the refinement of a coarse copy of the path, and the iterations it took.
+
+    Returns the seed (N, n) [rad], None where there is none, and the solver iterations spent on the
+    coarse copy (0 when none was solved), which count in the refinement's iterations.
 
     The chained IK leaves a redundant arm's elbow where the mid-range pull puts it, waypoint by
     waypoint, while the refined path puts it where the whole path's joint motion is least: IPOPT
@@ -243,7 +247,7 @@ def coarse_seed(problem: RefinementNLP, q_seed: Array) -> Array | None:
 
     N = problem.n_waypoints
     if problem.dof <= 6 or N < COARSE_SEED_MIN_PATH:
-        return None
+        return None, 0
     count = max(COARSE_SEED_WAYPOINTS, N // COARSE_SEED_STRIDE)
     idx = np.unique(np.linspace(0, N - 1, count).round().astype(int))
     f = problem.fused
@@ -261,8 +265,8 @@ def coarse_seed(problem: RefinementNLP, q_seed: Array) -> Array | None:
             len(idx),
             answer.status,
         )
-        return None
-    log.info("coarse seed: %d waypoints refined in %d IPOPT iterations", len(idx), answer.iterations)
+        return None, answer.iterations
+    log.info("coarse seed: %d waypoints refined in %d solver iterations", len(idx), answer.iterations)
     q = np.column_stack([np.interp(f.s, f.s[idx], answer.q[:, j]) for j in range(problem.dof)])
     lower, upper = _bounds(problem)
     q, err = solve_ik_batch(_kin(problem), _targets(problem), q, lower, upper, nullspace_gain=0.0)
@@ -271,8 +275,8 @@ def coarse_seed(problem: RefinementNLP, q_seed: Array) -> Array | None:
             "coarse seed: the projection misses %d poses; the chained IK seed stays",
             int((err >= 10.0 * CONVERGED).sum()),
         )
-        return None
-    return q
+        return None, answer.iterations
+    return q, answer.iterations
 
 
 def _out_of_reach(problem: RefinementNLP, q_seed: Array, home: Array | None) -> list[Violation]:
@@ -595,9 +599,10 @@ def solve_refinement(
             diagnosis=findings,
         )
 
+    coarse_iterations = 0
     if q0 is None and rotations is None and not skip_strict:
         seeding = StageTimes.clock()
-        smooth = coarse_seed(problem, q_seed)
+        smooth, coarse_iterations = coarse_seed(problem, q_seed)
         q_seed = q_seed if smooth is None else smooth
         _add(timings, "seed", seeding)
 
@@ -658,6 +663,7 @@ def solve_refinement(
         else:
             tried = f"{1 + len(others)} IK branch(es) tried"
             attempt = replace(attempt, reason=f"{attempt.reason} ({tried})" if others else attempt.reason)
+    attempt = replace(attempt, iterations=attempt.iterations + coarse_iterations)
     log.info(
         "refinement %s after %d solver iterations in %d rounds",
         attempt.status,

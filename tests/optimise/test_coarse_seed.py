@@ -38,7 +38,8 @@ def _iiwa(n: int, mid_range: float = 0.0):
 def test_the_coarse_seed_reaches_every_pose_and_leads_to_the_same_answer(n, mid_range):
     problem, nlp = _iiwa(n, mid_range)
     chain = initial_guess(nlp, problem.home)
-    seed = coarse_seed(nlp, chain)
+    seed, spent = coarse_seed(nlp, chain)
+    assert spent > 0
     assert seed is not None and seed.shape == chain.shape
     lower, upper = problem.robot.spec.lower, problem.robot.spec.upper
     assert np.all(seed >= lower - 1e-12) and np.all(seed <= upper + 1e-12)
@@ -53,6 +54,10 @@ def test_the_coarse_seed_reaches_every_pose_and_leads_to_the_same_answer(n, mid_
     # the coarse seed starts next to the answer, the chain does not (its elbow is 18-66 deg off)
     assert np.abs(seed - plain.q).max() < np.radians(5.0) < np.abs(chain - plain.q).max()
     assert smooth.iterations < plain.iterations
+    # the refinement seeded this way counts the coarse copy's iterations with its own
+    whole = solve_refinement(nlp, home=problem.home)
+    np.testing.assert_allclose(whole.q, smooth.q, atol=1e-9)
+    assert whole.iterations == spent + smooth.iterations
 
 
 @pytest.mark.parametrize(
@@ -92,7 +97,7 @@ def _coarse_problem(monkeypatch, nlp, chain):
         return SimpleNamespace(status="infeasible", iterations=0)
 
     monkeypatch.setattr(solve_module, "solve_refinement", fake_solve)
-    assert coarse_seed(nlp, chain) is None
+    assert coarse_seed(nlp, chain) == (None, 0)
     ((coarse, q0),) = caught
     assert q0.shape == (coarse.n_waypoints, nlp.dof)
     return coarse
@@ -102,4 +107,4 @@ def _coarse_problem(monkeypatch, nlp, chain):
 def test_no_coarse_seed_for_a_six_axis_arm_or_a_short_path(family, n):
     problem = generated_problem("test", family, load_suites()["generated"][family], n)
     nlp = problem.refinement()
-    assert coarse_seed(nlp, initial_guess(nlp, problem.home)) is None
+    assert coarse_seed(nlp, initial_guess(nlp, problem.home)) == (None, 0)
