@@ -159,11 +159,17 @@ def bundled_problem(suite: str, folder: Path) -> BenchProblem:
 
 
 def generated_problem(suite: str, family: str, spec: dict[str, Any], n: int) -> BenchProblem:
-    """A sine wave of ``n`` waypoints in front of the family's robot, with its boxes if any."""
+    """A sine wave of ``n`` waypoints in front of the family's robot, with its boxes if any.
+
+    The cost weights are the ones ``refine run`` gives the robot: the defaults, with the mid-range
+    cost of :data:`refine.pipeline.REDUNDANT_MID_RANGE_WEIGHT` for an arm of more than six joints.
+    """
     from refine.collision import CollisionModel
     from refine.frames import make_transform
     from refine.optimise.clearance import ClearanceSource
+    from refine.optimise.problem import Weights
     from refine.optimise.seed import TcpKinematics
+    from refine.pipeline import REDUNDANT_MID_RANGE_WEIGHT
     from refine.robot import load_robot
     from refine.settings import CollisionSettings, Shape
     from refine.synthetic import wave_path
@@ -208,6 +214,7 @@ def generated_problem(suite: str, family: str, spec: dict[str, Any], n: int) -> 
         axisymmetric=False,
         sources=sources,
         repair_max_slack_deg=None,
+        weights=Weights(mid_range=REDUNDANT_MID_RANGE_WEIGHT if robot.nq > 6 else 0.0),
         extra={"family": family, "length_m": float(spec.get("length_m", 1.0)), "obstacles": bool(boxes)},
     )
 

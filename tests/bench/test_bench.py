@@ -211,3 +211,12 @@ def test_the_fatrop_contender_is_verified_as_the_others_and_refuses_long_paths(s
     assert (
         f"at most {MAX_FATROP_WAYPOINTS} waypoints, the path has {MAX_FATROP_WAYPOINTS + 1}" in refused.note
     )
+
+
+def test_generated_problems_carry_the_weights_refine_run_gives_their_robot(suites_file):
+    from refine.optimise.problem import Weights
+
+    data = load_suites()
+    # refine run: no mid-range cost for a six-axis arm, 2.0 for the seven-axis LBR iiwa (problem-file.md)
+    assert generated_problem("t", "irb4600", data["generated"]["irb4600"], 20).weights == Weights()
+    assert generated_problem("t", "iiwa", data["generated"]["iiwa"], 20).weights == Weights(mid_range=2.0)

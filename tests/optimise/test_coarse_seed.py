@@ -25,8 +25,7 @@ from refine.pipeline import REDUNDANT_MID_RANGE_WEIGHT
 @functools.cache
 def _iiwa(n: int, mid_range: float = 0.0):
     problem = generated_problem("test", "iiwa", load_suites()["generated"]["iiwa"], n)
-    if mid_range:
-        problem = replace(problem, weights=Weights(mid_range=mid_range))
+    problem = replace(problem, weights=Weights(mid_range=mid_range))  # the generated family has 2.0
     return problem, problem.refinement()
 
 
