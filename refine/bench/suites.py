@@ -76,10 +76,12 @@ class BenchProblem:
         """Number of waypoints."""
         return len(self.fused)
 
-    def refinement(self, derivative_mode: str = "assembled", solver: str = "ipopt") -> Any:
+    def refinement(self, derivative_mode: str = "assembled", solver: str = "ipopt", **options: Any) -> Any:
         """The refinement NLP of this problem, built as the pipeline builds it, for ``solver``.
 
         No joint-step rows at first: the solve adds those near their bound, as in ``refine run``.
+        ``options``: other arguments of :func:`refine.optimise.problem.build_refinement` (an active
+        set, ``joint_steps``, ``elastic_deg``, ...), which replace the pipeline's.
         """
         from refine.optimise.problem import build_refinement
 
@@ -92,8 +94,8 @@ class BenchProblem:
             axisymmetric=self.axisymmetric,
             weights=self.weights,
             derivative_mode=derivative_mode,
-            joint_steps=(),
             solver=solver,
+            **{"joint_steps": (), **options},
         )
 
 

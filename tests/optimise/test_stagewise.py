@@ -18,7 +18,7 @@ import pytest
 
 from refine.bench.suites import generated_problem, load_suites, problems
 from refine.errors import InputError
-from refine.optimise.problem import ActiveSet, LinearRow, build_refinement
+from refine.optimise.problem import ActiveSet, LinearRow
 from refine.optimise.solve import solve_refinement
 from refine.optimise.stagewise import MAX_FATROP_WAYPOINTS, _inset, stage_layout
 from refine.settings import OptimiseSettings
@@ -29,18 +29,9 @@ def _generated(family: str, n: int):
     return generated_problem("test", family, load_suites()["generated"][family], n)
 
 
-def _build(problem, solver: str, **kwargs):
-    return build_refinement(
-        problem.robot,
-        problem.fused,
-        problem.base_in_world,
-        problem.tcp_in_flange,
-        problem.tolerances,
-        axisymmetric=problem.axisymmetric,
-        weights=problem.weights,
-        solver=solver,
-        **kwargs,
-    )
+def _build(problem, solver: str, **options):
+    """The refinement of a bench problem for ``solver``, with every joint-step row unless told."""
+    return problem.refinement(solver=solver, **{"joint_steps": "all", **options})
 
 
 def test_the_layout_puts_each_variable_where_the_stages_hold_it():
