@@ -239,3 +239,31 @@ def test_bad_inputs_are_named(irb4600, make_model, table_cell):
         model.point_jacobian(np.zeros(6), "link_9", np.zeros(3))
     with pytest.raises(InputError, match="not found"):
         make_model(irb4600, (Shape("part", "mesh", file="/nonexistent/part.stl"),))
+
+
+def test_the_gap_along_a_witness_normal_bounds_the_distance_and_meets_it_where_it_was_taken(
+    irb4600, nozzle, make_model
+):
+    """For convex bodies the gap along any direction is at most their distance, and along the
+    witness normal of a query it is the distance (the separating plane theorem). FCL's distance is
+    the reference, at the query's configuration and after a small move of every joint."""
+    model = make_model(irb4600, tool=(nozzle,))
+    bounded = [k for k in range(len(model.pairs)) if model._bounded[k]]
+    assert bounded
+    rng = np.random.default_rng(5)
+    tight = moved = 0
+    for _ in range(8):
+        q = _random_q(irb4600, rng, 0.4)
+        for k in bounded[:: max(1, len(bounded) // 12)]:
+            d = model.pair_distance(q, k)
+            if d <= 1e-3:
+                continue
+            here = model._plane_bound(k)
+            assert d - 2e-5 <= here <= d + 1e-9, (model.pairs[k], d, here)  # GJK stops within ~1e-6
+            tight += 1
+            q2 = q + rng.normal(0.0, np.radians(2.0), q.shape)
+            bound, _ = model.pair_bound(q2, k, plane=True)
+            assert bound <= model.pair_distance(q2, k) + 1e-9, model.pairs[k]
+            model.pair_distance(q, k)  # back to the first configuration for the next pair
+            moved += 1
+    assert tight >= 20 and moved >= 20
