@@ -60,6 +60,10 @@ def _refine(problem: BenchProblem, mode: str, solver: str = "ipopt") -> Answer:
             None,
             note=f"not run: fatrop takes at most {MAX_FATROP_WAYPOINTS} waypoints, the path has {problem.n_waypoints}",
         )
+    for source in problem.sources:  # no dense check kept from an earlier run of the same problem
+        forget = getattr(source, "forget", None)
+        if forget is not None:
+            forget()
     w0, c0 = time.perf_counter(), time.process_time()
     nlp = problem.refinement(mode, solver)
     build = time.perf_counter() - w0

@@ -78,6 +78,11 @@ class ClearanceSource:
         )
         return cls(model, TcpKinematics(robot, base, tcp), problem.collision.check_step_m)
 
+    def forget(self) -> None:
+        """Drop the dense checks kept for reuse, so the next refinement starts as a fresh run's would."""
+        self._recent.clear()
+        self.last = None
+
     # ---- the ConstraintSource protocol ------------------------------------------------------
 
     def clearance(self, q: Array) -> PathClearance:

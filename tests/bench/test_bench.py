@@ -220,3 +220,24 @@ def test_generated_problems_carry_the_weights_refine_run_gives_their_robot(suite
     # refine run: no mid-range cost for a six-axis arm, 2.0 for the seven-axis LBR iiwa (problem-file.md)
     assert generated_problem("t", "irb4600", data["generated"]["irb4600"], 20).weights == Weights()
     assert generated_problem("t", "iiwa", data["generated"]["iiwa"], 20).weights == Weights(mid_range=2.0)
+
+
+def test_each_refine_run_pays_for_its_own_clearance_checks(suites_file, monkeypatch):
+    """A repeated run of the same problem reuses no dense check of an earlier one (as a fresh
+    ``refine run`` could not), so every timed run does the same work."""
+    import refine.optimise.clearance as clearance_module
+
+    data = load_suites()
+    problem = generated_problem("t", "irb4600_obstacles", data["generated"]["irb4600_obstacles"], 40)
+    assert problem.sources
+    calls = []
+    real = clearance_module.check_path_clearance
+    monkeypatch.setattr(
+        clearance_module, "check_path_clearance", lambda *a, **k: calls.append(1) or real(*a, **k)
+    )
+    counts = []
+    for _ in range(3):
+        before = len(calls)
+        assert contenders_module.refine_assembled(problem).status == "ok"
+        counts.append(len(calls) - before)
+    assert counts[0] > 0 and counts == [counts[0]] * 3
