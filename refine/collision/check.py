@@ -405,6 +405,9 @@ def _waypoint_bounds(
         short = _short(bounds - model.pair_margins + tolerance_m, _pair_motion(model, q_path))
         need[:-1] |= short
         need[1:] |= short
+    if plane and at_waypoint is None:
+        _plane_bounds(model, q_path, poses, need, bounds, exact)
+        return poses, boxes, bounds, exact
     for k, q in enumerate(q_path):
         for p in np.flatnonzero(need[k]):
             bounds[k, p], exact[k, p] = model.pair_bound(q, int(p), poses[k], plane=plane)
@@ -413,6 +416,39 @@ def _waypoint_bounds(
             for p, d in model.measured().items():
                 bounds[k, p], exact[k, p] = d, True
     return poses, boxes, bounds, exact
+
+
+def _plane_bounds(
+    model: CollisionModel,
+    q_path: Array,
+    poses: Array,
+    need: NDArray[np.bool_],
+    bounds: Array,
+    exact: NDArray[np.bool_],
+) -> None:
+    """Bound the pairs ``need`` (N, P) marks, pair by pair along the path, into ``bounds`` and ``exact``.
+
+    What :meth:`CollisionModel.pair_bound` with ``plane`` gives waypoint by waypoint, with the gaps
+    along a pair's last witness normal taken at all its waypoints at once
+    (:meth:`CollisionModel.plane_bounds`): up to the first waypoint where the gap is not positive,
+    which is then measured (and gives the next normal). A pair without a normal yet, or with a mesh,
+    is bounded one waypoint at a time.
+    """
+    for p in np.flatnonzero(need.any(axis=0)):
+        p = int(p)
+        ks = np.flatnonzero(need[:, p])
+        i = 0
+        while i < len(ks):
+            gaps = model.plane_bounds(p, poses[ks[i:]])
+            if gaps is not None:
+                short = np.flatnonzero(gaps <= 0.0)
+                stop = int(short[0]) if short.size else len(gaps)
+                bounds[ks[i : i + stop], p] = gaps[:stop]
+                i += stop
+            if i < len(ks):
+                k = ks[i]
+                bounds[k, p], exact[k, p] = model.pair_bound(q_path[k], p, poses[k], plane=True)
+                i += 1
 
 
 def _advance_pairs(

@@ -138,6 +138,22 @@ class Body:
             return base + hx * abs(ux) + hy * abs(uy) + hz * abs(uz)
         return base + dims[1] * abs(uz) + dims[0] * math.hypot(ux, uy)
 
+    def reach_many(self, Ts: Array, direction: Array) -> Array:
+        """:meth:`reach` at every pose of ``Ts`` (K, 4, 4) for one ``direction`` (3,), (K,) [m]."""
+        d = np.asarray(direction, dtype=float)
+        base = Ts[:, :3, 3] @ d
+        local = np.einsum("kij,i->kj", Ts[:, :3, :3], d)  # the direction in each pose's shape frame
+        if self.vertices is not None:
+            return base + (local @ self.vertices.T).max(axis=1)
+        tag, *dims = self.kind_params
+        if tag == "convex":
+            return base + (local @ dims[0].T).max(axis=1)
+        if tag == "sphere":
+            return base + dims[0] * float(np.linalg.norm(d))
+        if tag == "box":
+            return base + np.abs(local) @ dims[0]
+        return base + dims[1] * np.abs(local[:, 2]) + dims[0] * np.hypot(local[:, 0], local[:, 1])
+
     def support(self, T: Array, direction: Array) -> Array:
         """The point of the body placed at T (4, 4) furthest along ``direction`` (3,), world [m]."""
         R, c = T[:3, :3], T[:3, 3]

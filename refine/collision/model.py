@@ -350,6 +350,21 @@ class CollisionModel:
         a, b = int(self._pa[k]), int(self._pb[k])
         return -self.bodies[a].reach(self._poses[a], -n) - self.bodies[b].reach(self._poses[b], n)
 
+    def plane_bounds(self, k: int, poses: Array) -> Array | None:
+        """Lower bounds [m] on pair k's distance at rows of moving-body poses (K, M, 4, 4), (K,).
+
+        The gap along the pair's last witness normal (:meth:`_plane_bound`) at every row at once;
+        None for a pair with a mesh or one never measured.
+        """
+        n = self._normals[k]
+        if not self._bounded[k] or np.isnan(n[0]):
+            return None
+        a, b = int(self._pa[k]), int(self._pb[k])
+        m = self._n_moving
+        Ta = poses[:, a] if a < m else np.broadcast_to(self._poses[a], (len(poses), 4, 4))
+        Tb = poses[:, b] if b < m else np.broadcast_to(self._poses[b], (len(poses), 4, 4))
+        return -self.bodies[a].reach_many(Ta, -n) - self.bodies[b].reach_many(Tb, n)
+
     def _hull_bound(self, k: int) -> float:
         a, b = int(self._pa[k]), int(self._pb[k])
         self._ensure_placed(a)

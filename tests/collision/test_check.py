@@ -12,6 +12,7 @@ from refine.collision import check_path_clearance, joint_reach, margins_proved
 from refine.errors import InputError
 from refine.frames import make_transform
 from refine.optimise.seed import TcpKinematics
+from refine.robot import load_robot
 from refine.settings import Shape
 
 PILLAR = Shape("pillar", "box", pose=make_transform(p=[1.0, 0.0, 1.0]), size_m=(0.2, 0.2, 2.0))
@@ -243,3 +244,65 @@ def test_a_path_the_proof_alone_passes_keeps_its_margins_at_every_sample(irb4600
                 qt = ends[0] + t * (ends[1] - ends[0])
                 assert min(model.pair_distance(qt, k) for k in pairs) >= 0.01 - 1e-4, (offset, t)
     assert any(verdicts) and not all(verdicts)
+
+
+@pytest.mark.parametrize("links", ["primitives", "convex pieces"])
+def test_the_proofs_bounds_are_those_waypoint_by_waypoint_and_below_every_distance(
+    links, irb4600, nozzle, make_model
+):
+    """The proof bounds the short pairs pair by pair along the path, the gaps along a normal taken
+    at many waypoints at once. Reference: a fresh model bounding the same pairs waypoint by
+    waypoint with ``pair_bound``, as the dense check does, and FCL's distance of every pair."""
+    from refine.collision import check as check_module
+
+    sphere = Shape("ball", "sphere", pose=make_transform(p=[1.05, -0.3, 1.1]), radius_m=0.08)
+    cell = (PILLAR, sphere)
+    rng = np.random.default_rng(11)
+    q = np.radians([-80.0, 5.0, 10.0, 0.0, 40.0, 0.0]) + np.linspace(0.0, 1.0, 40)[:, None] * np.radians(
+        [70.0, 10.0, -5.0, 30.0, 20.0, 90.0]
+    )
+    q += rng.normal(0.0, np.radians(0.3), q.shape)
+    robot = irb4600 if links == "primitives" else load_robot("abb_irb4600_60_205")
+    model = make_model(robot, cell, (nozzle,))
+    poses, boxes, bounds, exact = check_module._waypoint_bounds(model, q, 1e-4, True, plane=True)
+    reference = make_model(robot, cell, (nozzle,))
+    motion = check_module._pair_motion(reference, q)
+    short = check_module._short(boxes - reference.pair_margins + 1e-4, motion)
+    need = np.zeros(boxes.shape, dtype=bool)
+    need[:-1] |= short
+    need[1:] |= short
+    assert need.sum() > 50  # the path passes close enough for many pairs to need more than boxes
+    expected, expected_exact = boxes.copy(), np.zeros(boxes.shape, dtype=bool)
+    for k in range(len(q)):
+        for p in np.flatnonzero(need[k]):
+            expected[k, p], expected_exact[k, p] = reference.pair_bound(q[k], int(p), poses[k], plane=True)
+    np.testing.assert_array_equal(exact, expected_exact)
+    np.testing.assert_allclose(bounds, expected, rtol=0.0, atol=1e-12)
+    truth = np.array([[reference.pair_distance(qk, p) for p in range(len(reference.pairs))] for qk in q])
+    assert np.all(bounds <= truth + 1e-9)
+    np.testing.assert_allclose(bounds[exact], truth[exact], atol=1e-12)
+
+
+@pytest.mark.parametrize("kind", ["box", "sphere", "cylinder", "convex"])
+def test_a_bodys_reach_at_many_poses_is_its_support_point_along_the_direction(
+    kind, irb4600, nozzle, make_model
+):
+    box = Shape("b", "box", pose=make_transform(p=[1.0, 0.0, 0.5]), size_m=(0.2, 0.1, 0.4))
+    ball = Shape("s", "sphere", pose=make_transform(p=[1.0, 0.0, 0.5]), radius_m=0.07)
+    robot = load_robot("abb_irb4600_60_205") if kind == "convex" else irb4600  # links: convex pieces
+    model = make_model(robot, (box, ball), (nozzle,))
+    body = next(b for b in model.bodies if b.kind_params[0] == kind)
+    rng = np.random.default_rng(2)
+    from scipy.spatial.transform import Rotation
+
+    turns = Rotation.random(25, random_state=3).as_matrix()
+    Ts = np.array([make_transform(R, rng.normal(size=3)) for R in turns])
+    direction = rng.normal(size=3)
+    direction /= np.linalg.norm(direction)
+    got = body.reach_many(Ts, direction)
+    if kind == "convex":  # the corners placed in the world: the support is the furthest of them
+        corners = body.kind_params[1]
+        expected = [max(direction @ (T[:3, :3] @ c + T[:3, 3]) for c in corners) for T in Ts]
+    else:
+        expected = [direction @ body.support(T, direction) for T in Ts]
+    np.testing.assert_allclose(got, expected, atol=1e-12)
