@@ -64,6 +64,16 @@ FATROP_REPAIR_MU_INIT = 1e-6
 """fatrop's initial barrier parameter in a round after the first and in the repair (see
 :data:`refine.optimise.stagewise.FATROP_DEFAULTS`)."""
 
+FATROP_FAILED = "not solved (return flag"
+"""How fatrop's status begins when it stopped without converging (:mod:`refine.optimise.stagewise`)."""
+
+FATROP_HINT = (
+    "fatrop stopped without converging in at least one solve, so this verdict may be the solver's, not "
+    "the problem's: fatrop has no restoration phase and can fail from a start that breaks a row, "
+    "where IPOPT succeeds; run again with [optimise] solver = 'ipopt'"
+)
+"""Appended to the reason of an infeasible refinement in which fatrop failed to converge."""
+
 SOLVER_LABELS = {"ipopt": "IPOPT", "fatrop": "fatrop"}
 """How messages name each solver of :data:`refine.settings.SOLVERS`."""
 
@@ -664,6 +674,12 @@ def solve_refinement(
             tried = f"{1 + len(others)} IK branch(es) tried"
             attempt = replace(attempt, reason=f"{attempt.reason} ({tried})" if others else attempt.reason)
     attempt = replace(attempt, iterations=attempt.iterations + coarse_iterations)
+    if (
+        attempt.status == "infeasible"
+        and problem.solver_name == "fatrop"
+        and FATROP_FAILED in attempt.solver_status
+    ):
+        attempt = replace(attempt, reason=f"{attempt.reason} ({FATROP_HINT})")
     log.info(
         "refinement %s after %d solver iterations in %d rounds",
         attempt.status,

@@ -176,3 +176,23 @@ def _about_y(angle: float) -> np.ndarray:
     """The rotation by ``angle`` [rad] about y."""
     c, s = math.cos(angle), math.sin(angle)
     return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def test_an_infeasible_verdict_after_fatrop_failed_says_it_may_be_the_solvers():
+    """fatrop cannot repair tool_through_fixture (the seed passes through the clamp: the clearance
+    rows start broken), which IPOPT repairs; the verdict must not read as the problem's alone."""
+    problem = next(p for p in problems(load_suites(), "unreachable") if p.name == "tool_through_fixture")
+    answers = {
+        solver: solve_refinement(
+            problem.refinement(solver=solver),
+            home=problem.home,
+            sources=problem.sources,
+            repair_max_slack_deg=problem.repair_max_slack_deg,
+            max_rounds=problem.max_rounds,
+        )
+        for solver in ("ipopt", "fatrop")
+    }
+    assert answers["ipopt"].status == "repaired" and "fatrop" not in answers["ipopt"].reason
+    assert answers["fatrop"].status == "infeasible"
+    assert "may be the solver's, not the problem's" in answers["fatrop"].reason
+    assert "[optimise] solver = 'ipopt'" in answers["fatrop"].reason
