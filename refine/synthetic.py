@@ -337,15 +337,7 @@ def problem_reachability(problem, targets: ArrayLike, seed: int) -> tuple[Reacha
     robot = load_robot(problem.robot.model)
     kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange)
     margin = math.radians(problem.tolerances.joint_margin_deg)
-    collision = CollisionModel(
-        robot,
-        kin.base_in_world,
-        kin.tcp_in_flange,
-        problem.tool.collision,
-        problem.cell,
-        margin_m=problem.collision.margin_m,
-        self_margin_m=problem.collision.self_margin_m,
-    )
+    collision = CollisionModel.for_problem(problem, robot)
     starts = start_candidates(
         robot.spec.lower + margin, robot.spec.upper - margin, np.radians(problem.robot.home_deg), seed=seed
     )

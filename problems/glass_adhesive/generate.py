@@ -245,9 +245,6 @@ def main(argv: list[str] | None = None) -> int:
     write_truth_csv(HERE / "truth.csv", demo.s, demo.quaternions, demo.speed)
 
     # ---- summary
-    sensor = demo.sensor_in_source[:, :3, 3]
-    dist = np.linalg.norm(sensor, axis=1)
-    dz = demo.log.positions[:, 2] - sensor[:, 2]
     print(
         f"window {WINDOW_LENGTH * 1000:.0f} x {WINDOW_WIDTH * 1000:.0f} mm, corner radius "
         f"{CORNER_RADIUS * 1000:.0f} mm, cylinder radius {CYLINDER_RADIUS} m"
@@ -256,23 +253,7 @@ def main(argv: list[str] | None = None) -> int:
         f"bead: {n} points, {s[-1]:.4f} m, spacing {s[-1] / n * 1000:.2f} mm, offset "
         f"{BEAD_OFFSET * 1000:.0f} mm, corner radius {r_bead * 1000:.0f} mm"
     )
-    lo, hi = positions.min(axis=0), positions.max(axis=0)
-    print(
-        f"bead in world: x {lo[0]:.3f}..{hi[0]:.3f}, y {lo[1]:.3f}..{hi[1]:.3f}, z {lo[2]:.3f}..{hi[2]:.3f} m"
-    )
-    print(
-        f"drag angle {drag_deg.min():.1f}..{drag_deg.max():.1f} deg, speed "
-        f"{speed.min() * 1000:.1f}..{speed.max() * 1000:.1f} mm/s"
-    )
-    print(
-        f"demo: {len(demo.log.t)} samples at {model.rate_hz:g} Hz, {demo.duration_s:.2f} s "
-        f"({model.pause_s:g} s pause), outliers at samples {list(demo.outlier_indices)}"
-    )
-    print(
-        f"sensor to receiver {dist.min():.2f}..{dist.max():.2f} m; z error (median) near "
-        f"{np.median(dz[dist < dist.min() + 0.1]) * 1000:.1f} mm, far "
-        f"{np.median(dz[dist > dist.max() - 0.1]) * 1000:.1f} mm"
-    )
+    print("\n".join(demo.summary(positions, drag_deg, speed)))
     print(f"wrote {', '.join(p for p in ('bead.dxf', 'demo.liberty', 'truth.csv'))} in {HERE}")
 
     if not args.no_check:

@@ -185,15 +185,7 @@ def check_reachability(problem: Problem, positions, rotations) -> bool:
     home = np.radians(problem.robot.home_deg)
     targets = make_transform(rotations, positions)[::CHECK_STEP]
     logging.getLogger("refine.collision").setLevel(logging.ERROR)  # the open panel mesh is meant
-    collision = CollisionModel(
-        robot,
-        kin.base_in_world,
-        kin.tcp_in_flange,
-        problem.tool.collision,
-        problem.cell,
-        margin_m=problem.collision.margin_m,
-        self_margin_m=problem.collision.self_margin_m,
-    )
+    collision = CollisionModel.for_problem(problem, robot)
     starts = start_candidates(spec.lower + margin, spec.upper - margin, home, seed=SEED)
     report = reachability_report(kin, targets, joint_margin_rad=margin, starts=starts, collision=collision)
     gaps = report.clearance or {}
@@ -282,9 +274,6 @@ def main(argv: list[str] | None = None) -> int:
     write_truth_csv(HERE / "truth.csv", demo.s, demo.quaternions, demo.speed)
 
     # ---- summary
-    sensor = demo.sensor_in_source[:, :3, 3]
-    dist = np.linalg.norm(sensor, axis=1)
-    dz = demo.log.positions[:, 2] - sensor[:, 2]
     tilt = np.degrees(np.arccos(np.clip(-rotations[:, 2, 2], -1.0, 1.0)))
     normal_tilt = np.degrees(np.arccos(np.clip(normals[:, 2], -1.0, 1.0)))
     size_kb = (HERE / MESH_FILE).stat().st_size / 1024
@@ -302,26 +291,10 @@ def main(argv: list[str] | None = None) -> int:
         f"{perimeter / (len(bead_cad) - 1) * 1000:.2f} mm, CAD z {bead_cad[:, 2].min() * 1000:.1f}.."
         f"{bead_cad[:, 2].max() * 1000:.1f} mm, starts at CAD {np.round(bead_cad[0] * 1000, 1).tolist()} mm"
     )
-    lo, hi = positions.min(axis=0), positions.max(axis=0)
-    print(
-        f"bead in world: x {lo[0]:.3f}..{hi[0]:.3f}, y {lo[1]:.3f}..{hi[1]:.3f}, z {lo[2]:.3f}..{hi[2]:.3f} m"
-    )
+    print("\n".join(demo.summary(positions, drag_deg, speed)))
     print(
         f"surface normal {normal_tilt.min():.1f}..{normal_tilt.max():.1f} deg from vertical, "
         f"tool axis {tilt.min():.1f}..{tilt.max():.1f} deg from vertical"
-    )
-    print(
-        f"drag angle {drag_deg.min():.1f}..{drag_deg.max():.1f} deg, speed "
-        f"{speed.min() * 1000:.1f}..{speed.max() * 1000:.1f} mm/s"
-    )
-    print(
-        f"demo: {len(demo.log.t)} samples at {model.rate_hz:g} Hz, {demo.duration_s:.2f} s "
-        f"({model.pause_s:g} s pause), outliers at samples {list(demo.outlier_indices)}"
-    )
-    print(
-        f"sensor to receiver {dist.min():.2f}..{dist.max():.2f} m; z error (median) near "
-        f"{np.median(dz[dist < dist.min() + 0.1]) * 1000:.1f} mm, far "
-        f"{np.median(dz[dist > dist.max() - 0.1]) * 1000:.1f} mm"
     )
     print(f"wrote {MESH_FILE}, demo.liberty, truth.csv in {HERE}")
 

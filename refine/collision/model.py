@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import logging
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
@@ -28,6 +29,9 @@ from refine.errors import InputError
 from refine.frames import check_transform
 from refine.robot import Robot
 from refine.settings import Shape
+
+if TYPE_CHECKING:
+    from refine.problem import Problem
 
 log = logging.getLogger(__name__)
 
@@ -92,6 +96,19 @@ class CollisionModel:
         self._motion: Array | None = None
 
     # ---- building ----------------------------------------------------------------------------
+
+    @classmethod
+    def for_problem(cls, problem: Problem, robot: Robot) -> CollisionModel:
+        """The model of a problem's robot placement, tool shapes, cell and ``[collision]`` margins."""
+        return cls(
+            robot,
+            problem.robot.base_in_world,
+            problem.tool.tcp_in_flange,
+            problem.tool.collision,
+            problem.cell,
+            margin_m=problem.collision.margin_m,
+            self_margin_m=problem.collision.self_margin_m,
+        )
 
     def _robot_bodies(self) -> list[Body]:
         where = f"robot {self.robot.spec.name!r}"

@@ -167,6 +167,27 @@ class SimulatedDemo:
         """Time of the last sample [s]."""
         return float(self.log.t[-1])
 
+    def summary(self, positions: Array, drag_deg: Array, speed: Array) -> list[str]:
+        """Lines describing the demonstrated path and the log, as the problem generators print them.
+
+        ``positions`` (N, 3) [m] in the world, ``drag_deg`` (N,) the drag angle [deg] and ``speed``
+        (N,) the TCP speed [m/s] the demonstration was made from.
+        """
+        lo, hi = positions.min(axis=0), positions.max(axis=0)
+        sensor = self.sensor_in_source[:, :3, 3]
+        dist = np.linalg.norm(sensor, axis=1)
+        dz = self.log.positions[:, 2] - sensor[:, 2]
+        return [
+            f"bead in world: x {lo[0]:.3f}..{hi[0]:.3f}, y {lo[1]:.3f}..{hi[1]:.3f}, z {lo[2]:.3f}..{hi[2]:.3f} m",
+            f"drag angle {drag_deg.min():.1f}..{drag_deg.max():.1f} deg, speed "
+            f"{speed.min() * 1000:.1f}..{speed.max() * 1000:.1f} mm/s",
+            f"demo: {len(self.log.t)} samples at {self.model.rate_hz:g} Hz, {self.duration_s:.2f} s "
+            f"({self.model.pause_s:g} s pause), outliers at samples {list(self.outlier_indices)}",
+            f"sensor to receiver {dist.min():.2f}..{dist.max():.2f} m; z error (median) near "
+            f"{np.median(dz[dist < dist.min() + 0.1]) * 1000:.1f} mm, far "
+            f"{np.median(dz[dist > dist.max() - 0.1]) * 1000:.1f} mm",
+        ]
+
 
 # ---- error fields -------------------------------------------------------------------------------
 

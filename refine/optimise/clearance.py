@@ -66,17 +66,9 @@ class ClearanceSource:
     @classmethod
     def for_problem(cls, problem: Problem, robot: Robot) -> ClearanceSource:
         """The source for a problem's robot placement, tool shapes, cell and ``[collision]``."""
-        base, tcp = problem.robot.base_in_world, problem.tool.tcp_in_flange
-        model = CollisionModel(
-            robot,
-            base,
-            tcp,
-            problem.tool.collision,
-            problem.cell,
-            margin_m=problem.collision.margin_m,
-            self_margin_m=problem.collision.self_margin_m,
-        )
-        return cls(model, TcpKinematics(robot, base, tcp), problem.collision.check_step_m)
+        model = CollisionModel.for_problem(problem, robot)
+        kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange)
+        return cls(model, kin, problem.collision.check_step_m)
 
     def forget(self) -> None:
         """Drop the dense checks kept for reuse, so the next refinement starts as a fresh run's would."""
