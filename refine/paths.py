@@ -34,12 +34,25 @@ class CadPath:
         positions: path points in {F} [m], shape (N, 3).
         closed: whether the path returns to its start (the last point equals the first).
         source: where it came from (file name and entity), for messages.
+        reversed: the waypoints run against the order of the file (``[cad] reverse``, or
+            ``start_near`` at the last point of an open path).
+        start_offset_m: arc length along the file's order from its first point to the first
+            waypoint [m] (0 unless ``start_near`` moved the start; the length for a reversed
+            open path).
+        direction_given: the problem fixed the direction (``[cad] reverse``, or ``start_near`` on
+            an open path); the alignment keeps it instead of searching both.
+        start_given: the problem fixed the start of a closed path (``[cad] start_near``); the
+            alignment keeps it instead of searching every start.
     """
 
     s: Array
     positions: Array
     closed: bool = False
     source: str = ""
+    reversed: bool = False
+    start_offset_m: float = 0.0
+    direction_given: bool = False
+    start_given: bool = False
 
     def __post_init__(self) -> None:
         n = len(self.s)
@@ -128,6 +141,42 @@ class Demonstration:
 
 
 @dataclass(frozen=True)
+class PathOrder:
+    """Which way round, and from where, the run follows the CAD path: the worker's way.
+
+    Attributes:
+        direction: ``"as_cad"`` (the order of the CAD file) or ``"reversed"`` (against it).
+        start_offset_m: arc length along the CAD file's order from its first point to the run's
+            first waypoint [m]; 0 for an open path run as drawn, its length when reversed.
+        direction_source: ``"alignment"`` (both directions tried) or ``"problem"`` (``[cad]
+            reverse`` or ``start_near`` fixed it).
+        start_source: ``"alignment"`` (every start of a closed path tried), ``"problem"``
+            (``[cad] start_near``) or ``"open path"`` (an open path starts at an end).
+        residual_as_cad_m: median demo-to-path distance of the coarse match run as drawn [m],
+            before any tracker correction; None when not tried.
+        residual_reversed_m: the same run reversed [m]; None when not tried.
+    """
+
+    direction: str = "as_cad"
+    start_offset_m: float = 0.0
+    direction_source: str = "alignment"
+    start_source: str = "alignment"
+    residual_as_cad_m: float | None = None
+    residual_reversed_m: float | None = None
+
+    def as_json(self) -> dict[str, object]:
+        """Plain values for ``result.json`` (``demo_quality``)."""
+        return {
+            "direction": self.direction,
+            "start_offset_m": self.start_offset_m,
+            "direction_source": self.direction_source,
+            "start_source": self.start_source,
+            "direction_residual_as_cad_m": self.residual_as_cad_m,
+            "direction_residual_reversed_m": self.residual_reversed_m,
+        }
+
+
+@dataclass(frozen=True)
 class FusedPath:
     """CAD positions fused with demonstrated tool orientations and speeds, per waypoint.
 
@@ -138,6 +187,8 @@ class FusedPath:
         speed: demonstrated TCP speed along the CAD path [m/s], shape (N,), > 0.
         t_demo: demonstration time matched to each waypoint [s], shape (N,), increasing.
         residual: distance between the aligned demonstration and the CAD point [m], shape (N,).
+        order: which way round and from where the run follows the CAD path (the worker's way),
+            None for a path that was not aligned to a demonstration (PathML).
     """
 
     s: Array
@@ -146,6 +197,7 @@ class FusedPath:
     speed: Array
     t_demo: Array
     residual: Array
+    order: PathOrder | None = None
 
     def __post_init__(self) -> None:
         n = len(self.s)

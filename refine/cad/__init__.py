@@ -15,7 +15,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
-from refine.cad.resample import resample_by_arc_length
+from refine.cad.csv_ import metres_per_unit
+from refine.cad.resample import resample_by_arc_length, start_at_nearest
 from refine.errors import InputError
 from refine.frames import check_transform, transform_points
 from refine.lazy import lazy_names
@@ -75,9 +76,14 @@ def read_cad_path(settings: CadSettings, cad_in_world: NDArray) -> CadPath:
     """Read the CAD/CAM path and return it in the world frame {F}, resampled by arc length.
 
     Steps: read the file in ``settings.format`` and convert ``settings.units`` to metres; a path
-    whose last point is within :data:`CLOSED_TOLERANCE_M` of its first is closed; reverse it if
-    ``settings.reverse``; map it with ``cad_in_world``; resample it every ``settings.spacing_m``
-    or a little less (see :func:`refine.cad.resample.resample_by_arc_length`).
+    whose last point is within :data:`CLOSED_TOLERANCE_M` of its first is closed; with
+    ``settings.start_near`` start it at its point nearest to that (a closed path) or at its end
+    nearer to it (an open path; :func:`refine.cad.resample.start_at_nearest`; the mesh reader does
+    this itself); reverse it if ``settings.reverse``; map it with ``cad_in_world``; resample it
+    every ``settings.spacing_m`` or a little less (see
+    :func:`refine.cad.resample.resample_by_arc_length`). The result records what the problem
+    fixed (``direction_given``, ``start_given``): the alignment searches the rest
+    (:func:`refine.fuse.fuse`).
 
     Args:
         settings: the ``[cad]`` settings (file, format, units, spacing, layer, reverse; for
@@ -106,11 +112,27 @@ def read_cad_path(settings: CadSettings, cad_in_world: NDArray) -> CadPath:
         raise InputError(f"cad.format = {settings.format!r} is not one of {', '.join(sorted(_READERS))}")
     points = reader(settings)
     closed = bool(len(points) > 2 and np.linalg.norm(points[-1] - points[0]) <= CLOSED_TOLERANCE_M)
+    reversed_, offset = False, 0.0
+    if settings.start_near is not None and settings.format != "mesh":  # the mesh reader starts there itself
+        near = np.asarray(settings.start_near, dtype=float) * metres_per_unit(settings.units, str(settings.file))
+        points, reversed_, offset = start_at_nearest(points, near, closed, CLOSED_TOLERANCE_M)
     if settings.reverse:
         points = points[::-1].copy()
+        reversed_ = not reversed_
+        if not closed:
+            offset = float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum()) - offset
     points_world = transform_points(T_world_cad, points)
     length = float(np.sum(np.linalg.norm(np.diff(points_world, axis=0), axis=1)))
     check_waypoint_count(length, settings.spacing_m, f"cad.file {Path(settings.file).name!r}")
     s, positions = resample_by_arc_length(points_world, settings.spacing_m, closed=closed)
     source = Path(settings.file).name + (f" (layer {settings.layer})" if settings.layer else "")
-    return CadPath(s=s, positions=positions, closed=closed, source=source)
+    return CadPath(
+        s=s,
+        positions=positions,
+        closed=closed,
+        source=source,
+        reversed=reversed_,
+        start_offset_m=offset,
+        direction_given=settings.reverse or (settings.start_near is not None and not closed),
+        start_given=settings.start_near is not None and closed,
+    )

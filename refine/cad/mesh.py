@@ -31,6 +31,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from refine.cad.csv_ import metres_per_unit
+from refine.cad.resample import nearest_on_polyline, start_at_nearest
 from refine.errors import InputError
 from refine.lazy import lean_imports
 from refine.plausible import CAD_COORDINATE_LIMIT_M, check_coordinates
@@ -66,18 +67,6 @@ def _vector(value: ArrayLike, name: str, source: str) -> NDArray:
 
 def _polyline_length(p: NDArray) -> float:
     return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
-
-
-def _nearest_on_polyline(p: NDArray, q: NDArray) -> tuple[float, int, NDArray]:
-    """Distance from ``q`` to polyline ``p`` (K, 3), the segment index and the nearest point."""
-    a, b = p[:-1], p[1:]
-    ab = b - a
-    denom = np.einsum("ij,ij->i", ab, ab)
-    t = np.clip(np.einsum("ij,ij->i", q - a, ab) / np.where(denom > 0, denom, 1.0), 0.0, 1.0)
-    foot = a + t[:, None] * ab
-    d = np.linalg.norm(foot - q, axis=1)
-    j = int(np.argmin(d))
-    return float(d[j]), j, foot[j]
 
 
 def _boundary_loops(mesh: trimesh.Trimesh) -> list[NDArray]:
@@ -128,29 +117,18 @@ def _section_loops(mesh: trimesh.Trimesh, origin: NDArray, normal: NDArray) -> l
     return loops
 
 
-def _pick(loops: list[NDArray], start_near: NDArray | None, tol: float) -> NDArray:
+def _pick(loops: list[NDArray], start_near_point: NDArray | None, tol: float) -> NDArray:
     lengths = [_polyline_length(p) for p in loops]
-    if start_near is None:
+    if start_near_point is None:
         chosen = loops[int(np.argmax(lengths))].copy()
     else:
-        chosen = loops[int(np.argmin([_nearest_on_polyline(p, start_near)[0] for p in loops]))].copy()
+        chosen = loops[int(np.argmin([nearest_on_polyline(p, start_near_point)[0] for p in loops]))].copy()
     closed = len(chosen) > 3 and np.linalg.norm(chosen[-1] - chosen[0]) <= tol
     if closed:
         chosen[-1] = chosen[0]
-    if start_near is None:
+    if start_near_point is None:
         return chosen
-    if not closed:
-        ends = np.linalg.norm(chosen[[0, -1]] - start_near, axis=1)
-        return chosen[::-1].copy() if ends[1] < ends[0] else chosen
-    _, j, foot = _nearest_on_polyline(chosen, start_near)
-    ring = chosen[:-1]
-    if np.linalg.norm(foot - chosen[j + 1]) <= tol:
-        j, foot = j + 1, chosen[j + 1]
-    if np.linalg.norm(foot - ring[j % len(ring)]) <= tol:
-        ring = np.roll(ring, -(j % len(ring)), axis=0)
-    else:
-        ring = np.vstack([foot, ring[j + 1 :], ring[: j + 1]])
-    return np.vstack([ring, ring[:1]])
+    return start_at_nearest(chosen, start_near_point, closed, tol)[0]
 
 
 def points_from_mesh(

@@ -114,3 +114,64 @@ def resample_by_arc_length(
     positions[0] = points[0]
     positions[-1] = points[-1]
     return s, positions
+
+
+def nearest_on_polyline(points: NDArray, q: NDArray) -> tuple[float, int, NDArray]:
+    """Distance from ``q`` to the polyline ``points`` (K, 3), the segment index and the nearest point.
+
+    Args:
+        points: polyline vertices, shape (K, 3), K >= 2, in the unit of ``q``.
+        q: the point, shape (3,).
+
+    Returns:
+        ``(distance, j, foot)``: the distance, the index of the segment ``points[j] -> points[j + 1]``
+        that holds the nearest point, and that point, shape (3,).
+    """
+    a, b = points[:-1], points[1:]
+    ab = b - a
+    denom = np.einsum("ij,ij->i", ab, ab)
+    t = np.clip(np.einsum("ij,ij->i", q - a, ab) / np.where(denom > 0, denom, 1.0), 0.0, 1.0)
+    foot = a + t[:, None] * ab
+    d = np.linalg.norm(foot - q, axis=1)
+    j = int(np.argmin(d))
+    return float(d[j]), j, foot[j]
+
+
+def start_at_nearest(points: NDArray, near: NDArray, closed: bool, tol: float) -> tuple[NDArray, bool, float]:
+    """The polyline started at its point nearest to ``near`` (``[cad] start_near``).
+
+    A closed polyline (its last point repeats its first) is rotated to start, and end, at its point
+    nearest to ``near``, inserted between two vertices when it falls inside a segment; its direction
+    is kept. An open polyline starts at the end nearer to ``near``: it is reversed when that is its
+    last point.
+
+    Args:
+        points: polyline vertices, shape (K, 3), K >= 2.
+        near: the point to start near, shape (3,), in the unit of ``points``.
+        closed: whether the polyline is closed.
+        tol: vertices closer than this count as one point, in the unit of ``points``.
+
+    Returns:
+        ``(points, reversed, offset)``: the reordered vertices (a closed one ends with its first
+        point), whether they were reversed, and the arc length along the input from its first
+        point to the new first point, in the unit of ``points`` (for a reversed open polyline
+        its length).
+    """
+    seg = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    if not closed:
+        ends = np.linalg.norm(points[[0, -1]] - near, axis=1)
+        if ends[1] < ends[0]:
+            return points[::-1].copy(), True, float(seg.sum())
+        return points, False, 0.0
+    chosen = points.copy()
+    chosen[-1] = chosen[0]
+    _, j, foot = nearest_on_polyline(chosen, near)
+    offset = float(seg[:j].sum() + np.linalg.norm(foot - chosen[j]))
+    ring = chosen[:-1]
+    if np.linalg.norm(foot - chosen[j + 1]) <= tol:
+        j, foot = j + 1, chosen[j + 1]
+    if np.linalg.norm(foot - ring[j % len(ring)]) <= tol:
+        ring = np.roll(ring, -(j % len(ring)), axis=0)
+    else:
+        ring = np.vstack([foot, ring[j + 1 :], ring[: j + 1]])
+    return np.vstack([ring, ring[:1]]), False, offset % float(seg.sum())

@@ -142,12 +142,23 @@ def result_dict(result: RunResult) -> dict[str, Any]:
             for p, m in zip(result.passes, per_pass, strict=True)
         ],
         "truth": None if result.truth is None else result.truth.as_json(),
-        "demo_quality": None if result.demo_quality is None else result.demo_quality.as_json(),
+        "demo_quality": _demo_quality(result),
         "placement": None if result.placement is None else result.placement.as_json(),
         "timings_s": _timings(result),
         "outputs": {k: p.name for k, p in result.outputs.items()},
         "files": describe_files(result.outputs),
     }
+    return doc
+
+
+def _demo_quality(result: RunResult) -> dict[str, Any] | None:
+    """The quality gate's figures with the alignment's choice of direction and start (``fused.order``)."""
+    if result.demo_quality is None:
+        return None
+    doc = result.demo_quality.as_json()
+    order = result.fused.order
+    if order is not None:
+        doc.update(order.as_json())
     return doc
 
 
