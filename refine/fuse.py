@@ -279,13 +279,13 @@ def cyclic_dtw(cost: Array) -> tuple[NDArray[np.intp], int]:
     start = np.arange(n)
     step = np.zeros((m, n), dtype=np.int8)  # columns advanced into each cell
     for i in range(1, m):
-        best, arg, src = D.copy(), np.zeros(n, dtype=np.int8), start.copy()
+        best, src, arg = D.copy(), start.copy(), step[i]
         for d in (1, 2):
-            better = np.r_[np.zeros(d, dtype=bool), D[:-d] < best[d:]]
-            best[better] = D[:-d][better[d:]]
-            arg[better] = d
-            src[better] = start[:-d][better[d:]]
-        D, start, step[i] = best + ext[i], src, arg
+            better = D[:-d] < best[d:]
+            np.copyto(best[d:], D[:-d], where=better)
+            np.copyto(src[d:], start[:-d], where=better)
+            np.copyto(arg[d:], d, where=better)
+        D, start = best + ext[i], src
     end = np.arange(k, n)  # a full lap: end column = start column + K
     ok = start[end] == end - k
     if not np.any(ok & np.isfinite(D[end])):
@@ -329,7 +329,7 @@ def _search_order(
         idx = np.unique(np.r_[idx, n - 1])
     pts, sc = cad[idx], cad_s[idx]
     k = len(idx)
-    rows = rows[:: max(1, len(rows) // (4 * k))]
+    rows = rows[:: max(1, len(rows) // (2 * k))]
     out = {}
     for reverse in directions:
         ring = _ring(pts, closed, reverse)
@@ -442,7 +442,7 @@ def orient(
     p = demo.positions[i0:] + np.einsum("mij,j->mi", demo.rotations[i0:], T_E_TCP[:3, 3])
     cad_S = transform_points(T_S_F, cad.positions)
     n_search = min(SEARCH_MAX_POINTS, len(cad.s))
-    dt_grid = max((t[-1] - t[0]) / (4 * n_search), float(np.median(np.diff(t))))
+    dt_grid = max((t[-1] - t[0]) / (2 * n_search), float(np.median(np.diff(t))))
     tg = np.linspace(t[0], t[-1], int(np.ceil((t[-1] - t[0]) / dt_grid)) + 1)
     pg = _resample(t, uniform_filter1d(p, max(1, round(dt_grid / float(np.median(np.diff(t))))), axis=0), tg)
     directions = (False,) if cad.direction_given else (False, True)
