@@ -69,7 +69,13 @@ def fused_path(
         from refine.cad.pathml_ import fused_from_pathml
 
         track = problem.cad.track
-        fused = fused_from_pathml(problem.cad.file, problem.cad.spacing_m, track=track)
+        fused = fused_from_pathml(
+            problem.cad.file,
+            problem.cad.spacing_m,
+            track=track,
+            reverse=problem.cad.reverse,
+            start_near=problem.cad.start_near,
+        )
         watch.lap("cad")
         return fused
     from refine.cad import read_cad_path

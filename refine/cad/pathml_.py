@@ -22,6 +22,7 @@ import logging
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation, Slerp
 
 from refine.cad.resample import DUPLICATE_TOLERANCE_M, resample_by_arc_length
@@ -58,7 +59,14 @@ def _select_track(path: Path, tracks: list[tuple[str, PathMLTrack]], track: str 
     return hits[0]
 
 
-def fused_from_pathml(path: str | Path, spacing_m: float, track: str | None = None) -> FusedPath:
+def fused_from_pathml(
+    path: str | Path,
+    spacing_m: float,
+    track: str | None = None,
+    *,
+    reverse: bool = False,
+    start_near: ArrayLike | None = None,
+) -> FusedPath:
     """Read one PathML track as a fused path resampled by arc length (see the module docstring).
 
     Args:
@@ -66,6 +74,11 @@ def fused_from_pathml(path: str | Path, spacing_m: float, track: str | None = No
         spacing_m: largest waypoint spacing along the path [m], > 0.
         track: ``"layer/track"`` (or a track name that is unique in the document), or None for
             the first track of the first layer.
+        reverse: run the track against the order of its points (``[cad] reverse``); each point
+            keeps its orientation and speed.
+        start_near: start a closed track (its last point repeats its first) at its point nearest
+            to this, an open one at its end nearer to it [m], shape (3,) (``[cad] start_near``);
+            applied before ``reverse``.
 
     Returns:
         The fused path in {F}: arc length [m], positions [m], orientations R_F_TCP, speeds
@@ -103,6 +116,19 @@ def fused_from_pathml(path: str | Path, spacing_m: float, track: str | None = No
     points, rotations, speed = tr.positions[keep], tr.rotations[keep], tr.speed[keep]
     if len(points) < 2:
         raise InputError(f"PathML {path}: track {tr.name!r} needs at least 2 distinct points")
+    order = np.arange(len(points))
+    closed = len(points) > 2 and np.linalg.norm(points[-1] - points[0]) <= DUPLICATE_TOLERANCE_M
+    if start_near is not None:
+        near = np.asarray(start_near, dtype=float).reshape(3)
+        if closed:
+            ring = order[:-1]
+            k = int(np.argmin(np.linalg.norm(points[ring] - near, axis=1)))
+            order = np.r_[np.roll(ring, -k), ring[k]]
+        elif np.linalg.norm(points[-1] - near) < np.linalg.norm(points[0] - near):
+            order = order[::-1]
+    if reverse:
+        order = order[::-1]
+    points, rotations, speed = points[order], rotations[order], speed[order]
     s_points = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
 
     check_waypoint_count(

@@ -96,10 +96,35 @@ def _details_html(result: RunResult) -> str:
     return (
         "<section id='details'><h2>Run summary</h2>"
         f"<p>{html.escape(result.problem.description)}</p><pre>{summary}</pre>"
-        "<h2>Where the plan is slower than the demonstration</h2>"
+        + _order_html(result)
+        + "<h2>Where the plan is slower than the demonstration</h2>"
         + (f"<ul>{''.join(slow)}</ul>" if slow else "<p>nowhere</p>")
         + ("<h2>Clearance</h2>" + "".join(clearance) if clearance else "")
         + "</section>"
+    )
+
+
+def _order_html(result: RunResult) -> str:
+    """Which way round and from where the run follows the CAD path, and how that was chosen."""
+    order = result.fused.order
+    if order is None:
+        return ""
+    way = "as drawn in the CAD file" if order.direction == "as_cad" else "against the CAD file's order (reversed)"
+    chosen = (
+        f"found by the alignment: median distance {order.residual_as_cad_m * 1e3:.1f} mm as drawn, "
+        f"{order.residual_reversed_m * 1e3:.1f} mm reversed"
+        if order.direction_source == "alignment" and order.residual_as_cad_m is not None
+        else "set by the problem ([cad] reverse or start_near)"
+    )
+    start = {
+        "alignment": "where the worker started, found by the alignment",
+        "problem": "set by [cad] start_near",
+        "open path": "an end of the open path",
+    }[order.start_source]
+    return (
+        f"<h2>Direction and start</h2><p id='path-order'>The run goes {html.escape(way)} "
+        f"(<code>{html.escape(order.direction)}</code>, {html.escape(chosen)}) and starts "
+        f"{order.start_offset_m:.3f} m along the CAD path from its first point ({html.escape(start)}).</p>"
     )
 
 

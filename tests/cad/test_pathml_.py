@@ -137,3 +137,13 @@ def test_a_speed_of_a_kilometre_a_second_is_refused(tmp_path):
         InputError, match=r"point 5: speed 1000 m/s is outside the plausible range 0\.\.10 m/s"
     ):
         fused_from_pathml(_written(tmp_path, traj), 0.004)
+
+
+@pytest.mark.parametrize("how", [{"reverse": True}, {"start_near": (0.7, 0.1, 0.35)}])
+def test_reverse_and_start_near_run_the_track_from_its_other_end(aml, how):
+    fused = fused_from_pathml(aml, 0.004, **how)
+    truth = _trajectory()
+    np.testing.assert_allclose(fused.positions[[0, -1]], truth.positions_ref[[-1, 0]], atol=1e-15)
+    # each point keeps its recorded orientation: the one at arc length L - s of the track
+    L = truth.s[-1]
+    assert rotation_angle_deg(fused.rotations, _truth_rotation(L - fused.s)).max() < 1e-9
