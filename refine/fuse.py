@@ -644,7 +644,9 @@ def fuse(
         k = int(np.argmin(np.abs(run.s - a.start_shift_m % run.length))) % (len(run.s) - 1)
         if k:
             logger.info(
-                "path start moved by %d waypoints (%.1f mm) after the tracker correction", k, a.start_shift_m * 1e3
+                "path start moved by %d waypoints (%.1f mm) after the tracker correction",
+                k,
+                a.start_shift_m * 1e3,
             )
             run = reorder(cad, reverse, (start + k) % (len(run.s) - 1))
             a = align(run, demo, source_in_world, sensor_in_tcp, **kwargs)

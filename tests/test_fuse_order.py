@@ -52,7 +52,9 @@ def demonstrate(index, seed=7, model=None):
     p = transform_points(T_F_CAD, pts[index % N_FOOT])
     t = (tan[index % N_FOOT] if forward else -tan[index % N_FOOT]) @ T_F_CAD[:3, :3].T  # travel direction
     s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))]
-    drag = np.radians(DRAG_DEG) + np.radians(periodic_wave(s, s[-1] + 1e-9, (3.0,), np.random.default_rng(seed)))
+    drag = np.radians(DRAG_DEG) + np.radians(
+        periodic_wave(s, s[-1] + 1e-9, (3.0,), np.random.default_rng(seed))
+    )
     normals = np.repeat(T_F_CAD[:3, 2][None], len(s), axis=0)
     R = tool_rotations(t, normals, drag)
     speed = np.full(len(s), 0.11)
@@ -122,7 +124,9 @@ def test_a_demonstration_there_and_back_is_ambiguous_and_names_both_distances():
     last = 800  # an open stretch of the bead, 0.2 m; the worker goes along it and back
     cad = cad_path(closed=False, last=last)
     demo, _ = demonstrate(np.r_[np.arange(last), np.arange(last - 2, -1, -1)], seed=2)
-    with pytest.raises(InputError, match=r"which way round.* (\d+\.\d) mm as drawn, (\d+\.\d) mm reversed") as e:
+    with pytest.raises(
+        InputError, match=r"which way round.* (\d+\.\d) mm as drawn, (\d+\.\d) mm reversed"
+    ) as e:
         fuse(cad, demo, T_F_S, T_TCP_E)
     assert "[cad] reverse" in str(e.value)
 
@@ -143,11 +147,12 @@ def test_reverse_and_start_near_override_the_search_in_every_format(tmp_path, fm
     elif fmt == "dxf":
         _write_dxf(f, mm)
     else:
-        f.write_text("G21 G90\nG0 X%.6f Y%.6f Z0\n" % tuple(mm[0, :2]) + "".join(
-            "G1 X%.6f Y%.6f Z0\n" % (x, y) for x, y, _ in np.vstack([mm[1:], mm[:1]])
-        ))
+        moves = "".join(f"G1 X{x:.6f} Y{y:.6f} Z0\n" for x, y, _ in np.vstack([mm[1:], mm[:1]]))
+        f.write_text(f"G21 G90\nG0 X{mm[0, 0]:.6f} Y{mm[0, 1]:.6f} Z0\n" + moves)
     near = mm[100] + [0.0, 0.0, 5.0]  # vertex 100 = footprint point 1000, 5 mm above it
-    settings = CadSettings(file=f, format=fmt, units="mm", spacing_m=SPACING, reverse=True, start_near=tuple(near))
+    settings = CadSettings(
+        file=f, format=fmt, units="mm", spacing_m=SPACING, reverse=True, start_near=tuple(near)
+    )
     cad = read_cad_path(settings, T_F_CAD)
     assert cad.closed and cad.reversed and cad.direction_given and cad.start_given
     assert cad.start_offset_m == pytest.approx(1000 * L / N_FOOT, abs=1e-3)
@@ -168,7 +173,9 @@ def test_start_near_alone_keeps_the_direction_search(tmp_path):
     mm = pts[::10] * 1e3
     f = tmp_path / "bead.csv"
     f.write_text("".join(f"{x},{y},{z}\n" for x, y, z in np.vstack([mm, mm[:1]])))
-    cad = read_cad_path(CadSettings(file=f, format="csv", spacing_m=SPACING, start_near=tuple(mm[300])), T_F_CAD)
+    cad = read_cad_path(
+        CadSettings(file=f, format="csv", spacing_m=SPACING, start_near=tuple(mm[300])), T_F_CAD
+    )
     assert cad.start_given and not cad.direction_given
     demo, _ = demonstrate(3000 - np.arange(N_FOOT + 1), seed=9)
     fused = fuse(cad, demo, T_F_S, T_TCP_E)

@@ -114,7 +114,9 @@ def read_cad_path(settings: CadSettings, cad_in_world: NDArray) -> CadPath:
     closed = bool(len(points) > 2 and np.linalg.norm(points[-1] - points[0]) <= CLOSED_TOLERANCE_M)
     reversed_, offset = False, 0.0
     if settings.start_near is not None and settings.format != "mesh":  # the mesh reader starts there itself
-        near = np.asarray(settings.start_near, dtype=float) * metres_per_unit(settings.units, str(settings.file))
+        near = np.asarray(settings.start_near, dtype=float) * metres_per_unit(
+            settings.units, str(settings.file)
+        )
         points, reversed_, offset = start_at_nearest(points, near, closed, CLOSED_TOLERANCE_M)
     if settings.reverse:
         points = points[::-1].copy()

@@ -109,7 +109,11 @@ def _order_html(result: RunResult) -> str:
     order = result.fused.order
     if order is None:
         return ""
-    way = "as drawn in the CAD file" if order.direction == "as_cad" else "against the CAD file's order (reversed)"
+    way = (
+        "as drawn in the CAD file"
+        if order.direction == "as_cad"
+        else "against the CAD file's order (reversed)"
+    )
     chosen = (
         f"found by the alignment: median distance {order.residual_as_cad_m * 1e3:.1f} mm as drawn, "
         f"{order.residual_reversed_m * 1e3:.1f} mm reversed"
