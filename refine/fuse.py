@@ -68,6 +68,7 @@ _FIT_ROUNDS = (3, 3, 0)  # distortion fit/re-project rounds after each DTW pass
 SEARCH_MAX_POINTS = 240  # CAD points of the direction and start search at most
 DIRECTION_RATIO = 2.0  # the other direction's coarse residual must be this many times the chosen one's
 DIRECTIONS = ("as_cad", "reversed")
+SEARCH_ROUNDS = 2  # coarse matches per direction, the demo moved by the matched mean offset between them
 START_WINDOW_S = 0.2  # the demo's start position is its mean over this much time [s]
 
 
@@ -308,8 +309,11 @@ def _ring(points: Array, closed: bool, reverse: bool) -> Array:
 
 def _search_order(
     rows: Array, cad_s: Array, cad: Array, closed: bool, directions: tuple[bool, ...], search_start: bool
-) -> dict[bool, tuple[float, float]]:
+) -> dict[bool, tuple[float, float, Array]]:
     """Coarse match of demo rows for each direction (and, on a closed path, every start).
+
+    ``SEARCH_ROUNDS`` matches: after each, the demo rows are moved by the mean offset to their
+    matched points (a rigid tracker offset would otherwise blur the comparison on a small path).
 
     Args:
         rows: demo TCP positions on a time grid, from the start pause on [m], (M, 3).
@@ -320,8 +324,10 @@ def _search_order(
         search_start: try every start of a closed path.
 
     Returns:
-        Per direction: the median row-to-path distance [m] and the arc length of the start found,
-        along the waypoints' order from the first one [m].
+        Per direction: the larger of the median row-to-path and the median path-to-row distance
+        of the last match [m], the arc length of
+        the start found, along the waypoints' order from the first one [m], and the offset the
+        rows were moved by [m], (3,).
     """
     n = len(cad_s) - int(closed)
     idx = np.arange(0, n, -(-n // SEARCH_MAX_POINTS))
@@ -333,17 +339,27 @@ def _search_order(
     out = {}
     for reverse in directions:
         ring = _ring(pts, closed, reverse)
-        cost = cdist(rows, ring)
-        if closed and search_start:
-            cols, j0 = cyclic_dtw(cost)
-            d = cost[np.arange(len(rows)), cols % k]
-            j0 = (0 if j0 == 0 else k - j0) if reverse else j0  # index into pts
-            out[reverse] = (float(np.median(d)), float(sc[j0]))
-        else:
-            if closed:
-                ring, cost = np.vstack([ring, ring[:1]]), np.hstack([cost, cost[:, :1]])
-            cols = monotone_dtw(cost)
-            out[reverse] = (float(np.median(cost[np.arange(len(rows)), cols])), 0.0)
+        cyclic = closed and search_start
+        if closed and not cyclic:
+            ring = np.vstack([ring, ring[:1]])
+        shift, j0 = np.zeros(3), 0
+        for _ in range(SEARCH_ROUNDS):  # match, move the demo by the matched mean offset, match again
+            moved = rows + shift
+            cost = cdist(moved, ring)
+            if cyclic:
+                unwrapped, j0 = cyclic_dtw(cost)
+            else:
+                unwrapped = monotone_dtw(cost)
+            cols = unwrapped % len(ring)
+            d_demo = cost[np.arange(len(rows)), cols]
+            # each path point to the first row matched at or past it: a demo that stays on part
+            # of the path is near the path, but the path is not near it
+            j = np.arange(j0, j0 + len(ring))
+            first = np.minimum(np.searchsorted(unwrapped, j), len(rows) - 1)
+            d_path = np.linalg.norm(ring[j % len(ring)] - moved[first], axis=1)
+            shift = shift + np.mean(ring[cols] - moved, axis=0)
+        j0 = (0 if j0 == 0 else k - j0) if reverse else j0  # index into pts
+        out[reverse] = (max(float(np.median(d_demo)), float(np.median(d_path))), float(sc[j0]), shift)
     return out
 
 
@@ -410,8 +426,10 @@ def orient(
     The demo TCP positions from ``PRE_MOTION_S`` before ``motion_start`` (box-averaged on a time
     grid of about four rows per search point) are matched by DTW to the waypoints, thinned to at
     most ``SEARCH_MAX_POINTS``, once as drawn and once reversed; on a closed path by
-    :func:`cyclic_dtw`, which also finds the start. The direction whose median row-to-path
-    distance is smaller wins when the other's is at least ``DIRECTION_RATIO`` times it. The
+    :func:`cyclic_dtw`, which also finds the start; ``SEARCH_ROUNDS`` times, the rows moved by
+    their mean offset to the matched points in between. A direction's distance is the larger of
+    the median row-to-path and the median path-to-row distance; the smaller wins when the
+    other's is at least ``DIRECTION_RATIO`` times it. The
     start is then refined to the path point nearest to the demo's start position (its mean over
     the first ``START_WINDOW_S``, not past ``motion_start``), within two search steps of the
     coarse start, and rounded to the nearest waypoint.
@@ -470,7 +488,8 @@ def orient(
             s0 = (cad.length - s0) % cad.length
         ring_s = cad.s if not reverse else np.r_[0.0, np.cumsum(np.diff(cad.s)[::-1])]
         ring = cad_S if not reverse else cad_S[::-1]
-        p_start = _start_position(t, p, float(demo.t[demo.motion_start]))
+        # the demo's start moved by the offset the search found, then onto the path
+        p_start = _start_position(t, p, float(demo.t[demo.motion_start])) + found[reverse][2]
         h_search = cad.length / n_search
         s_start = _refine_start(p_start, ring_s, ring, s0, 2.0 * h_search)
         start = int(np.argmin(np.abs(ring_s - s_start))) % (len(ring_s) - 1)

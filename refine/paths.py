@@ -152,8 +152,9 @@ class PathOrder:
             reverse`` or ``start_near`` fixed it).
         start_source: ``"alignment"`` (every start of a closed path tried), ``"problem"``
             (``[cad] start_near``) or ``"open path"`` (an open path starts at an end).
-        residual_as_cad_m: median demo-to-path distance of the coarse match run as drawn [m],
-            before any tracker correction; None when not tried.
+        residual_as_cad_m: distance of the coarse match run as drawn [m]: the larger of the
+            median demo-to-path and path-to-demo distances, no distortion correction
+            (:func:`refine.fuse.orient`); None when not tried.
         residual_reversed_m: the same run reversed [m]; None when not tried.
     """
 

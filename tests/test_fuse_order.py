@@ -8,6 +8,7 @@ start and drag angle come from how the demonstration was generated.
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import ezdxf
@@ -120,15 +121,19 @@ def test_an_open_path_demonstrated_backwards_is_reversed_without_a_start_search(
     assert np.sqrt(np.mean(err[3:-3] ** 2)) < 1.0
 
 
-def test_a_demonstration_there_and_back_is_ambiguous_and_names_both_distances():
-    last = 800  # an open stretch of the bead, 0.2 m; the worker goes along it and back
+def test_a_demonstration_that_stays_mid_seam_is_ambiguous_and_names_both_distances():
+    last = 400  # a straight stretch of the bead, L = 0.32 m; the worker only wiggles about its middle
     cad = cad_path(closed=False, last=last)
-    demo, _ = demonstrate(np.r_[np.arange(last), np.arange(last - 2, -1, -1)], seed=2)
-    with pytest.raises(
-        InputError, match=r"which way round.* (\d+\.\d) mm as drawn, (\d+\.\d) mm reversed"
-    ) as e:
+    demo, _ = demonstrate(np.r_[np.arange(200, 240), np.arange(238, 160, -1), np.arange(162, 201)], seed=2)
+    with pytest.raises(InputError, match=r"which way round") as e:
         fuse(cad, demo, T_F_S, T_TCP_E)
-    assert "[cad] reverse" in str(e.value)
+    msg = str(e.value)
+    drawn, rev = (float(x) for x in re.search(r"(\d+\.\d) mm as drawn, (\d+\.\d) mm reversed", msg).groups())
+    # a demo about the middle is as far from the seam's ends either way: the path points lie
+    # about L / 4 = 80 mm from it in the median, whichever end the run starts at
+    L = cad.length
+    assert 0.6 * L / 4 < drawn * 1e-3 < 1.4 * L / 4 and 0.6 * L / 4 < rev * 1e-3 < 1.4 * L / 4
+    assert "[cad] reverse" in msg
 
 
 def _write_dxf(path, pts_mm):
