@@ -37,8 +37,8 @@ class CadPath:
         reversed: the waypoints run against the order of the file (``[cad] reverse``, or
             ``start_near`` at the last point of an open path).
         start_offset_m: arc length along the file's order from its first point to the first
-            waypoint [m] (0 unless ``start_near`` moved the start; the length for a reversed
-            open path).
+            waypoint [m] (0 unless ``start_near`` moved the start, and 0 for a mesh, whose reader
+            starts its loop there itself; the length for a reversed open path).
         direction_given: the problem fixed the direction (``[cad] reverse``, or ``start_near`` on
             an open path); the alignment keeps it instead of searching both.
         start_given: the problem fixed the start of a closed path (``[cad] start_near``); the
