@@ -1,5 +1,6 @@
 """result.json and the report say which way round and from where the run follows the CAD path."""
 
+import html
 from types import SimpleNamespace
 
 from refine.export.result_json import _demo_quality
@@ -26,7 +27,9 @@ def test_the_choice_is_added_to_demo_quality():
 
 
 def test_the_report_states_direction_start_and_both_distances():
-    page = _order_html(_result(PathOrder("reversed", 0.9094, "alignment", "alignment", 0.2956, 0.0371)))
+    page = html.unescape(
+        _order_html(_result(PathOrder("reversed", 0.9094, "alignment", "alignment", 0.2956, 0.0371)))
+    )
     assert "against the CAD file's order (reversed)" in page
     assert "295.6 mm as drawn, 37.1 mm reversed" in page and "starts 0.909 m along" in page
 
