@@ -854,6 +854,7 @@ def repair_by_placement(problem: Problem, robot: Robot, first: PassResult) -> Pl
     rows: list[ClearanceRow] = []
     found: SearchResult | None = None
     gaps: list[ObjectGap] = []
+    blocked: tuple[Placement, list[ObjectGap]] | None = None  # the last answer that broke a margin
     rounds = 0
     t0 = time.perf_counter()
     for rounds in range(1, CLEARANCE_ROUNDS + 1):
@@ -886,6 +887,7 @@ def repair_by_placement(problem: Problem, robot: Robot, first: PassResult) -> Pl
         gaps, more = clearance_rows(problem, robot, found.placement, found.q, support)
         if all(g.kept for g in gaps):
             break
+        blocked = (found.placement, [g for g in gaps if not g.kept])
         rows += more
     assert found is not None
     timings["search"] = time.perf_counter() - t0
@@ -919,6 +921,12 @@ def repair_by_placement(problem: Problem, robot: Robot, first: PassResult) -> Pl
         if broken:
             short += f": after {rounds} clearance rounds the best move still puts " + "; ".join(
                 g.describe() for g in broken[:3]
+            )
+        elif blocked is not None:
+            p, why = blocked
+            short += (
+                f"; the move that keeps the strict tolerances without them (shift {p.distance_m * 1e3:.1f} mm, "
+                f"turn {p.angle_deg:.2f} deg) puts " + "; ".join(g.describe() for g in why[:3])
             )
         plane = "" if bounds.free == "all" else f" in the support plane ({_plane_text(support)})"
         return PlacementRepair(
