@@ -13,7 +13,9 @@ robot and the other cell objects stay.
 
 The move: a turn ``R`` (rotation vector ``r``) about ``c``, the centroid of the CAD path's
 waypoints in the world frame {F} before the move, then a shift ``t`` of that point, both in {F}:
-``x' = c + R (x - c) + t``. Its size is the weighted norm
+``x' = c + R (x - c) + t``. A workpiece stays on what it rests on: with ``free = "plane"`` (the
+default) ``t`` lies in the support plane and ``r`` along its normal (:func:`move_basis`); the
+support is the cell object beneath the workpiece, or the world z plane (:func:`support_plane`). Its size is the weighted norm
 ``sqrt((|t| / translate_m)² + (angle(R) / rotate_deg)²)``, each part measured against its bound;
 "smallest" means the least such norm, with ``|t| <= translate_m`` and ``angle(R) <= rotate_deg``.
 
@@ -25,12 +27,18 @@ margin, the joint step, the singularity measure at every waypoint), each kept a 
 its bound (:data:`INSET_DEG`, :data:`SINGULARITY_INSET`), the cone elastic (a slack per waypoint
 with an exact L1 penalty, :data:`ELASTIC_WEIGHT`, so the problem always has an answer and an
 infeasible one says how far beyond the cone the best move leaves the path); the cost is the squared
-norm plus a small multiple of the usual path cost (orientation and joint smoothness). Clearance is not part
-of this search. IPOPT gets CasADi's exact Hessian except the singularity rows' curvature
+norm plus a small multiple of the usual path cost (orientation and joint smoothness). Clearance
+is part of the search in rounds (:func:`clearance_rows`), the way the refinement keeps it
+(:mod:`refine.optimise.clearance`): where an answer brings a moved object near or inside another
+cell object, the robot's base or a robot link at a waypoint, the signed distance linearised at the
+FCL witness points (the moved point exactly as a function of the move, the link's point to first
+order in the joints) becomes a row, and the search is made again from its answer. IPOPT gets CasADi's exact Hessian except the singularity rows' curvature
 (:data:`SKIP_SINGULARITY_CURVATURE`): a few more iterations, each a fraction of the cost.
 
 How it is verified (:func:`repair_by_placement`): the placement problem's answer is never the
-verdict. The problem is moved by the placement found and run through the ordinary strict
+verdict. The moved objects are checked against the rest of the cell (:func:`cell_gaps`: the
+collision margin to every other object and the robot's base, distance 0 or more to the support); a
+move that puts one into another is refused. The problem is moved by the placement found and run through the ordinary strict
 pipeline (:func:`refine.pipeline.solve_problem` without repair: IK seed, solve, verification,
 clearance rows and the dense clearance check); only an ``ok`` there makes the placement ``ok``.
 When it is not, the move is enlarged along the same direction (:data:`ENLARGE`, within the bounds)
@@ -932,7 +940,7 @@ def repair_by_placement(problem: Problem, robot: Robot, first: PassResult) -> Pl
         return PlacementRepair(
             "infeasible",
             reason=(
-                f"no workpiece move{plane} within {bounds.translate_m:g} m and {bounds.rotate_deg:g} deg "
+                f"no workpiece move within {bounds.translate_m:g} m and {bounds.rotate_deg:g} deg{plane} "
                 f"found that keeps {keeps}{solver}{short}"
             ),
             timings_s=timings,
