@@ -906,11 +906,16 @@ def repair_by_placement(problem: Problem, robot: Robot, first: PassResult) -> Pl
         "support": support,
         "rounds": rounds,
     }
-    broken = sorted((g for g in gaps if not g.kept), key=lambda g: g.distance_m - g.margin_m)
+    # the gaps measured at the last answer found; a failed search's point is no answer
+    broken = (
+        sorted((g for g in gaps if not g.kept), key=lambda g: g.distance_m - g.margin_m)
+        if found.success
+        else []
+    )
     near = sorted({f"{a!r} / {b!r}" for a, b in (r.pair for r in rows)})
     if not found.success or broken:
         short = ""
-        if found.slack_deg.size and found.slack_deg.max() > SLACK_TOLERANCE_DEG:
+        if not rows and found.slack_deg.size and found.slack_deg.max() > SLACK_TOLERANCE_DEG:
             worst = int(np.argmax(found.slack_deg))
             s = fused.s
             short = (

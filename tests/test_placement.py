@@ -504,4 +504,10 @@ def test_a_block_across_the_way_back_gives_no_move_and_is_named(tmp_path):
     _, result = _table_run(str(_table_cell(tmp_path, 0.10, extra={"block": BLOCK})))
     placement = result.placement
     assert placement.status == "infeasible" and placement.placement is None
-    assert "'block'" in placement.reason and "mm inside 'block'" in placement.reason, placement.reason
+    assert "'plate' / 'block'" in placement.reason, placement.reason  # the rows that leave no move
+    # without the rows the move goes straight back over the block: the shallowest way out of it is
+    # up, from the plate's underside (0.08 m) to the block's top (0.15 m)
+    depth_mm = (
+        BLOCK["xyz"][2] + BLOCK["size_m"][2] / 2 - (BOXES["plate"][1][2] - BOXES["plate"][0][2])
+    ) * 1e3
+    assert f"'plate' {depth_mm:.1f} mm inside 'block'" in placement.reason, placement.reason
