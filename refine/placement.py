@@ -672,7 +672,7 @@ def search_placement(
         base_in_world: T_F_R (4, 4).
         tcp_in_flange: T_flange_TCP (4, 4).
         tolerances: the strict tolerances (:class:`refine.settings.Tolerances`).
-        bounds: the largest shift [m] and turn [deg].
+        bounds: the largest shift [m] and turn [deg], and what may move (``free``).
         q0: joints to start from (N, n) [rad], e.g. the slack repair's or the IK seed.
         axisymmetric: only the tool axis counts in the cone.
         weights: the path cost weights (:class:`refine.optimise.problem.Weights`), or None.
