@@ -13,7 +13,9 @@ robot and the other cell objects stay.
 
 The move: a turn ``R`` (rotation vector ``r``) about ``c``, the centroid of the CAD path's
 waypoints in the world frame {F} before the move, then a shift ``t`` of that point, both in {F}:
-``x' = c + R (x - c) + t``. Its size is the weighted norm
+``x' = c + R (x - c) + t``. A workpiece stays on what it rests on: with ``free = "plane"`` (the
+default) ``t`` lies in the support plane and ``r`` along its normal (:func:`move_basis`); the
+support is the cell object beneath the workpiece, or the world z plane (:func:`support_plane`). Its size is the weighted norm
 ``sqrt((|t| / translate_m)² + (angle(R) / rotate_deg)²)``, each part measured against its bound;
 "smallest" means the least such norm, with ``|t| <= translate_m`` and ``angle(R) <= rotate_deg``.
 
@@ -25,12 +27,18 @@ margin, the joint step, the singularity measure at every waypoint), each kept a 
 its bound (:data:`INSET_DEG`, :data:`SINGULARITY_INSET`), the cone elastic (a slack per waypoint
 with an exact L1 penalty, :data:`ELASTIC_WEIGHT`, so the problem always has an answer and an
 infeasible one says how far beyond the cone the best move leaves the path); the cost is the squared
-norm plus a small multiple of the usual path cost (orientation and joint smoothness). Clearance is not part
-of this search. IPOPT gets CasADi's exact Hessian except the singularity rows' curvature
+norm plus a small multiple of the usual path cost (orientation and joint smoothness). Clearance
+is part of the search in rounds (:func:`clearance_rows`), the way the refinement keeps it
+(:mod:`refine.optimise.clearance`): where an answer brings a moved object near or inside another
+cell object, the robot's base or a robot link at a waypoint, the signed distance linearised at the
+FCL witness points (the moved point exactly as a function of the move, the link's point to first
+order in the joints) becomes a row, and the search is made again from its answer. IPOPT gets CasADi's exact Hessian except the singularity rows' curvature
 (:data:`SKIP_SINGULARITY_CURVATURE`): a few more iterations, each a fraction of the cost.
 
 How it is verified (:func:`repair_by_placement`): the placement problem's answer is never the
-verdict. The problem is moved by the placement found and run through the ordinary strict
+verdict. The moved objects are checked against the rest of the cell (:func:`cell_gaps`: the
+collision margin to every other object and the robot's base, distance 0 or more to the support); a
+move that puts one into another is refused. The problem is moved by the placement found and run through the ordinary strict
 pipeline (:func:`refine.pipeline.solve_problem` without repair: IK seed, solve, verification,
 clearance rows and the dense clearance check); only an ``ok`` there makes the placement ``ok``.
 When it is not, the move is enlarged along the same direction (:data:`ENLARGE`, within the bounds)
@@ -180,6 +188,10 @@ class PlacementRepair:
         solver_status: IPOPT's status of the placement search.
         iterations: IPOPT iterations of the search.
         timings_s: ``search`` and ``verify`` wall times [s].
+        moved_frames: the problem's frames after the move.
+        moved_objects: the names of the cell objects moved.
+        support: the plane the workpiece rests on (:func:`support_plane`), or None when not searched.
+        rounds: searches made (the first, then one per round of clearance rows).
     """
 
     status: str
@@ -193,6 +205,8 @@ class PlacementRepair:
     timings_s: dict[str, float] = field(default_factory=dict)
     moved_frames: dict[str, Array] = field(default_factory=dict)
     moved_objects: tuple[str, ...] = ()
+    support: SupportPlane | None = None
+    rounds: int = 0
 
     def describe(self) -> str:
         """One line for the command line's summary."""
@@ -207,7 +221,13 @@ class PlacementRepair:
             f"[{', '.join(f'{v * 1e3:.1f}' for v in p.translation_m)}] mm (world) and turn it "
             f"{p.angle_deg:.2f} deg about [{', '.join(f'{v:.3f}' for v in p.as_json()['rotation']['axis'])}] "
             f"through [{', '.join(f'{v:.3f}' for v in p.centre_m)}] m "
-            f"(norm {p.norm(self.bounds):.3f} of the bounds {self.bounds.translate_m:g} m, {self.bounds.rotate_deg:g} deg)"
+            f"(norm {p.norm(self.bounds):.3f} of the bounds {self.bounds.translate_m:g} m, {self.bounds.rotate_deg:g} deg"
+            + (
+                ""
+                if self.support is None or self.bounds.free == "all"
+                else f"; in {_plane_text(self.support)}"
+            )
+            + ")"
         )
         if self.status == "ok" and self.result is not None:
             c = self.result.refinement.check
@@ -229,7 +249,13 @@ class PlacementRepair:
         return {
             "status": self.status,
             "reason": self.reason,
-            "bounds": {"translate_m": self.bounds.translate_m, "rotate_deg": self.bounds.rotate_deg},
+            "bounds": {
+                "translate_m": self.bounds.translate_m,
+                "rotate_deg": self.bounds.rotate_deg,
+                "free": self.bounds.free,
+            },
+            "support": None if self.support is None else self.support.as_json(),
+            "rounds": self.rounds,
             "frame": "world",
             "about_m": None if move is None else move["about_m"],
             "translation_m": None if move is None else move["translation_m"],
@@ -294,6 +320,297 @@ def moved_path(fused: FusedPath, transform: Array) -> FusedPath:
     )
 
 
+# ---- where the workpiece may go ------------------------------------------------------------------
+
+SUPPORT_GAP_M = 0.002
+"""A cell object whose top lies within this of the workpiece's underside, and within this of the
+workpiece itself, is what the workpiece rests on [m]."""
+
+CONTACT_TOLERANCE_M = 1e-6
+"""The moved workpiece may touch its support (distance 0), and go no deeper than this into it [m]."""
+
+CLEARANCE_TOLERANCE_M = 1e-6
+"""The final check accepts a moved object this much closer than its margin (rounding) [m]."""
+
+LOOK_AHEAD_M = 0.03
+"""A pair within its margin plus this gets a clearance row in the next search round [m]."""
+
+BACK_OFF_M = 0.0005
+"""Each clearance row asks for this much more than the margin [m]: the distance is curved where
+the row is flat (as the refinement's rows, :mod:`refine.optimise.clearance`)."""
+
+CLEARANCE_ROUNDS = 6
+"""Most searches made with clearance rows added from the last answer."""
+
+
+@dataclass(frozen=True)
+class SupportPlane:
+    """The plane the workpiece rests on.
+
+    Attributes:
+        normal: unit normal (3,) in {F}, pointing away from the support into the workpiece.
+        point_m: a point of the plane [m], (3,), in {F}.
+        support: the cell object the workpiece rests on, or None for the world z plane.
+    """
+
+    normal: Array
+    point_m: Array
+    support: str | None = None
+
+    def as_json(self) -> dict[str, Any]:
+        """The ``support`` entry of the placement in ``result.json``."""
+        return {
+            "object": self.support,
+            "normal": [float(v) for v in self.normal],
+            "point_m": [float(v) for v in self.point_m],
+        }
+
+
+WORLD_Z = SupportPlane(np.array([0.0, 0.0, 1.0]), np.zeros(3), None)
+"""The support plane when no cell object is beneath the workpiece: the world's z = 0 plane's
+normal (the plane itself is put through the workpiece's lowest point by :func:`support_plane`)."""
+
+
+def move_basis(support: SupportPlane, free: str) -> tuple[Array, Array]:
+    """The directions the shift and the turn may take: ``t = E_t u``, ``r = E_r v``.
+
+    ``"plane"``: two orthonormal directions in the support plane for the shift, its normal for the
+    turn; ``"all"``: the identity for both.
+    """
+    if free == "all":
+        return np.eye(3), np.eye(3)
+    nrm = np.asarray(support.normal, dtype=float)
+    nrm = nrm / np.linalg.norm(nrm)
+    # the plane's directions: the null space of the normal (SVD), orthonormal by construction
+    plane = np.linalg.svd(nrm[None, :])[2][1:].T
+    return plane, nrm[:, None]
+
+
+def _bodies(shapes: tuple[Any, ...]) -> list[Any]:
+    from refine.collision.geometry import shape_body
+
+    return [shape_body(o, name=o.name, kind="cell", link=None, frame_id=-1, joint=-1) for o in shapes]
+
+
+def support_plane(problem: Problem) -> SupportPlane:
+    """What the workpiece rests on: the highest other cell object whose top touches its underside.
+
+    The underside is the lowest world-z point of the objects marked ``workpiece``; an object beneath
+    is one that is within :data:`SUPPORT_GAP_M` of a workpiece object and whose highest point is
+    within :data:`SUPPORT_GAP_M` of that underside. Its plane: for a box, the face whose outward
+    normal is nearest to world +z (the table top, tilted with the box); for another shape, world z
+    through its highest point. With nothing beneath, the world z plane through the underside.
+    """
+    from refine.collision.distance import place, signed_distance
+
+    up = np.array([0.0, 0.0, 1.0])
+    moved = [o for o in problem.cell if o.workpiece]
+    if not moved:
+        return WORLD_Z
+    parts = _bodies(tuple(moved))
+    bottom = min(-b.reach(np.asarray(o.pose, dtype=float), -up) for b, o in zip(parts, moved, strict=True))
+    best: tuple[float, SupportPlane] | None = None
+    for o in problem.cell:
+        if o.workpiece:
+            continue
+        (body,) = _bodies((o,))
+        T = np.asarray(o.pose, dtype=float)
+        top = body.reach(T, up)
+        if abs(top - bottom) > SUPPORT_GAP_M:
+            continue
+        place(body, T)
+        near = False
+        for b, w in zip(parts, moved, strict=True):
+            Tw = np.asarray(w.pose, dtype=float)
+            place(b, Tw)
+            near = near or signed_distance(b, Tw, body, T)[0] <= SUPPORT_GAP_M
+        if not near:
+            continue
+        normal = up
+        if o.shape == "box":
+            axes = np.concatenate([T[:3, :3].T, -T[:3, :3].T])  # the six face normals
+            normal = axes[int(np.argmax(axes @ up))]
+        plane = SupportPlane(
+            normal, T[:3, 3] + normal * (body.reach(T, normal) - float(normal @ T[:3, 3])), o.name
+        )
+        if best is None or top > best[0]:
+            best = (top, plane)
+    if best is not None:
+        return best[1]
+    return SupportPlane(up, np.array([0.0, 0.0, bottom]), None)
+
+
+@dataclass(frozen=True)
+class ClearanceRow:
+    """One linearised clearance constraint of the placement search.
+
+    ``distance_m + normal · (P(move) - moved_point_m) [+ gradient · (q_k - q)] >= bound_m``, with
+    ``P(move)`` the witness point of the moved object after the move.
+
+    Attributes:
+        point_m: the witness point on the moved object, where it is as placed [m], (3,).
+        moved_point_m: the same point after the move it was measured at [m], (3,).
+        normal: unit vector (3,) along which moving that point increases the distance.
+        distance_m: the signed distance there [m].
+        bound_m: the distance the row asks for (the pair's margin plus :data:`BACK_OFF_M`) [m].
+        pair: the moved object and the other body.
+        waypoint: for a robot link, the waypoint k whose joints it depends on; -1 otherwise.
+        gradient: d(distance)/dq of the link's point at that waypoint [m/rad], (n,).
+        q: the joints it was measured at [rad], (n,).
+    """
+
+    point_m: Array
+    moved_point_m: Array
+    normal: Array
+    distance_m: float
+    bound_m: float
+    pair: tuple[str, str]
+    waypoint: int = -1
+    gradient: Array = field(default_factory=lambda: np.zeros(0))
+    q: Array = field(default_factory=lambda: np.zeros(0))
+
+
+@dataclass(frozen=True)
+class ObjectGap:
+    """The distance of a moved object to another body, and what it must keep.
+
+    Attributes:
+        moved: the moved object (marked workpiece).
+        other: the other cell object, or the robot link.
+        distance_m: signed distance [m] (negative: the depth one is inside the other).
+        margin_m: the least distance allowed [m]: the collision margin, 0 for the support.
+        waypoint: the waypoint of a moving robot link's figure, -1 for a fixed body.
+    """
+
+    moved: str
+    other: str
+    distance_m: float
+    margin_m: float
+    waypoint: int = -1
+
+    @property
+    def kept(self) -> bool:
+        """The margin is kept (within the tolerance of rounding)."""
+        tolerance = CONTACT_TOLERANCE_M if self.margin_m == 0.0 else CLEARANCE_TOLERANCE_M
+        return self.distance_m >= self.margin_m - tolerance
+
+    def describe(self) -> str:
+        """``'plate' 3.2 mm inside 'table'`` or ``'plate' 4.1 mm from 'post' (margin 10.0 mm)``."""
+        where = f" at waypoint {self.waypoint}" if self.waypoint >= 0 else ""
+        if self.distance_m < 0.0:
+            return f"{self.moved!r} {-self.distance_m * 1e3:.1f} mm inside {self.other!r}{where}"
+        return (
+            f"{self.moved!r} {self.distance_m * 1e3:.1f} mm from {self.other!r}{where} "
+            f"(margin {self.margin_m * 1e3:.1f} mm)"
+        )
+
+
+def _gap_rows(
+    problem: Problem,
+    robot: Robot,
+    placement: Placement,
+    q: Array | None,
+    support: SupportPlane,
+    reach_m: float,
+) -> tuple[list[ObjectGap], list[ClearanceRow]]:
+    """The moved objects' distances to the rest of the cell and the robot, and rows for the close ones.
+
+    The other cell objects and the robot's fixed bodies (the base: the strict run does not check
+    them, they cannot move) are measured once; the robot's moving links at every waypoint of ``q``
+    (the pairs the collision model checks). The support is kept at distance 0 or more, the others
+    at the collision margin; with ``free = "plane"`` the support is not measured in the search (a
+    move in its plane keeps the contact) but it is in the final check (``q`` None).
+    """
+    from refine.collision import CollisionModel
+    from refine.collision.distance import place, signed_distance
+
+    bounds = problem.repair.placement
+    free = "all" if bounds is None else bounds.free
+    margin = problem.collision.margin_m
+    D = placement.transform
+    D_inv = np.linalg.inv(D)
+    moved_shapes = tuple(o for o in problem.cell if o.workpiece)
+    static_shapes = tuple(o for o in problem.cell if not o.workpiece)
+    moved = _bodies(moved_shapes)
+    moved_poses = [D @ np.asarray(o.pose, dtype=float) for o in moved_shapes]
+    for b, T in zip(moved, moved_poses, strict=True):
+        place(b, T)
+    others: list[tuple[Any, Array, float]] = []
+    for o, b in zip(static_shapes, _bodies(static_shapes), strict=True):
+        is_support = o.name == support.support
+        if is_support and free == "plane" and q is not None:
+            continue
+        T = np.asarray(o.pose, dtype=float)
+        place(b, T)
+        others.append((b, T, 0.0 if is_support else margin))
+    model = CollisionModel.for_problem(moved_problem(problem, D), robot) if moved_shapes else None
+    if model is not None and problem.collision.enabled:
+        q_any = _neutral(robot) if q is None else q[0]
+        poses = model.moving_poses(np.asarray(q_any, dtype=float)[None])[0]
+        for b, T in zip(model.bodies[: len(poses)], poses, strict=True):
+            if b.kind == "link" and b.joint == 0:  # fixed to the base
+                place(b, T)
+                others.append((b, T, margin))
+    gaps: list[ObjectGap] = []
+    rows: list[ClearanceRow] = []
+    for b, T_b, own in others:
+        for mb, T_m in zip(moved, moved_poses, strict=True):
+            d, p_m, _, nrm = signed_distance(mb, T_m, b, T_b)
+            gaps.append(ObjectGap(mb.name, b.name, float(d), own))
+            if d < own + reach_m:
+                point = D_inv[:3, :3] @ p_m + D_inv[:3, 3]
+                rows.append(ClearanceRow(point, p_m, nrm, float(d), own + BACK_OFF_M, (mb.name, b.name)))
+    if model is not None and problem.collision.enabled and q is not None:
+        names = {o.name for o in moved_shapes}
+        for k, qk in enumerate(np.asarray(q, dtype=float)):
+            contacts = [
+                c for c in model.contacts(qk, margin + reach_m) if c.other in names and not c.self_pair
+            ]
+            if not contacts:
+                continue
+            grads = model.distance_gradients(qk, contacts)
+            for c, g in zip(contacts, grads, strict=True):
+                gaps.append(ObjectGap(c.other, c.body, c.distance_m, c.margin_m, k))
+                point = D_inv[:3, :3] @ c.point_other + D_inv[:3, 3]
+                rows.append(
+                    ClearanceRow(
+                        point,
+                        np.asarray(c.point_other),
+                        -np.asarray(c.normal),
+                        c.distance_m,
+                        c.margin_m + BACK_OFF_M,
+                        (c.other, c.body),
+                        k,
+                        g,
+                        qk.copy(),
+                    )
+                )
+    return gaps, rows
+
+
+def _neutral(robot: Robot) -> Array:
+    """The robot's neutral joints [rad] (any configuration places the fixed bodies alike)."""
+    import pinocchio as pin
+
+    return np.asarray(pin.neutral(robot.model), dtype=float)
+
+
+def clearance_rows(
+    problem: Problem, robot: Robot, placement: Placement, q: Array, support: SupportPlane
+) -> tuple[list[ObjectGap], list[ClearanceRow]]:
+    """The moved objects' gaps at a search answer and the rows for the pairs near or below their margin."""
+    return _gap_rows(problem, robot, placement, q, support, LOOK_AHEAD_M)
+
+
+def cell_gaps(problem: Problem, robot: Robot, placement: Placement, support: SupportPlane) -> list[ObjectGap]:
+    """The final check: the moved objects' gaps to the rest of the cell and the robot's fixed bodies.
+
+    Every other cell object (the support included, at margin 0) and the robot's base bodies, with
+    the problem's collision margin; the moving links are the strict run's to check.
+    """
+    return _gap_rows(problem, robot, placement, None, support, 0.0)[0]
+
+
 # ---- the search ----------------------------------------------------------------------------------
 
 
@@ -318,6 +635,7 @@ class SearchResult:
         time_s: wall time of build and solve [s].
         slack_deg: the orientation beyond the (inset) cone each waypoint still needs with this
             move [deg], (N,); all zero (below :data:`SLACK_TOLERANCE_DEG`) when the move is feasible.
+        x: the solver's variables at the answer (to start the next clearance round from).
     """
 
     placement: Placement
@@ -327,6 +645,7 @@ class SearchResult:
     iterations: int
     time_s: float
     slack_deg: Array = field(default_factory=lambda: np.zeros(0))
+    x: Array = field(default_factory=lambda: np.zeros(0))
 
 
 def search_placement(
@@ -341,6 +660,9 @@ def search_placement(
     axisymmetric: bool = False,
     weights: Any = None,
     time_limit_s: float = 120.0,
+    support: SupportPlane | None = None,
+    rows: tuple[ClearanceRow, ...] = (),
+    start: SearchResult | None = None,
 ) -> SearchResult:
     """The smallest move of the workpiece for which the joints meet the strict constraints.
 
@@ -350,11 +672,15 @@ def search_placement(
         base_in_world: T_F_R (4, 4).
         tcp_in_flange: T_flange_TCP (4, 4).
         tolerances: the strict tolerances (:class:`refine.settings.Tolerances`).
-        bounds: the largest shift [m] and turn [deg].
+        bounds: the largest shift [m] and turn [deg], and what may move (``free``).
         q0: joints to start from (N, n) [rad], e.g. the slack repair's or the IK seed.
         axisymmetric: only the tool axis counts in the cone.
         weights: the path cost weights (:class:`refine.optimise.problem.Weights`), or None.
         time_limit_s: IPOPT's wall-time limit [s].
+        support: the plane the workpiece rests on; with ``bounds.free == "plane"`` the shift stays
+            in it and the turn is about its normal. None: the world z plane.
+        rows: clearance rows of the moved objects (:func:`clearance_rows`), kept as constraints.
+        start: an earlier answer to start from (the previous clearance round), or None.
     """
     from refine.optimise.derivatives import smoothness_matrix
     from refine.optimise.problem import Weights, joint_bounds, singularity_function, waypoint_function
@@ -369,10 +695,13 @@ def search_placement(
     # elastic slack per waypoint on the cone (cosine units), so that the problem always has an
     # answer: with the slack zero the move is feasible; otherwise it says how far from it the largest
     # move within the bounds leaves the path
-    x = ca.MX.sym("x", N * n + 6 + N)
+    E_t, E_r = move_basis(support or WORLD_Z, bounds.free)
+    m_t, m_r = E_t.shape[1], E_r.shape[1]
+    m = m_t + m_r
+    x = ca.MX.sym("x", N * n + m + N)
     Q = ca.reshape(x[: N * n], n, N)
-    u, v, sigma = x[N * n : N * n + 3], x[N * n + 3 : N * n + 6], x[N * n + 6 :]
-    t, r = T_max * u, A_max * v
+    u, v, sigma = x[N * n : N * n + m_t], x[N * n + m_t : N * n + m], x[N * n + m :]
+    t, r = T_max * ca.mtimes(ca.DM(E_t), u), A_max * ca.mtimes(ca.DM(E_r), v)
     R = _rotation(r)
     P = ca.DM(fused.positions.T)  # (3, N)
     c = ca.DM(centre)
@@ -382,6 +711,7 @@ def search_placement(
 
     G, cost = waypoint_function(robot, base_in_world, tcp_in_flange, axisymmetric).map(N)(Q, P_moved, R_moved)
     cos_theta = G[3, :]
+    clearance = rows
     rows = [ca.vec(ca.vertcat(G[:3, :], cos_theta + sigma.T)), ca.vec(Q[:, 1:] - Q[:, :-1])]
     inset = math.radians(INSET_DEG)
     cone = math.radians(tolerances.orientation_deg) - inset
@@ -397,6 +727,16 @@ def search_placement(
     rows.append(ca.vertcat(ca.dot(u, u), ca.dot(v, v)))
     lbg.append(np.array([-np.inf, -np.inf]))
     ubg.append(np.array([1.0, 1.0]))
+    for row in clearance:
+        # the signed distance linearised at its witness points: the moved object's point follows
+        # the move exactly, a robot link's point the joints to first order
+        moved = c + ca.mtimes(R, ca.DM(row.point_m - centre)) + t
+        d = row.distance_m + ca.dot(ca.DM(row.normal), moved - ca.DM(row.moved_point_m))
+        if row.waypoint >= 0:
+            d += ca.dot(ca.DM(row.gradient), Q[:, row.waypoint] - ca.DM(row.q))
+        rows.append(d)
+        lbg.append(np.array([row.bound_m]))
+        ubg.append(np.array([np.inf]))
 
     spec = robot.spec
     h = float(np.mean(np.diff(fused.s)))
@@ -411,8 +751,8 @@ def search_placement(
     lower, upper = joint_bounds(robot, tolerances)
     lower, upper = lower + inset, upper - inset
     free_t, free_r = float(T_max > 0), float(A_max > 0)  # a part with a zero bound stays at 0
-    lbx = np.concatenate([np.tile(lower, N), np.full(3, -free_t), np.full(3, -free_r), np.zeros(N)])
-    ubx = np.concatenate([np.tile(upper, N), np.full(3, free_t), np.full(3, free_r), np.full(N, 2.0)])
+    lbx = np.concatenate([np.tile(lower, N), np.full(m_t, -free_t), np.full(m_r, -free_r), np.zeros(N)])
+    ubx = np.concatenate([np.tile(upper, N), np.full(m_t, free_t), np.full(m_r, free_r), np.full(N, 2.0)])
     options = {
         "ipopt.print_level": 0,
         "ipopt.sb": "yes",
@@ -435,16 +775,21 @@ def search_placement(
             "hess_lag", [x, p_empty, lam_f, lam_g], [H], ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"]
         )
     solver = ca.nlpsol("placement", "ipopt", {"x": x, "f": f, "g": g}, options)
-    q_start = np.clip(np.asarray(q0, dtype=float), lower, upper).ravel()
-    start_cos = ca.Function("cos_theta", [x], [cos_theta])(np.concatenate([q_start, np.zeros(6 + N)]))
-    sigma0 = np.clip(math.cos(cone) - np.asarray(start_cos).ravel(), 0.0, 2.0)  # what the start needs
-    x0 = np.concatenate([q_start, np.zeros(6), sigma0])
+    if start is not None and start.x.size == x.size1():
+        x0 = np.clip(start.x, lbx, ubx)
+    else:
+        q_start = np.clip(np.asarray(q0, dtype=float), lower, upper).ravel()
+        start_cos = ca.Function("cos_theta", [x], [cos_theta])(np.concatenate([q_start, np.zeros(m + N)]))
+        sigma0 = np.clip(math.cos(cone) - np.asarray(start_cos).ravel(), 0.0, 2.0)  # what the start needs
+        x0 = np.concatenate([q_start, np.zeros(m), sigma0])
     sol = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=np.concatenate(lbg), ubg=np.concatenate(ubg))
     stats = solver.stats()
     log.debug("placement search timings: %s", {k: v for k, v in stats.items() if k.startswith("t_wall")})
     xs = np.asarray(sol["x"]).ravel()
-    placement = Placement(centre, T_max * xs[N * n : N * n + 3], A_max * xs[N * n + 3 : N * n + 6])
-    slack = np.clip(xs[N * n + 6 :], 0.0, None)
+    placement = Placement(
+        centre, T_max * (E_t @ xs[N * n : N * n + m_t]), A_max * (E_r @ xs[N * n + m_t : N * n + m])
+    )
+    slack = np.clip(xs[N * n + m :], 0.0, None)
     slack_deg = np.degrees(np.arccos(np.clip(math.cos(cone) - slack, -1.0, 1.0)) - cone)
     return SearchResult(
         placement,
@@ -454,6 +799,7 @@ def search_placement(
         int(stats.get("iter_count", 0)),
         time.perf_counter() - t0,
         slack_deg,
+        xs,
     )
 
 
@@ -493,13 +839,18 @@ def verify_placement(problem: Problem, robot: Robot, fused: FusedPath, placement
 def repair_by_placement(problem: Problem, robot: Robot, first: PassResult) -> PlacementRepair:
     """Search the smallest workpiece move that makes the strict problem feasible, and verify it.
 
+    The search is repeated with clearance rows (:func:`clearance_rows`) from its last answer until
+    the moved objects keep their margins to the rest of the cell and to the robot, for at most
+    :data:`CLEARANCE_ROUNDS` rounds.
+
     Args:
         problem: the problem as placed, with ``[repair] placement``.
         robot: the robot.
         first: the first pass's result as placed (its path, and its joints as the search's start).
 
     Returns:
-        The outcome; ``status`` is ``ok`` only when the moved problem's strict run is ``ok``.
+        The outcome; ``status`` is ``ok`` only when the moved problem's strict run is ``ok`` and the
+        moved objects keep their margins to the rest of the cell (:func:`cell_gaps`).
     """
     from refine.pipeline import weights_for
 
@@ -507,30 +858,64 @@ def repair_by_placement(problem: Problem, robot: Robot, first: PassResult) -> Pl
     assert bounds is not None
     timings: dict[str, float] = {}
     fused = first.fused
-    found = search_placement(
-        robot,
-        fused,
-        problem.robot.base_in_world,
-        problem.tool.tcp_in_flange,
-        problem.tolerances,
-        bounds,
-        first.refinement.q,
-        axisymmetric=problem.tool.axisymmetric,
-        weights=weights_for(problem, robot),
-        time_limit_s=problem.repair.time_limit_s,
+    support = support_plane(problem)
+    rows: list[ClearanceRow] = []
+    found: SearchResult | None = None
+    gaps: list[ObjectGap] = []
+    blocked: tuple[Placement, list[ObjectGap]] | None = None  # the last answer that broke a margin
+    rounds = 0
+    t0 = time.perf_counter()
+    for rounds in range(1, CLEARANCE_ROUNDS + 1):
+        found = search_placement(
+            robot,
+            fused,
+            problem.robot.base_in_world,
+            problem.tool.tcp_in_flange,
+            problem.tolerances,
+            bounds,
+            first.refinement.q,
+            axisymmetric=problem.tool.axisymmetric,
+            weights=weights_for(problem, robot),
+            time_limit_s=problem.repair.time_limit_s,
+            support=support,
+            rows=tuple(rows),
+            start=found,
+        )
+        log.info(
+            "placement search round %d: %s after %d iterations, shift %.4f m, turn %.3f deg, %d clearance rows",
+            rounds,
+            found.solver_status,
+            found.iterations,
+            found.placement.distance_m,
+            found.placement.angle_deg,
+            len(rows),
+        )
+        if not found.success:
+            break
+        gaps, more = clearance_rows(problem, robot, found.placement, found.q, support)
+        if all(g.kept for g in gaps):
+            break
+        blocked = (found.placement, [g for g in gaps if not g.kept])
+        rows += more
+    assert found is not None
+    timings["search"] = time.perf_counter() - t0
+    common = {
+        "bounds": bounds,
+        "solver_status": found.solver_status,
+        "iterations": found.iterations,
+        "support": support,
+        "rounds": rounds,
+    }
+    # the gaps measured at the last answer found; a failed search's point is no answer
+    broken = (
+        sorted((g for g in gaps if not g.kept), key=lambda g: g.distance_m - g.margin_m)
+        if found.success
+        else []
     )
-    timings["search"] = found.time_s
-    log.info(
-        "placement search: %s after %d iterations, shift %.4f m, turn %.3f deg",
-        found.solver_status,
-        found.iterations,
-        found.placement.distance_m,
-        found.placement.angle_deg,
-    )
-    common = {"bounds": bounds, "solver_status": found.solver_status, "iterations": found.iterations}
-    if not found.success:
+    near = sorted({f"{a!r} / {b!r}" for a, b in (r.pair for r in rows)})
+    if not found.success or broken:
         short = ""
-        if found.slack_deg.size and found.slack_deg.max() > SLACK_TOLERANCE_DEG:
+        if not rows and found.slack_deg.size and found.slack_deg.max() > SLACK_TOLERANCE_DEG:
             worst = int(np.argmax(found.slack_deg))
             s = fused.s
             short = (
@@ -543,11 +928,25 @@ def repair_by_placement(problem: Problem, robot: Robot, first: PassResult) -> Pl
             if found.solver_status == "Solve_Succeeded"
             else f" (placement search: IPOPT {found.solver_status})"
         )
+        keeps = "the strict tolerances"
+        if rows:
+            keeps += f" and the clearance of the moved objects ({', '.join(near)})"
+        if broken:
+            short += f": after {rounds} clearance rounds the best move still puts " + "; ".join(
+                g.describe() for g in broken[:3]
+            )
+        elif blocked is not None:
+            p, why = blocked
+            short += (
+                f"; the move that keeps the strict tolerances without them (shift {p.distance_m * 1e3:.1f} mm, "
+                f"turn {p.angle_deg:.2f} deg) puts " + "; ".join(g.describe() for g in why[:3])
+            )
+        plane = "" if bounds.free == "all" else f" in the support plane ({_plane_text(support)})"
         return PlacementRepair(
             "infeasible",
             reason=(
-                f"no workpiece move within {bounds.translate_m:g} m and {bounds.rotate_deg:g} deg found "
-                f"that keeps the strict tolerances{solver}{short}"
+                f"no workpiece move within {bounds.translate_m:g} m and {bounds.rotate_deg:g} deg{plane} "
+                f"found that keeps {keeps}{solver}{short}"
             ),
             timings_s=timings,
             **common,
@@ -558,8 +957,8 @@ def repair_by_placement(problem: Problem, robot: Robot, first: PassResult) -> Pl
             "infeasible",
             reason=(
                 "the placement search meets the strict tolerances without moving the workpiece, so what "
-                "fails as placed is what it leaves out: clearance to the cell (or an IK branch the strict "
-                "solve did not find); no workpiece move is proposed (see the diagnosis)"
+                "fails as placed is what it leaves out: the robot's clearance between waypoints (or an IK "
+                "branch the strict solve did not find); no workpiece move is proposed (see the diagnosis)"
             ),
             timings_s=timings,
             **common,
@@ -571,6 +970,10 @@ def repair_by_placement(problem: Problem, robot: Robot, first: PassResult) -> Pl
         if factor > 1.0 and not _within(found.placement.scaled(factor), bounds):
             break
         candidate = found.placement.scaled(factor)
+        collided = [g for g in cell_gaps(problem, robot, candidate, support) if not g.kept]
+        if collided:  # one object put into (or too near) another: refused before any run
+            tried.append(f"x{factor:g}: refused, it puts {'; '.join(g.describe() for g in collided)}")
+            continue
         result = verify_placement(problem, robot, fused, candidate)
         tried.append(f"x{factor:g}: {result.status}")
         if result.status == "ok":
@@ -585,20 +988,25 @@ def repair_by_placement(problem: Problem, robot: Robot, first: PassResult) -> Pl
                 **_moved(problem, candidate),
             )
     timings["verify"] = time.perf_counter() - t0
-    why = result.refinement.reason if result is not None else ""
+    why = f": {result.refinement.reason}" if result is not None else ""
     return PlacementRepair(
         "infeasible",
         placement=found.placement,
         reason=(
             f"the move found (shift {found.placement.distance_m:.4f} m, turn {found.placement.angle_deg:.3f} deg) "
-            f"and its enlargements within the bounds are not verified by the strict run "
-            f"({', '.join(tried)}; the placement search leaves clearance out): {why}"
+            f"and its enlargements within the bounds are not verified ({'; '.join(tried)}; the placement "
+            f"search checks the robot's clearance at the waypoints only){why}"
         ),
         result=result,
         timings_s=timings,
         **common,
         **_moved(problem, found.placement),
     )
+
+
+def _plane_text(support: SupportPlane) -> str:
+    what = f"the top of {support.support!r}" if support.support else "the world z plane"
+    return f"{what}, normal [{', '.join(f'{v:.3f}' for v in support.normal)}]"
 
 
 def _moved(problem: Problem, placement: Placement) -> dict[str, Any]:

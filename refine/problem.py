@@ -510,7 +510,10 @@ def _repair(t: dict[str, Any], path: Path) -> RepairSettings:
     if not isinstance(p, dict):
         raise InputError(f"{form}, got {p!r}")
     _check_keys(p, "repair.placement", _fields(PlacementSettings), path)
-    values = {k: _number(v, f"repair.placement.{k}") for k, v in p.items()}
+    values: dict[str, Any] = {
+        k: _string(v, f"repair.placement.{k}") if k == "free" else _number(v, f"repair.placement.{k}")
+        for k, v in p.items()
+    }
     return _build(RepairSettings, t, "repair", path, placement=PlacementSettings(**values))
 
 

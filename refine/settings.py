@@ -517,6 +517,8 @@ MAX_PLACEMENT_TRANSLATE_M = 1.0
 """Largest workpiece shift the placement repair may search [m]: beyond it the cell is laid out anew."""
 MAX_PLACEMENT_ROTATE_DEG = 45.0
 """Largest workpiece turn the placement repair may search [deg]."""
+PLACEMENT_FREEDOMS = ("plane", "all")
+"""``[repair] placement.free``: in the support plane only, or any rigid move."""
 
 
 @dataclass(frozen=True)
@@ -531,10 +533,13 @@ class PlacementSettings:
     Attributes:
         translate_m: largest shift of the workpiece [m] (0: no shift).
         rotate_deg: largest turn of the workpiece about the path's centroid [deg] (0: no turn).
+        free: ``"plane"``: the workpiece only slides in the plane it rests on and turns about that
+            plane's normal; ``"all"``: any rigid move (kept out of the cell's other objects).
     """
 
     translate_m: float = 0.0
     rotate_deg: float = 0.0
+    free: str = "plane"
 
     def __post_init__(self) -> None:
         _in_range("repair.placement", "translate_m", self.translate_m, 0.0, MAX_PLACEMENT_TRANSLATE_M, "m")
@@ -543,6 +548,10 @@ class PlacementSettings:
             raise InputError(
                 "repair.placement needs translate_m > 0 m or rotate_deg > 0 deg "
                 "(leave placement out to search no workpiece move)"
+            )
+        if self.free not in PLACEMENT_FREEDOMS:
+            raise InputError(
+                f"repair.placement.free must be one of {', '.join(map(repr, PLACEMENT_FREEDOMS))}, got {self.free!r}"
             )
 
 

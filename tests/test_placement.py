@@ -46,6 +46,7 @@ def _copy(tmp_path: Path, edit) -> Path:
 def test_the_option_is_read_with_its_bounds():
     p = load_problem(CASE)
     assert p.repair.placement == PlacementSettings(translate_m=0.2, rotate_deg=15.0)
+    assert p.repair.placement.free == "plane"  # the default: the part stays on what it rests on
     assert {o.name for o in p.cell if o.workpiece} == {"plate", "fixture"}
 
 
@@ -61,7 +62,9 @@ def test_without_the_option_there_is_no_placement_search(tmp_path):
         ("{ translate_m = 0.2, rotate_deg = 50 }", ["repair.placement.rotate_deg", "[0, 45] deg", "50"]),
         ("{ translate_m = -0.1 }", ["repair.placement.translate_m", "-0.1"]),
         ("{ translate_m = 0, rotate_deg = 0 }", ["translate_m > 0 m or rotate_deg > 0 deg"]),
-        ("{ translate_m = 0.2, turn_deg = 5 }", ["'turn_deg'", "allowed: rotate_deg, translate_m"]),
+        ("{ translate_m = 0.2, turn_deg = 5 }", ["'turn_deg'", "allowed: free, rotate_deg, translate_m"]),
+        ('{ translate_m = 0.2, free = "z" }', ["repair.placement.free", "'plane', 'all'", "'z'"]),
+        ("{ translate_m = 0.2, free = 1 }", ["repair.placement.free", "string"]),
         ("{ translate_m = true }", ["repair.placement.translate_m", "number"]),
         ("0.2", ["repair.placement must be a table", "translate_m", "rotate_deg"]),
     ],
@@ -339,3 +342,172 @@ def test_bounds_too_small_for_reach_give_an_infeasible_placement_saying_how_far_
     assert "beyond the cone" in outcome.reason, outcome.reason
     doc = outcome.as_json()
     assert doc["strict_status"] is None and doc["metrics"] is None
+
+
+# ---- the part on a table: it slides on the table top, it does not sink into it ------------------
+
+TABLE_SIZE_M = (0.6, 0.8, 0.7)
+TABLE_TOP_M = 0.0  # the table box is centred 0.35 m below z = 0 and 0.70 m high: its top is z = 0
+FIXTURE_BOTTOM_M = 0.04 - 0.08 / 2  # the fixture box (0.08 m high, centred at z = 0.04) rests on it
+BOXES = {  # the workpiece boxes as the case's problem.toml places them (half sizes, centres) [m]
+    "plate": (np.array([0.15, 0.15, 0.01]), np.array([0.85, 0.0, 0.09])),
+    "fixture": (np.array([0.10, 0.10, 0.04]), np.array([0.85, 0.0, 0.04])),
+}
+POST = {"size_m": (0.06, 0.10, 0.15), "xyz": (0.73, 0.20, 0.075)}  # on the table, beside the way back
+BLOCK = {"size_m": (0.06, 0.10, 0.15), "xyz": (0.73, 0.0, 0.075)}  # on the table, across the way back
+
+
+def _box_toml(name: str, size, xyz) -> str:
+    return (
+        f'[[cell.objects]]\nname = "{name}"\nshape = "box"\nsize_m = [{", ".join(map(str, size))}]\n'
+        f"pose = {{ xyz = [{', '.join(map(str, xyz))}], rpy_deg = [0.0, 0.0, 0.0] }}\n\n"
+    )
+
+
+def _table_cell(tmp_path: Path, too_far_m: float, free: str = "plane", extra: dict | None = None) -> Path:
+    """The case moved ``too_far_m`` farther along x than it is (so 0.15 m + that from where it is ok),
+    its fixture on a table whose top is z = 0, with optional other objects on the table."""
+    x = 0.85 + too_far_m
+
+    def edit(text: str) -> str:
+        text = _moved_toml(text, np.eye(3), np.array([too_far_m, 0.0, 0.0]), repair=True)
+        text = text.replace(
+            "placement = { translate_m = 0.2, rotate_deg = 15.0 }",
+            f'placement = {{ translate_m = 0.3, rotate_deg = 15.0, free = "{free}" }}',
+        )
+        objects = _box_toml("table", TABLE_SIZE_M, (x, 0.0, TABLE_TOP_M - TABLE_SIZE_M[2] / 2))
+        for name, box in (extra or {}).items():
+            objects += _box_toml(name, box["size_m"], box["xyz"])
+        return text.replace("[expected]", objects + "[expected]")
+
+    folder = tmp_path / f"table_{too_far_m}_{free}_{'_'.join(extra or {})}"
+    shutil.copytree(CASE, folder)
+    toml = folder / "problem.toml"
+    toml.write_text(edit(toml.read_text()))
+    return folder
+
+
+def _corners(name: str, too_far_m: float, transform: np.ndarray) -> np.ndarray:
+    """The 8 corners of a workpiece box after the cell's shift and then the placement's move [m]."""
+    half, centre = BOXES[name]
+    signs = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], dtype=float)
+    points = centre + [too_far_m, 0.0, 0.0] + signs * half
+    return points @ transform[:3, :3].T + transform[:3, 3]
+
+
+def _fcl_distance(name: str, too_far_m: float, transform: np.ndarray, box: dict) -> float:
+    """python-fcl's distance between a moved workpiece box and another box of the cell [m]."""
+    import fcl
+
+    half, centre = BOXES[name]
+    T = transform @ np.block(
+        [[np.eye(3), (centre + [too_far_m, 0.0, 0.0])[:, None]], [np.zeros((1, 3)), 1.0]]
+    )
+    a = fcl.CollisionObject(fcl.Box(*(2 * half)), fcl.Transform(T[:3, :3], T[:3, 3]))
+    b = fcl.CollisionObject(fcl.Box(*box["size_m"]), fcl.Transform(np.eye(3), np.array(box["xyz"])))
+    return float(fcl.distance(a, b, fcl.DistanceRequest(), fcl.DistanceResult()))
+
+
+def test_the_support_is_the_table_beneath_or_else_the_world_z_plane(tmp_path):
+    from refine.placement import support_plane
+
+    on_table = support_plane(load_problem(_table_cell(tmp_path, 0.10)))
+    assert on_table.support == "table"
+    assert np.allclose(on_table.normal, [0.0, 0.0, 1.0]) and on_table.point_m[2] == pytest.approx(TABLE_TOP_M)
+    # the case as it is has nothing beneath the fixture: the world z plane through its underside
+    alone = support_plane(load_problem(CASE))
+    assert alone.support is None and np.allclose(alone.normal, [0.0, 0.0, 1.0])
+    assert alone.point_m[2] == pytest.approx(FIXTURE_BOTTOM_M)
+
+    # a table 5 mm below the fixture does not carry it
+    def lowered(text: str) -> str:
+        return text.replace(
+            "[expected]", _box_toml("table", TABLE_SIZE_M, (0.85, 0.0, -0.355)) + "[expected]"
+        )
+
+    assert support_plane(load_problem(_copy(tmp_path, lowered))).support is None
+
+
+def test_a_plane_move_has_no_component_along_the_normal():
+    from refine.placement import SupportPlane, move_basis
+
+    normal = np.array([0.2, -0.3, 0.9]) / np.linalg.norm([0.2, -0.3, 0.9])
+    E_t, E_r = move_basis(SupportPlane(normal, np.zeros(3), "tilted"), "plane")
+    assert E_t.shape == (3, 2) and np.allclose(E_t.T @ E_t, np.eye(2)) and np.allclose(normal @ E_t, 0.0)
+    assert np.allclose(np.cross(E_r[:, 0], normal), 0.0)
+    E_t, E_r = move_basis(SupportPlane(normal, np.zeros(3), "tilted"), "all")
+    assert np.allclose(E_t, np.eye(3)) and np.allclose(E_r, np.eye(3))
+
+
+@functools.cache
+def _table_run(folder: str):
+    problem = load_problem(Path(folder))
+    return problem, solve_problem(problem)
+
+
+def _check_on_table(problem, result, too_far_m: float) -> np.ndarray:
+    placement = result.placement
+    assert placement.status == "ok", placement.reason
+    assert placement.result.status == "ok"  # its verified strict run
+    assert placement.support.support == "table"
+    D = placement.placement.transform
+    for name in BOXES:  # neither box goes below the table top (the table's own geometry)
+        assert _corners(name, too_far_m, D)[:, 2].min() >= TABLE_TOP_M - 1e-9, name
+    return D
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("too_far_m", [0.10, 0.20])  # 0.25 m and 0.35 m from where the part is ok
+def test_a_part_on_a_table_slides_on_the_table_top(tmp_path, too_far_m):
+    problem, result = _table_run(str(_table_cell(tmp_path, too_far_m)))
+    D = _check_on_table(problem, result, too_far_m)
+    move = result.placement.placement
+    assert abs(move.translation_m[2]) <= 1e-9  # the table's normal is world z
+    assert np.allclose(np.cross(move.rotvec_rad, [0.0, 0.0, 1.0]), 0.0, atol=1e-12)  # a turn about it
+    # the fixture's underside stays on the table top: every bottom corner at z = 0
+    assert np.allclose(np.sort(_corners("fixture", too_far_m, D)[:, 2])[:4], TABLE_TOP_M, atol=1e-9)
+    assert move.translation_m[0] < -0.05  # back towards the robot
+    doc = json.loads(json.dumps(result_dict(result)))["placement"]
+    assert doc["support"]["object"] == "table" and doc["bounds"]["free"] == "plane"
+
+
+@pytest.mark.slow
+def test_free_all_moves_out_of_the_plane_but_not_into_the_table(tmp_path, require):
+    jsonschema = require.module("jsonschema")
+    problem, result = _table_run(str(_table_cell(tmp_path, 0.10, free="all")))
+    D = _check_on_table(problem, result, 0.10)
+    move = result.placement.placement
+    out_of_plane = abs(move.translation_m[2]) + np.linalg.norm(move.rotvec_rad[:2])
+    assert out_of_plane > 1e-4  # a shift along z or a tilt: the wrist centre is above the shoulder
+    assert _corners("fixture", 0.10, D)[:, 2].min() >= TABLE_TOP_M - 1e-6
+    doc = json.loads(json.dumps(result_dict(result)))["placement"]
+    jsonschema.validate(doc, json.loads(SCHEMA.read_text()))
+    assert doc["bounds"]["free"] == "all"
+
+
+@pytest.mark.slow
+def test_a_post_beside_the_way_back_is_gone_around(tmp_path):
+    problem, result = _table_run(str(_table_cell(tmp_path, 0.10, extra={"post": POST})))
+    D = _check_on_table(problem, result, 0.10)
+    margin = problem.collision.margin_m
+    post_y_min = POST["xyz"][1] - POST["size_m"][1] / 2
+    for name in BOXES:
+        corners = _corners(name, 0.10, D)
+        assert corners[:, 1].max() <= post_y_min - margin + 1e-6, name  # past it, margin kept
+        assert _fcl_distance(name, 0.10, D, POST) >= margin - 1e-6, name
+    # the part ends beside the post (their x ranges overlap): only the shift along y keeps it clear
+    assert corners[:, 0].min() < POST["xyz"][0] + POST["size_m"][0] / 2
+
+
+@pytest.mark.slow
+def test_a_block_across_the_way_back_gives_no_move_and_is_named(tmp_path):
+    _, result = _table_run(str(_table_cell(tmp_path, 0.10, extra={"block": BLOCK})))
+    placement = result.placement
+    assert placement.status == "infeasible" and placement.placement is None
+    assert "'plate' / 'block'" in placement.reason, placement.reason  # the rows that leave no move
+    # without the rows the move goes straight back over the block: the shallowest way out of it is
+    # up, from the plate's underside (0.08 m) to the block's top (0.15 m)
+    depth_mm = (
+        BLOCK["xyz"][2] + BLOCK["size_m"][2] / 2 - (BOXES["plate"][1][2] - BOXES["plate"][0][2])
+    ) * 1e3
+    assert f"'plate' {depth_mm:.1f} mm inside 'block'" in placement.reason, placement.reason
