@@ -156,7 +156,10 @@ def register_receiver(
         sensor_rotations: sensor orientation R_S_E at each point, shape (N, 3, 3).
         tip_in_sensor: the tip offset in {E} [m], shape (3,).
         points_world: the touched points in {F} [m], shape (N, 3), in the same order.
-        fit_z: also estimate the tracker's z error (needs at least 4 points).
+        fit_z: consider the tracker's z error (needs at least 4 points): the rigid fit and the
+            fit with the z error are both made (each inside its RANSAC), and the z error is kept
+            only when it explains more points, or when, left out one at a time, the points
+            (at least 5 both fits keep) are predicted better with it (leave-one-out RMS).
         threshold_m: largest residual of a point that counts as touched right [m].
             With the z model, RANSAC fits subsets of at least 5 points, so finding a wrongly
             touched point takes at least 6 points; without it, subsets of 3 and 4 points do.
@@ -164,7 +167,9 @@ def register_receiver(
 
     Returns:
         ``source_in_world`` (4, 4), a residual per point (outliers included) and the rejected
-        points; figures: the fitted z error coefficients and its range over the points.
+        points; figures: the leave-one-out RMS of both fits (``loo_rms_rigid_m``,
+        ``loo_rms_z_model_m``, ``inf`` when it cannot be taken), ``z_model_used`` (1 or 0), the
+        z error coefficients used and its range over the points.
 
     Raises:
         InputError: fewer points than the model needs, collinear points, or no consistent subset.
@@ -180,24 +185,51 @@ def register_receiver(
             f"the order of the points file, resting at least the dwell time on each"
         )
 
-    def fit(idx: NDArray[np.intp]) -> Array:
-        check_point_geometry(world[idx], "RANSAC subset", 3)
-        T0 = kabsch(p[idx] + R[idx] @ tip, world[idx])
-        x0 = _pack(T0, np.zeros(zfield.N_COEFFS))
-        sol = least_squares(
-            lambda x: _touch_residuals(x, p[idx], R[idx], tip, world[idx], fit_z).ravel(), x0, x_scale="jac"
-        )
-        return sol.x
+    def fitter(with_z: bool):  # noqa: ANN202 - the fit of one model
+        def fit(idx: NDArray[np.intp]) -> Array:
+            check_point_geometry(world[idx], "RANSAC subset", 3)
+            T0 = kabsch(p[idx] + R[idx] @ tip, world[idx])
+            x0 = _pack(T0, np.zeros(zfield.N_COEFFS))
+            sol = least_squares(
+                lambda x: _touch_residuals(x, p[idx], R[idx], tip, world[idx], with_z).ravel(), x0, x_scale="jac"
+            )
+            return sol.x
 
-    def residuals(x: Array) -> Array:
-        return np.linalg.norm(_touch_residuals(x, p, R, tip, world, fit_z), axis=1)
+        return fit
 
-    sample = (max(5, n - max(1, n // 4)) if n >= 6 else n) if fit_z else 3
-    x, inliers = ransac(n, fit, residuals, sample, threshold_m)
-    T_F_S, coeffs = _unpack(x)
+    def residuals_of(with_z: bool):  # noqa: ANN202 - the residuals of one model
+        return lambda x: np.linalg.norm(_touch_residuals(x, p, R, tip, world, with_z), axis=1)
+
+    figures: dict[str, float] = {"threshold_m": float(threshold_m)}
     if not fit_z:
+        x, inliers = ransac(n, fitter(False), residuals_of(False), 3, threshold_m)
+        use_z = False
+    else:
+        sample = max(5, n - max(1, n // 4)) if n >= 6 else n
+        x_z, inliers_z = ransac(n, fitter(True), residuals_of(True), sample, threshold_m)
+        try:
+            x_rigid, inliers_rigid = ransac(n, fitter(False), residuals_of(False), 3, threshold_m)
+        except InputError:  # a z error so large that no rigid fit agrees with three points
+            x_rigid, inliers_rigid = x_z, np.zeros(n, dtype=bool)
+        # the z model enters only when it predicts left-out points better than the rigid fit, or
+        # when it explains more points
+        common = np.flatnonzero(inliers_rigid & inliers_z)
+        loo = {False: np.inf, True: np.inf}
+        if len(common) >= 5:
+            for with_z in (False, True):
+                errors = [
+                    residuals_of(with_z)(fitter(with_z)(np.setdiff1d(common, [i])))[i] for i in common
+                ]
+                loo[with_z] = float(np.sqrt(np.mean(np.square(errors))))
+        use_z = bool(loo[True] < loo[False] or inliers_z.sum() > inliers_rigid.sum())
+        x, inliers = (x_z, inliers_z) if use_z else (x_rigid, inliers_rigid)
+        figures["loo_rms_rigid_m"] = loo[False]
+        figures["loo_rms_z_model_m"] = loo[True]
+    figures["z_model_used"] = float(use_z)
+    T_F_S, coeffs = _unpack(x)
+    if not use_z:
         coeffs = np.zeros(zfield.N_COEFFS)
-    res = residuals(x)
+    res = residuals_of(use_z)(x)
     dz_min, dz_max = zfield.z_error_range_m(p, coeffs)
     return Calibration(
         kind="receiver",
@@ -205,7 +237,7 @@ def register_receiver(
         residuals_m=res,
         outliers=tuple(int(i) for i in np.flatnonzero(~inliers)),
         figures={
-            "threshold_m": float(threshold_m),
+            **figures,
             "z_coeffs_c2_per_m": float(coeffs[0]),
             "z_coeffs_c3_per_m2": float(coeffs[1]),
             "z_error_min_m": dz_min,
