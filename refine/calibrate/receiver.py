@@ -343,6 +343,11 @@ def frame_difference(T_a: ArrayLike, T_b: ArrayLike) -> tuple[float, float]:
     return float(np.linalg.norm(a[:3, 3] - b[:3, 3])), float(rotation_angle_deg(a[:3, :3], b[:3, :3]))
 
 
+def _same_frame(T_a: Array, T_b: Array) -> bool:
+    offset_m, angle_deg = frame_difference(T_a, T_b)
+    return offset_m <= SAME_FRAME_M and angle_deg <= SAME_FRAME_DEG
+
+
 def _principal_axes(points: Array) -> tuple[Array, Array]:
     """Centroid (3,) and principal axes (columns, largest spread first, right-handed) of points."""
     centre = points.mean(axis=0)
@@ -511,8 +516,10 @@ def register_receiver_to_path(
             x_new = np.concatenate([sol.x, held])
             moved_m, turned_deg = frame_difference(_unpack(x)[0], _unpack(x_new)[0])
             bent_m = float(np.abs(zfield.z_error(p, _unpack(x_new)[1]) - zfield.z_error(p, _unpack(x)[1])).max())
+            cost_before, cost_after = float(np.sum(robust_cost(x))), float(np.sum(robust_cost(x_new)))
             x = x_new
-            if moved_m + np.radians(turned_deg) + bent_m < 1e-5:
+            # a round contour leaves a turn free: the transform slides while the fit stays the same
+            if moved_m + np.radians(turned_deg) + bent_m < 1e-5 or abs(cost_before - cost_after) <= 1e-6 * cost_before:
                 break
         return x, iterations
 
@@ -555,24 +562,34 @@ def register_receiver_to_path(
     for k in sorted(range(len(coarse)), key=lambda k: (coarse_rms[k], k)):
         if coarse_rms[k] > 10.0 * max_rms_m:
             continue
-        if all(frame_difference(coarse[k], T)[0] > SAME_FRAME_M or frame_difference(coarse[k], T)[1] > SAME_FRAME_DEG for T in distinct):
+        if all(not _same_frame(coarse[k], T) for T in distinct):
             distinct.append(coarse[k])
-    first_pass = [refine(T, Z_STARTS) for T in distinct]
+    # the cues of the rigid fits: a hypothesis that the tool's attitude or the direction of travel
+    # already rules out is refined from no z error only
+    coarse_down = [
+        float(np.mean((tip_vectors @ T[:3, :3].T)[:, 2] < 0.0)) if attitude_known else 1.0 for T in distinct
+    ]
+    coarse_travel = [
+        float(spearmanr(np.arange(len(p)), tree.query(tips_raw @ T[:3, :3].T + T[:3, 3])[1]).statistic)
+        for T in distinct
+    ]
+    promising = [
+        d >= max(coarse_down) - CUE_TIE and t >= max(coarse_travel) - 2.0 * CUE_TIE
+        for d, t in zip(coarse_down, coarse_travel, strict=True)
+    ]
+    first_pass = [refine(T, Z_STARTS if ok else Z_STARTS[:1]) for T, ok in zip(distinct, promising, strict=True)]
     if fit_z and first_pass:
         # the z error belongs to the tracker, not to a hypothesis: every candidate is refined
         # again from the z error of the one that fits best
         best_z = tuple(float(v) for v in min(first_pass, key=lambda c: c.rms_m).coeffs)
         first_pass = [
-            min(c, refine(T, (best_z,)), key=lambda c: c.rms_m) for c, T in zip(first_pass, distinct, strict=True)
+            min(c, refine(T, (best_z,)), key=lambda c: c.rms_m) if ok else c
+            for c, T, ok in zip(first_pass, distinct, promising, strict=True)
         ]
     candidates: list[PathCandidate] = []
     for c in first_pass:
         logger.debug("path candidate: %s", c.describe())
-        if all(
-            frame_difference(c.source_in_world, o.source_in_world)[0] > SAME_FRAME_M
-            or frame_difference(c.source_in_world, o.source_in_world)[1] > SAME_FRAME_DEG
-            for o in candidates
-        ):
+        if all(not _same_frame(c.source_in_world, o.source_in_world) for o in candidates):
             candidates.append(c)
     fitting = [c for c in candidates if c.outlier_share <= 0.5 and c.rms_m <= max_rms_m]
     if not fitting:
