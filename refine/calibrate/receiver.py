@@ -295,6 +295,9 @@ SAME_FRAME_DEG = 0.5
 #: A cue (share of samples with the tool pointing down, rank correlation of travel) ties two
 #: candidates when they differ by less than this.
 CUE_TIE = 0.1
+#: Least ratio of the weakest to the best determined direction of the path fit (rotations scaled
+#: by the path's RMS radius); below it the distances leave a turn or a shift free.
+MIN_DETERMINATION = 0.003
 #: Starts of the z error coefficients (c2 [1/m], c3 [1/m^2]) of the path registration: none, and
 #: errors of either sign that level off at 1.3 m.
 Z_STARTS = ((0.0, 0.0), (0.1, -0.05), (-0.1, 0.05))
@@ -519,7 +522,7 @@ def register_receiver_to_path(
             cost_before, cost_after = float(np.sum(robust_cost(x))), float(np.sum(robust_cost(x_new)))
             x = x_new
             # a round contour leaves a turn free: the transform slides while the fit stays the same
-            if moved_m + np.radians(turned_deg) + bent_m < 1e-5 or abs(cost_before - cost_after) <= 1e-6 * cost_before:
+            if moved_m + np.radians(turned_deg) + bent_m < 1e-5 or abs(cost_before - cost_after) <= 1e-4 * cost_before:
                 break
         return x, iterations
 
@@ -620,6 +623,43 @@ def register_receiver_to_path(
             f"trace it from its start in its direction, over a part that is not symmetric, or register "
             f"on touched points (refine calibrate receiver)"
         )
+    # a round path leaves a turn free, a straight one a shift: the distances then do not fix the frame
+    x_win = _pack(winner.source_in_world, winner.coeffs)
+    _, nearest = tree.query(tips_world(x_win))
+    target, tangent = dense[nearest], tangents[nearest]
+    step = 1e-6
+    columns = []
+    for j in range(6):
+        dx = np.zeros_like(x_win)
+        dx[j] = step
+        columns.append(
+            (off_path(tips_world(x_win + dx), target, tangent) - off_path(tips_world(x_win - dx), target, tangent)).ravel()
+            / (2.0 * step)
+        )
+    jac = np.column_stack(columns)
+    jac[:, :3] *= max(float(np.sqrt(np.mean(np.sum((dense - dense.mean(axis=0)) ** 2, axis=1)))), 1e-3)
+    singular = np.linalg.svd(jac, compute_uv=False)
+    determination = float(singular[-1] / singular[0])
+    if determination < MIN_DETERMINATION:
+        others = sorted(
+            (c for c in fitting if c is not winner),
+            key=lambda c: frame_difference(c.source_in_world, winner.source_in_world)[1],
+        )
+        other = f"; another fit: {others[0].describe()}, " if others else ""
+        apart = (
+            "{:.0f} mm and {:.1f} deg away".format(*(lambda d: (d[0] * 1000, d[1]))(
+                frame_difference(others[0].source_in_world, winner.source_in_world)
+            ))
+            if others
+            else ""
+        )
+        raise InputError(
+            f"path registration: the distances from the path leave the frame free to turn or shift "
+            f"(the weakest direction is determined {determination:.1e} times as well as the best, "
+            f"at least {MIN_DETERMINATION:.0e} needed): {winner.describe()}{other}{apart}. A round "
+            f"or straight path does not fix the receiver: trace a path with corners, or register on "
+            f"touched points (refine calibrate receiver)"
+        )
     offset_m, turn_deg = frame_difference(winner.source_in_world, guess)
     if offset_m > max_guess_offset_m or turn_deg > max_guess_turn_deg:
         raise InputError(
@@ -636,6 +676,7 @@ def register_receiver_to_path(
         "samples_used": float(n),
         "tool_down_share": winner.tool_down,
         "travel_rank_correlation": winner.travel,
+        "determination": determination,
     }
     others = [c for c in fitting if c is not winner]
     if others:

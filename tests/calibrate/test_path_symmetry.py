@@ -35,7 +35,7 @@ def _trace(path: np.ndarray, seed: int):
     n = len(s)
     down = np.broadcast_to(np.diag([1.0, -1.0, -1.0]), (n, 3, 3))
     demo = simulate_demonstration(
-        s, closed, down, np.full(n, 0.2), TRUTH, TOOL, calibration_tracker_model(seed=seed, pause_s=0.5)
+        s, closed, down, np.full(n, 0.2), TRUTH, TOOL, calibration_tracker_model(seed=seed, pause_s=0.5, z_distortion_max_m=0.0)
     )
     return demo.log, closed
 
@@ -46,23 +46,25 @@ def _tip() -> np.ndarray:
     return invert_transform(TOOL)[:3, 3]
 
 
-@pytest.mark.parametrize("kind", ["rectangle", "circle", "slot"])
+@pytest.mark.parametrize("kind", ["rectangle", "slot"])
 @pytest.mark.parametrize("offset", FAR)
 def test_symmetric_contours_register_to_the_truth_from_far_guesses(kind, offset):
-    """Distances alone fit turned copies; the tool's attitude and the travel pick the true frame."""
+    """Distances alone fit turned copies; the tool's attitude and the travel pick the true frame.
+
+    The tracker has no far-field z error here: over a flat contour a tilt and a z error trade off.
+    """
     log, path = _trace(_contour(kind), seed=3)
     guess = TRUTH @ transform_from_xyz_rpy(*offset)
-    cal = register_receiver_to_path(log, _tip(), path, guess, **ANYWHERE)
+    cal = register_receiver_to_path(log, _tip(), path, guess, fit_z=False, **ANYWHERE)
     T = cal.values["source_in_world"]
     assert np.linalg.norm(T[:3, 3] - TRUTH[:3, 3]) < 2e-3
     assert rotation_angle_deg(T[:3, :3], TRUTH[:3, :3]) < 0.2
     with pytest.raises(InputError, match=r"mm and \d+\.\d deg from the first guess"):
-        register_receiver_to_path(log, _tip(), path, guess)
+        register_receiver_to_path(log, _tip(), path, guess, fit_z=False)
 
 
-def test_a_circle_traced_in_part_is_refused_naming_both_frames():
-    """A part of a circle fits the circle turned about its axis: no cue tells the turns apart."""
-    path = _contour("circle")
-    log, _ = _trace(path[:160], seed=4)
-    with pytest.raises(InputError, match=r"two frames fit the trace.*mm and \d+\.\d deg apart.*RMS"):
-        register_receiver_to_path(log, _tip(), np.vstack([path, path[:1]]), TRUTH, **ANYWHERE)
+def test_a_circle_is_refused_naming_the_frame_and_the_free_turn():
+    """A circle fits turned about its axis by any angle: the distances cannot fix the frame."""
+    log, path = _trace(_contour("circle"), seed=4)
+    with pytest.raises(InputError, match=r"free to turn or shift.*RMS .* mm.*deg away"):
+        register_receiver_to_path(log, _tip(), path, TRUTH, fit_z=False, **ANYWHERE)
