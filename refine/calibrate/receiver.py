@@ -168,7 +168,7 @@ def register_receiver(
     Returns:
         ``source_in_world`` (4, 4), a residual per point (outliers included) and the rejected
         points; figures: the leave-one-out RMS of both fits (``loo_rms_rigid_m``,
-        ``loo_rms_z_model_m``, ``inf`` when it cannot be taken), ``z_model_used`` (1 or 0), the
+        ``loo_rms_z_model_m``, left out when it cannot be taken), ``z_model_used`` (1 or 0), the
         z error coefficients used and its range over the points.
 
     Raises:
@@ -191,7 +191,9 @@ def register_receiver(
             T0 = kabsch(p[idx] + R[idx] @ tip, world[idx])
             x0 = _pack(T0, np.zeros(zfield.N_COEFFS))
             sol = least_squares(
-                lambda x: _touch_residuals(x, p[idx], R[idx], tip, world[idx], with_z).ravel(), x0, x_scale="jac"
+                lambda x: _touch_residuals(x, p[idx], R[idx], tip, world[idx], with_z).ravel(),
+                x0,
+                x_scale="jac",
             )
             return sol.x
 
@@ -217,14 +219,13 @@ def register_receiver(
         loo = {False: np.inf, True: np.inf}
         if len(common) >= 5:
             for with_z in (False, True):
-                errors = [
-                    residuals_of(with_z)(fitter(with_z)(np.setdiff1d(common, [i])))[i] for i in common
-                ]
+                errors = [residuals_of(with_z)(fitter(with_z)(np.setdiff1d(common, [i])))[i] for i in common]
                 loo[with_z] = float(np.sqrt(np.mean(np.square(errors))))
         use_z = bool(loo[True] < loo[False] or inliers_z.sum() > inliers_rigid.sum())
         x, inliers = (x_z, inliers_z) if use_z else (x_rigid, inliers_rigid)
-        figures["loo_rms_rigid_m"] = loo[False]
-        figures["loo_rms_z_model_m"] = loo[True]
+        if np.isfinite(loo[False]) and np.isfinite(loo[True]):
+            figures["loo_rms_rigid_m"] = loo[False]
+            figures["loo_rms_z_model_m"] = loo[True]
     figures["z_model_used"] = float(use_z)
     T_F_S, coeffs = _unpack(x)
     if not use_z:
@@ -364,7 +365,9 @@ def _principal_axes(points: Array) -> tuple[Array, Array]:
 def _even_in_length(points: Array, step_m: float) -> Array:
     """The points of a track kept every ``step_m`` of its length (a rest counts once)."""
     length = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
-    idx = np.unique(np.searchsorted(length, np.arange(0.0, length[-1] + step_m, step_m)).clip(0, len(points) - 1))
+    idx = np.unique(
+        np.searchsorted(length, np.arange(0.0, length[-1] + step_m, step_m)).clip(0, len(points) - 1)
+    )
     return points[idx]
 
 
@@ -518,11 +521,16 @@ def register_receiver_to_path(
             )
             x_new = np.concatenate([sol.x, held])
             moved_m, turned_deg = frame_difference(_unpack(x)[0], _unpack(x_new)[0])
-            bent_m = float(np.abs(zfield.z_error(p, _unpack(x_new)[1]) - zfield.z_error(p, _unpack(x)[1])).max())
+            bent_m = float(
+                np.abs(zfield.z_error(p, _unpack(x_new)[1]) - zfield.z_error(p, _unpack(x)[1])).max()
+            )
             cost_before, cost_after = float(np.sum(robust_cost(x))), float(np.sum(robust_cost(x_new)))
             x = x_new
             # a round contour leaves a turn free: the transform slides while the fit stays the same
-            if moved_m + np.radians(turned_deg) + bent_m < 1e-5 or abs(cost_before - cost_after) <= 1e-4 * cost_before:
+            if (
+                moved_m + np.radians(turned_deg) + bent_m < 1e-5
+                or abs(cost_before - cost_after) <= 1e-4 * cost_before
+            ):
                 break
         return x, iterations
 
@@ -560,7 +568,9 @@ def register_receiver_to_path(
     tips_raw = p + tip_vectors
     hypotheses = [guess, *path_hypotheses(tips_raw, dense)]
     coarse = [_coarse_icp(tips_raw, tree, dense, T) for T in hypotheses]
-    coarse_rms = [float(np.sqrt(np.mean(tree.query(tips_raw @ T[:3, :3].T + T[:3, 3])[0] ** 2))) for T in coarse]
+    coarse_rms = [
+        float(np.sqrt(np.mean(tree.query(tips_raw @ T[:3, :3].T + T[:3, 3])[0] ** 2))) for T in coarse
+    ]
     distinct: list[Array] = []
     for k in sorted(range(len(coarse)), key=lambda k: (coarse_rms[k], k)):
         if coarse_rms[k] > 10.0 * max_rms_m:
@@ -580,7 +590,9 @@ def register_receiver_to_path(
         d >= max(coarse_down) - CUE_TIE and t >= max(coarse_travel) - 2.0 * CUE_TIE
         for d, t in zip(coarse_down, coarse_travel, strict=True)
     ]
-    first_pass = [refine(T, Z_STARTS if ok else Z_STARTS[:1]) for T, ok in zip(distinct, promising, strict=True)]
+    first_pass = [
+        refine(T, Z_STARTS if ok else Z_STARTS[:1]) for T, ok in zip(distinct, promising, strict=True)
+    ]
     if fit_z and first_pass:
         # the z error belongs to the tracker, not to a hypothesis: every candidate is refined
         # again from the z error of the one that fits best
@@ -633,7 +645,10 @@ def register_receiver_to_path(
         dx = np.zeros_like(x_win)
         dx[j] = step
         columns.append(
-            (off_path(tips_world(x_win + dx), target, tangent) - off_path(tips_world(x_win - dx), target, tangent)).ravel()
+            (
+                off_path(tips_world(x_win + dx), target, tangent)
+                - off_path(tips_world(x_win - dx), target, tangent)
+            ).ravel()
             / (2.0 * step)
         )
     jac = np.column_stack(columns)
@@ -647,9 +662,11 @@ def register_receiver_to_path(
         )
         other = f"; another fit: {others[0].describe()}, " if others else ""
         apart = (
-            "{:.0f} mm and {:.1f} deg away".format(*(lambda d: (d[0] * 1000, d[1]))(
-                frame_difference(others[0].source_in_world, winner.source_in_world)
-            ))
+            "{:.0f} mm and {:.1f} deg away".format(
+                *(lambda d: (d[0] * 1000, d[1]))(
+                    frame_difference(others[0].source_in_world, winner.source_in_world)
+                )
+            )
             if others
             else ""
         )
@@ -674,10 +691,11 @@ def register_receiver_to_path(
         "candidates_fitting": float(len(fitting)),
         "icp_iterations": float(winner.iterations),
         "samples_used": float(n),
-        "tool_down_share": winner.tool_down,
         "travel_rank_correlation": winner.travel,
         "determination": determination,
     }
+    if attitude_known:
+        figures["tool_down_share"] = winner.tool_down
     others = [c for c in fitting if c is not winner]
     if others:
         runner_up = min(others, key=lambda c: (c.rms_m, tuple(np.round(c.source_in_world[:3, 3], 6))))

@@ -35,7 +35,13 @@ def _trace(path: np.ndarray, seed: int):
     n = len(s)
     down = np.broadcast_to(np.diag([1.0, -1.0, -1.0]), (n, 3, 3))
     demo = simulate_demonstration(
-        s, closed, down, np.full(n, 0.2), TRUTH, TOOL, calibration_tracker_model(seed=seed, pause_s=0.5, z_distortion_max_m=0.0)
+        s,
+        closed,
+        down,
+        np.full(n, 0.2),
+        TRUTH,
+        TOOL,
+        calibration_tracker_model(seed=seed, pause_s=0.5, z_distortion_max_m=0.0),
     )
     return demo.log, closed
 
