@@ -85,6 +85,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         required=True,
         help="the problem: its CAD path, its tool's tip and its source_in_world as the first guess",
     )
+    trace.add_argument(
+        "--max-guess-offset-m",
+        type=float,
+        default=0.2,
+        help="farthest the registration may lie from the problem's source_in_world [m] (default 0.2)",
+    )
+    trace.add_argument(
+        "--max-guess-turn-deg",
+        type=float,
+        default=30.0,
+        help="largest turn between the registration and the problem's source_in_world [deg] (default 30)",
+    )
 
     tcp = kinds.add_parser("tcp", help="tcp_in_flange by the four-point (or six-point) method")
     tcp.add_argument(
@@ -282,7 +294,13 @@ def _receiver_path(args: argparse.Namespace) -> tuple[Calibration, str, str, np.
     cad = read_cad_path(problem.cad, problem.frames.cad_in_world)
     tip = invert_transform(problem.tool.sensor_in_tcp)[:3, 3]
     cal = register_receiver_to_path(
-        _read_log(args), tip, cad.positions, problem.frames.source_in_world, fit_z=not args.no_z_model
+        _read_log(args),
+        tip,
+        cad.positions,
+        problem.frames.source_in_world,
+        fit_z=not args.no_z_model,
+        max_guess_offset_m=args.max_guess_offset_m,
+        max_guess_turn_deg=args.max_guess_turn_deg,
     )
     T = cal.values["source_in_world"]
     return cal, "frames", "source_in_world", T, "receiver registered on a trace along the CAD path"

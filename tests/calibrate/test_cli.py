@@ -278,3 +278,23 @@ def test_pivot_from_binary_and_csv_logs(tmp_path, capsys, cell):
     # a CSV log has one station
     assert main(["calibrate", "pivot", str(csv), "--format", "csv", "--units", "mm", "--station", "2"]) == 2
     assert "one station" in capsys.readouterr().err
+
+
+def test_receiver_path_refuses_a_far_source_unless_allowed(tmp_path, capsys):
+    """A receiver 0.64 m and 60 deg from the problem's is named, and written once allowed."""
+    from refine.calibrate.files import update_problem
+
+    problem = tmp_path / "glass"
+    shutil.copytree(GLASS, problem)
+    truth = load_problem(problem).frames.source_in_world
+    update_problem(
+        problem, "frames", "source_in_world", truth @ transform_from_xyz_rpy([0.5, 0.4, 0.0], [0, 0, 60])
+    )
+    args = ["calibrate", "receiver-path", str(problem / "demo.liberty"), "--problem", str(problem)]
+    assert main(args) == 2
+    assert "deg from the first guess" in capsys.readouterr().err
+    allow = ["--max-guess-offset-m", "1.0", "--max-guess-turn-deg", "90", "--write", str(problem)]
+    assert main(args + allow) == 0
+    T = load_problem(problem).frames.source_in_world
+    assert np.linalg.norm(T[:3, 3] - truth[:3, 3]) < 5e-3
+    assert rotation_angle_deg(T[:3, :3], truth[:3, :3]) < 0.2

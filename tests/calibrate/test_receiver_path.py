@@ -52,3 +52,33 @@ def test_a_far_first_guess_is_an_error(trace):
     guess = problem.frames.source_in_world @ transform_from_xyz_rpy([0.5, 0.4, 0.0], [0.0, 0.0, 60.0])
     with pytest.raises(InputError, match="first guess"):
         register_receiver_to_path(demo.log, tip, cad.positions, guess)
+
+
+FAR_GUESSES = [
+    ([0.5, 0.4, 0.0], [0.0, 0.0, 60.0]),
+    ([0.3, -0.2, 0.05], [0.0, 0.0, 120.0]),
+    ([-0.4, 0.3, 0.0], [0.0, 0.0, 175.0]),
+    ([0.2, 0.35, -0.1], [0.0, 0.0, -90.0]),
+]
+
+
+@pytest.mark.parametrize(("xyz", "rpy"), FAR_GUESSES)
+def test_far_guesses_allowed_find_the_true_frame_not_its_turned_copy(trace, xyz, rpy):
+    """The window fits turned 180 deg about the vertical as well; the direction of travel decides."""
+    problem, cad, demo, tip = trace
+    truth = problem.frames.source_in_world
+    guess = truth @ transform_from_xyz_rpy(xyz, rpy)
+    cal = register_receiver_to_path(
+        demo.log, tip, cad.positions, guess, max_guess_offset_m=np.inf, max_guess_turn_deg=360.0
+    )
+    T = cal.values["source_in_world"]
+    assert np.linalg.norm(T[:3, 3] - truth[:3, 3]) < 1e-3
+    assert rotation_angle_deg(T[:3, :3], truth[:3, :3]) < 0.1
+    assert cal.figures["tool_down_share"] == 1.0 and cal.figures["travel_rank_correlation"] > 0.5
+
+
+def test_the_far_guess_error_names_the_distance_to_the_frame_found(trace):
+    problem, cad, demo, tip = trace
+    guess = problem.frames.source_in_world @ transform_from_xyz_rpy([0.5, 0.4, 0.0], [0.0, 0.0, 60.0])
+    with pytest.raises(InputError, match=r"64[01] mm and 60\.0 deg from the first guess"):
+        register_receiver_to_path(demo.log, tip, cad.positions, guess)
