@@ -135,6 +135,8 @@ pose): shaped like a rotation, it moves the estimate by this over the path's RMS
 axis. With it, the estimated angle differs from the planted one by more than 2 standard
 uncertainties in 2.7 % of the 528 rows of ``benchmarks/frame_check.py`` and by more than 3 in
 none (13.3 % and 5.7 % without it): the uncertainty is not too small."""
+ROTATION_PRIOR_RAD = 1.0
+"""Standard deviation of the Gaussian prior on the tracker frame rotation [rad]."""
 DISTANCE_POWERS = (2, 3, 4)
 """Powers of the distance from the receiver in the distortion model (per receiver axis)."""
 
@@ -489,6 +491,17 @@ def _skew_rows(c: Array) -> Array:
     )
 
 
+def _across(c: Array) -> Array:
+    """Projectors (N, 3, 3) off the tangent of the path through points ``c`` (N, 3).
+
+    The time matching may slide a waypoint along the path: only the residual across it counts.
+    """
+    tangent = np.gradient(c, axis=0) if len(c) > 1 else np.zeros((1, 3))
+    norm = np.linalg.norm(tangent, axis=1, keepdims=True)
+    tangent = np.divide(tangent, norm, out=np.zeros_like(tangent), where=norm > 0)
+    return np.eye(3) - tangent[:, :, None] * tangent[:, None, :]
+
+
 def estimate_frame_error(
     demo: Demonstration, fused: FusedPath, source_in_world: ArrayLike, sensor_in_tcp: ArrayLike
 ) -> FrameEstimate:
@@ -512,11 +525,6 @@ def estimate_frame_error(
     x = x_F @ T_S_F[:3, :3].T + T_S_F[:3, 3]
     c = fused.positions @ T_S_F[:3, :3].T + T_S_F[:3, 3]
     n = len(c)
-    # the time matching may slide a waypoint along the path: only the residual across it counts
-    tangent = np.gradient(c, axis=0) if n > 1 else np.zeros((1, 3))
-    norm = np.linalg.norm(tangent, axis=1, keepdims=True)
-    tangent = np.divide(tangent, norm, out=np.zeros_like(tangent), where=norm > 0)
-    across = np.eye(3) - tangent[:, :, None] * tangent[:, None, :]
     # the distortion is a function of where the sensor is (not the TCP, a lever away)
     sensor = np.column_stack([np.interp(fused.t_demo, demo.t, demo.positions[:, j]) for j in range(3)])
     d = np.linalg.norm(sensor, axis=1) / _DISTANCE_SCALE_M
@@ -527,12 +535,19 @@ def estimate_frame_error(
     for j in range(3):
         basis[:, j, j::3] = radial
     # prior: each distortion coefficient (its term's error at 1 m) ~ the tracker's expected error
-    # along that receiver axis; rotation and offset free (a 30 rad / 30 m ridge keeps N regular)
-    prior = np.concatenate([np.full(6, 1e-3), np.tile(1.0 / np.asarray(PRIOR_ERROR_M) ** 2, n_terms)])
+    # along that receiver axis; offset free (a 30 m ridge keeps N regular), the rotation under a
+    # prior of 1 rad (57 deg): far weaker than any axis the path shows (a 1 mm error over a 40 mm
+    # path is a few degrees), it keeps an axis the path cannot show at zero instead of letting
+    # Gauss-Newton throw it anywhere
+    prior = np.concatenate([np.full(3, ROTATION_PRIOR_RAD**-2), np.full(3, 1e-3), np.tile(1.0 / np.asarray(PRIOR_ERROR_M) ** 2, n_terms)])
     # one independent residual per occupied cell of CORRELATION_LENGTH_M (a smooth error seen twice
     # where the path comes back is one observation)
     cells = len(np.unique(np.floor(c / CORRELATION_LENGTH_M).astype(np.int64), axis=0))
     inflation = max(1.0, n / cells)
+    # the rotation turns the CAD path about its centre (then rotation and offset are independent
+    # parameters, and a rotation the path cannot show stays at zero instead of drifting along the
+    # ridge with an offset); the offset is converted to the receiver's at the end
+    pivot = c.mean(axis=0)
     R = np.eye(3)
     w = np.ones(n)
     coef = np.zeros(nk)
@@ -541,27 +556,34 @@ def estimate_frame_error(
     A = np.zeros((n, 3, nk))
     resid = np.zeros(n)
     for _ in range(6):
-        cR = c @ R.T
-        A = np.concatenate([_skew_rows(cR), np.broadcast_to(np.eye(3), (n, 3, 3)), basis], axis=2)
+        cR = (c - pivot) @ R.T + pivot
+        across = _across(cR)
+        A = np.concatenate([_skew_rows(cR - pivot), np.broadcast_to(np.eye(3), (n, 3, 3)), basis], axis=2)
         A = np.einsum("nij,njk->nik", across, A)
         r = np.einsum("nij,nj->ni", across, x - cR)
         M = (A * np.sqrt(w)[:, None, None]).reshape(3 * n, nk)
         N = M.T @ M / (var * inflation) + np.diag(prior)
         coef = np.linalg.solve(N, M.T @ (r * np.sqrt(w)[:, None]).reshape(-1) / (var * inflation))
         R = matrix_from_rotvec(coef[:3]) @ R
-        resid = np.linalg.norm(r - np.einsum("nik,k->ni", A, coef), axis=1)
+        left = r - np.einsum("nik,k->ni", A, coef)
+        resid = np.linalg.norm(left, axis=1)
         cutoff = 4.685 * (1.4826 * np.median(resid) + 1e-4)  # Tukey: far waypoints get no say
         w = np.clip(1.0 - (resid / cutoff) ** 2, 0.0, None) ** 2
         # residual variance per coordinate across the path (two per waypoint)
         var = max(float(np.sum(w * resid**2) / max(np.sum(w) * 2 - nk, 1)), 1e-12)
+        # residuals correlated along the path (slow hand wander, smooth errors) count as fewer
+        inflation = max(1.0, n / cells, correlation_time(left, w))
     distortion = np.einsum("nik,k->ni", basis, coef[6:])
     posterior = np.linalg.inv(N)
     cov_sys = _systematic_covariance(A[:, :, :3], w)
     cov = posterior[:3, :3] + cov_sys
-    # the offset takes up what a wrongly estimated rotation moves the path's centre by (c̄ x δω)
+    # the receiver's offset: x = R (c - p) + p + t = R c + (t + p - R p); it takes up what a wrongly
+    # estimated rotation moves the pivot by (R p x δω), and the path's centre for the systematic part
+    Rp = R @ pivot
+    offset = coef[3:6] + pivot - Rp
+    J = np.concatenate([_skew_rows(Rp[None])[0], np.eye(3)], axis=1)  # d(offset) / d(ω, t)
     centre = _skew_rows((np.sum(w[:, None] * (c @ R.T), axis=0) / max(float(np.sum(w)), 1e-12))[None])[0]
-    offset = coef[3:6]
-    cov_offset = posterior[3:6, 3:6] + centre @ cov_sys @ centre.T + SYSTEMATIC_ERROR_M**2 * np.eye(3)
+    cov_offset = J @ posterior[:6, :6] @ J.T + centre @ cov_sys @ centre.T + SYSTEMATIC_ERROR_M**2 * np.eye(3)
     ev_o, V_o = np.linalg.eigh(0.5 * (cov_offset + cov_offset.T))
     offset_chi2 = float(np.sum((V_o.T @ offset) ** 2 / np.clip(ev_o, 1e-30, None)))
     offset_len = float(np.linalg.norm(offset))
@@ -593,6 +615,42 @@ def estimate_frame_error(
         offset_sigma_m=offset_sigma,
         offset_chi2=offset_chi2,
     )
+
+
+def correlation_time(residuals: ArrayLike, weights: ArrayLike | None = None) -> float:
+    """Integrated autocorrelation time of residuals along the path [waypoints] (module docstring).
+
+    Per component, ``1 + 2 Σ ρ(k)`` over the lags ``k = 1, 2, ...`` up to the first whose
+    autocorrelation ``ρ(k)`` is not positive (the initial positive sequence); the components are
+    averaged weighted by their variance. Independent residuals give 1; a residual that wanders
+    with a correlation of ``exp(-k / τ)`` gives about ``2 τ``: the fit then has that many times fewer
+    independent observations than waypoints.
+
+    Args:
+        residuals: the fit's residuals in waypoint (time) order, shape (N, 3) [m].
+        weights: the waypoints' robust weights, shape (N,); None: all 1.
+
+    Returns:
+        The factor (>= 1) [waypoints per independent observation].
+    """
+    from scipy.signal import correlate
+
+    e = np.asarray(residuals, dtype=float).reshape(len(residuals), -1)
+    if weights is not None:
+        e = e * np.sqrt(np.asarray(weights, dtype=float))[:, None]
+    e = e - e.mean(axis=0)
+    n = len(e)
+    total, energy = 0.0, 0.0
+    for col in e.T:
+        power = float(col @ col)
+        if n < 3 or power <= 0.0:
+            continue
+        rho = correlate(col, col, mode="full", method="fft")[n:] / power  # lags 1..n-1
+        stop = np.flatnonzero(rho <= 0.0)
+        k = int(stop[0]) if stop.size else len(rho)
+        total += power * (1.0 + 2.0 * float(rho[:k].sum()))
+        energy += power
+    return max(1.0, total / energy) if energy > 0.0 else 1.0
 
 
 def _systematic_covariance(rot_rows: Array, w: Array) -> Array:
