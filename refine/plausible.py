@@ -32,7 +32,8 @@ The ranges, with their reasons (docs/problem-file.md, "Plausibility ranges"):
   ±:data:`RADIAN_LIKE_LIMIT` "degrees" is taken for radians read as degrees (a tool that turns
   less than 3.2 deg about every receiver axis while it travels 20 mm is not a worker's hand);
   angles stated in radians beyond ±2π, or turning at a median rate above
-  :data:`MAX_TURN_RATE_DEG_S`, are taken for degrees read as radians.
+  :data:`MAX_TURN_RATE_DEG_S`, are taken for degrees read as radians. Logs shorter than
+  :data:`MIN_UNIT_CHECK_S` are not judged.
 """
 
 from __future__ import annotations
@@ -73,6 +74,9 @@ PLAIN_MOTION_EXTENT_M = 0.02
 """A demonstration whose extent reaches this [m] plainly moves."""
 RADIAN_LIKE_LIMIT = 3.2
 """Angles that all stay within ± this (π and some rounding) look like radians [deg or rad]."""
+MIN_UNIT_CHECK_S = 0.5
+"""Logs shorter than this [s] are not judged by :func:`check_demo_units` (a snippet, no
+demonstration: a worker's start pause alone lasts longer)."""
 MAX_TURN_RATE_DEG_S = 1500.0
 """Median turning rate [deg/s] above which the angles are not a hand's (the quality gate's
 ``MAX_HAND_RATE_DEG_S``); degrees read as radians turn 57 times too fast."""
@@ -254,6 +258,8 @@ def check_demo_units(
             (module docstring for the rules).
     """
     t = np.asarray(t, dtype=float)
+    if len(t) < 2 or t[-1] - t[0] < MIN_UNIT_CHECK_S:
+        return
     raw = np.asarray(positions_in_file, dtype=float).reshape(-1, 3)
     extent_raw = demo_extent(t, raw)
     distance_raw = float(np.median(np.linalg.norm(raw, axis=1)))
@@ -280,12 +286,11 @@ def check_demo_units(
                 else f"the motion spans {extent_m:.4g} m at a median {distance_m:.4g} m from the receiver"
             )
             hint = " or ".join(
-                f'units = "{u}" (then {extent_raw * metres_per_unit[u]:.3g} m)' for u in others
+                f'units = "{u}" (it then spans {extent_raw * metres_per_unit[u]:.3g} m)' for u in others
             )
             raise InputError(
-                f"{source}: read with positions in {units!r}, {what}: are the units right? "
-                f"If not, set [demonstration] {hint}"
-                + (" (or the tool never moved)" if too_small else "")
+                f"{source}: positions read as {units!r}: are the units right? {what}; if not, set "
+                f"{hint} (the [demonstration] key)" + ("; or the tool never moved" if too_small else "")
             )
 
     a = np.asarray(angles_in_file, dtype=float).reshape(-1, 3)
