@@ -3,8 +3,11 @@
 Scenes from ``tests/demo/wander_scenes.py`` (round profiles 30-60 mm across and rounded rectangles
 0.5-3 m long, hand wander 0.5-2 mm RMS with correlation times 0.1-1 s) are fused with the right
 ``source_in_world``, with it turned by 5 deg about world x, y or z, and with it shifted by 50 mm.
-Per case it prints how often the gate would stop (rotation), warn about the offset, or find the
-rotation not observable, over the seeds. ``--compare FILE`` runs another copy of
+Per case it prints, over the seeds, how often the gate would stop (rotation), warn that the path
+cannot check the frame well (``weak``: the least rotation it tells from noise is above
+``WEAK_CHECK_DEG``, and it does not stop), warn about the offset, or find a rotation axis not
+observable, and how often the fusion itself refused the demonstration (it does not follow the
+path: a wrong frame caught before the check). ``--compare FILE`` runs another copy of
 ``refine/demo/quality.py`` (e.g. an older one) on the same fused data as well.
 
     python benchmarks/frame_wander.py --seeds 20
@@ -24,6 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests" / "demo"
 from wander_scenes import given_frame, scene  # noqa: E402
 
 from refine.demo import quality  # noqa: E402
+from refine.errors import InputError  # noqa: E402
 from refine.fuse import fuse  # noqa: E402
 
 CASES = {
@@ -35,11 +39,15 @@ CASES = {
 }
 
 
-def verdict(module, est) -> tuple[bool, bool, bool]:
-    """(stop, offset warning, a rotation axis not observable) as the gate of ``module`` decides."""
+KEYS = ("stop", "weak", "offset warning", "an axis not observable", "refused")
+
+
+def verdict(module, est) -> tuple[bool, ...]:
+    """(stop, weak, offset warning, a rotation axis not observable, refused) as ``module``'s gate decides."""
     stop = est.observable_rotation_deg > module.FRAME_STOP_DEG and module.frame_error_significant(est)
+    weak = not stop and est.detectable_deg > module.WEAK_CHECK_DEG
     offset = est.offset_m > module.OFFSET_WARN_M and est.offset_chi2 > module._chi2_threshold(3)
-    return stop, offset, bool(est.not_observable)
+    return stop, weak, offset, bool(est.not_observable), False
 
 
 def main() -> None:
@@ -58,31 +66,35 @@ def main() -> None:
         spec.loader.exec_module(other)
         modules = {"compare": other, "now": quality}
     for kind in args.kinds:
-        counts = {(c, m): [0, 0, 0] for c in CASES for m in modules}
+        counts = {(c, m): [0] * len(KEYS) for c in CASES for m in modules}
         for seed in range(args.seeds):
             sc = scene(kind, seed)
             for case, change in CASES.items():
                 T = given_frame(sc, **change)
-                fused = fuse(sc.cad, sc.demo, T, wander_T_TCP_E())
+                try:
+                    fused = fuse(sc.cad, sc.demo, T, wander_T_TCP_E())
+                except InputError as e:
+                    for m in modules:
+                        counts[(case, m)][-1] += 1
+                    if args.v:
+                        print(f"{kind} {case:14s} {sc.name}: refused by the fusion: {e}", flush=True)
+                    continue
                 for m, module in modules.items():
                     est = module.estimate_frame_error(sc.demo, fused, T, wander_T_TCP_E())
                     v = verdict(module, est)
-                    for k in range(3):
-                        counts[(case, m)][k] += v[k]
+                    for k, hit in enumerate(v):
+                        counts[(case, m)][k] += hit
                     if args.v:
                         print(
                             f"{kind} {case:14s} {m:7s} {sc.name}: {est.observable_rotation_deg:5.1f} ± "
                             f"{est.observable_sigma_deg:4.1f} deg, offset {est.offset_m * 1e3:4.0f} mm "
                             f"(chi2 {est.offset_chi2:.0f}), hidden {len(est.not_observable)}, "
-                            f"{'STOP' if v[0] else 'pass'}{' OFFSET' if v[1] else ''}",
+                            f"{'STOP' if v[0] else 'pass'}{' WEAK' if v[1] else ''}{' OFFSET' if v[2] else ''}",
                             flush=True,
                         )
-        for (case, m), (stop, offset, hidden) in counts.items():
-            print(
-                f"{kind:5s} {case:14s} {m:7s}: stop {stop:2d}/{args.seeds}, offset warning "
-                f"{offset:2d}/{args.seeds}, an axis not observable {hidden:2d}/{args.seeds}",
-                flush=True,
-            )
+        for (case, m), row in counts.items():
+            text = ", ".join(f"{key} {n:2d}/{args.seeds}" for key, n in zip(KEYS, row, strict=True))
+            print(f"{kind:5s} {case:14s} {m:7s}: {text}", flush=True)
 
 
 def wander_T_TCP_E():

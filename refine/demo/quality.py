@@ -41,10 +41,23 @@ function of ``d``):
   fusion expects of the tracker along that receiver axis (``refine.fuse.PRIOR_ERROR_M``: 10, 10
   and 50 mm), while rotation and offset are free: a rotation is explained by a distortion only as
   far as the tracker's documented error allows;
+* the rotation turns the CAD path about its own centre, under a weak prior of
+  :data:`ROTATION_PRIOR_RAD` (the receiver's rotation and offset follow from it and the fitted
+  offset): rotation and offset are then separate parameters, and a rotation the path cannot show
+  (a round profile about its normal) stays at zero instead of drifting, with an offset, along the
+  direction the data leave free (where, turned by tens of degrees, the path's tangents no longer
+  match and the drift looked like a determined rotation); the across-path projection uses the
+  tangents of the turned path;
 * the rotation's uncertainty is the posterior covariance, with the residual variance counted once
-  per occupied cell of :data:`CORRELATION_LENGTH_M` (a path that comes back over the same space,
-  like a spiral, brings no new evidence about a smooth error), plus the rotation an unmodelled
-  smooth error of :data:`SYSTEMATIC_ERROR_M` can mimic (large on small paths).
+  per *independent* residual: per occupied cell of :data:`CORRELATION_LENGTH_M` (a path that comes
+  back over the same space, like a spiral, brings no new evidence about a smooth error) or per
+  integrated autocorrelation time of the residuals along the path (:func:`correlation_time`: a
+  hand wandering slowly off the path by a millimetre for tenths of a second gives residuals that
+  move together over dozens of waypoints), whichever counts fewer, plus the rotation an unmodelled
+  smooth error of :data:`SYSTEMATIC_ERROR_M` can mimic (large on small paths). The
+  autocorrelation time is used rather than a block bootstrap: it is deterministic, costs one FFT
+  per axis, and enters the same posterior covariance the rest of the check reads (the bootstrap
+  would need a block length chosen from the same autocorrelation anyway, and tens of refits).
 
 The path's shape decides which rotations it can show: along each principal axis of the rotation's
 covariance the uncertainty is known, and an axis whose uncertainty is more than
@@ -793,6 +806,7 @@ __all__ = [
     "DemoQuality",
     "device_error_summary",
     "FrameEstimate",
+    "correlation_time",
     "estimate_frame_error",
     "find_bad_runs",
     "gate_dropouts",
