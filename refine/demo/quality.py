@@ -45,9 +45,8 @@ function of ``d``):
   :data:`ROTATION_PRIOR_RAD` (the receiver's rotation and offset follow from it and the fitted
   offset): rotation and offset are then separate parameters, and a rotation the path cannot show
   (a round profile about its normal) stays at zero instead of drifting, with an offset, along the
-  direction the data leave free (where, turned by tens of degrees, the path's tangents no longer
-  match and the drift looked like a determined rotation); the across-path projection uses the
-  tangents of the turned path;
+  direction the data leave free (where, turned by tens of degrees, the CAD path's tangents no
+  longer match the turned path's and the drift looked like a determined rotation);
 * the rotation's uncertainty is the posterior covariance, with the residual variance counted once
   per *independent* residual: per occupied cell of :data:`CORRELATION_LENGTH_M` (a path that comes
   back over the same space, like a spiral, brings no new evidence about a smooth error) or per
@@ -561,47 +560,37 @@ def estimate_frame_error(
     # parameters, and a rotation the path cannot show stays at zero instead of drifting along the
     # ridge with an offset); the offset is converted to the receiver's at the end
     pivot = c.mean(axis=0)
-    R = np.eye(3)
     w = np.ones(n)
     coef = np.zeros(nk)
     var = (1e-3) ** 2
-    N = np.diag(prior)
-    A = np.zeros((n, 3, nk))
     resid = np.zeros(n)
+    left = np.zeros((n, 3))
+    # the time matching slides a waypoint along the demonstrated path, the CAD path's tangent
+    across = _across(c)
+    # linear in the rotation about the path's centre (the frame errors the check is for are a few
+    # degrees; 10 deg are estimated within 1.5 %): each round refits the same model with new weights,
+    # so nothing accumulates along a rotation the path cannot show
+    A = np.concatenate([_skew_rows(c - pivot), np.broadcast_to(np.eye(3), (n, 3, 3)), basis], axis=2)
+    A = np.einsum("nij,njk->nik", across, A)
+    r = np.einsum("nij,nj->ni", across, x - c)
     for _ in range(6):
-        cR = (c - pivot) @ R.T + pivot
-        across = _across(cR)
-        A = np.concatenate([_skew_rows(cR - pivot), np.broadcast_to(np.eye(3), (n, 3, 3)), basis], axis=2)
-        A = np.einsum("nij,njk->nik", across, A)
-        r = np.einsum("nij,nj->ni", across, x - cR)
         M = (A * np.sqrt(w)[:, None, None]).reshape(3 * n, nk)
         N = M.T @ M / (var * inflation) + np.diag(prior)
         coef = np.linalg.solve(N, M.T @ (r * np.sqrt(w)[:, None]).reshape(-1) / (var * inflation))
-        R = matrix_from_rotvec(coef[:3]) @ R
         left = r - np.einsum("nik,k->ni", A, coef)
         resid = np.linalg.norm(left, axis=1)
         cutoff = 4.685 * (1.4826 * np.median(resid) + 1e-4)  # Tukey: far waypoints get no say
         w = np.clip(1.0 - (resid / cutoff) ** 2, 0.0, None) ** 2
         # residual variance per coordinate across the path (two per waypoint)
         var = max(float(np.sum(w * resid**2) / max(np.sum(w) * 2 - nk, 1)), 1e-12)
-        # residuals correlated along the path (slow hand wander, smooth errors) count as fewer
-        inflation = max(1.0, n / cells, correlation_time(left, w))
+    R = matrix_from_rotvec(coef[:3])
     distortion = np.einsum("nik,k->ni", basis, coef[6:])
-    posterior = np.linalg.inv(N)
+    # residuals correlated along the path (slow hand wander, smooth errors) count as fewer: in the
+    # uncertainty only (the fit keeps its balance against the distortion's prior)
+    correlated = max(inflation, correlation_time(left, w))
+    posterior = np.linalg.inv(M.T @ M / (var * correlated) + np.diag(prior))
     cov_sys = _systematic_covariance(A[:, :, :3], w)
     cov = posterior[:3, :3] + cov_sys
-    # the receiver's offset: x = R (c - p) + p + t = R c + (t + p - R p); it takes up what a wrongly
-    # estimated rotation moves the pivot by (R p x δω), and the path's centre for the systematic part
-    Rp = R @ pivot
-    offset = coef[3:6] + pivot - Rp
-    J = np.concatenate([_skew_rows(Rp[None])[0], np.eye(3)], axis=1)  # d(offset) / d(ω, t)
-    centre = _skew_rows((np.sum(w[:, None] * (c @ R.T), axis=0) / max(float(np.sum(w)), 1e-12))[None])[0]
-    cov_offset = J @ posterior[:6, :6] @ J.T + centre @ cov_sys @ centre.T + SYSTEMATIC_ERROR_M**2 * np.eye(3)
-    ev_o, V_o = np.linalg.eigh(0.5 * (cov_offset + cov_offset.T))
-    offset_chi2 = float(np.sum((V_o.T @ offset) ** 2 / np.clip(ev_o, 1e-30, None)))
-    offset_len = float(np.linalg.norm(offset))
-    u_o = offset / offset_len if offset_len > 0 else V_o[:, 0]
-    offset_sigma = float(np.sqrt(max(u_o @ cov_offset @ u_o, 0.0)))
     sigma = float(np.degrees(np.sqrt(np.trace(cov) / 3.0)))
     rv = rotvec_from_matrix(R)
     angle = float(np.degrees(np.linalg.norm(rv)))
@@ -610,6 +599,25 @@ def estimate_frame_error(
         u = rv / np.linalg.norm(rv)
         sigma = float(np.degrees(np.sqrt(u @ cov @ u)))
     obs_angle, obs_sigma, obs_chi2, hidden = _observable_part(rv, cov, c)
+    # the receiver's offset: x = R (c - p) + p + t = R c + (t + p - R p), with R the rotation about
+    # the axes the path shows (about the others the path shows no rotation, so none of its shift of
+    # the pivot either; a rotation the data leave free would make the offset any size); it takes up
+    # what a wrongly estimated rotation moves the pivot by (R p x δω), and the path's centre for the
+    # systematic part
+    shown = np.eye(3)
+    for h in hidden:
+        a = np.asarray(h["axis_in_source"], dtype=float)
+        shown = shown - np.outer(a, a)
+    Rp = matrix_from_rotvec(shown @ coef[:3]) @ pivot
+    offset = coef[3:6] + pivot - Rp
+    J = np.concatenate([-_skew_rows(Rp[None])[0] @ shown, np.eye(3)], axis=1)  # d(offset) / d(ω, t)
+    centre = _skew_rows((np.sum(w[:, None] * (c @ R.T), axis=0) / max(float(np.sum(w)), 1e-12))[None])[0]
+    cov_offset = J @ posterior[:6, :6] @ J.T + centre @ cov_sys @ centre.T + SYSTEMATIC_ERROR_M**2 * np.eye(3)
+    ev_o, V_o = np.linalg.eigh(0.5 * (cov_offset + cov_offset.T))
+    offset_chi2 = float(np.sum((V_o.T @ offset) ** 2 / np.clip(ev_o, 1e-30, None)))
+    offset_len = float(np.linalg.norm(offset))
+    u_o = offset / offset_len if offset_len > 0 else V_o[:, 0]
+    offset_sigma = float(np.sqrt(max(u_o @ cov_offset @ u_o, 0.0)))
     return FrameEstimate(
         rotation_deg=angle,
         sigma_deg=sigma,

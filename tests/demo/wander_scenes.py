@@ -16,6 +16,7 @@ frame estimate the gate judges.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -59,18 +60,26 @@ def _bead(centre, half_u: float, half_v: float, r: float, spacing_m: float):
     return s, pos, rots
 
 
-def scene(kind: str, seed: int, wander_m: float | None = None, wander_time_s: float | None = None) -> Scene:
-    """The ``kind`` (``"small"`` or ``"large"``) scene for ``seed`` (module docstring)."""
+@lru_cache(maxsize=64)
+def scene(
+    kind: str,
+    seed: int,
+    wander_m: float | None = None,
+    wander_time_s: float | None = None,
+    size_m: float | None = None,
+) -> Scene:
+    """The ``kind`` (``"small"`` or ``"large"``) scene for ``seed`` (module docstring); ``wander_m``,
+    ``wander_time_s`` and ``size_m`` (diameter or length) override the seed's choice."""
     wander_m = WANDER_M[seed % len(WANDER_M)] if wander_m is None else wander_m
     wander_time_s = WANDER_TIME_S[(seed // 2) % len(WANDER_TIME_S)] if wander_time_s is None else wander_time_s
     if kind == "small":
-        diameter = SMALL_DIAMETERS_M[seed % len(SMALL_DIAMETERS_M)]
+        diameter = SMALL_DIAMETERS_M[seed % len(SMALL_DIAMETERS_M)] if size_m is None else size_m
         r = diameter / 2.0
         s, pos, rots = _bead([0.55, -0.25, 0.80], r + 1e-6, r + 1e-6, r, 0.001)
         T_F_S = transform_from_xyz_rpy([0.60, -0.42, 0.78], [0.0, 0.0, 90.0])
         speed, name = 0.01, f"round {diameter * 1e3:.0f} mm"
     elif kind == "large":
-        length = LARGE_LENGTHS_M[seed % len(LARGE_LENGTHS_M)]
+        length = LARGE_LENGTHS_M[seed % len(LARGE_LENGTHS_M)] if size_m is None else size_m
         s, pos, rots = _bead([0.0, 0.0, 0.0], length / 2, 0.3 * length, 0.05, 0.01)
         T_F_S = transform_from_xyz_rpy([0.02, -0.03, -0.30], [0.0, 0.0, 30.0])
         speed, name = 0.1, f"rectangle {length:.1f} m"
