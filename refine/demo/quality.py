@@ -50,9 +50,10 @@ function of ``d``):
 * the rotation's uncertainty is the posterior covariance, with the residual variance counted once
   per *independent* residual: per occupied cell of :data:`CORRELATION_LENGTH_M` (a path that comes
   back over the same space, like a spiral, brings no new evidence about a smooth error) or per
-  integrated autocorrelation time of the residuals along the path (:func:`correlation_time`: a
-  hand wandering slowly off the path by a millimetre for tenths of a second gives residuals that
-  move together over dozens of waypoints), whichever counts fewer, plus the rotation an unmodelled
+  integrated autocorrelation time of the residuals along the path, summed over lags up to
+  :data:`HAND_CORRELATION_S` (:func:`correlation_time`: a hand wandering slowly off the path by a
+  millimetre for tenths of a second gives residuals that move together over dozens of waypoints
+  on a fast path), whichever counts fewer, plus the rotation an unmodelled
   smooth error of :data:`SYSTEMATIC_ERROR_M` can mimic (large on small paths). The
   autocorrelation time is used rather than a block bootstrap: it is deterministic, costs one FFT
   per axis, and enters the same posterior covariance the rest of the check reads (the bootstrap
@@ -147,6 +148,11 @@ pose): shaped like a rotation, it moves the estimate by this over the path's RMS
 axis. With it, the estimated angle differs from the planted one by more than 2 standard
 uncertainties in 2.7 % of the 528 rows of ``benchmarks/frame_check.py`` and by more than 3 in
 none (13.3 % and 5.7 % without it): the uncertainty is not too small."""
+HAND_CORRELATION_S = 1.0
+"""Longest time over which the residuals' autocorrelation is summed [s] (:func:`correlation_time`):
+a hand wanders off the path and back within about a second; slower, smoother error is the
+tracker's, a function of where the sensor is, which the cells of :data:`CORRELATION_LENGTH_M` and
+:data:`SYSTEMATIC_ERROR_M` account for (summed over the whole path it would count them twice)."""
 ROTATION_PRIOR_RAD = 1.0
 """Standard deviation of the Gaussian prior on the tracker frame rotation [rad]."""
 DISTANCE_POWERS = (2, 3, 4)
@@ -587,9 +593,12 @@ def estimate_frame_error(
     distortion = np.einsum("nik,k->ni", basis, coef[6:])
     # residuals correlated along the path (slow hand wander, smooth errors) count as fewer: in the
     # uncertainty only (the fit keeps its balance against the distortion's prior)
-    correlated = max(inflation, correlation_time(left, w))
+    span_s = float(np.ptp(fused.t_demo)) if n > 1 else 0.0
+    max_lag = int(math.ceil(HAND_CORRELATION_S * (n - 1) / span_s)) if span_s > 0 else 0
+    correlated = max(inflation, correlation_time(left, w, max_lag))
     posterior = np.linalg.inv(M.T @ M / (var * correlated) + np.diag(prior))
-    cov_sys = _systematic_covariance(A[:, :, :3], w)
+    # the rotation an unmodelled smooth error can mimic, about the receiver as it is calibrated
+    cov_sys = _systematic_covariance(np.einsum("nij,njk->nik", across, _skew_rows(c @ R.T)), w)
     cov = posterior[:3, :3] + cov_sys
     sigma = float(np.degrees(np.sqrt(np.trace(cov) / 3.0)))
     rv = rotvec_from_matrix(R)
@@ -638,11 +647,14 @@ def estimate_frame_error(
     )
 
 
-def correlation_time(residuals: ArrayLike, weights: ArrayLike | None = None) -> float:
+def correlation_time(
+    residuals: ArrayLike, weights: ArrayLike | None = None, max_lag: int | None = None
+) -> float:
     """Integrated autocorrelation time of residuals along the path [waypoints] (module docstring).
 
     Per component, ``1 + 2 Σ ρ(k)`` over the lags ``k = 1, 2, ...`` up to the first whose
-    autocorrelation ``ρ(k)`` is not positive (the initial positive sequence); the components are
+    autocorrelation ``ρ(k)`` is not positive (the initial positive sequence), and at most
+    ``max_lag``; the components are
     averaged weighted by their variance. Independent residuals give 1; a residual that wanders
     with a correlation of ``exp(-k / τ)`` gives about ``2 τ``: the fit then has that many times fewer
     independent observations than waypoints.
@@ -650,6 +662,7 @@ def correlation_time(residuals: ArrayLike, weights: ArrayLike | None = None) -> 
     Args:
         residuals: the fit's residuals in waypoint (time) order, shape (N, 3) [m].
         weights: the waypoints' robust weights, shape (N,); None: all 1.
+        max_lag: the longest lag summed [waypoints]; None: no limit.
 
     Returns:
         The factor (>= 1) [waypoints per independent observation].
@@ -669,6 +682,8 @@ def correlation_time(residuals: ArrayLike, weights: ArrayLike | None = None) -> 
         rho = correlate(col, col, mode="full", method="fft")[n:] / power  # lags 1..n-1
         stop = np.flatnonzero(rho <= 0.0)
         k = int(stop[0]) if stop.size else len(rho)
+        if max_lag is not None:
+            k = min(k, max(int(max_lag), 0))
         total += power * (1.0 + 2.0 * float(rho[:k].sum()))
         energy += power
     return max(1.0, total / energy) if energy > 0.0 else 1.0
