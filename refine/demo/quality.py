@@ -573,23 +573,36 @@ def estimate_frame_error(
     left = np.zeros((n, 3))
     # the time matching slides a waypoint along the demonstrated path, the CAD path's tangent
     across = _across(c)
-    # linear in the rotation about the path's centre (the frame errors the check is for are a few
-    # degrees; 10 deg are estimated within 1.5 %): each round refits the same model with new weights,
-    # so nothing accumulates along a rotation the path cannot show
-    A = np.concatenate([_skew_rows(c - pivot), np.broadcast_to(np.eye(3), (n, 3, 3)), basis], axis=2)
-    A = np.einsum("nij,njk->nik", across, A)
-    r = np.einsum("nij,nj->ni", across, x - c)
+    # Gauss-Newton on the rotation about the path's centre; a step turns only about the axes the
+    # data determine better than WEAK_CHECK_DEG (about the others it stays at the prior's zero:
+    # turned far, the CAD path's tangents no longer match the turned path's and lend such an axis
+    # a precision it does not have)
+    R = np.eye(3)
+    A = np.zeros((n, 3, nk))
+    M = np.zeros((3 * n, nk))
     for _ in range(6):
+        cR = (c - pivot) @ R.T + pivot
+        A = np.concatenate([_skew_rows(cR - pivot), np.broadcast_to(np.eye(3), (n, 3, 3)), basis], axis=2)
+        A = np.einsum("nij,njk->nik", across, A)
+        r = np.einsum("nij,nj->ni", across, x - cR)
         M = (A * np.sqrt(w)[:, None, None]).reshape(3 * n, nk)
         N = M.T @ M / (var * inflation) + np.diag(prior)
-        coef = np.linalg.solve(N, M.T @ (r * np.sqrt(w)[:, None]).reshape(-1) / (var * inflation))
-        left = r - np.einsum("nik,k->ni", A, coef)
+        b = M.T @ (r * np.sqrt(w)[:, None]).reshape(-1) / (var * inflation)
+        b[:3] -= prior[:3] * rotvec_from_matrix(R)  # the prior holds the whole rotation, not the step
+        ev_r, V_r = np.linalg.eigh(np.linalg.inv(N)[:3, :3])
+        free = V_r[:, np.sqrt(np.clip(ev_r, 0.0, None)) <= math.radians(WEAK_CHECK_DEG)]
+        basis_step = np.zeros((nk, free.shape[1] + nk - 3))
+        basis_step[:3, : free.shape[1]] = free
+        basis_step[3:, free.shape[1] :] = np.eye(nk - 3)
+        step = basis_step @ np.linalg.solve(basis_step.T @ N @ basis_step, basis_step.T @ b)
+        coef = step
+        R = matrix_from_rotvec(step[:3]) @ R
+        left = r - np.einsum("nik,k->ni", A, step)
         resid = np.linalg.norm(left, axis=1)
         cutoff = 4.685 * (1.4826 * np.median(resid) + 1e-4)  # Tukey: far waypoints get no say
         w = np.clip(1.0 - (resid / cutoff) ** 2, 0.0, None) ** 2
         # residual variance per coordinate across the path (two per waypoint)
         var = max(float(np.sum(w * resid**2) / max(np.sum(w) * 2 - nk, 1)), 1e-12)
-    R = matrix_from_rotvec(coef[:3])
     distortion = np.einsum("nik,k->ni", basis, coef[6:])
     # residuals correlated along the path (slow hand wander, smooth errors) count as fewer: in the
     # uncertainty only (the fit keeps its balance against the distortion's prior)
@@ -617,7 +630,7 @@ def estimate_frame_error(
     for h in hidden:
         a = np.asarray(h["axis_in_source"], dtype=float)
         shown = shown - np.outer(a, a)
-    Rp = matrix_from_rotvec(shown @ coef[:3]) @ pivot
+    Rp = matrix_from_rotvec(shown @ rotvec_from_matrix(R)) @ pivot
     offset = coef[3:6] + pivot - Rp
     J = np.concatenate([-_skew_rows(Rp[None])[0] @ shown, np.eye(3)], axis=1)  # d(offset) / d(ω, t)
     centre = _skew_rows((np.sum(w[:, None] * (c @ R.T), axis=0) / max(float(np.sum(w)), 1e-12))[None])[0]
