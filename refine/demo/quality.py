@@ -42,11 +42,14 @@ function of ``d``):
   and 50 mm), while rotation and offset are free: a rotation is explained by a distortion only as
   far as the tracker's documented error allows;
 * the rotation turns the CAD path about its own centre, under a weak prior of
-  :data:`ROTATION_PRIOR_RAD` (the receiver's rotation and offset follow from it and the fitted
-  offset): rotation and offset are then separate parameters, and a rotation the path cannot show
-  (a round profile about its normal) stays at zero instead of drifting, with an offset, along the
-  direction the data leave free (where, turned by tens of degrees, the CAD path's tangents no
-  longer match the turned path's and the drift looked like a determined rotation);
+  :data:`ROTATION_PRIOR_RAD` on the whole rotation, and each Gauss-Newton step turns it only
+  about the axes the data determine to within :data:`WEAK_CHECK_DEG`: rotation and offset are
+  then separate parameters, and a rotation the path cannot show (a round profile about its
+  normal) stays at zero instead of drifting, with an offset, along the direction the data leave
+  free (turned by tens of degrees, the CAD path's tangents no longer match the turned path's and
+  lent the drift the look of a determined rotation). The receiver's offset follows from the
+  fitted one and the rotation about the axes the path shows (about the others the path shows
+  neither a rotation nor the shift of its centre that would come with it);
 * the rotation's uncertainty is the posterior covariance, with the residual variance counted once
   per *independent* residual: per occupied cell of :data:`CORRELATION_LENGTH_M` (a path that comes
   back over the same space, like a spiral, brings no new evidence about a smooth error) or per
