@@ -70,7 +70,7 @@ def test_a_first_order_wander_has_the_correlation_time_of_its_process(tau):
     assert correlation_time(e) == pytest.approx(expected, rel=0.15)
 
 
-@pytest.mark.parametrize("seed", [1, 2, 5])
+@pytest.mark.parametrize("seed", [3, 5, 6, 9])  # the old check stopped each at 13-56 deg
 def test_a_42_mm_round_profile_with_1_5_mm_of_wander_passes_on_the_right_frame(seed):
     sc = scene("small", seed, wander_m=0.0015, wander_time_s=0.3, size_m=0.042)
     warnings = _gate(sc, sc.source_in_world)
