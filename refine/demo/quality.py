@@ -149,8 +149,9 @@ SYSTEMATIC_ERROR_M = 0.001
 field and the orientation error times the sensor's lever to the TCP, both functions of the sensor
 pose): shaped like a rotation, it moves the estimate by this over the path's RMS lever about the
 axis. With it, the estimated angle differs from the planted one by more than 2 standard
-uncertainties in 2.7 % of the 528 rows of ``benchmarks/frame_check.py`` and by more than 3 in
-none (13.3 % and 5.7 % without it): the uncertainty is not too small."""
+uncertainties in 1.1 % of the 376 rows of ``benchmarks/frame_check.py`` (2.7 % before the
+centre-pivoted fit and the residuals' autocorrelation) and by more than 3 in none (13.3 % and
+5.7 % without it, measured with the earlier fit): the uncertainty is not too small."""
 HAND_CORRELATION_S = 1.0
 """Longest time over which the residuals' autocorrelation is summed [s] (:func:`correlation_time`):
 a hand wanders off the path and back within about a second; slower, smoother error is the
