@@ -684,8 +684,6 @@ def correlation_time(
     Returns:
         The factor (>= 1) [waypoints per independent observation].
     """
-    from scipy.signal import correlate
-
     e = np.asarray(residuals, dtype=float).reshape(len(residuals), -1)
     if weights is not None:
         e = e * np.sqrt(np.asarray(weights, dtype=float))[:, None]
@@ -696,7 +694,8 @@ def correlation_time(
         power = float(col @ col)
         if n < 3 or power <= 0.0:
             continue
-        rho = correlate(col, col, mode="full", method="fft")[n:] / power  # lags 1..n-1
+        spectrum = np.fft.rfft(col, 2 * n)  # zero-padded: the circular correlation is the linear one
+        rho = np.fft.irfft(spectrum * np.conj(spectrum), 2 * n)[1:n] / power  # lags 1..n-1
         stop = np.flatnonzero(rho <= 0.0)
         k = int(stop[0]) if stop.size else len(rho)
         if max_lag is not None:
