@@ -21,6 +21,19 @@ The ranges, with their reasons (docs/problem-file.md, "Plausibility ranges"):
   cell spans a kilometre, while a unit slip of a thousand or a million still shows.
 * :data:`CAD_SPEED_LIMIT_M_S`: a PathML point's speed [m/s]; industrial robots move their tool at
   a few metres per second.
+* Units of a demonstration CSV (:func:`check_demo_units`): the *extent* of a log is the diagonal
+  of the box its positions fill after a running median over :data:`EXTENT_MEDIAN_S` (tracker noise
+  of 1 mm and single-sample spikes then span a millimetre or two). A log whose extent in the
+  stated unit is below :data:`MIN_DEMO_EXTENT_M` (metres read as millimetres: the whole motion
+  spans a few mm) or whose extent or median distance from the receiver is beyond
+  :data:`DEMO_POSITION_LIMIT_M` (millimetres read as metres: kilometres) while another unit puts
+  it between :data:`PLAIN_MOTION_EXTENT_M` and that limit stops, naming the unit. A log that plainly
+  moves (extent at least :data:`PLAIN_MOTION_EXTENT_M`) with every angle within
+  ±:data:`RADIAN_LIKE_LIMIT` "degrees" is taken for radians read as degrees (a tool that turns
+  less than 3.2 deg about every receiver axis while it travels 20 mm is not a worker's hand);
+  angles stated in radians beyond ±2π, or turning at a median rate above
+  :data:`MAX_TURN_RATE_DEG_S`, are taken for degrees read as radians. Logs shorter than
+  :data:`MIN_UNIT_CHECK_S` are not judged.
 """
 
 from __future__ import annotations
@@ -52,6 +65,21 @@ CAD_COORDINATE_LIMIT_M = 1_000.0
 """Largest accepted |x|, |y| or |z| of a CAD/CAM point, in metres after the unit conversion."""
 CAD_SPEED_LIMIT_M_S = 10.0
 """Largest accepted speed of a PathML point [m/s]."""
+
+EXTENT_MEDIAN_S = 0.1
+"""Running median window over which a log's positions are taken before its extent [s]."""
+MIN_DEMO_EXTENT_M = 0.005
+"""A demonstration whose extent is below this [m] did not move (or its unit is wrong)."""
+PLAIN_MOTION_EXTENT_M = 0.02
+"""A demonstration whose extent reaches this [m] plainly moves."""
+RADIAN_LIKE_LIMIT = 3.2
+"""Angles that all stay within ± this (π and some rounding) look like radians [deg or rad]."""
+MIN_UNIT_CHECK_S = 0.5
+"""Logs shorter than this [s] are not judged by :func:`check_demo_units` (a snippet, no
+demonstration: a worker's start pause alone lasts longer)."""
+MAX_TURN_RATE_DEG_S = 1500.0
+"""Median turning rate [deg/s] above which the angles are not a hand's (the quality gate's
+``MAX_HAND_RATE_DEG_S``); degrees read as radians turn 57 times too fast."""
 
 Where = Callable[[int], str]
 """Names the location of sample ``k`` for an error message, e.g. ``"log.txt:17"``."""
@@ -174,3 +202,117 @@ def check_times(t: ArrayLike, where: Where) -> None:
             f"{where(k)}: time {t[k] - t[0]:.6g} s after the first sample; a demonstration lasts at "
             f"most {MAX_DURATION_S:g} s"
         )
+
+
+def demo_extent(t: ArrayLike, positions: ArrayLike) -> float:
+    """The extent of a demonstration [unit of ``positions``] (module docstring).
+
+    Args:
+        t: sample times [s], shape (M,).
+        positions: positions, shape (M, 3).
+    """
+    from scipy.ndimage import median_filter
+
+    t = np.asarray(t, dtype=float)
+    p = np.asarray(positions, dtype=float).reshape(-1, 3)
+    step = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
+    window = max(1, min(len(p), int(round(EXTENT_MEDIAN_S / step)) | 1))
+    smooth = median_filter(p, size=(window, 1), mode="nearest")
+    return float(np.linalg.norm(smooth.max(axis=0) - smooth.min(axis=0)))
+
+
+def _median_turn_rate_deg_s(t: np.ndarray, rotations: np.ndarray) -> float:
+    """Median angle between consecutive rotations divided by their time step [deg/s]."""
+    if len(t) < 2:
+        return 0.0
+    rel = np.einsum("kji,kjl->kil", rotations[:-1], rotations[1:])  # R_k^T R_{k+1}
+    cos = np.clip((np.trace(rel, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
+    return float(np.median(np.degrees(np.arccos(cos)) / np.diff(t)))
+
+
+def check_demo_units(
+    source: str,
+    t: ArrayLike,
+    positions_in_file: ArrayLike,
+    units: str,
+    metres_per_unit: dict[str, float],
+    angles_in_file: ArrayLike,
+    angle_units: str | None,
+    to_rotations: Callable[[np.ndarray], np.ndarray],
+) -> None:
+    """Stop a demonstration whose motion or turning is implausible for its stated units.
+
+    Args:
+        source: the file, for messages.
+        t: sample times [s], shape (M,).
+        positions_in_file: positions as written, in ``units``, shape (M, 3).
+        units: the stated position unit (a key of ``metres_per_unit``).
+        metres_per_unit: length of one unit [m], per unit name.
+        angles_in_file: azimuth, elevation, roll as written, shape (M, 3).
+        angle_units: ``"deg"`` or ``"rad"`` as stated; None: not stated, read as degrees and
+            checked for radians.
+        to_rotations: rotation matrices (M, 3, 3) from angles [deg] (M, 3).
+
+    Raises:
+        InputError: naming the extent or the angles found, the likely unit and the key to set
+            (module docstring for the rules).
+    """
+    t = np.asarray(t, dtype=float)
+    if len(t) < 2 or t[-1] - t[0] < MIN_UNIT_CHECK_S:
+        return
+    raw = np.asarray(positions_in_file, dtype=float).reshape(-1, 3)
+    extent_raw = demo_extent(t, raw)
+    distance_raw = float(np.median(np.linalg.norm(raw, axis=1)))
+    extent_m = extent_raw * metres_per_unit[units]
+    distance_m = distance_raw * metres_per_unit[units]
+
+    def plausible(unit: str) -> bool:
+        scale = metres_per_unit[unit]
+        return (
+            PLAIN_MOTION_EXTENT_M <= extent_raw * scale <= DEMO_POSITION_LIMIT_M
+            and distance_raw * scale <= DEMO_POSITION_LIMIT_M
+        )
+
+    too_small = extent_m < MIN_DEMO_EXTENT_M
+    too_large = extent_m > DEMO_POSITION_LIMIT_M or distance_m > DEMO_POSITION_LIMIT_M
+    if too_small or too_large:
+        scale = metres_per_unit[units]
+        others = [u for u in metres_per_unit if u != units and plausible(u)]
+        others = [u for u in others if (metres_per_unit[u] > scale) == too_small]
+        if others:
+            what = (
+                f"the whole motion spans {extent_m * 1e3:.3g} mm"
+                if too_small
+                else f"the motion spans {extent_m:.4g} m at a median {distance_m:.4g} m from the receiver"
+            )
+            hint = " or ".join(
+                f'units = "{u}" (it then spans {extent_raw * metres_per_unit[u]:.3g} m)' for u in others
+            )
+            raise InputError(
+                f"{source}: positions read as {units!r}: are the units right? {what}; if not, set "
+                f"{hint} (the [demonstration] key)" + ("; or the tool never moved" if too_small else "")
+            )
+
+    a = np.asarray(angles_in_file, dtype=float).reshape(-1, 3)
+    if angle_units is None:
+        largest = float(np.max(np.abs(a))) if a.size else 0.0
+        if extent_m >= PLAIN_MOTION_EXTENT_M and largest <= RADIAN_LIKE_LIMIT:
+            raise InputError(
+                f"{source}: the tool travels {extent_m * 1e3:.0f} mm but every angle stays within "
+                f"±{largest:.3g} deg: these look like radians; set [demonstration] angle_units = "
+                f'"rad" (or angle_units = "deg" if the tool really keeps its orientation within '
+                f"{RADIAN_LIKE_LIMIT} deg of the receiver's axes)"
+            )
+    elif angle_units == "rad":
+        bad = np.flatnonzero(~(np.abs(a) <= 2.0 * np.pi).all(axis=1))
+        rate = _median_turn_rate_deg_s(t, to_rotations(np.degrees(a))) if not bad.size else 0.0
+        if bad.size or rate > MAX_TURN_RATE_DEG_S:
+            found = (
+                f"an angle of {a[bad[0]][np.argmax(np.abs(a[bad[0]]))]:.6g} rad (beyond ±2π) at sample {bad[0]}"
+                if bad.size
+                else f"a median turning rate of {rate:.0f} deg/s (a hand turns at most {MAX_TURN_RATE_DEG_S:g} deg/s)"
+            )
+            raise InputError(
+                f"{source}: read with angles in radians, the log has {found}: these look like degrees; "
+                f'set [demonstration] angle_units = "deg"'
+            )

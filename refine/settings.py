@@ -268,6 +268,8 @@ class DemoSettings:
         smoothing_s: standard deviation of the Gaussian smoothing of positions and orientations [s].
         pause_speed_m_s: below this speed the tool counts as still (start pause) [m/s].
         truth: absolute path of a ``truth.csv`` (simulated demonstrations only), or None.
+        angle_units: angle unit of a CSV log, ``"deg"`` or ``"rad"``; None: degrees, and a log whose
+            angles look like radians stops (:func:`refine.plausible.check_demo_units`).
     """
 
     file: Path
@@ -280,9 +282,12 @@ class DemoSettings:
     smoothing_s: float = 0.03
     pause_speed_m_s: float = 0.01
     truth: Path | None = None
+    angle_units: str | None = None
 
     def __post_init__(self) -> None:
         _one_of("demonstration", "format", self.format, DEMO_FORMATS)
+        if self.angle_units is not None:
+            _one_of("demonstration", "angle_units", self.angle_units, ("deg", "rad"))
         _one_of("demonstration", "units", self.units, ("in", "cm", "m", "mm"))
         _in_range("demonstration", "station", self.station, 1, 32)
         _positive("demonstration", "rate_hz", self.rate_hz)

@@ -65,7 +65,7 @@ _READERS: dict[str, Callable[[DemoSettings], TrackerLog]] = {
     "liberty_binary": lambda d: read_liberty_binary(
         d.file, station=d.station, rate_hz=d.rate_hz, units=d.units
     ),
-    "csv": lambda d: read_demo_csv(d.file, units=d.units),
+    "csv": lambda d: read_demo_csv(d.file, units=d.units, angle_units=d.angle_units),
 }
 
 

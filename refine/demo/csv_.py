@@ -12,7 +12,12 @@ The format::
   ``t = 0``.
 * ``x, y, z`` is the sensor position in the receiver frame {S}, in the unit the caller names
   (``m``, ``mm``, ``cm`` or ``in``); it is returned in metres.
-* ``azimuth, elevation, roll`` are the Polhemus angles [deg]: ``R = Rz(azimuth)·Ry(elevation)·Rx(roll)``.
+* ``azimuth, elevation, roll`` are the Polhemus angles: ``R = Rz(azimuth)·Ry(elevation)·Rx(roll)``,
+  in degrees, or radians when the caller says so (``angle_units``).
+
+Units are never guessed silently: a log whose motion or turning is implausible for the stated
+units stops with a message naming the likely unit and the key to set
+(:func:`refine.plausible.check_demo_units`).
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ from refine.plausible import (
     DEMO_POSITION_LIMIT_M,
     check_angles,
     check_coordinates,
+    check_demo_units,
     check_times,
 )
 
@@ -38,25 +44,31 @@ logger = logging.getLogger(__name__)
 #: Length of one position unit [m].
 METRES_PER_UNIT = {"m": 1.0, "mm": 1e-3, "cm": 1e-2, "in": 0.0254}
 COLUMNS = ("t", "x", "y", "z", "azimuth", "elevation", "roll")
+ANGLE_UNITS = ("deg", "rad")
 
 
-def read_demo_csv(path: str | Path, units: str = "m") -> TrackerLog:
+def read_demo_csv(path: str | Path, units: str = "m", angle_units: str | None = None) -> TrackerLog:
     """Read a demonstration CSV (format in the module docstring).
 
     Args:
         path: the CSV file.
         units: position unit in the file: ``"m"``, ``"mm"``, ``"cm"`` or ``"in"``.
+        angle_units: angle unit in the file: ``"deg"`` or ``"rad"``; None: degrees, and a log whose
+            angles look like radians stops (:func:`refine.plausible.check_demo_units`).
 
     Returns:
         The samples: times [s] from 0, positions [m], rotations R_S_E.
 
     Raises:
         InputError: unreadable file, unknown unit, missing header columns (naming them), a
-            malformed line (naming file, line number and text), time that does not increase.
+            malformed line (naming file, line number and text), time that does not increase,
+            motion or angles implausible for the stated units (naming the likely unit).
     """
     path = Path(path)
     if units not in METRES_PER_UNIT:
         raise InputError(f"{path}: unknown position unit {units!r}; use one of {', '.join(METRES_PER_UNIT)}")
+    if angle_units is not None and angle_units not in ANGLE_UNITS:
+        raise InputError(f"{path}: unknown angle unit {angle_units!r}; use one of {', '.join(ANGLE_UNITS)}")
     try:
         lines = path.read_text(encoding="utf-8-sig").splitlines()
     except (OSError, UnicodeDecodeError) as e:
@@ -107,14 +119,25 @@ def read_demo_csv(path: str | Path, units: str = "m") -> TrackerLog:
         return f"{path}:{linenos[k]}"
 
     check_times(data[:, 0], where)
+    check_demo_units(
+        str(path),
+        data[:, 0],
+        data[:, 1:4],
+        units,
+        METRES_PER_UNIT,
+        data[:, 4:7],
+        angle_units,
+        lambda a: matrix_from_tracker_angles(a[:, 0], a[:, 1], a[:, 2], degrees=True),
+    )
     positions = data[:, 1:4] * METRES_PER_UNIT[units]
     check_coordinates(positions, DEMO_POSITION_LIMIT_M, where, "position", units)
-    check_angles(data[:, 4:7], [CSV_ANGLE_LIMIT_DEG] * 3, where, COLUMNS[4:7])
+    angles_deg = np.degrees(data[:, 4:7]) if angle_units == "rad" else data[:, 4:7]
+    check_angles(angles_deg, [CSV_ANGLE_LIMIT_DEG] * 3, where, COLUMNS[4:7])
     logger.debug("%s: %d samples over %.3f s", path, len(data), data[-1, 0] - data[0, 0])
     return TrackerLog(
         t=data[:, 0] - data[0, 0],
         positions=positions,
-        rotations=matrix_from_tracker_angles(data[:, 4], data[:, 5], data[:, 6], degrees=True),
+        rotations=matrix_from_tracker_angles(angles_deg[:, 0], angles_deg[:, 1], angles_deg[:, 2], degrees=True),
         source=str(path),
     )
 

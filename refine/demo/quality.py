@@ -41,10 +41,26 @@ function of ``d``):
   fusion expects of the tracker along that receiver axis (``refine.fuse.PRIOR_ERROR_M``: 10, 10
   and 50 mm), while rotation and offset are free: a rotation is explained by a distortion only as
   far as the tracker's documented error allows;
+* the rotation turns the CAD path about its own centre, under a weak prior of
+  :data:`ROTATION_PRIOR_RAD` on the whole rotation, and each Gauss-Newton step turns it only
+  about the axes the data determine to within :data:`WEAK_CHECK_DEG`: rotation and offset are
+  then separate parameters, and a rotation the path cannot show (a round profile about its
+  normal) stays at zero instead of drifting, with an offset, along the direction the data leave
+  free (turned by tens of degrees, the CAD path's tangents no longer match the turned path's and
+  lent the drift the look of a determined rotation). The receiver's offset follows from the
+  fitted one and the rotation about the axes the path shows (about the others the path shows
+  neither a rotation nor the shift of its centre that would come with it);
 * the rotation's uncertainty is the posterior covariance, with the residual variance counted once
-  per occupied cell of :data:`CORRELATION_LENGTH_M` (a path that comes back over the same space,
-  like a spiral, brings no new evidence about a smooth error), plus the rotation an unmodelled
-  smooth error of :data:`SYSTEMATIC_ERROR_M` can mimic (large on small paths).
+  per *independent* residual: per occupied cell of :data:`CORRELATION_LENGTH_M` (a path that comes
+  back over the same space, like a spiral, brings no new evidence about a smooth error) or per
+  integrated autocorrelation time of the residuals along the path, summed over lags up to
+  :data:`HAND_CORRELATION_S` (:func:`correlation_time`: a hand wandering slowly off the path by a
+  millimetre for tenths of a second gives residuals that move together over dozens of waypoints
+  on a fast path), whichever counts fewer, plus the rotation an unmodelled
+  smooth error of :data:`SYSTEMATIC_ERROR_M` can mimic (large on small paths). The
+  autocorrelation time is used rather than a block bootstrap: it is deterministic, costs one FFT
+  per axis, and enters the same posterior covariance the rest of the check reads (the bootstrap
+  would need a block length chosen from the same autocorrelation anyway, and tens of refits).
 
 The path's shape decides which rotations it can show: along each principal axis of the rotation's
 covariance the uncertainty is known, and an axis whose uncertainty is more than
@@ -133,8 +149,16 @@ SYSTEMATIC_ERROR_M = 0.001
 field and the orientation error times the sensor's lever to the TCP, both functions of the sensor
 pose): shaped like a rotation, it moves the estimate by this over the path's RMS lever about the
 axis. With it, the estimated angle differs from the planted one by more than 2 standard
-uncertainties in 2.7 % of the 528 rows of ``benchmarks/frame_check.py`` and by more than 3 in
-none (13.3 % and 5.7 % without it): the uncertainty is not too small."""
+uncertainties in 1.1 % of the 376 rows of ``benchmarks/frame_check.py`` (2.7 % before the
+centre-pivoted fit and the residuals' autocorrelation) and by more than 3 in none (13.3 % and
+5.7 % without it, measured with the earlier fit): the uncertainty is not too small."""
+HAND_CORRELATION_S = 1.0
+"""Longest time over which the residuals' autocorrelation is summed [s] (:func:`correlation_time`):
+a hand wanders off the path and back within about a second; slower, smoother error is the
+tracker's, a function of where the sensor is, which the cells of :data:`CORRELATION_LENGTH_M` and
+:data:`SYSTEMATIC_ERROR_M` account for (summed over the whole path it would count them twice)."""
+ROTATION_PRIOR_RAD = 1.0
+"""Standard deviation of the Gaussian prior on the tracker frame rotation [rad]."""
 DISTANCE_POWERS = (2, 3, 4)
 """Powers of the distance from the receiver in the distortion model (per receiver axis)."""
 
@@ -489,6 +513,17 @@ def _skew_rows(c: Array) -> Array:
     )
 
 
+def _across(c: Array) -> Array:
+    """Projectors (N, 3, 3) off the tangent of the path through points ``c`` (N, 3).
+
+    The time matching may slide a waypoint along the path: only the residual across it counts.
+    """
+    tangent = np.gradient(c, axis=0) if len(c) > 1 else np.zeros((1, 3))
+    norm = np.linalg.norm(tangent, axis=1, keepdims=True)
+    tangent = np.divide(tangent, norm, out=np.zeros_like(tangent), where=norm > 0)
+    return np.eye(3) - tangent[:, :, None] * tangent[:, None, :]
+
+
 def estimate_frame_error(
     demo: Demonstration, fused: FusedPath, source_in_world: ArrayLike, sensor_in_tcp: ArrayLike
 ) -> FrameEstimate:
@@ -512,11 +547,6 @@ def estimate_frame_error(
     x = x_F @ T_S_F[:3, :3].T + T_S_F[:3, 3]
     c = fused.positions @ T_S_F[:3, :3].T + T_S_F[:3, 3]
     n = len(c)
-    # the time matching may slide a waypoint along the path: only the residual across it counts
-    tangent = np.gradient(c, axis=0) if n > 1 else np.zeros((1, 3))
-    norm = np.linalg.norm(tangent, axis=1, keepdims=True)
-    tangent = np.divide(tangent, norm, out=np.zeros_like(tangent), where=norm > 0)
-    across = np.eye(3) - tangent[:, :, None] * tangent[:, None, :]
     # the distortion is a function of where the sensor is (not the TCP, a lever away)
     sensor = np.column_stack([np.interp(fused.t_demo, demo.t, demo.positions[:, j]) for j in range(3)])
     d = np.linalg.norm(sensor, axis=1) / _DISTANCE_SCALE_M
@@ -527,46 +557,66 @@ def estimate_frame_error(
     for j in range(3):
         basis[:, j, j::3] = radial
     # prior: each distortion coefficient (its term's error at 1 m) ~ the tracker's expected error
-    # along that receiver axis; rotation and offset free (a 30 rad / 30 m ridge keeps N regular)
-    prior = np.concatenate([np.full(6, 1e-3), np.tile(1.0 / np.asarray(PRIOR_ERROR_M) ** 2, n_terms)])
+    # along that receiver axis; offset free (a 30 m ridge keeps N regular), the rotation under a
+    # prior of 1 rad (57 deg): far weaker than any axis the path shows (a 1 mm error over a 40 mm
+    # path is a few degrees), it keeps an axis the path cannot show at zero instead of letting
+    # Gauss-Newton throw it anywhere
+    prior = np.concatenate([np.full(3, ROTATION_PRIOR_RAD**-2), np.full(3, 1e-3), np.tile(1.0 / np.asarray(PRIOR_ERROR_M) ** 2, n_terms)])
     # one independent residual per occupied cell of CORRELATION_LENGTH_M (a smooth error seen twice
     # where the path comes back is one observation)
     cells = len(np.unique(np.floor(c / CORRELATION_LENGTH_M).astype(np.int64), axis=0))
     inflation = max(1.0, n / cells)
-    R = np.eye(3)
+    # the rotation turns the CAD path about its centre (then rotation and offset are independent
+    # parameters, and a rotation the path cannot show stays at zero instead of drifting along the
+    # ridge with an offset); the offset is converted to the receiver's at the end
+    pivot = c.mean(axis=0)
     w = np.ones(n)
     coef = np.zeros(nk)
     var = (1e-3) ** 2
-    N = np.diag(prior)
-    A = np.zeros((n, 3, nk))
     resid = np.zeros(n)
+    left = np.zeros((n, 3))
+    # the time matching slides a waypoint along the demonstrated path, the CAD path's tangent
+    across = _across(c)
+    # Gauss-Newton on the rotation about the path's centre; a step turns only about the axes the
+    # data determine better than WEAK_CHECK_DEG (about the others it stays at the prior's zero:
+    # turned far, the CAD path's tangents no longer match the turned path's and lend such an axis
+    # a precision it does not have)
+    R = np.eye(3)
+    A = np.zeros((n, 3, nk))
+    M = np.zeros((3 * n, nk))
     for _ in range(6):
-        cR = c @ R.T
-        A = np.concatenate([_skew_rows(cR), np.broadcast_to(np.eye(3), (n, 3, 3)), basis], axis=2)
+        cR = (c - pivot) @ R.T + pivot
+        A = np.concatenate([_skew_rows(cR - pivot), np.broadcast_to(np.eye(3), (n, 3, 3)), basis], axis=2)
         A = np.einsum("nij,njk->nik", across, A)
         r = np.einsum("nij,nj->ni", across, x - cR)
         M = (A * np.sqrt(w)[:, None, None]).reshape(3 * n, nk)
         N = M.T @ M / (var * inflation) + np.diag(prior)
-        coef = np.linalg.solve(N, M.T @ (r * np.sqrt(w)[:, None]).reshape(-1) / (var * inflation))
-        R = matrix_from_rotvec(coef[:3]) @ R
-        resid = np.linalg.norm(r - np.einsum("nik,k->ni", A, coef), axis=1)
+        b = M.T @ (r * np.sqrt(w)[:, None]).reshape(-1) / (var * inflation)
+        b[:3] -= prior[:3] * rotvec_from_matrix(R)  # the prior holds the whole rotation, not the step
+        ev_r, V_r = np.linalg.eigh(np.linalg.inv(N)[:3, :3])
+        free = V_r[:, np.sqrt(np.clip(ev_r, 0.0, None)) <= math.radians(WEAK_CHECK_DEG)]
+        basis_step = np.zeros((nk, free.shape[1] + nk - 3))
+        basis_step[:3, : free.shape[1]] = free
+        basis_step[3:, free.shape[1] :] = np.eye(nk - 3)
+        step = basis_step @ np.linalg.solve(basis_step.T @ N @ basis_step, basis_step.T @ b)
+        coef = step
+        R = matrix_from_rotvec(step[:3]) @ R
+        left = r - np.einsum("nik,k->ni", A, step)
+        resid = np.linalg.norm(left, axis=1)
         cutoff = 4.685 * (1.4826 * np.median(resid) + 1e-4)  # Tukey: far waypoints get no say
         w = np.clip(1.0 - (resid / cutoff) ** 2, 0.0, None) ** 2
         # residual variance per coordinate across the path (two per waypoint)
         var = max(float(np.sum(w * resid**2) / max(np.sum(w) * 2 - nk, 1)), 1e-12)
     distortion = np.einsum("nik,k->ni", basis, coef[6:])
-    posterior = np.linalg.inv(N)
-    cov_sys = _systematic_covariance(A[:, :, :3], w)
+    # residuals correlated along the path (slow hand wander, smooth errors) count as fewer: in the
+    # uncertainty only (the fit keeps its balance against the distortion's prior)
+    span_s = float(np.ptp(fused.t_demo)) if n > 1 else 0.0
+    max_lag = int(math.ceil(HAND_CORRELATION_S * (n - 1) / span_s)) if span_s > 0 else 0
+    correlated = max(inflation, correlation_time(left, w, max_lag))
+    posterior = np.linalg.inv(M.T @ M / (var * correlated) + np.diag(prior))
+    # the rotation an unmodelled smooth error can mimic, about the receiver as it is calibrated
+    cov_sys = _systematic_covariance(np.einsum("nij,njk->nik", across, _skew_rows(c @ R.T)), w)
     cov = posterior[:3, :3] + cov_sys
-    # the offset takes up what a wrongly estimated rotation moves the path's centre by (c̄ x δω)
-    centre = _skew_rows((np.sum(w[:, None] * (c @ R.T), axis=0) / max(float(np.sum(w)), 1e-12))[None])[0]
-    offset = coef[3:6]
-    cov_offset = posterior[3:6, 3:6] + centre @ cov_sys @ centre.T + SYSTEMATIC_ERROR_M**2 * np.eye(3)
-    ev_o, V_o = np.linalg.eigh(0.5 * (cov_offset + cov_offset.T))
-    offset_chi2 = float(np.sum((V_o.T @ offset) ** 2 / np.clip(ev_o, 1e-30, None)))
-    offset_len = float(np.linalg.norm(offset))
-    u_o = offset / offset_len if offset_len > 0 else V_o[:, 0]
-    offset_sigma = float(np.sqrt(max(u_o @ cov_offset @ u_o, 0.0)))
     sigma = float(np.degrees(np.sqrt(np.trace(cov) / 3.0)))
     rv = rotvec_from_matrix(R)
     angle = float(np.degrees(np.linalg.norm(rv)))
@@ -575,6 +625,25 @@ def estimate_frame_error(
         u = rv / np.linalg.norm(rv)
         sigma = float(np.degrees(np.sqrt(u @ cov @ u)))
     obs_angle, obs_sigma, obs_chi2, hidden = _observable_part(rv, cov, c)
+    # the receiver's offset: x = R (c - p) + p + t = R c + (t + p - R p), with R the rotation about
+    # the axes the path shows (about the others the path shows no rotation, so none of its shift of
+    # the pivot either; a rotation the data leave free would make the offset any size); it takes up
+    # what a wrongly estimated rotation moves the pivot by (R p x δω), and the path's centre for the
+    # systematic part
+    shown = np.eye(3)
+    for h in hidden:
+        a = np.asarray(h["axis_in_source"], dtype=float)
+        shown = shown - np.outer(a, a)
+    Rp = matrix_from_rotvec(shown @ rotvec_from_matrix(R)) @ pivot
+    offset = coef[3:6] + pivot - Rp
+    J = np.concatenate([-_skew_rows(Rp[None])[0] @ shown, np.eye(3)], axis=1)  # d(offset) / d(ω, t)
+    centre = _skew_rows((np.sum(w[:, None] * (c @ R.T), axis=0) / max(float(np.sum(w)), 1e-12))[None])[0]
+    cov_offset = J @ posterior[:6, :6] @ J.T + centre @ cov_sys @ centre.T + SYSTEMATIC_ERROR_M**2 * np.eye(3)
+    ev_o, V_o = np.linalg.eigh(0.5 * (cov_offset + cov_offset.T))
+    offset_chi2 = float(np.sum((V_o.T @ offset) ** 2 / np.clip(ev_o, 1e-30, None)))
+    offset_len = float(np.linalg.norm(offset))
+    u_o = offset / offset_len if offset_len > 0 else V_o[:, 0]
+    offset_sigma = float(np.sqrt(max(u_o @ cov_offset @ u_o, 0.0)))
     return FrameEstimate(
         rotation_deg=angle,
         sigma_deg=sigma,
@@ -593,6 +662,47 @@ def estimate_frame_error(
         offset_sigma_m=offset_sigma,
         offset_chi2=offset_chi2,
     )
+
+
+def correlation_time(
+    residuals: ArrayLike, weights: ArrayLike | None = None, max_lag: int | None = None
+) -> float:
+    """Integrated autocorrelation time of residuals along the path [waypoints] (module docstring).
+
+    Per component, ``1 + 2 Σ ρ(k)`` over the lags ``k = 1, 2, ...`` up to the first whose
+    autocorrelation ``ρ(k)`` is not positive (the initial positive sequence), and at most
+    ``max_lag``; the components are
+    averaged weighted by their variance. Independent residuals give 1; a residual that wanders
+    with a correlation of ``exp(-k / τ)`` gives about ``2 τ``: the fit then has that many times fewer
+    independent observations than waypoints.
+
+    Args:
+        residuals: the fit's residuals in waypoint (time) order, shape (N, 3) [m].
+        weights: the waypoints' robust weights, shape (N,); None: all 1.
+        max_lag: the longest lag summed [waypoints]; None: no limit.
+
+    Returns:
+        The factor (>= 1) [waypoints per independent observation].
+    """
+    e = np.asarray(residuals, dtype=float).reshape(len(residuals), -1)
+    if weights is not None:
+        e = e * np.sqrt(np.asarray(weights, dtype=float))[:, None]
+    e = e - e.mean(axis=0)
+    n = len(e)
+    total, energy = 0.0, 0.0
+    for col in e.T:
+        power = float(col @ col)
+        if n < 3 or power <= 0.0:
+            continue
+        spectrum = np.fft.rfft(col, 2 * n)  # zero-padded: the circular correlation is the linear one
+        rho = np.fft.irfft(spectrum * np.conj(spectrum), 2 * n)[1:n] / power  # lags 1..n-1
+        stop = np.flatnonzero(rho <= 0.0)
+        k = int(stop[0]) if stop.size else len(rho)
+        if max_lag is not None:
+            k = min(k, max(int(max_lag), 0))
+        total += power * (1.0 + 2.0 * float(rho[:k].sum()))
+        energy += power
+    return max(1.0, total / energy) if energy > 0.0 else 1.0
 
 
 def _systematic_covariance(rot_rows: Array, w: Array) -> Array:
@@ -735,6 +845,7 @@ __all__ = [
     "DemoQuality",
     "device_error_summary",
     "FrameEstimate",
+    "correlation_time",
     "estimate_frame_error",
     "find_bad_runs",
     "gate_dropouts",

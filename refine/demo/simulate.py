@@ -5,6 +5,10 @@ tool is sampled in the receiver frame {S} and corrupted the way a Polhemus Liber
 
 * **tremor**: real motion of the hand, band-limited to 8-12 Hz (the truth is the intended motion,
   so for refine it is an error like the others);
+* **wander** (off by default): the hand drifting slowly off the intended path, per axis a
+  first-order low-pass filtered white noise (an Ornstein-Uhlenbeck process: a random walk pulled
+  back to the path) with RMS ``wander_position_m`` and correlation time ``wander_time_s`` (its
+  autocorrelation falls as ``exp(-|Δt| / wander_time_s)``); real motion like the tremor;
 * **distortion**: slow, deterministic functions of the sensor position in {S}: a z error growing
   smoothly with the distance from the receiver, a horizontal error field and a rotation error field;
 * **noise**: white position and orientation noise on every sample;
@@ -76,6 +80,8 @@ class TrackerModel:
         outlier_orientation_deg: range of the spike rotation angle (low, high) [deg].
         pause_s: time the tool is held still at the path start before moving [s].
         seed: seed of the random generator.
+        wander_position_m: slow hand wander off the path, RMS per axis [m] (0: none).
+        wander_time_s: correlation time of the wander [s] (> 0).
     """
 
     rate_hz: float = 240.0
@@ -93,6 +99,8 @@ class TrackerModel:
     outlier_orientation_deg: tuple[float, float] = (5.0, 20.0)
     pause_s: float = 2.0
     seed: int = 0
+    wander_position_m: float = 0.0
+    wander_time_s: float = 0.3
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -102,9 +110,10 @@ class TrackerModel:
                 raise InputError(f"TrackerModel.{f.name} must be finite numbers, got {value!r}")
             if f.name != "z_distortion_max_m" and min(values) < 0:
                 raise InputError(f"TrackerModel.{f.name} must be >= 0, got {value!r}")
-        if self.rate_hz <= 0 or self.range_m <= 0:
+        if self.rate_hz <= 0 or self.range_m <= 0 or self.wander_time_s <= 0:
             raise InputError(
-                f"TrackerModel.rate_hz and range_m must be > 0, got {self.rate_hz}, {self.range_m}"
+                f"TrackerModel.rate_hz, range_m and wander_time_s must be > 0, got {self.rate_hz}, "
+                f"{self.range_m}, {self.wander_time_s}"
             )
         for name in ("tremor_band_hz", "outlier_position_m", "outlier_orientation_deg"):
             lo_hi = getattr(self, name)
@@ -132,6 +141,7 @@ class TrackerModel:
             tremor_position_m=0.0,
             tremor_orientation_deg=0.0,
             n_outliers=0,
+            wander_position_m=0.0,
         )
 
 
@@ -223,6 +233,25 @@ def _tremor(rng: np.random.Generator, t: Array, band: tuple[float, float], rms: 
     return amplitude * np.sin(2.0 * np.pi * t[:, None, None] * freqs + phases).sum(axis=-1)
 
 
+def _wander(rng: np.random.Generator, t: Array, rms: float, time_s: float) -> Array:
+    """Three axes of slow wander, shape (M, 3): a stationary AR(1) process per axis.
+
+    ``x[k] = a x[k-1] + sqrt(1 - a²) rms e[k]`` with ``a = exp(-Δt / time_s)`` and ``e`` standard
+    normal (the exact sampling of an Ornstein-Uhlenbeck process at the step ``Δt``), started
+    from its stationary distribution: RMS ``rms``, autocorrelation ``exp(-|lag| / time_s)``.
+    """
+    from scipy.signal import lfilter
+
+    e = rng.normal(size=(len(t), 3))
+    if rms == 0.0 or len(t) == 0:
+        return np.zeros((len(t), 3))
+    dt = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
+    a = math.exp(-dt / time_s)
+    drive = math.sqrt(1.0 - a * a) * rms * e
+    drive[0] = rms * e[0]
+    return lfilter([1.0], [1.0, -a], drive, axis=0)
+
+
 def _random_directions(rng: np.random.Generator, n: int) -> Array:
     v = rng.normal(size=(n, 3))
     return v / np.linalg.norm(v, axis=1, keepdims=True)
@@ -246,8 +275,10 @@ def corrupt_sensor_poses(
 ) -> tuple[Array, Array, tuple[int, ...]]:
     """Apply the tracker error model to intended sensor poses, as the tracker would report them.
 
-    Tremor, distortion, noise and outliers are drawn from one generator seeded by
-    ``model.seed`` (in that order) and applied in {S}.
+    Tremor, distortion, noise, outliers and wander are drawn from one generator seeded by
+    ``model.seed`` (in that order, wander last so a log without it is the same as before) and
+    applied in {S} (the wander, real motion of the hand, is added to the sensor position like the
+    tremor).
 
     Args:
         t: sample times [s], shape (M,).
@@ -283,9 +314,14 @@ def corrupt_sensor_poses(
     spike_r = _random_directions(rng, len(idx)) * np.radians(
         rng.uniform(*model.outlier_orientation_deg, size=(len(idx), 1))
     )
+    wander_p = (
+        _wander(rng, t, model.wander_position_m, model.wander_time_s)
+        if model.wander_position_m > 0.0
+        else np.zeros((m, 3))
+    )
 
     # ---- apply them in {S}
-    p = p_true + tremor_p
+    p = p_true + tremor_p + wander_p
     p[:, 2] += z_distortion(p_true, model)
     p[:, :2] += (model.xy_error_max_m / math.sqrt(2.0)) * xy_field(p_true)
     p += noise_p
