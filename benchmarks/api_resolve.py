@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 import refine
-from refine.pipeline import fused_path
+from refine.run.stages import fused_path
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -21,7 +21,7 @@ from pathlib import Path
 
 from distributed import Client, LocalCluster
 
-from refine.batch import run_batch
+from refine.run.batch import run_batch
 from refine.synthetic import write_line_problem
 
 
@@ -37,8 +37,8 @@ def generate(folder: Path, n: int) -> Path:
 
 def _warm_up() -> None:
     import refine.export.result_json  # noqa: F401
-    import refine.pipeline  # noqa: F401
     import refine.report.html  # noqa: F401
+    import refine.run.stages  # noqa: F401
 
 
 def main() -> int:

@@ -39,7 +39,7 @@ from refine.demo.quality import (
 from refine.demo.simulate import TrackerModel, perturb_log, simulate_demonstration
 from refine.errors import InputError
 from refine.frames import transform_from_xyz_rpy
-from refine.fuse import fuse
+from refine.fuse.align import fuse
 from refine.paths import CadPath
 from refine.problem import load_problem
 from refine.settings import DemoSettings

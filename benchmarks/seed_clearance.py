@@ -23,9 +23,9 @@ from pathlib import Path
 
 from refine.collision import check_path_clearance, margins_proved
 from refine.optimise.clearance import ClearanceSource
-from refine.pipeline import _Stopwatch, constraint_sources, fused_path, refine_pass
 from refine.problem import load_problem
-from refine.robot import load_robot
+from refine.robot.model import load_robot
+from refine.run.stages import _Stopwatch, constraint_sources, fused_path, refine_pass
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -25,8 +25,8 @@ from refine.demo.csv_ import write_demo_csv
 from refine.demo.liberty import write_liberty_ascii
 from refine.demo.liberty_binary import write_liberty_binary
 from refine.demo.simulate import TrackerModel, perturb_log
-from refine.pipeline import solve_problem
 from refine.problem import load_problem
+from refine.run.stages import solve_problem
 
 ROOT = Path(__file__).resolve().parents[1]
 

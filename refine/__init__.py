@@ -25,7 +25,7 @@ from refine.lazy import lazy_names
 if TYPE_CHECKING:
     from refine.api import PassArrays, Result, refine_path, solve
     from refine.problem import Problem, load_problem
-    from refine.robot import Robot
+    from refine.robot.model import Robot
     from refine.settings import CollisionSettings, Shape, Tolerances
 
 _LAZY = {
@@ -35,7 +35,7 @@ _LAZY = {
     "refine_path": "refine.api",
     "Result": "refine.api",
     "PassArrays": "refine.api",
-    "Robot": "refine.robot",
+    "Robot": "refine.robot.model",
     "Shape": "refine.settings",
     "Tolerances": "refine.settings",
     "CollisionSettings": "refine.settings",

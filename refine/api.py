@@ -40,8 +40,8 @@ from refine.settings import (
 )
 
 if TYPE_CHECKING:
-    from refine.result import PassResult, RunResult
-    from refine.robot import Robot
+    from refine.robot.model import Robot
+    from refine.run.result import PassResult, RunResult
 
 Array = NDArray[np.float64]
 
@@ -93,7 +93,7 @@ class Result:
     :meth:`write` adds the files written (``outputs``, ``files``) and their times (``timings_s``).
 
     Attributes:
-        run: the underlying :class:`refine.result.RunResult` (problem, robot, per-pass details).
+        run: the underlying :class:`refine.run.result.RunResult` (problem, robot, per-pass details).
     """
 
     def __init__(self, run: RunResult) -> None:
@@ -191,7 +191,7 @@ class Result:
         Returns:
             kind -> path of every file written (``result``, ``trajectory``, ``pathml``, ...).
         """
-        from refine.pipeline import write_run
+        from refine.run.stages import write_run
 
         write_run(self.run, Path(out_dir), tuple(programs) if programs is not None else None, report=report)
         return dict(self.run.outputs)
@@ -228,7 +228,7 @@ def solve(
     Returns:
         The result; ``result.write(out_dir)`` writes the files ``refine run`` writes.
     """
-    from refine.pipeline import fused_path, solve_problem
+    from refine.run.stages import fused_path, solve_problem
 
     if not isinstance(problem, Problem):
         problem = load_problem(problem)
@@ -243,7 +243,7 @@ def _solve_again(
     problem: Problem, robot: Robot, fused: Any, previous: Result | None, initial_joints: ArrayLike | None
 ) -> Result:
     from refine.optimise.problem import reuse_for
-    from refine.pipeline import solve_problem, weights_for
+    from refine.run.stages import solve_problem, weights_for
 
     nlp = None
     n = robot.nq
@@ -306,7 +306,7 @@ def refine_path(
     around ``orientations``.
 
     Args:
-        robot: a :class:`refine.robot.Robot` (e.g. from ``Robot.from_urdf``) or a registry name.
+        robot: a :class:`refine.robot.model.Robot` (e.g. from ``Robot.from_urdf``) or a registry name.
         positions: TCP targets in the world frame {F} [m], shape (N, 3), N >= 3.
         orientations: demonstrated TCP orientations R_F_TCP: (N, 4) unit quaternions, scalar first
             (qw, qx, qy, qz) as in ``trajectory.csv``, or (N, 3, 3) rotation matrices.
@@ -343,7 +343,7 @@ def refine_path(
             the message names the argument and the unit.
     """
     from refine.paths import FusedPath
-    from refine.robot import Robot, load_robot
+    from refine.robot.model import Robot, load_robot
 
     if isinstance(robot, str):
         robot = load_robot(robot)

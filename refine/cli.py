@@ -10,8 +10,8 @@ import sys
 import time
 from pathlib import Path
 
-from refine.check import add_safety_options, check_command
 from refine.interrupt import forget_completion, stoppable
+from refine.run.check import add_safety_options, check_command
 
 
 def _seconds_since_process_start() -> float | None:
@@ -61,7 +61,7 @@ def _parser() -> argparse.ArgumentParser:
     from refine.calibrate.cli import add_parser as add_calibrate
 
     add_calibrate(sub)
-    from refine.batch import add_parser as add_batch
+    from refine.run.batch import add_parser as add_batch
 
     add_batch(sub)
     from refine.bench.cli import add_parser as add_bench
@@ -128,7 +128,7 @@ def _main(argv: list[str] | None) -> int:
 
             return run_bench(args)
         if args.command == "robots":
-            from refine.robot import available_robots, load_robot
+            from refine.robot.model import available_robots, load_robot
 
             for name in available_robots():
                 spec = load_robot(name).spec
@@ -176,8 +176,8 @@ def _exit_now(status: int) -> int:
 
 def _run(args: argparse.Namespace, problem) -> int:  # noqa: ANN001 - Problem, imported lazily
     from refine.export.result_json import result_dict, write_timings
-    from refine.pipeline import run
-    from refine.result import summary_lines
+    from refine.run.result import summary_lines
+    from refine.run.stages import run
 
     out = args.out or Path("out") / problem.file_stem
     if args.urscript_mode:
@@ -185,7 +185,7 @@ def _run(args: argparse.Namespace, problem) -> int:  # noqa: ANN001 - Problem, i
 
         output = dataclasses.replace(problem.output, urscript_mode=args.urscript_mode)
         problem = dataclasses.replace(problem, output=output)
-    from refine.preflight import parse_programs
+    from refine.run.preflight import parse_programs
 
     programs = parse_programs(args.programs, problem)
     t0 = time.perf_counter()

@@ -8,7 +8,7 @@ handler raises ``KeyboardInterrupt`` again, until one lands in plain Python code
 run. The CLI catches it and exits with status 130 (128 + SIGINT).
 
 Once the new output set is in place (:func:`outputs_complete`, called by
-:meth:`refine.outputs.StagedOutputs.commit`), there is nothing left to stop: later signals inside
+:meth:`refine.run.outputs.StagedOutputs.commit`), there is nothing left to stop: later signals inside
 :func:`stoppable` are recorded but raise nothing, the run ends as it would have (the summary is
 printed) and exits with its own status (0 ``ok``/``repaired``, 1 ``infeasible``).
 :func:`completed_status` gives that status to a caller that catches a ``KeyboardInterrupt`` which

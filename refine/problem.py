@@ -39,7 +39,7 @@ from refine.settings import (
 )
 
 if TYPE_CHECKING:
-    from refine.calibrate.cost import CalibrationSettings
+    from refine.settings import CalibrationSettings
 
 try:  # Python 3.11+
     import tomllib
@@ -250,7 +250,7 @@ _TOP_KEYS = {
 
 
 def _calibration(t: dict[str, Any]) -> CalibrationSettings:
-    from refine.calibrate.cost import calibration_settings
+    from refine.settings import calibration_settings
 
     return calibration_settings(t)
 
@@ -366,7 +366,7 @@ def _robot(t: dict[str, Any], path: Path, inside: Path | None = None) -> RobotSe
     out: dict[str, Any] = {}
     if "urdf" in t:
         out["urdf"] = _file(path.parent.resolve(), t["urdf"], "robot.urdf", inside)
-        from refine.robot_urdf import urdf_robot_name
+        from refine.robot.urdf import urdf_robot_name
 
         out["model"] = _string(t["model"], "robot.model") if "model" in t else urdf_robot_name(out["urdf"])
         if not re.fullmatch(r"[A-Za-z0-9_.-]{1,64}", out["model"]):
@@ -401,7 +401,7 @@ def _robot(t: dict[str, Any], path: Path, inside: Path | None = None) -> RobotSe
 
 
 def _robot_model(value: Any) -> str:
-    from refine.robot import available_robots
+    from refine.robot.model import available_robots
 
     known = available_robots()
     if not isinstance(value, str) or value not in known:

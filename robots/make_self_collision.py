@@ -23,8 +23,8 @@ import pinocchio as pin
 import trimesh
 from make_shapes import joint_links
 
-from refine.collision.self_collision import NEVER_M, sample_matrix, write_matrix
-from refine.robot import SELF_COLLISION_FILE, available_robots, load_robot, robots_dir
+from refine.robot.self_collision import NEVER_M, sample_matrix, write_matrix
+from refine.robot.model import SELF_COLLISION_FILE, available_robots, load_robot, robots_dir
 
 HERE = Path(__file__).resolve().parent
 MAKER_FRACTION = 0.2

@@ -4,7 +4,7 @@ For every link, the reference mesh (``../shared/robot-meshes/<robot>/``, loaded 
 its ``reference.urdf``) is carried into the frame of the same link of ``robots/<robot>/robot.urdf``
 (the two descriptions agree kinematically but lay out their link frames differently; the mesh is
 moved through the world at the zero configuration, and the shapes test checks the match at random
-configurations), covered by a few convex polytopes (:func:`refine.convex.convex_cover`), and
+configurations), covered by a few convex polytopes (:func:`refine.robot.convex.convex_cover`), and
 written as ``robots/<robot>/collision/<link>_<k>.obj``. The ``<collision>`` and ``<visual>``
 elements of the robot's URDF are rewritten to name these files; nothing else in the URDF changes.
 
@@ -25,7 +25,7 @@ import pinocchio as pin
 import trimesh
 from lxml import etree
 
-from refine.convex import convex_cover, overshoot
+from refine.robot.convex import convex_cover, overshoot
 
 HERE = Path(__file__).resolve().parent
 ROBOTS = ("abb_irb4600_60_205", "kuka_iiwa14_r820", "kuka_kr8_r1440_2_arc_hw", "ur10e")

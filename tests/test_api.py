@@ -13,7 +13,7 @@ from scipy.spatial.transform import Rotation
 import refine
 from refine.cli import main
 from refine.optimise.problem import build_refinement, reuse_for
-from refine.pipeline import fused_path
+from refine.run.stages import fused_path
 
 ROOT = Path(__file__).resolve().parents[1]
 GLASS = ROOT / "problems" / "glass_adhesive"
@@ -193,7 +193,7 @@ def test_solve_takes_a_folder_and_warm_starts_from_given_joints():
 
 def test_a_result_writes_the_program_of_the_robots_controller_by_default():
     """The KR arm's result asks for KRL, the LBR iiwa's for Sunrise: the robot says which, not the family."""
-    from refine.robot import load_robot
+    from refine.robot.model import load_robot
 
     for name, program in (("kuka_kr8_r1440_2_arc_hw", "krl"), ("kuka_iiwa14_r820", "sunrise")):
         robot = load_robot(name)

@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from refine.batch import collect, run_batch
 from refine.cli import main
 from refine.errors import InputError
+from refine.run.batch import collect, run_batch
 from refine.synthetic import write_line_problem
 
 # a 0.2 m line resampled every 5 mm: 40 segments, 41 waypoints
@@ -115,7 +115,7 @@ def test_a_problem_s_result_json_is_computed_once_and_holds_the_run_s_wall_time(
     import hashlib
 
     import refine.export.result_json as result_json
-    from refine.batch import run_one
+    from refine.run.batch import run_one
 
     problems = make_problems(tmp_path, 1)
     hashed = []

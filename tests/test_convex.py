@@ -10,8 +10,8 @@ from scipy.spatial.transform import Rotation
 
 from refine.collision.distance import place, signed_distance
 from refine.collision.geometry import Body, convex_parts
-from refine.convex import ConvexPiece, convex_cover, outer_polytope
 from refine.errors import InputError
+from refine.robot.convex import ConvexPiece, convex_cover, outer_polytope
 
 
 def _support_gap(piece: ConvexPiece, points: np.ndarray, n_dirs: int = 4000) -> tuple[float, float]:

@@ -12,11 +12,11 @@ import scipy.optimize
 
 from refine.cli import exit_status, main
 from refine.collision import CollisionModel
-from refine.diagnosis import Diagnoser, _reach_model, closest_pair_text, reach_tilts
 from refine.frames import make_transform
 from refine.optimise.clearance import ClearanceSource
+from refine.optimise.diagnosis import Diagnoser, _reach_model, closest_pair_text, reach_tilts
 from refine.optimise.seed import TcpKinematics
-from refine.robot import load_robot
+from refine.robot.model import load_robot
 from refine.settings import Shape
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -149,8 +149,8 @@ def test_a_run_out_of_time_says_so_and_is_not_a_verdict():
     import dataclasses
 
     from refine.export.result_json import result_dict
-    from refine.pipeline import solve_problem
     from refine.problem import load_problem
+    from refine.run.stages import solve_problem
 
     problem = load_problem(UNREACHABLE / "wrist_flip")
     problem = dataclasses.replace(problem, repair=dataclasses.replace(problem.repair, time_limit_s=0.1))

@@ -1,4 +1,4 @@
-"""Tests for refine.fuse on synthetic demonstrations with a known ground truth."""
+"""Tests for refine.fuse.align on synthetic demonstrations with a known ground truth."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ from refine.frames import (
     rotation_angle_deg,
     transform_from_xyz_rpy,
 )
-from refine.fuse import align, demo_tcp_poses, fuse, monotone_dtw
+from refine.fuse.align import align, demo_tcp_poses, fuse, monotone_dtw
 from refine.paths import CadPath, Demonstration
 
 log = logging.getLogger(__name__)

@@ -26,15 +26,15 @@ from refine.cad.csv_ import points_from_csv
 from refine.cad.dxf import points_from_dxf
 from refine.cad.gcode import points_from_gcode
 from refine.cad.mesh import points_from_mesh
+from refine.cad.pathml_read import read_pathml
 from refine.demo.csv_ import read_demo_csv
 from refine.demo.liberty import read_liberty_ascii
 from refine.demo.liberty_binary import read_liberty_binary
 from refine.demo.quality import gate_dropouts
 from refine.errors import InputError
-from refine.export.pathml_read import read_pathml
 from refine.plausible import CAD_COORDINATE_LIMIT_M, DEMO_POSITION_LIMIT_M
-from refine.preflight import preflight
 from refine.problem import load_problem
+from refine.run.preflight import preflight
 
 ROOT = Path(__file__).resolve().parents[1]
 GLASS = ROOT / "problems" / "glass_adhesive"

@@ -70,7 +70,7 @@ PROGRAM_CHILD = textwrap.dedent(
     import json, sys, time
     from pathlib import Path
     import refine.cli as cli
-    from refine.outputs import StagedOutputs
+    from refine.run.outputs import StagedOutputs
 
     PAUSE_BEFORE, PAUSE_AFTER = float(sys.argv[1]), float(sys.argv[2])
 
@@ -80,7 +80,7 @@ PROGRAM_CHILD = textwrap.dedent(
             print("staged", flush=True)
             time.sleep(PAUSE_BEFORE)
             def write(path):
-                files = {"trajectory.csv": __import__("refine.outputs").outputs.file_digest(stage.dir / "trajectory.csv")}
+                files = {"trajectory.csv": __import__("refine.run.outputs").outputs.file_digest(stage.dir / "trajectory.csv")}
                 path.write_text(json.dumps({"schema_version": 1, "status": "infeasible", "files": files}))
             stage.commit({"trajectory": stage.dir / "trajectory.csv"}, write)
         print("committed", flush=True)

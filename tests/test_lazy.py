@@ -99,7 +99,7 @@ def test_a_run_does_not_load_what_its_libraries_import_for_nothing():
     code = textwrap.dedent(
         """
         import sys
-        import refine.frames, refine.robot_geometry, refine.report.scene
+        import refine.frames, refine.robot.geometry, refine.report.scene
         print(sorted(m for m in ("networkx", "numpy.f2py", "numpy.testing") if m in sys.modules))
         import trimesh.graph
         print(trimesh.graph.nx.Graph.__name__)  # trimesh's graph helpers still reach networkx
@@ -119,7 +119,7 @@ def test_a_whole_run_loads_none_of_the_modules_it_never_uses(tmp_path):
         f"""
         import sys
         from refine.problem import load_problem
-        from refine.pipeline import run
+        from refine.run.stages import run
         result = run(load_problem({str(root / "problems" / "glass_adhesive")!r}), {str(tmp_path / "out")!r})
         assert result.status == "ok", result.status
         never = ("networkx", "numpy.f2py", "numpy.testing", "matplotlib.pyplot", "scipy.stats")

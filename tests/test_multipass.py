@@ -1,4 +1,4 @@
-"""Tests for refine.multipass: passes of a multi-layer weld from the demonstrated root pass."""
+"""Tests for refine.fuse.passes: passes of a multi-layer weld from the demonstrated root pass."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 
 from refine.errors import InputError
 from refine.frames import matrix_from_rotvec, rotvec_from_matrix
-from refine.multipass import Pass, generate_passes, seam_frames, transported_normals
+from refine.fuse.passes import Pass, generate_passes, seam_frames, transported_normals
 from refine.paths import FusedPath
 from refine.settings import MultipassSettings
 

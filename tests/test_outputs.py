@@ -14,12 +14,12 @@ from pathlib import Path
 import pytest
 
 from refine.errors import InputError
-from refine.outputs import PREVIOUS, StagedOutputs
+from refine.run.outputs import PREVIOUS, StagedOutputs
 
 
 def _write_result(outputs: dict[str, Path]):
     def write(path: Path) -> None:
-        from refine.outputs import describe_files
+        from refine.run.outputs import describe_files
 
         doc = {
             "schema_version": 1,

@@ -8,9 +8,9 @@ import pytest
 
 from refine.export import parse_rapid_targets, read_pathml, read_trajectory_csv, validate_pathml
 from refine.frames import matrix_from_quaternion, rotation_angle_deg
-from refine.pipeline import run
 from refine.problem import load_problem
-from refine.robot import load_robot
+from refine.robot.model import load_robot
+from refine.run.stages import run
 
 ROOT = Path(__file__).resolve().parents[1]
 XSD = ROOT.parent / "shared" / "aml" / "CAEX_ClassModel_V.3.0.xsd"
@@ -199,7 +199,7 @@ def glass_at_a_tenth():
     speed (joint change over planned time) as a fraction of its data-sheet speed."""
     from dataclasses import replace
 
-    from refine.pipeline import solve_problem
+    from refine.run.stages import solve_problem
 
     problem = load_problem(ROOT / "problems" / "glass_adhesive")
     assert problem.robot.model == "abb_irb4600_60_205"

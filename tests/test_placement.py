@@ -21,9 +21,9 @@ from scipy.spatial.transform import Rotation
 
 from refine.errors import InputError
 from refine.export.result_json import result_dict
-from refine.pipeline import fused_path, solve_problem
-from refine.placement import Placement, moved_path, moved_problem
 from refine.problem import load_problem
+from refine.run.placement import Placement, moved_path, moved_problem
+from refine.run.stages import fused_path, solve_problem
 from refine.settings import PlacementSettings
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -304,7 +304,7 @@ def test_the_part_put_back_by_the_known_move_is_ok_and_needs_no_placement(tmp_pa
     jsonschema.validate(doc, json.loads(SCHEMA.read_text()))
     assert doc["translation_m"] is None and doc["strict_status"] is None
     # asked anyway, the search finds no move to make and proposes none
-    from refine.placement import repair_by_placement
+    from refine.run.placement import repair_by_placement
 
     asked = repair_by_placement(problem, run.robot, run.first)
     assert asked.status == "infeasible" and asked.placement is None
@@ -314,7 +314,7 @@ def test_the_part_put_back_by_the_known_move_is_ok_and_needs_no_placement(tmp_pa
 @pytest.mark.slow
 def test_the_summary_and_the_report_offer_the_move_beside_the_slack_repair(tmp_path):
     from refine.report.html import write_report
-    from refine.result import summary_lines
+    from refine.run.result import summary_lines
 
     _, result = _solved()
     doc = result_dict(result)["placement"]
@@ -329,7 +329,7 @@ def test_the_summary_and_the_report_offer_the_move_beside_the_slack_repair(tmp_p
 @pytest.mark.slow
 def test_bounds_too_small_for_reach_give_an_infeasible_placement_saying_how_far_off():
     """5 mm and 0.5 deg: the data-sheet bound says no such move can bring the wrist centres in."""
-    from refine.placement import repair_by_placement
+    from refine.run.placement import repair_by_placement
 
     problem, result = _solved()
     small = PlacementSettings(translate_m=0.005, rotate_deg=0.5)
@@ -409,7 +409,7 @@ def _fcl_distance(name: str, too_far_m: float, transform: np.ndarray, box: dict)
 
 
 def test_the_support_is_the_table_beneath_or_else_the_world_z_plane(tmp_path):
-    from refine.placement import support_plane
+    from refine.run.placement import support_plane
 
     on_table = support_plane(load_problem(_table_cell(tmp_path, 0.10)))
     assert on_table.support == "table"
@@ -429,7 +429,7 @@ def test_the_support_is_the_table_beneath_or_else_the_world_z_plane(tmp_path):
 
 
 def test_a_plane_move_has_no_component_along_the_normal():
-    from refine.placement import SupportPlane, move_basis
+    from refine.run.placement import SupportPlane, move_basis
 
     normal = np.array([0.2, -0.3, 0.9]) / np.linalg.norm([0.2, -0.3, 0.9])
     E_t, E_r = move_basis(SupportPlane(normal, np.zeros(3), "tilted"), "plane")

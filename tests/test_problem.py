@@ -496,7 +496,7 @@ def test_programs_given_as_a_string_is_reported_with_the_value_written(problem_t
     ],
 )
 def test_without_an_output_table_the_robot_gets_the_program_its_controller_runs(tmp_path, bundled, language):
-    from refine.preflight import preflight
+    from refine.run.preflight import preflight
 
     folder = tmp_path / bundled
     shutil.copytree(BUNDLED.parent / bundled, folder, ignore=shutil.ignore_patterns("__pycache__"))

@@ -1,4 +1,4 @@
-"""The robot registry, the URDFs in robots/ and the Pinocchio kinematics of refine.robot."""
+"""The robot registry, the URDFs in robots/ and the Pinocchio kinematics of refine.robot.model."""
 
 from __future__ import annotations
 
@@ -11,7 +11,8 @@ import trimesh
 
 from refine.errors import InputError
 from refine.frames import make_transform, rotation_about
-from refine.robot import (
+from refine.robot.geometry import collision_shapes_from_urdf
+from refine.robot.model import (
     CONTROLLERS,
     Robot,
     RobotSpec,
@@ -19,7 +20,6 @@ from refine.robot import (
     load_robot,
     robots_dir,
 )
-from refine.robot_geometry import collision_shapes_from_urdf
 
 try:
     import tomllib

@@ -10,7 +10,7 @@ import pytest
 from refine.collision import CollisionModel
 from refine.frames import make_transform
 from refine.optimise.seed import TcpKinematics, start_candidates
-from refine.robot import load_robot
+from refine.robot.model import load_robot
 from refine.settings import Shape
 from refine.synthetic import (
     periodic_wave,

@@ -305,16 +305,16 @@ def _distance(a, b) -> float:
 def run_checks(s, positions, rotations, speed, step: int = 5) -> bool:
     """Chained DLS IK over every ``step``-th point of every pass of the true path; clearances.
 
-    The root pass is the true path; the later passes come from ``refine.multipass`` applied to it.
+    The root pass is the true path; the later passes come from ``refine.fuse.passes`` applied to it.
     Prints, per pass, the worst IK error, the smallest joint-limit margin, the smallest singular
     value and scaled manipulability of the TCP Jacobian (linear rows / reach), the largest joint
     step, and the smallest clearances (robot links to every cell object, tool to the cell objects
     that are not workpieces, and, for information, tool to the workpieces).
     """
-    from refine.multipass import Pass, generate_passes
+    from refine.fuse.passes import Pass, generate_passes
     from refine.optimise.seed import TcpKinematics, ik_chain, start_candidates
     from refine.paths import FusedPath
-    from refine.robot import load_robot
+    from refine.robot.model import load_robot
 
     problem = load_problem(HERE)
     robot = load_robot(problem.robot.model)

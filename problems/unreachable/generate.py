@@ -40,7 +40,7 @@ from refine.frames import (
 )
 from refine.optimise.seed import TcpKinematics, solve_ik
 from refine.problem import load_problem
-from refine.robot import load_robot
+from refine.robot.model import load_robot
 
 HERE = Path(__file__).resolve().parent
 SEED = 20240917

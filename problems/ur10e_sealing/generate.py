@@ -176,7 +176,7 @@ def check_reachability(problem: Problem, positions, rotations) -> bool:
     """Chained DLS IK over every ``CHECK_STEP``-th point of the true path; prints the figures."""
     from refine.collision import CollisionModel
     from refine.optimise.seed import TcpKinematics, start_candidates
-    from refine.robot import load_robot
+    from refine.robot.model import load_robot
 
     robot = load_robot(problem.robot.model)
     spec = robot.spec

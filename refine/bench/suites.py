@@ -134,9 +134,9 @@ def problems(data: dict[str, Any], suite: str, *, root: Path = ROOT) -> Iterator
 
 def bundled_problem(suite: str, folder: Path) -> BenchProblem:
     """A problem folder as the pipeline would refine it (its first pass)."""
-    from refine.pipeline import constraint_sources, fused_path, weights_for
     from refine.problem import load_problem
-    from refine.robot import load_robot
+    from refine.robot.model import load_robot
+    from refine.run.stages import constraint_sources, fused_path, weights_for
 
     problem = load_problem(folder)
     robot = load_robot(problem.robot.model)
@@ -164,15 +164,15 @@ def generated_problem(suite: str, family: str, spec: dict[str, Any], n: int) -> 
     """A sine wave of ``n`` waypoints in front of the family's robot, with its boxes if any.
 
     The cost weights are the ones ``refine run`` gives the robot: the defaults, with the mid-range
-    cost of :data:`refine.pipeline.REDUNDANT_MID_RANGE_WEIGHT` for an arm of more than six joints.
+    cost of :data:`refine.run.stages.REDUNDANT_MID_RANGE_WEIGHT` for an arm of more than six joints.
     """
     from refine.collision import CollisionModel
     from refine.frames import make_transform
     from refine.optimise.clearance import ClearanceSource
     from refine.optimise.problem import Weights
     from refine.optimise.seed import TcpKinematics
-    from refine.pipeline import REDUNDANT_MID_RANGE_WEIGHT
-    from refine.robot import load_robot
+    from refine.robot.model import load_robot
+    from refine.run.stages import REDUNDANT_MID_RANGE_WEIGHT
     from refine.settings import CollisionSettings, Shape
     from refine.synthetic import wave_path
 

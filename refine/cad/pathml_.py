@@ -1,7 +1,7 @@
 """A PathML track as the input of a refinement: positions, orientations and speeds in one file.
 
 A PathML document (from refine or another tool, read with
-:func:`refine.export.pathml_read.read_pathml`) already holds what the CAD and demonstration
+:func:`refine.cad.pathml_read.read_pathml`) already holds what the CAD and demonstration
 stages produce together: TCP positions in the world frame {F} [m], tool orientations R_F_TCP and
 speeds. :func:`fused_from_pathml` turns one of its tracks into a :class:`~refine.paths.FusedPath`
 at the waypoint spacing of the problem, so it can go straight to the optimiser:
@@ -25,9 +25,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation, Slerp
 
+from refine.cad.pathml_read import PathMLTrack, read_pathml
 from refine.cad.resample import DUPLICATE_TOLERANCE_M, resample_by_arc_length
 from refine.errors import InputError
-from refine.export.pathml_read import PathMLTrack, read_pathml
 from refine.paths import FusedPath
 from refine.plausible import CAD_COORDINATE_LIMIT_M, CAD_SPEED_LIMIT_M_S, check_coordinates
 from refine.settings import check_waypoint_count

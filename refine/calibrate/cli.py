@@ -307,7 +307,7 @@ def _receiver_path(args: argparse.Namespace) -> tuple[Calibration, str, str, np.
 
 
 def _robot_and_problem(args: argparse.Namespace):  # noqa: ANN202 - (Robot | None, Problem | None)
-    from refine.robot import load_robot
+    from refine.robot.model import load_robot
 
     problem = None
     if args.problem is not None:
@@ -395,13 +395,14 @@ def _cost(args: argparse.Namespace) -> int:
     if args.trajectory is not None:
         poses = tcp_poses_from_trajectory(args.trajectory)
     else:
-        from refine.pipeline import fused_path
+        from refine.run.stages import fused_path
 
         fused = fused_path(problem)
         poses = make_transform(fused.rotations, fused.positions)
     costs = calibration_cost(poses, nominal_frames(problem), problem.calibration)
     if args.truth is not None:
-        from refine.calibrate.cost import FRAMES, PathCost, deltas_between, path_errors
+        from refine.calibrate.cost import PathCost, deltas_between, path_errors
+        from refine.settings import FRAMES
 
         deltas = deltas_between(nominal_frames(problem), nominal_frames(load_problem(args.truth)))
         for name in FRAMES:

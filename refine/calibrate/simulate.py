@@ -21,7 +21,7 @@ from refine.demo.simulate import TrackerModel, corrupt_sensor_poses
 from refine.errors import InputError
 from refine.frames import make_transform
 from refine.paths import TrackerLog
-from refine.robot import Robot
+from refine.robot.model import Robot
 
 Array = NDArray[np.float64]
 

@@ -20,10 +20,10 @@ import fcl
 import numpy as np
 from numpy.typing import NDArray
 
-from refine.convex import ConvexPiece
 from refine.errors import InputError
 from refine.lazy import lean_imports
-from refine.robot_geometry import CollisionShape, fcl_convex, read_mesh
+from refine.robot.convex import ConvexPiece
+from refine.robot.geometry import CollisionShape, fcl_convex, read_mesh
 from refine.settings import Shape
 
 with lean_imports():

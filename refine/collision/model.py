@@ -27,7 +27,7 @@ from refine.collision.geometry import Body, link_body, shape_body, world_aabb
 from refine.collision.pairs import exclusion, joint_axes
 from refine.errors import InputError
 from refine.frames import check_transform
-from refine.robot import Robot
+from refine.robot.model import Robot
 from refine.settings import Shape
 
 if TYPE_CHECKING:

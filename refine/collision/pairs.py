@@ -26,7 +26,7 @@ to touch at some sampled configuration: every rule below is a fact of the kinema
    Such a pair can neither break its margin by moving nor be repaired; it is logged, with a warning
    when it is closer than ``self_margin_m``.
 
-For a robot with a sampled self-collision matrix (:mod:`refine.collision.self_collision`), two
+For a robot with a sampled self-collision matrix (:mod:`refine.robot.self_collision`), two
 links of the robot are checked exactly when the matrix enables them (reasons ``"matrix: adjacent"``,
 ``"matrix: always"``, ``"matrix: never"``), in place of rules 5 to 7; those rules still decide the
 tool's shapes against the links.

@@ -38,7 +38,7 @@ function of ``d``):
 * only the residual **across** the path counts (projected off the CAD tangent): the time matching
   slides a waypoint along the path, so the along-path part is the matching's own guess;
 * each distortion coefficient (its term's error at 1 m) has a Gaussian prior of the size the
-  fusion expects of the tracker along that receiver axis (``refine.fuse.PRIOR_ERROR_M``: 10, 10
+  fusion expects of the tracker along that receiver axis (``refine.fuse.align.PRIOR_ERROR_M``: 10, 10
   and 50 mm), while rotation and offset are free: a rotation is explained by a distortion only as
   far as the tracker's documented error allows;
 * the rotation turns the CAD path about its own centre, under a weak prior of
@@ -538,7 +538,7 @@ def estimate_frame_error(
     Returns:
         The estimate (module docstring for the model).
     """
-    from refine.fuse import PRIOR_ERROR_M, demo_tcp_poses
+    from refine.fuse.align import PRIOR_ERROR_M, demo_tcp_poses
 
     T_F_S = check_transform(source_in_world, "source_in_world")
     T_S_F = invert_transform(T_F_S)

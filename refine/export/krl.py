@@ -108,7 +108,7 @@ def kuka_status_turn(robot: Any, q: Array) -> tuple[NDArray[np.int64], NDArray[n
     """KUKA Status and Turn of joint vectors (rules and sources in the module docstring).
 
     Args:
-        robot: a :class:`refine.robot.Robot` with 6 joints (KUKA serial arm) or 7 (LBR iiwa).
+        robot: a :class:`refine.robot.model.Robot` with 6 joints (KUKA serial arm) or 7 (LBR iiwa).
         q: joint positions [rad], shape (N, n) or (n,).
 
     Returns:
@@ -280,7 +280,7 @@ def write_krl(
         path_src: output ``.src`` file; its stem, made a KRL name, names the program and both files.
         trajectory: the refined, timed path (poses in {F}, joints for Status, Turn and E1).
         problem: tool and base numbers, home, process output and switching.
-        robot: the :class:`refine.robot.Robot` the joints belong to (controller ``"kuka"``).
+        robot: the :class:`refine.robot.model.Robot` the joints belong to (controller ``"kuka"``).
         passes: several passes of a multi-pass weld as :class:`refine.export.program.ProgramPass`
             or ``(name, trajectory)`` in order, the root pass included; when given, ``trajectory``
             is not written. One fold per pass.

@@ -23,7 +23,7 @@ IDs are name-based GUIDs (UUID version 5) from the problem name and the element'
 hierarchy, so writing the same problem twice gives the same IDs and the files diff cleanly. A track's
 parameters refine its layer's: a reader takes the track value where both give one.
 
-:func:`refine.export.pathml_read.read_pathml` reads such documents back.
+:func:`refine.cad.pathml_read.read_pathml` reads such documents back.
 """
 
 from __future__ import annotations

@@ -89,7 +89,7 @@ def singular_runs(robot: Any, q: Array, threshold_deg: float = WRIST_SINGULAR_DE
     """First and last waypoint (inclusive) of each run near the wrist singularity.
 
     Args:
-        robot: the :class:`refine.robot.Robot`.
+        robot: the :class:`refine.robot.model.Robot`.
         q: joints [rad], shape (N, n).
         threshold_deg: how close to 0 or ±180 deg the wrist axis must come [deg].
     """

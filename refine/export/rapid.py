@@ -92,7 +92,7 @@ def abb_confdata(robot: Any, q: Array) -> NDArray[np.int64]:
     positive-forward axis 2.
 
     Args:
-        robot: a :class:`refine.robot.Robot` with six joints (an ABB serial arm).
+        robot: a :class:`refine.robot.model.Robot` with six joints (an ABB serial arm).
         q: joint positions [rad], shape (N, 6) or (6,).
 
     Returns:
@@ -192,7 +192,7 @@ def write_rapid(
         trajectory: the refined, timed path (poses in {F}, joints for the configuration data).
         problem: tool data, robot base, home, process output and switching, ``[output]``
             ``speed_levels`` and ``moves_per_routine``.
-        robot: the :class:`refine.robot.Robot` the joints belong to (six-axis ABB).
+        robot: the :class:`refine.robot.model.Robot` the joints belong to (six-axis ABB).
         repairs: the repaired segments of this path (listed in the header).
         pass_name: the pass's name in the header.
         zone: zone between path targets (``"z0"``, ``"z1"``, ...).

@@ -10,10 +10,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from refine.outputs import describe_files
+from refine.run.outputs import describe_files
 
 if TYPE_CHECKING:
-    from refine.result import PassResult, RunResult
+    from refine.run.result import PassResult, RunResult
 
 SCHEMA_VERSION = 1
 REPO_ROOT = Path(__file__).resolve().parents[2]

@@ -183,7 +183,7 @@ def write_sunrise(
         path: output file; its folder is used, the file is named after the class.
         trajectory: the refined, timed path (poses in {F}, joints for E1, Status and Turn).
         problem: tool, robot base, home, process I/O (``"<Group>.<Signal>"``) and switching.
-        robot: the :class:`refine.robot.Robot` the joints belong to (a seven-axis KUKA LBR).
+        robot: the :class:`refine.robot.model.Robot` the joints belong to (a seven-axis KUKA LBR).
         passes: several passes as :class:`refine.export.program.ProgramPass` or
             ``(name, trajectory)``, in order; when given, ``trajectory`` is not written.
         repairs: the repaired segments of ``trajectory`` (when ``passes`` is not given).

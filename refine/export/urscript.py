@@ -216,7 +216,7 @@ def write_urscript(
         path: output file; the program is named after the problem.
         trajectory: the refined, timed path (poses in {F}, joints for the approach).
         problem: tool, robot base, home, process output and switching.
-        robot: the :class:`refine.robot.Robot` the joints belong to (controller ``"ur"``).
+        robot: the :class:`refine.robot.model.Robot` the joints belong to (controller ``"ur"``).
         passes: several passes of a multi-pass weld as :class:`refine.export.program.ProgramPass`
             or ``(name, trajectory)`` in order, the root pass included; when given, ``trajectory``
             is not written. One block per pass.

@@ -18,7 +18,7 @@ from refine.paths import Trajectory
 from refine.settings import PROGRAM_FORMATS, ProcessParameter
 
 if TYPE_CHECKING:
-    from refine.result import PassResult, RunResult
+    from refine.run.result import PassResult, RunResult
 
 log = logging.getLogger(__name__)
 

@@ -25,7 +25,7 @@ from refine.optimise.problem import LinearRow, RefinementNLP
 from refine.optimise.seed import TcpKinematics
 from refine.optimise.verify import Violation
 from refine.problem import Problem
-from refine.robot import Robot
+from refine.robot.model import Robot
 
 log = logging.getLogger(__name__)
 

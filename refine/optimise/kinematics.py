@@ -24,7 +24,7 @@ from refine.errors import InputError
 from refine.frames import check_transform
 
 if TYPE_CHECKING:
-    from refine.robot import Robot
+    from refine.robot.model import Robot
 
 # column pairs (i, j) mixed by a rotation about x, y, z: R·Rot = [.., c·r_i + s·r_j, -s·r_i + c·r_j]
 _ALIGNED = {"JointModelRX": (0, (1, 2)), "JointModelRY": (1, (2, 0)), "JointModelRZ": (2, (0, 1))}

@@ -42,7 +42,7 @@ from refine.optimise.stagewise import FATROP_PREFIX, StagewiseSolver, check_size
 from refine.optimise.threads import limit_solver_threads
 from refine.paths import FusedPath
 from refine.problem import Tolerances
-from refine.robot import Robot
+from refine.robot.model import Robot
 from refine.settings import check_solver
 
 Array = NDArray[np.float64]

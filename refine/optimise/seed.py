@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from refine.errors import InputError
-from refine.robot import Robot
+from refine.robot.model import Robot
 
 log = logging.getLogger(__name__)
 

@@ -20,8 +20,8 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from refine.diagnosis import Diagnoser, Finding, reach_gap, reach_tilts, segments
 from refine.errors import SolverError
+from refine.optimise.diagnosis import Diagnoser, Finding, reach_gap, reach_tilts, segments
 from refine.optimise.problem import ActiveSet, LinearRow, RefinementNLP
 from refine.optimise.seed import (
     CONVERGED,
@@ -161,7 +161,7 @@ class Refinement:
         timings_s: ``seed``, ``solve``, ``verify``, ``build`` (rebuilds) wall times [s]; a
             :class:`StageTimes`, whose ``cpu`` holds the process CPU time of the same stages.
         diagnosis: every segment that needed slack or has no answer, with its measured causes
-            (:mod:`refine.diagnosis`); empty when ok.
+            (:mod:`refine.optimise.diagnosis`); empty when ok.
         time_limit_reached: the time budget ran out before a verdict (status ``infeasible``).
     """
 
@@ -205,7 +205,7 @@ def initial_guess(problem: RefinementNLP, home: Array | None = None, rotations: 
     """IK seed (N, n) [rad] chained along the path, from the best of several first-waypoint starts.
 
     ``rotations`` (N, 3, 3) replaces the demonstrated tool orientations as IK targets (e.g. tilted
-    into reach, :func:`refine.diagnosis.reach_tilts`).
+    into reach, :func:`refine.optimise.diagnosis.reach_tilts`).
     """
     lower, upper = _bounds(problem)
     starts = start_candidates(lower, upper, home)
@@ -298,7 +298,7 @@ def _out_of_reach(problem: RefinementNLP, q_seed: Array, home: Array | None) -> 
     lower, upper = _bounds(problem)
     shortfall = np.zeros(problem.n_waypoints)
     # points the wrist centre cannot bring into the arm's range at any orientation are out of reach
-    # for certain (refine.diagnosis.ReachModel); IK measures the rest
+    # for certain (refine.optimise.diagnosis.ReachModel); IK measures the rest
     certain = reach_gap(kin, problem.fused.positions, problem.tolerances.joint_margin_deg)
     sure = missed & (certain > REACH_TOLERANCE_M)  # a lower bound: the wrist joints' limits ignored
     shortfall[sure] = certain[sure]
@@ -852,7 +852,7 @@ def _tilt_is_a_bound(problem: RefinementNLP) -> bool:
     """
     if not problem.axisymmetric:
         return True
-    from refine.diagnosis import _reach_model
+    from refine.optimise.diagnosis import _reach_model
 
     reach = _reach_model(problem.robot, math.radians(problem.tolerances.joint_margin_deg))
     v = (np.linalg.inv(problem.tcp_in_flange) @ np.append(reach.point_in_flange, 1.0))[:3]

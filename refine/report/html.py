@@ -28,7 +28,7 @@ from refine.report.scene import scene_data
 from refine.report.verdict import verdict_html
 
 if TYPE_CHECKING:
-    from refine.result import RunResult
+    from refine.run.result import RunResult
 
 _ERRORS_JS = """
 (function () {
@@ -80,7 +80,7 @@ def _quantity_options(scene: dict) -> str:
 
 
 def _details_html(result: RunResult) -> str:
-    from refine.result import summary_lines
+    from refine.run.result import summary_lines
 
     summary = "\n".join(html.escape(line) for line in summary_lines(result))
     slow = [

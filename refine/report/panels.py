@@ -17,7 +17,7 @@ import numpy as np
 from refine.report.scene import _rounded
 
 if TYPE_CHECKING:
-    from refine.result import PassResult, RunResult
+    from refine.run.result import PassResult, RunResult
 
 JOINT_COLOURS = (
     "#1f77b4",

@@ -24,7 +24,7 @@ with lean_imports():
     import trimesh
 
 if TYPE_CHECKING:
-    from refine.result import RunResult
+    from refine.run.result import RunResult
 
 log = logging.getLogger(__name__)
 

@@ -14,7 +14,7 @@ import math
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from refine.result import RunResult
+    from refine.run.result import RunResult
 
 MEANING = {
     "ok": "every tolerance verified: the programs can be loaded as written",

@@ -5,16 +5,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from refine.calibrate.cost import (
-    CalibrationSettings,
-    FrameUncertainty,
-    calibration_cost,
-    path_errors,
-)
+from refine.calibrate.cost import calibration_cost, path_errors
 from refine.cli import main
 from refine.errors import InputError
 from refine.frames import make_transform, transform_from_xyz_rpy
 from refine.problem import load_problem
+from refine.settings import CalibrationSettings, FrameUncertainty
 
 GLASS = Path(__file__).resolve().parents[2] / "problems" / "glass_adhesive"
 

@@ -13,9 +13,9 @@ import trimesh
 from lxml import etree
 
 from refine.collision import CollisionModel
-from refine.collision.self_collision import read_matrix
 from refine.errors import InputError
-from refine.robot import SELF_COLLISION_FILE, available_robots, load_robot
+from refine.robot.model import SELF_COLLISION_FILE, available_robots, load_robot
+from refine.robot.self_collision import read_matrix
 
 NAMES = available_robots()
 

@@ -31,7 +31,7 @@ from refine.demo.quality import (
 )
 from refine.demo.simulate import TrackerModel, perturb_log
 from refine.errors import InputError
-from refine.fuse import fuse
+from refine.fuse.align import fuse
 from refine.problem import load_problem
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -21,7 +21,7 @@ from refine.demo.quality import FRAME_STOP_DEG, DemoQuality, gate_frame
 from refine.demo.simulate import TrackerModel, simulate_demonstration
 from refine.errors import InputError
 from refine.frames import transform_from_xyz_rpy
-from refine.fuse import fuse
+from refine.fuse.align import fuse
 from refine.paths import CadPath
 from refine.settings import DemoSettings
 

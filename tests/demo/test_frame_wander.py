@@ -34,7 +34,7 @@ from refine.demo.quality import (  # noqa: E402
     gate_frame,
 )
 from refine.errors import InputError  # noqa: E402
-from refine.fuse import fuse  # noqa: E402
+from refine.fuse.align import fuse  # noqa: E402
 
 SEEDS = range(20)
 

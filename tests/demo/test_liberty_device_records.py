@@ -171,8 +171,8 @@ def test_a_file_with_the_devices_header_reaches_result_json_figures(tmp_path):
     """A glass demonstration whose records carry the header, three of them flagged by the device."""
     import shutil
 
-    from refine.pipeline import fused_path
     from refine.problem import load_problem
+    from refine.run.stages import fused_path
 
     src = Path(__file__).resolve().parents[2] / "problems" / "glass_adhesive"
     dst = tmp_path / "glass"

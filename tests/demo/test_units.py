@@ -18,8 +18,8 @@ import pytest
 from refine.demo import read_tracker_log
 from refine.demo.csv_ import read_demo_csv
 from refine.errors import InputError
-from refine.pipeline import solve_problem
 from refine.problem import load_problem
+from refine.run.stages import solve_problem
 from refine.synthetic import write_line_problem
 
 TILT_DEG = 15.0

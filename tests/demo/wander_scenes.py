@@ -26,7 +26,7 @@ from refine.demo import clean_demonstration
 from refine.demo.quality import FrameEstimate, estimate_frame_error
 from refine.demo.simulate import TrackerModel, simulate_demonstration
 from refine.frames import transform_from_xyz_rpy
-from refine.fuse import fuse
+from refine.fuse.align import fuse
 from refine.paths import CadPath, Demonstration
 from refine.settings import DemoSettings
 from refine.synthetic import rounded_rectangle, tool_rotations

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from lxml import etree
 
+from refine.cad.pathml_read import read_pathml
 from refine.errors import InputError
 from refine.export.pathml import (
     CAEX_NS,
@@ -15,7 +16,6 @@ from refine.export.pathml import (
     validate_pathml,
     write_pathml,
 )
-from refine.export.pathml_read import read_pathml
 from refine.frames import rotation_angle_deg
 from refine.problem import ProcessParameter
 

@@ -42,8 +42,8 @@ from refine.export.writers import write_outputs
 from refine.frames import transform_from_xyz_rpy
 from refine.paths import Trajectory
 from refine.problem import CadSettings, DemoSettings, Problem, ProcessSettings, RobotSettings, ToolSettings
-from refine.result import PassResult, RunResult
-from refine.robot import load_robot
+from refine.robot.model import load_robot
+from refine.run.result import PassResult, RunResult
 
 RESOLUTION_M_S = 1e-4  # the writers' documented default speed rounding step
 RETRACT_M = 0.1  # the writers' documented default approach / retract distance
@@ -803,7 +803,7 @@ def test_each_pathml_track_of_a_multipass_weld_states_its_lateral_offset_and_lay
     ],
 )
 def test_a_run_checks_the_process_output_against_the_controller_s_range_before_solving(kind, output, message):
-    from refine.preflight import check_output_signal
+    from refine.run.preflight import check_output_signal
 
     if message is None:
         check_output_signal(kind, output)
@@ -863,7 +863,7 @@ def test_a_weld_script_read_back_gives_the_pass_between_the_arc_on_and_off(tmp_p
 
 def test_a_pathml_point_without_a_speed_is_read_with_its_frame_and_no_speed(tmp_path):
     """Speed, time and arc length are optional point values (another tool may give only the Frame)."""
-    from refine.export.pathml_read import read_pathml
+    from refine.cad.pathml_read import read_pathml
 
     _, problem, tr = _case("rapid")
     path = write_pathml(tmp_path / "b.aml", tr, problem)

@@ -18,9 +18,9 @@ from refine.export.krl import write_krl  # noqa: E402
 from refine.export.rapid import write_rapid  # noqa: E402
 from refine.export.urscript import write_urscript  # noqa: E402
 from refine.paths import Trajectory  # noqa: E402
-from refine.pipeline import run  # noqa: E402
 from refine.problem import ProcessSettings, load_problem  # noqa: E402
-from refine.robot import Robot, load_robot  # noqa: E402
+from refine.robot.model import Robot, load_robot  # noqa: E402
+from refine.run.stages import run  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 _spec = importlib.util.spec_from_file_location(

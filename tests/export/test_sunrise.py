@@ -17,7 +17,7 @@ from refine.export.sunrise import class_name, parse_sunrise, sunrise_signal, wri
 from refine.frames import invert_transform
 from refine.paths import Trajectory
 from refine.problem import load_problem
-from refine.robot import load_robot
+from refine.robot.model import load_robot
 
 ROOT = Path(__file__).resolve().parents[2]
 _spec = importlib.util.spec_from_file_location(
@@ -153,8 +153,8 @@ def test_only_a_seven_axis_lbr_gets_a_sunrise_application(tmp_path, weld_problem
 
 
 def test_a_run_refuses_sunrise_for_a_six_axis_kuka_before_solving(weld_problem):
-    from refine.preflight import preflight
-    from refine.robot import Robot
+    from refine.robot.model import Robot
+    from refine.run.preflight import preflight
 
     abb = load_robot("abb_irb4600_60_205")
     kuka6 = Robot(dataclasses.replace(abb.spec, controller="kuka"), abb.model)  # a six-axis KUKA arm

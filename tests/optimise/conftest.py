@@ -3,7 +3,7 @@ import pytest
 
 from refine.frames import transform_from_xyz_rpy
 from refine.optimise.seed import TcpKinematics
-from refine.robot import load_robot
+from refine.robot.model import load_robot
 
 
 @pytest.fixture(scope="session")

@@ -19,7 +19,7 @@ import refine.optimise.solve as solve_module
 from refine.bench.suites import generated_problem, load_suites
 from refine.optimise.problem import Weights
 from refine.optimise.solve import coarse_seed, initial_guess, solve_refinement
-from refine.pipeline import REDUNDANT_MID_RANGE_WEIGHT
+from refine.run.stages import REDUNDANT_MID_RANGE_WEIGHT
 
 
 @functools.cache

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from refine.pipeline import run
 from refine.problem import load_problem
+from refine.run.stages import run
 
 ROOT = Path(__file__).resolve().parents[2]
 ARTIFACTS = ROOT / "tests" / "artifacts"

@@ -5,9 +5,9 @@ from pathlib import Path
 import pytest
 from lxml import html as lxml_html
 
-from refine.pipeline import run
 from refine.problem import load_problem
 from refine.report.panels import PANELS
+from refine.run.stages import run
 
 ROOT = Path(__file__).resolve().parents[2]
 

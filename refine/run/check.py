@@ -1,7 +1,7 @@
 """``refine check``: every reader and every check of ``refine run``, without solving or writing.
 
 It fails (exit 2) exactly when ``run`` would fail on its input: it loads the problem, runs the
-:mod:`refine.preflight` checks (programs, I/O names, joint lists, output folder), reads the CAD path
+:mod:`refine.run.preflight` checks (programs, I/O names, joint lists, output folder), reads the CAD path
 and the demonstration, runs the demonstration quality gate and the alignment, reads the cell's and
 the tool's collision shapes and generates the passes of a multi-pass weld, and stops there.
 """
@@ -32,16 +32,16 @@ def add_safety_options(parser: argparse.ArgumentParser) -> None:
 
 def check_command(args: argparse.Namespace, problem: Problem) -> int:
     """Run every check on ``problem`` and print what was read; returns 0 (errors raise)."""
-    from refine.pipeline import constraint_sources, fused_path
-    from refine.preflight import parse_programs, preflight
-    from refine.robot import load_robot
+    from refine.robot.model import load_robot
+    from refine.run.preflight import parse_programs, preflight
+    from refine.run.stages import constraint_sources, fused_path
 
     programs = parse_programs(args.programs, problem)
     pre = preflight(problem, args.out, programs)
     fused = fused_path(problem, accept_frame_error=args.accept_frame_error)
     constraint_sources(problem, load_robot(problem.robot.model))  # reads the cell's and tool's meshes
     if problem.multipass is not None and problem.multipass.layers > 1:
-        from refine.multipass import generate_passes
+        from refine.fuse.passes import generate_passes
 
         generate_passes(fused, problem.multipass)
     demo = "" if problem.demonstration is None else f", demonstration {problem.demonstration.file.name}"

@@ -4,7 +4,7 @@ Primitives (``<cylinder>``, ``<box>``, ``<sphere>``) become FCL primitives. A ``
 OBJ, PLY; path relative to the URDF, ``scale`` honoured) becomes the ``fcl.Convex`` of its
 convex hull: FCL distance queries stay in the microsecond range and have a depth when they
 overlap. The registry's robots hold convex pieces computed from their makers' meshes (see
-:mod:`refine.convex`), so the hull of each file is the file. URDF cylinders and FCL
+:mod:`refine.robot.convex`), so the hull of each file is the file. URDF cylinders and FCL
 cylinders share a convention (axis along the local z, centred on the origin), so a URDF
 ``<origin>`` is the shape pose in its link frame as it stands.
 """
@@ -19,10 +19,10 @@ import numpy as np
 from lxml import etree
 from numpy.typing import ArrayLike, NDArray
 
-from refine.convex import ConvexPiece
 from refine.errors import InputError
 from refine.frames import make_transform, matrix_from_fixed_xyz
 from refine.lazy import lean_imports
+from refine.robot.convex import ConvexPiece
 
 with lean_imports():
     import trimesh

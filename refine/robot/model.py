@@ -20,7 +20,7 @@ import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
 from refine.errors import InputError
-from refine.robot_geometry import CollisionShape, collision_shapes_from_urdf
+from refine.robot.geometry import CollisionShape, collision_shapes_from_urdf
 
 try:
     import tomllib
@@ -153,7 +153,7 @@ class Robot:
     def from_urdf(
         cls, urdf: str | Path, *, controller: str, flange_frame: str = "tool0", **options: Any
     ) -> Robot:
-        """A robot from its URDF file instead of the registry (:func:`refine.robot_urdf.robot_from_urdf`).
+        """A robot from its URDF file instead of the registry (:func:`refine.robot.urdf.robot_from_urdf`).
 
         Args:
             urdf: the URDF file (collision meshes relative to its folder).
@@ -162,7 +162,7 @@ class Robot:
             **options: ``name``, ``maker``, ``model``, ``reach_m``, ``joint_acceleration_deg_s2``,
                 ``joint_lower_deg``, ``joint_upper_deg``, ``joint_velocity_deg_s``.
         """
-        from refine.robot_urdf import robot_from_urdf
+        from refine.robot.urdf import robot_from_urdf
 
         return robot_from_urdf(urdf, controller=controller, flange_frame=flange_frame, **options)
 
@@ -233,12 +233,12 @@ class Robot:
         """The link pairs never checked against each other, ``{frozenset({a, b}): reason}``.
 
         Read from ``self_collision.toml`` beside the URDF (the sampled matrix, see
-        :mod:`refine.collision.self_collision`); None when the robot has none, and then the
+        :mod:`refine.robot.self_collision`); None when the robot has none, and then the
         kinematic rules of :mod:`refine.collision.pairs` decide.
         """
         path = Path(self.spec.urdf).parent / SELF_COLLISION_FILE
         if self._matrix is None and path.is_file():
-            from refine.collision.self_collision import read_matrix  # the collision package imports us
+            from refine.robot.self_collision import read_matrix  # the collision package imports us
 
             self._matrix = read_matrix(path)
         return None if self._matrix is None else dict(self._matrix)
@@ -247,7 +247,7 @@ class Robot:
 def robots_dir() -> Path:
     """The robot registry folder: ``$REFINE_ROBOTS_DIR`` if set, else ``robots/`` of the repo."""
     override = os.environ.get("REFINE_ROBOTS_DIR")
-    return Path(override) if override else Path(__file__).resolve().parents[1] / "robots"
+    return Path(override) if override else Path(__file__).resolve().parents[2] / "robots"
 
 
 def available_robots() -> list[str]:

@@ -24,7 +24,7 @@ from refine.optimise.seed import TcpKinematics, solve_ik
 from refine.optimise.verify import runs, singularity_measures
 from refine.paths import FusedPath
 from refine.problem import Tolerances
-from refine.robot import Robot
+from refine.robot.model import Robot
 
 Array = NDArray[np.float64]
 

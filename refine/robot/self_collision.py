@@ -15,7 +15,7 @@ joint limits every pair of links is measured, and a pair is disabled when it is
 
 Every other pair is checked. The matrix is written per robot as ``self_collision.toml`` next to its
 URDF (:func:`write_matrix`) by ``robots/make_self_collision.py``, and read by
-:meth:`refine.robot.Robot.self_collision`.
+:meth:`refine.robot.model.Robot.self_collision`.
 """
 
 from __future__ import annotations
@@ -69,7 +69,7 @@ def sample_matrix(robot, samples: int, seed: int, never_m: float = NEVER_M) -> l
     """Measure every pair of the robot's links at ``samples`` random configurations.
 
     Args:
-        robot: a :class:`refine.robot.Robot` with collision shapes.
+        robot: a :class:`refine.robot.model.Robot` with collision shapes.
         samples: random configurations, uniform within the joint limits.
         seed: seed of the random generator.
         never_m: the distance a pair must always keep to be disabled as ``"never"`` [m].

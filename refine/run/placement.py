@@ -39,7 +39,7 @@ How it is verified (:func:`repair_by_placement`): the placement problem's answer
 verdict. The moved objects are checked against the rest of the cell (:func:`cell_gaps`: the
 collision margin to every other object and the robot's base, distance 0 or more to the support); a
 move that puts one into another is refused. The problem is moved by the placement found and run through the ordinary strict
-pipeline (:func:`refine.pipeline.solve_problem` without repair: IK seed, solve, verification,
+pipeline (:func:`refine.run.stages.solve_problem` without repair: IK seed, solve, verification,
 clearance rows and the dense clearance check); only an ``ok`` there makes the placement ``ok``.
 When it is not, the move is enlarged along the same direction (:data:`ENLARGE`, within the bounds)
 and verified again; the first enlargement that verifies is reported, with its factor.
@@ -64,8 +64,8 @@ from refine.settings import PlacementSettings
 
 if TYPE_CHECKING:
     from refine.problem import Problem
-    from refine.result import PassResult, RunResult
-    from refine.robot import Robot
+    from refine.robot.model import Robot
+    from refine.run.result import PassResult, RunResult
 
 log = logging.getLogger(__name__)
 
@@ -829,7 +829,7 @@ def verify_placement(problem: Problem, robot: Robot, fused: FusedPath, placement
     same as fusing the moved problem's files: fusion depends only on the CAD path and the
     demonstration relative to each other).
     """
-    from refine.pipeline import solve_problem
+    from refine.run.stages import solve_problem
 
     moved = moved_problem(problem, placement.transform)
     strict = dataclasses.replace(moved, repair=dataclasses.replace(moved.repair, enabled=False))
@@ -852,7 +852,7 @@ def repair_by_placement(problem: Problem, robot: Robot, first: PassResult) -> Pl
         The outcome; ``status`` is ``ok`` only when the moved problem's strict run is ``ok`` and the
         moved objects keep their margins to the rest of the cell (:func:`cell_gaps`).
     """
-    from refine.pipeline import weights_for
+    from refine.run.stages import weights_for
 
     bounds = problem.repair.placement
     assert bounds is not None

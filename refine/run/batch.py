@@ -178,8 +178,8 @@ def run_one(
     try:
         (Path(out_dir) / "error.txt").unlink(missing_ok=True)  # from an earlier failed attempt
         from refine.export.result_json import write_timings
-        from refine.pipeline import run
         from refine.problem import load_problem
+        from refine.run.stages import run
 
         result = run(load_problem(problem), Path(out_dir), programs, report=report)
         result.timings_s["run"] = time.perf_counter() - t0

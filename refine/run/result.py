@@ -12,11 +12,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from refine.evaluate import TruthComparison
     from refine.optimise.solve import Refinement
     from refine.paths import FusedPath, Trajectory
     from refine.problem import Problem
-    from refine.robot import Robot
+    from refine.robot.model import Robot
+    from refine.run.evaluate import TruthComparison
     from refine.timing import Timing
 
 
@@ -61,7 +61,7 @@ class RunResult:
         outputs: kind -> file written.
         demo_quality: the demonstration quality gate's figures (``refine.demo.quality.DemoQuality``),
             None for a path without a demonstration.
-        placement: the placement repair (``refine.placement.PlacementRepair``) when ``[repair]
+        placement: the placement repair (``refine.run.placement.PlacementRepair``) when ``[repair]
             placement`` is set, else None.
     """
 
@@ -126,7 +126,7 @@ def summary_lines(result: RunResult) -> list[str]:
             f"min singular value {check.sigma_min.min():.4f}",
         ]
         if p.clearance is not None:
-            from refine.diagnosis import closest_pair_text
+            from refine.optimise.diagnosis import closest_pair_text
 
             c, col = p.clearance, result.problem.collision
             pair = closest_pair_text(

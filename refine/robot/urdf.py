@@ -1,10 +1,10 @@
 """Robots outside the registry, straight from their URDF, and per-problem limit overrides.
 
-:func:`robot_from_urdf` (also ``Robot.from_urdf``) builds a :class:`~refine.robot.Robot` from any
+:func:`robot_from_urdf` (also ``Robot.from_urdf``) builds a :class:`~refine.robot.model.Robot` from any
 URDF of a serial arm with revolute or prismatic joints: the kinematics and the joint limits and
 speeds from the URDF's ``<joint>``/``<limit>``, the collision geometry from its ``<collision>``
 elements (primitives as they are, meshes as the convex hull of their vertices; see
-:mod:`refine.robot_geometry`), the program language from the controller family. A URDF has no
+:mod:`refine.robot.geometry`), the program language from the controller family. A URDF has no
 acceleration limits: unless given, each joint may reach its full speed from rest in
 :data:`DEFAULT_ACCELERATION_TIME_S` (a conservative rule, that of the registry's collaborative arm).
 
@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 from refine.errors import InputError
 
 if TYPE_CHECKING:
-    from refine.robot import Robot
+    from refine.robot.model import Robot
     from refine.settings import RobotSettings
 
 Array = NDArray[np.float64]
@@ -54,7 +54,7 @@ def robot_from_urdf(
 
     Args:
         urdf: the URDF file; mesh files of ``<collision>`` elements are relative to its folder.
-        controller: the controller family, one of :data:`refine.robot.CONTROLLERS` (``"abb"``,
+        controller: the controller family, one of :data:`refine.robot.model.CONTROLLERS` (``"abb"``,
             ``"kuka"``, ``"ur"``): it sets the program language.
         flange_frame: the URDF frame (link) the tool is mounted on.
         name: the robot's name in outputs; None for the URDF's ``<robot name>``.
@@ -73,7 +73,7 @@ def robot_from_urdf(
             one degree of freedom or no speed limit, an override has the wrong length, or the
             controller is unknown; the message names the value and its unit.
     """
-    from refine.robot import Robot, RobotSpec, _build_model
+    from refine.robot.model import Robot, RobotSpec, _build_model
 
     path = Path(urdf).resolve()
     pin_model = _build_model(path)
@@ -230,7 +230,7 @@ def _registry_robot(
     upper: tuple[float, ...] | None,
     velocity: tuple[float, ...] | None,
 ) -> Robot:
-    from refine.robot import Robot, load_robot
+    from refine.robot.model import Robot, load_robot
 
     robot = load_robot(name)
     spec = with_overrides(robot.spec, lower, upper, velocity, None)

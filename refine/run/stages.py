@@ -15,14 +15,14 @@ from typing import Any
 import numpy as np
 
 from refine.errors import InputError
-from refine.evaluate import compare_with_truth
 from refine.optimise.problem import RefinementNLP, Weights, build_refinement
 from refine.optimise.solve import ConstraintSource, solve_refinement
 from refine.paths import FusedPath, Trajectory
 from refine.problem import Problem
-from refine.result import PassResult, RunResult
-from refine.robot import Robot
-from refine.robot_urdf import robot_for
+from refine.robot.model import Robot
+from refine.robot.urdf import robot_for
+from refine.run.evaluate import compare_with_truth
+from refine.run.result import PassResult, RunResult
 from refine.timing import time_parameterise
 
 log = logging.getLogger(__name__)
@@ -81,7 +81,7 @@ def fused_path(
     from refine.cad import read_cad_path
     from refine.demo import clean_demonstration, read_tracker_log
     from refine.demo.quality import gate_dropouts, gate_frame
-    from refine.fuse import fuse
+    from refine.fuse.align import fuse
 
     assert problem.demonstration is not None  # Problem checks this
     cad = read_cad_path(problem.cad, problem.frames.cad_in_world)
@@ -249,7 +249,7 @@ def solve_problem(
     watch.lap("load")
     passes = [refine_pass(problem, robot, fused, watch, sources=sources, nlp=nlp, q0=q0)]
     if problem.multipass is not None and problem.multipass.layers > 1:
-        from refine.multipass import generate_passes
+        from refine.fuse.passes import generate_passes
 
         for p in generate_passes(fused, problem.multipass)[1:]:
             name = f"layer {p.layer} pass {p.index}"
@@ -270,8 +270,8 @@ def solve_problem(
         )
         watch.lap("truth")
     placement = None
-    if problem.repair.placement is not None:  # the workpiece move as a second repair (refine.placement)
-        from refine.placement import placement_repair
+    if problem.repair.placement is not None:  # the workpiece move as a second repair (refine.run.placement)
+        from refine.run.placement import placement_repair
 
         placement = placement_repair(problem, robot, passes)
         watch.add({"placement": sum(placement.timings_s.values())})
@@ -306,7 +306,7 @@ def run(
     Returns:
         The run's result, with ``outputs`` naming the files written.
     """
-    from refine.preflight import preflight
+    from refine.run.preflight import preflight
 
     preflight(problem, out_dir, programs, report=report)  # refuse before spending time on the solve
     return write_run(
@@ -330,14 +330,14 @@ def write_run(
     """
     from refine.export.result_json import write_result_json
     from refine.export.writers import write_outputs
-    from refine.outputs import StagedOutputs
-    from refine.preflight import preflight
+    from refine.run.outputs import StagedOutputs
+    from refine.run.preflight import preflight
 
     problem = result.problem
     checked = preflight(problem, out_dir, programs, report=report, robot=result.robot)
     t0 = time.perf_counter()
     protected = (*problem.input_files, *([problem.source] if problem.source else []))
-    with StagedOutputs(out_dir, protected) as stage:  # all or nothing: see refine.outputs
+    with StagedOutputs(out_dir, protected) as stage:  # all or nothing: see refine.run.outputs
         result.outputs.update(write_outputs(result, stage.dir, checked.programs))
         result.timings_s["export"] = time.perf_counter() - t0
         if report:
