@@ -89,10 +89,3 @@ def integer_in(owner: str, name: str, value: int, low: int, high: int) -> None:
 def one_of(owner: str, name: str, value: str, allowed: tuple[str, ...]) -> None:
     if value not in allowed:
         raise InputError(f"{owner}.{name} = {value!r} is not one of {', '.join(allowed)}")
-
-
-"""Largest workpiece shift the placement repair may search [m]: beyond it the cell is laid out anew."""
-"""Largest workpiece turn the placement repair may search [deg]."""
-"""``[repair] placement.free``: in the support plane only, or any rigid move."""
-
-

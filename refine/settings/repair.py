@@ -8,12 +8,15 @@ from refine.errors import InputError
 from refine.settings.limits import CAUSES, in_range, one_of
 
 MAX_PLACEMENT_TRANSLATE_M = 1.0
+"""Largest workpiece shift the placement repair may search [m]: beyond it the cell is laid out anew."""
 
 
 MAX_PLACEMENT_ROTATE_DEG = 45.0
+"""Largest workpiece turn the placement repair may search [deg]."""
 
 
 PLACEMENT_FREEDOMS = ("plane", "all")
+"""``[repair] placement.free``: in the support plane only, or any rigid move."""
 
 
 @dataclass(frozen=True)
