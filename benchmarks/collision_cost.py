@@ -28,7 +28,7 @@ import time
 from pathlib import Path
 
 from refine.problem import load_problem
-from refine.robot.model import load_robot
+from refine.robot.registry import load_robot
 from refine.run.stages import _Stopwatch, constraint_sources, fused_path, refine_pass
 
 ROOT = Path(__file__).resolve().parents[1]

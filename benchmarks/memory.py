@@ -62,7 +62,7 @@ def measure_log(path: str) -> dict:
 
 def measure_path(n: int) -> dict:
     from refine.problem import load_problem
-    from refine.robot.model import load_robot
+    from refine.robot.registry import load_robot
     from refine.run.stages import fused_path, refinement_for
 
     problem = load_problem(ROOT / "problems" / "glass_adhesive")

@@ -29,7 +29,7 @@ from refine.frames import transform_from_xyz_rpy
 from refine.optimise.problem import build_refinement
 from refine.optimise.solve import solve_refinement
 from refine.problem import Tolerances
-from refine.robot.model import load_robot
+from refine.robot.registry import load_robot
 from refine.synthetic import wave_path
 
 RESULTS = Path(__file__).resolve().parent / "results" / "scaling.csv"

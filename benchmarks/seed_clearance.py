@@ -24,7 +24,7 @@ from pathlib import Path
 from refine.collision import check_path_clearance, margins_proved
 from refine.optimise.clearance import ClearanceSource
 from refine.problem import load_problem
-from refine.robot.model import load_robot
+from refine.robot.registry import load_robot
 from refine.run.stages import _Stopwatch, constraint_sources, fused_path, refine_pass
 
 ROOT = Path(__file__).resolve().parents[1]

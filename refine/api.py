@@ -343,7 +343,8 @@ def refine_path(
             the message names the argument and the unit.
     """
     from refine.paths import FusedPath
-    from refine.robot.model import Robot, load_robot
+    from refine.robot.model import Robot
+    from refine.robot.registry import load_robot
 
     if isinstance(robot, str):
         robot = load_robot(robot)

@@ -128,7 +128,7 @@ def _main(argv: list[str] | None) -> int:
 
             return run_bench(args)
         if args.command == "robots":
-            from refine.robot.model import available_robots, load_robot
+            from refine.robot.registry import available_robots, load_robot
 
             for name in available_robots():
                 spec = load_robot(name).spec

@@ -150,7 +150,7 @@ def load_problem(path: str | Path, *, allow_outside: bool = False) -> Problem:
         path = path / "problem.toml"
     if not path.is_file():
         raise InputError(f"problem file not found: {path}")
-    data = _read_toml(path)
+    data = read_registry_toml(path)
     root = path.parent.resolve()
     _check_keys(data, "", _TOP_KEYS, path)
     for table in ("robot", "tool", "cad"):
@@ -188,7 +188,7 @@ def load_problem(path: str | Path, *, allow_outside: bool = False) -> Problem:
 # ---- loader internals ---------------------------------------------------------------------------
 
 
-def _read_toml(path: Path) -> dict[str, Any]:
+def read_registry_toml(path: Path) -> dict[str, Any]:
     """The parsed TOML of ``path``; size, encoding and syntax errors name the file and line."""
     try:
         size = path.stat().st_size
@@ -401,7 +401,7 @@ def _robot(t: dict[str, Any], path: Path, inside: Path | None = None) -> RobotSe
 
 
 def _robot_model(value: Any) -> str:
-    from refine.robot.model import available_robots
+    from refine.robot.registry import available_robots
 
     known = available_robots()
     if not isinstance(value, str) or value not in known:

@@ -20,9 +20,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from refine.frames import matrix_from_zyx, rotation_about, rotvec_from_matrix
-from refine.optimise.seed import TcpKinematics, ik_chain
+from refine.optimise.seed import ik_chain
 from refine.optimise.verify import singularity_measures
 from refine.paths import FusedPath
+from refine.robot.kinematics import TcpKinematics
 
 if TYPE_CHECKING:
     from refine.collision import CollisionModel
@@ -231,7 +232,7 @@ class Reachability:
 def polish_ik(kin: TcpKinematics, T_target: Array, q: Array, iterations: int = 5) -> tuple[Array, float]:
     """Minimum-norm Gauss-Newton steps on the TCP pose, from a nearly converged ``q``.
 
-    :func:`refine.optimise.seed.solve_ik` stops at its tolerance (1e-6); a few Gauss-Newton steps
+    :func:`refine.robot.kinematics.solve_ik` stops at its tolerance (1e-6); a few Gauss-Newton steps
     from there take the error down to rounding, without joint limits.
 
     Args:
@@ -332,7 +333,7 @@ def problem_reachability(problem, targets: ArrayLike, seed: int) -> tuple[Reacha
     """
     from refine.collision import CollisionModel
     from refine.optimise.seed import start_candidates
-    from refine.robot.model import load_robot
+    from refine.robot.registry import load_robot
 
     robot = load_robot(problem.robot.model)
     kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange)

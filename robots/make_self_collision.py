@@ -23,8 +23,9 @@ import pinocchio as pin
 import trimesh
 from make_shapes import joint_links
 
+from refine.robot.registry import available_robots, load_robot, robots_dir
 from refine.robot.self_collision import NEVER_M, sample_matrix, write_matrix
-from refine.robot.model import SELF_COLLISION_FILE, available_robots, load_robot, robots_dir
+from refine.robot.spec import SELF_COLLISION_FILE
 
 HERE = Path(__file__).resolve().parent
 MAKER_FRACTION = 0.2

@@ -193,7 +193,7 @@ def test_solve_takes_a_folder_and_warm_starts_from_given_joints():
 
 def test_a_result_writes_the_program_of_the_robots_controller_by_default():
     """The KR arm's result asks for KRL, the LBR iiwa's for Sunrise: the robot says which, not the family."""
-    from refine.robot.model import load_robot
+    from refine.robot.registry import load_robot
 
     for name, program in (("kuka_kr8_r1440_2_arc_hw", "krl"), ("kuka_iiwa14_r820", "sunrise")):
         robot = load_robot(name)

@@ -15,8 +15,8 @@ from refine.collision import CollisionModel
 from refine.frames import make_transform
 from refine.optimise.clearance import ClearanceSource
 from refine.optimise.diagnosis import Diagnoser, _reach_model, closest_pair_text, reach_tilts
-from refine.optimise.seed import TcpKinematics
-from refine.robot.model import load_robot
+from refine.robot.kinematics import TcpKinematics
+from refine.robot.registry import load_robot
 from refine.settings import Shape
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -29,7 +29,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from refine.export.krl import kuka_status_turn
-from refine.robot.model import load_robot
+from refine.robot.registry import load_robot
 
 NAME = "kuka_kr8_r1440_2_arc_hw"
 HOME_DEG = [0.0, -90.0, 90.0, 0.0, 0.0, 0.0]

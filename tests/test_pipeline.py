@@ -9,7 +9,7 @@ import pytest
 from refine.export import parse_rapid_targets, read_pathml, read_trajectory_csv, validate_pathml
 from refine.frames import matrix_from_quaternion, rotation_angle_deg
 from refine.problem import load_problem
-from refine.robot.model import load_robot
+from refine.robot.registry import load_robot
 from refine.run.stages import run
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -12,14 +12,9 @@ import trimesh
 from refine.errors import InputError
 from refine.frames import make_transform, rotation_about
 from refine.robot.geometry import collision_shapes_from_urdf
-from refine.robot.model import (
-    CONTROLLERS,
-    Robot,
-    RobotSpec,
-    available_robots,
-    load_robot,
-    robots_dir,
-)
+from refine.robot.model import Robot
+from refine.robot.registry import available_robots, load_robot, robots_dir
+from refine.robot.spec import CONTROLLERS, RobotSpec
 
 try:
     import tomllib

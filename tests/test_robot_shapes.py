@@ -15,7 +15,7 @@ import pytest
 import trimesh
 from scipy.spatial import ConvexHull
 
-from refine.robot.model import load_robot
+from refine.robot.registry import load_robot
 
 MESHES = Path(__file__).resolve().parents[1].parent / "shared" / "robot-meshes"
 NAMES = ["abb_irb4600_60_205", "kuka_iiwa14_r820", "kuka_kr8_r1440_2_arc_hw", "ur10e"]

@@ -12,7 +12,7 @@ from scipy.spatial.transform import Rotation
 import refine
 from refine.cli import main
 from refine.problem import load_problem
-from refine.robot.model import available_robots
+from refine.robot.registry import available_robots
 from refine.synthetic import write_line_problem
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -9,8 +9,9 @@ import pytest
 
 from refine.collision import CollisionModel
 from refine.frames import make_transform
-from refine.optimise.seed import TcpKinematics, start_candidates
-from refine.robot.model import load_robot
+from refine.optimise.seed import start_candidates
+from refine.robot.kinematics import TcpKinematics
+from refine.robot.registry import load_robot
 from refine.settings import Shape
 from refine.synthetic import (
     periodic_wave,

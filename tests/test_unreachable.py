@@ -25,8 +25,8 @@ from refine.demo.liberty import write_liberty_ascii
 from refine.demo.simulate import TrackerModel, perturb_log
 from refine.export.result_json import result_dict
 from refine.frames import rotation_angle_deg
-from refine.optimise.seed import TcpKinematics
 from refine.problem import load_problem
+from refine.robot.kinematics import TcpKinematics
 from refine.run.stages import solve_problem
 
 pytestmark = pytest.mark.slow

@@ -138,7 +138,7 @@ def solve_ik(robot, T_base_flange, q, iterations=300, damping=1e-3):
 def check_reachability(problem: Problem, positions, rotations, step: int = 10) -> bool:
     """Chained DLS IK over every ``step``-th point of the true path; prints the worst figures."""
     try:
-        from refine.robot.model import load_robot
+        from refine.robot.registry import load_robot
     except ImportError as e:  # pragma: no cover - the robot module is optional here
         print(f"reachability check skipped: {e}")
         return True

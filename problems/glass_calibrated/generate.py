@@ -42,7 +42,7 @@ from refine.cli import main as refine_main
 from refine.demo import write_liberty_ascii
 from refine.frames import invert_transform, rotvec_from_matrix, transform_from_xyz_rpy
 from refine.problem import load_problem
-from refine.robot.model import load_robot
+from refine.robot.registry import load_robot
 
 HERE = Path(__file__).resolve().parent
 GLASS = HERE.parent / "glass_adhesive"

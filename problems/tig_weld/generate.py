@@ -312,9 +312,10 @@ def run_checks(s, positions, rotations, speed, step: int = 5) -> bool:
     that are not workpieces, and, for information, tool to the workpieces).
     """
     from refine.fuse.passes import Pass, generate_passes
-    from refine.optimise.seed import TcpKinematics, ik_chain, start_candidates
+    from refine.optimise.seed import ik_chain, start_candidates
     from refine.paths import FusedPath
-    from refine.robot.model import load_robot
+    from refine.robot.kinematics import TcpKinematics
+    from refine.robot.registry import load_robot
 
     problem = load_problem(HERE)
     robot = load_robot(problem.robot.model)

@@ -38,9 +38,9 @@ from refine.frames import (
     matrix_from_rotvec,
     transform_points,
 )
-from refine.optimise.seed import TcpKinematics, solve_ik
 from refine.problem import load_problem
-from refine.robot.model import load_robot
+from refine.robot.kinematics import TcpKinematics, solve_ik
+from refine.robot.registry import load_robot
 
 HERE = Path(__file__).resolve().parent
 SEED = 20240917

@@ -175,8 +175,9 @@ def closed_tangents(points: np.ndarray) -> np.ndarray:
 def check_reachability(problem: Problem, positions, rotations) -> bool:
     """Chained DLS IK over every ``CHECK_STEP``-th point of the true path; prints the figures."""
     from refine.collision import CollisionModel
-    from refine.optimise.seed import TcpKinematics, start_candidates
-    from refine.robot.model import load_robot
+    from refine.optimise.seed import start_candidates
+    from refine.robot.kinematics import TcpKinematics
+    from refine.robot.registry import load_robot
 
     robot = load_robot(problem.robot.model)
     spec = robot.spec

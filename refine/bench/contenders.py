@@ -113,7 +113,8 @@ def refine_fatrop(problem: BenchProblem) -> Answer:
 
 def greedy_ik(problem: BenchProblem) -> Answer:
     """Per-waypoint IK of the demonstrated pose chained along the path: what a Cartesian planner does."""
-    from refine.optimise.seed import TcpKinematics, ik_chain, start_candidates
+    from refine.optimise.seed import ik_chain, start_candidates
+    from refine.robot.kinematics import TcpKinematics
 
     w0, c0 = time.perf_counter(), time.process_time()
     kin = TcpKinematics(problem.robot, problem.base_in_world, problem.tcp_in_flange)
@@ -277,8 +278,8 @@ class Verdict:
 
 def verify(problem: BenchProblem, q: Array | None, slack_deg: Array | None = None) -> Verdict:
     """Check joints ``q`` with refine's verification (Pinocchio, FCL) against the problem's tolerances."""
-    from refine.optimise.seed import TcpKinematics
     from refine.optimise.verify import check_path
+    from refine.robot.kinematics import TcpKinematics
 
     if q is None or not np.all(np.isfinite(q)):
         return Verdict(False, np.nan, np.nan, np.nan, "no answer")

@@ -135,7 +135,7 @@ def problems(data: dict[str, Any], suite: str, *, root: Path = ROOT) -> Iterator
 def bundled_problem(suite: str, folder: Path) -> BenchProblem:
     """A problem folder as the pipeline would refine it (its first pass)."""
     from refine.problem import load_problem
-    from refine.robot.model import load_robot
+    from refine.robot.registry import load_robot
     from refine.run.stages import constraint_sources, fused_path, weights_for
 
     problem = load_problem(folder)
@@ -170,8 +170,8 @@ def generated_problem(suite: str, family: str, spec: dict[str, Any], n: int) -> 
     from refine.frames import make_transform
     from refine.optimise.clearance import ClearanceSource
     from refine.optimise.problem import Weights
-    from refine.optimise.seed import TcpKinematics
-    from refine.robot.model import load_robot
+    from refine.robot.kinematics import TcpKinematics
+    from refine.robot.registry import load_robot
     from refine.run.stages import REDUNDANT_MID_RANGE_WEIGHT
     from refine.settings import CollisionSettings, Shape
     from refine.synthetic import wave_path

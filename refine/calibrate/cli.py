@@ -307,7 +307,7 @@ def _receiver_path(args: argparse.Namespace) -> tuple[Calibration, str, str, np.
 
 
 def _robot_and_problem(args: argparse.Namespace):  # noqa: ANN202 - (Robot | None, Problem | None)
-    from refine.robot.model import load_robot
+    from refine.robot.registry import load_robot
 
     problem = None
     if args.problem is not None:

@@ -244,7 +244,7 @@ class SimulatedReadings:
 
 def _reach(robot: Robot, targets: Array, tcp_in_flange: Array, rng: np.random.Generator) -> Array:
     """Joints [rad] (N, n) reaching TCP poses T_base_TCP (N, 4, 4), by damped least-squares IK."""
-    from refine.optimise.seed import TcpKinematics, solve_ik
+    from refine.robot.kinematics import TcpKinematics, solve_ik
 
     kin = TcpKinematics(robot, np.eye(4), tcp_in_flange)
     lo, hi = robot.spec.lower, robot.spec.upper

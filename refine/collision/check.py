@@ -69,7 +69,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from refine.collision.model import CollisionModel
 from refine.errors import InputError
-from refine.optimise.seed import TcpKinematics
+from refine.robot.kinematics import TcpKinematics
 
 log = logging.getLogger(__name__)
 

@@ -51,9 +51,9 @@ from refine.export.program import (
 from refine.export.rapid import segment_speeds
 from refine.frames import invert_transform, make_transform, matrix_from_rotvec, rotvec_from_matrix
 from refine.names import comment_text, identifier
-from refine.optimise.seed import TcpKinematics, solve_ik
 from refine.paths import Array, Trajectory
 from refine.problem import Problem
+from refine.robot.kinematics import TcpKinematics, solve_ik
 
 log = logging.getLogger(__name__)
 

@@ -22,9 +22,9 @@ from numpy.typing import NDArray
 
 from refine.collision import CollisionModel, Contact, PathClearance, check_path_clearance, margins_proved
 from refine.optimise.problem import LinearRow, RefinementNLP
-from refine.optimise.seed import TcpKinematics
 from refine.optimise.verify import Violation
 from refine.problem import Problem
+from refine.robot.kinematics import TcpKinematics
 from refine.robot.model import Robot
 
 log = logging.getLogger(__name__)

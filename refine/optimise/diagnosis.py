@@ -20,10 +20,10 @@ import pinocchio as pin
 import scipy.optimize
 from numpy.typing import NDArray
 
-from refine.optimise.seed import TcpKinematics, solve_ik
 from refine.optimise.verify import runs, singularity_measures
 from refine.paths import FusedPath
 from refine.problem import Tolerances
+from refine.robot.kinematics import TcpKinematics, solve_ik
 from refine.robot.model import Robot
 
 Array = NDArray[np.float64]

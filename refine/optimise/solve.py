@@ -23,15 +23,7 @@ from numpy.typing import NDArray
 from refine.errors import SolverError
 from refine.optimise.diagnosis import Diagnoser, Finding, reach_gap, reach_tilts, segments
 from refine.optimise.problem import ActiveSet, LinearRow, RefinementNLP
-from refine.optimise.seed import (
-    CONVERGED,
-    TcpKinematics,
-    alternative_seeds,
-    ik_chain,
-    reach_shortfall,
-    solve_ik_batch,
-    start_candidates,
-)
+from refine.optimise.seed import alternative_seeds, ik_chain, reach_shortfall, start_candidates
 from refine.optimise.verify import (
     PathCheck,
     Violation,
@@ -40,6 +32,7 @@ from refine.optimise.verify import (
     segment_singularity,
     singularity_measures,
 )
+from refine.robot.kinematics import CONVERGED, TcpKinematics, solve_ik_batch
 
 log = logging.getLogger(__name__)
 

@@ -14,9 +14,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from refine.frames import rotation_angle_deg
-from refine.optimise.seed import TcpKinematics
 from refine.paths import FusedPath
 from refine.problem import Tolerances
+from refine.robot.kinematics import TcpKinematics
 
 Array = NDArray[np.float64]
 

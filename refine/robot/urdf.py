@@ -1,33 +1,28 @@
-"""Robots outside the registry, straight from their URDF, and per-problem limit overrides.
+"""A robot's spec and kinematic model read straight from its URDF, and per-problem limit overrides.
 
-:func:`robot_from_urdf` (also ``Robot.from_urdf``) builds a :class:`~refine.robot.model.Robot` from any
-URDF of a serial arm with revolute or prismatic joints: the kinematics and the joint limits and
-speeds from the URDF's ``<joint>``/``<limit>``, the collision geometry from its ``<collision>``
-elements (primitives as they are, meshes as the convex hull of their vertices; see
-:mod:`refine.robot.geometry`), the program language from the controller family. A URDF has no
-acceleration limits: unless given, each joint may reach its full speed from rest in
-:data:`DEFAULT_ACCELERATION_TIME_S` (a conservative rule, that of the registry's collaborative arm).
-
-:func:`robot_for` is what a run uses: the registry robot of ``[robot] model``, or the URDF robot of
-``[robot] urdf``, with the problem's joint-limit and speed overrides applied.
+:func:`read_urdf` reads any URDF of a serial arm with revolute or prismatic joints into a
+:class:`~refine.robot.spec.RobotSpec` and a Pinocchio model: the kinematics and the joint limits and
+speeds from the URDF's ``<joint>``/``<limit>``, the program language from the controller family
+(the collision geometry is read by :class:`~refine.robot.model.Robot` from the same file's
+``<collision>`` elements, see :mod:`refine.robot.geometry`). A URDF has no acceleration limits:
+unless given, each joint may reach its full speed from rest in :data:`DEFAULT_ACCELERATION_TIME_S`
+(a conservative rule, that of the registry's collaborative arm). :func:`with_overrides` applies a
+problem's joint-limit and speed overrides to a spec. This module knows no ``Robot``:
+:func:`refine.robot.model.robot_from_urdf` builds one from what it reads.
 """
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
+import pinocchio as pin
 from numpy.typing import NDArray
 
 from refine.errors import InputError
-
-if TYPE_CHECKING:
-    from refine.robot.model import Robot
-    from refine.settings import RobotSettings
+from refine.robot.spec import RobotSpec, build_model
 
 Array = NDArray[np.float64]
 
@@ -36,7 +31,7 @@ DEFAULT_ACCELERATION_TIME_S = 1.0
 from rest in one second."""
 
 
-def robot_from_urdf(
+def read_urdf(
     urdf: str | Path,
     *,
     controller: str,
@@ -49,12 +44,12 @@ def robot_from_urdf(
     joint_lower_deg: Sequence[float] | None = None,
     joint_upper_deg: Sequence[float] | None = None,
     joint_velocity_deg_s: Sequence[float] | None = None,
-) -> Robot:
-    """A robot built from its URDF file (not from the registry).
+) -> tuple[RobotSpec, pin.Model]:
+    """A robot's spec and Pinocchio model read from its URDF file (not from the registry).
 
     Args:
         urdf: the URDF file; mesh files of ``<collision>`` elements are relative to its folder.
-        controller: the controller family, one of :data:`refine.robot.model.CONTROLLERS` (``"abb"``,
+        controller: the controller family, one of :data:`refine.robot.spec.CONTROLLERS` (``"abb"``,
             ``"kuka"``, ``"ur"``): it sets the program language.
         flange_frame: the URDF frame (link) the tool is mounted on.
         name: the robot's name in outputs; None for the URDF's ``<robot name>``.
@@ -73,10 +68,9 @@ def robot_from_urdf(
             one degree of freedom or no speed limit, an override has the wrong length, or the
             controller is unknown; the message names the value and its unit.
     """
-    from refine.robot.model import Robot, RobotSpec, _build_model
 
     path = Path(urdf).resolve()
-    pin_model = _build_model(path)
+    pin_model = build_model(path)
     joints = tuple(pin_model.names[j] for j in range(1, pin_model.njoints))
     if pin_model.nq != len(joints) or pin_model.nv != len(joints):
         raise InputError(
@@ -113,7 +107,7 @@ def robot_from_urdf(
         if joint_acceleration_deg_s2 is not None
         else spec.velocity / DEFAULT_ACCELERATION_TIME_S
     )
-    return Robot(replace(spec, acceleration=accel), pin_model)
+    return replace(spec, acceleration=accel), pin_model
 
 
 def urdf_robot_name(path: str | Path) -> str:
@@ -177,61 +171,3 @@ def with_overrides(
     return replace(spec, **changes) if changes else spec
 
 
-def robot_for(settings: RobotSettings) -> Robot:
-    """The robot of a problem's ``[robot]`` table, with its limit overrides (cached per process)."""
-    if settings.urdf is not None:
-        path = Path(settings.urdf).resolve()
-        stamp = path.stat().st_mtime_ns if path.is_file() else 0
-        return _urdf_robot(
-            str(path),
-            stamp,
-            settings.controller or "",
-            settings.flange_frame,
-            settings.model or None,
-            settings.reach_m,
-            settings.joint_lower_deg,
-            settings.joint_upper_deg,
-            settings.joint_velocity_deg_s,
-        )
-    return _registry_robot(
-        settings.model, settings.joint_lower_deg, settings.joint_upper_deg, settings.joint_velocity_deg_s
-    )
-
-
-@functools.cache
-def _urdf_robot(
-    urdf: str,
-    stamp: int,
-    controller: str,
-    flange_frame: str,
-    name: str | None,
-    reach_m: float | None,
-    lower: tuple[float, ...] | None,
-    upper: tuple[float, ...] | None,
-    velocity: tuple[float, ...] | None,
-) -> Robot:
-    del stamp  # part of the cache key only: an edited URDF is read again
-    return robot_from_urdf(
-        urdf,
-        controller=controller,
-        flange_frame=flange_frame,
-        name=name,
-        reach_m=reach_m,
-        joint_lower_deg=lower,
-        joint_upper_deg=upper,
-        joint_velocity_deg_s=velocity,
-    )
-
-
-@functools.cache
-def _registry_robot(
-    name: str,
-    lower: tuple[float, ...] | None,
-    upper: tuple[float, ...] | None,
-    velocity: tuple[float, ...] | None,
-) -> Robot:
-    from refine.robot.model import Robot, load_robot
-
-    robot = load_robot(name)
-    spec = with_overrides(robot.spec, lower, upper, velocity, None)
-    return robot if spec is robot.spec else Robot(spec, robot.model)

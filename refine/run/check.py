@@ -32,7 +32,7 @@ def add_safety_options(parser: argparse.ArgumentParser) -> None:
 
 def check_command(args: argparse.Namespace, problem: Problem) -> int:
     """Run every check on ``problem`` and print what was read; returns 0 (errors raise)."""
-    from refine.robot.model import load_robot
+    from refine.robot.registry import load_robot
     from refine.run.preflight import parse_programs, preflight
     from refine.run.stages import constraint_sources, fused_path
 

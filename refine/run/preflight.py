@@ -30,7 +30,7 @@ if TYPE_CHECKING:
 
 CONTROLLER_OF_FORMAT = {"rapid": "abb", "sunrise": "kuka", "krl": "kuka", "urscript": "ur"}
 """The controller family each program format runs on (which one a robot runs by default is its own
-``program``, :attr:`refine.robot.model.RobotSpec.program`: KRL for the KR arms, Sunrise for the LBR iiwa)."""
+``program``, :attr:`refine.robot.spec.RobotSpec.program`: KRL for the KR arms, Sunrise for the LBR iiwa)."""
 
 _RAPID_SIGNAL = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,31}")
 
@@ -188,7 +188,7 @@ def preflight(
     Raises:
         InputError: the first failed check, naming the key or the option.
     """
-    from refine.robot.urdf import robot_for
+    from refine.robot.registry import robot_for
 
     where = f"{problem.source}: " if problem.source is not None else ""
     if robot is None:

@@ -20,7 +20,7 @@ from refine.optimise.solve import ConstraintSource, solve_refinement
 from refine.paths import FusedPath, Trajectory
 from refine.problem import Problem
 from refine.robot.model import Robot
-from refine.robot.urdf import robot_for
+from refine.robot.registry import robot_for
 from refine.run.evaluate import compare_with_truth
 from refine.run.result import PassResult, RunResult
 from refine.timing import time_parameterise

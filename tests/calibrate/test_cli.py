@@ -145,7 +145,7 @@ def _joints_csv(path, joints):
 @pytest.fixture(scope="module")
 def tcp_readings(tmp_path_factory):
     from refine.calibrate.simulate import simulate_tcp_readings
-    from refine.robot.model import load_robot
+    from refine.robot.registry import load_robot
 
     robot = load_robot("abb_irb4600_60_205")
     tcp = transform_from_xyz_rpy([0.01, -0.02, 0.35], [0.0, 10.0, 30.0])

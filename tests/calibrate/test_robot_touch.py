@@ -5,7 +5,7 @@ from refine.calibrate.robot_touch import calibrate_tcp, register_workpiece, tcp_
 from refine.calibrate.simulate import simulate_tcp_readings, simulate_workpiece_readings
 from refine.errors import InputError
 from refine.frames import rotation_angle_deg, transform_from_xyz_rpy
-from refine.robot.model import load_robot
+from refine.robot.registry import load_robot
 
 TCP = transform_from_xyz_rpy([0.01, -0.02, 0.35], [0.0, 10.0, 30.0])  # a bent gun [m, deg]
 REFERENCE = np.array([1.2, 0.2, 0.6])  # the reference spike in the base frame [m]

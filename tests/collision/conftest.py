@@ -11,8 +11,8 @@ import trimesh
 
 from refine.collision import CollisionModel
 from refine.frames import make_transform, matrix_from_fixed_xyz
-from refine.optimise.seed import TcpKinematics
-from refine.robot.model import load_robot
+from refine.robot.kinematics import TcpKinematics
+from refine.robot.registry import load_robot
 from refine.settings import Shape
 
 PRIMITIVE_ROBOTS = Path(__file__).resolve().parent / "primitive_robots"

@@ -11,8 +11,8 @@ import pytest
 from refine.collision import check_path_clearance, joint_reach, margins_proved
 from refine.errors import InputError
 from refine.frames import make_transform
-from refine.optimise.seed import TcpKinematics
-from refine.robot.model import load_robot
+from refine.robot.kinematics import TcpKinematics
+from refine.robot.registry import load_robot
 from refine.settings import Shape
 
 PILLAR = Shape("pillar", "box", pose=make_transform(p=[1.0, 0.0, 1.0]), size_m=(0.2, 0.2, 2.0))

@@ -10,7 +10,7 @@ import trimesh
 from refine.collision import CollisionModel, linearised_distance
 from refine.errors import InputError
 from refine.frames import make_transform
-from refine.robot.model import available_robots, load_robot
+from refine.robot.registry import available_robots, load_robot
 from refine.settings import Shape
 
 NEAR_TABLE_DEG = [0.0, 45.0, 40.0, 0.0, 5.0, 0.0]

@@ -14,8 +14,8 @@ import pytest
 
 from refine.collision import CollisionModel, check_path_clearance
 from refine.frames import make_transform
-from refine.optimise.seed import TcpKinematics
-from refine.robot.model import load_robot
+from refine.robot.kinematics import TcpKinematics
+from refine.robot.registry import load_robot
 from refine.settings import Shape
 
 ROBOTS = ("ur10e", "abb_irb4600_60_205", "kuka_iiwa14_r820")

@@ -14,8 +14,9 @@ from lxml import etree
 
 from refine.collision import CollisionModel
 from refine.errors import InputError
-from refine.robot.model import SELF_COLLISION_FILE, available_robots, load_robot
+from refine.robot.registry import available_robots, load_robot
 from refine.robot.self_collision import read_matrix
+from refine.robot.spec import SELF_COLLISION_FILE
 
 NAMES = available_robots()
 

@@ -18,7 +18,7 @@ from refine.problem import (
     RobotSettings,
     ToolSettings,
 )
-from refine.robot.model import load_robot
+from refine.robot.registry import load_robot
 
 ROBOT = "abb_irb4600_60_205"
 

@@ -24,7 +24,8 @@ from refine.frames import (
 )
 from refine.paths import Trajectory
 from refine.problem import CadSettings, DemoSettings, Problem, ProcessSettings, RobotSettings, ToolSettings
-from refine.robot.model import Robot, load_robot
+from refine.robot.model import Robot
+from refine.robot.registry import load_robot
 
 IIWA = "kuka_iiwa14_r820"
 

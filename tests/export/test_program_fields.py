@@ -42,7 +42,7 @@ from refine.export.writers import write_outputs
 from refine.frames import transform_from_xyz_rpy
 from refine.paths import Trajectory
 from refine.problem import CadSettings, DemoSettings, Problem, ProcessSettings, RobotSettings, ToolSettings
-from refine.robot.model import load_robot
+from refine.robot.registry import load_robot
 from refine.run.result import PassResult, RunResult
 
 RESOLUTION_M_S = 1e-4  # the writers' documented default speed rounding step

@@ -19,7 +19,8 @@ from refine.export.rapid import write_rapid  # noqa: E402
 from refine.export.urscript import write_urscript  # noqa: E402
 from refine.paths import Trajectory  # noqa: E402
 from refine.problem import ProcessSettings, load_problem  # noqa: E402
-from refine.robot.model import Robot, load_robot  # noqa: E402
+from refine.robot.model import Robot
+from refine.robot.registry import load_robot
 from refine.run.stages import run  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]

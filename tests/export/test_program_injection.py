@@ -16,7 +16,7 @@ from refine.export.urscript import write_urscript
 from refine.frames import transform_from_xyz_rpy
 from refine.paths import Trajectory
 from refine.problem import CadSettings, DemoSettings, Problem, ProcessSettings, RobotSettings, ToolSettings
-from refine.robot.model import load_robot
+from refine.robot.registry import load_robot
 
 # every line break a parser might honour, then statements each dialect would run
 EVIL = (

@@ -17,7 +17,7 @@ from refine.export.sunrise import class_name, parse_sunrise, sunrise_signal, wri
 from refine.frames import invert_transform
 from refine.paths import Trajectory
 from refine.problem import load_problem
-from refine.robot.model import load_robot
+from refine.robot.registry import load_robot
 
 ROOT = Path(__file__).resolve().parents[2]
 _spec = importlib.util.spec_from_file_location(

@@ -15,7 +15,7 @@ from refine.export.urscript import UrPass, continuous_rotvecs, parse_urscript, w
 from refine.frames import invert_transform, make_transform, rotvec_from_matrix, transform_from_xyz_rpy
 from refine.paths import Trajectory
 from refine.problem import CadSettings, DemoSettings, Problem, ProcessSettings, RobotSettings, ToolSettings
-from refine.robot.model import load_robot
+from refine.robot.registry import load_robot
 
 UR = "ur10e"
 

@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 
 from refine.frames import transform_from_xyz_rpy
-from refine.optimise.seed import TcpKinematics
-from refine.robot.model import load_robot
+from refine.robot.kinematics import TcpKinematics
+from refine.robot.registry import load_robot
 
 
 @pytest.fixture(scope="session")

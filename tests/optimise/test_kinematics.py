@@ -12,7 +12,9 @@ import pytest
 from refine.errors import InputError
 from refine.frames import make_transform, matrix_from_fixed_xyz
 from refine.optimise.kinematics import fk_function, jacobian_function
-from refine.robot.model import Robot, RobotSpec, load_robot
+from refine.robot.model import Robot
+from refine.robot.registry import load_robot
+from refine.robot.spec import RobotSpec
 
 NAMES = ["abb_irb4600_60_205", "kuka_iiwa14_r820", "ur10e"]
 

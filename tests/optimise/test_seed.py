@@ -1,6 +1,7 @@
 import numpy as np
 
-from refine.optimise.seed import ik_chain, shift_turns, solve_ik, start_candidates
+from refine.optimise.seed import ik_chain, shift_turns, start_candidates
+from refine.robot.kinematics import solve_ik
 
 
 def test_dls_ik_reaches_a_reachable_pose(kin):
@@ -28,7 +29,7 @@ def test_pose_and_jacobian_in_one_pass_match_pinocchio_at_a_tcp_frame_and_finite
     import pinocchio as pin
 
     from refine.frames import transform_from_xyz_rpy
-    from refine.optimise.seed import TcpKinematics
+    from refine.robot.kinematics import TcpKinematics
 
     base = transform_from_xyz_rpy([0.4, -0.2, 0.1], [0.0, 0.0, 30.0])
     tool = transform_from_xyz_rpy([0.02, -0.01, 0.3], [10.0, 0.0, 20.0])
@@ -101,7 +102,7 @@ def test_chained_seed_follows_a_full_turn_of_the_tool_without_leaving_the_limits
 
 
 def test_batched_ik_solves_each_pose_as_the_single_pose_ik_does(kin):
-    from refine.optimise.seed import solve_ik, solve_ik_batch
+    from refine.robot.kinematics import solve_ik, solve_ik_batch
 
     rng = np.random.default_rng(4)
     lower, upper = kin.robot.spec.lower, kin.robot.spec.upper
@@ -136,7 +137,7 @@ def test_coarse_chain_with_batched_fill_follows_the_one_by_one_chain(kin, straig
 def test_rotation_vectors_match_scipy_including_near_zero_and_half_turns():
     from scipy.spatial.transform import Rotation
 
-    from refine.optimise.seed import rotation_vectors
+    from refine.robot.kinematics import rotation_vectors
 
     rv = Rotation.random(500, random_state=2).as_rotvec()
     rv[:5] *= 1e-9

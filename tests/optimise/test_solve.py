@@ -100,7 +100,7 @@ def test_singularity_margin_is_kept_at_and_between_waypoints_when_the_demo_graze
 @pytest.fixture(scope="module")
 def iiwa_wave():
     from refine.frames import transform_from_xyz_rpy
-    from refine.robot.model import load_robot
+    from refine.robot.registry import load_robot
 
     robot = load_robot("kuka_iiwa14_r820")
     tcp = transform_from_xyz_rpy([0.0, 0.0, 0.2], [0.0, 0.0, 0.0])

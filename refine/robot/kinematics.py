@@ -1,0 +1,248 @@
+"""refine.robot.kinematics."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
+
+from refine.errors import InputError
+from refine.robot.model import Robot
+
+Array = NDArray[np.float64]
+
+
+NULLSPACE_GAIN = 0.05
+"""Step toward mid-range per IK iteration for redundant arms, in the task's null space [rad·rad]."""
+
+
+CONVERGED = 1e-6
+"""Pose error norm [m and rad stacked] under which an IK solution counts as converged."""
+
+
+@dataclass(frozen=True)
+class TcpKinematics:
+    """Numeric TCP kinematics of a robot placed in the world with a tool.
+
+    Attributes:
+        robot: the robot model.
+        base_in_world: T_F_R (4, 4).
+        tcp_in_flange: T_flange_TCP (4, 4).
+    """
+
+    robot: Robot
+    base_in_world: Array
+    tcp_in_flange: Array
+
+    def pose(self, q: Array) -> Array:
+        """T_F_TCP for joints ``q`` [rad], shape (4, 4)."""
+        return self.base_in_world @ self.robot.fk(q) @ self.tcp_in_flange
+
+    def poses(self, qs: Array) -> Array:
+        """T_F_TCP for joint rows ``qs`` (N, n), shape (N, 4, 4)."""
+        return self.base_in_world @ self.robot.fk_many(qs) @ self.tcp_in_flange
+
+    def batch(self, qs: Array) -> tuple[Array, Array, Array]:
+        """TCP positions (M, 3), rotations (M, 3, 3) and Jacobians (M, 6, n) for joint rows ``qs`` (M, n).
+
+        One pass of Pinocchio per row gives the flange's placement with its Jacobian; the change to
+        the base placement and the TCP is done for all rows at once. The Jacobian as :meth:`jacobian`.
+        """
+        qs = np.atleast_2d(np.asarray(qs, dtype=float))
+        robot = self.robot
+        model, data, fid = robot.model, robot.data, robot.flange_id
+        if qs.ndim != 2 or qs.shape[1] != robot.nq:
+            raise InputError(f"qs: expected shape (M, {robot.nq}) [rad], got {qs.shape}")
+        J = np.empty((len(qs), 6, robot.nq))
+        T_bf = np.empty((len(qs), 4, 4))
+        for k, q in enumerate(qs):
+            J[k] = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
+            T_bf[k] = data.oMf[fid].homogeneous
+        T_wf = self.base_in_world @ T_bf
+        R_wb = self.base_in_world[:3, :3]
+        Jv, Jw = R_wb @ J[:, :3], R_wb @ J[:, 3:]
+        r = T_wf[:, :3, :3] @ self.tcp_in_flange[:3, 3]  # flange origin -> TCP, world axes (M, 3)
+        T = T_wf @ self.tcp_in_flange
+        return (
+            T[:, :3, 3],
+            T[:, :3, :3],
+            np.concatenate([Jv - np.cross(r[:, :, None], Jw, axis=1), Jw], axis=1),
+        )
+
+    def jacobians(self, qs: Array) -> Array:
+        """:meth:`jacobian` for joint rows ``qs`` (N, n), shape (N, 6, n) (see :meth:`batch`)."""
+        return self.batch(qs)[2]
+
+    def pose_jacobian(self, q: Array) -> tuple[Array, Array]:
+        """:meth:`pose` (4, 4) and :meth:`jacobian` (6, n) at once: one pass of Pinocchio for both."""
+        robot = self.robot
+        J = pin.computeFrameJacobian(
+            robot.model, robot.data, np.asarray(q, dtype=float), robot.flange_id, pin.LOCAL_WORLD_ALIGNED
+        )
+        T_wf = self.base_in_world @ robot.data.oMf[robot.flange_id].homogeneous
+        R_wb = self.base_in_world[:3, :3]
+        Jv, Jw = R_wb @ J[:3], R_wb @ J[3:]
+        rx, ry, rz = T_wf[:3, :3] @ self.tcp_in_flange[:3, 3]  # flange origin -> TCP, world axes
+        # v_TCP = v_flange + ω × r = v_flange - [r]ₓ ω
+        skew = np.array([[0.0, -rz, ry], [rz, 0.0, -rx], [-ry, rx, 0.0]])
+        return T_wf @ self.tcp_in_flange, np.vstack([Jv - skew @ Jw, Jw])
+
+    def jacobian(self, q: Array) -> Array:
+        """Geometric Jacobian (6, n) of the TCP, world-aligned axes, linear rows first."""
+        R_wb = self.base_in_world[:3, :3]
+        J = self.robot.jacobian(q)
+        Jv, Jw = R_wb @ J[:3], R_wb @ J[3:]
+        T_wf = self.base_in_world @ self.robot.fk(q)
+        r = T_wf[:3, :3] @ self.tcp_in_flange[:3, 3]  # flange origin -> TCP, world axes
+        return np.vstack([Jv - np.cross(r, Jw.T).T, Jw])
+
+
+def pose_error(T: Array, T_target: Array) -> Array:
+    e_p = T_target[:3, 3] - T[:3, 3]
+    e_r = pin.log3(T_target[:3, :3] @ T[:3, :3].T)
+    return np.concatenate([e_p, e_r])
+
+
+def solve_ik(
+    kin: TcpKinematics,
+    T_target: Array,
+    q0: Array,
+    lower: Array,
+    upper: Array,
+    *,
+    max_iterations: int = 100,
+    damping: float = 1e-3,
+    tol: float = CONVERGED,
+    position_only: bool = False,
+) -> tuple[Array, float]:
+    """Damped least-squares IK for one TCP pose, clamped to [lower, upper].
+
+    Args:
+        kin: TCP kinematics.
+        T_target: wanted T_F_TCP (4, 4).
+        q0: start joints [rad], shape (n,).
+        lower: lower joint bounds [rad], shape (n,).
+        upper: upper joint bounds [rad], shape (n,).
+        max_iterations: iteration cap.
+        damping: DLS damping λ [-] (on a Jacobian with rows in m and rad).
+        tol: stop when the pose error norm is below this [m and rad stacked].
+        position_only: solve for the TCP position alone (orientation free).
+
+    Returns:
+        joints [rad] (n,) and the remaining pose error norm (position [m] and angle [rad] stacked).
+    """
+    rows = slice(0, 3) if position_only else slice(0, 6)
+    q = np.clip(np.asarray(q0, dtype=float), lower, upper)
+    T, J = kin.pose_jacobian(q)
+    err = pose_error(T, T_target)[rows]
+    for _ in range(max_iterations):
+        if float(err @ err) < tol * tol:
+            break
+        J = J[rows]
+        JJt_inv = np.linalg.inv(J @ J.T + damping**2 * np.eye(len(err)))
+        dq = J.T @ JJt_inv @ err
+        if J.shape[1] > J.shape[0]:  # redundant: drift toward mid-range in the null space of the task
+            mid, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
+            pull = np.where(np.isfinite(half), (mid - q) / np.where(np.isfinite(half), half, 1.0) ** 2, 0.0)
+            dq += NULLSPACE_GAIN * (pull - J.T @ (JJt_inv @ (J @ pull)))
+        step = float(np.max(np.abs(dq)))
+        if step > 0.3:  # keep steps small so the chain does not jump branches
+            dq *= 0.3 / step
+        q = np.clip(q + dq, lower, upper)
+        T, J = kin.pose_jacobian(q)
+        err = pose_error(T, T_target)[rows]
+    return q, float(np.linalg.norm(err))
+
+
+def solve_ik_batch(
+    kin: TcpKinematics,
+    targets: Array,
+    q0: Array,
+    lower: Array,
+    upper: Array,
+    *,
+    max_iterations: int = 100,
+    damping: float = 1e-3,
+    tol: float = CONVERGED,
+    position_only: bool = False,
+    nullspace_gain: float = NULLSPACE_GAIN,
+) -> tuple[Array, Array]:
+    """:func:`solve_ik` for many independent poses at once, vectorised over them.
+
+    The arguments are :func:`solve_ik`'s, with ``targets`` (M, 4, 4) and ``q0`` (M, n) holding one
+    pose and start per row. A pose whose error stalls (:data:`STALL_ITERATIONS`) is given up before
+    ``max_iterations``. ``nullspace_gain``: a redundant arm's step toward mid-range in the task's
+    null space per iteration [rad·rad]; 0 to keep the start's redundancy (a projection onto the
+    poses that moves the joints the least).
+
+    Returns:
+        joints [rad] (M, n) and the remaining pose error norm per pose (M,).
+    """
+    rows = 3 if position_only else 6
+    q = np.clip(np.array(q0, dtype=float), lower, upper)
+    m, n = q.shape
+    err = np.zeros(m)
+    active = np.arange(m)
+    with np.errstate(invalid="ignore"):  # unbounded (multi-turn) joints have no mid-range
+        mid, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
+    finite = np.isfinite(half)
+    best, last_gain = np.full(m, np.inf), np.zeros(m, dtype=int)
+    for it in range(max_iterations + 1):
+        if not active.size:
+            break
+        p, R, J = kin.batch(q[active])
+        T = targets[active]
+        e = T[:, :3, 3] - p
+        if not position_only:
+            e = np.concatenate([e, rotation_vectors(T[:, :3, :3] @ np.transpose(R, (0, 2, 1)))], axis=1)
+        J = J[:, :rows]
+        norm = np.linalg.norm(e, axis=1)
+        err[active] = norm
+        improved = norm < (1.0 - STALL_FRACTION) * best[active]
+        best[active] = np.where(improved, norm, best[active])
+        last_gain[active] = np.where(improved, it, last_gain[active])
+        stalled = it - last_gain[active] >= STALL_ITERATIONS
+        going = (norm * norm >= tol * tol) & ~stalled
+        if it == max_iterations:
+            break
+        active, J, e = active[going], J[going], e[going]
+        if not active.size:
+            break
+        A = J @ np.transpose(J, (0, 2, 1)) + damping**2 * np.eye(rows)
+        dq = np.einsum("kji,kj->ki", J, np.linalg.solve(A, e[:, :, None])[:, :, 0])
+        if n > rows and nullspace_gain > 0.0:  # redundant: drift toward mid-range in the task's null space
+            pull = np.where(finite, (mid - q[active]) / np.where(finite, half, 1.0) ** 2, 0.0)
+            Jp = np.einsum("kij,kj->ki", J, pull)
+            dq += nullspace_gain * (
+                pull - np.einsum("kji,kj->ki", J, np.linalg.solve(A, Jp[:, :, None])[:, :, 0])
+            )
+        step = np.max(np.abs(dq), axis=1)
+        dq *= np.where(step > 0.3, 0.3 / np.maximum(step, 1e-300), 1.0)[:, None]
+        q[active] = np.clip(q[active] + dq, lower, upper)
+    return q, err
+
+
+STALL_ITERATIONS = 30
+
+
+STALL_FRACTION = 0.01
+"""A pose of :func:`solve_ik_batch` whose error has not fallen by 1 % in 30 iterations is given up
+(a start that leads nowhere, e.g. against a joint limit); its last joints and error are returned."""
+
+
+def rotation_vectors(R: Array) -> Array:
+    """Rotation vectors (M, 3) [rad] of rotation matrices (M, 3, 3): the vectorised ``log3``."""
+    cos = np.clip((np.trace(R, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
+    theta = np.arccos(cos)
+    vee = 0.5 * np.stack([R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], axis=1)
+    sin = np.sin(theta)
+    small = theta < 1e-6
+    scale = np.where(small, 1.0 + theta**2 / 6.0, theta / np.where(small, 1.0, sin))
+    out = vee * scale[:, None]
+    near_pi = theta > np.pi - 1e-3  # the skew part vanishes there: take the axis from R + Rᵀ
+    if near_pi.any():
+        out[near_pi] = Rotation.from_matrix(R[near_pi]).as_rotvec()
+    return out

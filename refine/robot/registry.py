@@ -1,0 +1,140 @@
+"""refine.robot.registry."""
+
+from __future__ import annotations
+
+import functools
+import logging
+import os
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from refine.errors import InputError
+from refine.robot.model import Robot, robot_from_urdf
+from refine.robot.spec import RobotSpec, build_model, read_registry_toml
+from refine.robot.urdf import with_overrides
+
+if TYPE_CHECKING:
+    from refine.settings import RobotSettings
+Array = NDArray[np.float64]
+
+logger = logging.getLogger(__name__)
+
+
+def robots_dir() -> Path:
+    """The robot registry folder: ``$REFINE_ROBOTS_DIR`` if set, else ``robots/`` of the repo."""
+    override = os.environ.get("REFINE_ROBOTS_DIR")
+    return Path(override) if override else Path(__file__).resolve().parents[2] / "robots"
+
+
+def available_robots() -> list[str]:
+    """Sorted names of the robots in :func:`robots_dir` (folders holding a ``robot.toml``)."""
+    root = robots_dir()
+    if not root.is_dir():
+        return []
+    return sorted(p.name for p in root.iterdir() if (p / "robot.toml").is_file())
+
+
+def load_robot(name: str) -> Robot:
+    """Load a robot of the registry by name; cached per registry folder.
+
+    Raises:
+        InputError: if the name is unknown (the message lists the available robots) or the
+            robot's files are inconsistent.
+    """
+    return _load_robot(name, str(robots_dir().resolve()))
+
+
+@functools.cache
+def _load_robot(name: str, root: str) -> Robot:
+    folder = Path(root) / name
+    if not (folder / "robot.toml").is_file():
+        raise InputError(
+            f"unknown robot {name!r}; available robots: {', '.join(available_robots()) or 'none'}"
+        )
+    meta = read_registry_toml(folder / "robot.toml")
+    urdf = (folder / str(meta["urdf"])).resolve()
+    model = build_model(urdf)
+    joint_ids = range(1, model.njoints)
+    acceleration_deg = np.asarray(meta["joint_acceleration_deg_s2"], dtype=float)
+    spec = RobotSpec(
+        name=name,
+        maker=str(meta["maker"]),
+        urdf=urdf,
+        flange_frame=str(meta["flange_frame"]),
+        joint_names=tuple(model.names[j] for j in joint_ids),
+        lower=np.array(model.lowerPositionLimit),
+        upper=np.array(model.upperPositionLimit),
+        velocity=np.array(model.velocityLimit),
+        acceleration=np.radians(acceleration_deg),
+        reach_m=float(meta["reach_m"]),
+        controller=str(meta["controller"]),
+        model=str(meta["model"]),
+        program=str(meta.get("program", "")),
+    )
+    if model.nq != spec.dof:
+        raise InputError(
+            f"robot {name!r}: only 1-DoF joints are supported, but nq = {model.nq} for {spec.dof} joints"
+        )
+    logger.debug("loaded robot %s (%d joints) from %s", name, spec.dof, urdf)
+    return Robot(spec, model)
+
+
+def robot_for(settings: RobotSettings) -> Robot:
+    """The robot of a problem's ``[robot]`` table, with its limit overrides (cached per process)."""
+    if settings.urdf is not None:
+        path = Path(settings.urdf).resolve()
+        stamp = path.stat().st_mtime_ns if path.is_file() else 0
+        return _urdf_robot(
+            str(path),
+            stamp,
+            settings.controller or "",
+            settings.flange_frame,
+            settings.model or None,
+            settings.reach_m,
+            settings.joint_lower_deg,
+            settings.joint_upper_deg,
+            settings.joint_velocity_deg_s,
+        )
+    return _registry_robot(
+        settings.model, settings.joint_lower_deg, settings.joint_upper_deg, settings.joint_velocity_deg_s
+    )
+
+
+@functools.cache
+def _urdf_robot(
+    urdf: str,
+    stamp: int,
+    controller: str,
+    flange_frame: str,
+    name: str | None,
+    reach_m: float | None,
+    lower: tuple[float, ...] | None,
+    upper: tuple[float, ...] | None,
+    velocity: tuple[float, ...] | None,
+) -> Robot:
+    del stamp  # part of the cache key only: an edited URDF is read again
+    return robot_from_urdf(
+        urdf,
+        controller=controller,
+        flange_frame=flange_frame,
+        name=name,
+        reach_m=reach_m,
+        joint_lower_deg=lower,
+        joint_upper_deg=upper,
+        joint_velocity_deg_s=velocity,
+    )
+
+
+@functools.cache
+def _registry_robot(
+    name: str,
+    lower: tuple[float, ...] | None,
+    upper: tuple[float, ...] | None,
+    velocity: tuple[float, ...] | None,
+) -> Robot:
+    robot = load_robot(name)
+    spec = with_overrides(robot.spec, lower, upper, velocity, None)
+    return robot if spec is robot.spec else Robot(spec, robot.model)
