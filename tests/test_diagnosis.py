@@ -14,7 +14,8 @@ from refine.cli import exit_status, main
 from refine.collision import CollisionModel
 from refine.frames import make_transform
 from refine.optimise.clearance import ClearanceSource
-from refine.optimise.diagnosis import Diagnoser, _reach_model, closest_pair_text, reach_tilts
+from refine.optimise.diagnosis import Diagnoser, closest_pair_text, reach_tilts
+from refine.optimise.reach import reach_model
 from refine.robot.kinematics import TcpKinematics
 from refine.robot.registry import load_robot
 from refine.settings import Shape
@@ -70,16 +71,16 @@ def test_the_clearance_line_says_when_the_closest_pair_is_a_self_pair(tool_in_fo
 def test_the_reach_model_matches_the_data_sheet_arm_lengths():
     """Wrist-centre range from the shoulder: iiwa 14 0.42 + 0.40 m links (axis 4 within 120 - 2 deg),
     IRB 4600-60/2.05 upper arm 0.90 m and forearm 0.96 m with the 0.175 m elbow offset."""
-    iiwa = _reach_model(load_robot("kuka_iiwa14_r820"), math.radians(2.0))
+    iiwa = reach_model(load_robot("kuka_iiwa14_r820"), math.radians(2.0))
     assert iiwa.spherical
     assert iiwa.r_max_m == pytest.approx(0.82, abs=1e-4)
     bent = math.radians(180.0 - 118.0)  # the angle between the links at the elbow
     assert iiwa.r_min_m == pytest.approx(
         math.sqrt(0.42**2 + 0.40**2 - 2 * 0.42 * 0.40 * math.cos(bent)), abs=1e-3
     )
-    irb = _reach_model(load_robot("abb_irb4600_60_205"), math.radians(2.0))
+    irb = reach_model(load_robot("abb_irb4600_60_205"), math.radians(2.0))
     assert irb.spherical and irb.r_max_m == pytest.approx(0.90 + math.hypot(0.175, 0.96), abs=1e-4)
-    assert not _reach_model(load_robot("ur10e"), math.radians(2.0)).spherical  # offset wrist
+    assert not reach_model(load_robot("ur10e"), math.radians(2.0)).spherical  # offset wrist
 
 
 def test_the_tilt_that_brings_the_wrist_centre_into_reach_matches_the_geometry():

@@ -21,8 +21,8 @@ from scipy.spatial.transform import Rotation
 
 from refine.errors import InputError
 from refine.export.result_json import result_dict
+from refine.optimise.moves import Placement, moved_path, moved_problem
 from refine.problem import load_problem
-from refine.run.placement import Placement, moved_path, moved_problem
 from refine.run.stages import fused_path, solve_problem
 from refine.settings import PlacementSettings
 
@@ -409,7 +409,7 @@ def _fcl_distance(name: str, too_far_m: float, transform: np.ndarray, box: dict)
 
 
 def test_the_support_is_the_table_beneath_or_else_the_world_z_plane(tmp_path):
-    from refine.run.placement import support_plane
+    from refine.optimise.moves import support_plane
 
     on_table = support_plane(load_problem(_table_cell(tmp_path, 0.10)))
     assert on_table.support == "table"
@@ -429,7 +429,7 @@ def test_the_support_is_the_table_beneath_or_else_the_world_z_plane(tmp_path):
 
 
 def test_a_plane_move_has_no_component_along_the_normal():
-    from refine.run.placement import SupportPlane, move_basis
+    from refine.optimise.moves import SupportPlane, move_basis
 
     normal = np.array([0.2, -0.3, 0.9]) / np.linalg.norm([0.2, -0.3, 0.9])
     E_t, E_r = move_basis(SupportPlane(normal, np.zeros(3), "tilted"), "plane")

@@ -69,7 +69,7 @@ def kin():
     return TcpKinematics(robot, np.eye(4), make_transform(None, [0.0, 0.0, 0.15]))
 
 
-def _targets(n=12):
+def problem_targets(n=12):
     path = wave_path(n, length_m=0.4, centre=(0.7, 0.0, 0.3))
     return make_transform(path.rotations, path.positions)
 
@@ -77,7 +77,7 @@ def _targets(n=12):
 def test_reachability_report_reaches_a_wave(kin):
     margin = math.radians(2.0)
     lower, upper = kin.robot.spec.lower + margin, kin.robot.spec.upper - margin
-    targets = _targets()
+    targets = problem_targets()
     report = reachability_report(
         kin,
         targets,
@@ -105,7 +105,7 @@ def test_reachability_report_clearance_to_a_box(kin):
     )
     report = reachability_report(
         kin,
-        _targets(6),
+        problem_targets(6),
         joint_margin_rad=margin,
         starts=start_candidates(lower, upper, None),
         collision=model,

@@ -46,7 +46,7 @@ class ProgramPass:
         name: pass name (``"pass 1"``, ``"layer 2 pass 1"``).
         trajectory: the timed path.
         repairs: the segments a repair gave extra orientation slack, as
-            :class:`refine.optimise.solve.Repair` (waypoint indices of this pass).
+            :class:`refine.optimise.outcome.Repair` (waypoint indices of this pass).
     """
 
     name: str

@@ -10,21 +10,21 @@ entries are what ``result.json`` reports under ``diagnosis`` (schema in
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-import pinocchio as pin
-import scipy.optimize
 from numpy.typing import NDArray
 
+from refine.optimise.reach import _rotations_about, reach_model
 from refine.optimise.verify import runs, singularity_measures
 from refine.paths import FusedPath
 from refine.problem import Tolerances
 from refine.robot.kinematics import TcpKinematics, solve_ik
-from refine.robot.model import Robot
+
+Array = NDArray[np.float64]
+
 
 Array = NDArray[np.float64]
 
@@ -55,199 +55,6 @@ def closest_pair_text(clearance: Any, cell_names: set[str], margin_m: float, sel
 
 
 # ---- reach -------------------------------------------------------------------------------------
-
-WRIST_TOLERANCE_M = 1e-4
-"""The last three joint axes meet within this distance for the wrist to count as spherical [m]."""
-
-
-@dataclass(frozen=True)
-class ReachModel:
-    """Where a robot can put its wrist centre (or TCP), measured from its shoulder.
-
-    For a robot whose last three axes meet (a spherical wrist), the wrist centre's distance from the
-    shoulder depends only on the arm joints (the elbow), so a pose is out of reach, whatever the
-    arm does, when that distance leaves ``[r_min_m, r_max_m]``. The shoulder is the point of axis 2
-    closest to axis 1; it turns with axis 1.
-
-    Attributes:
-        spherical: the last three axes meet; else the TCP stands in for the wrist centre.
-        point_in_flange: the wrist centre in the flange frame [m], (3,) (zeros when not spherical).
-        axis1: (unit direction, point) of axis 1 in the robot base frame.
-        shoulder_ref: the shoulder point with axis 1 at 0, base frame [m], (3,).
-        wrist_ref: the wrist centre with axis 1 at 0 (its azimuth sets the arm plane), base frame [m].
-        r_min_m, r_max_m: the range of the wrist-centre distance from the shoulder inside the
-            joint limits less the margin [m].
-    """
-
-    spherical: bool
-    point_in_flange: Array
-    axis1: tuple[Array, Array]
-    shoulder_ref: Array
-    wrist_ref: Array
-    r_min_m: float
-    r_max_m: float
-
-    def _azimuth(self, x: Array) -> Array:
-        w, p = self.axis1
-        e1 = np.cross(w, [1.0, 0.0, 0.0] if abs(w[0]) < 0.9 else [0.0, 1.0, 0.0])
-        e1 /= np.linalg.norm(e1)
-        e2 = np.cross(w, e1)
-        d = np.atleast_2d(x) - p
-        return np.arctan2(d @ e2, d @ e1)
-
-    def shoulders(self, points: Array) -> tuple[Array, Array]:
-        """The shoulder for each base-frame point (N, 3), arm turned towards it and away from it."""
-        w, p = self.axis1
-        theta = self._azimuth(points) - self._azimuth(self.wrist_ref)
-        out = []
-        for t in (theta, theta + math.pi):
-            R = _rotations_about(w, t)
-            out.append(p + np.einsum("nij,j->ni", R, self.shoulder_ref - p))
-        return out[0], out[1]
-
-    def distance(self, points: Array) -> Array:
-        """Distance from the shoulder [m] for base-frame points (N, 3).
-
-        The arm is turned towards the point, or away from it when that is closer to the range.
-        """
-        front, back = self.shoulders(points)
-        d = [np.linalg.norm(points - s, axis=1) for s in (front, back)]
-        out = [np.maximum(self.r_min_m - x, 0.0) + np.maximum(x - self.r_max_m, 0.0) for x in d]
-        return np.where(out[0] <= out[1], d[0], d[1])
-
-
-def _rotations_about(w: Array, angles: Array) -> Array:
-    """Rotation matrices (N, 3, 3) about the unit axis ``w`` by ``angles`` [rad]."""
-    K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
-    a = np.asarray(angles, dtype=float)[:, None, None]
-    return np.eye(3) + np.sin(a) * K + (1.0 - np.cos(a)) * (K @ K)
-
-
-def _axes(robot: Robot, q: Array) -> list[tuple[Array, Array]]:
-    """Every joint's axis (unit direction, a point on it) in the base frame at joints ``q``."""
-    model, data = robot.model, robot.model.createData()
-    pin.computeJointJacobians(model, data, q)
-    out = []
-    for j in range(1, model.njoints):
-        v, w = data.J[:3, model.joints[j].idx_v], data.J[3:, model.joints[j].idx_v]
-        w = w / np.linalg.norm(w)
-        out.append((w, np.cross(w, v)))  # v = p x w for p on the axis (WORLD convention)
-    return out
-
-
-def _meeting_point(lines: list[tuple[Array, Array]]) -> tuple[Array, float]:
-    """The point closest to every line (least squares) and its largest distance to one [m]."""
-    A = sum(np.eye(3) - np.outer(w, w) for w, _ in lines)
-    b = sum((np.eye(3) - np.outer(w, w)) @ p for w, p in lines)
-    x = np.linalg.lstsq(A, b, rcond=None)[0]
-    return x, max(float(np.linalg.norm((np.eye(3) - np.outer(w, w)) @ (x - p))) for w, p in lines)
-
-
-@functools.lru_cache(maxsize=16)
-def _reach_model(robot: Robot, joint_margin_rad: float, samples: int = 3000) -> ReachModel:
-    n = robot.nq
-    lower, upper = robot.spec.lower + joint_margin_rad, robot.spec.upper - joint_margin_rad
-    rng = np.random.default_rng(1)
-    q_ref = 0.5 * (np.clip(lower, -math.pi, math.pi) + np.clip(upper, -math.pi, math.pi))
-    q_ref[0] = 0.0 if lower[0] <= 0.0 <= upper[0] else q_ref[0]
-    axes = _axes(robot, q_ref + 0.3)  # away from aligned axes
-    wc, spread = _meeting_point(axes[-3:]) if n >= 6 else (np.zeros(3), np.inf)
-    spherical = spread < WRIST_TOLERANCE_M
-    flange = robot.fk(q_ref + 0.3)
-    point_in_flange = (np.linalg.inv(flange) @ np.append(wc, 1.0))[:3] if spherical else np.zeros(3)
-    axes = _axes(robot, q_ref)
-    (w1, p1), (w2, p2) = axes[0], axes[1]
-    # the point of axis 2 closest to axis 1
-    c = np.cross(w1, w2)
-    if np.linalg.norm(c) < 1e-9:
-        shoulder = p2
-    else:
-        t = np.dot(np.cross(p1 - p2, w1), c) / np.dot(c, c)
-        shoulder = p2 + t * w2
-
-    def point(q: Array) -> Array:
-        T = robot.fk(q)
-        return (T @ np.append(point_in_flange, 1.0))[:3]
-
-    def distance_from_shoulder(q: Array) -> float:
-        # the shoulder turns with axis 1: measured with axis 1 at q_ref's value
-        qq = np.array(q, dtype=float)
-        qq[0] = q_ref[0]
-        return float(np.linalg.norm(point(qq) - shoulder))
-
-    arm = slice(1, n - 3) if spherical else slice(1, n)
-    lo, hi = np.clip(lower, -math.pi, math.pi), np.clip(upper, -math.pi, math.pi)
-    qs = np.tile(q_ref, (samples, 1))
-    qs[:, arm] = lo[arm] + rng.random((samples, len(range(n)[arm]))) * (hi - lo)[arm]
-    d = np.array([distance_from_shoulder(q) for q in qs])
-    r = []
-    for sign, k in ((1.0, int(np.argmin(d))), (-1.0, int(np.argmax(d)))):
-        res = scipy.optimize.minimize(
-            lambda x, s=sign: (
-                s * distance_from_shoulder(np.concatenate([q_ref[: arm.start], x, q_ref[arm.stop :]]))
-            ),
-            qs[k, arm],
-            bounds=list(zip(lo[arm], hi[arm], strict=True)),
-            method="L-BFGS-B",
-        )
-        r.append(min(sign * d[k], float(res.fun)) * sign)
-    return ReachModel(spherical, point_in_flange, (w1, p1), shoulder, point(q_ref), r[0], r[1])
-
-
-def reach_gap(kin: TcpKinematics, positions: Array, joint_margin_deg: float) -> Array:
-    """How far each TCP position (N, 3) in {F} is out of reach at any tool orientation [m].
-
-    The wrist centre lies on a sphere of fixed radius around the TCP; the gap is how far the closest
-    (or farthest) point of that sphere stays outside the wrist centre's range from the shoulder.
-    Zeros for a robot without a spherical wrist (nothing certain to say).
-    """
-    reach = _reach_model(kin.robot, math.radians(joint_margin_deg))
-    out = np.zeros(len(positions))
-    if not reach.spherical:
-        return out
-    T_inv = np.linalg.inv(kin.base_in_world)
-    p = positions @ T_inv[:3, :3].T + T_inv[:3, 3]
-    L = float(np.linalg.norm((np.linalg.inv(kin.tcp_in_flange) @ np.append(reach.point_in_flange, 1.0))[:3]))
-    front, back = reach.shoulders(p)
-    d = np.minimum(np.linalg.norm(p - front, axis=1), np.linalg.norm(p - back, axis=1))
-    return np.maximum(np.maximum(d - L - reach.r_max_m, reach.r_min_m - d - L), 0.0)
-
-
-def reach_tilts(
-    kin: TcpKinematics, fused: FusedPath, tolerances: Tolerances, axisymmetric: bool, inset_m: float = 0.0
-) -> tuple[Array, Array]:
-    """The tilt of the tool each demonstrated pose needs for its wrist centre to be in reach.
-
-    Args:
-        kin: TCP kinematics.
-        fused: the fused path (demonstrated poses).
-        tolerances: the strict tolerances (joint margin, cone).
-        axisymmetric: only the tool axis counts.
-        inset_m: narrow the reachable range by this much at both ends [m] (keeps the elbow off
-            its stretched singularity).
-
-    Returns:
-        tilt per waypoint [deg] (0: in reach as demonstrated, inf: no tilt brings it in; all
-        zeros for a robot without a spherical wrist), and the demonstrated rotations tilted that
-        much (N, 3, 3).
-    """
-    d = Diagnoser(kin, fused, tolerances, axisymmetric)
-    tilts = np.zeros(len(fused.s))
-    rotations = np.array(fused.rotations, dtype=float)
-    if not d.reach.spherical:
-        return tilts, rotations
-    # the wrist centre of every demonstrated pose at once; only the poses out of range need a tilt
-    T_base = np.linalg.inv(kin.base_in_world)
-    R_base = T_base[:3, :3] @ np.asarray(fused.rotations, dtype=float)
-    p_base = np.asarray(fused.positions, dtype=float) @ T_base[:3, :3].T + T_base[:3, 3]
-    v = (np.linalg.inv(kin.tcp_in_flange) @ np.append(d.reach.point_in_flange, 1.0))[:3]
-    distance = d.reach.distance(p_base + R_base @ v)
-    lo, hi = d.reach.r_min_m + inset_m, d.reach.r_max_m - inset_m
-    for k in np.flatnonzero((distance < lo) | (distance > hi)):
-        T = np.eye(4)
-        T[:3, :3], T[:3, 3] = fused.rotations[k], fused.positions[k]
-        _, tilts[k], _, _, rotations[k] = d.reach_at(T, inset_m)
-    return tilts, rotations
 
 
 # ---- findings ----------------------------------------------------------------------------------
@@ -397,7 +204,7 @@ class Diagnoser:
         spec = self.kin.robot.spec
         self.margin = math.radians(self.tolerances.joint_margin_deg)
         self.lower, self.upper = spec.lower + self.margin, spec.upper - self.margin
-        self.reach = _reach_model(self.kin.robot, self.margin)
+        self.reach = reach_model(self.kin.robot, self.margin)
         self.cell = set() if self.model is None else {b.name for b in self.model.bodies if b.kind == "cell"}
 
     # -- the demonstrated pose and configuration -------------------------------------------------
@@ -698,3 +505,59 @@ class Diagnoser:
             suggestion=f"the demonstrated pose is out of reach inside the joint limits: the TCP misses it by "
             f"{miss:.4f} m; move the part closer to the robot",
         )
+
+
+def reach_gap(kin: TcpKinematics, positions: Array, joint_margin_deg: float) -> Array:
+    """How far each TCP position (N, 3) in {F} is out of reach at any tool orientation [m].
+
+    The wrist centre lies on a sphere of fixed radius around the TCP; the gap is how far the closest
+    (or farthest) point of that sphere stays outside the wrist centre's range from the shoulder.
+    Zeros for a robot without a spherical wrist (nothing certain to say).
+    """
+    reach = reach_model(kin.robot, math.radians(joint_margin_deg))
+    out = np.zeros(len(positions))
+    if not reach.spherical:
+        return out
+    T_inv = np.linalg.inv(kin.base_in_world)
+    p = positions @ T_inv[:3, :3].T + T_inv[:3, 3]
+    L = float(np.linalg.norm((np.linalg.inv(kin.tcp_in_flange) @ np.append(reach.point_in_flange, 1.0))[:3]))
+    front, back = reach.shoulders(p)
+    d = np.minimum(np.linalg.norm(p - front, axis=1), np.linalg.norm(p - back, axis=1))
+    return np.maximum(np.maximum(d - L - reach.r_max_m, reach.r_min_m - d - L), 0.0)
+
+
+def reach_tilts(
+    kin: TcpKinematics, fused: FusedPath, tolerances: Tolerances, axisymmetric: bool, inset_m: float = 0.0
+) -> tuple[Array, Array]:
+    """The tilt of the tool each demonstrated pose needs for its wrist centre to be in reach.
+
+    Args:
+        kin: TCP kinematics.
+        fused: the fused path (demonstrated poses).
+        tolerances: the strict tolerances (joint margin, cone).
+        axisymmetric: only the tool axis counts.
+        inset_m: narrow the reachable range by this much at both ends [m] (keeps the elbow off
+            its stretched singularity).
+
+    Returns:
+        tilt per waypoint [deg] (0: in reach as demonstrated, inf: no tilt brings it in; all
+        zeros for a robot without a spherical wrist), and the demonstrated rotations tilted that
+        much (N, 3, 3).
+    """
+    d = Diagnoser(kin, fused, tolerances, axisymmetric)
+    tilts = np.zeros(len(fused.s))
+    rotations = np.array(fused.rotations, dtype=float)
+    if not d.reach.spherical:
+        return tilts, rotations
+    # the wrist centre of every demonstrated pose at once; only the poses out of range need a tilt
+    T_base = np.linalg.inv(kin.base_in_world)
+    R_base = T_base[:3, :3] @ np.asarray(fused.rotations, dtype=float)
+    p_base = np.asarray(fused.positions, dtype=float) @ T_base[:3, :3].T + T_base[:3, 3]
+    v = (np.linalg.inv(kin.tcp_in_flange) @ np.append(d.reach.point_in_flange, 1.0))[:3]
+    distance = d.reach.distance(p_base + R_base @ v)
+    lo, hi = d.reach.r_min_m + inset_m, d.reach.r_max_m - inset_m
+    for k in np.flatnonzero((distance < lo) | (distance > hi)):
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = fused.rotations[k], fused.positions[k]
+        _, tilts[k], _, _, rotations[k] = d.reach_at(T, inset_m)
+    return tilts, rotations

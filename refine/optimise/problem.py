@@ -24,7 +24,7 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, Protocol
 
 import casadi as ca
 import numpy as np
@@ -37,13 +37,19 @@ from refine.optimise.derivatives import (
     smoothness_matrix,
     waypoint_kernels,
 )
-from refine.optimise.kinematics import fk_function, jacobian_function
 from refine.optimise.stagewise import FATROP_PREFIX, StagewiseSolver, check_size, fatrop_options, stage_rows
 from refine.optimise.threads import limit_solver_threads
+from refine.optimise.verify import (
+    Violation,
+)
+from refine.optimise.waypoint import ROW_NAMES, singularity_function, waypoint_function
 from refine.paths import FusedPath
 from refine.problem import Tolerances
 from refine.robot.model import Robot
 from refine.settings import check_solver
+
+Array = NDArray[np.float64]
+
 
 Array = NDArray[np.float64]
 
@@ -208,48 +214,6 @@ the scaling pass costs more than the factorisation at thousands of waypoints (6,
 2.3 s -> 1.1 s, same iterations). MUMPS orders the banded KKT matrix with QAMD (pivot order 6)
 rather than letting it choose: its automatic choice took 2.5 times as long at 6,400 waypoints."""
 
-ROW_NAMES = ("position x", "position y", "position z", "orientation cone")
-
-
-def waypoint_function(
-    robot: Robot, base_in_world: Array, tcp_in_flange: Array, axisymmetric: bool
-) -> ca.Function:
-    """Per-waypoint constraints ``g`` (4,) and orientation cost for joints ``q``.
-
-    Inputs: ``q`` (n,), ``p_ref`` (3,) CAD point [m], ``R_demo`` (9,) demonstrated rotation
-    (column-major). Outputs: ``g`` = [TCP position - p_ref (3), cos θ] and ``cost`` = 1 - cos θ,
-    θ the angle between the reached and demonstrated orientations (between the tool axes for an
-    axisymmetric tool).
-    """
-    fk = fk_function(robot, base_in_world, tcp_in_flange)
-    q = ca.SX.sym("q", robot.nq)
-    p_ref = ca.SX.sym("p_ref", 3)
-    r_demo = ca.SX.sym("R_demo", 9)
-    R_demo = ca.reshape(r_demo, 3, 3)
-    p, R = fk(q)
-    if axisymmetric:
-        cos_theta = ca.dot(R[:, 2], R_demo[:, 2])
-    else:
-        cos_theta = (ca.trace(ca.mtimes(R_demo.T, R)) - 1.0) / 2.0
-    g = ca.vertcat(p - p_ref, cos_theta)
-    return ca.Function(
-        "waypoint", [q, p_ref, r_demo], [g, 1.0 - cos_theta], ["q", "p_ref", "R_demo"], ["g", "cost"]
-    )
-
-
-def singularity_function(robot: Robot, base_in_world: Array, tcp_in_flange: Array) -> ca.Function:
-    """Scaled manipulability ``sqrt(det(Js Jsᵀ))`` of joints ``q`` [-].
-
-    ``Js`` is the TCP Jacobian with its linear rows divided by the robot's reach, so both halves are
-    unitless and the measure compares across robots.
-    """
-    jac = jacobian_function(robot, base_in_world, tcp_in_flange)
-    q = ca.SX.sym("q", robot.nq)
-    J = jac(q)
-    Js = ca.vertcat(J[:3, :] / robot.spec.reach_m, J[3:, :])
-    w = ca.sqrt(ca.det(ca.mtimes(Js, Js.T)) + 1e-12)
-    return ca.Function("singularity", [q], [w], ["q"], ["w"])
-
 
 @dataclass(frozen=True)
 class LinearRow:
@@ -340,7 +304,7 @@ def build_refinement(
             step far inside its bound does not change the answer, and the rows are most of the
             problem's rows, so :func:`refine.optimise.solve.solve_refinement` solves a problem built
             with only some of them by adding those where the seed or an answer comes near the bound
-            (:data:`refine.optimise.solve.STEP_NEAR`) and solving again until none is left out.
+            (:data:`refine.optimise.rounds.STEP_NEAR`) and solving again until none is left out.
         solver: ``"ipopt"`` (default: the faster by measurement, benchmarks/SPEED.md) or ``"fatrop"``
             (the same problem posed stage by stage for CasADi's structure-exploiting solver:
             :mod:`refine.optimise.stagewise`; at most
@@ -616,3 +580,19 @@ def _check_active(active: ActiveSet, N: int, n: int) -> None:
             raise InputError(
                 f"linear row {r.label!r}: k = {r.k}, f = {r.f}, gradient shape {np.shape(r.gradient)}"
             )
+
+
+class ConstraintSource(Protocol):
+    """Adds linearised rows where a constraint binds and checks the final path (e.g. collision)."""
+
+    def rows(self, problem: RefinementNLP, q: Array) -> tuple[LinearRow, ...]:
+        """New rows for the close pairs of joints ``q`` (N, n) not yet in ``problem.active``."""
+        ...
+
+    def violations(self, problem: RefinementNLP, q: Array) -> list[Violation]:
+        """Runs of waypoints/segments where the dense check finds the constraint broken."""
+        ...
+
+    def clearance(self, q: Array) -> object:
+        """The dense check's figures for joints ``q`` (N, n), for reports."""
+        ...

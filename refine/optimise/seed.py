@@ -15,7 +15,17 @@ import logging
 import numpy as np
 from numpy.typing import NDArray
 
+from refine.optimise.diagnosis import reach_gap
+from refine.optimise.outcome import problem_bounds, problem_kinematics, problem_targets
+from refine.optimise.problem import RefinementNLP
+from refine.optimise.verify import (
+    Violation,
+    runs,
+)
 from refine.robot.kinematics import CONVERGED, TcpKinematics, pose_error, solve_ik, solve_ik_batch
+
+Array = NDArray[np.float64]
+
 
 log = logging.getLogger(__name__)
 
@@ -275,3 +285,55 @@ def reach_shortfall(
                 best = (err, q)
         out[k], previous = best[0], [best[1]]
     return np.where(out < 1e-6, 0.0, out)
+
+
+REACH_TOLERANCE_M = 1e-3
+"""A CAD point the best position-only IK misses by more than this is reported out of reach [m]."""
+
+
+def initial_guess(problem: RefinementNLP, home: Array | None = None, rotations: Array | None = None) -> Array:
+    """IK seed (N, n) [rad] chained along the path, from the best of several first-waypoint starts.
+
+    ``rotations`` (N, 3, 3) replaces the demonstrated tool orientations as IK targets (e.g. tilted
+    into reach, :func:`refine.optimise.diagnosis.reach_tilts`).
+    """
+    lower, upper = problem_bounds(problem)
+    starts = start_candidates(lower, upper, home)
+    targets = problem_targets(problem)
+    if rotations is not None:
+        targets[:, :3, :3] = rotations
+    qs, _ = ik_chain(problem_kinematics(problem), targets, lower, upper, starts, prefer_first=home is not None)
+    return qs
+
+
+def out_of_reach(problem: RefinementNLP, q_seed: Array, home: Array | None) -> list[Violation]:
+    """Runs of waypoints whose CAD point no configuration inside the limits reaches."""
+    kin = problem_kinematics(problem)
+    missed = np.linalg.norm(kin.poses(q_seed)[:, :3, 3] - problem.fused.positions, axis=1) > REACH_TOLERANCE_M
+    if not missed.any():
+        return []
+    lower, upper = problem_bounds(problem)
+    shortfall = np.zeros(problem.n_waypoints)
+    # points the wrist centre cannot bring into the arm's range at any orientation are out of reach
+    # for certain (refine.optimise.reach.ReachModel); IK measures the rest
+    certain = reach_gap(kin, problem.fused.positions, problem.tolerances.joint_margin_deg)
+    sure = missed & (certain > REACH_TOLERANCE_M)  # a lower bound: the wrist joints' limits ignored
+    shortfall[sure] = certain[sure]
+    idx = np.flatnonzero(missed & ~sure)
+    if idx.size:
+        starts = start_candidates(lower, upper, home)
+        shortfall[idx] = reach_shortfall(kin, problem_targets(problem)[idx], lower, upper, starts)
+    s = problem.fused.s
+    return [
+        Violation(
+            a,
+            b,
+            float(s[a]),
+            float(s[b]),
+            "out of reach",
+            float(shortfall[a : b + 1].max()),
+            "m",
+            REACH_TOLERANCE_M,
+        )
+        for a, b in runs(shortfall > REACH_TOLERANCE_M)
+    ]

@@ -60,8 +60,8 @@ initial barrier parameter and bound push, because the first solve starts from th
 next to the answer (fatrop has no warm-start option of its own). Iterations on the generated
 IRB 4600 wave at 100 waypoints, same answer to 4e-8 rad: 54 with fatrop's ``mu_init`` of 0.1,
 22 with 1e-6, 9 with 1e-8, 4 with 1e-10. Rounds after the first and the repair start further
-from their answer and use 1e-6 (:data:`refine.optimise.solve.WARM_START_OPTIONS`,
-:data:`refine.optimise.solve.ELASTIC_OPTIONS`): with 1e-10 there, the repair of ``wrist_flip``
+from their answer and use 1e-6 (:data:`refine.optimise.rounds.WARM_START_OPTIONS`,
+:data:`refine.optimise.rounds.ELASTIC_OPTIONS`): with 1e-10 there, the repair of ``wrist_flip``
 took 436 iterations instead of 155."""
 
 FATROP_BOUND_RELAX = 1e-8

@@ -38,6 +38,15 @@ _LAZY = {
     "solve_ik": "refine.robot.kinematics",
 }
 
-__all__ = sorted(_LAZY)
+__all__ = [
+    "Robot",
+    "RobotSpec",
+    "TcpKinematics",
+    "available_robots",
+    "load_robot",
+    "robot_for",
+    "robot_from_urdf",
+    "solve_ik",
+]
 
 __getattr__, __dir__ = lazy_names("refine.robot", _LAZY, globals())

@@ -49,16 +49,27 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import math
 import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
-from refine.frames import fixed_xyz_from_matrix, matrix_from_rotvec
+from refine.optimise.moves import (
+    CLEARANCE_ROUNDS,
+    ClearanceRow,
+    ObjectGap,
+    Placement,
+    SupportPlane,
+    cell_gaps,
+    clearance_rows,
+    moved_path,
+    moved_problem,
+    pose_json,
+    support_plane,
+)
+from refine.optimise.placement import SLACK_TOLERANCE_DEG, ZERO_MOVE, SearchResult, search_placement
 from refine.paths import FusedPath
 from refine.settings import PlacementSettings
 
@@ -71,105 +82,9 @@ log = logging.getLogger(__name__)
 
 Array = NDArray[np.float64]
 
-INSET_DEG = 0.05
-"""The placement search keeps the orientation cone and the joint limits this far inside their
-bounds [deg], so that the strict re-solve of the moved problem does not start on a bound's edge."""
-
-SINGULARITY_INSET = 1.05
-"""The placement search bounds the singularity measure by this factor times the margin."""
-
-PATH_COST_WEIGHT = 1e-3
-"""Weight of the usual path cost (orientation deviation in deg², joint smoothness) against the
-squared placement norm: it settles the joints (a redundant arm's elbow) without moving the optimum
-of the placement by more than about 1e-3 of its bounds."""
-
-ELASTIC_WEIGHT = 1e4
-"""Cost per unit of elastic cone slack (cosine units) in the placement search: 0.1 deg beyond a
-3 deg cone costs about 0.9, 1 deg about 9, against a squared norm of at most 2 for the largest
-move, so slack is used only where no move within the bounds avoids it (an exact L1 penalty)."""
-
-ZERO_MOVE = 1e-3
-"""A move whose norm (against the bounds) is below this is no move at all: it is within what the
-small path cost (:data:`PATH_COST_WEIGHT`) may pull the answer by (0.2 mm and 0.015 deg of bounds
-of 0.2 m and 15 deg)."""
-
-SLACK_TOLERANCE_DEG = 1e-3
-"""A placement search answer whose elastic slack stays below this everywhere is a feasible move [deg]."""
-
-SKIP_SINGULARITY_CURVATURE = True
-"""Leave the singularity rows' second derivatives out of the Hessian IPOPT is given: they cost
-about 30 times the rest of it (a 6x6 determinant differentiated twice at every waypoint)."""
 
 ENLARGE = (1.0, 1.1, 1.25, 1.5)
 """Factors by which the move found is scaled, in turn, until the strict pipeline verifies it."""
-
-
-@dataclass(frozen=True)
-class Placement:
-    """A rigid move of the workpiece in the world frame {F}: ``x' = c + R (x - c) + t``.
-
-    Attributes:
-        centre_m: ``c``, the point the workpiece turns about (the CAD path's centroid) [m], (3,).
-        translation_m: ``t``, the shift of ``c`` [m], (3,), in {F}.
-        rotvec_rad: the turn ``R`` as a rotation vector (axis times angle) [rad], (3,), in {F}.
-    """
-
-    centre_m: Array
-    translation_m: Array
-    rotvec_rad: Array
-
-    @property
-    def rotation(self) -> Array:
-        """The turn R (3, 3)."""
-        return matrix_from_rotvec(self.rotvec_rad)
-
-    @property
-    def angle_deg(self) -> float:
-        """The angle of the turn [deg]."""
-        return math.degrees(float(np.linalg.norm(self.rotvec_rad)))
-
-    @property
-    def distance_m(self) -> float:
-        """The length of the shift [m]."""
-        return float(np.linalg.norm(self.translation_m))
-
-    @property
-    def transform(self) -> Array:
-        """The move as a world transform Δ (4, 4): a point x of the workpiece goes to Δ·x."""
-        T = np.eye(4)
-        R = self.rotation
-        T[:3, :3] = R
-        T[:3, 3] = self.centre_m + self.translation_m - R @ self.centre_m
-        return T
-
-    def norm(self, bounds: PlacementSettings) -> float:
-        """``sqrt((|t| / translate_m)² + (angle / rotate_deg)²)``; a part with a zero bound must be 0."""
-        terms = []
-        for value, bound in ((self.distance_m, bounds.translate_m), (self.angle_deg, bounds.rotate_deg)):
-            terms.append(value / bound if bound > 0 else (0.0 if value < 1e-12 else math.inf))
-        return math.hypot(*terms)
-
-    def scaled(self, factor: float) -> Placement:
-        """The same move scaled by ``factor`` (shift and turn angle alike)."""
-        return Placement(self.centre_m, factor * self.translation_m, factor * self.rotvec_rad)
-
-    def as_json(self) -> dict[str, Any]:
-        """The move's figures for ``result.json`` (world frame {F})."""
-        angle = self.angle_deg
-        axis = self.rotvec_rad / np.linalg.norm(self.rotvec_rad) if angle > 0 else np.array([0.0, 0.0, 1.0])
-        return {
-            "frame": "world",
-            "about_m": [float(v) for v in self.centre_m],
-            "translation_m": [float(v) for v in self.translation_m],
-            "distance_m": self.distance_m,
-            "rotation": {
-                "axis": [float(v) for v in axis],
-                "angle_deg": angle,
-                "rotvec_deg": [math.degrees(float(v)) for v in self.rotvec_rad],
-                "rpy_deg": [float(v) for v in fixed_xyz_from_matrix(self.rotation)],
-            },
-            "transform_in_world": self.transform.tolist(),
-        }
 
 
 @dataclass(frozen=True)
@@ -225,7 +140,7 @@ class PlacementRepair:
             + (
                 ""
                 if self.support is None or self.bounds.free == "all"
-                else f"; in {_plane_text(self.support)}"
+                else f"; in {plane_text(self.support)}"
             )
             + ")"
         )
@@ -264,7 +179,7 @@ class PlacementRepair:
             "transform_in_world": None if move is None else move["transform_in_world"],
             "norm": None if self.placement is None else self.placement.norm(self.bounds),
             "scale": self.scale,
-            "moved_frames": {name: _pose_json(T) for name, T in self.moved_frames.items()},
+            "moved_frames": {name: pose_json(T) for name, T in self.moved_frames.items()},
             "moved_objects": list(self.moved_objects),
             "strict_status": None if verified is None else verified.status,
             "metrics": None if verified is None else _aggregate([_pass_metrics(p) for p in verified.passes]),
@@ -273,534 +188,13 @@ class PlacementRepair:
         }
 
 
-def _pose_json(T: Array) -> dict[str, list[float]]:
-    """A pose as the problem file writes it: ``xyz`` [m] and fixed-axis X-Y-Z ``rpy_deg``."""
-    return {
-        "xyz": [float(v) for v in T[:3, 3]],
-        "rpy_deg": [float(v) for v in fixed_xyz_from_matrix(T[:3, :3])],
-    }
-
-
 # ---- the moved problem ---------------------------------------------------------------------------
-
-
-def moved_problem(problem: Problem, transform: Array) -> Problem:
-    """``problem`` with its workpiece moved by ``transform`` (Δ, world frame).
-
-    What moves: the CAD frame, the tracker receiver (the demonstration was recorded on the part)
-    and the cell objects marked ``workpiece``; the placement search is switched off in the copy, and
-    a simulated demonstration's truth (given in {F} as placed) is left out.
-    """
-    D = np.asarray(transform, dtype=float)
-    frames = dataclasses.replace(
-        problem.frames,
-        cad_in_world=D @ problem.frames.cad_in_world,
-        source_in_world=D @ problem.frames.source_in_world,
-    )
-    cell = tuple(dataclasses.replace(o, pose=D @ o.pose) if o.workpiece else o for o in problem.cell)
-    demo = problem.demonstration
-    if demo is not None and demo.truth is not None:  # a simulator's truth is in {F} as placed
-        demo = dataclasses.replace(demo, truth=None)
-    return dataclasses.replace(
-        problem,
-        frames=frames,
-        cell=cell,
-        demonstration=demo,
-        repair=dataclasses.replace(problem.repair, placement=None),
-    )
-
-
-def moved_path(fused: FusedPath, transform: Array) -> FusedPath:
-    """The fused path moved rigidly by ``transform`` (Δ): positions and orientations in {F}."""
-    D = np.asarray(transform, dtype=float)
-    return dataclasses.replace(
-        fused,
-        positions=fused.positions @ D[:3, :3].T + D[:3, 3],
-        rotations=np.einsum("ij,njk->nik", D[:3, :3], fused.rotations),
-    )
 
 
 # ---- where the workpiece may go ------------------------------------------------------------------
 
-SUPPORT_GAP_M = 0.002
-"""A cell object whose top lies within this of the workpiece's underside, and within this of the
-workpiece itself, is what the workpiece rests on [m]."""
-
-CONTACT_TOLERANCE_M = 1e-6
-"""The moved workpiece may touch its support (distance 0), and go no deeper than this into it [m]."""
-
-CLEARANCE_TOLERANCE_M = 1e-6
-"""The final check accepts a moved object this much closer than its margin (rounding) [m]."""
-
-LOOK_AHEAD_M = 0.03
-"""A pair within its margin plus this gets a clearance row in the next search round [m]."""
-
-BACK_OFF_M = 0.0005
-"""Each clearance row asks for this much more than the margin [m]: the distance is curved where
-the row is flat (as the refinement's rows, :mod:`refine.optimise.clearance`)."""
-
-CLEARANCE_ROUNDS = 6
-"""Most searches made with clearance rows added from the last answer."""
-
-
-@dataclass(frozen=True)
-class SupportPlane:
-    """The plane the workpiece rests on.
-
-    Attributes:
-        normal: unit normal (3,) in {F}, pointing away from the support into the workpiece.
-        point_m: a point of the plane [m], (3,), in {F}.
-        support: the cell object the workpiece rests on, or None for the world z plane.
-    """
-
-    normal: Array
-    point_m: Array
-    support: str | None = None
-
-    def as_json(self) -> dict[str, Any]:
-        """The ``support`` entry of the placement in ``result.json``."""
-        return {
-            "object": self.support,
-            "normal": [float(v) for v in self.normal],
-            "point_m": [float(v) for v in self.point_m],
-        }
-
-
-WORLD_Z = SupportPlane(np.array([0.0, 0.0, 1.0]), np.zeros(3), None)
-"""The support plane when no cell object is beneath the workpiece: the world's z = 0 plane's
-normal (the plane itself is put through the workpiece's lowest point by :func:`support_plane`)."""
-
-
-def move_basis(support: SupportPlane, free: str) -> tuple[Array, Array]:
-    """The directions the shift and the turn may take: ``t = E_t u``, ``r = E_r v``.
-
-    ``"plane"``: two orthonormal directions in the support plane for the shift, its normal for the
-    turn; ``"all"``: the identity for both.
-    """
-    if free == "all":
-        return np.eye(3), np.eye(3)
-    nrm = np.asarray(support.normal, dtype=float)
-    nrm = nrm / np.linalg.norm(nrm)
-    # the plane's directions: the null space of the normal (SVD), orthonormal by construction
-    plane = np.linalg.svd(nrm[None, :])[2][1:].T
-    return plane, nrm[:, None]
-
-
-def _bodies(shapes: tuple[Any, ...]) -> list[Any]:
-    from refine.collision.geometry import shape_body
-
-    return [shape_body(o, name=o.name, kind="cell", link=None, frame_id=-1, joint=-1) for o in shapes]
-
-
-def support_plane(problem: Problem) -> SupportPlane:
-    """What the workpiece rests on: the highest other cell object whose top touches its underside.
-
-    The underside is the lowest world-z point of the objects marked ``workpiece``; an object beneath
-    is one that is within :data:`SUPPORT_GAP_M` of a workpiece object and whose highest point is
-    within :data:`SUPPORT_GAP_M` of that underside. Its plane: for a box, the face whose outward
-    normal is nearest to world +z (the table top, tilted with the box); for another shape, world z
-    through its highest point. With nothing beneath, the world z plane through the underside.
-    """
-    from refine.collision.distance import place, signed_distance
-
-    up = np.array([0.0, 0.0, 1.0])
-    moved = [o for o in problem.cell if o.workpiece]
-    if not moved:
-        return WORLD_Z
-    parts = _bodies(tuple(moved))
-    bottom = min(-b.reach(np.asarray(o.pose, dtype=float), -up) for b, o in zip(parts, moved, strict=True))
-    best: tuple[float, SupportPlane] | None = None
-    for o in problem.cell:
-        if o.workpiece:
-            continue
-        (body,) = _bodies((o,))
-        T = np.asarray(o.pose, dtype=float)
-        top = body.reach(T, up)
-        if abs(top - bottom) > SUPPORT_GAP_M:
-            continue
-        place(body, T)
-        near = False
-        for b, w in zip(parts, moved, strict=True):
-            Tw = np.asarray(w.pose, dtype=float)
-            place(b, Tw)
-            near = near or signed_distance(b, Tw, body, T)[0] <= SUPPORT_GAP_M
-        if not near:
-            continue
-        normal = up
-        if o.shape == "box":
-            axes = np.concatenate([T[:3, :3].T, -T[:3, :3].T])  # the six face normals
-            normal = axes[int(np.argmax(axes @ up))]
-        plane = SupportPlane(
-            normal, T[:3, 3] + normal * (body.reach(T, normal) - float(normal @ T[:3, 3])), o.name
-        )
-        if best is None or top > best[0]:
-            best = (top, plane)
-    if best is not None:
-        return best[1]
-    return SupportPlane(up, np.array([0.0, 0.0, bottom]), None)
-
-
-@dataclass(frozen=True)
-class ClearanceRow:
-    """One linearised clearance constraint of the placement search.
-
-    ``distance_m + normal · (P(move) - moved_point_m) [+ gradient · (q_k - q)] >= bound_m``, with
-    ``P(move)`` the witness point of the moved object after the move.
-
-    Attributes:
-        point_m: the witness point on the moved object, where it is as placed [m], (3,).
-        moved_point_m: the same point after the move it was measured at [m], (3,).
-        normal: unit vector (3,) along which moving that point increases the distance.
-        distance_m: the signed distance there [m].
-        bound_m: the distance the row asks for (the pair's margin plus :data:`BACK_OFF_M`) [m].
-        pair: the moved object and the other body.
-        waypoint: for a robot link, the waypoint k whose joints it depends on; -1 otherwise.
-        gradient: d(distance)/dq of the link's point at that waypoint [m/rad], (n,).
-        q: the joints it was measured at [rad], (n,).
-    """
-
-    point_m: Array
-    moved_point_m: Array
-    normal: Array
-    distance_m: float
-    bound_m: float
-    pair: tuple[str, str]
-    waypoint: int = -1
-    gradient: Array = field(default_factory=lambda: np.zeros(0))
-    q: Array = field(default_factory=lambda: np.zeros(0))
-
-
-@dataclass(frozen=True)
-class ObjectGap:
-    """The distance of a moved object to another body, and what it must keep.
-
-    Attributes:
-        moved: the moved object (marked workpiece).
-        other: the other cell object, or the robot link.
-        distance_m: signed distance [m] (negative: the depth one is inside the other).
-        margin_m: the least distance allowed [m]: the collision margin, 0 for the support.
-        waypoint: the waypoint of a moving robot link's figure, -1 for a fixed body.
-    """
-
-    moved: str
-    other: str
-    distance_m: float
-    margin_m: float
-    waypoint: int = -1
-
-    @property
-    def kept(self) -> bool:
-        """The margin is kept (within the tolerance of rounding)."""
-        tolerance = CONTACT_TOLERANCE_M if self.margin_m == 0.0 else CLEARANCE_TOLERANCE_M
-        return self.distance_m >= self.margin_m - tolerance
-
-    def describe(self) -> str:
-        """``'plate' 3.2 mm inside 'table'`` or ``'plate' 4.1 mm from 'post' (margin 10.0 mm)``."""
-        where = f" at waypoint {self.waypoint}" if self.waypoint >= 0 else ""
-        if self.distance_m < 0.0:
-            return f"{self.moved!r} {-self.distance_m * 1e3:.1f} mm inside {self.other!r}{where}"
-        return (
-            f"{self.moved!r} {self.distance_m * 1e3:.1f} mm from {self.other!r}{where} "
-            f"(margin {self.margin_m * 1e3:.1f} mm)"
-        )
-
-
-def _gap_rows(
-    problem: Problem,
-    robot: Robot,
-    placement: Placement,
-    q: Array | None,
-    support: SupportPlane,
-    reach_m: float,
-) -> tuple[list[ObjectGap], list[ClearanceRow]]:
-    """The moved objects' distances to the rest of the cell and the robot, and rows for the close ones.
-
-    The other cell objects and the robot's fixed bodies (the base: the strict run does not check
-    them, they cannot move) are measured once; the robot's moving links at every waypoint of ``q``
-    (the pairs the collision model checks). The support is kept at distance 0 or more, the others
-    at the collision margin; with ``free = "plane"`` the support is not measured in the search (a
-    move in its plane keeps the contact) but it is in the final check (``q`` None).
-    """
-    from refine.collision import CollisionModel
-    from refine.collision.distance import place, signed_distance
-
-    bounds = problem.repair.placement
-    free = "all" if bounds is None else bounds.free
-    margin = problem.collision.margin_m
-    D = placement.transform
-    D_inv = np.linalg.inv(D)
-    moved_shapes = tuple(o for o in problem.cell if o.workpiece)
-    static_shapes = tuple(o for o in problem.cell if not o.workpiece)
-    moved = _bodies(moved_shapes)
-    moved_poses = [D @ np.asarray(o.pose, dtype=float) for o in moved_shapes]
-    for b, T in zip(moved, moved_poses, strict=True):
-        place(b, T)
-    others: list[tuple[Any, Array, float]] = []
-    for o, b in zip(static_shapes, _bodies(static_shapes), strict=True):
-        is_support = o.name == support.support
-        if is_support and free == "plane" and q is not None:
-            continue
-        T = np.asarray(o.pose, dtype=float)
-        place(b, T)
-        others.append((b, T, 0.0 if is_support else margin))
-    model = CollisionModel.for_problem(moved_problem(problem, D), robot) if moved_shapes else None
-    if model is not None and problem.collision.enabled:
-        q_any = _neutral(robot) if q is None else q[0]
-        poses = model.moving_poses(np.asarray(q_any, dtype=float)[None])[0]
-        for b, T in zip(model.bodies[: len(poses)], poses, strict=True):
-            if b.kind == "link" and b.joint == 0:  # fixed to the base
-                place(b, T)
-                others.append((b, T, margin))
-    gaps: list[ObjectGap] = []
-    rows: list[ClearanceRow] = []
-    for b, T_b, own in others:
-        for mb, T_m in zip(moved, moved_poses, strict=True):
-            d, p_m, _, nrm = signed_distance(mb, T_m, b, T_b)
-            gaps.append(ObjectGap(mb.name, b.name, float(d), own))
-            if d < own + reach_m:
-                point = D_inv[:3, :3] @ p_m + D_inv[:3, 3]
-                rows.append(ClearanceRow(point, p_m, nrm, float(d), own + BACK_OFF_M, (mb.name, b.name)))
-    if model is not None and problem.collision.enabled and q is not None:
-        names = {o.name for o in moved_shapes}
-        for k, qk in enumerate(np.asarray(q, dtype=float)):
-            contacts = [
-                c for c in model.contacts(qk, margin + reach_m) if c.other in names and not c.self_pair
-            ]
-            if not contacts:
-                continue
-            grads = model.distance_gradients(qk, contacts)
-            for c, g in zip(contacts, grads, strict=True):
-                gaps.append(ObjectGap(c.other, c.body, c.distance_m, c.margin_m, k))
-                point = D_inv[:3, :3] @ c.point_other + D_inv[:3, 3]
-                rows.append(
-                    ClearanceRow(
-                        point,
-                        np.asarray(c.point_other),
-                        -np.asarray(c.normal),
-                        c.distance_m,
-                        c.margin_m + BACK_OFF_M,
-                        (c.other, c.body),
-                        k,
-                        g,
-                        qk.copy(),
-                    )
-                )
-    return gaps, rows
-
-
-def _neutral(robot: Robot) -> Array:
-    """The robot's neutral joints [rad] (any configuration places the fixed bodies alike)."""
-    import pinocchio as pin
-
-    return np.asarray(pin.neutral(robot.model), dtype=float)
-
-
-def clearance_rows(
-    problem: Problem, robot: Robot, placement: Placement, q: Array, support: SupportPlane
-) -> tuple[list[ObjectGap], list[ClearanceRow]]:
-    """The moved objects' gaps at a search answer and the rows for the pairs near or below their margin."""
-    return _gap_rows(problem, robot, placement, q, support, LOOK_AHEAD_M)
-
-
-def cell_gaps(problem: Problem, robot: Robot, placement: Placement, support: SupportPlane) -> list[ObjectGap]:
-    """The final check: the moved objects' gaps to the rest of the cell and the robot's fixed bodies.
-
-    Every other cell object (the support included, at margin 0) and the robot's base bodies, with
-    the problem's collision margin; the moving links are the strict run's to check.
-    """
-    return _gap_rows(problem, robot, placement, None, support, 0.0)[0]
-
 
 # ---- the search ----------------------------------------------------------------------------------
-
-
-def _rotation(r: ca.MX) -> ca.MX:
-    """Rodrigues' rotation of the rotation vector ``r`` (3,), smooth at 0 (half-angle form)."""
-    theta = ca.sqrt(ca.dot(r, r) + 1e-14)
-    K = ca.skew(r)
-    half = theta / 2.0
-    return ca.DM.eye(3) + (ca.sin(theta) / theta) * K + 0.5 * (ca.sin(half) / half) ** 2 * ca.mtimes(K, K)
-
-
-@dataclass(frozen=True)
-class SearchResult:
-    """The placement problem's answer (not yet verified).
-
-    Attributes:
-        placement: the move found.
-        q: joints at every waypoint on the moved path [rad], (N, n).
-        success: IPOPT reported success.
-        solver_status: IPOPT's return status.
-        iterations: IPOPT iterations.
-        time_s: wall time of build and solve [s].
-        slack_deg: the orientation beyond the (inset) cone each waypoint still needs with this
-            move [deg], (N,); all zero (below :data:`SLACK_TOLERANCE_DEG`) when the move is feasible.
-        x: the solver's variables at the answer (to start the next clearance round from).
-    """
-
-    placement: Placement
-    q: Array
-    success: bool
-    solver_status: str
-    iterations: int
-    time_s: float
-    slack_deg: Array = field(default_factory=lambda: np.zeros(0))
-    x: Array = field(default_factory=lambda: np.zeros(0))
-
-
-def search_placement(
-    robot: Robot,
-    fused: FusedPath,
-    base_in_world: Array,
-    tcp_in_flange: Array,
-    tolerances: Any,
-    bounds: PlacementSettings,
-    q0: Array,
-    *,
-    axisymmetric: bool = False,
-    weights: Any = None,
-    time_limit_s: float = 120.0,
-    support: SupportPlane | None = None,
-    rows: tuple[ClearanceRow, ...] = (),
-    start: SearchResult | None = None,
-) -> SearchResult:
-    """The smallest move of the workpiece for which the joints meet the strict constraints.
-
-    Args:
-        robot: the robot.
-        fused: the path as placed (N waypoints).
-        base_in_world: T_F_R (4, 4).
-        tcp_in_flange: T_flange_TCP (4, 4).
-        tolerances: the strict tolerances (:class:`refine.settings.Tolerances`).
-        bounds: the largest shift [m] and turn [deg], and what may move (``free``).
-        q0: joints to start from (N, n) [rad], e.g. the slack repair's or the IK seed.
-        axisymmetric: only the tool axis counts in the cone.
-        weights: the path cost weights (:class:`refine.optimise.problem.Weights`), or None.
-        time_limit_s: IPOPT's wall-time limit [s].
-        support: the plane the workpiece rests on; with ``bounds.free == "plane"`` the shift stays
-            in it and the turn is about its normal. None: the world z plane.
-        rows: clearance rows of the moved objects (:func:`clearance_rows`), kept as constraints.
-        start: an earlier answer to start from (the previous clearance round), or None.
-    """
-    from refine.optimise.derivatives import smoothness_matrix
-    from refine.optimise.problem import Weights, joint_bounds, singularity_function, waypoint_function
-
-    t0 = time.perf_counter()
-    weights = weights or Weights()
-    N, n = len(fused), robot.nq
-    centre = fused.positions.mean(axis=0)
-    T_max, A_max = bounds.translate_m, math.radians(bounds.rotate_deg)
-
-    # decision variables: joints, the shift and the rotation vector scaled by their bounds, and an
-    # elastic slack per waypoint on the cone (cosine units), so that the problem always has an
-    # answer: with the slack zero the move is feasible; otherwise it says how far from it the largest
-    # move within the bounds leaves the path
-    E_t, E_r = move_basis(support or WORLD_Z, bounds.free)
-    m_t, m_r = E_t.shape[1], E_r.shape[1]
-    m = m_t + m_r
-    x = ca.MX.sym("x", N * n + m + N)
-    Q = ca.reshape(x[: N * n], n, N)
-    u, v, sigma = x[N * n : N * n + m_t], x[N * n + m_t : N * n + m], x[N * n + m :]
-    t, r = T_max * ca.mtimes(ca.DM(E_t), u), A_max * ca.mtimes(ca.DM(E_r), v)
-    R = _rotation(r)
-    P = ca.DM(fused.positions.T)  # (3, N)
-    c = ca.DM(centre)
-    P_moved = ca.mtimes(R, P - ca.repmat(c, 1, N)) + ca.repmat(c + t, 1, N)
-    R_demo = ca.DM(np.concatenate(list(fused.rotations), axis=1))  # (3, 3N): R_0 | R_1 | ...
-    R_moved = ca.reshape(ca.mtimes(R, R_demo), 9, N)  # column k: R·R_k, column-major
-
-    G, cost = waypoint_function(robot, base_in_world, tcp_in_flange, axisymmetric).map(N)(Q, P_moved, R_moved)
-    cos_theta = G[3, :]
-    clearance = rows
-    rows = [ca.vec(ca.vertcat(G[:3, :], cos_theta + sigma.T)), ca.vec(Q[:, 1:] - Q[:, :-1])]
-    inset = math.radians(INSET_DEG)
-    cone = math.radians(tolerances.orientation_deg) - inset
-    step = math.radians(tolerances.joint_step_deg)
-    lbg = [np.tile([0.0, 0.0, 0.0, math.cos(cone)], N)]
-    ubg = [np.tile([0.0, 0.0, 0.0, np.inf], N)]
-    lbg.append(np.full(n * (N - 1), -step + inset))
-    ubg.append(np.full(n * (N - 1), step - inset))
-    if tolerances.singularity_margin > 0:
-        rows.append(ca.vec(singularity_function(robot, base_in_world, tcp_in_flange).map(N)(Q)))
-        lbg.append(np.full(N, SINGULARITY_INSET * tolerances.singularity_margin))
-        ubg.append(np.full(N, np.inf))
-    rows.append(ca.vertcat(ca.dot(u, u), ca.dot(v, v)))
-    lbg.append(np.array([-np.inf, -np.inf]))
-    ubg.append(np.array([1.0, 1.0]))
-    for row in clearance:
-        # the signed distance linearised at its witness points: the moved object's point follows
-        # the move exactly, a robot link's point the joints to first order
-        moved = c + ca.mtimes(R, ca.DM(row.point_m - centre)) + t
-        d = row.distance_m + ca.dot(ca.DM(row.normal), moved - ca.DM(row.moved_point_m))
-        if row.waypoint >= 0:
-            d += ca.dot(ca.DM(row.gradient), Q[:, row.waypoint] - ca.DM(row.q))
-        rows.append(d)
-        lbg.append(np.array([row.bound_m]))
-        ubg.append(np.array([np.inf]))
-
-    spec = robot.spec
-    h = float(np.mean(np.diff(fused.s)))
-    half = 0.5 * (spec.upper - spec.lower)
-    K = smoothness_matrix(n, N, h, weights.velocity, weights.acceleration, 0.0, half) / N
-    qv = x[: N * n]
-    path_cost = weights.orientation * (180.0 / math.pi) ** 2 * 2.0 * ca.sum2(cost) / N + 0.5 * ca.dot(
-        qv, ca.mtimes(ca.DM(K), qv)
-    )
-    f = ca.dot(u, u) + ca.dot(v, v) + PATH_COST_WEIGHT * path_cost + ELASTIC_WEIGHT * ca.sum1(sigma)
-
-    lower, upper = joint_bounds(robot, tolerances)
-    lower, upper = lower + inset, upper - inset
-    free_t, free_r = float(T_max > 0), float(A_max > 0)  # a part with a zero bound stays at 0
-    lbx = np.concatenate([np.tile(lower, N), np.full(m_t, -free_t), np.full(m_r, -free_r), np.zeros(N)])
-    ubx = np.concatenate([np.tile(upper, N), np.full(m_t, free_t), np.full(m_r, free_r), np.full(N, 2.0)])
-    options = {
-        "ipopt.print_level": 0,
-        "ipopt.sb": "yes",
-        "print_time": False,
-        "ipopt.tol": 1e-8,
-        "ipopt.constr_viol_tol": 1e-9,
-        "ipopt.max_iter": 300,
-        "ipopt.mu_strategy": "adaptive",
-        "ipopt.max_wall_time": float(time_limit_s),
-    }
-    g = ca.vertcat(*rows)
-    if SKIP_SINGULARITY_CURVATURE and tolerances.singularity_margin > 0:
-        # the Hessian of the Lagrangian without the singularity rows' curvature (their λ·∇²w)
-        lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", g.size1())
-        first = 4 * N + n * (N - 1)
-        keep = ca.vertcat(lam_g[:first], ca.MX(N, 1), lam_g[first + N :])
-        H = ca.triu(ca.hessian(lam_f * f + ca.dot(keep, g), x)[0])
-        p_empty = ca.MX.sym("p", 0)
-        options["hess_lag"] = ca.Function(
-            "hess_lag", [x, p_empty, lam_f, lam_g], [H], ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"]
-        )
-    solver = ca.nlpsol("placement", "ipopt", {"x": x, "f": f, "g": g}, options)
-    if start is not None and start.x.size == x.size1():
-        x0 = np.clip(start.x, lbx, ubx)
-    else:
-        q_start = np.clip(np.asarray(q0, dtype=float), lower, upper).ravel()
-        start_cos = ca.Function("cos_theta", [x], [cos_theta])(np.concatenate([q_start, np.zeros(m + N)]))
-        sigma0 = np.clip(math.cos(cone) - np.asarray(start_cos).ravel(), 0.0, 2.0)  # what the start needs
-        x0 = np.concatenate([q_start, np.zeros(m), sigma0])
-    sol = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=np.concatenate(lbg), ubg=np.concatenate(ubg))
-    stats = solver.stats()
-    log.debug("placement search timings: %s", {k: v for k, v in stats.items() if k.startswith("t_wall")})
-    xs = np.asarray(sol["x"]).ravel()
-    placement = Placement(
-        centre, T_max * (E_t @ xs[N * n : N * n + m_t]), A_max * (E_r @ xs[N * n + m_t : N * n + m])
-    )
-    slack = np.clip(xs[N * n + m :], 0.0, None)
-    slack_deg = np.degrees(np.arccos(np.clip(math.cos(cone) - slack, -1.0, 1.0)) - cone)
-    return SearchResult(
-        placement,
-        xs[: N * n].reshape(N, n),
-        bool(stats.get("success", False)) and float(slack_deg.max()) <= SLACK_TOLERANCE_DEG,
-        str(stats.get("return_status", "unknown")),
-        int(stats.get("iter_count", 0)),
-        time.perf_counter() - t0,
-        slack_deg,
-        xs,
-    )
 
 
 # ---- search and verification ---------------------------------------------------------------------
@@ -941,7 +335,7 @@ def repair_by_placement(problem: Problem, robot: Robot, first: PassResult) -> Pl
                 f"; the move that keeps the strict tolerances without them (shift {p.distance_m * 1e3:.1f} mm, "
                 f"turn {p.angle_deg:.2f} deg) puts " + "; ".join(g.describe() for g in why[:3])
             )
-        plane = "" if bounds.free == "all" else f" in the support plane ({_plane_text(support)})"
+        plane = "" if bounds.free == "all" else f" in the support plane ({plane_text(support)})"
         return PlacementRepair(
             "infeasible",
             reason=(
@@ -1004,7 +398,7 @@ def repair_by_placement(problem: Problem, robot: Robot, first: PassResult) -> Pl
     )
 
 
-def _plane_text(support: SupportPlane) -> str:
+def plane_text(support: SupportPlane) -> str:
     what = f"the top of {support.support!r}" if support.support else "the world z plane"
     return f"{what}, normal [{', '.join(f'{v:.3f}' for v in support.normal)}]"
 

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from refine.optimise.solve import Refinement
+    from refine.optimise.outcome import Refinement
     from refine.paths import FusedPath, Trajectory
     from refine.problem import Problem
     from refine.robot.model import Robot

@@ -15,8 +15,8 @@ from typing import Any
 import numpy as np
 
 from refine.errors import InputError
-from refine.optimise.problem import RefinementNLP, Weights, build_refinement
-from refine.optimise.solve import ConstraintSource, solve_refinement
+from refine.optimise.problem import ConstraintSource, RefinementNLP, Weights, build_refinement
+from refine.optimise.solve import solve_refinement
 from refine.paths import FusedPath, Trajectory
 from refine.problem import Problem
 from refine.robot.model import Robot

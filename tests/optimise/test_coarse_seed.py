@@ -18,7 +18,8 @@ import pytest
 import refine.optimise.solve as solve_module
 from refine.bench.suites import generated_problem, load_suites
 from refine.optimise.problem import Weights
-from refine.optimise.solve import coarse_seed, initial_guess, solve_refinement
+from refine.optimise.seed import initial_guess
+from refine.optimise.solve import coarse_seed, solve_refinement
 from refine.run.stages import REDUNDANT_MID_RANGE_WEIGHT
 
 

@@ -210,7 +210,7 @@ def test_slack_in_degrees_is_the_cone_widening_the_cosine_slack_buys(irb4600, st
 
 
 def test_the_inspection_singularity_function_is_the_scaled_manipulability(irb4600, straight_tool, kin, q):
-    from refine.optimise.problem import singularity_function
+    from refine.optimise.waypoint import singularity_function
 
     f = singularity_function(irb4600, np.eye(4), straight_tool)
     scale = np.diag([1.0 / REACH_M] * 3 + [1.0] * 3)

@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 
 from refine.errors import InputError
-from refine.optimise.problem import ActiveSet, Weights, build_refinement, waypoint_function
+from refine.optimise.problem import ActiveSet, Weights, build_refinement
+from refine.optimise.waypoint import waypoint_function
 from refine.problem import Tolerances
 from refine.synthetic import wave_path
 
@@ -26,7 +27,7 @@ def test_problem_parameters_hold_the_cad_points_and_demo_rotations(irb4600, stra
     """Evaluating the NLP's constraints at the IK solution of each pose gives zero position rows."""
     fused = wave_path(20)
     nlp = build_refinement(irb4600, fused, np.eye(4), straight_tool, Tolerances())
-    from refine.optimise.solve import initial_guess
+    from refine.optimise.seed import initial_guess
 
     q = initial_guess(nlp)
     g = ca.Function("g", [nlp.nlp["x"], nlp.nlp["p"]], [nlp.nlp["g"]])(q.ravel(), nlp.params)

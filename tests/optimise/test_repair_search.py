@@ -4,7 +4,10 @@ import numpy as np
 
 from refine.frames import rotation_angle_deg
 from refine.optimise.problem import ActiveSet, LinearRow, build_refinement
-from refine.optimise.solve import ELASTIC_ONLY, _attempt, _rank_chains, _row_keys, initial_guess
+from refine.optimise.repair import ELASTIC_ONLY, solve_with_repair
+from refine.optimise.rounds import _row_keys
+from refine.optimise.seed import initial_guess
+from refine.optimise.solve import _rank_chains
 from refine.problem import Tolerances
 from refine.synthetic import wave_path
 
@@ -57,7 +60,7 @@ def test_the_elastic_problem_alone_gives_ok_where_the_strict_problem_is_feasible
     """Another IK branch solves the elastic problem only: an answer without slack is the strict answer."""
     nlp = build_refinement(irb4600, wave_path(60), np.eye(4), straight_tool, Tolerances())
     q_seed = initial_guess(nlp)
-    result = _attempt(nlp, q_seed, (), 15.0, 8, {}, skip_strict=ELASTIC_ONLY)
+    result = solve_with_repair(nlp, q_seed, (), 15.0, 8, {}, skip_strict=ELASTIC_ONLY)
     assert result.status == "ok", result.reason
     assert not result.repairs and not result.slack_deg.any()
     # recomputed here: on the CAD path, inside the strict cone

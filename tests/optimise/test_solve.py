@@ -169,12 +169,12 @@ def test_a_problem_with_some_joint_step_rows_is_solved_with_those_that_bind(
 ):
     """No row from the seed; the first answer steps past the bound, so the rows are added and it is
     solved again: the answer is the complete problem's, on the bound and not past it."""
-    import refine.optimise.solve as solve_module
+    import refine.optimise.rounds as rounds_module
 
     fused, q0 = steep_wave
     tol = Tolerances(joint_step_deg=12.5)
     complete = solve_refinement(build_refinement(irb4600, fused, np.eye(4), straight_tool, tol), q0)
-    monkeypatch.setattr(solve_module, "STEP_NEAR", 10.0)  # rows only for steps past the bound
+    monkeypatch.setattr(rounds_module, "STEP_NEAR", 10.0)  # rows only for steps past the bound
     lazy = solve_refinement(
         build_refinement(irb4600, fused, np.eye(4), straight_tool, tol, joint_steps=()), q0
     )

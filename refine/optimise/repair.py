@@ -1,0 +1,175 @@
+"""refine.optimise.repair."""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from refine.optimise.diagnosis import Finding
+from refine.optimise.outcome import (
+    Refinement,
+    Repair,
+    StageTimes,
+    add_time,
+    describe_check,
+    findings_of,
+    problem_kinematics,
+)
+from refine.optimise.problem import ActiveSet, ConstraintSource, RefinementNLP
+from refine.optimise.rounds import (
+    SOLVER_LABELS,
+    RoundLoop,
+    _new_singular,
+    _new_steps,
+    _singular_around,
+    _with_steps,
+    run_rounds,
+)
+from refine.optimise.verify import (
+    check_path,
+)
+
+log = logging.getLogger(__name__)
+
+Array = NDArray[np.float64]
+
+
+ELASTIC_ONLY = "not run (the elastic problem answers it: another IK branch, after the first failed)"
+"""Why the strict solve is skipped on the IK branches tried after the first: with repair on, the
+elastic problem's answer without slack is the strict problem's, so one solve does for both."""
+
+
+def solve_with_repair(
+    problem: RefinementNLP,
+    q_seed: Array,
+    sources: tuple[ConstraintSource, ...],
+    repair_max_slack_deg: float | None,
+    max_rounds: int,
+    timings: dict[str, float],
+    deadline: float = math.inf,
+    skip_strict: str = "",
+    stretched: Array | None = None,
+) -> Refinement:
+    """Strict solve from ``q_seed``, then the elastic repair when the strict problem fails.
+
+    With ``skip_strict`` (why the strict solve is not run: it is known to be infeasible, or the
+    elastic problem answers it) the repair starts at once; an elastic answer that verifies without
+    any slack is then ``ok``.
+    ``stretched`` (N,) marks the waypoints whose wrist centre the demonstration puts near or beyond
+    the end of the arm's range: the singularity bound holds there from the first solve (at and
+    between the waypoints), so the elbow cannot pass through its stretched singularity while the
+    solver pulls the wrist in.
+    """
+    kin = problem_kinematics(problem)
+    loop = RoundLoop(problem, timings, max_rounds=max_rounds, deadline=deadline)
+    start = StageTimes.clock()  # the constraints the seed shows to be needed count as seeding
+    initial = _new_singular(kin, q_seed, problem.tolerances.singularity_margin, problem.active)
+    if stretched is not None and stretched.any() and problem.tolerances.singularity_margin > 0:
+        initial = initial.union(_singular_around(stretched))
+    seed_rows = tuple(r for src in sources for r in src.rows(problem, q_seed))
+    seed_steps = _new_steps(problem, q_seed)
+    add_time(timings, "seed", start)
+    if initial.singular_waypoints or initial.singular_segments or seed_rows or seed_steps:
+        loop.rebuild(
+            active=problem.active.union(
+                ActiveSet(initial.singular_waypoints, initial.singular_segments, seed_rows)
+            ),
+            joint_steps=_with_steps(problem, seed_steps),
+        )
+    if skip_strict:
+        q = q_seed
+        slack = np.zeros(problem.n_waypoints)
+        check = check_path(kin, q, problem.fused, problem.tolerances, problem.axisymmetric)
+        stats = {"return_status": skip_strict}
+        strict_reason = skip_strict
+    else:
+        x, stats, check, slack = run_rounds(loop, q_seed.ravel(), sources)
+        q = loop.problem.joints(x)
+        strict_reason = describe_check(check, stats)
+    status = "ok" if check.ok and not skip_strict else "infeasible"
+    repairs: tuple[Repair, ...] = ()
+
+    if status == "infeasible" and repair_max_slack_deg is not None and repair_max_slack_deg > 0:
+        loop.rebuild(active=loop.problem.active, elastic_deg=repair_max_slack_deg)
+        # start from the seed (on the path, orientation off only where the limits clamped it), with
+        # each slack at what that start needs, so IPOPT begins feasible wherever it can
+        q_start = q_seed
+        clock = StageTimes.clock()
+        start = check_path(kin, q_start, problem.fused, problem.tolerances, problem.axisymmetric)
+        cos_needed = math.cos(math.radians(problem.tolerances.orientation_deg)) - np.cos(
+            np.radians(start.orientation_deviation_deg)
+        )
+        sigma0 = np.clip(cos_needed, 0.0, loop.problem.ubx[problem.n_waypoints * problem.dof :])
+        add_time(timings, "solve", clock)
+        x, stats, check, slack = run_rounds(loop, np.concatenate([q_start.ravel(), sigma0]), sources)
+        q = loop.problem.joints(x)
+        if check.ok:
+            status = "repaired"
+            if skip_strict == ELASTIC_ONLY and slack.max() <= 1e-3:
+                # the elastic problem found an answer without slack: ok if it verifies strictly
+                strict = check_path(kin, q, problem.fused, problem.tolerances, problem.axisymmetric)
+                extra = tuple(v for src in sources for v in src.violations(loop.problem, q))
+                if strict.ok and not extra:
+                    status, check, slack = "ok", strict, np.zeros(problem.n_waypoints)
+        else:
+            log.info("repair within %.1f deg failed: %s", repair_max_slack_deg, describe_check(check, stats))
+            note = f"no repair within {repair_max_slack_deg:g} deg of extra slack"
+            stats = {
+                **stats,
+                "return_status": f"{stats.get('return_status')}; {note} (strict: {strict_reason})",
+            }
+
+    solver_status = str(stats.get("return_status", "unknown"))
+    if status == "ok" and not stats.get("success", False):
+        log.warning(
+            "%s returned %s but the verified path meets every tolerance",
+            SOLVER_LABELS[problem.solver_name],
+            solver_status,
+        )
+    t0, c0 = StageTimes.clock()
+    findings: tuple[Finding, ...] = ()
+    if status == "repaired":
+        findings = findings_of(problem, sources, status, q, slack > 1e-3, slack)
+        repairs = tuple(
+            Repair(
+                f.index_start,
+                f.index_end,
+                f.s_start_m,
+                f.s_end_m,
+                float(f.slack_deg or 0.0),
+                f.cause.label,
+                f.cause.objects,
+            )
+            for f in findings
+        )
+    elif status == "infeasible":
+        mask = np.zeros(problem.n_waypoints, dtype=bool)
+        for v in check.violations:
+            mask[v.index_start : v.index_end + 1] = True
+        findings = findings_of(problem, sources, status, q, mask)
+    add_time(timings, "diagnose", (t0, c0))
+    reason = (
+        ""
+        if status == "ok"
+        else "; ".join(f.describe() for f in findings) + f" ({describe_check(check, stats)})"
+        if status == "infeasible"
+        else "; ".join(f.describe() for f in findings)
+    )
+    return Refinement(
+        status=status,
+        reason=reason,
+        q=q,
+        q_seed=q_seed,
+        check=check,
+        solver_status=solver_status,
+        iterations=loop.iterations,
+        outer_iterations=loop.outer,
+        active=loop.problem.active,
+        slack_deg=slack if status == "repaired" else np.zeros(problem.n_waypoints),
+        repairs=repairs,
+        timings_s=timings,
+        diagnosis=findings,
+    )

@@ -1,0 +1,55 @@
+"""refine.optimise.waypoint."""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+from numpy.typing import NDArray
+
+from refine.optimise.kinematics import fk_function, jacobian_function
+from refine.robot.model import Robot
+
+Array = NDArray[np.float64]
+
+
+ROW_NAMES = ("position x", "position y", "position z", "orientation cone")
+
+
+def waypoint_function(
+    robot: Robot, base_in_world: Array, tcp_in_flange: Array, axisymmetric: bool
+) -> ca.Function:
+    """Per-waypoint constraints ``g`` (4,) and orientation cost for joints ``q``.
+
+    Inputs: ``q`` (n,), ``p_ref`` (3,) CAD point [m], ``R_demo`` (9,) demonstrated rotation
+    (column-major). Outputs: ``g`` = [TCP position - p_ref (3), cos θ] and ``cost`` = 1 - cos θ,
+    θ the angle between the reached and demonstrated orientations (between the tool axes for an
+    axisymmetric tool).
+    """
+    fk = fk_function(robot, base_in_world, tcp_in_flange)
+    q = ca.SX.sym("q", robot.nq)
+    p_ref = ca.SX.sym("p_ref", 3)
+    r_demo = ca.SX.sym("R_demo", 9)
+    R_demo = ca.reshape(r_demo, 3, 3)
+    p, R = fk(q)
+    if axisymmetric:
+        cos_theta = ca.dot(R[:, 2], R_demo[:, 2])
+    else:
+        cos_theta = (ca.trace(ca.mtimes(R_demo.T, R)) - 1.0) / 2.0
+    g = ca.vertcat(p - p_ref, cos_theta)
+    return ca.Function(
+        "waypoint", [q, p_ref, r_demo], [g, 1.0 - cos_theta], ["q", "p_ref", "R_demo"], ["g", "cost"]
+    )
+
+
+def singularity_function(robot: Robot, base_in_world: Array, tcp_in_flange: Array) -> ca.Function:
+    """Scaled manipulability ``sqrt(det(Js Jsᵀ))`` of joints ``q`` [-].
+
+    ``Js`` is the TCP Jacobian with its linear rows divided by the robot's reach, so both halves are
+    unitless and the measure compares across robots.
+    """
+    jac = jacobian_function(robot, base_in_world, tcp_in_flange)
+    q = ca.SX.sym("q", robot.nq)
+    J = jac(q)
+    Js = ca.vertcat(J[:3, :] / robot.spec.reach_m, J[3:, :])
+    w = ca.sqrt(ca.det(ca.mtimes(Js, Js.T)) + 1e-12)
+    return ca.Function("singularity", [q], [w], ["q"], ["w"])
