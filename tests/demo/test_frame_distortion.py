@@ -22,16 +22,11 @@ from scipy.spatial.transform import Rotation
 from refine.cad import read_cad_path
 from refine.cli import main
 from refine.demo import clean_demonstration, read_tracker_log
-from refine.demo.quality import (
-    FRAME_WARN_DEG,
-    FrameEstimate,
-    frame_error_significant,
-    gate_dropouts,
-    gate_frame,
-)
+from refine.demo.quality import FRAME_WARN_DEG, FrameEstimate, gate_dropouts
 from refine.demo.simulate import TrackerModel, perturb_log
 from refine.errors import InputError
 from refine.fuse.align import fuse
+from refine.fuse.frame_check import frame_error_significant, gate_frame
 from refine.problem import load_problem
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -210,7 +205,7 @@ def test_an_accepted_frame_error_is_named_in_result_json(tmp_path, capsys):
     ],
 )
 def test_an_axis_is_not_observable_by_ratio_or_above_the_weak_check_limit(sigmas_deg, n_hidden):
-    from refine.demo.quality import _observable_part
+    from refine.fuse.frame_check import _observable_part
 
     V = Rotation.from_rotvec([0.3, -0.2, 0.5]).as_matrix()  # principal axes, columns
     cov = V @ np.diag(np.radians(sigmas_deg) ** 2) @ V.T

@@ -17,11 +17,12 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from refine.demo import clean_demonstration
-from refine.demo.quality import FRAME_STOP_DEG, DemoQuality, gate_frame
+from refine.demo.quality import FRAME_STOP_DEG, DemoQuality
 from refine.demo.simulate import TrackerModel, simulate_demonstration
 from refine.errors import InputError
 from refine.frames import transform_from_xyz_rpy
 from refine.fuse.align import fuse
+from refine.fuse.frame_check import gate_frame
 from refine.paths import CadPath
 from refine.settings import DemoSettings
 
@@ -55,7 +56,7 @@ def _check(seam, world_axis, angle_deg):
 
 @pytest.mark.parametrize("angle_deg", [0.0, 5.0])
 def test_the_rotation_about_a_straight_seam_is_stated_once_not_warned(seam, caplog, angle_deg):
-    with caplog.at_level(logging.INFO, logger="refine.demo.quality"):
+    with caplog.at_level(logging.INFO, logger="refine.fuse.frame_check"):
         quality = _check(seam, SEAM_DIR_F, angle_deg)  # about the seam itself: invisible
     assert quality.warnings == ()
     assert not [r for r in caplog.records if r.levelno >= logging.WARNING]

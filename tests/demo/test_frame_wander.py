@@ -24,17 +24,16 @@ sys.path.insert(0, str(Path(__file__).parent))
 
 from wander_scenes import T_TCP_E, frame_estimate, given_frame, scene  # noqa: E402
 
-from refine.demo.quality import (  # noqa: E402
-    FRAME_STOP_DEG,
+from refine.demo.quality import FRAME_STOP_DEG, DemoQuality
+from refine.errors import InputError  # noqa: E402
+from refine.fuse.align import fuse  # noqa: E402
+from refine.fuse.frame_check import (
     OFFSET_WARN_M,
-    DemoQuality,
     _chi2_threshold,
     correlation_time,
     frame_error_significant,
     gate_frame,
 )
-from refine.errors import InputError  # noqa: E402
-from refine.fuse.align import fuse  # noqa: E402
 
 SEEDS = range(20)
 
