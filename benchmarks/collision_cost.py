@@ -29,7 +29,8 @@ from pathlib import Path
 
 from refine.problem import load_problem
 from refine.robot.registry import load_robot
-from refine.run.stages import _Stopwatch, constraint_sources, fused_path, refine_pass
+from refine.run.stages import constraint_sources, fused_path, refine_pass
+from refine.stopwatch import Stopwatch
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -39,7 +40,7 @@ def refine_once(problem, robot, fused, collision: bool) -> dict[str, float]:
         problem, collision=dataclasses.replace(problem.collision, enabled=collision)
     )
     sources = constraint_sources(problem, robot)
-    watch = _Stopwatch()
+    watch = Stopwatch()
     t0 = time.perf_counter()
     result = refine_pass(problem, robot, fused, watch, sources=sources)
     wall = time.perf_counter() - t0 - watch.times.get("timing", 0.0)
@@ -94,7 +95,7 @@ def dense(names: list[str], repeat: int) -> None:
         if not sources:
             print(f"{name:32} no collision checking")
             continue
-        q = refine_pass(problem, robot, fused, _Stopwatch(), sources=sources).refinement.q
+        q = refine_pass(problem, robot, fused, Stopwatch(), sources=sources).refinement.q
         runs = [dense_once(sources[0], q) for _ in range(repeat)]
         m = {k: statistics.median(r[k] for r in runs) for k in runs[0]}
         print(

@@ -25,7 +25,8 @@ from refine.collision import check_path_clearance, margins_proved
 from refine.optimise.clearance import ClearanceSource
 from refine.problem import load_problem
 from refine.robot.registry import load_robot
-from refine.run.stages import _Stopwatch, constraint_sources, fused_path, refine_pass
+from refine.run.stages import constraint_sources, fused_path, refine_pass
+from refine.stopwatch import Stopwatch
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -70,7 +71,7 @@ def main() -> None:
         if not sources:
             print(f"{name:32} no collision checking")
             continue
-        q = refine_pass(problem, robot, fused_path(problem), _Stopwatch(), sources=sources).refinement.q_seed
+        q = refine_pass(problem, robot, fused_path(problem), Stopwatch(), sources=sources).refinement.q_seed
         ok, check_queries, check_s = timed(
             lambda s, q: check_path_clearance(s.model, q, s.kin, s.check_step_m).ok,
             problem,

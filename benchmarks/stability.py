@@ -26,7 +26,7 @@ from refine.demo.liberty import write_liberty_ascii
 from refine.demo.liberty_binary import write_liberty_binary
 from refine.demo.simulate import TrackerModel, perturb_log
 from refine.problem import load_problem
-from refine.run.stages import solve_problem
+from refine.run.solve import solve_problem
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -191,7 +191,7 @@ class Result:
         Returns:
             kind -> path of every file written (``result``, ``trajectory``, ``pathml``, ...).
         """
-        from refine.run.stages import write_run
+        from refine.run.write import write_run
 
         write_run(self.run, Path(out_dir), tuple(programs) if programs is not None else None, report=report)
         return dict(self.run.outputs)
@@ -228,7 +228,8 @@ def solve(
     Returns:
         The result; ``result.write(out_dir)`` writes the files ``refine run`` writes.
     """
-    from refine.run.stages import fused_path, solve_problem
+    from refine.run.solve import solve_problem
+    from refine.run.stages import fused_path
 
     if not isinstance(problem, Problem):
         problem = load_problem(problem)
@@ -243,7 +244,8 @@ def _solve_again(
     problem: Problem, robot: Robot, fused: Any, previous: Result | None, initial_joints: ArrayLike | None
 ) -> Result:
     from refine.optimise.problem import reuse_for
-    from refine.run.stages import solve_problem, weights_for
+    from refine.run.solve import solve_problem
+    from refine.run.stages import weights_for
 
     nlp = None
     n = robot.nq

@@ -177,7 +177,7 @@ def _exit_now(status: int) -> int:
 def _run(args: argparse.Namespace, problem) -> int:  # noqa: ANN001 - Problem, imported lazily
     from refine.export.result_json import result_dict, write_timings
     from refine.run.result import summary_lines
-    from refine.run.stages import run
+    from refine.run.write import run
 
     out = args.out or Path("out") / problem.file_stem
     if args.urscript_mode:

@@ -151,7 +151,7 @@ def test_a_run_out_of_time_says_so_and_is_not_a_verdict():
 
     from refine.export.result_json import result_dict
     from refine.problem import load_problem
-    from refine.run.stages import solve_problem
+    from refine.run.solve import solve_problem
 
     problem = load_problem(UNREACHABLE / "wrist_flip")
     problem = dataclasses.replace(problem, repair=dataclasses.replace(problem.repair, time_limit_s=0.1))

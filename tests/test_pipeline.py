@@ -10,7 +10,7 @@ from refine.export import parse_rapid_targets, read_pathml, read_trajectory_csv,
 from refine.frames import matrix_from_quaternion, rotation_angle_deg
 from refine.problem import load_problem
 from refine.robot.registry import load_robot
-from refine.run.stages import run
+from refine.run.write import run
 
 ROOT = Path(__file__).resolve().parents[1]
 XSD = ROOT.parent / "shared" / "aml" / "CAEX_ClassModel_V.3.0.xsd"
@@ -199,7 +199,7 @@ def glass_at_a_tenth():
     speed (joint change over planned time) as a fraction of its data-sheet speed."""
     from dataclasses import replace
 
-    from refine.run.stages import solve_problem
+    from refine.run.solve import solve_problem
 
     problem = load_problem(ROOT / "problems" / "glass_adhesive")
     assert problem.robot.model == "abb_irb4600_60_205"

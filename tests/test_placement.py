@@ -23,7 +23,8 @@ from refine.errors import InputError
 from refine.export.result_json import result_dict
 from refine.optimise.moves import Placement, moved_path, moved_problem
 from refine.problem import load_problem
-from refine.run.stages import fused_path, solve_problem
+from refine.run.solve import solve_problem
+from refine.run.stages import fused_path
 from refine.settings import PlacementSettings
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -304,7 +305,7 @@ def test_the_part_put_back_by_the_known_move_is_ok_and_needs_no_placement(tmp_pa
     jsonschema.validate(doc, json.loads(SCHEMA.read_text()))
     assert doc["translation_m"] is None and doc["strict_status"] is None
     # asked anyway, the search finds no move to make and proposes none
-    from refine.run.placement import repair_by_placement
+    from refine.run.solve import repair_by_placement
 
     asked = repair_by_placement(problem, run.robot, run.first)
     assert asked.status == "infeasible" and asked.placement is None
@@ -329,7 +330,7 @@ def test_the_summary_and_the_report_offer_the_move_beside_the_slack_repair(tmp_p
 @pytest.mark.slow
 def test_bounds_too_small_for_reach_give_an_infeasible_placement_saying_how_far_off():
     """5 mm and 0.5 deg: the data-sheet bound says no such move can bring the wrist centres in."""
-    from refine.run.placement import repair_by_placement
+    from refine.run.solve import repair_by_placement
 
     problem, result = _solved()
     small = PlacementSettings(translate_m=0.005, rotate_deg=0.5)

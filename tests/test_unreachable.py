@@ -1,7 +1,7 @@
 """The demonstrations of ``problems/unreachable``: each is repaired, or reported infeasible, for its reason.
 
 Every folder under ``problems/unreachable`` with a ``problem.toml`` is run through
-:func:`refine.run.stages.solve_problem` once and checked against its ``[expected]`` table: the status,
+:func:`refine.run.solve.solve_problem` once and checked against its ``[expected]`` table: the status,
 the reason (in a repair's reason when repaired, in the refinement's reason when infeasible), the
 slack a repair used, the arc-length range the reported segment must overlap, and that nothing fails
 silently. Cases with collision shapes import ``refine.optimise.clearance``: an import error fails
@@ -27,7 +27,7 @@ from refine.export.result_json import result_dict
 from refine.frames import rotation_angle_deg
 from refine.problem import load_problem
 from refine.robot.kinematics import TcpKinematics
-from refine.run.stages import solve_problem
+from refine.run.solve import solve_problem
 
 pytestmark = pytest.mark.slow
 

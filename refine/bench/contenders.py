@@ -90,7 +90,7 @@ def refine_assembled(problem: BenchProblem) -> Answer:
     tilts, chained IK, the constraints the seed shows to be needed: ``seed``) and solving it (every
     IPOPT round and what each round adds: ``solve``). Not timed: the robot's loading (done once per
     problem, as Drake's plant) and refine's own verification of each round's answer and diagnosis
-    of a repair (``verify`` and ``diagnose`` of :class:`refine.optimise.outcome.StageTimes`); the
+    of a repair (``verify`` and ``diagnose`` of :class:`refine.stopwatch.StageTimes`); the
     per-waypoint kernels are compiled and cached on disk before the timed runs (the warm-up run).
     """
     return _refine(problem, "assembled")

@@ -23,7 +23,7 @@ def _finite(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
 
 
-def _pass_metrics(p: PassResult) -> dict[str, Any]:
+def pass_metrics(p: PassResult) -> dict[str, Any]:
     check, timing = p.refinement.check, p.timing
     clearance = p.clearance
     return {
@@ -41,7 +41,7 @@ def _pass_metrics(p: PassResult) -> dict[str, Any]:
     }
 
 
-def _aggregate(per_pass: list[dict[str, Any]]) -> dict[str, Any]:
+def aggregate_metrics(per_pass: list[dict[str, Any]]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for key in per_pass[0]:
         values = [m[key] for m in per_pass if m[key] is not None]
@@ -62,7 +62,7 @@ def result_dict(result: RunResult) -> dict[str, Any]:
     """The JSON document of ``result`` as plain Python values."""
     problem = result.problem
     spec = result.robot.spec
-    per_pass = [_pass_metrics(p) for p in result.passes]
+    per_pass = [pass_metrics(p) for p in result.passes]
     first = result.first
     doc: dict[str, Any] = {
         "schema_version": SCHEMA_VERSION,
@@ -99,7 +99,7 @@ def result_dict(result: RunResult) -> dict[str, Any]:
             "joint_step_deg": problem.tolerances.joint_step_deg,
             "clearance_m": problem.collision.margin_m if problem.collision.enabled else None,
         },
-        "metrics": _aggregate(per_pass),
+        "metrics": aggregate_metrics(per_pass),
         "solver": {
             "name": problem.optimise.solver,
             "status": first.refinement.solver_status,

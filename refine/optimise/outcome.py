@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import logging
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -107,29 +106,6 @@ def problem_kinematics(problem: RefinementNLP) -> TcpKinematics:
 def problem_bounds(problem: RefinementNLP) -> tuple[Array, Array]:
     n = problem.dof
     return problem.lbx[:n], problem.ubx[:n]
-
-
-class StageTimes(dict):
-    """Wall time per stage [s] (the dict itself), with the process CPU time of the same stages in ``cpu``."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.cpu: dict[str, float] = {}
-
-    @staticmethod
-    def clock() -> tuple[float, float]:
-        """The wall and CPU clocks now."""
-        return time.perf_counter(), time.process_time()
-
-
-def add_time(timings: dict[str, float], key: str, start: tuple[float, float]) -> None:
-    """Add the wall time since ``start`` (:meth:`StageTimes.clock`) to stage ``key`` of ``timings``.
-
-    The CPU time goes to ``timings.cpu`` where ``timings`` is a :class:`StageTimes`.
-    """
-    timings[key] = timings.get(key, 0.0) + time.perf_counter() - start[0]
-    if isinstance(timings, StageTimes):
-        timings.cpu[key] = timings.cpu.get(key, 0.0) + time.process_time() - start[1]
 
 
 class TimeLimitReached(Exception):

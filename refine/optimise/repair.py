@@ -9,15 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from refine.optimise.diagnosis import Finding
-from refine.optimise.outcome import (
-    Refinement,
-    Repair,
-    StageTimes,
-    add_time,
-    describe_check,
-    findings_of,
-    problem_kinematics,
-)
+from refine.optimise.outcome import Refinement, Repair, describe_check, findings_of, problem_kinematics
 from refine.optimise.problem import ActiveSet, ConstraintSource, RefinementNLP
 from refine.optimise.rounds import (
     SOLVER_LABELS,
@@ -31,6 +23,7 @@ from refine.optimise.rounds import (
 from refine.optimise.verify import (
     check_path,
 )
+from refine.stopwatch import StageTimes, add_time
 
 log = logging.getLogger(__name__)
 

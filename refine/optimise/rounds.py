@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from refine.errors import SolverError
-from refine.optimise.outcome import StageTimes, TimeLimitReached, add_time, problem_kinematics
+from refine.optimise.outcome import TimeLimitReached, problem_kinematics
 from refine.optimise.problem import ActiveSet, ConstraintSource, LinearRow, RefinementNLP
 from refine.optimise.verify import (
     PathCheck,
@@ -20,6 +20,7 @@ from refine.optimise.verify import (
     singularity_measures,
 )
 from refine.robot.kinematics import TcpKinematics
+from refine.stopwatch import StageTimes, add_time
 
 log = logging.getLogger(__name__)
 

@@ -22,9 +22,7 @@ from numpy.typing import NDArray
 from refine.optimise.diagnosis import reach_tilts
 from refine.optimise.outcome import (
     Refinement,
-    StageTimes,
     TimeLimitReached,
-    add_time,
     findings_of,
     problem_bounds,
     problem_kinematics,
@@ -46,6 +44,7 @@ from refine.optimise.verify import (
     check_path,
 )
 from refine.robot.kinematics import CONVERGED, TcpKinematics, solve_ik_batch
+from refine.stopwatch import StageTimes, add_time
 
 Array = NDArray[np.float64]
 Array = NDArray[np.float64]

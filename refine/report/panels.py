@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from refine.report.scene import _rounded
+from refine.report.scene import rounded
 
 if TYPE_CHECKING:
     from refine.run.result import PassResult, RunResult
@@ -43,7 +43,7 @@ PANELS = (
 
 
 def _line(name: str, x: Any, y: Any, **style: Any) -> dict[str, Any]:
-    return {"name": name, "x": _rounded(x, 4), "y": _rounded(y, 4), **style}
+    return {"name": name, "x": rounded(x, 4), "y": rounded(y, 4), **style}
 
 
 def _flat(

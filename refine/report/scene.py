@@ -34,7 +34,7 @@ TOOL_AXIS_M = 0.03
 """Length of the drawn tool axis [m]."""
 
 
-def _rounded(a: Any, decimals: int = 5) -> list[float | None]:
+def rounded(a: Any, decimals: int = 5) -> list[float | None]:
     """A flat JSON-ready list, rounded, with NaN and inf as None."""
     arr = np.round(np.asarray(a, dtype=float), decimals).ravel()
     if np.all(np.isfinite(arr)):
@@ -76,9 +76,9 @@ def _mesh_json(name: str, mesh: trimesh.Trimesh, T: Any, kind: str) -> dict[str,
     return {
         "name": name,
         "kind": kind,
-        "x": _rounded(v[:, 0]),
-        "y": _rounded(v[:, 1]),
-        "z": _rounded(v[:, 2]),
+        "x": rounded(v[:, 0]),
+        "y": rounded(v[:, 1]),
+        "z": rounded(v[:, 2]),
         "i": f[:, 0].tolist(),
         "j": f[:, 1].tolist(),
         "k": f[:, 2].tolist(),
@@ -129,7 +129,7 @@ def robot_frames(result: RunResult) -> dict[str, Any]:
         p = result.passes[i]
         links = result.robot.link_poses(p.refinement.q[k])
         poses = [base @ links[frame] @ np.asarray(T) for _, frame, _, T in parts]
-        frames.append([_rounded(T[:3, :].ravel(), 5) for T in poses])
+        frames.append([rounded(T[:3, :].ravel(), 5) for T in poses])
         labels.append(f"{p.name}, waypoint {k}" if len(result.passes) > 1 else f"waypoint {k}")
         where.append([i, int(k)])
     meshes = [
@@ -149,13 +149,13 @@ def path_data(result: RunResult) -> list[dict[str, Any]]:
         quantities: dict[str, Any] = {
             "deviation": {
                 "title": "deviation from the demonstration [deg]",
-                "values": _rounded(check.orientation_deviation_deg, 3),
+                "values": rounded(check.orientation_deviation_deg, 3),
             },
         }
         if p.timing is not None:
             quantities["speed"] = {
                 "title": "planned TCP speed [mm/s]",
-                "values": _rounded(p.timing.speed * 1e3, 2),
+                "values": rounded(p.timing.speed * 1e3, 2),
             }
         else:
             quantities["speed"] = {
@@ -165,12 +165,12 @@ def path_data(result: RunResult) -> list[dict[str, Any]]:
         if p.clearance is not None:
             quantities["clearance"] = {
                 "title": "clearance [mm]",
-                "values": _rounded(p.clearance.waypoint_distance_m * 1e3, 2),
+                "values": rounded(p.clearance.waypoint_distance_m * 1e3, 2),
             }
         else:
             quantities["clearance"] = {"title": "clearance [mm]", "missing": "no cell objects or tool shapes"}
         slack = p.refinement.slack_deg if p.refinement.slack_deg.size == n else np.zeros(n)
-        quantities["slack"] = {"title": "repair slack [deg]", "values": _rounded(slack, 3)}
+        quantities["slack"] = {"title": "repair slack [deg]", "values": rounded(slack, 3)}
         step = max(1, n // 60)
         tips = check.poses[::step, :3, 3]
         tails = tips - check.poses[::step, :3, 2] * TOOL_AXIS_M
@@ -198,12 +198,12 @@ def path_data(result: RunResult) -> list[dict[str, Any]]:
             {
                 "name": p.name,
                 "status": p.refinement.status,
-                "x": _rounded(pos[:, 0]),
-                "y": _rounded(pos[:, 1]),
-                "z": _rounded(pos[:, 2]),
-                "s": _rounded(p.fused.s, 4),
+                "x": rounded(pos[:, 0]),
+                "y": rounded(pos[:, 1]),
+                "z": rounded(pos[:, 2]),
+                "s": rounded(p.fused.s, 4),
                 "quantities": quantities,
-                "axis": {"x": _rounded(axis[:, 0]), "y": _rounded(axis[:, 1]), "z": _rounded(axis[:, 2])},
+                "axis": {"x": rounded(axis[:, 0]), "y": rounded(axis[:, 1]), "z": rounded(axis[:, 2])},
                 "marks": marks,
             }
         )

@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from refine.errors import InputError
+from refine.run.result import EXECUTABLE
 
 log = logging.getLogger(__name__)
 
@@ -55,7 +56,6 @@ COLUMNS = (
 the wall time of its run in the worker [s], ``this batch`` or ``earlier`` (skipped by ``--resume``),
 and the reason (error message of a failed problem)."""
 
-EXECUTABLE = ("ok", "repaired")
 
 
 @dataclass(frozen=True)
@@ -179,7 +179,7 @@ def run_one(
         (Path(out_dir) / "error.txt").unlink(missing_ok=True)  # from an earlier failed attempt
         from refine.export.result_json import write_timings
         from refine.problem import load_problem
-        from refine.run.stages import run
+        from refine.run.write import run
 
         result = run(load_problem(problem), Path(out_dir), programs, report=report)
         result.timings_s["run"] = time.perf_counter() - t0

@@ -151,3 +151,6 @@ def summary_lines(result: RunResult) -> list[str]:
     stages = ", ".join(f"{k} {v:.3f}" for k, v in result.timings_s.items() if k != "total")
     lines.append(f"time [s]     {stages}" + (f"; total {total:.2f}" if total else ""))
     return lines
+
+
+EXECUTABLE = ("ok", "repaired")

@@ -8,8 +8,6 @@ figures for ``result.json``. A multi-pass weld runs the refine and timing stages
 from __future__ import annotations
 
 import logging
-import time
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -20,14 +18,12 @@ from refine.optimise.solve import solve_refinement
 from refine.paths import FusedPath, Trajectory
 from refine.problem import Problem
 from refine.robot.model import Robot
-from refine.robot.registry import robot_for
-from refine.run.evaluate import compare_with_truth
-from refine.run.result import PassResult, RunResult
+from refine.run.result import EXECUTABLE, PassResult
+from refine.stopwatch import Stopwatch
 from refine.timing import time_parameterise
 
 log = logging.getLogger(__name__)
 
-EXECUTABLE = ("ok", "repaired")
 
 REDUNDANT_MID_RANGE_WEIGHT = 2.0
 """Default ``[optimise] mid_range_weight`` for arms with more than 6 joints: on the LBR iiwa it
@@ -35,24 +31,9 @@ keeps every joint >= 18 deg from its limits on the test paths while costing < 0.
 orientation, and the solution moves by < 0.2 deg of joint angle when the demo is perturbed."""
 
 
-class _Stopwatch:
-    def __init__(self) -> None:
-        self.times: dict[str, float] = {}
-        self._t = time.perf_counter()
-
-    def lap(self, name: str) -> None:
-        now = time.perf_counter()
-        self.times[name] = self.times.get(name, 0.0) + now - self._t
-        self._t = now
-
-    def add(self, times: dict[str, float]) -> None:
-        for stage, seconds in times.items():
-            self.times[stage] = self.times.get(stage, 0.0) + seconds
-
-
 def fused_path(
     problem: Problem,
-    watch: _Stopwatch | None = None,
+    watch: Stopwatch | None = None,
     *,
     accept_frame_error: bool = False,
     qualities: list[Any] | None = None,
@@ -62,7 +43,7 @@ def fused_path(
     ``accept_frame_error`` turns the quality gate's stop on a tracker frame that looks wrong into a
     warning (see :mod:`refine.demo.quality`); the gate's figures are appended to ``qualities``.
     """
-    watch = watch or _Stopwatch()
+    watch = watch or Stopwatch()
     if problem.cad is None:
         raise InputError(f"problem {problem.name!r} has no [cad] file: its path must be given in memory")
     if problem.cad.format == "pathml":
@@ -155,7 +136,7 @@ def refine_pass(
     problem: Problem,
     robot: Robot,
     fused: FusedPath,
-    watch: _Stopwatch,
+    watch: Stopwatch,
     name: str = "pass 1",
     layer: int = 1,
     index: int = 1,
@@ -219,135 +200,3 @@ def refine_pass(
     return PassResult(name, layer, index, fused, refinement, timing, trajectory, clearance, nlp)
 
 
-def solve_problem(
-    problem: Problem,
-    *,
-    accept_frame_error: bool = False,
-    robot: Robot | None = None,
-    fused: FusedPath | None = None,
-    nlp: RefinementNLP | None = None,
-    q0: np.ndarray | None = None,
-) -> RunResult:
-    """Run every stage up to the timed trajectories, without writing files.
-
-    Args:
-        problem: the problem.
-        accept_frame_error: warn instead of stopping when the tracker frame looks wrong.
-        robot: the robot, when the caller holds it already; None to load ``problem.robot``.
-        fused: the first pass's path, when the caller holds it; None to read and fuse the
-            problem's files.
-        nlp: the first pass's problem, already built (re-solving); None to build it.
-        q0: initial joints (N, n) [rad] of the first pass (warm start); None for the IK seed.
-    """
-    watch = _Stopwatch()
-    if robot is None:
-        robot = robot_for(problem.robot)
-    watch.lap("load")
-    qualities: list[Any] = []
-    if fused is None:
-        fused = fused_path(problem, watch, accept_frame_error=accept_frame_error, qualities=qualities)
-    sources = constraint_sources(problem, robot)
-    watch.lap("load")
-    passes = [refine_pass(problem, robot, fused, watch, sources=sources, nlp=nlp, q0=q0)]
-    if problem.multipass is not None and problem.multipass.layers > 1:
-        from refine.fuse.passes import generate_passes
-
-        for p in generate_passes(fused, problem.multipass)[1:]:
-            name = f"layer {p.layer} pass {p.index}"
-            passes.append(refine_pass(problem, robot, p.path, watch, name, p.layer, p.index, sources))
-    truth = None
-    first = passes[0]
-    if (
-        problem.demonstration is not None
-        and problem.demonstration.truth is not None
-        and first.trajectory is not None
-    ):
-        assert first.timing is not None
-        truth = compare_with_truth(
-            problem.demonstration.truth,
-            first.trajectory,
-            first.timing,
-            axisymmetric=problem.tool.axisymmetric,
-        )
-        watch.lap("truth")
-    placement = None
-    if problem.repair.placement is not None:  # the workpiece move as a second repair (refine.run.placement)
-        from refine.run.placement import placement_repair
-
-        placement = placement_repair(problem, robot, passes)
-        watch.add({"placement": sum(placement.timings_s.values())})
-    return RunResult(
-        problem,
-        robot,
-        tuple(passes),
-        truth,
-        watch.times,
-        demo_quality=qualities[0] if qualities else None,
-        placement=placement,
-    )
-
-
-def run(
-    problem: Problem,
-    out_dir: Path,
-    programs: tuple[str, ...] | None = None,
-    *,
-    report: bool = True,
-    accept_frame_error: bool = False,
-) -> RunResult:
-    """Solve ``problem`` and write every output into ``out_dir``.
-
-    Args:
-        problem: the loaded problem.
-        out_dir: folder for ``result.json``, ``trajectory.csv``, ``<name>.aml`` and programs.
-        programs: program formats overriding ``[output] programs``.
-        report: also write ``report.html``.
-        accept_frame_error: warn instead of stopping when the tracker frame looks wrong.
-
-    Returns:
-        The run's result, with ``outputs`` naming the files written.
-    """
-    from refine.run.preflight import preflight
-
-    preflight(problem, out_dir, programs, report=report)  # refuse before spending time on the solve
-    return write_run(
-        solve_problem(problem, accept_frame_error=accept_frame_error), out_dir, programs, report=report
-    )
-
-
-def write_run(
-    result: RunResult, out_dir: Path, programs: tuple[str, ...] | None = None, *, report: bool = True
-) -> RunResult:
-    """Write every output of a solved run into ``out_dir`` (what :func:`run` does after solving).
-
-    Args:
-        result: the solved run.
-        out_dir: folder for ``result.json``, ``trajectory.csv``, ``<name>.aml`` and programs.
-        programs: program formats overriding ``[output] programs``.
-        report: also write ``report.html``.
-
-    Returns:
-        ``result``, with ``outputs`` naming the files written.
-    """
-    from refine.export.result_json import write_result_json
-    from refine.export.writers import write_outputs
-    from refine.run.outputs import StagedOutputs
-    from refine.run.preflight import preflight
-
-    problem = result.problem
-    checked = preflight(problem, out_dir, programs, report=report, robot=result.robot)
-    t0 = time.perf_counter()
-    protected = (*problem.input_files, *([problem.source] if problem.source else []))
-    with StagedOutputs(out_dir, protected) as stage:  # all or nothing: see refine.run.outputs
-        result.outputs.update(write_outputs(result, stage.dir, checked.programs))
-        result.timings_s["export"] = time.perf_counter() - t0
-        if report:
-            from refine.report.html import write_report
-
-            t0 = time.perf_counter()
-            result.outputs["report"] = write_report(stage.dir / "report.html", result)
-            result.timings_s["report"] = time.perf_counter() - t0
-        result.outputs["result"] = stage.dir / "result.json"
-        final = stage.commit(result.outputs, lambda path: write_result_json(path, result))
-    result.outputs.update(final)
-    return result

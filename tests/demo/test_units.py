@@ -19,7 +19,7 @@ from refine.demo import read_tracker_log
 from refine.demo.csv_ import read_demo_csv
 from refine.errors import InputError
 from refine.problem import load_problem
-from refine.run.stages import solve_problem
+from refine.run.solve import solve_problem
 from refine.synthetic import write_line_problem
 
 TILT_DEG = 15.0

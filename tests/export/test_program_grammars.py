@@ -21,7 +21,7 @@ from refine.paths import Trajectory  # noqa: E402
 from refine.problem import ProcessSettings, load_problem  # noqa: E402
 from refine.robot.model import Robot
 from refine.robot.registry import load_robot
-from refine.run.stages import run  # noqa: E402
+from refine.run.write import run
 
 ROOT = Path(__file__).resolve().parents[2]
 _spec = importlib.util.spec_from_file_location(

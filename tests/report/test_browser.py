@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from refine.problem import load_problem
-from refine.run.stages import run
+from refine.run.write import run
 
 ROOT = Path(__file__).resolve().parents[2]
 ARTIFACTS = ROOT / "tests" / "artifacts"

@@ -7,7 +7,7 @@ from lxml import html as lxml_html
 
 from refine.problem import load_problem
 from refine.report.panels import PANELS
-from refine.run.stages import run
+from refine.run.write import run
 
 ROOT = Path(__file__).resolve().parents[2]
 

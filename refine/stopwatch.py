@@ -1,0 +1,48 @@
+"""refine.stopwatch."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from numpy.typing import NDArray
+
+Array = NDArray[np.float64]
+
+
+class StageTimes(dict):
+    """Wall time per stage [s] (the dict itself), with the process CPU time of the same stages in ``cpu``."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.cpu: dict[str, float] = {}
+
+    @staticmethod
+    def clock() -> tuple[float, float]:
+        """The wall and CPU clocks now."""
+        return time.perf_counter(), time.process_time()
+
+
+def add_time(timings: dict[str, float], key: str, start: tuple[float, float]) -> None:
+    """Add the wall time since ``start`` (:meth:`StageTimes.clock`) to stage ``key`` of ``timings``.
+
+    The CPU time goes to ``timings.cpu`` where ``timings`` is a :class:`StageTimes`.
+    """
+    timings[key] = timings.get(key, 0.0) + time.perf_counter() - start[0]
+    if isinstance(timings, StageTimes):
+        timings.cpu[key] = timings.cpu.get(key, 0.0) + time.process_time() - start[1]
+
+
+class Stopwatch:
+    def __init__(self) -> None:
+        self.times: dict[str, float] = {}
+        self._t = time.perf_counter()
+
+    def lap(self, name: str) -> None:
+        now = time.perf_counter()
+        self.times[name] = self.times.get(name, 0.0) + now - self._t
+        self._t = now
+
+    def add(self, times: dict[str, float]) -> None:
+        for stage, seconds in times.items():
+            self.times[stage] = self.times.get(stage, 0.0) + seconds
