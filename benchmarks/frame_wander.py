@@ -28,7 +28,7 @@ from wander_scenes import given_frame, scene  # noqa: E402
 
 from refine.demo import quality  # noqa: E402
 from refine.errors import InputError  # noqa: E402
-from refine.fuse.align import fuse  # noqa: E402
+from refine.fuse.fusion import fuse
 
 CASES = {
     "right frame": {},

@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING
 
 from refine.errors import InfeasibleError, InputError, RefineError, SolverError
 from refine.lazy import lazy_names
+from refine.version import __version__
 
 if TYPE_CHECKING:
     from refine.api import PassArrays, Result, refine_path, solve
@@ -42,6 +43,7 @@ _LAZY = {
 }
 
 __all__ = [
+    "__version__",
     "CollisionSettings",
     "InfeasibleError",
     "InputError",
@@ -57,7 +59,6 @@ __all__ = [
     "refine_path",
     "solve",
 ]
-__version__ = "0.1.0"
 
 
 __getattr__, __dir__ = lazy_names("refine", _LAZY, globals())  # the API's names, imported on first use

@@ -154,7 +154,7 @@ class PathOrder:
             (``[cad] start_near``) or ``"open path"`` (an open path starts at an end).
         residual_as_cad_m: distance of the coarse match run as drawn [m]: the larger of the
             median demo-to-path and path-to-demo distances, no distortion correction
-            (:func:`refine.fuse.align.orient`); None when not tried.
+            (:func:`refine.fuse.order.orient`); None when not tried.
         residual_reversed_m: the same run reversed [m]; None when not tried.
     """
 

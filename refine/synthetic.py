@@ -1,6 +1,6 @@
 """Generated paths for tests, benchmarks and the simulated problems under ``problems/``.
 
-:func:`wave_path` stands in for the output of :func:`refine.fuse.align.fuse` when a test or a benchmark
+:func:`wave_path` stands in for the output of :func:`refine.fuse.fusion.fuse` when a test or a benchmark
 needs a refinement problem of a chosen size without reading files. The other helpers are shared by
 the problem generators: footprints of closed beads (:func:`rounded_rectangle`), a worker's smooth
 periodic variation (:func:`periodic_wave`), tool orientations of a dragged nozzle

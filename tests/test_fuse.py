@@ -18,7 +18,8 @@ from refine.frames import (
     rotation_angle_deg,
     transform_from_xyz_rpy,
 )
-from refine.fuse.align import align, demo_tcp_poses, fuse, monotone_dtw
+from refine.fuse.align import align, demo_tcp_poses, monotone_dtw
+from refine.fuse.fusion import fuse
 from refine.paths import CadPath, Demonstration
 
 log = logging.getLogger(__name__)

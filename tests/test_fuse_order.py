@@ -1,4 +1,4 @@
-"""The alignment finds the worker's direction and start on the CAD path (refine.fuse.align.orient).
+"""The alignment finds the worker's direction and start on the CAD path (refine.fuse.order.orient).
 
 Each demonstration is simulated with the project's generators (``refine.synthetic``) and tracker
 simulator (``refine.demo.simulate``) along a glass-like rounded rectangle; the expected direction,
@@ -21,7 +21,7 @@ from refine.demo import clean_demonstration
 from refine.demo.simulate import TrackerModel, simulate_demonstration
 from refine.errors import InputError
 from refine.frames import transform_from_xyz_rpy, transform_points
-from refine.fuse.align import fuse
+from refine.fuse.fusion import fuse
 from refine.paths import CadPath
 from refine.settings import CadSettings, DemoSettings
 from refine.synthetic import periodic_wave, rounded_rectangle, tool_rotations

@@ -83,7 +83,7 @@ def read_cad_path(settings: CadSettings, cad_in_world: NDArray) -> CadPath:
     every ``settings.spacing_m`` or a little less (see
     :func:`refine.cad.resample.resample_by_arc_length`). The result records what the problem
     fixed (``direction_given``, ``start_given``): the alignment searches the rest
-    (:func:`refine.fuse.align.fuse`).
+    (:func:`refine.fuse.fusion.fuse`).
 
     Args:
         settings: the ``[cad]`` settings (file, format, units, spacing, layer, reverse; for

@@ -17,8 +17,8 @@ import numpy as np
 from lxml import etree
 
 from refine.errors import InputError
-from refine.export.pathml import FRAME_KEYS, POINT_VALUES, caex_tag
 from refine.frames import matrix_from_fixed_xyz
+from refine.pathml_format import FRAME_KEYS, POINT_VALUES, caex_tag
 from refine.paths import Array
 from refine.problem import ProcessParameter
 

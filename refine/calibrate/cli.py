@@ -286,7 +286,7 @@ def _receiver(args: argparse.Namespace) -> tuple[Calibration, str, str, np.ndarr
 
 def _receiver_path(args: argparse.Namespace) -> tuple[Calibration, str, str, np.ndarray, str]:
     from refine.cad import read_cad_path
-    from refine.calibrate.receiver import register_receiver_to_path
+    from refine.calibrate.receiver_path import register_receiver_to_path
     from refine.frames import invert_transform
     from refine.problem import load_problem
 

@@ -46,7 +46,6 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from refine import __version__
 from refine.errors import InputError
 from refine.export.program import (
     Switch,
@@ -66,6 +65,7 @@ from refine.frames import invert_transform, kuka_abc_from_matrix, make_transform
 from refine.names import comment_text, identifier
 from refine.paths import Array, Trajectory
 from refine.problem import Problem
+from refine.version import __version__
 
 log = logging.getLogger(__name__)
 

@@ -38,28 +38,20 @@ from pathlib import Path
 import numpy as np
 from lxml import etree
 
-from refine import __version__
 from refine.errors import InputError
 from refine.frames import fixed_xyz_from_matrix
+from refine.pathml_format import CAEX_NS, FRAME_KEYS, POINT_VALUES, caex_tag
 from refine.paths import Trajectory
 from refine.problem import Problem, ProcessParameter
+from refine.version import __version__
 
 log = logging.getLogger(__name__)
 
-CAEX_NS = "http://www.dke.de/CAEX"
 _XSI_NS = "http://www.w3.org/2001/XMLSchema-instance"
 ROLE_LIB = "PathMLRoleClassLib"
 _BASE_ROLE = "AutomationMLBaseRoleClassLib/AutomationMLBaseRole"
 _FRAME_TYPE = "AutomationMLBaseAttributeTypeLib/Frame"
 _GUID_NAMESPACE = uuid.uuid5(uuid.NAMESPACE_DNS, "pathml.refine")
-# (name, unit) of the Frame sub-attributes and of the other values of every Point.
-FRAME_KEYS = (("x", "m"), ("y", "m"), ("z", "m"), ("rx", "deg"), ("ry", "deg"), ("rz", "deg"))
-POINT_VALUES = (("speed", "m/s"), ("time", "s"), ("arcLength", "m"))
-
-
-def caex_tag(name: str) -> str:
-    """Qualified name ``{http://www.dke.de/CAEX}name`` of a CAEX element."""
-    return f"{{{CAEX_NS}}}{name}"
 
 
 _IE, _ATTR, _VALUE, _ROLE_REQ = (

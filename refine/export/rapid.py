@@ -37,7 +37,6 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from refine import __version__
 from refine.errors import InputError
 from refine.export.program import (
     ProgramPass,
@@ -57,6 +56,7 @@ from refine.frames import continuous_quaternions, invert_transform, quaternion_f
 from refine.names import comment_text, identifier
 from refine.paths import Array, Trajectory
 from refine.problem import Problem
+from refine.version import __version__
 
 log = logging.getLogger(__name__)
 

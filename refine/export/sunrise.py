@@ -42,7 +42,6 @@ from typing import Any
 
 import numpy as np
 
-from refine import __version__
 from refine.errors import InputError
 from refine.export.krl import kuka_status_turn
 from refine.export.program import (
@@ -62,6 +61,7 @@ from refine.frames import invert_transform, kuka_abc_from_matrix, matrix_from_ku
 from refine.names import comment_text
 from refine.paths import Array, Trajectory
 from refine.problem import Problem
+from refine.version import __version__
 
 log = logging.getLogger(__name__)
 

@@ -35,7 +35,6 @@ from typing import Any
 
 import numpy as np
 
-from refine import __version__
 from refine.errors import InputError, SolverError
 from refine.export.program import (
     Switch,
@@ -54,6 +53,7 @@ from refine.names import comment_text, identifier
 from refine.paths import Array, Trajectory
 from refine.problem import Problem
 from refine.robot.kinematics import TcpKinematics, solve_ik
+from refine.version import __version__
 
 log = logging.getLogger(__name__)
 

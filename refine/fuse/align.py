@@ -38,38 +38,37 @@ cannot be told from timing; where the worker stops mid-path, ``t(s)`` may be off
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.ndimage import uniform_filter1d
 from scipy.optimize import isotonic_regression
 from scipy.spatial.distance import cdist
-from scipy.spatial.transform import Rotation, Slerp
 
 from refine.errors import InputError
 from refine.frames import check_transform, invert_transform, transform_points
-from refine.paths import CadPath, Demonstration, FusedPath, PathOrder
+from refine.paths import CadPath, Demonstration
+
+logger = logging.getLogger(__name__)
+Array = NDArray[np.float64]
+
 
 logger = logging.getLogger(__name__)
 Array = NDArray[np.float64]
 
 PRE_MOTION_S = 1.0  # demo kept before motion_start [s]
+START_WINDOW_S = 0.2  # the demo's start position is its mean over this much time [s]
 DTW_MAX_POINTS = 600  # CAD points used by the DTW at most
 SPEED_FLOOR_FRACTION = 0.1  # speed floor as a fraction of the median demonstrated speed
 MAX_RESIDUAL_M = 0.1  # demo-to-CAD distance beyond which a waypoint is not covered [m]
 MAX_CORRECTION_M = 0.15  # largest tracker position correction accepted [m]
-MAX_HAND_SPEED_M_S = 2.0  # mean speed above which a demonstration is implausible [m/s]
+MAX_MEAN_HAND_SPEED_M_S = 2.0  # mean speed above which a demonstration is implausible [m/s]
 TIME_HALF_WIDTH_M = 0.005  # half-width of the arc-length window that fits t(s) [m]
 BASIS_SMOOTHING_M = 0.02  # path length the distortion's argument is averaged over [m]
 PRIOR_ERROR_M = (0.01, 0.01, 0.05)  # expected tracker error along the receiver's x, y, z [m]
 _RIDGE_NOISE_M = 3e-3  # noise the ridge assumes, pessimistic: rows are correlated [m]
 _FIT_ROUNDS = (3, 3, 0)  # distortion fit/re-project rounds after each DTW pass
-SEARCH_MAX_POINTS = 240  # CAD points of the direction and start search at most
-DIRECTION_RATIO = 2.0  # the other direction's coarse residual must be this many times the chosen one's
-DIRECTIONS = ("as_cad", "reversed")
-SEARCH_ROUNDS = 2  # coarse matches per direction, the demo moved by the matched mean offset between them
-START_WINDOW_S = 0.2  # the demo's start position is its mean over this much time [s]
 
 
 @dataclass(frozen=True)
@@ -162,7 +161,7 @@ def _project(
     return s, foot, tangent, np.linalg.norm(points - foot, axis=1)
 
 
-def _resample(t: Array, x: Array, t_new: Array) -> Array:
+def resample_in_time(t: Array, x: Array, t_new: Array) -> Array:
     """Linear interpolation of the rows of x (M, 3) from times t to t_new [s]."""
     return np.column_stack([np.interp(t_new, t, c) for c in x.T])
 
@@ -256,114 +255,7 @@ def _coarse_match(
     return sg, W, raw_median
 
 
-def cyclic_dtw(cost: Array) -> tuple[NDArray[np.intp], int]:
-    """Monotone DTW once round a closed path, from any start: the column matched to each row.
-
-    The columns are the K points of a closed path (the closing point not repeated). Row 0 may be
-    matched to any column j0; each row advances by 0, 1 or 2 columns, modulo K; the last row is
-    matched to j0 again, one lap later.
-
-    Args:
-        cost: matching cost, shape (M, K).
-
-    Returns:
-        The unwrapped column per row (M,), from j0 to j0 + K, non-decreasing, and j0.
-
-    Raises:
-        InputError: when M rows cannot go once round (M < K / 2 + 1).
-    """
-    m, k = cost.shape
-    ext = np.concatenate([cost, cost, cost[:, :1]], axis=1)  # columns 0 .. 2K (2K is column 0 again)
-    n = 2 * k + 1
-    D = np.full(n, np.inf)
-    D[:k] = ext[0, :k]
-    start = np.arange(n)
-    step = np.zeros((m, n), dtype=np.int8)  # columns advanced into each cell
-    for i in range(1, m):
-        best, src, arg = D.copy(), start.copy(), step[i]
-        for d in (1, 2):
-            better = D[:-d] < best[d:]
-            np.copyto(best[d:], D[:-d], where=better)
-            np.copyto(src[d:], start[:-d], where=better)
-            np.copyto(arg[d:], d, where=better)
-        D, start = best + ext[i], src
-    end = np.arange(k, n)  # a full lap: end column = start column + K
-    ok = start[end] == end - k
-    if not np.any(ok & np.isfinite(D[end])):
-        raise InputError(f"DTW: {m} demo rows cannot go once round {k} path points (need >= {k // 2 + 1})")
-    j = int(end[ok][np.argmin(np.where(np.isfinite(D[end[ok]]), D[end[ok]], np.inf))])
-    cols = np.empty(m, dtype=np.intp)
-    cols[-1] = j
-    for i in range(m - 1, 0, -1):
-        j -= int(step[i, j])
-        cols[i - 1] = j
-    return cols, int(cols[0])
-
-
-def _ring(points: Array, closed: bool, reverse: bool) -> Array:
-    """Search points in the order of one direction; a closed path's (without its closing point) keeps its first."""
-    if not closed or not reverse:
-        return points[::-1] if reverse else points
-    return np.concatenate([points[:1], points[:0:-1]])
-
-
-def _search_order(
-    rows: Array, cad_s: Array, cad: Array, closed: bool, directions: tuple[bool, ...], search_start: bool
-) -> dict[bool, tuple[float, float, Array]]:
-    """Coarse match of demo rows for each direction (and, on a closed path, every start).
-
-    ``SEARCH_ROUNDS`` matches: after each, the demo rows are moved by the mean offset to their
-    matched points (a rigid tracker offset would otherwise blur the comparison on a small path).
-
-    Args:
-        rows: demo TCP positions on a time grid, from the start pause on [m], (M, 3).
-        cad_s: arc length of the waypoints [m], (N,).
-        cad: waypoints in the demo's frame [m], (N, 3).
-        closed: the path is closed (its last waypoint repeats its first).
-        directions: the directions to try (False as the waypoints run, True reversed).
-        search_start: try every start of a closed path.
-
-    Returns:
-        Per direction: the larger of the median row-to-path and the median path-to-row distance
-        of the last match [m], the arc length of
-        the start found, along the waypoints' order from the first one [m], and the offset the
-        rows were moved by [m], (3,).
-    """
-    n = len(cad_s) - int(closed)
-    idx = np.arange(0, n, -(-n // SEARCH_MAX_POINTS))
-    if not closed:
-        idx = np.unique(np.r_[idx, n - 1])
-    pts, sc = cad[idx], cad_s[idx]
-    k = len(idx)
-    rows = rows[:: max(1, len(rows) // (2 * k))]
-    out = {}
-    for reverse in directions:
-        ring = _ring(pts, closed, reverse)
-        cyclic = closed and search_start
-        if closed and not cyclic:
-            ring = np.vstack([ring, ring[:1]])
-        shift, j0 = np.zeros(3), 0
-        for _ in range(SEARCH_ROUNDS):  # match, move the demo by the matched mean offset, match again
-            moved = rows + shift
-            cost = cdist(moved, ring)
-            if cyclic:
-                unwrapped, j0 = cyclic_dtw(cost)
-            else:
-                unwrapped = monotone_dtw(cost)
-            cols = unwrapped % len(ring)
-            d_demo = cost[np.arange(len(rows)), cols]
-            # each path point to the first row matched at or past it: a demo that stays on part
-            # of the path is near the path, but the path is not near it
-            j = np.arange(j0, j0 + len(ring))
-            first = np.minimum(np.searchsorted(unwrapped, j), len(rows) - 1)
-            d_path = np.linalg.norm(ring[j % len(ring)] - moved[first], axis=1)
-            shift = shift + np.mean(ring[cols] - moved, axis=0)
-        j0 = (0 if j0 == 0 else k - j0) if reverse else j0  # index into pts
-        out[reverse] = (max(float(np.median(d_demo)), float(np.median(d_path))), float(sc[j0]), shift)
-    return out
-
-
-def _refine_start(p_start: Array, cad_s: Array, cad: Array, s0: float, radius: float) -> float:
+def refine_start(p_start: Array, cad_s: Array, cad: Array, s0: float, radius: float) -> float:
     """Arc length [m] of the point of a closed path nearest to ``p_start`` within ``radius`` of ``s0``."""
     L = float(cad_s[-1])
     ring_s, ring = cad_s[:-1], cad[:-1]
@@ -378,136 +270,10 @@ def _refine_start(p_start: Array, cad_s: Array, cad: Array, s0: float, radius: f
     return float((ring_s[j[best] % n] + u[best] * seg) % L)
 
 
-def _start_position(t: Array, p: Array, t_motion: float) -> Array:
+def start_position(t: Array, p: Array, t_motion: float) -> Array:
     """Mean position [m] over the first ``START_WINDOW_S`` of ``t``, but not past ``t_motion``."""
     first = t <= min(t[0] + START_WINDOW_S, t_motion)
     return p[first].mean(axis=0) if np.count_nonzero(first) > 1 else p[0]
-
-
-def reorder(cad: CadPath, reverse: bool, start: int) -> CadPath:
-    """The same waypoints run the other way and/or from another waypoint of a closed path.
-
-    Args:
-        cad: the path.
-        reverse: run it the other way (a closed path keeps its first point).
-        start: index, in the new direction, of the waypoint to start from (closed paths only).
-
-    Returns:
-        The path with its ``s`` restarted at 0, and ``reversed`` / ``start_offset_m`` updated.
-    """
-    if not reverse and not start:
-        return cad
-    p, ds = cad.positions, np.diff(cad.s)
-    L = cad.length
-    if reverse:
-        p, ds = p[::-1], ds[::-1]
-    first = (len(p) - 1 - start) % (len(p) - 1) if reverse else start  # index in cad of the new start
-    if cad.closed and start:
-        ring = np.roll(p[:-1], -start, axis=0)
-        p, ds = np.vstack([ring, ring[:1]]), np.roll(ds, -start)
-    sigma = float(cad.s[first]) if cad.closed else (L if reverse else 0.0)
-    offset = cad.start_offset_m - sigma if cad.reversed else cad.start_offset_m + sigma
-    if cad.closed:
-        offset %= L
-    return replace(
-        cad,
-        s=np.r_[0.0, np.cumsum(ds)],
-        positions=np.ascontiguousarray(p),
-        reversed=cad.reversed != reverse,
-        start_offset_m=float(offset),
-    )
-
-
-def orient(
-    cad: CadPath, demo: Demonstration, source_in_world: ArrayLike, sensor_in_tcp: ArrayLike
-) -> tuple[bool, int, PathOrder]:
-    """The CAD path turned to the worker's direction and, when closed, started where the worker started.
-
-    The demo TCP positions from ``PRE_MOTION_S`` before ``motion_start`` (box-averaged on a time
-    grid of about four rows per search point) are matched by DTW to the waypoints, thinned to at
-    most ``SEARCH_MAX_POINTS``, once as drawn and once reversed; on a closed path by
-    :func:`cyclic_dtw`, which also finds the start; ``SEARCH_ROUNDS`` times, the rows moved by
-    their mean offset to the matched points in between. A direction's distance is the larger of
-    the median row-to-path and the median path-to-row distance; the smaller wins when the
-    other's is at least ``DIRECTION_RATIO`` times it. The
-    start is then refined to the path point nearest to the demo's start position (its mean over
-    the first ``START_WINDOW_S``, not past ``motion_start``), within two search steps of the
-    coarse start, and rounded to the nearest waypoint.
-    What the problem fixed (``cad.direction_given``, ``cad.start_given``) is kept, not searched.
-
-    Args:
-        cad: the CAD path in {F}.
-        demo: the cleaned demonstration.
-        source_in_world: receiver pose in the world, T_F_S, shape (4, 4).
-        sensor_in_tcp: sensor pose in the tool frame, T_TCP_E, shape (4, 4).
-
-    Returns:
-        Whether to reverse the path, the waypoint to start from in that direction (the arguments
-        of :func:`reorder`), and what was chosen.
-
-    Raises:
-        InputError: neither direction clearly better (naming both distances [mm]).
-    """
-    open_path = not cad.closed
-    if cad.direction_given and (cad.start_given or open_path):
-        d = "reversed" if cad.reversed else "as_cad"
-        start = "open path" if open_path else "problem"
-        return False, 0, PathOrder(d, cad.start_offset_m, "problem", start)
-    T_S_F = invert_transform(check_transform(source_in_world, "source_in_world"))
-    T_E_TCP = invert_transform(check_transform(sensor_in_tcp, "sensor_in_tcp"))
-    i0 = int(np.searchsorted(demo.t, demo.t[demo.motion_start] - PRE_MOTION_S))
-    t = demo.t[i0:]
-    p = demo.positions[i0:] + np.einsum("mij,j->mi", demo.rotations[i0:], T_E_TCP[:3, 3])
-    cad_S = transform_points(T_S_F, cad.positions)
-    n_search = min(SEARCH_MAX_POINTS, len(cad.s))
-    dt_grid = max((t[-1] - t[0]) / (2 * n_search), float(np.median(np.diff(t))))
-    tg = np.linspace(t[0], t[-1], int(np.ceil((t[-1] - t[0]) / dt_grid)) + 1)
-    pg = _resample(t, uniform_filter1d(p, max(1, round(dt_grid / float(np.median(np.diff(t))))), axis=0), tg)
-    directions = (False,) if cad.direction_given else (False, True)
-    found = _search_order(pg, cad.s, cad_S, cad.closed, directions, not cad.start_given)
-    reverse = min(found, key=lambda r: found[r][0])
-    tried = ", ".join(f"{v[0] * 1e3:.0f} mm {'reversed' if r else 'as drawn'}" for r, v in found.items())
-    if found[reverse][0] > MAX_RESIDUAL_M:
-        raise InputError(
-            f"demo {demo.source!r} does not follow the CAD path {cad.source!r}: median distance "
-            f"{tried} before alignment (limit {MAX_RESIDUAL_M * 1e3:.0f} mm); check frames and units"
-        )
-    if len(found) == 2 and found[not reverse][0] < DIRECTION_RATIO * found[reverse][0]:
-        raise InputError(
-            f"demo {demo.source!r}: cannot tell which way round the CAD path {cad.source!r} it runs: "
-            f"median distance {found[False][0] * 1e3:.1f} mm as drawn, {found[True][0] * 1e3:.1f} mm "
-            f"reversed (the better must be under 1/{DIRECTION_RATIO:g} of the other); does it cover the "
-            "whole path once? set [cad] reverse to choose"
-        )
-    # as the file runs, and against it (cad may already run against the file: [cad] reverse)
-    residuals = (found[cad.reversed][0], found[not cad.reversed][0]) if len(found) == 2 else (None, None)
-    start = 0
-    if cad.closed and not cad.start_given:
-        s0 = found[reverse][1]
-        if reverse:  # the search's start is along the waypoints' order; measure it along the reversed run
-            s0 = (cad.length - s0) % cad.length
-        ring_s = cad.s if not reverse else np.r_[0.0, np.cumsum(np.diff(cad.s)[::-1])]
-        ring = cad_S if not reverse else cad_S[::-1]
-        # the demo's start moved by the offset the search found, then onto the path
-        p_start = _start_position(t, p, float(demo.t[demo.motion_start])) + found[reverse][2]
-        h_search = cad.length / n_search
-        s_start = _refine_start(p_start, ring_s, ring, s0, 2.0 * h_search)
-        start = int(np.argmin(np.abs(ring_s - s_start))) % (len(ring_s) - 1)
-    out = reorder(cad, reverse, start)
-    order = PathOrder(
-        "reversed" if out.reversed else "as_cad",
-        out.start_offset_m,
-        "problem" if cad.direction_given else "alignment",
-        "open path" if open_path else "problem" if cad.start_given else "alignment",
-        *residuals,
-    )
-    logger.info(
-        "path order: %s from %.3f m (coarse median distance %s)",
-        order.direction,
-        order.start_offset_m,
-        ", ".join(f"{DIRECTIONS[int(r)]} {v[0] * 1e3:.1f} mm" for r, v in found.items()),
-    )
-    return reverse, start, order
 
 
 def align(
@@ -533,7 +299,7 @@ def align(
         InputError: bad arguments; a demonstration that does not follow the path (median
             distance > ``MAX_RESIDUAL_M`` before correction), stops short of it (> 5 % of the
             waypoints farther than ``MAX_RESIDUAL_M``), needs a correction > ``MAX_CORRECTION_M``
-            or covers it faster than ``MAX_HAND_SPEED_M_S``.
+            or covers it faster than ``MAX_MEAN_HAND_SPEED_M_S``.
     """
     if not speed_smoothing_m > 0.0:
         raise InputError(f"speed_smoothing_m must be > 0 m, got {speed_smoothing_m}")
@@ -558,14 +324,14 @@ def align(
     dt_demo, t_move = float(np.median(np.diff(t))), t[-1] - demo.t[demo.motion_start]
     dt_grid = max(0.5 * h * t_move / L, (t[-1] - t[0]) / (8 * len(cols)))
     tg = np.linspace(t[0], t[-1], int(np.ceil((t[-1] - t[0]) / dt_grid)) + 1)
-    pg = _resample(t, uniform_filter1d(p, max(1, round(dt_grid / dt_demo)), axis=0), tg)
+    pg = resample_in_time(t, uniform_filter1d(p, max(1, round(dt_grid / dt_demo)), axis=0), tg)
     # the distortion is a function of heavily smoothed positions: noise in its argument would
     # let the polynomial "explain" the noise (errors in variables)
     n_arg = max(1, round(BASIS_SMOOTHING_M * t_move / L / dt_demo))
     q_arg = uniform_filter1d(q, n_arg, axis=0)
     centre = q_arg.mean(axis=0)
     scale = max(float(np.sqrt(np.mean(np.sum((q_arg - centre) ** 2, axis=1)))), 1e-3)
-    phi_g = _basis(_resample(t, q_arg, tg), centre, scale)
+    phi_g = _basis(resample_in_time(t, q_arg, tg), centre, scale)
 
     # ---- DTW passes, with the distortion fit between them
     sg, W, raw_median = _coarse_match(pg, phi_g, cad_s, cad_S, cols, 2.0 * h + 0.02, fit_distortion)
@@ -582,7 +348,7 @@ def align(
     s_raw = _project(pc, np.interp(t, tg, sg), cad_s, cad_S, 0.5 * h + 0.005)[0]
     v, t_match = _time_law(t, s_raw, cad_s, speed_smoothing_m)
     floor = SPEED_FLOOR_FRACTION * float(np.nanmedian(v)) if np.any(np.isfinite(v)) else np.nan
-    residual = np.linalg.norm(_resample(t, pc, t_match) - cad_S, axis=1)
+    residual = np.linalg.norm(resample_in_time(t, pc, t_match) - cad_S, axis=1)
 
     # ---- does the demonstration cover the path?
     span, max_corr = float(t_match[-1] - t_match[0]), float(np.linalg.norm(correction, axis=1).max())
@@ -600,16 +366,16 @@ def align(
             f"tracker correction of {max_corr * 1e3:.0f} mm (limit "
             f"{MAX_CORRECTION_M * 1e3:.0f} mm); check source_in_world and the path"
         )
-    if not np.isfinite(floor) or span <= 0.0 or L / span > MAX_HAND_SPEED_M_S:
+    if not np.isfinite(floor) or span <= 0.0 or L / span > MAX_MEAN_HAND_SPEED_M_S:
         raise InputError(
             f"demo {demo.source!r}: the {L:.2f} m path is matched to {span:.3f} s of "
-            f"demonstration (> {MAX_HAND_SPEED_M_S} m/s); wrong time units?"
+            f"demonstration (> {MAX_MEAN_HAND_SPEED_M_S} m/s); wrong time units?"
         )
     speed = np.maximum(np.nan_to_num(v, nan=floor), floor)
     shift = 0.0
     if cad.closed:
-        p_start = _start_position(t, pc, float(demo.t[demo.motion_start]))
-        shift = _refine_start(p_start, cad_s, cad_S, 0.0, 2.0 * h + 0.02)
+        p_start = start_position(t, pc, float(demo.t[demo.motion_start]))
+        shift = refine_start(p_start, cad_s, cad_S, 0.0, 2.0 * h + 0.02)
         shift = shift - L if shift > 0.5 * L else shift
     logger.info(
         "aligned %d waypoints to %d demo samples: raw median distance %.1f mm, max "
@@ -623,55 +389,3 @@ def align(
         100 * np.mean(speed == floor),
     )
     return Alignment(t_match, speed, floor, residual, raw_median, max_corr, shift)
-
-
-def fuse(
-    cad: CadPath,
-    demo: Demonstration,
-    source_in_world: ArrayLike,
-    sensor_in_tcp: ArrayLike,
-    *,
-    speed_smoothing_m: float = 0.03,
-    fit_distortion: bool = True,
-) -> FusedPath:
-    """CAD positions with the demonstrated tool orientation and speed at every waypoint.
-
-    Args:
-        cad: the CAD path in {F}.
-        demo: the cleaned demonstration (sensor {E} in the receiver {S}).
-        source_in_world: receiver pose in the world, T_F_S, shape (4, 4).
-        sensor_in_tcp: sensor pose in the tool frame, T_TCP_E, shape (4, 4).
-        speed_smoothing_m: half-width of the arc-length window of the speed fit [m].
-        fit_distortion: fit and remove a smooth tracker position error; see :func:`align`.
-
-    The waypoints are first put in the worker's order (:func:`orient`): the direction the worker
-    went and, on a closed path, the start the worker started from, so every output follows it.
-
-    Returns:
-        The fused path in the worker's order (``order`` says which); ``speed`` is floored at 10 %
-        of the median demonstrated speed.
-
-    Raises:
-        InputError: bad arguments, a direction that cannot be told, or a demonstration that does
-            not cover the path.
-    """
-    reverse, start, order = orient(cad, demo, source_in_world, sensor_in_tcp)
-    kwargs = {"speed_smoothing_m": speed_smoothing_m, "fit_distortion": fit_distortion}
-    run = reorder(cad, reverse, start)
-    a = align(run, demo, source_in_world, sensor_in_tcp, **kwargs)
-    if order.start_source == "alignment":  # the corrected demo may start a waypoint or more away
-        k = int(np.argmin(np.abs(run.s - a.start_shift_m % run.length))) % (len(run.s) - 1)
-        if k:
-            logger.info(
-                "path start moved by %d waypoints (%.1f mm) after the tracker correction",
-                k,
-                a.start_shift_m * 1e3,
-            )
-            run = reorder(cad, reverse, (start + k) % (len(run.s) - 1))
-            a = align(run, demo, source_in_world, sensor_in_tcp, **kwargs)
-    order = replace(order, start_offset_m=run.start_offset_m)
-    cad = run
-    T_F_TCP = demo_tcp_poses(demo, source_in_world, sensor_in_tcp)
-    slerp = Slerp(demo.t, Rotation.from_matrix(T_F_TCP[:, :3, :3]))
-    rotations = slerp(np.clip(a.t, demo.t[0], demo.t[-1])).as_matrix()
-    return FusedPath(cad.s.copy(), cad.positions.copy(), rotations, a.speed, a.t, a.residual, order)

@@ -62,8 +62,8 @@ def fused_path(
     from refine.cad import read_cad_path
     from refine.demo import clean_demonstration, read_tracker_log
     from refine.demo.quality import gate_dropouts
-    from refine.fuse.align import fuse
     from refine.fuse.frame_check import gate_frame
+    from refine.fuse.fusion import fuse
 
     assert problem.demonstration is not None  # Problem checks this
     cad = read_cad_path(problem.cad, problem.frames.cad_in_world)

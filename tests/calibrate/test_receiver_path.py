@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from refine.cad import read_cad_path
-from refine.calibrate.receiver import register_receiver_to_path
+from refine.calibrate.receiver_path import register_receiver_to_path
 from refine.calibrate.simulate import calibration_tracker_model
 from refine.demo.simulate import simulate_demonstration
 from refine.errors import InputError

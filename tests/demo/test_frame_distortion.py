@@ -25,8 +25,8 @@ from refine.demo import clean_demonstration, read_tracker_log
 from refine.demo.quality import FRAME_WARN_DEG, FrameEstimate, gate_dropouts
 from refine.demo.simulate import TrackerModel, perturb_log
 from refine.errors import InputError
-from refine.fuse.align import fuse
 from refine.fuse.frame_check import frame_error_significant, gate_frame
+from refine.fuse.fusion import fuse
 from refine.problem import load_problem
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -21,8 +21,8 @@ from refine.demo.quality import FRAME_STOP_DEG, DemoQuality
 from refine.demo.simulate import TrackerModel, simulate_demonstration
 from refine.errors import InputError
 from refine.frames import transform_from_xyz_rpy
-from refine.fuse.align import fuse
 from refine.fuse.frame_check import gate_frame
+from refine.fuse.fusion import fuse
 from refine.paths import CadPath
 from refine.settings import DemoSettings
 

@@ -26,7 +26,6 @@ from wander_scenes import T_TCP_E, frame_estimate, given_frame, scene  # noqa: E
 
 from refine.demo.quality import FRAME_STOP_DEG, DemoQuality
 from refine.errors import InputError  # noqa: E402
-from refine.fuse.align import fuse  # noqa: E402
 from refine.fuse.frame_check import (
     OFFSET_WARN_M,
     _chi2_threshold,
@@ -34,6 +33,7 @@ from refine.fuse.frame_check import (
     frame_error_significant,
     gate_frame,
 )
+from refine.fuse.fusion import fuse
 
 SEEDS = range(20)
 

@@ -26,8 +26,8 @@ from refine.demo import clean_demonstration
 from refine.demo.quality import FrameEstimate
 from refine.demo.simulate import TrackerModel, simulate_demonstration
 from refine.frames import transform_from_xyz_rpy
-from refine.fuse.align import fuse
 from refine.fuse.frame_check import estimate_frame_error
+from refine.fuse.fusion import fuse
 from refine.paths import CadPath, Demonstration
 from refine.settings import DemoSettings
 from refine.synthetic import rounded_rectangle, tool_rotations

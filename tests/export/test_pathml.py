@@ -9,14 +9,9 @@ from lxml import etree
 
 from refine.cad.pathml_read import read_pathml
 from refine.errors import InputError
-from refine.export.pathml import (
-    CAEX_NS,
-    LayerLayout,
-    TrackLayout,
-    validate_pathml,
-    write_pathml,
-)
+from refine.export.pathml import LayerLayout, TrackLayout, validate_pathml, write_pathml
 from refine.frames import rotation_angle_deg
+from refine.pathml_format import CAEX_NS
 from refine.problem import ProcessParameter
 
 AML_DIR = Path(__file__).resolve().parents[2].parent / "shared" / "aml"
