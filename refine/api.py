@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from refine.errors import InputError
 from refine.problem import Problem, load_problem
@@ -38,12 +38,11 @@ from refine.settings import (
     Tolerances,
     ToolSettings,
 )
+from refine.types import Array
 
 if TYPE_CHECKING:
     from refine.robot.model import Robot
     from refine.run.result import PassResult, RunResult
-
-Array = NDArray[np.float64]
 
 __all__ = ["PassArrays", "Result", "load_problem", "refine_path", "solve"]
 

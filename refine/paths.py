@@ -14,8 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from refine.errors import InputError
-
-Array = NDArray[np.float64]
+from refine.types import Array
 
 
 def _check_rows(name: str, arr: Array, n: int, tail: tuple[int, ...]) -> None:

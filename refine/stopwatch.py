@@ -4,11 +4,6 @@ from __future__ import annotations
 
 import time
 
-import numpy as np
-from numpy.typing import NDArray
-
-Array = NDArray[np.float64]
-
 
 class StageTimes(dict):
     """Wall time per stage [s] (the dict itself), with the process CPU time of the same stages in ``cpu``."""

@@ -24,11 +24,10 @@ from refine.optimise.seed import ik_chain
 from refine.optimise.verify import singularity_measures
 from refine.paths import FusedPath
 from refine.robot.kinematics import TcpKinematics
+from refine.types import Array
 
 if TYPE_CHECKING:
     from refine.collision import CollisionModel
-
-Array = NDArray[np.float64]
 
 
 def wave_path(

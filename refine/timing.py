@@ -33,11 +33,9 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
 from refine.errors import InputError, SolverError
-
-Array = NDArray[np.float64]
+from refine.types import Array
 
 logger = logging.getLogger(__name__)
 

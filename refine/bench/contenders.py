@@ -14,13 +14,11 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from numpy.typing import NDArray
 
 from refine.bench.suites import BenchProblem
+from refine.types import Array
 
 log = logging.getLogger(__name__)
-
-Array = NDArray[np.float64]
 
 
 class Unavailable(Exception):

@@ -16,18 +16,16 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from refine.errors import InputError
 from refine.paths import FusedPath
 from refine.settings import Tolerances
+from refine.types import Array
 
 try:
     import tomllib
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib  # type: ignore[no-redef]
-
-Array = NDArray[np.float64]
 
 ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_SUITES = ROOT / "benchmarks" / "suites.toml"

@@ -21,8 +21,7 @@ from refine.errors import InputError
 from refine.frames import check_transform, transform_points
 from refine.lazy import lazy_names
 from refine.paths import CadPath
-from refine.problem import CadSettings
-from refine.settings import check_waypoint_count
+from refine.settings import CadSettings, check_waypoint_count
 
 if TYPE_CHECKING:
     from refine.cad.csv_ import points_from_csv

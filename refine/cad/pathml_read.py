@@ -19,8 +19,8 @@ from lxml import etree
 from refine.errors import InputError
 from refine.frames import matrix_from_fixed_xyz
 from refine.pathml_format import FRAME_KEYS, POINT_VALUES, caex_tag
-from refine.paths import Array
-from refine.problem import ProcessParameter
+from refine.settings import ProcessParameter
+from refine.types import Array
 
 log = logging.getLogger(__name__)
 

@@ -27,14 +27,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
 from refine.errors import InputError
 from refine.frames import invert_transform, make_transform, matrix_from_quaternion, rotation_angle_deg
 from refine.settings.calibration import FRAMES, CalibrationSettings, FrameUncertainty
-
-Array = NDArray[np.float64]
+from refine.types import Array
 
 #: Percentile of the sampled path maxima reported as the worst error [%].
 WORST_PERCENTILE = 95.0

@@ -20,14 +20,13 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from refine.demo import read_demo_csv, read_liberty_ascii, read_liberty_binary
 from refine.errors import InputError
 from refine.frames import fixed_xyz_from_matrix, make_transform, matrix_from_quaternion
 from refine.paths import TrackerLog
-
-Array = NDArray[np.float64]
+from refine.types import Array
 
 LOG_FORMATS = ("liberty_ascii", "liberty_binary", "csv")
 #: Length of one position unit of a readings file [m].

@@ -16,7 +16,7 @@ import logging
 import math
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 from scipy.linalg import lstsq
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
@@ -24,10 +24,9 @@ from scipy.spatial.transform import Rotation
 from refine.calibrate import zfield
 from refine.calibrate.result import Calibration
 from refine.errors import InputError
+from refine.types import Array
 
 logger = logging.getLogger(__name__)
-
-Array = NDArray[np.float64]
 
 #: Least RMS swing about the tool's second principal axis [deg]: a swing about one axis only
 #: leaves the tip's component along that axis undetermined.

@@ -30,10 +30,9 @@ from refine.demo.filters import hampel, smooth_positions, speed_along_track
 from refine.errors import InputError
 from refine.frames import invert_transform, make_transform
 from refine.paths import TrackerLog
+from refine.types import Array
 
 logger = logging.getLogger(__name__)
-
-Array = NDArray[np.float64]
 
 #: Tip speed under which the tool counts as resting on a point [m/s].
 DWELL_SPEED_M_S = 0.02

@@ -6,7 +6,7 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
@@ -20,10 +20,9 @@ from refine.demo.filters import hampel
 from refine.errors import InputError
 from refine.frames import check_transform, make_transform, rotation_angle_deg
 from refine.paths import TrackerLog
+from refine.types import Array
 
 logger = logging.getLogger(__name__)
-Array = NDArray[np.float64]
-
 
 #: Turns about the trace's normal tried by the global search of the path registration.
 PATH_TURNS = 12

@@ -9,8 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from refine.errors import InputError
-
-Array = NDArray[np.float64]
+from refine.types import Array
 
 
 @dataclass(frozen=True)

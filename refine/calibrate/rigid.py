@@ -19,10 +19,10 @@ from scipy.spatial.transform import Rotation
 
 from refine.errors import InputError
 from refine.frames import make_transform, transform_points
+from refine.types import Array
 
 logger = logging.getLogger(__name__)
 
-Array = NDArray[np.float64]
 Model = TypeVar("Model")
 
 #: Smallest RMS distance of the reference points from their best-fit line [m]: below it the

@@ -27,10 +27,9 @@ from refine.calibrate.result import Calibration
 from refine.calibrate.rigid import check_point_geometry, kabsch, point_residuals, ransac
 from refine.errors import InputError
 from refine.frames import make_transform, rotation_angle_deg
+from refine.types import Array
 
 logger = logging.getLogger(__name__)
-
-Array = NDArray[np.float64]
 
 #: Default inlier threshold of robot touches [m]: a robot repeats to a few hundredths of a mm.
 ROBOT_THRESHOLD_M = 0.001

@@ -14,7 +14,7 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
 from refine.demo.simulate import TrackerModel, corrupt_sensor_poses
@@ -22,8 +22,7 @@ from refine.errors import InputError
 from refine.frames import make_transform
 from refine.paths import TrackerLog
 from refine.robot.model import Robot
-
-Array = NDArray[np.float64]
+from refine.types import Array
 
 
 def calibration_tracker_model(**changes: float | int) -> TrackerModel:

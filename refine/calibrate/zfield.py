@@ -16,9 +16,9 @@ meant for the measured range only; beyond it, a cubic is not an extrapolation to
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
-Array = NDArray[np.float64]
+from refine.types import Array
 
 #: Number of coefficients of the model, ``(c2, c3)``.
 N_COEFFS = 2

@@ -70,10 +70,9 @@ from numpy.typing import ArrayLike, NDArray
 from refine.collision.model import CollisionModel
 from refine.errors import InputError
 from refine.robot.kinematics import TcpKinematics
+from refine.types import Array
 
 log = logging.getLogger(__name__)
-
-Array = NDArray[np.float64]
 
 LINK_STEP_M = 0.005
 """Default largest motion of any link point between two checks [m]."""

@@ -36,14 +36,12 @@ from typing import NamedTuple
 
 import fcl
 import numpy as np
-from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from refine.collision.geometry import Body
+from refine.types import Array
 
 log = logging.getLogger(__name__)
-
-Array = NDArray[np.float64]
 
 MAX_MESH_CONTACTS = 64
 """Triangles in contact examined when a body penetrates a mesh."""

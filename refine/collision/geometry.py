@@ -25,13 +25,12 @@ from refine.lazy import lean_imports
 from refine.robot.convex import ConvexPiece
 from refine.robot.geometry import CollisionShape, fcl_convex, read_mesh
 from refine.settings import Shape
+from refine.types import Array
 
 with lean_imports():
     import trimesh
 
 log = logging.getLogger(__name__)
-
-Array = NDArray[np.float64]
 
 UNIT_SCALE = {"m": 1.0, "mm": 1e-3, "in": 0.0254}
 """Metres per unit of a mesh file."""

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from refine.collision.contact import Contact, linearised_distance
 from refine.collision.distance import hull_bound, place, signed_distance
@@ -29,13 +29,12 @@ from refine.errors import InputError
 from refine.frames import check_transform
 from refine.robot.model import Robot
 from refine.settings import Shape
+from refine.types import Array
 
 if TYPE_CHECKING:
     from refine.problem import Problem
 
 log = logging.getLogger(__name__)
-
-Array = NDArray[np.float64]
 
 
 class CollisionModel:

@@ -27,13 +27,11 @@ from __future__ import annotations
 
 import numpy as np
 import pinocchio as pin
-from numpy.typing import NDArray
 
 from refine.collision.geometry import Body
 from refine.collision.pairs import joint_axes
 from refine.errors import InputError
-
-Array = NDArray[np.float64]
+from refine.types import Array
 
 
 def corners(body: Body) -> Array:

@@ -42,13 +42,12 @@ import logging
 
 import numpy as np
 import pinocchio as pin
-from numpy.typing import NDArray
 
 from refine.collision.geometry import Body
+from refine.types import Array
 
 log = logging.getLogger(__name__)
 
-Array = NDArray[np.float64]
 Axes = dict[int, "tuple[Array, Array] | None"]
 
 _TOL = 1e-7

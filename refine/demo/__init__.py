@@ -29,7 +29,7 @@ from refine.demo.liberty import read_liberty_ascii, write_liberty_ascii
 from refine.demo.liberty_binary import read_liberty_binary, write_liberty_binary
 from refine.errors import InputError
 from refine.paths import Demonstration, TrackerLog
-from refine.problem import DemoSettings
+from refine.settings import DemoSettings
 
 __all__ = [
     "ANGLE_OUTLIER_FLOOR_DEG",

@@ -38,10 +38,9 @@ from numpy.typing import NDArray
 
 from refine.errors import InputError
 from refine.paths import TrackerLog
+from refine.types import Array
 
 logger = logging.getLogger(__name__)
-Array = NDArray[np.float64]
-
 MAX_BRIDGE_S = 0.05
 """Longest dropout bridged by interpolation [s] (module docstring for the error it allows)."""
 FROZEN_MIN_SAMPLES = 3

@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation, Slerp
 
 from refine.errors import InputError
@@ -43,10 +43,9 @@ from refine.frames import (
     quaternion_from_matrix,
 )
 from refine.paths import TrackerLog
+from refine.types import Array
 
 logger = logging.getLogger(__name__)
-
-Array = NDArray[np.float64]
 
 #: Wavelength of the slowly varying distortion fields [m] (each wave is scaled by 0.75-1.25).
 FIELD_WAVELENGTH_M = 1.5

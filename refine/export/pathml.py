@@ -42,7 +42,8 @@ from refine.errors import InputError
 from refine.frames import fixed_xyz_from_matrix
 from refine.pathml_format import CAEX_NS, FRAME_KEYS, POINT_VALUES, caex_tag
 from refine.paths import Trajectory
-from refine.problem import Problem, ProcessParameter
+from refine.problem import Problem
+from refine.settings import ProcessParameter
 from refine.version import __version__
 
 log = logging.getLogger(__name__)

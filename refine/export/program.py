@@ -31,8 +31,9 @@ import numpy as np
 from refine.errors import InputError
 from refine.names import comment_text
 from refine.optimise.verify import runs
-from refine.paths import Array, Trajectory
+from refine.paths import Trajectory
 from refine.problem import Problem
+from refine.types import Array
 
 WRIST_SINGULAR_DEG = 10.0
 """A waypoint is near the wrist singularity when the wrist axis is this close to 0 or ±180 deg."""

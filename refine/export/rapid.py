@@ -54,8 +54,9 @@ from refine.export.program import (
 )
 from refine.frames import continuous_quaternions, invert_transform, quaternion_from_matrix
 from refine.names import comment_text, identifier
-from refine.paths import Array, Trajectory
+from refine.paths import Trajectory
 from refine.problem import Problem
+from refine.types import Array
 from refine.version import __version__
 
 log = logging.getLogger(__name__)

@@ -59,8 +59,9 @@ from refine.export.program import (
 from refine.export.rapid import segment_speeds
 from refine.frames import invert_transform, kuka_abc_from_matrix, matrix_from_kuka_abc
 from refine.names import comment_text
-from refine.paths import Array, Trajectory
+from refine.paths import Trajectory
 from refine.problem import Problem
+from refine.types import Array
 from refine.version import __version__
 
 log = logging.getLogger(__name__)

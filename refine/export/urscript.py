@@ -50,9 +50,10 @@ from refine.export.program import (
 from refine.export.rapid import segment_speeds
 from refine.frames import invert_transform, make_transform, matrix_from_rotvec, rotvec_from_matrix
 from refine.names import comment_text, identifier
-from refine.paths import Array, Trajectory
+from refine.paths import Trajectory
 from refine.problem import Problem
 from refine.robot.kinematics import TcpKinematics, solve_ik
+from refine.types import Array
 from refine.version import __version__
 
 log = logging.getLogger(__name__)

@@ -49,14 +49,11 @@ from scipy.spatial.distance import cdist
 from refine.errors import InputError
 from refine.frames import check_transform, invert_transform, transform_points
 from refine.paths import CadPath, Demonstration
+from refine.types import Array
 
 logger = logging.getLogger(__name__)
-Array = NDArray[np.float64]
-
 
 logger = logging.getLogger(__name__)
-Array = NDArray[np.float64]
-
 PRE_MOTION_S = 1.0  # demo kept before motion_start [s]
 START_WINDOW_S = 0.2  # the demo's start position is its mean over this much time [s]
 DTW_MAX_POINTS = 600  # CAD points used by the DTW at most

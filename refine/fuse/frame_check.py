@@ -70,7 +70,7 @@ from dataclasses import replace
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from refine.demo.quality import (
     FRAME_STOP_DEG,
@@ -84,10 +84,9 @@ from refine.demo.quality import (
 from refine.errors import InputError
 from refine.frames import check_transform, invert_transform, matrix_from_rotvec, rotvec_from_matrix
 from refine.paths import Demonstration, FusedPath
+from refine.types import Array
 
 logger = logging.getLogger(__name__)
-Array = NDArray[np.float64]
-
 
 OFFSET_WARN_M = 0.025
 """Rigid tracker frame offset above which ``demo_quality`` carries a warning [m], when it is also

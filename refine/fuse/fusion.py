@@ -6,7 +6,7 @@ import logging
 from dataclasses import replace
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation, Slerp
 
 from refine.fuse.align import align, demo_tcp_poses
@@ -14,8 +14,6 @@ from refine.fuse.order import orient, reorder
 from refine.paths import CadPath, Demonstration, FusedPath
 
 logger = logging.getLogger(__name__)
-Array = NDArray[np.float64]
-
 
 def fuse(
     cad: CadPath,

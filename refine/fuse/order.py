@@ -21,10 +21,9 @@ from refine.fuse.align import (
     start_position,
 )
 from refine.paths import CadPath, Demonstration, PathOrder
+from refine.types import Array
 
 logger = logging.getLogger(__name__)
-Array = NDArray[np.float64]
-
 
 SEARCH_MAX_POINTS = 240  # CAD points of the direction and start search at most
 

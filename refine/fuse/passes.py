@@ -39,17 +39,15 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 from scipy.ndimage import gaussian_filter1d
 
 from refine.errors import InputError
 from refine.frames import matrix_from_rotvec
 from refine.paths import FusedPath
 from refine.settings import MultipassSettings
+from refine.types import Array
 
 logger = logging.getLogger(__name__)
-
-Array = NDArray[np.float64]
 
 #: Arc length [m] of the Gaussian that smooths the bisector along the path (1 sigma).
 BISECTOR_SMOOTHING_M = 0.005

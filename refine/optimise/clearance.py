@@ -18,7 +18,6 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from numpy.typing import NDArray
 
 from refine.collision import CollisionModel, Contact, PathClearance, check_path_clearance, margins_proved
 from refine.optimise.problem import LinearRow, RefinementNLP
@@ -26,10 +25,9 @@ from refine.optimise.verify import Violation
 from refine.problem import Problem
 from refine.robot.kinematics import TcpKinematics
 from refine.robot.model import Robot
+from refine.types import Array
 
 log = logging.getLogger(__name__)
-
-Array = NDArray[np.float64]
 
 LOOK_AHEAD_M = 0.03
 """Pairs within margin + this distance get a row, so the next solve cannot push them in [m]."""

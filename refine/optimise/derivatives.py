@@ -26,8 +26,8 @@ from numpy.typing import NDArray
 from refine.optimise import kinematics
 from refine.optimise.compiled import compiled, compiler
 from refine.optimise.kinematics import fk_function, jacobian_function
+from refine.types import Array
 
-Array = NDArray[np.float64]
 Index = NDArray[np.int64]
 
 _kernel_cache: dict[tuple, tuple[object, dict[str, ca.Function]]] = {}

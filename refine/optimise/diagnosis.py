@@ -15,18 +15,13 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
-from refine.optimise.reach import _rotations_about, reach_model
+from refine.optimise.reach import reach_model, rotations_about
 from refine.optimise.verify import runs, singularity_measures
 from refine.paths import FusedPath
-from refine.problem import Tolerances
 from refine.robot.kinematics import TcpKinematics, solve_ik
-
-Array = NDArray[np.float64]
-
-
-Array = NDArray[np.float64]
+from refine.settings import Tolerances
+from refine.types import Array
 
 
 def closest_pair_text(clearance: Any, cell_names: set[str], margin_m: float, self_margin_m: float) -> str:
@@ -228,7 +223,7 @@ class Diagnoser:
         if np.linalg.norm(axis) < 1e-12:
             T[:3, :3] = R if angle < 1.0 else R_demo
             return T
-        T[:3, :3] = _rotations_about(axis / np.linalg.norm(axis), np.array([angle]))[0] @ R
+        T[:3, :3] = rotations_about(axis / np.linalg.norm(axis), np.array([angle]))[0] @ R
         return T
 
     def _orientation_jacobian(self, q: Array) -> tuple[Array, Array]:
@@ -292,7 +287,7 @@ class Diagnoser:
             axis = np.cross(u, [1.0, 0.0, 0.0] if abs(u[0]) < 0.9 else [0.0, 1.0, 0.0])
         axis /= np.linalg.norm(axis)
         betas = np.radians(np.arange(0.0, 180.01, 0.1))
-        points = p + L * np.einsum("nij,j->ni", _rotations_about(axis, betas), u)
+        points = p + L * np.einsum("nij,j->ni", rotations_about(axis, betas), u)
         d = self.reach.distance(points)
         inside = np.flatnonzero((d >= lo - 1e-9) & (d <= hi + 1e-9))
         cone = int(round(self.tolerances.orientation_deg / 0.1))
@@ -300,7 +295,7 @@ class Diagnoser:
         R_in = T[:3, :3]
         if inside.size:
             axis_world = self.kin.base_in_world[:3, :3] @ axis
-            R_in = _rotations_about(axis_world, betas[inside[:1]])[0] @ T[:3, :3]
+            R_in = rotations_about(axis_world, betas[inside[:1]])[0] @ T[:3, :3]
         return d0, tilt, float(d[min(cone, len(d) - 1)]), float(d.min() if d0 > hi else d.max()), R_in
 
     def configuration(self, T: Array, q0: Array) -> tuple[Array, bool]:

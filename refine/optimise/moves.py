@@ -8,27 +8,21 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from refine.frames import fixed_xyz_from_matrix, matrix_from_rotvec
 from refine.paths import FusedPath
 from refine.settings import PlacementSettings
+from refine.types import Array
 
 if TYPE_CHECKING:
     from refine.problem import Problem
     from refine.robot.model import Robot
-Array = NDArray[np.float64]
-
 if TYPE_CHECKING:
     from refine.robot.model import Robot
-Array = NDArray[np.float64]
-
 
 if TYPE_CHECKING:
     from refine.problem import Problem
     from refine.robot.model import Robot
-Array = NDArray[np.float64]
-
 
 SUPPORT_GAP_M = 0.002
 """A cell object whose top lies within this of the workpiece's underside, and within this of the

@@ -6,7 +6,6 @@ import logging
 from dataclasses import dataclass, field
 
 import numpy as np
-from numpy.typing import NDArray
 
 from refine.optimise.diagnosis import Diagnoser, Finding, segments
 from refine.optimise.problem import ActiveSet, ConstraintSource, RefinementNLP
@@ -15,10 +14,9 @@ from refine.optimise.verify import (
     check_path,
 )
 from refine.robot.kinematics import TcpKinematics
+from refine.types import Array
 
 log = logging.getLogger(__name__)
-
-Array = NDArray[np.float64]
 
 
 @dataclass(frozen=True)

@@ -10,17 +10,15 @@ from typing import TYPE_CHECKING, Any
 
 import casadi as ca
 import numpy as np
-from numpy.typing import NDArray
 
 from refine.optimise.moves import WORLD_Z, ClearanceRow, Placement, SupportPlane, move_basis
 from refine.paths import FusedPath
 from refine.settings import PlacementSettings
+from refine.types import Array
 
 if TYPE_CHECKING:
     from refine.robot.model import Robot
 log = logging.getLogger(__name__)
-
-Array = NDArray[np.float64]
 
 
 INSET_DEG = 0.05

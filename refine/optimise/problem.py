@@ -28,7 +28,6 @@ from typing import Any, Protocol
 
 import casadi as ca
 import numpy as np
-from numpy.typing import NDArray
 
 from refine.errors import InputError
 from refine.optimise.derivatives import (
@@ -44,14 +43,9 @@ from refine.optimise.verify import (
 )
 from refine.optimise.waypoint import ROW_NAMES, singularity_function, waypoint_function
 from refine.paths import FusedPath
-from refine.problem import Tolerances
 from refine.robot.model import Robot
-from refine.settings import check_solver
-
-Array = NDArray[np.float64]
-
-
-Array = NDArray[np.float64]
+from refine.settings import Tolerances, check_solver
+from refine.types import Array
 
 
 @dataclass(frozen=True)

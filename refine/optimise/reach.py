@@ -9,12 +9,9 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 import scipy.optimize
-from numpy.typing import NDArray
 
 from refine.robot.model import Robot
-
-Array = NDArray[np.float64]
-
+from refine.types import Array
 
 WRIST_TOLERANCE_M = 1e-4
 """The last three joint axes meet within this distance for the wrist to count as spherical [m]."""
@@ -61,7 +58,7 @@ class ReachModel:
         theta = self._azimuth(points) - self._azimuth(self.wrist_ref)
         out = []
         for t in (theta, theta + math.pi):
-            R = _rotations_about(w, t)
+            R = rotations_about(w, t)
             out.append(p + np.einsum("nij,j->ni", R, self.shoulder_ref - p))
         return out[0], out[1]
 
@@ -76,7 +73,7 @@ class ReachModel:
         return np.where(out[0] <= out[1], d[0], d[1])
 
 
-def _rotations_about(w: Array, angles: Array) -> Array:
+def rotations_about(w: Array, angles: Array) -> Array:
     """Rotation matrices (N, 3, 3) about the unit axis ``w`` by ``angles`` [rad]."""
     K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
     a = np.asarray(angles, dtype=float)[:, None, None]

@@ -6,7 +6,6 @@ import logging
 import math
 
 import numpy as np
-from numpy.typing import NDArray
 
 from refine.optimise.diagnosis import Finding
 from refine.optimise.outcome import Refinement, Repair, describe_check, findings_of, problem_kinematics
@@ -14,20 +13,19 @@ from refine.optimise.problem import ActiveSet, ConstraintSource, RefinementNLP
 from refine.optimise.rounds import (
     SOLVER_LABELS,
     RoundLoop,
-    _new_singular,
-    _new_steps,
-    _singular_around,
-    _with_steps,
+    new_joint_steps,
+    new_singular_points,
     run_rounds,
+    singular_around,
+    with_joint_steps,
 )
 from refine.optimise.verify import (
     check_path,
 )
 from refine.stopwatch import StageTimes, add_time
+from refine.types import Array
 
 log = logging.getLogger(__name__)
-
-Array = NDArray[np.float64]
 
 
 ELASTIC_ONLY = "not run (the elastic problem answers it: another IK branch, after the first failed)"
@@ -59,18 +57,18 @@ def solve_with_repair(
     kin = problem_kinematics(problem)
     loop = RoundLoop(problem, timings, max_rounds=max_rounds, deadline=deadline)
     start = StageTimes.clock()  # the constraints the seed shows to be needed count as seeding
-    initial = _new_singular(kin, q_seed, problem.tolerances.singularity_margin, problem.active)
+    initial = new_singular_points(kin, q_seed, problem.tolerances.singularity_margin, problem.active)
     if stretched is not None and stretched.any() and problem.tolerances.singularity_margin > 0:
-        initial = initial.union(_singular_around(stretched))
+        initial = initial.union(singular_around(stretched))
     seed_rows = tuple(r for src in sources for r in src.rows(problem, q_seed))
-    seed_steps = _new_steps(problem, q_seed)
+    seed_steps = new_joint_steps(problem, q_seed)
     add_time(timings, "seed", start)
     if initial.singular_waypoints or initial.singular_segments or seed_rows or seed_steps:
         loop.rebuild(
             active=problem.active.union(
                 ActiveSet(initial.singular_waypoints, initial.singular_segments, seed_rows)
             ),
-            joint_steps=_with_steps(problem, seed_steps),
+            joint_steps=with_joint_steps(problem, seed_steps),
         )
     if skip_strict:
         q = q_seed

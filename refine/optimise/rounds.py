@@ -8,7 +8,6 @@ import time
 from dataclasses import dataclass, replace
 
 import numpy as np
-from numpy.typing import NDArray
 
 from refine.errors import SolverError
 from refine.optimise.outcome import TimeLimitReached, problem_kinematics
@@ -21,10 +20,9 @@ from refine.optimise.verify import (
 )
 from refine.robot.kinematics import TcpKinematics
 from refine.stopwatch import StageTimes, add_time
+from refine.types import Array
 
 log = logging.getLogger(__name__)
-
-Array = NDArray[np.float64]
 
 
 WARM_MU_INIT = 1e-4
@@ -51,7 +49,7 @@ outside the rows is solved again with them. Steps under the bound do not bind, s
 complete problem's."""
 
 
-def _new_singular(kin: TcpKinematics, q: Array, margin: float, active: ActiveSet) -> ActiveSet:
+def new_singular_points(kin: TcpKinematics, q: Array, margin: float, active: ActiveSet) -> ActiveSet:
     """Waypoints and segment points near the singularity not yet bounded in ``active``."""
     if margin <= 0:
         return ActiveSet()
@@ -64,7 +62,7 @@ def _new_singular(kin: TcpKinematics, q: Array, margin: float, active: ActiveSet
     return ActiveSet(waypoints, tuple(sorted(points - set(active.singular_segments))))
 
 
-def _new_steps(problem: RefinementNLP, q: Array) -> tuple[int, ...]:
+def new_joint_steps(problem: RefinementNLP, q: Array) -> tuple[int, ...]:
     """Joint-step rows ``k·n + j`` near their bound in ``q`` (N, n) that ``problem`` does not hold."""
     if problem.joint_steps == "all":
         return ()
@@ -73,12 +71,12 @@ def _new_steps(problem: RefinementNLP, q: Array) -> tuple[int, ...]:
     return tuple(sorted(set(near.tolist()) - set(problem.joint_steps)))
 
 
-def _with_steps(problem: RefinementNLP, more: tuple[int, ...]) -> tuple[int, ...] | None:
+def with_joint_steps(problem: RefinementNLP, more: tuple[int, ...]) -> tuple[int, ...] | None:
     """The joint-step rows of ``problem`` and ``more``, or None when nothing is added."""
     return tuple(sorted(set(problem.joint_steps) | set(more))) if more else None
 
 
-def _singular_around(mask: Array, widen: int = 2) -> ActiveSet:
+def singular_around(mask: Array, widen: int = 2) -> ActiveSet:
     """Singularity bounds at the waypoints of ``mask`` (N,) widened by ``widen``, and mid-segment."""
     N = len(mask)
     idx = np.flatnonzero(mask)
@@ -190,9 +188,9 @@ def run_rounds(
         if not stats.get("success", False) or loop.outer >= loop.max_rounds:
             return x, stats, check, slack
         start = StageTimes.clock()  # finding what the next round adds is the outer loop's solving
-        more = _new_singular(kin, q, margin, p.active)
+        more = new_singular_points(kin, q, margin, p.active)
         rows = tuple(r for src in sources for r in src.rows(p, q))
-        steps = _new_steps(p, q)
+        steps = new_joint_steps(p, q)
         add_time(loop.timings, "solve", start)
         if not (more.singular_waypoints or more.singular_segments or rows or steps):
             return x, stats, check, slack
@@ -210,7 +208,7 @@ def run_rounds(
         active = ActiveSet(
             grown.singular_waypoints, grown.singular_segments, merge_rows(p.active.linear_rows, rows)
         )
-        loop.rebuild(warm=True, active=active, elastic_deg=p.elastic_deg, joint_steps=_with_steps(p, steps))
+        loop.rebuild(warm=True, active=active, elastic_deg=p.elastic_deg, joint_steps=with_joint_steps(p, steps))
         x0, warm = (x if p.elastic_deg is not None else q.ravel()), True
 
 

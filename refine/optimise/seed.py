@@ -13,7 +13,6 @@ from __future__ import annotations
 import logging
 
 import numpy as np
-from numpy.typing import NDArray
 
 from refine.optimise.diagnosis import reach_gap
 from refine.optimise.outcome import problem_bounds, problem_kinematics, problem_targets
@@ -23,13 +22,9 @@ from refine.optimise.verify import (
     runs,
 )
 from refine.robot.kinematics import CONVERGED, TcpKinematics, pose_error, solve_ik, solve_ik_batch
-
-Array = NDArray[np.float64]
-
+from refine.types import Array
 
 log = logging.getLogger(__name__)
-
-Array = NDArray[np.float64]
 
 
 COARSE_STEP_M = 0.02

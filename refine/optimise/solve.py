@@ -17,7 +17,6 @@ import time
 from dataclasses import replace
 
 import numpy as np
-from numpy.typing import NDArray
 
 from refine.optimise.diagnosis import reach_tilts
 from refine.optimise.outcome import (
@@ -45,14 +44,9 @@ from refine.optimise.verify import (
 )
 from refine.robot.kinematics import CONVERGED, TcpKinematics, solve_ik_batch
 from refine.stopwatch import StageTimes, add_time
-
-Array = NDArray[np.float64]
-Array = NDArray[np.float64]
-
+from refine.types import Array
 
 log = logging.getLogger(__name__)
-
-Array = NDArray[np.float64]
 
 
 SEED_INSET_M = 0.05

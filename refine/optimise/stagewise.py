@@ -38,8 +38,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from refine.errors import InputError
+from refine.types import Array
 
-Array = NDArray[np.float64]
 Index = NDArray[np.int64]
 
 MAX_FATROP_WAYPOINTS = 2000

@@ -11,14 +11,12 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
 from refine.frames import rotation_angle_deg
 from refine.paths import FusedPath
-from refine.problem import Tolerances
 from refine.robot.kinematics import TcpKinematics
-
-Array = NDArray[np.float64]
+from refine.settings import Tolerances
+from refine.types import Array
 
 
 @dataclass(frozen=True)

@@ -3,14 +3,10 @@
 from __future__ import annotations
 
 import casadi as ca
-import numpy as np
-from numpy.typing import NDArray
 
 from refine.optimise.kinematics import fk_function, jacobian_function
 from refine.robot.model import Robot
-
-Array = NDArray[np.float64]
-
+from refine.types import Array
 
 ROW_NAMES = ("position x", "position y", "position z", "orientation cone")
 

@@ -30,13 +30,12 @@ from scipy.spatial import ConvexHull, HalfspaceIntersection, cKDTree
 
 from refine.errors import InputError
 from refine.lazy import lean_imports
+from refine.types import Array
 
 with lean_imports():
     import trimesh
 
 log = logging.getLogger(__name__)
-
-Array = NDArray[np.float64]
 
 PAD_M = 1e-6
 """Every supporting half-space is pushed out by this much [m], so rounding never uncovers a vertex."""

@@ -6,14 +6,11 @@ from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
-from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from refine.errors import InputError
 from refine.robot.model import Robot
-
-Array = NDArray[np.float64]
-
+from refine.types import Array
 
 NULLSPACE_GAIN = 0.05
 """Step toward mid-range per IK iteration for redundant arms, in the task's null space [rad·rad]."""

@@ -9,7 +9,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numpy.typing import NDArray
 
 from refine.errors import InputError
 from refine.robot.model import Robot, robot_from_urdf
@@ -18,8 +17,6 @@ from refine.robot.urdf import with_overrides
 
 if TYPE_CHECKING:
     from refine.settings import RobotSettings
-Array = NDArray[np.float64]
-
 logger = logging.getLogger(__name__)
 
 

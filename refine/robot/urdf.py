@@ -19,12 +19,10 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
-from numpy.typing import NDArray
 
 from refine.errors import InputError
 from refine.robot.spec import RobotSpec, build_model
-
-Array = NDArray[np.float64]
+from refine.types import Array
 
 DEFAULT_ACCELERATION_TIME_S = 1.0
 """Without acceleration limits, a joint's limit is its speed limit divided by this [s]: full speed

@@ -19,9 +19,7 @@ from refine.errors import InputError
 from refine.frames import rotation_angle_deg
 from refine.paths import Trajectory
 from refine.timing import Timing
-
-Array = NDArray[np.float64]
-
+from refine.types import Array
 
 FOLLOWING = 0.99
 """A waypoint's planned speed at or above this fraction of the demonstrated speed counts as

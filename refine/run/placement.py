@@ -51,22 +51,18 @@ import logging
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-from numpy.typing import NDArray
-
 from refine.optimise.moves import (
     Placement,
     SupportPlane,
     pose_json,
 )
 from refine.settings import PlacementSettings
+from refine.types import Array
 
 if TYPE_CHECKING:
     from refine.run.result import RunResult
 
 log = logging.getLogger(__name__)
-
-Array = NDArray[np.float64]
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,6 @@ import time
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from refine.optimise.moves import (
     CLEARANCE_ROUNDS,
@@ -32,9 +31,6 @@ from refine.run.result import PassResult, RunResult
 from refine.run.stages import constraint_sources, fused_path, log, refine_pass
 from refine.settings import PlacementSettings
 from refine.stopwatch import Stopwatch
-
-Array = NDArray[np.float64]
-
 
 
 def solve_problem(

@@ -6,13 +6,7 @@ import math
 from dataclasses import dataclass, fields
 from typing import Any
 
-import numpy as np
-from numpy.typing import NDArray
-
 from refine.errors import InputError
-
-Array = NDArray[np.float64]
-
 
 #: The frames whose uncertainty can be given, in the order they are reported.
 FRAMES = ("base_in_world", "tcp_in_flange", "cad_in_world", "source_in_world", "sensor_in_tcp")
