@@ -1,4 +1,9 @@
-"""refine.pathml_format."""
+"""The PathML document's vocabulary, shared by its writer and its reader.
+
+The PathML document's vocabulary, shared by its writer (:mod:`refine.export.pathml`) and its
+reader (:mod:`refine.cad.pathml_read`): the CAEX namespace, the Frame attribute's keys and units,
+and the values each point carries.
+"""
 
 from __future__ import annotations
 

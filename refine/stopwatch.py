@@ -1,4 +1,9 @@
-"""refine.stopwatch."""
+"""Stage timing: wall and CPU time per stage.
+
+:class:`StageTimes` and :func:`add_time` keep the optimiser's stages (seed, solve, verify, build), with
+the process CPU time beside the wall time; :class:`Stopwatch` laps the stages of a whole run. Both
+feed ``result.json``'s ``timings_s``.
+"""
 
 from __future__ import annotations
 
@@ -29,15 +34,18 @@ def add_time(timings: dict[str, float], key: str, start: tuple[float, float]) ->
 
 
 class Stopwatch:
+    """Wall time per stage of a run, lapped stage after stage."""
     def __init__(self) -> None:
         self.times: dict[str, float] = {}
         self._t = time.perf_counter()
 
     def lap(self, name: str) -> None:
+        """Add the time since the last lap to stage ``name``."""
         now = time.perf_counter()
         self.times[name] = self.times.get(name, 0.0) + now - self._t
         self._t = now
 
     def add(self, times: dict[str, float]) -> None:
+        """Add the times [s] of stages timed elsewhere."""
         for stage, seconds in times.items():
             self.times[stage] = self.times.get(stage, 0.0) + seconds

@@ -120,10 +120,12 @@ def find_dwells(log: TrackerLog, tip_in_sensor: ArrayLike, min_dwell_s: float = 
 
 
 def unpack_frame(x: Array) -> tuple[Array, Array]:
+    """The frame T (4, 4) and z-error coefficients (2,) of a parameter vector (rotation vector, translation, z)."""
     return make_transform(Rotation.from_rotvec(x[:3]).as_matrix(), x[3:6]), x[6:8]
 
 
 def pack_frame(T: Array, coeffs: Array) -> Array:
+    """The parameter vector (8,) of a frame T (4, 4) and z-error coefficients (2,): the inverse of :func:`unpack_frame`."""
     return np.concatenate([Rotation.from_matrix(T[:3, :3]).as_rotvec(), T[:3, 3], coeffs])
 
 

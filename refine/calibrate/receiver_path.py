@@ -1,4 +1,14 @@
-"""refine.calibrate.receiver_path."""
+"""Receiver registration from a trace along the CAD path (:func:`register_receiver_to_path`).
+
+A short demonstration with the tip on the path gives ``source_in_world``. A contour cannot tell its
+own symmetries apart from distances alone, so the registration is a global search: hypotheses from
+the first guess and from the trace laid on the path by their principal axes (upright and turned
+over, in :data:`PATH_TURNS` turns), each fitted by ICP (scipy ``cKDTree``) and refined with the
+tracker's z error; the fits within the noise are ranked by the tool's attitude (it points down at
+the part), the direction of travel, and the residual. Two frames that no cue tells apart, a path
+that leaves the frame free to turn or shift, or an answer far from the first guess are refused,
+naming the candidates and their figures.
+"""
 
 from __future__ import annotations
 

@@ -24,6 +24,7 @@ def _finite(x: float) -> float | None:
 
 
 def pass_metrics(p: PassResult) -> dict[str, Any]:
+    """The verified figures of one pass, as ``result.json`` writes them (``passes[i].metrics``)."""
     check, timing = p.refinement.check, p.timing
     clearance = p.clearance
     return {
@@ -42,6 +43,7 @@ def pass_metrics(p: PassResult) -> dict[str, Any]:
 
 
 def aggregate_metrics(per_pass: list[dict[str, Any]]) -> dict[str, Any]:
+    """The run's figures over its passes: the worst of each (largest error, smallest margin), times summed."""
     out: dict[str, Any] = {}
     for key in per_pass[0]:
         values = [m[key] for m in per_pass if m[key] is not None]

@@ -1,4 +1,9 @@
-"""refine.fuse.fusion."""
+"""The fusion stage: demonstration and CAD path into the path the optimiser refines.
+
+The fusion stage: the demonstration matched to the CAD path in the worker's direction and from
+the worker's start (:mod:`refine.fuse.order`), aligned (:mod:`refine.fuse.align`), and turned into
+the :class:`~refine.paths.FusedPath` the optimiser refines.
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,11 @@
-"""refine.fuse.order."""
+"""Which way round and from where: the worker's direction and start on the CAD path.
+
+Which way round and from where: the direction of travel and, on a closed contour, the start point
+of a demonstration on the CAD path, found by a coarse match both ways (cyclic on a closed path);
+the CAD waypoints reordered to the worker's direction and start (:func:`reorder`). A clearly
+better direction is taken (its coarse distance at most 1/:data:`DIRECTION_RATIO` of the other's);
+otherwise the run stops naming both. ``[cad] reverse`` and ``start_near`` override the search.
+"""
 
 from __future__ import annotations
 

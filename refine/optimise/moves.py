@@ -1,4 +1,10 @@
-"""refine.optimise.moves."""
+"""A workpiece move and what it must keep: its support plane and its clearance.
+
+A workpiece move and what it must keep: :class:`Placement` (a rigid move of the part and its
+fixtures), the support plane the part rests on and the directions a move may take in it, the moved
+problem and path, and the clearance rows of the moved objects against the rest of the cell,
+linearised at FCL's witness points.
+"""
 
 from __future__ import annotations
 
@@ -94,6 +100,7 @@ def move_basis(support: SupportPlane, free: str) -> tuple[Array, Array]:
 
 
 def fcl_bodies(shapes: tuple[Any, ...]) -> list[Any]:
+    """FCL bodies of cell shapes, in the world, named after the shapes."""
     from refine.collision.geometry import shape_body
 
     return [shape_body(o, name=o.name, kind="cell", link=None, frame_id=-1, joint=-1) for o in shapes]

@@ -1,4 +1,9 @@
-"""refine.optimise.outcome."""
+"""What a refinement returns, and the refinement problem's targets, bounds and kinematics.
+
+What a refinement returns: :class:`Refinement` with its :class:`Repair` segments and diagnosis, the
+answers given without a solve (out of reach, time limit), and the refinement problem's targets,
+bounds and kinematics that every stage of the solve reads.
+"""
 
 from __future__ import annotations
 
@@ -90,6 +95,7 @@ class Refinement:
 
 
 def problem_targets(problem: RefinementNLP) -> Array:
+    """The target TCP poses (N, 4, 4) in {F}: the CAD positions with the demonstrated orientations."""
     targets = np.zeros((problem.n_waypoints, 4, 4))
     targets[:, :3, :3] = problem.fused.rotations
     targets[:, :3, 3] = problem.fused.positions
@@ -98,10 +104,12 @@ def problem_targets(problem: RefinementNLP) -> Array:
 
 
 def problem_kinematics(problem: RefinementNLP) -> TcpKinematics:
+    """The numeric TCP kinematics of the refinement's robot, base and tool."""
     return TcpKinematics(problem.robot, problem.base_in_world, problem.tcp_in_flange)
 
 
 def problem_bounds(problem: RefinementNLP) -> tuple[Array, Array]:
+    """The joint bounds (lower, upper) [rad] the refinement keeps (the limits less the joint margin)."""
     n = problem.dof
     return problem.lbx[:n], problem.ubx[:n]
 
@@ -150,6 +158,7 @@ def unsolved(
 
 
 def describe_check(check: PathCheck, stats: dict) -> str:
+    """The solver's status and the first ten broken tolerances of a verification, for a reason text."""
     text = f"{stats.get('solver', 'IPOPT')}: {stats.get('return_status', 'unknown')}; " + "; ".join(
         v.describe() for v in check.violations[:10]
     )

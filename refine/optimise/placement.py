@@ -1,4 +1,10 @@
-"""refine.optimise.placement."""
+"""The placement search: the smallest workpiece move that makes the path executable.
+
+The placement search: the smallest rigid move of the workpiece (in its support plane unless
+``free = "all"``) under which the demonstrated orientations are reachable within the strict
+tolerances, posed as one CasADi NLP over the joints and the move, with the moved objects' clearance
+rows added round by round (:func:`search_placement`).
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,9 @@
-"""refine.optimise.reach."""
+"""Reach geometry: the wrist centre and the distances from the shoulder the joints allow.
+
+Reach geometry: the wrist centre of a spherical-wrist arm and the range of distances from its
+shoulder that the joints allow (:class:`ReachModel`), used by the seed's tilt, the infeasibility
+proof before solving and the diagnosis.
+"""
 
 from __future__ import annotations
 
@@ -102,6 +107,7 @@ def _meeting_point(lines: list[tuple[Array, Array]]) -> tuple[Array, float]:
 
 @functools.lru_cache(maxsize=16)
 def reach_model(robot: Robot, joint_margin_rad: float, samples: int = 3000) -> ReachModel:
+    """The reach model of ``robot`` with the joints kept ``joint_margin_rad`` inside their limits (sampled)."""
     n = robot.nq
     lower, upper = robot.spec.lower + joint_margin_rad, robot.spec.upper - joint_margin_rad
     rng = np.random.default_rng(1)

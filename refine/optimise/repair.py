@@ -1,4 +1,10 @@
-"""refine.optimise.repair."""
+"""The repair: a strict solve, then the least extra orientation slack when it has no answer.
+
+The repair: a strict solve from a seed and, when it has no answer and repair is on, the elastic
+problem that finds the smallest extra orientation slack per waypoint (an exact L1 penalty); the
+segments that needed slack are reported with the constraint that forced it
+(:func:`solve_with_repair`).
+"""
 
 from __future__ import annotations
 

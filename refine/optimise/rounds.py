@@ -1,4 +1,9 @@
-"""refine.optimise.rounds."""
+"""The outer rounds of a solve: solve, verify, add what binds, solve again.
+
+The outer rounds of a solve: solve, verify with Pinocchio, add the constraints that bind only in
+places (singularity bounds, clearance rows from the constraint sources, joint-step rows) and solve
+again, warm-started, until the verified path needs nothing more (:func:`run_rounds`).
+"""
 
 from __future__ import annotations
 
@@ -110,6 +115,7 @@ def _row_keys(problem: RefinementNLP) -> list[tuple]:
 
 @dataclass
 class RoundLoop:
+    """The state of one solve's outer rounds: the problem as grown so far, its multipliers, times and counts."""
     problem: RefinementNLP
     timings: dict[str, float]
     iterations: int = 0
@@ -213,6 +219,7 @@ def run_rounds(
 
 
 def merge_rows(old: tuple[LinearRow, ...], new: tuple[LinearRow, ...]) -> tuple[LinearRow, ...]:
+    """The rows of ``old`` and ``new``, a row of ``new`` replacing the one of ``old`` at the same place."""
     merged = {(r.k, r.f, r.label): r for r in old}
     merged.update({(r.k, r.f, r.label): r for r in new})
     return tuple(merged.values())

@@ -1,4 +1,8 @@
-"""refine.optimise.waypoint."""
+"""The per-waypoint CasADi functions the NLPs map over the path.
+
+The per-waypoint CasADi functions the NLPs map over the path: the path rows and the orientation
+cost (:func:`waypoint_function`) and the singularity measure (:func:`singularity_function`).
+"""
 
 from __future__ import annotations
 

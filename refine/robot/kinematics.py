@@ -1,4 +1,10 @@
-"""refine.robot.kinematics."""
+"""Numeric TCP kinematics and damped least-squares IK of a robot with its tool and base.
+
+Numeric TCP kinematics of a robot with a tool and base (:class:`TcpKinematics`: poses, Jacobians
+and their batches, with Pinocchio) and damped least-squares IK, one pose (:func:`solve_ik`) or many
+at once (:func:`solve_ik_batch`). The optimiser's seed, the verifier, the diagnosis, the program
+writers and the simulators all use these; they depend on the robot alone.
+"""
 
 from __future__ import annotations
 
@@ -98,6 +104,7 @@ class TcpKinematics:
 
 
 def pose_error(T: Array, T_target: Array) -> Array:
+    """Pose error (6,) of ``T`` to ``T_target``: position [m] and rotation vector [rad], both in {base}."""
     e_p = T_target[:3, 3] - T[:3, 3]
     e_r = pin.log3(T_target[:3, :3] @ T[:3, :3].T)
     return np.concatenate([e_p, e_r])

@@ -1,9 +1,10 @@
-"""Robot models: the registry of ``robots/`` and their Pinocchio kinematics.
+"""The robot model: :class:`Robot`, Pinocchio kinematics with the registry data and collision shapes.
 
-Each robot is a folder ``robots/<name>/`` holding ``robot.urdf``, ``robot.toml`` (maker, model,
-flange frame, reach, controller family and, optionally, the program it runs, default joint accelerations) and a ``README.md``.
-``load_robot(name)`` reads one into a :class:`Robot`; joint limits and speeds come from the URDF,
-accelerations from the TOML.
+A :class:`Robot` joins a :class:`~refine.robot.spec.RobotSpec` (a registry folder's ``robot.toml``,
+or a URDF read by :func:`refine.robot.urdf.read_urdf`) to the Pinocchio model of its URDF, the
+links' collision shapes (:mod:`refine.robot.geometry`) and the sampled self-collision matrix beside
+the URDF. Registry robots are loaded by :func:`refine.robot.registry.load_robot`; any URDF by
+:func:`robot_from_urdf` (also ``Robot.from_urdf``).
 """
 
 from __future__ import annotations
@@ -140,10 +141,10 @@ class Robot:
 
 
 def robot_from_urdf(urdf: str | Path, *, controller: str, flange_frame: str = "tool0", **options: Any) -> Robot:
-    """A robot built from its URDF file (not from the registry): :func:`refine.robot.urdf.read_urdf`'s
-    spec and model, with the collision geometry of the URDF's ``<collision>`` elements.
+    """A robot built from its URDF file (not from the registry).
 
-    Args and raises: as :func:`refine.robot.urdf.read_urdf`.
+    The spec and model of :func:`refine.robot.urdf.read_urdf`, with the collision geometry of the
+    URDF's ``<collision>`` elements. Arguments and errors as :func:`~refine.robot.urdf.read_urdf`.
     """
     spec, model = read_urdf(urdf, controller=controller, flange_frame=flange_frame, **options)
     return Robot(spec, model)

@@ -1,4 +1,9 @@
-"""refine.robot.registry."""
+"""The robot registry: robots by name, and the robot of a problem's ``[robot]`` table.
+
+The robot registry (``robots/``, or ``$REFINE_ROBOTS_DIR``): robots by name, cached per folder,
+and :func:`robot_for`, the robot of a problem's ``[robot]`` table (the registry's, or a URDF's),
+with the problem's joint-limit and speed overrides applied.
+"""
 
 from __future__ import annotations
 

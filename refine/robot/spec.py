@@ -1,4 +1,9 @@
-"""refine.robot.spec."""
+"""What a robot is, as data: its spec, its controller family, and its URDF's model.
+
+What a robot is, as data: :class:`RobotSpec` (the registry entry: joints, limits, reach,
+controller family and program), the controller families and their program formats, the registry's
+``robot.toml`` keys, and the Pinocchio model of a URDF (:func:`build_model`).
+"""
 
 from __future__ import annotations
 
@@ -129,6 +134,7 @@ class RobotSpec:
 
 
 def read_registry_toml(path: Path) -> dict[str, Any]:
+    """A registry ``robot.toml`` read and its keys checked (InputError naming unknown and missing keys)."""
     try:
         meta = tomllib.loads(path.read_text(encoding="utf-8"))
     except (OSError, tomllib.TOMLDecodeError) as e:
@@ -144,6 +150,7 @@ def read_registry_toml(path: Path) -> dict[str, Any]:
 
 
 def build_model(urdf: Path) -> pin.Model:
+    """The Pinocchio model of a URDF file (InputError when the file is missing or unreadable)."""
     if not Path(urdf).is_file():
         raise InputError(f"URDF file not found: {urdf}")
     try:

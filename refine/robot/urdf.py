@@ -66,7 +66,6 @@ def read_urdf(
             one degree of freedom or no speed limit, an override has the wrong length, or the
             controller is unknown; the message names the value and its unit.
     """
-
     path = Path(urdf).resolve()
     pin_model = build_model(path)
     joints = tuple(pin_model.names[j] for j in range(1, pin_model.njoints))

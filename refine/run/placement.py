@@ -179,6 +179,7 @@ class PlacementRepair:
 
 
 def plane_text(support: SupportPlane) -> str:
+    """The support plane in words, for messages: what it is the top of, and its normal."""
     what = f"the top of {support.support!r}" if support.support else "the world z plane"
     return f"{what}, normal [{', '.join(f'{v:.3f}' for v in support.normal)}]"
 

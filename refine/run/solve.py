@@ -1,4 +1,11 @@
-"""refine.run.solve."""
+"""Solving a problem: every pass refined, and the placement repair when asked.
+
+Solving a problem: every pass refined (:func:`solve_problem`), and, when asked and the strict
+problem has no answer, the placement repair: the smallest workpiece move found by
+:func:`refine.optimise.placement.search_placement`, kept in its support plane and clear of the
+cell, and verified by a strict run of the moved problem. The recursion (a moved problem solved
+again) stays inside this module.
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,8 @@
-"""refine.run.write."""
+"""A whole run, and its outputs written all-or-nothing.
+
+A whole run: load, preflight, solve (:func:`run`), and the outputs written all-or-nothing
+(:func:`write_run`: ``result.json``, trajectory, PathML, programs and the report).
+"""
 
 from __future__ import annotations
 

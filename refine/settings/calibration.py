@@ -1,4 +1,8 @@
-"""refine.settings.calibration."""
+"""The ``[calibration]`` table: each frame's standard deviations.
+
+The ``[calibration]`` table: each frame's standard deviations (translation per axis [m], rotation
+per axis [deg]) that :mod:`refine.calibrate.cost` propagates to the path.
+"""
 
 from __future__ import annotations
 

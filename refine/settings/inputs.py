@@ -1,4 +1,8 @@
-"""refine.settings.inputs."""
+"""The tables of a run's inputs: robot, tool, frames, CAD and demonstration.
+
+The tables of a run's inputs: ``[robot]``, ``[tool]``, ``[frames]``, ``[cad]`` and
+``[demonstration]``.
+"""
 
 from __future__ import annotations
 

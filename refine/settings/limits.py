@@ -42,11 +42,13 @@ MIN_ORIENTATION_DEG = 0.01
 
 
 def positive(owner: str, name: str, value: float) -> None:
+    """InputError unless ``value`` > 0; the message names ``owner.name``."""
     if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
         raise InputError(f"{owner}.{name} must be a finite number > 0, got {value!r}")
 
 
 def non_negative(owner: str, name: str, value: float) -> None:
+    """InputError unless ``value`` >= 0; the message names ``owner.name``."""
     if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
         raise InputError(f"{owner}.{name} must be a finite number >= 0, got {value!r}")
 
@@ -82,10 +84,12 @@ def in_range(owner: str, name: str, value: float, lo: float, hi: float, unit: st
 
 
 def integer_in(owner: str, name: str, value: int, low: int, high: int) -> None:
+    """InputError unless ``value`` is an integer in ``low..high``."""
     if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
         raise InputError(f"{owner}.{name} must be an integer in {low}..{high}, got {value!r}")
 
 
 def one_of(owner: str, name: str, value: str, allowed: tuple[str, ...]) -> None:
+    """InputError unless ``value`` is one of ``allowed``."""
     if value not in allowed:
         raise InputError(f"{owner}.{name} = {value!r} is not one of {', '.join(allowed)}")

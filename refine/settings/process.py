@@ -1,4 +1,8 @@
-"""refine.settings.process."""
+"""The tables of what a run must keep and make: tolerances, process, output, cell, optimiser.
+
+The tables of what the run must keep and make: ``[tolerances]``, ``[process]``, ``[output]``, the
+cell's shapes (``[[obstacles]]``), ``[collision]`` and ``[optimise]``.
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,9 @@
-"""refine.settings.repair."""
+"""The tables of repair, placement, multi-pass welds and a problem's expected outcome.
+
+The tables of what happens when the strict problem has no answer (``[repair]``, with its
+``placement`` search), the passes of a multi-layer weld (``[multipass]``), and a problem's
+expected outcome (``[expect]``).
+"""
 
 from __future__ import annotations
 
