@@ -1,15 +1,18 @@
 """refine: optimisation-based refinement of demonstrated robot paths.
 
-The pipeline (one module per stage, see ``docs/design.md``)::
+The package is built in floors, each importing only from the ones below (``docs/design.md``)::
 
-    demo/  parse, filter and smooth the tracker log
-    cad/   read and resample the CAD/CAM path
-    fuse   align the demonstration to the CAD path
-    frames SE(3) helpers and every orientation convention
-    robot  robot models (Pinocchio) and the registry of robots/
-    optimise/  the joint-path NLP (CasADi; IPOPT, or fatrop stage by stage)
-    timing TOPPRA time parameterisation
-    export/    PathML, robot programs, trajectory CSV, result JSON
+    base         errors, frames (SE(3), every angle convention), paths (the data between
+                 stages), settings/ (the problem file's tables)
+    robot/       spec, URDF reading, Robot, the registry, numeric kinematics and IK
+    inputs       problem, cad/ (CAD/CAM readers), demo/ (tracker readers), collision/ (FCL),
+                 timing (TOPPRA)
+    fuse/        the demonstration aligned to the CAD path; the tracker-frame check
+    optimise/    every optimisation problem: the refinement NLP, its solve and repair, the
+                 verifier, the diagnosis, the placement search (CasADi; IPOPT or fatrop)
+    outputs      export/ (PathML, programs, trajectory CSV, result JSON), report/
+    application  run/ (a problem from file to outputs), calibrate/, bench/
+    interfaces   api, cli
 
 The library API (``docs/api.md``): :func:`load_problem`, :func:`solve`, :func:`refine_path`,
 :class:`Result`, :class:`Robot`. They are imported on first use, so ``import refine`` stays light.
@@ -19,7 +22,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from refine.errors import InfeasibleError, InputError, RefineError, SolverError
+from refine.errors import InputError, RefineError, SolverError
 from refine.lazy import lazy_names
 from refine.version import __version__
 
@@ -45,7 +48,6 @@ _LAZY = {
 __all__ = [
     "__version__",
     "CollisionSettings",
-    "InfeasibleError",
     "InputError",
     "PassArrays",
     "Problem",

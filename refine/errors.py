@@ -13,18 +13,6 @@ class InputError(RefineError, ValueError):
     """A problem file, CAD/CAM file or tracker log is malformed or inconsistent."""
 
 
-class InfeasibleError(RefineError):
-    """The refinement problem has no solution within the tolerances.
-
-    Attributes:
-        result: the partial result (status, reason, figures) for inspection.
-    """
-
-    def __init__(self, message: str, result: Any = None) -> None:
-        super().__init__(message)
-        self.result = result
-
-
 class SolverError(RefineError):
     """A numerical backend (IPOPT, TOPPRA, FCL) failed for a reason other than infeasibility."""
 
