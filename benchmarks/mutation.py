@@ -64,7 +64,7 @@ GROUPS: dict[str, tuple[list[str], list[str]]] = {
             "refine/export/krl.py",
             "refine/export/urscript.py",
             "refine/export/pathml.py",
-            "refine/export/pathml_read.py",
+            "refine/cad/pathml_read.py",
             "refine/export/trajectory_csv.py",
             "refine/export/writers.py",
             "refine/export/sunrise.py",

@@ -80,7 +80,7 @@ PROGRAM_CHILD = textwrap.dedent(
             print("staged", flush=True)
             time.sleep(PAUSE_BEFORE)
             def write(path):
-                files = {"trajectory.csv": __import__("refine.run.outputs").outputs.file_digest(stage.dir / "trajectory.csv")}
+                files = {"trajectory.csv": __import__("refine.run.outputs").run.outputs.file_digest(stage.dir / "trajectory.csv")}
                 path.write_text(json.dumps({"schema_version": 1, "status": "infeasible", "files": files}))
             stage.commit({"trajectory": stage.dir / "trajectory.csv"}, write)
         print("committed", flush=True)

@@ -131,7 +131,7 @@ def write_matrix(
     """Write the matrix as TOML: the sampling settings and one ``[[pair]]`` per pair of links."""
     lines = [
         "# Self-collision matrix: which link pairs are checked. Written by robots/make_self_collision.py",
-        "# from random configurations within the joint limits; see refine/collision/self_collision.py.",
+        "# from random configurations within the joint limits; see refine/robot/self_collision.py.",
         "# reason: adjacent (joint neighbours), always (in contact at every sample), never (never closer",
         "# than never_m), maker (in contact on the maker's own meshes at a sizeable share of samples),",
         '# or "" (checked).',
