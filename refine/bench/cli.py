@@ -81,5 +81,6 @@ def run(args: argparse.Namespace) -> int:
         warmup=args.warmup,
         time_limit_s=args.time_limit,
     )
-    print(f"{len(rows)} row(s) appended to {args.csv}")
+    run_id = rows[0]["run_id"] if rows else "-"
+    print(f"{len(rows)} row(s) of run {run_id} appended to {args.csv}")
     return 0

@@ -112,7 +112,7 @@ def _suite_targets(suite: str, rows: list[Row]) -> list[str]:
         lines.append(
             "- Unreachable family: "
             + ", ".join(
-                f"{c} {s}/{n} verified answers, {d}/{m} infeasibilities detected"
+                f"{c} {s}/{n} successes, {d}/{m} stated infeasibilities detected"
                 for c, (s, n, d, m) in sorted(score.items())
             )
         )
