@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from refine.bench.outcomes import DEFAULT_TIME_LIMIT_S
 from refine.bench.suites import DEFAULT_SUITES
 
 DEFAULT_CSV = Path("out") / "bench" / "bench.csv"
@@ -32,7 +33,17 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="untimed runs per problem and contender before the timed ones (default 1)",
     )
     run.add_argument(
-        "--csv", type=Path, default=DEFAULT_CSV, help=f"CSV to append to (default {DEFAULT_CSV})"
+        "--time-limit",
+        type=float,
+        default=DEFAULT_TIME_LIMIT_S,
+        help=f"wall seconds one run may take; a longer run is a timeout, a failed row counts as this "
+        f"in time summaries (default {DEFAULT_TIME_LIMIT_S:g})",
+    )
+    run.add_argument(
+        "--csv",
+        type=Path,
+        default=DEFAULT_CSV,
+        help=f"CSV to append to, refused unless its header is this version's (default {DEFAULT_CSV})",
     )
     run.add_argument("--suites-file", type=Path, default=DEFAULT_SUITES, help="the suites' TOML file")
     listing = actions.add_parser("list", help="list the suites and contenders")
@@ -40,6 +51,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     report = actions.add_parser("report", help="write report.md with tables and log-log plots from a CSV")
     report.add_argument("csv", type=Path, nargs="?", default=DEFAULT_CSV)
     report.add_argument("--out", type=Path, default=None, help="folder for report.md (default: the CSV's)")
+    report.add_argument("--run-id", default=None, help="the run to report (default: the CSV's last run)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -55,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
     if args.bench_command == "report":
         from refine.bench.report import write_report
 
-        path = write_report(args.csv, args.out or args.csv.parent)
+        path = write_report(args.csv, args.out or args.csv.parent, args.run_id)
         print(f"wrote {path}")
         return 0
     from refine.bench.runner import run_suites
@@ -67,6 +79,8 @@ def run(args: argparse.Namespace) -> int:
         suites_file=args.suites_file,
         repeat=args.repeat,
         warmup=args.warmup,
+        time_limit_s=args.time_limit,
     )
-    print(f"{len(rows)} row(s) appended to {args.csv}")
+    run_id = rows[0]["run_id"] if rows else "-"
+    print(f"{len(rows)} row(s) of run {run_id} appended to {args.csv}")
     return 0

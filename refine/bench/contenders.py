@@ -265,6 +265,7 @@ class Verdict:
         max_orientation_deviation_deg: largest deviation from the demonstrated orientation [deg].
         min_clearance_m: least clearance (distance minus margin) in the dense check [m], NaN without a cell.
         reason: the first broken tolerance, empty when verified.
+        broken_s_m: arc-length range [m] of each stretch that breaks a tolerance (collisions included).
     """
 
     verified: bool
@@ -272,6 +273,7 @@ class Verdict:
     max_orientation_deviation_deg: float
     min_clearance_m: float
     reason: str
+    broken_s_m: list[tuple[float, float]] = field(default_factory=list)
 
 
 def verify(problem: BenchProblem, q: Array | None, slack_deg: Array | None = None) -> Verdict:
@@ -284,11 +286,14 @@ def verify(problem: BenchProblem, q: Array | None, slack_deg: Array | None = Non
     kin = TcpKinematics(problem.robot, problem.base_in_world, problem.tcp_in_flange)
     check = check_path(kin, q, problem.fused, problem.tolerances, problem.axisymmetric, slack_deg)
     violations = list(check.violations)
+    broken = [(float(v.s_start_m), float(v.s_end_m)) for v in check.violations]
     clearance = np.nan
+    s = problem.fused.s
     for source in problem.sources:
         result = source.clearance(q)
         clearance = result.min_clearance_m
         violations += [f"collision: {r.describe()}" for r in result.runs]
+        broken += [(float(s[r.index_start]), float(s[r.index_end])) for r in result.runs]
     first = violations[0] if violations else ""
     return Verdict(
         not violations,
@@ -296,4 +301,5 @@ def verify(problem: BenchProblem, q: Array | None, slack_deg: Array | None = Non
         float(check.orientation_deviation_deg.max()),
         float(clearance),
         first if isinstance(first, str) else first.describe(),
+        broken,
     )

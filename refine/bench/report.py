@@ -1,8 +1,12 @@
-"""``refine bench report``: a Markdown report with tables and log-log plots, from the CSV alone."""
+"""``refine bench report``: a Markdown report with tables and log-log plots, from the CSV alone.
+
+Every table, figure and ratio comes from the rows of one run (:func:`refine.bench.table.read_run`:
+the last run of the file, or the one asked for), and within the run, figures that pair or fit rows
+(the glass ratios, a family's growth exponent) take them from one suite.
+"""
 
 from __future__ import annotations
 
-import csv
 import math
 import statistics
 from collections import defaultdict
@@ -11,24 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from refine.bench.suites import growth_exponent
-from refine.errors import InputError
-
-Row = dict[str, str]
-
-
-def read_rows(csv_path: Path) -> list[Row]:
-    """The rows of a benchmark CSV (as strings)."""
-    try:
-        with Path(csv_path).open(newline="") as f:
-            rows = list(csv.DictReader(f))
-    except OSError as e:
-        raise InputError(f"benchmark CSV {csv_path}: {e}") from e
-    if not rows:
-        raise InputError(f"benchmark CSV {csv_path} has no rows")
-    missing = {"suite", "problem", "contender", "total_s", "n_waypoints"} - set(rows[0])
-    if missing:
-        raise InputError(f"benchmark CSV {csv_path}: missing columns {sorted(missing)}")
-    return rows
+from refine.bench.table import Row, read_run
 
 
 def _f(row: Row, key: str) -> float:
@@ -55,14 +42,25 @@ def _latest(rows: list[Row]) -> list[Row]:
 
 
 def targets(rows: list[Row]) -> list[str]:
-    """The figures the benchmark is judged by, as Markdown lines (those the CSV has data for)."""
+    """The figures the benchmark is judged by, as Markdown lines (those the rows have data for).
+
+    ``rows``: one run's. Rows are paired (glass ratios) and fitted (growth exponents) within a suite.
+    """
+    lines = []
+    for suite in sorted({r["suite"] for r in rows}):
+        lines += _suite_targets(suite, [r for r in rows if r["suite"] == suite])
+    return lines
+
+
+def _suite_targets(suite: str, rows: list[Row]) -> list[str]:
+    """The target lines of one suite's rows of one run."""
     by = {(r["problem"], r["contender"]): r for r in rows}
     lines = []
     glass = by.get(("glass_adhesive", "refine"))
     if glass:
         total = _f(glass, "total_s")
         line = (
-            f"- Glass cell, refine build + seed + solve: {_fmt(total)} s wall ({_fmt(_f(glass, 'cpu_s'))} s CPU), "
+            f"- Glass cell (suite `{suite}`), refine build + seed + solve: {_fmt(total)} s wall ({_fmt(_f(glass, 'cpu_s'))} s CPU), "
             f"verified {'yes' if _yes(glass, 'verified') else 'no'}, largest deviation "
             f"{_fmt(_f(glass, 'max_orientation_deviation_deg'), 2)} deg"
         )
@@ -85,13 +83,16 @@ def targets(rows: list[Row]) -> list[str]:
             families[r["problem"].rsplit("-", 1)[0]].append(r)
     for family, rs in sorted(families.items()):
         rs.sort(key=lambda r: int(r["n_waypoints"]))
-        n = np.array([int(r["n_waypoints"]) for r in rs])
-        t = np.array([_f(r, "total_s") for r in rs])
-        c = np.array([_f(r, "cpu_s") for r in rs])
+        fitted = [r for r in rs if _yes(r, "success")]  # a failed row's time is no point of the curve
+        n = np.array([int(r["n_waypoints"]) for r in fitted])
+        t = np.array([_f(r, "total_s") for r in fitted])
+        c = np.array([_f(r, "cpu_s") for r in fitted])
         at = {int(r["n_waypoints"]): r for r in rs}
+        span = f"{n.min()}-{n.max()}" if len(n) else "no"
         parts = [
-            f"- {family}: growth exponent of build + seed + solve {_fmt(growth_exponent(n, t), 2)} (wall), "
-            f"{_fmt(growth_exponent(n, c), 2)} (CPU) over {n.min()}-{n.max()} waypoints"
+            f"- {family} (suite `{suite}`): growth exponent of build + seed + solve "
+            f"{_fmt(growth_exponent(n, t), 2)} (wall), {_fmt(growth_exponent(n, c), 2)} (CPU) over the "
+            f"{len(fitted)} successful rows, {span} waypoints"
         ]
         if 6400 in at:
             parts.append(
@@ -100,15 +101,20 @@ def targets(rows: list[Row]) -> list[str]:
         verified = sum(_yes(r, "verified") for r in rs)
         parts.append(f"; {verified}/{len(rs)} verified")
         lines.append("".join(parts))
-    unreachable = [r for r in rows if r["suite"] == "unreachable"]
-    if unreachable:
-        score: dict[str, list[int]] = defaultdict(lambda: [0, 0])
-        for r in unreachable:
-            score[r["contender"]][0] += _yes(r, "success")
-            score[r["contender"]][1] += 1
+    if suite == "unreachable":
+        score: dict[str, list[int]] = defaultdict(lambda: [0, 0, 0, 0])
+        for r in rows:
+            stated = r["expected"] == "infeasible"
+            score[r["contender"]][0] += _yes(r, "success") and not stated
+            score[r["contender"]][1] += not stated
+            score[r["contender"]][2] += _yes(r, "detected_infeasible")
+            score[r["contender"]][3] += stated
         lines.append(
-            "- Unreachable family, success: "
-            + ", ".join(f"{c} {s}/{n}" for c, (s, n) in sorted(score.items()))
+            "- Unreachable family: "
+            + ", ".join(
+                f"{c} {s}/{n} successes, {d}/{m} stated infeasibilities detected"
+                for c, (s, n, d, m) in sorted(score.items())
+            )
         )
     return lines
 
@@ -136,16 +142,22 @@ def _plot(rows: list[Row], family: str, path: Path) -> None:
     plt.close(fig)
 
 
-def write_report(csv_path: Path, out_dir: Path) -> Path:
-    """Write ``report.md`` (and its plots) into ``out_dir`` from the CSV; returns the report's path."""
-    rows = _latest(read_rows(csv_path))
+def write_report(csv_path: Path, out_dir: Path, run_id: str | None = None) -> Path:
+    """Write ``report.md`` (and its plots) into ``out_dir`` from one run of the CSV; returns its path.
+
+    ``run_id``: the run to report (default: the file's last run).
+    """
+    run_id, rows = read_run(csv_path, run_id)
+    rows = _latest(rows)
     out_dir.mkdir(parents=True, exist_ok=True)
     first = rows[0]
     dates = sorted(r.get("date", "") for r in rows)
+    limits = sorted({r["time_limit_s"] for r in rows}, key=float)
     lines = [
         "# refine benchmark",
         "",
-        f"From `{Path(csv_path).name}`: {len(rows)} rows, {dates[0]} to {dates[-1]}.",
+        f"Run `{run_id}` of `{Path(csv_path).name}`: {len(rows)} rows, {dates[0]} to {dates[-1]} "
+        f"(schema {first['schema']}); no row of another run is used.",
         "",
         f"Machine: {first.get('machine', '?')}, {first.get('cpu', '?')}, {first.get('cores', '?')} cores. "
         f"Python {first.get('python', '?')}, refine {first.get('refine', '?')}, CasADi {first.get('casadi', '?')}, "
@@ -156,14 +168,21 @@ def write_report(csv_path: Path, out_dir: Path) -> Path:
         "same check: TCP position, orientation cone, joint limits, singularity margin, and clearance "
         "(dense check) where the problem has a cell.",
         "",
+        "Success: a claimed answer (`ok`, `repaired`) that passes that check, within the time limit. "
+        "Detected: on a problem stated infeasible, an `infeasible` answer with joints for every "
+        "waypoint that the check rejects in the stated stretch (docs/bench.md). A row with neither "
+        f"is failed and counts as the time limit, {' / '.join(limits)} s, in the summary's medians "
+        "(penalised); a crash is status `error`, a run over the limit `timeout`.",
+        "",
         "## Targets",
         "",
         *targets(rows),
         "",
         "## Summary",
         "",
-        "| suite | contender | problems | success | verified | median wall s | median CPU s |",
-        "|---|---|---:|---:|---:|---:|---:|",
+        "| suite | contender | problems | success | verified | detected infeasible | failed | timed out | "
+        "median wall s (penalised) | median CPU s (penalised) |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     groups: dict[tuple[str, str], list[Row]] = defaultdict(list)
     for r in rows:
@@ -171,8 +190,11 @@ def write_report(csv_path: Path, out_dir: Path) -> Path:
     for (suite, contender), rs in sorted(groups.items()):
         lines.append(
             f"| {suite} | {contender} | {len(rs)} | {sum(_yes(r, 'success') for r in rs)} | "
-            f"{sum(_yes(r, 'verified') for r in rs)} | {_fmt(statistics.median(_f(r, 'total_s') for r in rs))} | "
-            f"{_fmt(statistics.median(_f(r, 'cpu_s') for r in rs))} |"
+            f"{sum(_yes(r, 'verified') for r in rs)} | {sum(_yes(r, 'detected_infeasible') for r in rs)} | "
+            f"{sum(not (_yes(r, 'success') or _yes(r, 'detected_infeasible')) for r in rs)} | "
+            f"{sum(_yes(r, 'timed_out') for r in rs)} | "
+            f"{_fmt(statistics.median(_f(r, 'penalised_total_s') for r in rs))} | "
+            f"{_fmt(statistics.median(_f(r, 'penalised_cpu_s') for r in rs))} |"
         )
     for suite in sorted({r["suite"] for r in rows}):
         srows = sorted(
@@ -183,15 +205,16 @@ def write_report(csv_path: Path, out_dir: Path) -> Path:
             "",
             f"## Suite `{suite}`",
             "",
-            "| problem | N | contender | status | verified | success | build s | seed s | solve s | total s | "
+            "| problem | N | contender | status | verified | success | detected | build s | seed s | solve s | total s | "
             "CPU s | iter | max dev deg | min clearance mm | peak RSS MB | note |",
-            "|---|---:|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+            "|---|---:|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
         ]
         for r in srows:
             clearance = _f(r, "min_clearance_m") * 1e3
             lines.append(
                 f"| {r['problem']} | {r['n_waypoints']} | {r['contender']} | {r['status']} | "
                 f"{'yes' if _yes(r, 'verified') else 'no'} | {'yes' if _yes(r, 'success') else 'no'} | "
+                f"{'yes' if _yes(r, 'detected_infeasible') else ('no' if r['expected'] == 'infeasible' else '–')} | "
                 f"{_fmt(_f(r, 'build_s'))} | {_fmt(_f(r, 'seed_s'))} | {_fmt(_f(r, 'solve_s'))} | "
                 f"{_fmt(_f(r, 'total_s'))} | {_fmt(_f(r, 'cpu_s'))} | {r.get('iterations', '')} | "
                 f"{_fmt(_f(r, 'max_orientation_deviation_deg'), 2)} | {_fmt(clearance, 1)} | "

@@ -7,6 +7,8 @@ compiled kernels and caches warm, for every contender alike); then the ``repeat`
 contenders take turns (refine, Drake, refine, Drake, ...), so a change of the machine's load falls
 on all of them alike. A row holds the median wall time of each stage, the median and minimum of the
 total, the median and minimum CPU time, and the 1-minute load average before and after its runs.
+A row is scored by :mod:`refine.bench.outcomes`; every row of one call of :func:`run_suites` has
+its run id, and the CSV's header is checked before anything is appended (:mod:`refine.bench.table`).
 """
 
 from __future__ import annotations
@@ -27,18 +29,12 @@ from typing import Any
 import numpy as np
 
 from refine.bench.contenders import CONTENDERS, Answer, Unavailable, verify
+from refine.bench.outcomes import DEFAULT_TIME_LIMIT_S, penalised, score
 from refine.bench.suites import BenchProblem, load_suites, problems
+from refine.bench.table import COLUMNS, SCHEMA_VERSION, check_header, new_run_id
 from refine.errors import InputError
 
 log = logging.getLogger(__name__)
-
-COLUMNS = [
-    "suite", "problem", "robot", "n_waypoints", "obstacles", "expected", "contender", "status", "verified",
-    "success", "max_position_error_m", "max_orientation_deviation_deg", "min_clearance_m", "build_s", "seed_s",
-    "solve_s", "total_s", "min_total_s", "cpu_s", "min_cpu_s", "iterations", "repeats", "warmup", "load_1min",
-    "peak_rss_mb", "rss_growth_mb", "reason", "note", "date", "machine", "cpu", "cores", "python", "refine", "casadi", "pinocchio", "drake",
-]  # fmt: skip
-"""The CSV columns, in order (see docs of :func:`run_suites`)."""
 
 
 def environment() -> dict[str, str]:
@@ -75,29 +71,22 @@ def _peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: kilobytes
 
 
-def success(problem: BenchProblem, answer: Answer, verified: bool, verified_repaired: bool) -> bool:
-    """Did the contender do what the problem asks?
+def _call(
+    problem: BenchProblem, contender: str, function: Callable[[BenchProblem], Answer]
+) -> tuple[Answer, float]:
+    """One run of a contender and its wall time [s] on the runner's clock.
 
-    A normal problem: a verified answer. A problem built to be repaired: a verified answer, or a
-    repaired one that verifies with the slack it reports. A problem built to be infeasible: reporting
-    it infeasible (no executable answer claimed).
+    A crash is an ``error`` answer (:class:`Unavailable` passes through).
     """
-    if problem.expected == "infeasible":
-        return answer.status in ("infeasible", "failed")
-    if problem.expected == "repaired":
-        return verified or (answer.status == "repaired" and verified_repaired)
-    return verified
-
-
-def _call(problem: BenchProblem, contender: str, function: Callable[[BenchProblem], Answer]) -> Answer:
-    """One run of a contender; a crash is a ``failed`` answer (:class:`Unavailable` passes through)."""
+    t0 = time.perf_counter()
     try:
-        return function(problem)
+        answer = function(problem)
     except Unavailable:
         raise
     except Exception as e:  # a contender crashing is a result, not the end of the benchmark
         log.warning("%s on %s failed: %s", contender, problem.name, e)
-        return Answer("failed", None, note=f"{type(e).__name__}: {str(e)[:120]}")
+        answer = Answer("error", None, note=f"{type(e).__name__}: {str(e)[:120]}")
+    return answer, time.perf_counter() - t0
 
 
 def run_problem(
@@ -106,9 +95,10 @@ def run_problem(
     function: Callable[[BenchProblem], Answer],
     repeat: int,
     warmup: int = 0,
+    time_limit_s: float = DEFAULT_TIME_LIMIT_S,
 ) -> dict[str, Any] | None:
     """One row for ``contender`` on ``problem`` after ``warmup`` untimed runs (see :func:`run_turns`)."""
-    return run_turns(problem, {contender: function}, repeat, warmup)[contender]
+    return run_turns(problem, {contender: function}, repeat, warmup, time_limit_s=time_limit_s).get(contender)
 
 
 def run_turns(
@@ -117,11 +107,14 @@ def run_turns(
     repeat: int,
     warmup: int = 0,
     echo: Callable[[str], None] = print,
+    time_limit_s: float = DEFAULT_TIME_LIMIT_S,
 ) -> dict[str, dict[str, Any]]:
     """One row per contender of ``functions`` on ``problem``, the contenders taking turns.
 
     Each contender runs ``warmup`` times untimed, then the ``repeat`` timed runs go round the
     contenders in turn. A contender that raises :class:`Unavailable` is left out with a message.
+    A timed run longer than ``time_limit_s`` on the runner's clock (the whole call) times the row
+    out; the run is not interrupted.
     """
     functions = dict(functions)
     for name in list(functions):
@@ -131,7 +124,7 @@ def run_turns(
         except Unavailable as e:
             echo(f"skipping {name}: {e}")
             del functions[name]
-    answers: dict[str, list[Answer]] = {name: [] for name in functions}
+    answers: dict[str, list[tuple[Answer, float]]] = {name: [] for name in functions}
     load0 = _load()
     peak0 = _peak_rss_mb()
     for _ in range(repeat):
@@ -142,7 +135,11 @@ def run_turns(
                 echo(f"skipping {name}: {e}")
                 del functions[name], answers[name]
     load = f"{load0:.2f}-{_load():.2f}"
-    return {name: _row(problem, name, runs, warmup, load, peak0) for name, runs in answers.items() if runs}
+    return {
+        name: _row(problem, name, runs, warmup, load, peak0, time_limit_s)
+        for name, runs in answers.items()
+        if runs
+    }
 
 
 def _load() -> float:
@@ -153,15 +150,34 @@ def _load() -> float:
 
 
 def _row(
-    problem: BenchProblem, contender: str, runs: list[Answer], warmup: int, load: str, peak0: float
+    problem: BenchProblem,
+    contender: str,
+    timed: list[tuple[Answer, float]],
+    warmup: int,
+    load: str,
+    peak0: float,
+    time_limit_s: float,
 ) -> dict[str, Any]:
-    """The CSV row of ``contender``'s timed runs on ``problem``; the last answer is verified."""
+    """The CSV row of ``contender``'s timed runs on ``problem``; the last answer is verified and scored."""
+    runs = [a for a, _ in timed]
     answer = runs[-1]
     walls = [a.times_s for a in runs]
     cpus = [a.cpu_s for a in runs]
     repeat = len(runs)
+    timed_out = any(wall > time_limit_s for _, wall in timed)
     verdict = verify(problem, answer.q)
     repaired = answer.status == "repaired" and verify(problem, answer.q, answer.slack_deg).verified
+    scored = score(
+        problem.expected,
+        problem.expected_s_range_m,
+        answer.status,
+        answer.q,
+        problem.n_waypoints,
+        verdict.verified,
+        repaired,
+        verdict.broken_s_m,
+        timed_out,
+    )
     totals = [sum(w.values()) for w in walls]
     stage = {k: statistics.median(w.get(k, 0.0) for w in walls) for k in ("build", "seed", "solve")}
     peak = _peak_rss_mb()
@@ -173,9 +189,12 @@ def _row(
         "obstacles": bool(problem.sources),
         "expected": problem.expected,
         "contender": contender,
-        "status": answer.status,
+        "status": "timeout" if timed_out else answer.status,
         "verified": verdict.verified,
-        "success": success(problem, answer, verdict.verified, repaired),
+        "success": scored.success,
+        "detected_infeasible": scored.detected_infeasible,
+        "timed_out": timed_out,
+        "time_limit_s": time_limit_s,
         "max_position_error_m": verdict.max_position_error_m,
         "max_orientation_deviation_deg": verdict.max_orientation_deviation_deg,
         "min_clearance_m": verdict.min_clearance_m,
@@ -184,8 +203,10 @@ def _row(
         "solve_s": stage["solve"],
         "total_s": statistics.median(totals),
         "min_total_s": min(totals),
+        "penalised_total_s": penalised(statistics.median(totals), scored.failed, time_limit_s),
         "cpu_s": statistics.median(cpus),
         "min_cpu_s": min(cpus),
+        "penalised_cpu_s": penalised(statistics.median(cpus), scored.failed, time_limit_s),
         "iterations": answer.iterations,
         "repeats": repeat,
         "warmup": warmup,
@@ -206,14 +227,22 @@ def run_suites(
     repeat: int = 1,
     warmup: int = 0,
     echo: Callable[[str], None] = print,
+    time_limit_s: float = DEFAULT_TIME_LIMIT_S,
+    run_id: str | None = None,
 ) -> list[dict[str, Any]]:
     """Run every contender on every problem of ``suites`` and append the rows to ``csv_path``.
 
+    Every row carries the schema version and the run id (``run_id``, or a new one:
+    :func:`refine.bench.table.new_run_id`). An existing ``csv_path`` is appended to only when its
+    header is this version's (else :class:`InputError`, before any contender runs).
+
     Columns (:data:`COLUMNS`): the problem (suite, name, robot, waypoints, whether it has a cell, the
-    outcome it is built for), the contender, its own status, the shared verification (``verified``:
-    every tolerance kept; ``success``: see :func:`success`; worst position and orientation, least
-    clearance), wall time per stage and in total (median over repeats, and the minimum total), CPU
-    time (median and minimum), solver iterations, the repeats and untimed warm-up runs, the 1-minute
+    outcome it is built for), the contender, its own status (``error`` when it raised, ``timeout``
+    when a timed run took longer than ``time_limit_s``), the shared verification (``verified``:
+    every tolerance kept; ``success`` and ``detected_infeasible``: :mod:`refine.bench.outcomes`;
+    worst position and orientation, least clearance), wall time per stage and in total (median over
+    repeats, the minimum total, and the total counted as the time limit for a row that is neither a
+    success nor a detection), CPU time (likewise), solver iterations, the repeats and untimed warm-up runs, the 1-minute
     load average before and after the timed runs, the process's peak resident memory after the row
     and its growth during it [MB] (memory stays allocated, so the growth is the row's own only
     where it sets a new peak), the first broken tolerance, and the machine and versions.
@@ -227,12 +256,16 @@ def run_suites(
         raise InputError(f"repeat must be >= 1, got {repeat}")
     if warmup < 0:
         raise InputError(f"warmup must be >= 0, got {warmup}")
+    if not time_limit_s > 0:
+        raise InputError(f"time limit must be > 0 s, got {time_limit_s} s")
     data = load_suites(suites_file) if suites_file else load_suites()
+    new = check_header(csv_path)
     env = environment()
+    env.update(schema=SCHEMA_VERSION, run_id=run_id or new_run_id())
+    echo(f"run {env['run_id']} into {csv_path}")
     rows: list[dict[str, Any]] = []
     skipped: set[str] = set()
     csv_path.parent.mkdir(parents=True, exist_ok=True)
-    new = not csv_path.exists() or csv_path.stat().st_size == 0
     with csv_path.open("a", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=COLUMNS)
         if new:
@@ -241,7 +274,7 @@ def run_suites(
             for problem in problems(data, suite):
                 t0 = time.perf_counter()
                 functions = {name: CONTENDERS[name] for name in contenders if name not in skipped}
-                found = run_turns(problem, functions, repeat, warmup, echo)
+                found = run_turns(problem, functions, repeat, warmup, echo, time_limit_s)
                 skipped |= set(functions) - set(found)
                 for name, row in found.items():
                     row.update(env)
@@ -251,6 +284,7 @@ def run_suites(
                     echo(
                         f"{suite:11s} {problem.name:28s} {name:16s} {row['status']:10s} "
                         f"verified {'yes' if row['verified'] else 'no ':3s} success {'yes' if row['success'] else 'no '} "
+                        f"detected {'yes' if row['detected_infeasible'] else 'no '} "
                         f"total {row['total_s']:7.3f} s cpu {row['cpu_s']:7.3f} s load {row['load_1min']} "
                         f"({time.perf_counter() - t0:.1f} s for the problem's runs)"
                     )

@@ -51,6 +51,8 @@ class BenchProblem:
         max_rounds: outer rounds of the refinement.
         weights: refine's cost weights for the problem.
         expected: for the unreachable family, the outcome the problem states (else empty).
+        expected_s_range_m: the arc-length range [m] the problem states its infeasibility or repair
+            to be in (``[expected] s_range_m``), or None.
     """
 
     suite: str
@@ -67,6 +69,7 @@ class BenchProblem:
     max_rounds: int = 8
     weights: Any = None
     expected: str = ""
+    expected_s_range_m: tuple[float, float] | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -139,7 +142,9 @@ def bundled_problem(suite: str, folder: Path) -> BenchProblem:
     problem = load_problem(folder)
     robot = load_robot(problem.robot.model)
     toml_file = folder / "problem.toml" if folder.is_dir() else folder
-    expected = str(tomllib.loads(toml_file.read_text()).get("expected", {}).get("status", ""))
+    stated = tomllib.loads(toml_file.read_text()).get("expected", {})
+    expected = str(stated.get("status", ""))
+    s_range = stated.get("s_range_m")
     return BenchProblem(
         suite=suite,
         name=problem.name,
@@ -155,6 +160,7 @@ def bundled_problem(suite: str, folder: Path) -> BenchProblem:
         max_rounds=problem.collision.max_outer_iterations,
         weights=weights_for(problem, robot),
         expected=expected,
+        expected_s_range_m=None if s_range is None else (float(s_range[0]), float(s_range[1])),
     )
 
 

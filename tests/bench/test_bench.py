@@ -9,8 +9,9 @@ import pytest
 
 from refine.bench import contenders as contenders_module
 from refine.bench.contenders import Answer, Unavailable, verify
+from refine.bench.outcomes import score
 from refine.bench.report import write_report
-from refine.bench.runner import COLUMNS, run_suites, run_turns, success
+from refine.bench.runner import COLUMNS, run_suites, run_turns
 from refine.bench.suites import generated_problem, growth_exponent, load_suites, problems
 from refine.cli import main
 from refine.errors import InputError
@@ -129,16 +130,21 @@ def test_contenders_take_turns_after_their_untimed_warm_up_runs(suites_file):
 
 
 def test_success_rules_per_expected_outcome(suites_file):
+    """Success needs a claimed, verified answer; saying infeasible is never one (it may be a detection)."""
     problem = next(problems(load_suites(suites_file), "tiny"))
-    ok = Answer("ok", np.zeros((20, 6)))
-    infeasible = Answer("infeasible", None)
-    repaired = Answer("repaired", np.zeros((20, 6)))
-    assert success(problem, ok, True, False) and not success(problem, ok, False, False)
+    q = np.zeros((20, 6))
+
+    def judge(status, verified, repaired):
+        return score(
+            problem.expected, problem.expected_s_range_m, status, q, 20, verified, repaired, [], False
+        )
+
+    assert judge("ok", True, False).success and not judge("ok", False, False).success
     problem.expected = "infeasible"
-    assert success(problem, infeasible, False, False) and not success(problem, ok, False, False)
+    assert not judge("infeasible", False, False).success and not judge("ok", False, False).success
     problem.expected = "repaired"
-    assert success(problem, repaired, False, True) and not success(problem, repaired, False, False)
-    assert success(problem, ok, True, False)
+    assert judge("repaired", False, True).success and not judge("repaired", False, False).success
+    assert judge("ok", True, False).success
 
 
 def test_verification_rejects_an_answer_off_the_path(suites_file):
