@@ -119,7 +119,7 @@ def test_a_whole_run_loads_none_of_the_modules_it_never_uses(tmp_path):
         f"""
         import sys
         from refine.problem import load_problem
-        from refine.run.stages import run
+        from refine.run.write import run
         result = run(load_problem({str(root / "problems" / "glass_adhesive")!r}), {str(tmp_path / "out")!r})
         assert result.status == "ok", result.status
         never = ("networkx", "numpy.f2py", "numpy.testing", "matplotlib.pyplot", "scipy.stats")
