@@ -17,6 +17,12 @@ slipped in after the commit anyway (outside :func:`stoppable`).
 :func:`deferred` blocks both signals around a section that must finish once started (moving the
 finished outputs into place, removing a staging folder); a signal that arrives meanwhile is
 delivered as soon as the section ends.
+
+All of this is opt-in: a library call (``refine.solve``, ``refine.refine_path``,
+``Result.write``) changes no timer, signal handler or signal mask of the process. The output
+moves hold signals back (:func:`critical`) only inside :func:`guarded`, which :func:`stoppable`
+(the ``refine`` command) enters; a host program may enter :func:`guarded` itself (main thread
+only) to have its SIGINT, SIGTERM and SIGALRM held back while the files move.
 """
 
 from __future__ import annotations
@@ -24,13 +30,13 @@ from __future__ import annotations
 import signal
 import threading
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager, nullcontext
 
 REPEAT_S = 0.05
 """Interval of the repeated ``KeyboardInterrupt`` after the first signal [s]."""
 
 _SIGNALS = (signal.SIGINT, signal.SIGTERM)
-_state: dict = {"requested": False, "complete": None}
+_state: dict = {"requested": False, "complete": None, "guarded": False}
 
 
 def requested() -> bool:
@@ -41,8 +47,11 @@ def requested() -> bool:
 def outputs_complete(status: str) -> None:
     """Record that the run's new output set is in place, with its ``status``; stop the repeat timer.
 
-    From here on a signal inside :func:`stoppable` raises nothing (module docstring).
+    From here on a signal inside :func:`stoppable` raises nothing (module docstring). Outside
+    :func:`guarded` (a library call) it records nothing and leaves the process's timer alone.
     """
+    if not _state["guarded"]:
+        return
     _state["complete"] = status
     _state["requested"] = False
     if threading.current_thread() is threading.main_thread():
@@ -89,7 +98,8 @@ def stoppable() -> Iterator[None]:
     _state["requested"] = False
     _state["complete"] = None
     try:
-        yield
+        with guarded():
+            yield
     finally:
         held = signal.pthread_sigmask(signal.SIG_BLOCK, {*_SIGNALS, signal.SIGALRM})
         signal.setitimer(signal.ITIMER_REAL, 0.0, 0.0)
@@ -141,3 +151,33 @@ def deferred() -> Iterator[None]:
             signal.signal(sig, handler if handler is not None else signal.SIG_DFL)
         if noted:
             signal.raise_signal(noted[0])
+
+
+@contextmanager
+def guarded() -> Iterator[None]:
+    """Within the block (main thread only), :func:`critical` sections hold signals back.
+
+    Opt-in, for a program that owns the process's signals: the ``refine`` command enters it (through
+    :func:`stoppable`); a host program may, around ``Result.write``. In another thread the block
+    runs unguarded. Outside it no refine call touches a timer, signal handler or signal mask.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    before = _state["guarded"]
+    _state["guarded"] = True
+    try:
+        yield
+    finally:
+        _state["guarded"] = before
+
+
+def critical() -> AbstractContextManager[None]:
+    """A section that must finish once started: :func:`deferred` inside :func:`guarded`, else plain.
+
+    Unguarded, a signal's handler runs where it lands; the all-or-nothing outputs stay consistent
+    nonetheless (:mod:`refine.run.outputs`).
+    """
+    if _state["guarded"] and threading.current_thread() is threading.main_thread():
+        return deferred()
+    return nullcontext()

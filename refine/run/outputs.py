@@ -5,7 +5,8 @@ milliseconds of the move), or the new complete set; never a ``result.json`` besi
 describe. ``result.json`` lists every other file of its set with its size and SHA-256
 (``files``), so anyone can check the claim.
 
-How a set is committed (:meth:`StagedOutputs.commit`), with SIGINT/SIGTERM held back throughout:
+How a set is committed (:meth:`StagedOutputs.commit`), with SIGINT/SIGTERM held back throughout when
+the caller opted in (:func:`refine.interrupt.guarded`, as the ``refine`` command does):
 
 1. every file, ``result.json`` last, is written into ``<out>/.refine-staging-<pid>-<random>/``;
 2. the old ``result.json`` is renamed to ``.refine-previous.json`` (from here on no set is claimed);
@@ -17,7 +18,9 @@ How a set is committed (:meth:`StagedOutputs.commit`), with SIGINT/SIGTERM held 
 Then :func:`refine.interrupt.outputs_complete` records that the run is complete: a Ctrl-C from
 here on stops nothing (the command exits with the run's own status).
 
-A run that fails or is interrupted before step 2 leaves the previous set untouched and its staging
+A library call touches no signal: a host's handler that raises during steps 2-5 (its Ctrl-C) leaves
+the folder with no ``result.json`` (no set claimed, never a wrong one); the next run in the folder
+cleans it (below). A run that fails or is interrupted before step 2 leaves the previous set untouched and its staging
 folder removed. A process killed outright (SIGKILL) may leave a staging folder; the next run in the
 same folder removes those of processes that no longer run (and their ``.result.json.<pid>.tmp``),
 and cleans the files listed by a leftover ``.refine-previous.json``.
@@ -37,7 +40,7 @@ from pathlib import Path
 from types import TracebackType
 
 from refine.errors import InputError
-from refine.interrupt import deferred, outputs_complete
+from refine.interrupt import critical, outputs_complete
 
 log = logging.getLogger(__name__)
 
@@ -169,7 +172,7 @@ class StagedOutputs:
     def __exit__(
         self, kind: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> None:
-        with deferred():
+        with critical():
             shutil.rmtree(self.dir, ignore_errors=True)
             if not self.committed and not any(self.out_dir.iterdir()):
                 with contextlib.suppress(OSError):
@@ -203,7 +206,7 @@ class StagedOutputs:
                 raise InputError(
                     f"output {path.name!r} would replace {target.resolve()}; nothing was written"
                 )
-        with deferred():
+        with critical():
             write_result(staged["result"])
             with open(staged["result"], "rb") as f:
                 os.fsync(f.fileno())

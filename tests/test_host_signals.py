@@ -1,0 +1,91 @@
+"""A host program's timer, signal handlers and signal mask survive refine's library calls.
+
+The host sets a 30 s ``ITIMER_REAL`` and handlers of its own for SIGINT, SIGTERM and SIGALRM, then
+solves a short line and writes its files, in the main thread and in another one.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import threading
+import time
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+import refine
+
+HOST_TIMER_S = 30.0
+SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGALRM)
+
+
+def _line(n: int = 12) -> tuple[np.ndarray, np.ndarray]:
+    positions = np.column_stack([np.full(n, 0.6), np.linspace(-0.1, 0.1, n), np.full(n, 0.3)])
+    down = Rotation.from_euler("x", 180.0, degrees=True).as_matrix()  # tool z pointing down
+    return positions, np.repeat(down[None], n, axis=0)
+
+
+def _solve_and_write(out) -> dict:
+    positions, R = _line()
+    result = refine.refine_path("ur10e", positions, R, speeds=0.1, name="line")
+    return result.write(out, report=False)
+
+
+def _host_handler(signum: int, frame: object) -> None:  # the host's own; never called here
+    raise AssertionError(f"host handler called for signal {signum}")
+
+
+def test_library_calls_leave_the_hosts_timer_handlers_and_mask_alone(tmp_path):
+    old = {sig: signal.getsignal(sig) for sig in SIGNALS}
+    handlers = {sig: (lambda signum, frame, sig=sig: _host_handler(signum, frame)) for sig in SIGNALS}
+    mask_before = signal.pthread_sigmask(signal.SIG_BLOCK, [])
+    try:
+        for sig, handler in handlers.items():
+            signal.signal(sig, handler)
+        signal.setitimer(signal.ITIMER_REAL, HOST_TIMER_S)
+        t0 = time.monotonic()
+
+        files = _solve_and_write(tmp_path / "main")
+        assert json.loads(files["result"].read_text())["status"] == "ok"
+
+        left, interval = signal.getitimer(signal.ITIMER_REAL)
+        elapsed = time.monotonic() - t0
+        # the timer ran on undisturbed: 30 s less the time the calls took (10 ms of slack for timer
+        # granularity), never cancelled (0.0) nor re-armed
+        assert HOST_TIMER_S - elapsed - 0.01 <= left <= HOST_TIMER_S - elapsed + 0.01, (left, elapsed)
+        assert interval == 0.0
+        for sig, handler in handlers.items():
+            assert signal.getsignal(sig) is handler, signal.Signals(sig).name
+        assert signal.pthread_sigmask(signal.SIG_BLOCK, []) == mask_before
+
+        # from another thread, which may not set signal handlers at all, the write works
+        caught: list[BaseException] = []
+        written: dict = {}
+
+        def work() -> None:
+            try:
+                written.update(_solve_and_write(tmp_path / "thread"))
+            except BaseException as e:  # noqa: BLE001 - reported by the assertion below
+                caught.append(e)
+
+        worker = threading.Thread(target=work)
+        worker.start()
+        worker.join(timeout=300)
+        assert not worker.is_alive()
+        assert caught == []
+        assert sorted(p.name for p in (tmp_path / "thread").iterdir()) == sorted(
+            p.name for p in written.values()
+        )
+        assert json.loads(written["result"].read_text())["status"] == "ok"
+        left, _ = signal.getitimer(signal.ITIMER_REAL)
+        elapsed = time.monotonic() - t0
+        assert HOST_TIMER_S - elapsed - 0.01 <= left <= HOST_TIMER_S - elapsed + 0.01, (left, elapsed)
+        for sig, handler in handlers.items():
+            assert signal.getsignal(sig) is handler, signal.Signals(sig).name
+        assert signal.pthread_sigmask(signal.SIG_BLOCK, []) == mask_before
+        print(f"timer left {left:.3f} s after {elapsed:.3f} s of {HOST_TIMER_S} s")
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0.0)
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
