@@ -48,13 +48,15 @@ def outputs_complete(status: str) -> None:
     """Record that the run's new output set is in place, with its ``status``; stop the repeat timer.
 
     From here on a signal inside :func:`stoppable` raises nothing (module docstring). Outside
-    :func:`guarded` (a library call) it records nothing and leaves the process's timer alone.
+    :func:`guarded` (a library call) it records nothing; the process's timer is stopped only when
+    it is the repeat timer a signal inside :func:`stoppable` started.
     """
     if not _state["guarded"]:
         return
     _state["complete"] = status
+    repeating = _state["requested"]  # the repeat timer runs only after a signal inside stoppable
     _state["requested"] = False
-    if threading.current_thread() is threading.main_thread():
+    if repeating and threading.current_thread() is threading.main_thread():
         signal.setitimer(signal.ITIMER_REAL, 0.0, 0.0)
 
 

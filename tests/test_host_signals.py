@@ -7,6 +7,7 @@ solves a short line and writes its files, in the main thread and in another one.
 from __future__ import annotations
 
 import json
+import os
 import signal
 import threading
 import time
@@ -36,10 +37,23 @@ def _host_handler(signum: int, frame: object) -> None:  # the host's own; never 
     raise AssertionError(f"host handler called for signal {signum}")
 
 
-def test_library_calls_leave_the_hosts_timer_handlers_and_mask_alone(tmp_path):
+def test_library_calls_leave_the_hosts_timer_handlers_and_mask_alone(tmp_path, monkeypatch):
     old = {sig: signal.getsignal(sig) for sig in SIGNALS}
     handlers = {sig: (lambda signum, frame, sig=sig: _host_handler(signum, frame)) for sig in SIGNALS}
     mask_before = signal.pthread_sigmask(signal.SIG_BLOCK, [])
+    # while the files move into place, the host's handlers stay installed and nothing is blocked
+    during_moves: list[bool] = []
+    replace = os.replace
+
+    def watched_replace(src, dst) -> None:  # noqa: ANN001 - as os.replace
+        if threading.current_thread() is threading.main_thread():
+            during_moves.append(
+                all(signal.getsignal(sig) is h for sig, h in handlers.items())
+                and signal.pthread_sigmask(signal.SIG_BLOCK, []) == mask_before
+            )
+        replace(src, dst)
+
+    monkeypatch.setattr(os, "replace", watched_replace)
     try:
         for sig, handler in handlers.items():
             signal.signal(sig, handler)
@@ -48,6 +62,7 @@ def test_library_calls_leave_the_hosts_timer_handlers_and_mask_alone(tmp_path):
 
         files = _solve_and_write(tmp_path / "main")
         assert json.loads(files["result"].read_text())["status"] == "ok"
+        assert len(during_moves) >= len(files) and all(during_moves), during_moves
 
         left, interval = signal.getitimer(signal.ITIMER_REAL)
         elapsed = time.monotonic() - t0
@@ -85,6 +100,50 @@ def test_library_calls_leave_the_hosts_timer_handlers_and_mask_alone(tmp_path):
             assert signal.getsignal(sig) is handler, signal.Signals(sig).name
         assert signal.pthread_sigmask(signal.SIG_BLOCK, []) == mask_before
         print(f"timer left {left:.3f} s after {elapsed:.3f} s of {HOST_TIMER_S} s")
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0.0)
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+
+
+def test_a_host_that_opts_in_has_its_sigint_held_back_until_the_files_are_moved(tmp_path, monkeypatch):
+    from refine.interrupt import guarded
+
+    positions, R = _line()
+    result = refine.refine_path("ur10e", positions, R, speeds=0.1, name="line")
+    old = {sig: signal.getsignal(sig) for sig in SIGNALS}
+    received: list[tuple[int, bool]] = []  # (signal, result.json in place when the handler ran)
+    out = tmp_path / "out"
+
+    def host_sigint(signum: int, frame: object) -> None:
+        received.append((signum, (out / "result.json").is_file()))
+
+    replace = os.replace
+    moves: list[str] = []
+
+    def replace_and_interrupt(src, dst) -> None:  # noqa: ANN001 - as os.replace
+        if os.path.dirname(dst) == str(out):  # a move into the output folder (not in staging)
+            moves.append(os.path.basename(dst))
+            if len(moves) == 1:
+                signal.raise_signal(signal.SIGINT)  # Ctrl-C at the first move
+        replace(src, dst)
+
+    monkeypatch.setattr(os, "replace", replace_and_interrupt)
+    try:
+        signal.signal(signal.SIGINT, host_sigint)
+        signal.signal(signal.SIGALRM, _host_handler)
+        signal.setitimer(signal.ITIMER_REAL, HOST_TIMER_S)
+        t0 = time.monotonic()
+        with guarded():
+            files = result.write(out, report=False)
+        left, _ = signal.getitimer(signal.ITIMER_REAL)
+        elapsed = time.monotonic() - t0
+        assert moves[-1] == "result.json" and len(moves) == len(files)
+        # delivered once, after the last move: result.json was already in place
+        assert received == [(signal.SIGINT, True)]
+        assert signal.getsignal(signal.SIGINT) is host_sigint
+        assert signal.getsignal(signal.SIGALRM) is _host_handler
+        assert HOST_TIMER_S - elapsed - 0.01 <= left <= HOST_TIMER_S - elapsed + 0.01, (left, elapsed)
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0.0)
         for sig, handler in old.items():
