@@ -178,10 +178,12 @@ def run_one(
     try:
         (Path(out_dir) / "error.txt").unlink(missing_ok=True)  # from an earlier failed attempt
         from refine.export.result_json import write_timings
+        from refine.interrupt import guarded
         from refine.problem import load_problem
         from refine.run.write import run
 
-        result = run(load_problem(problem), Path(out_dir), programs, report=report)
+        with guarded():  # a pool worker of the batch command: its moves hold Ctrl-C back
+            result = run(load_problem(problem), Path(out_dir), programs, report=report)
         result.timings_s["run"] = time.perf_counter() - t0
         # the run's wall time is known only now: rewrite timings_s alone (atomically), the rest of
         # the document and its files' SHA-256 standing as written
