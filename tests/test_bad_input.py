@@ -226,3 +226,29 @@ def test_a_garbage_dxf_fails_check_as_it_fails_run(tmp_path, capsys, command):
     (problem / "bead.dxf").write_bytes(b"0\nSECTION\n2\nENTITIES\n0\nGARBAGE\n" + os.urandom(300))
     out = tmp_path / "o"
     _expect_refused([command, str(problem), "--out", str(out)], out, capsys, ["bead.dxf"])
+
+
+TIG = ROOT / "problems" / "tig_weld"
+KR8 = ROOT / "problems" / "kr8_arc_weld"
+
+
+@pytest.mark.parametrize("command", ["check", "run"])
+def test_a_program_the_arms_own_controller_does_not_run_is_refused(tmp_path, capsys, command):
+    # the LBR iiwa's Sunrise cabinet runs Sunrise Java only; the KR 8's KR C5 runs KRL only
+    out = tmp_path / "o"
+    err = _expect_refused(
+        [command, str(TIG), "--out", str(out), "--programs", "krl"],
+        out,
+        capsys,
+        ["--programs", "'krl'", "kuka_iiwa14_r820", "kuka controller", "sunrise only"],
+    )
+    assert "krl only" not in err
+    problem = _copy(KR8, tmp_path)
+    toml = problem / "problem.toml"
+    toml.write_text(_sub('programs = ["krl"]', 'programs = ["sunrise"]')(toml.read_text()))
+    _expect_refused(
+        [command, str(problem), "--out", str(out)],
+        out,
+        capsys,
+        ["problem.toml", "'sunrise'", "kuka_kr8_r1440_2_arc_hw", "kuka controller", "krl only"],
+    )

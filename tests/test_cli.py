@@ -96,3 +96,56 @@ def test_ctrl_c_while_the_command_line_is_read_exits_130_without_a_traceback(mon
     assert refine.cli.main(["robots"]) == 130
     err = capsys.readouterr().err
     assert "interrupted" in err and "Traceback" not in err
+
+
+def _line_problems(tmp_path: Path) -> tuple[Path, Path]:
+    """The same straight bead on the registry's UR10e and on the UR10e from its URDF file.
+
+    The URDF's robot is renamed ``cell_ur10e``, a name the registry does not have.
+    """
+    from refine.synthetic import write_line_problem
+
+    registry = write_line_problem(tmp_path / "registry" / "line").parent
+    urdf = write_line_problem(tmp_path / "urdf" / "line").parent
+    shutil.copytree(ROOT / "robots" / "ur10e", urdf / "robot")
+    description = urdf / "robot" / "robot.urdf"
+    xml = description.read_text()
+    assert xml.count('<robot name="ur10e">') == 1
+    description.write_text(xml.replace('<robot name="ur10e">', '<robot name="cell_ur10e">'))
+    toml = urdf / "problem.toml"
+    text = toml.read_text()
+    assert '[robot]\nmodel = "ur10e"\n' in text
+    toml.write_text(
+        text.replace('[robot]\nmodel = "ur10e"\n', '[robot]\nurdf = "robot/robot.urdf"\ncontroller = "ur"\n')
+    )
+    return registry, urdf
+
+
+def test_check_takes_a_robot_from_a_urdf_as_run_does(tmp_path, capsys):
+    import xml.etree.ElementTree as ET
+
+    registry, urdf = _line_problems(tmp_path)
+    assert main(["check", str(registry)]) == 0
+    from_registry = capsys.readouterr().out
+    assert main(["check", str(urdf)]) == 0
+    from_urdf = capsys.readouterr().out
+    # the URDF's robot is named after its <robot name="...">; every other finding is the same
+    urdf_name = ET.parse(urdf / "robot" / "robot.urdf").getroot().get("name")
+    assert urdf_name == "cell_ur10e" and main(["robots"]) == 0 and urdf_name not in capsys.readouterr().out
+    assert "(robot ur10e," in from_registry and "(robot cell_ur10e," in from_urdf
+    assert from_urdf.replace("(robot cell_ur10e,", "(robot ur10e,") == from_registry
+    assert "problem file OK" in from_urdf and "programs urscript" in from_urdf
+
+
+def test_check_of_a_urdf_robot_still_reports_what_is_wrong(tmp_path, capsys):
+    _, urdf = _line_problems(tmp_path)
+    toml = urdf / "problem.toml"
+    text = toml.read_text()
+    toml.write_text(text.replace('controller = "ur"\n', 'controller = "ur"\nhome_deg = [0.0, -90.0, 90.0]\n'))
+    assert main(["check", str(urdf)]) == 2
+    err = capsys.readouterr().err
+    assert "home_deg" in err and "6" in err and "Traceback" not in err  # the UR10e has six joints
+    toml.write_text(text.replace('programs = ["urscript"]', 'programs = ["rapid"]'))
+    assert main(["check", str(urdf)]) == 2
+    err = capsys.readouterr().err
+    assert "'rapid'" in err and "ur controller" in err and "urscript only" in err

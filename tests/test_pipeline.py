@@ -135,9 +135,9 @@ def test_every_bundled_path_keeps_its_clearance_between_waypoints_too(case, requ
         assert p.clearance.segment_samples.sum() >= len(p.fused) - 1  # between waypoints, not only at them
 
 
-def test_three_layer_weld_is_valid_pathml_with_three_layers_and_a_matching_krl_program(tig, require):
+def test_three_layer_weld_is_valid_pathml_with_three_layers_and_a_matching_sunrise_program(tig, require):
     require.path(XSD, "the CAEX 3.0 schema")
-    from refine.export.krl import parse_krl
+    from refine.export.sunrise import parse_sunrise
 
     result, out = tig
     assert [(p.layer, p.index) for p in result.passes] == [(1, 1), (2, 1), (2, 2), (3, 1), (3, 2), (3, 3)]
@@ -146,15 +146,27 @@ def test_three_layer_weld_is_valid_pathml_with_three_layers_and_a_matching_krl_p
     doc = read_pathml(aml)
     assert len(doc.layers) == 3
     assert [len(layer.tracks) for layer in doc.layers] == [1, 2, 3]
-    krl = parse_krl(out / "tig_weld.src", out / "tig_weld.dat")
-    assert len(krl) == len(result.passes) == 6
-    for kp, p in zip(krl, result.passes, strict=True):
-        np.testing.assert_allclose(kp.positions, p.trajectory.poses[:, :3, 3], atol=1e-6)
-        assert rotation_angle_deg(kp.rotations, p.trajectory.poses[:, :3, :3]).max() < 1e-4
+    sunrise = parse_sunrise(out / "TigWeld.java")
+    assert len(sunrise) == len(result.passes) == 6
+    T_base_world = np.linalg.inv(result.problem.robot.base_in_world)
+    for sp, p in zip(sunrise, result.passes, strict=True):
+        poses = T_base_world @ p.trajectory.poses
+        np.testing.assert_allclose(sp.positions, poses[:, :3, 3], atol=1e-6)
+        assert rotation_angle_deg(sp.rotations, poses[:, :3, :3]).max() < 1e-4
     # the PathML tracks hold the same poses, layer by layer
     tracks = [t for layer in doc.layers for t in layer.tracks]
     for t, p in zip(tracks, result.passes, strict=True):
         np.testing.assert_allclose(t.positions, p.trajectory.poses[:, :3, 3], atol=1e-9)
+
+
+def test_the_lbr_iiwa_weld_writes_its_sunrise_application_and_no_krl(tig):
+    # three layers of 1, 2 and 3 passes; the problem is named tig_weld (Java class TigWeld); no report
+    _, out = tig
+    passes = ["L1P1", "L2P1", "L2P2", "L3P1", "L3P2", "L3P3"]
+    expected = {f"trajectory_{p}.csv" for p in passes} | {"tig_weld.aml", "TigWeld.java", "result.json"}
+    written = {f.name for f in out.iterdir()}
+    assert written == expected
+    assert not [f for f in written if f.endswith((".src", ".dat"))]
 
 
 def test_sealing_program_is_urscript_whose_poses_match_the_path(sealing):

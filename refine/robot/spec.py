@@ -128,6 +128,15 @@ class RobotSpec:
         return self.program or DEFAULT_PROGRAM[self.controller]
 
     @property
+    def programs(self) -> tuple[str, ...]:
+        """The program formats the robot's controller runs.
+
+        ``program`` alone when the robot names one (an LBR iiwa's Sunrise cabinet runs Sunrise only,
+        a KR C controller KRL only), else every format of the controller family (:data:`PROGRAMS`).
+        """
+        return (self.program,) if self.program else PROGRAMS[self.controller]
+
+    @property
     def dof(self) -> int:
         """Number of actuated joints n."""
         return len(self.joint_names)

@@ -32,21 +32,22 @@ def add_safety_options(parser: argparse.ArgumentParser) -> None:
 
 def check_command(args: argparse.Namespace, problem: Problem) -> int:
     """Run every check on ``problem`` and print what was read; returns 0 (errors raise)."""
-    from refine.robot.registry import load_robot
+    from refine.robot.registry import robot_for
     from refine.run.preflight import parse_programs, preflight
     from refine.run.stages import constraint_sources, fused_path
 
     programs = parse_programs(args.programs, problem)
-    pre = preflight(problem, args.out, programs)
+    robot = robot_for(problem.robot)  # the registry's robot or the URDF's, as ``run`` resolves it
+    pre = preflight(problem, args.out, programs, robot=robot)
     fused = fused_path(problem, accept_frame_error=args.accept_frame_error)
-    constraint_sources(problem, load_robot(problem.robot.model))  # reads the cell's and tool's meshes
+    constraint_sources(problem, robot)  # reads the cell's and tool's meshes
     if problem.multipass is not None and problem.multipass.layers > 1:
         from refine.fuse.passes import generate_passes
 
         generate_passes(fused, problem.multipass)
     demo = "" if problem.demonstration is None else f", demonstration {problem.demonstration.file.name}"
     print(
-        f"{problem.name}: problem file OK, inputs read and checked (robot {problem.robot.model}, CAD {problem.cad.file.name}{demo}, "
+        f"{problem.name}: problem file OK, inputs read and checked (robot {robot.spec.name}, CAD {problem.cad.file.name}{demo}, "
         f"{len(fused)} waypoints over {fused.s[-1]:.3f} m; programs {', '.join(pre.programs) or 'none'})"
     )
     return 0

@@ -4,8 +4,8 @@ A problem that loads (``refine.problem`` checks every value and file) can still 
 robot or the output folder. :func:`preflight` finds those mistakes before the solve, so a run never
 spends minutes and then refuses to write:
 
-* the program formats exist and the robot's controller runs them (RAPID: ABB, KRL: KUKA,
-  URScript: Universal Robots);
+* the program formats exist and the robot's controller runs them (RAPID: ABB, KRL: the KUKA KR
+  arms, Sunrise: the KUKA LBR iiwa, URScript: Universal Robots);
 * ``process.output`` is a signal each of those programs can switch (a RAPID signal name, a KRL
   ``$OUT[n]`` with n in 1..4096, a UR standard output 0..7);
 * ``robot.home_deg`` and ``robot.joint_acceleration_deg_s2`` have one value per joint;
@@ -27,10 +27,7 @@ from refine.settings import PROGRAM_FORMATS
 
 if TYPE_CHECKING:
     from refine.robot.model import Robot
-
-CONTROLLER_OF_FORMAT = {"rapid": "abb", "sunrise": "kuka", "krl": "kuka", "urscript": "ur"}
-"""The controller family each program format runs on (which one a robot runs by default is its own
-``program``, :attr:`refine.robot.spec.RobotSpec.program`: KRL for the KR arms, Sunrise for the LBR iiwa)."""
+    from refine.robot.spec import RobotSpec
 
 _RAPID_SIGNAL = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,31}")
 
@@ -61,17 +58,22 @@ def parse_programs(text: str | None, problem: Problem) -> tuple[str, ...] | None
     return programs
 
 
-def check_programs(problem: Problem, controller: str, robot_name: str, programs: tuple[str, ...]) -> None:
-    """Every program format is known, runs on ``controller`` and can switch ``process.output``."""
+def check_programs(problem: Problem, spec: RobotSpec, programs: tuple[str, ...]) -> None:
+    """Every program format is known, runs on the robot's controller and can switch ``process.output``.
+
+    The formats a robot runs are :attr:`refine.robot.spec.RobotSpec.programs`: its own ``program``
+    when the registry names one (``sunrise`` for the LBR iiwa, ``krl`` for the KR 8), else every
+    format of its controller family.
+    """
     for kind in programs:
         if kind not in PROGRAM_FORMATS:
             raise InputError(f"program format {kind!r} is not one of {', '.join(PROGRAM_FORMATS)}")
-        if CONTROLLER_OF_FORMAT[kind] != controller:
-            fits = [k for k, c in CONTROLLER_OF_FORMAT.items() if c == controller]
+        if kind not in spec.programs:
+            runs = ", ".join(spec.programs)
+            model = f" ({spec.model})" if spec.model else ""
             raise InputError(
-                f"program format {kind!r} is for {CONTROLLER_OF_FORMAT[kind]} controllers, but robot "
-                f"{robot_name!r} has a {controller} controller; use {', '.join(fits) or 'none'} "
-                "([output] programs or --programs)"
+                f"program format {kind!r} does not run on robot {spec.name!r}{model}: its {spec.controller} "
+                f"controller runs {runs} only; use {runs} ([output] programs or --programs)"
             )
         check_output_signal(kind, problem.process.output)
 
@@ -200,7 +202,7 @@ def preflight(
     else:
         where = "--programs: "
     try:
-        check_programs(problem, robot.spec.controller, robot.spec.name, programs)
+        check_programs(problem, robot.spec, programs)
         if "sunrise" in programs and robot.nq != 7:
             raise InputError(
                 f"program format 'sunrise' is for the seven-axis KUKA LBR, but robot {robot.spec.name!r} has "
