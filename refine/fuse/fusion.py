@@ -20,6 +20,7 @@ from refine.paths import CadPath, Demonstration, FusedPath
 
 logger = logging.getLogger(__name__)
 
+
 def fuse(
     cad: CadPath,
     demo: Demonstration,
