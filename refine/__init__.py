@@ -20,14 +20,16 @@ The library API (``docs/api.md``): :func:`load_problem`, :func:`solve`, :func:`r
 
 from __future__ import annotations
 
+import logging
 from typing import TYPE_CHECKING
 
-from refine.errors import InputError, RefineError, SolverError
+from refine.errors import Cancelled, InputError, RefineError, SolverError
 from refine.lazy import lazy_names
 from refine.version import __version__
 
 if TYPE_CHECKING:
     from refine.api import PassArrays, Result, refine_path, solve
+    from refine.control import Progress
     from refine.problem import Problem, load_problem
     from refine.robot.model import Robot
     from refine.settings import CollisionSettings, Shape, Tolerances
@@ -43,14 +45,17 @@ _LAZY = {
     "Shape": "refine.settings",
     "Tolerances": "refine.settings",
     "CollisionSettings": "refine.settings",
+    "Progress": "refine.control",
 }
 
 __all__ = [
     "__version__",
+    "Cancelled",
     "CollisionSettings",
     "InputError",
     "PassArrays",
     "Problem",
+    "Progress",
     "RefineError",
     "Result",
     "Robot",
@@ -62,5 +67,7 @@ __all__ = [
     "solve",
 ]
 
+
+logging.getLogger("refine").addHandler(logging.NullHandler())  # a library logs only where the host says
 
 __getattr__, __dir__ = lazy_names("refine", _LAZY, globals())  # the API's names, imported on first use

@@ -17,7 +17,9 @@ call can start from a previous answer: ``initial_joints=`` warm-starts the solve
 from __future__ import annotations
 
 import copy
-from collections.abc import Mapping, Sequence
+import dataclasses
+import threading
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -25,6 +27,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from refine.control import Progress, controlled
 from refine.errors import InputError
 from refine.problem import Problem, load_problem
 from refine.settings import (
@@ -215,6 +218,9 @@ def solve(
     *,
     initial_joints: ArrayLike | None = None,
     previous: Result | None = None,
+    time_limit_s: float | None = None,
+    cancel: threading.Event | Callable[[], bool] | None = None,
+    progress: Callable[[Progress], Any] | None = None,
 ) -> Result:
     """Run a problem through every stage up to the verified, timed path, writing no file.
 
@@ -223,6 +229,14 @@ def solve(
         initial_joints: joints (N, n) [rad] to start the first pass from instead of the IK seed.
         previous: an earlier result of the same problem with a small change (tolerances, weights):
             its built problem is reused where it can be and its joints are the start.
+        time_limit_s: wall-time budget [s] of each pass's refinement, instead of the problem's
+            ``[repair] time_limit_s``; when it runs out before a verdict the status is ``"timeout"``.
+        cancel: a :class:`threading.Event` (or a callable returning True) that stops the call:
+            checked after every stage, every solve -> verify round and every IPOPT iteration; the
+            call then raises :class:`refine.Cancelled`. Ctrl-C raises ``KeyboardInterrupt``, also
+            from inside IPOPT; neither ever becomes a verdict.
+        progress: called with a :class:`refine.control.Progress` after every stage and every IPOPT
+            iteration, in the calling thread; what it raises ends the call.
 
     Returns:
         The result; ``result.write(out_dir)`` writes the files ``refine run`` writes.
@@ -230,13 +244,21 @@ def solve(
     from refine.run.solve import solve_problem
     from refine.run.stages import fused_path
 
-    if not isinstance(problem, Problem):
-        problem = load_problem(problem)
-    if previous is None:
-        q0 = _joints(initial_joints, None, None)
-        return Result(solve_problem(problem, q0=q0))
-    fused = fused_path(problem)
-    return _solve_again(problem, previous.run.robot, fused, previous, initial_joints)
+    with controlled(cancel, progress):
+        if not isinstance(problem, Problem):
+            problem = load_problem(problem)
+        problem = _with_time_limit(problem, time_limit_s)
+        if previous is None:
+            q0 = _joints(initial_joints, None, None)
+            return Result(solve_problem(problem, q0=q0))
+        fused = fused_path(problem)
+        return _solve_again(problem, previous.run.robot, fused, previous, initial_joints)
+
+
+def _with_time_limit(problem: Problem, time_limit_s: float | None) -> Problem:
+    if time_limit_s is None:
+        return problem
+    return dataclasses.replace(problem, repair=dataclasses.replace(problem.repair, time_limit_s=time_limit_s))
 
 
 def _solve_again(
@@ -300,6 +322,9 @@ def refine_path(
     repair: RepairSettings | None = None,
     process: ProcessSettings | None = None,
     programs: Sequence[str] | None = None,
+    time_limit_s: float | None = None,
+    cancel: threading.Event | Callable[[], bool] | None = None,
+    progress: Callable[[Progress], Any] | None = None,
 ) -> Result:
     """Refine a path given as arrays, with the engine, verification and diagnosis of ``refine run``.
 
@@ -335,6 +360,14 @@ def refine_path(
         process: ``[process]`` settings (output name, parameters); None for the defaults.
         programs: programs :meth:`Result.write` writes by default; None for the one of the robot's
             controller (``robot.spec.default_program``: KRL for the KR arms, Sunrise for the LBR iiwa).
+        time_limit_s: wall-time budget [s] of each pass's refinement, instead of the problem's
+            ``[repair] time_limit_s``; when it runs out before a verdict the status is ``"timeout"``.
+        cancel: a :class:`threading.Event` (or a callable returning True) that stops the call:
+            checked after every stage, every solve -> verify round and every IPOPT iteration; the
+            call then raises :class:`refine.Cancelled`. Ctrl-C raises ``KeyboardInterrupt``, also
+            from inside IPOPT; neither ever becomes a verdict.
+        progress: called with a :class:`refine.control.Progress` after every stage and every IPOPT
+            iteration, in the calling thread; what it raises ends the call.
 
     Returns:
         The verified, timed result (no file written).
@@ -388,7 +421,8 @@ def refine_path(
         optimise=optimise or OptimiseSettings(),
         repair=repair or RepairSettings(),
     )
-    return _solve_again(problem, robot, fused, previous, initial_joints)
+    with controlled(cancel, progress):
+        return _solve_again(_with_time_limit(problem, time_limit_s), robot, fused, previous, initial_joints)
 
 
 def _finite(a: ArrayLike, name: str, unit: str) -> Array:

@@ -209,7 +209,7 @@ def _run(args: argparse.Namespace, problem) -> int:  # noqa: ANN001 - Problem, i
 
 
 def exit_status(status: str) -> int:
-    """The exit status of a run: 0 for ``ok`` and ``repaired`` (executable), 1 for ``infeasible``."""
+    """The exit status of a run: 0 ``ok``/``repaired`` (executable), 1 ``infeasible``/``timeout``."""
     return 0 if status in ("ok", "repaired") else 1
 
 

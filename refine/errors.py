@@ -19,3 +19,7 @@ class SolverError(RefineError):
     def __init__(self, message: str, result: Any = None) -> None:
         super().__init__(message)
         self.result = result
+
+
+class Cancelled(RefineError):
+    """The caller asked the call to stop (its ``cancel`` event or callable): no verdict was reached."""

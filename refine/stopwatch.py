@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import time
 
+from refine.control import stage_done
+
 
 class StageTimes(dict):
     """Wall time per stage [s] (the dict itself), with the process CPU time of the same stages in ``cpu``."""
@@ -40,10 +42,15 @@ class Stopwatch:
         self._t = time.perf_counter()
 
     def lap(self, name: str) -> None:
-        """Add the time since the last lap to stage ``name``."""
+        """Add the time since the last lap to stage ``name``; tell the call's host (:mod:`refine.control`).
+
+        Raises:
+            refine.errors.Cancelled: the host asked the call to stop.
+        """
         now = time.perf_counter()
         self.times[name] = self.times.get(name, 0.0) + now - self._t
         self._t = now
+        stage_done(name)
 
     def add(self, times: dict[str, float]) -> None:
         """Add the times [s] of stages timed elsewhere."""

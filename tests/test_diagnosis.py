@@ -157,7 +157,7 @@ def test_a_run_out_of_time_says_so_and_is_not_a_verdict():
     problem = dataclasses.replace(problem, repair=dataclasses.replace(problem.repair, time_limit_s=0.1))
     result = solve_problem(problem)
     refinement = result.refinement
-    assert refinement.time_limit_reached and refinement.status == "infeasible"
+    assert refinement.time_limit_reached and refinement.status == "timeout"
     assert "time limit of 0.1 s" in refinement.reason and refinement.solver_status == "time limit reached"
     assert result_dict(result)["solver"]["time_limit_reached"] is True
     assert exit_status(result.status) == 1

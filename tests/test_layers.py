@@ -33,6 +33,7 @@ FLOORS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "refine.paths",
             "refine.plausible",
             "refine.interrupt",
+            "refine.control",
             "refine.stopwatch",
             "refine.settings",
             "refine.pathml_format",

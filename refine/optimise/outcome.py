@@ -8,7 +8,7 @@ bounds and kinematics that every stage of the solve reads.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -59,7 +59,8 @@ class Refinement:
     """The outcome of a refinement.
 
     Attributes:
-        status: ``"ok"``, ``"repaired"`` (feasible with extra orientation slack) or ``"infeasible"``.
+        status: ``"ok"``, ``"repaired"`` (feasible with extra orientation slack), ``"infeasible"``, or
+            ``"timeout"`` (the time budget ran out before a verdict: neither an answer nor a proof).
         reason: empty when ok; otherwise why, naming segments, constraint and figures.
         q: joints per waypoint [rad], shape (N, n).
         q_seed: the IK seed the solver started from [rad], shape (N, n).
@@ -75,7 +76,8 @@ class Refinement:
             :class:`StageTimes`, whose ``cpu`` holds the process CPU time of the same stages.
         diagnosis: every segment that needed slack or has no answer, with its measured causes
             (:mod:`refine.optimise.diagnosis`); empty when ok.
-        time_limit_reached: the time budget ran out before a verdict (status ``infeasible``).
+        time_limit_reached: the time budget ran out before a verdict (status ``timeout``), or after
+            the first IK branch's verdict, before the others were tried.
     """
 
     status: str
@@ -121,13 +123,17 @@ class TimeLimitReached(Exception):
 def timed_out(
     problem: RefinementNLP, q_seed: Array, time_limit_s: float | None, timings: dict[str, float]
 ) -> Refinement:
-    """The answer when the time budget ran out before any verdict: infeasible, saying so."""
+    """The answer when the time budget ran out before any verdict: status ``timeout``, saying so."""
     reason = (
-        f"time limit of {time_limit_s:g} s ([repair] time_limit_s) reached before a verdict: neither an "
+        f"time limit of {time_limit_s:g} s ([repair] time_limit_s, or the call's time_limit_s) reached "
+        "before a verdict: neither an "
         "answer nor a proof of infeasibility was found; raise the limit to let the solver finish"
     )
     log.warning("refinement stopped: %s", reason)
-    return unsolved(problem, q_seed, reason, "time limit reached", timings, time_limit_reached=True)
+    return replace(
+        unsolved(problem, q_seed, reason, "time limit reached", timings, time_limit_reached=True),
+        status="timeout",
+    )
 
 
 def unsolved(
@@ -140,7 +146,9 @@ def unsolved(
     time_limit_reached: bool = False,
 ) -> Refinement:
     """An infeasible answer without a solve: the seed, checked, with the reason and diagnosis."""
-    check = check_path(problem_kinematics(problem), q_seed, problem.fused, problem.tolerances, problem.axisymmetric)
+    check = check_path(
+        problem_kinematics(problem), q_seed, problem.fused, problem.tolerances, problem.axisymmetric
+    )
     return Refinement(
         "infeasible",
         reason,
@@ -177,7 +185,9 @@ def findings_of(
 ) -> tuple[Finding, ...]:
     """The diagnosis of every run of ``mask`` (waypoints that needed slack or break a tolerance)."""
     model = next((getattr(src, "model", None) for src in sources if hasattr(src, "model")), None)
-    diagnoser = Diagnoser(problem_kinematics(problem), problem.fused, problem.tolerances, problem.axisymmetric, model)
+    diagnoser = Diagnoser(
+        problem_kinematics(problem), problem.fused, problem.tolerances, problem.axisymmetric, model
+    )
     return tuple(
         diagnoser.segment(status, a, b, q, None if slack is None else float(np.max(slack[a : b + 1])))
         for a, b in segments(mask)

@@ -41,6 +41,7 @@ from refine.optimise.threads import limit_solver_threads
 from refine.optimise.verify import (
     Violation,
 )
+from refine.optimise.watch import iteration_watch
 from refine.optimise.waypoint import ROW_NAMES, singularity_function, waypoint_function
 from refine.paths import FusedPath
 from refine.robot.model import Robot
@@ -105,6 +106,8 @@ class RefinementNLP:
             (segment k, joint j) in increasing order (see :func:`build_refinement`).
         robot, base_in_world, tcp_in_flange, fused, tolerances: what it was built from.
         build_time_s: wall time of the build [s].
+        watch: IPOPT's iteration callback (:mod:`refine.optimise.watch`), kept alive with the solver;
+            None for fatrop.
     """
 
     nlp: dict[str, Any]
@@ -134,6 +137,7 @@ class RefinementNLP:
     singularity_hessian: bool = False
     joint_steps: str | tuple[int, ...] = "all"
     solver_name: str = "ipopt"
+    watch: Any = None
 
     def rebuilt(
         self,
@@ -413,6 +417,7 @@ def build_refinement(
         )
     )
     limit_solver_threads()
+    watch = None
     if solver == "fatrop":
         options = dict(solver_options or {})
         built: Any = StagewiseSolver(
@@ -435,11 +440,13 @@ def build_refinement(
     else:
         options = {**IPOPT_DEFAULTS, **(solver_options or {})}
         ipopt = {k: v for k, v in options.items() if not k.startswith(FATROP_PREFIX)}
-        built = ca.nlpsol("refine", "ipopt", nlp, {**derivatives, **ipopt})
+        watch = iteration_watch(x.numel(), g.numel(), p.numel())
+        built = ca.nlpsol("refine", "ipopt", nlp, {**derivatives, **ipopt, "iteration_callback": watch})
     return RefinementNLP(
         nlp=nlp,
         solver=built,
         solver_options=options,
+        watch=watch,
         params=params,
         lbx=lbx,
         ubx=ubx,

@@ -14,6 +14,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from refine.control import after_solve, check_cancelled, enter_round, stage_done
 from refine.errors import SolverError
 from refine.optimise.outcome import TimeLimitReached, problem_kinematics
 from refine.optimise.problem import ActiveSet, ConstraintSource, LinearRow, RefinementNLP
@@ -138,11 +139,15 @@ class RoundLoop:
             if len(lam_x) == len(p.lbx):
                 extra["lam_x0"] = lam_x
         name = SOLVER_LABELS[p.solver_name]
+        check_cancelled("solve")
+        if p.watch is not None:
+            p.watch.iteration, p.watch.interrupted = 0, False
         try:
             sol = p.solver(x0=x0, p=p.params, lbx=p.lbx, ubx=p.ubx, lbg=p.lbg, ubg=p.ubg, **extra)
         except RuntimeError as e:
             raise SolverError(f"{name} failed to run: {e}") from e
         stats = {**p.solver.stats(), "solver": name}
+        after_solve(str(stats.get("return_status", "unknown")), p.watch is not None and p.watch.interrupted)
         self.multipliers = (
             dict(zip(_row_keys(p), np.asarray(sol["lam_g"]).ravel().tolist(), strict=True)),
             np.asarray(sol["lam_x"]).ravel(),
@@ -180,6 +185,7 @@ def run_rounds(
     warm = False
     while True:
         loop.outer += 1
+        enter_round(loop.outer)
         x, stats = loop.solve(x0, warm)
         p = loop.problem
         q, slack = p.joints(x), p.slack_deg(x)
@@ -191,6 +197,7 @@ def run_rounds(
         if extra:
             check = replace(check, violations=check.violations + tuple(extra))
         add_time(loop.timings, "verify", start)
+        stage_done("verify")
         if not stats.get("success", False) or loop.outer >= loop.max_rounds:
             return x, stats, check, slack
         start = StageTimes.clock()  # finding what the next round adds is the outer loop's solving

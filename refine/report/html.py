@@ -52,6 +52,7 @@ h1{margin:.4em 0 .1em;font-size:1.7em} h2{font-size:1.2em;margin:1em 0 .4em}
 .badge{font-size:.8em;padding:.1em .5em;border-radius:.3em;color:#fff;vertical-align:middle}
 .badge.st-ok,b.st-ok{background:#2e8b57;color:#fff;padding:0 .3em} .badge.st-repaired,b.st-repaired{background:#d68910;color:#fff;padding:0 .3em}
 .badge.st-infeasible,b.st-infeasible{background:#c0392b;color:#fff;padding:0 .3em}
+.badge.st-timeout,b.st-timeout{background:#7f8c8d;color:#fff;padding:0 .3em}
 .meaning{font-size:1.1em;margin:.2em 0 .6em}
 .cols{display:flex;gap:2em;flex-wrap:wrap} .cols>div{flex:1 1 30em}
 table.figures{border-collapse:collapse;width:100%} .figures td,.figures th{padding:.3em .6em;text-align:left;border-bottom:1px solid #ddd}
@@ -157,7 +158,7 @@ def write_report(path: Path, result: RunResult) -> Path:
     script = (Path(__file__).with_name("report.js")).read_text(encoding="utf-8")
     attempt = (
         " The robot is drawn at the optimiser's best attempt: the path is not executable."
-        if result.status == "infeasible"
+        if result.status in ("infeasible", "timeout")
         else ""
     )
     page = (

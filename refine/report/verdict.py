@@ -20,6 +20,7 @@ MEANING = {
     "ok": "every tolerance verified: the programs can be loaded as written",
     "repaired": "executable, verified, with extra orientation slack where the demonstration could not be held",
     "infeasible": "no executable path within the tolerances: no program was written",
+    "timeout": "no verdict: the time limit ran out before an answer or a proof; no program was written",
 }
 
 

@@ -93,11 +93,11 @@ class BatchSummary:
     counts: dict[str, int] = field(default_factory=dict)
 
     def exit_status(self) -> int:
-        """0 all ok or repaired, 1 some infeasible, 2 some failed, 130 interrupted."""
+        """0 all ok or repaired, 1 some infeasible or timed out, 2 some failed, 130 interrupted."""
         statuses = {r["status"] for r in self.rows}
         if self.interrupted:
             return 130
-        return 2 if "failed" in statuses else 1 if "infeasible" in statuses else 0
+        return 2 if "failed" in statuses else 1 if {"infeasible", "timeout"} & set(statuses) else 0
 
 
 def collect(paths: Iterable[str | Path], out_dir: Path) -> list[BatchItem]:
@@ -378,7 +378,7 @@ def write_summary(summary: BatchSummary, out_dir: Path) -> tuple[Path, Path]:
             writer.writerow({k: "" if row.get(k) is None else row[k] for k in COLUMNS})
     statuses = [r["status"] for r in summary.rows]
     tally = ", ".join(
-        f"{statuses.count(s)} {s}" for s in ("ok", "repaired", "infeasible", "failed") if s in statuses
+        f"{statuses.count(s)} {s}" for s in ("ok", "repaired", "infeasible", "timeout", "failed") if s in statuses
     )
     lines = [
         "# Batch summary",

@@ -71,7 +71,8 @@ class PlacementRepair:
 
     Attributes:
         status: ``"ok"`` (a move verified by the strict pipeline), ``"infeasible"`` (no move
-            within the bounds found or verified) or ``"not needed"`` (every pass is ok as placed).
+            within the bounds found or verified), ``"not needed"`` (every pass is ok as placed) or
+            ``"not tried"`` (a pass ran out of time before a verdict).
         bounds: the ``[repair] placement`` bounds.
         placement: the move reported (the verified one when ok; the search's best otherwise), or
             None when there is none.

@@ -101,9 +101,9 @@ class RunResult:
 
     @property
     def status(self) -> str:
-        """``ok`` when every pass is ok, ``infeasible`` when any is, else ``repaired``."""
+        """The worst pass's status, in the order of :data:`STATUS_ORDER`."""
         statuses = {p.refinement.status for p in self.passes}
-        return "infeasible" if "infeasible" in statuses else "repaired" if "repaired" in statuses else "ok"
+        return next((s for s in STATUS_ORDER if s in statuses), "ok")
 
 
 def summary_lines(result: RunResult) -> list[str]:
@@ -154,3 +154,7 @@ def summary_lines(result: RunResult) -> list[str]:
 
 
 EXECUTABLE = ("ok", "repaired")
+
+STATUS_ORDER = ("infeasible", "timeout", "repaired", "ok")
+"""A run's statuses, worst first: a proof that a pass cannot be done outranks a pass that ran out of
+time, which outranks a repair."""

@@ -124,6 +124,12 @@ def placement_repair(
     assert bounds is not None
     if all(p.refinement.status == "ok" for p in passes):
         return PlacementRepair("not needed", bounds)
+    if any(p.refinement.status == "timeout" for p in passes):
+        return PlacementRepair(
+            "not tried",
+            bounds,
+            reason="a pass ran out of its time limit ([repair] time_limit_s) before a verdict",
+        )
     return repair_by_placement(problem, robot, passes[0])
 
 

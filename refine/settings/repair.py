@@ -137,6 +137,6 @@ class ExpectedOutcome:
     cause: str = ""
 
     def __post_init__(self) -> None:
-        one_of("expected", "status", self.status, ("ok", "repaired", "infeasible"))
+        one_of("expected", "status", self.status, ("ok", "repaired", "infeasible", "timeout"))
         if self.cause:
             one_of("expected", "cause", self.cause, CAUSES)

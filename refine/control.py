@@ -1,0 +1,170 @@
+"""What a host program controls in a call: cancelling it, hearing its progress, its time budget.
+
+A library call (``refine.refine_path``, ``refine.solve``) runs inside :func:`controlled`, which
+records the host's ``cancel`` (a :class:`threading.Event`, or any callable returning ``True`` once the
+call should stop) and ``progress`` (a callable given a :class:`Progress`) for the current thread and
+context only: two threads, each with its own call, never see each other's.
+
+Each stage tells the host when it has finished (:func:`stage_done`, called by
+:meth:`refine.stopwatch.Stopwatch.lap` and after each round's verification) and checks for a cancel
+there; inside IPOPT the
+solver's iteration callback (:mod:`refine.optimise.watch`) asks it once per iteration and stops the
+solver. A cancelled call raises :class:`refine.errors.Cancelled`, never a verdict.
+
+Ctrl-C is Python's ``KeyboardInterrupt`` as everywhere else; inside IPOPT, CasADi catches it and
+IPOPT returns ``NonIpopt_Exception_Thrown``, which the solve turns back into ``KeyboardInterrupt``
+(:func:`interrupted_status`). Nothing here touches a signal handler, timer or mask.
+"""
+
+from __future__ import annotations
+
+import contextvars
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import Any
+
+from refine.errors import Cancelled
+
+INTERRUPTED_STATUSES = frozenset({"NonIpopt_Exception_Thrown"})
+"""IPOPT's return status when an exception that is not IPOPT's own stopped it: with refine's compiled
+functions, CasADi's ``KeyboardInterruptException`` (a Ctrl-C caught between evaluations); CasADi
+turns other evaluation errors into IPOPT's evaluation-error handling, not into this status."""
+
+
+@dataclass(frozen=True)
+class Progress:
+    """Where a call is, for a host's ``progress`` callback.
+
+    Attributes:
+        stage: the stage that has just finished (``"load"``, ``"cad"``, ``"demo"``, ``"fuse"``,
+            ``"build"``, ``"verify"`` (one per round), ``"refine"``, ``"timing"``: the stage names of
+            ``result.json``'s ``timings_s``), or ``"solve"`` for each IPOPT iteration.
+        round: the solve -> verify round of the current pass, from 1 (0 outside the rounds).
+        iteration: IPOPT's iteration within the current solve (0 outside a solve).
+        figures: stage-specific numbers, e.g. ``objective`` and ``constraint_violation`` in a solve.
+    """
+
+    stage: str
+    round: int = 0
+    iteration: int = 0
+    figures: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
+class Control:
+    """The current call's cancel and progress hooks, and where it is (:func:`controlled`)."""
+
+    cancel: Callable[[], bool] | None = None
+    progress: Callable[[Progress], Any] | None = None
+    stage: str = ""
+    round: int = 0
+    cancelled_in_solver: bool = False
+
+
+_current: contextvars.ContextVar[Control | None] = contextvars.ContextVar("refine_control", default=None)
+
+
+def _as_predicate(cancel: threading.Event | Callable[[], bool] | None) -> Callable[[], bool] | None:
+    if cancel is None:
+        return None
+    if isinstance(cancel, threading.Event):
+        return cancel.is_set
+    if not callable(cancel):
+        raise TypeError(
+            f"cancel must be a threading.Event or a callable returning bool, not {type(cancel).__name__}"
+        )
+    return cancel
+
+
+@contextmanager
+def controlled(
+    cancel: threading.Event | Callable[[], bool] | None = None,
+    progress: Callable[[Progress], Any] | None = None,
+) -> Iterator[Control]:
+    """Run the block as one host call with these hooks (see the module docstring).
+
+    Raises:
+        TypeError: ``cancel`` is neither an event nor callable, or ``progress`` is not callable.
+    """
+    if progress is not None and not callable(progress):
+        raise TypeError(
+            f"progress must be a callable taking a refine.control.Progress, not {type(progress).__name__}"
+        )
+    control = Control(cancel=_as_predicate(cancel), progress=progress)
+    token = _current.set(control)
+    try:
+        yield control
+    finally:
+        _current.reset(token)
+
+
+def current() -> Control | None:
+    """The current call's :class:`Control`, or None outside :func:`controlled`."""
+    return _current.get()
+
+
+def cancel_requested() -> bool:
+    """Whether the current call's host has asked it to stop."""
+    control = _current.get()
+    return bool(control is not None and control.cancel is not None and control.cancel())
+
+
+def check_cancelled(where: str) -> None:
+    """Raise :class:`Cancelled` if the host asked the current call to stop.
+
+    Args:
+        where: the stage that noticed, for the message (e.g. ``"seed"``).
+    """
+    if cancel_requested():
+        raise Cancelled(f"cancelled by the caller during the {where} stage")
+
+
+def stage_done(name: str, **figures: float) -> None:
+    """Tell the current call's host that stage ``name`` has finished; stop if it asked to.
+
+    Raises:
+        Cancelled: the host asked the call to stop.
+    """
+    control = _current.get()
+    if control is None:
+        return
+    control.stage = name
+    if control.progress is not None:
+        control.progress(Progress(name, control.round, 0, dict(figures)))
+    check_cancelled(name)
+
+
+def enter_round(round: int) -> None:
+    """Note that the current call's refinement starts solve -> verify round ``round`` (from 1)."""
+    control = _current.get()
+    if control is not None:
+        control.round = round
+
+
+def solver_iteration(iteration: int, **figures: float) -> bool:
+    """From inside a solver: tell the host, and whether the solver should stop (cancelled)."""
+    control = _current.get()
+    if control is None:
+        return False
+    if control.progress is not None:
+        control.progress(Progress("solve", control.round, iteration, dict(figures)))
+    if control.cancel is not None and control.cancel():
+        control.cancelled_in_solver = True
+        return True
+    return False
+
+
+def after_solve(return_status: str, interrupted: bool = False) -> None:
+    """Turn a solver stopped by the host or by Ctrl-C into :class:`Cancelled` or ``KeyboardInterrupt``.
+
+    Called with IPOPT's return status right after each solve, before the status could become a
+    verdict; ``interrupted``: a ``KeyboardInterrupt`` stopped the solver's iteration callback.
+    """
+    control = _current.get()
+    if control is not None and control.cancelled_in_solver:
+        control.cancelled_in_solver = False
+        raise Cancelled(f"cancelled by the caller inside the solver (IPOPT: {return_status})")
+    if interrupted or return_status in INTERRUPTED_STATUSES:
+        raise KeyboardInterrupt(f"interrupted inside the solver (IPOPT: {return_status})")
