@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from refine.robot.registry import PACKAGED_ROBOTS
 from refine.run.outputs import describe_files
 
 if TYPE_CHECKING:
@@ -17,6 +18,19 @@ if TYPE_CHECKING:
 
 SCHEMA_VERSION = 1
 REPO_ROOT = Path(__file__).resolve().parents[2]
+
+
+def shown_path(path: Path | str) -> str:
+    """A path as ``result.json`` shows it.
+
+    Relative to the source checkout when inside it (the bundled problems and robots), the
+    registry's copy in an installed wheel as ``robots/...``, anything else absolute.
+    """
+    path = Path(path).resolve()
+    for root, prefix in ((PACKAGED_ROBOTS, "robots"), (REPO_ROOT, "")):
+        if path.is_relative_to(root):
+            return str(Path(prefix) / path.relative_to(root)) if prefix else os.path.relpath(path, root)
+    return str(path)
 
 
 def _finite(x: float) -> float | None:
@@ -75,14 +89,14 @@ def result_dict(result: RunResult) -> dict[str, Any]:
             if p.refinement.reason
         ),
         "problem": problem.name,
-        "problem_dir": os.path.relpath(problem.root, REPO_ROOT),
+        "problem_dir": shown_path(problem.root),
         "n_waypoints": len(first.fused),
         "n_passes": len(result.passes),
         "dof": result.robot.nq,
         "path_length_m": float(first.fused.s[-1]),
         "robot": {
             "model": spec.name,
-            "urdf": os.path.relpath(spec.urdf, REPO_ROOT),
+            "urdf": shown_path(spec.urdf),
             "flange_frame": spec.flange_frame,
             "base_in_world": np.asarray(problem.robot.base_in_world).tolist(),
             "joint_lower_rad": spec.lower.tolist(),

@@ -25,10 +25,21 @@ if TYPE_CHECKING:
 logger = logging.getLogger(__name__)
 
 
+PACKAGED_ROBOTS = Path(__file__).resolve().parents[1] / "robots_data"
+"""The registry a built wheel carries (copied from ``robots/`` by ``setup.py``)."""
+
+
 def robots_dir() -> Path:
-    """The robot registry folder: ``$REFINE_ROBOTS_DIR`` if set, else ``robots/`` of the repo."""
+    """The robot registry folder.
+
+    ``$REFINE_ROBOTS_DIR`` if set; else ``robots/`` beside the package in a source checkout or an
+    editable install; else the copy an installed wheel carries (:data:`PACKAGED_ROBOTS`).
+    """
     override = os.environ.get("REFINE_ROBOTS_DIR")
-    return Path(override) if override else Path(__file__).resolve().parents[2] / "robots"
+    if override:
+        return Path(override)
+    source = Path(__file__).resolve().parents[2] / "robots"
+    return source if source.is_dir() or not PACKAGED_ROBOTS.is_dir() else PACKAGED_ROBOTS
 
 
 def available_robots() -> list[str]:
