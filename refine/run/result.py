@@ -34,7 +34,9 @@ class PassResult:
         trajectory: the timed path the exporters read (None when infeasible).
         clearance: the dense clearance check of the refined path (None without collision).
         nlp: the pass's refinement problem as built (a ``RefinementNLP``), for re-solving it
-            after a small change; None when not kept.
+            after a small change; None when not kept. Not pickled: its CasADi expressions and
+            compiled solver belong to the process that built them, so a pass that crossed a
+            process boundary is re-solved from its joints, with the problem built anew.
     """
 
     name: str
@@ -46,6 +48,9 @@ class PassResult:
     trajectory: Trajectory | None
     clearance: Any = None
     nlp: Any = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {**self.__dict__, "nlp": None}
 
 
 @dataclass(frozen=True)
