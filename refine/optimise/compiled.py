@@ -9,7 +9,11 @@ constants, the base placement and the tool), the CasADi version and the compiler
 the same robot and tool reuses it and a change to any of them compiles a new one.
 
 Cache folder: ``$REFINE_CACHE_DIR`` when set, else ``$XDG_CACHE_HOME/refine``, else
-``~/.cache/refine``. ``REFINE_COMPILE=0`` turns compilation off. Without a C compiler (``$CC``,
+``~/.cache/refine``. It holds ``<name>-<digest>.so`` and ``.names`` pairs and nothing else; after each
+new library the least recently used pairs are removed until the folder holds at most
+``$REFINE_CACHE_MAX_MB`` megabytes (default :data:`DEFAULT_CACHE_MAX_MB`; a library in use stays
+loaded). In the process, at most :data:`LOADED_MAX` libraries stay loaded, least recently used
+dropped first. ``REFINE_COMPILE=0`` turns compilation off (nothing is written at all). Without a C compiler (``$CC``,
 else ``cc``, ``gcc`` or ``clang`` on the ``PATH``), or when compiling fails, the same functions run in
 CasADi's virtual machine: slower, same results.
 """
@@ -23,20 +27,28 @@ import os
 import shutil
 import subprocess
 import tempfile
+from collections import OrderedDict
 from collections.abc import Callable
 from pathlib import Path
 
 import casadi as ca
 
+from refine.errors import InputError
+
 log = logging.getLogger(__name__)
 
 CACHE_ENV = "REFINE_CACHE_DIR"
+CACHE_MAX_ENV = "REFINE_CACHE_MAX_MB"
+DEFAULT_CACHE_MAX_MB = 256.0
+"""The cache folder's default bound [MB]: some hundred robot, base and tool combinations."""
+LOADED_MAX = 64
+"""Libraries kept loaded in one process (each is a robot, base placement and tool)."""
 COMPILE_ENV = "REFINE_COMPILE"
 COMPILE_FLAGS = ("-O1", "-fPIC", "-shared")
 """-O1: the generated code is straight-line arithmetic; -O2/-O3 compile several times longer for a
 few per cent of run time."""
 
-_loaded: dict[str, dict[str, ca.Function]] = {}
+_loaded: OrderedDict[str, dict[str, ca.Function]] = OrderedDict()
 
 
 def cache_dir() -> Path:
@@ -88,23 +100,82 @@ def compiled(name: str, key: str, make: Callable[[], list[ca.Function]]) -> dict
         "\n".join([ca.__version__, cc, version, *COMPILE_FLAGS, key]).encode()
     ).hexdigest()[:24]
     if digest in _loaded:
+        _loaded[digest] = _loaded.pop(digest)  # the most recently used goes last
         return _loaded[digest]
     library = cache_dir() / f"{name}-{digest}.so"
     names = library.with_suffix(".names")
     functions: list[ca.Function] | None = None
     try:
-        if not (library.exists() and names.exists()):
+        if library.exists() and names.exists():
+            os.utime(library)  # recently used: the last to be evicted
+        else:
             functions = make()
             gen = ca.CodeGenerator(f"{name}.c", {"with_header": False})
             for f in functions:
                 gen.add(f)
             _build(cc, gen.dump(), library, [f.name() for f in functions])
+            evict(library.parent, cache_max_bytes(), keep=library)
         loaded = {f: ca.external(f, str(library)) for f in names.read_text().split()}
     except (OSError, RuntimeError) as e:
         log.warning("compiling %s failed (%s); using CasADi's virtual machine", name, e)
         return {f.name(): f for f in (functions or make())}
     _loaded[digest] = loaded
+    while len(_loaded) > LOADED_MAX:
+        del _loaded[next(iter(_loaded))]
     return loaded
+
+
+def cache_max_bytes() -> float:
+    """The cache folder's bound [bytes], from ``$REFINE_CACHE_MAX_MB`` (module docstring).
+
+    Raises:
+        InputError: the variable is not a number >= 0.
+    """
+    raw = os.environ.get(CACHE_MAX_ENV)
+    if raw is None or not raw.strip():
+        return DEFAULT_CACHE_MAX_MB * 1e6
+    try:
+        value = float(raw)
+    except ValueError:
+        value = -1.0
+    if not value >= 0.0:
+        raise InputError(f"${CACHE_MAX_ENV} must be a number of megabytes >= 0, got {raw!r}")
+    return value * 1e6
+
+
+def evict(folder: Path, max_bytes: float, keep: Path | None = None) -> list[Path]:
+    """Remove the least recently used libraries of ``folder`` until it holds at most ``max_bytes``.
+
+    A library and its ``.names`` file go together; ``keep`` (the one just built) stays whatever its
+    size. Only ``*.so`` / ``*.names`` pairs are touched, nothing else in the folder.
+
+    Returns:
+        The libraries removed, oldest first.
+    """
+    entries = []
+    for so in folder.glob("*.so"):
+        try:
+            stat = so.stat()
+            names = so.with_suffix(".names")
+            size = stat.st_size + (names.stat().st_size if names.exists() else 0)
+        except FileNotFoundError:  # removed by a concurrent run
+            continue
+        entries.append((stat.st_mtime, so, size))
+    entries.sort()
+    total = sum(size for _, _, size in entries)
+    removed = []
+    for _, so, size in entries:
+        if total <= max_bytes:
+            break
+        if keep is not None and so == keep:
+            continue
+        for f in (so, so.with_suffix(".names")):
+            f.unlink(missing_ok=True)
+        total -= size
+        removed.append(so)
+    if removed:
+        log.info("cache %s: removed %d least recently used libraries", folder, len(removed))
+    return removed
 
 
 @functools.cache

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,7 +31,10 @@ from refine.types import Array
 
 Index = NDArray[np.int64]
 
-_kernel_cache: dict[tuple, tuple[object, dict[str, ca.Function]]] = {}
+_kernel_cache: OrderedDict[tuple, tuple[object, dict[str, ca.Function]]] = OrderedDict()
+KERNELS_MAX = 64
+"""Kernel sets kept in the process (one per robot, base placement and tool), least recently used
+dropped first."""
 
 
 def waypoint_kernels(
@@ -58,6 +62,7 @@ def waypoint_kernels(
         compiler(),
     )
     if key in _kernel_cache:
+        _kernel_cache.move_to_end(key)
         return _kernel_cache[key][1]
     kernels = compiled(
         "refine_kernels",
@@ -69,6 +74,8 @@ def waypoint_kernels(
     # CasADi's virtual machine, and is only built when a problem has such rows
     kernels = _Kernels(kernels, lambda: _singularity_kernels(robot, base_in_world, tcp_in_flange))
     _kernel_cache[key] = (robot, kernels)  # the robot is held so that its id is not reused
+    while len(_kernel_cache) > KERNELS_MAX:
+        _kernel_cache.popitem(last=False)
     return kernels
 
 

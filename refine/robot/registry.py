@@ -25,6 +25,10 @@ if TYPE_CHECKING:
 logger = logging.getLogger(__name__)
 
 
+ROBOTS_MAX = 32
+"""Robots kept in the process per kind (registry entries with their overrides, URDF files), least
+recently used dropped first."""
+
 PACKAGED_ROBOTS = Path(__file__).resolve().parents[1] / "robots_data"
 """The registry a built wheel carries (copied from ``robots/`` by ``setup.py``)."""
 
@@ -116,7 +120,7 @@ def robot_for(settings: RobotSettings) -> Robot:
     )
 
 
-@functools.cache
+@functools.lru_cache(maxsize=ROBOTS_MAX)
 def _urdf_robot(
     urdf: str,
     stamp: int,
@@ -141,7 +145,7 @@ def _urdf_robot(
     )
 
 
-@functools.cache
+@functools.lru_cache(maxsize=ROBOTS_MAX)
 def _registry_robot(
     name: str,
     lower: tuple[float, ...] | None,

@@ -1,10 +1,13 @@
 """The hand-assembled derivatives of the refinement NLP against CasADi's own differentiation, and the
 on-disk cache of compiled kernels."""
 
+import os
+
 import casadi as ca
 import numpy as np
 import pytest
 
+from refine.errors import InputError
 from refine.optimise import compiled as compiled_module
 from refine.optimise.compiled import compiled, compiler
 from refine.optimise.derivatives import waypoint_kernels
@@ -142,3 +145,39 @@ def test_without_compilation_the_functions_themselves_are_used(tmp_path, monkeyp
     out = compiled("t", "key", lambda: [f])
     assert float(out["square"](4.0)) == 16.0
     assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.skipif(compiler() is None, reason="no C compiler")
+def test_the_cache_folder_keeps_its_bound_dropping_the_least_recently_used(tmp_path, monkeypatch):
+    monkeypatch.setenv("REFINE_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(compiled_module, "_loaded", {})
+
+    def make(scale):
+        x = ca.SX.sym("x")
+        return lambda: [ca.Function("twice", [x], [scale * x])]
+
+    compiled("t", "key-0", make(0.0))
+    (first,) = tmp_path.glob("t-*.so")
+    pair_bytes = first.stat().st_size + first.with_suffix(".names").stat().st_size
+    # room for three libraries of this size, not four
+    monkeypatch.setenv("REFINE_CACHE_MAX_MB", str(3.5 * pair_bytes / 1e6))
+    libraries = [first]
+    for k in range(1, 6):
+        before = set(tmp_path.glob("t-*.so"))
+        compiled("t", f"key-{k}", make(float(k)))
+        (new,) = set(tmp_path.glob("t-*.so")) - before
+        libraries.append(new)
+        os.utime(new, (1e9 + k, 1e9 + k))  # distinct use times, in the order made
+        if k == 3:  # the first library is used again: it becomes the most recent
+            monkeypatch.setattr(compiled_module, "_loaded", {})
+            compiled("t", "key-0", make(0.0))
+            os.utime(first, (1e9 + 3.5, 1e9 + 3.5))
+    left = set(tmp_path.glob("t-*.so"))
+    total = sum(p.stat().st_size + p.with_suffix(".names").stat().st_size for p in left)
+    assert total <= 3.5 * pair_bytes
+    # made in the order 0 1 2 3 (0 used again) 4 5: the three most recent are 5, 4 and 0
+    assert left == {libraries[5], libraries[4], libraries[0]}
+    assert not any(p.with_suffix(".names").exists() for p in set(libraries) - left)
+    monkeypatch.setenv("REFINE_CACHE_MAX_MB", "lots")
+    with pytest.raises(InputError, match="REFINE_CACHE_MAX_MB must be a number of megabytes"):
+        compiled("t", "key-9", make(9.0))
