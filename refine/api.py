@@ -29,6 +29,7 @@ from numpy.typing import ArrayLike
 
 from refine.control import Progress, controlled
 from refine.errors import InputError
+from refine.plausible import CAD_SPEED_LIMIT_M_S
 from refine.problem import Problem, load_problem
 from refine.settings import (
     CollisionSettings,
@@ -49,6 +50,13 @@ if TYPE_CHECKING:
 
 __all__ = ["PassArrays", "Result", "load_problem", "refine_path", "solve"]
 
+
+MM_SUSPECT_REACHES = 10.0
+"""Positions whose nearest point is this many reaches from the robot's base are refused: no cell
+puts a path that far, while millimetres read as metres put it a thousand times too far."""
+
+QUATERNION_ORDERS = ("wxyz", "xyzw")
+"""The quaternion orders :func:`refine_path` reads, one of which the caller must state."""
 
 SPEED_CAP_WITHOUT_DEMO_M_S = 5.0
 """TCP speed cap [m/s] when :func:`refine_path` gets no speeds: above what industrial arms reach
@@ -322,6 +330,7 @@ def refine_path(
     repair: RepairSettings | None = None,
     process: ProcessSettings | None = None,
     programs: Sequence[str] | None = None,
+    quaternion_order: str | None = None,
     time_limit_s: float | None = None,
     cancel: threading.Event | Callable[[], bool] | None = None,
     progress: Callable[[Progress], Any] | None = None,
@@ -334,8 +343,8 @@ def refine_path(
     Args:
         robot: a :class:`refine.robot.model.Robot` (e.g. from ``Robot.from_urdf``) or a registry name.
         positions: TCP targets in the world frame {F} [m], shape (N, 3), N >= 3.
-        orientations: demonstrated TCP orientations R_F_TCP: (N, 4) unit quaternions, scalar first
-            (qw, qx, qy, qz) as in ``trajectory.csv``, or (N, 3, 3) rotation matrices.
+        orientations: demonstrated TCP orientations R_F_TCP: (N, 4) unit quaternions in the order
+            ``quaternion_order`` states, or (N, 3, 3) rotation matrices.
         speeds: demonstrated TCP speed [m/s], (N,) or one number; None for no cap but the robot's
             limits (:data:`SPEED_CAP_WITHOUT_DEMO_M_S`).
         arc_length: arc length of each waypoint along the path [m], (N,), strictly increasing;
@@ -360,6 +369,9 @@ def refine_path(
         process: ``[process]`` settings (output name, parameters); None for the defaults.
         programs: programs :meth:`Result.write` writes by default; None for the one of the robot's
             controller (``robot.spec.default_program``: KRL for the KR arms, Sunrise for the LBR iiwa).
+        quaternion_order: ``"wxyz"`` (scalar first, as ``trajectory.csv``) or ``"xyzw"`` (scalar
+            last, as scipy's ``Rotation.as_quat()``); required with quaternions, since both orders
+            read any unit quaternion.
         time_limit_s: wall-time budget [s] of each pass's refinement, instead of the problem's
             ``[repair] time_limit_s``; when it runs out before a verdict the status is ``"timeout"``.
         cancel: a :class:`threading.Event` (or a callable returning True) that stops the call:
@@ -373,8 +385,9 @@ def refine_path(
         The verified, timed result (no file written).
 
     Raises:
-        InputError: a shape, a non-finite value, a non-rotation, a non-increasing arc length;
-            the message names the argument and the unit.
+        InputError: a shape, a non-finite value, a non-rotation, a non-increasing arc length,
+            quaternions without their order, positions that read as millimetres (nowhere within
+            ten reaches of the base), speeds above 10 m/s; the message names the argument and the unit.
     """
     from refine.paths import FusedPath
     from refine.robot.model import Robot
@@ -388,7 +401,9 @@ def refine_path(
     if p.ndim != 2 or p.shape[1] != 3 or len(p) < 3:
         raise InputError(f"positions: expected shape (N, 3) [m] with N >= 3, got {p.shape}")
     N = len(p)
-    R = _rotations(orientations, N)
+    base = _transform(base_in_world, "base_in_world")
+    _check_position_units(p, robot, base)
+    R = _rotations(orientations, N, quaternion_order)
     s = _arc_length(p, arc_length)
     v = _speeds(speeds, N)
     dt = np.diff(s) * 0.5 * (1.0 / v[1:] + 1.0 / v[:-1])
@@ -400,7 +415,7 @@ def refine_path(
         root=Path.cwd(),
         robot=RobotSettings(
             model=robot.spec.name,
-            base_in_world=_transform(base_in_world, "base_in_world"),
+            base_in_world=base,
             home_deg=None if home_deg is None else tuple(float(a) for a in home_deg),
         ),
         tool=ToolSettings(
@@ -435,11 +450,20 @@ def _finite(a: ArrayLike, name: str, unit: str) -> Array:
     return arr
 
 
-def _rotations(orientations: ArrayLike, N: int) -> Array:
+def _rotations(orientations: ArrayLike, N: int, order: str | None) -> Array:
     from refine.frames import check_rotation, matrix_from_quaternion
 
     o = _finite(orientations, "orientations", "-")
     if o.shape == (N, 4):
+        if order not in QUATERNION_ORDERS:
+            raise InputError(
+                f"orientations: (N, 4) quaternions need quaternion_order='wxyz' (scalar first, as in "
+                f"trajectory.csv) or 'xyzw' (scalar last, as scipy's Rotation.as_quat()), got "
+                f"{order!r}: every unit quaternion is valid in both orders, so the order cannot be "
+                "told from the numbers"
+            )
+        if order == "xyzw":
+            o = np.column_stack([o[:, 3], o[:, :3]])
         norms = np.linalg.norm(o, axis=1)
         if np.any(np.abs(norms - 1.0) > 1e-3):
             k = int(np.argmax(np.abs(norms - 1.0)))
@@ -481,7 +505,33 @@ def _speeds(speeds: ArrayLike | float | None, N: int) -> Array:
         raise InputError(f"speeds: expected shape ({N},) or one number [m/s], got {v.shape}")
     if np.any(v <= 0.0):
         raise InputError(f"speeds: every speed must be > 0 m/s, got min {v.min():g} m/s")
+    if v.max() > CAD_SPEED_LIMIT_M_S:
+        k = int(np.argmax(v))
+        raise InputError(
+            f"speeds: {v[k]:g} m/s at waypoint {k} is beyond {CAD_SPEED_LIMIT_M_S:g} m/s, faster than "
+            f"industrial robots move their tool; speeds are in m/s ({v[k]:g} mm/s would be "
+            f"{v[k] / 1000:g} m/s)"
+        )
     return v
+
+
+def _check_position_units(p: Array, robot: Any, base_in_world: Array) -> None:
+    """Refuse positions no part of which the robot could reach in metres but could in millimetres."""
+    reach = float(robot.spec.reach_m)
+    base = base_in_world[:3, 3]
+    nearest = float(np.linalg.norm(p - base, axis=1).min())
+    if nearest <= MM_SUSPECT_REACHES * reach:
+        return
+    in_mm = float(np.linalg.norm(p / 1000.0 - base, axis=1).max())
+    hint = (
+        f"; read as millimetres they would be within {in_mm:.3g} m of it: positions are in metres"
+        if in_mm <= reach
+        else ""
+    )
+    raise InputError(
+        f"positions: the nearest is {nearest:.4g} m from the robot's base, {nearest / reach:.3g} times "
+        f"its reach of {reach:g} m{hint}"
+    )
 
 
 def _transform(T: ArrayLike | None, name: str) -> Array:

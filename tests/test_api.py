@@ -61,6 +61,7 @@ def test_refine_path_on_the_glass_cell_arrays_gives_the_joints_of_refine_run(tmp
         tool_shapes=p.tool.collision,
         collision=p.collision,
         name=p.name,
+        quaternion_order="wxyz",
     )
     assert result.status == "ok"
     assert result.joints.shape == q_cli.shape
@@ -78,9 +79,11 @@ def test_quaternions_and_matrices_give_the_same_path():
     q_xyzw = Rotation.from_matrix(R).as_quat()
     wxyz = np.column_stack([q_xyzw[:, 3], q_xyzw[:, :3]])
     a = refine.refine_path("ur10e", positions, R, speeds=0.1)
-    b = refine.refine_path("ur10e", positions, wxyz, speeds=0.1)
-    assert a.status == b.status == "ok"
+    b = refine.refine_path("ur10e", positions, wxyz, speeds=0.1, quaternion_order="wxyz")
+    c = refine.refine_path("ur10e", positions, q_xyzw, speeds=0.1, quaternion_order="xyzw")
+    assert a.status == b.status == c.status == "ok"
     assert np.abs(a.joints - b.joints).max() < 1e-9
+    assert np.abs(a.joints - c.joints).max() < 1e-9
     # the poses are the robot's forward kinematics of the joints, and on the path
     robot = refine.Robot
     assert robot is a.run.robot.__class__
@@ -110,7 +113,11 @@ def test_to_dict_is_the_written_result_json(tmp_path):
     ("kwargs", "message"),
     [
         ({"positions": np.zeros((2, 3))}, "N >= 3"),
-        ({"orientations": np.ones((N, 4))}, "unit quaternions"),
+        ({"orientations": np.ones((N, 4)), "quaternion_order": "wxyz"}, "unit quaternions"),
+        ({"orientations": np.tile([1.0, 0.0, 0.0, 0.0], (N, 1))}, "need quaternion_order='wxyz'"),
+        ({"orientations": np.tile([1.0, 0.0, 0.0, 0.0], (N, 1)), "quaternion_order": "qxyz"}, "got 'qxyz'"),
+        ({"positions": line()[0] * 1000.0}, "read as millimetres they would be within"),
+        ({"speeds": 50.0}, "50 m/s at waypoint 0 is beyond 10 m/s"),
         ({"orientations": np.ones((N, 3))}, "(N, 4) quaternions"),
         ({"orientations": np.repeat(np.diag([1.0, 1.0, -1.0])[None], N, 0)}, "reflection"),
         ({"speeds": -0.1}, "> 0 m/s"),
