@@ -408,8 +408,13 @@ def refine_path(
     v = _speeds(speeds, N)
     dt = np.diff(s) * 0.5 * (1.0 / v[1:] + 1.0 / v[:-1])
     fused = FusedPath(s, p, R, v, np.concatenate([[0.0], np.cumsum(dt)]), np.zeros(N))
-    if not isinstance(tolerances, Tolerances):
-        tolerances = Tolerances(**dict(tolerances or {}))
+    tolerances = _settings(tolerances, Tolerances, "tolerances")
+    collision = _settings(collision, CollisionSettings, "collision")
+    optimise = _settings(optimise, OptimiseSettings, "optimise")
+    repair = _settings(repair, RepairSettings, "repair")
+    process = _settings(process, ProcessSettings, "process")
+    cell = _shapes(cell, "cell")
+    tool_shapes = _shapes(tool_shapes, "tool_shapes")
     problem = Problem(
         name=name,
         root=Path.cwd(),
@@ -438,6 +443,49 @@ def refine_path(
     )
     with controlled(cancel, progress):
         return _solve_again(_with_time_limit(problem, time_limit_s), robot, fused, previous, initial_joints)
+
+
+def _settings(value: Any, cls: type, name: str) -> Any:
+    """``value`` as a ``cls``: an instance, a mapping of its fields, or None for the defaults.
+
+    Anything else, or an unknown field, is an InputError naming the argument and the fields.
+    """
+    if value is None:
+        return cls()
+    if isinstance(value, cls):
+        return value
+    fields = [f.name for f in dataclasses.fields(cls)]
+    if not isinstance(value, Mapping):
+        raise InputError(
+            f"{name}: expected a refine.{cls.__name__} or a mapping of its fields, got {type(value).__name__}",
+            key=name,
+            value=value,
+            expected=f"refine.{cls.__name__} or a mapping of {', '.join(fields)}",
+        )
+    unknown = sorted(set(value) - set(fields))
+    if unknown:
+        raise InputError(
+            f"{name}: unknown field(s) {', '.join(map(repr, unknown))}; the fields are {', '.join(fields)}",
+            key=f"{name}.{unknown[0]}",
+            value=value[unknown[0]],
+            expected=f"one of the fields {', '.join(fields)}",
+        )
+    return cls(**dict(value))
+
+
+def _shapes(shapes: Any, name: str) -> tuple:
+    """``shapes`` as a tuple of :class:`refine.settings.Shape`; anything else is an InputError."""
+    items = tuple(shapes or ())
+    for k, shape in enumerate(items):
+        if not isinstance(shape, Shape):
+            raise InputError(
+                f"{name}[{k}]: expected a refine.Shape, got {type(shape).__name__} (a problem file's "
+                f"table becomes one with refine.Shape(kind=..., name=..., ...))",
+                key=f"{name}[{k}]",
+                value=shape,
+                expected="refine.Shape",
+            )
+    return items
 
 
 def _finite(a: ArrayLike, name: str, unit: str) -> Array:

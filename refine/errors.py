@@ -10,7 +10,28 @@ class RefineError(Exception):
 
 
 class InputError(RefineError, ValueError):
-    """A problem file, CAD/CAM file or tracker log is malformed or inconsistent."""
+    """A problem file, CAD/CAM file or tracker log is malformed or inconsistent.
+
+    Besides the message, the parts a host program would show where they apply (None otherwise):
+
+    Attributes:
+        key: the setting or argument, e.g. ``"tolerances.orientation_deg"`` or ``"positions"``.
+        value: the value given.
+        expected: what is accepted, in words with the unit (``"a number in [0, 90] deg"``).
+        file: the file the value came from.
+    """
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        key: str | None = None,
+        value: Any = None,
+        expected: str | None = None,
+        file: str | None = None,
+    ) -> None:
+        super().__init__(message)
+        self.key, self.value, self.expected, self.file = key, value, expected, file
 
 
 class SolverError(RefineError):

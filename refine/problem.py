@@ -182,7 +182,7 @@ def load_problem(path: str | Path, *, allow_outside: bool = False) -> Problem:
             source=path,
         )
     except InputError as e:
-        raise InputError(f"{path}: {e}") from e
+        raise InputError(f"{path}: {e}", key=e.key, value=e.value, expected=e.expected, file=str(path)) from e
 
 
 # ---- loader internals ---------------------------------------------------------------------------

@@ -2,6 +2,7 @@
 
 import json
 import re
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -118,6 +119,10 @@ def test_to_dict_is_the_written_result_json(tmp_path):
         ({"orientations": np.tile([1.0, 0.0, 0.0, 0.0], (N, 1)), "quaternion_order": "qxyz"}, "got 'qxyz'"),
         ({"positions": line()[0] * 1000.0}, "read as millimetres they would be within"),
         ({"speeds": 50.0}, "50 m/s at waypoint 0 is beyond 10 m/s"),
+        ({"tolerances": {"orientation": 5.0}}, "tolerances: unknown field(s) 'orientation'; the fields are"),
+        ({"tolerances": 5.0}, "tolerances: expected a refine.Tolerances or a mapping"),
+        ({"cell": [{"kind": "box"}]}, "cell[0]: expected a refine.Shape, got dict"),
+        ({"repair": {"time_limit_s": 0.0}}, "repair.time_limit_s must be a finite number in [0.1, 86400] s"),
         ({"orientations": np.ones((N, 3))}, "(N, 4) quaternions"),
         ({"orientations": np.repeat(np.diag([1.0, 1.0, -1.0])[None], N, 0)}, "reflection"),
         ({"speeds": -0.1}, "> 0 m/s"),
@@ -132,6 +137,23 @@ def test_bad_arrays_are_refused_with_the_argument_named(kwargs, message):
     args = {"positions": positions, "orientations": R, **kwargs}
     with pytest.raises(refine.InputError, match=re.escape(message)):
         refine.refine_path("ur10e", args.pop("positions"), args.pop("orientations"), **args)
+
+
+def test_an_input_error_carries_the_key_the_value_and_what_is_expected(tmp_path):
+    positions, R = line()
+    with pytest.raises(refine.InputError) as caught:
+        refine.refine_path("ur10e", positions, R, tolerances={"orientation_deg": -1.0})
+    e = caught.value
+    assert (e.key, e.value, e.file) == ("tolerances.orientation_deg", -1.0, None)
+    assert "deg" in e.expected
+    shutil.copytree(GLASS, tmp_path / "glass")
+    problem = tmp_path / "glass" / "problem.toml"
+    text = problem.read_text()
+    problem.write_text(re.sub(r"(?m)^orientation_deg\s*=.*$", "orientation_deg = 400.0", text, count=1))
+    with pytest.raises(refine.InputError) as caught:
+        refine.load_problem(problem)
+    e = caught.value
+    assert (e.key, e.value, e.file) == ("tolerances.orientation_deg", 400.0, str(problem))
 
 
 def test_positions_with_nan_are_refused():

@@ -80,16 +80,31 @@ def in_range(owner: str, name: str, value: float, lo: float, hi: float, unit: st
     ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
     if not (ok and lo <= value <= hi):
         u = f" {unit}" if unit else ""
-        raise InputError(f"{owner}.{name} must be a finite number in [{lo:g}, {hi:g}]{u}, got {value!r}")
+        raise InputError(
+            f"{owner}.{name} must be a finite number in [{lo:g}, {hi:g}]{u}, got {value!r}",
+            key=f"{owner}.{name}",
+            value=value,
+            expected=f"a finite number in [{lo:g}, {hi:g}]{u}",
+        )
 
 
 def integer_in(owner: str, name: str, value: int, low: int, high: int) -> None:
     """InputError unless ``value`` is an integer in ``low..high``."""
     if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
-        raise InputError(f"{owner}.{name} must be an integer in {low}..{high}, got {value!r}")
+        raise InputError(
+            f"{owner}.{name} must be an integer in {low}..{high}, got {value!r}",
+            key=f"{owner}.{name}",
+            value=value,
+            expected=f"an integer in {low}..{high}",
+        )
 
 
 def one_of(owner: str, name: str, value: str, allowed: tuple[str, ...]) -> None:
     """InputError unless ``value`` is one of ``allowed``."""
     if value not in allowed:
-        raise InputError(f"{owner}.{name} = {value!r} is not one of {', '.join(allowed)}")
+        raise InputError(
+            f"{owner}.{name} = {value!r} is not one of {', '.join(allowed)}",
+            key=f"{owner}.{name}",
+            value=value,
+            expected=f"one of {', '.join(allowed)}",
+        )
