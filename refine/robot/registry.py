@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from refine.errors import InputError
+from refine.robot.coupling import interactions_from_toml
 from refine.robot.model import Robot, robot_from_urdf
 from refine.robot.spec import RobotSpec, build_model, read_registry_toml
 from refine.robot.urdf import with_overrides
@@ -75,6 +76,11 @@ def _load_robot(name: str, root: str) -> Robot:
         controller=str(meta["controller"]),
         model=str(meta["model"]),
         program=str(meta.get("program", "")),
+        joint_coupling=str(meta.get("joint_coupling", "")),
+        controller_frame=str(meta.get("controller_frame", "")),
+        joint_interaction=interactions_from_toml(
+            meta.get("joint_interaction", []), model.nq, str(folder / "robot.toml")
+        ),
     )
     if model.nq != spec.dof:
         raise InputError(
