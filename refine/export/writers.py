@@ -130,6 +130,16 @@ def write_outputs(result: RunResult, out_dir: Path, programs: tuple[str, ...]) -
                 result.robot,
                 passes=named,
             )
+        elif kind == "tp":
+            from refine.export.tp import write_tp
+
+            outputs["tp"] = write_tp(out_dir / f"{name}.ls", trajectories[0], problem, result.robot, passes=named)
+        elif kind == "inform":
+            from refine.export.inform import write_inform
+
+            outputs["inform"] = write_inform(
+                out_dir / f"{name}.JBI", trajectories[0], problem, result.robot, passes=named
+            )
         elif kind == "sunrise":
             from refine.export.sunrise import write_sunrise
 
