@@ -18,8 +18,10 @@ Expected values come from Pinocchio's forward kinematics at the planned URDF joi
 from __future__ import annotations
 
 import dataclasses
+import importlib.util
 import math
 import re
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -38,6 +40,12 @@ from refine.problem import ProcessSettings  # noqa: E402
 from refine.robot.model import Robot  # noqa: E402
 
 GRAMMARS = Path(__file__).resolve().parent / "grammars"
+_spec = importlib.util.spec_from_file_location(
+    "program_grammar", Path(__file__).with_name("program_grammar.py")
+)
+pg = importlib.util.module_from_spec(_spec)
+sys.modules["program_grammar"] = pg
+_spec.loader.exec_module(pg)
 POSITION_MM, ORIENTATION_DEG = 0.01, 0.001  # what a program pose may differ from the plan
 CONTROLLER_FRAME_IN_ROOT = np.array([0.0, 0.0, 0.4])  # a "base" frame like ROS-Industrial's
 
@@ -400,3 +408,32 @@ def test_writers_refuse_other_controllers_and_frame_numbers(tmp_path, trajectory
     far = dataclasses.replace(problem, frames=dataclasses.replace(problem.frames, base_number=12))
     with pytest.raises(InputError, match="user frame 1..9"):
         write_tp(tmp_path / "b.ls", trajectory, far, fanuc)
+
+
+def test_the_grammar_readers_find_each_pass_as_the_plan(tmp_path, trajectory, problem, fanuc, yaskawa):
+    tp = pg.read_tp(write_tp(tmp_path / "r.ls", trajectory, problem, fanuc))
+    (p,) = tp.passes
+    assert pg.pose_errors(p.poses, trajectory.poses)[0] <= POSITION_MM
+    T_root_robot = _T(np.eye(3), CONTROLLER_FRAME_IN_ROOT * 1000.0)
+    job = pg.read_inform(
+        write_inform(tmp_path / "r.JBI", trajectory, problem, yaskawa),
+        problem.robot.base_in_world,
+        T_root_robot,
+    )
+    (p,) = job.passes
+    dp, dr = pg.pose_errors(p.poses, trajectory.poses)
+    assert dp <= POSITION_MM and dr <= ORIENTATION_DEG
+
+
+def test_preflight_runs_tp_and_inform_only_on_their_controllers(problem, irb4600, fanuc, yaskawa):
+    from refine.run.preflight import check_programs
+
+    check_programs(problem, fanuc.spec, ("tp",))
+    check_programs(problem, yaskawa.spec, ("inform",))
+    with pytest.raises(InputError, match="abb controller runs rapid only"):
+        check_programs(problem, irb4600.spec, ("tp",))
+    with pytest.raises(InputError, match="fanuc controller runs tp only"):
+        check_programs(problem, fanuc.spec, ("inform",))
+    bad = _glue_problem(problem, output="DO[600]")
+    with pytest.raises(InputError, match=r"DO\[n\] needs n in 1..512"):
+        check_programs(bad, fanuc.spec, ("tp",))
