@@ -43,7 +43,8 @@ class RobotSettings:
         home_deg: a preferred joint configuration [deg] to start the IK seed from, or None.
         urdf: a robot outside the registry: its URDF file (absolute path), or None.
         flange_frame: with ``urdf``: the frame the tool is mounted on.
-        controller: with ``urdf``: the controller family (``"abb"``, ``"kuka"``, ``"ur"``).
+        controller: with ``urdf``: the controller family (``"abb"``, ``"kuka"``, ``"ur"``, ``"fanuc"``,
+            ``"yaskawa"``).
         reach_m: with ``urdf``: the reach [m] scaling the singularity measure (default: the
             chain from the second joint to the flange, stretched).
         joint_lower_deg: per-joint lower limits [deg] in place of the robot's, or None.
@@ -68,7 +69,9 @@ class RobotSettings:
         if self.urdf is None and not self.model:
             raise InputError("[robot] needs model (a registry robot) or urdf (a robot's URDF file)")
         if self.urdf is not None and self.controller is None:
-            raise InputError('[robot] a robot from its URDF needs controller ("abb", "kuka" or "ur")')
+            raise InputError(
+                '[robot] a robot from its URDF needs controller ("abb", "kuka", "ur", "fanuc" or "yaskawa")'
+            )
         if self.urdf is None and (self.controller is not None or self.reach_m is not None):
             raise InputError("[robot] controller and reach_m go with urdf (a registry robot has its own)")
         if self.reach_m is not None:
