@@ -6,7 +6,8 @@ sample of Motoman's knowledge base "INFORM job header"):
 
 * ``/JOB``, ``//NAME <NAME>`` (letters, digits, ``_``, at most :data:`NAME_CHARS`), ``//POS`` with
   ``///NPOS <C>,0,0,0,0,0`` (the number of robot teaching positions), ``///TOOL <t>`` (``[tool]
-  number``), ``///POSTYPE ROBOT`` (Cartesian data in the robot coordinate system), ``///RECTAN``,
+  number``; a comment gives the values its tool file must hold), ``///POSTYPE ROBOT`` (Cartesian
+  data in the robot coordinate system), ``///RECTAN``,
   ``///RCONF l,m,n,o,p,q,0,...`` (24 values, the last 18 unused) before the positions it applies to,
   and ``Cnnnnn=X,Y,Z,Rx,Ry,Rz``: X Y Z [mm, 3 decimals], Rx Ry Rz [deg, 4 decimals] with
   ``R_robot_tcp = Rz(Rz)·Ry(Ry)·Rx(Rx)`` (rotations about the fixed X, Y, Z axes in that order).
@@ -259,6 +260,14 @@ def write_inform(
         for note in header_notes(p, robot):
             job.comment(note)
     job.comment(f"positions: TCP of tool {tool} ({problem.tool.name}) in the ROBOT frame, mm and deg")
+    T_tool = problem.tool.tcp_in_flange
+    values = [_num(v * 1000.0, 3) for v in T_tool[:3, 3]] + [
+        _num(v, 4) for v in fixed_xyz_from_matrix(T_tool[:3, :3])
+    ]
+    job.comment(
+        f"tool file {tool} must hold "
+        + ", ".join(f"{k}={v}" for k, v in zip(("X", "Y", "Z", "Rx", "Ry", "Rz"), values, strict=True))
+    )
     home_deg = np.degrees(robot.spec.to_controller(home_q))
     job.comment("home joints [deg]: " + ", ".join(_num(v, 3) for v in home_deg))
     vj = _num(joint_percent, 2)
