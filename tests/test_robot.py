@@ -151,8 +151,8 @@ def test_spec_rejects_inverted_limits_and_unknown_controller(robots):
     kwargs = {k: getattr(spec, k) for k in spec.__dataclass_fields__}
     with pytest.raises(InputError, match="lower limit"):
         RobotSpec(**{**kwargs, "lower": spec.upper, "upper": spec.lower})
-    with pytest.raises(InputError, match="controller 'fanuc' is not one of abb, kuka, ur"):
-        RobotSpec(**{**kwargs, "controller": "fanuc"})
+    with pytest.raises(InputError, match="controller 'staubli' is not one of abb, kuka, ur, fanuc, yaskawa"):
+        RobotSpec(**{**kwargs, "controller": "staubli"})
     with pytest.raises(InputError, match="velocity must be 6"):
         RobotSpec(**{**kwargs, "velocity": spec.velocity[:3]})
 

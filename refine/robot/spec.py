@@ -26,15 +26,21 @@ except ModuleNotFoundError:  # Python 3.10
 logger = logging.getLogger(__name__)
 
 
-CONTROLLERS = ("abb", "kuka", "ur")
+CONTROLLERS = ("abb", "kuka", "ur", "fanuc", "yaskawa")
 
 
-DEFAULT_PROGRAM = {"abb": "rapid", "kuka": "krl", "ur": "urscript"}
+DEFAULT_PROGRAM = {"abb": "rapid", "kuka": "krl", "ur": "urscript", "fanuc": "tp", "yaskawa": "inform"}
 """The program format a controller family runs unless the robot names another (``program`` in
 ``robot.toml``): KUKA's KR C controllers run KRL, the LBR iiwa's Sunrise cabinet runs Sunrise Java."""
 
 
-PROGRAMS = {"abb": ("rapid",), "kuka": ("krl", "sunrise"), "ur": ("urscript",)}
+PROGRAMS = {
+    "abb": ("rapid",),
+    "kuka": ("krl", "sunrise"),
+    "ur": ("urscript",),
+    "fanuc": ("tp",),
+    "yaskawa": ("inform",),
+}
 """The program formats a controller family can run."""
 
 
