@@ -128,6 +128,9 @@ def _add_import(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--model", default=None, help="the maker's designation (default: the <robot name>)")
     p.add_argument("--flange-frame", default="tool0", help="the frame the tool is mounted on")
     p.add_argument(
+        "--reach-m", type=float, default=None, help="the reach [m] (default: the wrist centre's from axis 1)"
+    )
+    p.add_argument(
         "--package",
         dest="packages",
         action="append",
@@ -168,6 +171,7 @@ def _import_robot(args: argparse.Namespace) -> int:
         maker=args.maker,
         model=args.model,
         flange_frame=args.flange_frame,
+        reach_m=args.reach_m,
         packages=packages,
         licence=args.licence,
         samples=args.samples,

@@ -260,6 +260,8 @@ def test_import_writes_a_registry_folder_that_loads_and_covers_its_mesh(tmp_path
             "yaskawa",
             "--samples",
             "20",
+            "--reach-m",
+            "0.6",
             "--registry",
             str(registry),
         ]

@@ -59,8 +59,9 @@ class ImportResult:
         folder: the registry folder written.
         description: the description file expanded.
         shapes: each link's convex pieces and their fit to its mesh.
-        reach_m: the wrist centre's largest distance from axis 1 [m].
+        reach_m: the reach written to ``robot.toml`` [m].
         pairs: the sampled self-collision matrix.
+        reach_given: the reach given to the import [m]; None when it is the wrist centre's.
     """
 
     folder: Path
@@ -68,6 +69,7 @@ class ImportResult:
     shapes: list[LinkShapes]
     reach_m: float
     pairs: list[PairStats]
+    reach_given: float | None = None
 
 
 def find_description(package: Path, xacro: str | None) -> Path:
@@ -157,6 +159,7 @@ def import_support_package(
     maker: str | None = None,
     model: str | None = None,
     flange_frame: str = "tool0",
+    reach_m: float | None = None,
     packages: Mapping[str, str | Path] | None = None,
     licence: str | Path | None = None,
     samples: int = 20000,
@@ -177,6 +180,8 @@ def import_support_package(
         maker: the manufacturer; None for the controller family's (:data:`MAKERS`).
         model: the maker's designation; None for the description's ``<robot name>``.
         flange_frame: the frame the tool is mounted on.
+        reach_m: the reach [m]; None for the wrist centre's largest distance from axis 1
+            (:func:`refine.robot.reach.wrist_centre_reach`).
         packages: package name -> folder, for packages not found beside the description.
         licence: a licence file copied to ``collision/LICENSE``; None for the package's own
             ``LICENSE`` file if it has one (the README quotes the ``package.xml`` licence anyway).
@@ -212,7 +217,9 @@ def import_support_package(
     pin_model = build_model(expanded)
     if not pin_model.existFrame(flange_frame):
         raise InputError(f"{source.name}: no frame {flange_frame!r} for the flange")
-    reach = wrist_centre_reach(pin_model, flange_frame)
+    if reach_m is not None and not reach_m > 0.0:
+        raise InputError(f"--reach-m {reach_m}: the reach must be positive [m]")
+    reach = float(reach_m) if reach_m is not None else wrist_centre_reach(pin_model, flange_frame)
     say(f"{pkg}/{source.relative_to(package)} expanded: {pin_model.nq} joints, reach {reach * 1e3:.1f} mm")
     if folder.exists():
         shutil.rmtree(folder)
@@ -240,7 +247,13 @@ def import_support_package(
     from refine.robot.model import robot_from_urdf
 
     robot = robot_from_urdf(
-        urdf, controller=controller, flange_frame=flange_frame, name=name, maker=maker_name, model=label
+        urdf,
+        controller=controller,
+        flange_frame=flange_frame,
+        name=name,
+        maker=maker_name,
+        model=label,
+        reach_m=reach,
     )
     pairs = sample_matrix(robot, samples, seed, NEVER_M)
     pairs = with_maker(pairs, maker_contacts(robot, expanded, max(samples // 10, 1), seed))
@@ -274,7 +287,7 @@ def import_support_package(
         ),
         encoding="utf-8",
     )
-    result = ImportResult(folder, source, shapes, reach, pairs)
+    result = ImportResult(folder, source, shapes, reach, pairs, reach_m)
     (folder / "README.md").write_text(
         readme(result, package, pkg, robot, program, samples, seed), encoding="utf-8"
     )
@@ -347,8 +360,13 @@ def readme(
         )
     lines += [
         "",
-        f"Reach: {result.reach_m * 1e3:.1f} mm, the wrist centre's largest distance from axis 1 over the joint "
-        "ranges (`refine.robot.reach.wrist_centre_reach`), the figure the data sheets quote.",
+        f"Reach: {result.reach_m * 1e3:.1f} mm"
+        + (
+            ", the wrist centre's largest distance from axis 1 over the joint ranges "
+            "(`refine.robot.reach.wrist_centre_reach`), the figure the data sheets quote."
+            if result.reach_given is None
+            else ", as given to the import (`--reach-m`)."
+        ),
         "Accelerations: not in the description; the registry's rule for industrial arms, "
         f"{ACCELERATION_RULE}.",
         "",
