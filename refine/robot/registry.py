@@ -99,6 +99,7 @@ def robot_for(settings: RobotSettings) -> Robot:
             str(path),
             stamp,
             settings.controller or "",
+            tuple(settings.packages),
             settings.flange_frame,
             settings.model or None,
             settings.reach_m,
@@ -116,6 +117,7 @@ def _urdf_robot(
     urdf: str,
     stamp: int,
     controller: str,
+    packages: tuple[tuple[str, Path], ...],
     flange_frame: str,
     name: str | None,
     reach_m: float | None,
@@ -127,6 +129,7 @@ def _urdf_robot(
     return robot_from_urdf(
         urdf,
         controller=controller,
+        packages=dict(packages),
         flange_frame=flange_frame,
         name=name,
         reach_m=reach_m,
