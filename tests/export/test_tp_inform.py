@@ -437,3 +437,43 @@ def test_preflight_runs_tp_and_inform_only_on_their_controllers(problem, irb4600
     bad = _glue_problem(problem, output="DO[600]")
     with pytest.raises(InputError, match=r"DO\[n\] needs n in 1..512"):
         check_programs(bad, fanuc.spec, ("tp",))
+
+
+@pytest.mark.slow
+def test_the_m20ia_weld_writes_a_tp_program_in_the_controllers_joints(tmp_path):
+    """``refine run problems/m20ia_arc_weld``: every TP pose against FK at trajectory.csv's joints."""
+    import csv
+    import json
+
+    from refine.problem import load_problem
+    from refine.robot.registry import load_robot
+    from refine.run.write import run
+
+    root = Path(__file__).resolve().parents[2]
+    problem = load_problem(root / "problems" / "m20ia_arc_weld")
+    run(problem, tmp_path)
+    doc = json.loads((tmp_path / "result.json").read_text())
+    assert doc["status"] == "ok", doc["reason"]
+    assert set(doc["outputs"]) >= {"tp"} and not {"rapid", "krl", "inform"} & set(doc["outputs"])
+    robot = load_robot("fanuc_m20ia")
+    with (tmp_path / "trajectory.csv").open(newline="") as f:
+        q_controller = np.radians([[float(r[f"q{j}"]) for j in range(1, 7)] for r in csv.DictReader(f)])
+    q = q_controller.copy()
+    q[:, 2] = q_controller[:, 2] + q_controller[:, 1]  # the pendant's J3 back to the URDF's
+    prog = interpret_tp((tmp_path / doc["outputs"]["tp"]).read_text(encoding="ascii"))
+    T_root_world = np.array(doc["robot"]["controller_in_base"])
+    np.testing.assert_allclose(T_root_world[:3, 3], [0.0, 0.0, 0.525])  # the description's base frame
+    uf, ut = prog["selected"]["UFRAME_NUM"], prog["selected"]["UTOOL_NUM"]
+    T_root_uf = T_root_world @ _frame(prog["frames"][f"UFRAME[{uf}]"])
+    T_flange_tcp = _frame(prog["frames"][f"UTOOL[{ut}]"])
+    path = _tp_path(prog)
+    reached = [T_root_uf @ prog["positions"][m["pos"]][4] @ np.linalg.inv(T_flange_tcp) for m in path]
+    dp, dr = _errors(reached, [_flange(robot, qk) for qk in q])
+    assert dp <= POSITION_MM and dr <= ORIENTATION_DEG, (dp, dr)
+    assert all(
+        prog["positions"][m["pos"]][3] == _expected_config(robot, qk) for m, qk in zip(path, q, strict=True)
+    )
+    home = prog["positions"][[m for m in prog["motions"] if m["kind"] == "J"][0]["pos"]][4]
+    np.testing.assert_allclose(home, problem.robot.home_deg, atol=1e-4)  # the pendant's joints, as given
+    j3 = np.degrees(q_controller[:, 2])
+    assert np.all((j3 >= -185.0 + 2.0 - 1e-6) & (j3 <= 273.1 - 2.0 + 1e-6))  # the J3 range, with the margin
