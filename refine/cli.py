@@ -57,7 +57,8 @@ def _parser() -> argparse.ArgumentParser:
     check.add_argument("--programs", default=None, help="program formats to check, as for run")
     for parser in (run, check):
         add_safety_options(parser)
-    sub.add_parser("robots", help="list the robots of the registry")
+    robots = sub.add_parser("robots", help="list the robots of the registry, or import one")
+    _add_import(robots.add_subparsers(dest="robots_command"))
     from refine.calibrate.cli import add_parser as add_calibrate
 
     add_calibrate(sub)
@@ -107,6 +108,77 @@ def _interrupted() -> int:
         return exit_status(done)
     print("refine: interrupted; the output folder keeps its previous complete set", file=sys.stderr)
     return 130
+
+
+def _add_import(sub: argparse._SubParsersAction) -> None:
+    """``refine robots import``: a registry folder from a ROS-Industrial support package."""
+    p = sub.add_parser(
+        "import",
+        help="write a registry folder (URDF, convex link shapes, self-collision matrix, robot.toml, "
+        "README) from a ROS-Industrial support package",
+    )
+    p.add_argument("package", type=Path, help="the support package's folder (holding its package.xml)")
+    p.add_argument("--name", required=True, help="the registry name (lower-case letters, digits, _)")
+    p.add_argument(
+        "--xacro", default=None, help="the description, relative to the package (default: its only one)"
+    )
+    p.add_argument("--controller", required=True, help="controller family: abb, kuka, ur, fanuc, yaskawa")
+    p.add_argument("--program", default=None, help="program format (default: the controller family's)")
+    p.add_argument("--maker", default=None, help="manufacturer (default: the controller family's)")
+    p.add_argument("--model", default=None, help="the maker's designation (default: the <robot name>)")
+    p.add_argument("--flange-frame", default="tool0", help="the frame the tool is mounted on")
+    p.add_argument(
+        "--reach-m", type=float, default=None, help="the reach [m] (default: the wrist centre's from axis 1)"
+    )
+    p.add_argument(
+        "--package",
+        dest="packages",
+        action="append",
+        default=[],
+        metavar="NAME=FOLDER",
+        help="a ROS package's folder, when it is not beside the description (repeatable)",
+    )
+    p.add_argument(
+        "--licence", type=Path, default=None, help="licence file to copy (default: the package's LICENSE)"
+    )
+    p.add_argument(
+        "--samples", type=int, default=20000, help="random configurations for the self-collision matrix"
+    )
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--registry", type=Path, default=None, help="the registry folder (default: robots/)")
+    p.add_argument("--replace", action="store_true", help="write over an existing folder")
+    p.set_defaults(handler=_import_robot)
+
+
+def _import_robot(args: argparse.Namespace) -> int:
+    from refine.errors import InputError
+    from refine.robot.importer import import_support_package
+    from refine.robot.registry import robots_dir
+
+    packages = {}
+    for item in args.packages:
+        name, sep, folder = item.partition("=")
+        if not sep or not name or not folder:
+            raise InputError(f"--package {item!r}: expected NAME=FOLDER")
+        packages[name] = Path(folder)
+    import_support_package(
+        args.package,
+        args.name,
+        args.registry or robots_dir(),
+        controller=args.controller,
+        xacro=args.xacro,
+        program=args.program,
+        maker=args.maker,
+        model=args.model,
+        flange_frame=args.flange_frame,
+        reach_m=args.reach_m,
+        packages=packages,
+        licence=args.licence,
+        samples=args.samples,
+        seed=args.seed,
+        replace=args.replace,
+    )
+    return 0
 
 
 def _main(argv: list[str] | None) -> int:

@@ -378,11 +378,15 @@ def _robot(t: dict[str, Any], path: Path, inside: Path | None = None) -> RobotSe
                 out[key] = _string(t[key], f"robot.{key}")
         if "reach_m" in t:
             out["reach_m"] = _number(t["reach_m"], "robot.reach_m")
+        if "packages" in t:
+            from refine.robot.description import package_folders
+
+            out["packages"] = package_folders(t["packages"], path.parent.resolve())
     elif "model" not in t:
         raise InputError("[robot] missing required key 'model' (a registry robot) or 'urdf' (a URDF file)")
     else:
         out["model"] = _robot_model(t["model"])
-        extra = sorted({"flange_frame", "controller", "reach_m"} & set(t))
+        extra = sorted({"flange_frame", "controller", "reach_m", "packages"} & set(t))
         if extra:
             raise InputError(
                 f"[robot] {', '.join(extra)} go with urdf; robot {t['model']!r} of the registry has its own"

@@ -339,7 +339,10 @@ def problem_reachability(problem, targets: ArrayLike, seed: int) -> tuple[Reacha
     margin = math.radians(problem.tolerances.joint_margin_deg)
     collision = CollisionModel.for_problem(problem, robot)
     starts = start_candidates(
-        robot.spec.lower + margin, robot.spec.upper - margin, np.radians(problem.robot.home_deg), seed=seed
+        robot.spec.lower + margin,
+        robot.spec.upper - margin,
+        np.radians(robot.spec.from_controller(problem.robot.home_deg)),
+        seed=seed,
     )
     report = reachability_report(kin, targets, joint_margin_rad=margin, starts=starts, collision=collision)
     ok = bool(

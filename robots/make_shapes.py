@@ -4,14 +4,16 @@ For every link, the reference mesh (``../shared/robot-meshes/<robot>/``, loaded 
 its ``reference.urdf``) is carried into the frame of the same link of ``robots/<robot>/robot.urdf``
 (the two descriptions agree kinematically but lay out their link frames differently; the mesh is
 moved through the world at the zero configuration, and the shapes test checks the match at random
-configurations), covered by a few convex polytopes (:func:`refine.robot.convex.convex_cover`), and
-written as ``robots/<robot>/collision/<link>_<k>.obj``. The ``<collision>`` and ``<visual>``
-elements of the robot's URDF are rewritten to name these files; nothing else in the URDF changes.
+configurations), covered by a few convex polytopes and written as
+``robots/<robot>/collision/<link>_<k>.obj`` by :func:`refine.robot.shapes.make_link_shapes` (the code
+``refine robots import`` uses, with its settings :data:`refine.robot.shapes.SETTINGS`). The
+``<collision>`` and ``<visual>`` elements of the robot's URDF are rewritten to name these files;
+nothing else in the URDF changes.
 
     python3 robots/make_shapes.py [--robots ur10e ...] [--meshes ../shared/robot-meshes]
 
-Needs ``rtree`` (the ``test`` extra) for the overshoot measurement. Prints, per link, the pieces,
-their faces and how far they reach beyond the reference mesh.
+Needs ``rtree`` for the overshoot measurement. Prints, per link, the pieces, their faces, how far
+the reference mesh lies outside them and how far they reach beyond it.
 """
 
 from __future__ import annotations
@@ -23,16 +25,13 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 import trimesh
-from lxml import etree
 
-from refine.robot.convex import convex_cover, overshoot
+from refine.robot.shapes import joint_links, make_link_shapes, rewrite_urdf
 
 HERE = Path(__file__).resolve().parent
 ROBOTS = ("abb_irb4600_60_205", "kuka_iiwa14_r820", "kuka_kr8_r1440_2_arc_hw", "ur10e")
 REFERENCE_FLANGE = {"kuka_iiwa14_r820": "lbr_link_ee"}
 """The reference's flange frame where it is not ``tool0``."""
-SETTINGS = {"max_overshoot_m": 0.015, "max_pieces": 4, "tolerance_m": 0.006, "max_planes": 48}
-"""Slab hulls at most 15 mm beyond the mesh, each simplified to <= 48 planes within 6 mm of its hull."""
 ROBOT_SETTINGS = {
     "kuka_iiwa14_r820": {"max_overshoot_m": 0.010, "tolerance_m": 0.005},
     "kuka_kr8_r1440_2_arc_hw": {"max_pieces": 5, "tolerance_m": 0.004, "mixed": True, "cuts": 8},
@@ -40,18 +39,6 @@ ROBOT_SETTINGS = {
 """Tighter for the iiwa, whose round housings leave hulls loose in the waist between them. The KR 8's
 reference meshes are coarse (faces up to tens of mm, many separate shells), which the fast overshoot
 estimate handles poorly: its cuts are ranked by the exact measure and may differ in direction."""
-
-
-def joint_links(urdf: Path) -> dict[str, str]:
-    """The link each joint moves (child of the joint), and the root link under ``"universe"``."""
-    root = etree.parse(str(urdf)).getroot()
-    children = {j.find("child").get("link"): j.get("name") for j in root.iter("joint")}
-    links = [link.get("name") for link in root.iter("link")]
-    out = {"universe": next(name for name in links if name not in children)}
-    for joint in root.iter("joint"):
-        if joint.get("type") in ("revolute", "continuous", "prismatic"):
-            out[joint.get("name")] = joint.find("child").get("link")
-    return out
 
 
 def reference_meshes(robot: str, meshes: Path) -> dict[str, trimesh.Trimesh]:
@@ -89,45 +76,23 @@ def reference_meshes(robot: str, meshes: Path) -> dict[str, trimesh.Trimesh]:
     return out
 
 
-def rewrite_urdf(urdf: Path, files: dict[str, list[str]]) -> None:
-    """Replace every link's ``<visual>`` and ``<collision>`` by meshes naming ``files[link]``."""
-    tree = etree.parse(str(urdf))
-    for link in tree.getroot().iter("link"):
-        name = link.get("name")
-        for old in link.findall("visual") + link.findall("collision"):
-            link.remove(old)
-        for tag in ("visual", "collision"):
-            for path in files.get(name, []):
-                element = etree.SubElement(link, tag, name=Path(path).stem)
-                geometry = etree.SubElement(element, "geometry")
-                etree.SubElement(geometry, "mesh", filename=path)
-    etree.indent(tree, space="  ")
-    text = etree.tostring(tree, xml_declaration=True, encoding="utf-8").decode("utf-8")
-    urdf.write_text(text.replace("--><robot", "-->\n<robot") + "\n", encoding="utf-8")
-
-
 def make(robot: str, meshes: Path) -> None:
     """Write one robot's shapes and rewrite its URDF; print what they are."""
-    out_dir = HERE / robot / "collision"
-    out_dir.mkdir(exist_ok=True)
-    for old in out_dir.glob("*.obj"):
-        old.unlink()
-    files: dict[str, list[str]] = {}
     print(f"{robot}:")
-    for link, mesh in reference_meshes(robot, meshes).items():
-        pieces = convex_cover(mesh, **{**SETTINGS, **ROBOT_SETTINGS.get(robot, {})})
-        reach = overshoot(pieces, mesh, samples=3000)
-        for k, piece in enumerate(pieces):
-            path = f"collision/{link}_{k}.obj"
-            piece.write_obj(
-                HERE / robot / path,
-                f"{robot} {link}: convex piece {k + 1} of {len(pieces)}, link frame, metres.\n"
-                f"Computed by robots/make_shapes.py from the reference collision mesh; see README.md.",
-            )
-            files.setdefault(link, []).append(path)
-        faces = ", ".join(f"{p.plane_count} faces/{len(p.faces)} triangles" for p in pieces)
-        print(f"  {link:12} {len(pieces)} piece(s): {faces}; {reach * 1e3:.1f} mm beyond the mesh at most")
-    rewrite_urdf(HERE / robot / "robot.urdf", files)
+    shapes = make_link_shapes(
+        reference_meshes(robot, meshes),
+        HERE / robot,
+        robot,
+        "the reference collision mesh by robots/make_shapes.py",
+        **ROBOT_SETTINGS.get(robot, {}),
+    )
+    for s in shapes:
+        faces = ", ".join(f"{p.plane_count} faces/{len(p.faces)} triangles" for p in s.pieces)
+        print(
+            f"  {s.link:12} {len(s.pieces)} piece(s): {faces}; {max(s.outside_m, 0.0) * 1e3:.1f} mm of the "
+            f"mesh outside, {s.overshoot_m * 1e3:.1f} mm beyond the mesh at most"
+        )
+    rewrite_urdf(HERE / robot / "robot.urdf", {s.link: s.files for s in shapes})
 
 
 def main() -> None:

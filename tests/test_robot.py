@@ -78,8 +78,10 @@ def _from_deg(*angles: float) -> np.ndarray:
 # ---- registry and folder layout ---------------------------------------------------------------
 
 
-def test_registry_lists_the_four_robots():
-    assert available_robots() == NAMES
+def test_registry_lists_the_bundled_robots():
+    # the four described here, and the two imported from their support packages
+    # (tests/test_robot_descriptions.py)
+    assert available_robots() == sorted([*NAMES, "fanuc_m20ia", "motoman_gp12"])
 
 
 @pytest.mark.parametrize("name", NAMES)
@@ -151,8 +153,8 @@ def test_spec_rejects_inverted_limits_and_unknown_controller(robots):
     kwargs = {k: getattr(spec, k) for k in spec.__dataclass_fields__}
     with pytest.raises(InputError, match="lower limit"):
         RobotSpec(**{**kwargs, "lower": spec.upper, "upper": spec.lower})
-    with pytest.raises(InputError, match="controller 'fanuc' is not one of abb, kuka, ur"):
-        RobotSpec(**{**kwargs, "controller": "fanuc"})
+    with pytest.raises(InputError, match="controller 'staubli' is not one of abb, kuka, ur, fanuc, yaskawa"):
+        RobotSpec(**{**kwargs, "controller": "staubli"})
     with pytest.raises(InputError, match="velocity must be 6"):
         RobotSpec(**{**kwargs, "velocity": spec.velocity[:3]})
 

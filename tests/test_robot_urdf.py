@@ -101,8 +101,8 @@ def test_overrides_and_bad_values_name_the_key_and_unit():
         refine.Robot.from_urdf(URDF, controller="kuka", joint_upper_deg=[10, 20])
     with pytest.raises(refine.InputError, match="no frame 'flange_tip'.*tool0"):
         refine.Robot.from_urdf(URDF, controller="kuka", flange_frame="flange_tip")
-    with pytest.raises(refine.InputError, match="controller 'fanuc' is not one of"):
-        refine.Robot.from_urdf(URDF, controller="fanuc")
+    with pytest.raises(refine.InputError, match="controller 'staubli' is not one of"):
+        refine.Robot.from_urdf(URDF, controller="staubli")
 
 
 def kr8_problem(folder: Path) -> Path:

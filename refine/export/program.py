@@ -68,13 +68,17 @@ def as_passes(
 
 
 def home_joints(problem: Problem, robot: Any, q_first: Array) -> Array:
-    """The home joint position [rad], shape (n,): ``[robot] home_deg`` or the first waypoint's joints."""
+    """The home joint position [rad], URDF joints, shape (n,): ``[robot] home_deg`` or the first waypoint's.
+
+    ``home_deg`` holds the controller's joints (``RobotSpec.from_controller`` turns them into the
+    URDF's for a robot with a joint coupling, such as FANUC's J2/J3).
+    """
     home = problem.robot.home_deg
     if home is None:
         return np.asarray(q_first, dtype=float).copy()
     if len(home) != robot.nq:
         raise InputError(f"robot.home_deg has {len(home)} values; {robot.spec.name!r} has {robot.nq} joints")
-    return np.radians(np.asarray(home, dtype=float))
+    return np.radians(robot.spec.from_controller(np.asarray(home, dtype=float)))
 
 
 def wrist_axis(robot: Any) -> int:
@@ -234,3 +238,52 @@ def weld_end(problem: Problem, wait: Wait, switch: Switch) -> list[str]:
         wait(pr.postflow_s, "gas post-flow"),
         switch("gas", False, ""),
     ]
+
+
+def controller_base(robot: Any) -> Array:
+    """``T_root_controller`` (4, 4) [m]: the controller's position frame in the URDF's root link.
+
+    The frame is ``spec.controller_frame`` (ROS-Industrial's ``base``), which must be fixed to the
+    root; the identity when the robot names none.
+    """
+    name = getattr(robot.spec, "controller_frame", "")
+    if not name:
+        return np.eye(4)
+    fid = robot.frame_id(name)
+    if robot.model.frames[fid].parentJoint != 0:
+        raise InputError(
+            f"robot {robot.spec.name!r}: controller_frame {name!r} moves with a joint; it must be fixed to the base"
+        )
+    return robot.frame_pose(np.zeros(robot.nq), name)
+
+
+def arm_configuration(robot: Any, q: Array) -> tuple[Array, Array]:
+    """Which side of axis 1 the wrist is on and where the elbow is, for joint vectors ``q`` [rad] (N, 6).
+
+    The geometry comes from the model (link frames parallel to the base at zero, as in ``robots/``):
+    the wrist centre is the origin of joint 5, the shoulder of joint 2, the elbow of joint 3; the
+    frame of joint 1 turns with axis 1 and the arm points along its x axis at zero.
+
+    Returns:
+        ``behind`` (N,) bool: the wrist centre has a negative x in the frame of joint 1 (behind
+        axis 1); ``elbow_up`` (N,) bool: the elbow lies above the line from the shoulder to the
+        wrist centre, "above" along the axis of joint 1's frame z (up for a floor-mounted arm).
+    """
+    qs = np.atleast_2d(np.asarray(q, dtype=float))
+    if qs.shape[1] != 6 or robot.nq != 6:
+        raise InputError(
+            f"arm configuration needs a six-axis robot, got {robot.spec.name!r} with q {qs.shape}"
+        )
+    import pinocchio as pin
+
+    behind = np.zeros(len(qs), dtype=bool)
+    elbow_up = np.zeros(len(qs), dtype=bool)
+    for k, qk in enumerate(qs):
+        pin.forwardKinematics(robot.model, robot.data, qk)
+        a1 = robot.data.oMi[1]
+        p2, p3, wrist = (robot.data.oMi[i].translation for i in (2, 3, 5))
+        behind[k] = float((a1.rotation.T @ (wrist - a1.translation))[0]) < 0.0
+        line = (wrist - p2) / max(float(np.linalg.norm(wrist - p2)), 1e-12)
+        up = a1.rotation[:, 2] - float(np.dot(a1.rotation[:, 2], line)) * line
+        elbow_up[k] = float(np.dot(p3 - p2, up)) > 0.0
+    return behind, elbow_up

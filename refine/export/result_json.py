@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from refine.export.program import controller_base
 from refine.robot.registry import PACKAGED_ROBOTS
 from refine.run.outputs import describe_files
 
@@ -101,6 +102,8 @@ def result_dict(result: RunResult) -> dict[str, Any]:
             "base_in_world": np.asarray(problem.robot.base_in_world).tolist(),
             "joint_lower_rad": spec.lower.tolist(),
             "joint_upper_rad": spec.upper.tolist(),
+            "joint_coupling": spec.joint_coupling,
+            "controller_in_base": controller_base(result.robot).tolist(),
         },
         "tool": {
             "name": problem.tool.name,

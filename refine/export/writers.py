@@ -8,6 +8,7 @@ URScript) or one RAPID module per pass.
 from __future__ import annotations
 
 import logging
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -74,11 +75,13 @@ def write_outputs(result: RunResult, out_dir: Path, programs: tuple[str, ...]) -
     problem, name = result.problem, result.problem.file_stem
     trajectories = [p.trajectory for p in done if p.trajectory is not None]
     outputs: dict[str, Path] = {}
+    spec = result.robot.spec
+    controller = [replace(t, q=spec.to_controller(t.q)) for t in trajectories]  # the joints the pendant shows
     if len(trajectories) == 1:
-        outputs["trajectory"] = write_trajectory_csv(out_dir / "trajectory.csv", trajectories[0])
+        outputs["trajectory"] = write_trajectory_csv(out_dir / "trajectory.csv", controller[0])
         outputs["pathml"] = write_pathml(out_dir / f"{name}.aml", trajectories[0], problem)
     else:
-        for k, (p, t) in enumerate(zip(done, trajectories, strict=True), start=1):
+        for k, (p, t) in enumerate(zip(done, controller, strict=True), start=1):
             outputs[f"trajectory_{k}"] = write_trajectory_csv(
                 out_dir / f"trajectory_L{p.layer}P{p.index}.csv", t
             )
@@ -129,6 +132,16 @@ def write_outputs(result: RunResult, out_dir: Path, programs: tuple[str, ...]) -
                 problem,
                 result.robot,
                 passes=named,
+            )
+        elif kind == "tp":
+            from refine.export.tp import write_tp
+
+            outputs["tp"] = write_tp(out_dir / f"{name}.ls", trajectories[0], problem, result.robot, passes=named)
+        elif kind == "inform":
+            from refine.export.inform import write_inform
+
+            outputs["inform"] = write_inform(
+                out_dir / f"{name}.JBI", trajectories[0], problem, result.robot, passes=named
             )
         elif kind == "sunrise":
             from refine.export.sunrise import write_sunrise

@@ -42,7 +42,7 @@ from refine.optimise.verify import (
     Violation,
 )
 from refine.optimise.watch import iteration_watch
-from refine.optimise.waypoint import ROW_NAMES, singularity_function, waypoint_function
+from refine.optimise.waypoint import ROW_NAMES, interaction_rows, singularity_function, waypoint_function
 from refine.paths import FusedPath
 from refine.robot.model import Robot
 from refine.settings import Tolerances, check_solver
@@ -317,6 +317,8 @@ def build_refinement(
     weights = weights or Weights()
     active = active or ActiveSet()
     N, n = len(fused), robot.nq
+    held = interaction_rows(robot, N, math.radians(tolerances.joint_margin_deg), active.linear_rows)
+    active = active.union(ActiveSet(linear_rows=tuple(LinearRow(k, 0.0, *r) for k, *r in held)))
     if N < 3:
         raise InputError(f"refinement needs at least 3 waypoints, got {N}")
     if solver == "fatrop":

@@ -14,6 +14,7 @@ import numpy as np
 
 from refine.frames import rotation_angle_deg
 from refine.paths import FusedPath
+from refine.robot.coupling import interaction_rows
 from refine.robot.kinematics import TcpKinematics
 from refine.settings import Tolerances
 from refine.types import Array
@@ -60,7 +61,8 @@ class PathCheck:
         position_error_m: |TCP - CAD point| [m], shape (N,).
         orientation_deviation_deg: angle to the demonstrated orientation (tool axis only for an
             axisymmetric tool) [deg], shape (N,).
-        joint_margin_rad: distance of each waypoint's closest joint to its limit [rad], shape (N,).
+        joint_margin_rad: distance of each waypoint's closest joint to its limit (or to an interaction
+            limit of the controller's joints) [rad], shape (N,).
         singularity: scaled manipulability sqrt(det(Js Jsᵀ)) [-], shape (N,).
         sigma_min: smallest singular value of the scaled Jacobian [-], shape (N,).
         singularity_between: smallest scaled manipulability inside each segment, joints
@@ -157,7 +159,9 @@ def check_path(
         ori = rotation_angle_deg(fused.rotations, poses[:, :3, :3])
     spec = kin.robot.spec
     margins = np.minimum(q - spec.lower, spec.upper - q)
-    joint_margin = margins.min(axis=1)
+    A, lower, upper = interaction_rows(spec.joint_coupling, spec.joint_interaction, q.shape[1])
+    inter = np.minimum(q @ A.T - lower, upper - q @ A.T)  # (N, m): the controller's interaction limits
+    joint_margin = np.minimum(margins.min(axis=1), inter.min(axis=1, initial=np.inf))
     sing, smin = singularity_measures(kin, q)
 
     s = fused.s
@@ -175,6 +179,8 @@ def check_path(
     margin = math.radians(tolerances.joint_margin_deg) - 1e-7
     for j in range(q.shape[1]):
         add(margins[:, j] < margin, f"joint limit (joint {j + 1})", margins[:, j], "rad", margin, False)
+    for i, it in enumerate(spec.joint_interaction):
+        add(inter[:, i] < margin, f"joint limit ({it.label})", inter[:, i], "rad", margin, False)
     steps = np.abs(np.diff(q, axis=0))
     step_limit = math.radians(tolerances.joint_step_deg) + 1e-9
     for j in range(q.shape[1]):

@@ -6,6 +6,9 @@ cost (:func:`waypoint_function`) and the singularity measure (:func:`singularity
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Any
+
 import casadi as ca
 
 from refine.optimise.kinematics import fk_function, jacobian_function
@@ -53,3 +56,35 @@ def singularity_function(robot: Robot, base_in_world: Array, tcp_in_flange: Arra
     Js = ca.vertcat(J[:3, :] / robot.spec.reach_m, J[3:, :])
     w = ca.sqrt(ca.det(ca.mtimes(Js, Js.T)) + 1e-12)
     return ca.Function("singularity", [q], [w], ["q"], ["w"])
+
+
+INTERACTION_LABEL = "interaction limit"
+"""Label prefix of the rows that keep a robot's joint interaction limits at every waypoint."""
+
+
+def interaction_rows(
+    robot: Robot, N: int, margin_rad: float, held: Sequence[Any] = ()
+) -> list[tuple[int, Array, float, str]]:
+    """Rows ``g·q_k >= lower`` that keep the robot's joint interaction limits at every waypoint.
+
+    Each limit ``lower <= a·q <= upper`` on the URDF joints (:func:`refine.robot.coupling.interaction_rows`,
+    from the controller's limits such as FANUC's J2/J3 interaction) gives two rows per waypoint,
+    ``a·q >= lower + margin`` and ``-a·q >= -(upper - margin)``; a linear constraint held at the
+    waypoints holds on the straight joint segments between them.
+
+    Returns:
+        (waypoint k, gradient (n,), lower bound, label) of each row; empty without limits or when
+        ``held`` (the rows a problem already has, with a ``label``) holds them already.
+    """
+    if any(str(getattr(r, "label", "")).startswith(INTERACTION_LABEL) for r in held):
+        return []
+    from refine.robot.coupling import interaction_rows as limits
+
+    spec = robot.spec
+    A, lower, upper = limits(spec.joint_coupling, spec.joint_interaction, robot.nq)
+    out = []
+    for a, lo, hi, it in zip(A, lower, upper, spec.joint_interaction, strict=True):
+        label = f"{INTERACTION_LABEL}: {it.label}"
+        for k in range(N):
+            out += [(k, a, float(lo) + margin_rad, label), (k, -a, -(float(hi) - margin_rad), label)]
+    return out

@@ -75,17 +75,25 @@ def pass_panels(result: RunResult, p: PassResult) -> dict[str, Any]:
         ]
     }
 
-    q = np.degrees(p.refinement.q)
+    q_urdf = p.refinement.q
+    q = np.degrees(spec.to_controller(q_urdf))  # the joints as the controller shows them
     lines = []
     for j in range(q.shape[1]):
         colour = JOINT_COLOURS[j % len(JOINT_COLOURS)]
         lines.append(_line(f"q{j + 1}", s, q[:, j], colour=colour, group=f"q{j + 1}"))
         for bound, label in ((spec.lower[j], "min"), (spec.upper[j], "max")):
             if abs(bound) < 4 * math.pi:
-                lines.append(
-                    _flat(f"q{j + 1} {label}", s, math.degrees(bound), colour, "dot", legend=False)
-                    | {"group": f"q{j + 1}"}
-                )
+                at_bound = q_urdf.copy()
+                at_bound[:, j] = bound
+                moving = np.degrees(spec.to_controller(at_bound)[:, j])  # a coupled joint's limit moves
+                style = {"colour": colour, "dash": "dot", "legend": False, "group": f"q{j + 1}"}
+                if np.ptp(moving) > 1e-9:
+                    lines.append(_line(f"q{j + 1} {label}", s, moving, **style))
+                else:
+                    lines.append(
+                        _flat(f"q{j + 1} {label}", s, float(moving[0]), colour, "dot", legend=False)
+                        | {"group": f"q{j + 1}"}
+                    )
     panels["joints"] = {"lines": lines}
 
     if p.timing is None:

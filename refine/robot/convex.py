@@ -114,6 +114,11 @@ def _qhull(points: ArrayLike) -> trimesh.Trimesh:
         raise InputError(f"convex hull: need (N >= 4, 3) points [m], got shape {p.shape}")
     try:
         hull = trimesh.convex.convex_hull(p)
+        if not hull.is_watertight:
+            # trimesh's repair drops sliver triangles (near-coplanar corners), opening the surface;
+            # qhull's own triangles are closed: keep them all, wound outward
+            hull = trimesh.convex.convex_hull(p, repair=False)
+            trimesh.repair.fix_normals(hull, multibody=False)
     except Exception as e:  # qhull raises its own error types for flat or degenerate input
         raise InputError(f"convex hull of {len(p)} points failed (all in one plane?): {e}") from e
     if hull.volume <= 0.0:

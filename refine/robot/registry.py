@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from refine.errors import InputError
+from refine.robot.coupling import interactions_from_toml
 from refine.robot.model import Robot, robot_from_urdf
 from refine.robot.spec import RobotSpec, build_model, read_registry_toml
 from refine.robot.urdf import with_overrides
@@ -90,6 +91,11 @@ def _load_robot(name: str, root: str) -> Robot:
         controller=str(meta["controller"]),
         model=str(meta["model"]),
         program=str(meta.get("program", "")),
+        joint_coupling=str(meta.get("joint_coupling", "")),
+        controller_frame=str(meta.get("controller_frame", "")),
+        joint_interaction=interactions_from_toml(
+            meta.get("joint_interaction", []), model.nq, str(folder / "robot.toml")
+        ),
     )
     if model.nq != spec.dof:
         raise InputError(
@@ -108,6 +114,7 @@ def robot_for(settings: RobotSettings) -> Robot:
             str(path),
             stamp,
             settings.controller or "",
+            tuple(settings.packages),
             settings.flange_frame,
             settings.model or None,
             settings.reach_m,
@@ -125,6 +132,7 @@ def _urdf_robot(
     urdf: str,
     stamp: int,
     controller: str,
+    packages: tuple[tuple[str, Path], ...],
     flange_frame: str,
     name: str | None,
     reach_m: float | None,
@@ -136,6 +144,7 @@ def _urdf_robot(
     return robot_from_urdf(
         urdf,
         controller=controller,
+        packages=dict(packages),
         flange_frame=flange_frame,
         name=name,
         reach_m=reach_m,

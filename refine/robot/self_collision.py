@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import itertools
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import fcl
@@ -41,6 +41,8 @@ log = logging.getLogger(__name__)
 REASONS = ("adjacent", "always", "never", "maker")
 NEVER_M = 0.01
 """A pair is disabled as ``"never"`` when no sample brings it closer than this [m]."""
+MAKER_FRACTION = 0.2
+"""Share of samples in contact on the maker's meshes from which a pair is disabled as ``"maker"``."""
 
 
 @dataclass(frozen=True)
@@ -123,6 +125,67 @@ def sample_matrix(robot, samples: int, seed: int, never_m: float = NEVER_M) -> l
         reason = "always" if contacts[(a, b)] == samples else "never" if least[(a, b)] > never_m else ""
         out.append(PairStats((a, b), reason, float(least[(a, b)]), fraction))
     return out
+
+
+def maker_contacts(
+    robot,  # noqa: ANN001 - Robot
+    reference_urdf: str | Path,
+    samples: int,
+    seed: int,
+    package_dirs: tuple[str, ...] = (),
+) -> dict[frozenset[str], float]:
+    """Per pair of the robot's links, the share of random configurations where the maker's meshes touch.
+
+    The maker's meshes are the ``<collision>`` meshes of ``reference_urdf`` (loaded with Pinocchio,
+    relative names found in ``package_dirs``), whose joints are in the robot's order.
+    """
+    import trimesh
+
+    from refine.robot.shapes import joint_links
+
+    ref, geometry, _ = pin.buildModelsFromUrdf(str(reference_urdf), package_dirs=list(package_dirs))
+    links = joint_links(Path(robot.spec.urdf))
+    link_of = {k: links[robot.model.names[g.parentJoint]] for k, g in enumerate(geometry.geometryObjects)}
+    models = []
+    for g in geometry.geometryObjects:
+        mesh = trimesh.load(g.meshPath, force="mesh")
+        bvh = fcl.BVHModel()
+        bvh.beginModel(len(mesh.vertices), len(mesh.faces))
+        bvh.addSubModel(np.asarray(mesh.vertices) * np.asarray(g.meshScale), np.asarray(mesh.faces))
+        bvh.endModel()
+        models.append(bvh)
+    data, gdata = ref.createData(), geometry.createData()
+    count: dict[frozenset[str], int] = {}
+    for q in np.random.default_rng(seed).uniform(
+        robot.spec.lower, robot.spec.upper, size=(samples, robot.nq)
+    ):
+        pin.forwardKinematics(ref, data, q)
+        pin.updateGeometryPlacements(ref, data, geometry, gdata)
+        objects = [
+            fcl.CollisionObject(m, fcl.Transform(gdata.oMg[k].rotation, gdata.oMg[k].translation))
+            for k, m in enumerate(models)
+        ]
+        for a in range(len(models)):
+            for b in range(a + 1, len(models)):
+                if link_of[a] != link_of[b] and fcl.collide(
+                    objects[a], objects[b], fcl.CollisionRequest(), fcl.CollisionResult()
+                ):
+                    pair = frozenset((link_of[a], link_of[b]))
+                    count[pair] = count.get(pair, 0) + 1
+    return {pair: n / samples for pair, n in count.items()}
+
+
+def with_maker(
+    stats: list[PairStats], maker: dict[frozenset[str], float], fraction: float = MAKER_FRACTION
+) -> list[PairStats]:
+    """``stats`` with each checked pair disabled as ``"maker"`` whose maker's meshes touch often.
+
+    Often: at ``fraction`` of the samples of :func:`maker_contacts` or more.
+    """
+    return [
+        replace(s, reason="maker") if not s.reason and maker.get(frozenset(s.links), 0.0) >= fraction else s
+        for s in stats
+    ]
 
 
 def write_matrix(

@@ -17,6 +17,7 @@ import pinocchio as pin
 from numpy.typing import NDArray
 
 from refine.errors import InputError
+from refine.robot.coupling import JointInteraction, check_coupling, from_controller, to_controller
 
 try:
     import tomllib
@@ -26,16 +27,22 @@ except ModuleNotFoundError:  # Python 3.10
 logger = logging.getLogger(__name__)
 
 
-CONTROLLERS = ("abb", "kuka", "ur")
+CONTROLLERS = ("abb", "kuka", "ur", "fanuc", "yaskawa")
 
 
-DEFAULT_PROGRAM = {"abb": "rapid", "kuka": "krl", "ur": "urscript"}
+DEFAULT_PROGRAM = {"abb": "rapid", "kuka": "krl", "ur": "urscript", "fanuc": "tp", "yaskawa": "inform"}
 """The program format a controller family runs unless the robot names another (``program`` in
 ``robot.toml``): KUKA's KR C controllers run KRL, the LBR iiwa's Sunrise cabinet runs Sunrise Java."""
 
 
-PROGRAMS = {"abb": ("rapid",), "kuka": ("krl", "sunrise"), "ur": ("urscript",)}
-"""The program formats a controller family can run."""
+PROGRAMS = {
+    "abb": ("rapid",),
+    "kuka": ("krl", "sunrise"),
+    "ur": ("urscript",),
+    "fanuc": ("tp",),
+    "yaskawa": ("inform",),
+}
+"""The program formats a controller family can run (FANUC R-30iB: TP ``.ls``; Yaskawa YRC/DX: INFORM ``.JBI``)."""
 
 
 SELF_COLLISION_FILE = "self_collision.toml"
@@ -56,7 +63,7 @@ _TOML_KEYS = frozenset(
 )
 
 
-_TOML_OPTIONAL = frozenset({"program"})
+_TOML_OPTIONAL = frozenset({"program", "joint_coupling", "joint_interaction", "controller_frame"})
 
 
 @dataclass(frozen=True, eq=False)
@@ -78,6 +85,13 @@ class RobotSpec:
         model: the maker's model designation, e.g. ``"IRB 4600-60/2.05"``.
         program: the program format the robot's controller runs (``robot.toml``); ``""`` for the
             controller family's :data:`DEFAULT_PROGRAM` (see :attr:`default_program`).
+        joint_coupling: how the controller counts the joints where it differs from the URDF, one
+            of :data:`refine.robot.coupling.JOINT_COUPLINGS` (``"fanuc_j2_j3"``); ``""`` when the
+            controller's joints are the URDF's.
+        joint_interaction: linear limits on the controller's joints (FANUC's J2/J3 interaction
+            limit), :class:`refine.robot.coupling.JointInteraction`; kept by the optimisation.
+        controller_frame: the URDF frame the controller measures positions in (ROS-Industrial's
+            ``base``: FANUC's world frame, Yaskawa's robot frame); ``""`` for the URDF's root link.
     """
 
     name: str
@@ -93,6 +107,9 @@ class RobotSpec:
     controller: str
     model: str = ""
     program: str = ""
+    joint_coupling: str = ""
+    joint_interaction: tuple[JointInteraction, ...] = ()
+    controller_frame: str = ""
 
     def __post_init__(self) -> None:
         n = len(self.joint_names)
@@ -121,6 +138,20 @@ class RobotSpec:
                 f"robot {self.name!r}: program {self.program!r} does not run on a {self.controller} "
                 f"controller; use one of {', '.join(PROGRAMS[self.controller])}"
             )
+        check_coupling(self.joint_coupling, n, f"robot {self.name!r}")
+        for it in self.joint_interaction:
+            if len(it.coefficients) != n:
+                raise InputError(
+                    f"robot {self.name!r}: {it.label} has {len(it.coefficients)} coefficients for {n} joints"
+                )
+
+    def to_controller(self, q: Any) -> NDArray[np.float64]:
+        """URDF joints (..., n) as the robot's controller shows them (same unit): :attr:`joint_coupling`."""
+        return to_controller(self.joint_coupling, q)
+
+    def from_controller(self, q_controller: Any) -> NDArray[np.float64]:
+        """The controller's joints (..., n) as URDF joints (same unit); inverse of :meth:`to_controller`."""
+        return from_controller(self.joint_coupling, q_controller)
 
     @property
     def default_program(self) -> str:

@@ -1,6 +1,7 @@
 """A robot's spec and kinematic model read straight from its URDF, and per-problem limit overrides.
 
-:func:`read_urdf` reads any URDF of a serial arm with revolute or prismatic joints into a
+:func:`read_urdf` reads any URDF or xacro (expanded, ROS packages found, by
+:mod:`refine.robot.description`) of a serial arm with revolute or prismatic joints into a
 :class:`~refine.robot.spec.RobotSpec` and a Pinocchio model: the kinematics and the joint limits and
 speeds from the URDF's ``<joint>``/``<limit>``, the program language from the controller family
 (the collision geometry is read by :class:`~refine.robot.model.Robot` from the same file's
@@ -13,7 +14,8 @@ problem's joint-limit and speed overrides to a spec. This module knows no ``Robo
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import logging
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -21,8 +23,12 @@ import numpy as np
 import pinocchio as pin
 
 from refine.errors import InputError
+from refine.robot.description import resolve_description
+from refine.robot.reach import wrist_centre_reach
 from refine.robot.spec import RobotSpec, build_model
 from refine.types import Array
+
+logger = logging.getLogger(__name__)
 
 DEFAULT_ACCELERATION_TIME_S = 1.0
 """Without acceleration limits, a joint's limit is its speed limit divided by this [s]: full speed
@@ -33,6 +39,7 @@ def read_urdf(
     urdf: str | Path,
     *,
     controller: str,
+    packages: Mapping[str, str | Path] | None = None,
     flange_frame: str = "tool0",
     name: str | None = None,
     maker: str = "",
@@ -46,15 +53,19 @@ def read_urdf(
     """A robot's spec and Pinocchio model read from its URDF file (not from the registry).
 
     Args:
-        urdf: the URDF file; mesh files of ``<collision>`` elements are relative to its folder.
+        urdf: the URDF or xacro file; mesh files of ``<collision>`` elements are relative to its
+            folder or ``package://`` URLs (expanded by :func:`refine.robot.description.resolve_description`).
         controller: the controller family, one of :data:`refine.robot.spec.CONTROLLERS` (``"abb"``,
-            ``"kuka"``, ``"ur"``): it sets the program language.
+            ``"kuka"``, ``"ur"``, ``"fanuc"``, ``"yaskawa"``): it sets the program language.
+        packages: ROS package name -> folder, for packages not found beside the description.
         flange_frame: the URDF frame (link) the tool is mounted on.
         name: the robot's name in outputs; None for the URDF's ``<robot name>``.
         maker: the manufacturer, for reports.
         model: the maker's model designation, for reports.
-        reach_m: reach [m] that scales the singularity measure; None for the length of the chain
-            from the second joint to the flange with every joint at zero (the arm stretched).
+        reach_m: reach [m] that scales the singularity measure; None for the reach as the makers
+            quote it, the wrist centre's largest distance from axis 1
+            (:func:`refine.robot.reach.wrist_centre_reach`), or, for a chain whose first joint is
+            not revolute, the length of the chain from the second joint to the flange at zero.
         joint_acceleration_deg_s2: per-joint acceleration limits [deg/s^2]; None for the speed
             limits over :data:`DEFAULT_ACCELERATION_TIME_S`.
         joint_lower_deg: per-joint lower limits [deg] instead of the URDF's.
@@ -66,7 +77,8 @@ def read_urdf(
             one degree of freedom or no speed limit, an override has the wrong length, or the
             controller is unknown; the message names the value and its unit.
     """
-    path = Path(urdf).resolve()
+    source = Path(urdf).resolve()
+    path = resolve_description(source, packages)
     pin_model = build_model(path)
     joints = tuple(pin_model.names[j] for j in range(1, pin_model.njoints))
     if pin_model.nq != len(joints) or pin_model.nv != len(joints):
@@ -85,7 +97,7 @@ def read_urdf(
             "give joint_velocity_deg_s [deg/s]"
         )
     spec = RobotSpec(
-        name=name or urdf_robot_name(path),
+        name=name or urdf_robot_name(source),
         maker=maker,
         urdf=path,
         flange_frame=flange_frame,
@@ -94,7 +106,7 @@ def read_urdf(
         upper=np.array(pin_model.upperPositionLimit, dtype=float),
         velocity=np.where(velocity > 0.0, velocity, 1.0),  # replaced below when missing
         acceleration=np.ones(len(joints)),  # set below
-        reach_m=float(reach_m) if reach_m is not None else _stretched_length(pin_model, flange_frame),
+        reach_m=float(reach_m) if reach_m is not None else _reach(pin_model, flange_frame),
         controller=controller,
         model=model,
     )
@@ -116,6 +128,15 @@ def urdf_robot_name(path: str | Path) -> str:
         return str(etree.parse(str(path)).getroot().get("name") or path.stem)
     except (OSError, etree.XMLSyntaxError) as e:
         raise InputError(f"cannot read URDF {path}: {e}") from e
+
+
+def _reach(pin_model, flange_frame: str) -> float:  # noqa: ANN001 - pinocchio.Model
+    """The wrist centre's reach, or the stretched chain where axis 1 is no revolute joint [m]."""
+    try:
+        return wrist_centre_reach(pin_model, flange_frame)
+    except InputError as e:
+        logger.warning("%s: the reach is the stretched chain's length instead", e)
+        return _stretched_length(pin_model, flange_frame)
 
 
 def _stretched_length(pin_model, flange_frame: str) -> float:  # noqa: ANN001 - pinocchio.Model

@@ -5,9 +5,11 @@ robot or the output folder. :func:`preflight` finds those mistakes before the so
 spends minutes and then refuses to write:
 
 * the program formats exist and the robot's controller runs them (RAPID: ABB, KRL: the KUKA KR
-  arms, Sunrise: the KUKA LBR iiwa, URScript: Universal Robots);
+  arms, Sunrise: the KUKA LBR iiwa, URScript: Universal Robots, TP: FANUC, INFORM: Yaskawa);
 * ``process.output`` is a signal each of those programs can switch (a RAPID signal name, a KRL
-  ``$OUT[n]`` with n in 1..4096, a UR standard output 0..7);
+  ``$OUT[n]`` with n in 1..4096, a UR standard output 0..7, a FANUC ``DO[n]`` with n in 1..512, a
+  Yaskawa ``OT#(n)`` with n in 1..4096); TP needs a six-axis arm, a user frame 1..9 and a tool frame
+  1..10, INFORM a six-axis arm and a tool file 0..63;
 * ``robot.home_deg`` and ``robot.joint_acceleration_deg_s2`` have one value per joint;
 * the output folder is a folder (or can be made one), and no output would overwrite an input file.
 """
@@ -97,10 +99,34 @@ def check_output_signal(kind: str, output: str) -> None:
         from refine.export.urscript import ur_output_number
 
         ur_output_number(output)  # raises outside 0..7; a name maps to the default
+    if kind == "tp":
+        from refine.export.tp import fanuc_io_number
+
+        fanuc_io_number(output, "DO", 1)  # raises outside DO[1..512]; a name maps to the default
+    if kind == "inform":
+        from refine.export.inform import yaskawa_io_number
+
+        yaskawa_io_number(output, "OT", 1)  # raises outside OT#(1..4096); a name maps to the default
     if kind == "sunrise":
         from refine.export.sunrise import sunrise_signal
 
         sunrise_signal(output)  # raises unless "<I/O group>.<signal>"
+
+
+def check_arm_programs(problem: Problem, robot: Robot, programs: tuple[str, ...]) -> None:
+    """TP and INFORM: a six-axis arm, and frame and tool numbers the controller has."""
+    for kind in ("tp", "inform"):
+        if kind in programs and robot.nq != 6:
+            raise InputError(f"program format {kind!r} is for six-axis arms; robot {robot.spec.name!r} has {robot.nq}")
+    if "tp" in programs:
+        from refine.export.tp import MAX_UFRAME, MAX_UTOOL
+
+        if not 1 <= problem.frames.base_number <= MAX_UFRAME:
+            raise InputError(
+                f"frames.base_number = {problem.frames.base_number}: a FANUC user frame is 1..{MAX_UFRAME}"
+            )
+        if not 1 <= problem.tool.number <= MAX_UTOOL:
+            raise InputError(f"tool.number = {problem.tool.number}: a FANUC tool frame is 1..{MAX_UTOOL}")
 
 
 def check_joint_lists(problem: Problem, n_joints: int, robot_name: str) -> None:
@@ -132,6 +158,14 @@ def planned_outputs(problem: Problem, programs: tuple[str, ...], report: bool = 
             names += [f"{prog}.src", f"{prog}.dat"]
         elif kind == "urscript":
             names.append(f"{stem}.script")
+        elif kind == "tp":
+            from refine.export.tp import tp_file_name
+
+            names.append(tp_file_name(stem))
+        elif kind == "inform":
+            from refine.export.inform import inform_file_name
+
+            names.append(inform_file_name(stem))
         elif kind == "sunrise":
             from refine.export.sunrise import class_name
 
@@ -208,6 +242,7 @@ def preflight(
                 f"program format 'sunrise' is for the seven-axis KUKA LBR, but robot {robot.spec.name!r} has "
                 f"{robot.nq} axes; use krl"
             )
+        check_arm_programs(problem, robot, programs)
     except InputError as e:
         raise InputError(f"{where}{e}") from e
     try:

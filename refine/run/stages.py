@@ -162,7 +162,7 @@ def refine_pass(
     if nlp is None:
         nlp = refinement_for(problem, robot, fused)
     watch.lap("build")
-    home = None if problem.robot.home_deg is None else np.radians(problem.robot.home_deg)
+    home = None if problem.robot.home_deg is None else np.radians(robot.spec.from_controller(problem.robot.home_deg))
     refinement = solve_refinement(
         nlp,
         q0,

@@ -41,9 +41,12 @@ class RobotSettings:
             robot's default, or None.
         velocity_scale: fraction of the data-sheet joint speeds the plan may use, in (0, 1].
         home_deg: a preferred joint configuration [deg] to start the IK seed from, or None.
-        urdf: a robot outside the registry: its URDF file (absolute path), or None.
+        urdf: a robot outside the registry: its URDF or xacro file (absolute path), or None.
+        packages: with ``urdf``: ROS package name -> folder (absolute path), for the packages its
+            ``$(find pkg)`` and ``package://pkg/`` name that are not found beside it.
         flange_frame: with ``urdf``: the frame the tool is mounted on.
-        controller: with ``urdf``: the controller family (``"abb"``, ``"kuka"``, ``"ur"``).
+        controller: with ``urdf``: the controller family (``"abb"``, ``"kuka"``, ``"ur"``,
+            ``"fanuc"``, ``"yaskawa"``).
         reach_m: with ``urdf``: the reach [m] scaling the singularity measure (default: the
             chain from the second joint to the flange, stretched).
         joint_lower_deg: per-joint lower limits [deg] in place of the robot's, or None.
@@ -57,6 +60,7 @@ class RobotSettings:
     velocity_scale: float = 1.0
     home_deg: tuple[float, ...] | None = None
     urdf: Path | None = None
+    packages: tuple[tuple[str, Path], ...] = ()
     flange_frame: str = "tool0"
     controller: str | None = None
     reach_m: float | None = None
@@ -68,9 +72,13 @@ class RobotSettings:
         if self.urdf is None and not self.model:
             raise InputError("[robot] needs model (a registry robot) or urdf (a robot's URDF file)")
         if self.urdf is not None and self.controller is None:
-            raise InputError('[robot] a robot from its URDF needs controller ("abb", "kuka" or "ur")')
-        if self.urdf is None and (self.controller is not None or self.reach_m is not None):
-            raise InputError("[robot] controller and reach_m go with urdf (a registry robot has its own)")
+            raise InputError(
+                '[robot] a robot from its URDF needs controller ("abb", "kuka", "ur", "fanuc" or "yaskawa")'
+            )
+        if self.urdf is None and (self.controller is not None or self.reach_m is not None or self.packages):
+            raise InputError(
+                "[robot] controller, reach_m and packages go with urdf (a registry robot has its own)"
+            )
         if self.reach_m is not None:
             positive("robot", "reach_m", self.reach_m)
         for a in self.joint_velocity_deg_s or ():

@@ -17,7 +17,7 @@ Matrix4 = np.ndarray
 
 CAD_FORMATS = ("csv", "dxf", "gcode", "mesh", "pathml")
 DEMO_FORMATS = ("liberty_ascii", "liberty_binary", "csv")
-PROGRAM_FORMATS = ("rapid", "krl", "urscript", "sunrise")
+PROGRAM_FORMATS = ("rapid", "krl", "urscript", "sunrise", "tp", "inform")
 URSCRIPT_MODES = ("program", "script_node")
 SHAPES = ("box", "cylinder", "sphere", "mesh")
 CAUSES = ("reach", "joint limit", "joint wrap", "singularity", "collision", "self-collision", "orientation")

@@ -308,6 +308,77 @@ def read_sunrise(path: Path, base_in_world: np.ndarray) -> ParsedProgram:
     return ParsedProgram("sunrise", (path.name,), passes, statements, facts)
 
 
+# ---- FANUC TP and Yaskawa INFORM ---------------------------------------------------------------
+
+
+def _fixed_xyz_pose(xyz_mm, angles_deg) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_euler("xyz", angles_deg, degrees=True).as_matrix()  # Rz·Ry·Rx
+    T[:3, 3] = np.asarray(xyz_mm, dtype=float) / 1000.0
+    return T
+
+
+def read_tp(path: Path) -> ParsedProgram:
+    """Parse a TP program; each pass's ``L`` path positions (in the user frame, the world {F}).
+
+    A pass starts at the ``J`` move to an approach point; its path is the ``L`` moves after it
+    without the last (the retract).
+    """
+    tree = parser("tp").parse(path.read_text(encoding="ascii"))
+    positions = {}
+    for p in tree.find_data("pdef"):
+        body = p.children[3]
+        if body.data == "cartesian":
+            xyz = [float(v) for v in body.children[1].children]
+            wpr = [float(v) for v in body.children[2].children]
+            positions[int(p.children[0])] = _fixed_xyz_pose(xyz, wpr)
+    passes, current, statements = [], None, []
+    for line in tree.find_data("line"):
+        st = line.children[1]
+        if isinstance(st, Token):
+            continue
+        statements.append(st.data)
+        if st.data == "motion":
+            kind, index = str(st.children[0]), int(st.children[1].children[0])
+            if kind == "J" and index in positions:
+                current = []
+                passes.append(current)
+            elif kind == "L" and current is not None:
+                current.append(positions[index])
+    parsed = [ParsedPass(moves[:-1]) for moves in passes if moves]
+    return ParsedProgram("tp", (path.name,), parsed, statements, {})
+
+
+def read_inform(path: Path, base_in_world: np.ndarray, controller_in_base: np.ndarray) -> ParsedProgram:
+    """Parse an INFORM job; each pass's ``MOVL`` positions (ROBOT frame) as TCP poses in {F}.
+
+    A pass starts at a ``MOVJ`` to a point other than the first (home); its path is the ``MOVL``
+    moves after it without the last (the retract).
+    """
+    tree = parser("inform").parse(path.read_text(encoding="ascii"))
+    T_world_robot = base_in_world @ controller_in_base
+    positions = {}
+    for c in tree.find_data("cvar"):
+        v = [float(x) for x in c.children[1:]]
+        positions[str(c.children[0])] = T_world_robot @ _fixed_xyz_pose(v[:3], v[3:])
+    body = next(tree.find_data("body"))
+    passes, current, statements, home = [], None, [], None
+    for st in body.children:
+        if isinstance(st, Token):
+            continue
+        statements.append(st.data)
+        if st.data == "movj":
+            name = str(st.children[0])
+            home = home or name
+            if name != home:
+                current = []
+                passes.append(current)
+        elif st.data == "movl" and current is not None:
+            current.append(positions[str(st.children[0])])
+    parsed = [ParsedPass(moves[:-1]) for moves in passes if moves]
+    return ParsedProgram("inform", (path.name,), parsed, statements, {})
+
+
 # ---- against trajectory.csv ---------------------------------------------------------------------
 
 
@@ -355,6 +426,10 @@ def read_programs(out: Path) -> list[tuple[ParsedProgram, list[tuple[float, floa
             programs.append(read_urscript(f, base))
         elif kind == "sunrise":
             programs.append(read_sunrise(f, base))
+        elif kind == "tp":
+            programs.append(read_tp(f))
+        elif kind == "inform":
+            programs.append(read_inform(f, base, np.array(doc["robot"]["controller_in_base"])))
     results = []
     rapid_k = 0
     for prog in programs:
