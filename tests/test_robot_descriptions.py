@@ -229,8 +229,14 @@ def test_the_imported_arms_cover_their_packages_meshes(name, macro, package):
     rng = np.random.default_rng(11)
     for q in [np.zeros(6), *rng.uniform(robot.spec.lower, robot.spec.upper, size=(3, 6))]:
         np.testing.assert_allclose(robot.fk(q), composed_fk(chain, q, "tool0"), atol=1e-6)
+    assert {"robot.urdf", "robot.toml", "README.md", "self_collision.toml"} <= {
+        p.name for p in (ROOT / "robots" / name).iterdir()
+    }
     pieces: dict[str, list[np.ndarray]] = {}
     for s in robot.collision_shapes():
+        # closed convex pieces of a few dozen planes (48 asked; a sliver triangle of qhull's may
+        # count as a plane of its own)
+        assert s.convex.mesh.is_watertight and s.convex.plane_count <= 50, f"{name} {s.name}"
         pieces.setdefault(s.link, []).append(
             s.convex.vertices @ s.link_T_shape[:3, :3].T + s.link_T_shape[:3, 3]
         )

@@ -5,7 +5,11 @@ the application.
 
 * :mod:`~refine.robot.spec`: :class:`RobotSpec` (the registry entry: limits, reach, controller
   family and program) and the controller families' facts; the Pinocchio model of a URDF.
-* :mod:`~refine.robot.urdf`: a spec and a model read from any URDF, and limit overrides.
+* :mod:`~refine.robot.urdf`: a spec and a model read from any URDF, and limit overrides;
+  :mod:`~refine.robot.description`: a xacro expanded and its ROS packages found;
+  :mod:`~refine.robot.reach`: the reach as the makers quote it.
+* :mod:`~refine.robot.importer`: a registry folder made from a ROS-Industrial support package
+  (``refine robots import``), its link shapes by :mod:`~refine.robot.shapes`.
 * :mod:`~refine.robot.model`: :class:`Robot`, the model with its collision shapes and
   self-collision matrix.
 * :mod:`~refine.robot.registry`: the robots of ``robots/`` by name, and the robot of a

@@ -56,11 +56,14 @@ class Robot:
         """A robot from its URDF file instead of the registry (:func:`refine.robot.urdf.robot_from_urdf`).
 
         Args:
-            urdf: the URDF file (collision meshes relative to its folder).
-            controller: the controller family (``"abb"``, ``"kuka"``, ``"ur"``): the program language.
+            urdf: the URDF or xacro file (collision meshes relative to its folder or
+                ``package://`` URLs, packages found beside it: :mod:`refine.robot.description`).
+            controller: the controller family (``"abb"``, ``"kuka"``, ``"ur"``, ``"fanuc"``,
+                ``"yaskawa"``): the program language.
             flange_frame: the frame the tool is mounted on.
-            **options: ``name``, ``maker``, ``model``, ``reach_m``, ``joint_acceleration_deg_s2``,
-                ``joint_lower_deg``, ``joint_upper_deg``, ``joint_velocity_deg_s``.
+            **options: ``packages`` (ROS package name -> folder), ``name``, ``maker``, ``model``,
+                ``reach_m``, ``joint_acceleration_deg_s2``, ``joint_lower_deg``, ``joint_upper_deg``,
+                ``joint_velocity_deg_s``.
         """
         return robot_from_urdf(urdf, controller=controller, flange_frame=flange_frame, **options)
 
