@@ -38,9 +38,7 @@ from refine.optimise.derivatives import (
 )
 from refine.optimise.stagewise import FATROP_PREFIX, StagewiseSolver, check_size, fatrop_options, stage_rows
 from refine.optimise.threads import limit_solver_threads
-from refine.optimise.verify import (
-    Violation,
-)
+from refine.optimise.verify import Violation
 from refine.optimise.watch import iteration_watch
 from refine.optimise.waypoint import ROW_NAMES, interaction_rows, singularity_function, waypoint_function
 from refine.paths import FusedPath
