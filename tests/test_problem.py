@@ -485,7 +485,8 @@ def test_programs_given_as_a_string_is_reported_with_the_value_written(problem_t
 
 
 # The language each arm's controller runs, from the makers' documentation: ABB IRC5 runs RAPID, the
-# KUKA KR C4 runs KRL, the LBR iiwa's Sunrise cabinet runs Sunrise Java, a UR e-Series runs URScript.
+# KUKA KR C4 runs KRL, the LBR iiwa's Sunrise cabinet runs Sunrise Java, a UR e-Series runs URScript,
+# a FANUC R-30iB runs TP, a Yaskawa YRC1000 runs INFORM.
 @pytest.mark.parametrize(
     ("bundled", "language"),
     [
@@ -493,6 +494,8 @@ def test_programs_given_as_a_string_is_reported_with_the_value_written(problem_t
         ("kr8_arc_weld", "krl"),
         ("tig_weld", "sunrise"),
         ("ur10e_sealing", "urscript"),
+        ("m20ia_arc_weld", "tp"),
+        ("gp12_arc_weld", "inform"),
     ],
 )
 def test_without_an_output_table_the_robot_gets_the_program_its_controller_runs(tmp_path, bundled, language):

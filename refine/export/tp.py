@@ -16,7 +16,8 @@ the reference for the ``TB``/``DB`` and ``$WAITTMOUT`` syntax) show it:
   (``[frames] base_number`` and ``[tool] number``).
 * Motion: ``J P[i] 20% FINE`` to the home position (joint representation ``J1= .. deg``, the
   controller's joints), ``J`` to an approach point ``retract_m`` behind the first path point along the
-  tool z axis, ``L P[i] <v>mm/sec CNT<c>`` through the path (speed in whole mm/sec: the fastest of at
+  tool z axis, ``L P[i] <v>cm/min CNT<c>`` through the path (speed in whole cm/min, 1/6 mm/s, the
+  finest unit a TP speed has: the fastest of at
   most ``[output] speed_levels`` levels not above the segment's planned speed; ``FINE`` where the
   robot must stop), ``L`` to the retract point, ``J`` home.
 * Process output switched on the move: ``TB <s>sec,DO[n]=ON`` (time before) or ``DB <d>mm,DO[n]=ON``
@@ -83,6 +84,8 @@ DEFAULT_OUTPUT = 1
 ABORT_LABEL = 90
 """``LBL`` of the failed arc start."""
 MAX_SPEED_MM_S = 2000
+CM_MIN = 1.0 / 6000.0
+"""One cm/min [m/s]: the step of the path speeds (TP speeds are whole numbers of their unit)."""
 
 
 def _name(text: str) -> str:
@@ -254,11 +257,11 @@ def _pass_moves(
     else:
         prog.motion(f"L P[{points[0]}] {approach_mm_s}mm/sec CNT{cnt}{_switch(problem, io, 'ON', lead)}")
     for k in range(1, len(tr)):
-        v = int(round(levels[level_of[k - 1]] * 1000.0))
+        v = int(round(levels[level_of[k - 1]] / CM_MIN))  # a whole number of cm/min
         term = "FINE" if weld and k == len(tr) - 1 else f"CNT{cnt}"
         option = " Wjnt" if wjnt[k] else ""
         off = _switch(problem, io, "OFF", off_lead) if k == off_k and not weld else ""
-        prog.motion(f"L P[{points[k]}] {min(max(v, 1), MAX_SPEED_MM_S)}mm/sec {term}{option}{off}")
+        prog.motion(f"L P[{points[k]}] {min(max(v, 1), 6 * MAX_SPEED_MM_S)}cm/min {term}{option}{off}")
     if weld:
         _weld_end(prog, problem, io)
     prog.motion(f"L P[{ret}] {approach_mm_s}mm/sec CNT{cnt}")
@@ -276,7 +279,7 @@ def write_tp(
     retract_m: float = 0.1,
     ptp_percent: int = 20,
     cnt: int = 100,
-    speed_resolution_m_s: float = 1e-3,
+    speed_resolution_m_s: float = CM_MIN,
 ) -> Path:
     """Write the trajectory as a FANUC TP program in ASCII (``<NAME>.ls``).
 
@@ -292,7 +295,7 @@ def write_tp(
         retract_m: approach and retract distance along the tool z axis [m].
         ptp_percent: speed of the ``J`` moves [% of the joints' maximum].
         cnt: ``CNT`` termination of the path moves (0..100; 100 blends the most).
-        speed_resolution_m_s: speed levels are multiples of this [m/s]; TP speeds are whole mm/sec.
+        speed_resolution_m_s: speed levels are multiples of this [m/s], a whole number of cm/min.
 
     Returns:
         The path written.
@@ -310,9 +313,15 @@ def write_tp(
         raise InputError(
             f"TP export: cnt must be 0..100 and ptp_percent 1..100 [%], got {cnt}, {ptp_percent}"
         )
-    if not (speed_resolution_m_s >= 1e-3 and approach_speed_m_s > 0.0 and retract_m > 0.0):
+    steps = speed_resolution_m_s / CM_MIN
+    if not (
+        steps >= 1.0 - 1e-9
+        and abs(steps - round(steps)) < 1e-6
+        and approach_speed_m_s > 0.0
+        and retract_m > 0.0
+    ):
         raise InputError(
-            "TP export: speed_resolution_m_s must be >= 0.001 m/s (whole mm/sec), approach speed and "
+            "TP export: speed_resolution_m_s must be a whole number of cm/min (1/6000 m/s), approach speed and "
             "retract [m] > 0"
         )
     uf, ut = problem.frames.base_number, problem.tool.number

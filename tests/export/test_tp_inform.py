@@ -186,7 +186,9 @@ def interpret_tp(text: str) -> dict:
                     "kind": kind,
                     "pos": pos,
                     "speed": float(speed.children[0]),
-                    "unit": "%" if speed.data == "joint_speed" else "mm/sec",
+                    "unit": {"joint_speed": "%", "linear_speed": "mm/sec", "linear_speed_cm": "cm/min"}[
+                        speed.data
+                    ],
                     "fine": st.children[3].data == "fine",
                     "wjnt": any(o.data == "wjnt" for o in options),
                     "switches": switches,
@@ -249,10 +251,11 @@ def test_tp_glue_program_parses_and_every_pose_is_the_forward_kinematics(
     k_off = path.index(offs[0])
     assert trajectory.t[k_off - 1] <= t_end - 0.2 <= trajectory.t[k_off] + 1e-9  # the move that holds it
     assert not any(m["fine"] for m in path), "a glue path never stops with the gun open"
-    # speeds: whole mm/sec, never above the planned segment speed
-    planned_mm_s = 500.0 * (trajectory.speed[:-1] + trajectory.speed[1:])
+    # speeds: whole cm/min (1 mm/s = 6 cm/min), never above the planned segment speed
+    planned_cm_min = 6.0 * 500.0 * (trajectory.speed[:-1] + trajectory.speed[1:])
+    assert {m["unit"] for m in path[1:]} == {"cm/min"}
     written = np.array([m["speed"] for m in path[1:]])
-    assert np.all(written == np.round(written)) and np.all(written <= planned_mm_s + 1e-9)
+    assert np.all(written == np.round(written)) and np.all(written <= planned_cm_min + 1e-9)
 
 
 def test_tp_home_holds_the_controllers_joints(tmp_path, trajectory, problem, fanuc):
