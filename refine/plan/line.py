@@ -1,0 +1,155 @@
+"""Approach and retract: straight TCP lines along the tool z axis, with the joints from IK along them.
+
+A controller's linear move (MoveL, LIN, movel) keeps the orientation and moves the TCP on the
+straight line. :func:`plan_line` samples that line, solves IK at every sample from the previous
+one (so the joints stay on the pass's branch, starting from the pass's own end joints), and checks
+the motion like the path: the joints within their limits minus the margin, no joint step above
+``joint_step_deg`` between samples (a branch jump), the scaled manipulability above the
+singularity margin at and between samples, and the clearance with margin along the continuous
+joint-interpolated motion between the samples. Between two samples the joint-interpolated TCP
+leaves the straight line by at most :attr:`Motion.line_deviation_m` (measured at the midpoints and
+kept below :data:`MAX_LINE_DEVIATION_M` by refining the samples).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from refine.plan.motion import AIR_SPEED_M_S, Motion, MotionIssue
+from refine.plan.verify import MotionChecker
+from refine.robot.kinematics import solve_ik
+from refine.types import Array
+
+LINE_STEP_M = 0.002
+"""Largest TCP travel between two IK samples of a line [m]."""
+
+MAX_LINE_DEVIATION_M = 1e-4
+"""The samples are refined until the joint-interpolated TCP stays this close to the line [m]."""
+
+IK_TOLERANCE = 1e-8
+"""Pose error [m and rad stacked] under which an IK sample counts as on the line."""
+
+
+def _line_deviation(checker: MotionChecker, q: Array, start: Array, end: Array) -> float:
+    """Largest distance [m] of the joint-interpolated TCP (at the midpoints) from the segment start-end."""
+    mid = checker.kin.poses(0.5 * (q[:-1] + q[1:]))[:, :3, 3]
+    axis = end - start
+    length = float(np.linalg.norm(axis))
+    u = np.clip((mid - start) @ axis / max(length * length, 1e-300), 0.0, 1.0)
+    return float(np.max(np.linalg.norm(mid - (start + u[:, None] * axis), axis=1))) if len(mid) else 0.0
+
+
+def line_joints(
+    checker: MotionChecker, q_anchor: Array, T_anchor: Array, offset_m: float, count: int
+) -> tuple[Array, float]:
+    """IK along the tool z line from ``T_anchor`` to ``offset_m`` along its z axis, ``count`` steps.
+
+    Returns:
+        joints (count + 1, n) [rad], the anchor's first; and the largest IK residual.
+    """
+    kin = checker.kin
+    lower, upper = checker.lower, checker.upper
+    rows = [np.asarray(q_anchor, dtype=float)]
+    worst = 0.0
+    for k in range(1, count + 1):
+        T = T_anchor.copy()
+        T[:3, 3] = T_anchor[:3, 3] + (k / count) * offset_m * T_anchor[:3, 2]
+        q, residual = solve_ik(kin, T, rows[-1], lower, upper, damping=1e-6, tol=IK_TOLERANCE)
+        rows.append(q)
+        worst = max(worst, residual)
+    return np.array(rows), worst
+
+
+def plan_line(
+    checker: MotionChecker,
+    kind: str,
+    name: str,
+    q_anchor: Array,
+    T_anchor: Array,
+    *,
+    retract_m: float,
+    speed_m_s: float = AIR_SPEED_M_S,
+) -> Motion:
+    """The approach onto (``kind="approach"``) or the retract from (``"retract"``) a pass's end waypoint.
+
+    Args:
+        checker: what the motion is checked against.
+        kind: ``"approach"`` (from ``retract_m`` behind the waypoint onto it) or ``"retract"``
+            (from the waypoint back by ``retract_m``).
+        name: the motion's name.
+        q_anchor: the pass's joints at the waypoint [rad], shape (n,).
+        T_anchor: the TCP pose at the waypoint, world frame (4, 4).
+        retract_m: the line's length along -z of the tool [m].
+        speed_m_s: the TCP speed of the line [m/s] (its duration is ``retract_m / speed_m_s``).
+    """
+    t0 = time.perf_counter()
+    count = max(1, math.ceil(retract_m / LINE_STEP_M))
+    end = T_anchor[:3, 3] - retract_m * T_anchor[:3, 2]
+    for _ in range(4):
+        q, residual = line_joints(checker, q_anchor, T_anchor, -retract_m, count)
+        deviation = _line_deviation(checker, q, T_anchor[:3, 3], end)
+        if deviation <= MAX_LINE_DEVIATION_M or residual > IK_TOLERANCE * 10:
+            break
+        count *= 2
+    issues: list[MotionIssue] = []
+    poses = checker.kin.poses(q)
+    if residual > IK_TOLERANCE * 10:
+        k = int(np.argmax(np.linalg.norm(poses[:, :3, 3] - (T_anchor[:3, 3] + np.outer(
+            np.linspace(0.0, 1.0, len(q)), end - T_anchor[:3, 3])), axis=1)))
+        issues.append(
+            MotionIssue(
+                "unreachable",
+                f"IK along the line leaves it by {residual:.2e} (position [m] and angle [rad] stacked) within "
+                "the joint limits",
+                fraction=k / max(len(q) - 1, 1),
+                tcp_m=poses[k, :3, 3],
+            )
+        )
+    step = np.degrees(np.max(np.abs(np.diff(q, axis=0)), axis=1))
+    if step.size and step.max() > checker.tolerances.joint_step_deg:
+        k = int(np.argmax(step))
+        issues.append(
+            MotionIssue(
+                "singularity",
+                f"the joints jump by {step.max():.1f} deg between two samples {LINE_STEP_M * 1e3:g} mm apart "
+                f"(joint step bound {checker.tolerances.joint_step_deg:g} deg): a branch change on the line",
+                fraction=k / max(len(q) - 1, 1),
+                tcp_m=poses[k, :3, 3],
+            )
+        )
+    margin = math.radians(checker.tolerances.joint_margin_deg)
+    issues += checker.limit_issues(q, margin)
+    sing_issues, least = checker.singularity_issues(q)
+    issues += sing_issues
+    if kind == "approach":
+        q = q[::-1].copy()  # from the approach point onto the waypoint
+    check = checker.clearance(q)
+    issues += checker.clearance_issues(q, check)
+    ends = (poses[-1], poses[0]) if kind == "approach" else (poses[0], poses[-1])
+    return Motion(
+        kind=kind,
+        name=name,
+        q=q,
+        start_pose=ends[0],
+        end_pose=ends[1],
+        duration_s=retract_m / speed_m_s,
+        planner="line",
+        planner_time_s=time.perf_counter() - t0,
+        status="failed" if issues else "ok",
+        min_distance_m=None if check is None else check.min_distance_m,
+        min_clearance_m=None if check is None else check.min_clearance_m,
+        closest=_closest(check),
+        min_joint_margin_rad=float(checker.joint_margin(q).min()),
+        min_singularity=least,
+        line_deviation_m=deviation,
+        issues=tuple(issues),
+    )
+
+
+def _closest(check) -> tuple[str, str]:  # noqa: ANN001 - PathClearance or None
+    if check is None or not len(check.segment_clearance_m):
+        return ("", "")
+    return tuple(check.segment_pair[int(np.argmin(check.segment_clearance_m))])  # type: ignore[return-value]
