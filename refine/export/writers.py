@@ -85,19 +85,29 @@ def write_outputs(result: RunResult, out_dir: Path, programs: tuple[str, ...]) -
         outputs["pathml"] = write_pathml(
             out_dir / f"{name}.aml", concatenate(trajectories), problem, layers=_pathml_layers(done, problem)
         )
-    from refine.export.program import ProgramPass
+    from refine.export.program import ProgramPass, with_motions
 
+    if any(not m.ok for m in getattr(result, "motions", ())):
+        log.warning("a motion of the program failed its checks: no files but result.json")
+        return {}
     named = [
         ProgramPass(p.name, t, getattr(p.refinement, "repairs", ()))  # no refinement: written from a plan
         for p, t in zip(done, trajectories, strict=True)
     ]
+    named = with_motions(named, getattr(result, "motions", ()))
     for kind in programs:
         if kind == "rapid":
             from refine.export import write_rapid
 
             if len(named) == 1:
                 outputs["rapid"] = write_rapid(
-                    out_dir / f"{name}.mod", trajectories[0], problem, result.robot, repairs=named[0].repairs
+                    out_dir / f"{name}.mod",
+                    trajectories[0],
+                    problem,
+                    result.robot,
+                    repairs=named[0].repairs,
+                    air_in=named[0].air_in,
+                    air_out=named[0].air_out,
                 )
             for k, (p, t) in enumerate(zip(done, trajectories, strict=True), start=1):
                 if len(named) > 1:

@@ -20,7 +20,7 @@ import numpy as np
 
 from refine.plan.motion import AIR_SPEED_M_S, Motion, MotionIssue
 from refine.plan.verify import MotionChecker
-from refine.robot.kinematics import solve_ik
+from refine.robot.kinematics import solve_ik_batch
 from refine.types import Array
 
 LINE_STEP_M = 0.002
@@ -47,19 +47,26 @@ def line_joints(
 ) -> tuple[Array, float]:
     """IK along the tool z line from ``T_anchor`` to ``offset_m`` along its z axis, ``count`` steps.
 
+    On a seven-axis arm axis 3 (the LBR's redundancy angle E1) is held at the anchor's value, as the
+    controller holds it on a linear move.
+
     Returns:
         joints (count + 1, n) [rad], the anchor's first; and the largest IK residual.
     """
     kin = checker.kin
-    lower, upper = checker.lower, checker.upper
+    lower, upper = checker.lower.copy(), checker.upper.copy()
+    if kin.robot.nq == 7:  # an LBR's linear move keeps its redundancy angle E1 (axis 3) constant
+        lower[2] = upper[2] = float(q_anchor[2])
     rows = [np.asarray(q_anchor, dtype=float)]
     worst = 0.0
     for k in range(1, count + 1):
         T = T_anchor.copy()
         T[:3, 3] = T_anchor[:3, 3] + (k / count) * offset_m * T_anchor[:3, 2]
-        q, residual = solve_ik(kin, T, rows[-1], lower, upper, damping=1e-6, tol=IK_TOLERANCE)
-        rows.append(q)
-        worst = max(worst, residual)
+        q, residual = solve_ik_batch(
+            kin, T[None], rows[-1][None], lower, upper, damping=1e-6, tol=IK_TOLERANCE, nullspace_gain=0.0
+        )
+        rows.append(q[0])
+        worst = max(worst, float(residual[0]))
     return np.array(rows), worst
 
 
