@@ -95,6 +95,10 @@ def write_outputs(result: RunResult, out_dir: Path, programs: tuple[str, ...]) -
         for p, t in zip(done, trajectories, strict=True)
     ]
     named = with_motions(named, getattr(result, "motions", ()))
+    if getattr(result, "motions", ()):
+        from refine.export.motions_csv import write_motions_csv
+
+        outputs["motions"] = write_motions_csv(out_dir / "motions.csv", result.motions)
     for kind in programs:
         if kind == "rapid":
             from refine.export import write_rapid

@@ -32,7 +32,7 @@ INFLATION_M = 0.01
 ATTEMPTS = 3
 """Plans tried (each with twice the previous extra clearance) before an air move is given up."""
 
-RESOLUTION_RAD = 0.01
+RESOLUTION_RAD = 0.02
 """Joint-space distance between OMPL's validity checks along a motion [rad]."""
 
 SEED = 20260101

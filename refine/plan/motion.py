@@ -190,3 +190,39 @@ def joint_move_time(q: Array, velocity: Array, acceleration: Array) -> float:
         t = np.where(dq >= ramp, dq / v + v / a, 2.0 * np.sqrt(dq / a))
         total += float(np.max(t)) if len(t) else 0.0
     return total
+
+
+TABLE_COLUMNS = (
+    "kind",
+    "name",
+    "status",
+    "planner",
+    "duration_s",
+    "via_points",
+    "min_distance_mm",
+    "closest",
+    "planner_time_s",
+    "issue",
+)
+"""The columns of the motions table (``motions.csv`` and the report)."""
+
+
+def table_rows(motions: tuple[Motion, ...]) -> list[dict[str, str]]:
+    """One row of :data:`TABLE_COLUMNS` per motion, as text (distances in mm, times in s)."""
+    rows = []
+    for m in motions:
+        rows.append(
+            {
+                "kind": m.kind,
+                "name": m.name,
+                "status": m.status,
+                "planner": m.planner,
+                "duration_s": f"{m.duration_s:.3f}",
+                "via_points": str(len(m.via)),
+                "min_distance_mm": "" if m.min_distance_m is None else f"{m.min_distance_m * 1e3:.1f}",
+                "closest": " / ".join(m.closest) if m.closest[0] else "",
+                "planner_time_s": f"{m.planner_time_s:.3f}",
+                "issue": "; ".join(i.describe() for i in m.issues),
+            }
+        )
+    return rows

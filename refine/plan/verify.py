@@ -22,6 +22,9 @@ from refine.robot.kinematics import TcpKinematics
 from refine.settings import Tolerances
 from refine.types import Array
 
+LOCATE_SAMPLES = 21
+"""Samples along the worst segment of a broken margin that locate its worst point for the diagnosis."""
+
 
 @dataclass
 class MotionChecker:
@@ -101,7 +104,12 @@ class MotionChecker:
         for run in check.runs:
             segs = range(run.index_start, max(run.index_end, run.index_start + 1))
             k = min(segs, key=lambda i: check.segment_clearance_m[i] if i < len(check.segment_clearance_m) else 0.0)
-            at = q[min(k, len(q) - 1)]
+            where = float(k)
+            if k + 1 < len(q):  # where inside the segment: the worst of a few samples along it
+                u = np.linspace(0.0, 1.0, LOCATE_SAMPLES)
+                worst = min(u, key=lambda t: self.clearance_at(q[k] + t * (q[k + 1] - q[k]))[0])
+                where = k + float(worst)
+            at = q[k] + (where - k) * (q[min(k + 1, len(q) - 1)] - q[k])
             cause = "self-collision" if run.worst_pair[1] not in cell else "collision"
             out.append(
                 MotionIssue(
@@ -110,7 +118,7 @@ class MotionChecker:
                     f"({-run.min_clearance_m * 1e3:.1f} mm inside the margin); below margin: "
                     f"{', '.join(run.objects)}",
                     objects=run.objects,
-                    fraction=k / max(len(q) - 1, 1),
+                    fraction=where / max(len(q) - 1, 1),
                     tcp_m=self.kin.pose(at)[:3, 3],
                     distance_m=run.min_distance_m,
                 )

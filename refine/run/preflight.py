@@ -166,7 +166,7 @@ def planned_outputs(problem: Problem, programs: tuple[str, ...], report: bool = 
     passes = [(1, 1)]
     if mp is not None and mp.layers > 1:
         passes = [(k, i) for k, row in enumerate(mp.lateral_offsets_m, 1) for i in range(1, len(row) + 1)]
-    names = ["result.json", f"{stem}.aml"]
+    names = ["result.json", f"{stem}.aml", "motions.csv"]
     names += ["trajectory.csv"] if len(passes) == 1 else [f"trajectory_L{k}P{i}.csv" for k, i in passes]
     if report:
         names.append("report.html")
