@@ -192,6 +192,8 @@ def write_rapid(
     speed_resolution_m_s: float = 1e-4,
     air_in: Array | None = None,
     air_out: Array | None = None,
+    start_home: bool = True,
+    end_home: bool = True,
 ) -> Path:
     """Write the trajectory as an ABB RAPID module (``.mod``).
 
@@ -213,6 +215,10 @@ def write_rapid(
             line). None: ``MoveJ`` to the approach point as a pose.
         air_out: the run's planned return, joints [rad] (K, n) after the retract point (via points,
             then home), each a ``MoveAbsJ ... fine``; None: straight home.
+        start_home: the module starts with a move to home; False for a pass of a multi-pass weld
+            that runs after the previous pass's module (``air_in`` is then the planned link from
+            its retract point).
+        end_home: the module ends with the move home; False for a pass the next module follows.
 
     Returns:
         The path written.
@@ -326,7 +332,9 @@ def write_rapid(
     chunks = [moves[i : i + size] for i in range(0, len(moves), size)]
     routines = [f"path_{i + 1}" for i in range(len(chunks))]
 
-    main = ["ConfJ \\On;", "ConfL \\On;", f"MoveAbsJ jHome\\NoEOffs, vAir, fine, {tool};"]
+    main = ["ConfJ \\On;", "ConfL \\On;"]
+    home_move = f"MoveAbsJ jHome\\NoEOffs, vAir, fine, {tool};"
+    main.append(home_move if start_home else "! runs after the previous pass's module, from its retract point")
     air_zone = "z10" if air_in is None else "fine"  # planned motions: exact stops, as verified
     air_decls: list[str] = []
     if air_in is None:
@@ -351,7 +359,7 @@ def write_rapid(
         out_names = [f"jOut{k + 1}" for k in range(len(air_out) - 1)]  # the last row is home
         air_decls += [_jointtarget(a, q) for a, q in zip(out_names, air_out[:-1], strict=True)]
         main += [f"MoveAbsJ {a}\\NoEOffs, vAir, fine, {tool};" for a in out_names]
-    main.append(f"MoveAbsJ jHome\\NoEOffs, vAir, fine, {tool};")
+    main.append(home_move if end_home else "! the next pass's module follows")
     home_at = next(k for k, ln in enumerate(lines) if ln.startswith("    CONST jointtarget jHome"))
     lines[home_at + 1 : home_at + 1] = air_decls
     lines += ["", "    PROC main()", *(f"        {ln}" for ln in main), "    ENDPROC"]

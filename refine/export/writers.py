@@ -114,7 +114,8 @@ def write_outputs(result: RunResult, out_dir: Path, programs: tuple[str, ...]) -
                     air_out=named[0].air_out,
                 )
             for k, (p, t) in enumerate(zip(done, trajectories, strict=True), start=1):
-                if len(named) > 1:
+                if len(named) > 1:  # with planned motions, module k runs after module k - 1 (the link)
+                    planned = named[k - 1].air_in is not None
                     outputs[f"rapid_{k}"] = write_rapid(
                         out_dir / f"{name}_L{p.layer}P{p.index}.mod",
                         t,
@@ -122,6 +123,10 @@ def write_outputs(result: RunResult, out_dir: Path, programs: tuple[str, ...]) -
                         result.robot,
                         repairs=getattr(p.refinement, "repairs", ()),
                         pass_name=p.name,
+                        air_in=named[k - 1].air_in,
+                        air_out=named[k - 1].air_out,
+                        start_home=k == 1 or not planned,
+                        end_home=k == len(named) or not planned,
                     )
         elif kind == "krl":
             from refine.export.krl import write_krl

@@ -82,7 +82,9 @@ def plan_air(
             planner = "RRT-Connect"
             found = None
             for attempt in range(ATTEMPTS):
-                found = _rrt_connect(checker, q_start, q_goal, INFLATION_M * 2**attempt, seed + attempt, time_limit_s)
+                found = _rrt_connect(
+                    checker, q_start, q_goal, INFLATION_M * 2**attempt, seed + attempt, time_limit_s
+                )
                 if found is None:
                     continue
                 again, again_check = _verify(checker, found)

@@ -104,8 +104,15 @@ def plan_line(
     issues: list[MotionIssue] = []
     poses = checker.kin.poses(q)
     if residual > IK_TOLERANCE * 10:
-        k = int(np.argmax(np.linalg.norm(poses[:, :3, 3] - (T_anchor[:3, 3] + np.outer(
-            np.linspace(0.0, 1.0, len(q)), end - T_anchor[:3, 3])), axis=1)))
+        k = int(
+            np.argmax(
+                np.linalg.norm(
+                    poses[:, :3, 3]
+                    - (T_anchor[:3, 3] + np.outer(np.linspace(0.0, 1.0, len(q)), end - T_anchor[:3, 3])),
+                    axis=1,
+                )
+            )
+        )
         issues.append(
             MotionIssue(
                 "unreachable",

@@ -74,12 +74,16 @@ def plan_program(
     motions: list[Motion] = []
     here, where = q_home, "home"
     for k, p in enumerate(passes):
-        approach = plan_line(checker, "approach", f"approach {p.name}", p.q[0], p.poses[0], retract_m=retract_m)
+        approach = plan_line(
+            checker, "approach", f"approach {p.name}", p.q[0], p.poses[0], retract_m=retract_m
+        )
         kind = "home" if k == 0 else "link"
         motions.append(plan_air(checker, kind, f"{where} -> {p.name}", here, approach.q[0], **air))
         motions.append(approach)
         motions.append(_path_motion(p))
-        retract = plan_line(checker, "retract", f"retract {p.name}", p.q[-1], p.poses[-1], retract_m=retract_m)
+        retract = plan_line(
+            checker, "retract", f"retract {p.name}", p.q[-1], p.poses[-1], retract_m=retract_m
+        )
         motions.append(retract)
         here, where = retract.q[-1], p.name
     motions.append(plan_air(checker, "return", f"{where} -> home", here, q_home, **air))

@@ -103,7 +103,10 @@ class MotionChecker:
         out = []
         for run in check.runs:
             segs = range(run.index_start, max(run.index_end, run.index_start + 1))
-            k = min(segs, key=lambda i: check.segment_clearance_m[i] if i < len(check.segment_clearance_m) else 0.0)
+            k = min(
+                segs,
+                key=lambda i: check.segment_clearance_m[i] if i < len(check.segment_clearance_m) else 0.0,
+            )
             where = float(k)
             if k + 1 < len(q):  # where inside the segment: the worst of a few samples along it
                 u = np.linspace(0.0, 1.0, LOCATE_SAMPLES)

@@ -189,3 +189,12 @@ def test_the_run_s_planned_air_moves_are_written_as_joint_targets_with_exact_sto
     at = lines.index(next(ln for ln in lines if ln.startswith("MoveAbsJ jIn3")))
     assert lines[at + 3].startswith("TriggL p0000, vAir, trOn")  # then the straight line onto the first target
     assert re.search(r"MoveL RelTool\(p\d+, 0, 0, -100\), vAir, fine,", main)  # the retract, exact
+
+
+def test_a_later_pass_s_module_starts_with_the_planned_link_not_at_home(tmp_path, trajectory, problem, irb4600):
+    link = np.radians([[5.0, 5.0, 0.0, 0.0, 30.0, 0.0], [-19.5, 9.0, -14.0, 39.0, 49.0, -59.0]])
+    text = write_rapid(
+        tmp_path / "p2.mod", trajectory, problem, irb4600, air_in=link, start_home=False, end_home=False
+    ).read_text()
+    main = text.split("PROC main()")[1].split("ENDPROC")[0]
+    assert re.findall(r"MoveAbsJ (\w+)\\NoEOffs", main) == ["jIn1", "jIn2"]

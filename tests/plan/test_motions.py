@@ -48,7 +48,13 @@ def joints_at(problem, robot, position, q0=None) -> np.ndarray:
     kin = kinematics(problem, robot)
     q0 = np.radians([0.0, 20.0, 20.0, 0.0, 50.0, 0.0]) if q0 is None else q0
     q, residual = solve_ik(
-        kin, make_transform(DOWN, position), q0, robot.spec.lower, robot.spec.upper, max_iterations=300, tol=1e-10
+        kin,
+        make_transform(DOWN, position),
+        q0,
+        robot.spec.lower,
+        robot.spec.upper,
+        max_iterations=300,
+        tol=1e-10,
     )
     assert residual < 1e-6
     return q
@@ -68,7 +74,9 @@ def checker_with(problem, robot, cell) -> MotionChecker:
         margin_m=problem.collision.margin_m,
         self_margin_m=problem.collision.self_margin_m,
     )
-    return MotionChecker(kinematics(problem, robot), model, problem.tolerances, problem.collision.check_step_m)
+    return MotionChecker(
+        kinematics(problem, robot), model, problem.tolerances, problem.collision.check_step_m
+    )
 
 
 def inside_box(points, centre, size) -> np.ndarray:
@@ -110,11 +118,15 @@ def test_a_home_inside_the_table_is_an_input_error_naming_the_table_and_the_dist
     tcp = np.array([0.95, 0.0, 0.42])  # inside the table, beside the glass (x < 1.05)
     assert inside_box(tcp[None], table.pose[:3, 3], table.size_m)[0] == 0.0
     q = joints_at(problem, robot, tcp)
-    bad = dataclasses.replace(problem, robot=dataclasses.replace(problem.robot, home_deg=tuple(np.degrees(q))))
+    bad = dataclasses.replace(
+        problem, robot=dataclasses.replace(problem.robot, home_deg=tuple(np.degrees(q)))
+    )
     with pytest.raises(InputError, match=r"home_deg.*inside table: distance -\d+\.\d mm \(margin 10 mm\)"):
         preflight(bad, robot=robot)
     clear = joints_at(problem, robot, np.array([1.2, 0.0, 0.9]))  # 0.25 m above the glass
-    ok = dataclasses.replace(problem, robot=dataclasses.replace(problem.robot, home_deg=tuple(np.degrees(clear))))
+    ok = dataclasses.replace(
+        problem, robot=dataclasses.replace(problem.robot, home_deg=tuple(np.degrees(clear)))
+    )
     preflight(ok, robot=robot)
 
 
@@ -153,7 +165,9 @@ def test_a_retract_into_a_clamp_is_caught_naming_the_clamp_and_where(glass):
 
 def test_a_failed_motion_makes_the_run_infeasible(glass):
     problem, robot = glass
-    failed = Motion("retract", "retract pass 1", np.zeros((2, 6)), np.eye(4), np.eye(4), 0.4, "line", 0.0, "failed")
+    failed = Motion(
+        "retract", "retract pass 1", np.zeros((2, 6)), np.eye(4), np.eye(4), 0.4, "line", 0.0, "failed"
+    )
     result = RunResult(problem, robot, (), None, motions=(failed,))
     assert result.status == "infeasible" and result.failed_motions == (failed,)
     from refine.cli import exit_status
