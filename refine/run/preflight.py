@@ -153,7 +153,7 @@ def check_home(problem: Problem, robot: Robot) -> None:
         where = "inside" if c.distance_m < 0.0 else "closer than the margin to"
         others = "; ".join(f"{b.body} vs {b.other} at {b.distance_m * 1e3:.1f} mm" for b in below[1:4])
         raise InputError(
-            f"robot.home_deg = {list(home)} puts {c.body} {where} {c.other}: distance {c.distance_m * 1e3:.1f} mm "
+            f"robot.home_deg = [{', '.join(f'{float(v):g}' for v in home)}] deg puts {c.body} {where} {c.other}: distance {c.distance_m * 1e3:.1f} mm "
             f"(margin {margin * 1e3:g} mm)" + (f"; also {others}" if others else "")
             + "; every motion of the program starts and ends at home: choose a home clear of the cell"
         )
