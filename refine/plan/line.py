@@ -102,17 +102,12 @@ def plan_line(
             break
         count *= 2
     issues: list[MotionIssue] = []
+    wanted = T_anchor[:3, 3] + np.outer(np.linspace(0.0, 1.0, len(q)), end - T_anchor[:3, 3])
+    if kind == "approach":  # from the approach point onto the waypoint: every figure in that order
+        q, wanted = q[::-1].copy(), wanted[::-1]
     poses = checker.kin.poses(q)
     if residual > IK_TOLERANCE * 10:
-        k = int(
-            np.argmax(
-                np.linalg.norm(
-                    poses[:, :3, 3]
-                    - (T_anchor[:3, 3] + np.outer(np.linspace(0.0, 1.0, len(q)), end - T_anchor[:3, 3])),
-                    axis=1,
-                )
-            )
-        )
+        k = int(np.argmax(np.linalg.norm(poses[:, :3, 3] - wanted, axis=1)))
         issues.append(
             MotionIssue(
                 "unreachable",
@@ -138,17 +133,14 @@ def plan_line(
     issues += checker.limit_issues(q, margin)
     sing_issues, least = checker.singularity_issues(q)
     issues += sing_issues
-    if kind == "approach":
-        q = q[::-1].copy()  # from the approach point onto the waypoint
     check = checker.clearance(q)
     issues += checker.clearance_issues(q, check)
-    ends = (poses[-1], poses[0]) if kind == "approach" else (poses[0], poses[-1])
     return Motion(
         kind=kind,
         name=name,
         q=q,
-        start_pose=ends[0],
-        end_pose=ends[1],
+        start_pose=poses[0],
+        end_pose=poses[-1],
         duration_s=retract_m / speed_m_s,
         planner="line",
         planner_time_s=time.perf_counter() - t0,

@@ -163,6 +163,22 @@ def test_a_retract_into_a_clamp_is_caught_naming_the_clamp_and_where(glass):
     assert clear.duration_s == pytest.approx(0.1 / 0.25)
 
 
+def test_an_approach_runs_from_the_approach_point_onto_the_waypoint(glass):
+    problem, robot = glass
+    q = joints_at(problem, robot, np.array([1.2, 0.0, 0.66]))
+    kin = kinematics(problem, robot)
+    T = kin.pose(q)
+    on_line = T[:3, 3] - 0.02 * T[:3, 2]  # 20 mm back along the tool axis: near the waypoint's end
+    checker = checker_with(problem, robot, [box("clamp", on_line + [0.0, 0.3, 0.0], (0.03, 0.03, 0.03))])
+    motion = plan_line(checker, "approach", "approach pass 1", q, T, retract_m=0.1)
+    assert motion.ok, motion.reason
+    np.testing.assert_allclose(kin.pose(motion.q[0])[:3, 3], T[:3, 3] - 0.1 * T[:3, 2], atol=1e-7)
+    np.testing.assert_array_equal(motion.q[-1], q)
+    blocked = checker_with(problem, robot, [box("clamp", on_line, (0.03, 0.03, 0.03))])
+    hit = plan_line(blocked, "approach", "approach pass 1", q, T, retract_m=0.1).issues[0]
+    assert "clamp" in hit.objects and hit.fraction > 0.5  # near the end of the approach, by the waypoint
+
+
 def test_a_failed_motion_makes_the_run_infeasible(glass):
     problem, robot = glass
     failed = Motion(
