@@ -57,17 +57,24 @@ def line_joints(
     lower, upper = checker.lower.copy(), checker.upper.copy()
     if kin.robot.nq == 7:  # an LBR's linear move keeps its redundancy angle E1 (axis 3) constant
         lower[2] = upper[2] = float(q_anchor[2])
-    rows = [np.asarray(q_anchor, dtype=float)]
-    worst = 0.0
-    for k in range(1, count + 1):
-        T = T_anchor.copy()
-        T[:3, 3] = T_anchor[:3, 3] + (k / count) * offset_m * T_anchor[:3, 2]
-        q, residual = solve_ik_batch(
-            kin, T[None], rows[-1][None], lower, upper, damping=1e-6, tol=IK_TOLERANCE, nullspace_gain=0.0
-        )
-        rows.append(q[0])
-        worst = max(worst, float(residual[0]))
-    return np.array(rows), worst
+    anchor = np.asarray(q_anchor, dtype=float)
+    targets = np.repeat(T_anchor[None], count, axis=0)
+    u = np.arange(1, count + 1) / count
+    targets[:, :3, 3] = T_anchor[:3, 3] + np.outer(u * offset_m, T_anchor[:3, 2])
+    # every sample from the anchor's joints at once (the line is short); the joint-step check of
+    # plan_line finds a sample that left the anchor's branch
+    q, residual = solve_ik_batch(
+        kin,
+        targets,
+        np.tile(anchor, (count, 1)),
+        lower,
+        upper,
+        damping=1e-6,
+        tol=IK_TOLERANCE,
+        nullspace_gain=0.0,
+        max_iterations=200,
+    )
+    return np.vstack([anchor, q]), float(residual.max())
 
 
 def plan_line(
