@@ -4,9 +4,12 @@ A controller's linear move (MoveL, LIN, movel) keeps the orientation and moves t
 straight line. :func:`plan_line` samples that line, solves IK at every sample from the previous
 one (so the joints stay on the pass's branch, starting from the pass's own end joints), and checks
 the motion like the path: the joints within their limits minus the margin, no joint step above
-``joint_step_deg`` between samples (a branch jump), the scaled manipulability above the
-singularity margin at and between samples, and the clearance with margin along the continuous
-joint-interpolated motion between the samples. Between two samples the joint-interpolated TCP
+``joint_step_deg`` between samples (a branch jump), every joint within its speed limit at the
+line's speed, and the clearance with margin along the continuous
+joint-interpolated motion between the samples. Near a singularity the joints a straight line needs
+turn ever faster: the line fails when a joint would exceed its speed limit at the line's TCP speed
+(the scaled manipulability along it is reported as a figure). Between two samples the
+joint-interpolated TCP
 leaves the straight line by at most :attr:`Motion.line_deviation_m` (measured at the midpoints and
 kept below :data:`MAX_LINE_DEVIATION_M` by refining the samples).
 """
@@ -138,8 +141,21 @@ def plan_line(
         )
     margin = math.radians(checker.tolerances.joint_margin_deg)
     issues += checker.limit_issues(q, margin)
-    sing_issues, least = checker.singularity_issues(q)
-    issues += sing_issues
+    _, least = checker.singularity_issues(q)  # the figure; what a singularity breaks is the speed:
+    dt = (retract_m / (len(q) - 1)) / speed_m_s
+    rate = np.abs(np.diff(q, axis=0)) / dt / checker.kin.robot.spec.velocity  # share of each joint's limit
+    if rate.size and rate.max() > 1.0:
+        k, j = np.unravel_index(int(np.argmax(rate)), rate.shape)
+        issues.append(
+            MotionIssue(
+                "singularity",
+                f"joint {j + 1} would turn at {rate.max():.1f} times its speed limit "
+                f"({math.degrees(checker.kin.robot.spec.velocity[j]):.0f} deg/s) to keep the TCP on the line at "
+                f"{speed_m_s:g} m/s (scaled manipulability down to {least:.4f})",
+                fraction=k / max(len(q) - 1, 1),
+                tcp_m=poses[k, :3, 3],
+            )
+        )
     check = checker.clearance(q)
     issues += checker.clearance_issues(q, check)
     return Motion(
