@@ -181,6 +181,16 @@ class Result:
         """
         return copy.deepcopy(self._figures()["placement"])
 
+    @property
+    def motions(self) -> list[dict[str, Any]]:
+        """Every motion of the program, verified: ``result.json``'s ``motions``.
+
+        Home, approach, path, retract, the links between passes and the return, each with its
+        start and end, duration, planner, via points, least distance and status; the schema is
+        ``docs/motions.schema.json``. Empty when a pass is not executable.
+        """
+        return copy.deepcopy(self._figures()["motions"])
+
     def to_dict(self) -> dict[str, Any]:
         """The ``result.json`` document of this result, as plain Python values."""
         from refine.export.result_json import result_dict

@@ -43,6 +43,7 @@ FLOORS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("inputs", ("refine.problem", "refine.cad", "refine.demo", "refine.collision", "refine.timing")),
     ("fusion", ("refine.fuse",)),
     ("optimise", ("refine.optimise",)),
+    ("plan", ("refine.plan",)),
     ("outputs", ("refine.run.result", "refine.run.evaluate", "refine.run.outputs", "refine.export", "refine.report")),
     ("application", ("refine.run", "refine.calibrate", "refine.synthetic", "refine.bench")),
     ("interfaces", ("refine.api", "refine.cli", "refine")),

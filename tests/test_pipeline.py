@@ -249,3 +249,31 @@ def test_result_json_rewritten_with_the_total_time_is_the_whole_document_written
     rewritten = (tmp_path / "rewritten.json").read_text()
     assert rewritten == (tmp_path / "whole.json").read_text()
     assert json.loads(rewritten)["timings_s"]["total"] == 2.5
+
+
+def test_every_motion_of_the_program_is_in_result_json_verified_and_written(glass, require):
+    """home, approach, path, retract, return: each verified, and the module runs those motions."""
+    import csv
+    import re
+
+    jsonschema = require.module("jsonschema")
+    result, out = glass
+    doc = json.loads((out / "result.json").read_text())
+    motions = doc["motions"]
+    jsonschema.validate(motions, json.loads((ROOT / "docs" / "motions.schema.json").read_text()))
+    assert [m["kind"] for m in motions] == ["home", "approach", "path", "retract", "return"]
+    assert all(m["status"] == "ok" for m in motions)
+    assert doc["program_time_s"] == pytest.approx(sum(m["duration_s"] for m in motions))
+    assert motions[2]["duration_s"] == pytest.approx(doc["metrics"]["cycle_time_s"])
+    # the approach ends on the first waypoint and starts 0.1 m back along its tool axis
+    first = result.trajectory.poses[0]
+    np.testing.assert_allclose(motions[1]["end"]["tcp_position_m"], first[:3, 3], atol=1e-7)
+    np.testing.assert_allclose(motions[1]["start"]["tcp_position_m"], first[:3, 3] - 0.1 * first[:3, 2], atol=1e-7)
+    # the home move ends where the approach starts, and the module's approach point is those joints
+    np.testing.assert_allclose(motions[0]["end"]["joints_deg"], motions[1]["start"]["joints_deg"])
+    text = (out / "glass_adhesive.mod").read_text()
+    written = re.search(r"CONST jointtarget jIn1:=\[\[([^\]]*)\]", text)[1]
+    np.testing.assert_allclose([float(v) for v in written.split(",")], motions[0]["end"]["joints_deg"], atol=1e-4)
+    rows = list(csv.DictReader((out / "motions.csv").open()))
+    assert [r["kind"] for r in rows] == [m["kind"] for m in motions]
+    assert "id='motions'" in (out / "report.html").read_text()

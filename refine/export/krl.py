@@ -37,6 +37,7 @@ the second-to-last joint); joint signs must be KUKA's.
 from __future__ import annotations
 
 import logging
+import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -150,19 +151,35 @@ def krl_io_number(name: str, kind: str, default: int) -> tuple[int, str]:
     return number, f"{name!r} is ${kind}[{number}]"
 
 
-def _declarations(names: list[str], tr: Trajectory, robot: Any, back: Array) -> list[str]:
-    """``DECL E6POS`` of the approach point, every waypoint and the retract point of one pass."""
+def _declarations(
+    names: list[str], tr: Trajectory, robot: Any, back: Array, q_approach: Array | None = None
+) -> list[str]:
+    """``DECL E6POS`` of the approach point, every waypoint and the retract point of one pass.
+
+    ``q_approach``: the planned joints at the approach point [rad], whose Status and Turn the
+    approach point gets (else the first waypoint's).
+    """
     n = len(tr)
     status, turn = kuka_status_turn(robot, tr.q)
+    if q_approach is not None:
+        s_app, t_app = kuka_status_turn(robot, np.asarray(q_approach, dtype=float)[None])
+        status, turn = status.copy(), turn.copy()
     if len(set(status)) > 1:  # a CP motion keeps its start Status: a change means a singular pose
         log.warning("KRL: Status changes along a LIN pass (%s): a singularity", sorted(set(status.tolist())))
     e1 = np.degrees(tr.q[:, 2]) if robot.nq == 7 else np.zeros(n)
     poses, rows = [tr.poses[0] @ back, *tr.poses, tr.poses[-1] @ back], [0, *range(n), n - 1]
     tail = ",".join(f"E{i} 0.0" for i in range(2, 7))
-    return [
+    out = [
         f"DECL E6POS {name}={{{_xyzabc(T)},S {status[r]},T {turn[r]},E1 {_real(e1[r], 6)},{tail}}}"
         for name, T, r in zip(names, poses, rows, strict=True)
     ]
+    if q_approach is not None:
+        e1_app = math.degrees(q_approach[2]) if robot.nq == 7 else 0.0
+        out[0] = (
+            f"DECL E6POS {names[0]}={{{_xyzabc(poses[0])},S {int(s_app[0])},T {int(t_app[0])},"
+            f"E1 {_real(e1_app, 6)},{tail}}}"
+        )
+    return out
 
 
 def _e6axis(q: Array) -> str:
@@ -343,12 +360,22 @@ def write_krl(
         tr = p.trajectory
         points = [f"XP{k}" if len(runs) == 1 else f"XP{i}_{k}" for k in range(1, len(tr) + 1)]
         names = [f"XAPP{i}", *points, f"XRET{i}"]
-        dat_lines += _declarations(names, tr, robot, back)
+        air_in = getattr(p, "air_in", None)
+        dat_lines += _declarations(names, tr, robot, back, None if air_in is None else air_in[-1])
         head = f"pass {i} of {len(runs)}: " + comment_text(str(p.name)).replace(";", ",")
         src_lines += [f";FOLD {head}", f"  ; {head}, {len(tr)} points, {float(tr.t[-1]):.3f} s planned"]
+        if air_in is not None:  # the run's planned air move: via points (exact stops), then the approach
+            vias = [f"XIN{i}_{k}" for k in range(1, len(air_in))]
+            dat_lines += [f"DECL E6AXIS {v}={{{_e6axis(q)}}}" for v, q in zip(vias, air_in, strict=False)]
+            src_lines += [f"  PTP {v} ; via point of the planned move to pass {i}" for v in vias]
         moves = _moves(names, tr, robot, problem, io, air, speed_resolution_m_s)
         src_lines += [f"  {line}" for line in moves]
         src_lines.append(";ENDFOLD")
+    air_out = getattr(runs[-1], "air_out", None)
+    if air_out is not None:  # the run's planned return: via points, then home
+        vias = [f"XOUT{k}" for k in range(1, len(air_out))]
+        dat_lines += [f"DECL E6AXIS {v}={{{_e6axis(q)}}}" for v, q in zip(vias, air_out, strict=False)]
+        src_lines += [f"PTP {v} ; via point of the planned return" for v in vias]
     src_lines.append("PTP XHOMEPOS")
     src.parent.mkdir(parents=True, exist_ok=True)
     src.write_text("\n".join([*src_lines, "END"]) + "\n", encoding="utf-8")

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -48,11 +48,34 @@ class ProgramPass:
         trajectory: the timed path.
         repairs: the segments a repair gave extra orientation slack, as
             :class:`refine.optimise.outcome.Repair` (waypoint indices of this pass).
+        air_in: the planned air move onto this pass's approach point (the run's ``home`` or
+            ``link`` motion), as the joints [rad] it moves through after its start, shape (K, n):
+            its via points, then the approach joints (the last row). None: the writer's own
+            approach (a program written without a run's motions).
+        air_out: for the last pass, the planned ``return``: the joints [rad] after its start, via
+            points then home (the last row); None: straight home.
     """
 
     name: str
     trajectory: Trajectory
     repairs: tuple[Any, ...] = ()
+    air_in: Array | None = None
+    air_out: Array | None = None
+
+
+def with_motions(passes: list[ProgramPass], motions: tuple[Any, ...]) -> list[ProgramPass]:
+    """The passes with the run's planned air moves (``refine.plan.motion.Motion``) to write.
+
+    The air move into pass i is the i-th ``home``/``link`` motion, the return the ``return``
+    motion; without motions (or when their count does not match) the passes are returned as given.
+    """
+    into = [m for m in motions if m.kind in ("home", "link")]
+    back = [m for m in motions if m.kind == "return"]
+    if len(into) != len(passes) or len(back) != 1:
+        return passes
+    out = [replace(p, air_in=np.asarray(m.q[1:], dtype=float)) for p, m in zip(passes, into, strict=True)]
+    out[-1] = replace(out[-1], air_out=np.asarray(back[0].q[1:], dtype=float))
+    return out
 
 
 def as_passes(

@@ -83,6 +83,11 @@ def _pose(T: Array) -> str:
     return f"[[{trans}],[{quat}]]"
 
 
+def _jointtarget(name: str, q: Array) -> str:
+    """``CONST jointtarget`` of joints ``q`` [rad] (``robax`` in deg, external axes unused)."""
+    return f"    CONST jointtarget {name}:=[[{','.join(_num(v, 4) for v in np.degrees(q))}],{_EXTAX}];"
+
+
 def abb_confdata(robot: Any, q: Array) -> NDArray[np.int64]:
     """ABB configuration data ``[cf1, cf4, cf6, cfx]`` of joint vectors (see the module docstring).
 
@@ -185,6 +190,10 @@ def write_rapid(
     approach_speed_m_s: float = 0.25,
     retract_m: float = 0.1,
     speed_resolution_m_s: float = 1e-4,
+    air_in: Array | None = None,
+    air_out: Array | None = None,
+    start_home: bool = True,
+    end_home: bool = True,
 ) -> Path:
     """Write the trajectory as an ABB RAPID module (``.mod``).
 
@@ -200,6 +209,16 @@ def write_rapid(
         approach_speed_m_s: TCP speed of the approach and retract moves [m/s].
         retract_m: approach and retract distance along the tool z axis [m].
         speed_resolution_m_s: speed levels are multiples of this step [m/s] (0.1 mm/s by default).
+        air_in: the run's planned move from home to the approach point, as joints [rad] (K, n): via
+            points, then the approach joints; written as ``MoveAbsJ ... fine`` through each (the
+            approach point then a joint target, and the ``MoveL`` onto the first target its straight
+            line). None: ``MoveJ`` to the approach point as a pose.
+        air_out: the run's planned return, joints [rad] (K, n) after the retract point (via points,
+            then home), each a ``MoveAbsJ ... fine``; None: straight home.
+        start_home: the module starts with a move to home; False for a pass of a multi-pass weld
+            that runs after the previous pass's module (``air_in`` is then the planned link from
+            its retract point).
+        end_home: the module ends with the move home; False for a pass the next module follows.
 
     Returns:
         The path written.
@@ -313,8 +332,18 @@ def write_rapid(
     chunks = [moves[i : i + size] for i in range(0, len(moves), size)]
     routines = [f"path_{i + 1}" for i in range(len(chunks))]
 
-    main = ["ConfJ \\On;", "ConfL \\On;", f"MoveAbsJ jHome\\NoEOffs, vAir, fine, {tool};"]
-    main.append(f"MoveJ RelTool({names[0]}, 0, 0, -{retract_mm}), vAir, z10, {move_tail}")
+    main = ["ConfJ \\On;", "ConfL \\On;"]
+    home_move = f"MoveAbsJ jHome\\NoEOffs, vAir, fine, {tool};"
+    main.append(home_move if start_home else "! runs after the previous pass's module, from its retract point")
+    air_zone = "z10" if air_in is None else "fine"  # planned motions: exact stops, as verified
+    air_decls: list[str] = []
+    if air_in is None:
+        main.append(f"MoveJ RelTool({names[0]}, 0, 0, -{retract_mm}), vAir, z10, {move_tail}")
+    else:
+        air_names = [f"jIn{k + 1}" for k in range(len(air_in))]
+        air_decls += [_jointtarget(a, q) for a, q in zip(air_names, air_in, strict=True)]
+        main += [f"MoveAbsJ {a}\\NoEOffs, vAir, fine, {tool};" for a in air_names]
+        main[-1] += "  ! the approach point"
     if weld:
         main += [f"MoveL {names[0]}, vAir, fine, {move_tail}", *_weld_start(problem, output)]
     else:
@@ -325,10 +354,14 @@ def write_rapid(
         ]
     main += [f"{r};" for r in routines]
     main += _weld_end(problem, output) if weld else []
-    main += [
-        f"MoveL RelTool({names[-1]}, 0, 0, -{retract_mm}), vAir, z10, {move_tail}",
-        f"MoveAbsJ jHome\\NoEOffs, vAir, fine, {tool};",
-    ]
+    main.append(f"MoveL RelTool({names[-1]}, 0, 0, -{retract_mm}), vAir, {air_zone}, {move_tail}")
+    if air_out is not None and len(air_out) > 1:
+        out_names = [f"jOut{k + 1}" for k in range(len(air_out) - 1)]  # the last row is home
+        air_decls += [_jointtarget(a, q) for a, q in zip(out_names, air_out[:-1], strict=True)]
+        main += [f"MoveAbsJ {a}\\NoEOffs, vAir, fine, {tool};" for a in out_names]
+    main.append(home_move if end_home else "! the next pass's module follows")
+    home_at = next(k for k, ln in enumerate(lines) if ln.startswith("    CONST jointtarget jHome"))
+    lines[home_at + 1 : home_at + 1] = air_decls
     lines += ["", "    PROC main()", *(f"        {ln}" for ln in main), "    ENDPROC"]
     for r, chunk in zip(routines, chunks, strict=True):
         lines += ["", f"    PROC {r}()", *(f"        {ln}" for ln in chunk), "    ENDPROC"]

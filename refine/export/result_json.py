@@ -85,9 +85,12 @@ def result_dict(result: RunResult) -> dict[str, Any]:
         "schema_version": SCHEMA_VERSION,
         "status": result.status,
         "reason": "; ".join(
-            (f"{p.name}: " if len(result.passes) > 1 else "") + p.refinement.reason
-            for p in result.passes
-            if p.refinement.reason
+            [
+                (f"{p.name}: " if len(result.passes) > 1 else "") + p.refinement.reason
+                for p in result.passes
+                if p.refinement.reason
+            ]
+            + [m.reason for m in result.failed_motions]
         ),
         "problem": problem.name,
         "problem_dir": shown_path(problem.root),
@@ -160,6 +163,8 @@ def result_dict(result: RunResult) -> dict[str, Any]:
             {"name": p.name, "layer": p.layer, "index": p.index, "status": p.refinement.status, "metrics": m}
             for p, m in zip(result.passes, per_pass, strict=True)
         ],
+        "motions": [m.as_json() for m in result.motions],
+        "program_time_s": sum(m.duration_s for m in result.motions) if result.motions else None,
         "truth": None if result.truth is None else result.truth.as_json(),
         "demo_quality": _demo_quality(result),
         "placement": None if result.placement is None else result.placement.as_json(),

@@ -320,14 +320,31 @@ def write_sunrise(
         label = comment_text(str(p.name))
         body += [f"        // pass {i} of {len(runs)}: {label}, {n} points, {float(tr.t[-1]):.3f} s planned"]
         off_value = off_lead * 1000.0  # ms for lead_s, mm for lead_m
+        air_in = getattr(p, "air_in", None)
+        if air_in is not None:  # the run's planned air move: via points, then the approach joints
+            body += [
+                f"        robot.move(ptp(new JointPosition({', '.join(_num(v, 9) for v in q)}))"
+                f".setJointVelocityRel({_num(joint_velocity_rel, 3)}));" + (
+                    f"  // via point of the planned move to pass {i}" if k < len(air_in) - 1 else
+                    f"  // the approach point of pass {i}"
+                )
+                for k, q in enumerate(air_in)
+            ]
         body += [
             f"        runPass(join({', '.join(f'{m}()' for m in parts)}), {off_k}, {_num(off_value, 3)}, "
-            f"{'true' if weld else 'false'});"
+            f"{'true' if weld else 'false'}, {'false' if air_in is not None else 'true'});"
         ]
         for m, chunk in zip(parts, chunks, strict=True):
             methods += [f"    private static double[][] {m}() {{", "        return new double[][] {"]
             methods += [f"            {r}," for r in chunk]
             methods += ["        };", "    }", ""]
+    air_out = getattr(runs[-1], "air_out", None)
+    if air_out is not None:  # the run's planned return: via points, then home
+        body += [
+            f"        robot.move(ptp(new JointPosition({', '.join(_num(v, 9) for v in q)}))"
+            f".setJointVelocityRel({_num(joint_velocity_rel, 3)}));  // via point of the planned return"
+            for q in air_out[:-1]
+        ]
     body += [
         f"        robot.move(ptp(home()).setJointVelocityRel({_num(joint_velocity_rel, 3)}));",
         "    }",
@@ -361,11 +378,13 @@ def write_sunrise(
         "        return rows;",
         "    }",
         "",
-        "    private void runPass(double[][] points, int offIndex, double offLead, boolean weld) {",
+        "    private void runPass(double[][] points, int offIndex, double offLead, boolean weld, boolean toApproach) {",
         "        Frame first = frame(points[0]);",
-        "        Frame approach = first.copyWithRedundancy();",
-        f"        approach.transform(Transformation.ofTranslation(0.0, 0.0, -{_num(retract_m * 1000.0, 3)}));",
-        f"        tcp.move(ptp(approach).setJointVelocityRel({_num(joint_velocity_rel, 3)}));",
+        "        if (toApproach) {",
+        "            Frame approach = first.copyWithRedundancy();",
+        f"            approach.transform(Transformation.ofTranslation(0.0, 0.0, -{_num(retract_m * 1000.0, 3)}));",
+        f"            tcp.move(ptp(approach).setJointVelocityRel({_num(joint_velocity_rel, 3)}));",
+        "        }",
         "        SplineMotionCP<?>[] segments = new SplineMotionCP<?>[points.length - 1];",
         "        for (int k = 1; k < points.length; k++) {",
         "            segments[k - 1] = spl(frame(points[k])).setCartVelocity(points[k][9]);",

@@ -280,9 +280,17 @@ def write_urscript(
         tr = p.trajectory
         n, label = len(tr), comment_text(str(p.name))
         poses = np.concatenate([T_base_world @ tr.poses, [T_base_world @ tr.poses[-1] @ back]])
-        q_app = _approach_joints(
-            robot, tr.q[0], poses[0] @ back @ invert_transform(tool.tcp_in_flange), label
-        )
+        air_in = getattr(p, "air_in", None)
+        if air_in is None:
+            q_app = _approach_joints(
+                robot, tr.q[0], poses[0] @ back @ invert_transform(tool.tcp_in_flange), label
+            )
+        else:  # the run's planned air move: via points (no blend), then the approach joints
+            q_app = air_in[-1]
+            body += [
+                f"movej([{','.join(_num(v, 9) for v in q)}], {jmove})  # via point of the planned move to pass {i}"
+                for q in air_in[:-1]
+            ]
         rv = continuous_rotvecs(poses[:, :3, :3], previous)
         previous = rv[-1]
         gaps = np.linalg.norm(np.diff(poses[:n, :3, 3], axis=0), axis=1)
@@ -320,6 +328,12 @@ def write_urscript(
             body.append(f"movel({_pose(poses[k], rv[k])}, a={a}, v={speed}, r={_num(blends[k], 6)})")
         body += _weld_end(out, gas, problem) if weld else []
         body.append(f"movel({_pose(poses[n], rv[n])}, a={a}, v={air}, r=0)")
+    air_out = getattr(runs[-1], "air_out", None)
+    if air_out is not None:  # the run's planned return: via points, then home
+        body += [
+            f"movej([{','.join(_num(v, 9) for v in q)}], {jmove})  # via point of the planned return"
+            for q in air_out[:-1]
+        ]
     body.append(f"movej([{','.join(_num(v, 9) for v in home)}], {jmove})  # home")
     if mode == "program":
         lines = [f"def {prog}():", *(f"  {ln}" for ln in body), "end", f"{prog}()"]

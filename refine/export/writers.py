@@ -88,22 +88,37 @@ def write_outputs(result: RunResult, out_dir: Path, programs: tuple[str, ...]) -
         outputs["pathml"] = write_pathml(
             out_dir / f"{name}.aml", concatenate(trajectories), problem, layers=_pathml_layers(done, problem)
         )
-    from refine.export.program import ProgramPass
+    from refine.export.program import ProgramPass, with_motions
 
+    if any(not m.ok for m in getattr(result, "motions", ())):
+        log.warning("a motion of the program failed its checks: no files but result.json")
+        return {}
     named = [
         ProgramPass(p.name, t, getattr(p.refinement, "repairs", ()))  # no refinement: written from a plan
         for p, t in zip(done, trajectories, strict=True)
     ]
+    named = with_motions(named, getattr(result, "motions", ()))
+    if getattr(result, "motions", ()):
+        from refine.export.motions_csv import write_motions_csv
+
+        outputs["motions"] = write_motions_csv(out_dir / "motions.csv", result.motions)
     for kind in programs:
         if kind == "rapid":
             from refine.export import write_rapid
 
             if len(named) == 1:
                 outputs["rapid"] = write_rapid(
-                    out_dir / f"{name}.mod", trajectories[0], problem, result.robot, repairs=named[0].repairs
+                    out_dir / f"{name}.mod",
+                    trajectories[0],
+                    problem,
+                    result.robot,
+                    repairs=named[0].repairs,
+                    air_in=named[0].air_in,
+                    air_out=named[0].air_out,
                 )
             for k, (p, t) in enumerate(zip(done, trajectories, strict=True), start=1):
-                if len(named) > 1:
+                if len(named) > 1:  # with planned motions, module k runs after module k - 1 (the link)
+                    planned = named[k - 1].air_in is not None
                     outputs[f"rapid_{k}"] = write_rapid(
                         out_dir / f"{name}_L{p.layer}P{p.index}.mod",
                         t,
@@ -111,6 +126,10 @@ def write_outputs(result: RunResult, out_dir: Path, programs: tuple[str, ...]) -
                         result.robot,
                         repairs=getattr(p.refinement, "repairs", ()),
                         pass_name=p.name,
+                        air_in=named[k - 1].air_in,
+                        air_out=named[k - 1].air_out,
+                        start_home=k == 1 or not planned,
+                        end_home=k == len(named) or not planned,
                     )
         elif kind == "krl":
             from refine.export.krl import write_krl

@@ -101,7 +101,30 @@ def _details_html(result: RunResult) -> str:
         + "<h2>Where the plan is slower than the demonstration</h2>"
         + (f"<ul>{''.join(slow)}</ul>" if slow else "<p>nowhere</p>")
         + ("<h2>Clearance</h2>" + "".join(clearance) if clearance else "")
+        + _motions_html(result)
         + "</section>"
+    )
+
+
+def _motions_html(result: RunResult) -> str:
+    """The program's motions as a table (``result.json`` ``motions``), with the program's time."""
+    from refine.plan.motion import TABLE_COLUMNS, table_rows
+
+    if not result.motions:
+        return ""
+    head = "".join(f"<th>{html.escape(c)}</th>" for c in TABLE_COLUMNS)
+    body = "".join(
+        f"<tr class='{'ok' if row['status'] == 'ok' else 'bad'}'>"
+        + "".join(f"<td>{html.escape(row[c])}</td>" for c in TABLE_COLUMNS)
+        + "</tr>"
+        for row in table_rows(result.motions)
+    )
+    total = sum(m.duration_s for m in result.motions)
+    return (
+        "<h2>The program's motions</h2><p id='motions-note'>Every motion the program makes, each verified "
+        f"(limits, clearance along the continuous motion, singularity on the lines); {total:.2f} s from home "
+        "to home.</p>"
+        f"<table id='motions'><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
     )
 
 

@@ -11,6 +11,9 @@ spends minutes and then refuses to write:
   Yaskawa ``OT#(n)`` with n in 1..4096); TP needs a six-axis arm, a user frame 1..9 and a tool frame
   1..10, INFORM a six-axis arm and a tool file 0..63;
 * ``robot.home_deg`` and ``robot.joint_acceleration_deg_s2`` have one value per joint;
+* the home pose is inside the joint limits and keeps the collision margins: its robot and tool
+  are no closer to a cell object than ``collision.margin_m`` and to each other than
+  ``collision.self_margin_m`` (every motion of the program starts and ends there);
 * the output folder is a folder (or can be made one), and no output would overwrite an input file.
 """
 
@@ -139,6 +142,49 @@ def check_joint_lists(problem: Problem, n_joints: int, robot_name: str) -> None:
             )
 
 
+def check_home(problem: Problem, robot: Robot) -> None:
+    """``robot.home_deg`` lies inside the joint limits and keeps the collision margins.
+
+    Raises:
+        InputError: a joint outside its limits, or the closest pair below its margin, named with
+            the distance in mm (negative: the bodies overlap by that much).
+    """
+    import math
+
+    import numpy as np
+
+    home = problem.robot.home_deg
+    if home is None:
+        return
+    q = np.radians(np.asarray(home, dtype=float))
+    spec = robot.spec
+    for j, (v, lo, hi) in enumerate(zip(q, spec.lower, spec.upper, strict=True)):
+        if not lo <= v <= hi:
+            raise InputError(
+                f"robot.home_deg: joint {j + 1} at {math.degrees(v):g} deg is outside its limits "
+                f"[{math.degrees(lo):.1f}, {math.degrees(hi):.1f}] deg"
+            )
+    if not problem.collision.enabled or not (problem.cell or problem.tool.collision):
+        return
+    from refine.collision import CollisionModel
+
+    model = CollisionModel.for_problem(problem, robot)
+    below = sorted(
+        (c for c in model.contacts(q, max(model.margin_m, model.self_margin_m)) if c.clearance_m < 0.0),
+        key=lambda c: c.clearance_m,
+    )
+    if below:
+        c = below[0]
+        margin = c.distance_m - c.clearance_m
+        where = "inside" if c.distance_m < 0.0 else "closer than the margin to"
+        others = "; ".join(f"{b.body} vs {b.other} at {b.distance_m * 1e3:.1f} mm" for b in below[1:4])
+        raise InputError(
+            f"robot.home_deg = [{', '.join(f'{float(v):g}' for v in home)}] deg puts {c.body} {where} {c.other}: distance {c.distance_m * 1e3:.1f} mm "
+            f"(margin {margin * 1e3:g} mm)" + (f"; also {others}" if others else "")
+            + "; every motion of the program starts and ends at home: choose a home clear of the cell"
+        )
+
+
 def planned_outputs(problem: Problem, programs: tuple[str, ...], report: bool = True) -> tuple[str, ...]:
     """Every file name a run of ``problem`` may write (the writers' naming rules)."""
     stem = problem.file_stem
@@ -146,7 +192,7 @@ def planned_outputs(problem: Problem, programs: tuple[str, ...], report: bool = 
     passes = [(1, 1)]
     if mp is not None and mp.layers > 1:
         passes = [(k, i) for k, row in enumerate(mp.lateral_offsets_m, 1) for i in range(1, len(row) + 1)]
-    names = ["result.json", f"{stem}.aml"]
+    names = ["result.json", f"{stem}.aml", "motions.csv"]
     names += ["trajectory.csv"] if len(passes) == 1 else [f"trajectory_L{k}P{i}.csv" for k, i in passes]
     if report:
         names.append("report.html")
@@ -247,6 +293,7 @@ def preflight(
         raise InputError(f"{where}{e}") from e
     try:
         check_joint_lists(problem, robot.nq, robot.spec.name)
+        check_home(problem, robot)
     except InputError as e:
         raise InputError(f"{problem.source}: {e}" if problem.source else str(e)) from e
     outputs = planned_outputs(problem, programs, report)

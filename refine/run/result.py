@@ -68,6 +68,8 @@ class RunResult:
             None for a path without a demonstration.
         placement: the placement repair (``refine.run.placement.PlacementRepair``) when ``[repair]
             placement`` is set, else None.
+        motions: every motion of the program, verified (``refine.plan.motion.Motion``: home,
+            approach, path, retract, link, return); empty when a pass is not executable.
     """
 
     problem: Problem
@@ -78,6 +80,12 @@ class RunResult:
     outputs: dict[str, Path] = field(default_factory=dict)
     demo_quality: Any = None
     placement: Any = None
+    motions: tuple[Any, ...] = ()
+
+    @property
+    def failed_motions(self) -> tuple[Any, ...]:
+        """The motions that failed their checks (an air move or line that collides or cannot be made)."""
+        return tuple(m for m in self.motions if not m.ok)
 
     @property
     def first(self) -> PassResult:
@@ -108,6 +116,8 @@ class RunResult:
     def status(self) -> str:
         """The worst pass's status, in the order of :data:`STATUS_ORDER`."""
         statuses = {p.refinement.status for p in self.passes}
+        if self.failed_motions:
+            return "infeasible"
         return next((s for s in STATUS_ORDER if s in statuses), "ok")
 
 
@@ -148,6 +158,13 @@ def summary_lines(result: RunResult) -> list[str]:
                 f"timing       cycle {p.timing.cycle_time_s:.2f} s, "
                 f"{len(p.timing.slow_segments)} segment(s) slower than the demo"
             )
+    for m in result.motions:
+        clear = "" if m.min_distance_m is None else f", min distance {m.min_distance_m * 1e3:.1f} mm"
+        via = f", {len(m.via)} via points" if len(m.via) else ""
+        lines.append(
+            f"motion       {m.kind:<8} {m.name}: {m.status}, {m.duration_s:.2f} s, {m.planner}{via}{clear}"
+            + (f" ({m.reason})" if m.issues else "")
+        )
     if result.placement is not None:
         lines.append(f"placement    {result.placement.describe()}")
     if result.truth is not None:

@@ -76,6 +76,10 @@ def solve_problem(
         for p in generate_passes(fused, problem.multipass)[1:]:
             name = f"layer {p.layer} pass {p.index}"
             passes.append(refine_pass(problem, robot, p.path, watch, name, p.layer, p.index, sources))
+    from refine.run.stages import plan_motions
+
+    motions = plan_motions(problem, robot, passes, sources)
+    watch.lap("motions")
     truth = None
     first = passes[0]
     if (
@@ -105,6 +109,7 @@ def solve_problem(
         watch.times,
         demo_quality=qualities[0] if qualities else None,
         placement=placement,
+        motions=motions,
     )
 
 

@@ -200,3 +200,45 @@ def refine_pass(
     return PassResult(name, layer, index, fused, refinement, timing, trajectory, clearance, nlp)
 
 
+
+
+def plan_motions(
+    problem: Problem, robot: Robot, passes: list[PassResult], sources: tuple[ConstraintSource, ...]
+) -> tuple[Any, ...]:
+    """Every motion of the program (``refine.plan.program``), verified; () when a pass is not executable.
+
+    The collision model is the run's own (the clearance source's, with its margins) when the run
+    checks collision, else the motions are checked for limits and singularity only.
+    """
+    if not passes or any(p.trajectory is None for p in passes):
+        return ()
+    from refine.plan.program import PlannedPass, plan_program
+    from refine.plan.verify import MotionChecker
+    from refine.robot.kinematics import TcpKinematics
+
+    model = next((getattr(s, "model", None) for s in sources if getattr(s, "model", None) is not None), None)
+    kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange)
+    checker = MotionChecker(kin, model, problem.tolerances, problem.collision.check_step_m)
+    planned = []
+    for p in passes:
+        assert p.trajectory is not None and p.timing is not None
+        check = p.refinement.check
+        planned.append(
+            PlannedPass(
+                p.name,
+                p.trajectory.q,
+                kin.poses(p.trajectory.q),
+                p.timing.cycle_time_s,
+                p.clearance,
+                float(check.joint_margin_rad.min()),
+                float(check.singularity.min()),
+            )
+        )
+    spec = robot.spec
+    accel = spec.acceleration
+    if problem.robot.joint_acceleration_deg_s2 is not None:
+        accel = np.radians(problem.robot.joint_acceleration_deg_s2)
+    home = None if problem.robot.home_deg is None else np.radians(problem.robot.home_deg)
+    return plan_program(
+        checker, planned, home, velocity=spec.velocity * problem.robot.velocity_scale, acceleration=accel
+    )

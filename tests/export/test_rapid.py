@@ -162,3 +162,39 @@ def test_single_and_many_configurations_agree(irb4600, trajectory):
 def test_rejects_a_bad_zone(tmp_path, trajectory, problem, irb4600):
     with pytest.raises(InputError, match="zone"):
         write_rapid(tmp_path / "x.mod", trajectory, problem, irb4600, zone="zz")
+
+
+def test_the_run_s_planned_air_moves_are_written_as_joint_targets_with_exact_stops(
+    tmp_path, trajectory, problem, irb4600
+):
+    """Via points and approach joints of the home move, via points of the return, in order, exact."""
+    air_in = np.radians([[10.0, 5.0, 0.0, 0.0, 30.0, 0.0], [20.0, 10.0, 5.0, 0.0, 40.0, 0.0], [-19.5, 9.0, -14.0, 39.0, 49.0, -59.0]])
+    air_out = np.radians([[30.0, -5.0, 10.0, 0.0, 45.0, 10.0], [0.0, 0.0, 0.0, 0.0, 30.0, 0.0]])
+    text = write_rapid(
+        tmp_path / "air.mod", trajectory, problem, irb4600, air_in=air_in, air_out=air_out
+    ).read_text()
+    decl = {
+        m[1]: np.array([float(v) for v in m[2].split(",")])
+        for m in re.finditer(r"CONST jointtarget (\w+):=\[\[([^\]]*)\]", text)
+    }
+    main = text.split("PROC main()")[1].split("ENDPROC")[0]
+    order = re.findall(r"MoveAbsJ (\w+)\\NoEOffs, vAir, (\w+),", main)
+    assert [name for name, _ in order] == ["jHome", "jIn1", "jIn2", "jIn3", "jOut1", "jHome"]
+    assert all(zone == "fine" for _, zone in order)
+    for k, q in enumerate(air_in, start=1):
+        np.testing.assert_allclose(decl[f"jIn{k}"], np.degrees(q), atol=1e-4)
+    np.testing.assert_allclose(decl["jOut1"], np.degrees(air_out[0]), atol=1e-4)
+    assert "MoveJ RelTool" not in main  # the approach point is the planned joint target
+    lines = [ln.strip() for ln in main.splitlines() if ln.strip()]
+    at = lines.index(next(ln for ln in lines if ln.startswith("MoveAbsJ jIn3")))
+    assert lines[at + 3].startswith("TriggL p0000, vAir, trOn")  # then the straight line onto the first target
+    assert re.search(r"MoveL RelTool\(p\d+, 0, 0, -100\), vAir, fine,", main)  # the retract, exact
+
+
+def test_a_later_pass_s_module_starts_with_the_planned_link_not_at_home(tmp_path, trajectory, problem, irb4600):
+    link = np.radians([[5.0, 5.0, 0.0, 0.0, 30.0, 0.0], [-19.5, 9.0, -14.0, 39.0, 49.0, -59.0]])
+    text = write_rapid(
+        tmp_path / "p2.mod", trajectory, problem, irb4600, air_in=link, start_home=False, end_home=False
+    ).read_text()
+    main = text.split("PROC main()")[1].split("ENDPROC")[0]
+    assert re.findall(r"MoveAbsJ (\w+)\\NoEOffs", main) == ["jIn1", "jIn2"]

@@ -201,3 +201,23 @@ def test_continuous_rotvecs_pick_the_closest_equivalent_vector():
     for i in range(6):  # along each smooth sweep through π the written vectors never jump
         sweep = out[60 * i : 60 * (i + 1)]
         assert np.linalg.norm(np.diff(sweep, axis=0), axis=1).max() < 0.05
+
+
+def test_the_run_s_planned_air_moves_are_written_as_movej_through_each_via_point(tmp_path, path, ur_problem, ur10e):
+    """Via points before the pass (the approach is the pass's first movej), the return's before home."""
+    from refine.export.program import ProgramPass
+
+    air_in = np.radians([[0.0, -90.0, 90.0, -90.0, -90.0, 0.0], [25.0, -95.0, 100.0, -105.0, -88.0, -140.0]])
+    air_out = np.radians([[40.0, -70.0, 80.0, -100.0, -80.0, 100.0], [0.0, -90.0, 90.0, -90.0, -90.0, 0.0]])
+    run = ProgramPass("pass 1", path, (), air_in, air_out)
+    text = write_urscript(tmp_path / "air.script", path, ur_problem, ur10e, passes=[run]).read_text()
+    movej = [
+        np.array([float(v) for v in m[1].split(",")]) for m in re.finditer(r"movej\(\[([^\]]*)\]", text)
+    ]
+    # home, via, approach (the pass's first movej), via of the return, home
+    assert len(movej) == 5
+    np.testing.assert_allclose(movej[1], air_in[0], atol=1e-8)
+    np.testing.assert_allclose(movej[2], air_in[1], atol=1e-8)
+    np.testing.assert_allclose(movej[3], air_out[0], atol=1e-8)
+    passes = parse_urscript(tmp_path / "air.script")
+    np.testing.assert_allclose(passes[0].q_approach, air_in[-1], atol=1e-8)

@@ -1,0 +1,1 @@
+"""The motion plan of a program: home, approach, passes, retract, links and return, each verified."""
