@@ -163,7 +163,7 @@ def result_dict(result: RunResult) -> dict[str, Any]:
             {"name": p.name, "layer": p.layer, "index": p.index, "status": p.refinement.status, "metrics": m}
             for p, m in zip(result.passes, per_pass, strict=True)
         ],
-        "motions": [m.as_json() for m in result.motions],
+        "motions": [m.as_json(result.robot.spec.to_controller) for m in result.motions],
         "program_time_s": sum(m.duration_s for m in result.motions) if result.motions else None,
         "truth": None if result.truth is None else result.truth.as_json(),
         "demo_quality": _demo_quality(result),

@@ -11,6 +11,7 @@ approach and retract are straight TCP lines with the joints from IK along them.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -137,12 +138,16 @@ class Motion:
         """The failure in one line (empty when ``ok``)."""
         return "; ".join(f"{self.name}: {i.describe()}" for i in self.issues)
 
-    def as_json(self) -> dict[str, Any]:
-        """The motion as ``result.json`` writes it (``motions[i]``, see docs/outputs.md)."""
+    def as_json(self, shown: Callable[[Array], Array] = lambda q: q) -> dict[str, Any]:
+        """The motion as ``result.json`` writes it (``motions[i]``, see docs/outputs.md).
+
+        Args:
+            shown: URDF joints -> the joints as the controller shows them (``RobotSpec.to_controller``).
+        """
 
         def end(q: Array, T: Array) -> dict[str, Any]:
             return {
-                "joints_deg": [float(v) for v in np.degrees(q)],
+                "joints_deg": [float(v) for v in np.degrees(shown(q))],
                 "tcp_position_m": [float(v) for v in T[:3, 3]],
                 "tcp_rotation": [[float(v) for v in row] for row in T[:3, :3]],
             }
@@ -160,7 +165,7 @@ class Motion:
             "planner": self.planner,
             "planner_time_s": float(self.planner_time_s),
             "via_points": int(len(self.via)),
-            "via_points_deg": [[float(v) for v in np.degrees(row)] for row in self.via],
+            "via_points_deg": [[float(v) for v in np.degrees(shown(row))] for row in self.via],
             "min_distance_m": num(self.min_distance_m),
             "min_clearance_m": num(self.min_clearance_m),
             "closest_pair": list(self.closest) if self.closest[0] else None,

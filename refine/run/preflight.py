@@ -156,12 +156,13 @@ def check_home(problem: Problem, robot: Robot) -> None:
     home = problem.robot.home_deg
     if home is None:
         return
-    q = np.radians(np.asarray(home, dtype=float))
     spec = robot.spec
+    q = np.radians(spec.from_controller(np.asarray(home, dtype=float)))  # the controller's -> the URDF's
+    coupled = " (as the URDF counts it)" if spec.joint_coupling else ""
     for j, (v, lo, hi) in enumerate(zip(q, spec.lower, spec.upper, strict=True)):
         if not lo <= v <= hi:
             raise InputError(
-                f"robot.home_deg: joint {j + 1} at {math.degrees(v):g} deg is outside its limits "
+                f"robot.home_deg: joint {j + 1} at {math.degrees(v):g} deg{coupled} is outside its limits "
                 f"[{math.degrees(lo):.1f}, {math.degrees(hi):.1f}] deg"
             )
     if not problem.collision.enabled or not (problem.cell or problem.tool.collision):

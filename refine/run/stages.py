@@ -238,7 +238,7 @@ def plan_motions(
     accel = spec.acceleration
     if problem.robot.joint_acceleration_deg_s2 is not None:
         accel = np.radians(problem.robot.joint_acceleration_deg_s2)
-    home = None if problem.robot.home_deg is None else np.radians(problem.robot.home_deg)
+    home = None if problem.robot.home_deg is None else np.radians(spec.from_controller(problem.robot.home_deg))
     return plan_program(
         checker, planned, home, velocity=spec.velocity * problem.robot.velocity_scale, acceleration=accel
     )
