@@ -35,6 +35,8 @@ class PassResult:
         clearance: the dense clearance check of the refined path (None without collision).
         nlp: the pass's refinement problem as built (a ``RefinementNLP``), for re-solving it
             after a small change; None when not kept.
+        line: the controller's straight-line motion between the waypoints, checked
+            (:class:`refine.optimise.controller_line.LineCheck`); None when not checked.
     """
 
     name: str
@@ -46,6 +48,7 @@ class PassResult:
     trajectory: Trajectory | None
     clearance: Any = None
     nlp: Any = None
+    line: Any = None
 
 
 @dataclass(frozen=True)
@@ -138,6 +141,8 @@ def summary_lines(result: RunResult) -> list[str]:
                 + (f", {pair}" if pair else "")
                 + f"; checked between waypoints: {c.queries} queries in {c.time_s:.2f} s"
             )
+        if p.line is not None:
+            lines.append(f"line         {p.line.describe()}" + ("" if p.line.ok else " (broken)"))
         if p.timing is not None:
             lines.append(
                 f"timing       cycle {p.timing.cycle_time_s:.2f} s, "
