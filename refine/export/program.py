@@ -208,7 +208,9 @@ def speed_levels(
     # here[j, i]: the level at cand[j] covers j..i-1 (i > j); the next level starts at i (none when i == m)
     j_all, i_all = np.arange(m)[:, None], np.arange(m + 1)[None, :]
     here = np.where(i_all > j_all, (cum_w[i_all] - cum_w[j_all]) / cand[:, None], np.inf)
-    if share is not None:  # the level at cand[j] must keep the fastest segment of cand[i - 1] within the share
+    if (
+        share is not None
+    ):  # the level at cand[j] must keep the fastest segment of cand[i - 1] within the share
         slowest_kept = np.concatenate([[0.0], fastest * (1.0 - share)])[i_all]
         here = np.where(slowest_kept <= cand[:, None] * (1.0 + 1e-12), here, np.inf)
     for k in range(1, k_max + 1):
@@ -270,7 +272,9 @@ ZONE_SEGMENT_SHARE = {"rapid": 0.5, "krl": 0.5, "urscript": 0.4, "sunrise": 0.5}
 is larger than half a move; the URScript writer caps ``r`` at 40 % of the shorter segment."""
 
 
-def corner_deviation(before: Array, corner: Array, after: Array, radius_m: float, segment_share: float) -> tuple[float, float]:
+def corner_deviation(
+    before: Array, corner: Array, after: Array, radius_m: float, segment_share: float
+) -> tuple[float, float]:
     """The zone a corner gets and the largest deviation from the programmed path it allows.
 
     The corner path starts on the incoming move ``r`` before the target and ends on the outgoing
@@ -283,7 +287,9 @@ def corner_deviation(before: Array, corner: Array, after: Array, radius_m: float
     midpoint); ``r sin(theta/2)`` bounds both.
 
     Args:
-        before, corner, after: the previous target, this target and the next one [m], (3,) each.
+        before: the previous target [m], (3,).
+        corner: this target [m], (3,).
+        after: the next target [m], (3,).
         radius_m: the zone's radius [m] (0 for an exact stop).
         segment_share: the largest share of a neighbouring move the zone may take.
 

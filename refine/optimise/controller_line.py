@@ -210,7 +210,8 @@ def check_controller_lines(
     a, b = poses[segment, :3, 3], poses[segment + 1, :3, 3]
     chord = b - a
     along = np.clip(
-        np.einsum("ij,ij->i", lin_poses[:, :3, 3] - a, chord) / np.maximum(np.einsum("ij,ij->i", chord, chord), 1e-300),
+        np.einsum("ij,ij->i", lin_poses[:, :3, 3] - a, chord)
+        / np.maximum(np.einsum("ij,ij->i", chord, chord), 1e-300),
         0.0,
         1.0,
     )
@@ -235,10 +236,24 @@ def check_controller_lines(
     margin = math.radians(tolerances.joint_margin_deg) - 1e-7
     for j in range(q.shape[1]):
         per_seg = _segment_min(margins[:, j], segment, n_seg)
-        add(per_seg < margin, f"joint limit on the controller's line (joint {j + 1})", per_seg, "rad", margin, False)
+        add(
+            per_seg < margin,
+            f"joint limit on the controller's line (joint {j + 1})",
+            per_seg,
+            "rad",
+            margin,
+            False,
+        )
     sing_seg = _segment_min(sing, segment, n_seg)
     sing_tol = tolerances.singularity_margin - 1e-9
-    add(sing_seg < sing_tol, "singularity on the controller's line", sing_seg, "-", tolerances.singularity_margin, False)
+    add(
+        sing_seg < sing_tol,
+        "singularity on the controller's line",
+        sing_seg,
+        "-",
+        tolerances.singularity_margin,
+        False,
+    )
 
     clear = change = proved = None
     if reach is not None:

@@ -224,10 +224,10 @@ def program_formats(problem: Problem, robot: Robot) -> tuple[str, ...]:
 def controller_line_check(
     problem: Problem, robot: Robot, q: np.ndarray, s: np.ndarray, sources: tuple[ConstraintSource, ...] = ()
 ) -> Any:
-    """The controller's straight-line motion between the waypoints of ``q``, checked.
+    r"""The controller's straight-line motion between the waypoints of ``q``, checked.
 
     The orientation model is the slerp of :mod:`refine.optimise.controller_line`; where a RAPID or
-    KRL program hands a run near the wrist singularity to the controller (``SingArea \\Wrist``,
+    KRL program hands a run near the wrist singularity to the controller (``SingArea \Wrist``,
     ``$ORI_TYPE = #JOINT``), the wrist's joint-linear orientation. Clearance comes from the
     problem's collision source (the first that has a collision model): proved along the joints
     through the samples of the line, checked densely where the proof falls short.
@@ -245,7 +245,9 @@ def controller_line_check(
     if {"rapid", "krl"} & set(program_formats(problem, robot)):
         for a, b in singular_runs(robot, q):
             wrist[max(a, 1) - 1 : b + 1] = True  # the moves from the one onto target max(a, 1) to b + 1
-    model = next((getattr(src, "model", None) for src in sources if getattr(src, "model", None) is not None), None)
+    model = next(
+        (getattr(src, "model", None) for src in sources if getattr(src, "model", None) is not None), None
+    )
 
     def clearance(dense: np.ndarray) -> tuple[np.ndarray | None, float]:
         if margins_proved(model, dense):
@@ -262,5 +264,3 @@ def controller_line_check(
         clearance=None if model is None else clearance,
         reach=None if model is None else joint_reach(model),
     )
-
-
