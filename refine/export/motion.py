@@ -8,7 +8,7 @@ the report state the same figures, so what is reported is what is written:
   zone (``z1`` by default), a smaller predefined zone (``z0``) or ``fine``; KRL's ``C_DIS`` with
   ``$APO.CDIS`` or an exact stop; URScript's blend radius ``r``, made as small as the tolerance
   needs; Sunrise's spline passes through every target (no zone) and blends only the approach into
-  it, by ``setBlendingCart``. A weld's first and last targets are exact stops in every format.
+  it, by ``setBlendingCart(1.0)`` (1 mm, not narrowed: its deviation is reported as it is). A weld's first and last targets are exact stops in every format.
 * **Speeds.** The programmed speed of every segment: RAPID's ``speeddata`` levels
   (:func:`refine.export.program.speed_levels`, with ``[output] speed_share``), the rounded
   ``$VEL.CP``, ``v`` and ``setCartVelocity`` of KRL, URScript and Sunrise.
@@ -21,10 +21,20 @@ from dataclasses import dataclass
 import numpy as np
 
 from refine.errors import InputError
-from refine.export.program import RAPID_ZONES_M, ZONE_SEGMENT_SHARE, Zones, corner_zones, speed_levels
+from refine.export.program import (
+    RAPID_ZONES_M,
+    ZONE_SEGMENT_SHARE,
+    Zones,
+    corner_deviation,
+    corner_zones,
+    speed_levels,
+)
 from refine.paths import Trajectory
 from refine.problem import Problem
 from refine.types import Array
+
+MOTION_FORMATS = ("rapid", "krl", "urscript", "sunrise")
+"""The program formats whose zones and speeds :func:`program_motion` knows."""
 
 SUNRISE_APPROACH_BLEND_M = 0.001
 """The Sunrise writer's blend of the approach move into the spline (``setBlendingCart``) [m]."""
@@ -162,21 +172,16 @@ def program_motion(
             )
             label = tuple(f"r={r:.6g}" for r in zones.radius_m)
             zones = Zones(zones.radius_m, zones.deviation_m, label, zones.tolerance_m, zones.narrowed)
-        else:  # the spline passes through every target; only the approach blends into it
-            zones = corner_zones(
-                points,
-                [(f"blend {SUNRISE_APPROACH_BLEND_M * 1e3:g} mm", SUNRISE_APPROACH_BLEND_M)],
-                tolerance,
-                segment_share,
-                ("spline", 0.0),
-                (ends[0], False),
-            )
-            label = tuple(zones.label[:1]) + ("spline",) * (len(zones.label) - 1)
-            radius, deviation = zones.radius_m.copy(), zones.deviation_m.copy()
-            radius[1:], deviation[1:] = 0.0, 0.0
-            zones = Zones(
-                radius, deviation, label, zones.tolerance_m, tuple(k for k in zones.narrowed if k == 0)
-            )
+        else:  # the spline passes through every target; only the approach blends into it, by 1 mm always
+            n = len(trajectory)
+            radius, deviation = np.zeros(n), np.zeros(n)
+            label = ["spline"] * n
+            if not weld:
+                radius[0], deviation[0] = corner_deviation(
+                    points[0], points[1], points[2], SUNRISE_APPROACH_BLEND_M, segment_share
+                )
+                label[0] = f"blend {SUNRISE_APPROACH_BLEND_M * 1e3:g} mm"
+            zones = Zones(radius, deviation, tuple(label), tolerance, ())
         programmed = _rounded(planned, speed_resolution_m_s)
         levels = np.unique(programmed)
     else:

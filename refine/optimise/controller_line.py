@@ -109,6 +109,36 @@ class LineCheck:
         """True when the controller's line breaks no tolerance."""
         return not self.violations
 
+    def as_json(self, joint_linear_clearance_m: Array | None = None) -> dict:
+        """The figures ``result.json`` writes (``passes[i].line``).
+
+        Args:
+            joint_linear_clearance_m: the least clearance per segment of the joint-linear motion
+                [m], (N-1,), for the bound on the line's (less ``clearance_change_m``); None to
+                leave it out.
+        """
+        least_clearance = None
+        if joint_linear_clearance_m is not None and self.clearance_change_m is not None:
+            least_clearance = float(np.min(np.asarray(joint_linear_clearance_m) - self.clearance_change_m))
+        if self.clearance_m is not None:
+            least_clearance = float(self.clearance_m.min())
+        return {
+            "ok": self.ok,
+            "samples": int(len(self.t)),
+            "max_position_difference_m": float(self.position_difference_m.max(initial=0.0)),
+            "max_orientation_difference_deg": float(self.orientation_difference_deg.max(initial=0.0)),
+            "max_joint_difference_deg": float(self.joint_difference_deg.max(initial=0.0)),
+            "max_ik_error": float(self.ik_error.max(initial=0.0)),
+            "min_joint_margin_rad": float(self.joint_margin_rad.min(initial=np.inf)),
+            "min_singularity_measure": float(self.singularity.min(initial=np.inf)),
+            "clearance_proved": self.clearance_proved,
+            "max_clearance_change_m": (
+                None if self.clearance_change_m is None else float(self.clearance_change_m.max(initial=0.0))
+            ),
+            "min_clearance_m": least_clearance,
+            "violations": [v.describe() for v in self.violations],
+        }
+
     def describe(self) -> str:
         """One line: the largest differences to the joint-linear motion."""
         return (
@@ -217,7 +247,7 @@ def check_controller_lines(
     )
     off_line = np.linalg.norm(lin_poses[:, :3, 3] - (a + along[:, None] * chord), axis=1)
     rel = np.einsum("kji,kjl->kil", lin_poses[:, :3, :3], targets[:, :3, :3])
-    angle = np.degrees(np.arccos(np.clip((np.trace(rel, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)))
+    angle = np.degrees(Rotation.from_matrix(rel).magnitude())
     joint_diff = np.degrees(np.abs(q_line - q_lin).max(axis=1))
     margins = np.minimum(q_line - spec.lower, spec.upper - q_line)
     sing, _ = singularity_measures(kin, q_line, smallest=False)

@@ -140,7 +140,9 @@ def unsolved(
     time_limit_reached: bool = False,
 ) -> Refinement:
     """An infeasible answer without a solve: the seed, checked, with the reason and diagnosis."""
-    check = check_path(problem_kinematics(problem), q_seed, problem.fused, problem.tolerances, problem.axisymmetric)
+    check = check_path(
+        problem_kinematics(problem), q_seed, problem.fused, problem.tolerances, problem.axisymmetric
+    )
     return Refinement(
         "infeasible",
         reason,
@@ -177,7 +179,9 @@ def findings_of(
 ) -> tuple[Finding, ...]:
     """The diagnosis of every run of ``mask`` (waypoints that needed slack or break a tolerance)."""
     model = next((getattr(src, "model", None) for src in sources if hasattr(src, "model")), None)
-    diagnoser = Diagnoser(problem_kinematics(problem), problem.fused, problem.tolerances, problem.axisymmetric, model)
+    diagnoser = Diagnoser(
+        problem_kinematics(problem), problem.fused, problem.tolerances, problem.axisymmetric, model
+    )
     return tuple(
         diagnoser.segment(status, a, b, q, None if slack is None else float(np.max(slack[a : b + 1])))
         for a, b in segments(mask)
