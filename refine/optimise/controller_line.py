@@ -22,7 +22,8 @@ and k+1 with poses (p_k, R_k) and (p_{k+1}, R_{k+1}):
 :data:`MAX_SAMPLE_STEP_DEG` between samples); the joints at each sample are solved by damped least squares from the joint-linear
 interpolation, without a pull to mid-range, so they stay on the refined joints' branch (as the
 controller's IK from its current joints). At every sample: the IK's residual, the joint-limit
-margins, the singularity measure. The clearance is proved along the joint path through the
+margins (kept to ``joint_margin_deg`` less :data:`JOINT_MARGIN_ALLOWANCE_DEG`), the singularity
+measure (to ``singularity_margin`` less :data:`SINGULARITY_ALLOWANCE`). The clearance is proved along the joint path through the
 waypoints and the samples (the collision model's motion bound, :func:`refine.collision.check.margins_proved`),
 and where the proof falls short that path is checked densely and its breaks reported. The figures
 compare the two motions: the distance of the joint-linear TCP from the straight line, the angle
@@ -57,6 +58,14 @@ MAX_SAMPLE_STEP_DEG = 0.5
 """More sub-steps where a joint moves more than this between two samples [deg]."""
 IK_TOLERANCE = 1e-9
 """Pose error [m and rad stacked] the IK along the line must reach."""
+JOINT_MARGIN_ALLOWANCE_DEG = 0.01
+"""The line may come this much closer to a joint limit than ``[tolerances] joint_margin_deg`` [deg]:
+between two waypoints that keep the margin exactly (a repair's active bound) the line's joints
+bow by the square of the step (1e-6 rad at 1 mm spacing), well inside the margin; the limit itself
+stays the margin less this away."""
+SINGULARITY_ALLOWANCE = 1e-4
+"""The line's singularity measure may fall this much below ``[tolerances] singularity_margin`` [-],
+for the same reason."""
 IK_FAILED = 1e-6
 """A sample whose IK stays further than this from the line [m and rad stacked] has no answer."""
 
@@ -263,7 +272,7 @@ def check_controller_lines(
 
     ik_worst = _segment_max(err, segment, n_seg, 0.0)
     add(ik_worst > IK_FAILED, "no IK on the controller's line", ik_worst, "m+rad", IK_FAILED, True)
-    margin = math.radians(tolerances.joint_margin_deg) - 1e-7
+    margin = math.radians(max(tolerances.joint_margin_deg - JOINT_MARGIN_ALLOWANCE_DEG, 0.0)) - 1e-7
     for j in range(q.shape[1]):
         per_seg = _segment_min(margins[:, j], segment, n_seg)
         add(
@@ -275,7 +284,7 @@ def check_controller_lines(
             False,
         )
     sing_seg = _segment_min(sing, segment, n_seg)
-    sing_tol = tolerances.singularity_margin - 1e-9
+    sing_tol = tolerances.singularity_margin - SINGULARITY_ALLOWANCE
     add(
         sing_seg < sing_tol,
         "singularity on the controller's line",
