@@ -23,7 +23,7 @@ and k+1 with poses (p_k, R_k) and (p_{k+1}, R_{k+1}):
 interpolation, without a pull to mid-range, so they stay on the refined joints' branch (as the
 controller's IK from its current joints). At every sample: the IK's residual, the joint-limit
 margins (kept to ``joint_margin_deg`` less :data:`JOINT_MARGIN_ALLOWANCE_DEG`), the singularity
-measure (to ``singularity_margin`` less :data:`SINGULARITY_ALLOWANCE`). The clearance is proved along the joint path through the
+measure (to ``singularity_margin`` less :data:`SINGULARITY_SHARE` of it). The clearance is proved along the joint path through the
 waypoints and the samples (the collision model's motion bound, :func:`refine.collision.check.margins_proved`),
 and where the proof falls short that path is checked densely and its breaks reported. The figures
 compare the two motions: the distance of the joint-linear TCP from the straight line, the angle
@@ -63,9 +63,11 @@ JOINT_MARGIN_ALLOWANCE_DEG = 0.01
 between two waypoints that keep the margin exactly (a repair's active bound) the line's joints
 bow by the square of the step (1e-6 rad at 1 mm spacing), well inside the margin; the limit itself
 stays the margin less this away."""
-SINGULARITY_ALLOWANCE = 1e-4
-"""The line's singularity measure may fall this much below ``[tolerances] singularity_margin`` [-],
-for the same reason."""
+SINGULARITY_SHARE = 0.02
+"""The line's singularity measure may fall this share below ``[tolerances] singularity_margin``
+[-]: where a repair holds the waypoints and the joint-linear motion at the margin, the line, whose
+joints differ from the joint-linear ones by the square of the step, dips below it by a small share
+(1.5 % on the bundled wrist-flip case)."""
 IK_FAILED = 1e-6
 """A sample whose IK stays further than this from the line [m and rad stacked] has no answer."""
 
@@ -284,7 +286,7 @@ def check_controller_lines(
             False,
         )
     sing_seg = _segment_min(sing, segment, n_seg)
-    sing_tol = tolerances.singularity_margin - SINGULARITY_ALLOWANCE
+    sing_tol = tolerances.singularity_margin * (1.0 - SINGULARITY_SHARE)
     add(
         sing_seg < sing_tol,
         "singularity on the controller's line",
