@@ -136,3 +136,21 @@ def test_rapid_speeds_of_a_ramp_stay_within_the_share_and_the_report_figures_say
         assert np.all(m.programmed_m_s >= (1.0 - share) * planned - 1e-12)
         assert m.beyond_share == [] and m.as_json()["largest_speed_shortfall_rel"] <= share
         np.testing.assert_allclose(m.difference_rel, (m.programmed_m_s - planned) / planned)
+
+
+def test_the_problem_file_sets_the_path_tolerance_and_the_speed_share(tmp_path):
+    import shutil
+
+    from refine.problem import load_problem
+
+    folder = tmp_path / "glass_adhesive"
+    shutil.copytree(Path(__file__).resolve().parents[2] / "problems" / "glass_adhesive", folder)
+    toml = folder / "problem.toml"
+    text = toml.read_text(encoding="utf-8")
+    text = text.replace("[process]\n", "[process]\npath_tolerance_m = 0.0002\n", 1)
+    toml.write_text(text.replace("[output]\n", "[output]\nspeed_share = 0.05\n", 1), encoding="utf-8")
+    problem = load_problem(folder)
+    assert problem.process.path_tolerance_m == 0.0002 and problem.output.speed_share == 0.05
+    toml.write_text(toml.read_text(encoding="utf-8").replace("speed_share = 0.05", "speed_share = 0.9"))
+    with pytest.raises(InputError, match=r"output.speed_share must be a finite number in \[0.0001, 0.5\]"):
+        load_problem(folder)
