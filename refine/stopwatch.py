@@ -37,6 +37,7 @@ def add_time(timings: dict[str, float], key: str, start: tuple[float, float]) ->
 
 class Stopwatch:
     """Wall time per stage of a run, lapped stage after stage."""
+
     def __init__(self) -> None:
         self.times: dict[str, float] = {}
         self._t = time.perf_counter()

@@ -286,5 +286,3 @@ def register_receiver_from_log(
 
 
 # ---- trace along the CAD path ------------------------------------------------------------------
-
-

@@ -278,7 +278,9 @@ def register_receiver_to_path(
             x_new = np.concatenate([sol.x, held])
             moved_m, turned_deg = frame_difference(unpack_frame(x)[0], unpack_frame(x_new)[0])
             bent_m = float(
-                np.abs(zfield.z_error(p, unpack_frame(x_new)[1]) - zfield.z_error(p, unpack_frame(x)[1])).max()
+                np.abs(
+                    zfield.z_error(p, unpack_frame(x_new)[1]) - zfield.z_error(p, unpack_frame(x)[1])
+                ).max()
             )
             cost_before, cost_after = float(np.sum(robust_cost(x))), float(np.sum(robust_cost(x_new)))
             x = x_new

@@ -137,7 +137,9 @@ def read_demo_csv(path: str | Path, units: str = "m", angle_units: str | None = 
     return TrackerLog(
         t=data[:, 0] - data[0, 0],
         positions=positions,
-        rotations=matrix_from_tracker_angles(angles_deg[:, 0], angles_deg[:, 1], angles_deg[:, 2], degrees=True),
+        rotations=matrix_from_tracker_angles(
+            angles_deg[:, 0], angles_deg[:, 1], angles_deg[:, 2], degrees=True
+        ),
         source=str(path),
     )
 

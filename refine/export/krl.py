@@ -48,6 +48,7 @@ import pinocchio as pin
 from numpy.typing import NDArray
 
 from refine.errors import InputError
+from refine.export.motion import Zones, program_motion, segment_speeds
 from refine.export.program import (
     Switch,
     Wait,
@@ -61,7 +62,6 @@ from refine.export.program import (
     weld_end,
     weld_start,
 )
-from refine.export.rapid import segment_speeds
 from refine.frames import invert_transform, kuka_abc_from_matrix, make_transform, matrix_from_kuka_abc
 from refine.names import comment_text, identifier
 from refine.paths import Trajectory
@@ -244,9 +244,19 @@ def _trigger(problem: Problem, io: _Io, value: str, lead: float) -> str:
 
 
 def _moves(
-    names: list[str], tr: Trajectory, robot: Any, problem: Problem, io: _Io, air: str, step: float
+    names: list[str],
+    tr: Trajectory,
+    robot: Any,
+    problem: Problem,
+    io: _Io,
+    air: str,
+    step: float,
+    zones: Zones,
 ) -> list[str]:
-    """The motion of one pass: approach, process on, the seam, process off, retract."""
+    """The motion of one pass: approach, process on, the seam, process off, retract.
+
+    Each path point is approximated (``C_DIS``) or an exact stop as ``zones`` says.
+    """
     path, current, weld = names[1:-1], None, problem.process.kind == "weld"
     by_time = problem.process.lead_m is None
     lead = problem.process.lead_s if by_time else float(problem.process.lead_m)
@@ -256,7 +266,7 @@ def _moves(
     if weld:
         lines += [f"LIN {path[0]}", *_weld_start(io, problem)]
     else:
-        lines += [_trigger(problem, io, "TRUE", lead), f"LIN {path[0]} C_DIS"]
+        lines += [_trigger(problem, io, "TRUE", lead), f"LIN {path[0]}" + _zone(zones, 0)]
     sing_on, sing_off = {}, {}
     for a, b in singular_runs(robot, tr.q):
         sing_on[max(a, 1)] = f"$ORI_TYPE = #JOINT ; near the wrist singularity at points {a + 1}-{b + 1}"
@@ -267,11 +277,15 @@ def _moves(
         current = text
         lines += [sing_on[k]] if k in sing_on else []
         lines += [_trigger(problem, io, "FALSE", off_lead)] if k == off_k and not weld else []
-        exact = k == len(path) - 1 and weld
-        lines.append(f"LIN {path[k]}" + ("" if exact else " C_DIS"))
+        lines.append(f"LIN {path[k]}" + _zone(zones, k))
         lines += [sing_off[k]] if k in sing_off else []
     lines += _weld_end(io, problem) if weld else []
     return lines + [f"$VEL.CP = {air}", f"LIN {names[-1]}"]
+
+
+def _zone(zones: Zones, k: int) -> str:
+    """`` C_DIS`` where point ``k`` is approximated, nothing at an exact stop."""
+    return " C_DIS" if zones.label[k] == "C_DIS" else ""
 
 
 def _lengths(tr: Trajectory) -> Array:
@@ -363,12 +377,25 @@ def write_krl(
         air_in = getattr(p, "air_in", None)
         dat_lines += _declarations(names, tr, robot, back, None if air_in is None else air_in[-1])
         head = f"pass {i} of {len(runs)}: " + comment_text(str(p.name)).replace(";", ",")
-        src_lines += [f";FOLD {head}", f"  ; {head}, {len(tr)} points, {float(tr.t[-1]):.3f} s planned"]
+        zones = program_motion(
+            "krl",
+            tr,
+            problem,
+            approximation_m=approximation_m,
+            retract_m=retract_m,
+            speed_resolution_m_s=speed_resolution_m_s,
+        ).zones
+        src_lines += [
+            f";FOLD {head}",
+            f"  ; {head}, {len(tr)} points, {float(tr.t[-1]):.3f} s planned",
+            f"  ; zones: C_DIS, exact at {len(zones.narrowed)} point(s) to keep the path tolerance "
+            f"{zones.tolerance_m * 1e3:g} mm; largest corner deviation {zones.largest_deviation_m * 1e3:.3f} mm",
+        ]
         if air_in is not None:  # the run's planned air move: via points (exact stops), then the approach
             vias = [f"XIN{i}_{k}" for k in range(1, len(air_in))]
             dat_lines += [f"DECL E6AXIS {v}={{{_e6axis(q)}}}" for v, q in zip(vias, air_in, strict=False)]
             src_lines += [f"  PTP {v} ; via point of the planned move to pass {i}" for v in vias]
-        moves = _moves(names, tr, robot, problem, io, air, speed_resolution_m_s)
+        moves = _moves(names, tr, robot, problem, io, air, speed_resolution_m_s, zones)
         src_lines += [f"  {line}" for line in moves]
         src_lines.append(";ENDFOLD")
     air_out = getattr(runs[-1], "air_out", None)

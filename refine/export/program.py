@@ -12,7 +12,11 @@ r"""What every robot program writer shares: passes with their repairs, home, sin
   comment.
 * :func:`speed_levels`: a few speeds for many segments: each segment runs at the fastest level
   not above its planned speed, and the levels are chosen (exact dynamic programme over the
-  distinct rounded speeds) to add the least time to the path.
+  distinct rounded speeds) to add the least time to the path; with a ``share``, as many more
+  levels as it takes for every segment to run within that share of its planned speed.
+* :func:`corner_zones`: the blend zone of every path target and the largest deviation from the
+  programmed path it allows (:func:`corner_deviation`), the zone made smaller or an exact stop
+  where the deviation would exceed ``[process] path_tolerance_m``.
 * :func:`lead_point`: where on the path a switch ``lead`` before its end falls.
 * :func:`weld_start` and :func:`weld_end`: the arc start and end in the order every dialect writes
   them (gas pre-flow, arc on, wait for the arc; crater fill, arc off, gas post-flow, gas off), each
@@ -178,31 +182,50 @@ def process_summary(problem: Problem, mechanism: str, out: str, gas: str = "", o
 
 
 def speed_levels(
-    speeds_m_s: Array, lengths_m: Array, count: int, resolution_m_s: float = 1e-3
+    speeds_m_s: Array,
+    lengths_m: Array,
+    count: int,
+    resolution_m_s: float = 1e-3,
+    share: float | None = None,
 ) -> tuple[Array, Array]:
-    """At most ``count`` speed levels for segments, adding the least time.
+    """At most ``count`` speed levels for segments, adding the least time (more where ``share`` needs them).
 
     Each segment runs at the fastest level not above its planned speed (rounded down to
-    ``resolution_m_s``), so no segment runs faster than planned.
+    ``resolution_m_s``), so no segment runs faster than planned. With ``share``, no segment may
+    run slower than ``(1 - share)`` times its planned speed: the levels are then the fewest that
+    allow it when ``count`` does not (the least number by covering the sorted speeds from the
+    slowest up), chosen for the least added time among those that keep every segment within it.
 
     Args:
         speeds_m_s: planned speed of each segment [m/s], shape (M,).
         lengths_m: length of each segment [m], shape (M,).
-        count: largest number of levels.
+        count: largest number of levels (raised when ``share`` needs more).
         resolution_m_s: levels are multiples of this [m/s].
+        share: largest shortfall of a segment's level below its planned speed, as a share of it
+            [-] in (0, 1); None for no such bound.
 
     Returns:
-        the levels [m/s], ascending, shape (K,) with K <= count; and each segment's level index,
-        shape (M,).
+        the levels [m/s], ascending, shape (K,); and each segment's level index, shape (M,).
     """
-    v = np.maximum(np.floor(np.asarray(speeds_m_s, dtype=float) / resolution_m_s), 1.0) * resolution_m_s
+    planned = np.asarray(speeds_m_s, dtype=float)
+    v = np.maximum(np.floor(planned / resolution_m_s), 1.0) * resolution_m_s
     length = np.asarray(lengths_m, dtype=float)
     if count < 1:
         raise InputError(f"speed_levels: count must be >= 1, got {count}")
+    if share is not None and not 0.0 < share < 1.0:
+        raise InputError(f"speed_levels: share must be in (0, 1), got {share}")
     cand, inverse = np.unique(v, return_inverse=True)
     w = np.bincount(inverse, weights=length, minlength=len(cand))  # length at each distinct speed
     m = len(cand)
+    fastest = np.zeros(m)  # the fastest planned speed of each candidate's segments
+    np.maximum.at(fastest, inverse, planned)
     k_max = min(count, m)
+    if share is not None:
+        need, j = 0, 0
+        while j < m:  # a level at cand[j] serves every candidate whose segments it keeps within the share
+            need += 1
+            j = int(np.searchsorted(fastest * (1.0 - share), cand[j], side="right"))
+        k_max = max(k_max, need)
     # cost[i, j]: time of the candidates i..j-1 all run at level cand[i]
     cum_w = np.concatenate([[0.0], np.cumsum(w)])
     best = np.full((k_max + 1, m + 1), np.inf)
@@ -212,6 +235,11 @@ def speed_levels(
     # here[j, i]: the level at cand[j] covers j..i-1 (i > j); the next level starts at i (none when i == m)
     j_all, i_all = np.arange(m)[:, None], np.arange(m + 1)[None, :]
     here = np.where(i_all > j_all, (cum_w[i_all] - cum_w[j_all]) / cand[:, None], np.inf)
+    if (
+        share is not None
+    ):  # the level at cand[j] must keep the fastest segment of cand[i - 1] within the share
+        slowest_kept = np.concatenate([[0.0], fastest * (1.0 - share)])[i_all]
+        here = np.where(slowest_kept <= cand[:, None] * (1.0 + 1e-12), here, np.inf)
     for k in range(1, k_max + 1):
         total = here + best[k - 1]  # every j at once; best[k - 1] depends on the previous k only
         pick = np.argmin(total, axis=1)  # the first i of the least time, as a scan of i upwards finds
@@ -310,3 +338,121 @@ def arm_configuration(robot: Any, q: Array) -> tuple[Array, Array]:
         up = a1.rotation[:, 2] - float(np.dot(a1.rotation[:, 2], line)) * line
         elbow_up[k] = float(np.dot(p3 - p2, up)) > 0.0
     return behind, elbow_up
+
+
+RAPID_ZONES_M = {"z0": 0.0003, "z1": 0.001, "z5": 0.005, "z10": 0.01, "z15": 0.015, "z20": 0.02}
+"""``pzone_tcp`` of RAPID's predefined zones [m] (RAPID reference, data type ``zonedata``)."""
+
+ZONE_SEGMENT_SHARE = {"rapid": 0.5, "krl": 0.5, "urscript": 0.4, "sunrise": 0.5}
+"""A zone reaches at most this share of each neighbouring segment: ABB and KUKA halve a zone that
+is larger than half a move; the URScript writer caps ``r`` at 40 % of the shorter segment."""
+
+
+def corner_deviation(
+    before: Array, corner: Array, after: Array, radius_m: float, segment_share: float
+) -> tuple[float, float]:
+    """The zone a corner gets and the largest deviation from the programmed path it allows.
+
+    The corner path starts on the incoming move ``r`` before the target and ends on the outgoing
+    move ``r`` after it, with ``r = min(radius_m, share * |incoming|, share * |outgoing|)``, and
+    lies inside the triangle of those two points and the target (true of a corner path that is a
+    weighted mean of them, as the parabolic and Bezier blends of the controllers are). With
+    ``theta`` the angle the direction turns through, every point of that triangle is within
+    ``r sin(theta/2) cos(theta/2)`` of the two moves, and the path passes within
+    ``r sin(theta/2)`` of the target (it crosses the bisector between the target and the chord's
+    midpoint); ``r sin(theta/2)`` bounds both.
+
+    Args:
+        before: the previous target [m], (3,).
+        corner: this target [m], (3,).
+        after: the next target [m], (3,).
+        radius_m: the zone's radius [m] (0 for an exact stop).
+        segment_share: the largest share of a neighbouring move the zone may take.
+
+    Returns:
+        the zone's radius as the controller applies it [m] and the deviation bound [m].
+    """
+    d_in, d_out = np.asarray(corner) - np.asarray(before), np.asarray(after) - np.asarray(corner)
+    l_in, l_out = float(np.linalg.norm(d_in)), float(np.linalg.norm(d_out))
+    if radius_m <= 0.0 or l_in == 0.0 or l_out == 0.0:
+        return 0.0, 0.0
+    r = min(radius_m, segment_share * l_in, segment_share * l_out)
+    cos_turn = float(np.clip(np.dot(d_in, d_out) / (l_in * l_out), -1.0, 1.0))
+    return r, r * math.sqrt(max(0.0, 0.5 * (1.0 - cos_turn)))  # sin(theta/2) = sqrt((1 - cos theta)/2)
+
+
+@dataclass(frozen=True)
+class Zones:
+    """The blend zone of every path target of a pass as a program writes it.
+
+    Attributes:
+        radius_m: the zone's radius as the controller applies it, per target [m], (N,); 0 for an
+            exact stop.
+        deviation_m: the largest deviation from the programmed path the zone allows
+            (:func:`corner_deviation`), per target [m], (N,).
+        label: the zone as the program names it (``"z1"``, ``"fine"``, ``"C_DIS"``, ``"r=0.0008"``).
+        tolerance_m: ``[process] path_tolerance_m`` [m].
+        narrowed: targets whose zone was made smaller or an exact stop to keep the tolerance.
+    """
+
+    radius_m: Array
+    deviation_m: Array
+    label: tuple[str, ...]
+    tolerance_m: float
+    narrowed: tuple[int, ...]
+
+    @property
+    def largest_deviation_m(self) -> float:
+        """The largest deviation any zone of the pass allows [m]."""
+        return float(self.deviation_m.max(initial=0.0))
+
+
+def corner_zones(
+    points: Array,
+    choices: list[tuple[str, float]],
+    tolerance_m: float,
+    segment_share: float,
+    exact: tuple[str, float] = ("fine", 0.0),
+    ends: tuple[bool, bool] = (True, True),
+    continuous: bool = False,
+) -> Zones:
+    """The zone of every target: the first of ``choices`` whose deviation keeps ``tolerance_m``.
+
+    Args:
+        points: the approach point, the N path targets and the retract point [m], (N + 2, 3).
+        choices: (label, radius [m]) from the largest zone down; the first is the program's zone.
+        tolerance_m: largest deviation a zone may allow [m].
+        segment_share: the share of a neighbouring move a zone may take (:data:`ZONE_SEGMENT_SHARE`).
+        exact: label and radius of an exact stop, used where no choice keeps the tolerance.
+        ends: whether the first and the last target are blended (False: they are exact stops).
+        continuous: the radius may take any value (URScript ``r``): where the first choice breaks
+            the tolerance, the largest radius that keeps it, labelled ``r=<radius>``.
+
+    Returns:
+        the zones of the N targets.
+    """
+    points = np.asarray(points, dtype=float)
+    n = len(points) - 2
+    radius, deviation, labels, narrowed = np.zeros(n), np.zeros(n), [], []
+    for k in range(n):
+        if (k == 0 and not ends[0]) or (k == n - 1 and not ends[1]):
+            labels.append(exact[0])
+            continue
+        before, corner, after = points[k], points[k + 1], points[k + 2]
+        chosen = None
+        for label, r in choices:
+            r_eff, dev = corner_deviation(before, corner, after, r, segment_share)
+            if dev <= tolerance_m:
+                chosen = (label, r_eff, dev)
+                break
+        if chosen is None and continuous:
+            r_eff, dev = corner_deviation(before, corner, after, choices[0][1], segment_share)
+            r_eff *= tolerance_m / dev  # the deviation is proportional to the radius
+            chosen = (f"r={r_eff:.6g}", r_eff, tolerance_m)
+        if chosen is None:
+            chosen = (exact[0], exact[1], 0.0)
+        if chosen[0] != choices[0][0]:
+            narrowed.append(k)
+        labels.append(chosen[0])
+        radius[k], deviation[k] = chosen[1], chosen[2]
+    return Zones(radius, deviation, tuple(labels), tolerance_m, tuple(narrowed))

@@ -38,6 +38,7 @@ import pinocchio as pin
 from numpy.typing import NDArray
 
 from refine.errors import InputError
+from refine.export.motion import program_motion, segment_speeds
 from refine.export.program import (
     ProgramPass,
     Switch,
@@ -48,7 +49,6 @@ from refine.export.program import (
     lead_point,
     process_summary,
     singular_runs,
-    speed_levels,
     weld_end,
     weld_start,
 )
@@ -132,9 +132,7 @@ def abb_confdata(robot: Any, q: Array) -> NDArray[np.int64]:
     return conf[0] if single else conf
 
 
-def segment_speeds(trajectory: Trajectory) -> Array:
-    """Planned speed of each segment k -> k+1 [m/s], shape (N-1,): mean of its end speeds."""
-    return 0.5 * (trajectory.speed[:-1] + trajectory.speed[1:])
+__all__ = ["abb_confdata", "parse_rapid_targets", "segment_speeds", "write_rapid"]
 
 
 def _trigg_io(name: str, lead: float, by_time: bool, output: str, value: int) -> str:
@@ -254,11 +252,21 @@ def write_rapid(
     width = max(4, len(str(n - 1)))
     names = [f"p{k:0{width}d}" for k in range(n)]
 
-    # ---- speeds: a few levels, none above the planned speed
-    lengths = np.linalg.norm(np.diff(trajectory.poses[:, :3, 3], axis=0), axis=1)
-    planned = segment_speeds(trajectory)
-    levels, level_of = speed_levels(planned, lengths, problem.output.speed_levels, speed_resolution_m_s)
-    extra_s = float(np.sum(lengths / levels[level_of]) - np.sum(lengths / planned))
+    # ---- speeds: a few levels, none above the planned speed, each segment within the speed share;
+    # ---- zones: the largest of z1, z0 whose deviation keeps the path tolerance, else fine
+    motion = program_motion(
+        "rapid",
+        trajectory,
+        problem,
+        zone=zone,
+        retract_m=retract_m,
+        speed_resolution_m_s=speed_resolution_m_s,
+    )
+    lengths = motion.lengths_m
+    levels = motion.levels
+    level_of = np.searchsorted(levels, motion.programmed_m_s)
+    extra_s = motion.extra_time_s
+    zones = motion.zones
     speed_name = [f"vPath{i + 1}" for i in range(len(levels))]
     retract_mm = _num(retract_m * 1000.0, 3)
 
@@ -291,7 +299,10 @@ def write_rapid(
         "rot [q1,q2,q3,q4], robconf [cf1,cf4,cf6,cfx] of the refined joints.",
         f"    ! Process: {process_note}.",
         f"    ! Speeds: {len(levels)} speeddata levels, each segment at the fastest level not above its "
-        f"planned speed: {extra_s:+.3f} s on the planned path.",
+        f"planned speed and within {problem.output.speed_share:.1%} of it: {extra_s:+.3f} s on the planned path.",
+        f"    ! Zones: {zone} between targets, smaller or fine at {len(zones.narrowed)} target(s) to keep "
+        f"the path tolerance {zones.tolerance_m * 1e3:g} mm; largest corner deviation "
+        f"{zones.largest_deviation_m * 1e3:.3f} mm.",
         *(f"    ! {line}" for line in notes),
         f"    PERS tooldata {tool}:=[TRUE,{_pose(tool_t.tcp_in_flange)},"
         f"[{_num(tool_t.mass_kg, 3)},[{cog}],[1,0,0,0],0,0,0]];",
@@ -320,7 +331,7 @@ def write_rapid(
     for k in range(1, n):
         if k in sing_on:
             moves.append(sing_on[k])
-        z = "fine" if k == n - 1 and weld else zone
+        z = zones.label[k]
         v = speed_name[level_of[k - 1]]
         if k == off_k and not weld:
             moves.append(f"TriggL {names[k]}, {v}, trOff, {z}, {move_tail}")
@@ -350,7 +361,7 @@ def write_rapid(
         main += [
             _trigg_io("trOn", lead, by_time, output, 1),
             _trigg_io("trOff", off_lead, by_time, output, 0),
-            f"TriggL {names[0]}, vAir, trOn, {zone}, {move_tail}",
+            f"TriggL {names[0]}, vAir, trOn, {zones.label[0]}, {move_tail}",
         ]
     main += [f"{r};" for r in routines]
     main += _weld_end(problem, output) if weld else []

@@ -57,6 +57,36 @@ def pass_metrics(p: PassResult) -> dict[str, Any]:
     }
 
 
+def program_motions(result: RunResult, p: PassResult) -> dict[str, Any]:
+    """The zones and speeds of every program the run wrote for pass ``p`` (:mod:`refine.export.motion`)."""
+    from refine.export.motion import MOTION_FORMATS, program_motion
+
+    if p.trajectory is None:
+        return {}
+    kinds = {key.split("_")[0] for key in result.outputs}
+    return {
+        kind: program_motion(kind, p.trajectory, result.problem) for kind in MOTION_FORMATS if kind in kinds
+    }
+
+
+def controller_figures(result: RunResult) -> dict[str, Any]:
+    """The run's figures of the motion as the controllers run it: the worst over passes and programs."""
+    lines = [p.line.as_json() for p in result.passes if p.line is not None]
+    motions = [m for p in result.passes for m in program_motions(result, p).values()]
+    worst = {
+        key: max((d[key] for d in lines), default=None)
+        for key in ("max_position_difference_m", "max_orientation_difference_deg", "max_joint_difference_deg")
+    }
+    return {
+        **{f"line_{key}": value for key, value in worst.items()},
+        "line_ok": all(d["ok"] for d in lines) if lines else None,
+        "path_tolerance_m": result.problem.process.path_tolerance_m,
+        "largest_zone_deviation_m": max((m.zones.largest_deviation_m for m in motions), default=None),
+        "speed_share": result.problem.output.speed_share,
+        "segments_beyond_speed_share": sum(len(m.beyond_share) for m in motions) if motions else None,
+    }
+
+
 def aggregate_metrics(per_pass: list[dict[str, Any]]) -> dict[str, Any]:
     """The run's figures over its passes: the worst of each (largest error, smallest margin), times summed."""
     out: dict[str, Any] = {}
@@ -160,11 +190,22 @@ def result_dict(result: RunResult) -> dict[str, Any]:
             for r in p.refinement.repairs
         ],
         "passes": [
-            {"name": p.name, "layer": p.layer, "index": p.index, "status": p.refinement.status, "metrics": m}
+            {
+                "name": p.name,
+                "layer": p.layer,
+                "index": p.index,
+                "status": p.refinement.status,
+                "metrics": m,
+                "line": None
+                if p.line is None
+                else p.line.as_json(None if p.clearance is None else p.clearance.segment_clearance_m),
+                "programs": {kind: motion.as_json() for kind, motion in program_motions(result, p).items()},
+            }
             for p, m in zip(result.passes, per_pass, strict=True)
         ],
         "motions": [m.as_json(result.robot.spec.to_controller) for m in result.motions],
         "program_time_s": sum(m.duration_s for m in result.motions) if result.motions else None,
+        "controller": controller_figures(result),
         "truth": None if result.truth is None else result.truth.as_json(),
         "demo_quality": _demo_quality(result),
         "placement": None if result.placement is None else result.placement.as_json(),

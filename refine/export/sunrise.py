@@ -44,6 +44,7 @@ import numpy as np
 
 from refine.errors import InputError
 from refine.export.krl import kuka_status_turn
+from refine.export.motion import segment_speeds
 from refine.export.program import (
     Switch,
     Wait,
@@ -56,7 +57,6 @@ from refine.export.program import (
     weld_end,
     weld_start,
 )
-from refine.export.rapid import segment_speeds
 from refine.frames import invert_transform, kuka_abc_from_matrix, matrix_from_kuka_abc
 from refine.names import comment_text
 from refine.paths import Trajectory

@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from refine.errors import InputError, SolverError
+from refine.export.motion import program_motion, segment_speeds
 from refine.export.program import (
     Switch,
     Wait,
@@ -47,7 +48,6 @@ from refine.export.program import (
     weld_end,
     weld_start,
 )
-from refine.export.rapid import segment_speeds
 from refine.frames import invert_transform, make_transform, matrix_from_rotvec, rotvec_from_matrix
 from refine.names import comment_text, identifier
 from refine.paths import Trajectory
@@ -294,11 +294,10 @@ def write_urscript(
         rv = continuous_rotvecs(poses[:, :3, :3], previous)
         previous = rv[-1]
         gaps = np.linalg.norm(np.diff(poses[:n, :3, 3], axis=0), axis=1)
-        blends = np.zeros(n)
-        blends[1:-1] = np.minimum(blend_m, 0.4 * np.minimum(gaps[:-1], gaps[1:]))
-        if not weld:  # fly into and out of the path
-            blends[0] = min(blend_m, 0.4 * gaps[0], 0.4 * retract_m)
-            blends[-1] = min(blend_m, 0.4 * gaps[-1], 0.4 * retract_m)
+        zones = program_motion(
+            "urscript", tr, problem, blend_m=blend_m, retract_m=retract_m, speed_resolution_m_s=step
+        ).zones
+        blends = zones.radius_m  # capped at 40 % of the neighbouring moves, smaller where the tolerance needs
         on_lead, off_lead = _lead_m(problem, tr, approach_speed_m_s)
         if on_lead > retract_m:
             raise InputError(f"process lead {on_lead:g} m is longer than the approach move ({retract_m:g} m)")
@@ -306,6 +305,9 @@ def write_urscript(
         off_k = max(int(np.flatnonzero(s_end[-1] - s_end <= off_lead + 1e-12)[0]), 1)
         body += [
             f"# pass {i} of {len(runs)}: {label}, {n} waypoints, {float(tr.t[-1]):.3f} s planned",
+            f"# blends: r <= {_num(blend_m, 6)} m, smaller at {len(zones.narrowed)} waypoint(s) to keep the "
+            f"path tolerance {zones.tolerance_m * 1e3:g} mm; largest corner deviation "
+            f"{zones.largest_deviation_m * 1e3:.3f} mm",
             f"movej([{','.join(_num(v, 9) for v in q_app)}], {jmove})",
         ]
         if weld:

@@ -188,7 +188,13 @@ def estimate_frame_error(
     # prior of 1 rad (57 deg): far weaker than any axis the path shows (a 1 mm error over a 40 mm
     # path is a few degrees), it keeps an axis the path cannot show at zero instead of letting
     # Gauss-Newton throw it anywhere
-    prior = np.concatenate([np.full(3, ROTATION_PRIOR_RAD**-2), np.full(3, 1e-3), np.tile(1.0 / np.asarray(PRIOR_ERROR_M) ** 2, n_terms)])
+    prior = np.concatenate(
+        [
+            np.full(3, ROTATION_PRIOR_RAD**-2),
+            np.full(3, 1e-3),
+            np.tile(1.0 / np.asarray(PRIOR_ERROR_M) ** 2, n_terms),
+        ]
+    )
     # one independent residual per occupied cell of CORRELATION_LENGTH_M (a smooth error seen twice
     # where the path comes back is one observation)
     cells = len(np.unique(np.floor(c / CORRELATION_LENGTH_M).astype(np.int64), axis=0))

@@ -229,7 +229,9 @@ def orient(
     n_search = min(SEARCH_MAX_POINTS, len(cad.s))
     dt_grid = max((t[-1] - t[0]) / (2 * n_search), float(np.median(np.diff(t))))
     tg = np.linspace(t[0], t[-1], int(np.ceil((t[-1] - t[0]) / dt_grid)) + 1)
-    pg = resample_in_time(t, uniform_filter1d(p, max(1, round(dt_grid / float(np.median(np.diff(t))))), axis=0), tg)
+    pg = resample_in_time(
+        t, uniform_filter1d(p, max(1, round(dt_grid / float(np.median(np.diff(t))))), axis=0), tg
+    )
     directions = (False,) if cad.direction_given else (False, True)
     found = _search_order(pg, cad.s, cad_S, cad.closed, directions, not cad.start_given)
     reverse = min(found, key=lambda r: found[r][0])

@@ -155,5 +155,3 @@ def reach_model(robot: Robot, joint_margin_rad: float, samples: int = 3000) -> R
         )
         r.append(min(sign * d[k], float(res.fun)) * sign)
     return ReachModel(spherical, point_in_flange, (w1, p1), shoulder, point(q_ref), r[0], r[1])
-
-

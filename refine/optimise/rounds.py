@@ -117,6 +117,7 @@ def _row_keys(problem: RefinementNLP) -> list[tuple]:
 @dataclass
 class RoundLoop:
     """The state of one solve's outer rounds: the problem as grown so far, its multipliers, times and counts."""
+
     problem: RefinementNLP
     timings: dict[str, float]
     iterations: int = 0
@@ -221,7 +222,9 @@ def run_rounds(
         active = ActiveSet(
             grown.singular_waypoints, grown.singular_segments, merge_rows(p.active.linear_rows, rows)
         )
-        loop.rebuild(warm=True, active=active, elastic_deg=p.elastic_deg, joint_steps=with_joint_steps(p, steps))
+        loop.rebuild(
+            warm=True, active=active, elastic_deg=p.elastic_deg, joint_steps=with_joint_steps(p, steps)
+        )
         x0, warm = (x if p.elastic_deg is not None else q.ravel()), True
 
 

@@ -297,7 +297,9 @@ def initial_guess(problem: RefinementNLP, home: Array | None = None, rotations: 
     targets = problem_targets(problem)
     if rotations is not None:
         targets[:, :3, :3] = rotations
-    qs, _ = ik_chain(problem_kinematics(problem), targets, lower, upper, starts, prefer_first=home is not None)
+    qs, _ = ik_chain(
+        problem_kinematics(problem), targets, lower, upper, starts, prefer_first=home is not None
+    )
     return qs
 
 

@@ -122,7 +122,9 @@ def solve_refinement(
     # the tilt each demonstrated pose needs for the wrist centre to be in reach: a seed tilted into
     # reach (off the stretched elbow) converges where the demonstrated one cannot, and a tilt beyond
     # the cone (or cone + slack) proves the strict (or repaired) problem infeasible without a solve
-    tilts, _ = reach_tilts(kin := problem_kinematics(problem), problem.fused, problem.tolerances, problem.axisymmetric)
+    tilts, _ = reach_tilts(
+        kin := problem_kinematics(problem), problem.fused, problem.tolerances, problem.axisymmetric
+    )
     certain = _tilt_is_a_bound(problem)
     rotations = None
     stretched = np.zeros(problem.n_waypoints, dtype=bool)
@@ -362,7 +364,9 @@ def coarse_seed(problem: RefinementNLP, q_seed: Array) -> tuple[Array | None, in
     log.info("coarse seed: %d waypoints refined in %d solver iterations", len(idx), answer.iterations)
     q = np.column_stack([np.interp(f.s, f.s[idx], answer.q[:, j]) for j in range(problem.dof)])
     lower, upper = problem_bounds(problem)
-    q, err = solve_ik_batch(problem_kinematics(problem), problem_targets(problem), q, lower, upper, nullspace_gain=0.0)
+    q, err = solve_ik_batch(
+        problem_kinematics(problem), problem_targets(problem), q, lower, upper, nullspace_gain=0.0
+    )
     if not np.all(err < 10.0 * CONVERGED):
         log.info(
             "coarse seed: the projection misses %d poses; the chained IK seed stays",

@@ -80,7 +80,7 @@ def _quantity_options(scene: dict) -> str:
     return "".join(out)
 
 
-def _details_html(result: RunResult) -> str:
+def _details_html(result: RunResult, doc: dict) -> str:
     from refine.run.result import summary_lines
 
     summary = "\n".join(html.escape(line) for line in summary_lines(result))
@@ -102,6 +102,7 @@ def _details_html(result: RunResult) -> str:
         + (f"<ul>{''.join(slow)}</ul>" if slow else "<p>nowhere</p>")
         + ("<h2>Clearance</h2>" + "".join(clearance) if clearance else "")
         + _motions_html(result)
+        + _controller_html(doc)
         + "</section>"
     )
 
@@ -126,6 +127,47 @@ def _motions_html(result: RunResult) -> str:
         "to home.</p>"
         f"<table id='motions'><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
     )
+
+
+def _controller_html(doc: dict) -> str:
+    """The motion as the controllers run it: the straight-line check, every target's zone, every segment's speed."""
+    parts = []
+    for p in doc["passes"]:
+        line = p.get("line")
+        if line is not None:
+            change = line["max_clearance_change_m"]
+            parts.append(
+                f"<p>{html.escape(p['name'])}: the controller's straight TCP line "
+                f"{'passes' if line['ok'] else 'fails'} ({line['samples']} samples): it differs from the "
+                f"joint-linear motion by {line['max_position_difference_m'] * 1e3:.4f} mm, "
+                f"{line['max_orientation_difference_deg']:.4f} deg orientation and "
+                f"{line['max_joint_difference_deg']:.4f} deg of joint angle"
+                + ("" if change is None else f" (clearance changes by at most {change * 1e3:.3f} mm)")
+                + "".join(f"; {html.escape(v)}" for v in line["violations"])
+                + ".</p>"
+            )
+        for kind, m in p.get("programs", {}).items():
+            rows = []
+            for k, (zone, dev) in enumerate(zip(m["zones"], m["zone_deviation_m"], strict=True)):
+                diff = m["speed_difference_rel"][k - 1] if k > 0 else None
+                rows.append(
+                    f"<tr><td>{k}</td><td>{html.escape(zone)}</td><td>{dev * 1e3:.3f}</td>"
+                    f"<td>{'' if diff is None else f'{diff * 100:+.2f}'}</td></tr>"
+                )
+            parts.append(
+                f"<details><summary>{html.escape(p['name'])}, {html.escape(kind)}: largest corner deviation "
+                f"{m['largest_zone_deviation_m'] * 1e3:.3f} mm (path tolerance {m['path_tolerance_m'] * 1e3:g} mm, "
+                f"{m['narrowed_zones']} zone(s) narrowed); {m['speed_levels']} speed(s), largest shortfall "
+                f"{m['largest_speed_shortfall_rel'] * 100:.2f} % of the planned speed (share "
+                f"{m['speed_share'] * 100:g} %), {m['segments_beyond_share']} segment(s) beyond it, "
+                f"{m['extra_time_s']:+.3f} s</summary><table class='zones'><tr><th>target</th><th>zone</th>"
+                "<th>corner deviation [mm]</th><th>speed of the move onto it vs plan [%]</th></tr>"
+                + "".join(rows)
+                + "</table></details>"
+            )
+    if not parts:
+        return ""
+    return "<h2>As the controller runs it</h2>" + "".join(parts)
 
 
 def _order_html(result: RunResult) -> str:
@@ -200,7 +242,7 @@ def write_report(path: Path, result: RunResult) -> Path:
         "<span id='quantity-note'></span></div><div id='scene'></div></section>"
         f"<section id='panels-section'><h2>Along the path</h2><div class='controls'>{pass_select}</div>"
         f"<div class='panels'>{panels}</div></section>"
-        f"{_details_html(result)}"
+        f"{_details_html(result, doc)}"
         f"<script type='application/json' id='report-data'>{payload}</script>"
         f"<script>{script}</script></body></html>"
     )

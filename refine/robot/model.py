@@ -143,7 +143,9 @@ class Robot:
         return None if self._matrix is None else dict(self._matrix)
 
 
-def robot_from_urdf(urdf: str | Path, *, controller: str, flange_frame: str = "tool0", **options: Any) -> Robot:
+def robot_from_urdf(
+    urdf: str | Path, *, controller: str, flange_frame: str = "tool0", **options: Any
+) -> Robot:
     """A robot built from its URDF file (not from the registry).
 
     The spec and model of :func:`refine.robot.urdf.read_urdf`, with the collision geometry of the

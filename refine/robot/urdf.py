@@ -187,5 +187,3 @@ def with_overrides(
             _values(joint_acceleration_deg_s2, n, "joint_acceleration_deg_s2", "deg/s^2")
         )
     return replace(spec, **changes) if changes else spec
-
-

@@ -57,7 +57,6 @@ the wall time of its run in the worker [s], ``this batch`` or ``earlier`` (skipp
 and the reason (error message of a failed problem)."""
 
 
-
 @dataclass(frozen=True)
 class BatchItem:
     """One problem of a batch.

@@ -161,7 +161,9 @@ class PlacementRepair:
             "moved_frames": {name: pose_json(T) for name, T in self.moved_frames.items()},
             "moved_objects": list(self.moved_objects),
             "strict_status": None if verified is None else verified.status,
-            "metrics": None if verified is None else aggregate_metrics([pass_metrics(p) for p in verified.passes]),
+            "metrics": None
+            if verified is None
+            else aggregate_metrics([pass_metrics(p) for p in verified.passes]),
             "solver": {"name": "ipopt", "status": self.solver_status, "iterations": self.iterations},
             "timings_s": {k: round(v, 6) for k, v in self.timings_s.items()},
         }
@@ -183,5 +185,3 @@ def plane_text(support: SupportPlane) -> str:
     """The support plane in words, for messages: what it is the top of, and its normal."""
     what = f"the top of {support.support!r}" if support.support else "the world z plane"
     return f"{what}, normal [{', '.join(f'{v:.3f}' for v in support.normal)}]"
-
-

@@ -37,6 +37,8 @@ class PassResult:
             after a small change; None when not kept. Not pickled: its CasADi expressions and
             compiled solver belong to the process that built them, so a pass that crossed a
             process boundary is re-solved from its joints, with the problem built anew.
+        line: the controller's straight-line motion between the waypoints, checked
+            (:class:`refine.optimise.controller_line.LineCheck`); None when not checked.
     """
 
     name: str
@@ -48,6 +50,7 @@ class PassResult:
     trajectory: Trajectory | None
     clearance: Any = None
     nlp: Any = None
+    line: Any = None
 
     def __getstate__(self) -> dict[str, Any]:
         return {**self.__dict__, "nlp": None}
@@ -153,6 +156,8 @@ def summary_lines(result: RunResult) -> list[str]:
                 + (f", {pair}" if pair else "")
                 + f"; checked between waypoints: {c.queries} queries in {c.time_s:.2f} s"
             )
+        if p.line is not None:
+            lines.append(f"line         {p.line.describe()}" + ("" if p.line.ok else " (broken)"))
         if p.timing is not None:
             lines.append(
                 f"timing       cycle {p.timing.cycle_time_s:.2f} s, "

@@ -8,6 +8,7 @@ figures for ``result.json``. A multi-pass weld runs the refine and timing stages
 from __future__ import annotations
 
 import logging
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -197,7 +198,20 @@ def refine_pass(
     clearance = None
     for source in sources:
         clearance = source.clearance(refinement.q)  # the dense check's figures, for the report
-    return PassResult(name, layer, index, fused, refinement, timing, trajectory, clearance, nlp)
+    line = None
+    if refinement.status in EXECUTABLE:
+        line = controller_line_check(problem, robot, refinement.q, fused.s, sources)
+        watch.lap("line_check")
+        if not line.ok:
+            found = "; ".join(v.describe() for v in line.violations)
+            refinement = replace(
+                refinement,
+                status="infeasible",
+                reason=(f"{refinement.reason}; " if refinement.reason else "") + found,
+                check=replace(refinement.check, violations=refinement.check.violations + line.violations),
+            )
+            timing = trajectory = None
+    return PassResult(name, layer, index, fused, refinement, timing, trajectory, clearance, nlp, line)
 
 
 
@@ -241,4 +255,56 @@ def plan_motions(
     home = None if problem.robot.home_deg is None else np.radians(spec.from_controller(problem.robot.home_deg))
     return plan_program(
         checker, planned, home, velocity=spec.velocity * problem.robot.velocity_scale, acceleration=accel
+    )
+
+
+def program_formats(problem: Problem, robot: Robot) -> tuple[str, ...]:
+    """The program formats a run writes by default: ``[output] programs`` or the robot's own."""
+    if problem.output.programs is not None:
+        return problem.output.programs
+    return (robot.spec.default_program,)
+
+
+def controller_line_check(
+    problem: Problem, robot: Robot, q: np.ndarray, s: np.ndarray, sources: tuple[ConstraintSource, ...] = ()
+) -> Any:
+    r"""The controller's straight-line motion between the waypoints of ``q``, checked.
+
+    The orientation model is the slerp of :mod:`refine.optimise.controller_line`; where a RAPID or
+    KRL program hands a run near the wrist singularity to the controller (``SingArea \Wrist``,
+    ``$ORI_TYPE = #JOINT``), the wrist's joint-linear orientation. Clearance comes from the
+    problem's collision source (the first that has a collision model): proved along the joints
+    through the samples of the line, checked densely where the proof falls short.
+
+    Returns:
+        a :class:`refine.optimise.controller_line.LineCheck`.
+    """
+    from refine.collision.check import check_path_clearance, joint_reach, margins_proved
+    from refine.export.program import singular_runs
+    from refine.optimise.controller_line import check_controller_lines
+    from refine.robot.kinematics import TcpKinematics
+
+    kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange)
+    wrist = np.zeros(len(q) - 1, dtype=bool)
+    if {"rapid", "krl"} & set(program_formats(problem, robot)):
+        for a, b in singular_runs(robot, q):
+            wrist[max(a, 1) - 1 : b + 1] = True  # the moves from the one onto target max(a, 1) to b + 1
+    model = next(
+        (getattr(src, "model", None) for src in sources if getattr(src, "model", None) is not None), None
+    )
+
+    def clearance(dense: np.ndarray) -> tuple[np.ndarray | None, float]:
+        if margins_proved(model, dense):
+            return None, 1e-4  # margins_proved's and check_path_clearance's default tolerance
+        found = check_path_clearance(model, dense, kin, problem.collision.check_step_m)
+        return found.segment_clearance_m, found.tolerance_m
+
+    return check_controller_lines(
+        kin,
+        q,
+        s,
+        problem.tolerances,
+        wrist=wrist,
+        clearance=None if model is None else clearance,
+        reach=None if model is None else joint_reach(model),
     )

@@ -68,6 +68,11 @@ class ProcessParameter:
     unit: str
 
 
+PATH_TOLERANCE_M = {"glue": 0.0005, "seal": 0.0005, "weld": 0.0003, "other": 0.0005}
+"""Default ``[process] path_tolerance_m`` per process kind [m]: half a millimetre for a glue or
+sealant bead, 0.3 mm for a weld (a fillet seam's joint)."""
+
+
 @dataclass(frozen=True)
 class ProcessSettings:
     """``[process]``: what the tool does along the path.
@@ -85,6 +90,9 @@ class ProcessSettings:
         arc_timeout_s: weld: how long to wait for the arc signal before stopping with an error [s].
         crater_fill_s: weld: dwell with the arc on at the end point, filling the crater [s].
         postflow_s: weld: gas post-flow after the arc is off [s].
+        path_tolerance_m: largest deviation from the programmed path a blend zone may allow [m];
+            None (the default) for the process kind's (:data:`PATH_TOLERANCE_M`). Where a program's
+            zone would allow more, it writes a smaller zone or an exact stop.
     """
 
     kind: str = "other"
@@ -98,9 +106,13 @@ class ProcessSettings:
     arc_timeout_s: float = 2.0
     crater_fill_s: float = 0.5
     postflow_s: float = 3.0
+    path_tolerance_m: float | None = None
 
     def __post_init__(self) -> None:
         one_of("process", "kind", self.kind, ("glue", "weld", "seal", "other"))
+        if self.path_tolerance_m is None:
+            object.__setattr__(self, "path_tolerance_m", PATH_TOLERANCE_M[self.kind])
+        in_range("process", "path_tolerance_m", self.path_tolerance_m, 1e-6, 0.05, "m")
         for i, p in enumerate(self.parameters):
             in_range(f"process.parameters[{i}]", "value", p.value, -1e9, 1e9, p.unit)
         for name in ("lead_s", "preflow_s", "crater_fill_s", "postflow_s"):
@@ -124,13 +136,18 @@ class OutputSettings:
             Sunrise for the LBR iiwa, URScript for UR); an empty tuple for none.
         urscript_mode: ``"program"`` (a ``def`` ... ``end`` function called at the end of the file)
             or ``"script_node"`` (the body alone, for a PolyScope Script node).
-        speed_levels: RAPID: at most this many ``speeddata`` for the path moves.
+        speed_levels: RAPID: at most this many ``speeddata`` for the path moves, raised where
+            ``speed_share`` needs more.
+        speed_share: largest shortfall of a segment's programmed speed below its planned speed, as
+            a share of it [-]: a program whose speed levels would leave a segment slower writes
+            more levels.
         moves_per_routine: RAPID: path moves per ``PROC`` (longer paths are split into several).
     """
 
     programs: tuple[str, ...] | None = None
     urscript_mode: str = "program"
     speed_levels: int = 5
+    speed_share: float = 0.02
     moves_per_routine: int = 500
 
     def __post_init__(self) -> None:
@@ -138,6 +155,7 @@ class OutputSettings:
             one_of("output", "programs[]", p, PROGRAM_FORMATS)
         one_of("output", "urscript_mode", self.urscript_mode, URSCRIPT_MODES)
         integer_in("output", "speed_levels", self.speed_levels, 1, 100)
+        in_range("output", "speed_share", self.speed_share, 1e-4, 0.5)
         integer_in("output", "moves_per_routine", self.moves_per_routine, 10, 100000)
 
 

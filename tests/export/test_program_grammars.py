@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import importlib.util
+import math
 import sys
 from pathlib import Path
 
@@ -44,7 +45,12 @@ def test_rapid_glue_module_parses_and_its_targets_are_the_trajectory(tmp_path, t
     st = prog.statements
     assert st[:3] == ["ConfJ", "ConfL", "MoveAbsJ"] and st[-1] == "MoveAbsJ", "home at start and end"
     assert st.count("TriggIO") == 2 and st.count("TriggL") == 2 and "SetDO" not in st
-    assert len(prog.facts["speeddata"]) <= problem.output.speed_levels + 1  # + the approach speed
+    # + the approach speed; more levels only as the speed share needs: levels a factor (1 - share)
+    # apart cover the planned speeds' range with ceil(log(v_max / v_min) / -log(1 - share)) + 1
+    v = 0.5 * (trajectory.speed[1:] + trajectory.speed[:-1])
+    share = problem.output.speed_share
+    geometric = math.ceil(math.log(v.max() / v.min()) / -math.log(1.0 - share)) + 1
+    assert len(prog.facts["speeddata"]) <= max(problem.output.speed_levels, geometric) + 1
 
 
 def test_rapid_weld_module_has_the_start_and_end_sequence(tmp_path, trajectory, problem, irb4600):

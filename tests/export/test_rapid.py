@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import math
 import re
 
 import numpy as np
@@ -25,13 +26,18 @@ def test_round_trip_recovers_positions_and_orientations(module, trajectory):
     assert np.all(np.sum(quats[1:] * quats[:-1], axis=1) > 0.0), "quaternion signs jump"
 
 
-def test_each_target_is_reached_at_a_few_speed_levels_never_above_its_planned_speed(module, trajectory):
+def test_each_target_is_reached_at_a_few_speed_levels_never_above_its_planned_speed(module, trajectory, problem):
     _, _, _, speeds = parse_rapid_targets(module)
     assert speeds[0] == pytest.approx(0.25)  # the approach onto the first target
     planned = segment_speeds(trajectory)
+    share = problem.output.speed_share
     assert np.all(speeds[1:] <= planned + 1e-12)
     assert np.all(speeds[1:] >= 0.8 * planned), "a level far below the planned speed"
-    assert len(set(speeds[1:].tolist())) <= 5 == len(re.findall(r"speeddata vPath", module.read_text()))
+    assert np.all(speeds[1:] >= (1.0 - share) * planned - 1e-12), "a segment below the speed share"
+    # levels a factor (1 - share) apart cover the planned speeds with this many; no more are written
+    geometric = math.ceil(math.log(planned.max() / planned.min()) / -math.log(1.0 - share)) + 1
+    written = len(re.findall(r"speeddata vPath", module.read_text()))
+    assert len(set(speeds[1:].tolist())) == written <= max(problem.output.speed_levels, geometric)
 
 
 def test_written_confdata_is_that_of_the_refined_joints(module, trajectory, irb4600):
@@ -77,7 +83,9 @@ def test_module_is_syntactically_sane(module, trajectory, problem):
         assert re.search(rf"\b{name}\b", body), f"robtarget {name} never used"
     moves = re.findall(r"^\s*(?:MoveL|TriggL) (p\d+), \w+, (?:trO\w+, )?(\w+),", body, re.M)
     assert [m[0] for m in moves] == targets
-    assert {m[1] for m in moves} == {"z1"}, "a glue path flies through, also at its ends"
+    # a glue path flies through, also at its ends: z1, or z0 where z1 would cut a corner by more
+    # than the path tolerance (the turn from the approach onto the path)
+    assert {m[1] for m in moves} <= {"z1", "z0"} and moves[len(moves) // 2][1] == "z1"
     main = body.split("ENDPROC")[0]
     assert main.count("MoveAbsJ jHome") == 2 and "CONST jointtarget jHome:=" in text
     on = f"TriggIO trOn, 0 \\Time \\DOp:={problem.process.output}, 1;"

@@ -1,0 +1,189 @@
+"""What a program makes the controller do along a pass: the blend zone of every target and every segment's speed.
+
+Each writer decides its zones and speeds here (:func:`program_motion`), and ``result.json`` and
+the report state the same figures, so what is reported is what is written:
+
+* **Zones.** The zones of the path targets (:func:`refine.export.program.corner_zones`), with the
+  approach and retract points as the first target's and the last target's neighbours: RAPID's
+  zone (``z1`` by default), a smaller predefined zone (``z0``) or ``fine``; KRL's ``C_DIS`` with
+  ``$APO.CDIS`` or an exact stop; URScript's blend radius ``r``, made as small as the tolerance
+  needs; Sunrise's spline passes through every target (no zone) and blends only the approach into
+  it, by ``setBlendingCart(1.0)`` (1 mm, not narrowed: its deviation is reported as it is). A weld's first and last targets are exact stops in every format.
+* **Speeds.** The programmed speed of every segment: RAPID's ``speeddata`` levels
+  (:func:`refine.export.program.speed_levels`, with ``[output] speed_share``), the rounded
+  ``$VEL.CP``, ``v`` and ``setCartVelocity`` of KRL, URScript and Sunrise.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from refine.errors import InputError
+from refine.export.program import (
+    RAPID_ZONES_M,
+    ZONE_SEGMENT_SHARE,
+    Zones,
+    corner_deviation,
+    corner_zones,
+    speed_levels,
+)
+from refine.paths import Trajectory
+from refine.problem import Problem
+from refine.types import Array
+
+MOTION_FORMATS = ("rapid", "krl", "urscript", "sunrise")
+"""The program formats whose zones and speeds :func:`program_motion` knows."""
+
+SUNRISE_APPROACH_BLEND_M = 0.001
+"""The Sunrise writer's blend of the approach move into the spline (``setBlendingCart``) [m]."""
+
+
+def segment_speeds(trajectory: Trajectory) -> Array:
+    """Planned speed of each segment k -> k+1 [m/s], shape (N-1,): mean of its end speeds."""
+    return 0.5 * (trajectory.speed[:-1] + trajectory.speed[1:])
+
+
+@dataclass(frozen=True)
+class ProgramMotion:
+    """The zones and speeds a program writes for one pass.
+
+    Attributes:
+        kind: the program format (``"rapid"``, ``"krl"``, ``"urscript"``, ``"sunrise"``).
+        zones: the zone of every target and the deviation it allows.
+        planned_m_s: the planned speed of every segment [m/s], (N-1,).
+        programmed_m_s: the speed the program writes for it [m/s], (N-1,).
+        lengths_m: every segment's length [m], (N-1,).
+        share: ``[output] speed_share``, the shortfall below the planned speed a segment may have [-].
+        levels: the program's distinct speeds for the path (RAPID's ``speeddata``) [m/s].
+    """
+
+    kind: str
+    zones: Zones
+    planned_m_s: Array
+    programmed_m_s: Array
+    lengths_m: Array
+    share: float
+    levels: Array
+
+    @property
+    def difference_rel(self) -> Array:
+        """Each segment's programmed speed less its planned speed, as a share of the planned [-], (N-1,)."""
+        return (self.programmed_m_s - self.planned_m_s) / self.planned_m_s
+
+    @property
+    def beyond_share(self) -> list[int]:
+        """The segments that run slower than the planned speed by more than ``share``."""
+        return np.flatnonzero(-self.difference_rel > self.share * (1.0 + 1e-9)).tolist()
+
+    @property
+    def extra_time_s(self) -> float:
+        """The time the programmed speeds add to the planned path [s]."""
+        return float(np.sum(self.lengths_m / self.programmed_m_s) - np.sum(self.lengths_m / self.planned_m_s))
+
+    def as_json(self) -> dict:
+        """The figures ``result.json`` writes (``passes[i].programs.<kind>``)."""
+        diff = self.difference_rel
+        return {
+            "zones": list(self.zones.label),
+            "zone_radius_m": self.zones.radius_m.tolist(),
+            "zone_deviation_m": self.zones.deviation_m.tolist(),
+            "path_tolerance_m": self.zones.tolerance_m,
+            "largest_zone_deviation_m": self.zones.largest_deviation_m,
+            "narrowed_zones": len(self.zones.narrowed),
+            "speed_share": self.share,
+            "speed_levels": len(self.levels),
+            "speed_difference_rel": diff.tolist(),
+            "largest_speed_shortfall_rel": float(max(0.0, -diff.min(initial=0.0))),
+            "segments_beyond_share": len(self.beyond_share),
+            "segments_below_plan": int(np.count_nonzero(diff < -1e-9)),
+            "extra_time_s": self.extra_time_s,
+        }
+
+
+def _rounded(speeds: Array, step: float) -> Array:
+    return np.maximum(np.round(speeds / step), 1.0) * step
+
+
+def zone_points(trajectory: Trajectory, retract_m: float) -> Array:
+    """The approach point, the targets and the retract point [m], (N + 2, 3): ``retract_m`` behind the ends along tool z."""
+    poses = trajectory.poses
+    back = np.array([0.0, 0.0, -retract_m])
+    return np.vstack(
+        [
+            poses[0, :3, :3] @ back + poses[0, :3, 3],
+            poses[:, :3, 3],
+            poses[-1, :3, :3] @ back + poses[-1, :3, 3],
+        ]
+    )
+
+
+def program_motion(
+    kind: str,
+    trajectory: Trajectory,
+    problem: Problem,
+    *,
+    zone: str = "z1",
+    approximation_m: float = 0.001,
+    blend_m: float = 0.001,
+    retract_m: float = 0.1,
+    speed_resolution_m_s: float = 1e-4,
+) -> ProgramMotion:
+    """The zones and speeds program ``kind`` writes for ``trajectory`` (the writers' defaults as theirs).
+
+    Args:
+        kind: ``"rapid"``, ``"krl"``, ``"urscript"`` or ``"sunrise"``.
+        trajectory: the pass's timed path.
+        problem: ``[process]`` (kind, ``path_tolerance_m``) and ``[output]`` (``speed_levels``,
+            ``speed_share``).
+        zone: RAPID's zone between path targets (``"z0"``, ``"z1"``, ...).
+        approximation_m: KRL's ``$APO.CDIS`` [m].
+        blend_m: URScript's blend radius [m].
+        retract_m: approach and retract distance along the tool z axis [m].
+        speed_resolution_m_s: speeds are multiples of this [m/s].
+    """
+    weld = problem.process.kind == "weld"
+    tolerance = float(problem.process.path_tolerance_m or 0.0)
+    points = zone_points(trajectory, retract_m)
+    ends = (not weld, not weld)
+    share = problem.output.speed_share
+    planned = segment_speeds(trajectory)
+    lengths = np.linalg.norm(np.diff(trajectory.poses[:, :3, 3], axis=0), axis=1)
+    segment_share = ZONE_SEGMENT_SHARE.get(kind, 0.5)
+    if kind == "rapid":
+        if zone not in RAPID_ZONES_M:
+            raise InputError(f"RAPID zone must be one of {', '.join(RAPID_ZONES_M)}, got {zone!r}")
+        top = RAPID_ZONES_M[zone]
+        choices = [(name, r) for name, r in sorted(RAPID_ZONES_M.items(), key=lambda kv: -kv[1]) if r <= top]
+        zones = corner_zones(points, choices, tolerance, segment_share, ("fine", 0.0), ends)
+        levels, level_of = speed_levels(
+            planned, lengths, problem.output.speed_levels, speed_resolution_m_s, share=share
+        )
+        programmed = levels[level_of]
+    elif kind in ("krl", "urscript", "sunrise"):
+        if kind == "krl":
+            zones = corner_zones(
+                points, [("C_DIS", approximation_m)], tolerance, segment_share, ("exact", 0.0), ends
+            )
+        elif kind == "urscript":
+            zones = corner_zones(
+                points, [("r", blend_m)], tolerance, segment_share, ("r=0", 0.0), ends, continuous=True
+            )
+            label = tuple(f"r={r:.6g}" for r in zones.radius_m)
+            zones = Zones(zones.radius_m, zones.deviation_m, label, zones.tolerance_m, zones.narrowed)
+        else:  # the spline passes through every target; only the approach blends into it, by 1 mm always
+            n = len(trajectory)
+            radius, deviation = np.zeros(n), np.zeros(n)
+            label = ["spline"] * n
+            if not weld:
+                radius[0], deviation[0] = corner_deviation(
+                    points[0], points[1], points[2], SUNRISE_APPROACH_BLEND_M, segment_share
+                )
+                label[0] = f"blend {SUNRISE_APPROACH_BLEND_M * 1e3:g} mm"
+            zones = Zones(radius, deviation, tuple(label), tolerance, ())
+        programmed = _rounded(planned, speed_resolution_m_s)
+        levels = np.unique(programmed)
+    else:
+        raise InputError(f"program_motion: no zone and speed rules for program format {kind!r}")
+    return ProgramMotion(kind, zones, planned, programmed, lengths, share, levels)

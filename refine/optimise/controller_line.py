@@ -1,0 +1,328 @@
+r"""The motion a controller runs between two path targets: a straight TCP line, checked.
+
+The programs move between path targets with Cartesian linear moves (RAPID ``MoveL``, KRL ``LIN``,
+URScript ``movel``): the TCP runs on the straight line between the two targets and the orientation
+is interpolated between theirs. The joints follow from the controller's inverse kinematics along
+that line, not from a linear interpolation of the joints. This module models that motion and
+checks it.
+
+**The model** (per controller family in ``docs/outputs.md``), for t in [0, 1] between targets k
+and k+1 with poses (p_k, R_k) and (p_{k+1}, R_{k+1}):
+
+* position ``p(t) = p_k + t (p_{k+1} - p_k)``;
+* orientation ``R(t) = R_k exp(t log(R_kᵀ R_{k+1}))``, the shortest rotation at a constant rate
+  (quaternion slerp; :data:`SLERP`);
+* inside a run the programs hand to the controller's wrist-singularity handling (RAPID
+  ``SingArea \Wrist``, KRL ``$ORI_TYPE = #JOINT``; :data:`WRIST`), the controller gives up the
+  exact orientation and moves the wrist in joint space: there the orientation is the joint-linear
+  one, ``R(q_k + t (q_{k+1} - q_k))``, and the position still the line's.
+
+**The check** (:func:`check_controller_lines`): every segment is sampled at ``t = i/m``
+(``m`` even and >= :data:`MIN_SAMPLES`, more where a joint moves more than
+:data:`MAX_SAMPLE_STEP_DEG` between samples); the joints at each sample are solved by damped least squares from the joint-linear
+interpolation, without a pull to mid-range, so they stay on the refined joints' branch (as the
+controller's IK from its current joints). At every sample: the IK's residual, the joint-limit
+margins (kept to ``joint_margin_deg`` less :data:`JOINT_MARGIN_ALLOWANCE_DEG`), the singularity
+measure (to ``singularity_margin`` less :data:`SINGULARITY_SHARE` of it). The clearance is proved along the joint path through the
+waypoints and the samples (the collision model's motion bound, :func:`refine.collision.check.margins_proved`),
+and where the proof falls short that path is checked densely and its breaks reported. The figures
+compare the two motions: the distance of the joint-linear TCP from the straight line, the angle
+between the two orientations, the difference of the joints at equal t and what that difference can
+change any clearance by, ``|q_line(t) - q_lin(t)| @ R`` with ``R`` the joints' reach
+(:func:`refine.collision.check.joint_reach`): no point of the robot or tool is further apart
+between the two motions at equal t.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from refine.optimise.verify import Violation, runs, singularity_measures
+from refine.robot.kinematics import TcpKinematics, solve_ik_batch
+from refine.settings import Tolerances
+from refine.types import Array
+
+SLERP = "slerp"
+"""Orientation model: shortest rotation between the two targets at a constant rate."""
+WRIST = "wrist"
+"""Orientation model inside a wrist-singularity run: the joint-linear wrist's orientation."""
+
+MIN_SAMPLES = 8
+"""Sub-steps per segment at least (7 samples inside it)."""
+MAX_SAMPLE_STEP_DEG = 0.5
+"""More sub-steps where a joint moves more than this between two samples [deg]."""
+IK_TOLERANCE = 1e-9
+"""Pose error [m and rad stacked] the IK along the line must reach."""
+JOINT_MARGIN_ALLOWANCE_DEG = 0.01
+"""The line may come this much closer to a joint limit than ``[tolerances] joint_margin_deg`` [deg]:
+between two waypoints that keep the margin exactly (a repair's active bound) the line's joints
+bow by the square of the step (1e-6 rad at 1 mm spacing), well inside the margin; the limit itself
+stays the margin less this away."""
+SINGULARITY_SHARE = 0.02
+"""The line's singularity measure may fall this share below ``[tolerances] singularity_margin``
+[-]: where a repair holds the waypoints and the joint-linear motion at the margin, the line, whose
+joints differ from the joint-linear ones by the square of the step, dips below it by a small share
+(1.5 % on the bundled wrist-flip case)."""
+IK_FAILED = 1e-6
+"""A sample whose IK stays further than this from the line [m and rad stacked] has no answer."""
+
+
+@dataclass(frozen=True)
+class LineCheck:
+    """The controller's straight-line motion of a joint path, checked and compared with the joint-linear one.
+
+    Attributes:
+        samples: sub-steps per segment, (N-1,).
+        t: parameter of every sample inside its segment, (M,).
+        segment: segment of every sample, (M,).
+        q: joints of every sample by IK along the line [rad], (M, n).
+        ik_error: IK residual per sample [m and rad stacked], (M,).
+        position_difference_m: per segment, the largest distance of the joint-linear TCP from the
+            straight line [m], (N-1,).
+        orientation_difference_deg: per segment, the largest angle between the joint-linear and the
+            controller's orientation at equal t [deg], (N-1,).
+        joint_difference_deg: per segment, the largest joint difference of the two motions at equal
+            t [deg], (N-1,).
+        joint_margin_rad: per segment, the least joint-limit margin on the line [rad], (N-1,).
+        singularity: per segment, the least scaled manipulability on the line [-], (N-1,).
+        clearance_m: per segment, the least clearance on the line by the dense check [m], (N-1,);
+            None when the motion bound proved every margin (or without a collision check).
+        clearance_proved: the motion bound proved every margin along the line's joint path; None
+            without a collision check.
+        clearance_change_m: per segment, the largest change of any clearance between the
+            joint-linear motion and the line's at equal t (the joint difference times the joints'
+            reach) [m], (N-1,); None without a collision check.
+        violations: what the line breaks (empty when it passes).
+    """
+
+    samples: Array
+    t: Array
+    segment: Array
+    q: Array
+    ik_error: Array
+    position_difference_m: Array
+    orientation_difference_deg: Array
+    joint_difference_deg: Array
+    joint_margin_rad: Array
+    singularity: Array
+    clearance_m: Array | None
+    clearance_proved: bool | None
+    clearance_change_m: Array | None
+    violations: tuple[Violation, ...]
+
+    @property
+    def ok(self) -> bool:
+        """True when the controller's line breaks no tolerance."""
+        return not self.violations
+
+    def as_json(self, joint_linear_clearance_m: Array | None = None) -> dict:
+        """The figures ``result.json`` writes (``passes[i].line``).
+
+        Args:
+            joint_linear_clearance_m: the least clearance per segment of the joint-linear motion
+                [m], (N-1,), for the bound on the line's (less ``clearance_change_m``); None to
+                leave it out.
+        """
+        least_clearance = None
+        if joint_linear_clearance_m is not None and self.clearance_change_m is not None:
+            least_clearance = float(np.min(np.asarray(joint_linear_clearance_m) - self.clearance_change_m))
+        if self.clearance_m is not None:
+            least_clearance = float(self.clearance_m.min())
+        return {
+            "ok": self.ok,
+            "samples": int(len(self.t)),
+            "max_position_difference_m": float(self.position_difference_m.max(initial=0.0)),
+            "max_orientation_difference_deg": float(self.orientation_difference_deg.max(initial=0.0)),
+            "max_joint_difference_deg": float(self.joint_difference_deg.max(initial=0.0)),
+            "max_ik_error": float(self.ik_error.max(initial=0.0)),
+            "min_joint_margin_rad": float(self.joint_margin_rad.min(initial=np.inf)),
+            "min_singularity_measure": float(self.singularity.min(initial=np.inf)),
+            "clearance_proved": self.clearance_proved,
+            "max_clearance_change_m": (
+                None if self.clearance_change_m is None else float(self.clearance_change_m.max(initial=0.0))
+            ),
+            "min_clearance_m": least_clearance,
+            "violations": [v.describe() for v in self.violations],
+        }
+
+    def describe(self) -> str:
+        """One line: the largest differences to the joint-linear motion."""
+        return (
+            f"controller line vs joint-linear: {self.position_difference_m.max(initial=0.0) * 1e3:.4f} mm, "
+            f"{self.orientation_difference_deg.max(initial=0.0):.4f} deg orientation, "
+            f"{self.joint_difference_deg.max(initial=0.0):.4f} deg joints"
+        )
+
+
+def line_poses(poses: Array, q: Array, segment: Array, t: Array, kin: TcpKinematics, wrist: Array) -> Array:
+    """Poses (M, 4, 4) of the controller's line at ``t`` inside ``segment`` (see the module notes).
+
+    Args:
+        poses: T_F_TCP of the targets, (N, 4, 4).
+        q: joints at the targets [rad], (N, n) (for the wrist model).
+        segment: segment of each sample, (M,).
+        t: parameter in [0, 1] of each sample, (M,).
+        kin: TCP kinematics (for the wrist model).
+        wrist: per segment, True where the orientation follows the joint-linear wrist, (N-1,).
+    """
+    a, b = poses[segment], poses[segment + 1]
+    out = np.zeros((len(t), 4, 4))
+    out[:, 3, 3] = 1.0
+    out[:, :3, 3] = a[:, :3, 3] + t[:, None] * (b[:, :3, 3] - a[:, :3, 3])
+    R_a = Rotation.from_matrix(a[:, :3, :3])
+    step = (R_a.inv() * Rotation.from_matrix(b[:, :3, :3])).as_rotvec()
+    out[:, :3, :3] = (R_a * Rotation.from_rotvec(t[:, None] * step)).as_matrix()
+    on_wrist = wrist[segment]
+    if on_wrist.any():
+        q_lin = q[segment] + t[:, None] * (q[segment + 1] - q[segment])
+        out[on_wrist, :3, :3] = kin.poses(q_lin[on_wrist])[:, :3, :3]
+    return out
+
+
+def sample_parameters(q: Array) -> tuple[Array, Array, Array]:
+    """Sub-steps per segment (N-1,), and each inner sample's segment (M,) and parameter t (M,)."""
+    dq = np.degrees(np.abs(np.diff(q, axis=0))).max(axis=1)
+    m = np.maximum(MIN_SAMPLES, np.ceil(dq / MAX_SAMPLE_STEP_DEG)).astype(int)
+    m += m % 2  # even: the midpoint, where a segment's two motions are furthest apart, is a sample
+    segment = np.repeat(np.arange(len(m)), m - 1)
+    first = np.concatenate([[0], np.cumsum(m - 1)[:-1]])
+    t = (np.arange(len(segment)) - first[segment] + 1) / m[segment]
+    return m, segment, t
+
+
+def _segment_max(values: Array, segment: Array, count: int, initial: float) -> Array:
+    out = np.full(count, initial)
+    np.maximum.at(out, segment, values)
+    return out
+
+
+def _segment_min(values: Array, segment: Array, count: int) -> Array:
+    out = np.full(count, np.inf)
+    np.minimum.at(out, segment, values)
+    return out
+
+
+def check_controller_lines(
+    kin: TcpKinematics,
+    q: Array,
+    s: Array,
+    tolerances: Tolerances,
+    *,
+    wrist: Array | None = None,
+    clearance: Callable[[Array], tuple[Array | None, float]] | None = None,
+    reach: Array | None = None,
+) -> LineCheck:
+    """Check the controller's straight-line motion between the waypoints of joint path ``q``.
+
+    Args:
+        kin: TCP kinematics of the robot, base and tool.
+        q: refined joints per waypoint [rad], (N, n).
+        s: arc length per waypoint [m], (N,) (for the violations).
+        tolerances: joint margin and singularity margin to keep on the line.
+        wrist: per segment, True where the program hands the wrist to the controller's singularity
+            handling (orientation joint-linear), (N-1,); None for nowhere.
+        clearance: the clearance check of a joint path: joints (K, n) [rad] -> None when every
+            margin is proved kept, else the least clearance per segment of that path by the dense
+            check [m] (K-1,); and the tolerance a clearance may fall below 0 [m]. None without a
+            collision check.
+        reach: per joint, the largest distance of any robot or tool point from its axis [m], (n,),
+            for ``clearance_change_m``; None without a collision check.
+
+    Returns:
+        The per-segment figures and the violations.
+    """
+    q = np.asarray(q, dtype=float)
+    n_seg = len(q) - 1
+    wrist = np.zeros(n_seg, dtype=bool) if wrist is None else np.asarray(wrist, dtype=bool)
+    poses = kin.poses(q)
+    m, segment, t = sample_parameters(q)
+    q_lin = q[segment] + t[:, None] * (q[segment + 1] - q[segment])
+    targets = line_poses(poses, q, segment, t, kin, wrist)
+    spec = kin.robot.spec
+    q_line, err = solve_ik_batch(
+        kin, targets, q_lin, spec.lower, spec.upper, tol=IK_TOLERANCE, max_iterations=60, nullspace_gain=0.0
+    )
+    lin_poses = kin.poses(q_lin)
+    a, b = poses[segment, :3, 3], poses[segment + 1, :3, 3]
+    chord = b - a
+    along = np.clip(
+        np.einsum("ij,ij->i", lin_poses[:, :3, 3] - a, chord)
+        / np.maximum(np.einsum("ij,ij->i", chord, chord), 1e-300),
+        0.0,
+        1.0,
+    )
+    off_line = np.linalg.norm(lin_poses[:, :3, 3] - (a + along[:, None] * chord), axis=1)
+    rel = np.einsum("kji,kjl->kil", lin_poses[:, :3, :3], targets[:, :3, :3])
+    angle = np.degrees(Rotation.from_matrix(rel).magnitude())
+    joint_diff = np.degrees(np.abs(q_line - q_lin).max(axis=1))
+    margins = np.minimum(q_line - spec.lower, spec.upper - q_line)
+    sing, _ = singularity_measures(kin, q_line, smallest=False)
+
+    violations: list[Violation] = []
+
+    def add(bad: Array, reason: str, values: Array, unit: str, limit: float, worst_is_max: bool) -> None:
+        for i, j in runs(bad):
+            part = values[i : j + 1]
+            part = part[np.isfinite(part)]
+            worst = float(part.max() if worst_is_max else part.min()) if part.size else math.nan
+            violations.append(Violation(i, j, float(s[i]), float(s[j]), reason, worst, unit, limit))
+
+    ik_worst = _segment_max(err, segment, n_seg, 0.0)
+    add(ik_worst > IK_FAILED, "no IK on the controller's line", ik_worst, "m+rad", IK_FAILED, True)
+    margin = math.radians(max(tolerances.joint_margin_deg - JOINT_MARGIN_ALLOWANCE_DEG, 0.0)) - 1e-7
+    for j in range(q.shape[1]):
+        per_seg = _segment_min(margins[:, j], segment, n_seg)
+        add(
+            per_seg < margin,
+            f"joint limit on the controller's line (joint {j + 1})",
+            per_seg,
+            "rad",
+            margin,
+            False,
+        )
+    sing_seg = _segment_min(sing, segment, n_seg)
+    sing_tol = tolerances.singularity_margin * (1.0 - SINGULARITY_SHARE)
+    add(
+        sing_seg < sing_tol,
+        "singularity on the controller's line",
+        sing_seg,
+        "-",
+        tolerances.singularity_margin,
+        False,
+    )
+
+    clear = change = proved = None
+    if reach is not None:
+        change = _segment_max(np.abs(q_line - q_lin) @ np.asarray(reach, dtype=float), segment, n_seg, 0.0)
+    if clearance is not None:
+        # the joint path through every waypoint and every sample, in order
+        order = np.argsort(np.concatenate([np.arange(len(q)) * 1.0, segment + t]), kind="stable")
+        dense = np.concatenate([q, q_line])[order]
+        dense_seg = np.concatenate([np.arange(len(q)) * 1.0, segment + t])[order]
+        per_dense, tolerance_m = clearance(dense)
+        proved = per_dense is None
+    if clearance is not None and per_dense is not None:
+        owner = np.minimum(np.floor(dense_seg[:-1]).astype(int), n_seg - 1)  # each dense step's segment
+        clear = _segment_min(per_dense, owner, n_seg)
+        add(clear < -tolerance_m, "clearance on the controller's line", clear, "m", -tolerance_m, False)
+    return LineCheck(
+        samples=m,
+        t=t,
+        segment=segment,
+        q=q_line,
+        ik_error=err,
+        position_difference_m=_segment_max(off_line, segment, n_seg, 0.0),
+        orientation_difference_deg=_segment_max(angle, segment, n_seg, 0.0),
+        joint_difference_deg=_segment_max(joint_diff, segment, n_seg, 0.0),
+        joint_margin_rad=_segment_min(margins.min(axis=1), segment, n_seg),
+        singularity=sing_seg,
+        clearance_m=clear,
+        clearance_proved=proved,
+        clearance_change_m=change,
+        violations=tuple(violations),
+    )

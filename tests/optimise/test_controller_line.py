@@ -1,0 +1,91 @@
+"""The controller's straight TCP line between waypoints against figures computed by hand."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from refine.optimise.controller_line import check_controller_lines
+from refine.optimise.verify import segment_singularity
+from refine.robot.kinematics import TcpKinematics
+from refine.robot.registry import load_robot
+from refine.settings import Tolerances
+
+
+@pytest.fixture(scope="module")
+def ur10e_kin():
+    return TcpKinematics(load_robot("ur10e"), np.eye(4), np.eye(4))
+
+
+Q0 = np.radians([10.0, -100.0, 90.0, -80.0, -90.0, 0.0])
+
+
+@pytest.mark.parametrize("turn_deg", [4.0, 10.0])
+def test_a_turn_of_axis_1_leaves_the_line_by_the_sagitta_of_its_arc(ur10e_kin, turn_deg):
+    """Axis 1 alone: the joint-linear TCP runs on an arc of radius r round the base z axis.
+
+    Its midpoint is the sagitta r (1 - cos(turn / 2)) off the chord; the tool turns about the same
+    axis at the same rate as the slerp between the two orientations, so they agree at equal t.
+    """
+    d = math.radians(turn_deg)
+    q = np.array([Q0, Q0 + [d, 0, 0, 0, 0, 0]])
+    p = ur10e_kin.pose(Q0)[:3, 3]
+    radius = math.hypot(p[0], p[1])  # distance of the TCP from axis 1 (the base z axis)
+    line = check_controller_lines(ur10e_kin, q, np.array([0.0, 1.0]), Tolerances())
+    assert line.position_difference_m[0] == pytest.approx(radius * (1.0 - math.cos(d / 2.0)), rel=1e-6)
+    assert line.orientation_difference_deg[0] < 1e-6
+    assert line.ok and line.ik_error.max() < 1e-8
+    # the line's joints put the TCP on the chord at the fraction t of its length
+    ends = ur10e_kin.poses(q)[:, :3, 3]
+    on_chord = ends[0] + line.t[:, None] * (ends[1] - ends[0])
+    np.testing.assert_allclose(ur10e_kin.poses(line.q)[:, :3, 3], on_chord, atol=1e-9)
+
+
+def test_a_long_turn_whose_chord_passes_the_base_axis_fails_on_the_line_only(ur10e_kin):
+    """150 deg of axis 1: the joint-linear arc stays at radius r, the chord comes within
+    r cos(75 deg) of the base axis, where the arm folds over its shoulder singularity."""
+    q = np.array([Q0, Q0 + np.radians([150.0, 0, 0, 0, 0, 0])])
+    between, _ = segment_singularity(ur10e_kin, q)
+    tol = Tolerances(joint_step_deg=360.0)
+    assert between[0] > tol.singularity_margin  # the joint-linear check passes it
+    line = check_controller_lines(ur10e_kin, q, np.array([0.0, 1.0]), tol)
+    reasons = {v.reason for v in line.violations}
+    assert "singularity on the controller's line" in reasons or "no IK on the controller's line" in reasons
+    assert not line.ok
+
+
+def test_a_wrist_run_keeps_the_joint_linear_orientation(ur10e_kin):
+    """Where the wrist is handed to the controller, the orientation is the joint-linear one: no
+    orientation difference, whatever the joints do."""
+    q = np.array([Q0, Q0 + np.radians([2.0, 3.0, -4.0, 20.0, 15.0, -30.0])])
+    free = check_controller_lines(ur10e_kin, q, np.array([0.0, 1.0]), Tolerances())
+    wrist = check_controller_lines(ur10e_kin, q, np.array([0.0, 1.0]), Tolerances(), wrist=np.array([True]))
+    assert free.orientation_difference_deg[0] > 0.1  # a wrist motion turns the tool off the slerp
+    assert wrist.orientation_difference_deg[0] < 1e-6
+
+
+def test_a_clearance_break_on_the_line_is_reported_by_segment(ur10e_kin):
+    """A clearance the dense check finds broken on the line's joints is a violation of its segment."""
+    q = np.array([Q0, Q0 + [0.01, 0, 0, 0, 0, 0], Q0 + [0.02, 0, 0, 0, 0, 0]])
+    seen = []
+
+    def clearance(dense):
+        seen.append(dense)
+        per = np.full(len(dense) - 1, 0.05)
+        per[-1] = -0.003  # the last step, inside the second segment
+        return per, 1e-4
+
+    line = check_controller_lines(
+        ur10e_kin, q, np.array([0.0, 1.0, 2.0]), Tolerances(), clearance=clearance, reach=np.ones(6)
+    )
+    (dense,) = seen
+    assert len(dense) == 3 + len(line.t)  # every waypoint and every sample, in order
+    np.testing.assert_allclose(dense[0], q[0]) and np.testing.assert_allclose(dense[-1], q[-1])
+    (v,) = line.violations
+    assert (v.index_start, v.index_end, v.reason) == (1, 1, "clearance on the controller's line")
+    assert v.worst == pytest.approx(-0.003) and line.clearance_proved is False
+    # the joints differ by at most joint_difference_deg; with a reach of 1 m per joint the change
+    # of any clearance is at most the sum of the joint differences, here below 6 x that
+    assert np.all(line.clearance_change_m <= 6 * np.radians(line.joint_difference_deg) + 1e-12)
