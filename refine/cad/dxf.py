@@ -21,6 +21,11 @@ at the first entity's start. Curves are flattened so that no chord is farther th
 whose ends meet) is *marked closed* by returning its first point again as its last point, exactly.
 The drawing's ``$INSUNITS`` is only checked against ``units`` (a mismatch is logged as a warning);
 ``units`` decides.
+
+:func:`points_from_dxf` reads one path and refuses pieces that do not form one chain;
+:func:`tracks_from_dxf` reads every connected chain as a track of its own (a closed entity is always
+one), with the points the CAD defines (polyline vertices, line ends, the ends of arcs and splines)
+marked for the resampling (:func:`refine.cad.resample.resample_track`).
 """
 
 from __future__ import annotations

@@ -20,9 +20,17 @@ What is read, per line (block):
   other ``G`` code, and rotary or extra axes (``A B C U V W``), are an :class:`InputError`.
 
 The machine starts at the program origin. The path is the sequence of feed moves (``G1``, ``G2``,
-``G3``); a rapid ``G0`` that moves ends a *feed sequence* (one bead, seam or cut). Arcs are
-discretised so that no chord is farther than ``arc_tolerance_m`` from the arc; their points lie
-on the exact circle (or helix).
+``G3``), split into *feed sequences* (tracks: one bead, seam or cut each):
+
+* a rapid ``G0`` that moves ends a track;
+* a plunge or retract, a ``G1`` that moves along Z alone (within :data:`PLUNGE_XY_TOLERANCE_M`
+  in X and Y), ends a track and belongs to none;
+* a closed loop ends a track: a feed move that ends at a block end of its own track (within
+  :data:`LOOP_TOLERANCE_M`) makes the loop from that block end a closed track, and what came
+  before it, if anything, an open one.
+
+Arcs are discretised so that no chord is farther than ``arc_tolerance_m`` from the arc; their
+points lie on the exact circle (or helix).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Resampling a polyline at equal arc-length steps.
+"""Resampling a polyline: at equal arc-length steps, or keeping its feature points within a chord tolerance.
 
 The CAD readers return the path as a dense polyline: every vertex of the drawing plus the points
 that flatten its arcs and splines. The optimiser wants waypoints at a fixed spacing instead.
@@ -20,6 +20,11 @@ The rule, precisely:
 Corners of the input polyline are not kept as waypoints unless they happen to fall on a step: a
 waypoint grid that hits every corner would need uneven spacing. Between two waypoints the robot
 path therefore cuts a corner by at most ``h / 2`` along each leg; choose ``h`` accordingly.
+
+The CAD stage places its waypoints with :func:`resample_track` instead: the readers' feature
+points and corners are kept exactly, the spacing is even only between two of them, and it shrinks
+until the chord error against the reader's polyline is within a tolerance. The polyline and the
+waypoints together are kept with the path as its geometry, to measure the chord error against.
 """
 
 from __future__ import annotations
