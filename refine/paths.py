@@ -65,12 +65,15 @@ class ChordError:
     point: Array
 
 
-def chord_error(exact_s: Array, exact: Array, s: Array, positions: Array) -> ChordError:
+def chord_error(
+    exact_s: Array, exact: Array, s: Array, positions: Array, targets: Array | None = None
+) -> ChordError:
     """How far the CAD geometry lies from the straight moves between ``positions``.
 
     Every point of the geometry whose arc length falls in ``[s[i], s[i + 1]]`` is measured against
-    the straight segment ``positions[i] -> positions[i + 1]``; the geometry holds the waypoints
-    themselves, so a reached point off its target counts too.
+    the straight segment ``positions[i] -> positions[i + 1]``; with ``targets`` (the waypoints on
+    the geometry), each reached point is also measured against its own target, so a reached
+    point off its target counts in full.
 
     Args:
         exact_s: arc length of each geometry point [m], shape (M,), non-decreasing, in the
@@ -78,11 +81,18 @@ def chord_error(exact_s: Array, exact: Array, s: Array, positions: Array) -> Cho
         exact: the geometry [m], shape (M, 3).
         s: arc length of the waypoints [m], shape (N,).
         positions: the points the moves run through [m], shape (N, 3) (targets or reached).
+        targets: the waypoints' targets on the geometry [m], shape (N, 3), or None.
     """
     j = np.clip(np.searchsorted(s, exact_s, side="right") - 1, 0, len(s) - 2)
     err = chord_errors(exact, j, positions)
     k = int(np.argmax(err))
-    return ChordError(float(err[k]), int(j[k]), float(exact_s[k]), exact[k].copy())
+    worst = ChordError(float(err[k]), int(j[k]), float(exact_s[k]), exact[k].copy())
+    if targets is not None:
+        off = np.linalg.norm(positions - targets, axis=1)
+        i = int(np.argmax(off))
+        if off[i] > worst.max_m:
+            worst = ChordError(float(off[i]), min(i, len(s) - 2), float(s[i]), targets[i].copy())
+    return worst
 
 
 def _reorder_exact(

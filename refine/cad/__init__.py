@@ -66,6 +66,8 @@ __all__ = [
 
 #: A path whose last point lies this close to its first is closed [m].
 CLOSED_TOLERANCE_M = 1e-6
+#: Largest distance between a curve and the polyline the DXF and G-code readers flatten it to [m].
+FLATTENING_TOLERANCE_M = 1e-6
 
 def _single(points: NDArray) -> list[CadTrack]:
     closed = bool(len(points) > 2 and np.linalg.norm(points[-1] - points[0]) <= CLOSED_TOLERANCE_M)
@@ -74,8 +76,10 @@ def _single(points: NDArray) -> list[CadTrack]:
 
 _READERS: dict[str, Callable[[CadSettings], list[CadTrack]]] = {
     "csv": lambda c: _single(__getattr__("points_from_csv")(c.file, c.units)),
-    "dxf": lambda c: __getattr__("tracks_from_dxf")(c.file, c.units, layer=c.layer),
-    "gcode": lambda c: __getattr__("tracks_from_gcode")(c.file, c.units),
+    "dxf": lambda c: __getattr__("tracks_from_dxf")(
+        c.file, c.units, layer=c.layer, flatten_tolerance_m=FLATTENING_TOLERANCE_M
+    ),
+    "gcode": lambda c: __getattr__("tracks_from_gcode")(c.file, c.units, arc_tolerance_m=FLATTENING_TOLERANCE_M),
     "mesh": lambda c: _single(
         __getattr__("points_from_mesh")(
             c.file,
@@ -167,8 +171,10 @@ def read_cad_tracks(settings: CadSettings, cad_in_world: NDArray) -> list[CadPat
         points_world = transform_points(T_world_cad, points)
         length = float(np.sum(np.linalg.norm(np.diff(points_world, axis=0), axis=1)))
         check_waypoint_count(length, settings.spacing_m, f"cad.file {name!r}")
+        # against the reader's polyline, less its flattening: the exact curve is then within the tolerance
+        tol = settings.chord_tolerance_m - FLATTENING_TOLERANCE_M
         s, positions, exact_s, exact = resample_track(
-            points_world, settings.spacing_m, settings.chord_tolerance_m, kinds=kinds, closed=closed
+            points_world, settings.spacing_m, tol, kinds=kinds, closed=closed
         )
         if len(s) > MAX_WAYPOINTS:
             raise InputError(

@@ -235,8 +235,8 @@ def _span_grid(
 ) -> tuple[NDArray, NDArray]:
     """Equal steps from point ``lo`` to point ``hi`` of the polyline, fine enough for ``tol``."""
     length = float(cum[hi] - cum[lo])
-    n = max(1, math.ceil(length / spacing_m))
-    while length / n > spacing_m:
+    n = max(1, math.ceil(length / spacing_m * (1.0 - 1e-12)))  # 40 mm at 5 mm is 8 steps despite rounding
+    while length / n > spacing_m * (1.0 + 1e-12):
         n += 1
     inner = points[lo + 1 : hi]
     seg = np.diff(cum)

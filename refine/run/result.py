@@ -61,7 +61,7 @@ class PassResult:
         from refine.paths import chord_error
 
         reached = self.refinement.check.poses[:, :3, 3]
-        return chord_error(fused.exact_s, fused.exact, fused.s, reached)
+        return chord_error(fused.exact_s, fused.exact, fused.s, reached, fused.positions)
 
 
 @dataclass(frozen=True)
