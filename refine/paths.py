@@ -289,7 +289,8 @@ class FusedPath:
         order: which way round and from where the run follows the CAD path (the worker's way),
             None for a path that was not aligned to a demonstration (PathML).
         exact_s: arc length of each point of the CAD geometry, in ``s`` [m], shape (M,), or None
-            (a path without CAD geometry: PathML, arrays, the later passes of a multi-pass weld).
+            (a path without CAD geometry: arrays, the later passes of a multi-pass weld; a PathML
+            track's geometry is its polyline).
         exact: the CAD geometry in {F} [m], shape (M, 3) (see :class:`CadPath`).
     """
 

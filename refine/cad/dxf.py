@@ -369,6 +369,15 @@ def _components(
     return out
 
 
+def _close(points: NDArray, kinds: NDArray, tol: float) -> tuple[NDArray, NDArray]:
+    """A closed entity's points ending with its first point, exactly."""
+    if np.linalg.norm(points[-1] - points[0]) <= tol:
+        points = points.copy()
+        points[-1] = points[0]
+        return points, kinds
+    return np.vstack([points, points[:1]]), np.r_[kinds, kinds[:1]]
+
+
 def tracks_from_dxf(
     path: str | Path, units: str = "mm", layer: str | None = None, flatten_tolerance_m: float = 1e-6
 ) -> list[CadTrack]:
@@ -398,11 +407,11 @@ def tracks_from_dxf(
     extent = float(np.ptp(np.vstack([f[0] for f in found]), axis=0).max())
     join_tol = 1e-6 * max(extent, 1.0)
     tracks = []
+    shut = {f[3] for f in found if f[2]}
     for points, kinds, labels in _components(found, join_tol, source):
-        closed = len(points) > 2 and np.linalg.norm(points[-1] - points[0]) <= join_tol
+        closed = labels[0] in shut or (len(points) > 2 and np.linalg.norm(points[-1] - points[0]) <= join_tol)
         if closed:
-            points = points.copy()
-            points[-1] = points[0]
+            points, kinds = _close(points, kinds, join_tol)
         tracks.append(CadTrack(points * scale, kinds, bool(closed), ", ".join(labels)))
     logger.debug("%s: %d track(s)", source, len(tracks))
     return tracks

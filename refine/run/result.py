@@ -51,7 +51,7 @@ class PassResult:
     def cad_chord(self) -> ChordError | None:
         """How far the CAD geometry lies from the straight moves between the reached TCP positions.
 
-        None for a pass without CAD geometry (a PathML path, arrays, the later passes of a
+        None for a pass without CAD geometry (a path given as arrays, the later passes of a
         multi-pass weld). Measured against the poses the verifier reached (Pinocchio), so an
         error at a waypoint counts as well as the chord between two.
         """

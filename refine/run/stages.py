@@ -72,6 +72,7 @@ def fused_tracks(
             track=track,
             reverse=problem.cad.reverse,
             start_near=problem.cad.start_near,
+            chord_tolerance_m=problem.cad.chord_tolerance_m,
         )
         watch.lap("cad")
         return [fused]

@@ -16,23 +16,25 @@ from refine.fuse.tracks import join_tracks, split_tracks
 from refine.paths import CadPath, FusedPath, chord_error
 from refine.settings import CadSettings
 
-# A bead in mm: a sharp corner at (100, 0), a 20 mm arc (ARC entity, centre (100, 60), from -90 to
-# 0 deg) from (100, 40) to (120, 60), a sharp corner at (120, 100) and a 20 mm bulge arc (a quarter
-# turn counter-clockwise, bulge tan(pi / 8), centre (40, 100)) from (60, 100) to (40, 120).
-CORNERS_MM = [(0.0, 0.0), (100.0, 0.0), (120.0, 100.0)]
-ARC_CENTRE_MM, BULGE_CENTRE_MM, RADIUS_MM = (100.0, 60.0), (40.0, 100.0), 20.0
+# A bead in mm from (-2.5, 0): a sharp corner at (100, 0), a 20 mm arc (ARC entity, centre (100, 60),
+# from -90 to 0 deg) from (100, 40) to (120, 60), a sharp corner at (120, 100) and a 20 mm bulge arc
+# (a quarter turn counter-clockwise, bulge tan(pi / 8), centre (42.5, 100)) from (62.5, 100) to
+# (42.5, 120). Neither corner falls on an even 5 mm grid from the end before it (102.5 of 142.5 mm,
+# 40 of 97.5 mm), so only keeping it puts a waypoint there.
+CORNERS_MM = [(-2.5, 0.0), (100.0, 0.0), (120.0, 100.0)]
+ARC_CENTRE_MM, BULGE_CENTRE_MM, RADIUS_MM = (100.0, 60.0), (42.5, 100.0), 20.0
 
 
 def _bead(tmp_path) -> Path:
     doc = ezdxf.new()
     msp = doc.modelspace()
     a = {"layer": "BEAD"}
-    msp.add_line((0, 0), (100, 0), dxfattribs=a)
+    msp.add_line((-2.5, 0), (100, 0), dxfattribs=a)
     msp.add_line((100, 0), (100, 40), dxfattribs=a)
     msp.add_arc(ARC_CENTRE_MM, RADIUS_MM, -90.0, 0.0, dxfattribs=a)
     msp.add_line((120, 60), (120, 100), dxfattribs=a)
     msp.add_lwpolyline(
-        [(120, 100, 0.0), (60, 100, math.tan(math.pi / 8)), (40, 120, 0.0)], format="xyb", dxfattribs=a
+        [(120, 100, 0.0), (62.5, 100, math.tan(math.pi / 8)), (42.5, 120, 0.0)], format="xyb", dxfattribs=a
     )
     path = tmp_path / "bead.dxf"
     doc.saveas(path)
@@ -65,7 +67,7 @@ def test_dxf_corners_are_waypoints_and_arcs_are_within_the_chord_tolerance(tmp_p
     p = cad.positions * 1e3
     for corner in CORNERS_MM:  # each sharp corner is a waypoint, exactly
         assert np.min(np.linalg.norm(p[:, :2] - corner, axis=1)) < 1e-9
-    for ends in ([(100, 40), (120, 60)], [(60, 100), (40, 120)]):  # so are the ends of the arcs
+    for ends in ([(100, 40), (120, 60)], [(62.5, 100), (42.5, 120)]):  # so are the ends of the arcs
         for e in ends:
             assert np.min(np.linalg.norm(p[:, :2] - e, axis=1)) < 1e-9
     assert np.all(np.diff(cad.s) <= 0.005 + 1e-12)  # the user's spacing bounds every step
@@ -99,10 +101,11 @@ def test_a_coarser_tolerance_gives_fewer_waypoints_on_arcs_only(tmp_path):
     f = _bead(tmp_path)
     fine = read_cad_path(_settings(f, spacing_m=0.005, layer="BEAD", chord_tolerance_m=1e-4), np.eye(4))
     coarse = read_cad_path(_settings(f, spacing_m=0.005, layer="BEAD", chord_tolerance_m=1e-3), np.eye(4))
-    # lines: 100 + 40 + 40 + 60 mm at 5 mm -> 20 + 8 + 8 + 12 steps; each arc: 31.4 mm, which 5 mm
-    # steps (7, sagitta 0.126 mm) keep within 1 mm but not within 0.1 mm (8 steps: 0.096 mm)
-    assert len(coarse.s) - 1 == 48 + 2 * 7
-    assert len(fine.s) - 1 == 48 + 2 * 8
+    # lines between kept points: 102.5 + 40 + 40 + 57.5 mm at 5 mm -> 21 + 8 + 8 + 12 steps; each
+    # arc: 31.4 mm, which 5 mm steps (7, sagitta 0.126 mm) keep within 1 mm but not within 0.1 mm
+    # (8 steps: 0.096 mm)
+    assert len(coarse.s) - 1 == 49 + 2 * 7
+    assert len(fine.s) - 1 == 49 + 2 * 8
 
 
 def test_a_tolerance_out_of_range_is_an_input_error(tmp_path):
