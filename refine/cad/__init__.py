@@ -1,7 +1,9 @@
-"""The CAD/CAM stage: read the path file, bring it to the world frame, resample it by arc length.
+"""The CAD/CAM stage: read the path file, bring it to the world frame, place the waypoints on it.
 
-``read_cad_path`` is the entry point; ``csv_``, ``dxf``, ``gcode`` and ``mesh`` read one format each
-into points in the CAD frame [m], and ``resample`` places the waypoints. A PathML document holds
+``read_cad_tracks`` (every track of the file) and ``read_cad_path`` (a file with one) are the entry
+points; ``csv_``, ``dxf``, ``gcode`` and ``mesh`` read one format each into tracks in the CAD frame
+[m], their feature points marked, and ``resample`` places the waypoints: feature points and corners
+kept, the chord error against the CAD geometry within ``[cad] chord_tolerance_m``. A PathML document holds
 orientations and speeds as well, so it skips this stage and the fusion:
 :func:`~refine.cad.pathml_.fused_from_pathml` reads it straight into a fused path.
 """
