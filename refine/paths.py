@@ -17,11 +17,96 @@ from refine.errors import InputError
 from refine.types import Array
 
 
+def _check_exact(owner: str, exact_s: Array | None, exact: Array | None) -> None:
+    if (exact_s is None) != (exact is None):
+        raise InputError(f"{owner}: exact_s and exact go together")
+    if exact_s is not None and exact is not None:
+        _check_rows(f"{owner}.exact_s", exact_s, len(exact_s), ())
+        _check_rows(f"{owner}.exact", exact, len(exact_s), (3,))
+
+
 def _check_rows(name: str, arr: Array, n: int, tail: tuple[int, ...]) -> None:
     if arr.shape != (n, *tail):
         raise InputError(f"{name}: expected shape {(n, *tail)}, got {arr.shape}")
     if not np.all(np.isfinite(arr)):
         raise InputError(f"{name}: contains NaN or infinite values")
+
+
+def chord_errors(points: Array, j: Array, positions: Array) -> Array:
+    """Distance of each point of a curve to the straight move that passes it [m], shape (K,).
+
+    Args:
+        points: points of the curve, shape (K, 3).
+        j: for each point, the index of the move ``positions[j] -> positions[j + 1]`` whose
+            arc-length interval holds it, shape (K,).
+        positions: the waypoints, shape (N, 3).
+    """
+    a, b = positions[j], positions[j + 1]
+    ab = b - a
+    denom = np.einsum("ij,ij->i", ab, ab)
+    t = np.clip(np.einsum("ij,ij->i", points - a, ab) / np.where(denom > 0.0, denom, 1.0), 0.0, 1.0)
+    return np.linalg.norm(a + t[:, None] * ab - points, axis=1)
+
+
+@dataclass(frozen=True)
+class ChordError:
+    """The largest distance between a CAD curve and the straight moves through reached points.
+
+    Attributes:
+        max_m: the largest distance [m].
+        segment: index ``i`` of the move from waypoint ``i`` to ``i + 1`` where it is.
+        s_m: arc length of the CAD point that is farthest [m].
+        point: that CAD point in {F} [m], shape (3,).
+    """
+
+    max_m: float
+    segment: int
+    s_m: float
+    point: Array
+
+
+def chord_error(
+    exact_s: Array, exact: Array, s: Array, positions: Array, targets: Array | None = None
+) -> ChordError:
+    """How far the CAD geometry lies from the straight moves between ``positions``.
+
+    Every point of the geometry whose arc length falls in ``[s[i], s[i + 1]]`` is measured against
+    the straight segment ``positions[i] -> positions[i + 1]``; with ``targets`` (the waypoints on
+    the geometry), each reached point is also measured against its own target, so a reached
+    point off its target counts in full.
+
+    Args:
+        exact_s: arc length of each geometry point [m], shape (M,), non-decreasing, in the
+            waypoints' arc length.
+        exact: the geometry [m], shape (M, 3).
+        s: arc length of the waypoints [m], shape (N,).
+        positions: the points the moves run through [m], shape (N, 3) (targets or reached).
+        targets: the waypoints' targets on the geometry [m], shape (N, 3), or None.
+    """
+    j = np.clip(np.searchsorted(s, exact_s, side="right") - 1, 0, len(s) - 2)
+    err = chord_errors(exact, j, positions)
+    k = int(np.argmax(err))
+    worst = ChordError(float(err[k]), int(j[k]), float(exact_s[k]), exact[k].copy())
+    if targets is not None:
+        off = np.linalg.norm(positions - targets, axis=1)
+        i = int(np.argmax(off))
+        if off[i] > worst.max_m:
+            worst = ChordError(float(off[i]), min(i, len(s) - 2), float(s[i]), targets[i].copy())
+    return worst
+
+
+def _reorder_exact(
+    exact_s: Array, exact: Array, length: float, reverse: bool, sigma: float, closed: bool
+) -> tuple[Array, Array]:
+    """The geometry of a path run the other way and/or from arc length ``sigma`` (closed paths)."""
+    if reverse:
+        exact_s, exact = length - exact_s[::-1], exact[::-1]
+    if closed and sigma > 0.0:
+        head = exact_s >= sigma
+        tail = (exact_s > 0.0) & (exact_s <= sigma)
+        exact_s = np.r_[exact_s[head] - sigma, exact_s[tail] + length - sigma]
+        exact = np.vstack([exact[head], exact[tail]])
+    return np.clip(exact_s, 0.0, length), np.ascontiguousarray(exact)
 
 
 @dataclass(frozen=True)
@@ -42,6 +127,11 @@ class CadPath:
             an open path); the alignment keeps it instead of searching both.
         start_given: the problem fixed the start of a closed path (``[cad] start_near``); the
             alignment keeps it instead of searching every start.
+        exact_s: arc length of each point of the CAD geometry, in the waypoints' arc length [m],
+            shape (M,), or None when the path has none (given as points only).
+        exact: the CAD geometry as the reader evaluates it, in {F} [m], shape (M, 3): every vertex
+            and the points of its curves within the reader's flattening tolerance, and the
+            waypoints; what the chord error is measured against.
     """
 
     s: Array
@@ -52,6 +142,8 @@ class CadPath:
     start_offset_m: float = 0.0
     direction_given: bool = False
     start_given: bool = False
+    exact_s: Array | None = None
+    exact: Array | None = None
 
     def __post_init__(self) -> None:
         n = len(self.s)
@@ -61,6 +153,13 @@ class CadPath:
         _check_rows("CadPath.positions", self.positions, n, (3,))
         if np.any(np.diff(self.s) <= 0.0):
             raise InputError(f"CadPath from {self.source!r}: arc length must strictly increase")
+        _check_exact("CadPath", self.exact_s, self.exact)
+
+    def reordered_exact(self, reverse: bool, sigma: float) -> tuple[Array | None, Array | None]:
+        """The geometry run the other way (``reverse``) and then from arc length ``sigma`` [m] (closed)."""
+        if self.exact_s is None or self.exact is None:
+            return None, None
+        return _reorder_exact(self.exact_s, self.exact, self.length, reverse, sigma, self.closed)
 
     @property
     def length(self) -> float:
@@ -189,6 +288,10 @@ class FusedPath:
         residual: distance between the aligned demonstration and the CAD point [m], shape (N,).
         order: which way round and from where the run follows the CAD path (the worker's way),
             None for a path that was not aligned to a demonstration (PathML).
+        exact_s: arc length of each point of the CAD geometry, in ``s`` [m], shape (M,), or None
+            (a path without CAD geometry: arrays, the later passes of a multi-pass weld; a PathML
+            track's geometry is its polyline).
+        exact: the CAD geometry in {F} [m], shape (M, 3) (see :class:`CadPath`).
     """
 
     s: Array
@@ -198,9 +301,12 @@ class FusedPath:
     t_demo: Array
     residual: Array
     order: PathOrder | None = None
+    exact_s: Array | None = None
+    exact: Array | None = None
 
     def __post_init__(self) -> None:
         n = len(self.s)
+        _check_exact("FusedPath", self.exact_s, self.exact)
         _check_rows("FusedPath.positions", self.positions, n, (3,))
         _check_rows("FusedPath.rotations", self.rotations, n, (3, 3))
         _check_rows("FusedPath.speed", self.speed, n, ())

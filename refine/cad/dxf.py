@@ -21,6 +21,11 @@ at the first entity's start. Curves are flattened so that no chord is farther th
 whose ends meet) is *marked closed* by returning its first point again as its last point, exactly.
 The drawing's ``$INSUNITS`` is only checked against ``units`` (a mismatch is logged as a warning);
 ``units`` decides.
+
+:func:`points_from_dxf` reads one path and refuses pieces that do not form one chain;
+:func:`tracks_from_dxf` reads every connected chain as a track of its own (a closed entity is always
+one), with the points the CAD defines (polyline vertices, line ends, the ends of arcs and splines)
+marked for the resampling (:func:`refine.cad.resample.resample_track`).
 """
 
 from __future__ import annotations
@@ -36,6 +41,7 @@ from ezdxf.math import bulge_center
 from numpy.typing import NDArray
 
 from refine.cad.csv_ import metres_per_unit
+from refine.cad.resample import FEATURE, FLATTENING, VERTEX, CadTrack
 from refine.errors import InputError
 from refine.plausible import CAD_COORDINATE_LIMIT_M
 
@@ -51,15 +57,17 @@ def _label(e) -> str:
     return f"{e.dxftype()} #{e.dxf.handle} on layer {e.dxf.layer!r}"
 
 
-def _bulged_polyline(xyb: NDArray, elevation: float, ocs, closed: bool, tol: float) -> NDArray:
-    """Vertices (x, y, bulge) in the entity's OCS -> flattened WCS points (K, 3)."""
+def _bulged_polyline(xyb: NDArray, elevation: float, ocs, closed: bool, tol: float) -> tuple[NDArray, NDArray]:
+    """Vertices (x, y, bulge) in the entity's OCS -> flattened WCS points (K, 3) and their kinds (K,)."""
     n = len(xyb)
     pts: list[NDArray] = [xyb[:1, :2]]
+    kinds: list[NDArray] = [np.array([VERTEX], dtype=np.int8)]
     for i in range(n - 1 + int(closed)):
         a, b, bulge = xyb[i, :2], xyb[(i + 1) % n, :2], xyb[i, 2]
         # the bulge is tan(sweep / 4), 2 * sagitta / chord: an arc within tol of its chord is the chord
         if bulge == 0.0 or np.allclose(a, b) or abs(bulge) * float(np.linalg.norm(b - a)) / 2.0 <= tol:
             pts.append(b[None])
+            kinds.append(np.array([VERTEX], dtype=np.int8))
             continue
         c = np.asarray(bulge_center(tuple(a), tuple(b), bulge))
         r = float(np.linalg.norm(a - c))
@@ -70,9 +78,12 @@ def _bulged_polyline(xyb: NDArray, elevation: float, ocs, closed: bool, tol: flo
         arc = c + r * np.column_stack([np.cos(ang), np.sin(ang)])
         arc[-1] = b
         pts.append(arc)
+        kinds[-1][-1] = FEATURE  # an arc's ends are feature points
+        kinds.append(np.r_[np.full(k - 1, FLATTENING), FEATURE].astype(np.int8))
     xy = np.vstack(pts)
     ocs_pts = np.column_stack([xy, np.full(len(xy), elevation)])
-    return np.array([tuple(v) for v in ocs.points_to_wcs(ocs_pts.tolist())], dtype=float)
+    wcs = np.array([tuple(v) for v in ocs.points_to_wcs(ocs_pts.tolist())], dtype=float)
+    return wcs, np.concatenate(kinds)
 
 
 def _defining_values(e) -> NDArray:
@@ -141,21 +152,35 @@ def _is_closed(e) -> bool:
 
 def _entity_points(e, tol: float) -> tuple[NDArray, bool]:
     """One path entity -> (points (K, 3) in drawing units, closed)."""
+    pts, _, closed = _entity_polyline(e, tol)
+    return pts, closed
+
+
+def _curve_kinds(n: int) -> NDArray:
+    """Kinds of the points of a flattened curve: its ends are feature points."""
+    kinds = np.full(n, FLATTENING, dtype=np.int8)
+    kinds[[0, -1]] = FEATURE
+    return kinds
+
+
+def _entity_polyline(e, tol: float) -> tuple[NDArray, NDArray, bool]:
+    """One path entity -> (points (K, 3) in drawing units, their kinds (K,), closed)."""
     kind = e.dxftype()
     if kind == "LINE":
-        return np.array([tuple(e.dxf.start), tuple(e.dxf.end)], dtype=float), False
-    if kind == "ARC":
-        return np.array([tuple(v) for v in e.flattening(tol)], dtype=float), False
-    if kind == "SPLINE":
+        return np.array([tuple(e.dxf.start), tuple(e.dxf.end)], dtype=float), np.full(2, VERTEX, np.int8), False
+    if kind in ("ARC", "SPLINE"):
         pts = np.array([tuple(v) for v in e.flattening(tol)], dtype=float)
-        return pts, bool(e.closed)
+        return pts, _curve_kinds(len(pts)), kind == "SPLINE" and bool(e.closed)
     if kind == "LWPOLYLINE":
-        return _bulged_polyline(_xyb(e), e.dxf.elevation, e.ocs(), e.closed, tol), bool(e.closed)
+        pts, kinds = _bulged_polyline(_xyb(e), e.dxf.elevation, e.ocs(), e.closed, tol)
+        return pts, kinds, bool(e.closed)
     # POLYLINE
     if e.is_3d_polyline:
-        return np.array([tuple(v) for v in e.points_in_wcs()], dtype=float), bool(e.is_closed)
+        pts = np.array([tuple(v) for v in e.points_in_wcs()], dtype=float)
+        return pts, np.full(len(pts), VERTEX, np.int8), bool(e.is_closed)
     elevation = e.dxf.elevation.z
-    return _bulged_polyline(_xyb(e), elevation, e.ocs(), e.is_closed, tol), bool(e.is_closed)
+    pts, kinds = _bulged_polyline(_xyb(e), elevation, e.ocs(), e.is_closed, tol)
+    return pts, kinds, bool(e.is_closed)
 
 
 def _chain(pieces: list[NDArray], labels: list[str], tol: float, source: str) -> NDArray:
@@ -214,6 +239,37 @@ def _select(entities: list, layer: str | None, source: str) -> list:
     return entities
 
 
+def _read_pieces(
+    path: Path, units: str, layer: str | None, flatten_tolerance_m: float
+) -> tuple[list[tuple[NDArray, NDArray, bool, str]], float, str]:
+    """The chosen path entities as (points [drawing units], kinds, closed, label), the scale and the source."""
+    source = f"DXF file {str(path)!r}"
+    scale = metres_per_unit(units, str(path))
+    try:
+        doc = ezdxf.readfile(path)
+    except (OSError, ezdxf.DXFError) as e:
+        raise InputError(f"{source} cannot be read: {e}") from e
+    insunits = _INSUNITS.get(doc.header.get("$INSUNITS", 0))
+    if insunits is not None and insunits != units:
+        logger.warning("%s says $INSUNITS=%s but cad.units=%s; using %s", source, insunits, units, units)
+    entities = [
+        e
+        for e in doc.modelspace()
+        if e.dxftype() in PATH_TYPES
+        and not (e.dxftype() == "POLYLINE" and (e.is_poly_face_mesh or e.is_polygon_mesh))
+    ]
+    chosen = _select(entities, layer, source)
+    tol = flatten_tolerance_m / scale
+    pieces = []
+    for e in chosen:
+        _check_extent(e, scale, units, source, tol)
+        pts, kinds, is_closed = _entity_polyline(e, tol)
+        if len(pts) < 2:
+            raise InputError(f"{source}: {_label(e)} has fewer than 2 points")
+        pieces.append((pts, kinds, is_closed, _label(e)))
+    return pieces, scale, source
+
+
 def points_from_dxf(
     path: str | Path, units: str = "mm", layer: str | None = None, flatten_tolerance_m: float = 1e-6
 ) -> NDArray:
@@ -234,32 +290,10 @@ def points_from_dxf(
             pieces that do not chain (naming the entity and point).
     """
     path = Path(path)
-    source = f"DXF file {str(path)!r}"
-    scale = metres_per_unit(units, str(path))
-    try:
-        doc = ezdxf.readfile(path)
-    except (OSError, ezdxf.DXFError) as e:
-        raise InputError(f"{source} cannot be read: {e}") from e
-    insunits = _INSUNITS.get(doc.header.get("$INSUNITS", 0))
-    if insunits is not None and insunits != units:
-        logger.warning("%s says $INSUNITS=%s but cad.units=%s; using %s", source, insunits, units, units)
-    entities = [
-        e
-        for e in doc.modelspace()
-        if e.dxftype() in PATH_TYPES
-        and not (e.dxftype() == "POLYLINE" and (e.is_poly_face_mesh or e.is_polygon_mesh))
-    ]
-    chosen = _select(entities, layer, source)
-    tol = flatten_tolerance_m / scale
-    pieces, labels, closed = [], [], []
-    for e in chosen:
-        _check_extent(e, scale, units, source, tol)
-        pts, is_closed = _entity_points(e, tol)
-        if len(pts) < 2:
-            raise InputError(f"{source}: {_label(e)} has fewer than 2 points")
-        pieces.append(pts)
-        labels.append(_label(e))
-        closed.append(is_closed)
+    found, scale, source = _read_pieces(path, units, layer, flatten_tolerance_m)
+    pieces = [f[0] for f in found]
+    labels = [f[3] for f in found]
+    closed = [f[2] for f in found]
     extent = float(np.ptp(np.vstack(pieces), axis=0).max())
     join_tol = 1e-6 * max(extent, 1.0)
     if len(pieces) > 1 and any(closed):
@@ -273,3 +307,111 @@ def points_from_dxf(
             points = np.vstack([points, points[:1]])
     logger.debug("%s: %d points from %s", source, len(points), ", ".join(labels))
     return points * scale
+
+
+def _components(
+    pieces: list[tuple[NDArray, NDArray, bool, str]], tol: float, source: str
+) -> list[tuple[NDArray, NDArray, list[str]]]:
+    """The open pieces chained end to end into connected chains, each closed piece alone.
+
+    A chain runs from its loose end that belongs to the earlier entity in drawing order (a loop
+    from its first entity's start); the chains are ordered by their first entity. Returns
+    (points, kinds, labels) per chain.
+    """
+    ends = np.array([[p[0][0], p[0][-1]] for p in pieces])  # (n, 2, 3)
+    shut = {i for i, p in enumerate(pieces) if p[2]}
+    used: set[int] = set()
+
+    def follow(point: NDArray) -> tuple[int, int] | None:
+        d = np.linalg.norm(ends - point, axis=2)
+        hits = [(int(i), int(j)) for i, j in np.argwhere(d <= tol) if i not in used and i not in shut]
+        if len(hits) > 1:
+            raise InputError(
+                f"{source}: a branch in the chain at {np.round(point, 6).tolist()} "
+                f"({', '.join(pieces[i][3] for i, _ in hits)}); choose one path with cad.layer"
+            )
+        return hits[0] if hits else None
+
+    out = []
+    for first in range(len(pieces)):
+        if first in used:
+            continue
+        used.add(first)
+        if first in shut:
+            out.append((pieces[first][0], pieces[first][1], [pieces[first][3]]))
+            continue
+        chain = [(first, False)]  # (piece, run against its drawing order)
+        for forward in (True, False):
+            point = ends[first, 1 if forward else 0]
+            while (hit := follow(point)) is not None:
+                i, j = hit
+                used.add(i)
+                point = ends[i, 1 - j]
+                if forward:
+                    chain.append((i, j == 1))
+                else:
+                    chain.insert(0, (i, j == 0))
+        if chain[-1][0] < chain[0][0]:
+            chain = [(i, not r) for i, r in reversed(chain)]
+        p_parts, k_parts, labels = [], [], []
+        for n, (i, against) in enumerate(chain):
+            pts, kinds = pieces[i][0], pieces[i][1]
+            if against:
+                pts, kinds = pts[::-1], kinds[::-1]
+            if n:
+                k_parts[-1] = k_parts[-1].copy()
+                k_parts[-1][-1] = max(k_parts[-1][-1], kinds[0])
+                pts, kinds = pts[1:], kinds[1:]
+            p_parts.append(pts)
+            k_parts.append(kinds)
+            labels.append(pieces[i][3])
+        out.append((np.vstack(p_parts), np.concatenate(k_parts), labels))
+    return out
+
+
+def _close(points: NDArray, kinds: NDArray, tol: float) -> tuple[NDArray, NDArray]:
+    """A closed entity's points ending with its first point, exactly."""
+    if np.linalg.norm(points[-1] - points[0]) <= tol:
+        points = points.copy()
+        points[-1] = points[0]
+        return points, kinds
+    return np.vstack([points, points[:1]]), np.r_[kinds, kinds[:1]]
+
+
+def tracks_from_dxf(
+    path: str | Path, units: str = "mm", layer: str | None = None, flatten_tolerance_m: float = 1e-6
+) -> list[CadTrack]:
+    """Every track of a DXF drawing: its path entities chained into connected pieces.
+
+    The entities are chosen as by :func:`points_from_dxf`; pieces that touch end to end form one
+    track, a disconnected piece (or a closed entity) is a track of its own. Tracks are ordered by
+    their first entity in drawing order. Feature points (:class:`~refine.cad.resample.CadTrack`
+    ``kinds``): the ends of arcs, bulges and splines; vertices: polyline vertices and line ends.
+
+    Args:
+        path: the DXF file.
+        units: length unit of the drawing: ``"m"``, ``"mm"`` or ``"in"``.
+        layer: layer holding the path, or None when the drawing holds a single path or only lines
+            and arcs.
+        flatten_tolerance_m: largest distance between a curve and its chords [m].
+
+    Returns:
+        The tracks in the CAD frame [m]; a closed one ends with its first point.
+
+    Raises:
+        InputError: unreadable file, no or ambiguous path entities (listing layers and entities),
+            a branch (three pieces meeting at a point).
+    """
+    path = Path(path)
+    found, scale, source = _read_pieces(path, units, layer, flatten_tolerance_m)
+    extent = float(np.ptp(np.vstack([f[0] for f in found]), axis=0).max())
+    join_tol = 1e-6 * max(extent, 1.0)
+    tracks = []
+    shut = {f[3] for f in found if f[2]}
+    for points, kinds, labels in _components(found, join_tol, source):
+        closed = labels[0] in shut or (len(points) > 2 and np.linalg.norm(points[-1] - points[0]) <= join_tol)
+        if closed:
+            points, kinds = _close(points, kinds, join_tol)
+        tracks.append(CadTrack(points * scale, kinds, bool(closed), ", ".join(labels)))
+    logger.debug("%s: %d track(s)", source, len(tracks))
+    return tracks

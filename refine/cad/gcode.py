@@ -20,9 +20,17 @@ What is read, per line (block):
   other ``G`` code, and rotary or extra axes (``A B C U V W``), are an :class:`InputError`.
 
 The machine starts at the program origin. The path is the sequence of feed moves (``G1``, ``G2``,
-``G3``); a rapid ``G0`` that moves ends a *feed sequence* (one bead, seam or cut). Arcs are
-discretised so that no chord is farther than ``arc_tolerance_m`` from the arc; their points lie
-on the exact circle (or helix).
+``G3``), split into *feed sequences* (tracks: one bead, seam or cut each):
+
+* a rapid ``G0`` that moves ends a track;
+* a plunge or retract, a ``G1`` that moves along Z alone (within :data:`PLUNGE_XY_TOLERANCE_M`
+  in X and Y), ends a track and belongs to none;
+* a closed loop ends a track: a feed move that ends at a block end of its own track (within
+  :data:`LOOP_TOLERANCE_M`) makes the loop from that block end a closed track, and what came
+  before it, if anything, an open one.
+
+Arcs are discretised so that no chord is farther than ``arc_tolerance_m`` from the arc; their
+points lie on the exact circle (or helix).
 """
 
 from __future__ import annotations
@@ -37,6 +45,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from refine.cad.csv_ import METRES_PER_UNIT, metres_per_unit
+from refine.cad.resample import FEATURE, FLATTENING, VERTEX, CadTrack
 from refine.errors import InputError
 from refine.plausible import CAD_COORDINATE_LIMIT_M, check_coordinates, check_point
 
@@ -56,14 +65,38 @@ _AXES = {"X": 0, "Y": 1, "Z": 2}
 _OFFSETS = {"I": 0, "J": 1, "K": 2}
 
 
+#: Largest distance between an arc and its chords in the tracks of :func:`tracks_from_gcode` [m].
+FLATTEN_TOLERANCE_M = 1e-6
+#: A feed move that ends this close to a block end of its track closes a loop [m].
+LOOP_TOLERANCE_M = 1e-6
+#: A linear feed move whose XY motion is at most this is a plunge or retract along Z [m].
+PLUNGE_XY_TOLERANCE_M = 1e-9
+
+
 @dataclass
 class _Sequence:
     points: list[NDArray] = field(default_factory=list)
     first_line: int = 0
     last_line: int = 0
+    kinds: list[int] = field(default_factory=list)
+    block_ends: list[tuple[int, int]] = field(default_factory=list)  # (point index, line)
+    closed: bool = False
 
     def length(self) -> float:
         return float(np.linalg.norm(np.diff(np.array(self.points), axis=0), axis=1).sum())
+
+    def split_loop(self, where: int) -> list[_Sequence]:
+        """At a block end that the path returns to: the part before it and the closed loop from it."""
+        if where == 0:
+            self.closed = True
+            return [self]
+        m, line = next((k, ln) for k, ln in self.block_ends if k == where)
+        before = _Sequence(self.points[: m + 1], self.first_line, line, self.kinds[: m + 1])
+        before.block_ends = [(k, ln) for k, ln in self.block_ends if k <= m]
+        first = next(ln for k, ln in self.block_ends if k > m)
+        loop = _Sequence(self.points[m:], first, self.last_line, self.kinds[m:], closed=True)
+        loop.block_ends = [(k - m, ln) for k, ln in self.block_ends if k >= m]
+        return [before, loop]
 
 
 def _strip_comments(text: str, where: str) -> str:
@@ -158,30 +191,8 @@ def _program_index(program: int | str | None, n: int, source: str) -> int | None
     return k - 1
 
 
-def points_from_gcode(
-    path: str | Path,
-    units: str = "mm",
-    program: int | str | None = None,
-    arc_tolerance_m: float = ARC_TOLERANCE_M,
-) -> NDArray:
-    """Read the feed path of a G-code program (see the module docstring for the dialect).
-
-    Args:
-        path: the G-code file (``.nc``, ``.ngc``, ``.gcode``, ``.tap``).
-        units: length unit until the file says ``G20``/``G21``: ``"m"``, ``"mm"`` or ``"in"``.
-        program: which feed sequence (1-based, an int or a numeric string such as ``"2"``) when
-            rapids split the file into several; None when there is only one.
-        arc_tolerance_m: largest chord error of the arc discretisation [m], > 0.
-
-    Returns:
-        The feed path in the program's frame [m], shape (K, 3), K >= 2, from the start of the
-        sequence's first feed move to the end of its last.
-
-    Raises:
-        InputError: unreadable file; a malformed line, an unsupported code or axis, an arc that
-            is not a circle (naming the file and line); no feed moves; several feed sequences
-            and no ``program`` (listing each one's start, length and lines); a bad ``program``.
-    """
+def _parse(path: Path, units: str, arc_tolerance_m: float) -> tuple[list[_Sequence], str]:
+    """The feed tracks of a G-code file (see the module docstring) and the file's name for messages."""
     path = Path(path)
     source = f"G-code file {str(path)!r}"
     scale = metres_per_unit(units, str(path))
@@ -253,7 +264,12 @@ def points_from_gcode(
             pos = end
             continue
         if motion == 1:
+            if np.linalg.norm((end - pos)[:2]) <= PLUNGE_XY_TOLERANCE_M:  # a plunge or retract ends a track
+                current = None
+                pos = end
+                continue
             new = end[None]
+            new_kinds = [VERTEX]
         else:
             ccw = motion == 3
             if radius is not None:
@@ -272,16 +288,54 @@ def points_from_gcode(
             check_point(centre, CAD_COORDINATE_LIMIT_M, where, "arc centre")
             new = _arc_points(pos, end, centre, plane, ccw, turns, arc_tolerance_m, where)
             check_coordinates(new, CAD_COORDINATE_LIMIT_M, lambda _k, at=where: at, "arc point")
+            new_kinds = [FLATTENING] * (len(new) - 1) + [FEATURE]
         if np.linalg.norm(new[-1] - pos) <= 1e-12 and len(new) == 1:
             continue
         if current is None:
-            current = _Sequence([pos.copy()], first_line=lineno)
+            current = _Sequence([pos.copy()], first_line=lineno, kinds=[VERTEX], block_ends=[(0, lineno)])
             sequences.append(current)
+        if motion != 1:
+            current.kinds[-1] = FEATURE  # an arc's ends are feature points
+        back = [k for k, _ in current.block_ends if np.linalg.norm(current.points[k] - end) <= LOOP_TOLERANCE_M]
         current.points.extend(new)
+        current.kinds.extend(new_kinds)
         current.last_line = lineno
+        current.block_ends.append((len(current.points) - 1, lineno))
         pos = end
+        if back:  # the path returns to a block end of its track: a closed loop ends the track
+            current.points[-1] = current.points[back[0]].copy()
+            sequences[-1:] = current.split_loop(back[0])
+            current = None
     if not sequences:
         raise InputError(f"{source}: no feed moves (G1/G2/G3) found")
+    return sequences, source
+
+
+def points_from_gcode(
+    path: str | Path,
+    units: str = "mm",
+    program: int | str | None = None,
+    arc_tolerance_m: float = ARC_TOLERANCE_M,
+) -> NDArray:
+    """Read the feed path of a G-code program (see the module docstring for the dialect).
+
+    Args:
+        path: the G-code file (``.nc``, ``.ngc``, ``.gcode``, ``.tap``).
+        units: length unit until the file says ``G20``/``G21``: ``"m"``, ``"mm"`` or ``"in"``.
+        program: which feed sequence (track, 1-based, an int or a numeric string such as ``"2"``)
+            when the file has several; None when there is only one.
+        arc_tolerance_m: largest chord error of the arc discretisation [m], > 0.
+
+    Returns:
+        The feed path in the program's frame [m], shape (K, 3), K >= 2, from the start of the
+        sequence's first feed move to the end of its last.
+
+    Raises:
+        InputError: unreadable file; a malformed line, an unsupported code or axis, an arc that
+            is not a circle (naming the file and line); no feed moves; several feed sequences
+            and no ``program`` (listing each one's start, length and lines); a bad ``program``.
+    """
+    sequences, source = _parse(Path(path), units, arc_tolerance_m)
     k = _program_index(program, len(sequences), source)
     if k is None and len(sequences) > 1:
         listed = "; ".join(
@@ -290,11 +344,43 @@ def points_from_gcode(
             for i, s in enumerate(sequences, start=1)
         )
         raise InputError(
-            f"{source}: {len(sequences)} feed sequences separated by rapids (G0): {listed}; "
-            'choose one with cad.track = "<number>"'
+            f"{source}: {len(sequences)} feed sequences (tracks, split at rapids G0, plunges and retracts "
+            f'along Z and closed loops): {listed}; choose one with cad.track = "<number>"'
         )
     chosen = sequences[k or 0]
     logger.debug(
         "%s: feed sequence %d of %d, %d points", source, (k or 0) + 1, len(sequences), len(chosen.points)
     )
     return np.array(chosen.points, dtype=float)
+
+
+def tracks_from_gcode(
+    path: str | Path, units: str = "mm", arc_tolerance_m: float = FLATTEN_TOLERANCE_M
+) -> list[CadTrack]:
+    """Every track (feed sequence) of a G-code program, with its block ends and arc ends.
+
+    Tracks split at rapids, at plunges and retracts along Z and at closed loops (see the module
+    docstring). Kinds (:class:`~refine.cad.resample.CadTrack`): the ends of arcs are feature
+    points, the ends of linear blocks vertices, the points between an arc's ends flatten it.
+
+    Args:
+        path: the G-code file.
+        units: length unit until the file says ``G20``/``G21``: ``"m"``, ``"mm"`` or ``"in"``.
+        arc_tolerance_m: largest chord error of the arc discretisation [m], > 0.
+
+    Returns:
+        The tracks in file order, in the program's frame [m]; a closed one ends with its first point.
+
+    Raises:
+        InputError: what :func:`points_from_gcode` rejects except several sequences.
+    """
+    sequences, _ = _parse(Path(path), units, arc_tolerance_m)
+    return [
+        CadTrack(
+            np.array(s.points, dtype=float),
+            np.array(s.kinds, dtype=np.int8),
+            s.closed,
+            f"lines {s.first_line}-{s.last_line}",
+        )
+        for s in sequences
+    ]

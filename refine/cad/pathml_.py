@@ -7,7 +7,9 @@ speeds. :func:`fused_from_pathml` turns one of its tracks into a :class:`~refine
 at the waypoint spacing of the problem, so it can go straight to the optimiser:
 
 * The track's points, consecutive duplicates dropped, form a polyline; waypoints are placed on it
-  every ``spacing_m`` or a little less (:func:`refine.cad.resample.resample_by_arc_length`).
+  as on a CAD path (:func:`refine.cad.resample.resample_track`): its corners (points where it
+  turns by more than 5 deg) kept, steps of at most ``spacing_m``, the polyline within
+  ``chord_tolerance_m`` of the straight moves; the polyline is kept as the path's geometry.
   Arc length is measured along the points, not taken from their ``arcLength`` values.
 * Orientations are interpolated by Slerp at the waypoints' arc lengths, speeds linearly; speeds
   below :data:`MIN_SPEED_M_S` (a trajectory that starts or ends at rest has speed 0 there) are
@@ -26,7 +28,7 @@ from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation, Slerp
 
 from refine.cad.pathml_read import PathMLTrack, read_pathml
-from refine.cad.resample import DUPLICATE_TOLERANCE_M, resample_by_arc_length
+from refine.cad.resample import DUPLICATE_TOLERANCE_M, resample_track
 from refine.errors import InputError
 from refine.paths import FusedPath
 from refine.plausible import CAD_COORDINATE_LIMIT_M, CAD_SPEED_LIMIT_M_S, check_coordinates
@@ -66,6 +68,7 @@ def fused_from_pathml(
     *,
     reverse: bool = False,
     start_near: ArrayLike | None = None,
+    chord_tolerance_m: float = 1e-4,
 ) -> FusedPath:
     """Read one PathML track as a fused path resampled by arc length (see the module docstring).
 
@@ -79,6 +82,8 @@ def fused_from_pathml(
         start_near: start a closed track (its last point repeats its first) at its point nearest
             to this, an open one at its end nearer to it [m], shape (3,) (``[cad] start_near``);
             applied before ``reverse``.
+        chord_tolerance_m: largest distance of the track's polyline from the straight moves
+            between waypoints [m] (``[cad] chord_tolerance_m``).
 
     Returns:
         The fused path in {F}: arc length [m], positions [m], orientations R_F_TCP, speeds
@@ -136,7 +141,7 @@ def fused_from_pathml(
         spacing_m,
         f"cad.file {Path(path).name!r}",
     )
-    s, positions = resample_by_arc_length(points, spacing_m)
+    s, positions, exact_s, exact = resample_track(points, spacing_m, chord_tolerance_m)
     s = np.clip(s, 0.0, s_points[-1])
     R = Slerp(s_points, Rotation.from_matrix(rotations))(s).as_matrix()
     v = np.interp(s, s_points, speed)
@@ -148,4 +153,13 @@ def fused_from_pathml(
         v = np.maximum(v, MIN_SPEED_M_S)
     t = np.concatenate([[0.0], np.cumsum(np.diff(s) / (0.5 * (v[1:] + v[:-1])))])
     logger.debug("PathML %s: track %r, %d points -> %d waypoints", path, tr.name, len(points), len(s))
-    return FusedPath(s=s, positions=positions, rotations=R, speed=v, t_demo=t, residual=np.zeros(len(s)))
+    return FusedPath(
+        s=s,
+        positions=positions,
+        rotations=R,
+        speed=v,
+        t_demo=t,
+        residual=np.zeros(len(s)),
+        exact_s=exact_s,
+        exact=exact,
+    )

@@ -42,8 +42,10 @@ def pass_metrics(p: PassResult) -> dict[str, Any]:
     """The verified figures of one pass, as ``result.json`` writes them (``passes[i].metrics``)."""
     check, timing = p.refinement.check, p.timing
     clearance = p.clearance
+    chord = p.cad_chord
     return {
         "max_position_error_m": float(check.position_error_m.max()),
+        "max_cad_chord_error_m": None if chord is None else chord.max_m,
         "max_orientation_deviation_deg": float(check.orientation_deviation_deg.max()),
         "mean_orientation_deviation_deg": float(check.orientation_deviation_deg.mean()),
         "max_slack_deg": float(p.refinement.slack_deg.max()) if p.refinement.slack_deg.size else 0.0,
@@ -105,6 +107,28 @@ def aggregate_metrics(per_pass: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
+def cad_chord_json(result: RunResult) -> dict[str, Any] | None:
+    """The largest distance of the CAD geometry from the straight moves, and where (``cad_chord_error``)."""
+    worst = None
+    for p in result.passes:
+        chord = p.cad_chord
+        if chord is not None and (worst is None or chord.max_m > worst[1].max_m):
+            worst = (p, chord)
+    if worst is None:
+        return None
+    p, chord = worst
+    cad = result.problem.cad
+    return {
+        "max_m": chord.max_m,
+        "tolerance_m": None if cad is None else cad.chord_tolerance_m,
+        "pass": p.name,
+        "segment": chord.segment,
+        "s_m": chord.s_m,
+        "point_m": chord.point.tolist(),
+        "n_waypoints": [len(q.fused) for q in result.passes],
+    }
+
+
 def result_dict(result: RunResult) -> dict[str, Any]:
     """The JSON document of ``result`` as plain Python values."""
     problem = result.problem
@@ -152,6 +176,7 @@ def result_dict(result: RunResult) -> dict[str, Any]:
             "clearance_m": problem.collision.margin_m if problem.collision.enabled else None,
         },
         "metrics": aggregate_metrics(per_pass),
+        "cad_chord_error": cad_chord_json(result),
         "solver": {
             "name": problem.optimise.solver,
             "status": first.refinement.solver_status,

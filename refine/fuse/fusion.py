@@ -70,4 +70,14 @@ def fuse(
     T_F_TCP = demo_tcp_poses(demo, source_in_world, sensor_in_tcp)
     slerp = Slerp(demo.t, Rotation.from_matrix(T_F_TCP[:, :3, :3]))
     rotations = slerp(np.clip(a.t, demo.t[0], demo.t[-1])).as_matrix()
-    return FusedPath(cad.s.copy(), cad.positions.copy(), rotations, a.speed, a.t, a.residual, order)
+    return FusedPath(
+        cad.s.copy(),
+        cad.positions.copy(),
+        rotations,
+        a.speed,
+        a.t,
+        a.residual,
+        order,
+        exact_s=cad.exact_s,
+        exact=cad.exact,
+    )

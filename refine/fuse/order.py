@@ -169,6 +169,8 @@ def reorder(cad: CadPath, reverse: bool, start: int) -> CadPath:
     if reverse:
         p, ds = p[::-1], ds[::-1]
     first = (len(p) - 1 - start) % (len(p) - 1) if reverse else start  # index in cad of the new start
+    sigma_run = float(np.sum(ds[:start])) if cad.closed and start else 0.0  # new start along the run
+    exact_s, exact = cad.reordered_exact(reverse, sigma_run)
     if cad.closed and start:
         ring = np.roll(p[:-1], -start, axis=0)
         p, ds = np.vstack([ring, ring[:1]]), np.roll(ds, -start)
@@ -182,6 +184,8 @@ def reorder(cad: CadPath, reverse: bool, start: int) -> CadPath:
         positions=np.ascontiguousarray(p),
         reversed=cad.reversed != reverse,
         start_offset_m=float(offset),
+        exact_s=exact_s,
+        exact=exact,
     )
 
 

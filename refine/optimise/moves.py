@@ -434,4 +434,5 @@ def moved_path(fused: FusedPath, transform: Array) -> FusedPath:
         fused,
         positions=fused.positions @ D[:3, :3].T + D[:3, 3],
         rotations=np.einsum("ij,njk->nik", D[:3, :3], fused.rotations),
+        exact=None if fused.exact is None else fused.exact @ D[:3, :3].T + D[:3, 3],
     )

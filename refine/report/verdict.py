@@ -46,6 +46,17 @@ def figure_rows(doc: dict[str, Any]) -> list[tuple[str, str, str, bool | None]]:
             pos <= tol["position_m"],
         )
     )
+    chord = doc.get("cad_chord_error")
+    if chord is not None:
+        where = f" ({chord['pass']})" if doc.get("n_passes", 1) > 1 else ""
+        rows.append(
+            (
+                "TCP path from the CAD geometry (max, straight moves between targets)",
+                f"{chord['max_m'] * 1e3:.3f} mm at s = {chord['s_m'] * 1e3:.0f} mm{where}",
+                f"<= {chord['tolerance_m'] * 1e3:g} mm",
+                chord["max_m"] <= chord["tolerance_m"] + tol["position_m"],
+            )
+        )
     slack = m.get("max_slack_deg") or 0.0
     dev = m["max_orientation_deviation_deg"]
     cone = tol["orientation_deg"]

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from refine.optimise.outcome import Refinement
-    from refine.paths import FusedPath, Trajectory
+    from refine.paths import ChordError, FusedPath, Trajectory
     from refine.problem import Problem
     from refine.robot.model import Robot
     from refine.run.evaluate import TruthComparison
@@ -54,6 +54,22 @@ class PassResult:
 
     def __getstate__(self) -> dict[str, Any]:
         return {**self.__dict__, "nlp": None}
+
+    @property
+    def cad_chord(self) -> ChordError | None:
+        """How far the CAD geometry lies from the straight moves between the reached TCP positions.
+
+        None for a pass without CAD geometry (a path given as arrays, the later passes of a
+        multi-pass weld). Measured against the poses the verifier reached (Pinocchio), so an
+        error at a waypoint counts as well as the chord between two.
+        """
+        fused = self.fused
+        if fused.exact_s is None or fused.exact is None:
+            return None
+        from refine.paths import chord_error
+
+        reached = self.refinement.check.poses[:, :3, 3]
+        return chord_error(fused.exact_s, fused.exact, fused.s, reached, fused.positions)
 
 
 @dataclass(frozen=True)
@@ -136,7 +152,8 @@ def summary_lines(result: RunResult) -> list[str]:
         lines += [
             f"status       {head}{p.refinement.status}, {len(p.fused)} waypoints"
             + (f" ({p.refinement.reason})" if p.refinement.reason else ""),
-            f"position     max error {check.position_error_m.max():.2e} m (tolerance {tol.position_m:.0e} m)",
+            f"position     max error {check.position_error_m.max():.2e} m (tolerance {tol.position_m:.0e} m)"
+            + _chord_text(p, result.problem.cad),
             f"orientation  max deviation from demo {check.orientation_deviation_deg.max():.3f} deg "
             f"(cone {tol.orientation_deg:g} deg)",
             f"joints       min margin to limits {math.degrees(check.joint_margin_rad.min()):.2f} deg",
@@ -178,6 +195,14 @@ def summary_lines(result: RunResult) -> list[str]:
     stages = ", ".join(f"{k} {v:.3f}" for k, v in result.timings_s.items() if k != "total")
     lines.append(f"time [s]     {stages}" + (f"; total {total:.2f}" if total else ""))
     return lines
+
+
+def _chord_text(p: PassResult, cad: Any) -> str:
+    chord = p.cad_chord
+    if chord is None:
+        return ""
+    limit = f" (tolerance {cad.chord_tolerance_m * 1e3:g} mm)" if cad is not None else ""
+    return f"; from the CAD {chord.max_m * 1e3:.3f} mm{limit} at s = {chord.s_m:.3f} m"
 
 
 EXECUTABLE = ("ok", "repaired")

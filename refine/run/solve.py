@@ -35,7 +35,7 @@ from refine.robot.registry import robot_for
 from refine.run.evaluate import compare_with_truth
 from refine.run.placement import PlacementRepair, plane_text
 from refine.run.result import PassResult, RunResult
-from refine.run.stages import constraint_sources, fused_path, log, refine_pass
+from refine.run.stages import constraint_sources, fused_tracks, log, refine_pass
 from refine.settings import PlacementSettings
 from refine.stopwatch import Stopwatch
 
@@ -65,11 +65,16 @@ def solve_problem(
         robot = robot_for(problem.robot)
     watch.lap("load")
     qualities: list[Any] = []
+    tracks = [fused] if fused is not None else []
     if fused is None:
-        fused = fused_path(problem, watch, accept_frame_error=accept_frame_error, qualities=qualities)
+        tracks = fused_tracks(problem, watch, accept_frame_error=accept_frame_error, qualities=qualities)
+        fused = tracks[0]
     sources = constraint_sources(problem, robot)
     watch.lap("load")
-    passes = [refine_pass(problem, robot, fused, watch, sources=sources, nlp=nlp, q0=q0)]
+    first_name = "pass 1" if len(tracks) == 1 else "track 1"
+    passes = [refine_pass(problem, robot, fused, watch, first_name, sources=sources, nlp=nlp, q0=q0)]
+    for k, track in enumerate(tracks[1:], start=2):  # each further track of the CAD file is a pass
+        passes.append(refine_pass(problem, robot, track, watch, f"track {k}", 1, k, sources))
     if problem.multipass is not None and problem.multipass.layers > 1:
         from refine.fuse.passes import generate_passes
 
@@ -86,6 +91,7 @@ def solve_problem(
         problem.demonstration is not None
         and problem.demonstration.truth is not None
         and first.trajectory is not None
+        and len(tracks) == 1  # a simulator's truth runs along the whole demonstration
     ):
         assert first.timing is not None
         truth = compare_with_truth(

@@ -43,6 +43,22 @@ def fused_path(
 
     ``accept_frame_error`` turns the quality gate's stop on a tracker frame that looks wrong into a
     warning (see :mod:`refine.demo.quality`); the gate's figures are appended to ``qualities``.
+    A CAD file with several tracks gives its first track's path (:func:`fused_tracks` gives all).
+    """
+    return fused_tracks(problem, watch, accept_frame_error=accept_frame_error, qualities=qualities)[0]
+
+
+def fused_tracks(
+    problem: Problem,
+    watch: Stopwatch | None = None,
+    *,
+    accept_frame_error: bool = False,
+    qualities: list[Any] | None = None,
+) -> list[FusedPath]:
+    """The fused path of every track of ``problem`` (one unless its CAD file has several).
+
+    Several tracks are fused with the demonstration as one path, joined in the program's order
+    (:mod:`refine.fuse.tracks`); see :func:`fused_path` for the arguments.
     """
     watch = watch or Stopwatch()
     if problem.cad is None:
@@ -57,18 +73,35 @@ def fused_path(
             track=track,
             reverse=problem.cad.reverse,
             start_near=problem.cad.start_near,
+            chord_tolerance_m=problem.cad.chord_tolerance_m,
         )
         watch.lap("cad")
-        return fused
-    from refine.cad import read_cad_path
+        return [fused]
+    from refine.cad import read_cad_tracks
     from refine.demo import clean_demonstration, read_tracker_log
     from refine.demo.quality import gate_dropouts
     from refine.fuse.frame_check import gate_frame
     from refine.fuse.fusion import fuse
 
     assert problem.demonstration is not None  # Problem checks this
-    cad = read_cad_path(problem.cad, problem.frames.cad_in_world)
-    check_dense_steps(problem, cad.length)
+    tracks = read_cad_tracks(problem.cad, problem.frames.cad_in_world)
+    check_dense_steps(problem, sum(c.length for c in tracks))
+    if len(tracks) > 1:
+        from refine.fuse.tracks import join_tracks
+
+        if problem.multipass is not None and problem.multipass.layers > 1:
+            raise InputError(
+                f"cad.file {problem.cad.file.name!r} has {len(tracks)} tracks and [multipass] has "
+                f"{problem.multipass.layers} layers: a multi-pass weld needs one track (choose it with cad.track)"
+            )
+        if problem.repair.placement is not None:
+            raise InputError(
+                f"cad.file {problem.cad.file.name!r} has {len(tracks)} tracks: [repair] placement moves one "
+                "track's workpiece; choose the track with cad.track"
+            )
+        cad, ranges = join_tracks(tracks, problem.cad.spacing_m)
+    else:
+        cad = tracks[0]
     watch.lap("cad")
     raw, quality = gate_dropouts(read_tracker_log(problem.demonstration))
     demo = clean_demonstration(raw, problem.demonstration)
@@ -81,7 +114,11 @@ def fused_path(
     watch.lap("fuse")
     if qualities is not None:
         qualities.append(quality)
-    return fused
+    if len(tracks) > 1:
+        from refine.fuse.tracks import split_tracks
+
+        return split_tracks(fused, tracks, ranges)
+    return [fused]
 
 
 def check_dense_steps(problem: Problem, length_m: float) -> None:

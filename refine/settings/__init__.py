@@ -31,6 +31,7 @@ from refine.settings.limits import (  # noqa: F401
     MAX_SMOOTHING_S,
     MAX_WAYPOINTS,
     MIN_CHECK_STEP_M,
+    MIN_CHORD_TOLERANCE_M,
     MIN_ORIENTATION_DEG,
     MIN_SPACING_M,
     PROGRAM_FORMATS,

@@ -19,6 +19,7 @@ from refine.settings.limits import (
     DEMO_FORMATS,
     MAX_HAMPEL_WINDOW,
     MAX_SMOOTHING_S,
+    MIN_CHORD_TOLERANCE_M,
     MIN_SPACING_M,
     Matrix4,
     in_range,
@@ -159,20 +160,24 @@ class CadSettings:
         format: ``"csv"``, ``"dxf"``, ``"gcode"``, ``"mesh"`` (STL, OBJ, PLY) or ``"pathml"``
             (from the extension when not given).
         units: length unit of the file: ``"m"``, ``"mm"`` or ``"in"``.
-        spacing_m: waypoint spacing along the path after resampling [m].
+        spacing_m: largest waypoint spacing along the path after resampling [m].
+        chord_tolerance_m: largest distance of the CAD geometry from the straight moves between
+            waypoints [m].
         layer: DXF layer holding the path, or None for the only/first path entity.
         reverse: run the path in the opposite direction.
         section_origin: a point of the cutting plane [file units] (mesh: plane section).
         section_normal: the cutting plane's normal (mesh: plane section).
         boundary: take the mesh's open boundary instead of a section (mesh).
         start_near: start a closed contour at its point nearest to this [file units], or None.
-        track: PathML track to read, as ``"layer/track"`` names, or None for the first (pathml).
+        track: the track to read: its 1-based number (DXF, G-code), ``"layer/track"`` (PathML), or
+            None for every track (DXF, G-code) or the first (PathML).
     """
 
     file: Path
     format: str = "csv"
     units: str = "mm"
     spacing_m: float = 0.005
+    chord_tolerance_m: float = 1e-4
     layer: str | None = None
     reverse: bool = False
     section_origin: tuple[float, float, float] | None = None
@@ -191,6 +196,7 @@ class CadSettings:
             raise InputError("cad: section_origin and section_normal go together")
         one_of("cad", "units", self.units, ("m", "mm", "in"))
         in_range("cad", "spacing_m", self.spacing_m, MIN_SPACING_M, 1.0, "m")
+        in_range("cad", "chord_tolerance_m", self.chord_tolerance_m, MIN_CHORD_TOLERANCE_M, 0.01, "m")
         for key in ("section_origin", "section_normal", "start_near"):
             for v in getattr(self, key) or ():
                 in_range("cad", f"{key}[]", v, -1e6, 1e6, "file units")

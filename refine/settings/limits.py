@@ -25,6 +25,8 @@ CAUSES = ("reach", "joint limit", "joint wrap", "singularity", "collision", "sel
 # ---- documented ranges that bound the work (docs/problem-file.md, "Ranges and limits")
 MIN_SPACING_M = 1e-4
 """Finest waypoint spacing [m]: 0.1 mm, a tenth of the finest tracker resolution that matters."""
+MIN_CHORD_TOLERANCE_M = 1e-5
+"""Finest chord tolerance of the resampling [m]: 10 µm, ten times the CAD readers' flattening."""
 MAX_HAMPEL_WINDOW = 50
 """Widest Hampel half-window [samples]: 0.2 s at 240 Hz; wider windows only blur real motion."""
 MAX_SMOOTHING_S = 1.0
