@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -150,6 +150,29 @@ class ClearanceSource:
         self.stats["rows_s"] += time.perf_counter() - t0
         log.info("clearance: %d linearised rows from %d waypoints", len(rows), len(q))
         return tuple(rows)
+
+    def refresh_rows(self, rows: tuple[LinearRow, ...], q: Array) -> tuple[LinearRow, ...]:
+        """``rows`` with their bounds taken again at joints ``q`` (N, n), their gradients kept.
+
+        Each row's pair (its label, ``"body / other"``) is measured at the row's place along ``q``
+        in the cell as it is now, so a row made before a cell object moved asks for the margin from
+        where the object is: ``g·q' >= margin + back-off - d(q) + g·q``. A row whose pair this
+        source does not check is kept as it is.
+        """
+        q = np.asarray(q, dtype=float)
+        index = {f"{a} / {b}": p for p, (a, b) in enumerate(self.model.pairs)}
+        margins = self.model.pair_margins
+        out = []
+        for r in rows:
+            p = index.get(r.label)
+            if p is None:
+                out.append(r)
+                continue
+            qk = q[r.k] if r.f == 0.0 else (1.0 - r.f) * q[r.k] + r.f * q[min(r.k + 1, len(q) - 1)]
+            d = self.model.pair_distance(qk, p)
+            g = np.asarray(r.gradient, dtype=float)
+            out.append(replace(r, lower=float(margins[p]) + BACK_OFF_M - d + float(g @ qk)))
+        return tuple(out)
 
     def _rows_at(self, qk: Array, k: int, f: float, reach: float) -> list[LinearRow]:
         contacts: list[Contact] = self.model.contacts(qk, reach)

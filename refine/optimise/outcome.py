@@ -76,6 +76,9 @@ class Refinement:
         diagnosis: every segment that needed slack or has no answer, with its measured causes
             (:mod:`refine.optimise.diagnosis`); empty when ok.
         time_limit_reached: the time budget ran out before a verdict (status ``infeasible``).
+        problem: the last problem solved (with the active set and joint-step rows the rounds
+            found), for a re-solve to start from (:mod:`refine.optimise.warm`); None when none was solved.
+        multipliers: that solve's multipliers by row and of the variable bounds, or None.
     """
 
     status: str
@@ -92,6 +95,8 @@ class Refinement:
     timings_s: dict[str, float] = field(default_factory=dict)
     diagnosis: tuple[Finding, ...] = ()
     time_limit_reached: bool = False
+    problem: RefinementNLP | None = None
+    multipliers: tuple[dict[tuple, float], Array] | None = None
 
 
 def problem_targets(problem: RefinementNLP) -> Array:
