@@ -271,6 +271,7 @@ def _solve_again(
                 first.fused.rotations if len(first.fused) == len(fused) else None,
                 first.refinement.problem if nlp is not None else None,
                 first.refinement.multipliers if nlp is not None else None,
+                first.clearance,
             )
     return Result(solve_problem(problem, robot=robot, fused=fused, nlp=nlp, q0=q0, warm=warm))
 

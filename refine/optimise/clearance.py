@@ -20,6 +20,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from refine.collision import CollisionModel, Contact, PathClearance, check_path_clearance, margins_proved
+from refine.collision.carry import CheckedBounds, carried_bounds
 from refine.optimise.problem import LinearRow, RefinementNLP
 from refine.optimise.verify import Violation
 from refine.problem import Problem
@@ -49,6 +50,8 @@ class ClearanceSource:
         kin: TCP kinematics of the same robot, base and tool.
         check_step_m: largest TCP travel between two poses of the dense check [m].
         last: the last dense check made, by joints (for reports).
+        prior: a previous check's bounds (of a previous answer, re-solving) that the checks of
+            nearby paths start from (:mod:`refine.collision.carry`), or None.
         stats: queries and time spent, for the collision cost figures.
     """
 
@@ -56,6 +59,7 @@ class ClearanceSource:
     kin: TcpKinematics
     check_step_m: float
     last: PathClearance | None = None
+    prior: CheckedBounds | None = None
     _recent: dict[tuple, PathClearance] = field(default_factory=dict)
     stats: dict[str, float] = field(
         default_factory=lambda: {"rounds": 0, "rows": 0, "check_s": 0.0, "rows_s": 0.0}
@@ -86,13 +90,20 @@ class ClearanceSource:
         found = self._recent.pop(key, None)
         if found is None:
             t0 = time.perf_counter()
-            found = check_path_clearance(self.model, q, self.kin, self.check_step_m)
+            found = check_path_clearance(self.model, q, self.kin, self.check_step_m, prior=self._carried(q))
             self.stats["check_s"] += time.perf_counter() - t0
         self._recent[key] = found  # most recent last
         while len(self._recent) > RECENT_CHECKS:
             del self._recent[next(iter(self._recent))]
         self.last = found
         return found
+
+    def carry_from(self, clearance: object) -> None:
+        """Start the checks from a previous answer's check (``PathClearance``) where it is near."""
+        self.prior = getattr(clearance, "bounds", None)
+
+    def _carried(self, q: Array) -> Array | None:
+        return None if self.prior is None else carried_bounds(self.model, self.prior, q)
 
     @staticmethod
     def _key(q: Array) -> tuple:
@@ -131,7 +142,7 @@ class ClearanceSource:
         q = np.asarray(q, dtype=float)
         if self._key(q) not in self._recent:
             t0 = time.perf_counter()
-            proved = margins_proved(self.model, q)
+            proved = margins_proved(self.model, q, prior=self._carried(q))
             self.stats["check_s"] += time.perf_counter() - t0
             if proved:
                 return ()

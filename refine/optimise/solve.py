@@ -138,6 +138,10 @@ def solve_refinement(
         stretched = inset > 0.0
     multipliers = None
     if warm is not None:
+        for src in sources:
+            carry = getattr(src, "carry_from", None)
+            if carry is not None and warm.clearance is not None:
+                carry(warm.clearance)
         q0 = warm_seed(problem, warm)
         final = None if warm.problem is None else reuse_final(warm.problem, problem, problem.fused, problem.tolerances)
         if final is not None and final.active.linear_rows:

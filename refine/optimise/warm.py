@@ -11,7 +11,9 @@ offset) starts from what the previous solve ended with (:class:`WarmStart`):
   rows) and joint-step rows, given the new path and tolerances as parameters and bounds
   (:func:`reuse_final`): no CasADi build;
 * the solve starts from the previous multipliers (row by row, see
-  :class:`refine.optimise.rounds.RoundLoop`).
+  :class:`refine.optimise.rounds.RoundLoop`);
+* the dense clearance checks start from the previous check's distance bounds less the motion since
+  (:mod:`refine.collision.carry`), so only the pairs the motion brought near are measured again.
 
 The answer then runs through the rounds and the verification of any other solve, so it is checked
 (and grown, where a row is missing) exactly as a cold one.
@@ -42,12 +44,15 @@ class WarmStart:
         problem: the previous solve's last problem (its active set and joint-step rows), or None.
         multipliers: the previous last solve's multipliers, as kept by
             :class:`refine.optimise.rounds.RoundLoop` (by row, and of the variable bounds), or None.
+        clearance: the previous answer's dense clearance check (a ``PathClearance``), whose bounds
+            the new checks start from (:mod:`refine.collision.carry`), or None.
     """
 
     q: Array
     rotations: Array | None = None
     problem: RefinementNLP | None = None
     multipliers: tuple[dict[tuple, float], Array] | None = None
+    clearance: object = None
 
 
 def warm_seed(problem: RefinementNLP, warm: WarmStart) -> Array:
