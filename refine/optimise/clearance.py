@@ -165,24 +165,29 @@ class ClearanceSource:
     def refresh_rows(self, rows: tuple[LinearRow, ...], q: Array) -> tuple[LinearRow, ...]:
         """``rows`` with their bounds taken again at joints ``q`` (N, n), their gradients kept.
 
-        Each row's pair (its label, ``"body / other"``) is measured at the row's place along ``q``
-        in the cell as it is now, so a row made before a cell object moved asks for the margin from
-        where the object is: ``g·q' >= margin + back-off - d(q) + g·q``. A row whose pair this
-        source does not check is kept as it is.
+        Each row's bodies (its label, ``"body / other"``, as the contacts name them) are measured at
+        the row's place along ``q`` in the cell as it is now, so a row made before a cell object
+        moved asks for the margin from where the object is: ``g·q' >= margin + back-off - d(q) + g·q``.
+        A body of several shapes (a link's collision pieces) is measured by its nearest shape pair
+        to the other, so the refreshed row asks for at least what its own pair needs. A row whose
+        bodies this source does not check is kept as it is.
         """
         q = np.asarray(q, dtype=float)
-        index = {f"{a} / {b}": p for p, (a, b) in enumerate(self.model.pairs)}
+        name = {b.label: b.name for b in self.model.bodies}
+        pairs: dict[str, list[int]] = {}
+        for p, (a, b) in enumerate(self.model.pairs):
+            pairs.setdefault(f"{name[a]} / {name[b]}", []).append(p)
         margins = self.model.pair_margins
         out = []
         for r in rows:
-            p = index.get(r.label)
-            if p is None:
+            found = pairs.get(r.label)
+            if not found:
                 out.append(r)
                 continue
             qk = q[r.k] if r.f == 0.0 else (1.0 - r.f) * q[r.k] + r.f * q[min(r.k + 1, len(q) - 1)]
-            d = self.model.pair_distance(qk, p)
+            need = max(float(margins[p]) - self.model.pair_distance(qk, p) for p in found)
             g = np.asarray(r.gradient, dtype=float)
-            out.append(replace(r, lower=float(margins[p]) + BACK_OFF_M - d + float(g @ qk)))
+            out.append(replace(r, lower=need + BACK_OFF_M + float(g @ qk)))
         return tuple(out)
 
     def _rows_at(self, qk: Array, k: int, f: float, reach: float) -> list[LinearRow]:

@@ -35,4 +35,6 @@ def test_the_repair_text_names_what_binds_in_the_answer_after_the_first_cause():
     held = Cause("collision", 0.0105, 0.01, "m", objects=("link_6", "post"), in_answer=True)
     step = Cause("joint step", 20.0, 20.0, "deg", joint=4, in_answer=True)
     text = Finding("repaired", 3, 9, 0.1, 0.2, (first, held, step), 2.5).describe()
-    assert text.endswith("reach: tilt the tool; also at its bound in the answer: collision (link_6, post), joint step (joint 4)")
+    assert text.endswith(
+        "reach: tilt the tool; also at its bound in the answer: collision (link_6, post), joint step (joint 4)"
+    )

@@ -3,6 +3,7 @@
 import dataclasses
 
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 
 import refine
@@ -27,7 +28,9 @@ def cell_line():
     part = refine.Shape(
         "part", "box", pose=make_transform(p=[0.6, 0.0, 0.17]), size_m=(0.2, 0.5, 0.04), workpiece=True
     )
-    gun = refine.Shape("gun", "cylinder", pose=make_transform(p=[0.0, 0.0, 0.05]), radius_m=0.03, length_m=0.1)
+    gun = refine.Shape(
+        "gun", "cylinder", pose=make_transform(p=[0.0, 0.0, 0.05]), radius_m=0.03, length_m=0.1
+    )
     return positions, DOWN @ tilt, (table, part), (gun,)
 
 
@@ -108,7 +111,9 @@ def test_carried_bounds_bound_the_distances_after_the_joints_and_a_cell_object_m
 def test_measure_least_finds_the_least_figures_and_every_waypoint_a_bound_leaves_unproved():
     # 6 waypoints, 2 pairs with margin 0.01 m; the true distances and lower bounds 1-4 mm under them
     true = np.array([[0.05, 0.2], [0.03, 0.2], [0.04, 0.012], [0.06, 0.2], [0.031, 0.2], [0.08, 0.2]])
-    bounds = true - np.array([[0.001, 0.0], [0.002, 0.0], [0.001, 0.004], [0.001, 0.0], [0.003, 0.0], [0.0, 0.0]])
+    bounds = true - np.array(
+        [[0.001, 0.0], [0.002, 0.0], [0.001, 0.004], [0.001, 0.0], [0.003, 0.0], [0.0, 0.0]]
+    )
     margins = np.array([0.01, 0.01])
     seen = []
 
@@ -122,3 +127,37 @@ def test_measure_least_finds_the_least_figures_and_every_waypoint_a_bound_leaves
     # 2's 0.012 m, and no other waypoint's distance bound is below it
     assert seen[0] == 2
     assert measured.tolist() == [False, False, True, False, False, False]
+
+
+def test_a_kept_clearance_row_asks_for_the_margin_from_where_the_object_moved():
+    """The TCP at (0.6, 0, 0.3) pointing down: the gun (flange z 0 to 0.1, the TCP at 0.15) ends
+    0.05 m above it, 0.25 m above the table's top face (z = 0.1); raising the table 5 mm shortens
+    that by 5 mm, so the refreshed row asks for 5 mm more."""
+    from refine.optimise.clearance import BACK_OFF_M
+    from refine.optimise.problem import LinearRow
+    from refine.robot.kinematics import solve_ik
+
+    _, _, cell, tool = cell_line()
+    robot = load_robot("ur10e")
+    kin = TcpKinematics(robot, np.eye(4), TCP)
+    target = make_transform(p=[0.6, 0.0, 0.3])
+    target[:3, :3] = DOWN
+    start = np.radians([0.0, -100.0, -100.0, -70.0, 90.0, 0.0])
+    q, err = solve_ik(kin, target, start, robot.spec.lower, robot.spec.upper, tol=1e-12, max_iterations=300)
+    assert err < 1e-9
+    rows = (
+        LinearRow(0, 0.0, np.zeros(6), 0.0, "tool:gun / table"),
+        LinearRow(0, 0.0, np.zeros(6), 0.0, "nothing / here"),
+    )
+
+    def refreshed(cell):
+        model = CollisionModel(robot, np.eye(4), TCP, tool, cell, margin_m=0.01, self_margin_m=0.005)
+        return ClearanceSource(model, kin, 0.005).refresh_rows(rows, q[None])
+
+    before = refreshed(cell)
+    after = refreshed(
+        tuple(dataclasses.replace(o, pose=make_transform(p=[0.0, 0.0, 0.005]) @ o.pose) for o in cell)
+    )
+    assert before[0].lower == pytest.approx(0.01 + BACK_OFF_M - 0.25, abs=1e-6)
+    assert after[0].lower - before[0].lower == pytest.approx(0.005, abs=1e-7)
+    assert after[1] is rows[1]  # a pair the source does not check is kept
