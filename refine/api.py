@@ -283,14 +283,17 @@ def _solve_again(
     problem: Problem, robot: Robot, fused: Any, previous: Result | None, initial_joints: ArrayLike | None
 ) -> Result:
     from refine.optimise.problem import reuse_for
+    from refine.optimise.warm import WarmStart
     from refine.run.solve import solve_problem
     from refine.run.stages import weights_for
 
     nlp = None
+    warm = None
     n = robot.nq
     q0 = _joints(initial_joints, len(fused), n)
     if previous is not None:
-        old = previous.run.first.nlp
+        first = previous.run.first
+        old = first.nlp
         same = (
             old is not None
             and previous.run.robot is robot
@@ -300,9 +303,17 @@ def _solve_again(
             and old.weights == weights_for(problem, robot)
         )
         nlp = reuse_for(old, fused, problem.tolerances) if same else None
-        if q0 is None and previous.run.first.refinement.q.shape == (len(fused), n):
-            q0 = previous.run.first.refinement.q
-    return Result(solve_problem(problem, robot=robot, fused=fused, nlp=nlp, q0=q0))
+        if q0 is None and previous.run.robot is robot and first.refinement.q.shape == (len(fused), n):
+            # the previous joints moved onto the new poses, and its last problem and multipliers
+            # where the robot, tool and weights are the same (refine.optimise.warm)
+            warm = WarmStart(
+                first.refinement.q,
+                first.fused.rotations if len(first.fused) == len(fused) else None,
+                first.refinement.problem if nlp is not None else None,
+                first.refinement.multipliers if nlp is not None else None,
+                first.clearance,
+            )
+    return Result(solve_problem(problem, robot=robot, fused=fused, nlp=nlp, q0=q0, warm=warm))
 
 
 def _joints(q: ArrayLike | None, N: int | None, n: int | None) -> Array | None:

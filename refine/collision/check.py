@@ -67,6 +67,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from refine.collision.carry import CheckedBounds, checked_bounds, measure_least
 from refine.collision.model import CollisionModel
 from refine.errors import InputError
 from refine.robot.kinematics import TcpKinematics
@@ -131,6 +132,11 @@ class PathClearance:
         tolerance_m: a clearance counts as broken below ``-tolerance_m`` [m].
         certified_segments: segments proved clear along their whole motion by the per-pair
             motion bound (``method="bound"``; see the module notes); the rest were sampled densely.
+        waypoint_measured: None when every waypoint is measured; from known bounds (``prior``), the
+            waypoints measured (N,): those that can hold the least distance or clearance or whose
+            margins the bounds leave unproved; the others' figures are lower bounds.
+        bounds: the lower bounds on every pair's distance at the waypoints the check ended with,
+            for the check of a nearby path (:mod:`refine.collision.carry`); None for ``"sample"``.
     """
 
     waypoint_distance_m: Array
@@ -144,6 +150,8 @@ class PathClearance:
     time_s: float
     tolerance_m: float
     certified_segments: int = 0
+    waypoint_measured: NDArray[np.bool_] | None = None
+    bounds: CheckedBounds | None = None
 
     @property
     def ok(self) -> bool:
@@ -237,6 +245,7 @@ def check_path_clearance(
     link_step_m: float = LINK_STEP_M,
     tolerance_m: float = 1e-4,
     method: str = "bound",
+    prior: Array | None = None,
 ) -> PathClearance:
     """Check a joint path densely against the collision model.
 
@@ -249,6 +258,8 @@ def check_path_clearance(
         tolerance_m: clearances down to ``-tolerance_m`` still count as kept [m].
         method: ``"bound"`` to certify every segment pair by pair by the motion bound and sample
             densely only segments with a broken margin, ``"sample"`` to sample every segment densely.
+        prior: lower bounds (N, P) [m] on the pairs' distances at the waypoints known beforehand
+            (:mod:`refine.collision.carry`): what they prove is not measured again.
 
     Returns:
         The per-waypoint and per-segment figures and the runs below the margin.
@@ -289,13 +300,28 @@ def check_path_clearance(
         )
 
     points: list[_Sample] = []
+    carry = prior is not None and method == "bound" and len(model.pairs) > 0
+    at_waypoint = None if carry else lambda q, poses, boxes: points.append(sample(q, poses, boxes))
     poses, boxes, bounds, exact = _waypoint_bounds(
-        model,
-        q_path,
-        tolerance_m,
-        method == "bound",
-        lambda q, poses, boxes: points.append(sample(q, poses, boxes)),
+        model, q_path, tolerance_m, method == "bound", at_waypoint, prior=prior
     )
+    measured = None  # every waypoint measured, unless the check starts from known bounds:
+    if carry:  # then exact where they can be the least or a margin is not proved, bounds elsewhere
+        at: dict[int, _Sample] = {}  # the waypoints measured
+
+        def measure(k: int) -> tuple[float, float]:
+            at[k] = sample(q_path[k], poses[k], bounds[k].copy())
+            for p, d in model.measured().items():
+                bounds[k, p], exact[k, p] = d, True
+            return at[k].distance, at[k].clearance
+
+        measured = measure_least(bounds, model.pair_margins, measure)
+        clear = bounds - model.pair_margins
+        least = np.argmin(clear, axis=1)  # per waypoint, the pair of least clearance bound
+        points = [
+            at.get(k, _Sample(bounds[k].min(), clear[k, p], model.pairs[p], bounds[k, p], frozenset()))
+            for k, p in enumerate(least)
+        ]
     wp_dist = np.array([p.distance for p in points])
     wp_clear = np.array([p.clearance for p in points])
     sweep = np.abs(np.diff(q_path, axis=0)) @ joint_reach(model)  # any body point's motion per segment [m]
@@ -340,12 +366,16 @@ def check_path_clearance(
         time_s=time.perf_counter() - start,
         tolerance_m=tolerance_m,
         certified_segments=len(sweep) - len(dense),
+        waypoint_measured=measured,
+        bounds=checked_bounds(model, q_path, bounds) if method == "bound" else None,
     )
     log.info("%s", result.summary())
     return result
 
 
-def margins_proved(model: CollisionModel, q_path: ArrayLike, *, tolerance_m: float = 1e-4) -> bool:
+def margins_proved(
+    model: CollisionModel, q_path: ArrayLike, *, tolerance_m: float = 1e-4, prior: Array | None = None
+) -> bool:
     """True when the motion bound proves that the joint path keeps every pair's margin.
 
     The certification of :func:`check_path_clearance` (``method="bound"``) without its figures:
@@ -360,6 +390,7 @@ def margins_proved(model: CollisionModel, q_path: ArrayLike, *, tolerance_m: flo
         model: the collision model (robot, tool, cell, margins).
         q_path: joints per waypoint [rad], shape (N, n).
         tolerance_m: clearances down to ``-tolerance_m`` still count as kept [m].
+        prior: lower bounds (N, P) [m] on the pairs' distances at the waypoints, known beforehand.
     """
     q_path = np.asarray(q_path, dtype=float)
     if q_path.ndim != 2 or q_path.shape[1] != model.robot.nq or not np.all(np.isfinite(q_path)):
@@ -368,7 +399,7 @@ def margins_proved(model: CollisionModel, q_path: ArrayLike, *, tolerance_m: flo
         )
     if len(q_path) < 2:
         return False
-    poses, _, bounds, exact = _waypoint_bounds(model, q_path, tolerance_m, True, plane=True)
+    poses, _, bounds, exact = _waypoint_bounds(model, q_path, tolerance_m, True, plane=True, prior=prior)
     found_by_segment: list[list[_Sample] | None] = [None] * (len(q_path) - 1)
     inner: list[list[_Sample]] = [[] for _ in found_by_segment]
     _advance_pairs(model, q_path, poses, bounds, exact, inner, found_by_segment, tolerance_m)
@@ -383,13 +414,15 @@ def _waypoint_bounds(
     at_waypoint: Callable[[Array, Array, Array], None] | None = None,
     *,
     plane: bool = False,
+    prior: Array | None = None,
 ) -> tuple[Array, Array, Array, NDArray[np.bool_]]:
     """The moving bodies' poses and each pair's distance bounds at every waypoint.
 
     With ``by_bound``, the pairs whose box bounds do not certify a segment next to a waypoint are
     bounded better there (:meth:`CollisionModel.pair_bound`, with ``plane`` the gap along the last
     witness normal before an FCL query). ``at_waypoint(q, poses, boxes)`` runs at each waypoint
-    with the model placed there; the pairs it measures improve the bounds.
+    with the model placed there (given ``prior``, the best bounds known there); the pairs it
+    measures improve the bounds. ``prior`` (N, P): lower bounds known beforehand [m].
 
     Returns:
         poses (N, M, 4, 4), box bounds (N, P) [m], the better bounds (N, P) [m], and which of
@@ -397,7 +430,7 @@ def _waypoint_bounds(
     """
     poses = model.moving_poses(q_path)
     boxes = model.box_bounds(poses)  # lower bounds on each pair's distance per waypoint (N, P) [m]
-    bounds = boxes.copy()  # and the better bounds and distances found
+    bounds = boxes.copy() if prior is None else np.maximum(boxes, prior)  # and the better ones found
     exact = np.zeros(bounds.shape, dtype=bool)
     need = np.zeros(bounds.shape, dtype=bool)  # pairs to measure at each waypoint
     if by_bound and len(q_path) > 1:
@@ -411,7 +444,7 @@ def _waypoint_bounds(
         for p in np.flatnonzero(need[k]):
             bounds[k, p], exact[k, p] = model.pair_bound(q, int(p), poses[k], plane=plane)
         if at_waypoint is not None:
-            at_waypoint(q, poses[k], boxes[k])
+            at_waypoint(q, poses[k], boxes[k] if prior is None else bounds[k].copy())
             for p, d in model.measured().items():
                 bounds[k, p], exact[k, p] = d, True
     return poses, boxes, bounds, exact

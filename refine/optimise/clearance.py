@@ -15,11 +15,12 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from refine.collision import CollisionModel, Contact, PathClearance, check_path_clearance, margins_proved
+from refine.collision.carry import CheckedBounds, carried_bounds
 from refine.optimise.problem import LinearRow, RefinementNLP
 from refine.optimise.verify import Violation
 from refine.problem import Problem
@@ -49,6 +50,8 @@ class ClearanceSource:
         kin: TCP kinematics of the same robot, base and tool.
         check_step_m: largest TCP travel between two poses of the dense check [m].
         last: the last dense check made, by joints (for reports).
+        prior: a previous check's bounds (of a previous answer, re-solving) that the checks of
+            nearby paths start from (:mod:`refine.collision.carry`), or None.
         stats: queries and time spent, for the collision cost figures.
     """
 
@@ -56,6 +59,7 @@ class ClearanceSource:
     kin: TcpKinematics
     check_step_m: float
     last: PathClearance | None = None
+    prior: CheckedBounds | None = None
     _recent: dict[tuple, PathClearance] = field(default_factory=dict)
     stats: dict[str, float] = field(
         default_factory=lambda: {"rounds": 0, "rows": 0, "check_s": 0.0, "rows_s": 0.0}
@@ -86,13 +90,20 @@ class ClearanceSource:
         found = self._recent.pop(key, None)
         if found is None:
             t0 = time.perf_counter()
-            found = check_path_clearance(self.model, q, self.kin, self.check_step_m)
+            found = check_path_clearance(self.model, q, self.kin, self.check_step_m, prior=self._carried(q))
             self.stats["check_s"] += time.perf_counter() - t0
         self._recent[key] = found  # most recent last
         while len(self._recent) > RECENT_CHECKS:
             del self._recent[next(iter(self._recent))]
         self.last = found
         return found
+
+    def carry_from(self, clearance: object) -> None:
+        """Start the checks from a previous answer's check (``PathClearance``) where it is near."""
+        self.prior = getattr(clearance, "bounds", None)
+
+    def _carried(self, q: Array) -> Array | None:
+        return None if self.prior is None else carried_bounds(self.model, self.prior, q)
 
     @staticmethod
     def _key(q: Array) -> tuple:
@@ -131,7 +142,7 @@ class ClearanceSource:
         q = np.asarray(q, dtype=float)
         if self._key(q) not in self._recent:
             t0 = time.perf_counter()
-            proved = margins_proved(self.model, q)
+            proved = margins_proved(self.model, q, prior=self._carried(q))
             self.stats["check_s"] += time.perf_counter() - t0
             if proved:
                 return ()
@@ -150,6 +161,34 @@ class ClearanceSource:
         self.stats["rows_s"] += time.perf_counter() - t0
         log.info("clearance: %d linearised rows from %d waypoints", len(rows), len(q))
         return tuple(rows)
+
+    def refresh_rows(self, rows: tuple[LinearRow, ...], q: Array) -> tuple[LinearRow, ...]:
+        """``rows`` with their bounds taken again at joints ``q`` (N, n), their gradients kept.
+
+        Each row's bodies (its label, ``"body / other"``, as the contacts name them) are measured at
+        the row's place along ``q`` in the cell as it is now, so a row made before a cell object
+        moved asks for the margin from where the object is: ``g·q' >= margin + back-off - d(q) + g·q``.
+        A body of several shapes (a link's collision pieces) is measured by its nearest shape pair
+        to the other, so the refreshed row asks for at least what its own pair needs. A row whose
+        bodies this source does not check is kept as it is.
+        """
+        q = np.asarray(q, dtype=float)
+        name = {b.label: b.name for b in self.model.bodies}
+        pairs: dict[str, list[int]] = {}
+        for p, (a, b) in enumerate(self.model.pairs):
+            pairs.setdefault(f"{name[a]} / {name[b]}", []).append(p)
+        margins = self.model.pair_margins
+        out = []
+        for r in rows:
+            found = pairs.get(r.label)
+            if not found:
+                out.append(r)
+                continue
+            qk = q[r.k] if r.f == 0.0 else (1.0 - r.f) * q[r.k] + r.f * q[min(r.k + 1, len(q) - 1)]
+            need = max(float(margins[p]) - self.model.pair_distance(qk, p) for p in found)
+            g = np.asarray(r.gradient, dtype=float)
+            out.append(replace(r, lower=need + BACK_OFF_M + float(g @ qk)))
+        return tuple(out)
 
     def _rows_at(self, qk: Array, k: int, f: float, reach: float) -> list[LinearRow]:
         contacts: list[Contact] = self.model.contacts(qk, reach)

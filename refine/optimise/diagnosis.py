@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from refine.optimise.binding import binding_at
 from refine.optimise.reach import reach_model, rotations_about
 from refine.optimise.verify import runs, singularity_measures
 from refine.paths import FusedPath
@@ -75,6 +76,8 @@ class Cause:
         explains_deg: the orientation change this cause alone asks for [deg] (inf when no change
             of orientation is enough), the measure the causes are ordered by.
         suggestion: what would fix it, in words with figures.
+        in_answer: measured at the answer rather than at the demonstrated orientation: a constraint
+            at its bound there (:mod:`refine.optimise.binding`); ``explains_deg`` is then 0.
     """
 
     cause: str
@@ -85,6 +88,7 @@ class Cause:
     joint: int | None = None
     explains_deg: float = 0.0
     suggestion: str = ""
+    in_answer: bool = False
 
     @property
     def label(self) -> str:
@@ -139,7 +143,13 @@ class Finding:
             head += f"{self.slack_deg:.2f} deg extra orientation slack, "
         c = self.cause
         objs = f" ({', '.join(c.objects)})" if c.objects else ""
-        return head + c.label + objs + (f": {c.suggestion}" if c.suggestion else "")
+        text = head + c.label + objs + (f": {c.suggestion}" if c.suggestion else "")
+        held = [x for x in self.causes[1:] if x.in_answer]
+        if held:
+            text += "; also at its bound in the answer: " + ", ".join(
+                x.label + (f" ({', '.join(x.objects)})" if x.objects else "") for x in held
+            )
+        return text
 
     def as_json(self) -> dict[str, Any]:
         """The ``diagnosis`` entry of ``result.json`` (docs/diagnosis.schema.json)."""
@@ -449,6 +459,11 @@ class Diagnoser:
         if reach_rows:
             causes.append(self._reach_cause(reach_rows))
         causes.sort(key=lambda c: -c.explains_deg)
+        if status == "repaired":  # and what holds the answer there, not named yet
+            named = {(c.cause, c.joint, c.objects) for c in causes}
+            for entry in binding_at(self.kin, q, a, b, self.tolerances, self.lower, self.upper, self.model, self.cell):
+                if (entry["cause"], entry["joint"], entry["objects"]) not in named:
+                    causes.append(Cause(**entry, in_answer=True))
         if not causes:
             causes = [
                 Cause(

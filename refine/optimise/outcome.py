@@ -78,6 +78,9 @@ class Refinement:
             (:mod:`refine.optimise.diagnosis`); empty when ok.
         time_limit_reached: the time budget ran out before a verdict (status ``timeout``), or after
             the first IK branch's verdict, before the others were tried.
+        problem: the last problem solved (with the active set and joint-step rows the rounds
+            found), for a re-solve to start from (:mod:`refine.optimise.warm`); None when none was solved.
+        multipliers: that solve's multipliers by row and of the variable bounds, or None.
     """
 
     status: str
@@ -94,6 +97,8 @@ class Refinement:
     timings_s: dict[str, float] = field(default_factory=dict)
     diagnosis: tuple[Finding, ...] = ()
     time_limit_reached: bool = False
+    problem: RefinementNLP | None = None
+    multipliers: tuple[dict[tuple, float], Array] | None = None
 
 
 def problem_targets(problem: RefinementNLP) -> Array:

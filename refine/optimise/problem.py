@@ -211,6 +211,14 @@ the scaling pass costs more than the factorisation at thousands of waypoints (6,
 rather than letting it choose: its automatic choice took 2.5 times as long at 6,400 waypoints."""
 
 
+REDUNDANT_IPOPT: dict[str, Any] = {"ipopt.acceptable_iter": 2, "ipopt.acceptable_constr_viol_tol": 1e-10}
+"""IPOPT settings added for an arm of more than six joints: stop after two consecutive iterations at
+the acceptable level (error 1e-6, constraints met to 1e-10) instead of fifteen. On the LBR iiwa at
+6,400 waypoints the full solve reaches that level one iteration after the coarse seed and then
+cannot reach 1e-9: it spent 15 more iterations (0.14 s each) before stopping there anyway (42 in
+all, coarse copy included; with these 30, solve CPU 1.6 s against 6.4 s). Verified as any answer."""
+
+
 @dataclass(frozen=True)
 class LinearRow:
     """A linearised constraint ``g·((1-f)·q_k + f·q_{k+1}) >= lower`` on the joints [rad].
@@ -438,7 +446,7 @@ def build_refinement(
             options=fatrop_options(options),
         )
     else:
-        options = {**IPOPT_DEFAULTS, **(solver_options or {})}
+        options = {**IPOPT_DEFAULTS, **(REDUNDANT_IPOPT if n > 6 else {}), **(solver_options or {})}
         ipopt = {k: v for k, v in options.items() if not k.startswith(FATROP_PREFIX)}
         watch = iteration_watch(x.numel(), g.numel(), p.numel())
         built = ca.nlpsol("refine", "ipopt", nlp, {**derivatives, **ipopt, "iteration_callback": watch})

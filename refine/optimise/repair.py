@@ -49,6 +49,7 @@ def solve_with_repair(
     deadline: float = math.inf,
     skip_strict: str = "",
     stretched: Array | None = None,
+    multipliers: tuple[dict[tuple, float], Array] | None = None,
 ) -> Refinement:
     """Strict solve from ``q_seed``, then the elastic repair when the strict problem fails.
 
@@ -58,10 +59,11 @@ def solve_with_repair(
     ``stretched`` (N,) marks the waypoints whose wrist centre the demonstration puts near or beyond
     the end of the arm's range: the singularity bound holds there from the first solve (at and
     between the waypoints), so the elbow cannot pass through its stretched singularity while the
-    solver pulls the wrist in.
+    solver pulls the wrist in. ``multipliers`` (a previous solve's of the same rows, see
+    :class:`RoundLoop`) warm-start the first strict solve.
     """
     kin = problem_kinematics(problem)
-    loop = RoundLoop(problem, timings, max_rounds=max_rounds, deadline=deadline)
+    loop = RoundLoop(problem, timings, max_rounds=max_rounds, deadline=deadline, multipliers=multipliers)
     start = StageTimes.clock()  # the constraints the seed shows to be needed count as seeding
     initial = new_singular_points(kin, q_seed, problem.tolerances.singularity_margin, problem.active)
     if stretched is not None and stretched.any() and problem.tolerances.singularity_margin > 0:
@@ -83,7 +85,7 @@ def solve_with_repair(
         stats = {"return_status": skip_strict}
         strict_reason = skip_strict
     else:
-        x, stats, check, slack = run_rounds(loop, q_seed.ravel(), sources)
+        x, stats, check, slack = run_rounds(loop, q_seed.ravel(), sources, warm=multipliers is not None)
         q = loop.problem.joints(x)
         strict_reason = describe_check(check, stats)
     status = "ok" if check.ok and not skip_strict else "infeasible"
@@ -169,4 +171,6 @@ def solve_with_repair(
         repairs=repairs,
         timings_s=timings,
         diagnosis=findings,
+        problem=loop.problem,
+        multipliers=loop.multipliers,
     )

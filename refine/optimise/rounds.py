@@ -178,12 +178,14 @@ class RoundLoop:
 
 
 def run_rounds(
-    loop: RoundLoop, x0: Array, sources: tuple[ConstraintSource, ...]
+    loop: RoundLoop, x0: Array, sources: tuple[ConstraintSource, ...], *, warm: bool = False
 ) -> tuple[Array, dict, PathCheck, Array]:
-    """Solve, verify and grow the active set until nothing more is needed (or the rounds run out)."""
+    """Solve, verify and grow the active set until nothing more is needed (or the rounds run out).
+
+    ``warm``: the first solve starts from the loop's multipliers (a previous solve's, re-solving).
+    """
     kin = problem_kinematics(loop.problem)
     margin = loop.problem.tolerances.singularity_margin
-    warm = False
     while True:
         loop.outer += 1
         enter_round(loop.outer)

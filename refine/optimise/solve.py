@@ -42,6 +42,7 @@ from refine.optimise.seed import (
 from refine.optimise.verify import (
     check_path,
 )
+from refine.optimise.warm import WarmStart, reuse_final, warm_seed
 from refine.robot.kinematics import CONVERGED, TcpKinematics, solve_ik_batch
 from refine.stopwatch import StageTimes, add_time
 from refine.types import Array
@@ -93,6 +94,7 @@ def solve_refinement(
     max_rounds: int = MAX_OUTER_ITERATIONS,
     max_branches: int = 3,
     time_limit_s: float | None = None,
+    warm: WarmStart | None = None,
 ) -> Refinement:
     """Solve ``problem`` with its solver from ``q0`` (or the IK seed), verify, and repair if asked.
 
@@ -112,6 +114,9 @@ def solve_refinement(
             result is ``infeasible`` with ``time_limit_reached`` set and a reason saying so; when it
             runs out while other IK branches are tried, the first branch's verdict stands. Build
             the problem with ``ipopt.max_wall_time`` at most this so one solve cannot overrun it.
+        warm: a previous answer to start from instead of ``q0`` (:mod:`refine.optimise.warm`): its
+            joints moved onto the new poses are the seed, and its last problem (active set,
+            joint-step rows) and multipliers are kept where they fit.
 
     Raises:
         SolverError: the solver itself failed (not an infeasibility): the message names its status.
@@ -133,6 +138,18 @@ def solve_refinement(
             kin, problem.fused, problem.tolerances, problem.axisymmetric, SEED_INSET_M
         )
         stretched = inset > 0.0
+    multipliers = None
+    if warm is not None:
+        for src in sources:
+            carry = getattr(src, "carry_from", None)
+            if carry is not None and warm.clearance is not None:
+                carry(warm.clearance)
+        q0 = warm_seed(problem, warm)
+        final = None if warm.problem is None else reuse_final(warm.problem, problem, problem.fused, problem.tolerances)
+        if final is not None and final.active.linear_rows:
+            final = _refreshed_rows(final, sources, q0)
+        if final is not None:
+            problem, multipliers = final, warm.multipliers
     q_seed = initial_guess(problem, home, rotations) if q0 is None else np.asarray(q0, dtype=float)
     unreachable = out_of_reach(problem, q_seed, home)
     add_time(timings, "seed", start)
@@ -202,6 +219,7 @@ def solve_refinement(
             deadline,
             skip,
             stretched,
+            multipliers,
         )
 
     try:
@@ -258,6 +276,27 @@ def solve_refinement(
         attempt.outer_iterations,
     )
     return attempt
+
+
+def _refreshed_rows(
+    problem: RefinementNLP, sources: tuple[ConstraintSource, ...], q: Array
+) -> RefinementNLP | None:
+    """``problem`` with its linear rows' bounds taken again at joints ``q`` (N, n), or None.
+
+    The rows were linearised against the cell as it was; each source that made them
+    (``refresh_rows``) measures their pairs again at ``q`` and keeps their gradients. None when a
+    row has no source to refresh it (the problem is then rebuilt by the rounds as usual).
+    """
+    rows = problem.active.linear_rows
+    for src in sources:
+        refresh = getattr(src, "refresh_rows", None)
+        if refresh is not None:
+            rows = refresh(rows, q)
+    if rows is problem.active.linear_rows or len(rows) != len(problem.active.linear_rows):
+        return None
+    head = len(problem.lbg) - len(rows)
+    lbg = np.concatenate([problem.lbg[:head], [r.lower for r in rows]])
+    return replace(problem, lbg=lbg, active=replace(problem.active, linear_rows=rows))
 
 
 def _rank_chains(

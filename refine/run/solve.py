@@ -28,6 +28,7 @@ from refine.optimise.moves import (
 )
 from refine.optimise.placement import SLACK_TOLERANCE_DEG, ZERO_MOVE, SearchResult, search_placement
 from refine.optimise.problem import RefinementNLP
+from refine.optimise.warm import WarmStart
 from refine.paths import FusedPath
 from refine.problem import Problem
 from refine.robot.model import Robot
@@ -48,6 +49,7 @@ def solve_problem(
     fused: FusedPath | None = None,
     nlp: RefinementNLP | None = None,
     q0: np.ndarray | None = None,
+    warm: WarmStart | None = None,
 ) -> RunResult:
     """Run every stage up to the timed trajectories, without writing files.
 
@@ -59,6 +61,7 @@ def solve_problem(
             problem's files.
         nlp: the first pass's problem, already built (re-solving); None to build it.
         q0: initial joints (N, n) [rad] of the first pass (warm start); None for the IK seed.
+        warm: a previous answer of the first pass to re-solve from (:mod:`refine.optimise.warm`).
     """
     watch = Stopwatch()
     if robot is None:
@@ -72,7 +75,7 @@ def solve_problem(
     sources = constraint_sources(problem, robot)
     watch.lap("load")
     first_name = "pass 1" if len(tracks) == 1 else "track 1"
-    passes = [refine_pass(problem, robot, fused, watch, first_name, sources=sources, nlp=nlp, q0=q0)]
+    passes = [refine_pass(problem, robot, fused, watch, first_name, sources=sources, nlp=nlp, q0=q0, warm=warm)]
     for k, track in enumerate(tracks[1:], start=2):  # each further track of the CAD file is a pass
         passes.append(refine_pass(problem, robot, track, watch, f"track {k}", 1, k, sources))
     if problem.multipass is not None and problem.multipass.layers > 1:

@@ -16,6 +16,7 @@ import numpy as np
 from refine.errors import InputError
 from refine.optimise.problem import ConstraintSource, RefinementNLP, Weights, build_refinement
 from refine.optimise.solve import solve_refinement
+from refine.optimise.warm import WarmStart
 from refine.paths import FusedPath, Trajectory
 from refine.problem import Problem
 from refine.robot.model import Robot
@@ -182,6 +183,7 @@ def refine_pass(
     *,
     nlp: RefinementNLP | None = None,
     q0: np.ndarray | None = None,
+    warm: WarmStart | None = None,
 ) -> PassResult:
     """Refine, verify and time one pass.
 
@@ -196,6 +198,7 @@ def refine_pass(
         sources: collision constraint sources.
         nlp: a problem already built for this pass (re-solving); None to build it.
         q0: initial joints (N, n) [rad] instead of the IK seed (warm start); None for the seed.
+        warm: a previous answer to re-solve from (:mod:`refine.optimise.warm`), instead of ``q0``.
     """
     if nlp is None:
         nlp = refinement_for(problem, robot, fused)
@@ -208,6 +211,7 @@ def refine_pass(
         sources=sources,
         repair_max_slack_deg=problem.repair.max_slack_deg if problem.repair.enabled else None,
         time_limit_s=problem.repair.time_limit_s,
+        warm=warm,
         **({"max_rounds": problem.collision.max_outer_iterations} if sources else {}),
     )
     watch.lap("refine")

@@ -1,0 +1,129 @@
+"""Solving again from a previous answer: its joints moved onto the new poses, its built problem kept.
+
+A re-solve after a small change (the part moved a few millimetres, another cone, another tool
+offset) starts from what the previous solve ended with (:class:`WarmStart`):
+
+* the seed is the previous joints projected onto the new poses (:func:`warm_seed`): each waypoint's
+  least-squares IK from its previous joints, without null-space drift, towards the new position with
+  the previous orientation turned as the demonstration turned. No chained IK, no start candidates,
+  and no reach search (the projection reaches every pose the previous answer nearly reached);
+* the problem is the previous solve's last one, with its active set (singularity bounds, clearance
+  rows) and joint-step rows, given the new path and tolerances as parameters and bounds
+  (:func:`reuse_final`): no CasADi build;
+* the solve starts from the previous multipliers (row by row, see
+  :class:`refine.optimise.rounds.RoundLoop`);
+* the dense clearance checks start from the previous check's distance bounds less the motion since
+  (:mod:`refine.collision.carry`), so only the pairs the motion brought near are measured again.
+
+The answer then runs through the rounds and the verification of any other solve, so it is checked
+(and grown, where a row is missing) exactly as a cold one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from refine.optimise.outcome import problem_bounds, problem_kinematics, problem_targets
+from refine.optimise.problem import RefinementNLP, joint_bounds, path_params, path_row_bounds, reuse_for
+from refine.paths import FusedPath
+from refine.robot.kinematics import CONVERGED, solve_ik_batch
+from refine.settings import Tolerances
+from refine.types import Array
+
+
+@dataclass(frozen=True)
+class WarmStart:
+    """What a re-solve keeps of the previous answer.
+
+    Attributes:
+        q: the previous answer's joints (N, n) [rad].
+        rotations: the demonstrated orientations R_F_TCP (N, 3, 3) the previous answer was refined
+            for; None when unknown (the seed then keeps the previous reached orientations).
+        problem: the previous solve's last problem (its active set and joint-step rows), or None.
+        multipliers: the previous last solve's multipliers, as kept by
+            :class:`refine.optimise.rounds.RoundLoop` (by row, and of the variable bounds), or None.
+        clearance: the previous answer's dense clearance check (a ``PathClearance``), whose bounds
+            the new checks start from (:mod:`refine.collision.carry`), or None.
+    """
+
+    q: Array
+    rotations: Array | None = None
+    problem: RefinementNLP | None = None
+    multipliers: tuple[dict[tuple, float], Array] | None = None
+    clearance: object = None
+
+
+def warm_seed(problem: RefinementNLP, warm: WarmStart) -> Array:
+    """The previous joints moved onto ``problem``'s poses (N, n) [rad].
+
+    Each waypoint's target is the new CAD position with the previous reached orientation turned by
+    the change of the demonstrated orientation there (``R_demo_new R_demo_oldᵀ R_reached``): a
+    rigidly moved part moves the previous answer's poses rigidly, a new cone or weight leaves them
+    where they were. Least-squares IK (:func:`refine.robot.kinematics.solve_ik_batch`, no
+    null-space drift) from the previous joints moves each waypoint the least. A waypoint whose
+    projection does not converge keeps what the IK reached (the NLP takes it from there).
+    """
+    q0 = np.asarray(warm.q, dtype=float)
+    kin = problem_kinematics(problem)
+    lower, upper = problem_bounds(problem)
+    q0 = np.clip(q0, lower, upper)
+    reached = kin.poses(q0)
+    targets = problem_targets(problem)
+    R = reached[:, :3, :3]
+    if warm.rotations is not None:
+        R = problem.fused.rotations @ np.transpose(warm.rotations, (0, 2, 1)) @ R
+    targets[:, :3, :3] = R
+    position = np.linalg.norm(reached[:, :3, 3] - targets[:, :3, 3], axis=1)
+    cos = (np.einsum("kij,kij->k", reached[:, :3, :3], R) - 1.0) / 2.0
+    turn = np.arccos(np.clip(cos, -1.0, 1.0))
+    off = np.flatnonzero(position + turn > CONVERGED)
+    if not off.size:
+        return q0
+    q = q0.copy()
+    q[off], _ = solve_ik_batch(kin, targets[off], q0[off], lower, upper, nullspace_gain=0.0)
+    return q
+
+
+def reuse_final(
+    final: RefinementNLP, built: RefinementNLP, fused: FusedPath, tolerances: Tolerances
+) -> RefinementNLP | None:
+    """The previous solve's last problem ``final`` with a new path and tolerances, or None.
+
+    ``final`` holds the active set and joint-step rows the previous rounds found; its solver is
+    kept, and only the parameters and bounds change: the path rows and joint steps from
+    ``tolerances`` (:func:`refine.optimise.problem.path_row_bounds`), the singularity rows at the
+    new margin, the linear rows at their bounds (rows whose bound depends on where the cell is are
+    the constraint source's to refresh: their next round replaces them). ``built`` is the problem
+    as first built (``reuse_for`` checks that the robot, tool and spacing allow a reuse); None when
+    it refuses, when ``final`` is an elastic problem, or when its size differs.
+    """
+    if reuse_for(built, fused, tolerances) is None:
+        return None
+    N = final.n_waypoints
+    if final.elastic_deg is not None or len(fused) != N or final.robot is not built.robot:
+        return None
+    lower, upper = joint_bounds(final.robot, tolerances)
+    lbg_path, ubg_path = path_row_bounds(tolerances, N, final.dof, steps=final.step_rows())
+    a = final.active
+    singular = len(a.singular_waypoints) + len(a.singular_segments)
+    rows = len(a.linear_rows)
+    head = len(lbg_path)
+    if len(final.lbg) != head + singular + rows:
+        return None
+    lbg = np.concatenate(
+        [lbg_path, np.full(singular, tolerances.singularity_margin), final.lbg[head + singular :]]
+    )
+    ubg = np.concatenate([ubg_path, final.ubg[head:]])
+    return replace(
+        final,
+        params=path_params(fused),
+        lbx=np.tile(lower, N),
+        ubx=np.tile(upper, N),
+        lbg=lbg,
+        ubg=ubg,
+        fused=fused,
+        tolerances=tolerances,
+        build_time_s=0.0,
+    )

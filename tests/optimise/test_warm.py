@@ -1,0 +1,163 @@
+"""Re-solving from a previous answer (refine.optimise.warm, refine.collision.carry) through the API."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+import refine
+from refine.collision import check_path_clearance
+from refine.collision.carry import carried_bounds, checked_bounds, measure_least
+from refine.collision.model import CollisionModel
+from refine.frames import make_transform
+from refine.optimise.clearance import ClearanceSource
+from refine.robot.kinematics import TcpKinematics
+from refine.robot.registry import load_robot
+
+N = 31
+DOWN = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])
+TCP = make_transform(p=[0.0, 0.0, 0.15])
+
+
+def cell_line():
+    """A line 0.3 m above a table on a UR10e with a gun: the table is 0.2 m below the TCP."""
+    positions = np.column_stack([np.full(N, 0.6), np.linspace(-0.2, 0.2, N), np.full(N, 0.3)])
+    tilt = Rotation.from_euler("x", np.linspace(0.0, 8.0, N)[:, None], degrees=True).as_matrix()
+    table = refine.Shape("table", "box", pose=make_transform(p=[0.6, 0.0, 0.05]), size_m=(0.6, 0.8, 0.1))
+    part = refine.Shape(
+        "part", "box", pose=make_transform(p=[0.6, 0.0, 0.17]), size_m=(0.2, 0.5, 0.04), workpiece=True
+    )
+    gun = refine.Shape(
+        "gun", "cylinder", pose=make_transform(p=[0.0, 0.0, 0.05]), radius_m=0.03, length_m=0.1
+    )
+    return positions, DOWN @ tilt, (table, part), (gun,)
+
+
+def moved(positions, rotations, cell, shift_m, turn_deg):
+    """The path, its orientations and the workpiece moved rigidly: turned about z through (0.6, 0, 0.3)."""
+    c = np.array([0.6, 0.0, 0.3])
+    R = Rotation.from_euler("z", turn_deg, degrees=True).as_matrix()
+    M = make_transform(p=c - R @ c + np.asarray(shift_m))
+    M[:3, :3] = R
+    cell = tuple(dataclasses.replace(o, pose=M @ o.pose) if o.workpiece else o for o in cell)
+    return positions @ R.T + M[:3, 3], np.einsum("ij,njk->nik", R, rotations), cell, M
+
+
+def test_a_moved_part_re_solved_from_the_previous_answer_is_the_cold_answer_and_verified():
+    positions, R, cell, tool = cell_line()
+    common = {
+        "speeds": 0.1,
+        "tcp_in_flange": TCP,
+        "tool_shapes": tool,
+        "collision": refine.CollisionSettings(margin_m=0.01),
+    }
+    first = refine.refine_path("ur10e", positions, R, cell=cell, **common)
+    assert first.status == "ok"
+    p2, R2, cell2, M = moved(positions, R, cell, [0.002, 0.0, 0.0], 0.3)
+    warm = refine.refine_path("ur10e", p2, R2, cell=cell2, previous=first, **common)
+    cold = refine.refine_path("ur10e", p2, R2, cell=cell2, **common)
+    assert warm.status == cold.status == "ok"
+    assert np.abs(warm.joints - cold.joints).max() <= 1e-6
+    assert warm.run.timings_s["build"] < 1e-3  # the previous problem kept
+    # verified: the TCP on the moved points by plain forward kinematics, the orientation in the cone
+    kin = TcpKinematics(warm.run.robot, np.eye(4), TCP)
+    poses = kin.poses(warm.joints)
+    assert np.abs(poses[:, :3, 3] - p2).max() <= 1e-6
+    cos = (np.einsum("kij,kij->k", poses[:, :3, :3], R2) - 1.0) / 2.0
+    assert np.degrees(np.arccos(np.clip(cos, -1, 1))).max() <= 3.0 + 1e-6
+    # and clear of the moved cell by a dense sampled check of its own (not the bound the warm check used)
+    source = ClearanceSource.for_problem(cold.run.problem, cold.run.robot)
+    sampled = check_path_clearance(source.model, warm.joints, source.kin, 0.002, method="sample")
+    assert sampled.ok and sampled.min_distance_m >= 0.01 - 1e-4
+    # the least distance is measured, not a bound: the cold check measures every waypoint
+    assert warm.run.first.clearance.waypoint_measured is not None  # the warm check measured only some
+    assert abs(warm.metrics["min_clearance_m"] - cold.metrics["min_clearance_m"]) <= 1e-5
+
+
+def test_carried_bounds_bound_the_distances_after_the_joints_and_a_cell_object_moved():
+    """Every carried bound is at most the pair's distance FCL measures after the move.
+
+    The prior holds the exact distances at the first joints; the table then rises 5 mm towards the
+    robot and the joints move by up to 0.3 deg, so every distance to the table shrinks by about
+    5 mm: a bound that forgot the table's move would stand above it.
+    """
+    _, _, cell, tool = cell_line()
+    robot = load_robot("ur10e")
+
+    def model_of(cell, tool=tool):
+        return CollisionModel(robot, np.eye(4), TCP, tool, cell, margin_m=0.01, self_margin_m=0.005)
+
+    q_old = np.tile(np.radians([0.0, -100.0, -100.0, -70.0, 90.0, 0.0]), (5, 1))
+    q_old[:, 0] += np.linspace(-0.2, 0.2, 5)
+    before = model_of(cell)
+    exact = np.array([[before.pair_distance(q, p) for p in range(len(before.pairs))] for q in q_old])
+    prior = checked_bounds(before, q_old, exact)
+    raised = tuple(dataclasses.replace(o, pose=make_transform(p=[0.0, 0.0, 0.005]) @ o.pose) for o in cell)
+    after = model_of(raised)
+    q = q_old + np.random.default_rng(3).uniform(-0.005, 0.005, q_old.shape)
+    carried = carried_bounds(after, prior, q)
+    assert carried is not None
+    table = [p for p, pair in enumerate(after.pairs) if "table" in pair]
+    assert table and np.isfinite(carried[:, table]).all()
+    for k, p in zip(*np.nonzero(np.isfinite(carried)), strict=True):
+        assert carried[k, p] <= after.pair_distance(q[k], int(p)) + 1e-9, after.pairs[p]
+    # another tool is another body: its pairs keep no bound
+    other = model_of(cell, (dataclasses.replace(tool[0], radius_m=0.031),))
+    gun = [p for p, pair in enumerate(other.pairs) if "tool:gun" in pair]
+    assert gun and np.all(np.isneginf(carried_bounds(other, prior, q_old)[:, gun]))
+
+
+def test_measure_least_finds_the_least_figures_and_every_waypoint_a_bound_leaves_unproved():
+    # 6 waypoints, 2 pairs with margin 0.01 m; the true distances and lower bounds 1-4 mm under them
+    true = np.array([[0.05, 0.2], [0.03, 0.2], [0.04, 0.012], [0.06, 0.2], [0.031, 0.2], [0.08, 0.2]])
+    bounds = true - np.array(
+        [[0.001, 0.0], [0.002, 0.0], [0.001, 0.004], [0.001, 0.0], [0.003, 0.0], [0.0, 0.0]]
+    )
+    margins = np.array([0.01, 0.01])
+    seen = []
+
+    def measure(k):
+        seen.append(k)
+        return float(true[k].min()), float((true[k] - margins).min())
+
+    measured = measure_least(bounds, margins, measure)
+    # waypoint 2's bound 0.008 m is below the margin: measured first; its clearance 0.002 m is the least
+    # (nothing else can be lower: the next clearance bound is 0.018 m); the least distance is waypoint
+    # 2's 0.012 m, and no other waypoint's distance bound is below it
+    assert seen[0] == 2
+    assert measured.tolist() == [False, False, True, False, False, False]
+
+
+def test_a_kept_clearance_row_asks_for_the_margin_from_where_the_object_moved():
+    """The TCP at (0.6, 0, 0.3) pointing down: the gun (flange z 0 to 0.1, the TCP at 0.15) ends
+    0.05 m above it, 0.25 m above the table's top face (z = 0.1); raising the table 5 mm shortens
+    that by 5 mm, so the refreshed row asks for 5 mm more."""
+    from refine.optimise.clearance import BACK_OFF_M
+    from refine.optimise.problem import LinearRow
+    from refine.robot.kinematics import solve_ik
+
+    _, _, cell, tool = cell_line()
+    robot = load_robot("ur10e")
+    kin = TcpKinematics(robot, np.eye(4), TCP)
+    target = make_transform(p=[0.6, 0.0, 0.3])
+    target[:3, :3] = DOWN
+    start = np.radians([0.0, -100.0, -100.0, -70.0, 90.0, 0.0])
+    q, err = solve_ik(kin, target, start, robot.spec.lower, robot.spec.upper, tol=1e-12, max_iterations=300)
+    assert err < 1e-9
+    rows = (
+        LinearRow(0, 0.0, np.zeros(6), 0.0, "tool:gun / table"),
+        LinearRow(0, 0.0, np.zeros(6), 0.0, "nothing / here"),
+    )
+
+    def refreshed(cell):
+        model = CollisionModel(robot, np.eye(4), TCP, tool, cell, margin_m=0.01, self_margin_m=0.005)
+        return ClearanceSource(model, kin, 0.005).refresh_rows(rows, q[None])
+
+    before = refreshed(cell)
+    after = refreshed(
+        tuple(dataclasses.replace(o, pose=make_transform(p=[0.0, 0.0, 0.005]) @ o.pose) for o in cell)
+    )
+    assert before[0].lower == pytest.approx(0.01 + BACK_OFF_M - 0.25, abs=1e-6)
+    assert after[0].lower - before[0].lower == pytest.approx(0.005, abs=1e-7)
+    assert after[1] is rows[1]  # a pair the source does not check is kept
