@@ -419,7 +419,7 @@ def descartes(problem: BenchProblem) -> Answer:
         profile.target_pose_sample_resolution = half
     model = _cell_model(problem)
     profile.enable_collision = model is not None
-    profile.allow_collision = False
+    profile.allow_collision = model is None  # without a cell nothing is checked, as for refine
     if model is not None:
         _set_margin(t, profile.vertex_collision_check_config, float(model.margin_m))
     profile.enable_edge_collision = False
