@@ -49,6 +49,9 @@ class RobotSettings:
         joint_lower_deg: per-joint lower limits [deg] in place of the robot's, or None.
         joint_upper_deg: per-joint upper limits [deg] in place of the robot's, or None.
         joint_velocity_deg_s: per-joint speed limits [deg/s] in place of the robot's, or None.
+        base_link: with ``urdf``: the link the arm stands on (its base frame), or None for the
+            URDF's root.
+        locked_joints_deg: with ``urdf``: joints held still, as (name, value [deg]) pairs.
     """
 
     model: str = ""
@@ -63,6 +66,8 @@ class RobotSettings:
     joint_lower_deg: tuple[float, ...] | None = None
     joint_upper_deg: tuple[float, ...] | None = None
     joint_velocity_deg_s: tuple[float, ...] | None = None
+    base_link: str | None = None
+    locked_joints_deg: tuple[tuple[str, float], ...] = ()
 
     def __post_init__(self) -> None:
         if self.urdf is None and not self.model:
@@ -71,6 +76,8 @@ class RobotSettings:
             raise InputError('[robot] a robot from its URDF needs controller ("abb", "kuka" or "ur")')
         if self.urdf is None and (self.controller is not None or self.reach_m is not None):
             raise InputError("[robot] controller and reach_m go with urdf (a registry robot has its own)")
+        if self.urdf is None and (self.base_link is not None or self.locked_joints_deg):
+            raise InputError("[robot] base_link and locked_joints_deg go with urdf (a registry robot has its own chain)")
         if self.reach_m is not None:
             positive("robot", "reach_m", self.reach_m)
         for a in self.joint_velocity_deg_s or ():
