@@ -109,9 +109,10 @@ class Problem:
     source: Path | None = None
 
     def __post_init__(self) -> None:
-        if self.demonstration is None and self.cad is not None and self.cad.format != "pathml":
+        if self.demonstration is None and self.cad is not None and self.cad.format not in ("pathml", "toolpath"):
             raise InputError(
-                'missing required table [demonstration] (only a PathML path, [cad] format = "pathml", may go without)'
+                "missing required table [demonstration] (only a PathML path or a CAM toolpath, "
+                '[cad] format = "pathml" or "toolpath", may go without)'
             )
 
     @property

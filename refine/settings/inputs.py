@@ -155,8 +155,8 @@ class CadSettings:
 
     Attributes:
         file: absolute path of the file.
-        format: ``"csv"``, ``"dxf"``, ``"gcode"``, ``"mesh"`` (STL, OBJ, PLY) or ``"pathml"``
-            (from the extension when not given).
+        format: ``"csv"``, ``"dxf"``, ``"gcode"``, ``"mesh"`` (STL, OBJ, PLY), ``"pathml"`` or
+            ``"toolpath"`` (a CAM toolpath with tool axes, CSV) (from the extension when not given).
         units: length unit of the file: ``"m"``, ``"mm"`` or ``"in"``.
         spacing_m: waypoint spacing along the path after resampling [m].
         layer: DXF layer holding the path, or None for the only/first path entity.
@@ -166,6 +166,7 @@ class CadSettings:
         boundary: take the mesh's open boundary instead of a section (mesh).
         start_near: start a closed contour at its point nearest to this [file units], or None.
         track: PathML track to read, as ``"layer/track"`` names, or None for the first (pathml).
+        speed_m_s: the tool's speed along a CAM toolpath [m/s] (toolpath; required there).
     """
 
     file: Path
@@ -179,9 +180,14 @@ class CadSettings:
     boundary: bool = False
     start_near: tuple[float, float, float] | None = None
     track: str | None = None
+    speed_m_s: float | None = None
 
     def __post_init__(self) -> None:
         one_of("cad", "format", self.format, CAD_FORMATS)
+        if (self.format == "toolpath") != (self.speed_m_s is not None):
+            raise InputError(
+                "cad: speed_m_s [m/s] goes with format = 'toolpath' (a CAM toolpath's speed), and only with it"
+            )
         if self.format == "mesh" and self.boundary == (self.section_normal is not None):
             raise InputError(
                 "cad: a mesh path needs either boundary = true or section_origin + section_normal"
