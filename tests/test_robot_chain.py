@@ -49,7 +49,9 @@ def test_an_unlocked_joint_off_the_chain_is_named(workcell):
 
 
 def test_the_chain_from_its_base_link_with_the_rest_locked(workcell):
-    robot = robot_from_urdf(workcell, controller="abb", base_link="base_link", locked_joints_deg={"turntable": 30.0})
+    robot = robot_from_urdf(
+        workcell, controller="abb", base_link="base_link", locked_joints_deg={"turntable": 30.0}
+    )
     assert robot.spec.joint_names == ("j1", "j2")
     # by hand: in base_link's frame, tool0 is 0.3 + 0.2 m up at zero; j2 = 90 deg swings the 0.2 m to +x
     assert robot.fk(np.zeros(2))[:3, 3] == pytest.approx([0.0, 0.0, 0.5])
@@ -89,6 +91,8 @@ def test_the_problem_file_names_the_chain(workcell):
     assert problem.robot.locked_joints_deg == (("turntable", 0.0),)
     assert robot_for(problem.robot).spec.joint_names == ("j1", "j2")
     text = (folder / "problem.toml").read_text()
-    (folder / "problem.toml").write_text(text.replace("locked_joints_deg = { turntable = 0.0 }", "locked_joints_deg = 3"))
+    (folder / "problem.toml").write_text(
+        text.replace("locked_joints_deg = { turntable = 0.0 }", "locked_joints_deg = 3")
+    )
     with pytest.raises(InputError, match="locked_joints_deg must be a table of joint = value"):
         load_problem(folder)

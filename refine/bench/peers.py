@@ -125,7 +125,12 @@ def _geometry(body: Any, folder: Path) -> ET.Element:
 
 
 def _add_link(
-    root: ET.Element, name: str, parent: str, T_parent_link: Array, body: Any = None, folder: Path | None = None
+    root: ET.Element,
+    name: str,
+    parent: str,
+    T_parent_link: Array,
+    body: Any = None,
+    folder: Path | None = None,
 ) -> None:
     link = ET.SubElement(root, "link", name=name)
     if body is not None and folder is not None:
@@ -277,7 +282,9 @@ def tesseract_environment(problem: BenchProblem) -> Any:
         raise Unavailable(f"Tesseract's environment of {problem.name} did not load (files in {folder})")
     names = list(env.getJointGroup("manipulator").getJointNames())
     if names != list(problem.robot.spec.joint_names):
-        raise Unavailable(f"Tesseract's joint group {names} is not refine's {list(problem.robot.spec.joint_names)}")
+        raise Unavailable(
+            f"Tesseract's joint group {names} is not refine's {list(problem.robot.spec.joint_names)}"
+        )
     manip = t["common"].ManipulatorInfo()
     manip.manipulator = "manipulator"
     manip.tcp_frame = TCP
@@ -320,7 +327,10 @@ def _program(
         if seed is not None:
             waypoint.setSeed(t["common"].JointState(names, np.asarray(seed[k], dtype=float)))
         move = cl.MoveInstruction(
-            cl.CartesianWaypointPoly_wrap_CartesianWaypoint(waypoint), cl.MoveInstructionType_LINEAR, PROFILE, manip
+            cl.CartesianWaypointPoly_wrap_CartesianWaypoint(waypoint),
+            cl.MoveInstructionType_LINEAR,
+            PROFILE,
+            manip,
         )
         program.appendMoveInstruction(cl.MoveInstructionPoly_wrap_MoveInstruction(move))
     return program
@@ -451,6 +461,7 @@ def _set_margin(t: dict[str, Any], config: Any, margin_m: float) -> None:
     manager = config.contact_manager_config
     manager.margin_data = t["common"].CollisionMarginData(margin_m)
     manager.margin_data_override_type = t["common"].CollisionMarginOverrideType_OVERRIDE_DEFAULT_MARGIN
+
 
 PEERS = {"trajopt": trajopt, "descartes": descartes}
 """The peers by name; they join :data:`refine.bench.contenders.CONTENDERS` when this module is imported."""

@@ -76,17 +76,23 @@ def read_toolpath(path: str | Path, units: str = "mm") -> tuple[Array, Array]:
             names = [c.lower() for c in cells]
             missing = [c for c in COLUMNS if c not in names]
             if missing:
-                raise InputError(f"{where}: header {', '.join(names)} lacks column(s) {', '.join(missing)}")
+                raise InputError(
+                    f"{where}: header {', '.join(names)} lacks column(s) {', '.join(missing)}"
+                ) from None
             columns = [names.index(c) for c in COLUMNS]
             continue
         if columns is not None:
             if len(values) <= max(columns):
-                raise InputError(f"{where}: {len(values)} numbers, the header names {max(columns) + 1} columns")
+                raise InputError(
+                    f"{where}: {len(values)} numbers, the header names {max(columns) + 1} columns"
+                )
             row = [values[c] for c in columns]
         elif len(values) in (6, 7):
             row = values[-6:]
         else:
-            raise InputError(f"{where}: {len(values)} numbers; expected x, y, z, i, j, k (or a point number first)")
+            raise InputError(
+                f"{where}: {len(values)} numbers; expected x, y, z, i, j, k (or a point number first)"
+            )
         point, axis = np.array(row[:3]) * scale, np.array(row[3:])
         check_point(point, CAD_COORDINATE_LIMIT_M, where, "position")
         norm = float(np.linalg.norm(axis))
@@ -139,7 +145,9 @@ def fused_from_toolpath(
             its spacing.
     """
     if not (0.0 < speed_m_s <= CAD_SPEED_LIMIT_M_S):
-        raise InputError(f"cad.speed_m_s = {speed_m_s} m/s: a toolpath needs a speed in (0, {CAD_SPEED_LIMIT_M_S:g}] m/s")
+        raise InputError(
+            f"cad.speed_m_s = {speed_m_s} m/s: a toolpath needs a speed in (0, {CAD_SPEED_LIMIT_M_S:g}] m/s"
+        )
     T = check_transform(cad_in_world, "frames.cad_in_world")
     points, axes = read_toolpath(path, units)
     keep = np.r_[True, np.linalg.norm(np.diff(points, axis=0), axis=1) > DUPLICATE_TOLERANCE_M]

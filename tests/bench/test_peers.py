@@ -56,7 +56,9 @@ def test_tesseract_places_the_tcp_where_pinocchio_does():
     from refine.bench.peers import TCP, tesseract_environment
 
     problem = generated_problem("t", "wave", WAVE, 5)
-    problem.base_in_world = np.array([[0.0, -1.0, 0.0, 0.2], [1.0, 0.0, 0.0, -0.1], [0.0, 0.0, 1.0, 0.3], [0, 0, 0, 1]])
+    problem.base_in_world = np.array(
+        [[0.0, -1.0, 0.0, 0.2], [1.0, 0.0, 0.0, -0.1], [0.0, 0.0, 1.0, 0.3], [0, 0, 0, 1]]
+    )
     _, env, _, _, names, _ = tesseract_environment(problem)
     kin = TcpKinematics(problem.robot, problem.base_in_world, problem.tcp_in_flange)
     for q in (np.zeros(6), np.array([0.3, -0.4, 0.5, 1.0, 0.7, -2.0])):
