@@ -143,6 +143,23 @@ def _add_link(
     ET.SubElement(joint, "origin", _origin(T_parent_link))
 
 
+def _narrow_limits(problem: BenchProblem, root: ET.Element) -> None:
+    """Narrow the limits of the robot's revolute joints in a URDF tree by the problem's joint margin."""
+    margin = math.radians(problem.tolerances.joint_margin_deg)
+    joints = set(problem.robot.spec.joint_names)
+    for joint in root.iter("joint"):
+        limit = joint.find("limit")
+        if joint.get("name") in joints and limit is not None and joint.get("type") == "revolute":
+            limit.set("lower", f"{float(limit.get('lower')) + margin:.12g}")
+            limit.set("upper", f"{float(limit.get('upper')) - margin:.12g}")
+
+
+def _narrowed(problem: BenchProblem, urdf_text: str) -> str:
+    root = ET.fromstring(urdf_text)
+    _narrow_limits(problem, root)
+    return ET.tostring(root, encoding="unicode")
+
+
 def _cell_model(problem: BenchProblem) -> Any:
     """The problem's collision model (of its clearance source), or None without a cell."""
     for source in problem.sources:
@@ -172,13 +189,7 @@ def compose_urdf(problem: BenchProblem, folder: Path) -> tuple[str, list[tuple[s
         name = mesh.get("filename", "")
         if not name.startswith(("/", "package://", "file://")):
             mesh.set("filename", str((urdf.parent / name).resolve()))
-    margin = math.radians(problem.tolerances.joint_margin_deg)
-    joints = set(robot.spec.joint_names)
-    for joint in root.iter("joint"):
-        limit = joint.find("limit")
-        if joint.get("name") in joints and limit is not None and joint.get("type") == "revolute":
-            limit.set("lower", f"{float(limit.get('lower')) + margin:.12g}")
-            limit.set("upper", f"{float(limit.get('upper')) - margin:.12g}")
+    _narrow_limits(problem, root)
     children = {c.get("link") for c in root.iter("child")}
     (base,) = [link.get("name") for link in root.findall("link") if link.get("name") not in children]
     flange = robot.spec.flange_frame
@@ -240,11 +251,29 @@ def tesseract_environment(problem: BenchProblem) -> Any:
     t = _import_tesseract()
     libs = t["root"].parent / "tesseract_robotics.libs"
     folder = Path(tempfile.mkdtemp(prefix="refine-peers-"))
-    base = None
-    urdf_text, pairs = compose_urdf(problem, folder)
-    for j in ET.fromstring(urdf_text).findall("joint"):
-        if j.find("parent").get("link") == WORLD:
-            base = j.find("child").get("link")
+    given = problem.extra.get("tesseract_files")
+    tcp_frame, working_frame, tip = TCP, WORLD, TCP
+    if given is not None:  # the peers' own workcell (a stationary tool): its URDF and SRDF as they stand
+        urdf_text = _narrowed(problem, Path(given["urdf"]).read_text())
+        pairs = None
+        tcp_frame, working_frame, tip = given["tcp_frame"], given["working_frame"], given["tip_link"]
+        srdf_text = Path(given["srdf"]).read_text()
+        srdf_root = ET.fromstring(srdf_text)
+        group = srdf_root.find("group[@name='manipulator']/chain")
+        base = group.get("base_link")
+        for old in list(srdf_root):
+            if old.tag in ("contact_managers_plugin_config", "kinematics_plugin_config"):
+                srdf_root.remove(old)
+        ET.SubElement(srdf_root, "kinematics_plugin_config", filename=str(folder / "kinematics.yaml"))
+        ET.SubElement(srdf_root, "contact_managers_plugin_config", filename=str(folder / "contact_managers.yaml"))
+        srdf_text = ET.tostring(srdf_root, encoding="unicode")
+    else:
+        base = None
+        urdf_text, pairs = compose_urdf(problem, folder)
+        for j in ET.fromstring(urdf_text).findall("joint"):
+            if j.find("parent").get("link") == WORLD:
+                base = j.find("child").get("link")
+        srdf_text = None
     (folder / "kinematics.yaml").write_text(
         "kinematic_plugins:\n"
         f"  search_paths: [{libs}]\n"
@@ -255,7 +284,7 @@ def tesseract_environment(problem: BenchProblem) -> Any:
         "      plugins:\n"
         "        KDLInvKinChainLMA:\n"
         "          class: KDLInvKinChainLMAFactory\n"
-        f"          config: {{base_link: {base}, tip_link: {TCP}}}\n"
+        f"          config: {{base_link: {base}, tip_link: {tip}}}\n"
     )
     (folder / "contact_managers.yaml").write_text(
         "contact_manager_plugins:\n"
@@ -271,7 +300,7 @@ def tesseract_environment(problem: BenchProblem) -> Any:
         "      BulletCastBVHManager: {class: BulletCastBVHManagerFactory}\n"
     )
     (folder / "cell.urdf").write_text(urdf_text)
-    (folder / "cell.srdf").write_text(_srdf(problem, urdf_text, pairs, folder))
+    (folder / "cell.srdf").write_text(srdf_text or _srdf(problem, urdf_text, pairs or [], folder))
     env = t["environment"].Environment()
     locator = t["common"].GeneralResourceLocator()
     if not env.init(
@@ -287,8 +316,8 @@ def tesseract_environment(problem: BenchProblem) -> Any:
         )
     manip = t["common"].ManipulatorInfo()
     manip.manipulator = "manipulator"
-    manip.tcp_frame = TCP
-    manip.working_frame = WORLD
+    manip.tcp_frame = tcp_frame
+    manip.working_frame = working_frame
     manip.manipulator_ik_solver = "KDLInvKinChainLMA"
     problem.extra["tesseract_env"] = (t, env, manip, locator, names, folder)
     return problem.extra["tesseract_env"]
