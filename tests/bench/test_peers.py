@@ -85,3 +85,29 @@ def test_trajopt_and_descartes_answer_a_short_wave_and_the_shared_check_grades_t
     assert verdict.max_position_error_m < 1e-5
     # its samples turn about the tool axis by at most half the cone
     assert verdict.max_orientation_deviation_deg <= 0.5 * problem.tolerances.orientation_deg + 1e-3
+
+
+@pytest.mark.slow
+def test_the_puzzle_piece_as_tesseract_poses_it(require):
+    from refine.bench.suites import tesseract_puzzle
+    from refine.frames import make_transform, matrix_from_fixed_xyz
+
+    support = require.path(
+        require.shared / "peers" / "tesseract_support", "the puzzle piece's files (../shared/peers)"
+    )
+    problem = tesseract_puzzle("t", support)
+    assert problem.robot.spec.joint_names == tuple(f"joint_a{k}" for k in range(1, 8))
+    assert problem.n_waypoints >= 437 and problem.axisymmetric
+    # by hand from the URDF: world -> link_grinder (0.35, -0.35, 0.6) -> grinder_frame (0, 0, 0.1), turned pi about y
+    assert problem.tool_in_world[:3, 3] == pytest.approx([0.35, -0.35, 0.7])
+    assert problem.tool_in_world[:3, 2] == pytest.approx([0.0, 0.0, -1.0], abs=1e-5)
+    # tool0 -> ee_mount -> tool1 -> part, the URDF's three origins
+    rpy = (lambda r: matrix_from_fixed_xyz(r, degrees=False))
+    expected = (
+        make_transform(rpy([1.5708, 0.0, 0.0]), [0.0, 0.0, 0.0])
+        @ make_transform(rpy([0.523599, -0.523599, 0.0]), [-0.0083, 0.0541, 0.0143])
+        @ make_transform(rpy([0.0, -0.2618, 0.0]), [0.0110, 0.0030, -0.0379])
+    )
+    assert problem.tcp_in_flange == pytest.approx(expected, abs=1e-9)
+    assert problem.fused.positions[0] == pytest.approx([0.0789071, 0.0, 0.0237139])
+    assert verify(problem, None).reason == "no answer"
