@@ -109,9 +109,10 @@ class Problem:
     source: Path | None = None
 
     def __post_init__(self) -> None:
-        if self.demonstration is None and self.cad is not None and self.cad.format != "pathml":
+        if self.demonstration is None and self.cad is not None and self.cad.format not in ("pathml", "toolpath"):
             raise InputError(
-                'missing required table [demonstration] (only a PathML path, [cad] format = "pathml", may go without)'
+                "missing required table [demonstration] (only a PathML path or a CAM toolpath, "
+                '[cad] format = "pathml" or "toolpath", may go without)'
             )
 
     @property
@@ -373,9 +374,18 @@ def _robot(t: dict[str, Any], path: Path, inside: Path | None = None) -> RobotSe
             raise InputError(
                 f"robot.model = {out['model']!r}: a robot's name is 1 to 64 letters, digits, '_', '.' or '-'"
             )
-        for key in ("flange_frame", "controller"):
+        for key in ("flange_frame", "controller", "base_link"):
             if key in t:
                 out[key] = _string(t[key], f"robot.{key}")
+        if "locked_joints_deg" in t:
+            locked = t["locked_joints_deg"]
+            if not isinstance(locked, dict):
+                raise InputError(
+                    f"robot.locked_joints_deg must be a table of joint = value [deg], got {locked!r}"
+                )
+            out["locked_joints_deg"] = tuple(
+                (str(k), _number(v, f"robot.locked_joints_deg.{k}")) for k, v in locked.items()
+            )
         if "reach_m" in t:
             out["reach_m"] = _number(t["reach_m"], "robot.reach_m")
         if "packages" in t:
@@ -386,7 +396,7 @@ def _robot(t: dict[str, Any], path: Path, inside: Path | None = None) -> RobotSe
         raise InputError("[robot] missing required key 'model' (a registry robot) or 'urdf' (a URDF file)")
     else:
         out["model"] = _robot_model(t["model"])
-        extra = sorted({"flange_frame", "controller", "reach_m", "packages"} & set(t))
+        extra = sorted({"flange_frame", "controller", "reach_m", "packages", "base_link", "locked_joints_deg"} & set(t))
         if extra:
             raise InputError(
                 f"[robot] {', '.join(extra)} go with urdf; robot {t['model']!r} of the registry has its own"

@@ -23,7 +23,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--contender",
         action="append",
         default=None,
-        help="contender (repeatable; default: all): refine, refine-casadi-ad, refine-fatrop, greedy-ik, drake-ik",
+        help="contender (repeatable; default: all): refine, refine-casadi-ad, refine-fatrop, greedy-ik, drake-ik, trajopt, descartes",
     )
     run.add_argument("--repeat", type=int, default=1, help="runs per problem and contender (median, minimum)")
     run.add_argument(
@@ -56,6 +56,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Carry out ``refine bench ...``; returns the exit status."""
+    from refine.bench import peers  # noqa: F401  (adds trajopt and descartes to CONTENDERS)
     from refine.bench.contenders import CONTENDERS
     from refine.bench.suites import describe, load_suites
 

@@ -52,6 +52,8 @@ def _refine(problem: BenchProblem, mode: str, solver: str = "ipopt") -> Answer:
     from refine.optimise.solve import solve_refinement
     from refine.optimise.stagewise import MAX_FATROP_WAYPOINTS
 
+    if problem.tool_in_world is not None:
+        return Answer("failed", None, note="not run: refine's refinement does not state a stationary tool yet")
     if solver == "fatrop" and problem.n_waypoints > MAX_FATROP_WAYPOINTS:
         return Answer(
             "failed",
@@ -115,7 +117,7 @@ def greedy_ik(problem: BenchProblem) -> Answer:
     from refine.robot.kinematics import TcpKinematics
 
     w0, c0 = time.perf_counter(), time.process_time()
-    kin = TcpKinematics(problem.robot, problem.base_in_world, problem.tcp_in_flange)
+    kin = TcpKinematics(problem.robot, problem.base_in_world, problem.tcp_in_flange, problem.tool_in_world)
     margin = np.radians(problem.tolerances.joint_margin_deg)
     lower, upper = problem.robot.spec.lower + margin, problem.robot.spec.upper - margin
     targets = np.tile(np.eye(4), (problem.n_waypoints, 1, 1))
@@ -155,6 +157,8 @@ def drake_chained_ik(problem: BenchProblem) -> Answer:
         from pydrake.solvers import SnoptSolver
     except ImportError as e:
         raise Unavailable(f"pydrake is not installed ({e}); pip install '.[bench]'") from e
+    if problem.tool_in_world is not None:
+        return Answer("failed", None, note="not run: the Drake contender does not pose a stationary tool")
     snopt = SnoptSolver()
     if not snopt.available():
         raise Unavailable("pydrake has no SNOPT here")
@@ -283,7 +287,7 @@ def verify(problem: BenchProblem, q: Array | None, slack_deg: Array | None = Non
 
     if q is None or not np.all(np.isfinite(q)):
         return Verdict(False, np.nan, np.nan, np.nan, "no answer")
-    kin = TcpKinematics(problem.robot, problem.base_in_world, problem.tcp_in_flange)
+    kin = TcpKinematics(problem.robot, problem.base_in_world, problem.tcp_in_flange, problem.tool_in_world)
     check = check_path(kin, q, problem.fused, problem.tolerances, problem.axisymmetric, slack_deg)
     violations = list(check.violations)
     broken = [(float(v.s_start_m), float(v.s_end_m)) for v in check.violations]

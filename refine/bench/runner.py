@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from refine.bench import peers  # noqa: F401  (adds trajopt and descartes to CONTENDERS)
 from refine.bench.contenders import CONTENDERS, Answer, Unavailable, verify
 from refine.bench.outcomes import DEFAULT_TIME_LIMIT_S, penalised, score
 from refine.bench.suites import BenchProblem, load_suites, problems

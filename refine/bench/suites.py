@@ -53,6 +53,9 @@ class BenchProblem:
         expected: for the unreachable family, the outcome the problem states (else empty).
         expected_s_range_m: the arc-length range [m] the problem states its infeasibility or repair
             to be in (``[expected] s_range_m``), or None.
+        tool_in_world: T_F_TCP of a stationary tool (the robot holds the part; ``tcp_in_flange``
+            then places the part's frame on the flange and the path is in the part's frame), or
+            None (see :class:`refine.robot.kinematics.TcpKinematics`).
     """
 
     suite: str
@@ -71,6 +74,7 @@ class BenchProblem:
     expected: str = ""
     expected_s_range_m: tuple[float, float] | None = None
     extra: dict[str, Any] = field(default_factory=dict)
+    tool_in_world: Array | None = None
 
     @property
     def n_waypoints(self) -> int:
@@ -108,7 +112,7 @@ def load_suites(path: Path = DEFAULT_SUITES) -> dict[str, Any]:
         raise InputError(f"suites file {path}: {e}") from e
     suites, generated = data.get("suite", {}), data.get("generated", {})
     for name, suite in suites.items():
-        unknown = set(suite) - {"problems", "generated", "sizes"}
+        unknown = set(suite) - {"problems", "generated", "sizes", "tesseract"}
         if unknown:
             raise InputError(f"suites file {path}: [suite.{name}] has unknown keys {sorted(unknown)}")
         for family in suite.get("generated", []):
@@ -128,6 +132,10 @@ def problems(data: dict[str, Any], suite: str, *, root: Path = ROOT) -> Iterator
     spec = data["suite"][suite]
     for folder in spec.get("problems", []):
         yield bundled_problem(suite, root / folder)
+    for name in spec.get("tesseract", []):
+        if name != "puzzle_piece":
+            raise InputError(f"[suite.{suite}] tesseract = {name!r}: the one known is 'puzzle_piece'")
+        yield tesseract_puzzle(suite, root.parent / "shared" / "peers" / "tesseract_support")
     for family in spec.get("generated", []):
         for n in spec["sizes"]:
             yield generated_problem(suite, family, data["generated"][family], int(n))
@@ -222,6 +230,76 @@ def generated_problem(suite: str, family: str, spec: dict[str, Any], n: int) -> 
         repair_max_slack_deg=None,
         weights=Weights(mid_range=REDUNDANT_MID_RANGE_WEIGHT if robot.nq > 6 else 0.0),
         extra={"family": family, "length_m": float(spec.get("length_m", 1.0)), "obstacles": bool(boxes)},
+    )
+
+
+PUZZLE_SPACING_M = 0.0025
+"""Waypoint spacing of the puzzle piece's toolpath [m] (its points are about 2.5 mm apart)."""
+
+PUZZLE_SPEED_M_S = 0.02
+"""The puzzle piece's grinding speed [m/s] (the example states none)."""
+
+
+def tesseract_puzzle(suite: str, support: Path) -> BenchProblem:
+    """Tesseract's puzzle piece as Tesseract poses it: the iiwa holds the part, the grinder stands in the world.
+
+    From the example's files in ``support`` (``tesseract_support``): the workcell URDF read with
+    its arm's chain (``base_link`` to ``tool0``, the grinder's two joints locked at zero), the part's
+    frame on the flange (``tcp_in_flange`` = T_tool0_part), the grinder's TCP (``grinder_frame``)
+    as a stationary tool, and the toolpath (positions and tool axes in the part's frame) with the
+    spin about the tool axis free. The URDF's ``package://`` mesh paths are written out absolute
+    into a copy beside a temporary folder. No clearance is checked: refine's URDF reader takes each
+    link's convex hull, and the concave part's hull reaches into the grinder at the grinding point;
+    the contenders are told so and check none either.
+    """
+    import tempfile
+
+    from refine.cad.toolpath import fused_from_toolpath
+    from refine.robot.model import robot_from_urdf
+
+    urdf = support / "urdf" / "puzzle_piece_workcell.urdf"
+    if not urdf.is_file():
+        raise InputError(f"the puzzle piece's files are not at {support} (tesseract_support of Tesseract's example)")
+    folder = Path(tempfile.mkdtemp(prefix="refine-puzzle-"))
+    text = urdf.read_text().replace("package://tesseract_support/", f"{support.resolve()}/")
+    (folder / urdf.name).write_text(text)
+    robot = robot_from_urdf(
+        folder / urdf.name,
+        controller="kuka",
+        flange_frame="tool0",
+        base_link="base_link",
+        locked_joints_deg={"joint_aux1": 0.0, "joint_aux2": 0.0},
+    )
+    model = robot.model
+    data = model.createData()
+    import pinocchio as pin
+
+    pin.framesForwardKinematics(model, data, pin.neutral(model))
+    T_base = {name: data.oMf[model.getFrameId(name)].homogeneous for name in ("tool0", "part", "grinder_frame")}
+    base_in_world = np.eye(4)
+    base_in_world[2, 3] = 0.5  # world -> table -> base_link
+    fused = fused_from_toolpath(
+        support / "urdf" / "puzzle_bent.csv", "mm", PUZZLE_SPACING_M, PUZZLE_SPEED_M_S, np.eye(4)
+    )
+    return BenchProblem(
+        suite=suite,
+        name="puzzle_piece_tesseract",
+        robot=robot,
+        fused=fused,
+        base_in_world=base_in_world,
+        tcp_in_flange=np.linalg.inv(T_base["tool0"]) @ T_base["part"],
+        tolerances=Tolerances(),
+        axisymmetric=True,
+        tool_in_world=base_in_world @ T_base["grinder_frame"],
+        extra={
+            "tesseract_files": {
+                "urdf": folder / urdf.name,
+                "srdf": support / "urdf" / "puzzle_piece_workcell.srdf",
+                "tcp_frame": "grinder_frame",
+                "working_frame": "part",
+                "tip_link": "part",
+            }
+        },
     )
 
 

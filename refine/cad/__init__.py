@@ -145,6 +145,11 @@ def read_cad_tracks(settings: CadSettings, cad_in_world: NDArray) -> list[CadPat
     if T_world_cad.shape != (4, 4):
         raise InputError(f"frames.cad_in_world: expected shape (4, 4), got {T_world_cad.shape}")
     reader = _READERS.get(settings.format)
+    if settings.format == "toolpath":
+        raise InputError(
+            f"cad.format = 'toolpath': {settings.file} holds tool axes too; read it with "
+            "refine.cad.toolpath.fused_from_toolpath(file, units, spacing_m, speed_m_s, cad_in_world)"
+        )
     if settings.format == "pathml":
         raise InputError(
             f"cad.format = 'pathml': {settings.file} holds orientations and speeds too; read it with "

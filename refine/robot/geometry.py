@@ -75,19 +75,30 @@ def fcl_convex(piece: ConvexPiece) -> fcl.Convex:
 
 
 def read_mesh(path: Path, where: str) -> trimesh.Trimesh:
-    """A mesh file's triangles as they stand in the file (no unit scaling).
+    """A mesh file's triangles as they stand in the file (no unit scaling of ours).
+
+    STL, OBJ, PLY and COLLADA (``.dae``, through pycollada) are read by trimesh; a COLLADA file
+    states its length unit (``<unit meter="0.001"/>``), which is applied, so its triangles come in
+    metres (the unit scaling the caller applies comes on top).
 
     Raises:
         InputError: starting with ``where``, if the file is missing, unreadable or holds no triangles.
     """
     if not path.is_file():
         raise InputError(f"{where}: mesh file {path} not found")
+    if path.suffix.lower() == ".dae":
+        try:
+            import collada  # noqa: F401  (trimesh reads COLLADA through pycollada)
+        except ImportError as e:
+            raise InputError(f"{where}: mesh {path} is COLLADA, which needs pycollada (pip install pycollada)") from e
     try:
         mesh = trimesh.load(str(path), force="mesh")
     except Exception as e:  # trimesh raises many kinds for bad files
         raise InputError(f"{where}: cannot read mesh {path}: {e}") from e
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         raise InputError(f"{where}: mesh {path} holds no triangles")
+    if path.suffix.lower() == ".dae" and mesh.units not in (None, "meters", "m"):
+        mesh.convert_units("meters")  # the file's own <unit meter="...">
     return mesh
 
 

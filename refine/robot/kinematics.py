@@ -30,23 +30,48 @@ CONVERGED = 1e-6
 class TcpKinematics:
     """Numeric TCP kinematics of a robot placed in the world with a tool.
 
+    With a stationary tool (``tool_in_world``) the robot holds the part and the tool stands in the
+    world: ``tcp_in_flange`` then places the part's frame on the flange (the robot-held work
+    object), and every pose and Jacobian is the tool's TCP as seen from the part,
+    ``T_part_TCP(q) = (T_F_R · fk(q) · T_flange_part)⁻¹ · T_F_TCP``, in the part's frame (the frame
+    a path along the part is given in).
+
     Attributes:
         robot: the robot model.
         base_in_world: T_F_R (4, 4).
-        tcp_in_flange: T_flange_TCP (4, 4).
+        tcp_in_flange: T_flange_TCP (4, 4); with a stationary tool, T_flange_part.
+        tool_in_world: T_F_TCP of a stationary tool (4, 4), or None for a tool on the flange.
     """
 
     robot: Robot
     base_in_world: Array
     tcp_in_flange: Array
+    tool_in_world: Array | None = None
 
     def pose(self, q: Array) -> Array:
-        """T_F_TCP for joints ``q`` [rad], shape (4, 4)."""
-        return self.base_in_world @ self.robot.fk(q) @ self.tcp_in_flange
+        """T_F_TCP for joints ``q`` [rad], shape (4, 4) (with a stationary tool: T_part_TCP)."""
+        T = self.base_in_world @ self.robot.fk(q) @ self.tcp_in_flange
+        return T if self.tool_in_world is None else _rigid_inverse(T) @ self.tool_in_world
 
     def poses(self, qs: Array) -> Array:
-        """T_F_TCP for joint rows ``qs`` (N, n), shape (N, 4, 4)."""
-        return self.base_in_world @ self.robot.fk_many(qs) @ self.tcp_in_flange
+        """T_F_TCP for joint rows ``qs`` (N, n), shape (N, 4, 4) (with a stationary tool: T_part_TCP)."""
+        T = self.base_in_world @ self.robot.fk_many(qs) @ self.tcp_in_flange
+        return T if self.tool_in_world is None else _rigid_inverse(T) @ self.tool_in_world
+
+    def _stationary(self, T_wf: Array, Jv: Array, Jw: Array) -> tuple[Array, Array]:
+        """T_part_TCP (..., 4, 4) and its Jacobian (..., 6, n) from the flange's pose and world Jacobian.
+
+        The part moves, the tool stands: the TCP moves in the part's frame as the point of the part
+        at the TCP moves backwards, ``v = -R_F_partᵀ (v_flange + ω × (p_TCP - o_flange))`` and
+        ``ω_rel = -R_F_partᵀ ω``, both in the part's frame.
+        """
+        T_wp = T_wf @ self.tcp_in_flange
+        tool = self.tool_in_world
+        r = tool[:3, 3] - T_wf[..., :3, 3]  # flange origin -> tool TCP, world axes (..., 3)
+        Jv_point = Jv - np.cross(r[..., :, None], Jw, axis=-2)
+        Rt = np.swapaxes(T_wp[..., :3, :3], -1, -2)
+        J = -np.concatenate([Rt @ Jv_point, Rt @ Jw], axis=-2)
+        return _rigid_inverse(T_wp) @ tool, J
 
     def batch(self, qs: Array) -> tuple[Array, Array, Array]:
         """TCP positions (M, 3), rotations (M, 3, 3) and Jacobians (M, 6, n) for joint rows ``qs`` (M, n).
@@ -67,6 +92,9 @@ class TcpKinematics:
         T_wf = self.base_in_world @ T_bf
         R_wb = self.base_in_world[:3, :3]
         Jv, Jw = R_wb @ J[:, :3], R_wb @ J[:, 3:]
+        if self.tool_in_world is not None:
+            T, J_rel = self._stationary(T_wf, Jv, Jw)
+            return T[:, :3, 3], T[:, :3, :3], J_rel
         r = T_wf[:, :3, :3] @ self.tcp_in_flange[:3, 3]  # flange origin -> TCP, world axes (M, 3)
         T = T_wf @ self.tcp_in_flange
         return (
@@ -88,6 +116,8 @@ class TcpKinematics:
         T_wf = self.base_in_world @ robot.data.oMf[robot.flange_id].homogeneous
         R_wb = self.base_in_world[:3, :3]
         Jv, Jw = R_wb @ J[:3], R_wb @ J[3:]
+        if self.tool_in_world is not None:
+            return self._stationary(T_wf, Jv, Jw)
         rx, ry, rz = T_wf[:3, :3] @ self.tcp_in_flange[:3, 3]  # flange origin -> TCP, world axes
         # v_TCP = v_flange + ω × r = v_flange - [r]ₓ ω
         skew = np.array([[0.0, -rz, ry], [rz, 0.0, -rx], [-ry, rx, 0.0]])
@@ -99,8 +129,20 @@ class TcpKinematics:
         J = self.robot.jacobian(q)
         Jv, Jw = R_wb @ J[:3], R_wb @ J[3:]
         T_wf = self.base_in_world @ self.robot.fk(q)
+        if self.tool_in_world is not None:
+            return self._stationary(T_wf, Jv, Jw)[1]
         r = T_wf[:3, :3] @ self.tcp_in_flange[:3, 3]  # flange origin -> TCP, world axes
         return np.vstack([Jv - np.cross(r, Jw.T).T, Jw])
+
+
+def _rigid_inverse(T: Array) -> Array:
+    """The inverse of rigid transforms (..., 4, 4)."""
+    inv = np.zeros_like(T)
+    Rt = np.swapaxes(T[..., :3, :3], -1, -2)
+    inv[..., :3, :3] = Rt
+    inv[..., :3, 3] = -(Rt @ T[..., :3, 3, None])[..., 0]
+    inv[..., 3, 3] = 1.0
+    return inv
 
 
 def pose_error(T: Array, T_target: Array) -> Array:

@@ -121,6 +121,8 @@ def robot_for(settings: RobotSettings) -> Robot:
             settings.joint_lower_deg,
             settings.joint_upper_deg,
             settings.joint_velocity_deg_s,
+            settings.base_link,
+            settings.locked_joints_deg,
         )
     return _registry_robot(
         settings.model, settings.joint_lower_deg, settings.joint_upper_deg, settings.joint_velocity_deg_s
@@ -139,6 +141,8 @@ def _urdf_robot(
     lower: tuple[float, ...] | None,
     upper: tuple[float, ...] | None,
     velocity: tuple[float, ...] | None,
+    base_link: str | None = None,
+    locked: tuple[tuple[str, float], ...] = (),
 ) -> Robot:
     del stamp  # part of the cache key only: an edited URDF is read again
     return robot_from_urdf(
@@ -151,6 +155,8 @@ def _urdf_robot(
         joint_lower_deg=lower,
         joint_upper_deg=upper,
         joint_velocity_deg_s=velocity,
+        base_link=base_link,
+        locked_joints_deg=dict(locked),
     )
 
 

@@ -49,8 +49,14 @@ def read_urdf(
     joint_lower_deg: Sequence[float] | None = None,
     joint_upper_deg: Sequence[float] | None = None,
     joint_velocity_deg_s: Sequence[float] | None = None,
+    base_link: str | None = None,
+    locked_joints_deg: Mapping[str, float] | None = None,
 ) -> tuple[RobotSpec, pin.Model]:
     """A robot's spec and Pinocchio model read from its URDF file (not from the registry).
+
+    A workcell's URDF (a turntable, a positioner, a second arm beside the robot) names the arm's
+    chain by ``base_link`` and ``flange_frame`` and holds every other joint at a value of
+    ``locked_joints_deg`` (:func:`chain_model`).
 
     Args:
         urdf: the URDF or xacro file; mesh files of ``<collision>`` elements are relative to its
@@ -71,6 +77,10 @@ def read_urdf(
         joint_lower_deg: per-joint lower limits [deg] instead of the URDF's.
         joint_upper_deg: per-joint upper limits [deg] instead of the URDF's.
         joint_velocity_deg_s: per-joint speed limits [deg/s] instead of the URDF's.
+        base_link: the URDF link the arm stands on, its base frame (every pose of the robot is
+            relative to it); None for the URDF's root.
+        locked_joints_deg: joints held still, by name, at these values [deg] (a prismatic joint's
+            value in mm); every joint not on the chain to the flange must be among them.
 
     Raises:
         InputError: the file cannot be read, the flange frame is missing, a joint has more than
@@ -79,7 +89,7 @@ def read_urdf(
     """
     source = Path(urdf).resolve()
     path = resolve_description(source, packages)
-    pin_model = build_model(path)
+    pin_model = chain_model(build_model(path), path, flange_frame, base_link, locked_joints_deg or {})
     joints = tuple(pin_model.names[j] for j in range(1, pin_model.njoints))
     if pin_model.nq != len(joints) or pin_model.nv != len(joints):
         raise InputError(
@@ -117,6 +127,66 @@ def read_urdf(
         else spec.velocity / DEFAULT_ACCELERATION_TIME_S
     )
     return replace(spec, acceleration=accel), pin_model
+
+
+def chain_model(
+    model: pin.Model, path: Path, flange_frame: str, base_link: str | None, locked_deg: Mapping[str, float]
+) -> pin.Model:
+    """The arm's chain of a URDF's model: ``locked_deg`` joints held still, re-rooted at ``base_link``.
+
+    The locked joints are removed (Pinocchio's ``buildReducedModel``, every other joint at zero
+    for the reference); the rest must all carry the flange. With ``base_link``, which no joint may
+    move once the locked joints are held, the model's root becomes that link: every placement fixed
+    to the old root is expressed in it, so the base frame, the robot's poses and ``base_in_world``
+    are that link's. Links fixed to the old root keep their collision geometry as bodies fixed to
+    the base.
+
+    Raises:
+        InputError: an unknown or repeated joint or link, a joint off the chain left unlocked, or a
+            base link that a joint still moves; the message names them.
+    """
+    names = [model.names[j] for j in range(1, model.njoints)]
+    unknown = sorted(set(locked_deg) - set(names))
+    if unknown:
+        raise InputError(
+            f"URDF {path}: robot.locked_joints_deg names {unknown}, not joints of the URDF; joints: {', '.join(names)}"
+        )
+    if locked_deg:
+        q_ref = pin.neutral(model)
+        for name, value in locked_deg.items():
+            joint = model.joints[model.getJointId(name)]
+            if joint.nq != 1:
+                raise InputError(f"URDF {path}: joint {name!r} has {joint.nq} coordinates; only 1-DoF joints lock")
+            prismatic = model.joints[model.getJointId(name)].shortname().startswith("JointModelP")
+            q_ref[joint.idx_q] = float(value) * 1e-3 if prismatic else np.radians(float(value))
+        model = pin.buildReducedModel(model, [model.getJointId(n) for n in locked_deg], q_ref)
+    if not model.existFrame(flange_frame):
+        return model  # read_urdf names the missing flange
+    carrying = set(model.supports[model.frames[model.getFrameId(flange_frame)].parentJoint])
+    loose = [model.names[j] for j in range(1, model.njoints) if j not in carrying]
+    if loose:
+        raise InputError(
+            f"URDF {path}: joint(s) {', '.join(loose)} do not carry the flange {flange_frame!r}; "
+            "hold them in robot.locked_joints_deg = {name = value [deg]}"
+        )
+    if base_link is None:
+        return model
+    if not model.existFrame(base_link):
+        raise InputError(f"URDF {path}: robot.base_link {base_link!r} is not a frame of the URDF")
+    frame = model.frames[model.getFrameId(base_link)]
+    if frame.parentJoint != 0:
+        raise InputError(
+            f"URDF {path}: robot.base_link {base_link!r} is moved by joint {model.names[frame.parentJoint]!r}; "
+            "lock it or name a link below the moving joints"
+        )
+    root_in_base = frame.placement.inverse()
+    for j in range(1, model.njoints):
+        if model.parents[j] == 0:
+            model.jointPlacements[j] = root_in_base * model.jointPlacements[j]
+    for i in range(1, len(model.frames)):  # the universe frame stays the root
+        if model.frames[i].parentJoint == 0:
+            model.frames[i].placement = root_in_base * model.frames[i].placement
+    return model
 
 
 def urdf_robot_name(path: str | Path) -> str:

@@ -78,6 +78,19 @@ def fused_tracks(
         )
         watch.lap("cad")
         return [fused]
+    if problem.cad.format == "toolpath":  # positions and tool axes: the orientations without a demonstration
+        from refine.cad.toolpath import fused_from_toolpath
+
+        fused = fused_from_toolpath(
+            problem.cad.file,
+            problem.cad.units,
+            problem.cad.spacing_m,
+            float(problem.cad.speed_m_s),
+            problem.frames.cad_in_world,
+            reverse=problem.cad.reverse,
+        )
+        watch.lap("cad")
+        return [fused]
     from refine.cad import read_cad_tracks
     from refine.demo import clean_demonstration, read_tracker_log
     from refine.demo.quality import gate_dropouts

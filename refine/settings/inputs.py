@@ -53,6 +53,9 @@ class RobotSettings:
         joint_lower_deg: per-joint lower limits [deg] in place of the robot's, or None.
         joint_upper_deg: per-joint upper limits [deg] in place of the robot's, or None.
         joint_velocity_deg_s: per-joint speed limits [deg/s] in place of the robot's, or None.
+        base_link: with ``urdf``: the link the arm stands on (its base frame), or None for the
+            URDF's root.
+        locked_joints_deg: with ``urdf``: joints held still, as (name, value [deg]) pairs.
     """
 
     model: str = ""
@@ -68,6 +71,8 @@ class RobotSettings:
     joint_lower_deg: tuple[float, ...] | None = None
     joint_upper_deg: tuple[float, ...] | None = None
     joint_velocity_deg_s: tuple[float, ...] | None = None
+    base_link: str | None = None
+    locked_joints_deg: tuple[tuple[str, float], ...] = ()
 
     def __post_init__(self) -> None:
         if self.urdf is None and not self.model:
@@ -80,6 +85,8 @@ class RobotSettings:
             raise InputError(
                 "[robot] controller, reach_m and packages go with urdf (a registry robot has its own)"
             )
+        if self.urdf is None and (self.base_link is not None or self.locked_joints_deg):
+            raise InputError("[robot] base_link and locked_joints_deg go with urdf (a registry robot has its own chain)")
         if self.reach_m is not None:
             positive("robot", "reach_m", self.reach_m)
         for a in self.joint_velocity_deg_s or ():
@@ -157,8 +164,8 @@ class CadSettings:
 
     Attributes:
         file: absolute path of the file.
-        format: ``"csv"``, ``"dxf"``, ``"gcode"``, ``"mesh"`` (STL, OBJ, PLY) or ``"pathml"``
-            (from the extension when not given).
+        format: ``"csv"``, ``"dxf"``, ``"gcode"``, ``"mesh"`` (STL, OBJ, PLY), ``"pathml"`` or
+            ``"toolpath"`` (a CAM toolpath with tool axes, CSV) (from the extension when not given).
         units: length unit of the file: ``"m"``, ``"mm"`` or ``"in"``.
         spacing_m: largest waypoint spacing along the path after resampling [m].
         chord_tolerance_m: largest distance of the CAD geometry from the straight moves between
@@ -171,6 +178,7 @@ class CadSettings:
         start_near: start a closed contour at its point nearest to this [file units], or None.
         track: the track to read: its 1-based number (DXF, G-code), ``"layer/track"`` (PathML), or
             None for every track (DXF, G-code) or the first (PathML).
+        speed_m_s: the tool's speed along a CAM toolpath [m/s] (toolpath; required there).
     """
 
     file: Path
@@ -185,9 +193,14 @@ class CadSettings:
     boundary: bool = False
     start_near: tuple[float, float, float] | None = None
     track: str | None = None
+    speed_m_s: float | None = None
 
     def __post_init__(self) -> None:
         one_of("cad", "format", self.format, CAD_FORMATS)
+        if (self.format == "toolpath") != (self.speed_m_s is not None):
+            raise InputError(
+                "cad: speed_m_s [m/s] goes with format = 'toolpath' (a CAM toolpath's speed), and only with it"
+            )
         if self.format == "mesh" and self.boundary == (self.section_normal is not None):
             raise InputError(
                 "cad: a mesh path needs either boundary = true or section_origin + section_normal"

@@ -15,7 +15,7 @@ from refine.errors import InputError
 
 Matrix4 = np.ndarray
 
-CAD_FORMATS = ("csv", "dxf", "gcode", "mesh", "pathml")
+CAD_FORMATS = ("csv", "dxf", "gcode", "mesh", "pathml", "toolpath")
 DEMO_FORMATS = ("liberty_ascii", "liberty_binary", "csv")
 PROGRAM_FORMATS = ("rapid", "krl", "urscript", "sunrise", "tp", "inform")
 URSCRIPT_MODES = ("program", "script_node")
