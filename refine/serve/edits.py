@@ -181,6 +181,8 @@ def apply_changes(base: Any, changes: Mapping[str, Any], path: Path) -> tuple[An
     problem = problem_from_data(doc.unwrap(), path)  # the frames checked before a move uses them
     if MOVE in changes:
         D = move_transform(changes[MOVE], problem.frames.cad_in_world)
+        if np.array_equal(D, np.eye(4)):  # no move: the file keeps its own text
+            return doc, problem
         for key in ("frames.cad_in_world", "frames.source_in_world"):
             _set(doc, key, pose_table(D @ _frame(doc, key)))
         for obj in doc.get("cell", {}).get("objects", []):
