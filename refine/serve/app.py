@@ -140,6 +140,9 @@ def create_app(session: Session, out_dir: Path, *, token: str | None = None) -> 
 
         return Response(page_script(), media_type="text/javascript")
 
+    async def no_icon(request: Request) -> Response:
+        return Response(status_code=204)
+
     async def plotly(request: Request) -> Response:
         return Response(plotly_js, media_type="text/javascript")
 
@@ -219,6 +222,7 @@ def create_app(session: Session, out_dir: Path, *, token: str | None = None) -> 
         Route("/", page),
         Route("/page.js", script),
         Route("/plotly.js", plotly),
+        Route("/favicon.ico", no_icon),
         Route("/api/change", change, methods=["POST"]),
         Route("/api/reset", reset, methods=["POST"]),
         Route("/api/diff", diff),

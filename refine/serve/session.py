@@ -159,10 +159,16 @@ class FusedCache:
 
 
 def resolve(problem: Problem, fused: FusedPath, previous: RunResult | None) -> RunResult:
-    """Solve ``problem`` on ``fused``, from ``previous``'s answer where it applies (module docstring)."""
+    """Solve ``problem`` on ``fused``, from ``previous``'s answer where it applies (module docstring).
+
+    Only an ``ok`` answer is a start: a repaired or failed one holds joints bent by the slack or
+    left where the solver gave up. When the warm solve is not ``ok`` the problem is solved again
+    from the IK seed and that answer is kept, so a verdict never depends on the changes before it
+    (the cold answer is the one ``refine run`` gives).
+    """
     robot = robot_for(problem.robot)
     nlp, q0 = None, None
-    if previous is not None and previous.robot is robot:
+    if previous is not None and previous.robot is robot and previous.status == "ok":
         old = previous.first.nlp
         same = (
             old is not None
@@ -174,7 +180,11 @@ def resolve(problem: Problem, fused: FusedPath, previous: RunResult | None) -> R
         nlp = reuse_for(old, fused, problem.tolerances) if same else None
         if previous.first.refinement.q.shape == (len(fused), robot.nq):
             q0 = warm_joints(problem, robot, fused, previous.first.refinement.q)
-    return solve_problem(problem, robot=robot, fused=fused, nlp=nlp, q0=q0)
+    result = solve_problem(problem, robot=robot, fused=fused, nlp=nlp, q0=q0)
+    if result.status != "ok" and (nlp is not None or q0 is not None):
+        log.info("serve: the warm solve is %s; solving again from the IK seed", result.status)
+        result = solve_problem(problem, robot=robot, fused=fused)
+    return result
 
 
 WARM_IK_ITERATIONS = 40
