@@ -41,8 +41,16 @@ def add_parser(sub: Any) -> None:
 
 
 def serve_command(args: argparse.Namespace) -> int:
-    """Run the app until Ctrl-C; the exit status (0)."""
-    import uvicorn
+    """Run the app until Ctrl-C (or SIGTERM); the exit status (0)."""
+    try:
+        import starlette  # noqa: F401
+        import tomlkit  # noqa: F401
+        import uvicorn
+        import websockets  # noqa: F401
+    except ImportError as e:
+        raise InputError(
+            f"refine serve needs the serve extra ({e.name} is missing): pip install -e '.[serve]'"
+        ) from e
 
     from refine.serve.app import create_app
     from refine.serve.session import Session
@@ -70,7 +78,10 @@ def serve_command(args: argparse.Namespace) -> int:
 
     threading.Thread(target=say, daemon=True).start()
     try:
-        server.run()
+        server.run()  # Ctrl-C: uvicorn closes the connections, then raises it again here
+    except KeyboardInterrupt:
+        pass
     finally:
         session.close()
+    print("refine serve: stopped", flush=True)
     return 0

@@ -184,7 +184,9 @@
     if (msg.type === "error") { showError(msg.message); return; }
     if (msg.type === "pending") {
       $("state").textContent = "solving revision " + msg.revision + "...";
-      $("state").className = "busy"; fillValues(msg.values); return;
+      $("state").className = "busy"; fillValues(msg.values);
+      document.body.dataset.latest = String(Math.max(Number(document.body.dataset.latest || 0), msg.revision));
+      return;
     }
     if (msg.type === "verdict") {
       if (msg.error) { showError(msg.error); }
@@ -196,7 +198,7 @@
       $("state").className = busy ? "busy" : "";
       document.body.dataset.status = msg.status || "";
       document.body.dataset.revision = String(msg.revision);
-      document.body.dataset.latest = String(msg.latest);
+      document.body.dataset.latest = String(Math.max(Number(document.body.dataset.latest || 0), msg.latest));
       return;
     }
     if (msg.type === "scene") {

@@ -132,7 +132,7 @@ def test_the_part_moved_up_out_of_reach_is_repaired_with_its_cause_and_moved_bac
     before, placed = revision(page), page.get_attribute("body", "data-status")
     for mm in (200, 400, 600):  # a drag: the steps before the last may be dropped
         _move_z(page, mm)
-    page.wait_for_function(f"Number(document.body.dataset.latest) >= {before + 3}", timeout=20_000)
+    page.wait_for_function(f"Number(document.body.dataset.latest) >= {before + 3}")
     status = settled(page)
     assert status in ("repaired", "infeasible")
     text = page.inner_text("#verdict")
