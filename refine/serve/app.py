@@ -6,8 +6,10 @@ Built on Starlette (routing, websockets, responses) served by uvicorn. Every req
 the printed access token (``?token=``, the ``X-Refine-Token`` header, or the cookie the page
 gets), compared in constant time. A request with an ``Origin`` of another site is refused.
 
-The browser never names a file: the problem file is the one the app was started on, the outputs
-go to the folder given on the command line, and ``/files/NAME`` serves only a file written there.
+The browser names no file but a calibration log, which must lie inside the problem folder
+(:func:`refine.serve.calibration.inside_folder`): the problem file is the one the app was started
+on, the outputs go to the folder given on the command line, and ``/files/NAME`` serves only a file
+written there.
 """
 
 from __future__ import annotations
@@ -160,6 +162,15 @@ def create_app(session: Session, out_dir: Path, *, token: str | None = None) -> 
         _pending(hub, session, revision)
         return JSONResponse({"revision": revision})
 
+    async def calibrate(request: Request) -> Response:
+        from refine.serve.calibration import fit
+
+        try:
+            body = await _body(request)
+            return JSONResponse(await anyio.to_thread.run_sync(fit, session.problem, body))
+        except InputError as e:
+            return JSONResponse({"error": str(e)}, status_code=400)
+
     async def diff(request: Request) -> Response:
         return JSONResponse({"diff": await anyio.to_thread.run_sync(session.diff)})
 
@@ -226,6 +237,7 @@ def create_app(session: Session, out_dir: Path, *, token: str | None = None) -> 
         Route("/api/change", change, methods=["POST"]),
         Route("/api/reset", reset, methods=["POST"]),
         Route("/api/diff", diff),
+        Route("/api/calibrate", calibrate, methods=["POST"]),
         Route("/api/write", write, methods=["POST"]),
         Route("/files/{name:path}", written),
         WebSocketRoute("/ws", socket),

@@ -45,6 +45,7 @@ POSES: tuple[str, ...] = (
     "frames.cad_in_world",
     "frames.source_in_world",
     "tool.tcp_in_flange",
+    "tool.sensor_in_tcp",
     "robot.base_in_world",
 )
 """The frames the page may change, as poses ``{xyz, rpy_deg}``."""

@@ -79,6 +79,24 @@
     }).catch(function (e) { $("written").textContent = ""; showError(e.message); });
   });
 
+  var calibration = null;
+  $("cal-fit").addEventListener("click", function () {
+    showError(""); $("cal-accept").disabled = true;
+    api("POST", "api/calibrate", { kind: "pivot", file: $("cal-file").value, format: $("cal-format").value,
+      rate_hz: Number($("cal-rate").value) }).then(function (j) {
+      calibration = j;
+      $("cal-lines").textContent = j.lines.join("\n"); $("cal-lines").hidden = false;
+      var kept = [], rejected = [];
+      j.residuals_mm.forEach(function (r, k) { (j.rejected.indexOf(k) >= 0 ? rejected : kept).push([k, r]); });
+      Plotly.react($("cal-plot"), [
+        { type: "scatter", mode: "markers", name: "kept", x: kept.map(function (p) { return p[0]; }), y: kept.map(function (p) { return p[1]; }), marker: { size: 3 } },
+        { type: "scatter", mode: "markers", name: "rejected", x: rejected.map(function (p) { return p[0]; }), y: rejected.map(function (p) { return p[1]; }), marker: { size: 6, color: "#c0392b" } }
+      ], { height: 220, margin: { l: 50, r: 10, t: 10, b: 40 }, xaxis: { title: { text: "sample" } }, yaxis: { title: { text: "residual [mm]" } } }, CONFIG);
+      $("cal-accept").disabled = false;
+    }).catch(function (e) { showError(e.message); });
+  });
+  $("cal-accept").addEventListener("click", function () { if (calibration) { send(calibration.change); $("cal-accept").disabled = true; } });
+
   function fillValues(v) {
     values = v;
     document.querySelectorAll("input.scalar").forEach(function (i) {

@@ -30,6 +30,7 @@ FRAMES: dict[str, str] = {
     "frames.cad_in_world": "CAD frame in the world (cad_in_world)",
     "frames.source_in_world": "tracker receiver in the world (source_in_world)",
     "tool.tcp_in_flange": "TCP in the flange (tcp_in_flange)",
+    "tool.sensor_in_tcp": "tracker sensor in the TCP frame (sensor_in_tcp)",
     "robot.base_in_world": "robot base in the world (base_in_world)",
 }
 """The frames' labels."""
@@ -114,6 +115,16 @@ def page_html(title: str, errors_js: str) -> str:
         f"{_move_rows()}"
         f"<h2>Tolerances, margins, speed</h2>{_scalar_rows()}"
         f"<h2>Frames</h2>{_frame_rows()}"
+        "<h2>Calibration: a pivot log in the problem folder</h2>"
+        "<div class='row'><label for='cal-file'>log (path in the problem folder)</label>"
+        "<input type='text' id='cal-file' placeholder='measurements/pivot.liberty'></div>"
+        "<div class='row'><label for='cal-format'>format</label><select id='cal-format'>"
+        "<option>liberty_ascii</option><option>liberty_binary</option><option>csv</option></select></div>"
+        "<div class='row'><label for='cal-rate'>sample rate</label>"
+        "<input type='text' inputmode='decimal' id='cal-rate' value='240'><span class='unit'>Hz</span></div>"
+        "<button id='cal-fit' type='button'>Fit</button>"
+        "<button id='cal-accept' type='button' disabled>Accept into the problem (sensor_in_tcp)</button>"
+        "<pre id='cal-lines' hidden></pre><div id='cal-plot'></div>"
         "<h2>Save and write</h2>"
         "<button id='reset' type='button'>Undo all changes</button>"
         "<button id='show-diff' type='button'>Show the changes to problem.toml</button>"

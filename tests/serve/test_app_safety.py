@@ -95,3 +95,36 @@ def test_a_bad_change_is_answered_with_the_key_and_unit(session, folder):
     assert "tolerances.orientation_deg" in answer.json()["error"] and "deg" in answer.json()["error"]
     assert client.post("/api/change", content=b"not json").status_code == 400
     assert session.revision == 0
+
+
+@pytest.mark.parametrize(
+    "name",
+    ["../glass/problem.toml", "/etc/passwd", "measurements/../../x.liberty", "link.liberty", "", "nothere.liberty"],
+)
+def test_a_calibration_log_outside_the_problem_folder_is_refused(session, folder, name, tmp_path_factory):
+    outside = tmp_path_factory.mktemp("outside") / "pivot.liberty"
+    shutil.copy(ROOT / "problems" / "glass_calibrated" / "measurements" / "pivot.liberty", outside)
+    if not (folder / "link.liberty").exists():
+        (folder / "link.liberty").symlink_to(outside)  # a link from inside the folder to outside it
+    client = TestClient(create_app(session, folder / "out"), base_url="http://127.0.0.1:8000")
+    answer = client.post("/api/calibrate", json={"kind": "pivot", "file": name, "rate_hz": 60})
+    assert answer.status_code == 400, name
+    assert "problem folder" in answer.json()["error"]
+
+
+def test_a_pivot_log_in_the_folder_is_fitted_to_the_generators_tip(session, folder):
+    shutil.copytree(ROOT / "problems" / "glass_calibrated" / "measurements", folder / "measurements", dirs_exist_ok=True)
+    client = TestClient(create_app(session, folder / "out"), base_url="http://127.0.0.1:8000")
+    answer = client.post(
+        "/api/calibrate", json={"kind": "pivot", "file": "measurements/pivot.liberty", "rate_hz": 60}
+    )
+    assert answer.status_code == 200, answer.text
+    fit = answer.json()
+    # the simulated tip (problems/glass_calibrated/README.md, from generate.py): 25.98, 15.00, -250.00 mm
+    assert max(abs(a - b) for a, b in zip(fit["tip_in_sensor_mm"], [25.98, 15.00, -250.00], strict=True)) < 0.5
+    assert len(fit["rejected"]) == 4  # the generator's four spikes
+    assert len(fit["residuals_mm"]) == 600
+    assert set(fit["change"]) == {"tool.sensor_in_tcp"}
+    assert session.revision == 0  # a fit changes nothing until it is accepted
+    bad = client.post("/api/calibrate", json={"kind": "pivot", "file": "measurements/pivot.liberty", "rate_hz": 0})
+    assert bad.status_code == 400 and "Hz" in bad.json()["error"]
