@@ -1,4 +1,4 @@
-"""Command line: ``refine run PROBLEM --out DIR``, ``refine check PROBLEM``, ``refine robots``."""
+"""Command line: ``refine run PROBLEM --out DIR``, ``refine check PROBLEM``, ``refine serve PROBLEM``, ``refine robots``."""
 
 from __future__ import annotations
 
@@ -68,6 +68,9 @@ def _parser() -> argparse.ArgumentParser:
     from refine.bench.cli import add_parser as add_bench
 
     add_bench(sub)
+    from refine.serve.cli import add_parser as add_serve
+
+    add_serve(sub)
     return p
 
 

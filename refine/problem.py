@@ -151,7 +151,19 @@ def load_problem(path: str | Path, *, allow_outside: bool = False) -> Problem:
         path = path / "problem.toml"
     if not path.is_file():
         raise InputError(f"problem file not found: {path}")
-    data = read_registry_toml(path)
+    return problem_from_data(read_registry_toml(path), path, allow_outside=allow_outside)
+
+
+def problem_from_data(data: dict[str, Any], path: Path, *, allow_outside: bool = False) -> Problem:
+    """A :class:`Problem` from the parsed tables of ``path`` (what :func:`load_problem` reads).
+
+    The checks and messages are those of :func:`load_problem`; data files are looked up beside
+    ``path``. An editor that holds the file's tables in memory (``refine serve``) checks a change
+    through this before it is saved.
+
+    Raises:
+        InputError: as :func:`load_problem`.
+    """
     root = path.parent.resolve()
     _check_keys(data, "", _TOP_KEYS, path)
     for table in ("robot", "tool", "cad"):

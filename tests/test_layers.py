@@ -45,7 +45,7 @@ FLOORS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("optimise", ("refine.optimise",)),
     ("plan", ("refine.plan",)),
     ("outputs", ("refine.run.result", "refine.run.evaluate", "refine.run.outputs", "refine.export", "refine.report")),
-    ("application", ("refine.run", "refine.calibrate", "refine.synthetic", "refine.bench")),
+    ("application", ("refine.run", "refine.calibrate", "refine.synthetic", "refine.bench", "refine.serve")),
     ("interfaces", ("refine.api", "refine.cli", "refine")),
 )
 

@@ -30,7 +30,7 @@ from refine.report.verdict import verdict_html
 if TYPE_CHECKING:
     from refine.run.result import RunResult
 
-_ERRORS_JS = """
+ERRORS_JS = """
 (function () {
   var box = null;
   function note(text) {
@@ -229,7 +229,7 @@ def write_report(path: Path, result: RunResult) -> Path:
     page = (
         "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
         f"<title>refine: {html.escape(result.problem.name)} ({html.escape(result.status)})</title>"
-        f"<script>{_ERRORS_JS}</script><style>{_CSS}</style>"
+        f"<script>{ERRORS_JS}</script><style>{_CSS}</style>"
         f"<script>{get_plotlyjs()}</script></head><body>"
         "<ul id='js-errors' hidden></ul>"
         f"{verdict_html(result, doc)}"

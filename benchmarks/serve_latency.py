@@ -1,0 +1,106 @@
+"""The time from a change in refine serve to its verdict on the glass cell, and the server's memory.
+
+Starts the app on a copy of the glass cell (uvicorn on a free port, in this process), connects a
+websocket as the page does and sends changes one at a time, each after the verdict of the one
+before: the orientation cone alternating 2.9 / 3.0 deg, then the workpiece moved by 1 mm steps
+along x and back. The latency of a change is from sending it to receiving its verdict message.
+Prints the median and 95th percentile of each kind, the load average beside them, and the
+process's resident memory after the first solve and after ``--memory-changes`` changes.
+
+    nice python3 benchmarks/serve_latency.py [--changes 50] [--memory-changes 500]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import os
+import shutil
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import uvicorn
+import websockets
+
+from refine.serve.app import create_app
+from refine.serve.session import Session
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def rss_mb() -> float:
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+async def changes(url: str, kinds: list[dict], first: bool) -> list[float]:
+    out = []
+    async with websockets.connect(url, max_size=None) as ws:
+        if first:  # the verdict of the problem as loaded
+            while json.loads(await ws.recv()).get("type") != "scene":
+                pass
+        for change in kinds:
+            t0 = time.perf_counter()
+            await ws.send(json.dumps({"type": "change", "changes": change}))
+            while True:
+                msg = json.loads(await ws.recv())
+                if msg["type"] == "error":
+                    raise RuntimeError(msg["message"])
+                if msg["type"] == "verdict" and msg["revision"] == msg["latest"]:
+                    if msg["error"]:
+                        raise RuntimeError(msg["error"])
+                    out.append(time.perf_counter() - t0)
+                    break
+    return out
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--changes", type=int, default=50)
+    parser.add_argument("--memory-changes", type=int, default=500)
+    args = parser.parse_args()
+    folder = Path(tempfile.mkdtemp()) / "glass_adhesive"
+    shutil.copytree(ROOT / "problems" / "glass_adhesive", folder)
+    session = Session(folder)
+    server = uvicorn.Server(uvicorn.Config(create_app(session, folder / "out"), port=0, log_level="warning"))
+    threading.Thread(target=server.run, daemon=True).start()
+    while not server.started:
+        time.sleep(0.05)
+    url = f"ws://127.0.0.1:{server.servers[0].sockets[0].getsockname()[1]}/ws"
+    n = args.changes
+    cone = [{"tolerances.orientation_deg": 2.9 if k % 2 == 0 else 3.0} for k in range(n)]
+    steps = [min(k, n - k) for k in range(1, n + 1)]
+    move = [{"move": {"xyz": [s * 1e-3, 0.0, 0.0], "rpy_deg": [0.0, 0.0, 0.0]}} for s in steps]
+    t_cone = asyncio.run(changes(url, cone, first=True))
+    after_first = rss_mb()
+    load_cone = os.getloadavg()[0]
+    t_move = asyncio.run(changes(url, move, first=False))
+    load_move = os.getloadavg()[0]
+    for label, t, load in (("cone 2.9/3.0 deg", t_cone, load_cone), ("part moved 1 mm steps", t_move, load_move)):
+        a = np.asarray(t)
+        print(
+            f"{label:24s} {len(a)} changes: median {np.median(a):.3f} s, p95 {np.percentile(a, 95):.3f} s, "
+            f"max {a.max():.3f} s (load average {load:.2f})"
+        )
+    done = 2 * n
+    extra = max(0, args.memory_changes - done)
+    if extra:
+        more = [{"tolerances.orientation_deg": 2.9 if k % 2 == 0 else 3.0} for k in range(extra)]
+        asyncio.run(changes(url, more, first=False))
+    print(
+        f"resident memory: {after_first:.0f} MB after the first solve, {rss_mb():.0f} MB after "
+        f"{done + extra} changes; solver: {session.solver.solved} solved, {session.solver.dropped} dropped"
+    )
+    server.should_exit = True
+    session.close()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

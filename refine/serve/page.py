@@ -1,0 +1,148 @@
+"""The page of ``refine serve``: the verdict, the controls and the 3D view; ``page.js`` draws it.
+
+The page carries no data of its own: ``page.js`` opens the websocket, shows every state the server
+sends (the verdict as the report draws it, the scene, the values in the controls) and sends the
+changes. Plotly's JavaScript is served by the app from the installed ``plotly`` package, so the
+page works without a network. Uncaught errors and ``console.error`` calls are listed in
+``#js-errors`` (hidden while empty), as in the report.
+"""
+
+from __future__ import annotations
+
+import html
+from pathlib import Path
+
+from refine.serve.edits import SCALARS
+
+LABELS: dict[str, str] = {
+    "tolerances.orientation_deg": "orientation cone",
+    "tolerances.joint_margin_deg": "joint margin",
+    "tolerances.singularity_margin": "singularity margin",
+    "collision.margin_m": "clearance to the cell",
+    "collision.self_margin_m": "clearance between links",
+    "robot.velocity_scale": "speed scale (share of the joint speeds)",
+    "repair.placement.translate_m": "placement search: largest shift",
+    "repair.placement.rotate_deg": "placement search: largest turn",
+}
+"""The controls' labels."""
+
+FRAMES: dict[str, str] = {
+    "frames.cad_in_world": "CAD frame in the world (cad_in_world)",
+    "frames.source_in_world": "tracker receiver in the world (source_in_world)",
+    "tool.tcp_in_flange": "TCP in the flange (tcp_in_flange)",
+    "tool.sensor_in_tcp": "tracker sensor in the TCP frame (sensor_in_tcp)",
+    "robot.base_in_world": "robot base in the world (base_in_world)",
+}
+"""The frames' labels."""
+
+_CSS = """
+body{font-family:system-ui,sans-serif;margin:0;color:#222;display:flex;height:100vh}
+#side{width:36em;overflow:auto;padding:0 1em 1em;border-right:1px solid #ccc;font-size:.9em}
+#main{flex:1;display:flex;flex-direction:column;min-width:0} #scene{flex:1;min-height:400px}
+h1{margin:.4em 0 .1em;font-size:1.4em} h2{font-size:1.05em;margin:.8em 0 .3em}
+.badge{font-size:.8em;padding:.1em .5em;border-radius:.3em;color:#fff}
+.st-ok .badge,.badge.st-ok{background:#2e8b57} .badge.st-repaired{background:#d68910}
+.badge.st-infeasible{background:#c0392b}
+table.figures{border-collapse:collapse;width:100%} .figures td,.figures th{padding:.2em .4em;text-align:left;border-bottom:1px solid #ddd}
+tr.pass td{background:#e8f6ee} tr.fail td{background:#fbe3e1;font-weight:600} tr.neutral td{background:#f6f6f6}
+#verdict .cols>div:nth-child(2){display:none}
+ul.segments li{margin:.3em 0;cursor:pointer} ul.segments li:hover{text-decoration:underline}
+#state{font-family:monospace;margin:.4em 0} #state.busy{color:#d68910}
+#error{color:#fff;background:#c0392b;padding:.4em;border-radius:.3em} #js-errors{color:#c0392b}
+.row{display:flex;gap:.4em;align-items:center;margin:.15em 0} .row label{flex:1}
+.row input.scalar{width:7em} .pose input{width:5.2em} .unit{color:#777;width:2.5em}
+.controls{display:flex;gap:.6em;align-items:center;flex-wrap:wrap;padding:.3em .6em}
+.controls input[type=range]{width:20em} #frame-label{font-family:monospace;min-width:12em}
+pre#diff{background:#f4f4f4;padding:.5em;white-space:pre-wrap;max-height:20em;overflow:auto}
+button{margin:.2em .2em .2em 0}
+"""
+
+
+def _scalar_rows() -> str:
+    rows = []
+    for key, unit in SCALARS.items():
+        rows.append(
+            f"<div class='row'><label for='{key}'>{html.escape(LABELS[key])}</label>"
+            f"<input type='text' inputmode='decimal' id='{key}' data-key='{key}' class='scalar'>"
+            f"<span class='unit'>{html.escape(unit)}</span></div>"
+        )
+    return "".join(rows)
+
+
+def _frame_rows() -> str:
+    rows = []
+    for key, label in FRAMES.items():
+        cells = "".join(
+            f"<input type='text' inputmode='decimal' data-key='{key}' data-part='{part}' data-axis='{i}' "
+            f"aria-label='{key} {part}[{i}]'>"
+            for part in ("xyz", "rpy_deg")
+            for i in range(3)
+        )
+        rows.append(
+            f"<div class='pose' id='pose-{key}'><div>{html.escape(label)}: x y z [m], "
+            f"rx ry rz [deg]</div><div>{cells}</div></div>"
+        )
+    return "".join(rows)
+
+
+def _move_rows() -> str:
+    spec = (
+        ("x", "xyz", 0, "mm", 800),
+        ("y", "xyz", 1, "mm", 800),
+        ("z", "xyz", 2, "mm", 800),
+        ("turn about z", "rpy_deg", 2, "deg", 45),
+    )
+    return "".join(
+        f"<div class='row'><label for='move-{name}'>{name}</label>"
+        f"<input type='range' id='move-{name.split()[0]}' class='move' data-part='{part}' data-axis='{i}' "
+        f"min='-{limit}' max='{limit}' step='1' value='0'>"
+        f"<output id='move-{name.split()[0]}-value'>0</output><span class='unit'>{unit}</span></div>"
+        for name, part, i, unit, limit in spec
+    )
+
+
+def page_html(title: str, errors_js: str) -> str:
+    """The whole page (its script and Plotly are separate requests)."""
+    return (
+        "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
+        f"<title>refine serve: {html.escape(title)}</title>"
+        f"<script>{errors_js}</script><style>{_CSS}</style>"
+        "<script src='plotly.js'></script></head><body>"
+        "<div id='side'><ul id='js-errors' hidden></ul>"
+        "<div id='state'>connecting...</div><div id='error' hidden></div>"
+        "<div id='verdict-box'></div>"
+        "<h2>Move the workpiece (the CAD path, the receiver and the workpiece objects together)</h2>"
+        f"{_move_rows()}"
+        f"<h2>Tolerances, margins, speed</h2>{_scalar_rows()}"
+        f"<h2>Frames</h2>{_frame_rows()}"
+        "<h2>Calibration: a pivot log in the problem folder</h2>"
+        "<div class='row'><label for='cal-file'>log (path in the problem folder)</label>"
+        "<input type='text' id='cal-file' placeholder='measurements/pivot.liberty'></div>"
+        "<div class='row'><label for='cal-format'>format</label><select id='cal-format'>"
+        "<option>liberty_ascii</option><option>liberty_binary</option><option>csv</option></select></div>"
+        "<div class='row'><label for='cal-rate'>sample rate</label>"
+        "<input type='text' inputmode='decimal' id='cal-rate' value='240'><span class='unit'>Hz</span></div>"
+        "<button id='cal-fit' type='button'>Fit</button>"
+        "<button id='cal-accept' type='button' disabled>Accept into the problem (sensor_in_tcp)</button>"
+        "<pre id='cal-lines' hidden></pre><div id='cal-plot'></div>"
+        "<h2>Save and write</h2>"
+        "<button id='reset' type='button'>Undo all changes</button>"
+        "<button id='show-diff' type='button'>Show the changes to problem.toml</button>"
+        "<button id='write' type='button' disabled>Save problem.toml and write the outputs</button>"
+        "<pre id='diff' hidden></pre><div id='written'></div></div>"
+        "<div id='main'><div class='controls'><button id='play' type='button'>Play</button>"
+        "<input id='frame' type='range' min='0' value='0' step='1' aria-label='position along the path'>"
+        "<span id='frame-label'></span>"
+        "<label>colour the path by <select id='quantity'>"
+        "<option value='deviation'>deviation from the demonstration [deg]</option>"
+        "<option value='clearance'>clearance [mm]</option>"
+        "<option value='slack'>repair slack [deg]</option>"
+        "<option value='speed'>planned TCP speed [mm/s]</option></select></label>"
+        "<span id='quantity-note'></span></div><div id='scene'></div></div>"
+        "<script src='page.js'></script></body></html>"
+    )
+
+
+def page_script() -> str:
+    """``page.js``."""
+    return (Path(__file__).with_name("page.js")).read_text(encoding="utf-8")

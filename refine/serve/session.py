@@ -1,0 +1,373 @@
+"""The problem being edited in the browser, its warm re-solves (the latest change wins), and writing it.
+
+A :class:`Session` holds the problem file's TOML document as read (or as last saved), the changes
+made since, the problem they describe and its last answer. :meth:`Session.change` checks a change
+at once (as the problem file would be checked) and hands the new problem to a
+:class:`LatestSolver`: one thread that solves one problem at a time and, when it is free, takes
+only the newest problem asked for, so a drag that sends many changes never queues stale solves.
+
+A re-solve starts from the previous answer: the fused path is reused when the change leaves the
+CAD path and the demonstration alone, moved rigidly when the workpiece moved with its receiver,
+the built refinement problem is reused where :func:`refine.optimise.problem.reuse_for` allows (same
+robot, base, tool and weights) and the previous joints are the start. Writing saves the problem
+file and runs it as ``refine run`` does (:func:`refine.run.write.run`), from the saved file.
+"""
+
+from __future__ import annotations
+
+import difflib
+import logging
+import threading
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import tomlkit
+
+from refine.errors import InputError
+from refine.frames import invert_transform
+from refine.optimise.moves import moved_path
+from refine.optimise.problem import joint_bounds, reuse_for
+from refine.paths import FusedPath
+from refine.problem import Problem, load_problem
+from refine.robot.kinematics import TcpKinematics, solve_ik_batch
+from refine.robot.model import Robot
+from refine.robot.registry import robot_for
+from refine.run.result import RunResult
+from refine.run.solve import solve_problem
+from refine.run.stages import fused_path, weights_for
+from refine.serve.edits import apply_changes, check_keys
+
+log = logging.getLogger(__name__)
+
+RIGID_ATOL = 1e-5
+"""Tolerance on the receiver-to-CAD transform under which a workpiece move keeps the fused path [m, -]:
+above the rounding of the poses written into the problem file (:data:`refine.serve.edits.DECIMALS_M`)."""
+
+
+@dataclass
+class Job:
+    """One problem to solve: the revision of the changes that made it."""
+
+    revision: int
+    problem: Problem
+    changes: dict[str, Any]
+    asked_s: float = field(default_factory=time.perf_counter)
+    solve_s: float = 0.0
+
+
+class LatestSolver:
+    """A thread that solves the newest job asked for; jobs superseded while it was busy are dropped.
+
+    Args:
+        solve: solves a job; what it returns (or the error it raises) goes to ``done``.
+        done: called on the solver's thread with the job and ``(answer, error)``.
+    """
+
+    def __init__(
+        self, solve: Callable[[Job], Any], done: Callable[[Job, Any, BaseException | None], None]
+    ) -> None:
+        self._solve, self._done = solve, done
+        self._wake = threading.Condition()
+        self._pending: Job | None = None
+        self._stopping = False
+        self.busy = False
+        self.solved = 0
+        self.dropped = 0
+        self._thread = threading.Thread(target=self._loop, name="refine-serve-solver", daemon=True)
+        self._thread.start()
+
+    def submit(self, job: Job) -> None:
+        """Ask for ``job``; a job still waiting is replaced (and counted as dropped)."""
+        with self._wake:
+            if self._pending is not None:
+                self.dropped += 1
+            self._pending = job
+            self._wake.notify()
+
+    def idle(self) -> bool:
+        """Whether nothing is being solved and nothing waits."""
+        with self._wake:
+            return not self.busy and self._pending is None
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        """Drop the waiting job and end the thread after the solve under way [s to wait for it]."""
+        with self._wake:
+            self._stopping = True
+            self._pending = None
+            self._wake.notify()
+        self._thread.join(timeout_s)
+
+    def _loop(self) -> None:
+        while True:
+            with self._wake:
+                while self._pending is None and not self._stopping:
+                    self._wake.wait()
+                if self._stopping:
+                    return
+                job, self._pending = self._pending, None
+                self.busy = True
+            answer, error = None, None
+            try:
+                answer = self._solve(job)
+            except Exception as e:  # the error goes to the page; the thread keeps serving
+                error = e
+            with self._wake:
+                self.busy = False
+                self.solved += 1
+            self._done(job, answer, error)
+
+
+def fusion_inputs(problem: Problem) -> str:
+    """What the fused path depends on besides the frames' placement in {F} (compared as text)."""
+    return repr((problem.cad, problem.demonstration, np.round(problem.tool.sensor_in_tcp, 12).tolist()))
+
+
+def _relative(problem: Problem) -> np.ndarray:
+    f = problem.frames
+    return invert_transform(f.source_in_world) @ f.cad_in_world
+
+
+class FusedCache:
+    """The last fused path, reused (or moved rigidly with the workpiece) while its inputs hold."""
+
+    def __init__(self) -> None:
+        self._problem: Problem | None = None
+        self._fused: FusedPath | None = None
+        self.reused = 0
+        self.fused = 0
+
+    def path_for(self, problem: Problem) -> FusedPath:
+        """The fused path of ``problem``: reused, moved by the workpiece move, or fused anew."""
+        old, fused = self._problem, self._fused
+        if old is not None and fused is not None and fusion_inputs(old) == fusion_inputs(problem):
+            D = problem.frames.cad_in_world @ invert_transform(old.frames.cad_in_world)
+            if np.allclose(D, np.eye(4), atol=RIGID_ATOL):
+                self.reused += 1
+                return fused
+            pathml = problem.cad is not None and problem.cad.format == "pathml"
+            if not pathml and np.allclose(_relative(old), _relative(problem), atol=RIGID_ATOL):
+                self.reused += 1
+                return moved_path(fused, D)
+        self.fused += 1
+        new = fused_path(problem)
+        self._problem, self._fused = problem, new
+        return new
+
+
+def resolve(problem: Problem, fused: FusedPath, previous: RunResult | None) -> RunResult:
+    """Solve ``problem`` on ``fused``, from ``previous``'s answer where it applies (module docstring).
+
+    Only an ``ok`` answer is a start: a repaired or failed one holds joints bent by the slack or
+    left where the solver gave up. When the warm solve is not ``ok`` the problem is solved again
+    from the IK seed and that answer is kept, so a verdict never depends on the changes before it
+    (the cold answer is the one ``refine run`` gives).
+    """
+    robot = robot_for(problem.robot)
+    nlp, q0 = None, None
+    if previous is not None and previous.robot is robot and previous.status == "ok":
+        old = previous.first.nlp
+        same = (
+            old is not None
+            and np.array_equal(old.base_in_world, problem.robot.base_in_world)
+            and np.array_equal(old.tcp_in_flange, problem.tool.tcp_in_flange)
+            and old.axisymmetric == problem.tool.axisymmetric
+            and old.weights == weights_for(problem, robot)
+        )
+        nlp = reuse_for(old, fused, problem.tolerances) if same else None
+        if previous.first.refinement.q.shape == (len(fused), robot.nq):
+            q0 = warm_joints(problem, robot, fused, previous.first.refinement.q)
+    result = solve_problem(problem, robot=robot, fused=fused, nlp=nlp, q0=q0)
+    if result.status != "ok" and (nlp is not None or q0 is not None):
+        log.info("serve: the warm solve is %s; solving again from the IK seed", result.status)
+        result = solve_problem(problem, robot=robot, fused=fused)
+    return result
+
+
+WARM_IK_ITERATIONS = 40
+"""Iterations of the position IK that carries the previous joints onto a moved path."""
+WARM_REACH_M = 1e-5
+"""Largest TCP miss of the carried joints [m] for them to be the start (else the IK seed is built)."""
+
+
+def warm_joints(problem: Problem, robot: Robot, fused: FusedPath, q_prev: np.ndarray) -> np.ndarray | None:
+    """The previous joints as the start of ``problem``: as they are, or carried onto a moved path.
+
+    When the previous joints no longer put the TCP on the path (the part, the base or the tool
+    moved), a position-only IK from them (:func:`refine.robot.kinematics.solve_ik_batch`) carries
+    each waypoint onto its CAD point with the least joint motion. None when that fails, or leaves
+    a joint step above the tolerance: the solve then builds its IK seed (a start that misses the
+    path would send every waypoint through the reach check's multi-start IK).
+    """
+    kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange)
+    miss = np.linalg.norm(kin.poses(q_prev)[:, :3, 3] - fused.positions, axis=1)
+    if miss.max() <= WARM_REACH_M:
+        return q_prev
+    lower, upper = joint_bounds(robot, problem.tolerances)
+    targets = np.tile(np.eye(4), (len(fused), 1, 1))
+    targets[:, :3, 3] = fused.positions
+    q, err = solve_ik_batch(
+        kin, targets, q_prev, lower, upper, max_iterations=WARM_IK_ITERATIONS, position_only=True
+    )
+    step = np.abs(np.diff(q, axis=0)).max(initial=0.0)
+    if err.max() > WARM_REACH_M or step > np.radians(problem.tolerances.joint_step_deg):
+        return None
+    return q
+
+
+@dataclass
+class Answer:
+    """The last solve: its revision, changes, result or error, and timings [s]."""
+
+    revision: int
+    changes: dict[str, Any]
+    result: RunResult | None
+    error: str | None
+    solve_s: float
+    latency_s: float
+
+
+class Session:
+    """A problem folder open for editing (module docstring).
+
+    Args:
+        folder: the problem folder or its ``problem.toml``.
+        on_answer: called (on the solver's thread) with every finished :class:`Answer`.
+    """
+
+    def __init__(self, folder: Path, on_answer: Callable[[Answer], None] | None = None) -> None:
+        path = Path(folder)
+        self.path = (path / "problem.toml" if path.is_dir() else path).resolve()
+        self.folder = self.path.parent
+        self._lock = threading.Lock()
+        self._engine = threading.Lock()  # one solve or write at a time: they share the robot's model
+        self._on_answer = on_answer
+        self._cache = FusedCache()
+        self._load()
+        self.revision = 0
+        self.answer: Answer | None = None
+        self.solver = LatestSolver(self._solve, self._finished)
+
+    def _load(self) -> None:
+        self.problem = load_problem(self.path)  # checks the file as `refine run` does
+        self.text = self.path.read_text(encoding="utf-8")
+        self.base = tomlkit.parse(self.text)
+        self.doc = self.base
+        self.changes: dict[str, Any] = {}
+
+    def on_answer(self, callback: Callable[[Answer], None]) -> None:
+        """Call ``callback`` (on the solver's thread) with every finished :class:`Answer`."""
+        self._on_answer = callback
+
+    def start(self) -> None:
+        """Solve the problem as loaded (revision 0)."""
+        self.solver.submit(Job(self.revision, self.problem, {}))
+
+    def change(self, changes: Mapping[str, Any]) -> int:
+        """Merge ``changes`` into the session's changes, check them and ask for a solve.
+
+        Returns:
+            The new revision.
+
+        Raises:
+            InputError: a key the page may not change or a value the problem file would refuse;
+                the session is left as it was.
+        """
+        check_keys(changes)
+        with self._lock:
+            merged = {**self.changes, **changes}
+            doc, problem = apply_changes(self.base, merged, self.path)
+            self.revision += 1
+            self.changes, self.doc, self.problem = merged, doc, problem
+            job = Job(self.revision, problem, dict(merged))
+        self.solver.submit(job)
+        return job.revision
+
+    def reset(self) -> int:
+        """Drop every change since the file was read or saved and solve it again."""
+        with self._lock:
+            self.revision += 1
+            self.changes, self.doc = {}, self.base
+            self.problem = load_problem(self.path)
+            job = Job(self.revision, self.problem, {})
+        self.solver.submit(job)
+        return job.revision
+
+    def _solve(self, job: Job) -> RunResult:
+        previous = self.answer.result if self.answer is not None else None
+        t0 = time.perf_counter()
+        with self._engine:
+            try:
+                return resolve(job.problem, self._cache.path_for(job.problem), previous)
+            finally:
+                job.solve_s = time.perf_counter() - t0
+
+    def _finished(self, job: Job, result: RunResult | None, error: BaseException | None) -> None:
+        now = time.perf_counter()
+        if error is not None and not isinstance(error, InputError):
+            log.exception("serve: the solve of revision %d failed", job.revision, exc_info=error)
+        message = None
+        if error is not None:
+            message = str(error) if isinstance(error, InputError) else f"{type(error).__name__}: {error}"
+        answer = Answer(
+            job.revision,
+            job.changes,
+            result if error is None else (self.answer.result if self.answer else None),
+            message,
+            job.solve_s,
+            now - job.asked_s,
+        )
+        if error is None:
+            self.answer = answer
+        if self._on_answer is not None:
+            self._on_answer(answer)
+
+    def current_text(self) -> str:
+        """The problem file as it would be saved."""
+        with self._lock:
+            return tomlkit.dumps(self.doc)
+
+    def diff(self) -> str:
+        """The unified diff from the file on disk to the problem file as it would be saved."""
+        saved = self.path.read_text(encoding="utf-8")
+        return "".join(
+            difflib.unified_diff(
+                saved.splitlines(keepends=True),
+                self.current_text().splitlines(keepends=True),
+                fromfile="problem.toml (on disk)",
+                tofile="problem.toml (in the app)",
+            )
+        )
+
+    def save(self) -> Path:
+        """Write the problem file with the changes (comments and order kept) and make it the base."""
+        text = self.current_text()
+        tmp = self.path.with_name(f".{self.path.name}.saving")
+        tmp.write_text(text, encoding="utf-8")
+        tmp.replace(self.path)  # a reader never sees half a file
+        with self._lock:
+            self.text = text
+            self.base = tomlkit.parse(text)
+            self.doc = self.base
+            self.changes = {}
+        return self.path
+
+    def write(self, out_dir: Path) -> RunResult:
+        """Save the problem file and write every output into ``out_dir`` as ``refine run`` does.
+
+        The saved file is read back and run by :func:`refine.run.write.run`, the function behind
+        ``refine run``, so the files are those the command would write (all or nothing).
+        """
+        from refine.run.write import run
+
+        with self._engine:
+            self.save()
+            problem = load_problem(self.path)
+            return run(problem, out_dir)
+
+    def close(self) -> None:
+        """Stop the solver thread."""
+        self.solver.stop()

@@ -1,0 +1,77 @@
+"""The messages the page is sent: the verdict, the scene, the settings' values.
+
+The verdict is the report's first screen (:func:`refine.report.verdict.verdict_html`, from the
+``result.json`` document) and the scene the report's 3D data (:func:`refine.report.scene.scene_data`),
+so the app and the report never disagree.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from refine.export.result_json import result_dict
+from refine.report.scene import scene_data
+from refine.report.verdict import verdict_html
+from refine.serve.edits import MOVE, POSES, SCALARS, pose_table
+
+if TYPE_CHECKING:
+    from refine.serve.session import Answer, Session
+
+
+def _scalar(problem: Any, dotted: str) -> float | None:
+    node = problem
+    for name in dotted.split("."):
+        node = getattr(node, name, None)
+        if node is None:
+            return None
+    return float(node)
+
+
+def _pose(problem: Any, dotted: str) -> dict[str, list[float]]:
+    table, name = dotted.split(".")
+    return pose_table(np.asarray(getattr(getattr(problem, table), name)))
+
+
+def values_of(session: Session) -> dict[str, Any]:
+    """The values the controls show: of the problem last asked for, and the workpiece move."""
+    problem = session.problem
+    move = session.changes.get(MOVE, {})
+    return {
+        "scalars": {key: _scalar(problem, key) for key in SCALARS},
+        "poses": {key: _pose(problem, key) for key in POSES},
+        "move": {
+            "xyz": list(move.get("xyz", [0.0, 0.0, 0.0])),
+            "rpy_deg": list(move.get("rpy_deg", [0.0, 0.0, 0.0])),
+        },
+        "changed": sorted(session.changes),
+    }
+
+
+def verdict_message(session: Session, answer: Answer) -> dict[str, Any]:
+    """The verdict of ``answer`` (or the error that stopped its solve) with the revision it answers."""
+    result = answer.result
+    out: dict[str, Any] = {
+        "type": "verdict",
+        "revision": answer.revision,
+        "latest": session.revision,
+        "error": answer.error,
+        "solve_s": answer.solve_s,
+        "latency_s": answer.latency_s,
+        "values": values_of(session),
+        "status": None,
+        "verdict_html": None,
+    }
+    if result is not None and answer.error is None:
+        doc = result_dict(result)
+        doc["outputs"] = {}
+        out["status"] = result.status
+        out["verdict_html"] = verdict_html(result, doc)
+    return out
+
+
+def scene_message(answer: Answer) -> dict[str, Any]:
+    """The 3D scene of ``answer``."""
+    assert answer.result is not None
+    return {"type": "scene", "revision": answer.revision, "scene": scene_data(answer.result)}

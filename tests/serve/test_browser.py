@@ -1,0 +1,185 @@
+"""refine serve in Debian's chromium, driven by Playwright: the glass cell's first screen, a bad value,
+a change of the cone seen in a second tab, the part moved out of reach and back, and write.
+
+One server for the module (uvicorn on a free port, in a thread) on a copy of the glass cell; the
+tests run in order on it. Screenshots go to tests/artifacts/serve/.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+ARTIFACTS = ROOT / "tests" / "artifacts" / "serve"
+CHROMIUM = Path("/usr/bin/chromium")
+SOLVE_S = 240  # the longest a solve may take on a loaded machine [s]
+
+playwright = pytest.importorskip("playwright.sync_api", reason="playwright is in the test extra")
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(not CHROMIUM.exists(), reason="chromium is not installed (.ci/run installs it)"),
+]
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    import uvicorn
+
+    from refine.serve.app import create_app
+    from refine.serve.session import Session
+
+    folder = tmp_path_factory.mktemp("serve") / "glass_adhesive"
+    shutil.copytree(ROOT / "problems" / "glass_adhesive", folder)
+    session = Session(folder)
+    app = create_app(session, folder / "out")
+    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=0, log_level="warning"))
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    deadline = time.time() + 60
+    while not server.started and time.time() < deadline:
+        time.sleep(0.05)
+    assert server.started, "the server did not start"
+    port = server.servers[0].sockets[0].getsockname()[1]
+    yield {"url": f"http://127.0.0.1:{port}/", "folder": folder, "session": session}
+    server.should_exit = True
+    thread.join(30)
+
+
+@pytest.fixture(scope="module")
+def pages(server):
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    with playwright.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=["--no-sandbox"])
+        errors: list[str] = []
+        tabs = []
+        for _ in range(2):  # a second tab sees the same state
+            page = browser.new_page(viewport={"width": 1500, "height": 900})
+            page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.set_default_timeout(SOLVE_S * 1000)  # a loaded machine: the server shares two cores
+            page.goto(server["url"], wait_until="domcontentloaded")
+            tabs.append(page)
+        yield {"tabs": tabs, "errors": errors}
+        browser.close()
+
+
+def settled(page, timeout_s: float = SOLVE_S) -> str:
+    """Wait until the verdict shown answers the latest change; its status."""
+    page.wait_for_function(
+        "document.body.dataset.revision !== undefined && document.body.dataset.revision === document.body.dataset.latest"
+        " && document.body.dataset.scene === document.body.dataset.revision",
+        timeout=timeout_s * 1000,
+    )
+    return page.get_attribute("body", "data-status")
+
+
+def revision(page) -> int:
+    return int(page.get_attribute("body", "data-revision"))
+
+
+def test_the_first_screen_shows_the_cell_and_the_verdict(pages):
+    page = pages["tabs"][0]
+    assert settled(page) == "ok"
+    assert page.inner_text("#verdict .badge") == "ok"
+    assert "orientation deviation from the demonstration" in page.inner_text("#verdict")
+    traces = page.evaluate("document.getElementById('scene').data.map(t => t.name)")
+    for name in ("table", "glass", "cup_1", "robot"):  # the cell's objects from the problem file, the robot
+        assert name in traces
+    page.screenshot(path=str(ARTIFACTS / "first-screen.png"))
+    assert pages["errors"] == []
+    assert page.is_hidden("#js-errors")
+
+
+def test_a_bad_value_is_answered_with_its_unit_and_changes_nothing(pages):
+    page = pages["tabs"][0]
+    before = revision(page)
+    page.fill("[id='tolerances.orientation_deg']", "-1")
+    page.press("[id='tolerances.orientation_deg']", "Enter")
+    page.wait_for_selector("#error:not([hidden])", timeout=20_000)
+    message = page.inner_text("#error")
+    assert "tolerances.orientation_deg" in message and "deg" in message and "-1" in message
+    time.sleep(0.5)
+    assert revision(page) == before and page.get_attribute("body", "data-status") == "ok"
+
+
+def test_a_change_of_the_cone_resolves_and_both_tabs_show_it(pages):
+    page, other = pages["tabs"]
+    before = revision(page)
+    page.fill("[id='tolerances.orientation_deg']", "2.5")
+    page.press("[id='tolerances.orientation_deg']", "Enter")
+    page.wait_for_function(f"Number(document.body.dataset.revision) > {before}", timeout=SOLVE_S * 1000)
+    assert settled(page) in ("ok", "repaired")
+    assert "<= 2.5 deg" in page.inner_text("#verdict")  # the tolerance row of the new verdict
+    settled(other)
+    assert revision(other) == revision(page)
+    assert other.input_value("[id='tolerances.orientation_deg']") == "2.5"
+    assert "<= 2.5 deg" in other.inner_text("#verdict")
+
+
+def _move_z(page, mm: int) -> None:
+    page.eval_on_selector(
+        "#move-z", f"(e) => {{ e.value = '{mm}'; e.dispatchEvent(new Event('input')); }}"
+    )
+
+
+def test_the_part_moved_up_out_of_reach_is_repaired_with_its_cause_and_moved_back_is_ok(pages):
+    page = pages["tabs"][0]
+    before, placed = revision(page), page.get_attribute("body", "data-status")
+    for mm in (200, 400, 600):  # a drag: the steps before the last may be dropped
+        _move_z(page, mm)
+    page.wait_for_function(f"Number(document.body.dataset.latest) >= {before + 3}")
+    status = settled(page)
+    assert status in ("repaired", "infeasible")
+    text = page.inner_text("#verdict")
+    assert "reach" in text, text  # the cause: the wrist centre beyond the arm's reach
+    page.screenshot(path=str(ARTIFACTS / "out-of-reach.png"))
+    _move_z(page, 0)
+    page.wait_for_function(f"Number(document.body.dataset.latest) >= {before + 4}")
+    assert settled(page) == placed  # as before the move: the verdict does not depend on the way there
+    assert pages["errors"] == []
+
+
+def test_write_saves_the_problem_and_writes_what_refine_run_writes(pages, server, tmp_path):
+    import json
+
+    from refine.cli import main
+
+    page = pages["tabs"][0]
+    page.click("#show-diff")
+    page.wait_for_selector("#diff:not([hidden])")
+    diff = page.inner_text("#diff")
+    assert "-orientation_deg = 3.0" in diff and "+orientation_deg = 2.5" in diff
+    page.click("#write")
+    page.wait_for_selector("#write-status", timeout=SOLVE_S * 1000)
+    page.locator("#written-files").scroll_into_view_if_needed()
+    page.screenshot(path=str(ARTIFACTS / "written.png"))
+    folder = server["folder"]
+    saved = (folder / "problem.toml").read_text(encoding="utf-8")
+    assert "orientation_deg = 2.5" in saved
+    assert "# the window's CAD frame: origin at the lowest point of the glass" in saved
+    written = sorted(p.name for p in (folder / "out").iterdir())
+    listed = sorted(page.inner_text("#written-files").split())
+    assert written == listed
+    # refine run on the saved problem, into another folder: the same files with the same contents
+    assert main(["run", str(folder), "--out", str(tmp_path / "cli")]) == 0
+    assert sorted(p.name for p in (tmp_path / "cli").iterdir()) == written
+    for name in written:
+        a, b = (folder / "out" / name).read_bytes(), (tmp_path / "cli" / name).read_bytes()
+        if name == "result.json":
+            da, db = json.loads(a), json.loads(b)
+            for d in (da, db):
+                d.pop("timings_s", None)
+                for entry, listed in d.get("files", {}).items():
+                    if entry.endswith(".aml"):  # its time of writing, compared above without it
+                        listed.pop("sha256", None)
+            assert da == db
+        elif name != "report.html":  # the report shows the run's timings
+            stamp = rb'LastWritingDateTime="[^"]*"'  # PathML's time of writing
+            assert re.sub(stamp, b"", a) == re.sub(stamp, b"", b), name
+    assert pages["errors"] == []
