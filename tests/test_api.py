@@ -102,7 +102,7 @@ def test_to_dict_is_the_written_result_json(tmp_path):
     positions, R = line()
     result = refine.refine_path("ur10e", positions, R, speeds=0.1, name="line")
     files = result.write(tmp_path, report=False)
-    assert set(files) == {"result", "trajectory", "pathml", "urscript"}  # the UR's own language
+    assert set(files) == {"result", "trajectory", "pathml", "urscript", "motions"}  # the UR's own language
     written = json.loads(files["result"].read_text())
     doc = json.loads(json.dumps(result.to_dict()))
     assert written == doc

@@ -163,7 +163,7 @@ def test_the_lbr_iiwa_weld_writes_its_sunrise_application_and_no_krl(tig):
     # three layers of 1, 2 and 3 passes; the problem is named tig_weld (Java class TigWeld); no report
     _, out = tig
     passes = ["L1P1", "L2P1", "L2P2", "L3P1", "L3P2", "L3P3"]
-    expected = {f"trajectory_{p}.csv" for p in passes} | {"tig_weld.aml", "TigWeld.java", "result.json"}
+    expected = {f"trajectory_{p}.csv" for p in passes} | {"tig_weld.aml", "TigWeld.java", "result.json", "motions.csv"}
     written = {f.name for f in out.iterdir()}
     assert written == expected
     assert not [f for f in written if f.endswith((".src", ".dat"))]

@@ -3,7 +3,7 @@
 A controller's linear move (MoveL, LIN, movel) keeps the orientation and moves the TCP on the
 straight line. :func:`plan_line` samples that line, solves IK at every sample from the previous
 one (so the joints stay on the pass's branch, starting from the pass's own end joints), and checks
-the motion like the path: the joints within their limits minus the margin, no joint step above
+the motion like the path: the joints within their limits, no joint step above
 ``joint_step_deg`` between samples (a branch jump), every joint within its speed limit at the
 line's speed, and the clearance with margin along the continuous
 joint-interpolated motion between the samples. Near a singularity the joints a straight line needs
@@ -139,8 +139,7 @@ def plan_line(
                 tcp_m=poses[k, :3, 3],
             )
         )
-    margin = math.radians(checker.tolerances.joint_margin_deg)
-    issues += checker.limit_issues(q, margin)
+    issues += checker.limit_issues(q, 0.0)  # the controller's limits (the margin is the optimiser's)
     _, least = checker.singularity_issues(q)  # the figure; what a singularity breaks is the speed:
     dt = (retract_m / (len(q) - 1)) / speed_m_s
     rate = np.abs(np.diff(q, axis=0)) / dt / checker.kin.robot.spec.velocity  # share of each joint's limit
