@@ -460,7 +460,9 @@ def test_the_m20ia_weld_writes_a_tp_program_in_the_controllers_joints(tmp_path):
     assert set(doc["outputs"]) >= {"tp"} and not {"rapid", "krl", "inform"} & set(doc["outputs"])
     robot = load_robot("fanuc_m20ia")
     with (tmp_path / "trajectory.csv").open(newline="") as f:
-        q_controller = np.radians([[float(r[f"q{j}"]) for j in range(1, 7)] for r in csv.DictReader(f)])
+        q_controller = np.array(
+            [[float(r[f"q{j}"]) for j in range(1, 7)] for r in csv.DictReader(f)]
+        )  # [rad]
     q = q_controller.copy()
     q[:, 2] = q_controller[:, 2] + q_controller[:, 1]  # the pendant's J3 back to the URDF's
     prog = interpret_tp((tmp_path / doc["outputs"]["tp"]).read_text(encoding="ascii"))
