@@ -27,9 +27,19 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from refine.arguments import (  # noqa: I001
+    arc_length_from,
+    check_position_units,
+    finite_array,
+    joints_from,
+    rotations_from,
+    settings_from,
+    shapes_from,
+    speeds_from,
+    transform_from,
+)
 from refine.control import Progress, controlled
 from refine.errors import InputError
-from refine.plausible import CAD_SPEED_LIMIT_M_S
 from refine.problem import Problem, load_problem
 from refine.settings import (
     CollisionSettings,
@@ -51,17 +61,6 @@ if TYPE_CHECKING:
 __all__ = ["PassArrays", "Result", "load_problem", "refine_path", "solve"]
 
 
-MM_SUSPECT_REACHES = 10.0
-"""Positions whose nearest point is this many reaches from the robot's base are refused: no cell
-puts a path that far, while millimetres read as metres put it a thousand times too far."""
-
-QUATERNION_ORDERS = ("wxyz", "xyzw")
-"""The quaternion orders :func:`refine_path` reads, one of which the caller must state."""
-
-SPEED_CAP_WITHOUT_DEMO_M_S = 5.0
-"""TCP speed cap [m/s] when :func:`refine_path` gets no speeds: above what industrial arms reach
-along a process path, so the joint speed and acceleration limits alone set the timing. The
-``slow_segments`` of such a result compare against this cap."""
 
 
 @dataclass(frozen=True)
@@ -267,7 +266,7 @@ def solve(
             problem = load_problem(problem)
         problem = _with_time_limit(problem, time_limit_s)
         if previous is None:
-            q0 = _joints(initial_joints, None, None)
+            q0 = joints_from(initial_joints, None, None)
             return Result(solve_problem(problem, q0=q0))
         fused = fused_path(problem)
         return _solve_again(problem, previous.run.robot, fused, previous, initial_joints)
@@ -290,7 +289,7 @@ def _solve_again(
     nlp = None
     warm = None
     n = robot.nq
-    q0 = _joints(initial_joints, len(fused), n)
+    q0 = joints_from(initial_joints, len(fused), n)
     if previous is not None:
         first = previous.run.first
         old = first.nlp
@@ -314,18 +313,6 @@ def _solve_again(
                 first.clearance,
             )
     return Result(solve_problem(problem, robot=robot, fused=fused, nlp=nlp, q0=q0, warm=warm))
-
-
-def _joints(q: ArrayLike | None, N: int | None, n: int | None) -> Array | None:
-    if q is None:
-        return None
-    q = np.asarray(q, dtype=float)
-    if q.ndim != 2 or (N is not None and q.shape != (N, n)):
-        want = f"({N}, {n})" if N is not None else "(N, n)"
-        raise InputError(f"initial_joints: expected shape {want} [rad], got {q.shape}")
-    if not np.all(np.isfinite(q)):
-        raise InputError("initial_joints: contains NaN or infinite values [rad]")
-    return q
 
 
 def refine_path(
@@ -418,24 +405,24 @@ def refine_path(
         robot = load_robot(robot)
     elif not isinstance(robot, Robot):
         raise InputError(f"robot: expected a refine.Robot or a registry name, got {type(robot).__name__}")
-    p = _finite(positions, "positions", "m")
+    p = finite_array(positions, "positions", "m")
     if p.ndim != 2 or p.shape[1] != 3 or len(p) < 3:
         raise InputError(f"positions: expected shape (N, 3) [m] with N >= 3, got {p.shape}")
     N = len(p)
-    base = _transform(base_in_world, "base_in_world")
-    _check_position_units(p, robot, base)
-    R = _rotations(orientations, N, quaternion_order)
-    s = _arc_length(p, arc_length)
-    v = _speeds(speeds, N)
+    base = transform_from(base_in_world, "base_in_world")
+    check_position_units(p, robot, base)
+    R = rotations_from(orientations, N, quaternion_order)
+    s = arc_length_from(p, arc_length)
+    v = speeds_from(speeds, N)
     dt = np.diff(s) * 0.5 * (1.0 / v[1:] + 1.0 / v[:-1])
     fused = FusedPath(s, p, R, v, np.concatenate([[0.0], np.cumsum(dt)]), np.zeros(N))
-    tolerances = _settings(tolerances, Tolerances, "tolerances")
-    collision = _settings(collision, CollisionSettings, "collision")
-    optimise = _settings(optimise, OptimiseSettings, "optimise")
-    repair = _settings(repair, RepairSettings, "repair")
-    process = _settings(process, ProcessSettings, "process")
-    cell = _shapes(cell, "cell")
-    tool_shapes = _shapes(tool_shapes, "tool_shapes")
+    tolerances = settings_from(tolerances, Tolerances, "tolerances")
+    collision = settings_from(collision, CollisionSettings, "collision")
+    optimise = settings_from(optimise, OptimiseSettings, "optimise")
+    repair = settings_from(repair, RepairSettings, "repair")
+    process = settings_from(process, ProcessSettings, "process")
+    cell = shapes_from(cell, "cell")
+    tool_shapes = shapes_from(tool_shapes, "tool_shapes")
     problem = Problem(
         name=name,
         root=Path.cwd(),
@@ -446,7 +433,7 @@ def refine_path(
         ),
         tool=ToolSettings(
             name=tool_name,
-            tcp_in_flange=_transform(tcp_in_flange, "tcp_in_flange"),
+            tcp_in_flange=transform_from(tcp_in_flange, "tcp_in_flange"),
             axisymmetric=bool(axisymmetric),
             collision=tuple(tool_shapes),
         ),
@@ -464,148 +451,3 @@ def refine_path(
     )
     with controlled(cancel, progress):
         return _solve_again(_with_time_limit(problem, time_limit_s), robot, fused, previous, initial_joints)
-
-
-def _settings(value: Any, cls: type, name: str) -> Any:
-    """``value`` as a ``cls``: an instance, a mapping of its fields, or None for the defaults.
-
-    Anything else, or an unknown field, is an InputError naming the argument and the fields.
-    """
-    if value is None:
-        return cls()
-    if isinstance(value, cls):
-        return value
-    fields = [f.name for f in dataclasses.fields(cls)]
-    if not isinstance(value, Mapping):
-        raise InputError(
-            f"{name}: expected a refine.{cls.__name__} or a mapping of its fields, got {type(value).__name__}",
-            key=name,
-            value=value,
-            expected=f"refine.{cls.__name__} or a mapping of {', '.join(fields)}",
-        )
-    unknown = sorted(set(value) - set(fields))
-    if unknown:
-        raise InputError(
-            f"{name}: unknown field(s) {', '.join(map(repr, unknown))}; the fields are {', '.join(fields)}",
-            key=f"{name}.{unknown[0]}",
-            value=value[unknown[0]],
-            expected=f"one of the fields {', '.join(fields)}",
-        )
-    return cls(**dict(value))
-
-
-def _shapes(shapes: Any, name: str) -> tuple:
-    """``shapes`` as a tuple of :class:`refine.settings.Shape`; anything else is an InputError."""
-    items = tuple(shapes or ())
-    for k, shape in enumerate(items):
-        if not isinstance(shape, Shape):
-            raise InputError(
-                f"{name}[{k}]: expected a refine.Shape, got {type(shape).__name__} (a problem file's "
-                f"table becomes one with refine.Shape(kind=..., name=..., ...))",
-                key=f"{name}[{k}]",
-                value=shape,
-                expected="refine.Shape",
-            )
-    return items
-
-
-def _finite(a: ArrayLike, name: str, unit: str) -> Array:
-    try:
-        arr = np.asarray(a, dtype=float)
-    except (TypeError, ValueError) as e:
-        raise InputError(f"{name}: not an array of numbers [{unit}]: {e}") from e
-    if not np.all(np.isfinite(arr)):
-        raise InputError(f"{name}: contains NaN or infinite values [{unit}]")
-    return arr
-
-
-def _rotations(orientations: ArrayLike, N: int, order: str | None) -> Array:
-    from refine.frames import check_rotation, matrix_from_quaternion
-
-    o = _finite(orientations, "orientations", "-")
-    if o.shape == (N, 4):
-        if order not in QUATERNION_ORDERS:
-            raise InputError(
-                f"orientations: (N, 4) quaternions need quaternion_order='wxyz' (scalar first, as in "
-                f"trajectory.csv) or 'xyzw' (scalar last, as scipy's Rotation.as_quat()), got "
-                f"{order!r}: every unit quaternion is valid in both orders, so the order cannot be "
-                "told from the numbers"
-            )
-        if order == "xyzw":
-            o = np.column_stack([o[:, 3], o[:, :3]])
-        norms = np.linalg.norm(o, axis=1)
-        if np.any(np.abs(norms - 1.0) > 1e-3):
-            k = int(np.argmax(np.abs(norms - 1.0)))
-            raise InputError(
-                f"orientations: quaternion {k} has length {norms[k]:.6f}; expected unit quaternions "
-                "(qw, qx, qy, qz)"
-            )
-        return matrix_from_quaternion(o)
-    if o.shape == (N, 3, 3):
-        return check_rotation(o, "orientations").copy()
-    raise InputError(
-        f"orientations: expected (N, 4) quaternions (qw, qx, qy, qz) or (N, 3, 3) rotation matrices "
-        f"with N = {N} (the number of positions), got {o.shape}"
-    )
-
-
-def _arc_length(p: Array, arc_length: ArrayLike | None) -> Array:
-    if arc_length is None:
-        steps = np.linalg.norm(np.diff(p, axis=0), axis=1)
-        if np.any(steps <= 0.0):
-            k = int(np.flatnonzero(steps <= 0.0)[0])
-            raise InputError(f"positions: waypoints {k} and {k + 1} coincide; the path must move [m]")
-        return np.concatenate([[0.0], np.cumsum(steps)])
-    s = _finite(arc_length, "arc_length", "m")
-    if s.shape != (len(p),):
-        raise InputError(f"arc_length: expected shape ({len(p)},) [m], got {s.shape}")
-    if np.any(np.diff(s) <= 0.0):
-        raise InputError("arc_length: must strictly increase along the path [m]")
-    return s - s[0]
-
-
-def _speeds(speeds: ArrayLike | float | None, N: int) -> Array:
-    if speeds is None:
-        return np.full(N, SPEED_CAP_WITHOUT_DEMO_M_S)
-    v = _finite(speeds, "speeds", "m/s")
-    if v.ndim == 0:
-        v = np.full(N, float(v))
-    if v.shape != (N,):
-        raise InputError(f"speeds: expected shape ({N},) or one number [m/s], got {v.shape}")
-    if np.any(v <= 0.0):
-        raise InputError(f"speeds: every speed must be > 0 m/s, got min {v.min():g} m/s")
-    if v.max() > CAD_SPEED_LIMIT_M_S:
-        k = int(np.argmax(v))
-        raise InputError(
-            f"speeds: {v[k]:g} m/s at waypoint {k} is beyond {CAD_SPEED_LIMIT_M_S:g} m/s, faster than "
-            f"industrial robots move their tool; speeds are in m/s ({v[k]:g} mm/s would be "
-            f"{v[k] / 1000:g} m/s)"
-        )
-    return v
-
-
-def _check_position_units(p: Array, robot: Any, base_in_world: Array) -> None:
-    """Refuse positions no part of which the robot could reach in metres but could in millimetres."""
-    reach = float(robot.spec.reach_m)
-    base = base_in_world[:3, 3]
-    nearest = float(np.linalg.norm(p - base, axis=1).min())
-    if nearest <= MM_SUSPECT_REACHES * reach:
-        return
-    in_mm = float(np.linalg.norm(p / 1000.0 - base, axis=1).max())
-    hint = (
-        f"; read as millimetres they would be within {in_mm:.3g} m of it: positions are in metres"
-        if in_mm <= reach
-        else ""
-    )
-    raise InputError(
-        f"positions: the nearest is {nearest:.4g} m from the robot's base, {nearest / reach:.3g} times "
-        f"its reach of {reach:g} m{hint}"
-    )
-
-
-def _transform(T: ArrayLike | None, name: str) -> Array:
-    from refine.frames import check_transform
-
-    if T is None:
-        return np.eye(4)
-    return check_transform(_finite(T, name, "m"), name).copy()

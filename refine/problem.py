@@ -19,6 +19,7 @@ import numpy as np
 from refine.errors import InputError
 from refine.frames import transform_from_xyz_rpy
 from refine.names import comment_text, file_stem
+from refine.problem_toml import read_problem_toml
 from refine.settings import (
     CadSettings,
     CollisionSettings,
@@ -41,11 +42,6 @@ from refine.settings import (
 if TYPE_CHECKING:
     from refine.settings import CalibrationSettings
 
-try:  # Python 3.11+
-    import tomllib
-except ModuleNotFoundError:  # pragma: no cover - Python 3.10
-    import tomli as tomllib  # type: ignore[no-redef]
-
 Matrix4 = np.ndarray
 MAX_POSE_M = 100.0
 """Largest pose translation accepted [m]: a robot cell fits in 100 m."""
@@ -64,8 +60,6 @@ __all__ = [
     "load_problem",
 ]
 
-MAX_PROBLEM_FILE_BYTES = 1 << 20
-"""Largest problem.toml read [bytes] (1 MiB; the bundled ones are under 5 kB)."""
 MAX_INPUT_FILE_BYTES = 1 << 30
 """Largest data file a problem may name [bytes] (1 GiB; a 2-million-line Liberty log is 130 MB)."""
 
@@ -151,7 +145,7 @@ def load_problem(path: str | Path, *, allow_outside: bool = False) -> Problem:
         path = path / "problem.toml"
     if not path.is_file():
         raise InputError(f"problem file not found: {path}")
-    return problem_from_data(read_registry_toml(path), path, allow_outside=allow_outside)
+    return problem_from_data(read_problem_toml(path), path, allow_outside=allow_outside)
 
 
 def problem_from_data(data: dict[str, Any], path: Path, *, allow_outside: bool = False) -> Problem:
@@ -199,30 +193,6 @@ def problem_from_data(data: dict[str, Any], path: Path, *, allow_outside: bool =
 
 
 # ---- loader internals ---------------------------------------------------------------------------
-
-
-def read_registry_toml(path: Path) -> dict[str, Any]:
-    """The parsed TOML of ``path``; size, encoding and syntax errors name the file and line."""
-    try:
-        size = path.stat().st_size
-        if size > MAX_PROBLEM_FILE_BYTES:
-            raise InputError(
-                f"{path}: {size} bytes is too large for a problem file (limit {MAX_PROBLEM_FILE_BYTES} bytes)"
-            )
-        raw = path.read_bytes()
-    except OSError as e:
-        raise InputError(f"{path}: cannot be read: {e.strerror}") from e
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as e:
-        line = raw[: e.start].count(b"\n") + 1
-        raise InputError(
-            f"{path}:{line}: not UTF-8 text (byte 0x{raw[e.start]:02x} at offset {e.start})"
-        ) from e
-    try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise InputError(f"{path}: not valid TOML: {e}") from e
 
 
 def _string(value: Any, key: str) -> str:

@@ -549,26 +549,16 @@ def reuse_for(problem: RefinementNLP, fused: FusedPath, tolerances: Tolerances) 
     """
     N = problem.n_waypoints
     a = problem.active
-    if problem.elastic_deg is not None or a.singular_waypoints or a.singular_segments or a.linear_rows:
-        return None
-    if len(fused) != N:
+    if problem.elastic_deg is not None or a.singular_waypoints or a.singular_segments or a.linear_rows or len(fused) != N:
         return None
     h_old, h_new = float(np.mean(np.diff(problem.fused.s))), float(np.mean(np.diff(fused.s)))
     if abs(h_new / h_old - 1.0) > SPACING_REUSE_REL:
         return None
     lower, upper = joint_bounds(problem.robot, tolerances)
     lbg, ubg = path_row_bounds(tolerances, N, problem.dof, steps=problem.step_rows())
-    return replace(
-        problem,
-        params=path_params(fused),
-        lbx=np.tile(lower, N),
-        ubx=np.tile(upper, N),
-        lbg=lbg,
-        ubg=ubg,
-        fused=fused,
-        tolerances=tolerances,
-        build_time_s=0.0,
-    )
+    lbx, ubx = np.tile(lower, N), np.tile(upper, N)
+    params = path_params(fused)
+    return replace(problem, params=params, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, fused=fused, tolerances=tolerances, build_time_s=0.0)
 
 
 ELASTIC_WEIGHT = 1e4

@@ -102,7 +102,9 @@ def test_the_puzzle_piece_as_tesseract_poses_it(require):
     assert problem.tool_in_world[:3, 3] == pytest.approx([0.35, -0.35, 0.7])
     assert problem.tool_in_world[:3, 2] == pytest.approx([0.0, 0.0, -1.0], abs=1e-5)
     # tool0 -> ee_mount -> tool1 -> part, the URDF's three origins
-    rpy = (lambda r: matrix_from_fixed_xyz(r, degrees=False))
+    def rpy(r):
+        return matrix_from_fixed_xyz(r, degrees=False)
+
     expected = (
         make_transform(rpy([1.5708, 0.0, 0.0]), [0.0, 0.0, 0.0])
         @ make_transform(rpy([0.523599, -0.523599, 0.0]), [-0.0083, 0.0541, 0.0143])
