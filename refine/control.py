@@ -39,7 +39,8 @@ class Progress:
 
     Attributes:
         stage: the stage that has just finished (``"load"``, ``"cad"``, ``"demo"``, ``"fuse"``,
-            ``"build"``, ``"verify"`` (one per round), ``"refine"``, ``"timing"``: the stage names of
+            ``"build"``, ``"verify"`` (one per round), ``"refine"``, ``"timing"``, ``"line_check"``,
+            ``"motions"``: the stage names of
             ``result.json``'s ``timings_s``), or ``"solve"`` for each IPOPT iteration.
         round: the solve -> verify round of the current pass, from 1 (0 outside the rounds).
         iteration: IPOPT's iteration within the current solve (0 outside a solve).

@@ -19,7 +19,7 @@ from scipy.spatial.transform import Rotation
 import refine
 from refine.control import after_solve
 
-STAGES = {"load", "cad", "demo", "fuse", "build", "verify", "refine", "timing", "solve"}
+STAGES = {"load", "cad", "demo", "fuse", "build", "verify", "refine", "timing", "line_check", "motions", "solve"}
 """The stage names docs/api.md gives for ``Progress.stage``."""
 
 
@@ -36,7 +36,7 @@ def test_progress_reports_each_stage_and_each_solver_iteration():
     assert result.status == "ok"
     stages = [p.stage for p in seen]
     assert set(stages) <= STAGES, set(stages) - STAGES
-    assert stages[-1] == "timing" and "verify" in stages
+    assert stages[-1] == "motions" and "verify" in stages
     iterations = [p.iteration for p in seen if p.stage == "solve"]
     assert iterations and iterations[0] == 1
     # within one solve the iterations count up by one; a new solve starts again at 1

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -99,6 +100,10 @@ class Refinement:
     time_limit_reached: bool = False
     problem: RefinementNLP | None = None
     multipliers: tuple[dict[tuple, float], Array] | None = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        # the built problem's CasADi expressions and solver stay in the process that built them
+        return {**self.__dict__, "problem": None}
 
 
 def problem_targets(problem: RefinementNLP) -> Array:
