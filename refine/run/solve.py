@@ -122,7 +122,7 @@ def solve_problem(
     )
 
 
-ENLARGE = (1.0, 1.1, 1.25, 1.5)
+ENLARGE = (1.0, 1.1, 1.25, 1.5, 2.0, 3.0)
 """Factors by which the move found is scaled, in turn, until the strict pipeline verifies it."""
 
 
@@ -314,7 +314,10 @@ def repair_by_placement(problem: Problem, robot: Robot, first: PassResult) -> Pl
                 **_moved(problem, candidate),
             )
     timings["verify"] = time.perf_counter() - t0
-    why = f": {result.refinement.reason}" if result is not None else ""
+    why = ""
+    if result is not None:
+        failed = "; ".join(m.reason for m in getattr(result, "failed_motions", ()))
+        why = f": {failed or result.refinement.reason}"
     return PlacementRepair(
         "infeasible",
         placement=found.placement,
