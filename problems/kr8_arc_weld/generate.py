@@ -29,6 +29,9 @@ Run from the repository root::
 
     python problems/kr8_arc_weld/generate.py            # writes the files, checks reach and clearance
     python problems/kr8_arc_weld/generate.py --no-check # skip the IK and clearance check
+
+``problems/m20ia_arc_weld`` and ``problems/gp12_arc_weld`` weld the same seam in the same cell with
+other robots: their ``generate.py`` run this one's :func:`main` into their own folders.
 """
 
 from __future__ import annotations
@@ -168,7 +171,9 @@ def check_reachability(problem: Problem, positions: np.ndarray, rotations: np.nd
     """Chained IK over every ``CHECK_STEP``-th point of the true path; prints the figures."""
     targets = make_transform(rotations, positions)[::CHECK_STEP]
     report, ok = problem_reachability(problem, targets, SEED)
-    qd = np.degrees(report.qs)
+    from refine.robot.registry import load_robot
+
+    qd = np.degrees(load_robot(problem.robot.model).spec.to_controller(report.qs))  # the controller's joints
     print(
         f"reachability: {len(qd)} IK targets, from A1..A6 [deg] = {np.round(qd[0], 1).tolist()}; worst pose "
         f"error {report.errors.max():.2e}, smallest joint margin {math.degrees(report.joint_margins.min()):.1f} "
@@ -189,14 +194,15 @@ def check_reachability(problem: Problem, positions: np.ndarray, rotations: np.nd
     return ok
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None, folder: Path = HERE) -> int:
+    """Write the files into ``folder`` (this problem's, or another problem's on the same cell)."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--no-check", action="store_true", help="skip the IK and clearance check")
     args = parser.parse_args(argv)
-    write_dxf(HERE / "seam.dxf")
+    write_dxf(folder / "seam.dxf")
     for name in ("demo.liberty", "truth.csv"):  # the problem names them; the first run writes them below
-        (HERE / name).touch()
-    problem = load_problem(HERE)
+        (folder / name).touch()
+    problem = load_problem(folder)
     check_cell(problem)
     T_F_CAD = problem.frames.cad_in_world
     rng = np.random.default_rng(SEED)
@@ -224,8 +230,8 @@ def main(argv: list[str] | None = None) -> int:
     demo = simulate_demonstration(
         s, positions, rotations, speed, problem.frames.source_in_world, problem.tool.sensor_in_tcp, model
     )
-    write_liberty_ascii(HERE / "demo.liberty", demo.log, units="in", rate_hz=model.rate_hz)
-    write_truth_csv(HERE / "truth.csv", demo.s, demo.quaternions, demo.speed)
+    write_liberty_ascii(folder / "demo.liberty", demo.log, units="in", rate_hz=model.rate_hz)
+    write_truth_csv(folder / "truth.csv", demo.s, demo.quaternions, demo.speed)
     lo, hi = positions.min(axis=0), positions.max(axis=0)
     print(
         f"seam {s[-1]:.4f} m ({len(s)} points), world x {lo[0]:.3f}..{hi[0]:.3f}, y {lo[1]:.3f}..{hi[1]:.3f}, "
