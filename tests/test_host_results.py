@@ -25,6 +25,7 @@ def _solve_line(shift_m: float) -> refine.Result:
 
 def test_a_result_pickles_with_everything_but_its_built_problem(tmp_path):
     result = _solve_line(0.0)
+    result.run.robot.collision_shapes()  # the robot's cached FCL shapes, as any collision run leaves them
     back = pickle.loads(pickle.dumps(result))
     assert back.status == result.status == "ok"
     np.testing.assert_array_equal(back.joints, result.joints)

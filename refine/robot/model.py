@@ -124,6 +124,14 @@ class Robot:
             if frame.type == pin.FrameType.BODY
         }
 
+    def __getstate__(self) -> dict[str, Any]:
+        # the parsed collision shapes (FCL geometry) and Pinocchio's data are rebuilt on the other side
+        return {**self.__dict__, "data": None, "_shapes": None}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self.data = self.model.createData()
+
     def collision_shapes(self) -> list[CollisionShape]:
         """Collision primitives of every link, parsed once from the URDF's ``<collision>``."""
         if self._shapes is None:
