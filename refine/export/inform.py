@@ -50,6 +50,7 @@ from refine.export.program import (
     arm_configuration,
     as_passes,
     controller_base,
+    fixed_decimals,
     header_notes,
     home_joints,
     process_summary,
@@ -81,11 +82,6 @@ MAX_SPEED_MM_S = 1500.0
 
 def _name(text: str) -> str:
     return identifier(text, "J", NAME_CHARS).upper()
-
-
-def _num(value: float, decimals: int) -> str:
-    text = f"{value:.{decimals}f}"
-    return f"{0.0:.{decimals}f}" if float(text) == 0.0 else text
 
 
 def yaskawa_io_number(name: str, kind: str, default: int) -> tuple[int, str]:
@@ -151,8 +147,8 @@ class _Job:
             if rconf != current:
                 lines.append("///RCONF " + ",".join(str(v) for v in rconf))
                 current = rconf
-            xyz = [_num(v * 1000.0, 3) for v in T[:3, 3]]
-            rxyz = [_num(v, 4) for v in fixed_xyz_from_matrix(T[:3, :3])]
+            xyz = [fixed_decimals(v * 1000.0, 3) for v in T[:3, 3]]
+            rxyz = [fixed_decimals(v, 4) for v in fixed_xyz_from_matrix(T[:3, :3])]
             lines.append(f"C{k:05d}=" + ",".join(xyz + rxyz))
         return lines
 
@@ -160,11 +156,11 @@ class _Job:
 def _weld_start(job: _Job, problem: Problem, io: _Io) -> None:
     pr = problem.process
     job.comment("gas pre-flow")
-    job.inst += [f"DOUT OT#({io.gas}) ON", f"TIMER T={_num(pr.preflow_s, 2)}"]
+    job.inst += [f"DOUT OT#({io.gas}) ON", f"TIMER T={fixed_decimals(pr.preflow_s, 2)}"]
     job.comment("arc on, wait for arc ok")
     job.inst += [
         f"DOUT OT#({io.out}) ON",
-        f"WAIT IN#({io.arc_ok})=ON T={_num(pr.arc_timeout_s, 2)}",
+        f"WAIT IN#({io.arc_ok})=ON T={fixed_decimals(pr.arc_timeout_s, 2)}",
         f"JUMP *ARCFAIL IF IN#({io.arc_ok})=OFF",
     ]
 
@@ -172,9 +168,9 @@ def _weld_start(job: _Job, problem: Problem, io: _Io) -> None:
 def _weld_end(job: _Job, problem: Problem, io: _Io) -> None:
     pr = problem.process
     job.comment("crater fill")
-    job.inst += [f"TIMER T={_num(pr.crater_fill_s, 2)}", f"DOUT OT#({io.out}) OFF"]
+    job.inst += [f"TIMER T={fixed_decimals(pr.crater_fill_s, 2)}", f"DOUT OT#({io.out}) OFF"]
     job.comment("gas post-flow")
-    job.inst += [f"TIMER T={_num(pr.postflow_s, 2)}", f"DOUT OT#({io.gas}) OFF"]
+    job.inst += [f"TIMER T={fixed_decimals(pr.postflow_s, 2)}", f"DOUT OT#({io.gas}) OFF"]
 
 
 def write_inform(
@@ -261,17 +257,17 @@ def write_inform(
             job.comment(note)
     job.comment(f"positions: TCP of tool {tool} ({problem.tool.name}) in the ROBOT frame, mm and deg")
     T_tool = problem.tool.tcp_in_flange
-    values = [_num(v * 1000.0, 3) for v in T_tool[:3, 3]] + [
-        _num(v, 4) for v in fixed_xyz_from_matrix(T_tool[:3, :3])
+    values = [fixed_decimals(v * 1000.0, 3) for v in T_tool[:3, 3]] + [
+        fixed_decimals(v, 4) for v in fixed_xyz_from_matrix(T_tool[:3, :3])
     ]
     job.comment(
         f"tool file {tool} must hold "
         + ", ".join(f"{k}={v}" for k, v in zip(("X", "Y", "Z", "Rx", "Ry", "Rz"), values, strict=True))
     )
     home_deg = np.degrees(robot.spec.to_controller(home_q))
-    job.comment("home joints [deg]: " + ", ".join(_num(v, 3) for v in home_deg))
-    vj = _num(joint_percent, 2)
-    air = _num(min(approach_speed_m_s * 1000.0, MAX_SPEED_MM_S), 1)
+    job.comment("home joints [deg]: " + ", ".join(fixed_decimals(v, 3) for v in home_deg))
+    vj = fixed_decimals(joint_percent, 2)
+    air = fixed_decimals(min(approach_speed_m_s * 1000.0, MAX_SPEED_MM_S), 1)
     job.inst.append(f"MOVJ {home} VJ={vj}")
     for i, p in enumerate(runs, start=1):
         tr = p.trajectory
@@ -293,7 +289,7 @@ def write_inform(
         else:
             job.inst.append(f"DOUT OT#({out}) ON")
         for k in range(1, len(tr)):
-            v = _num(min(levels[level_of[k - 1]] * 1000.0, MAX_SPEED_MM_S), 1)
+            v = fixed_decimals(min(levels[level_of[k - 1]] * 1000.0, MAX_SPEED_MM_S), 1)
             job.inst.append(f"MOVL {points[k]} V={v} PL={0 if k == len(tr) - 1 else pl}")
         if weld:
             _weld_end(job, problem, io)
@@ -303,7 +299,7 @@ def write_inform(
     job.inst.append(f"MOVJ {home} VJ={vj}")
     if weld:
         job.inst += ["JUMP *DONE", "*ARCFAIL", f"DOUT OT#({io.out}) OFF", f"DOUT OT#({io.gas}) OFF"]
-        job.comment(f"no arc within {_num(pr.arc_timeout_s, 2)} s")
+        job.comment(f"no arc within {fixed_decimals(pr.arc_timeout_s, 2)} s")
         job.inst += ["PAUSE", "*DONE"]
     job.inst.append("END")
     stamp = datetime.now(timezone.utc).strftime("%Y/%m/%d %H:%M")

@@ -67,6 +67,12 @@ class ProgramPass:
     air_out: Array | None = None
 
 
+def fixed_decimals(value: float, decimals: int) -> str:
+    """``value`` with exactly ``decimals`` decimals, a rounded-off negative zero written as zero."""
+    text = f"{value:.{decimals}f}"
+    return f"{0.0:.{decimals}f}" if float(text) == 0.0 else text
+
+
 def with_motions(passes: list[ProgramPass], motions: tuple[Any, ...]) -> list[ProgramPass]:
     """The passes with the run's planned air moves (``refine.plan.motion.Motion``) to write.
 

@@ -57,6 +57,7 @@ from refine.export.program import (
     arm_configuration,
     as_passes,
     controller_base,
+    fixed_decimals,
     header_notes,
     home_joints,
     lead_point,
@@ -91,11 +92,6 @@ CM_MIN = 1.0 / 6000.0
 def _name(text: str) -> str:
     """A TP program name: letters, digits, ``_``, a letter first, upper case, at most 36 characters."""
     return identifier(text, "P", 36).upper()
-
-
-def _num(value: float, decimals: int) -> str:
-    text = f"{value:.{decimals}f}"
-    return f"{0.0:.{decimals}f}" if float(text) == 0.0 else text
 
 
 def fanuc_io_number(name: str, kind: str, default: int) -> tuple[int, str]:
@@ -133,8 +129,8 @@ def fanuc_config(robot: Any, q: Array) -> list[str]:
 
 
 def _xyzwpr(T: Array) -> tuple[list[str], list[str]]:
-    xyz = [_num(v * 1000.0, 4) for v in T[:3, 3]]
-    wpr = [_num(v, 4) for v in fixed_xyz_from_matrix(T[:3, :3])]
+    xyz = [fixed_decimals(v * 1000.0, 4) for v in T[:3, 3]]
+    wpr = [fixed_decimals(v, 4) for v in fixed_xyz_from_matrix(T[:3, :3])]
     return xyz, wpr
 
 
@@ -184,7 +180,7 @@ class _Program:
 
     def joints(self, q_controller_deg: Array) -> int:
         index = len(self.pos) + 1
-        j = [f"J{i + 1}= {_num(v, 4)} deg" for i, v in enumerate(q_controller_deg)]
+        j = [f"J{i + 1}= {fixed_decimals(v, 4)} deg" for i, v in enumerate(q_controller_deg)]
         sep = ",\t"
         self.pos.append(
             f"P[{index}]{{\n   GP1:\n\tUF : {self.uf}, UT : {self.ut},\n"
@@ -197,7 +193,7 @@ def _weld_start(prog: _Program, problem: Problem, io: _Io) -> None:
     pr = problem.process
     prog.line(f"DO[{io.gas}]=ON")
     prog.comment("gas pre-flow")
-    prog.line(f"WAIT {_num(pr.preflow_s, 2)}(sec)")
+    prog.line(f"WAIT {fixed_decimals(pr.preflow_s, 2)}(sec)")
     prog.line(f"DO[{io.out}]=ON")
     prog.comment("arc on, wait for arc ok")
     prog.line(f"$WAITTMOUT=({int(round(pr.arc_timeout_s * 100.0))})")
@@ -207,18 +203,18 @@ def _weld_start(prog: _Program, problem: Problem, io: _Io) -> None:
 def _weld_end(prog: _Program, problem: Problem, io: _Io) -> None:
     pr = problem.process
     prog.comment("crater fill")
-    prog.line(f"WAIT {_num(pr.crater_fill_s, 2)}(sec)")
+    prog.line(f"WAIT {fixed_decimals(pr.crater_fill_s, 2)}(sec)")
     prog.line(f"DO[{io.out}]=OFF")
     prog.comment("gas post-flow")
-    prog.line(f"WAIT {_num(pr.postflow_s, 2)}(sec)")
+    prog.line(f"WAIT {fixed_decimals(pr.postflow_s, 2)}(sec)")
     prog.line(f"DO[{io.gas}]=OFF")
 
 
 def _switch(problem: Problem, io: _Io, value: str, lead: float) -> str:
     """``TB <s>sec,DO[n]=..`` or ``DB <d>mm,DO[n]=..``: ``lead`` [s or m] before the move's end."""
     if problem.process.lead_m is None:
-        return f" TB {_num(lead, 2)}sec,DO[{io.out}]={value}"
-    return f" DB {_num(lead * 1000.0, 1)}mm,DO[{io.out}]={value}"
+        return f" TB {fixed_decimals(lead, 2)}sec,DO[{io.out}]={value}"
+    return f" DB {fixed_decimals(lead * 1000.0, 1)}mm,DO[{io.out}]={value}"
 
 
 def _pass_moves(
@@ -389,7 +385,7 @@ def write_tp(
         prog.line(f"LBL[{ABORT_LABEL}]")
         prog.line(f"DO[{io.out}]=OFF")
         prog.line(f"DO[{io.gas}]=OFF")
-        prog.comment(f"no arc within {_num(pr.arc_timeout_s, 2)} s")
+        prog.comment(f"no arc within {fixed_decimals(pr.arc_timeout_s, 2)} s")
         prog.line("ABORT")
     mn = [f"{k:4d}:{line}" for k, line in enumerate(prog.mn, start=1)]
     attr = [
