@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from refine.bench.outcomes import DEFAULT_TIME_LIMIT_S
+from refine.bench.provenance import DEFAULT_BLAS_THREADS
 from refine.bench.suites import DEFAULT_SUITES
 
 DEFAULT_CSV = Path("out") / "bench" / "bench.csv"
@@ -45,13 +46,28 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         default=DEFAULT_CSV,
         help=f"CSV to append to, refused unless its header is this version's (default {DEFAULT_CSV})",
     )
+    run.add_argument(
+        "--blas-threads",
+        type=int,
+        default=DEFAULT_BLAS_THREADS,
+        help=f"threads of every BLAS (CasADi's OpenBLAS under MUMPS, NumPy's) while contenders run, "
+        f"recorded per row (default {DEFAULT_BLAS_THREADS})",
+    )
     run.add_argument("--suites-file", type=Path, default=DEFAULT_SUITES, help="the suites' TOML file")
     listing = actions.add_parser("list", help="list the suites and contenders")
     listing.add_argument("--suites-file", type=Path, default=DEFAULT_SUITES)
     report = actions.add_parser("report", help="write report.md with tables and log-log plots from a CSV")
     report.add_argument("csv", type=Path, nargs="?", default=DEFAULT_CSV)
     report.add_argument("--out", type=Path, default=None, help="folder for report.md (default: the CSV's)")
-    report.add_argument("--run-id", default=None, help="the run to report (default: the CSV's last run)")
+    report.add_argument(
+        "--run",
+        "--run-id",
+        dest="run_ids",
+        action="append",
+        default=None,
+        metavar="ID",
+        help="a run to report (repeatable: one section per run, no figure mixes runs; default: the CSV's last run)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -68,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
     if args.bench_command == "report":
         from refine.bench.report import write_report
 
-        path = write_report(args.csv, args.out or args.csv.parent, args.run_id)
+        path = write_report(args.csv, args.out or args.csv.parent, args.run_ids)
         print(f"wrote {path}")
         return 0
     from refine.bench.runner import run_suites
@@ -81,6 +97,7 @@ def run(args: argparse.Namespace) -> int:
         repeat=args.repeat,
         warmup=args.warmup,
         time_limit_s=args.time_limit,
+        blas_threads=args.blas_threads,
     )
     run_id = rows[0]["run_id"] if rows else "-"
     print(f"{len(rows)} row(s) of run {run_id} appended to {args.csv}")

@@ -12,6 +12,7 @@ import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -37,6 +38,11 @@ class Answer:
         iterations: solver iterations (summed), 0 when not applicable.
         note: a short remark (e.g. the solver's status).
         slack_deg: extra orientation slack per waypoint a repaired answer claims [deg], or None.
+        solver_status: the iterative solver's own return status (IPOPT's ``Solve_Succeeded``,
+            ``Maximum_Iterations_Exceeded``, ...), empty for a contender without one; a status of
+            :data:`refine.bench.outcomes.NOT_CONVERGED` makes the row no success, however it verifies.
+        solver_options: the options the solver ran with (written to the CSV as JSON), empty when
+            the contender has none or does not say.
     """
 
     status: str
@@ -46,6 +52,8 @@ class Answer:
     iterations: int = 0
     note: str = ""
     slack_deg: Array | None = None
+    solver_status: str = ""
+    solver_options: dict[str, Any] = field(default_factory=dict)
 
 
 def _refine(problem: BenchProblem, mode: str, solver: str = "ipopt") -> Answer:
@@ -80,7 +88,18 @@ def _refine(problem: BenchProblem, mode: str, solver: str = "ipopt") -> Answer:
     # refine verifies inside its loop (and diagnoses a repair); those stages are not counted
     cpu = build_cpu + sum(t.cpu.get(k, 0.0) for k in ("build", "seed", "solve"))
     slack = result.slack_deg if result.status == "repaired" else None
-    return Answer(result.status, result.q, times, cpu, result.iterations, result.solver_status[:80], slack)
+    solved = result.problem if result.problem is not None else nlp
+    return Answer(
+        result.status,
+        result.q,
+        times,
+        cpu,
+        result.iterations,
+        result.solver_status[:80],
+        slack,
+        solver_status=result.solver_status.split(";")[0].strip(),
+        solver_options=dict(solved.solver_options),
+    )
 
 
 def refine_assembled(problem: BenchProblem) -> Answer:

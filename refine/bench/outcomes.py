@@ -3,9 +3,11 @@
 The rules (docs/bench.md, "Outcome columns"):
 
 * ``success``: the contender claimed an answer (status ``ok`` or ``repaired``), the run ended
-  within the time limit without raising, and the shared verification passed (a ``repaired`` answer
-  with the slack it reports, on a problem built to be repaired). Nothing else is a success; in
-  particular answering ``infeasible`` never is.
+  within the time limit without raising, its solver's own status is not one of
+  :data:`NOT_CONVERGED` (IPOPT's ``Maximum_Iterations_Exceeded`` is no success even when the path
+  happens to verify), and the shared verification passed (a ``repaired`` answer with the slack it
+  reports, on a problem built to be repaired). Nothing else is a success; in particular answering
+  ``infeasible`` never is. With several timed runs, every one must be a success.
 * ``detected_infeasible``: only on a problem whose file states it infeasible (``[expected] status
   = "infeasible"`` with an ``s_range_m``). The contender answered ``infeasible`` itself (not by
   raising, not past the time limit) *with an attempt*: finite joints for every waypoint. The shared
@@ -29,6 +31,29 @@ DEFAULT_TIME_LIMIT_S = 300.0
 
 CLAIMS = ("ok", "repaired")
 """The statuses by which a contender claims an executable answer."""
+
+NOT_CONVERGED = (
+    "Maximum_",  # IPOPT: Maximum_Iterations_Exceeded, Maximum_CpuTime_Exceeded, Maximum_WallTime_Exceeded
+    "Restoration_Failed",
+    "Error_In_Step_Computation",
+    "Search_Direction_Becomes_Too_Small",
+    "Diverging_Iterates",
+    "User_Requested_Stop",
+    "Not_Enough_Degrees_Of_Freedom",
+    "Infeasible_Problem_Detected",
+    "Invalid_",
+    "Unrecoverable_Exception",
+    "NonIpopt_Exception_Thrown",
+    "Insufficient_Memory",
+    "Internal_Error",
+    "not solved",  # fatrop through refine.optimise.stagewise: "not solved (return flag ...)"
+)
+"""Beginnings of a solver's return status that say it stopped without converging (IPOPT's names)."""
+
+
+def converged(solver_status: str) -> bool:
+    """Whether a solver's return status allows a success: empty (no iterative solver) or not :data:`NOT_CONVERGED`."""
+    return not solver_status.strip().startswith(NOT_CONVERGED)
 
 
 @dataclass(frozen=True)
@@ -60,6 +85,7 @@ def score(
     verified_repaired: bool,
     broken_s_m: list[tuple[float, float]],
     timed_out: bool,
+    solver_status: str = "",
 ) -> Scored:
     """Score one row by the module's rules.
 
@@ -73,12 +99,13 @@ def score(
         verified_repaired: it passed with the slack a ``repaired`` answer reports.
         broken_s_m: arc-length ranges [m] of the stretches the verification found broken.
         timed_out: a timed run took longer than the time limit.
+        solver_status: the solver's own return status (empty without one): see :func:`converged`.
     """
     if timed_out or status not in CLAIMS + ("infeasible",):
         return Scored(False, False)
     if status in CLAIMS:
         repaired_ok = expected == "repaired" and status == "repaired" and verified_repaired
-        return Scored(verified or repaired_ok, False)
+        return Scored((verified or repaired_ok) and converged(solver_status), False)
     detected = (
         expected == "infeasible"
         and expected_s_range_m is not None

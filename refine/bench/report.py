@@ -1,12 +1,14 @@
-"""``refine bench report``: a Markdown report with tables and log-log plots, from the CSV alone.
+"""``refine bench report``: a Markdown report with tables, plots and provenance, from the CSV alone.
 
-Every table, figure and ratio comes from the rows of one run (:func:`refine.bench.table.read_run`:
-the last run of the file, or the one asked for), and within the run, figures that pair or fit rows
-(the glass ratios, a family's growth exponent) take them from one suite.
+Every table, figure and ratio comes from the rows of one run (:func:`refine.bench.table.read_runs`:
+the last run of the file, or the ones asked for, each in its own section), and within the run,
+figures that pair or fit rows (the glass ratios, a family's growth exponent, a performance
+profile) take them from one suite. The figures themselves are :mod:`refine.bench.figures`'.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import statistics
 from collections import defaultdict
@@ -14,23 +16,33 @@ from pathlib import Path
 
 import numpy as np
 
-from refine.bench.suites import growth_exponent
-from refine.bench.table import Row, read_run
-
-
-def _f(row: Row, key: str) -> float:
-    try:
-        return float(row.get(key, "") or "nan")
-    except ValueError:
-        return math.nan
-
-
-def _yes(row: Row, key: str) -> bool:
-    return row.get(key, "") == "True"
+from refine.bench.figures import (
+    PROFILES,
+    SHIFT_S,
+    growth,
+    plot_growth,
+    plot_profile,
+    shifted_geometric_mean,
+    solved,
+)
+from refine.bench.figures import number as _f
+from refine.bench.figures import yes as _yes
+from refine.bench.table import Row, read_runs
 
 
 def _fmt(x: float, digits: int = 3) -> str:
     return "–" if math.isnan(x) else f"{x:.{digits}f}"
+
+
+def _exponent(fit: dict) -> str:
+    """``0.72, 95 % interval 0.65 to 0.79, local slopes 0.61 to 0.80`` (what the fit has points for)."""
+    text = _fmt(fit["exponent"], 2)
+    if not math.isnan(fit["low"]):
+        text += f", 95 % interval {_fmt(fit['low'], 2)} to {_fmt(fit['high'], 2)}"
+    local = fit["local"]
+    if len(local) > 1:
+        text += f", local slopes {_fmt(min(local), 2)} to {_fmt(max(local), 2)}"
+    return text
 
 
 def _latest(rows: list[Row]) -> list[Row]:
@@ -89,10 +101,11 @@ def _suite_targets(suite: str, rows: list[Row]) -> list[str]:
         c = np.array([_f(r, "cpu_s") for r in fitted])
         at = {int(r["n_waypoints"]): r for r in rs}
         span = f"{n.min()}-{n.max()}" if len(n) else "no"
+        wall, cpu = growth(list(n), list(t)), growth(list(n), list(c))
         parts = [
             f"- {family} (suite `{suite}`): growth exponent of build + seed + solve "
-            f"{_fmt(growth_exponent(n, t), 2)} (wall), {_fmt(growth_exponent(n, c), 2)} (CPU) over the "
-            f"{len(fitted)} successful rows, {span} waypoints"
+            f"{_fmt(wall['exponent'], 2)} (wall), {_fmt(cpu['exponent'], 2)} (CPU) over the "
+            f"{len(fitted)} successful rows, {span} waypoints (CPU: {_exponent(cpu)})"
         ]
         if 6400 in at:
             parts.append(
@@ -119,115 +132,236 @@ def _suite_targets(suite: str, rows: list[Row]) -> list[str]:
     return lines
 
 
-def _plot(rows: list[Row], family: str, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, (ax_wall, ax_cpu) = plt.subplots(1, 2, figsize=(9, 3.6))
-    contenders = sorted({r["contender"] for r in rows})
-    for contender in contenders:
-        rs = sorted((r for r in rows if r["contender"] == contender), key=lambda r: int(r["n_waypoints"]))
-        n = [int(r["n_waypoints"]) for r in rs]
-        for ax, key in ((ax_wall, "total_s"), (ax_cpu, "cpu_s")):
-            ax.loglog(n, [_f(r, key) for r in rs], "o-", label=contender)
-    for ax, title in ((ax_wall, "wall time [s]"), (ax_cpu, "CPU time [s]")):
-        ax.set_xlabel("waypoints")
-        ax.set_title(f"{family}: {title}")
-        ax.grid(True, which="both", alpha=0.3)
-    ax_wall.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+def _distinct(rows: list[Row], key: str) -> str:
+    values = list(dict.fromkeys(r.get(key, "") for r in rows if r.get(key, "")))
+    return " / ".join(values) if values else "not recorded"
 
 
-def write_report(csv_path: Path, out_dir: Path, run_id: str | None = None) -> Path:
-    """Write ``report.md`` (and its plots) into ``out_dir`` from one run of the CSV; returns its path.
-
-    ``run_id``: the run to report (default: the file's last run).
-    """
-    run_id, rows = read_run(csv_path, run_id)
-    rows = _latest(rows)
-    out_dir.mkdir(parents=True, exist_ok=True)
+def provenance(run_id: str, rows: list[Row]) -> list[str]:
+    """The provenance block of one run's rows: what ran, where, with which settings."""
     first = rows[0]
     dates = sorted(r.get("date", "") for r in rows)
+    lines = [
+        f"- run `{run_id}`, rows {dates[0]} to {dates[-1]}, schema {first['schema']}",
+        f"- refine {first.get('refine', '?')}, commit `{_distinct(rows, 'git_commit')}`",
+        f"- solvers: {_distinct(rows, 'solver_versions')}; Pinocchio {first.get('pinocchio', '?')}, "
+        f"Drake {first.get('drake') or 'not installed'}; Python {first.get('python', '?')}",
+        f"- machine: {first.get('machine', '?')}, {first.get('cpu', '?')}, {first.get('cores', '?')} cores; "
+        f"1-minute load during the runs {_distinct(rows, 'load_1min')}",
+        f"- BLAS threads: {_distinct(rows, 'blas_threads')}",
+        f"- time limit per run {_distinct(rows, 'time_limit_s')} s; timed runs per row "
+        f"{_distinct(rows, 'repeats')}, untimed warm-up runs {_distinct(rows, 'warmup')}",
+    ]
+    for contender in sorted({r["contender"] for r in rows}):
+        options = {r.get("solver_options", "") for r in rows if r["contender"] == contender}
+        options.discard("")
+        options.discard("{}")
+        if options:
+            shown = "; ".join(_options(o) for o in sorted(options))
+            lines.append(f"- solver options of {contender} (the last solve's): {shown}")
+    return lines
+
+
+def _options(text: str) -> str:
+    try:
+        options = json.loads(text)
+    except ValueError:
+        return text
+    return ", ".join(f"`{k}={v}`" for k, v in sorted(options.items()))
+
+
+def _profiles_table(groups: dict[tuple[str, str], list[Row]]) -> list[str]:
+    names = list(PROFILES)
+    lines = [
+        "| suite | contender | problems | "
+        + " | ".join(f"success `{n}`" for n in names)
+        + " | detected infeasible | failed | timed out |",
+        "|---|---|---:|" + "---:|" * len(names) + "---:|---:|---:|",
+    ]
+    for (suite, contender), rs in sorted(groups.items()):
+        stated = sum(r["expected"] == "infeasible" for r in rs)
+        cells = [f"{sum(PROFILES[n][1](r) for r in rs)}/{len(rs)}" for n in names]
+        lines.append(
+            f"| {suite} | {contender} | {len(rs)} | " + " | ".join(cells) + " | "
+            f"{sum(_yes(r, 'detected_infeasible') for r in rs)}/{stated} | "
+            f"{sum(not solved(r) for r in rs)} | {sum(_yes(r, 'timed_out') for r in rs)} |"
+        )
+    return lines
+
+
+def _times_table(groups: dict[tuple[str, str], list[Row]]) -> list[str]:
+    lines = [
+        "| suite | contender | problems | shifted geometric mean CPU s (penalised) | ratio to the suite's best | "
+        "shifted geometric mean wall s (penalised) | median wall s (penalised) | least CPU s of a solved row | "
+        "median spread of repeats |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    sgm = {k: shifted_geometric_mean([_f(r, "penalised_cpu_s") for r in rs]) for k, rs in groups.items()}
+    for (suite, contender), rs in sorted(groups.items()):
+        best = min(v for (s, _), v in sgm.items() if s == suite)
+        spreads = [
+            (_f(r, "max_total_s") - _f(r, "min_total_s")) / _f(r, "total_s")
+            for r in rs
+            if _f(r, "total_s") > 0 and int(r.get("repeats") or 1) > 1
+        ]
+        least = [_f(r, "cpu_s") for r in rs if solved(r)]
+        lines.append(
+            f"| {suite} | {contender} | {len(rs)} | {_fmt(sgm[(suite, contender)])} | "
+            f"{_fmt(sgm[(suite, contender)] / best, 2) if best > 0 else '–'} | "
+            f"{_fmt(shifted_geometric_mean([_f(r, 'penalised_total_s') for r in rs]))} | "
+            f"{_fmt(statistics.median(_f(r, 'penalised_total_s') for r in rs))} | "
+            f"{_fmt(min(least)) if least else '–'} | "
+            f"{_fmt(100 * statistics.median(spreads), 0) + ' %' if spreads else '–'} |"
+        )
+    return lines
+
+
+def _growth_table(rows: list[Row]) -> list[str]:
+    lines = [
+        "| suite | family | contender | sizes fitted | exponent of CPU time | exponent of wall time |",
+        "|---|---|---|---|---|---|",
+    ]
+    count = 0
+    keys = sorted(
+        {(r["suite"], r["problem"].rsplit("-", 1)[0], r["contender"]) for r in rows if "-" in r["problem"]}
+    )
+    for suite, family, contender in keys:
+        rs = [
+            r for r in rows
+            if (r["suite"], r["problem"].rsplit("-", 1)[0], r["contender"]) == (suite, family, contender)
+            and _yes(r, "success")
+        ]  # fmt: skip
+        n = [int(r["n_waypoints"]) for r in rs]
+        if len(set(n)) < 2:
+            continue
+        count += 1
+        lines.append(
+            f"| {suite} | {family} | {contender} | {', '.join(map(str, sorted(n)))} | "
+            f"{_exponent(growth(n, [_f(r, 'cpu_s') for r in rs]))} | "
+            f"{_exponent(growth(n, [_f(r, 'total_s') for r in rs]))} |"
+        )
+    return lines if count else []
+
+
+def run_section(run_id: str, rows: list[Row], out_dir: Path, prefix: str = "") -> list[str]:
+    """The Markdown of one run's rows (plots written into ``out_dir``, names starting ``prefix``)."""
+    rows = _latest(rows)
     limits = sorted({r["time_limit_s"] for r in rows}, key=float)
     lines = [
-        "# refine benchmark",
-        "",
-        f"Run `{run_id}` of `{Path(csv_path).name}`: {len(rows)} rows, {dates[0]} to {dates[-1]} "
-        f"(schema {first['schema']}); no row of another run is used.",
-        "",
-        f"Machine: {first.get('machine', '?')}, {first.get('cpu', '?')}, {first.get('cores', '?')} cores. "
-        f"Python {first.get('python', '?')}, refine {first.get('refine', '?')}, CasADi {first.get('casadi', '?')}, "
-        f"Pinocchio {first.get('pinocchio', '?')}, Drake {first.get('drake') or 'not installed'}.",
-        "",
         "Times are build + seed + solve of each contender (verification excluded, the same for all); "
-        "wall time is the median over repeats, CPU time the process's. Every answer is verified by the "
-        "same check: TCP position, orientation cone, joint limits, singularity margin, and clearance "
-        "(dense check) where the problem has a cell.",
+        "wall time is the median over repeats, CPU time the process's. Every answer of every timed "
+        "run is verified by the same check: TCP position, orientation cone, joint limits, "
+        "singularity margin, and clearance (dense check) where the problem has a cell.",
         "",
-        "Success: a claimed answer (`ok`, `repaired`) that passes that check, within the time limit. "
-        "Detected: on a problem stated infeasible, an `infeasible` answer with joints for every "
-        "waypoint that the check rejects in the stated stretch (docs/bench.md). A row with neither "
-        f"is failed and counts as the time limit, {' / '.join(limits)} s, in the summary's medians "
-        "(penalised); a crash is status `error`, a run over the limit `timeout`.",
+        "Success: a claimed answer (`ok`, `repaired`) of a solver that converged, passing that check, "
+        "within the time limit, in every timed run. Detected: on a problem stated infeasible, an "
+        "`infeasible` answer with joints for every waypoint that the check rejects in the stated "
+        "stretch (docs/bench.md). A row with neither is failed and counts as the time limit, "
+        f"{' / '.join(limits)} s, in the penalised times; a crash is status `error`, a run over the "
+        "limit `timeout`.",
         "",
-        "## Targets",
+        "### Provenance",
+        "",
+        *provenance(run_id, rows),
+        "",
+        "### Targets",
         "",
         *targets(rows),
         "",
-        "## Summary",
+        "### Success per tolerance profile",
         "",
-        "| suite | contender | problems | success | verified | detected infeasible | failed | timed out | "
-        "median wall s (penalised) | median CPU s (penalised) |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+        *(f"- `{name}`: {text}" for name, (text, _) in PROFILES.items()),
+        "- residuals: the objective and KKT residuals of the answer on the refinement NLP, the same "
+        'evaluation for every contender (docs/bench.md, "Quality columns")',
+        "",
     ]
     groups: dict[tuple[str, str], list[Row]] = defaultdict(list)
     for r in rows:
         groups[(r["suite"], r["contender"])].append(r)
-    for (suite, contender), rs in sorted(groups.items()):
-        lines.append(
-            f"| {suite} | {contender} | {len(rs)} | {sum(_yes(r, 'success') for r in rs)} | "
-            f"{sum(_yes(r, 'verified') for r in rs)} | {sum(_yes(r, 'detected_infeasible') for r in rs)} | "
-            f"{sum(not (_yes(r, 'success') or _yes(r, 'detected_infeasible')) for r in rs)} | "
-            f"{sum(_yes(r, 'timed_out') for r in rs)} | "
-            f"{_fmt(statistics.median(_f(r, 'penalised_total_s') for r in rs))} | "
-            f"{_fmt(statistics.median(_f(r, 'penalised_cpu_s') for r in rs))} |"
-        )
+    lines += _profiles_table(groups)
+    lines += [
+        "",
+        "### Times",
+        "",
+        f"Shifted geometric means (shift {SHIFT_S:g} s) and medians of the penalised times: a failed row "
+        "counts as the time limit. The spread of a row is (slowest - fastest) / median of its timed runs.",
+        "",
+        *_times_table(groups),
+    ]
+    grown = _growth_table(rows)
+    if grown:
+        lines += ["", "### Growth (successful rows, log-log least squares)", "", *grown]
     for suite in sorted({r["suite"] for r in rows}):
         srows = sorted(
             (r for r in rows if r["suite"] == suite),
             key=lambda r: (r["problem"].rsplit("-", 1)[0], int(r["n_waypoints"]), r["contender"]),
         )
+        lines += ["", f"### Suite `{suite}`", ""]
+        if len({r["contender"] for r in srows}) > 1:
+            paths = plot_profile(
+                srows, f"performance profile, suite {suite} (CPU time)", out_dir / f"{prefix}{suite}-profile"
+            )
+            lines += [
+                f"![performance profile of suite {suite}]({paths[0].name}) ([SVG]({paths[1].name})): "
+                "the share of the suite's problems each contender solved within τ times the best "
+                "contender's CPU time on that problem (Dolan and Moré); a failed row is never within.",
+                "",
+            ]
         lines += [
-            "",
-            f"## Suite `{suite}`",
-            "",
-            "| problem | N | contender | status | verified | success | detected | build s | seed s | solve s | total s | "
-            "CPU s | iter | max dev deg | min clearance mm | peak RSS MB | note |",
-            "|---|---:|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+            "| problem | N | contender | status | solver status | verified | success | detected | total s | "
+            "CPU s | iter | objective | primal res. | dual res. | max dev deg | min clearance mm | note |",
+            "|---|---:|---|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---|",
         ]
         for r in srows:
             clearance = _f(r, "min_clearance_m") * 1e3
             lines.append(
                 f"| {r['problem']} | {r['n_waypoints']} | {r['contender']} | {r['status']} | "
-                f"{'yes' if _yes(r, 'verified') else 'no'} | {'yes' if _yes(r, 'success') else 'no'} | "
+                f"{r.get('solver_status') or '–'} | {r.get('verified_runs', '?')}/{r.get('repeats', '?')} | "
+                f"{'yes' if _yes(r, 'success') else 'no'} | "
                 f"{'yes' if _yes(r, 'detected_infeasible') else ('no' if r['expected'] == 'infeasible' else '–')} | "
-                f"{_fmt(_f(r, 'build_s'))} | {_fmt(_f(r, 'seed_s'))} | {_fmt(_f(r, 'solve_s'))} | "
                 f"{_fmt(_f(r, 'total_s'))} | {_fmt(_f(r, 'cpu_s'))} | {r.get('iterations', '')} | "
+                f"{_sci(_f(r, 'objective'), 6)} | {_sci(_f(r, 'primal_residual'))} | {_sci(_f(r, 'dual_residual'))} | "
                 f"{_fmt(_f(r, 'max_orientation_deviation_deg'), 2)} | {_fmt(clearance, 1)} | "
-                f"{_fmt(_f(r, 'peak_rss_mb'), 0)} | {(r.get('reason') or r.get('note', ''))[:60]} |"
+                f"{(r.get('reason') or r.get('note', ''))[:60]} |"
             )
         families = sorted({r["problem"].rsplit("-", 1)[0] for r in srows if "-" in r["problem"]})
         for family in families:
             frows = [r for r in srows if r["problem"].rsplit("-", 1)[0] == family]
             if len({r["n_waypoints"] for r in frows}) < 2:
                 continue
-            png = out_dir / f"{suite}-{family}.png"
-            _plot(frows, family, png)
+            png = out_dir / f"{prefix}{suite}-{family}.png"
+            plot_growth(frows, family, png)
             lines += ["", f"![{family}: time against waypoints, log-log]({png.name})"]
+    return lines
+
+
+def _sci(x: float, digits: int = 1) -> str:
+    return "–" if math.isnan(x) else f"{x:.{digits}e}"
+
+
+def write_report(csv_path: Path, out_dir: Path, run_ids: list[str] | str | None = None) -> Path:
+    """Write ``report.md`` (and its plots) into ``out_dir`` from runs of the CSV; returns its path.
+
+    ``run_ids``: the runs to report, each in its own section (default: the file's last run).
+    """
+    if isinstance(run_ids, str):
+        run_ids = [run_ids]
+    runs = read_runs(csv_path, run_ids)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    name = Path(csv_path).name
+    if len(runs) == 1:
+        run_id, rows = runs[0]
+        head = f"Run `{run_id}` of `{name}`: {len(rows)} rows; no row of another run is used."
+    else:
+        head = (
+            f"Runs {', '.join(f'`{r}`' for r, _ in runs)} of `{name}`, one section each: no table, "
+            "ratio, fit or profile combines rows of two runs."
+        )
+    lines = ["# refine benchmark", "", head]
+    for i, (run_id, rows) in enumerate(runs):
+        title = f"## Run `{run_id}`" if len(runs) > 1 else "## The run"
+        prefix = f"run{i + 1}-" if len(runs) > 1 else ""
+        lines += ["", title, "", *run_section(run_id, rows, out_dir, prefix)]
     report = out_dir / "report.md"
     report.write_text("\n".join(lines) + "\n")
     return report

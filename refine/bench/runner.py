@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import csv
 import datetime
+import json
 import logging
 import os
 import platform
@@ -31,6 +32,9 @@ import numpy as np
 from refine.bench import peers  # noqa: F401  (adds trajopt and descartes to CONTENDERS)
 from refine.bench.contenders import CONTENDERS, Answer, Unavailable, verify
 from refine.bench.outcomes import DEFAULT_TIME_LIMIT_S, penalised, score
+from refine.bench.provenance import DEFAULT_BLAS_THREADS, fixed_threads, git_commit, solver_versions
+from refine.bench.provenance import blas_threads as current_blas_threads
+from refine.bench.quality import evaluate
 from refine.bench.suites import BenchProblem, load_suites, problems
 from refine.bench.table import COLUMNS, SCHEMA_VERSION, check_header, new_run_id
 from refine.errors import InputError
@@ -62,7 +66,9 @@ def environment() -> dict[str, str]:
         "cores": str(os.cpu_count()),
         "python": platform.python_version(),
         "refine": version("refine"),
+        "git_commit": git_commit(),
         "casadi": version("casadi"),
+        "solver_versions": solver_versions(),
         "pinocchio": version("pin"),
         "drake": version("drake"),
     }
@@ -159,26 +165,41 @@ def _row(
     peak0: float,
     time_limit_s: float,
 ) -> dict[str, Any]:
-    """The CSV row of ``contender``'s timed runs on ``problem``; the last answer is verified and scored."""
+    """The CSV row of ``contender``'s timed runs on ``problem``: every answer verified and scored.
+
+    The row is a success (a detection) only when every timed run is one; its verification figures
+    and quality columns are the last answer's.
+    """
     runs = [a for a, _ in timed]
     answer = runs[-1]
     walls = [a.times_s for a in runs]
     cpus = [a.cpu_s for a in runs]
     repeat = len(runs)
     timed_out = any(wall > time_limit_s for _, wall in timed)
-    verdict = verify(problem, answer.q)
-    repaired = answer.status == "repaired" and verify(problem, answer.q, answer.slack_deg).verified
-    scored = score(
-        problem.expected,
-        problem.expected_s_range_m,
-        answer.status,
-        answer.q,
-        problem.n_waypoints,
-        verdict.verified,
-        repaired,
-        verdict.broken_s_m,
-        timed_out,
-    )
+    verdicts, scores = [], []
+    for a in runs:
+        verdict = verify(problem, a.q)
+        repaired = a.status == "repaired" and verify(problem, a.q, a.slack_deg).verified
+        verdicts.append(verdict)
+        scores.append(
+            score(
+                problem.expected,
+                problem.expected_s_range_m,
+                a.status,
+                a.q,
+                problem.n_waypoints,
+                verdict.verified,
+                repaired,
+                verdict.broken_s_m,
+                timed_out,
+                a.solver_status,
+            )
+        )
+    verdict = verdicts[-1]
+    success = all(s.success for s in scores)
+    detected = all(s.detected_infeasible for s in scores)
+    failed = not (success or detected)
+    quality = evaluate(problem, answer.q)
     totals = [sum(w.values()) for w in walls]
     stage = {k: statistics.median(w.get(k, 0.0) for w in walls) for k in ("build", "seed", "solve")}
     peak = _peak_rss_mb()
@@ -191,11 +212,16 @@ def _row(
         "expected": problem.expected,
         "contender": contender,
         "status": "timeout" if timed_out else answer.status,
-        "verified": verdict.verified,
-        "success": scored.success,
-        "detected_infeasible": scored.detected_infeasible,
+        "solver_status": answer.solver_status,
+        "verified": all(v.verified for v in verdicts),
+        "verified_runs": sum(v.verified for v in verdicts),
+        "success": success,
+        "detected_infeasible": detected,
         "timed_out": timed_out,
         "time_limit_s": time_limit_s,
+        "objective": quality.objective,
+        "primal_residual": quality.primal_residual,
+        "dual_residual": quality.dual_residual,
         "max_position_error_m": verdict.max_position_error_m,
         "max_orientation_deviation_deg": verdict.max_orientation_deviation_deg,
         "min_clearance_m": verdict.min_clearance_m,
@@ -204,10 +230,12 @@ def _row(
         "solve_s": stage["solve"],
         "total_s": statistics.median(totals),
         "min_total_s": min(totals),
-        "penalised_total_s": penalised(statistics.median(totals), scored.failed, time_limit_s),
+        "max_total_s": max(totals),
+        "penalised_total_s": penalised(statistics.median(totals), failed, time_limit_s),
         "cpu_s": statistics.median(cpus),
         "min_cpu_s": min(cpus),
-        "penalised_cpu_s": penalised(statistics.median(cpus), scored.failed, time_limit_s),
+        "max_cpu_s": max(cpus),
+        "penalised_cpu_s": penalised(statistics.median(cpus), failed, time_limit_s),
         "iterations": answer.iterations,
         "repeats": repeat,
         "warmup": warmup,
@@ -216,6 +244,7 @@ def _row(
         "rss_growth_mb": peak - peak0,
         "reason": verdict.reason[:160],
         "note": answer.note,
+        "solver_options": json.dumps(answer.solver_options, sort_keys=True, default=str),
     }
 
 
@@ -230,6 +259,7 @@ def run_suites(
     echo: Callable[[str], None] = print,
     time_limit_s: float = DEFAULT_TIME_LIMIT_S,
     run_id: str | None = None,
+    blas_threads: int = DEFAULT_BLAS_THREADS,
 ) -> list[dict[str, Any]]:
     """Run every contender on every problem of ``suites`` and append the rows to ``csv_path``.
 
@@ -247,7 +277,9 @@ def run_suites(
     load average before and after the timed runs, the process's peak resident memory after the row
     and its growth during it [MB] (memory stays allocated, so the growth is the row's own only
     where it sets a new peak), the first broken tolerance, and the machine and versions.
-    Contenders take turns on each problem (:func:`run_turns`).
+    Contenders take turns on each problem (:func:`run_turns`). Every BLAS runs with
+    ``blas_threads`` threads throughout (:func:`refine.bench.provenance.fixed_threads`, recorded
+    in ``blas_threads``); the quality columns are :func:`refine.bench.quality.evaluate`'s.
     """
     contenders = list(contenders)
     unknown = [c for c in contenders if c not in CONTENDERS]
@@ -275,11 +307,13 @@ def run_suites(
             for problem in problems(data, suite):
                 t0 = time.perf_counter()
                 functions = {name: CONTENDERS[name] for name in contenders if name not in skipped}
-                found = run_turns(problem, functions, repeat, warmup, echo, time_limit_s)
+                with fixed_threads(blas_threads):  # libraries loaded by earlier problems included
+                    found = run_turns(problem, functions, repeat, warmup, echo, time_limit_s)
+                    threads = current_blas_threads()  # as they were for these runs
                 skipped |= set(functions) - set(found)
                 for name, row in found.items():
-                    row.update(env)
-                    writer.writerow({k: _cell(row.get(k, "")) for k in COLUMNS})
+                    row.update(env, blas_threads=threads)
+                    writer.writerow({k: _cell(row.get(k, ""), k in EXACT) for k in COLUMNS})
                     f.flush()
                     rows.append(row)
                     echo(
@@ -292,7 +326,11 @@ def run_suites(
     return rows
 
 
-def _cell(value: Any) -> Any:
+EXACT = ("objective", "primal_residual", "dual_residual")
+"""Columns written with 15 significant digits (the others with 6): an objective is compared closely."""
+
+
+def _cell(value: Any, exact: bool = False) -> Any:
     if isinstance(value, float):
-        return "" if np.isnan(value) else f"{value:.6g}"
+        return "" if np.isnan(value) else f"{value:.15g}" if exact else f"{value:.6g}"
     return value

@@ -13,16 +13,18 @@ from pathlib import Path
 
 from refine.errors import InputError
 
-SCHEMA_VERSION = "2"
+SCHEMA_VERSION = "3"
 """Version of :data:`COLUMNS`, written in every row (``schema``); raised whenever the columns change."""
 
 COLUMNS = [
     "schema", "run_id", "suite", "problem", "robot", "n_waypoints", "obstacles", "expected", "contender",
-    "status", "verified", "success", "detected_infeasible", "timed_out", "time_limit_s",
-    "max_position_error_m", "max_orientation_deviation_deg", "min_clearance_m", "build_s", "seed_s",
-    "solve_s", "total_s", "min_total_s", "penalised_total_s", "cpu_s", "min_cpu_s", "penalised_cpu_s",
-    "iterations", "repeats", "warmup", "load_1min", "peak_rss_mb", "rss_growth_mb", "reason", "note", "date",
-    "machine", "cpu", "cores", "python", "refine", "casadi", "pinocchio", "drake",
+    "status", "solver_status", "verified", "verified_runs", "success", "detected_infeasible", "timed_out",
+    "time_limit_s", "objective", "primal_residual", "dual_residual", "max_position_error_m",
+    "max_orientation_deviation_deg", "min_clearance_m", "build_s", "seed_s", "solve_s", "total_s",
+    "min_total_s", "max_total_s", "penalised_total_s", "cpu_s", "min_cpu_s", "max_cpu_s", "penalised_cpu_s",
+    "iterations", "repeats", "warmup", "load_1min", "peak_rss_mb", "rss_growth_mb", "reason", "note",
+    "solver_options", "blas_threads", "date", "machine", "cpu", "cores", "python", "refine", "git_commit",
+    "casadi", "solver_versions", "pinocchio", "drake",
 ]  # fmt: skip
 """The CSV columns, in order (docs/bench.md)."""
 
@@ -57,10 +59,10 @@ def check_header(csv_path: Path) -> bool:
     return False
 
 
-def read_run(csv_path: Path, run_id: str | None = None) -> tuple[str, list[Row]]:
-    """The rows of one run of a benchmark CSV (as strings): ``run_id``'s, or the last run's.
+def read_runs(csv_path: Path, run_ids: list[str] | None = None) -> list[tuple[str, list[Row]]]:
+    """The rows of some runs of a benchmark CSV (as strings), run by run: ``run_ids``', or the last run's.
 
-    The last run is that of the file's last row (runs are appended). Returns the run id and its rows.
+    The last run is that of the file's last row (runs are appended). Returns (run id, its rows) per run.
 
     Raises:
         InputError: unreadable file, no rows, a header of another schema, or an unknown run id.
@@ -76,13 +78,19 @@ def read_run(csv_path: Path, run_id: str | None = None) -> tuple[str, list[Row]]
     if header != COLUMNS:
         raise InputError(
             f"benchmark CSV {path}: its header has {len(header)} columns, schema {SCHEMA_VERSION} has "
-            f"{len(COLUMNS)}; it was written by another version (rows without a run id cannot be "
-            "told apart): run the benchmark again into a new file"
+            f"{len(COLUMNS)}; it was written by another version (its columns would be misread): "
+            "run the benchmark again into a new file"
         )
     if not rows:
         raise InputError(f"benchmark CSV {path} has no rows")
     runs = list(dict.fromkeys(r["run_id"] for r in rows))
-    chosen = runs[-1] if run_id is None else run_id
-    if chosen not in runs:
-        raise InputError(f"benchmark CSV {path} has no run {chosen!r}; its runs: {', '.join(runs)}")
-    return chosen, [r for r in rows if r["run_id"] == chosen]
+    chosen = list(dict.fromkeys(run_ids)) if run_ids else [runs[-1]]
+    unknown = [r for r in chosen if r not in runs]
+    if unknown:
+        raise InputError(f"benchmark CSV {path} has no run {', '.join(unknown)}; its runs: {', '.join(runs)}")
+    return [(run, [r for r in rows if r["run_id"] == run]) for run in chosen]
+
+
+def read_run(csv_path: Path, run_id: str | None = None) -> tuple[str, list[Row]]:
+    """The rows of one run (:func:`read_runs`): ``run_id``'s, or the last run's; returns the id and rows."""
+    return read_runs(csv_path, [run_id] if run_id else None)[0]

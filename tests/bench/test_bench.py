@@ -92,8 +92,8 @@ def test_run_writes_one_row_per_problem_and_contender_and_the_report_reads_the_c
 
     report = write_report(out, tmp_path / "report")
     text = report.read_text()
-    assert "| tiny | refine | 4 | 4 | 4 |" in text and "| tiny | greedy-ik | 4 | 4 | 4 |" in text
-    assert "growth exponent" in text and "Machine:" in text
+    assert "| tiny | refine | 4 | 4/4 |" in text and "| tiny | greedy-ik | 4 | 4/4 |" in text
+    assert "growth exponent" in text and "- machine:" in text
     assert (tmp_path / "report" / "tiny-wave.png").stat().st_size > 1000
 
 

@@ -211,8 +211,12 @@ def test_the_report_uses_the_rows_of_one_run_and_pairs_rows_within_a_suite(tmp_p
     assert "irb4600 (suite `growth`): growth exponent of build + seed + solve" in latest
     growth_line = next(line for line in latest.splitlines() if "suite `growth`): growth" in line)
     assert "solve 2.00 (wall)" in growth_line and "2 successful rows, 100-400 waypoints" in growth_line
-    assert "| growth | refine | 3 | 2 | 2 | 0 | 1 | 0 | 16.000 | 16.000 |" in latest
-    assert "| glass | greedy-ik | 1 | 1 |" in latest and "| quick |" not in latest
+    # success per profile: 2 of 3 verified, none within a KKT profile (no residuals), 1 failed
+    assert "| growth | refine | 3 | 2/3 | 0/3 | 0/3 | 0/0 | 1 | 0 |" in latest
+    # shifted geometric mean of the penalised 1, 16, 300 s with shift 0.1 s:
+    # (1.1 * 16.1 * 300.1)^(1/3) - 0.1 = 17.351 s; the median 16 s
+    assert "| growth | refine | 3 | 17.351 | 1.00 | 17.351 | 16.000 |" in latest
+    assert "| glass | greedy-ik | 1 | 1/1 |" in latest and "| quick |" not in latest
 
     assert main(["bench", "report", str(path), "--run-id", a, "--out", str(tmp_path / "first")]) == 0
     first = (tmp_path / "first" / "report.md").read_text()
@@ -220,6 +224,6 @@ def test_the_report_uses_the_rows_of_one_run_and_pairs_rows_within_a_suite(tmp_p
     assert "ratio refine / greedy-ik 2.00 (wall)" in first
     growth_a = next(line for line in first.splitlines() if "suite `growth`): growth" in line)
     assert "solve 1.00 (wall)" in growth_a and "2 successful rows, 100-400 waypoints" in growth_a
-    assert "| quick | refine | 1 | 1 |" in first  # the quick suite's row stays in its own suite
-    with pytest.raises(InputError, match="no run 'nope'"):
+    assert "| quick | refine | 1 | 1/1 |" in first  # the quick suite's row stays in its own suite
+    with pytest.raises(InputError, match="no run nope"):
         write_report(path, tmp_path / "x", "nope")
