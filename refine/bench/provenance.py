@@ -18,9 +18,11 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import functools
+import io
 import os
 import re
 import subprocess
+import sys
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -62,16 +64,21 @@ def solver_versions() -> str:
     x = ca.MX.sym("x")
     options = {"ipopt.print_level": 5, "print_time": False, "ipopt.max_iter": 1, "ipopt.sb": "yes"}
     solver = ca.nlpsol("versions", "ipopt", {"x": x, "f": (x - 1) ** 2}, options)
+    printed = io.StringIO()
+    libc = ctypes.CDLL(None)
     with tempfile.TemporaryFile() as out:
+        sys.stdout.flush()
         saved = os.dup(1)
-        os.dup2(out.fileno(), 1)  # IPOPT writes to the C library's stdout
+        os.dup2(out.fileno(), 1)  # IPOPT may write to the C library's stdout, CasADi to Python's
         try:
-            solver(x0=0.0)
+            with contextlib.redirect_stdout(printed):
+                solver(x0=0.0)
         finally:
+            libc.fflush(None)
             os.dup2(saved, 1)
             os.close(saved)
         out.seek(0)
-        text = out.read().decode(errors="replace")
+        text = out.read().decode(errors="replace") + printed.getvalue()
     ipopt = re.search(r"Ipopt version ([0-9][\w.]*[0-9])", text)
     mumps = re.search(r"MUMPS ([0-9][\w.]*[0-9])", text)
     return (

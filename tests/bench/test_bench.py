@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import json
 
 import numpy as np
 import pytest
@@ -87,6 +88,15 @@ def test_run_writes_one_row_per_problem_and_contender_and_the_report_reads_the_c
         assert float(row["max_position_error_m"]) <= 1e-6
     refine_rows = [r for r in table if r["contender"] == "refine"]
     assert all(int(r["iterations"]) > 0 for r in refine_rows)
+    # quality and provenance: IPOPT's own status and options, the shared residuals, versions, threads
+    for row in refine_rows:
+        assert row["solver_status"] == "Solve_Succeeded" and row["verified_runs"] == row["repeats"]
+        assert json.loads(row["solver_options"])["ipopt.tol"] > 0
+        assert float(row["primal_residual"]) < 1e-6 and float(row["dual_residual"]) < 1e-4
+        assert float(row["objective"]) > 0
+    for row in table:
+        assert "ipopt 3." in row["solver_versions"] and row["blas_threads"]
+        assert set(part.split()[1] for part in row["blas_threads"].split("; ")) == {"1"}
     assert all(float(r["max_orientation_deviation_deg"]) <= 3.0 for r in refine_rows)
     assert all(r["min_clearance_m"] for r in table if r["obstacles"] == "True")
 

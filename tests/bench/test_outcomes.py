@@ -118,6 +118,14 @@ def test_the_scoring_rules_by_hand():
     assert not rule(stated, "infeasible", joints, broken=[(0.15, 0.3)], timed_out=True).detected_infeasible
     assert not rule(("infeasible", None), "infeasible", joints, broken=[(0.15, 0.3)]).detected_infeasible
     assert not rule(("repaired", (0.1, 0.2)), "infeasible", joints, broken=[(0.15, 0.3)]).detected_infeasible
+    # a solver that stopped without converging gives no success, however its answer verifies
+    assert rule(("", None), "ok", joints, verified=True).success  # no solver status: none to judge
+    assert score("", None, "ok", joints, 20, True, False, [], False, "Solve_Succeeded").success
+    assert score("", None, "ok", joints, 20, True, False, [], False, "Solved_To_Acceptable_Level").success
+    assert not score("", None, "ok", joints, 20, True, False, [], False, "Maximum_Iterations_Exceeded").success
+    assert not score("", None, "ok", joints, 20, True, False, [], False, "Maximum_CpuTime_Exceeded").success
+    assert not score("", None, "ok", joints, 20, True, False, [], False, "not solved (return flag 2)").success
+    assert not score("repaired", None, "repaired", joints, 20, False, True, [], False, "Restoration_Failed").success
     # never both; and saying infeasible is never a success
     assert not rule(stated, "infeasible", joints, broken=[(0.15, 0.30)]).success
     assert rule(stated, "infeasible", joints, broken=[(0.15, 0.30)]).failed is False
@@ -227,3 +235,35 @@ def test_the_report_uses_the_rows_of_one_run_and_pairs_rows_within_a_suite(tmp_p
     assert "| quick | refine | 1 | 1/1 |" in first  # the quick suite's row stays in its own suite
     with pytest.raises(InputError, match="no run nope"):
         write_report(path, tmp_path / "x", "nope")
+
+
+def test_every_timed_run_is_verified_and_an_unconverged_solver_is_no_success(tmp_path, monkeypatch):
+    suites = tmp_path / "suites.toml"
+    suites.write_text(TINY)
+    calls = []
+
+    def flaky(problem):
+        """Right on its first call, 0.1 rad off on every joint on the second."""
+        calls.append(1)
+        answer = contenders_module.greedy_ik(problem)
+        q = answer.q if len(calls) == 1 else answer.q + 0.1
+        return Answer("ok", q, answer.times_s, answer.cpu_s)
+
+    def out_of_iterations(problem):
+        answer = contenders_module.greedy_ik(problem)
+        return Answer("ok", answer.q, answer.times_s, answer.cpu_s, solver_status="Maximum_Iterations_Exceeded")
+
+    monkeypatch.setitem(contenders_module.CONTENDERS, "greedy-ik", flaky)
+    monkeypatch.setitem(contenders_module.CONTENDERS, "drake-ik", out_of_iterations)
+    rows = run_suites(
+        ["tiny"], ["greedy-ik", "drake-ik"], tmp_path / "b.csv", suites_file=suites, repeat=2,
+        time_limit_s=50.0, echo=lambda _: None,
+    )  # fmt: skip
+    by = {r["contender"]: r for r in rows}
+    # the last answer alone would not verify, the first did: 1 of 2, no success, the limit counted
+    assert by["greedy-ik"]["verified_runs"] == 1 and not by["greedy-ik"]["verified"]
+    assert not by["greedy-ik"]["success"] and by["greedy-ik"]["penalised_cpu_s"] == 50.0
+    # verified in both runs, but its solver ran out of iterations
+    out = by["drake-ik"]
+    assert out["verified_runs"] == 2 and out["verified"] and out["solver_status"] == "Maximum_Iterations_Exceeded"
+    assert not out["success"] and out["penalised_total_s"] == 50.0
