@@ -122,10 +122,14 @@ def test_the_scoring_rules_by_hand():
     assert rule(("", None), "ok", joints, verified=True).success  # no solver status: none to judge
     assert score("", None, "ok", joints, 20, True, False, [], False, "Solve_Succeeded").success
     assert score("", None, "ok", joints, 20, True, False, [], False, "Solved_To_Acceptable_Level").success
-    assert not score("", None, "ok", joints, 20, True, False, [], False, "Maximum_Iterations_Exceeded").success
+    assert not score(
+        "", None, "ok", joints, 20, True, False, [], False, "Maximum_Iterations_Exceeded"
+    ).success
     assert not score("", None, "ok", joints, 20, True, False, [], False, "Maximum_CpuTime_Exceeded").success
     assert not score("", None, "ok", joints, 20, True, False, [], False, "not solved (return flag 2)").success
-    assert not score("repaired", None, "repaired", joints, 20, False, True, [], False, "Restoration_Failed").success
+    assert not score(
+        "repaired", None, "repaired", joints, 20, False, True, [], False, "Restoration_Failed"
+    ).success
     # never both; and saying infeasible is never a success
     assert not rule(stated, "infeasible", joints, broken=[(0.15, 0.30)]).success
     assert rule(stated, "infeasible", joints, broken=[(0.15, 0.30)]).failed is False
@@ -251,7 +255,9 @@ def test_every_timed_run_is_verified_and_an_unconverged_solver_is_no_success(tmp
 
     def out_of_iterations(problem):
         answer = contenders_module.greedy_ik(problem)
-        return Answer("ok", answer.q, answer.times_s, answer.cpu_s, solver_status="Maximum_Iterations_Exceeded")
+        return Answer(
+            "ok", answer.q, answer.times_s, answer.cpu_s, solver_status="Maximum_Iterations_Exceeded"
+        )
 
     monkeypatch.setitem(contenders_module.CONTENDERS, "greedy-ik", flaky)
     monkeypatch.setitem(contenders_module.CONTENDERS, "drake-ik", out_of_iterations)
@@ -265,5 +271,9 @@ def test_every_timed_run_is_verified_and_an_unconverged_solver_is_no_success(tmp
     assert not by["greedy-ik"]["success"] and by["greedy-ik"]["penalised_cpu_s"] == 50.0
     # verified in both runs, but its solver ran out of iterations
     out = by["drake-ik"]
-    assert out["verified_runs"] == 2 and out["verified"] and out["solver_status"] == "Maximum_Iterations_Exceeded"
+    assert (
+        out["verified_runs"] == 2
+        and out["verified"]
+        and out["solver_status"] == "Maximum_Iterations_Exceeded"
+    )
     assert not out["success"] and out["penalised_total_s"] == 50.0

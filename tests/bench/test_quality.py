@@ -14,29 +14,21 @@ from refine.bench.contenders import verify
 from refine.bench.figures import growth, performance_ratios, profile_curve, shifted_geometric_mean
 from refine.bench.provenance import blas_threads, fixed_threads, git_commit, solver_versions
 from refine.bench.quality import _dual_residual, evaluate
-from refine.bench.suites import load_suites, problems
+from refine.bench.suites import generated_problem
 from refine.optimise.verify import check_path
 from refine.robot.kinematics import TcpKinematics
 
-TINY = """
-[suite.tiny]
-generated = ["wave"]
-sizes = [20]
-
-[generated.wave]
-robot = "abb_irb4600_60_205"
-centre_m = [1.3, 0.0, 0.6]
-length_m = 0.3
-tool_length_m = 0.35
-"""
-
 
 @pytest.fixture(scope="module")
-def wave(tmp_path_factory):
-    path = tmp_path_factory.mktemp("suites") / "suites.toml"
-    path.write_text(TINY)
-    (problem,) = problems(load_suites(path), "tiny")
-    return problem
+def wave():
+    """A 20-waypoint, 0.3 m sine wave in front of the IRB 4600 (a generated family of the suites)."""
+    spec = {
+        "robot": "abb_irb4600_60_205",
+        "centre_m": [1.3, 0.0, 0.6],
+        "length_m": 0.3,
+        "tool_length_m": 0.35,
+    }
+    return generated_problem("tiny", "wave", spec, 20)
 
 
 def test_dual_residual_of_a_one_variable_problem_by_hand():
@@ -64,7 +56,9 @@ def test_the_objective_of_constant_joints_is_the_orientation_term_alone(wave):
     2(1 - cos θ)·(180/π)² over the waypoints (Weights' definition), θ from the verification."""
     q = np.tile(contenders_module.greedy_ik(wave).q[0], (wave.n_waypoints, 1))
     kin = TcpKinematics(wave.robot, wave.base_in_world, wave.tcp_in_flange, wave.tool_in_world)
-    theta = np.radians(check_path(kin, q, wave.fused, wave.tolerances, wave.axisymmetric).orientation_deviation_deg)
+    theta = np.radians(
+        check_path(kin, q, wave.fused, wave.tolerances, wave.axisymmetric).orientation_deviation_deg
+    )
     assert wave.weights.mid_range == 0.0
     by_hand = wave.weights.orientation * np.mean(2.0 * (1.0 - np.cos(theta))) * (180.0 / np.pi) ** 2
     assert evaluate(wave, q).objective == pytest.approx(by_hand, rel=1e-9)
@@ -83,7 +77,9 @@ def test_residuals_tell_the_refined_optimum_from_a_feasible_ik_chain(wave):
     # and it is no optimum: the refinement lowers the objective from it
     assert at_chain.dual_residual > 1e-4 and at_optimum.objective < at_chain.objective
     # no joints, or joints of the wrong shape: no figures
-    assert math.isnan(evaluate(wave, None).objective) and math.isnan(evaluate(wave, chained.q[:5]).dual_residual)
+    assert math.isnan(evaluate(wave, None).objective) and math.isnan(
+        evaluate(wave, chained.q[:5]).dual_residual
+    )
 
 
 def test_provenance_names_the_commit_the_solvers_and_the_threads():
@@ -132,4 +128,6 @@ def test_growth_of_a_power_law_with_a_kink():
     assert fit["exponent"] == pytest.approx(1.6)
     assert fit["low"] < 1.6 < fit["high"]
     exact = growth([100, 1000, 10000], [0.5, 5.0, 50.0])
-    assert exact["exponent"] == pytest.approx(1.0) and exact["high"] - exact["low"] == pytest.approx(0.0, abs=1e-9)
+    assert exact["exponent"] == pytest.approx(1.0) and exact["high"] - exact["low"] == pytest.approx(
+        0.0, abs=1e-9
+    )
