@@ -108,13 +108,17 @@ def plot_profile(rows: list[Row], title: str, path: Path, key: str = "cpu_s") ->
     finite = [x for rs in ratios.values() for x in rs if math.isfinite(x)]
     top = max(2.0, max(finite, default=2.0) * 1.5)
     taus = np.logspace(0.0, math.log10(top), 400)
-    fig, ax = plt.subplots(figsize=(6.4, 4.0))
-    for contender, rs in ratios.items():
+    fig, ax = plt.subplots(figsize=(8.4, 4.0))
+    styles = ["-", "--", "-.", ":"]
+    for i, (contender, rs) in enumerate(ratios.items()):
+        count = sum(map(math.isfinite, rs))
         ax.step(
             taus,
             profile_curve(rs, taus),
             where="post",
-            label=f"{contender} ({sum(map(math.isfinite, rs))}/{len(rs)})",
+            linestyle=styles[(i // 10) % len(styles)] if count else ":",
+            linewidth=1.8 if count else 1.0,
+            label=f"{contender} ({count}/{len(rs)})",
         )
     ax.set_xscale("log", base=2)
     ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}"))
@@ -124,7 +128,9 @@ def plot_profile(rows: list[Row], title: str, path: Path, key: str = "cpu_s") ->
     ax.set_ylabel("share of problems within τ")
     ax.set_title(title, fontsize=10)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8, loc="lower right", title="solved / problems", title_fontsize=8)
+    ax.legend(
+        fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), title="solved / problems", title_fontsize=8
+    )
     fig.tight_layout()
     paths = [path.with_suffix(".png"), path.with_suffix(".svg")]
     fig.savefig(paths[0], dpi=110)
