@@ -237,6 +237,12 @@ def test_the_report_uses_the_rows_of_one_run_and_pairs_rows_within_a_suite(tmp_p
     growth_a = next(line for line in first.splitlines() if "suite `growth`): growth" in line)
     assert "solve 1.00 (wall)" in growth_a and "2 successful rows, 100-400 waypoints" in growth_a
     assert "| quick | refine | 1 | 1/1 |" in first  # the quick suite's row stays in its own suite
+    # two runs asked for: a section each, each with its own ratio, none pairing rows across runs
+    assert main(["bench", "report", str(path), "--run", a, "--run", b, "--out", str(tmp_path / "both")]) == 0
+    both = (tmp_path / "both" / "report.md").read_text()
+    section_a, section_b = both.split(f"## Run `{a}`")[1].split(f"## Run `{b}`")
+    assert "ratio refine / greedy-ik 2.00 (wall)" in section_a and "greedy-ik 0.25" not in section_a
+    assert "ratio refine / greedy-ik 0.25 (wall)" in section_b and "greedy-ik 2.00" not in section_b
     with pytest.raises(InputError, match="no run nope"):
         write_report(path, tmp_path / "x", "nope")
 
