@@ -101,4 +101,7 @@ def run(args: argparse.Namespace) -> int:
     )
     run_id = rows[0]["run_id"] if rows else "-"
     print(f"{len(rows)} row(s) of run {run_id} appended to {args.csv}")
+    absent = sorted({r["contender"] for r in rows if r["status"] == "unavailable"})
+    if absent:
+        print(f"not run here (rows with status unavailable, the reason in note): {', '.join(absent)}")
     return 0

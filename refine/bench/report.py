@@ -244,8 +244,16 @@ def _growth_table(rows: list[Row]) -> list[str]:
 
 
 def run_section(run_id: str, rows: list[Row], out_dir: Path, prefix: str = "") -> list[str]:
-    """The Markdown of one run's rows (plots written into ``out_dir``, names starting ``prefix``)."""
+    """The Markdown of one run's rows (plots written into ``out_dir``, names starting ``prefix``).
+
+    Rows of a contender that could not run here (status ``unavailable``) are listed in the
+    provenance block and enter no table or figure.
+    """
     rows = _latest(rows)
+    absent = [r for r in rows if r["status"] == "unavailable"]
+    rows = [r for r in rows if r["status"] != "unavailable"]
+    if not rows:
+        return ["No contender ran: " + "; ".join(sorted({f"{r['contender']} ({r['note']})" for r in absent}))]
     limits = sorted({r["time_limit_s"] for r in rows}, key=float)
     lines = [
         "Times are build + seed + solve of each contender (verification excluded, the same for all); "
@@ -263,6 +271,11 @@ def run_section(run_id: str, rows: list[Row], out_dir: Path, prefix: str = "") -
         "### Provenance",
         "",
         *provenance(run_id, rows),
+        *(
+            f"- not run here: {c} on {sum(r['contender'] == c for r in absent)} problem(s), "
+            f"{next(r['note'] for r in absent if r['contender'] == c)}"
+            for c in sorted({r["contender"] for r in absent})
+        ),
         "",
         "### Targets",
         "",

@@ -115,11 +115,13 @@ def run_turns(
     warmup: int = 0,
     echo: Callable[[str], None] = print,
     time_limit_s: float = DEFAULT_TIME_LIMIT_S,
+    unavailable: dict[str, str] | None = None,
 ) -> dict[str, dict[str, Any]]:
     """One row per contender of ``functions`` on ``problem``, the contenders taking turns.
 
     Each contender runs ``warmup`` times untimed, then the ``repeat`` timed runs go round the
-    contenders in turn. A contender that raises :class:`Unavailable` is left out with a message.
+    contenders in turn. A contender that raises :class:`Unavailable` is left out with a message
+    (and its reason put in ``unavailable``, by name, when given).
     A timed run longer than ``time_limit_s`` on the runner's clock (the whole call) times the row
     out; the run is not interrupted.
     """
@@ -131,6 +133,8 @@ def run_turns(
         except Unavailable as e:
             echo(f"skipping {name}: {e}")
             del functions[name]
+            if unavailable is not None:
+                unavailable[name] = str(e)
     answers: dict[str, list[tuple[Answer, float]]] = {name: [] for name in functions}
     load0 = _load()
     peak0 = _peak_rss_mb()
@@ -141,6 +145,8 @@ def run_turns(
             except Unavailable as e:
                 echo(f"skipping {name}: {e}")
                 del functions[name], answers[name]
+                if unavailable is not None:
+                    unavailable[name] = str(e)
     load = f"{load0:.2f}-{_load():.2f}"
     return {
         name: _row(problem, name, runs, warmup, load, peak0, time_limit_s)
@@ -297,7 +303,7 @@ def run_suites(
     env.update(schema=SCHEMA_VERSION, run_id=run_id or new_run_id())
     echo(f"run {env['run_id']} into {csv_path}")
     rows: list[dict[str, Any]] = []
-    skipped: set[str] = set()
+    skipped: dict[str, str] = {}  # contender -> why it cannot run here
     csv_path.parent.mkdir(parents=True, exist_ok=True)
     with csv_path.open("a", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=COLUMNS)
@@ -308,9 +314,12 @@ def run_suites(
                 t0 = time.perf_counter()
                 functions = {name: CONTENDERS[name] for name in contenders if name not in skipped}
                 with fixed_threads(blas_threads):  # libraries loaded by earlier problems included
-                    found = run_turns(problem, functions, repeat, warmup, echo, time_limit_s)
+                    found = run_turns(problem, functions, repeat, warmup, echo, time_limit_s, skipped)
                     threads = current_blas_threads()  # as they were for these runs
-                skipped |= set(functions) - set(found)
+                for name in contenders:  # a contender that cannot run here still leaves its row
+                    if name in skipped and name not in found:
+                        found[name] = _unavailable_row(problem, name, skipped[name], warmup, time_limit_s)
+                found = {name: found[name] for name in contenders if name in found}
                 for name, row in found.items():
                     row.update(env, blas_threads=threads)
                     writer.writerow({k: _cell(row.get(k, ""), k in EXACT) for k in COLUMNS})
@@ -320,10 +329,39 @@ def run_suites(
                         f"{suite:11s} {problem.name:28s} {name:16s} {row['status']:10s} "
                         f"verified {'yes' if row['verified'] else 'no ':3s} success {'yes' if row['success'] else 'no '} "
                         f"detected {'yes' if row['detected_infeasible'] else 'no '} "
-                        f"total {row['total_s']:7.3f} s cpu {row['cpu_s']:7.3f} s load {row['load_1min']} "
+                        f"total {row['total_s']:7.3f} s cpu {row['cpu_s']:7.3f} s load {row.get('load_1min', '')} "
                         f"({time.perf_counter() - t0:.1f} s for the problem's runs)"
                     )
     return rows
+
+
+def _unavailable_row(
+    problem: BenchProblem, contender: str, reason: str, warmup: int, time_limit_s: float
+) -> dict[str, Any]:
+    """The row of a contender that cannot run here: status ``unavailable``, the reason in ``note``."""
+    return {
+        "suite": problem.suite,
+        "problem": problem.name,
+        "robot": problem.robot.spec.name,
+        "n_waypoints": problem.n_waypoints,
+        "obstacles": bool(problem.sources),
+        "expected": problem.expected,
+        "contender": contender,
+        "status": "unavailable",
+        "verified": False,
+        "verified_runs": 0,
+        "success": False,
+        "detected_infeasible": False,
+        "timed_out": False,
+        "time_limit_s": time_limit_s,
+        "total_s": float("nan"),
+        "cpu_s": float("nan"),
+        "penalised_total_s": time_limit_s,
+        "penalised_cpu_s": time_limit_s,
+        "repeats": 0,
+        "warmup": warmup,
+        "note": reason[:160],
+    }
 
 
 EXACT = ("objective", "primal_residual", "dual_residual")

@@ -77,11 +77,16 @@ def test_run_writes_one_row_per_problem_and_contender_and_the_report_reads_the_c
     rows = run_suites(
         ["tiny"], ["refine", "greedy-ik", "drake-ik"], out, suites_file=suites_file, echo=messages.append
     )
-    assert len(rows) == 8  # 4 problems x 2 contenders; the missing one is skipped with a message
+    # 4 problems x 3 contenders; the missing one is skipped with a message and leaves rows that say so
+    assert len(rows) == 12
     assert any("skipping drake-ik: not installed here" in m for m in messages)
     with out.open() as f:
         table = list(csv.DictReader(f))
-    assert list(table[0]) == COLUMNS and len(table) == 8
+    assert list(table[0]) == COLUMNS and len(table) == 12
+    missing_rows = [r for r in table if r["contender"] == "drake-ik"]
+    assert len(missing_rows) == 4 and {r["status"] for r in missing_rows} == {"unavailable"}
+    assert all(r["note"] == "not installed here" and r["success"] == "False" for r in missing_rows)
+    table = [r for r in table if r["contender"] != "drake-ik"]
     for row in table:
         assert row["verified"] == "True" and row["success"] == "True", row
         assert float(row["total_s"]) > 0 and float(row["cpu_s"]) > 0 and row["casadi"]
@@ -103,7 +108,8 @@ def test_run_writes_one_row_per_problem_and_contender_and_the_report_reads_the_c
     report = write_report(out, tmp_path / "report")
     text = report.read_text()
     assert "| tiny | refine | 4 | 4/4 |" in text and "| tiny | greedy-ik | 4 | 4/4 |" in text
-    assert "growth exponent" in text and "- machine:" in text
+    assert "growth exponent" in text and "- machine:" in text and "| tiny | drake-ik |" not in text
+    assert "- not run here: drake-ik on 4 problem(s), not installed here" in text
     assert (tmp_path / "report" / "tiny-wave.png").stat().st_size > 1000
 
 
