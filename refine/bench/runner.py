@@ -210,13 +210,7 @@ def _row(
     stage = {k: statistics.median(w.get(k, 0.0) for w in walls) for k in ("build", "seed", "solve")}
     peak = _peak_rss_mb()
     return {
-        "suite": problem.suite,
-        "problem": problem.name,
-        "robot": problem.robot.spec.name,
-        "n_waypoints": problem.n_waypoints,
-        "obstacles": bool(problem.sources),
-        "expected": problem.expected,
-        "contender": contender,
+        **_problem_columns(problem, contender),
         "status": "timeout" if timed_out else answer.status,
         "solver_status": answer.solver_status,
         "verified": all(v.verified for v in verdicts),
@@ -335,10 +329,8 @@ def run_suites(
     return rows
 
 
-def _unavailable_row(
-    problem: BenchProblem, contender: str, reason: str, warmup: int, time_limit_s: float
-) -> dict[str, Any]:
-    """The row of a contender that cannot run here: status ``unavailable``, the reason in ``note``."""
+def _problem_columns(problem: BenchProblem, contender: str) -> dict[str, Any]:
+    """The columns that name the problem and the contender."""
     return {
         "suite": problem.suite,
         "problem": problem.name,
@@ -347,6 +339,15 @@ def _unavailable_row(
         "obstacles": bool(problem.sources),
         "expected": problem.expected,
         "contender": contender,
+    }
+
+
+def _unavailable_row(
+    problem: BenchProblem, contender: str, reason: str, warmup: int, time_limit_s: float
+) -> dict[str, Any]:
+    """The row of a contender that cannot run here: status ``unavailable``, the reason in ``note``."""
+    return {
+        **_problem_columns(problem, contender),
         "status": "unavailable",
         "verified": False,
         "verified_runs": 0,
