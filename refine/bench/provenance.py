@@ -8,7 +8,7 @@ Written in every row (docs/bench.md, "Provenance"):
   line IPOPT prints at the start of every solve (``This is Ipopt version 3.14.19, running with
   linear solver MUMPS 5.8.2.``) of a one-variable problem solved once per process.
 * ``blas_threads``: the thread count of every BLAS in the process while the contenders run: the
-  OpenBLAS beside CasADi that MUMPS calls (set by :func:`refine.optimise.threads.limit_solver_threads`)
+  OpenBLAS beside CasADi that MUMPS calls (which the refinement also sets, :mod:`refine.optimise.threads`)
   and those threadpoolctl finds (NumPy's, SciPy's), all fixed by :func:`fixed_threads` for the
   runs of each problem and read after them.
 """
@@ -87,17 +87,25 @@ def solver_versions() -> str:
     )
 
 
-def _casadi_openblas_threads() -> int | None:
-    """The thread count of the OpenBLAS beside CasADi, or None where there is none."""
+def _casadi_openblas() -> ctypes.CDLL | None:
+    """The OpenBLAS beside CasADi (the one MUMPS calls under IPOPT), or None where there is none."""
     import casadi
 
     folder = Path(casadi.__file__).parent
     for path in sorted(folder.glob("libcasadi-tp-openblas.so*")) + sorted(folder.glob("libopenblas*.so*")):
         try:
-            return int(ctypes.CDLL(str(path)).openblas_get_num_threads())
+            lib = ctypes.CDLL(str(path))
+            lib.openblas_get_num_threads  # noqa: B018  (it must have the call)
         except (OSError, AttributeError):
             continue
+        return lib
     return None
+
+
+def _casadi_openblas_threads() -> int | None:
+    """The thread count of the OpenBLAS beside CasADi, or None where there is none."""
+    lib = _casadi_openblas()
+    return None if lib is None else int(lib.openblas_get_num_threads())
 
 
 def blas_threads() -> str:
@@ -116,20 +124,23 @@ def blas_threads() -> str:
 def fixed_threads(count: int = DEFAULT_BLAS_THREADS) -> Iterator[str]:
     """Run the block with every BLAS at ``count`` threads; yields :func:`blas_threads` as set.
 
-    CasADi's OpenBLAS is set through refine's own setting (``REFINE_SOLVER_BLAS_THREADS``, which
-    the refinement applies before each solve), the others with threadpoolctl; both are restored after.
+    CasADi's OpenBLAS is set directly and through refine's own setting (``REFINE_SOLVER_BLAS_THREADS``,
+    which the refinement applies before a solve), the others with threadpoolctl; all are restored after.
 
     Raises:
         InputError: ``count`` below 1.
     """
-    from refine.optimise.threads import THREADS_ENV, limit_solver_threads
+    from refine.optimise.threads import THREADS_ENV
 
     if count < 1:
         raise InputError(f"BLAS threads must be >= 1, got {count}")
     before = os.environ.get(THREADS_ENV)
-    os.environ[THREADS_ENV] = str(count)
+    lib = _casadi_openblas()
+    threads_before = None if lib is None else int(lib.openblas_get_num_threads())
+    os.environ[THREADS_ENV] = str(count)  # what the refinement sets before a solve
     try:
-        limit_solver_threads()
+        if lib is not None:
+            lib.openblas_set_num_threads(ctypes.c_int(count))
         with threadpool_limits(limits=count, user_api="blas"):
             yield blas_threads()
     finally:
@@ -137,4 +148,5 @@ def fixed_threads(count: int = DEFAULT_BLAS_THREADS) -> Iterator[str]:
             os.environ.pop(THREADS_ENV, None)
         else:
             os.environ[THREADS_ENV] = before
-        limit_solver_threads()
+        if lib is not None and threads_before is not None:
+            lib.openblas_set_num_threads(ctypes.c_int(threads_before))

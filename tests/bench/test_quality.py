@@ -87,10 +87,13 @@ def test_provenance_names_the_commit_the_solvers_and_the_threads():
     assert commit == "" or len(commit.split("-")[0]) == 40
     versions = solver_versions()
     assert versions.startswith("casadi ") and "ipopt 3." in versions and "mumps 5." in versions
-    with fixed_threads(1) as inside:
-        assert inside == blas_threads()
-        counts = [part.split()[1] for part in inside.split("; ")]
-        assert counts and set(counts) == {"1"}
+    before = blas_threads()
+    for count in (1, 2, 1):  # each setting holds inside, whatever came before
+        with fixed_threads(count) as inside:
+            assert inside == blas_threads()
+            counts = [part.split()[1] for part in inside.split("; ")]
+            assert counts and set(counts) == {str(count)}
+    assert blas_threads() == before
 
 
 def test_shifted_geometric_mean_by_hand():
