@@ -142,7 +142,9 @@ def provenance(run_id: str, rows: list[Row]) -> list[str]:
     first = rows[0]
     dates = sorted(r.get("date", "") for r in rows)
     lines = [
-        f"- run `{run_id}`, rows {dates[0]} to {dates[-1]}, schema {first['schema']}",
+        f"- run `{run_id}`, started {dates[0]}"
+        + (f" (rows dated to {dates[-1]})" if dates[-1] != dates[0] else "")
+        + f", {len(rows)} rows, schema {first['schema']}",
         f"- refine {first.get('refine', '?')}, commit `{_distinct(rows, 'git_commit')}`",
         f"- solvers: {_distinct(rows, 'solver_versions')}; Pinocchio {first.get('pinocchio', '?')}, "
         f"Drake {first.get('drake') or 'not installed'}; Python {first.get('python', '?')}",
