@@ -111,6 +111,10 @@ def test_run_writes_one_row_per_problem_and_contender_and_the_report_reads_the_c
     assert "growth exponent" in text and "- machine:" in text and "| tiny | drake-ik |" not in text
     assert "- not run here: drake-ik on 4 problem(s), not installed here" in text
     assert (tmp_path / "report" / "tiny-wave.png").stat().st_size > 1000
+    # the suite's performance profile beside the report, as PNG and SVG, and linked from it
+    assert (tmp_path / "report" / "tiny-profile.png").stat().st_size > 1000
+    assert (tmp_path / "report" / "tiny-profile.svg").read_text().lstrip().startswith("<?xml")
+    assert "(tiny-profile.png)" in text and "(tiny-profile.svg)" in text
 
 
 def test_contenders_take_turns_after_their_untimed_warm_up_runs(suites_file):
