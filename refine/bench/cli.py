@@ -56,7 +56,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     run.add_argument("--suites-file", type=Path, default=DEFAULT_SUITES, help="the suites' TOML file")
     listing = actions.add_parser("list", help="list the suites and contenders")
     listing.add_argument("--suites-file", type=Path, default=DEFAULT_SUITES)
-    report = actions.add_parser("report", help="write report.md with tables and log-log plots from a CSV")
+    report = actions.add_parser(
+        "report",
+        help="write report.md from one run of a CSV: success per tolerance profile, times, performance profiles, growth, provenance",
+    )
     report.add_argument("csv", type=Path, nargs="?", default=DEFAULT_CSV)
     report.add_argument("--out", type=Path, default=None, help="folder for report.md (default: the CSV's)")
     report.add_argument(

@@ -291,6 +291,8 @@ def run_suites(
         raise InputError(f"warmup must be >= 0, got {warmup}")
     if not time_limit_s > 0:
         raise InputError(f"time limit must be > 0 s, got {time_limit_s} s")
+    if blas_threads < 1:
+        raise InputError(f"BLAS threads must be >= 1, got {blas_threads}")
     data = load_suites(suites_file) if suites_file else load_suites()
     new = check_header(csv_path)
     env = environment()

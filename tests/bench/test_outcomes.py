@@ -174,6 +174,11 @@ def test_a_csv_with_another_header_is_refused_before_anything_runs(tmp_path, mon
     code = main(["bench", "run", "--suite", "tiny", "--contender", "greedy-ik", "--csv", str(old),
                  "--suites-file", str(suites)])  # fmt: skip
     assert code != 0 and old.read_bytes() == before and calls == []
+    # a thread count below 1 is refused before anything runs, too
+    new = tmp_path / "new.csv"
+    with pytest.raises(InputError, match="BLAS threads must be >= 1, got 0"):
+        run_suites(["tiny"], ["greedy-ik"], new, suites_file=suites, blas_threads=0, echo=lambda _: None)
+    assert not new.exists() and calls == []
     # and the report refuses it too rather than reading shifted columns
     with pytest.raises(InputError, match="37 columns"):
         write_report(old, tmp_path / "report")
