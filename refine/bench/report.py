@@ -287,7 +287,8 @@ def run_section(run_id: str, rows: list[Row], out_dir: Path, prefix: str = "") -
         "",
         *(f"- `{name}`: {text}" for name, (text, _) in PROFILES.items()),
         "- residuals: the objective and KKT residuals of the answer on the refinement NLP, the same "
-        'evaluation for every contender (docs/bench.md, "Quality columns")',
+        'evaluation for every contender (docs/bench.md, "Quality columns"); the KKT profiles ask for '
+        "an optimum of refine's cost, so a contender that minimises another cost fails them by design",
         "",
     ]
     groups: dict[tuple[str, str], list[Row]] = defaultdict(list)
