@@ -313,7 +313,7 @@ def run_section(run_id: str, rows: list[Row], out_dir: Path, prefix: str = "") -
             key=lambda r: (r["problem"].rsplit("-", 1)[0], int(r["n_waypoints"]), r["contender"]),
         )
         lines += ["", f"### Suite `{suite}`", ""]
-        if len({r["contender"] for r in srows}) > 1:
+        if len({r["contender"] for r in srows}) > 1 and len({r["problem"] for r in srows}) > 1:
             paths = plot_profile(
                 srows, f"performance profile, suite {suite} (CPU time)", out_dir / f"{prefix}{suite}-profile"
             )
