@@ -52,6 +52,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     report.add_argument("csv", type=Path, nargs="?", default=DEFAULT_CSV)
     report.add_argument("--out", type=Path, default=None, help="folder for report.md (default: the CSV's)")
     report.add_argument("--run-id", default=None, help="the run to report (default: the CSV's last run)")
+    export = actions.add_parser(
+        "export",
+        help="write the last round of refine's NLP on a problem (nlp.casadi, bounds.json, instance.json) for any NLP solver",
+    )
+    export.add_argument(
+        "paths",
+        nargs="+",
+        metavar="PROBLEM DIR",
+        help="a problem folder or SUITE/NAME (e.g. glass/glass_adhesive), then the folder to write; "
+        "with --set only the folder",
+    )
+    export.add_argument(
+        "--set", default=None, help="export every problem of the test set [instances.SET] instead"
+    )
+    export.add_argument("--suites-file", type=Path, default=DEFAULT_SUITES, help="the suites' TOML file")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -71,6 +86,8 @@ def run(args: argparse.Namespace) -> int:
         path = write_report(args.csv, args.out or args.csv.parent, args.run_id)
         print(f"wrote {path}")
         return 0
+    if args.bench_command == "export":
+        return _export(args)
     from refine.bench.runner import run_suites
 
     rows = run_suites(
@@ -84,4 +101,25 @@ def run(args: argparse.Namespace) -> int:
     )
     run_id = rows[0]["run_id"] if rows else "-"
     print(f"{len(rows)} row(s) of run {run_id} appended to {args.csv}")
+    return 0
+
+
+def _export(args: argparse.Namespace) -> int:
+    from refine.bench.export import export_instance, export_set, find_problem
+    from refine.bench.suites import load_suites
+    from refine.errors import InputError
+
+    data = load_suites(args.suites_file)
+    if args.set is not None:
+        if len(args.paths) != 1:
+            raise InputError(f"bench export --set {args.set} takes one folder, got {len(args.paths)} paths")
+        export_set(data, args.set, Path(args.paths[0]))
+        return 0
+    if len(args.paths) != 2:
+        raise InputError(f"bench export takes PROBLEM and DIR, got {len(args.paths)} paths")
+    done = export_instance(find_problem(data, args.paths[0]), Path(args.paths[1]))
+    print(
+        f"{done.name}: round {done.round} of refine's outer loop, refine {done.status} in {done.iterations} "
+        f"IPOPT iterations, objective {done.objective:.13g}; wrote {done.folder}/nlp.casadi, bounds.json, instance.json"
+    )
     return 0

@@ -12,6 +12,7 @@ import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -48,8 +49,35 @@ class Answer:
     slack_deg: Array | None = None
 
 
-def _refine(problem: BenchProblem, mode: str, solver: str = "ipopt") -> Answer:
+def solve_as_refine(
+    problem: BenchProblem, mode: str = "assembled", solver: str = "ipopt", solver_options: dict | None = None
+) -> tuple[Any, float, float]:
+    """Build ``problem``'s refinement and solve it as ``refine run`` does (the refine contenders' call).
+
+    Returns:
+        the :class:`refine.optimise.outcome.Refinement`, the build's wall and CPU time [s].
+    """
     from refine.optimise.solve import solve_refinement
+
+    for source in problem.sources:  # no dense check kept from an earlier run of the same problem
+        forget = getattr(source, "forget", None)
+        if forget is not None:
+            forget()
+    w0, c0 = time.perf_counter(), time.process_time()
+    nlp = problem.refinement(mode, solver, solver_options=dict(solver_options or {}))
+    build = time.perf_counter() - w0
+    build_cpu = time.process_time() - c0
+    result = solve_refinement(
+        nlp,
+        home=problem.home,
+        sources=problem.sources,
+        repair_max_slack_deg=problem.repair_max_slack_deg,
+        max_rounds=problem.max_rounds,
+    )
+    return result, build, build_cpu
+
+
+def _refine(problem: BenchProblem, mode: str, solver: str = "ipopt") -> Answer:
     from refine.optimise.stagewise import MAX_FATROP_WAYPOINTS
 
     if problem.tool_in_world is not None:
@@ -60,21 +88,7 @@ def _refine(problem: BenchProblem, mode: str, solver: str = "ipopt") -> Answer:
             None,
             note=f"not run: fatrop takes at most {MAX_FATROP_WAYPOINTS} waypoints, the path has {problem.n_waypoints}",
         )
-    for source in problem.sources:  # no dense check kept from an earlier run of the same problem
-        forget = getattr(source, "forget", None)
-        if forget is not None:
-            forget()
-    w0, c0 = time.perf_counter(), time.process_time()
-    nlp = problem.refinement(mode, solver)
-    build = time.perf_counter() - w0
-    build_cpu = time.process_time() - c0
-    result = solve_refinement(
-        nlp,
-        home=problem.home,
-        sources=problem.sources,
-        repair_max_slack_deg=problem.repair_max_slack_deg,
-        max_rounds=problem.max_rounds,
-    )
+    result, build, build_cpu = solve_as_refine(problem, mode, solver)
     t = result.timings_s
     times = {"build": build + t.get("build", 0.0), "seed": t.get("seed", 0.0), "solve": t.get("solve", 0.0)}
     # refine verifies inside its loop (and diagnoses a repair); those stages are not counted

@@ -110,6 +110,11 @@ def load_suites(path: Path = DEFAULT_SUITES) -> dict[str, Any]:
         data = tomllib.loads(Path(path).read_text())
     except (OSError, tomllib.TOMLDecodeError) as e:
         raise InputError(f"suites file {path}: {e}") from e
+    unknown = set(data) - set(TOP_KEYS)
+    if unknown:
+        raise InputError(
+            f"suites file {path}: unknown table(s) {sorted(unknown)}; the tables are {', '.join(TOP_KEYS)}"
+        )
     suites, generated = data.get("suite", {}), data.get("generated", {})
     for name, suite in suites.items():
         unknown = set(suite) - {"problems", "generated", "sizes", "tesseract"}
@@ -122,7 +127,18 @@ def load_suites(path: Path = DEFAULT_SUITES) -> dict[str, Any]:
                 )
         if suite.get("generated") and not suite.get("sizes"):
             raise InputError(f"suites file {path}: [suite.{name}] has generated paths but no sizes")
+    for name, spec in data.get("instances", {}).items():
+        unknown = set(spec) - {"problems"}
+        if unknown or not isinstance(spec.get("problems"), list):
+            raise InputError(
+                f"suites file {path}: [instances.{name}] takes one key, problems (a list of SUITE/NAME or "
+                f"problem folders); it has {sorted(spec)}"
+            )
     return data
+
+
+TOP_KEYS = ("suite", "generated", "instances")
+"""The tables of a suites file: suites, generated families, and test sets of exported instances."""
 
 
 def problems(data: dict[str, Any], suite: str, *, root: Path = ROOT) -> Iterator[BenchProblem]:
