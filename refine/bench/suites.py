@@ -127,6 +127,8 @@ def load_suites(path: Path = DEFAULT_SUITES) -> dict[str, Any]:
                 )
         if suite.get("generated") and not suite.get("sizes"):
             raise InputError(f"suites file {path}: [suite.{name}] has generated paths but no sizes")
+    for name, family in generated.items():
+        check_family(f"suites file {path}: [generated.{name}]", family)
     for name, spec in data.get("instances", {}).items():
         unknown = set(spec) - {"problems"}
         if unknown or not isinstance(spec.get("problems"), list):
@@ -135,6 +137,56 @@ def load_suites(path: Path = DEFAULT_SUITES) -> dict[str, Any]:
                 f"problem folders); it has {sorted(spec)}"
             )
     return data
+
+
+FAMILY_KEYS: dict[str, Any] = {
+    "robot": None,
+    "centre_m": None,
+    "length_m": 1.0,
+    "tool_length_m": 0.3,
+    "amplitude_m": 0.05,
+    "wavelength_m": 0.5,
+    "tilt_deg": 12.0,
+    "speed_m_s": 0.1,
+    "noise_deg": 0.0,
+    "noise_seed": 0,
+    "boxes": [],
+}
+"""The keys of a ``[generated.NAME]`` family and their defaults (None: required); docs/bench.md
+says what each means."""
+
+BOX_KEYS = ("name", "centre_m", "size_m")
+"""The keys of one of a family's ``boxes``."""
+
+
+def check_family(where: str, family: dict[str, Any]) -> None:
+    """Raise :class:`InputError` for a family with an unknown or missing key, naming it and the allowed ones."""
+    unknown = sorted(set(family) - set(FAMILY_KEYS))
+    if unknown:
+        raise InputError(
+            f"{where}: unknown key(s) {unknown}; the keys are {', '.join(FAMILY_KEYS)}",
+            key=unknown[0],
+            value=family[unknown[0]],
+            expected=", ".join(FAMILY_KEYS),
+        )
+    missing = [k for k, v in FAMILY_KEYS.items() if v is None and k not in family]
+    if missing:
+        raise InputError(f"{where}: {', '.join(missing)} missing (required: robot, centre_m)", key=missing[0])
+    for k, box in enumerate(family.get("boxes", [])):
+        if not isinstance(box, dict) or set(box) != set(BOX_KEYS):
+            raise InputError(
+                f"{where}: boxes[{k}] has keys {sorted(box) if isinstance(box, dict) else box!r}; "
+                f"a box has exactly {', '.join(BOX_KEYS)}",
+                key=f"boxes[{k}]",
+                expected=", ".join(BOX_KEYS),
+            )
+    numbers = [k for k, v in FAMILY_KEYS.items() if isinstance(v, float)] + ["noise_seed"]
+    for key in numbers:
+        value = family.get(key, FAMILY_KEYS[key])
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise InputError(f"{where}: {key} = {value!r} is not a number", key=key, value=value)
+        if value < 0 or (value == 0 and key in ("length_m", "tool_length_m", "wavelength_m", "speed_m_s")):
+            raise InputError(f"{where}: {key} = {value!r} must be > 0 (>= 0 for amplitude, tilt, noise)", key=key, value=value)
 
 
 TOP_KEYS = ("suite", "generated", "instances")
@@ -204,10 +256,22 @@ def generated_problem(suite: str, family: str, spec: dict[str, Any], n: int) -> 
     from refine.settings import CollisionSettings, Shape
     from refine.synthetic import wave_path
 
+    check_family(f"[generated.{family}]", spec)
+    value = {**FAMILY_KEYS, **spec}
     robot = load_robot(spec["robot"])
-    tool = float(spec.get("tool_length_m", 0.3))
+    tool = float(value["tool_length_m"])
     tcp = make_transform(p=[0.0, 0.0, tool])
-    fused = wave_path(n, length_m=float(spec.get("length_m", 1.0)), centre=tuple(spec["centre_m"]))
+    fused = wave_path(
+        n,
+        length_m=float(value["length_m"]),
+        centre=tuple(spec["centre_m"]),
+        amplitude_m=float(value["amplitude_m"]),
+        wavelength_m=float(value["wavelength_m"]),
+        tilt_deg=float(value["tilt_deg"]),
+        speed_m_s=float(value["speed_m_s"]),
+    )
+    if value["noise_deg"] > 0:
+        fused = with_orientation_noise(fused, float(value["noise_deg"]), int(value["noise_seed"]))
     sources: tuple = ()
     boxes = spec.get("boxes", [])
     if boxes:
@@ -245,8 +309,29 @@ def generated_problem(suite: str, family: str, spec: dict[str, Any], n: int) -> 
         sources=sources,
         repair_max_slack_deg=None,
         weights=Weights(mid_range=REDUNDANT_MID_RANGE_WEIGHT if robot.nq > 6 else 0.0),
-        extra={"family": family, "length_m": float(spec.get("length_m", 1.0)), "obstacles": bool(boxes)},
+        extra={
+            "family": family,
+            "length_m": float(value["length_m"]),
+            "obstacles": bool(boxes),
+            "noise_deg": float(value["noise_deg"]),
+        },
     )
+
+
+def with_orientation_noise(fused: FusedPath, noise_deg: float, seed: int) -> FusedPath:
+    """``fused`` with each demonstrated orientation turned by a random rotation, as a hand's jitter.
+
+    Each waypoint's rotation vector has three independent normal components of standard deviation
+    ``noise_deg`` [deg] (in the tool frame), drawn from ``numpy.random.default_rng(seed)``, so a
+    family's paths are the same in every run; the CAD points stay exact.
+    """
+    from dataclasses import replace
+
+    from refine.frames import matrix_from_rotvec
+
+    rng = np.random.default_rng(seed)
+    turns = matrix_from_rotvec(np.radians(rng.normal(0.0, noise_deg, size=(len(fused), 3))))
+    return replace(fused, rotations=fused.rotations @ turns)
 
 
 PUZZLE_SPACING_M = 0.0025
