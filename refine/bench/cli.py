@@ -25,6 +25,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="contender (repeatable; default: all): refine, refine-casadi-ad, refine-fatrop, greedy-ik, drake-ik, trajopt, descartes",
     )
+    run.add_argument(
+        "--contender-file",
+        action="append",
+        default=[],
+        metavar="FILE.py:NAME",
+        help="register the contender NAME defined in FILE.py (repeatable; docs/bench.md)",
+    )
+    run.add_argument(
+        "--solver-option",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a solver option for every run, typed int, float or text (repeatable): max_iter=100 "
+        "(IPOPT's, ipopt.max_iter), fatrop.tol=1e-8; no round of refine overrides it",
+    )
     run.add_argument("--repeat", type=int, default=1, help="runs per problem and contender (median, minimum)")
     run.add_argument(
         "--warmup",
@@ -72,8 +87,17 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Carry out ``refine bench ...``; returns the exit status."""
     from refine.bench import peers  # noqa: F401  (adds trajopt and descartes to CONTENDERS)
-    from refine.bench.contenders import CONTENDERS
+    from refine.bench.contenders import (
+        CONTENDERS,
+        load_contender_file,
+        load_entry_points,
+        parse_solver_option,
+    )
     from refine.bench.suites import describe, load_suites
+
+    load_entry_points()
+    for spec in getattr(args, "contender_file", []):
+        load_contender_file(spec)
 
     if args.bench_command == "list":
         for line in describe(load_suites(args.suites_file)):
@@ -98,6 +122,7 @@ def run(args: argparse.Namespace) -> int:
         repeat=args.repeat,
         warmup=args.warmup,
         time_limit_s=args.time_limit,
+        solver_options=dict(parse_solver_option(text) for text in args.solver_option),
     )
     run_id = rows[0]["run_id"] if rows else "-"
     print(f"{len(rows)} row(s) of run {run_id} appended to {args.csv}")

@@ -95,7 +95,7 @@ def export_instance(
         raise InputError(
             f"{problem.name}: refine's refinement does not state a stationary tool, nothing to export"
         )
-    result, _, _ = solve_as_refine(problem, "assembled", "ipopt", solver_options)
+    result, _, _, _ = solve_as_refine(problem, "assembled", "ipopt", solver_options)
     if result.problem is None:
         raise InputError(
             f"{problem.name}: refine answered {result.status} before solving any NLP "

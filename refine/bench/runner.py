@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import csv
 import datetime
+import json
 import logging
 import os
 import platform
@@ -29,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from refine.bench import peers  # noqa: F401  (adds trajopt and descartes to CONTENDERS)
-from refine.bench.contenders import CONTENDERS, Answer, Unavailable, verify
+from refine.bench.contenders import CONTENDERS, Answer, Unavailable, timed_call, verify
 from refine.bench.outcomes import DEFAULT_TIME_LIMIT_S, penalised, score
 from refine.bench.suites import BenchProblem, load_suites, problems
 from refine.bench.table import COLUMNS, SCHEMA_VERSION, check_header, new_run_id
@@ -72,24 +73,6 @@ def _peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: kilobytes
 
 
-def _call(
-    problem: BenchProblem, contender: str, function: Callable[[BenchProblem], Answer]
-) -> tuple[Answer, float]:
-    """One run of a contender and its wall time [s] on the runner's clock.
-
-    A crash is an ``error`` answer (:class:`Unavailable` passes through).
-    """
-    t0 = time.perf_counter()
-    try:
-        answer = function(problem)
-    except Unavailable:
-        raise
-    except Exception as e:  # a contender crashing is a result, not the end of the benchmark
-        log.warning("%s on %s failed: %s", contender, problem.name, e)
-        answer = Answer("error", None, note=f"{type(e).__name__}: {str(e)[:120]}")
-    return answer, time.perf_counter() - t0
-
-
 def run_problem(
     problem: BenchProblem,
     contender: str,
@@ -121,7 +104,7 @@ def run_turns(
     for name in list(functions):
         try:
             for _ in range(warmup):
-                _call(problem, name, functions[name])
+                timed_call(problem, name, functions[name])
         except Unavailable as e:
             echo(f"skipping {name}: {e}")
             del functions[name]
@@ -131,7 +114,7 @@ def run_turns(
     for _ in range(repeat):
         for name in list(functions):
             try:
-                answers[name].append(_call(problem, name, functions[name]))
+                answers[name].append(timed_call(problem, name, functions[name]))
             except Unavailable as e:
                 echo(f"skipping {name}: {e}")
                 del functions[name], answers[name]
@@ -216,6 +199,7 @@ def _row(
         "rss_growth_mb": peak - peak0,
         "reason": verdict.reason[:160],
         "note": answer.note,
+        "solver_options": json.dumps(answer.solver_options, sort_keys=True) if answer.solver_options else "",
     }
 
 
@@ -230,6 +214,7 @@ def run_suites(
     echo: Callable[[str], None] = print,
     time_limit_s: float = DEFAULT_TIME_LIMIT_S,
     run_id: str | None = None,
+    solver_options: dict[str, Any] | None = None,
 ) -> list[dict[str, Any]]:
     """Run every contender on every problem of ``suites`` and append the rows to ``csv_path``.
 
@@ -247,7 +232,9 @@ def run_suites(
     load average before and after the timed runs, the process's peak resident memory after the row
     and its growth during it [MB] (memory stays allocated, so the growth is the row's own only
     where it sets a new peak), the first broken tolerance, and the machine and versions.
-    Contenders take turns on each problem (:func:`run_turns`).
+    Contenders take turns on each problem (:func:`run_turns`). ``solver_options`` (keyed with the
+    solver's prefix, ``ipopt.max_iter``) go to every problem (``BenchProblem.solver_options``); each
+    row's ``solver_options`` is what its contender reports it used, as JSON.
     """
     contenders = list(contenders)
     unknown = [c for c in contenders if c not in CONTENDERS]
@@ -273,6 +260,7 @@ def run_suites(
             writer.writeheader()
         for suite in suites:
             for problem in problems(data, suite):
+                problem.solver_options = dict(solver_options or {})
                 t0 = time.perf_counter()
                 functions = {name: CONTENDERS[name] for name in contenders if name not in skipped}
                 found = run_turns(problem, functions, repeat, warmup, echo, time_limit_s)

@@ -53,6 +53,9 @@ class BenchProblem:
         expected: for the unreachable family, the outcome the problem states (else empty).
         expected_s_range_m: the arc-length range [m] the problem states its infeasibility or repair
             to be in (``[expected] s_range_m``), or None.
+        solver_options: solver options of the run (``refine bench run --solver-option``), keyed with
+            the solver's prefix (``ipopt.max_iter``, ``fatrop.tol``); a contender uses those of its
+            solver and records what it used (:attr:`refine.bench.contenders.Answer.solver_options`).
         tool_in_world: T_F_TCP of a stationary tool (the robot holds the part; ``tcp_in_flange``
             then places the part's frame on the flange and the path is in the part's frame), or
             None (see :class:`refine.robot.kinematics.TcpKinematics`).
@@ -75,6 +78,7 @@ class BenchProblem:
     expected_s_range_m: tuple[float, float] | None = None
     extra: dict[str, Any] = field(default_factory=dict)
     tool_in_world: Array | None = None
+    solver_options: dict[str, Any] = field(default_factory=dict)
 
     @property
     def n_waypoints(self) -> int:
