@@ -28,18 +28,6 @@ from refine.errors import InputError
 from refine.optimise.rounds import RoundLoop
 from refine.stopwatch import StageTimes
 
-SUITES = """
-[suite.tiny]
-generated = ["wave"]
-sizes = [20]
-
-[generated.wave]
-robot = "abb_irb4600_60_205"
-centre_m = [1.3, 0.0, 0.6]
-length_m = 0.3
-tool_length_m = 0.35
-"""
-
 PLUGIN = '''
 """Two contenders outside refine: one follows the demonstration by IK, one answers the robot's zero pose."""
 import numpy as np
@@ -67,9 +55,9 @@ def registry():
 
 
 @pytest.fixture
-def suites_file(tmp_path):
+def suites_file(tmp_path, tiny_wave):
     path = tmp_path / "suites.toml"
-    path.write_text(SUITES)
+    path.write_text(tiny_wave)
     return path
 
 

@@ -15,17 +15,7 @@ from refine.bench.suites import ROOT, load_suites
 from refine.cli import main
 from refine.errors import InputError
 
-SUITES = """
-[suite.tiny]
-generated = ["wave", "wave_box"]
-sizes = [20]
-
-[generated.wave]
-robot = "abb_irb4600_60_205"
-centre_m = [1.3, 0.0, 0.6]
-length_m = 0.3
-tool_length_m = 0.35
-
+WAVE_BOX = """
 [generated.wave_box]
 robot = "abb_irb4600_60_205"
 centre_m = [1.3, 0.0, 0.6]
@@ -44,9 +34,9 @@ TOLERANCES = {"ipopt.tol": 1e-9, "ipopt.constr_viol_tol": 1e-10}
 
 
 @pytest.fixture(scope="module")
-def suites(tmp_path_factory):
+def suites(tmp_path_factory, tiny_wave):
     path = tmp_path_factory.mktemp("suites") / "suites.toml"
-    path.write_text(SUITES)
+    path.write_text(tiny_wave.replace('generated = ["wave"]', 'generated = ["wave", "wave_box"]') + WAVE_BOX)
     return path
 
 
@@ -149,10 +139,10 @@ def test_unknown_problems_sets_and_keys_are_errors(suites, tmp_path, capsys):
     assert main(["bench", "export", "--set", "none", str(tmp_path), "--suites-file", str(suites)]) != 0
     assert "no test set 'none' of exported instances; sets: pair" in capsys.readouterr().err
     bad = tmp_path / "bad.toml"
-    bad.write_text(SUITES + '\n[instances.odd]\nproblems = []\nsolver = "x"\n')
+    bad.write_text(suites.read_text() + '\n[instances.odd]\nproblems = []\nsolver = "x"\n')
     with pytest.raises(InputError, match=r"\[instances.odd\] takes one key"):
         load_suites(bad)
-    bad.write_text(SUITES + "\n[instance.typo]\nproblems = []\n")
+    bad.write_text(suites.read_text() + "\n[instance.typo]\nproblems = []\n")
     with pytest.raises(InputError, match=r"unknown table\(s\) \['instance'\]"):
         load_suites(bad)
     with pytest.raises(InputError, match="missing"):
