@@ -82,6 +82,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--set", default=None, help="export every problem of the test set [instances.SET] instead"
     )
     export.add_argument("--suites-file", type=Path, default=DEFAULT_SUITES, help="the suites' TOML file")
+    export.add_argument(
+        "--solver-option",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="an IPOPT option for refine's solve (repeatable, as for run), recorded in instance.json",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -130,19 +137,21 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _export(args: argparse.Namespace) -> int:
+    from refine.bench.contenders import parse_solver_option
     from refine.bench.export import export_instance, export_set, find_problem
     from refine.bench.suites import load_suites
     from refine.errors import InputError
 
     data = load_suites(args.suites_file)
+    options = dict(parse_solver_option(text) for text in args.solver_option)
     if args.set is not None:
         if len(args.paths) != 1:
             raise InputError(f"bench export --set {args.set} takes one folder, got {len(args.paths)} paths")
-        export_set(data, args.set, Path(args.paths[0]))
+        export_set(data, args.set, Path(args.paths[0]), solver_options=options)
         return 0
     if len(args.paths) != 2:
         raise InputError(f"bench export takes PROBLEM and DIR, got {len(args.paths)} paths")
-    done = export_instance(find_problem(data, args.paths[0]), Path(args.paths[1]))
+    done = export_instance(find_problem(data, args.paths[0]), Path(args.paths[1]), solver_options=options)
     print(
         f"{done.name}: round {done.round} of refine's outer loop, refine {done.status} in {done.iterations} "
         f"IPOPT iterations, objective {done.objective:.13g}; wrote {done.folder}/nlp.casadi, bounds.json, instance.json"

@@ -409,7 +409,7 @@ def tesseract_puzzle(suite: str, support: Path) -> BenchProblem:
 
 
 def describe(data: dict[str, Any]) -> list[str]:
-    """One line per suite: its problems and generated families."""
+    """One line per suite (its problems and generated families), then one per test set of exported instances."""
     lines = []
     for name, suite in sorted(data.get("suite", {}).items()):
         count = len(suite.get("problems", [])) + len(suite.get("generated", [])) * len(suite.get("sizes", []))
@@ -421,6 +421,8 @@ def describe(data: dict[str, Any]) -> list[str]:
                 f"at {sizes[0]}-{sizes[-1]} waypoints"
             )
         lines.append(f"{name:12s} {count:3d} problems: {', '.join(parts)}")
+    for name, spec in sorted(data.get("instances", {}).items()):
+        lines.append(f"{name:12s} {len(spec['problems']):3d} exported instances (bench export --set {name})")
     return lines
 
 

@@ -122,6 +122,10 @@ def test_the_command_exports_a_problem_and_a_named_test_set(suites, tmp_path, ca
     assert raw["ubg"][-1] is None and load_instance(tmp_path / "one")[1]["ubg"][-1] == math.inf
     plain = solve_instance(tmp_path / "one", TOLERANCES)
     assert math.isclose(plain["objective"], info["refine"]["objective"], rel_tol=1e-6)
+    tight = ["--solver-option", "tol=1e-10", "--suites-file", str(suites)]
+    assert main(["bench", "export", "tiny/wave-20", str(tmp_path / "tight"), *tight]) == 0
+    used = json.loads((tmp_path / "tight" / "instance.json").read_text())["refine"]["ipopt_options"]
+    assert used["ipopt.tol"] == 1e-10
     assert (
         main(["bench", "export", "--set", "pair", str(tmp_path / "set"), "--suites-file", str(suites)]) == 0
     )
@@ -147,6 +151,11 @@ def test_unknown_problems_sets_and_keys_are_errors(suites, tmp_path, capsys):
         load_suites(bad)
     with pytest.raises(InputError, match="missing"):
         load_instance(tmp_path)
+
+
+def test_bench_list_names_the_test_sets(suites, capsys):
+    assert main(["bench", "list", "--suites-file", str(suites)]) == 0
+    assert "pair           2 exported instances (bench export --set pair)" in capsys.readouterr().out
 
 
 def test_the_repository_test_set_names_problems_of_its_suites():
