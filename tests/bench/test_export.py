@@ -166,3 +166,25 @@ def test_the_repository_test_set_names_problems_of_its_suites():
         folders = [f.rsplit("/", 1)[-1] for f in spec.get("problems", [])]
         generated = [f"{g}-{n}" for g in spec.get("generated", []) for n in spec.get("sizes", [])]
         assert name in folders + generated, reference
+
+
+def test_a_repaired_problem_exports_its_elastic_last_round(suites, tmp_path):
+    from dataclasses import replace
+
+    # the post 2 cm from the wave's crest, with a 1 deg cone: the strict problem has no answer, the
+    # repair leans the tool up to 5 deg more
+    problem = find_problem(load_suites(suites), "tiny/wave_box-20")
+    tight = replace(problem.tolerances, orientation_deg=1.0)
+    done = export_instance(replace(problem, tolerances=tight, repair_max_slack_deg=5.0), tmp_path)
+    function, b, info = load_instance(tmp_path)
+    assert done.status == "repaired" and info["elastic"] and info["round"] >= 2
+    N, n = 20, 6
+    assert info["n_x"] == N * n + N and len(b["x0"]) == N * n + N and not any(b["x0"][N * n :])
+    x = np.array(info["refine"]["x"])
+    slack = x[N * n :]
+    # the slacks are what the cone rows need at refine's joints: some waypoints need slack, and every
+    # cone row is met
+    g = np.asarray(function(x, b["p"])[1]).ravel()
+    assert slack.max() > 1e-5 and np.all(g[3 : 4 * N : 4] >= math.cos(math.radians(1.0)) - 1e-12)
+    plain = solve_instance(tmp_path, TOLERANCES)
+    assert math.isclose(plain["objective"], done.objective, rel_tol=1e-6)
