@@ -72,12 +72,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="write the last round of refine's NLP on a problem (nlp.casadi, bounds.json, instance.json) for any NLP solver",
     )
     export.add_argument(
-        "paths",
-        nargs="+",
-        metavar="PROBLEM DIR",
-        help="a problem folder or SUITE/NAME (e.g. glass/glass_adhesive), then the folder to write; "
-        "with --set only the folder",
+        "problem",
+        nargs="?",
+        metavar="PROBLEM",
+        help="a problem folder or SUITE/NAME, e.g. glass/glass_adhesive (not with --set)",
     )
+    export.add_argument("folder", type=Path, metavar="DIR", help="the folder to write")
     export.add_argument(
         "--set", default=None, help="export every problem of the test set [instances.SET] instead"
     )
@@ -145,13 +145,13 @@ def _export(args: argparse.Namespace) -> int:
     data = load_suites(args.suites_file)
     options = dict(parse_solver_option(text) for text in args.solver_option)
     if args.set is not None:
-        if len(args.paths) != 1:
-            raise InputError(f"bench export --set {args.set} takes one folder, got {len(args.paths)} paths")
-        export_set(data, args.set, Path(args.paths[0]), solver_options=options)
+        if args.problem is not None:
+            raise InputError(f"bench export --set {args.set} takes only DIR, not also {args.problem!r}")
+        export_set(data, args.set, args.folder, solver_options=options)
         return 0
-    if len(args.paths) != 2:
-        raise InputError(f"bench export takes PROBLEM and DIR, got {len(args.paths)} paths")
-    done = export_instance(find_problem(data, args.paths[0]), Path(args.paths[1]), solver_options=options)
+    if args.problem is None:
+        raise InputError("bench export needs PROBLEM and DIR (or --set NAME and DIR)")
+    done = export_instance(find_problem(data, args.problem), args.folder, solver_options=options)
     print(
         f"{done.name}: round {done.round} of refine's outer loop, refine {done.status} in {done.iterations} "
         f"IPOPT iterations, objective {done.objective:.13g}; wrote {done.folder}/nlp.casadi, bounds.json, instance.json"

@@ -142,6 +142,8 @@ def test_unknown_problems_sets_and_keys_are_errors(suites, tmp_path, capsys):
         find_problem(data, "nowhere")
     assert main(["bench", "export", "--set", "none", str(tmp_path), "--suites-file", str(suites)]) != 0
     assert "no test set 'none' of exported instances; sets: pair" in capsys.readouterr().err
+    assert main(["bench", "export", str(tmp_path), "--suites-file", str(suites)]) != 0
+    assert "needs PROBLEM and DIR" in capsys.readouterr().err
     bad = tmp_path / "bad.toml"
     bad.write_text(suites.read_text() + '\n[instances.odd]\nproblems = []\nsolver = "x"\n')
     with pytest.raises(InputError, match=r"\[instances.odd\] takes one key"):
