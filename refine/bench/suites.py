@@ -146,7 +146,10 @@ def load_suites(path: Path = DEFAULT_SUITES) -> dict[str, Any]:
 FAMILY_KEYS: dict[str, Any] = {
     "robot": None,
     "centre_m": None,
+    "shape": "wave",
     "length_m": 1.0,
+    "width_m": 0.3,
+    "corner_radius_m": 0.05,
     "tool_length_m": 0.3,
     "amplitude_m": 0.05,
     "wavelength_m": 0.5,
@@ -158,6 +161,10 @@ FAMILY_KEYS: dict[str, Any] = {
 }
 """The keys of a ``[generated.NAME]`` family and their defaults (None: required); docs/bench.md
 says what each means."""
+
+SHAPES = ("wave", "loop")
+"""The shapes of a generated family: a sine wave (:func:`refine.synthetic.wave_path`) or a closed
+rounded rectangle (:func:`loop_path`)."""
 
 BOX_KEYS = ("name", "centre_m", "size_m")
 """The keys of one of a family's ``boxes``."""
@@ -184,12 +191,25 @@ def check_family(where: str, family: dict[str, Any]) -> None:
                 key=f"boxes[{k}]",
                 expected=", ".join(BOX_KEYS),
             )
+    if family.get("shape", "wave") not in SHAPES:
+        raise InputError(
+            f"{where}: shape = {family['shape']!r}; the shapes are {', '.join(SHAPES)}",
+            key="shape",
+            value=family["shape"],
+            expected=", ".join(SHAPES),
+        )
+    if family.get("shape") == "loop":
+        r = family.get("corner_radius_m", FAMILY_KEYS["corner_radius_m"])
+        for key in ("length_m", "width_m"):
+            if not family.get(key, FAMILY_KEYS[key]) > 2 * r:
+                raise InputError(f"{where}: a loop's {key} must exceed twice corner_radius_m ({2 * r:g} m)", key=key)
     numbers = [k for k, v in FAMILY_KEYS.items() if isinstance(v, float)] + ["noise_seed"]
     for key in numbers:
         value = family.get(key, FAMILY_KEYS[key])
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
             raise InputError(f"{where}: {key} = {value!r} is not a number", key=key, value=value)
-        if value < 0 or (value == 0 and key in ("length_m", "tool_length_m", "wavelength_m", "speed_m_s")):
+        positive = ("length_m", "tool_length_m", "wavelength_m", "speed_m_s", "width_m", "corner_radius_m")
+        if value < 0 or (value == 0 and key in positive):
             raise InputError(f"{where}: {key} = {value!r} must be > 0 (>= 0 for amplitude, tilt, noise)", key=key, value=value)
 
 
@@ -245,7 +265,7 @@ def bundled_problem(suite: str, folder: Path) -> BenchProblem:
 
 
 def generated_problem(suite: str, family: str, spec: dict[str, Any], n: int) -> BenchProblem:
-    """A sine wave of ``n`` waypoints in front of the family's robot, with its boxes if any.
+    """The family's path of ``n`` waypoints (a sine wave or a loop) in front of its robot, with its boxes if any.
 
     The cost weights are the ones ``refine run`` gives the robot: the defaults, with the mid-range
     cost of :data:`refine.run.stages.REDUNDANT_MID_RANGE_WEIGHT` for an arm of more than six joints.
@@ -265,15 +285,26 @@ def generated_problem(suite: str, family: str, spec: dict[str, Any], n: int) -> 
     robot = load_robot(spec["robot"])
     tool = float(value["tool_length_m"])
     tcp = make_transform(p=[0.0, 0.0, tool])
-    fused = wave_path(
-        n,
-        length_m=float(value["length_m"]),
-        centre=tuple(spec["centre_m"]),
-        amplitude_m=float(value["amplitude_m"]),
-        wavelength_m=float(value["wavelength_m"]),
-        tilt_deg=float(value["tilt_deg"]),
-        speed_m_s=float(value["speed_m_s"]),
-    )
+    if value["shape"] == "loop":
+        fused = loop_path(
+            n,
+            length_m=float(value["length_m"]),
+            width_m=float(value["width_m"]),
+            corner_radius_m=float(value["corner_radius_m"]),
+            centre=tuple(spec["centre_m"]),
+            tilt_deg=float(value["tilt_deg"]),
+            speed_m_s=float(value["speed_m_s"]),
+        )
+    else:
+        fused = wave_path(
+            n,
+            length_m=float(value["length_m"]),
+            centre=tuple(spec["centre_m"]),
+            amplitude_m=float(value["amplitude_m"]),
+            wavelength_m=float(value["wavelength_m"]),
+            tilt_deg=float(value["tilt_deg"]),
+            speed_m_s=float(value["speed_m_s"]),
+        )
     if value["noise_deg"] > 0:
         fused = with_orientation_noise(fused, float(value["noise_deg"]), int(value["noise_seed"]))
     sources: tuple = ()
@@ -319,6 +350,44 @@ def generated_problem(suite: str, family: str, spec: dict[str, Any], n: int) -> 
             "obstacles": bool(boxes),
             "noise_deg": float(value["noise_deg"]),
         },
+    )
+
+
+def loop_path(
+    n: int,
+    *,
+    length_m: float,
+    width_m: float,
+    corner_radius_m: float,
+    centre: tuple[float, float, float],
+    tilt_deg: float,
+    speed_m_s: float,
+) -> FusedPath:
+    """A closed horizontal rounded rectangle of ``n`` waypoints, the tool down and dragged along it.
+
+    ``width_m`` along world x, ``length_m`` along y, quarter-circle corners of ``corner_radius_m``
+    (:func:`refine.synthetic.rounded_rectangle`), counter-clockwise from the middle of the edge
+    nearer the robot, at equal arc length; the tool's z axis points down, leaned back against the
+    travel by ``tilt_deg``, its x axis along the travel (:func:`refine.synthetic.tool_rotations`).
+    The tool turns once about the vertical over the lap.
+    """
+    from refine.synthetic import rounded_rectangle, tool_rotations
+
+    a, b, da, db, _, perimeter = rounded_rectangle(0.5 * length_m, 0.5 * width_m, corner_radius_m, n)
+    # the footprint turned by -90 deg: (a, b) -> (x, y) = (b, -a), so the lap starts in the middle
+    # of the edge nearer the robot and runs counter-clockwise seen from above
+    positions = np.column_stack([centre[0] + b, centre[1] - a, np.full(n, centre[2])])
+    tangents = np.column_stack([db, -da, np.zeros(n)])
+    up = np.tile([0.0, 0.0, 1.0], (n, 1))
+    s = np.arange(n) * perimeter / n
+    speed = np.full(n, speed_m_s)
+    return FusedPath(
+        s=s,
+        positions=positions,
+        rotations=tool_rotations(tangents, up, np.full(n, math.radians(tilt_deg))),
+        speed=speed,
+        t_demo=s / speed_m_s,
+        residual=np.zeros(n),
     )
 
 
