@@ -285,26 +285,14 @@ def generated_problem(suite: str, family: str, spec: dict[str, Any], n: int) -> 
     robot = load_robot(spec["robot"])
     tool = float(value["tool_length_m"])
     tcp = make_transform(p=[0.0, 0.0, tool])
+    common = {"centre": tuple(spec["centre_m"]), "length_m": float(value["length_m"])}
+    common |= {"tilt_deg": float(value["tilt_deg"]), "speed_m_s": float(value["speed_m_s"])}
     if value["shape"] == "loop":
-        fused = loop_path(
-            n,
-            length_m=float(value["length_m"]),
-            width_m=float(value["width_m"]),
-            corner_radius_m=float(value["corner_radius_m"]),
-            centre=tuple(spec["centre_m"]),
-            tilt_deg=float(value["tilt_deg"]),
-            speed_m_s=float(value["speed_m_s"]),
-        )
+        loop = {"width_m": float(value["width_m"]), "corner_radius_m": float(value["corner_radius_m"])}
+        fused = loop_path(n, **common, **loop)
     else:
-        fused = wave_path(
-            n,
-            length_m=float(value["length_m"]),
-            centre=tuple(spec["centre_m"]),
-            amplitude_m=float(value["amplitude_m"]),
-            wavelength_m=float(value["wavelength_m"]),
-            tilt_deg=float(value["tilt_deg"]),
-            speed_m_s=float(value["speed_m_s"]),
-        )
+        wave = {"amplitude_m": float(value["amplitude_m"]), "wavelength_m": float(value["wavelength_m"])}
+        fused = wave_path(n, **common, **wave)
     if value["noise_deg"] > 0:
         fused = with_orientation_noise(fused, float(value["noise_deg"]), int(value["noise_seed"]))
     sources: tuple = ()
