@@ -110,8 +110,11 @@ def refine_options(nlp: Any) -> dict[str, Any]:
     def own(options: dict[str, Any]) -> dict[str, Any]:
         return {k: v for k, v in options.items() if k.startswith(prefix) and k not in given}
 
+    options = {k: v for k, v in nlp.solver_options.items() if k.startswith(prefix)}
+    if nlp.solver_name == "fatrop":  # fatrop's defaults are merged in its stage-wise solver
+        options = {f"{FATROP_PREFIX}{k}": v for k, v in getattr(nlp.solver, "options", {}).items()}
     return {
-        "options": {k: v for k, v in nlp.solver_options.items() if k.startswith(prefix)},
+        "options": options,
         "given": sorted(given),
         "later_rounds": own(WARM_START_OPTIONS),
         "repair": own(ELASTIC_OPTIONS),

@@ -191,3 +191,14 @@ def test_a_given_option_is_not_overridden_by_later_rounds_or_the_repair(wave):
 def test_the_module_documents_its_interface():
     assert module.ENTRY_POINT_GROUP == "refine.bench.contenders"
     assert Answer("ok", None).solver_options == {}
+
+
+def test_fatrop_gets_its_own_options_and_records_them_with_its_defaults(wave):
+    from refine.bench.contenders import refine_fatrop
+
+    wave.solver_options = {"fatrop.max_iter": 50, "ipopt.max_iter": 1}
+    answer = refine_fatrop(wave)
+    used = answer.solver_options
+    assert answer.status == "ok" and used["given"] == ["fatrop.max_iter"]
+    assert used["options"]["fatrop.max_iter"] == 50 and "fatrop.tol" in used["options"]
+    assert not any(k.startswith("ipopt.") for k in used["options"])  # IPOPT's are not fatrop's
