@@ -26,6 +26,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="contender (repeatable; default: all): refine, refine-casadi-ad, refine-fatrop, greedy-ik, drake-ik, trajopt, descartes",
     )
+    run.add_argument(
+        "--contender-file",
+        action="append",
+        default=[],
+        metavar="FILE.py:NAME",
+        help="register the contender NAME defined in FILE.py (repeatable; docs/bench.md)",
+    )
+    run.add_argument(
+        "--solver-option",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a solver option for every run, typed int, float or text (repeatable): max_iter=100 "
+        "(IPOPT's, ipopt.max_iter), fatrop.tol=1e-8; no round of refine overrides it",
+    )
     run.add_argument("--repeat", type=int, default=1, help="runs per problem and contender (median, minimum)")
     run.add_argument(
         "--warmup",
@@ -71,13 +86,44 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="ID",
         help="a run to report (repeatable: one section per run, no figure mixes runs; default: the CSV's last run)",
     )
+    export = actions.add_parser(
+        "export",
+        help="write the last round of refine's NLP on a problem (nlp.casadi, bounds.json, instance.json) for any NLP solver",
+    )
+    export.add_argument(
+        "problem",
+        nargs="?",
+        metavar="PROBLEM",
+        help="a problem folder or SUITE/NAME, e.g. glass/glass_adhesive (not with --set)",
+    )
+    export.add_argument("folder", type=Path, metavar="DIR", help="the folder to write")
+    export.add_argument(
+        "--set", default=None, help="export every problem of the test set [instances.SET] instead"
+    )
+    export.add_argument("--suites-file", type=Path, default=DEFAULT_SUITES, help="the suites' TOML file")
+    export.add_argument(
+        "--solver-option",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="an IPOPT option for refine's solve (repeatable, as for run), recorded in instance.json",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     """Carry out ``refine bench ...``; returns the exit status."""
     from refine.bench import peers  # noqa: F401  (adds trajopt and descartes to CONTENDERS)
-    from refine.bench.contenders import CONTENDERS
+    from refine.bench.contenders import (
+        CONTENDERS,
+        load_contender_file,
+        load_entry_points,
+        parse_solver_option,
+    )
     from refine.bench.suites import describe, load_suites
+
+    load_entry_points()
+    for spec in getattr(args, "contender_file", []):
+        load_contender_file(spec)
 
     if args.bench_command == "list":
         for line in describe(load_suites(args.suites_file)):
@@ -90,6 +136,8 @@ def run(args: argparse.Namespace) -> int:
         path = write_report(args.csv, args.out or args.csv.parent, args.run_ids)
         print(f"wrote {path}")
         return 0
+    if args.bench_command == "export":
+        return _export(args)
     from refine.bench.runner import run_suites
 
     rows = run_suites(
@@ -101,10 +149,34 @@ def run(args: argparse.Namespace) -> int:
         warmup=args.warmup,
         time_limit_s=args.time_limit,
         blas_threads=args.blas_threads,
+        solver_options=dict(parse_solver_option(text) for text in args.solver_option),
     )
     run_id = rows[0]["run_id"] if rows else "-"
     print(f"{len(rows)} row(s) of run {run_id} appended to {args.csv}")
     absent = sorted({r["contender"] for r in rows if r["status"] == "unavailable"})
     if absent:
         print(f"not run here (rows with status unavailable, the reason in note): {', '.join(absent)}")
+    return 0
+
+
+def _export(args: argparse.Namespace) -> int:
+    from refine.bench.contenders import parse_solver_option
+    from refine.bench.export import export_instance, export_set, find_problem
+    from refine.bench.suites import load_suites
+    from refine.errors import InputError
+
+    data = load_suites(args.suites_file)
+    options = dict(parse_solver_option(text) for text in args.solver_option)
+    if args.set is not None:
+        if args.problem is not None:
+            raise InputError(f"bench export --set {args.set} takes only DIR, not also {args.problem!r}")
+        export_set(data, args.set, args.folder, solver_options=options)
+        return 0
+    if args.problem is None:
+        raise InputError("bench export needs PROBLEM and DIR (or --set NAME and DIR)")
+    done = export_instance(find_problem(data, args.problem), args.folder, solver_options=options)
+    print(
+        f"{done.name}: round {done.round} of refine's outer loop, refine {done.status} in {done.iterations} "
+        f"IPOPT iterations, objective {done.objective:.13g}; wrote {done.folder}/nlp.casadi, bounds.json, instance.json"
+    )
     return 0

@@ -1,9 +1,12 @@
 """The contenders of ``refine bench``: refine with each derivative mode and solver, greedy IK, and Drake.
 
-Each contender turns a :class:`~refine.bench.suites.BenchProblem` into joints per waypoint and its
-stage times; :func:`verify` then checks every answer the same way (TCP position, orientation cone,
-joint limits and singularity margin with Pinocchio, clearance with the dense check when the problem
-has a cell), so no contender grades itself.
+A contender is a callable ``(BenchProblem) -> Answer`` (:data:`Contender`, docs/bench.md): it turns
+a :class:`~refine.bench.suites.BenchProblem` into joints per waypoint and its stage times;
+:func:`verify` then checks every answer the same way (TCP position, orientation cone, joint limits
+and singularity margin with Pinocchio, clearance with the dense check when the problem has a cell),
+so no contender grades itself. Contenders are registered by name in :data:`CONTENDERS`: the
+built-in ones, plug-ins from a file (:func:`load_contender_file`) or from the entry-point group
+:data:`ENTRY_POINT_GROUP` (:func:`load_entry_points`); :func:`timed_call` is the runner's clock.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from refine.bench.suites import BenchProblem
+from refine.errors import InputError
 from refine.types import Array
 
 log = logging.getLogger(__name__)
@@ -41,8 +45,8 @@ class Answer:
         solver_status: the iterative solver's own return status (IPOPT's ``Solve_Succeeded``,
             ``Maximum_Iterations_Exceeded``, ...), empty for a contender without one; a status of
             :data:`refine.bench.outcomes.NOT_CONVERGED` makes the row no success, however it verifies.
-        solver_options: the options the solver ran with (written to the CSV as JSON), empty when
-            the contender has none or does not say.
+        solver_options: the solver options the contender used, as it reports them (empty when it
+            reports none); refine's: :func:`refine_options`.
     """
 
     status: str
@@ -56,24 +60,30 @@ class Answer:
     solver_options: dict[str, Any] = field(default_factory=dict)
 
 
-def _refine(problem: BenchProblem, mode: str, solver: str = "ipopt") -> Answer:
-    from refine.optimise.solve import solve_refinement
-    from refine.optimise.stagewise import MAX_FATROP_WAYPOINTS
+def solve_as_refine(
+    problem: BenchProblem, mode: str = "assembled", solver: str = "ipopt", solver_options: dict | None = None
+) -> tuple[Any, float, float]:
+    """Build ``problem``'s refinement and solve it as ``refine run`` does (the refine contenders' call).
 
-    if problem.tool_in_world is not None:
-        return Answer("failed", None, note="not run: refine's refinement does not state a stationary tool yet")
-    if solver == "fatrop" and problem.n_waypoints > MAX_FATROP_WAYPOINTS:
-        return Answer(
-            "failed",
-            None,
-            note=f"not run: fatrop takes at most {MAX_FATROP_WAYPOINTS} waypoints, the path has {problem.n_waypoints}",
-        )
+    The solver options are the problem's (``problem.solver_options``, those of ``solver``'s prefix)
+    updated with ``solver_options``; refine's defaults fill in the rest.
+
+    Returns:
+        the :class:`refine.optimise.outcome.Refinement`, the first round's problem, and the build's
+        wall and CPU time [s].
+    """
+    from refine.optimise.solve import solve_refinement
+    from refine.optimise.stagewise import FATROP_PREFIX
+
     for source in problem.sources:  # no dense check kept from an earlier run of the same problem
         forget = getattr(source, "forget", None)
         if forget is not None:
             forget()
+    prefix = FATROP_PREFIX if solver == "fatrop" else "ipopt."
+    given = {k: v for k, v in problem.solver_options.items() if k.startswith(prefix)}
+    given.update(solver_options or {})
     w0, c0 = time.perf_counter(), time.process_time()
-    nlp = problem.refinement(mode, solver)
+    nlp = problem.refinement(mode, solver, solver_options=given)
     build = time.perf_counter() - w0
     build_cpu = time.process_time() - c0
     result = solve_refinement(
@@ -83,6 +93,52 @@ def _refine(problem: BenchProblem, mode: str, solver: str = "ipopt") -> Answer:
         repair_max_slack_deg=problem.repair_max_slack_deg,
         max_rounds=problem.max_rounds,
     )
+    return result, nlp, build, build_cpu
+
+
+def refine_options(nlp: Any) -> dict[str, Any]:
+    """What refine's solve of ``nlp`` used: its solver's options, which were given, and what rounds change.
+
+    ``options``: the first round's options of the problem's solver (refine's defaults and the given
+    ones); ``given``: the keys the caller gave, which no round overrides; ``later_rounds`` and
+    ``repair``: the options refine sets itself for a round that starts from the last answer
+    (:data:`refine.optimise.rounds.WARM_START_OPTIONS`) and for the elastic repair
+    (:data:`refine.optimise.rounds.ELASTIC_OPTIONS`), less the given ones.
+    """
+    from refine.optimise.rounds import ELASTIC_OPTIONS, WARM_START_OPTIONS
+    from refine.optimise.stagewise import FATROP_PREFIX
+
+    prefix = FATROP_PREFIX if nlp.solver_name == "fatrop" else "ipopt."
+    given = nlp.given_options
+
+    def own(options: dict[str, Any]) -> dict[str, Any]:
+        return {k: v for k, v in options.items() if k.startswith(prefix) and k not in given}
+
+    options = {k: v for k, v in nlp.solver_options.items() if k.startswith(prefix)}
+    if nlp.solver_name == "fatrop":  # fatrop's defaults are merged in its stage-wise solver
+        options = {f"{FATROP_PREFIX}{k}": v for k, v in getattr(nlp.solver, "options", {}).items()}
+    return {
+        "options": options,
+        "given": sorted(given),
+        "later_rounds": own(WARM_START_OPTIONS),
+        "repair": own(ELASTIC_OPTIONS),
+    }
+
+
+def _refine(problem: BenchProblem, mode: str, solver: str = "ipopt") -> Answer:
+    from refine.optimise.stagewise import MAX_FATROP_WAYPOINTS
+
+    if problem.tool_in_world is not None:
+        return Answer(
+            "failed", None, note="not run: refine's refinement does not state a stationary tool yet"
+        )
+    if solver == "fatrop" and problem.n_waypoints > MAX_FATROP_WAYPOINTS:
+        return Answer(
+            "failed",
+            None,
+            note=f"not run: fatrop takes at most {MAX_FATROP_WAYPOINTS} waypoints, the path has {problem.n_waypoints}",
+        )
+    result, nlp, build, build_cpu = solve_as_refine(problem, mode, solver)
     t = result.timings_s
     times = {"build": build + t.get("build", 0.0), "seed": t.get("seed", 0.0), "solve": t.get("solve", 0.0)}
     # refine verifies inside its loop (and diagnoses a repair); those stages are not counted
@@ -98,7 +154,7 @@ def _refine(problem: BenchProblem, mode: str, solver: str = "ipopt") -> Answer:
         result.solver_status[:80],
         slack,
         solver_status=result.solver_status.split(";")[0].strip(),
-        solver_options=dict(solved.solver_options),
+        solver_options=refine_options(solved),
     )
 
 
@@ -268,14 +324,154 @@ def _drake_plant(problem: BenchProblem):
 DRAKE_CONE_BACKOFF_DEG = 1e-3
 """How much narrower the cone given to Drake is than the problem's [deg]."""
 
-CONTENDERS: dict[str, Callable[[BenchProblem], Answer]] = {
+Contender = Callable[[BenchProblem], Answer]
+"""A contender: called with one problem, returns its :class:`Answer` (docs/bench.md, "Plug-in contenders")."""
+
+CONTENDERS: dict[str, Contender] = {
     "refine": refine_assembled,
     "refine-casadi-ad": refine_casadi_ad,
     "refine-fatrop": refine_fatrop,
     "greedy-ik": greedy_ik,
     "drake-ik": drake_chained_ik,
 }
-"""Every contender by name, in the order the runner tries them."""
+"""Every contender by name, in the order the runner tries them (plug-ins after the built-in ones)."""
+
+ENTRY_POINT_GROUP = "refine.bench.contenders"
+"""The entry-point group of installed plug-in contenders: each entry point's name is the contender's
+name, its object a :data:`Contender`."""
+
+
+def register_contender(name: str, function: Contender, *, replace: bool = False) -> str:
+    """Add ``function`` to :data:`CONTENDERS` as ``name``; returns the name.
+
+    Raises:
+        InputError: the name is empty or holds a space, comma or colon; ``function`` is not
+            callable; or another contender has the name (unless ``replace``).
+    """
+    if not name or any(c in name for c in " ,:") or not name.isprintable():
+        raise InputError(
+            f"contender name {name!r}: give a non-empty name without spaces, commas or colons",
+            key="contender",
+            value=name,
+        )
+    if not callable(function):
+        raise InputError(
+            f"contender {name!r} is a {type(function).__name__}, not a callable", key="contender", value=name
+        )
+    known = CONTENDERS.get(name)
+    if known is not None and known is not function and not replace:
+        raise InputError(
+            f"a contender named {name!r} exists already; give another name", key="contender", value=name
+        )
+    CONTENDERS[name] = function
+    return name
+
+
+def load_contender_file(spec: str) -> str:
+    """Register the contender ``NAME`` defined in ``FILE.py`` (``spec`` = ``FILE.py:NAME``); returns NAME.
+
+    The file is run as a module of its own (named after the file), so it may import refine and
+    anything installed.
+
+    Raises:
+        InputError: ``spec`` is not ``FILE:NAME``, the file is missing or fails to import, or it has
+            no callable ``NAME``.
+    """
+    import importlib.util
+    from pathlib import Path
+
+    file, sep, name = spec.rpartition(":")
+    if not sep or not file or not name:
+        raise InputError(
+            f"--contender-file {spec!r}: expected FILE.py:NAME", key="contender-file", value=spec
+        )
+    path = Path(file)
+    if not path.is_file():
+        raise InputError(f"--contender-file {spec!r}: no file {path}", key="contender-file", value=spec)
+    module_spec = importlib.util.spec_from_file_location(f"refine_bench_plugin_{path.stem}", path)
+    module = importlib.util.module_from_spec(module_spec)
+    try:
+        module_spec.loader.exec_module(module)
+    except Exception as e:
+        raise InputError(
+            f"--contender-file {spec!r}: {path} failed to import: {type(e).__name__}: {e}"
+        ) from e
+    if not hasattr(module, name):
+        found = sorted(k for k, v in vars(module).items() if callable(v) and not k.startswith("_"))
+        raise InputError(
+            f"--contender-file {spec!r}: {path} defines no {name!r}; its callables: {', '.join(found)}",
+            key="contender-file",
+            value=spec,
+        )
+    return register_contender(name, getattr(module, name))
+
+
+def load_entry_points() -> list[str]:
+    """Register every installed contender of the entry-point group :data:`ENTRY_POINT_GROUP`; their names.
+
+    Raises:
+        InputError: an entry point fails to load, or its name is taken.
+    """
+    from importlib import metadata
+
+    names = []
+    for entry in metadata.entry_points(group=ENTRY_POINT_GROUP):
+        try:
+            function = entry.load()
+        except Exception as e:
+            raise InputError(
+                f"contender entry point {entry.name} = {entry.value}: {type(e).__name__}: {e}"
+            ) from e
+        names.append(register_contender(entry.name, function))
+    return names
+
+
+def parse_solver_option(text: str) -> tuple[str, Any]:
+    """``key=value`` of ``--solver-option`` as (key, typed value): an int, else a float, else the text.
+
+    A key without a solver prefix is IPOPT's (``max_iter`` -> ``ipopt.max_iter``); ``fatrop.``
+    keys go to fatrop. ``yes``/``no`` stay text, as IPOPT takes them.
+
+    Raises:
+        InputError: no ``=``, or an empty key or value.
+    """
+    key, sep, value = text.partition("=")
+    key, value = key.strip(), value.strip()
+    if not sep or not key or not value:
+        raise InputError(
+            f"--solver-option {text!r}: expected key=value, e.g. max_iter=100 or ipopt.tol=1e-8",
+            key="solver-option",
+            value=text,
+            expected="key=value",
+        )
+    if "." not in key:
+        key = f"ipopt.{key}"
+    for kind in (int, float):
+        try:
+            return key, kind(value)
+        except ValueError:
+            pass
+    return key, value
+
+
+def timed_call(problem: BenchProblem, name: str, function: Contender) -> tuple[Answer, float]:
+    """One run of a contender and its wall time [s] on the runner's clock (``time.perf_counter``).
+
+    The clock runs around the whole call, whatever the contender times itself. A crash is an
+    ``error`` answer with the exception in its note; :class:`Unavailable` passes through (the
+    runner then skips the contender); an answer of another type is an ``error`` too.
+    """
+    t0 = time.perf_counter()
+    try:
+        answer = function(problem)
+    except Unavailable:
+        raise
+    except Exception as e:  # a contender crashing is a result, not the end of the benchmark
+        log.warning("%s on %s failed: %s", name, problem.name, e)
+        answer = Answer("error", None, note=f"{type(e).__name__}: {str(e)[:120]}")
+    if not isinstance(answer, Answer):
+        answer = Answer("error", None, note=f"returned a {type(answer).__name__}, not an Answer")
+    return answer, time.perf_counter() - t0
 
 
 @dataclass

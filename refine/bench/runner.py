@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from refine.bench import peers  # noqa: F401  (adds trajopt and descartes to CONTENDERS)
-from refine.bench.contenders import CONTENDERS, Answer, Unavailable, verify
+from refine.bench.contenders import CONTENDERS, Answer, Unavailable, timed_call, verify
 from refine.bench.outcomes import DEFAULT_TIME_LIMIT_S, penalised, score
 from refine.bench.provenance import DEFAULT_BLAS_THREADS, fixed_threads, git_commit, solver_versions
 from refine.bench.provenance import blas_threads as current_blas_threads
@@ -78,24 +78,6 @@ def _peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: kilobytes
 
 
-def _call(
-    problem: BenchProblem, contender: str, function: Callable[[BenchProblem], Answer]
-) -> tuple[Answer, float]:
-    """One run of a contender and its wall time [s] on the runner's clock.
-
-    A crash is an ``error`` answer (:class:`Unavailable` passes through).
-    """
-    t0 = time.perf_counter()
-    try:
-        answer = function(problem)
-    except Unavailable:
-        raise
-    except Exception as e:  # a contender crashing is a result, not the end of the benchmark
-        log.warning("%s on %s failed: %s", contender, problem.name, e)
-        answer = Answer("error", None, note=f"{type(e).__name__}: {str(e)[:120]}")
-    return answer, time.perf_counter() - t0
-
-
 def run_problem(
     problem: BenchProblem,
     contender: str,
@@ -129,7 +111,7 @@ def run_turns(
     for name in list(functions):
         try:
             for _ in range(warmup):
-                _call(problem, name, functions[name])
+                timed_call(problem, name, functions[name])
         except Unavailable as e:
             echo(f"skipping {name}: {e}")
             del functions[name]
@@ -141,7 +123,7 @@ def run_turns(
     for _ in range(repeat):
         for name in list(functions):
             try:
-                answers[name].append(_call(problem, name, functions[name]))
+                answers[name].append(timed_call(problem, name, functions[name]))
             except Unavailable as e:
                 echo(f"skipping {name}: {e}")
                 del functions[name], answers[name]
@@ -260,6 +242,7 @@ def run_suites(
     time_limit_s: float = DEFAULT_TIME_LIMIT_S,
     run_id: str | None = None,
     blas_threads: int = DEFAULT_BLAS_THREADS,
+    solver_options: dict[str, Any] | None = None,
 ) -> list[dict[str, Any]]:
     """Run every contender on every problem of ``suites`` and append the rows to ``csv_path``.
 
@@ -280,6 +263,9 @@ def run_suites(
     Contenders take turns on each problem (:func:`run_turns`). Every BLAS runs with
     ``blas_threads`` threads throughout (:func:`refine.bench.provenance.fixed_threads`, recorded
     in ``blas_threads``); the quality columns are :func:`refine.bench.quality.evaluate`'s.
+    ``solver_options`` (keyed with the
+    solver's prefix, ``ipopt.max_iter``) go to every problem (``BenchProblem.solver_options``); each
+    row's ``solver_options`` is what its contender reports it used, as JSON.
     """
     contenders = list(contenders)
     unknown = [c for c in contenders if c not in CONTENDERS]
@@ -307,6 +293,7 @@ def run_suites(
             writer.writeheader()
         for suite in suites:
             for problem in problems(data, suite):
+                problem.solver_options = dict(solver_options or {})
                 t0 = time.perf_counter()
                 functions = {name: CONTENDERS[name] for name in contenders if name not in skipped}
                 with fixed_threads(blas_threads):  # libraries loaded by earlier problems included

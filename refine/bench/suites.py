@@ -53,6 +53,9 @@ class BenchProblem:
         expected: for the unreachable family, the outcome the problem states (else empty).
         expected_s_range_m: the arc-length range [m] the problem states its infeasibility or repair
             to be in (``[expected] s_range_m``), or None.
+        solver_options: solver options of the run (``refine bench run --solver-option``), keyed with
+            the solver's prefix (``ipopt.max_iter``, ``fatrop.tol``); a contender uses those of its
+            solver and records what it used (:attr:`refine.bench.contenders.Answer.solver_options`).
         tool_in_world: T_F_TCP of a stationary tool (the robot holds the part; ``tcp_in_flange``
             then places the part's frame on the flange and the path is in the part's frame), or
             None (see :class:`refine.robot.kinematics.TcpKinematics`).
@@ -75,6 +78,7 @@ class BenchProblem:
     expected_s_range_m: tuple[float, float] | None = None
     extra: dict[str, Any] = field(default_factory=dict)
     tool_in_world: Array | None = None
+    solver_options: dict[str, Any] = field(default_factory=dict)
 
     @property
     def n_waypoints(self) -> int:
@@ -110,6 +114,11 @@ def load_suites(path: Path = DEFAULT_SUITES) -> dict[str, Any]:
         data = tomllib.loads(Path(path).read_text())
     except (OSError, tomllib.TOMLDecodeError) as e:
         raise InputError(f"suites file {path}: {e}") from e
+    unknown = set(data) - set(TOP_KEYS)
+    if unknown:
+        raise InputError(
+            f"suites file {path}: unknown table(s) {sorted(unknown)}; the tables are {', '.join(TOP_KEYS)}"
+        )
     suites, generated = data.get("suite", {}), data.get("generated", {})
     for name, suite in suites.items():
         unknown = set(suite) - {"problems", "generated", "sizes", "tesseract"}
@@ -122,7 +131,90 @@ def load_suites(path: Path = DEFAULT_SUITES) -> dict[str, Any]:
                 )
         if suite.get("generated") and not suite.get("sizes"):
             raise InputError(f"suites file {path}: [suite.{name}] has generated paths but no sizes")
+    for name, family in generated.items():
+        check_family(f"suites file {path}: [generated.{name}]", family)
+    for name, spec in data.get("instances", {}).items():
+        unknown = set(spec) - {"problems"}
+        if unknown or not isinstance(spec.get("problems"), list):
+            raise InputError(
+                f"suites file {path}: [instances.{name}] takes one key, problems (a list of SUITE/NAME or "
+                f"problem folders); it has {sorted(spec)}"
+            )
     return data
+
+
+FAMILY_KEYS: dict[str, Any] = {
+    "robot": None,
+    "centre_m": None,
+    "shape": "wave",
+    "length_m": 1.0,
+    "width_m": 0.3,
+    "corner_radius_m": 0.05,
+    "tool_length_m": 0.3,
+    "amplitude_m": 0.05,
+    "wavelength_m": 0.5,
+    "tilt_deg": 12.0,
+    "speed_m_s": 0.1,
+    "noise_deg": 0.0,
+    "noise_seed": 0,
+    "boxes": [],
+}
+"""The keys of a ``[generated.NAME]`` family and their defaults (None: required); docs/bench.md
+says what each means."""
+
+SHAPES = ("wave", "loop")
+"""The shapes of a generated family: a sine wave (:func:`refine.synthetic.wave_path`) or a closed
+rounded rectangle (:func:`loop_path`)."""
+
+BOX_KEYS = ("name", "centre_m", "size_m")
+"""The keys of one of a family's ``boxes``."""
+
+
+def check_family(where: str, family: dict[str, Any]) -> None:
+    """Raise :class:`InputError` for a family with an unknown or missing key, naming it and the allowed ones."""
+    unknown = sorted(set(family) - set(FAMILY_KEYS))
+    if unknown:
+        raise InputError(
+            f"{where}: unknown key(s) {unknown}; the keys are {', '.join(FAMILY_KEYS)}",
+            key=unknown[0],
+            value=family[unknown[0]],
+            expected=", ".join(FAMILY_KEYS),
+        )
+    missing = [k for k, v in FAMILY_KEYS.items() if v is None and k not in family]
+    if missing:
+        raise InputError(f"{where}: {', '.join(missing)} missing (required: robot, centre_m)", key=missing[0])
+    for k, box in enumerate(family.get("boxes", [])):
+        if not isinstance(box, dict) or set(box) != set(BOX_KEYS):
+            raise InputError(
+                f"{where}: boxes[{k}] has keys {sorted(box) if isinstance(box, dict) else box!r}; "
+                f"a box has exactly {', '.join(BOX_KEYS)}",
+                key=f"boxes[{k}]",
+                expected=", ".join(BOX_KEYS),
+            )
+    if family.get("shape", "wave") not in SHAPES:
+        raise InputError(
+            f"{where}: shape = {family['shape']!r}; the shapes are {', '.join(SHAPES)}",
+            key="shape",
+            value=family["shape"],
+            expected=", ".join(SHAPES),
+        )
+    if family.get("shape") == "loop":
+        r = family.get("corner_radius_m", FAMILY_KEYS["corner_radius_m"])
+        for key in ("length_m", "width_m"):
+            if not family.get(key, FAMILY_KEYS[key]) > 2 * r:
+                raise InputError(f"{where}: a loop's {key} must exceed twice corner_radius_m ({2 * r:g} m)", key=key)
+    numbers = [k for k, v in FAMILY_KEYS.items() if isinstance(v, float)] + ["noise_seed"]
+    for key in numbers:
+        value = family.get(key, FAMILY_KEYS[key])
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise InputError(f"{where}: {key} = {value!r} is not a number", key=key, value=value)
+        positive = ("length_m", "tool_length_m", "wavelength_m", "speed_m_s", "width_m", "corner_radius_m")
+        if value < 0 or (value == 0 and key in positive):
+            raise InputError(f"{where}: {key} = {value!r} must be > 0 (>= 0 for amplitude, tilt, noise)", key=key, value=value)
+
+
+TOP_KEYS = ("suite", "generated", "instances")
+"""The tables of a suites file: suites, generated families, and test sets of exported instances."""
 
 
 def problems(data: dict[str, Any], suite: str, *, root: Path = ROOT) -> Iterator[BenchProblem]:
@@ -173,7 +265,7 @@ def bundled_problem(suite: str, folder: Path) -> BenchProblem:
 
 
 def generated_problem(suite: str, family: str, spec: dict[str, Any], n: int) -> BenchProblem:
-    """A sine wave of ``n`` waypoints in front of the family's robot, with its boxes if any.
+    """The family's path of ``n`` waypoints (a sine wave or a loop) in front of its robot, with its boxes if any.
 
     The cost weights are the ones ``refine run`` gives the robot: the defaults, with the mid-range
     cost of :data:`refine.run.stages.REDUNDANT_MID_RANGE_WEIGHT` for an arm of more than six joints.
@@ -188,10 +280,21 @@ def generated_problem(suite: str, family: str, spec: dict[str, Any], n: int) -> 
     from refine.settings import CollisionSettings, Shape
     from refine.synthetic import wave_path
 
+    check_family(f"[generated.{family}]", spec)
+    value = {**FAMILY_KEYS, **spec}
     robot = load_robot(spec["robot"])
-    tool = float(spec.get("tool_length_m", 0.3))
+    tool = float(value["tool_length_m"])
     tcp = make_transform(p=[0.0, 0.0, tool])
-    fused = wave_path(n, length_m=float(spec.get("length_m", 1.0)), centre=tuple(spec["centre_m"]))
+    common = {"centre": tuple(spec["centre_m"]), "length_m": float(value["length_m"])}
+    common |= {"tilt_deg": float(value["tilt_deg"]), "speed_m_s": float(value["speed_m_s"])}
+    if value["shape"] == "loop":
+        loop = {"width_m": float(value["width_m"]), "corner_radius_m": float(value["corner_radius_m"])}
+        fused = loop_path(n, **common, **loop)
+    else:
+        wave = {"amplitude_m": float(value["amplitude_m"]), "wavelength_m": float(value["wavelength_m"])}
+        fused = wave_path(n, **common, **wave)
+    if value["noise_deg"] > 0:
+        fused = with_orientation_noise(fused, float(value["noise_deg"]), int(value["noise_seed"]))
     sources: tuple = ()
     boxes = spec.get("boxes", [])
     if boxes:
@@ -229,8 +332,67 @@ def generated_problem(suite: str, family: str, spec: dict[str, Any], n: int) -> 
         sources=sources,
         repair_max_slack_deg=None,
         weights=Weights(mid_range=REDUNDANT_MID_RANGE_WEIGHT if robot.nq > 6 else 0.0),
-        extra={"family": family, "length_m": float(spec.get("length_m", 1.0)), "obstacles": bool(boxes)},
+        extra={
+            "family": family,
+            "length_m": float(value["length_m"]),
+            "obstacles": bool(boxes),
+            "noise_deg": float(value["noise_deg"]),
+        },
     )
+
+
+def loop_path(
+    n: int,
+    *,
+    length_m: float,
+    width_m: float,
+    corner_radius_m: float,
+    centre: tuple[float, float, float],
+    tilt_deg: float,
+    speed_m_s: float,
+) -> FusedPath:
+    """A closed horizontal rounded rectangle of ``n`` waypoints, the tool down and dragged along it.
+
+    ``width_m`` along world x, ``length_m`` along y, quarter-circle corners of ``corner_radius_m``
+    (:func:`refine.synthetic.rounded_rectangle`), counter-clockwise from the middle of the edge
+    nearer the robot, at equal arc length; the tool's z axis points down, leaned back against the
+    travel by ``tilt_deg``, its x axis along the travel (:func:`refine.synthetic.tool_rotations`).
+    The tool turns once about the vertical over the lap.
+    """
+    from refine.synthetic import rounded_rectangle, tool_rotations
+
+    a, b, da, db, _, perimeter = rounded_rectangle(0.5 * length_m, 0.5 * width_m, corner_radius_m, n)
+    # the footprint turned by -90 deg: (a, b) -> (x, y) = (b, -a), so the lap starts in the middle
+    # of the edge nearer the robot and runs counter-clockwise seen from above
+    positions = np.column_stack([centre[0] + b, centre[1] - a, np.full(n, centre[2])])
+    tangents = np.column_stack([db, -da, np.zeros(n)])
+    up = np.tile([0.0, 0.0, 1.0], (n, 1))
+    s = np.arange(n) * perimeter / n
+    speed = np.full(n, speed_m_s)
+    return FusedPath(
+        s=s,
+        positions=positions,
+        rotations=tool_rotations(tangents, up, np.full(n, math.radians(tilt_deg))),
+        speed=speed,
+        t_demo=s / speed_m_s,
+        residual=np.zeros(n),
+    )
+
+
+def with_orientation_noise(fused: FusedPath, noise_deg: float, seed: int) -> FusedPath:
+    """``fused`` with each demonstrated orientation turned by a random rotation, as a hand's jitter.
+
+    Each waypoint's rotation vector has three independent normal components of standard deviation
+    ``noise_deg`` [deg] (in the tool frame), drawn from ``numpy.random.default_rng(seed)``, so a
+    family's paths are the same in every run; the CAD points stay exact.
+    """
+    from dataclasses import replace
+
+    from refine.frames import matrix_from_rotvec
+
+    rng = np.random.default_rng(seed)
+    turns = matrix_from_rotvec(np.radians(rng.normal(0.0, noise_deg, size=(len(fused), 3))))
+    return replace(fused, rotations=fused.rotations @ turns)
 
 
 PUZZLE_SPACING_M = 0.0025
@@ -304,7 +466,7 @@ def tesseract_puzzle(suite: str, support: Path) -> BenchProblem:
 
 
 def describe(data: dict[str, Any]) -> list[str]:
-    """One line per suite: its problems and generated families."""
+    """One line per suite (its problems and generated families), then one per test set of exported instances."""
     lines = []
     for name, suite in sorted(data.get("suite", {}).items()):
         count = len(suite.get("problems", [])) + len(suite.get("generated", [])) * len(suite.get("sizes", []))
@@ -316,6 +478,8 @@ def describe(data: dict[str, Any]) -> list[str]:
                 f"at {sizes[0]}-{sizes[-1]} waypoints"
             )
         lines.append(f"{name:12s} {count:3d} problems: {', '.join(parts)}")
+    for name, spec in sorted(data.get("instances", {}).items()):
+        lines.append(f"{name:12s} {len(spec['problems']):3d} exported instances (bench export --set {name})")
     return lines
 
 

@@ -85,6 +85,7 @@ class RefinementNLP:
         solver: the solver built for it: CasADi's IPOPT solver (derivatives included), or a
             :class:`refine.optimise.stagewise.StagewiseSolver` (fatrop), called the same way.
         solver_options: the options it was built with.
+        given_options: the options its caller gave (before refine's defaults); a round never overrides them.
         solver_name: ``"ipopt"`` or ``"fatrop"`` (see :func:`build_refinement`).
         params: numeric value of ``p`` (CAD points and demonstrated orientations).
         lbx, ubx: variable bounds: joint limits minus margin [rad] (n·N), then the slacks (N) when elastic.
@@ -136,6 +137,7 @@ class RefinementNLP:
     joint_steps: str | tuple[int, ...] = "all"
     solver_name: str = "ipopt"
     watch: Any = None
+    given_options: dict[str, Any] = field(default_factory=dict)
 
     def rebuilt(
         self,
@@ -151,7 +153,7 @@ class RefinementNLP:
         Any of the active set, elastic setting, joint-step rows, path and tolerances may change; a
         new path needs an active set of its own waypoints.
         """
-        return build_refinement(
+        built = build_refinement(
             self.robot,
             self.fused if fused is None else fused,
             self.base_in_world,
@@ -167,6 +169,7 @@ class RefinementNLP:
             joint_steps=self.joint_steps if joint_steps is None else joint_steps,
             solver=self.solver_name,
         )
+        return replace(built, given_options=self.given_options)
 
     def step_rows(self) -> Array:
         """Indices ``k·n + j`` of the joint-step rows the problem holds, in row order, (S,)."""
@@ -454,6 +457,7 @@ def build_refinement(
         nlp=nlp,
         solver=built,
         solver_options=options,
+        given_options=dict(solver_options or {}),
         watch=watch,
         params=params,
         lbx=lbx,
@@ -502,9 +506,8 @@ def joint_bounds(robot: Robot, tolerances: Tolerances) -> tuple[Array, Array]:
     margin = math.radians(tolerances.joint_margin_deg)
     lower, upper = robot.spec.lower + margin, robot.spec.upper - margin
     if np.any(lower >= upper):
-        raise InputError(
-            f"tolerances.joint_margin_deg = {tolerances.joint_margin_deg} deg leaves no joint range"
-        )
+        margin_deg = tolerances.joint_margin_deg
+        raise InputError(f"tolerances.joint_margin_deg = {margin_deg} deg leaves no joint range")
     return lower, upper
 
 
@@ -576,9 +579,7 @@ def _check_active(active: ActiveSet, N: int, n: int) -> None:
             raise InputError(f"singular segment point ({k}, {f}) needs 0 <= k < {N - 1} and 0 < f < 1")
     for r in active.linear_rows:
         if not (0 <= r.k < N and 0.0 <= r.f < 1.0 and np.shape(r.gradient) == (n,)):
-            raise InputError(
-                f"linear row {r.label!r}: k = {r.k}, f = {r.f}, gradient shape {np.shape(r.gradient)}"
-            )
+            raise InputError(f"linear row {r.label!r}: k = {r.k}, f = {r.f}, gradient {np.shape(r.gradient)}")
 
 
 class ConstraintSource(Protocol):

@@ -91,11 +91,12 @@ def singular_around(mask: Array, widen: int = 2) -> ActiveSet:
 
 
 WARM_START_OPTIONS = {"ipopt.mu_init": WARM_MU_INIT, "fatrop.mu_init": FATROP_REPAIR_MU_INIT}
-"""Solver options of a round that starts from the last round's answer (and, for IPOPT, multipliers)."""
+"""Solver options of a round that starts from the last round's answer (and, for IPOPT, multipliers),
+unless the problem's caller gave the same option (:attr:`RefinementNLP.given_options`)."""
 
 
 ELASTIC_OPTIONS = {"ipopt.mu_strategy": "monotone", "fatrop.mu_init": FATROP_REPAIR_MU_INIT}
-"""Solver options of the elastic (repair) problem (IPOPT's reasons below). Its start is far from the answer (the seed needs
+"""Solver options of the elastic (repair) problem unless its caller gave them (IPOPT's reasons below). Its start is far from the answer (the seed needs
 several degrees more slack than the repair) and near the stretched elbow or a wrist singularity;
 the adaptive barrier strategy drops the barrier to 1e-6 within ten iterations there and then crawls
 (300 iterations without convergence on 2 of 20 noisy copies of ``reach_tilt``), while Fiacco-McCormick's
@@ -173,6 +174,7 @@ class RoundLoop:
             options.update(ELASTIC_OPTIONS)
         if warm:
             options.update(WARM_START_OPTIONS)
+        options.update(self.problem.given_options)  # the caller's options win over a round's own
         self.problem = replace(self.problem, solver_options=options).rebuilt(**changes)
         add_time(self.timings, "build", start)
 
