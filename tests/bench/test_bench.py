@@ -96,7 +96,7 @@ def test_run_writes_one_row_per_problem_and_contender_and_the_report_reads_the_c
     # quality and provenance: IPOPT's own status and options, the shared residuals, versions, threads
     for row in refine_rows:
         assert row["solver_status"] == "Solve_Succeeded" and row["verified_runs"] == row["repeats"]
-        assert json.loads(row["solver_options"])["ipopt.tol"] > 0
+        assert json.loads(row["solver_options"])["options"]["ipopt.tol"] > 0
         assert float(row["primal_residual"]) < 1e-6 and float(row["dual_residual"]) < 1e-4
         assert float(row["objective"]) > 0
     for row in table:
