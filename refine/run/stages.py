@@ -221,7 +221,7 @@ def refine_pass(
         nlp,
         q0,
         home=home,
-        sources=sources,
+        sources=sources + (line_source(problem, robot),),
         repair_max_slack_deg=problem.repair.max_slack_deg if problem.repair.enabled else None,
         time_limit_s=problem.repair.time_limit_s,
         warm=warm,
@@ -319,6 +319,30 @@ def program_formats(problem: Problem, robot: Robot) -> tuple[str, ...]:
     return (robot.spec.default_program,)
 
 
+def wrist_segments(problem: Problem, robot: Robot, q: np.ndarray) -> np.ndarray:
+    r"""Per segment of joints ``q``, True where a RAPID or KRL program hands the wrist to the controller.
+
+    The runs near the wrist singularity (``SingArea \Wrist``, ``$ORI_TYPE = #JOINT``): the moves from
+    the one onto each run's first target to its last.
+    """
+    from refine.export.program import singular_runs
+
+    wrist = np.zeros(len(q) - 1, dtype=bool)
+    if {"rapid", "krl"} & set(program_formats(problem, robot)):
+        for a, b in singular_runs(robot, q):
+            wrist[max(a, 1) - 1 : b + 1] = True
+    return wrist
+
+
+def line_source(problem: Problem, robot: Robot) -> Any:
+    """The controller's line as a constraint source of the refinement's rounds (joint margins, singularity)."""
+    from refine.optimise.controller_line import ControllerLineSource
+    from refine.robot.kinematics import TcpKinematics
+
+    kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange)
+    return ControllerLineSource(kin, problem.tolerances, lambda q: wrist_segments(problem, robot, q))
+
+
 def controller_line_check(
     problem: Problem, robot: Robot, q: np.ndarray, s: np.ndarray, sources: tuple[ConstraintSource, ...] = ()
 ) -> Any:
@@ -334,15 +358,11 @@ def controller_line_check(
         a :class:`refine.optimise.controller_line.LineCheck`.
     """
     from refine.collision.check import check_path_clearance, joint_reach, margins_proved
-    from refine.export.program import singular_runs
     from refine.optimise.controller_line import check_controller_lines
     from refine.robot.kinematics import TcpKinematics
 
     kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange)
-    wrist = np.zeros(len(q) - 1, dtype=bool)
-    if {"rapid", "krl"} & set(program_formats(problem, robot)):
-        for a, b in singular_runs(robot, q):
-            wrist[max(a, 1) - 1 : b + 1] = True  # the moves from the one onto target max(a, 1) to b + 1
+    wrist = wrist_segments(problem, robot, q)
     model = next(
         (getattr(src, "model", None) for src in sources if getattr(src, "model", None) is not None), None
     )
