@@ -302,14 +302,12 @@ def plan_motions(
                 float(check.singularity.min()),
             )
         )
+    from refine.plan.motion import air_limits
+
+    velocity, accel = air_limits(problem, robot)
     spec = robot.spec
-    accel = spec.acceleration
-    if problem.robot.joint_acceleration_deg_s2 is not None:
-        accel = np.radians(problem.robot.joint_acceleration_deg_s2)
     home = None if problem.robot.home_deg is None else np.radians(spec.from_controller(problem.robot.home_deg))
-    return plan_program(
-        checker, planned, home, velocity=spec.velocity * problem.robot.velocity_scale, acceleration=accel
-    )
+    return plan_program(checker, planned, home, velocity=velocity, acceleration=accel)
 
 
 def program_formats(problem: Problem, robot: Robot) -> tuple[str, ...]:
