@@ -336,6 +336,9 @@ def check_controller_lines(
     )
 
 
+LINE_LABEL = "controller line"
+"""The label every row of :func:`line_rows` starts with."""
+
 LINE_REASONS = ("joint limit on the controller's line", "singularity on the controller's line")
 """The violations of the line the refinement's rows can mend (the others the final check reports)."""
 
@@ -376,10 +379,10 @@ def line_rows(kin: TcpKinematics, q: Array, line: LineCheck, tolerances: Toleran
         e[j] = 1.0
         for i in np.flatnonzero(line.q[:, j] - spec.lower[j] < margin - JOINT_TOLERANCE_RAD):
             lower = spec.lower[j] + margin - bow[i, j]
-            rows.append(LinearRow(int(seg[i]), float(t[i]), e, float(lower), f"controller line joint {j + 1} lower"))
+            rows.append(LinearRow(int(seg[i]), float(t[i]), e, float(lower), f"{LINE_LABEL} joint {j + 1} lower"))
         for i in np.flatnonzero(spec.upper[j] - line.q[:, j] < margin - JOINT_TOLERANCE_RAD):
             lower = -(spec.upper[j] - margin - bow[i, j])
-            rows.append(LinearRow(int(seg[i]), float(t[i]), -e, float(lower), f"controller line joint {j + 1} upper"))
+            rows.append(LinearRow(int(seg[i]), float(t[i]), -e, float(lower), f"{LINE_LABEL} joint {j + 1} upper"))
     if tolerances.singularity_margin > 0:
         w, _ = singularity_measures(kin, line.q, smallest=False)
         low = np.flatnonzero(w < tolerances.singularity_margin - SINGULARITY_TOLERANCE)
@@ -390,7 +393,7 @@ def line_rows(kin: TcpKinematics, q: Array, line: LineCheck, tolerances: Toleran
             grad = (w_step.reshape(len(low), n) - w[low, None]) / GRADIENT_STEP_RAD
             for g, i in zip(grad, low, strict=True):
                 lower = tolerances.singularity_margin + SINGULARITY_HEADROOM - w[i] + float(g @ q_lin[i])
-                rows.append(LinearRow(int(seg[i]), float(t[i]), g, float(lower), "controller line singularity"))
+                rows.append(LinearRow(int(seg[i]), float(t[i]), g, float(lower), f"{LINE_LABEL} singularity"))
     return tuple(rows)
 
 
@@ -449,6 +452,14 @@ class ControllerLineSource:
         if not any(v.reason.startswith(LINE_REASONS) for v in line.violations):
             return ()
         return line_rows(self.kin, q, line, self.tolerances)
+
+    def refresh_rows(self, rows: tuple[LinearRow, ...], q: Array) -> tuple[LinearRow, ...]:
+        """``rows`` without this source's: a line's rows hold for the path they were made on only.
+
+        A re-solve of a moved path (:mod:`refine.optimise.warm`) then builds its problem anew, and
+        its rounds add the rows its own line needs.
+        """
+        return tuple(r for r in rows if not r.label.startswith(LINE_LABEL))
 
     def clearance(self, q: Array) -> None:
         """No clearance figures: the line's clearance is the final check's."""

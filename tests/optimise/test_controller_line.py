@@ -139,3 +139,17 @@ def test_the_line_source_makes_rows_only_for_an_answer_it_verified(ur10e_kin):
     assert (v.reason, v.index_start, v.s_start_m) == ("joint limit on the controller's line (joint 6)", 0, 0.002)
     assert source.rows(problem, q) and source.checks == 1
     assert source.rows(problem, q + 1e-3) == ()
+
+
+def test_a_re_solve_of_a_moved_path_drops_the_line_s_rows_and_keeps_the_others(ur10e_kin):
+    """The line's rows hold for the path they were made on; a clearance row is its source's to refresh."""
+    from refine.optimise.controller_line import ControllerLineSource
+    from refine.optimise.problem import LinearRow
+
+    rows = (
+        LinearRow(0, 0.5, np.eye(6)[5], -6.0, "controller line joint 6 lower"),
+        LinearRow(1, 0.0, np.ones(6), 0.1, "link_3 / table"),
+        LinearRow(0, 0.25, np.ones(6), 0.02, "controller line singularity"),
+    )
+    kept = ControllerLineSource(ur10e_kin, Tolerances()).refresh_rows(rows, np.zeros((3, 6)))
+    assert [r.label for r in kept] == ["link_3 / table"]
