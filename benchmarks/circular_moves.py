@@ -8,9 +8,10 @@ chord tolerance alone would need (``sweep / (2 acos(1 - tol / r))``, rounded up)
 spacing alone (``length / spacing_m``, rounded up), and the circular moves that would replace them
 (one per 90 deg of sweep: a via and an end target each). With ``--runs DIR`` (finished runs of the
 same problems, ``DIR/<problem>/trajectory.csv``) it adds what a circular move would have to
-reproduce along the arc: the refined tool axis's turn relative to the arc's tangent frame
-(what ABB's ``CirPathMode \\PathFrame`` and KUKA's ``$CIRC_TYPE = #PATH`` hold constant) and the
-planned speed's range.
+reproduce along the arc: the largest angle between the refined tool axis and the one a circular
+move gives, the orientation in the arc's tangent frame turned at a constant rate from the start
+target's to the end target's (ABB's ``CirPathMode \\PathFrame``, KUKA's ``$CIRC_TYPE = #PATH``
+with ``#VAR``), and the planned speed's range.
 
     python3 benchmarks/circular_moves.py [--runs /tmp/out]
 """
@@ -86,12 +87,25 @@ def along_arc(run: Path, T_world_cad: np.ndarray, centre, r, a0, sweep) -> str: 
     R_cad = Rotation.from_matrix(T_world_cad[:3, :3])
     frame = R_cad * Rotation.from_rotvec(np.outer(tangent_turn, [0.0, 0.0, 1.0])) * R_cad.inv()
     in_frame = frame.inv() * Rotation.from_quat(q)
+    # what the circular move would hold: the tool in the arc's frame turning at a constant rate from
+    # its start to its end orientation (the slerp in that frame, at the fraction of the sweep)
+    frac = tangent_turn / tangent_turn[-1]
+    step = (in_frame[0].inv() * in_frame[-1]).as_rotvec()
+    held = in_frame[0] * Rotation.from_rotvec(np.outer(frac, step))
     axis = in_frame.apply([0.0, 0.0, 1.0])  # the tool axis (a torch or nozzle may spin freely about it)
-    drift = np.degrees(np.arccos(np.clip(axis @ axis[0], -1.0, 1.0))).max()
+    held_axis = held.apply([0.0, 0.0, 1.0])
+    drift = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", axis, held_axis), -1.0, 1.0))).max()
+    demo = Rotation.from_quat(
+        np.column_stack([rows["qx_demo"], rows["qy_demo"], rows["qz_demo"], rows["qw_demo"]])[mask]
+    ).apply([0.0, 0.0, 1.0])
+    held_world = (frame * held).apply([0.0, 0.0, 1.0])
+    off_demo = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", held_world, demo), -1.0, 1.0))).max()
+    refined_off = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", Rotation.from_quat(q).apply([0.0, 0.0, 1.0]), demo), -1.0, 1.0))).max()
     v = rows["speed"][mask] * 1e3
     return (
         f"{mask.sum()} run waypoints: tool turns {math.degrees(abs(tangent_turn[-1])):.1f} deg with the tangent, "
-        f"its axis {drift:.2f} deg in the tangent frame; speed {v.min():.2f}-{v.max():.2f} mm/s"
+        f"its axis up to {drift:.2f} deg off the circular move's, which is up to {off_demo:.2f} deg off "
+        f"the demonstration's (the refined: {refined_off:.2f} deg); speed {v.min():.2f}-{v.max():.2f} mm/s"
     )
 
 
