@@ -58,6 +58,10 @@ class ProgramPass:
             approach (a program written without a run's motions).
         air_out: for the last pass, the planned ``return``: the joints [rad] after its start, via
             points then home (the last row); None: straight home.
+
+        air_in_s, air_out_s: the time [s] of each joint move of ``air_in`` and ``air_out`` (one per
+            row) at ``[output] air_speed_share`` (:func:`refine.plan.motion.air_limits`); None
+            without planned motions.
     """
 
     name: str
@@ -65,6 +69,8 @@ class ProgramPass:
     repairs: tuple[Any, ...] = ()
     air_in: Array | None = None
     air_out: Array | None = None
+    air_in_s: tuple[float, ...] | None = None
+    air_out_s: tuple[float, ...] | None = None
 
 
 def fixed_decimals(value: float, decimals: int) -> str:
@@ -83,8 +89,11 @@ def with_motions(passes: list[ProgramPass], motions: tuple[Any, ...]) -> list[Pr
     back = [m for m in motions if m.kind == "return"]
     if len(into) != len(passes) or len(back) != 1:
         return passes
-    out = [replace(p, air_in=np.asarray(m.q[1:], dtype=float)) for p, m in zip(passes, into, strict=True)]
-    out[-1] = replace(out[-1], air_out=np.asarray(back[0].q[1:], dtype=float))
+    out = [
+        replace(p, air_in=np.asarray(m.q[1:], dtype=float), air_in_s=tuple(m.move_s) or None)
+        for p, m in zip(passes, into, strict=True)
+    ]
+    out[-1] = replace(out[-1], air_out=np.asarray(back[0].q[1:], dtype=float), air_out_s=tuple(back[0].move_s) or None)
     return out
 
 

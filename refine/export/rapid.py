@@ -190,6 +190,8 @@ def write_rapid(
     speed_resolution_m_s: float = 1e-4,
     air_in: Array | None = None,
     air_out: Array | None = None,
+    air_in_s: tuple[float, ...] | None = None,
+    air_out_s: tuple[float, ...] | None = None,
     start_home: bool = True,
     end_home: bool = True,
 ) -> Path:
@@ -213,6 +215,10 @@ def write_rapid(
             line). None: ``MoveJ`` to the approach point as a pose.
         air_out: the run's planned return, joints [rad] (K, n) after the retract point (via points,
             then home), each a ``MoveAbsJ ... fine``; None: straight home.
+        air_in_s: the planned time of each joint move of ``air_in`` [s] (one per row): each
+            ``MoveAbsJ`` then runs in it (its time argument ``T``, rounded up to the millisecond), as
+            planned at ``[output] air_speed_share``; None: at ``vAir``.
+        air_out_s: the same for ``air_out``.
         start_home: the module starts with a move to home; False for a pass of a multi-pass weld
             that runs after the previous pass's module (``air_in`` is then the planned link from
             its retract point).
@@ -353,7 +359,9 @@ def write_rapid(
     else:
         air_names = [f"jIn{k + 1}" for k in range(len(air_in))]
         air_decls += [_jointtarget(a, q) for a, q in zip(air_names, air_in, strict=True)]
-        main += [f"MoveAbsJ {a}\\NoEOffs, vAir, fine, {tool};" for a in air_names]
+        main += [
+            f"MoveAbsJ {a}\\NoEOffs, {_air_speed(air_in_s, k)}, fine, {tool};" for k, a in enumerate(air_names)
+        ]
         main[-1] += "  ! the approach point"
     if weld:
         main += [f"MoveL {names[0]}, vAir, fine, {move_tail}", *_weld_start(problem, output)]
@@ -369,7 +377,11 @@ def write_rapid(
     if air_out is not None and len(air_out) > 1:
         out_names = [f"jOut{k + 1}" for k in range(len(air_out) - 1)]  # the last row is home
         air_decls += [_jointtarget(a, q) for a, q in zip(out_names, air_out[:-1], strict=True)]
-        main += [f"MoveAbsJ {a}\\NoEOffs, vAir, fine, {tool};" for a in out_names]
+        main += [
+            f"MoveAbsJ {a}\\NoEOffs, {_air_speed(air_out_s, k)}, fine, {tool};" for k, a in enumerate(out_names)
+        ]
+    if air_out is not None and air_out_s is not None:
+        home_move = f"MoveAbsJ jHome\\NoEOffs, {_air_speed(air_out_s, len(air_out) - 1)}, fine, {tool};"
     main.append(home_move if end_home else "! the next pass's module follows")
     home_at = next(k for k, ln in enumerate(lines) if ln.startswith("    CONST jointtarget jHome"))
     lines[home_at + 1 : home_at + 1] = air_decls
@@ -399,6 +411,13 @@ def _floats(text: str, count: int, where: str) -> list[float]:
     if len(values) != count:
         raise InputError(f"RAPID {where}: expected {count} numbers, got {len(values)}")
     return values
+
+
+def _air_speed(times: tuple[float, ...] | None, k: int) -> str:
+    """``vAir`` with the planned time of joint move ``k`` (its time argument ``T``, rounded up to 1 ms), or ``vAir`` alone."""
+    if times is None or k >= len(times):
+        return "vAir"
+    return f"vAir\\T:={math.ceil(times[k] * 1000.0 - 1e-9) / 1000.0:.3f}"
 
 
 def parse_rapid_targets(path: str | Path) -> tuple[Array, Array, NDArray[np.int64], Array]:

@@ -126,6 +126,17 @@ def _io_number(name: str, kind: str, default: int) -> tuple[int, str]:
     return int(m.group(1)), f"{name!r} is digital {word} {int(m.group(1))}"
 
 
+def _timed(jmove: str, times: tuple[float, ...] | None, k: int) -> str:
+    """``movej``'s arguments: with ``t`` the planned time of air move ``k`` (rounded up to 1 ms) when known.
+
+    A ``movej`` given ``t`` takes that time (the controller then ignores ``a`` and ``v``), the time
+    the run planned at ``[output] air_speed_share``.
+    """
+    if times is None or not 0 <= k < len(times):
+        return jmove
+    return f"{jmove}, t={math.ceil(times[k] * 1000.0 - 1e-9) / 1000.0:.3f}"
+
+
 def _lead_m(problem: Problem, tr: Trajectory, approach_speed_m_s: float) -> tuple[float, float]:
     """The process lead as distances [m] before the first point (on) and the last point (off).
 
@@ -287,9 +298,11 @@ def write_urscript(
             )
         else:  # the run's planned air move: via points (no blend), then the approach joints
             q_app = air_in[-1]
+            times = getattr(p, "air_in_s", None)
             body += [
-                f"movej([{','.join(_num(v, 9) for v in q)}], {jmove})  # via point of the planned move to pass {i}"
-                for q in air_in[:-1]
+                f"movej([{','.join(_num(v, 9) for v in q)}], {_timed(jmove, times, k)})"
+                f"  # via point of the planned move to pass {i}"
+                for k, q in enumerate(air_in[:-1])
             ]
         rv = continuous_rotvecs(poses[:, :3, :3], previous)
         previous = rv[-1]
@@ -308,7 +321,8 @@ def write_urscript(
             f"# blends: r <= {_num(blend_m, 6)} m, smaller at {len(zones.narrowed)} waypoint(s) to keep the "
             f"path tolerance {zones.tolerance_m * 1e3:g} mm; largest corner deviation "
             f"{zones.largest_deviation_m * 1e3:.3f} mm",
-            f"movej([{','.join(_num(v, 9) for v in q_app)}], {jmove})",
+            f"movej([{','.join(_num(v, 9) for v in q_app)}], "
+            f"{_timed(jmove, getattr(p, 'air_in_s', None), len(air_in) - 1 if air_in is not None else -1)})",
         ]
         if weld:
             body += [
@@ -331,12 +345,14 @@ def write_urscript(
         body += _weld_end(out, gas, problem) if weld else []
         body.append(f"movel({_pose(poses[n], rv[n])}, a={a}, v={air}, r=0)")
     air_out = getattr(runs[-1], "air_out", None)
+    back_s = getattr(runs[-1], "air_out_s", None)
     if air_out is not None:  # the run's planned return: via points, then home
         body += [
-            f"movej([{','.join(_num(v, 9) for v in q)}], {jmove})  # via point of the planned return"
-            for q in air_out[:-1]
+            f"movej([{','.join(_num(v, 9) for v in q)}], {_timed(jmove, back_s, k)})  # via point of the planned return"
+            for k, q in enumerate(air_out[:-1])
         ]
-    body.append(f"movej([{','.join(_num(v, 9) for v in home)}], {jmove})  # home")
+    last = len(air_out) - 1 if air_out is not None else -1
+    body.append(f"movej([{','.join(_num(v, 9) for v in home)}], {_timed(jmove, back_s, last)})  # home")
     if mode == "program":
         lines = [f"def {prog}():", *(f"  {ln}" for ln in body), "end", f"{prog}()"]
     else:

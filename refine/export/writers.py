@@ -102,6 +102,7 @@ def write_outputs(result: RunResult, out_dir: Path, programs: tuple[str, ...]) -
         from refine.export.motions_csv import write_motions_csv
 
         outputs["motions"] = write_motions_csv(out_dir / "motions.csv", result.motions)
+    air_percent = round(problem.output.air_speed_share * 100.0)  # the air moves' joint speed [%]
     for kind in programs:
         if kind == "rapid":
             from refine.export import write_rapid
@@ -115,6 +116,8 @@ def write_outputs(result: RunResult, out_dir: Path, programs: tuple[str, ...]) -
                     repairs=named[0].repairs,
                     air_in=named[0].air_in,
                     air_out=named[0].air_out,
+                    air_in_s=named[0].air_in_s,
+                    air_out_s=named[0].air_out_s,
                 )
             for k, (p, t) in enumerate(zip(done, trajectories, strict=True), start=1):
                 if len(named) > 1:  # with planned motions, module k runs after module k - 1 (the link)
@@ -128,6 +131,8 @@ def write_outputs(result: RunResult, out_dir: Path, programs: tuple[str, ...]) -
                         pass_name=p.name,
                         air_in=named[k - 1].air_in,
                         air_out=named[k - 1].air_out,
+                        air_in_s=named[k - 1].air_in_s,
+                        air_out_s=named[k - 1].air_out_s,
                         start_home=k == 1 or not planned,
                         end_home=k == len(named) or not planned,
                     )
@@ -140,6 +145,7 @@ def write_outputs(result: RunResult, out_dir: Path, programs: tuple[str, ...]) -
                 problem,
                 result.robot,
                 passes=named,
+                ptp_percent=air_percent,
             )
             outputs["krl_src"], outputs["krl_dat"] = src, dat
         elif kind == "urscript":
@@ -155,17 +161,29 @@ def write_outputs(result: RunResult, out_dir: Path, programs: tuple[str, ...]) -
         elif kind == "tp":
             from refine.export.tp import write_tp
 
-            outputs["tp"] = write_tp(out_dir / f"{name}.ls", trajectories[0], problem, result.robot, passes=named)
+            outputs["tp"] = write_tp(
+                out_dir / f"{name}.ls", trajectories[0], problem, result.robot, passes=named, ptp_percent=air_percent
+            )
         elif kind == "inform":
             from refine.export.inform import write_inform
 
             outputs["inform"] = write_inform(
-                out_dir / f"{name}.JBI", trajectories[0], problem, result.robot, passes=named
+                out_dir / f"{name}.JBI",
+                trajectories[0],
+                problem,
+                result.robot,
+                passes=named,
+                joint_percent=float(air_percent),
             )
         elif kind == "sunrise":
             from refine.export.sunrise import write_sunrise
 
             outputs["sunrise"] = write_sunrise(
-                out_dir / f"{name}.java", trajectories[0], problem, result.robot, passes=named
+                out_dir / f"{name}.java",
+                trajectories[0],
+                problem,
+                result.robot,
+                passes=named,
+                joint_velocity_rel=air_percent / 100.0,
             )
     return outputs

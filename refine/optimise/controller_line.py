@@ -22,8 +22,8 @@ and k+1 with poses (p_k, R_k) and (p_{k+1}, R_{k+1}):
 :data:`MAX_SAMPLE_STEP_DEG` between samples); the joints at each sample are solved by damped least squares from the joint-linear
 interpolation, without a pull to mid-range, so they stay on the refined joints' branch (as the
 controller's IK from its current joints). At every sample: the IK's residual, the joint-limit
-margins (kept to ``joint_margin_deg`` less :data:`JOINT_MARGIN_ALLOWANCE_DEG`), the singularity
-measure (to ``singularity_margin`` less :data:`SINGULARITY_SHARE` of it). The clearance is proved along the joint path through the
+margins (kept to the full ``joint_margin_deg``, less the waypoint check's 1e-7 rad of rounding),
+the singularity measure (to the full ``singularity_margin``, less 1e-9). The clearance is proved along the joint path through the
 waypoints and the samples (the collision model's motion bound, :func:`refine.collision.check.margins_proved`),
 and where the proof falls short that path is checked densely and its breaks reported. The figures
 compare the two motions: the distance of the joint-linear TCP from the straight line, the angle
@@ -31,17 +31,26 @@ between the two orientations, the difference of the joints at equal t and what t
 change any clearance by, ``|q_line(t) - q_lin(t)| @ R`` with ``R`` the joints' reach
 (:func:`refine.collision.check.joint_reach`): no point of the robot or tool is further apart
 between the two motions at equal t.
+
+**Fed back to the refinement** (:class:`ControllerLineSource`): the line's joints bow away from the
+joint-linear ones by about the square of the step (1e-6 rad at 1 mm spacing), so a refinement that
+holds its waypoints exactly at a joint limit's margin or at the singularity margin (an active
+bound) has a line that dips just below it. The source checks the line of every answer the
+refinement's rounds verify and, where the line breaks a joint margin or the singularity margin,
+adds linear rows at the offending samples (:func:`line_rows`), and the rounds solve again from the
+answer, so the verified path keeps the full margins on the controller's line.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from refine.optimise.problem import LinearRow
 from refine.optimise.verify import Violation, runs, singularity_measures
 from refine.robot.kinematics import TcpKinematics, solve_ik_batch
 from refine.settings import Tolerances
@@ -58,16 +67,15 @@ MAX_SAMPLE_STEP_DEG = 0.5
 """More sub-steps where a joint moves more than this between two samples [deg]."""
 IK_TOLERANCE = 1e-9
 """Pose error [m and rad stacked] the IK along the line must reach."""
-JOINT_MARGIN_ALLOWANCE_DEG = 0.01
-"""The line may come this much closer to a joint limit than ``[tolerances] joint_margin_deg`` [deg]:
-between two waypoints that keep the margin exactly (a repair's active bound) the line's joints
-bow by the square of the step (1e-6 rad at 1 mm spacing), well inside the margin; the limit itself
-stays the margin less this away."""
-SINGULARITY_SHARE = 0.02
-"""The line's singularity measure may fall this share below ``[tolerances] singularity_margin``
-[-]: where a repair holds the waypoints and the joint-linear motion at the margin, the line, whose
-joints differ from the joint-linear ones by the square of the step, dips below it by a small share
-(1.5 % on the bundled wrist-flip case)."""
+JOINT_TOLERANCE_RAD = 1e-7
+"""Rounding a joint margin on the line may show [rad], as the waypoints' check allows."""
+SINGULARITY_TOLERANCE = 1e-9
+"""Rounding the singularity measure on the line may show [-], as the waypoints' check allows."""
+SINGULARITY_HEADROOM = 1e-6
+"""A singularity row asks for this much more than the margin [-]: the measure is linearised at the
+line's sample, so the answer's measure differs from the row's by the square of its change."""
+GRADIENT_STEP_RAD = 1e-7
+"""Forward-difference step of the singularity measure's gradient [rad]."""
 IK_FAILED = 1e-6
 """A sample whose IK stays further than this from the line [m and rad stacked] has no answer."""
 
@@ -274,7 +282,7 @@ def check_controller_lines(
 
     ik_worst = _segment_max(err, segment, n_seg, 0.0)
     add(ik_worst > IK_FAILED, "no IK on the controller's line", ik_worst, "m+rad", IK_FAILED, True)
-    margin = math.radians(max(tolerances.joint_margin_deg - JOINT_MARGIN_ALLOWANCE_DEG, 0.0)) - 1e-7
+    margin = math.radians(tolerances.joint_margin_deg) - JOINT_TOLERANCE_RAD
     for j in range(q.shape[1]):
         per_seg = _segment_min(margins[:, j], segment, n_seg)
         add(
@@ -286,7 +294,7 @@ def check_controller_lines(
             False,
         )
     sing_seg = _segment_min(sing, segment, n_seg)
-    sing_tol = tolerances.singularity_margin * (1.0 - SINGULARITY_SHARE)
+    sing_tol = tolerances.singularity_margin - SINGULARITY_TOLERANCE
     add(
         sing_seg < sing_tol,
         "singularity on the controller's line",
@@ -326,3 +334,133 @@ def check_controller_lines(
         clearance_change_m=change,
         violations=tuple(violations),
     )
+
+
+LINE_LABEL = "controller line"
+"""The label every row of :func:`line_rows` starts with."""
+
+LINE_REASONS = ("joint limit on the controller's line", "singularity on the controller's line")
+"""The violations of the line the refinement's rows can mend (the others the final check reports)."""
+
+
+def line_rows(kin: TcpKinematics, q: Array, line: LineCheck, tolerances: Tolerances) -> tuple[LinearRow, ...]:
+    """Linear rows on the joints that keep the controller's line of ``q`` at the full margins.
+
+    At a sample at ``t`` inside segment ``k`` the line's joints are the joint-linear ones
+    ``q_lin = (1-t) q_k + t q_{k+1}`` plus the bow ``d = q_line - q_lin``, which a small change of
+    the waypoints leaves the same to first order. So, for every sample that breaks a margin:
+
+    * joint j under its lower limit's margin: ``q_lin_j >= lower_j + margin - d_j``
+      (above the upper one: ``-q_lin_j >= -(upper_j - margin - d_j)``);
+    * singularity measure ``w`` under ``singularity_margin``: ``w`` linearised at the sample,
+      ``∇w · q_lin >= margin + headroom - w(q_line) + ∇w · q_lin``
+      (:data:`SINGULARITY_HEADROOM`; ``∇w`` by forward differences).
+
+    Args:
+        kin: TCP kinematics.
+        q: the joints whose line was checked [rad], (N, n).
+        line: its check (:func:`check_controller_lines`).
+        tolerances: the margins.
+
+    Returns:
+        The rows, labelled ``controller line ...`` (a later round's row at the same sample and
+        label replaces this one).
+    """
+    spec = kin.robot.spec
+    q = np.asarray(q, dtype=float)
+    seg, t = line.segment, line.t
+    q_lin = q[seg] + t[:, None] * (q[seg + 1] - q[seg])
+    bow = line.q - q_lin
+    margin = math.radians(tolerances.joint_margin_deg)
+    rows: list[LinearRow] = []
+    n = q.shape[1]
+    for j in range(n):
+        e = np.zeros(n)
+        e[j] = 1.0
+        for i in np.flatnonzero(line.q[:, j] - spec.lower[j] < margin - JOINT_TOLERANCE_RAD):
+            lower = spec.lower[j] + margin - bow[i, j]
+            rows.append(LinearRow(int(seg[i]), float(t[i]), e, float(lower), f"{LINE_LABEL} joint {j + 1} lower"))
+        for i in np.flatnonzero(spec.upper[j] - line.q[:, j] < margin - JOINT_TOLERANCE_RAD):
+            lower = -(spec.upper[j] - margin - bow[i, j])
+            rows.append(LinearRow(int(seg[i]), float(t[i]), -e, float(lower), f"{LINE_LABEL} joint {j + 1} upper"))
+    if tolerances.singularity_margin > 0:
+        w, _ = singularity_measures(kin, line.q, smallest=False)
+        low = np.flatnonzero(w < tolerances.singularity_margin - SINGULARITY_TOLERANCE)
+        if low.size:
+            at = line.q[low]
+            stepped = (at[:, None, :] + GRADIENT_STEP_RAD * np.eye(n)[None]).reshape(-1, n)
+            w_step, _ = singularity_measures(kin, stepped, smallest=False)
+            grad = (w_step.reshape(len(low), n) - w[low, None]) / GRADIENT_STEP_RAD
+            for g, i in zip(grad, low, strict=True):
+                lower = tolerances.singularity_margin + SINGULARITY_HEADROOM - w[i] + float(g @ q_lin[i])
+                rows.append(LinearRow(int(seg[i]), float(t[i]), g, float(lower), f"{LINE_LABEL} singularity"))
+    return tuple(rows)
+
+
+@dataclass
+class ControllerLineSource:
+    """The controller's line as a constraint source of the refinement's rounds.
+
+    Each answer the rounds verify is checked on the controller's line (joint margins, singularity;
+    the clearance and the IK are the final check's, :func:`check_controller_lines` with a
+    collision check); a break is a violation of that answer, and :func:`line_rows` are the rows
+    the next round adds. Rows are made only for an answer whose violations were asked for (not
+    for the seed, whose line means nothing yet).
+
+    Attributes:
+        kin: TCP kinematics of the robot, base and tool.
+        tolerances: the margins to keep.
+        wrist: joints (N, n) -> per segment, True where the program hands the wrist to the
+            controller (see :func:`check_controller_lines`); None for nowhere.
+        checks: lines checked, for the figures (how many rounds looked at the line).
+    """
+
+    kin: TcpKinematics
+    tolerances: Tolerances
+    wrist: Callable[[Array], Array] | None = None
+    checks: int = 0
+    _last: tuple[Array, LineCheck] | None = None
+
+    def _check(self, q: Array) -> LineCheck:
+        q = np.asarray(q, dtype=float)
+        if self._last is not None and self._last[0].shape == q.shape and np.array_equal(self._last[0], q):
+            return self._last[1]
+        s = np.arange(len(q), dtype=float)
+        line = check_controller_lines(
+            self.kin, q, s, self.tolerances, wrist=None if self.wrist is None else self.wrist(q)
+        )
+        self.checks += 1
+        self._last = (q.copy(), line)
+        return line
+
+    def violations(self, problem: object, q: Array) -> list[Violation]:
+        """The line's joint-margin and singularity breaks of joints ``q`` (N, n), with the path's arc lengths."""
+        line = self._check(q)
+        s = np.asarray(problem.fused.s, dtype=float)  # type: ignore[attr-defined]
+        return [
+            replace(v, s_start_m=float(s[v.index_start]), s_end_m=float(s[v.index_end]))
+            for v in line.violations
+            if v.reason.startswith(LINE_REASONS)
+        ]
+
+    def rows(self, problem: object, q: Array) -> tuple[LinearRow, ...]:
+        """Rows for the breaks of the last verified answer when ``q`` is it; () otherwise."""
+        q = np.asarray(q, dtype=float)
+        if self._last is None or self._last[0].shape != q.shape or not np.array_equal(self._last[0], q):
+            return ()
+        line = self._last[1]
+        if not any(v.reason.startswith(LINE_REASONS) for v in line.violations):
+            return ()
+        return line_rows(self.kin, q, line, self.tolerances)
+
+    def refresh_rows(self, rows: tuple[LinearRow, ...], q: Array) -> tuple[LinearRow, ...]:
+        """``rows`` without this source's: a line's rows hold for the path they were made on only.
+
+        A re-solve of a moved path (:mod:`refine.optimise.warm`) then builds its problem anew, and
+        its rounds add the rows its own line needs.
+        """
+        return tuple(r for r in rows if not r.label.startswith(LINE_LABEL))
+
+    def clearance(self, q: Array) -> None:
+        """No clearance figures: the line's clearance is the final check's."""
+        return None

@@ -22,7 +22,7 @@ import time
 
 import numpy as np
 
-from refine.plan.motion import Motion, MotionIssue, joint_move_time
+from refine.plan.motion import Motion, MotionIssue, joint_move_times
 from refine.plan.verify import MotionChecker
 from refine.types import Array
 
@@ -105,13 +105,15 @@ def plan_air(
                     )
                 ]
     poses = checker.kin.poses(rows)
+    times = joint_move_times(rows, velocity, acceleration)
     return Motion(
         kind=kind,
         name=name,
         q=rows,
         start_pose=poses[0],
         end_pose=poses[-1],
-        duration_s=joint_move_time(rows, velocity, acceleration),
+        duration_s=float(np.sum(times)),
+        move_s=tuple(float(t) for t in times),
         planner=planner,
         planner_time_s=time.perf_counter() - t0,
         status="failed" if issues else "ok",

@@ -101,6 +101,8 @@ class Motion:
             samples (joint-interpolated) [m]; None for other kinds.
         issues: why it failed (empty when ``ok``).
         direct_issues: for an air move planned around the cell, what the direct joint move hit.
+        move_s: an air move's time per joint move between its rows [s], (K-1,) (what the programs
+            command for each: RAPID's time argument ``T``, URScript's ``t``); () for other kinds.
     """
 
     kind: str
@@ -120,6 +122,7 @@ class Motion:
     line_deviation_m: float | None = None
     issues: tuple[MotionIssue, ...] = ()
     direct_issues: tuple[MotionIssue, ...] = ()
+    move_s: tuple[float, ...] = ()
 
     @property
     def ok(self) -> bool:
@@ -177,24 +180,46 @@ class Motion:
         }
 
 
-def joint_move_time(q: Array, velocity: Array, acceleration: Array) -> float:
-    """Time [s] of a joint-interpolated move through the rows of ``q`` (K, n), stopping at each row.
+def joint_move_times(q: Array, velocity: Array, acceleration: Array) -> Array:
+    """Time [s] of each joint-interpolated move between consecutive rows of ``q`` (K, n), stopping at each row, (K-1,).
 
-    Each segment is one synchronised joint move: every joint's trapezoidal (or triangular) speed
-    profile at its velocity and acceleration limit, the slowest joint setting the segment's time.
+    Each move is one synchronised joint move: every joint's trapezoidal (or triangular) speed
+    profile at its velocity and acceleration limit, the slowest joint setting the move's time
+    (how a controller's joint move, PTP, ``MoveAbsJ``, ``movej``, times its axes).
 
     Args:
         q: joints [rad], start first, shape (K, n).
-        velocity: joint speed limits [rad/s], shape (n,).
-        acceleration: joint acceleration limits [rad/s^2], shape (n,).
+        velocity: joint speeds [rad/s], shape (n,) (:func:`air_limits`).
+        acceleration: joint accelerations [rad/s^2], shape (n,).
     """
-    total = 0.0
     v, a = np.asarray(velocity, dtype=float), np.asarray(acceleration, dtype=float)
-    for dq in np.abs(np.diff(np.asarray(q, dtype=float), axis=0)):
-        ramp = v * v / a  # the distance of a full ramp up and down [rad]
-        t = np.where(dq >= ramp, dq / v + v / a, 2.0 * np.sqrt(dq / a))
-        total += float(np.max(t)) if len(t) else 0.0
-    return total
+    dq = np.abs(np.diff(np.asarray(q, dtype=float), axis=0))
+    ramp = v * v / a  # the distance of a full ramp up and down [rad]
+    t = np.where(dq >= ramp, dq / v + v / a, 2.0 * np.sqrt(dq / a))
+    return t.max(axis=1) if t.size else np.zeros(len(dq))
+
+
+def joint_move_time(q: Array, velocity: Array, acceleration: Array) -> float:
+    """Time [s] of a joint-interpolated move through the rows of ``q`` (K, n), stopping at each row.
+
+    The sum of :func:`joint_move_times`.
+    """
+    return float(np.sum(joint_move_times(q, velocity, acceleration)))
+
+
+def air_limits(problem: Any, robot: Any) -> tuple[Array, Array]:
+    """The joint speeds and accelerations the programs' air moves run at [rad/s], [rad/s^2], (n,) each.
+
+    The speed: ``[output] air_speed_share`` of each joint's maximum (the share the writers command:
+    RAPID ``MoveAbsJ`` with the move's time argument ``T``, URScript ``movej`` with ``t``, KRL
+    ``BAS (#VEL_PTP, %)``, FANUC ``J ... %``, INFORM ``VJ``, Sunrise ``setJointVelocityRel``); the
+    acceleration: the run's (``[robot] joint_acceleration_deg_s2`` or the robot's limits).
+    """
+    spec = robot.spec
+    accel = spec.acceleration
+    if problem.robot.joint_acceleration_deg_s2 is not None:
+        accel = np.radians(problem.robot.joint_acceleration_deg_s2)
+    return np.asarray(spec.velocity, dtype=float) * problem.output.air_speed_share, np.asarray(accel, dtype=float)
 
 
 TABLE_COLUMNS = (

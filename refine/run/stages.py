@@ -221,7 +221,7 @@ def refine_pass(
         nlp,
         q0,
         home=home,
-        sources=sources,
+        sources=sources + (line_source(problem, robot),),
         repair_max_slack_deg=problem.repair.max_slack_deg if problem.repair.enabled else None,
         time_limit_s=problem.repair.time_limit_s,
         warm=warm,
@@ -302,14 +302,12 @@ def plan_motions(
                 float(check.singularity.min()),
             )
         )
+    from refine.plan.motion import air_limits
+
+    velocity, accel = air_limits(problem, robot)
     spec = robot.spec
-    accel = spec.acceleration
-    if problem.robot.joint_acceleration_deg_s2 is not None:
-        accel = np.radians(problem.robot.joint_acceleration_deg_s2)
     home = None if problem.robot.home_deg is None else np.radians(spec.from_controller(problem.robot.home_deg))
-    return plan_program(
-        checker, planned, home, velocity=spec.velocity * problem.robot.velocity_scale, acceleration=accel
-    )
+    return plan_program(checker, planned, home, velocity=velocity, acceleration=accel)
 
 
 def program_formats(problem: Problem, robot: Robot) -> tuple[str, ...]:
@@ -317,6 +315,30 @@ def program_formats(problem: Problem, robot: Robot) -> tuple[str, ...]:
     if problem.output.programs is not None:
         return problem.output.programs
     return (robot.spec.default_program,)
+
+
+def wrist_segments(problem: Problem, robot: Robot, q: np.ndarray) -> np.ndarray:
+    r"""Per segment of joints ``q``, True where a RAPID or KRL program hands the wrist to the controller.
+
+    The runs near the wrist singularity (``SingArea \Wrist``, ``$ORI_TYPE = #JOINT``): the moves from
+    the one onto each run's first target to its last.
+    """
+    from refine.export.program import singular_runs
+
+    wrist = np.zeros(len(q) - 1, dtype=bool)
+    if {"rapid", "krl"} & set(program_formats(problem, robot)):
+        for a, b in singular_runs(robot, q):
+            wrist[max(a, 1) - 1 : b + 1] = True
+    return wrist
+
+
+def line_source(problem: Problem, robot: Robot) -> Any:
+    """The controller's line as a constraint source of the refinement's rounds (joint margins, singularity)."""
+    from refine.optimise.controller_line import ControllerLineSource
+    from refine.robot.kinematics import TcpKinematics
+
+    kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange)
+    return ControllerLineSource(kin, problem.tolerances, lambda q: wrist_segments(problem, robot, q))
 
 
 def controller_line_check(
@@ -334,15 +356,11 @@ def controller_line_check(
         a :class:`refine.optimise.controller_line.LineCheck`.
     """
     from refine.collision.check import check_path_clearance, joint_reach, margins_proved
-    from refine.export.program import singular_runs
     from refine.optimise.controller_line import check_controller_lines
     from refine.robot.kinematics import TcpKinematics
 
     kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange)
-    wrist = np.zeros(len(q) - 1, dtype=bool)
-    if {"rapid", "krl"} & set(program_formats(problem, robot)):
-        for a, b in singular_runs(robot, q):
-            wrist[max(a, 1) - 1 : b + 1] = True  # the moves from the one onto target max(a, 1) to b + 1
+    wrist = wrist_segments(problem, robot, q)
     model = next(
         (getattr(src, "model", None) for src in sources if getattr(src, "model", None) is not None), None
     )

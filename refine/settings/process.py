@@ -142,6 +142,10 @@ class OutputSettings:
             a share of it [-]: a program whose speed levels would leave a segment slower writes
             more levels.
         moves_per_routine: RAPID: path moves per ``PROC`` (longer paths are split into several).
+        air_speed_share: joint speed of the air moves (home, links, via points, return: RAPID
+            ``MoveAbsJ``, KRL and FANUC ``PTP``/``J``, INFORM ``MOVJ``, URScript ``movej``, Sunrise
+            ``ptp``) as a share of each joint's maximum speed, in whole percent [-]; the planned
+            durations and the programs use the same.
     """
 
     programs: tuple[str, ...] | None = None
@@ -149,6 +153,7 @@ class OutputSettings:
     speed_levels: int = 5
     speed_share: float = 0.02
     moves_per_routine: int = 500
+    air_speed_share: float = 0.2
 
     def __post_init__(self) -> None:
         for p in self.programs or ():
@@ -157,6 +162,14 @@ class OutputSettings:
         integer_in("output", "speed_levels", self.speed_levels, 1, 100)
         in_range("output", "speed_share", self.speed_share, 1e-4, 0.5)
         integer_in("output", "moves_per_routine", self.moves_per_routine, 10, 100000)
+        in_range("output", "air_speed_share", self.air_speed_share, 0.01, 1.0)
+        if abs(self.air_speed_share * 100.0 - round(self.air_speed_share * 100.0)) > 1e-9:
+            raise InputError(
+                f"output.air_speed_share must be a whole percent (0.01 steps), got {self.air_speed_share!r}",
+                key="output.air_speed_share",
+                value=self.air_speed_share,
+                expected="0.01, 0.02, ..., 1.0",
+            )
 
 
 @dataclass(frozen=True)

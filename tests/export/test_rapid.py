@@ -206,3 +206,23 @@ def test_a_later_pass_s_module_starts_with_the_planned_link_not_at_home(tmp_path
     ).read_text()
     main = text.split("PROC main()")[1].split("ENDPROC")[0]
     assert re.findall(r"MoveAbsJ (\w+)\\NoEOffs", main) == ["jIn1", "jIn2"]
+
+
+def test_each_planned_air_move_runs_in_its_planned_time(tmp_path, trajectory, problem, irb4600):
+    """``MoveAbsJ`` through a planned move carries each move's time (``\\T``, rounded up to 1 ms)."""
+    air_in = np.radians([[10.0, 5.0, 0.0, 0.0, 30.0, 0.0], [-19.5, 9.0, -14.0, 39.0, 49.0, -59.0]])
+    air_out = np.radians([[30.0, -5.0, 10.0, 0.0, 45.0, 10.0], [0.0, 0.0, 0.0, 0.0, 30.0, 0.0]])
+    text = write_rapid(
+        tmp_path / "timed.mod",
+        trajectory,
+        problem,
+        irb4600,
+        air_in=air_in,
+        air_out=air_out,
+        air_in_s=(1.25, 2.0001),
+        air_out_s=(0.5, 3.0),
+    ).read_text()
+    main = text.split("PROC main()")[1].split("ENDPROC")[0]
+    timed = re.findall(r"MoveAbsJ (\w+)\\NoEOffs, vAir(?:\\T:=([0-9.]+))?, fine,", main)
+    # the first move home is where the program starts from: not a planned move, at vAir
+    assert timed == [("jHome", ""), ("jIn1", "1.250"), ("jIn2", "2.001"), ("jOut1", "0.500"), ("jHome", "3.000")]

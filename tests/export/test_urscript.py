@@ -221,3 +221,16 @@ def test_the_run_s_planned_air_moves_are_written_as_movej_through_each_via_point
     np.testing.assert_allclose(movej[3], air_out[0], atol=1e-8)
     passes = parse_urscript(tmp_path / "air.script")
     np.testing.assert_allclose(passes[0].q_approach, air_in[-1], atol=1e-8)
+
+
+def test_each_planned_movej_takes_its_planned_time(tmp_path, path, ur_problem, ur10e):
+    """Via points, approach and home of a planned run carry ``t``: each move's planned time, rounded up to 1 ms."""
+    from refine.export.program import ProgramPass
+
+    air_in = np.radians([[0.0, -90.0, 90.0, -90.0, -90.0, 0.0], [25.0, -95.0, 100.0, -105.0, -88.0, -140.0]])
+    air_out = np.radians([[40.0, -70.0, 80.0, -100.0, -80.0, 100.0], [0.0, -90.0, 90.0, -90.0, -90.0, 0.0]])
+    run = ProgramPass("pass 1", path, (), air_in, air_out, air_in_s=(1.5, 2.25), air_out_s=(0.75, 1.0004))
+    text = write_urscript(tmp_path / "timed.script", path, ur_problem, ur10e, passes=[run]).read_text()
+    times = [m[1] for m in re.finditer(r"movej\(\[[^\]]*\], a=[0-9.]+, v=[0-9.]+(?:, t=([0-9.]+))?\)", text)]
+    # the first home is the program's start (not planned); then via, approach, return via, home
+    assert times == [None, "1.500", "2.250", "0.750", "1.001"]

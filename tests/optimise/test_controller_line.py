@@ -89,3 +89,67 @@ def test_a_clearance_break_on_the_line_is_reported_by_segment(ur10e_kin):
     # the joints differ by at most joint_difference_deg; with a reach of 1 m per joint the change
     # of any clearance is at most the sum of the joint differences, here below 6 x that
     assert np.all(line.clearance_change_m <= 6 * np.radians(line.joint_difference_deg) + 1e-12)
+
+
+def test_line_rows_ask_for_what_keeps_the_full_joint_margin_on_the_line(ur10e_kin):
+    """Axis 1 turns 10 deg with axis 6 held 40 deg inside its lower limit: both waypoints keep a
+    40 deg margin exactly, but the line's axis 6 dips below them (the joint-linear check passes).
+
+    The rows of that dip ask axis 6 to rise by the dip; raising both waypoints' axis 6 by what the
+    rows ask (a spin about the flange axis, which leaves the line's shape alone) keeps the full
+    margin on the line, and by half of it does not.
+    """
+    from refine.optimise.controller_line import line_rows
+
+    q_start = Q0.copy()
+    q_start[5] = math.radians(-320.0)  # UR10e axis 6 is limited to +-360 deg: 40 deg of margin
+    q = np.array([q_start, q_start + np.radians([10.0, 0, 0, 0, 0, 0])])
+    tol = Tolerances(joint_margin_deg=40.0, joint_step_deg=360.0)
+    line = check_controller_lines(ur10e_kin, q, np.array([0.0, 1.0]), tol)
+    assert [v.reason for v in line.violations] == ["joint limit on the controller's line (joint 6)"]
+    rows = line_rows(ur10e_kin, q, line, tol)
+    assert rows and {r.label for r in rows} == {"controller line joint 6 lower"}
+    assert all(r.gradient[5] == 1.0 and np.count_nonzero(r.gradient) == 1 for r in rows)
+    # what the rows ask beyond the joint-linear motion at their samples [rad]
+    need = max(r.lower - r.gradient @ ((1 - r.f) * q[r.k] + r.f * q[r.k + 1]) for r in rows)
+    dip = math.radians(-320.0) - line.q[:, 5].min()  # the line's axis 6 below the waypoints'
+    assert need == pytest.approx(dip, rel=1e-6) and 1e-4 < need < 0.01
+    for share, ok in ((1.0, True), (0.5, False)):
+        lifted = q.copy()
+        lifted[:, 5] += share * need
+        again = check_controller_lines(ur10e_kin, lifted, np.array([0.0, 1.0]), tol)
+        assert again.ok is ok
+    assert again.joint_margin_rad.min() < math.radians(40.0)
+
+
+def test_the_line_source_makes_rows_only_for_an_answer_it_verified(ur10e_kin):
+    """The seed's line is not fed back: rows come for the joints whose violations were asked for."""
+    from types import SimpleNamespace
+
+    from refine.optimise.controller_line import ControllerLineSource
+
+    q_start = Q0.copy()
+    q_start[5] = math.radians(-320.0)
+    q = np.array([q_start, q_start + np.radians([10.0, 0, 0, 0, 0, 0])])
+    tol = Tolerances(joint_margin_deg=40.0, joint_step_deg=360.0)
+    source = ControllerLineSource(ur10e_kin, tol)
+    problem = SimpleNamespace(fused=SimpleNamespace(s=np.array([0.002, 0.007])))
+    assert source.rows(problem, q) == ()  # never verified: the seed
+    (v,) = source.violations(problem, q)
+    assert (v.reason, v.index_start, v.s_start_m) == ("joint limit on the controller's line (joint 6)", 0, 0.002)
+    assert source.rows(problem, q) and source.checks == 1
+    assert source.rows(problem, q + 1e-3) == ()
+
+
+def test_a_re_solve_of_a_moved_path_drops_the_line_s_rows_and_keeps_the_others(ur10e_kin):
+    """The line's rows hold for the path they were made on; a clearance row is its source's to refresh."""
+    from refine.optimise.controller_line import ControllerLineSource
+    from refine.optimise.problem import LinearRow
+
+    rows = (
+        LinearRow(0, 0.5, np.eye(6)[5], -6.0, "controller line joint 6 lower"),
+        LinearRow(1, 0.0, np.ones(6), 0.1, "link_3 / table"),
+        LinearRow(0, 0.25, np.ones(6), 0.02, "controller line singularity"),
+    )
+    kept = ControllerLineSource(ur10e_kin, Tolerances()).refresh_rows(rows, np.zeros((3, 6)))
+    assert [r.label for r in kept] == ["link_3 / table"]

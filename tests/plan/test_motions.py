@@ -258,3 +258,28 @@ def test_a_joint_move_takes_the_slowest_joint_s_trapezoid():
     q = np.array([[0.0, 0.0], [1.0, 0.1]])
     assert joint_move_time(q, np.array([1.0, 1.0]), np.array([2.0, 2.0])) == pytest.approx(1.5)
     assert joint_move_time(q[:, 1:], np.array([1.0]), np.array([2.0])) == pytest.approx(2.0 * math.sqrt(0.05))
+
+
+def test_air_moves_run_at_the_output_s_share_of_each_joint_s_speed():
+    """At 20 % of 2 rad/s (0.4 rad/s) and 2 rad/s^2, 1 rad takes 1 / 0.4 + 0.4 / 2 = 2.7 s by hand;
+    the second move, 0.02 rad, is a triangle under the 0.08 rad of a full ramp: 2 sqrt(0.01) = 0.2 s."""
+    from types import SimpleNamespace
+
+    from refine.plan.motion import air_limits, joint_move_times
+    from refine.settings import OutputSettings
+
+    robot = SimpleNamespace(spec=SimpleNamespace(velocity=np.array([2.0]), acceleration=np.array([2.0])))
+    problem = SimpleNamespace(output=OutputSettings(), robot=SimpleNamespace(joint_acceleration_deg_s2=None))
+    v, a = air_limits(problem, robot)
+    assert v == pytest.approx([0.4]) and a == pytest.approx([2.0])
+    times = joint_move_times(np.array([[0.0], [1.0], [1.02]]), v, a)
+    assert times == pytest.approx([2.7, 0.2])
+
+
+@pytest.mark.parametrize("share", [0.0, 0.125, 1.5])
+def test_an_air_speed_share_off_whole_percents_is_an_input_error(share):
+    from refine.errors import InputError
+    from refine.settings import OutputSettings
+
+    with pytest.raises(InputError, match="air_speed_share"):
+        OutputSettings(air_speed_share=share)
