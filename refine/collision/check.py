@@ -399,6 +399,11 @@ def margins_proved(
         )
     if len(q_path) < 2:
         return False
+    if (
+        prior is not None
+        and not _short(prior - model.pair_margins + tolerance_m, _pair_motion(model, q_path)).any()
+    ):
+        return True  # the known bounds certify every segment: no pose or distance is needed
     poses, _, bounds, exact = _waypoint_bounds(model, q_path, tolerance_m, True, plane=True, prior=prior)
     found_by_segment: list[list[_Sample] | None] = [None] * (len(q_path) - 1)
     inner: list[list[_Sample]] = [[] for _ in found_by_segment]

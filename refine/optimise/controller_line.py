@@ -226,7 +226,8 @@ def check_controller_lines(
         tolerances: joint margin and singularity margin to keep on the line.
         wrist: per segment, True where the program hands the wrist to the controller's singularity
             handling (orientation joint-linear), (N-1,); None for nowhere.
-        clearance: the clearance check of a joint path: joints (K, n) [rad] -> None when every
+        clearance: the clearance check of a joint path: joints (K, n) [rad] and each row's place
+            along ``q`` in segments (K,) (``k + t``, waypoint k at ``t = 0``) -> None when every
             margin is proved kept, else the least clearance per segment of that path by the dense
             check [m] (K-1,); and the tolerance a clearance may fall below 0 [m]. None without a
             collision check.
@@ -304,7 +305,7 @@ def check_controller_lines(
         order = np.argsort(np.concatenate([np.arange(len(q)) * 1.0, segment + t]), kind="stable")
         dense = np.concatenate([q, q_line])[order]
         dense_seg = np.concatenate([np.arange(len(q)) * 1.0, segment + t])[order]
-        per_dense, tolerance_m = clearance(dense)
+        per_dense, tolerance_m = clearance(dense, dense_seg)
         proved = per_dense is None
     if clearance is not None and per_dense is not None:
         owner = np.minimum(np.floor(dense_seg[:-1]).astype(int), n_seg - 1)  # each dense step's segment
