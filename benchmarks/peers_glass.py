@@ -56,7 +56,9 @@ def main() -> int:
                     else f"not verified: {verdict.reason[:70]}"
                 )
             loads.append(os.getloadavg()[0])
-        print(f"{problem.name}, {problem.n_waypoints} waypoints, {args.repeat} runs each, contenders in turns")
+        print(
+            f"{problem.name}, {problem.n_waypoints} waypoints, {args.repeat} runs each, contenders in turns"
+        )
         base = statistics.median(t[0] for t in times[names[0]])
         for name in names:
             cpu = statistics.median(t[0] for t in times[name])
