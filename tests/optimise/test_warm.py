@@ -7,7 +7,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import refine
-from refine.collision import check_path_clearance
+from refine.collision import check_path_clearance, margins_proved
 from refine.collision.carry import bounds_between, carried_bounds, checked_bounds, measure_least
 from refine.collision.model import CollisionModel
 from refine.frames import make_transform
@@ -139,6 +139,28 @@ def test_bounds_between_waypoints_bound_the_distances_of_points_off_the_joint_li
     raised = tuple(dataclasses.replace(o, pose=make_transform(p=[0.0, 0.0, 0.005]) @ o.pose) for o in cell)
     other = CollisionModel(robot, np.eye(4), TCP, tool, raised, margin_m=0.01, self_margin_m=0.005)
     assert bounds_between(other, checked, rows, place) is None
+
+
+def test_margins_proved_from_known_bounds_takes_no_query_and_never_proves_a_broken_margin():
+    """Exact distances as the known bounds: with a 1 cm margin (every cell pair further) they prove
+    the path without an FCL query; with a margin above the least cell distance no bound may prove it."""
+    _, _, cell, tool = cell_line()
+    robot = load_robot("ur10e")
+    q = np.tile(np.radians([0.0, -100.0, -100.0, -70.0, 90.0, 0.0]), (4, 1))
+    q[:, 0] += np.linspace(-0.02, 0.02, 4)
+    model = CollisionModel(robot, np.eye(4), TCP, tool, cell, margin_m=0.01, self_margin_m=0.005)
+    exact = np.array([[model.pair_distance(qk, p) for p in range(len(model.pairs))] for qk in q])
+    assert exact.min() > 0.01  # the path keeps the margins
+    before = model.queries
+    assert margins_proved(model, q, prior=exact)
+    assert model.queries == before
+    nearest = min(
+        exact[:, p].min() for p, pair in enumerate(model.pairs) if "table" in pair or "part" in pair
+    )
+    tight = CollisionModel(robot, np.eye(4), TCP, tool, cell, margin_m=nearest + 0.01, self_margin_m=0.005)
+    assert tight.pairs == model.pairs  # the bounds' columns are its pairs too
+    assert not margins_proved(tight, q, prior=exact)
+    assert not margins_proved(tight, q)
 
 
 def test_measure_least_finds_the_least_figures_and_every_waypoint_a_bound_leaves_unproved():
