@@ -56,6 +56,10 @@ DESCARTES_SAMPLE_DEG = 10.0
 CONE_BACKOFF_DEG = 1e-3
 """How much narrower than the problem's cone the peers' orientation tolerance is [deg]."""
 
+KDL_EPS = 1e-10
+"""The KDL IK's stopping tolerance on its pose error [m and rad] (KDL's default 1e-5 leaves
+micrometres: refine's verifier holds the position to 1 µm)."""
+
 WORLD, TCP = "refine_world", "refine_tcp"
 """The links the composed environment adds: the world (the root) and the TCP on the flange."""
 
@@ -288,7 +292,7 @@ def tesseract_environment(problem: BenchProblem) -> Any:
         "      plugins:\n"
         "        KDLInvKinChainLMA:\n"
         "          class: KDLInvKinChainLMAFactory\n"
-        f"          config: {{base_link: {base}, tip_link: {tip}}}\n"
+        f"          config: {{base_link: {base}, tip_link: {tip}, eps: {KDL_EPS}}}\n"
     )
     (folder / "contact_managers.yaml").write_text(
         "contact_manager_plugins:\n"

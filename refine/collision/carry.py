@@ -111,6 +111,45 @@ def carried_bounds(model: CollisionModel, prior: CheckedBounds, q: Array) -> Arr
     return np.where(out > 0.0, out, -np.inf)
 
 
+def bounds_between(model: CollisionModel, checked: CheckedBounds, q: Array, place: Array) -> Array | None:
+    """Lower bounds (K, P) [m] on ``model``'s pair distances along a path through a checked one's waypoints.
+
+    ``q`` (K, n) [rad] are joints at positions ``place`` (K,) along the checked path, in segments
+    (``k + t``: waypoint k at ``t = 0``, a point of the segment from waypoint k to k+1 for
+    ``0 < t < 1``), e.g. the controller's line between the waypoints. At each row, every pair's
+    distance is at least the checked bound at either end of its segment less the motion from that
+    end's joints (``d(q) >= d(q_k) - |q - q_k| · R_p``, :mod:`refine.collision.motion`); the
+    larger of the two is kept. None when the model is not the checked one's (other pairs, another
+    base, a body of another shape or place) or a row at a waypoint does not hold its joints.
+    """
+    q = np.asarray(q, dtype=float)
+    place = np.asarray(place, dtype=float)
+    N = len(checked.q)
+    if (
+        tuple(model.pairs) != checked.pairs
+        or not np.array_equal(model.base_in_world, checked.base_in_world)
+        or q.ndim != 2
+        or q.shape[1] != checked.q.shape[1]
+        or len(place) != len(q)
+        or not np.all((place >= 0.0) & (place <= N - 1))
+    ):
+        return None
+    for b in model.bodies:
+        joint, now = _shape(model, b)
+        before = checked.shapes.get(b.label)
+        if before is None or before[0] != joint or not np.array_equal(before[1], now):
+            return None
+    a = np.floor(place).astype(int)
+    at_waypoint = place == a
+    if not np.array_equal(q[at_waypoint], checked.q[a[at_waypoint]]):
+        return None
+    b = np.where(at_waypoint, a, np.minimum(a + 1, N - 1))  # a waypoint keeps its own bound
+    R = model.pair_motion.T  # (n, P) [m/rad]
+    return np.maximum(
+        checked.bounds[a] - np.abs(q - checked.q[a]) @ R, checked.bounds[b] - np.abs(q - checked.q[b]) @ R
+    )
+
+
 def measure_least(
     bounds: Array, margins: Array, measure: Callable[[int], tuple[float, float]]
 ) -> NDArray[np.bool_]:

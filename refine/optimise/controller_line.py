@@ -20,7 +20,7 @@ and k+1 with poses (p_k, R_k) and (p_{k+1}, R_{k+1}):
 **The check** (:func:`check_controller_lines`): every segment is sampled at ``t = i/m``
 (``m`` even and >= :data:`MIN_SAMPLES`, more where a joint moves more than
 :data:`MAX_SAMPLE_STEP_DEG` between samples); the joints at each sample are solved by damped least squares from the joint-linear
-interpolation, without a pull to mid-range, so they stay on the refined joints' branch (as the
+interpolation (moved by one Newton step, :func:`_newton_start`), without a pull to mid-range, so they stay on the refined joints' branch (as the
 controller's IK from its current joints). At every sample: the IK's residual, the joint-limit
 margins (kept to the full ``joint_margin_deg``, less the waypoint check's 1e-7 rad of rounding),
 the singularity measure (to the full ``singularity_margin``, less 1e-9). The clearance is proved along the joint path through the
@@ -52,7 +52,7 @@ from scipy.spatial.transform import Rotation
 
 from refine.optimise.problem import LinearRow
 from refine.optimise.verify import Violation, runs, singularity_measures
-from refine.robot.kinematics import TcpKinematics, solve_ik_batch
+from refine.robot.kinematics import TcpKinematics, rotation_vectors, solve_ik_batch
 from refine.settings import Tolerances
 from refine.types import Array
 
@@ -203,6 +203,32 @@ def sample_parameters(q: Array) -> tuple[Array, Array, Array]:
     return m, segment, t
 
 
+def _newton_start(
+    kin: TcpKinematics, q: Array, segment: Array, t: Array, q_lin: Array, lin_poses: Array, targets: Array
+) -> Array:
+    """The IK's start on the line: the joint-linear joints ``q_lin`` moved by one damped Newton step.
+
+    The step takes the Jacobian interpolated between the two waypoints' (the line lies within the
+    square of the step of the joint-linear motion, so that step leaves about the IK's tolerance and
+    saves it one pass over every sample). A row whose step exceeds :data:`NEWTON_STEP_MAX` (near a
+    singularity) starts from ``q_lin`` as it is, so every start stays on the refined joints' branch.
+    """
+    J_wp = kin.jacobians(q)
+    J = J_wp[segment] + t[:, None, None] * (J_wp[segment + 1] - J_wp[segment])
+    R = targets[:, :3, :3] @ np.transpose(lin_poses[:, :3, :3], (0, 2, 1))
+    e = np.concatenate([targets[:, :3, 3] - lin_poses[:, :3, 3], rotation_vectors(R)], axis=1)
+    A = J @ np.transpose(J, (0, 2, 1)) + NEWTON_DAMPING**2 * np.eye(6)
+    dq = np.einsum("kji,kj->ki", J, np.linalg.solve(A, e[:, :, None])[:, :, 0])
+    small = np.abs(dq).max(axis=1) <= NEWTON_STEP_MAX
+    return np.where(small[:, None], q_lin + dq, q_lin)
+
+
+NEWTON_DAMPING = 1e-3
+"""Damping of :func:`_newton_start`'s step, as the IK's own."""
+NEWTON_STEP_MAX = 1e-3
+"""A larger start step [rad] on any joint is not taken: the row starts from the joint-linear joints."""
+
+
 def _segment_max(values: Array, segment: Array, count: int, initial: float) -> Array:
     out = np.full(count, initial)
     np.maximum.at(out, segment, values)
@@ -234,7 +260,8 @@ def check_controller_lines(
         tolerances: joint margin and singularity margin to keep on the line.
         wrist: per segment, True where the program hands the wrist to the controller's singularity
             handling (orientation joint-linear), (N-1,); None for nowhere.
-        clearance: the clearance check of a joint path: joints (K, n) [rad] -> None when every
+        clearance: the clearance check of a joint path: joints (K, n) [rad] and each row's place
+            along ``q`` in segments (K,) (``k + t``, waypoint k at ``t = 0``) -> None when every
             margin is proved kept, else the least clearance per segment of that path by the dense
             check [m] (K-1,); and the tolerance a clearance may fall below 0 [m]. None without a
             collision check.
@@ -252,10 +279,11 @@ def check_controller_lines(
     q_lin = q[segment] + t[:, None] * (q[segment + 1] - q[segment])
     targets = line_poses(poses, q, segment, t, kin, wrist)
     spec = kin.robot.spec
-    q_line, err = solve_ik_batch(
-        kin, targets, q_lin, spec.lower, spec.upper, tol=IK_TOLERANCE, max_iterations=60, nullspace_gain=0.0
-    )
     lin_poses = kin.poses(q_lin)
+    start = _newton_start(kin, q, segment, t, q_lin, lin_poses, targets)
+    q_line, err = solve_ik_batch(
+        kin, targets, start, spec.lower, spec.upper, tol=IK_TOLERANCE, max_iterations=60, nullspace_gain=0.0
+    )
     a, b = poses[segment, :3, 3], poses[segment + 1, :3, 3]
     chord = b - a
     along = np.clip(
@@ -312,7 +340,7 @@ def check_controller_lines(
         order = np.argsort(np.concatenate([np.arange(len(q)) * 1.0, segment + t]), kind="stable")
         dense = np.concatenate([q, q_line])[order]
         dense_seg = np.concatenate([np.arange(len(q)) * 1.0, segment + t])[order]
-        per_dense, tolerance_m = clearance(dense)
+        per_dense, tolerance_m = clearance(dense, dense_seg)
         proved = per_dense is None
     if clearance is not None and per_dense is not None:
         owner = np.minimum(np.floor(dense_seg[:-1]).astype(int), n_seg - 1)  # each dense step's segment

@@ -355,18 +355,21 @@ def controller_line_check(
     Returns:
         a :class:`refine.optimise.controller_line.LineCheck`.
     """
+    from refine.collision.carry import bounds_between
     from refine.collision.check import check_path_clearance, joint_reach, margins_proved
     from refine.optimise.controller_line import check_controller_lines
     from refine.robot.kinematics import TcpKinematics
 
     kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange)
     wrist = wrist_segments(problem, robot, q)
-    model = next(
-        (getattr(src, "model", None) for src in sources if getattr(src, "model", None) is not None), None
-    )
+    source = next((src for src in sources if getattr(src, "model", None) is not None), None)
+    model = None if source is None else source.model
 
-    def clearance(dense: np.ndarray) -> tuple[np.ndarray | None, float]:
-        if margins_proved(model, dense):
+    def clearance(dense: np.ndarray, place: np.ndarray) -> tuple[np.ndarray | None, float]:
+        # the waypoints' own dense check (kept by the source) bounds every pair along the line
+        checked = getattr(source.clearance(q), "bounds", None)
+        prior = None if checked is None else bounds_between(model, checked, dense, place)
+        if margins_proved(model, dense, prior=prior):
             return None, 1e-4  # margins_proved's and check_path_clearance's default tolerance
         found = check_path_clearance(model, dense, kin, problem.collision.check_step_m)
         return found.segment_clearance_m, found.tolerance_m

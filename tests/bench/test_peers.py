@@ -82,7 +82,7 @@ def test_trajopt_and_descartes_answer_a_short_wave_and_the_shared_check_grades_t
     answer = descartes(problem)
     assert answer.status == "ok" and answer.q.shape == (8, 6)
     verdict = verify(problem, answer.q)
-    assert verdict.max_position_error_m < 1e-5
+    assert verdict.max_position_error_m < 1e-6  # the verifier's limit: KDL's IK is asked for 1e-10
     # its samples turn about the tool axis by at most half the cone
     assert verdict.max_orientation_deviation_deg <= 0.5 * problem.tolerances.orientation_deg + 1e-3
 

@@ -71,8 +71,10 @@ def test_a_clearance_break_on_the_line_is_reported_by_segment(ur10e_kin):
     q = np.array([Q0, Q0 + [0.01, 0, 0, 0, 0, 0], Q0 + [0.02, 0, 0, 0, 0, 0]])
     seen = []
 
-    def clearance(dense):
+    def clearance(dense, place):
         seen.append(dense)
+        assert len(place) == len(dense) and np.all(np.diff(place) > 0.0)  # along the path, in order
+        np.testing.assert_array_equal(place[[0, -1]], [0.0, 2.0])
         per = np.full(len(dense) - 1, 0.05)
         per[-1] = -0.003  # the last step, inside the second segment
         return per, 1e-4

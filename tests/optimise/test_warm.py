@@ -7,8 +7,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import refine
-from refine.collision import check_path_clearance
-from refine.collision.carry import carried_bounds, checked_bounds, measure_least
+from refine.collision import check_path_clearance, margins_proved
+from refine.collision.carry import bounds_between, carried_bounds, checked_bounds, measure_least
 from refine.collision.model import CollisionModel
 from refine.frames import make_transform
 from refine.optimise.clearance import ClearanceSource
@@ -106,6 +106,61 @@ def test_carried_bounds_bound_the_distances_after_the_joints_and_a_cell_object_m
     other = model_of(cell, (dataclasses.replace(tool[0], radius_m=0.031),))
     gun = [p for p, pair in enumerate(other.pairs) if "tool:gun" in pair]
     assert gun and np.all(np.isneginf(carried_bounds(other, prior, q_old)[:, gun]))
+
+
+def test_bounds_between_waypoints_bound_the_distances_of_points_off_the_joint_line():
+    """A check's bounds at the waypoints bound every pair's distance at joints between them.
+
+    Each row between two waypoints is moved off their joint line by up to 0.3 deg per joint, as
+    the controller's line is: FCL's distance there must not fall below the carried bound. A row
+    said to stand at a waypoint but holding other joints, or a moved table, gives no bound.
+    """
+    _, _, cell, tool = cell_line()
+    robot = load_robot("ur10e")
+    model = CollisionModel(robot, np.eye(4), TCP, tool, cell, margin_m=0.01, self_margin_m=0.005)
+    q = np.tile(np.radians([0.0, -100.0, -100.0, -70.0, 90.0, 0.0]), (4, 1))
+    q[:, 0] += np.linspace(-0.2, 0.2, 4)
+    exact = np.array([[model.pair_distance(qk, p) for p in range(len(model.pairs))] for qk in q])
+    checked = checked_bounds(model, q, exact)
+    place = np.array([0.0, 0.25, 0.5, 1.0, 1.5, 2.0, 2.75, 3.0])
+    a = np.floor(place).astype(int)
+    t = (place - a)[:, None]
+    rows = q[a] + t * (q[np.minimum(a + 1, 3)] - q[a])
+    inside = place != a
+    rows[inside] += np.random.default_rng(5).uniform(-1.0, 1.0, (inside.sum(), 6)) * np.radians(0.3)
+    found = bounds_between(model, checked, rows, place)
+    assert found is not None and np.isfinite(found).all()
+    for k, p in np.ndindex(found.shape):  # FCL's mesh distances repeat to about 1e-7 m
+        assert found[k, p] <= model.pair_distance(rows[k], p) + 1e-6, (k, model.pairs[p])
+    np.testing.assert_allclose(found[~inside], exact[a[~inside]])  # at a waypoint: its own bound
+    wrong = rows.copy()
+    wrong[3] += 1e-3
+    assert bounds_between(model, checked, wrong, place) is None
+    raised = tuple(dataclasses.replace(o, pose=make_transform(p=[0.0, 0.0, 0.005]) @ o.pose) for o in cell)
+    other = CollisionModel(robot, np.eye(4), TCP, tool, raised, margin_m=0.01, self_margin_m=0.005)
+    assert bounds_between(other, checked, rows, place) is None
+
+
+def test_margins_proved_from_known_bounds_takes_no_query_and_never_proves_a_broken_margin():
+    """Exact distances as the known bounds: with a 1 cm margin (every cell pair further) they prove
+    the path without an FCL query; with a margin above the least cell distance no bound may prove it."""
+    _, _, cell, tool = cell_line()
+    robot = load_robot("ur10e")
+    q = np.tile(np.radians([0.0, -100.0, -100.0, -70.0, 90.0, 0.0]), (4, 1))
+    q[:, 0] += np.linspace(-0.02, 0.02, 4)
+    model = CollisionModel(robot, np.eye(4), TCP, tool, cell, margin_m=0.01, self_margin_m=0.005)
+    exact = np.array([[model.pair_distance(qk, p) for p in range(len(model.pairs))] for qk in q])
+    assert exact.min() > 0.01  # the path keeps the margins
+    before = model.queries
+    assert margins_proved(model, q, prior=exact)
+    assert model.queries == before
+    nearest = min(
+        exact[:, p].min() for p, pair in enumerate(model.pairs) if "table" in pair or "part" in pair
+    )
+    tight = CollisionModel(robot, np.eye(4), TCP, tool, cell, margin_m=nearest + 0.01, self_margin_m=0.005)
+    assert tight.pairs == model.pairs  # the bounds' columns are its pairs too
+    assert not margins_proved(tight, q, prior=exact)
+    assert not margins_proved(tight, q)
 
 
 def test_measure_least_finds_the_least_figures_and_every_waypoint_a_bound_leaves_unproved():
