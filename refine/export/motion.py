@@ -15,8 +15,8 @@ the report state the same figures, so what is reported is what is written:
 * **Speeds.** The programmed speed of every segment: RAPID's ``speeddata`` levels
   (:func:`refine.export.program.speed_levels`, with ``[output] speed_share``), the rounded
   ``$VEL.CP``, ``v`` and ``setCartVelocity`` of KRL, URScript and Sunrise; TP's and INFORM's levels
-  as RAPID's (TP in whole mm/sec where such levels keep the share, else in cm/min; INFORM ``V`` in
-  0.1 mm/s).
+  as RAPID's (TP in whole mm/sec where such levels keep the share, else in whole cm/min, else in
+  tenths of an inch/min; INFORM ``V`` in 0.1 mm/s).
 """
 
 from __future__ import annotations
@@ -51,7 +51,10 @@ acceleration rule for industrial arms (each joint reaches full speed from rest i
 TP_MM_S = 1e-3
 """One mm/sec [m/s], the unit TP speeds are written in when whole numbers of it keep the share."""
 TP_CM_MIN = 1.0 / 6000.0
-"""One cm/min [m/s], the finer TP speed unit used otherwise."""
+"""One cm/min [m/s], the finer TP speed unit used where whole mm/sec would not keep the share."""
+TP_TENTH_INCH_MIN = 0.1 * 0.0254 / 60.0
+"""0.1 inch/min [m/s] (about 0.042 mm/s), the finest TP linear speed (``16.0inch/min``), used where
+whole cm/min would not keep the share either (slow welds)."""
 INFORM_PL_RADIUS_M = float("inf")
 """The radius modelled for ``PL=n`` (n >= 1) [m]: the controller's positioning zone parameters
 (S1CxG033..S1CxG040) are not at hand, so no bound on them is assumed; the zone is then as large as
@@ -112,11 +115,15 @@ def tp_zones(
 
 
 def _tp_levels(planned: Array, lengths: Array, count: int, share: float) -> Array:
-    """Each segment's TP speed [m/s]: whole mm/sec levels if they keep ``share``, else whole cm/min."""
-    for step in (TP_MM_S, TP_CM_MIN):
+    """Each segment's TP speed [m/s]: levels in the coarsest unit that keeps ``share``.
+
+    Whole mm/sec, else whole cm/min, else tenths of an inch/min (the finest).
+    """
+    steps = (TP_MM_S, TP_CM_MIN, TP_TENTH_INCH_MIN)
+    for step in steps:
         levels, level_of = speed_levels(planned, lengths, count, step, share=share)
         programmed = levels[level_of]
-        if step == TP_CM_MIN or np.all(programmed >= (1.0 - share) * planned * (1.0 - 1e-12)):
+        if step == steps[-1] or np.all(programmed >= (1.0 - share) * planned * (1.0 - 1e-12)):
             return programmed
     raise AssertionError("unreachable")
 

@@ -21,8 +21,8 @@ the reference for the ``TB``/``DB`` and ``$WAITTMOUT`` syntax) show it:
   same figures): each target's ``CNT<n>`` is the largest ``n <= cnt`` whose modelled corner keeps
   ``[process] path_tolerance_m``, else ``FINE`` (:func:`refine.export.motion.tp_zones`); each
   segment runs at the fastest of a few levels not above its planned speed and within ``[output]
-  speed_share`` of it, in whole mm/sec where such levels do, else in whole cm/min (1/6 mm/s, the
-  finer TP unit).
+  speed_share`` of it, in whole mm/sec where such levels do, else in whole cm/min (1/6 mm/s), else
+  in tenths of an inch/min (about 0.042 mm/s, the finest TP unit, as in ``16.0inch/min``).
 * Process output switched on the move: ``TB <s>sec,DO[n]=ON`` (time before) or ``DB <d>mm,DO[n]=ON``
   (distance before) on the move onto the first path point and ``...=OFF`` on the move that holds
   the switching point before the last (``process.lead_s`` / ``lead_m``). A weld stops on the first
@@ -220,11 +220,17 @@ def _switch(problem: Problem, io: _Io, value: str, lead: float) -> str:
 
 
 def _speed(v_m_s: float) -> str:
-    """A TP path speed: whole mm/sec when it is one, else whole cm/min (:func:`refine.export.motion.tp_zones`)."""
-    mm_s = v_m_s * 1000.0
+    """A TP path speed in the coarsest unit that holds it: whole mm/sec, whole cm/min, or 0.1 inch/min.
+
+    The levels come from :func:`refine.export.motion.program_motion` as multiples of one of them.
+    """
+    mm_s, cm_min = v_m_s * 1000.0, v_m_s / CM_MIN
     if abs(mm_s - round(mm_s)) < 1e-6:
         return f"{min(max(int(round(mm_s)), 1), MAX_SPEED_MM_S)}mm/sec"
-    return f"{min(max(int(round(v_m_s / CM_MIN)), 1), 6 * MAX_SPEED_MM_S)}cm/min"
+    if abs(cm_min - round(cm_min)) < 1e-6:
+        return f"{min(max(int(round(cm_min)), 1), 6 * MAX_SPEED_MM_S)}cm/min"
+    inch_min = v_m_s * 60.0 / 0.0254
+    return f"{fixed_decimals(min(max(inch_min, 0.1), MAX_SPEED_MM_S * 60.0 / 25.4), 1)}inch/min"
 
 
 def _pass_moves(

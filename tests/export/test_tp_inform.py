@@ -187,9 +187,12 @@ def interpret_tp(text: str) -> dict:
                     "kind": kind,
                     "pos": pos,
                     "speed": float(speed.children[0]),
-                    "unit": {"joint_speed": "%", "linear_speed": "mm/sec", "linear_speed_cm": "cm/min"}[
-                        speed.data
-                    ],
+                    "unit": {
+                        "joint_speed": "%",
+                        "linear_speed": "mm/sec",
+                        "linear_speed_cm": "cm/min",
+                        "linear_speed_inch": "inch/min",
+                    }[speed.data],
                     "fine": st.children[3].data == "fine",
                     "cnt": int(st.children[3].children[0]) if st.children[3].data == "cnt" else None,
                     "wjnt": any(o.data == "wjnt" for o in options),
@@ -263,11 +266,14 @@ def test_tp_glue_program_parses_and_every_pose_is_the_forward_kinematics(
     t_end = float(trajectory.t[-1])
     k_off = path.index(offs[0])
     assert trajectory.t[k_off - 1] <= t_end - 0.2 <= trajectory.t[k_off] + 1e-9  # the move that holds it
-    # speeds: whole numbers of mm/sec or cm/min, not above the planned segment speed nor 2 % below it
+    # speeds: whole mm/sec or cm/min, or tenths of inch/min, not above the planned speed nor 2 % below it
     planned_mm_s = 500.0 * (trajectory.speed[:-1] + trajectory.speed[1:])
     written = np.array([m["speed"] for m in path[1:]])
-    assert np.all(written == np.round(written))
-    mm_s = np.array([v if m["unit"] == "mm/sec" else v / 6.0 for v, m in zip(written, path[1:], strict=True)])
+    assert all(
+        v == round(v, 0 if m["unit"] != "inch/min" else 1) for v, m in zip(written, path[1:], strict=True)
+    )
+    per_mm_s = {"mm/sec": 1.0, "cm/min": 1.0 / 6.0, "inch/min": 25.4 / 60.0}
+    mm_s = np.array([v * per_mm_s[m["unit"]] for v, m in zip(written, path[1:], strict=True)])
     assert np.all(mm_s <= planned_mm_s + 1e-9) and np.all(mm_s >= 0.98 * planned_mm_s - 1e-9)
     # CNT between the ends, from the model worked here: the corner starts n/100 x v x 0.25 s before
     # the target (v the faster move [mm/s]), at most half of either move, and cuts it by that x sin(turn/2)

@@ -127,3 +127,11 @@ def test_speed_levels_end_where_the_resolution_cannot_keep_the_share():
         np.array([0.00515, 0.05]), np.array([0.01, 0.01]), 1, 1.0 / 6000.0, share=0.02
     )
     np.testing.assert_allclose(levels[index], [0.005, 0.05])
+
+
+def test_tp_slow_weld_speeds_fall_back_to_tenths_of_an_inch_per_minute(make):
+    """5.15 mm/s: 5 mm/sec and 30 cm/min (5.0 mm/s) are both 2.9 % slow (share 2 %); 5.15 mm/s is
+    12.165 inch/min, so 12.1 inch/min = 5.1223 mm/s, 0.5 % slow."""
+    m = program_motion("tp", _l_path(0.00515), make("weld"))
+    np.testing.assert_allclose(m.programmed_m_s, 12.1 * 0.0254 / 60.0)
+    assert m.beyond_share == []
