@@ -14,7 +14,9 @@ sample of Motoman's knowledge base "INFORM job header"):
 * ``//INST``, ``///DATE``, ``///COMM`` (at most 32 characters), ``///ATTR SC,RW``, ``///GROUP1
   RB1``, then the instructions: ``NOP``, comments ``'text`` (at most :data:`COMMENT_CHARS`),
   ``MOVJ C00000 VJ=<%>`` to home, ``MOVJ`` to an approach point ``retract_m`` behind the first path
-  point along the tool z axis, ``MOVL Cnnnnn V=<mm/s> PL=<0..8>`` through the path, ``MOVL`` to the
+  point along the tool z axis (with a run's planned air move, ``ProgramPass.air_in``: ``MOVJ ...
+  PL=0`` to each of its via points and to its end, the approach joints, each written as the TCP
+  there with the joints' figure; the planned return's via points likewise before home), ``MOVL Cnnnnn V=<mm/s> PL=<0..8>`` through the path, ``MOVL`` to the
   retract point, ``MOVJ`` home, ``END``. Zones and speeds follow
   :func:`refine.export.motion.program_motion` (``result.json`` states the same figures): ``PL=<pl>``
   where its corner keeps ``[process] path_tolerance_m``, else ``PL=0`` (and ``PL=0`` where the robot
@@ -175,6 +177,12 @@ def _weld_end(job: _Job, problem: Problem, io: _Io) -> None:
     job.inst += [f"TIMER T={fixed_decimals(pr.postflow_s, 2)}", f"DOUT OT#({io.gas}) OFF"]
 
 
+def _joint_position(job: _Job, robot: Any, problem: Problem, q: Array) -> str:
+    """A position of the job at URDF joints ``q`` [rad]: the TCP in the ROBOT frame with their figure."""
+    T = invert_transform(controller_base(robot)) @ robot.fk(q) @ problem.tool.tcp_in_flange
+    return job.position(T, yaskawa_rconf(robot, q)[0])
+
+
 def write_inform(
     path: str | Path,
     trajectory: Trajectory,
@@ -242,8 +250,7 @@ def write_inform(
 
     job = _Job()
     home_q = home_joints(problem, robot, runs[0].trajectory.q[0])
-    home_T = invert_transform(controller_base(robot)) @ robot.fk(home_q) @ problem.tool.tcp_in_flange
-    home = job.position(home_T, yaskawa_rconf(robot, home_q)[0])
+    home = _joint_position(job, robot, problem, home_q)
     job.inst.append("NOP")
     job.comment(f"refine {__version__}: {problem.name}, {problem.robot.model}")
     job.comment(f"output {out_note}")
@@ -277,7 +284,8 @@ def write_inform(
         job.comment(f"pass {i} of {len(runs)}: {p.name}, {len(tr)} points")
         rconf = yaskawa_rconf(robot, tr.q)
         T = T_robot_world @ tr.poses
-        app = job.position(T[0] @ back, rconf[0])
+        vias = [] if p.air_in is None else [_joint_position(job, robot, problem, qk) for qk in p.air_in]
+        app = job.position(T[0] @ back, rconf[0]) if p.air_in is None else vias[-1]
         points = [job.position(Tk, rk) for Tk, rk in zip(T, rconf, strict=True)]
         ret = job.position(T[-1] @ back, rconf[-1])
         motion = program_motion(
@@ -290,7 +298,11 @@ def write_inform(
             job.comment(
                 f"{len(zones.narrowed)} point(s) at PL=0 to keep the path tolerance {zones.tolerance_m * 1e3:g} mm"
             )
-        job.inst += [f"MOVJ {app} VJ={vj} PL={pl}", f"MOVL {points[0]} V={air} PL=0"]
+        job.inst += [f"MOVJ {v} VJ={vj} PL=0" for v in vias[:-1]]  # the planned air move's via points
+        job.inst += [
+            f"MOVJ {app} VJ={vj} PL={pl if p.air_in is None else 0}",
+            f"MOVL {points[0]} V={air} PL=0",
+        ]
         if weld:
             _weld_start(job, problem, io)
         else:
@@ -303,6 +315,9 @@ def write_inform(
         else:
             job.inst.append(f"DOUT OT#({out}) OFF")
         job.inst.append(f"MOVL {ret} V={air} PL={pl}")
+    back_vias = runs[-1].air_out
+    if back_vias is not None and len(back_vias) > 1:  # the planned return's via points
+        job.inst += [f"MOVJ {_joint_position(job, robot, problem, q)} VJ={vj} PL=0" for q in back_vias[:-1]]
     job.inst.append(f"MOVJ {home} VJ={vj}")
     if weld:
         job.inst += ["JUMP *DONE", "*ARCFAIL", f"DOUT OT#({io.out}) OFF", f"DOUT OT#({io.gas}) OFF"]

@@ -16,7 +16,9 @@ the reference for the ``TB``/``DB`` and ``$WAITTMOUT`` syntax) show it:
   (``[frames] base_number`` and ``[tool] number``).
 * Motion: ``J P[i] 20% FINE`` to the home position (joint representation ``J1= .. deg``, the
   controller's joints), ``J`` to an approach point ``retract_m`` behind the first path point along the
-  tool z axis, ``L P[i] <v>mm/sec CNT<n>`` through the path, ``L`` to the retract point, ``J`` home.
+  tool z axis (with a run's planned air move, :class:`refine.export.program.ProgramPass` ``air_in``:
+  ``J ... FINE`` to each of its via points and to its end, the approach joints, as joint positions;
+  the planned return's via points likewise before home), ``L P[i] <v>mm/sec CNT<n>`` through the path, ``L`` to the retract point, ``J`` home.
   Zones and speeds follow :func:`refine.export.motion.program_motion` (``result.json`` states the
   same figures): each target's ``CNT<n>`` is the largest ``n <= cnt`` whose modelled corner keeps
   ``[process] path_tolerance_m``, else ``FINE`` (:func:`refine.export.motion.tp_zones`); each
@@ -233,6 +235,13 @@ def _speed(v_m_s: float) -> str:
     return f"{fixed_decimals(min(max(inch_min, 0.1), MAX_SPEED_MM_S * 60.0 / 25.4), 1)}inch/min"
 
 
+def _planned_joints(prog: _Program, robot: Any, q: Array, ptp_percent: int) -> None:
+    """A planned air move's via points and end as ``J`` moves to joint positions, stopping on each (as verified)."""
+    for qk in np.atleast_2d(q):
+        index = prog.joints(np.degrees(robot.spec.to_controller(qk)))
+        prog.motion(f"J P[{index}] {int(ptp_percent)}% FINE")
+
+
 def _pass_moves(
     prog: _Program,
     tr: Trajectory,
@@ -244,11 +253,12 @@ def _pass_moves(
     retract_m: float,
     ptp_percent: int,
     cnt: int,
+    air_in: Array | None = None,
 ) -> None:
     weld = problem.process.kind == "weld"
     conf = fanuc_config(robot, tr.q)
     back = make_transform(p=[0.0, 0.0, -retract_m])
-    app = prog.cartesian(tr.poses[0] @ back, conf[0])
+    app = prog.cartesian(tr.poses[0] @ back, conf[0]) if air_in is None else 0
     points = [prog.cartesian(T, c) for T, c in zip(tr.poses, conf, strict=True)]
     ret = prog.cartesian(tr.poses[-1] @ back, conf[-1])
     by_time = problem.process.lead_m is None
@@ -267,7 +277,10 @@ def _pass_moves(
             f"{len(zones.narrowed)} corner(s) below CNT{cnt} or FINE to keep the path tolerance "
             f"{zones.tolerance_m * 1e3:g} mm"
         )
-    prog.motion(f"J P[{app}] {int(ptp_percent)}% CNT100")
+    if air_in is None:
+        prog.motion(f"J P[{app}] {int(ptp_percent)}% CNT100")
+    else:
+        _planned_joints(prog, robot, air_in, ptp_percent)
     if weld:
         prog.motion(f"L P[{points[0]}] {approach_mm_s}mm/sec {zones.label[0]}")
         _weld_start(prog, problem, io)
@@ -388,7 +401,10 @@ def write_tp(
             retract_m=retract_m,
             ptp_percent=ptp_percent,
             cnt=cnt,
+            air_in=p.air_in,
         )
+    if runs[-1].air_out is not None and len(runs[-1].air_out) > 1:
+        _planned_joints(prog, robot, runs[-1].air_out[:-1], ptp_percent)  # the planned return's via points
     prog.motion(f"J P[{home}] {int(ptp_percent)}% FINE")
     if weld:
         prog.line("END")

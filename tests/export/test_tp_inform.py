@@ -525,3 +525,48 @@ def test_the_m20ia_weld_writes_a_tp_program_in_the_controllers_joints(tmp_path):
     np.testing.assert_allclose(home, problem.robot.home_deg, atol=1e-4)  # the pendant's joints, as given
     j3 = np.degrees(q_controller[:, 2])
     assert np.all((j3 >= -185.0 + 2.0 - 1e-6) & (j3 <= 273.1 - 2.0 + 1e-6))  # the J3 range, with the margin
+
+
+def test_planned_air_moves_are_written_through_their_via_points(
+    tmp_path, trajectory, problem, fanuc, yaskawa
+):
+    """A run's planned move into the pass (via point, then the approach joints) and its return's via
+    point: TP as joint positions in the controller's joints, INFORM as the TCP there with the figure."""
+    from refine.export.program import ProgramPass
+
+    q0 = trajectory.q[0]
+    via_in, approach, via_out = q0 + np.radians([5, -4, 3, 0, 2, 0]), q0, q0 + np.radians([-6, 3, 0, 2, 0, 1])
+    home = q0 + np.radians([0, -10, 5, 0, 0, 0])
+    run = ProgramPass(
+        "pass 1", trajectory, air_in=np.array([via_in, approach]), air_out=np.array([via_out, home])
+    )
+    prog = interpret_tp(
+        write_tp(tmp_path / "air.ls", trajectory, problem, fanuc, passes=[run]).read_text("ascii")
+    )
+    moves = [m for m in prog["motions"] if m["kind"] in ("J", "L")]
+    first_l = next(i for i, m in enumerate(moves) if m["kind"] == "L")
+    into = moves[1:first_l]  # after home: the via point and the approach
+    assert [m["kind"] for m in into] == ["J", "J"] and all(m["fine"] for m in into)
+    for m, q in zip(into, (via_in, approach), strict=True):
+        kind, *_, joints = prog["positions"][m["pos"]]
+        assert kind == "joints"
+        np.testing.assert_allclose(joints, _fanuc_joints_deg(q), atol=1e-4)
+    back = moves[-2]  # the return's via point, then home
+    np.testing.assert_allclose(prog["positions"][back["pos"]][4], _fanuc_joints_deg(via_out), atol=1e-4)
+    assert moves[-1]["pos"] == moves[0]["pos"]
+
+    job = interpret_inform(
+        write_inform(tmp_path / "air.JBI", trajectory, problem, yaskawa, passes=[run]).read_text("ascii")
+    )
+    movj = [i for i in job["inst"] if i[0] == "movj"]
+    T_root_robot = _T(np.eye(3), CONTROLLER_FRAME_IN_ROOT * 1000.0)
+    T_flange_tcp = problem.tool.tcp_in_flange
+    for (_, c, _, pl), q in zip(movj[1:3], (via_in, approach), strict=True):
+        T_robot_tcp, rconf = job["positions"][c]
+        dp, dr = _errors([T_root_robot @ T_robot_tcp @ np.linalg.inv(T_flange_tcp)], [_flange(yaskawa, q)])
+        assert (
+            dp <= POSITION_MM and dr <= ORIENTATION_DEG and rconf == _expected_rconf(yaskawa, q) and pl == 0
+        )
+    T_robot_tcp, rconf = job["positions"][movj[-2][1]]
+    dp, _ = _errors([T_root_robot @ T_robot_tcp @ np.linalg.inv(T_flange_tcp)], [_flange(yaskawa, via_out)])
+    assert dp <= POSITION_MM and movj[-1][1] == movj[0][1]
