@@ -150,6 +150,11 @@ def _add_import(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--registry", type=Path, default=None, help="the registry folder (default: robots/)")
     p.add_argument("--replace", action="store_true", help="write over an existing folder")
+    p.add_argument(
+        "--joint-coupling",
+        default="auto",
+        help="how the controller counts the joints: auto (a FANUC package's J23_factor), none, fanuc_j2_j3",
+    )
     p.set_defaults(handler=_import_robot)
 
 
@@ -180,6 +185,7 @@ def _import_robot(args: argparse.Namespace) -> int:
         samples=args.samples,
         seed=args.seed,
         replace=args.replace,
+        joint_coupling=args.joint_coupling,
     )
     return 0
 

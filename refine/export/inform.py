@@ -14,9 +14,14 @@ sample of Motoman's knowledge base "INFORM job header"):
 * ``//INST``, ``///DATE``, ``///COMM`` (at most 32 characters), ``///ATTR SC,RW``, ``///GROUP1
   RB1``, then the instructions: ``NOP``, comments ``'text`` (at most :data:`COMMENT_CHARS`),
   ``MOVJ C00000 VJ=<%>`` to home, ``MOVJ`` to an approach point ``retract_m`` behind the first path
-  point along the tool z axis, ``MOVL Cnnnnn V=<mm/s> PL=<0..8>`` through the path (``V`` at 0.1 mm/s:
-  the fastest of at most ``[output] speed_levels`` levels not above the segment's planned speed;
-  ``PL=0`` where the robot stops), ``MOVL`` to the retract point, ``MOVJ`` home, ``END``.
+  point along the tool z axis (with a run's planned air move, ``ProgramPass.air_in``: ``MOVJ ...
+  PL=0`` to each of its via points and to its end, the approach joints, each written as the TCP
+  there with the joints' figure; the planned return's via points likewise before home), ``MOVL Cnnnnn V=<mm/s> PL=<0..8>`` through the path, ``MOVL`` to the
+  retract point, ``MOVJ`` home, ``END``. Zones and speeds follow
+  :func:`refine.export.motion.program_motion` (``result.json`` states the same figures): ``PL=<pl>``
+  where its corner keeps ``[process] path_tolerance_m``, else ``PL=0`` (and ``PL=0`` where the robot
+  stops); ``V`` at 0.1 mm/s, the fastest of a few levels not above the segment's planned speed and
+  within ``[output] speed_share`` of it.
 * Process output: ``DOUT OT#(n) ON`` once the robot stands on the first path point (``PL=0``) and
   ``DOUT OT#(n) OFF`` on the last: INFORM switches an output after the move before it has ended,
   so a job has no switching ahead of a point and ``process.lead_s``/``lead_m`` is not applied (the
@@ -46,6 +51,7 @@ from typing import Any
 import numpy as np
 
 from refine.errors import InputError
+from refine.export.motion import program_motion
 from refine.export.program import (
     arm_configuration,
     as_passes,
@@ -55,9 +61,7 @@ from refine.export.program import (
     home_joints,
     process_summary,
     singular_runs,
-    speed_levels,
 )
-from refine.export.rapid import segment_speeds
 from refine.frames import fixed_xyz_from_matrix, invert_transform, make_transform
 from refine.names import comment_text, identifier
 from refine.paths import Trajectory
@@ -173,6 +177,12 @@ def _weld_end(job: _Job, problem: Problem, io: _Io) -> None:
     job.inst += [f"TIMER T={fixed_decimals(pr.postflow_s, 2)}", f"DOUT OT#({io.gas}) OFF"]
 
 
+def _joint_position(job: _Job, robot: Any, problem: Problem, q: Array) -> str:
+    """A position of the job at URDF joints ``q`` [rad]: the TCP in the ROBOT frame with their figure."""
+    T = invert_transform(controller_base(robot)) @ robot.fk(q) @ problem.tool.tcp_in_flange
+    return job.position(T, yaskawa_rconf(robot, q)[0])
+
+
 def write_inform(
     path: str | Path,
     trajectory: Trajectory,
@@ -200,7 +210,8 @@ def write_inform(
         approach_speed_m_s: ``V`` of the moves onto the first point and to the retract [m/s].
         retract_m: approach and retract distance along the tool z axis [m].
         joint_percent: ``VJ`` of the ``MOVJ`` moves [% of the joints' maximum].
-        pl: position level of the path moves (0..8; 0 stops on every point).
+        pl: position level of the path moves (0..8; 0 stops on every point); ``PL=0`` where the
+            corner would leave ``[process] path_tolerance_m`` (:func:`refine.export.motion.program_motion`).
         speed_resolution_m_s: speed levels are multiples of this [m/s] (INFORM ``V`` has 0.1 mm/s).
 
     Returns:
@@ -239,8 +250,7 @@ def write_inform(
 
     job = _Job()
     home_q = home_joints(problem, robot, runs[0].trajectory.q[0])
-    home_T = invert_transform(controller_base(robot)) @ robot.fk(home_q) @ problem.tool.tcp_in_flange
-    home = job.position(home_T, yaskawa_rconf(robot, home_q)[0])
+    home = _joint_position(job, robot, problem, home_q)
     job.inst.append("NOP")
     job.comment(f"refine {__version__}: {problem.name}, {problem.robot.model}")
     job.comment(f"output {out_note}")
@@ -274,28 +284,40 @@ def write_inform(
         job.comment(f"pass {i} of {len(runs)}: {p.name}, {len(tr)} points")
         rconf = yaskawa_rconf(robot, tr.q)
         T = T_robot_world @ tr.poses
-        app = job.position(T[0] @ back, rconf[0])
+        vias = [] if p.air_in is None else [_joint_position(job, robot, problem, qk) for qk in p.air_in]
+        app = job.position(T[0] @ back, rconf[0]) if p.air_in is None else vias[-1]
         points = [job.position(Tk, rk) for Tk, rk in zip(T, rconf, strict=True)]
         ret = job.position(T[-1] @ back, rconf[-1])
-        lengths = np.linalg.norm(np.diff(tr.poses[:, :3, 3], axis=0), axis=1)
-        levels, level_of = speed_levels(
-            segment_speeds(tr), lengths, problem.output.speed_levels, speed_resolution_m_s
+        motion = program_motion(
+            "inform", tr, problem, retract_m=retract_m, pl=pl, speed_resolution_m_s=speed_resolution_m_s
         )
+        zones = motion.zones
         for a, b in singular_runs(robot, tr.q):
             job.comment(f"points {a}-{b} near the wrist singularity")
-        job.inst += [f"MOVJ {app} VJ={vj} PL={pl}", f"MOVL {points[0]} V={air} PL=0"]
+        if zones.narrowed:
+            job.comment(
+                f"{len(zones.narrowed)} point(s) at PL=0 to keep the path tolerance {zones.tolerance_m * 1e3:g} mm"
+            )
+        job.inst += [f"MOVJ {v} VJ={vj} PL=0" for v in vias[:-1]]  # the planned air move's via points
+        job.inst += [
+            f"MOVJ {app} VJ={vj} PL={pl if p.air_in is None else 0}",
+            f"MOVL {points[0]} V={air} PL=0",
+        ]
         if weld:
             _weld_start(job, problem, io)
         else:
             job.inst.append(f"DOUT OT#({out}) ON")
         for k in range(1, len(tr)):
-            v = fixed_decimals(min(levels[level_of[k - 1]] * 1000.0, MAX_SPEED_MM_S), 1)
-            job.inst.append(f"MOVL {points[k]} V={v} PL={0 if k == len(tr) - 1 else pl}")
+            v = fixed_decimals(min(motion.programmed_m_s[k - 1] * 1000.0, MAX_SPEED_MM_S), 1)
+            job.inst.append(f"MOVL {points[k]} V={v} {'PL=0' if k == len(tr) - 1 else zones.label[k]}")
         if weld:
             _weld_end(job, problem, io)
         else:
             job.inst.append(f"DOUT OT#({out}) OFF")
         job.inst.append(f"MOVL {ret} V={air} PL={pl}")
+    back_vias = runs[-1].air_out
+    if back_vias is not None and len(back_vias) > 1:  # the planned return's via points
+        job.inst += [f"MOVJ {_joint_position(job, robot, problem, q)} VJ={vj} PL=0" for q in back_vias[:-1]]
     job.inst.append(f"MOVJ {home} VJ={vj}")
     if weld:
         job.inst += ["JUMP *DONE", "*ARCFAIL", f"DOUT OT#({io.out}) OFF", f"DOUT OT#({io.gas}) OFF"]

@@ -210,6 +210,8 @@ def speed_levels(
     run slower than ``(1 - share)`` times its planned speed: the levels are then the fewest that
     allow it when ``count`` does not (the least number by covering the sorted speeds from the
     slowest up), chosen for the least added time among those that keep every segment within it.
+    A segment the resolution cannot keep within the share (its planned speed rounded down falls
+    below it) gets that rounded speed as a level of its own.
 
     Args:
         speeds_m_s: planned speed of each segment [m/s], shape (M,).
@@ -239,7 +241,8 @@ def speed_levels(
         need, j = 0, 0
         while j < m:  # a level at cand[j] serves every candidate whose segments it keeps within the share
             need += 1
-            j = int(np.searchsorted(fastest * (1.0 - share), cand[j], side="right"))
+            # (at least itself: a candidate rounded below its own segments' share serves them alone)
+            j = max(j + 1, int(np.searchsorted(fastest * (1.0 - share), cand[j], side="right")))
         k_max = max(k_max, need)
     # cost[i, j]: time of the candidates i..j-1 all run at level cand[i]
     cum_w = np.concatenate([[0.0], np.cumsum(w)])
@@ -254,7 +257,8 @@ def speed_levels(
         share is not None
     ):  # the level at cand[j] must keep the fastest segment of cand[i - 1] within the share
         slowest_kept = np.concatenate([[0.0], fastest * (1.0 - share)])[i_all]
-        here = np.where(slowest_kept <= cand[:, None] * (1.0 + 1e-12), here, np.inf)
+        kept = (slowest_kept <= cand[:, None] * (1.0 + 1e-12)) | (i_all == j_all + 1)
+        here = np.where(kept, here, np.inf)
     for k in range(1, k_max + 1):
         total = here + best[k - 1]  # every j at once; best[k - 1] depends on the previous k only
         pick = np.argmin(total, axis=1)  # the first i of the least time, as a scan of i upwards finds
@@ -358,9 +362,10 @@ def arm_configuration(robot: Any, q: Array) -> tuple[Array, Array]:
 RAPID_ZONES_M = {"z0": 0.0003, "z1": 0.001, "z5": 0.005, "z10": 0.01, "z15": 0.015, "z20": 0.02}
 """``pzone_tcp`` of RAPID's predefined zones [m] (RAPID reference, data type ``zonedata``)."""
 
-ZONE_SEGMENT_SHARE = {"rapid": 0.5, "krl": 0.5, "urscript": 0.4, "sunrise": 0.5}
+ZONE_SEGMENT_SHARE = {"rapid": 0.5, "krl": 0.5, "urscript": 0.4, "sunrise": 0.5, "tp": 0.5, "inform": 0.5}
 """A zone reaches at most this share of each neighbouring segment: ABB and KUKA halve a zone that
-is larger than half a move; the URScript writer caps ``r`` at 40 % of the shorter segment."""
+is larger than half a move; the URScript writer caps ``r`` at 40 % of the shorter segment; FANUC's
+and Yaskawa's corners are modelled as ABB's and KUKA's (neither maker's manual at hand says)."""
 
 
 def corner_deviation(

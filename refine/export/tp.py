@@ -16,10 +16,15 @@ the reference for the ``TB``/``DB`` and ``$WAITTMOUT`` syntax) show it:
   (``[frames] base_number`` and ``[tool] number``).
 * Motion: ``J P[i] 20% FINE`` to the home position (joint representation ``J1= .. deg``, the
   controller's joints), ``J`` to an approach point ``retract_m`` behind the first path point along the
-  tool z axis, ``L P[i] <v>cm/min CNT<c>`` through the path (speed in whole cm/min, 1/6 mm/s, the
-  finest unit a TP speed has: the fastest of at
-  most ``[output] speed_levels`` levels not above the segment's planned speed; ``FINE`` where the
-  robot must stop), ``L`` to the retract point, ``J`` home.
+  tool z axis (with a run's planned air move, :class:`refine.export.program.ProgramPass` ``air_in``:
+  ``J ... FINE`` to each of its via points and to its end, the approach joints, as joint positions;
+  the planned return's via points likewise before home), ``L P[i] <v>mm/sec CNT<n>`` through the path, ``L`` to the retract point, ``J`` home.
+  Zones and speeds follow :func:`refine.export.motion.program_motion` (``result.json`` states the
+  same figures): each target's ``CNT<n>`` is the largest ``n <= cnt`` whose modelled corner keeps
+  ``[process] path_tolerance_m``, else ``FINE`` (:func:`refine.export.motion.tp_zones`); each
+  segment runs at the fastest of a few levels not above its planned speed and within ``[output]
+  speed_share`` of it, in whole mm/sec where such levels do, else in whole cm/min (1/6 mm/s), else
+  in tenths of an inch/min (about 0.042 mm/s, the finest TP unit, as in ``16.0inch/min``).
 * Process output switched on the move: ``TB <s>sec,DO[n]=ON`` (time before) or ``DB <d>mm,DO[n]=ON``
   (distance before) on the move onto the first path point and ``...=OFF`` on the move that holds
   the switching point before the last (``process.lead_s`` / ``lead_m``). A weld stops on the first
@@ -53,6 +58,7 @@ from typing import Any
 import numpy as np
 
 from refine.errors import InputError
+from refine.export.motion import program_motion
 from refine.export.program import (
     arm_configuration,
     as_passes,
@@ -63,9 +69,7 @@ from refine.export.program import (
     lead_point,
     process_summary,
     singular_runs,
-    speed_levels,
 )
-from refine.export.rapid import segment_speeds
 from refine.frames import fixed_xyz_from_matrix, invert_transform, make_transform
 from refine.names import comment_text, identifier
 from refine.paths import Trajectory
@@ -217,6 +221,27 @@ def _switch(problem: Problem, io: _Io, value: str, lead: float) -> str:
     return f" DB {fixed_decimals(lead * 1000.0, 1)}mm,DO[{io.out}]={value}"
 
 
+def _speed(v_m_s: float) -> str:
+    """A TP path speed in the coarsest unit that holds it: whole mm/sec, whole cm/min, or 0.1 inch/min.
+
+    The levels come from :func:`refine.export.motion.program_motion` as multiples of one of them.
+    """
+    mm_s, cm_min = v_m_s * 1000.0, v_m_s / CM_MIN
+    if abs(mm_s - round(mm_s)) < 1e-6:
+        return f"{min(max(int(round(mm_s)), 1), MAX_SPEED_MM_S)}mm/sec"
+    if abs(cm_min - round(cm_min)) < 1e-6:
+        return f"{min(max(int(round(cm_min)), 1), 6 * MAX_SPEED_MM_S)}cm/min"
+    inch_min = v_m_s * 60.0 / 0.0254
+    return f"{fixed_decimals(min(max(inch_min, 0.1), MAX_SPEED_MM_S * 60.0 / 25.4), 1)}inch/min"
+
+
+def _planned_joints(prog: _Program, robot: Any, q: Array, ptp_percent: int) -> None:
+    """A planned air move's via points and end as ``J`` moves to joint positions, stopping on each (as verified)."""
+    for qk in np.atleast_2d(q):
+        index = prog.joints(np.degrees(robot.spec.to_controller(qk)))
+        prog.motion(f"J P[{index}] {int(ptp_percent)}% FINE")
+
+
 def _pass_moves(
     prog: _Program,
     tr: Trajectory,
@@ -224,40 +249,49 @@ def _pass_moves(
     problem: Problem,
     io: _Io,
     *,
-    approach_mm_s: int,
+    approach_speed_m_s: float,
     retract_m: float,
     ptp_percent: int,
     cnt: int,
-    resolution_m_s: float,
+    air_in: Array | None = None,
 ) -> None:
     weld = problem.process.kind == "weld"
     conf = fanuc_config(robot, tr.q)
     back = make_transform(p=[0.0, 0.0, -retract_m])
-    app = prog.cartesian(tr.poses[0] @ back, conf[0])
+    app = prog.cartesian(tr.poses[0] @ back, conf[0]) if air_in is None else 0
     points = [prog.cartesian(T, c) for T, c in zip(tr.poses, conf, strict=True)]
     ret = prog.cartesian(tr.poses[-1] @ back, conf[-1])
     by_time = problem.process.lead_m is None
     lead = problem.process.lead_s if by_time else float(problem.process.lead_m)
-    lengths = np.linalg.norm(np.diff(tr.poses[:, :3, 3], axis=0), axis=1)
-    along = tr.t if by_time else np.concatenate([[0.0], np.cumsum(lengths)])
+    motion = program_motion("tp", tr, problem, retract_m=retract_m, cnt=cnt, approach_m_s=approach_speed_m_s)
+    along = tr.t if by_time else np.concatenate([[0.0], np.cumsum(motion.lengths_m)])
     off_k, off_lead = lead_point(along, lead)
-    levels, level_of = speed_levels(segment_speeds(tr), lengths, problem.output.speed_levels, resolution_m_s)
+    zones = motion.zones
+    approach_mm_s = min(max(int(round(approach_speed_m_s * 1000.0)), 1), MAX_SPEED_MM_S)
     wjnt = np.zeros(len(tr), dtype=bool)
     for a, b in singular_runs(robot, tr.q):
         wjnt[max(a, 1) : b + 2] = True
         prog.comment(f"waypoints {a}-{b} near the wrist singularity: Wjnt")
-    prog.motion(f"J P[{app}] {int(ptp_percent)}% CNT100")
+    if zones.narrowed:
+        prog.comment(
+            f"{len(zones.narrowed)} corner(s) below CNT{cnt} or FINE to keep the path tolerance "
+            f"{zones.tolerance_m * 1e3:g} mm"
+        )
+    if air_in is None:
+        prog.motion(f"J P[{app}] {int(ptp_percent)}% CNT100")
+    else:
+        _planned_joints(prog, robot, air_in, ptp_percent)
     if weld:
-        prog.motion(f"L P[{points[0]}] {approach_mm_s}mm/sec FINE")
+        prog.motion(f"L P[{points[0]}] {approach_mm_s}mm/sec {zones.label[0]}")
         _weld_start(prog, problem, io)
     else:
-        prog.motion(f"L P[{points[0]}] {approach_mm_s}mm/sec CNT{cnt}{_switch(problem, io, 'ON', lead)}")
+        on = _switch(problem, io, "ON", lead)
+        prog.motion(f"L P[{points[0]}] {approach_mm_s}mm/sec {zones.label[0]}{on}")
     for k in range(1, len(tr)):
-        v = int(round(levels[level_of[k - 1]] / CM_MIN))  # a whole number of cm/min
-        term = "FINE" if weld and k == len(tr) - 1 else f"CNT{cnt}"
         option = " Wjnt" if wjnt[k] else ""
         off = _switch(problem, io, "OFF", off_lead) if k == off_k and not weld else ""
-        prog.motion(f"L P[{points[k]}] {min(max(v, 1), 6 * MAX_SPEED_MM_S)}cm/min {term}{option}{off}")
+        speed = _speed(float(motion.programmed_m_s[k - 1]))
+        prog.motion(f"L P[{points[k]}] {speed} {zones.label[k]}{option}{off}")
     if weld:
         _weld_end(prog, problem, io)
     prog.motion(f"L P[{ret}] {approach_mm_s}mm/sec CNT{cnt}")
@@ -275,7 +309,6 @@ def write_tp(
     retract_m: float = 0.1,
     ptp_percent: int = 20,
     cnt: int = 100,
-    speed_resolution_m_s: float = CM_MIN,
 ) -> Path:
     """Write the trajectory as a FANUC TP program in ASCII (``<NAME>.ls``).
 
@@ -290,8 +323,9 @@ def write_tp(
         approach_speed_m_s: speed of the moves onto the first point and to the retract [m/s].
         retract_m: approach and retract distance along the tool z axis [m].
         ptp_percent: speed of the ``J`` moves [% of the joints' maximum].
-        cnt: ``CNT`` termination of the path moves (0..100; 100 blends the most).
-        speed_resolution_m_s: speed levels are multiples of this [m/s], a whole number of cm/min.
+        cnt: the largest ``CNT`` of the path moves (1..100; 100 blends the most); smaller, or
+            ``FINE``, where the corner would leave ``[process] path_tolerance_m``
+            (:func:`refine.export.motion.tp_zones`).
 
     Returns:
         The path written.
@@ -305,21 +339,12 @@ def write_tp(
     runs = as_passes(problem.name, trajectory, passes, repairs)
     if any(len(p.trajectory) < 2 for p in runs):
         raise InputError("TP export: every pass needs at least 2 waypoints")
-    if not (0 <= cnt <= 100 and 1 <= ptp_percent <= 100):
+    if not (1 <= cnt <= 100 and 1 <= ptp_percent <= 100):
         raise InputError(
-            f"TP export: cnt must be 0..100 and ptp_percent 1..100 [%], got {cnt}, {ptp_percent}"
+            f"TP export: cnt must be 1..100 and ptp_percent 1..100 [%], got {cnt}, {ptp_percent}"
         )
-    steps = speed_resolution_m_s / CM_MIN
-    if not (
-        steps >= 1.0 - 1e-9
-        and abs(steps - round(steps)) < 1e-6
-        and approach_speed_m_s > 0.0
-        and retract_m > 0.0
-    ):
-        raise InputError(
-            "TP export: speed_resolution_m_s must be a whole number of cm/min (1/6000 m/s), approach speed and "
-            "retract [m] > 0"
-        )
+    if not (approach_speed_m_s > 0.0 and retract_m > 0.0):
+        raise InputError("TP export: approach speed [m/s] and retract [m] must be > 0")
     uf, ut = problem.frames.base_number, problem.tool.number
     if not (1 <= uf <= MAX_UFRAME and 1 <= ut <= MAX_UTOOL):
         raise InputError(
@@ -364,7 +389,6 @@ def write_tp(
     home_deg = np.degrees(robot.spec.to_controller(home_joints(problem, robot, runs[0].trajectory.q[0])))
     home = prog.joints(home_deg)
     prog.motion(f"J P[{home}] {int(ptp_percent)}% FINE")
-    approach_mm_s = min(max(int(round(approach_speed_m_s * 1000.0)), 1), MAX_SPEED_MM_S)
     for i, p in enumerate(runs, start=1):
         prog.comment(f"pass {i} of {len(runs)}: {p.name}, {len(p.trajectory)} points")
         _pass_moves(
@@ -373,12 +397,14 @@ def write_tp(
             robot,
             problem,
             io,
-            approach_mm_s=approach_mm_s,
+            approach_speed_m_s=approach_speed_m_s,
             retract_m=retract_m,
             ptp_percent=ptp_percent,
             cnt=cnt,
-            resolution_m_s=speed_resolution_m_s,
+            air_in=p.air_in,
         )
+    if runs[-1].air_out is not None and len(runs[-1].air_out) > 1:
+        _planned_joints(prog, robot, runs[-1].air_out[:-1], ptp_percent)  # the planned return's via points
     prog.motion(f"J P[{home}] {int(ptp_percent)}% FINE")
     if weld:
         prog.line("END")

@@ -22,6 +22,7 @@ from lxml import etree
 from refine.errors import InputError
 from refine.frames import make_transform, matrix_from_fixed_xyz
 from refine.lazy import lean_imports
+from refine.robot.coupling import JOINT_COUPLINGS
 from refine.robot.description import package_name, resolve_description
 from refine.robot.geometry import read_mesh
 from refine.robot.reach import wrist_centre_reach
@@ -37,6 +38,7 @@ from refine.robot.shapes import LinkShapes, make_link_shapes, rewrite_urdf, shap
 from refine.robot.spec import CONTROLLERS, DEFAULT_PROGRAM, PROGRAMS, SELF_COLLISION_FILE, build_model
 
 with lean_imports():
+    import pinocchio as pin
     import trimesh
 
 MAKERS = {
@@ -49,6 +51,23 @@ MAKERS = {
 """The maker written to ``robot.toml`` for each controller family unless ``maker`` names another."""
 ACCELERATION_RULE = "2x the joint speed limit per second"
 """The registry's rule for industrial arms without acceleration figures: full speed from rest in 0.5 s."""
+
+
+COUPLING_CHOICES = ("auto", "none", *JOINT_COUPLINGS)
+"""``--joint-coupling``: ``auto`` decides from the package (:func:`detect_joint_coupling`)."""
+
+
+@dataclass(frozen=True)
+class Coupling:
+    """The joint coupling an import writes, and how it was decided.
+
+    Attributes:
+        name: one of :data:`refine.robot.coupling.JOINT_COUPLINGS`, or ``""`` for none.
+        reason: one sentence on the evidence (for the import's output and the README).
+    """
+
+    name: str
+    reason: str
 
 
 @dataclass(frozen=True)
@@ -70,6 +89,102 @@ class ImportResult:
     reach_m: float
     pairs: list[PairStats]
     reach_given: float | None = None
+    coupling: Coupling = Coupling("", "")
+
+
+def driver_j23_factors(package: Path, stem: str) -> list[tuple[str, int]]:
+    """The ``J23_factor`` defaults the package's launch files give the ROS-Industrial FANUC driver.
+
+    Only the launch files whose name holds the description's file stem (``m20ia`` for
+    ``m20ia.xacro``) count when any does (a package may describe several variants).
+
+    Returns:
+        (launch file name, factor) of every ``<arg name="J23_factor" default="n">`` found.
+    """
+    found = []
+    for path in sorted(package.glob("launch/*.launch")) + sorted(package.glob("launch/*.launch.xml")):
+        try:
+            root = etree.parse(str(path)).getroot()
+        except (OSError, etree.XMLSyntaxError):
+            continue
+        for arg in root.iter("arg"):
+            value = arg.get("default", arg.get("value"))
+            if (
+                arg.get("name") == "J23_factor"
+                and value is not None
+                and re.fullmatch(r"-?\d+", value.strip())
+            ):
+                found.append((path.name, int(value)))
+    own = [(n, f) for n, f in found if re.search(rf"(^|_){re.escape(stem)}(\.|$)", n)]
+    return own or found
+
+
+def _turn_axes(model: pin.Model) -> tuple[np.ndarray, np.ndarray]:
+    """The world directions joints 2 and 3 turn about at zero, unit vectors (3,)."""
+    data = model.createData()
+    q = pin.neutral(model)
+    pin.computeJointJacobians(model, data, q)
+    axes = []
+    for j in (2, 3):
+        J = pin.getJointJacobian(model, data, j, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+        w = J[3:, model.joints[j].idx_v]
+        axes.append(w / max(float(np.linalg.norm(w)), 1e-12))
+    return axes[0], axes[1]
+
+
+def detect_joint_coupling(
+    package: Path, source: Path, model: pin.Model, controller: str, requested: str = "auto"
+) -> Coupling:
+    """The joint coupling of an imported arm: ``requested``, or with ``"auto"`` what the package says.
+
+    ``auto``: only a ``fanuc`` controller counts joints otherwise than the URDF. Its support
+    package's driver launch files state ``J23_factor`` (:func:`driver_j23_factors`): the
+    ROS-Industrial ``fanuc_driver`` adds ``J23_factor · J2`` to the controller's J3 to get the
+    URDF's, so a factor 1 is ``"fanuc_j2_j3"`` and 0 none; without the argument, none. The joint
+    axes are checked against it: with factor 1, J2 and J3 must turn about opposite directions
+    (the ROS-Industrial FANUC descriptions: +y and -y), as they do when J3 is counted from the
+    horizontal through a parallel link.
+
+    Raises:
+        InputError: an unknown ``requested``; a coupling for a six-joint-less arm; a factor other
+            than 0 and 1, launch files that disagree, or axes that contradict the factor.
+    """
+    if requested not in COUPLING_CHOICES:
+        raise InputError(f"--joint-coupling {requested!r} is not one of {', '.join(COUPLING_CHOICES)}")
+    if requested == "none":
+        return Coupling("", "none: --joint-coupling none")
+    if requested != "auto":
+        if model.nq < 3:
+            raise InputError(f"--joint-coupling {requested}: needs at least 3 joints, the arm has {model.nq}")
+        return Coupling(requested, f"{requested}: --joint-coupling {requested}")
+    if controller != "fanuc":
+        return Coupling("", f"none: a {controller} controller counts the joints as the URDF does")
+    factors = driver_j23_factors(package, source.name.split(".")[0])
+    if not factors:
+        return Coupling(
+            "",
+            "none: the package's launch files give the FANUC driver no J23_factor "
+            "(pass --joint-coupling fanuc_j2_j3 for an arm with a parallel link)",
+        )
+    values = sorted({f for _, f in factors})
+    files = ", ".join(f"{n} ({f})" for n, f in factors)
+    if len(values) > 1 or values[0] not in (0, 1):
+        raise InputError(
+            f"J23_factor in the launch files: {files}; refine models 0 and 1 only: choose with --joint-coupling"
+        )
+    if values[0] == 0:
+        return Coupling("", f"none: J23_factor = 0 in {files}")
+    a2, a3 = _turn_axes(model)
+    if float(np.dot(a2, a3)) > -0.999:
+        raise InputError(
+            f"J23_factor = 1 in {files}, but joints 2 and 3 turn about {np.round(a2, 3).tolist()} and "
+            f"{np.round(a3, 3).tolist()}, not opposite directions: choose with --joint-coupling"
+        )
+    return Coupling(
+        "fanuc_j2_j3",
+        f"fanuc_j2_j3: J23_factor = 1 in {files}, and joints 2 and 3 turn about opposite directions "
+        f"({np.round(a2, 3).tolist()}, {np.round(a3, 3).tolist()})",
+    )
 
 
 def find_description(package: Path, xacro: str | None) -> Path:
@@ -165,6 +280,7 @@ def import_support_package(
     samples: int = 20000,
     seed: int = 1,
     replace: bool = False,
+    joint_coupling: str = "auto",
     say: Callable[[str], None] = print,
 ) -> ImportResult:
     """Write ``registry/name`` from a support package; ``say`` reports each step (the shapes' fit).
@@ -188,6 +304,8 @@ def import_support_package(
         samples: random configurations for the self-collision matrix (a tenth for the maker's meshes).
         seed: seed of the samples.
         replace: write over an existing folder.
+        joint_coupling: ``"auto"`` (decided from the package, :func:`detect_joint_coupling`),
+            ``"none"`` or one of :data:`refine.robot.coupling.JOINT_COUPLINGS`.
         say: where progress lines go.
 
     Raises:
@@ -220,7 +338,9 @@ def import_support_package(
     if reach_m is not None and not reach_m > 0.0:
         raise InputError(f"--reach-m {reach_m}: the reach must be positive [m]")
     reach = float(reach_m) if reach_m is not None else wrist_centre_reach(pin_model, flange_frame)
+    coupling = detect_joint_coupling(package, source, pin_model, controller, joint_coupling)
     say(f"{pkg}/{source.relative_to(package)} expanded: {pin_model.nq} joints, reach {reach * 1e3:.1f} mm")
+    say(f"  joint coupling {coupling.reason}")
     if folder.exists():
         shutil.rmtree(folder)
     folder.mkdir(parents=True)
@@ -282,17 +402,58 @@ def import_support_package(
                 + " deg/s.",
                 f'acceleration_rule = "{ACCELERATION_RULE}"',
                 f"joint_acceleration_deg_s2 = [{', '.join(f'{2.0 * v:.1f}' for v in speeds)}]",
+                *_controller_lines(pin_model, controller, coupling, robot.spec),
                 "",
             ]
         ),
         encoding="utf-8",
     )
-    result = ImportResult(folder, source, shapes, reach, pairs, reach_m)
+    result = ImportResult(folder, source, shapes, reach, pairs, reach_m, coupling)
     (folder / "README.md").write_text(
         readme(result, package, pkg, robot, program, samples, seed), encoding="utf-8"
     )
     say(f"wrote {folder}")
     return result
+
+
+CONTROLLER_FRAME = "base"
+"""ROS-Industrial's frame of the maker's own coordinates, fixed to ``base_link``."""
+
+
+def _controller_lines(model: pin.Model, controller: str, coupling: Coupling, spec) -> list[str]:  # noqa: ANN001
+    """``robot.toml``'s controller conventions: the position frame, the joint coupling and the J3 row.
+
+    * ``controller_frame = "base"`` for a FANUC or Yaskawa arm whose description has a ``base``
+      frame fixed to the root (ROS-Industrial: the maker's world / robot coordinates); the TP and
+      INFORM writers measure positions in it.
+    * ``joint_coupling`` as decided (:func:`detect_joint_coupling`); with ``fanuc_j2_j3``, the
+      description's joint 3 range as a ``joint_interaction`` row on the controller's J3 (the
+      descriptions copy FANUC's motion ranges, which are the controller's).
+    """
+    lines = []
+    fixed = (
+        model.existFrame(CONTROLLER_FRAME)
+        and model.frames[model.getFrameId(CONTROLLER_FRAME)].parentJoint == 0
+    )
+    if controller in ("fanuc", "yaskawa") and fixed:
+        lines += [
+            "",
+            f"# Positions in the controller's frame, the description's `{CONTROLLER_FRAME}`.",
+            f'controller_frame = "{CONTROLLER_FRAME}"',
+        ]
+    if coupling.name:
+        lo, hi = np.degrees(spec.lower[2]), np.degrees(spec.upper[2])
+        lines += [
+            "",
+            f"# Joint coupling {coupling.reason}.",
+            f'joint_coupling = "{coupling.name}"',
+            "# The description's joint 3 range, kept on the J3 the controller shows (from the horizontal).",
+            "joint_interaction = [",
+            f"    {{ joints = [3], coefficients = [1.0], lower_deg = {lo:.1f}, upper_deg = {hi:.1f}, "
+            'label = "J3 from the horizontal" },',
+            "]",
+        ]
+    return lines
 
 
 def _write_licence(folder: Path, package: Path, licence: str | Path | None) -> None:
@@ -369,6 +530,17 @@ def readme(
         ),
         "Accelerations: not in the description; the registry's rule for industrial arms, "
         f"{ACCELERATION_RULE}.",
+        "",
+        "## The controller's joints",
+        f"Joint coupling {result.coupling.reason}."
+        + (
+            " J3_controller = J3_urdf - J2_urdf: `home_deg`, the program's joints, `trajectory.csv` and the "
+            "report hold the controller's joints, and the description's joint 3 range is kept on the "
+            "controller's J3 (`joint_interaction` in `robot.toml`). FANUC's J2/J3 interference area "
+            "(the J3 range as a function of J2) is not in the package and not modelled."
+            if result.coupling.name == "fanuc_j2_j3"
+            else " The controller's joints are the URDF's."
+        ),
         "",
         "## Collision shapes",
         "Each link's collision mesh is covered by convex pieces (`refine.robot.shapes.make_link_shapes`, the code "

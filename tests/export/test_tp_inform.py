@@ -35,6 +35,7 @@ from lark import Lark, Token  # noqa: E402
 
 from refine.errors import InputError  # noqa: E402
 from refine.export.inform import write_inform  # noqa: E402
+from refine.export.motion import program_motion  # noqa: E402
 from refine.export.tp import write_tp  # noqa: E402
 from refine.problem import ProcessSettings  # noqa: E402
 from refine.robot.model import Robot  # noqa: E402
@@ -186,10 +187,14 @@ def interpret_tp(text: str) -> dict:
                     "kind": kind,
                     "pos": pos,
                     "speed": float(speed.children[0]),
-                    "unit": {"joint_speed": "%", "linear_speed": "mm/sec", "linear_speed_cm": "cm/min"}[
-                        speed.data
-                    ],
+                    "unit": {
+                        "joint_speed": "%",
+                        "linear_speed": "mm/sec",
+                        "linear_speed_cm": "cm/min",
+                        "linear_speed_inch": "inch/min",
+                    }[speed.data],
                     "fine": st.children[3].data == "fine",
+                    "cnt": int(st.children[3].children[0]) if st.children[3].data == "cnt" else None,
                     "wjnt": any(o.data == "wjnt" for o in options),
                     "switches": switches,
                 }
@@ -217,6 +222,17 @@ def _tp_path(prog: dict) -> list[dict]:
     first = next(i for i, m in enumerate(moves) if m["kind"] == "L")  # after the home and approach J
     last = max(i for i, m in enumerate(moves) if m["kind"] == "L")  # the retract
     return moves[first:last]
+
+
+def _turns_and_legs_mm(trajectory) -> tuple[np.ndarray, np.ndarray]:
+    """The direction change at every inner target [rad] (N-2,) and every move's length [mm] (N-1,)."""
+    d = np.diff(trajectory.poses[:, :3, 3], axis=0) * 1000.0
+    legs = np.linalg.norm(d, axis=1)
+    turn = [
+        math.acos(max(-1.0, min(1.0, float(a @ b) / (np.linalg.norm(a) * np.linalg.norm(b)))))
+        for a, b in zip(d[:-1], d[1:], strict=True)
+    ]
+    return np.array(turn), legs
 
 
 def _glue_problem(problem, **process):
@@ -250,12 +266,31 @@ def test_tp_glue_program_parses_and_every_pose_is_the_forward_kinematics(
     t_end = float(trajectory.t[-1])
     k_off = path.index(offs[0])
     assert trajectory.t[k_off - 1] <= t_end - 0.2 <= trajectory.t[k_off] + 1e-9  # the move that holds it
-    assert not any(m["fine"] for m in path), "a glue path never stops with the gun open"
-    # speeds: whole cm/min (1 mm/s = 6 cm/min), never above the planned segment speed
-    planned_cm_min = 6.0 * 500.0 * (trajectory.speed[:-1] + trajectory.speed[1:])
-    assert {m["unit"] for m in path[1:]} == {"cm/min"}
+    # speeds: whole mm/sec or cm/min, or tenths of inch/min, not above the planned speed nor 2 % below it
+    planned_mm_s = 500.0 * (trajectory.speed[:-1] + trajectory.speed[1:])
     written = np.array([m["speed"] for m in path[1:]])
-    assert np.all(written == np.round(written)) and np.all(written <= planned_cm_min + 1e-9)
+    assert all(
+        v == round(v, 0 if m["unit"] != "inch/min" else 1) for v, m in zip(written, path[1:], strict=True)
+    )
+    per_mm_s = {"mm/sec": 1.0, "cm/min": 1.0 / 6.0, "inch/min": 25.4 / 60.0}
+    mm_s = np.array([v * per_mm_s[m["unit"]] for v, m in zip(written, path[1:], strict=True)])
+    assert np.all(mm_s <= planned_mm_s + 1e-9) and np.all(mm_s >= 0.98 * planned_mm_s - 1e-9)
+    # CNT between the ends, from the model worked here: the corner starts n/100 x v x 0.25 s before
+    # the target (v the faster move [mm/s]), at most half of either move, and cuts it by that x sin(turn/2)
+    turn, legs = _turns_and_legs_mm(trajectory)
+    for k in range(1, len(path) - 1):
+        full, half, sine = (
+            max(mm_s[k - 1], mm_s[k]) * 0.25,
+            0.5 * min(legs[k - 1], legs[k]),
+            math.sin(turn[k - 1] / 2),
+        )
+        expected = next(
+            (n for n in range(100, 0, -1) if min(full * n / 100.0, half) * sine <= 0.5 + 1e-9), None
+        )
+        assert (None if path[k]["fine"] else path[k]["cnt"]) == expected, k
+    # and what the program writes is what result.json reports (refine.export.motion)
+    reported = program_motion("tp", trajectory, glue).zones.label
+    assert [("FINE" if m["fine"] else f"CNT{m['cnt']}") for m in path] == list(reported)
 
 
 def test_tp_home_holds_the_controllers_joints(tmp_path, trajectory, problem, fanuc):
@@ -352,7 +387,15 @@ def test_inform_glue_job_parses_and_every_pose_is_the_forward_kinematics(
     dp, dr = _errors(reached, planned)
     assert dp <= POSITION_MM and dr <= ORIENTATION_DEG, (dp, dr)
     planned_mm_s = 500.0 * (trajectory.speed[:-1] + trajectory.speed[1:])
-    assert np.all(np.array([v for _, _, v, _ in path[1:]]) <= planned_mm_s + 1e-9)
+    written = np.array([v for _, _, v, _ in path[1:]])
+    assert np.all(written <= planned_mm_s + 1e-9) and np.all(written >= 0.98 * planned_mm_s - 1e-9)
+    # PL=1 between the ends where half the shorter move times sin(turn/2) keeps 0.5 mm, else PL=0
+    turn, legs = _turns_and_legs_mm(trajectory)
+    for k in range(1, len(path) - 1):
+        cut = 0.5 * min(legs[k - 1], legs[k]) * math.sin(turn[k - 1] / 2)
+        assert path[k][3] == (1 if cut <= 0.5 + 1e-9 else 0), k
+    reported = program_motion("inform", trajectory, glue).zones.label
+    assert [f"PL={pl}" for *_, pl in path[1:-1]] == list(reported[1:-1])
     assert moves[0][0] == "movj" and moves[-1][:2] == moves[0][:2], "home at start and end"
 
 
@@ -482,3 +525,48 @@ def test_the_m20ia_weld_writes_a_tp_program_in_the_controllers_joints(tmp_path):
     np.testing.assert_allclose(home, problem.robot.home_deg, atol=1e-4)  # the pendant's joints, as given
     j3 = np.degrees(q_controller[:, 2])
     assert np.all((j3 >= -185.0 + 2.0 - 1e-6) & (j3 <= 273.1 - 2.0 + 1e-6))  # the J3 range, with the margin
+
+
+def test_planned_air_moves_are_written_through_their_via_points(
+    tmp_path, trajectory, problem, fanuc, yaskawa
+):
+    """A run's planned move into the pass (via point, then the approach joints) and its return's via
+    point: TP as joint positions in the controller's joints, INFORM as the TCP there with the figure."""
+    from refine.export.program import ProgramPass
+
+    q0 = trajectory.q[0]
+    via_in, approach, via_out = q0 + np.radians([5, -4, 3, 0, 2, 0]), q0, q0 + np.radians([-6, 3, 0, 2, 0, 1])
+    home = q0 + np.radians([0, -10, 5, 0, 0, 0])
+    run = ProgramPass(
+        "pass 1", trajectory, air_in=np.array([via_in, approach]), air_out=np.array([via_out, home])
+    )
+    prog = interpret_tp(
+        write_tp(tmp_path / "air.ls", trajectory, problem, fanuc, passes=[run]).read_text("ascii")
+    )
+    moves = [m for m in prog["motions"] if m["kind"] in ("J", "L")]
+    first_l = next(i for i, m in enumerate(moves) if m["kind"] == "L")
+    into = moves[1:first_l]  # after home: the via point and the approach
+    assert [m["kind"] for m in into] == ["J", "J"] and all(m["fine"] for m in into)
+    for m, q in zip(into, (via_in, approach), strict=True):
+        kind, *_, joints = prog["positions"][m["pos"]]
+        assert kind == "joints"
+        np.testing.assert_allclose(joints, _fanuc_joints_deg(q), atol=1e-4)
+    back = moves[-2]  # the return's via point, then home
+    np.testing.assert_allclose(prog["positions"][back["pos"]][4], _fanuc_joints_deg(via_out), atol=1e-4)
+    assert moves[-1]["pos"] == moves[0]["pos"]
+
+    job = interpret_inform(
+        write_inform(tmp_path / "air.JBI", trajectory, problem, yaskawa, passes=[run]).read_text("ascii")
+    )
+    movj = [i for i in job["inst"] if i[0] == "movj"]
+    T_root_robot = _T(np.eye(3), CONTROLLER_FRAME_IN_ROOT * 1000.0)
+    T_flange_tcp = problem.tool.tcp_in_flange
+    for (_, c, _, pl), q in zip(movj[1:3], (via_in, approach), strict=True):
+        T_robot_tcp, rconf = job["positions"][c]
+        dp, dr = _errors([T_root_robot @ T_robot_tcp @ np.linalg.inv(T_flange_tcp)], [_flange(yaskawa, q)])
+        assert (
+            dp <= POSITION_MM and dr <= ORIENTATION_DEG and rconf == _expected_rconf(yaskawa, q) and pl == 0
+        )
+    T_robot_tcp, rconf = job["positions"][movj[-2][1]]
+    dp, _ = _errors([T_root_robot @ T_robot_tcp @ np.linalg.inv(T_flange_tcp)], [_flange(yaskawa, via_out)])
+    assert dp <= POSITION_MM and movj[-1][1] == movj[0][1]
