@@ -38,7 +38,7 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 from refine.errors import InputError, RefineError
 from refine.report.html import ERRORS_JS
 from refine.serve.session import Answer, Session
-from refine.serve.state import scene_message, values_of, verdict_message
+from refine.serve.state import SceneDiff, values_of, verdict_message
 
 log = logging.getLogger(__name__)
 
@@ -59,10 +59,13 @@ class Hub:
     last: dict[str, str] = field(default_factory=dict)
     lock: threading.Lock = field(default_factory=threading.Lock)
 
-    def publish(self, kind: str, text: str) -> None:
-        """Send ``text`` to every open websocket (from any thread); keep it as the last ``kind``."""
+    def publish(self, kind: str, text: str, keep: str | None = None) -> None:
+        """Send ``text`` to every open websocket (from any thread).
+
+        ``keep`` (``text`` when None) is kept as the last ``kind``, sent first to a websocket opened later.
+        """
         with self.lock:
-            self.last[kind] = text
+            self.last[kind] = text if keep is None else keep
             loop, queues = self.loop, list(self.queues)
         if loop is None or loop.is_closed():
             return
@@ -122,10 +125,13 @@ def create_app(session: Session, out_dir: Path, *, token: str | None = None) -> 
     out_dir = Path(out_dir).resolve()
     plotly_js = get_plotlyjs()
 
+    scenes = SceneDiff()
+
     def answered(answer: Answer) -> None:  # on the solver's thread
         hub.publish("verdict", json.dumps(verdict_message(session, answer), allow_nan=False))
         if answer.error is None and answer.result is not None:
-            hub.publish("scene", json.dumps(scene_message(answer), allow_nan=False))
+            changed, whole = scenes.messages(answer)
+            hub.publish("scene", changed, keep=whole)
 
     session.on_answer(answered)
 

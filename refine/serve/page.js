@@ -220,7 +220,7 @@
       return;
     }
     if (msg.type === "scene") {
-      scene = msg.scene; scene.revision = msg.revision; parts = scene.robot.parts;
+      scene = Object.assign(scene || {}, msg.scene); scene.revision = msg.revision; parts = scene.parts;   // the sections that changed
       slider.max = String(scene.robot.frames.length - 1);
       $("frame-label").textContent = scene.robot.labels[Math.min(Number(slider.value), scene.robot.frames.length - 1)];
       draw();
