@@ -148,6 +148,15 @@ def create_app(session: Session, out_dir: Path, *, token: str | None = None) -> 
 
         return Response(page_script(), media_type="text/javascript")
 
+    async def module(request: Request) -> Response:
+        from refine.serve.page import module_script
+
+        try:
+            text = module_script(request.path_params.get("name") or request.url.path.rsplit("/", 1)[-1])
+        except KeyError:
+            return PlainTextResponse("no such script", status_code=404)
+        return Response(text, media_type="text/javascript")
+
     async def no_icon(request: Request) -> Response:
         return Response(status_code=204)
 
@@ -238,6 +247,8 @@ def create_app(session: Session, out_dir: Path, *, token: str | None = None) -> 
     routes = [
         Route("/", page),
         Route("/page.js", script),
+        Route("/scene3d.js", module),
+        Route("/three/{name:str}", module),
         Route("/plotly.js", plotly),
         Route("/favicon.ico", no_icon),
         Route("/api/change", change, methods=["POST"]),

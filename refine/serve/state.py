@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from refine.export.result_json import result_dict
-from refine.report.scene import scene_data
+from refine.report.scene import rounded, scene_data
 from refine.report.verdict import verdict_html
 from refine.serve.edits import MOVE, POSES, SCALARS, pose_table
 
@@ -84,8 +84,24 @@ def scene_sections(answer: Answer) -> dict[str, str]:
     scene = scene_data(answer.result)
     robot = dict(scene["robot"])
     parts = robot.pop("parts")
+    robot["flange"] = flange_poses(answer.result, robot["where"])
     sections = {"cell": scene["cell"], "parts": parts, "robot": robot, "paths": scene["paths"]}
     return {k: json.dumps(sections[k], allow_nan=False, separators=(",", ":")) for k in SCENE_SECTIONS}
+
+
+def flange_poses(result: Any, where: list[list[int]]) -> list[list[float | None]]:
+    """The flange's pose in {F} at each robot frame of the scene (``where``: pass, waypoint), as 12 numbers.
+
+    The page puts the TCP gizmo at the flange times ``tcp_in_flange`` and turns a drag back into
+    ``tcp_in_flange``.
+    """
+    robot = result.robot
+    base = np.asarray(result.problem.robot.base_in_world, dtype=float)
+    out = []
+    for i, k in where:
+        T = base @ robot.link_poses(result.passes[i].refinement.q[k])[robot.spec.flange_frame]
+        out.append(rounded(T[:3, :].ravel(), 6))
+    return out
 
 
 def scene_message(revision: int, sections: Mapping[str, str], keys: Iterable[str]) -> str:
