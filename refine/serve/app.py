@@ -6,7 +6,7 @@ Built on Starlette (routing, websockets, responses) served by uvicorn. Every req
 the printed access token (``?token=``, the ``X-Refine-Token`` header, or the cookie the page
 gets), compared in constant time. A request with an ``Origin`` of another site is refused.
 
-The browser names no file but a calibration log, which must lie inside the problem folder
+The browser names no file but calibration measurements, which must lie inside the problem folder
 (:func:`refine.serve.calibration.inside_folder`): the problem file is the one the app was started
 on, the outputs go to the folder given on the command line, and ``/files/NAME`` serves only a file
 written there.

@@ -2,8 +2,9 @@
 
 The page carries no data of its own: ``page.js`` opens the websocket, shows every state the server
 sends (the verdict as the report draws it, the scene, the values in the controls) and sends the
-changes. Plotly's JavaScript is served by the app from the installed ``plotly`` package, so the
-page works without a network. Uncaught errors and ``console.error`` calls are listed in
+changes; ``scene3d.js`` draws the cell with three.js and holds the gizmo. three.js is shipped in
+``refine/serve/three/`` and Plotly's JavaScript (the calibration's residual plot) comes from the
+installed ``plotly`` package, both served by the app, so the page works without a network. Uncaught errors and ``console.error`` calls are listed in
 ``#js-errors`` (hidden while empty), as in the report.
 """
 

@@ -15,7 +15,7 @@ from refine.serve.session import Session
 
 ROOT = Path(__file__).resolve().parents[2]
 TOKEN = "s3cret-token-for-the-test"
-ROUTES = ("/", "/page.js", "/plotly.js", "/api/diff")
+ROUTES = ("/", "/page.js", "/scene3d.js", "/three/TransformControls.js", "/plotly.js", "/api/diff")
 
 
 @pytest.fixture(scope="module")
@@ -81,6 +81,15 @@ def test_no_file_outside_the_output_folder_is_served(session, folder, name):
     answer = client.get(f"/files/{name}")
     assert answer.status_code == 404, name
     assert "glass_adhesive" not in answer.text  # not the problem file's text
+
+
+@pytest.mark.parametrize("name", ["..%2Fapp.py", "LICENSE.js", "three.module.js", "%2E%2E%2Fsession.py"])
+def test_only_the_pages_own_scripts_are_served_from_the_package(session, folder, name):
+    client = TestClient(create_app(session, folder / "out"), base_url="http://127.0.0.1:8000")
+    assert client.get(f"/three/{name}").status_code == 404, name
+    three = client.get("/three/three.module.min.js")
+    assert three.status_code == 200 and three.headers["content-type"].startswith("text/javascript")
+    assert "Three.js Authors" in three.text[:300]
 
 
 def test_a_file_written_there_is_served(session, folder):

@@ -1,12 +1,15 @@
 """refine serve in Debian's chromium, driven by Playwright: the glass cell's first screen, a bad value,
-a change of the cone seen in a second tab, the part moved out of reach and back, and write.
+a change of the cone seen in a second tab, the part moved out of reach and back, the part dragged
+by the 3D gizmo, a receiver calibration fitted and accepted, and write.
 
-One server for the module (uvicorn on a free port, in a thread) on a copy of the glass cell; the
-tests run in order on it. Screenshots go to tests/artifacts/serve/.
+One server for the module (uvicorn on a free port, in a thread) on a copy of the glass cell (with
+the measurements of problems/glass_calibrated); the tests run in order on it. Screenshots go to
+tests/artifacts/serve/ (the folder is printed at the end of the run).
 """
 
 from __future__ import annotations
 
+import json
 import re
 import shutil
 import threading
@@ -36,6 +39,7 @@ def server(tmp_path_factory):
 
     folder = tmp_path_factory.mktemp("serve") / "glass_adhesive"
     shutil.copytree(ROOT / "problems" / "glass_adhesive", folder)
+    shutil.copytree(ROOT / "problems" / "glass_calibrated" / "measurements", folder / "measurements")
     session = Session(folder)
     app = create_app(session, folder / "out")
     server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=0, log_level="warning"))
@@ -52,8 +56,11 @@ def server(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def pages(server):
+def pages(server, request):
     ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    reporter = request.config.pluginmanager.get_plugin("terminalreporter")
+    if reporter is not None:
+        request.addfinalizer(lambda: reporter.write_line(f"refine serve screenshots: {ARTIFACTS}"))
     with playwright.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=str(CHROMIUM), args=["--no-sandbox"])
         errors: list[str] = []
@@ -88,12 +95,27 @@ def test_the_first_screen_shows_the_cell_and_the_verdict(pages):
     assert settled(page) == "ok"
     assert page.inner_text("#verdict .badge") == "ok"
     assert "orientation deviation from the demonstration" in page.inner_text("#verdict")
-    traces = page.evaluate("document.getElementById('scene').data.map(t => t.name)")
-    for name in ("table", "glass", "cup_1", "robot"):  # the cell's objects from the problem file, the robot
-        assert name in traces
+    drawn = json.loads(page.get_attribute("#scene", "data-objects"))
+    for name in ("table", "glass", "cup_1", "robot", "pass 1 (ok)"):  # the cell's objects, the robot, the path
+        assert name in drawn
     page.screenshot(path=str(ARTIFACTS / "first-screen.png"))
     assert pages["errors"] == []
     assert page.is_hidden("#js-errors")
+
+
+def test_the_tcp_gizmo_sits_where_the_flange_pose_and_tcp_in_flange_put_the_tcp_on_the_path(server, pages):
+    import numpy as np
+
+    from refine.report.scene import robot_frames
+    from refine.serve.state import flange_poses
+
+    result = server["session"].answer.result
+    where = robot_frames(result)["where"]
+    flange = flange_poses(result, where)
+    tcp = np.asarray(result.problem.tool.tcp_in_flange)
+    for (i, k), row in zip(where, flange, strict=True):
+        T = np.vstack([np.reshape(row, (3, 4)), [0, 0, 0, 1]]) @ tcp
+        assert np.linalg.norm(T[:3, 3] - result.passes[i].fused.positions[k]) < 2e-6  # [m]: on the CAD path
 
 
 def test_a_bad_value_is_answered_with_its_unit_and_changes_nothing(pages):
@@ -145,9 +167,61 @@ def test_the_part_moved_up_out_of_reach_is_repaired_with_its_cause_and_moved_bac
     assert pages["errors"] == []
 
 
-def test_write_saves_the_problem_and_writes_what_refine_run_writes(pages, server, tmp_path):
-    import json
+def _pose(page, key: str) -> list[float]:
+    return [float(page.input_value(f"[aria-label='{key} xyz[{i}]']")) for i in range(3)]
 
+
+def test_the_part_dragged_by_the_gizmo_moves_the_cad_frame_and_the_receiver_by_as_much(pages):
+    page = pages["tabs"][0]
+    cad0, source0 = _pose(page, "frames.cad_in_world"), _pose(page, "frames.source_in_world")
+    before = revision(page)
+    page.select_option("#gizmo", "move")
+    x, y = page.evaluate("document.getElementById('scene').view.screenOf([0.35, 0, 0])")  # on the x arrow
+    page.mouse.move(x, y)
+    page.mouse.down()
+    for k in range(1, 9):  # a drag: changes at most every 120 ms, the latest wins
+        page.mouse.move(x + 10 * k, y)
+        time.sleep(0.03)
+    page.mouse.up()
+    page.wait_for_function(f"Number(document.body.dataset.latest) > {before}")
+    assert settled(page) in ("ok", "repaired", "infeasible")
+    moved = float(page.inner_text("#move-x-value"))  # [mm]
+    cad, source = _pose(page, "frames.cad_in_world"), _pose(page, "frames.source_in_world")
+    assert cad[0] - cad0[0] > 0.01  # [m] along world x, the arrow dragged
+    assert abs((cad[0] - cad0[0]) * 1e3 - moved) <= 0.5  # the slider shows the move in whole mm
+    assert abs((source[0] - source0[0]) - (cad[0] - cad0[0])) < 2e-6  # moved together
+    assert abs(cad[1] - cad0[1]) < 2e-6 and abs(cad[2] - cad0[2]) < 2e-6
+    page.screenshot(path=str(ARTIFACTS / "gizmo-drag.png"))
+    page.select_option("#gizmo", "")
+    page.eval_on_selector("#move-x", "(e) => { e.value = '0'; e.dispatchEvent(new Event('input')); }")
+    page.wait_for_function(f"Number(document.body.dataset.latest) > {revision(page)}")
+    assert settled(page) == "ok"
+    assert max(abs(a - b) for a, b in zip(_pose(page, "frames.cad_in_world"), cad0, strict=True)) < 2e-6
+    assert pages["errors"] == []
+
+
+def test_a_receiver_calibration_is_fitted_shows_its_rejected_point_and_is_accepted(pages):
+    page = pages["tabs"][0]
+    page.select_option("#cal-kind", "receiver")
+    page.fill("#cal-file", "measurements/touch.liberty")
+    page.fill("#cal-rate", "60")
+    page.fill("#cal-points", "measurements/fixture_points.csv")
+    page.click("#cal-fit")
+    page.wait_for_selector("#cal-lines:not([hidden])", timeout=60_000)
+    lines = page.inner_text("#cal-lines")
+    assert re.search(r"F4 +residual +\d+\.\d+ mm +REJECTED", lines), lines  # touched 20 mm off (generate.py)
+    before = revision(page)
+    page.click("#cal-accept")
+    page.wait_for_function(f"Number(document.body.dataset.latest) > {before}")
+    assert settled(page) == "ok"
+    source = _pose(page, "frames.source_in_world")
+    assert max(abs(a - b) for a, b in zip(source, [1.30, -0.82, 0.72], strict=True)) < 0.002  # the truth [m]
+    page.locator("#cal-plot").scroll_into_view_if_needed()
+    page.screenshot(path=str(ARTIFACTS / "calibration.png"))
+    assert pages["errors"] == []
+
+
+def test_write_saves_the_problem_and_writes_what_refine_run_writes(pages, server, tmp_path):
     from refine.cli import main
 
     page = pages["tabs"][0]
@@ -155,6 +229,7 @@ def test_write_saves_the_problem_and_writes_what_refine_run_writes(pages, server
     page.wait_for_selector("#diff:not([hidden])")
     diff = page.inner_text("#diff")
     assert "-orientation_deg = 3.0" in diff and "+orientation_deg = 2.5" in diff
+    assert "+source_in_world = " in diff  # the accepted calibration
     page.click("#write")
     page.wait_for_selector("#write-status", timeout=SOLVE_S * 1000)
     page.locator("#written-files").scroll_into_view_if_needed()

@@ -114,12 +114,13 @@ def test_the_scene_resends_only_the_sections_that_changed():
 
     scenes = iter(
         [
-            {"cell": [1], "robot": {"parts": ["p"], "frames": [0]}, "paths": [7]},
-            {"cell": [1], "robot": {"parts": ["p"], "frames": [1]}, "paths": [8]},
+            {"cell": [1], "robot": {"parts": ["p"], "frames": [0], "where": []}, "paths": [7]},
+            {"cell": [1], "robot": {"parts": ["p"], "frames": [1], "where": []}, "paths": [8]},
         ]
     )
-    real = state.scene_data
+    real, flange = state.scene_data, state.flange_poses
     state.scene_data = lambda result: next(scenes)
+    state.flange_poses = lambda result, where: []
     try:
         diff = state.SceneDiff()
         answer = SimpleNamespace(revision=1, result=object())
@@ -127,10 +128,10 @@ def test_the_scene_resends_only_the_sections_that_changed():
         answer.revision = 2
         second, whole2 = diff.messages(answer)
     finally:
-        state.scene_data = real
+        state.scene_data, state.flange_poses = real, flange
     assert sorted(json.loads(first)["scene"]) == ["cell", "parts", "paths", "robot"]
-    assert json.loads(second) == {"type": "scene", "revision": 2, "scene": {"robot": {"frames": [1]}, "paths": [8]}}
-    assert json.loads(whole2)["scene"] == {"cell": [1], "parts": ["p"], "robot": {"frames": [1]}, "paths": [8]}
+    assert json.loads(second) == {"type": "scene", "revision": 2, "scene": {"robot": {"frames": [1], "where": [], "flange": []}, "paths": [8]}}
+    assert json.loads(whole2)["scene"] == {"cell": [1], "parts": ["p"], "robot": {"frames": [1], "where": [], "flange": []}, "paths": [8]}
 
 
 @pytest.fixture(scope="module")
