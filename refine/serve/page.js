@@ -109,7 +109,7 @@ import { View, poseMatrix, matrixPose, rowMatrix } from "./scene3d.js";
       Plotly.react($("cal-plot"), [
         { type: "scatter", mode: "markers", name: "kept", x: kept.map(first), y: kept.map(second), marker: { size: many ? 3 : 8 } },
         { type: "scatter", mode: "markers", name: "rejected", x: rejected.map(first), y: rejected.map(second), marker: { size: many ? 6 : 10, color: "#c0392b" } }
-      ], { height: 220, margin: { l: 50, r: 10, t: 10, b: 40 }, xaxis: { title: { text: many ? "sample" : "point" }, type: many ? "linear" : "category" },
+      ], { height: 220, margin: { l: 50, r: 10, t: 10, b: 40 }, xaxis: { title: { text: many ? "sample" : "point" }, type: many ? "linear" : "category", categoryorder: "array", categoryarray: many ? [] : names },
         yaxis: { title: { text: "residual [mm]" } } }, CONFIG);
       $("cal-accept").textContent = "Accept into the problem (" + j.key + ")";
       $("cal-accept").disabled = false;

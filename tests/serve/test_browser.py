@@ -3,13 +3,14 @@ a change of the cone seen in a second tab, the part moved out of reach and back,
 by the 3D gizmo, a receiver calibration fitted and accepted, and write.
 
 One server for the module (uvicorn on a free port, in a thread) on a copy of the glass cell (with
-the measurements of problems/glass_calibrated); the tests run in order on it. Screenshots go to
+the measurements of problems/glass_calibrated); the steps run in order on it, as one test. Screenshots go to
 tests/artifacts/serve/ (the folder is printed at the end of the run).
 """
 
 from __future__ import annotations
 
 import json
+import os
 import re
 import shutil
 import threading
@@ -56,11 +57,9 @@ def server(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def pages(server, request):
+def pages(server, summary):
     ARTIFACTS.mkdir(parents=True, exist_ok=True)
-    reporter = request.config.pluginmanager.get_plugin("terminalreporter")
-    if reporter is not None:
-        request.addfinalizer(lambda: reporter.write_line(f"refine serve screenshots: {ARTIFACTS}"))
+    summary.append(f"refine serve in the browser: screenshots in {ARTIFACTS}")
     with playwright.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=str(CHROMIUM), args=["--no-sandbox"])
         errors: list[str] = []
@@ -90,7 +89,7 @@ def revision(page) -> int:
     return int(page.get_attribute("body", "data-revision"))
 
 
-def test_the_first_screen_shows_the_cell_and_the_verdict(pages):
+def _the_first_screen_shows_the_cell_and_the_verdict(pages):
     page = pages["tabs"][0]
     assert settled(page) == "ok"
     assert page.inner_text("#verdict .badge") == "ok"
@@ -103,7 +102,7 @@ def test_the_first_screen_shows_the_cell_and_the_verdict(pages):
     assert page.is_hidden("#js-errors")
 
 
-def test_the_tcp_gizmo_sits_where_the_flange_pose_and_tcp_in_flange_put_the_tcp_on_the_path(server, pages):
+def _the_tcp_gizmo_sits_where_the_flange_pose_and_tcp_in_flange_put_the_tcp_on_the_path(server, pages):
     import numpy as np
 
     from refine.report.scene import robot_frames
@@ -118,7 +117,7 @@ def test_the_tcp_gizmo_sits_where_the_flange_pose_and_tcp_in_flange_put_the_tcp_
         assert np.linalg.norm(T[:3, 3] - result.passes[i].fused.positions[k]) < 2e-6  # [m]: on the CAD path
 
 
-def test_a_bad_value_is_answered_with_its_unit_and_changes_nothing(pages):
+def _a_bad_value_is_answered_with_its_unit_and_changes_nothing(pages):
     page = pages["tabs"][0]
     before = revision(page)
     page.fill("[id='tolerances.orientation_deg']", "-1")
@@ -130,7 +129,7 @@ def test_a_bad_value_is_answered_with_its_unit_and_changes_nothing(pages):
     assert revision(page) == before and page.get_attribute("body", "data-status") == "ok"
 
 
-def test_a_change_of_the_cone_resolves_and_both_tabs_show_it(pages):
+def _a_change_of_the_cone_resolves_and_both_tabs_show_it(pages):
     page, other = pages["tabs"]
     before = revision(page)
     page.fill("[id='tolerances.orientation_deg']", "2.5")
@@ -144,24 +143,26 @@ def test_a_change_of_the_cone_resolves_and_both_tabs_show_it(pages):
     assert "<= 2.5 deg" in other.inner_text("#verdict")
 
 
-def _move_z(page, mm: int) -> None:
+def _move_x(page, mm: int) -> None:
     page.eval_on_selector(
-        "#move-z", f"(e) => {{ e.value = '{mm}'; e.dispatchEvent(new Event('input')); }}"
+        "#move-x", f"(e) => {{ e.value = '{mm}'; e.dispatchEvent(new Event('input')); }}"
     )
 
 
-def test_the_part_moved_up_out_of_reach_is_repaired_with_its_cause_and_moved_back_is_ok(pages):
+def _the_part_moved_away_out_of_reach_fails_with_its_cause_and_moved_back_is_ok(pages):
     page = pages["tabs"][0]
     before, placed = revision(page), page.get_attribute("body", "data-status")
-    for mm in (200, 400, 600):  # a drag: the steps before the last may be dropped
-        _move_z(page, mm)
+    for mm in (200, 400, 600):  # a drag away from the robot: the steps before the last may be dropped
+        _move_x(page, mm)
     page.wait_for_function(f"Number(document.body.dataset.latest) >= {before + 3}")
     status = settled(page)
     assert status in ("repaired", "infeasible")
+    page.click("#verdict details summary")  # the solver's diagnosis, one click away
     text = page.inner_text("#verdict")
-    assert "reach" in text, text  # the cause: the wrist centre beyond the arm's reach
+    # the cause: the wrist centre beyond the arm's reach (the part's near edge is then 1.9 m from the base)
+    assert "reach" in text, text
     page.screenshot(path=str(ARTIFACTS / "out-of-reach.png"))
-    _move_z(page, 0)
+    _move_x(page, 0)
     page.wait_for_function(f"Number(document.body.dataset.latest) >= {before + 4}")
     assert settled(page) == placed  # as before the move: the verdict does not depend on the way there
     assert pages["errors"] == []
@@ -171,7 +172,7 @@ def _pose(page, key: str) -> list[float]:
     return [float(page.input_value(f"[aria-label='{key} xyz[{i}]']")) for i in range(3)]
 
 
-def test_the_part_dragged_by_the_gizmo_moves_the_cad_frame_and_the_receiver_by_as_much(pages):
+def _the_part_dragged_by_the_gizmo_moves_the_cad_frame_and_the_receiver_by_as_much(pages):
     page = pages["tabs"][0]
     cad0, source0 = _pose(page, "frames.cad_in_world"), _pose(page, "frames.source_in_world")
     before = revision(page)
@@ -200,7 +201,7 @@ def test_the_part_dragged_by_the_gizmo_moves_the_cad_frame_and_the_receiver_by_a
     assert pages["errors"] == []
 
 
-def test_a_receiver_calibration_is_fitted_shows_its_rejected_point_and_is_accepted(pages):
+def _a_receiver_calibration_is_fitted_shows_its_rejected_point_and_is_accepted(pages):
     page = pages["tabs"][0]
     page.select_option("#cal-kind", "receiver")
     page.fill("#cal-file", "measurements/touch.liberty")
@@ -221,7 +222,7 @@ def test_a_receiver_calibration_is_fitted_shows_its_rejected_point_and_is_accept
     assert pages["errors"] == []
 
 
-def test_write_saves_the_problem_and_writes_what_refine_run_writes(pages, server, tmp_path):
+def _write_saves_the_problem_and_writes_what_refine_run_writes(pages, server, tmp_path):
     from refine.cli import main
 
     page = pages["tabs"][0]
@@ -267,3 +268,31 @@ def test_write_saves_the_problem_and_writes_what_refine_run_writes(pages, server
             stamp = rb'LastWritingDateTime="[^"]*"'  # PathML's time of writing
             assert re.sub(stamp, b"", a) == re.sub(stamp, b"", b), name
     assert pages["errors"] == []
+
+
+STEPS = (
+    _the_first_screen_shows_the_cell_and_the_verdict,
+    _the_tcp_gizmo_sits_where_the_flange_pose_and_tcp_in_flange_put_the_tcp_on_the_path,
+    _a_bad_value_is_answered_with_its_unit_and_changes_nothing,
+    _a_change_of_the_cone_resolves_and_both_tabs_show_it,
+    _the_part_moved_away_out_of_reach_fails_with_its_cause_and_moved_back_is_ok,
+    _the_part_dragged_by_the_gizmo_moves_the_cad_frame_and_the_receiver_by_as_much,
+    _a_receiver_calibration_is_fitted_shows_its_rejected_point_and_is_accepted,
+    _write_saves_the_problem_and_writes_what_refine_run_writes,
+)
+"""What a user does, in order on one server (one test, so that parallel workers never split it)."""
+
+
+def test_a_user_reviews_changes_calibrates_and_writes_the_glass_cell(server, pages, tmp_path, summary):
+    import inspect
+
+    times = []
+    for step in STEPS:
+        given = {"server": server, "pages": pages, "tmp_path": tmp_path}
+        t0, c0 = time.perf_counter(), time.process_time()
+        step(**{name: given[name] for name in inspect.signature(step).parameters})
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        times.append(f"{step.__name__.strip('_')}: {wall:.1f} s ({cpu:.1f} s CPU in this process)")
+    summary.append("refine serve in the browser, each step's wall time: " + "; ".join(times))
+    summary.append(f"load average at the end: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    (ARTIFACTS / "steps.txt").write_text("\n".join(times) + "\n", encoding="utf-8")
