@@ -174,22 +174,37 @@ class FusedCache:
         return new
 
 
+WARM_MOVE_M = 0.1
+"""Farthest a waypoint may have moved since the previous answer for that answer to be the start [m]:
+a warm start is for small changes, and a jump beyond it is solved cold at once rather than after a
+warm solve that is not ``ok``."""
+
+
+def near(previous: RunResult, fused: FusedPath) -> bool:
+    """Whether ``fused`` has the previous first pass's waypoints, none moved beyond :data:`WARM_MOVE_M`."""
+    old = previous.first.fused.positions
+    if old.shape != fused.positions.shape:
+        return False
+    return bool(np.linalg.norm(old - fused.positions, axis=1).max() <= WARM_MOVE_M)
+
+
 def resolve(problem: Problem, fused: FusedPath, previous: RunResult | None) -> RunResult:
     """Solve ``problem`` on ``fused``, from ``previous``'s answer where it applies (module docstring).
 
     The start is :class:`refine.optimise.warm.WarmStart`, as ``refine.solve(..., previous=...)``
     re-solves: the previous joints moved onto the new poses and, when robot, base, tool and
     weights are the same, the previous last problem, its multipliers and its clearance bounds.
-    Only an ``ok`` answer is a start: a repaired or failed one holds joints bent by the slack or
-    left where the solver gave up. When the warm solve is not ``ok`` the problem is solved again
-    from the IK seed and that answer is kept, so a verdict never depends on the changes before it
-    (the cold answer is the one ``refine run`` gives).
+    Only an ``ok`` answer is a start, and only for a path :func:`near` the one it answered: a
+    repaired or failed one holds joints bent by the slack or left where the solver gave up, and a
+    path moved far (a jump of the part) is solved as ``refine run`` solves it. When the warm solve
+    is not ``ok`` the problem is solved again from the IK seed and that answer is kept, so a
+    verdict never depends on the changes before it (the cold answer is the one ``refine run`` gives).
     """
     from refine.api import Result, _solve_again  # the re-solve of refine.solve(..., previous=...)
 
     robot = robot_for(problem.robot)
     start = None
-    if previous is not None and previous.robot is robot and previous.status == "ok":
+    if previous is not None and previous.robot is robot and previous.status == "ok" and near(previous, fused):
         start = Result(previous)
     result = _solve_again(problem, robot, fused, start, None).run
     if result.status != "ok" and start is not None:

@@ -11,7 +11,7 @@ import pytest
 import tomlkit
 
 from refine.serve.edits import apply_changes
-from refine.serve.session import FusedCache, Job, LatestSolver
+from refine.serve.session import WARM_MOVE_M, FusedCache, Job, LatestSolver, near
 
 ROOT = Path(__file__).resolve().parents[2]
 GLASS = ROOT / "problems" / "glass_adhesive" / "problem.toml"
@@ -156,3 +156,20 @@ def test_the_fused_path_moves_with_the_workpiece_as_fusing_the_moved_files_gives
     angle = np.arccos(np.clip((np.einsum("nij,nij->n", fresh.rotations, carried.rotations) - 1) / 2, -1, 1))
     assert np.degrees(angle).max() < 1e-3
 
+
+
+def test_a_previous_answer_is_a_start_only_for_a_path_moved_a_little():
+    from types import SimpleNamespace
+
+    line = np.column_stack([np.linspace(0.0, 1.0, 11), np.zeros(11), np.zeros(11)])  # 1 m along x
+    previous = SimpleNamespace(first=SimpleNamespace(fused=SimpleNamespace(positions=line)))
+
+    def path(points):
+        return SimpleNamespace(positions=points)
+
+    assert near(previous, path(line + [0.0, 0.0, 0.05]))  # 50 mm up
+    assert near(previous, path(line + [0.0, 0.59 * WARM_MOVE_M, 0.79 * WARM_MOVE_M]))  # just inside the limit
+    assert not near(previous, path(line + [0.6, 0.0, 0.0]))  # the jump of the browser test
+    turned = line @ np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # 90 deg about z
+    assert not near(previous, path(turned))  # the far end moved by sqrt(2) m
+    assert not near(previous, path(line[:10]))  # another number of waypoints
