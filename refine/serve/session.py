@@ -8,7 +8,7 @@ only the newest problem asked for, so a drag that sends many changes never queue
 
 A re-solve starts from the previous answer: the fused path is reused when the change leaves the
 CAD path and the demonstration alone, moved rigidly when the workpiece moved with its receiver,
-and the solve is the re-solve of ``refine.solve(..., previous=...)`` (:mod:`refine.optimise.warm`:
+and the solve starts as ``refine.solve(..., previous=...)`` does (:mod:`refine.optimise.warm`:
 the previous joints moved onto the new poses, the previous last problem and multipliers kept where
 robot, base, tool and weights are the same). A solve still running when a newer change comes is
 stopped (:func:`refine.control.controlled`). Writing saves the problem
@@ -33,12 +33,15 @@ from refine.control import controlled
 from refine.errors import Cancelled, InputError
 from refine.frames import invert_transform
 from refine.optimise.moves import moved_path
+from refine.optimise.problem import RefinementNLP, reuse_for
+from refine.optimise.warm import WarmStart
 from refine.paths import FusedPath
 from refine.problem import Problem, load_problem
+from refine.robot.model import Robot
 from refine.robot.registry import robot_for
 from refine.run.result import RunResult
 from refine.run.solve import solve_problem
-from refine.run.stages import fused_path
+from refine.run.stages import fused_path, weights_for
 from refine.serve.edits import apply_changes, check_keys
 
 log = logging.getLogger(__name__)
@@ -188,6 +191,35 @@ def near(previous: RunResult, fused: FusedPath) -> bool:
     return bool(np.linalg.norm(old - fused.positions, axis=1).max() <= WARM_MOVE_M)
 
 
+def warm_start(
+    previous: RunResult, problem: Problem, robot: Robot, fused: FusedPath
+) -> tuple[RefinementNLP | None, WarmStart | None]:
+    """The built problem to reuse and the start :func:`resolve` takes from ``previous`` (its docstring).
+
+    The previous last problem and multipliers are kept only with its built problem, which needs the
+    same base, tool and weights (:func:`refine.optimise.problem.reuse_for` checks the rest).
+    """
+    first = previous.first
+    built = first.nlp
+    setup = built is not None and (
+        np.array_equal(built.base_in_world, problem.robot.base_in_world)
+        and np.array_equal(built.tcp_in_flange, problem.tool.tcp_in_flange)
+        and built.axisymmetric == problem.tool.axisymmetric
+        and built.weights == weights_for(problem, robot)
+    )
+    nlp = reuse_for(built, fused, problem.tolerances) if setup else None
+    if first.refinement.q.shape != (len(fused), robot.nq):
+        return nlp, None
+    kept = nlp is not None
+    return nlp, WarmStart(
+        q=first.refinement.q,
+        rotations=first.fused.rotations if len(first.fused) == len(fused) else None,
+        problem=first.refinement.problem if kept else None,
+        multipliers=first.refinement.multipliers if kept else None,
+        clearance=first.clearance,
+    )
+
+
 def resolve(problem: Problem, fused: FusedPath, previous: RunResult | None) -> RunResult:
     """Solve ``problem`` on ``fused``, from ``previous``'s answer where it applies (module docstring).
 
@@ -200,14 +232,12 @@ def resolve(problem: Problem, fused: FusedPath, previous: RunResult | None) -> R
     is not ``ok`` the problem is solved again from the IK seed and that answer is kept, so a
     verdict never depends on the changes before it (the cold answer is the one ``refine run`` gives).
     """
-    from refine.api import Result, _solve_again  # the re-solve of refine.solve(..., previous=...)
-
     robot = robot_for(problem.robot)
-    start = None
+    nlp, warm = None, None
     if previous is not None and previous.robot is robot and previous.status == "ok" and near(previous, fused):
-        start = Result(previous)
-    result = _solve_again(problem, robot, fused, start, None).run
-    if result.status != "ok" and start is not None:
+        nlp, warm = warm_start(previous, problem, robot, fused)
+    result = solve_problem(problem, robot=robot, fused=fused, nlp=nlp, warm=warm)
+    if result.status != "ok" and warm is not None:
         log.info("serve: the warm solve is %s; solving again from the IK seed", result.status)
         result = solve_problem(problem, robot=robot, fused=fused)
     return result
