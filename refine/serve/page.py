@@ -57,7 +57,7 @@ ul.segments li{margin:.3em 0;cursor:pointer} ul.segments li:hover{text-decoratio
 .controls{display:flex;gap:.6em;align-items:center;flex-wrap:wrap;padding:.3em .6em}
 .controls input[type=range]{width:20em} #frame-label{font-family:monospace;min-width:12em}
 pre#diff{background:#f4f4f4;padding:.5em;white-space:pre-wrap;max-height:20em;overflow:auto}
-button{margin:.2em .2em .2em 0} .row[hidden]{display:none} .note{color:#777}
+button{margin:.2em .2em .2em 0} .row[hidden]{display:none} pre#cal-lines{white-space:pre-wrap} .note{color:#777}
 #scene{position:relative;overflow:hidden} #scene canvas{display:block}
 .ramp{display:inline-block;width:8em;height:.8em;margin:0 .3em;vertical-align:middle;
 background:linear-gradient(90deg,#440154,#3b528b,#21918c,#5ec962,#fde725)}

@@ -117,6 +117,30 @@ def _the_tcp_gizmo_sits_where_the_flange_pose_and_tcp_in_flange_put_the_tcp_on_t
         assert np.linalg.norm(T[:3, 3] - result.passes[i].fused.positions[k]) < 2e-6  # [m]: on the CAD path
 
 
+def _the_frames_drawn_and_dragged_are_those_of_the_problem(server, pages):
+    import numpy as np
+
+    from refine.frames import transform_from_xyz_rpy
+
+    page = pages["tabs"][0]
+    # three.js's Euler "ZYX" against the problem file's fixed-axis X-Y-Z angles, both ways
+    pose = {"xyz": [0.1, -0.2, 0.3], "rpy_deg": [10.0, -35.0, 120.0]}
+    got = page.evaluate(
+        "async (p) => { const m = await import('./scene3d.js'); const T = m.poseMatrix(p);"
+        " return { T: T.clone().transpose().elements, back: m.matrixPose(T) }; }",
+        pose,
+    )
+    T = transform_from_xyz_rpy(pose["xyz"], pose["rpy_deg"])
+    assert np.abs(np.reshape(got["T"], (4, 4)) - T).max() < 1e-6
+    assert np.abs(np.subtract(got["back"]["rpy_deg"], pose["rpy_deg"])).max() < 1e-4
+    # the TCP gizmo sits on the path's first waypoint when the scrubber is at its start
+    page.select_option("#gizmo", "tool.tcp_in_flange")
+    tcp = page.evaluate("document.getElementById('scene').view.frames['tool.tcp_in_flange'].elements.slice(12, 15)")
+    first = server["session"].answer.result.passes[0].fused.positions[0]
+    assert np.linalg.norm(np.subtract(tcp, first)) < 1e-5  # [m]
+    page.select_option("#gizmo", "")
+
+
 def _a_bad_value_is_answered_with_its_unit_and_changes_nothing(pages):
     page = pages["tabs"][0]
     before = revision(page)
@@ -273,6 +297,7 @@ def _write_saves_the_problem_and_writes_what_refine_run_writes(pages, server, tm
 STEPS = (
     _the_first_screen_shows_the_cell_and_the_verdict,
     _the_tcp_gizmo_sits_where_the_flange_pose_and_tcp_in_flange_put_the_tcp_on_the_path,
+    _the_frames_drawn_and_dragged_are_those_of_the_problem,
     _a_bad_value_is_answered_with_its_unit_and_changes_nothing,
     _a_change_of_the_cone_resolves_and_both_tabs_show_it,
     _the_part_moved_away_out_of_reach_fails_with_its_cause_and_moved_back_is_ok,
