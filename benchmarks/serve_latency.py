@@ -3,9 +3,12 @@
 Starts the app on a copy of the glass cell (uvicorn on a free port, in this process), connects a
 websocket as the page does and sends changes one at a time, each after the verdict of the one
 before: the orientation cone alternating 2.9 / 3.0 deg, then the workpiece moved by 1 mm steps
-along x and back. The latency of a change is from sending it to receiving its verdict message.
-Prints the median and 95th percentile of each kind, the load average beside them, and the
-process's resident memory after the first solve and after ``--memory-changes`` changes.
+along x and back. The latency of a change is from sending it to receiving its verdict message;
+its CPU time is the whole process's (server and client) over the same span, which a shared
+machine's load does not stretch. Prints the median and 95th percentile of each kind, the load
+average beside them; then a drag (20 changes sent at once: the time to the last one's verdict, and
+how many solves were stopped when overtaken); and the process's resident memory after the first
+solve and after ``--memory-changes`` changes.
 
     nice python3 benchmarks/serve_latency.py [--changes 50] [--memory-changes 500]
 """
