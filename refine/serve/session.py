@@ -367,12 +367,15 @@ class Session:
             )
         )
 
-    def save(self) -> Path:
-        """Write the problem file with the changes (comments and order kept) and make it the base."""
-        text = self.current_text()
+    def _replace_file(self, text: str) -> None:
         tmp = self.path.with_name(f".{self.path.name}.saving")
         tmp.write_text(text, encoding="utf-8")
         tmp.replace(self.path)  # a reader never sees half a file
+
+    def save(self) -> Path:
+        """Write the problem file with the changes (comments and order kept) and make it the base."""
+        text = self.current_text()
+        self._replace_file(text)
         with self._lock:
             self.text = text
             self.base = tomlkit.parse(text)
@@ -384,14 +387,24 @@ class Session:
         """Save the problem file and write every output into ``out_dir`` as ``refine run`` does.
 
         The saved file is read back and run by :func:`refine.run.write.run`, the function behind
-        ``refine run``, so the files are those the command would write (all or nothing).
+        ``refine run``, so the files are those the command would write (all or nothing). When the
+        run raises, the problem file is put back as it was and the changes are kept, so the file
+        and the outputs never disagree.
         """
         from refine.run.write import run
 
         with self._engine:
+            on_disk = self.path.read_text(encoding="utf-8")
+            with self._lock:
+                kept = (self.text, self.base, self.doc, dict(self.changes))
             self.save()
-            problem = load_problem(self.path)
-            return run(problem, out_dir)
+            try:
+                return run(load_problem(self.path), out_dir)
+            except BaseException:
+                self._replace_file(on_disk)
+                with self._lock:
+                    self.text, self.base, self.doc, self.changes = kept
+                raise
 
     def close(self) -> None:
         """Stop the solver thread."""

@@ -179,3 +179,27 @@ def test_receiver_tcp_and_touched_points_are_fitted_to_the_frames_they_were_simu
     assert [names[k] for k in fit["rejected"]] == rejected
     assert len(fit["residuals_mm"]) >= 4 and fit["rms_residual_mm"] < 1.0
     assert session.revision == 0  # nothing changes until the fit is accepted
+
+
+def test_a_write_that_fails_leaves_the_problem_file_as_it_was_and_keeps_the_changes(folder, monkeypatch):
+    import refine.run.write
+    from refine.errors import RefineError
+
+    s = Session(folder)
+    s.solver.stop()  # no solve: only the change's check and the write matter here
+    try:
+        before = s.path.read_text(encoding="utf-8")
+        s.change({"tolerances.orientation_deg": 2.5})
+
+        def failing(problem, out_dir):
+            assert "orientation_deg = 2.5" in s.path.read_text(encoding="utf-8")  # saved before the run
+            raise RefineError("the disk is full (a planted failure)")
+
+        monkeypatch.setattr(refine.run.write, "run", failing)
+        answer = TestClient(create_app(s, folder / "out"), base_url="http://127.0.0.1:8000").post("/api/write")
+        assert answer.status_code == 400 and "disk is full" in answer.json()["error"]
+        assert s.path.read_text(encoding="utf-8") == before
+        assert s.changes == {"tolerances.orientation_deg": 2.5}
+        assert "+orientation_deg = 2.5" in s.diff()
+    finally:
+        s.close()
