@@ -1,6 +1,6 @@
 """refine serve in Debian's chromium, driven by Playwright: the glass cell's first screen, a bad value,
 a change of the cone seen in a second tab, the part moved out of reach and back, the part dragged
-by the 3D gizmo, a receiver calibration fitted and accepted, and write.
+and turned by the 3D gizmo, a receiver calibration fitted and accepted, and write.
 
 One server for the module (uvicorn on a free port, in a thread) on a copy of the glass cell (with
 the measurements of problems/glass_calibrated); the steps run in order on it, as one test. Screenshots go to
@@ -225,6 +225,43 @@ def _the_part_dragged_by_the_gizmo_moves_the_cad_frame_and_the_receiver_by_as_mu
     assert pages["errors"] == []
 
 
+def _the_part_turned_by_the_gizmo_turns_the_receiver_about_the_cad_origin(pages):
+    import math
+
+    page = pages["tabs"][0]
+    cad0, source0 = _pose(page, "frames.cad_in_world"), _pose(page, "frames.source_in_world")
+    rz0 = float(page.input_value("[aria-label='frames.cad_in_world rpy_deg[2]']"))
+    before = revision(page)
+    page.select_option("#gizmo", "move")
+    page.select_option("#gizmo-mode", "rotate")
+    view = "document.getElementById('scene').view"
+    a = page.evaluate(f"{view}.screenOf([0.5, 0, 0])")  # on the z ring, and a little along it
+    b = page.evaluate(f"{view}.screenOf([0.5, 0.1, 0])")
+    page.mouse.move(*a)
+    page.mouse.down()
+    for k in range(1, 9):
+        page.mouse.move(a[0] + (b[0] - a[0]) * 0.4 * k, a[1] + (b[1] - a[1]) * 0.4 * k)
+        time.sleep(0.03)
+    page.mouse.up()
+    page.wait_for_function(f"Number(document.body.dataset.latest) > {before}")
+    assert settled(page) in ("ok", "repaired", "infeasible")
+    turn = float(page.input_value("[aria-label='frames.cad_in_world rpy_deg[2]']")) - rz0
+    assert abs(turn) > 5.0  # [deg]
+    cad, source = _pose(page, "frames.cad_in_world"), _pose(page, "frames.source_in_world")
+    assert max(abs(p - q) for p, q in zip(cad, cad0, strict=True)) < 2e-6  # turned about its own origin
+    c, s_ = math.cos(math.radians(turn)), math.sin(math.radians(turn))
+    dx, dy = source0[0] - cad0[0], source0[1] - cad0[1]
+    expected = [cad0[0] + c * dx - s_ * dy, cad0[1] + s_ * dx + c * dy, source0[2]]  # by hand
+    assert max(abs(p - q) for p, q in zip(source, expected, strict=True)) < 2e-5, (source, expected)
+    page.select_option("#gizmo-mode", "translate")
+    page.select_option("#gizmo", "")
+    page.eval_on_selector("#move-turn", "(e) => { e.value = '0'; e.dispatchEvent(new Event('input')); }")
+    page.wait_for_function(f"Number(document.body.dataset.latest) > {revision(page)}")
+    assert settled(page) == "ok"
+    assert max(abs(p - q) for p, q in zip(_pose(page, "frames.source_in_world"), source0, strict=True)) < 2e-6
+    assert pages["errors"] == []
+
+
 def _a_receiver_calibration_is_fitted_shows_its_rejected_point_and_is_accepted(pages):
     page = pages["tabs"][0]
     page.select_option("#cal-kind", "receiver")
@@ -302,6 +339,7 @@ STEPS = (
     _a_change_of_the_cone_resolves_and_both_tabs_show_it,
     _the_part_moved_away_out_of_reach_fails_with_its_cause_and_moved_back_is_ok,
     _the_part_dragged_by_the_gizmo_moves_the_cad_frame_and_the_receiver_by_as_much,
+    _the_part_turned_by_the_gizmo_turns_the_receiver_about_the_cad_origin,
     _a_receiver_calibration_is_fitted_shows_its_rejected_point_and_is_accepted,
     _write_saves_the_problem_and_writes_what_refine_run_writes,
 )
