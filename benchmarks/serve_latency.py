@@ -3,9 +3,12 @@
 Starts the app on a copy of the glass cell (uvicorn on a free port, in this process), connects a
 websocket as the page does and sends changes one at a time, each after the verdict of the one
 before: the orientation cone alternating 2.9 / 3.0 deg, then the workpiece moved by 1 mm steps
-along x and back. The latency of a change is from sending it to receiving its verdict message.
-Prints the median and 95th percentile of each kind, the load average beside them, and the
-process's resident memory after the first solve and after ``--memory-changes`` changes.
+along x and back. The latency of a change is from sending it to receiving its verdict message;
+its CPU time is the whole process's (server and client) over the same span, which a shared
+machine's load does not stretch. Prints the median and 95th percentile of each kind, the load
+average beside them; then a drag (20 changes sent at once: the time to the last one's verdict, and
+how many solves were stopped when overtaken); and the process's resident memory after the first
+solve and after ``--memory-changes`` changes.
 
     nice python3 benchmarks/serve_latency.py [--changes 50] [--memory-changes 500]
 """
@@ -39,14 +42,15 @@ def rss_mb() -> float:
     return float("nan")
 
 
-async def changes(url: str, kinds: list[dict], first: bool) -> list[float]:
-    out = []
+async def changes(url: str, kinds: list[dict], first: bool) -> tuple[list[float], list[float]]:
+    """Send each change after the verdict of the one before; the latencies and CPU times [s]."""
+    out, cpu = [], []
     async with websockets.connect(url, max_size=None) as ws:
         if first:  # the verdict of the problem as loaded
             while json.loads(await ws.recv()).get("type") != "scene":
                 pass
         for change in kinds:
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             await ws.send(json.dumps({"type": "change", "changes": change}))
             while True:
                 msg = json.loads(await ws.recv())
@@ -56,8 +60,24 @@ async def changes(url: str, kinds: list[dict], first: bool) -> list[float]:
                     if msg["error"]:
                         raise RuntimeError(msg["error"])
                     out.append(time.perf_counter() - t0)
+                    cpu.append(time.process_time() - c0)
                     break
-    return out
+    return out, cpu
+
+
+async def drag(url: str, kinds: list[dict]) -> float:
+    """Send every change at once, as a slider dragged fast; the time to the verdict of the last [s]."""
+    async with websockets.connect(url, max_size=None) as ws:
+        t0 = time.perf_counter()
+        for change in kinds:
+            await ws.send(json.dumps({"type": "change", "changes": change}))
+        latest = None
+        while True:
+            msg = json.loads(await ws.recv())
+            if msg["type"] == "pending":
+                latest = msg["revision"]
+            if msg["type"] == "verdict" and msg["revision"] == msg["latest"] == latest:
+                return time.perf_counter() - t0
 
 
 def main() -> int:
@@ -77,22 +97,36 @@ def main() -> int:
     cone = [{"tolerances.orientation_deg": 2.9 if k % 2 == 0 else 3.0} for k in range(n)]
     steps = [min(k, n - k) for k in range(1, n + 1)]
     move = [{"move": {"xyz": [s * 1e-3, 0.0, 0.0], "rpy_deg": [0.0, 0.0, 0.0]}} for s in steps]
-    t_cone = asyncio.run(changes(url, cone, first=True))
+    t_cone, c_cone = asyncio.run(changes(url, cone, first=True))
     after_first = rss_mb()
     load_cone = os.getloadavg()[0]
-    t_move = asyncio.run(changes(url, move, first=False))
+    t_move, c_move = asyncio.run(changes(url, move, first=False))
     load_move = os.getloadavg()[0]
-    for label, t, load in (("cone 2.9/3.0 deg", t_cone, load_cone), ("part moved 1 mm steps", t_move, load_move)):
-        a = np.asarray(t)
+    for label, t, c, load in (
+        ("cone 2.9/3.0 deg", t_cone, c_cone, load_cone),
+        ("part moved 1 mm steps", t_move, c_move, load_move),
+    ):
+        a, b = np.asarray(t), np.asarray(c)
         print(
             f"{label:24s} {len(a)} changes: median {np.median(a):.3f} s, p95 {np.percentile(a, 95):.3f} s, "
-            f"max {a.max():.3f} s (load average {load:.2f})"
+            f"max {a.max():.3f} s; CPU of the process median {np.median(b):.3f} s, p95 "
+            f"{np.percentile(b, 95):.3f} s (load average {load:.2f})"
         )
-    done = 2 * n
+    before = session.solver.solved
+    steps20 = [{"move": {"xyz": [k * 1e-3, 0.0, 0.0], "rpy_deg": [0.0, 0.0, 0.0]}} for k in range(1, 21)]
+    t_drag = asyncio.run(drag(url, steps20))
+    print(
+        f"a drag of 20 changes sent at once: the last one's verdict after {t_drag:.3f} s, "
+        f"{session.solver.solved - before} solved, {session.solver.cancelled} solves stopped when superseded"
+    )
+    done = 2 * n + len(steps20)
     extra = max(0, args.memory_changes - done)
     if extra:
         more = [{"tolerances.orientation_deg": 2.9 if k % 2 == 0 else 3.0} for k in range(extra)]
         asyncio.run(changes(url, more, first=False))
+    import gc
+
+    gc.collect()
     print(
         f"resident memory: {after_first:.0f} MB after the first solve, {rss_mb():.0f} MB after "
         f"{done + extra} changes; solver: {session.solver.solved} solved, {session.solver.dropped} dropped"

@@ -6,7 +6,7 @@ Built on Starlette (routing, websockets, responses) served by uvicorn. Every req
 the printed access token (``?token=``, the ``X-Refine-Token`` header, or the cookie the page
 gets), compared in constant time. A request with an ``Origin`` of another site is refused.
 
-The browser names no file but a calibration log, which must lie inside the problem folder
+The browser names no file but calibration measurements, which must lie inside the problem folder
 (:func:`refine.serve.calibration.inside_folder`): the problem file is the one the app was started
 on, the outputs go to the folder given on the command line, and ``/files/NAME`` serves only a file
 written there.
@@ -38,7 +38,7 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 from refine.errors import InputError, RefineError
 from refine.report.html import ERRORS_JS
 from refine.serve.session import Answer, Session
-from refine.serve.state import scene_message, values_of, verdict_message
+from refine.serve.state import SceneDiff, values_of, verdict_message
 
 log = logging.getLogger(__name__)
 
@@ -59,10 +59,13 @@ class Hub:
     last: dict[str, str] = field(default_factory=dict)
     lock: threading.Lock = field(default_factory=threading.Lock)
 
-    def publish(self, kind: str, text: str) -> None:
-        """Send ``text`` to every open websocket (from any thread); keep it as the last ``kind``."""
+    def publish(self, kind: str, text: str, keep: str | None = None) -> None:
+        """Send ``text`` to every open websocket (from any thread).
+
+        ``keep`` (``text`` when None) is kept as the last ``kind``, sent first to a websocket opened later.
+        """
         with self.lock:
-            self.last[kind] = text
+            self.last[kind] = text if keep is None else keep
             loop, queues = self.loop, list(self.queues)
         if loop is None or loop.is_closed():
             return
@@ -122,10 +125,13 @@ def create_app(session: Session, out_dir: Path, *, token: str | None = None) -> 
     out_dir = Path(out_dir).resolve()
     plotly_js = get_plotlyjs()
 
+    scenes = SceneDiff()
+
     def answered(answer: Answer) -> None:  # on the solver's thread
         hub.publish("verdict", json.dumps(verdict_message(session, answer), allow_nan=False))
         if answer.error is None and answer.result is not None:
-            hub.publish("scene", json.dumps(scene_message(answer), allow_nan=False))
+            changed, whole = scenes.messages(answer)
+            hub.publish("scene", changed, keep=whole)
 
     session.on_answer(answered)
 
@@ -141,6 +147,15 @@ def create_app(session: Session, out_dir: Path, *, token: str | None = None) -> 
         from refine.serve.page import page_script
 
         return Response(page_script(), media_type="text/javascript")
+
+    async def module(request: Request) -> Response:
+        from refine.serve.page import module_script
+
+        try:
+            text = module_script(request.path_params.get("name") or request.url.path.rsplit("/", 1)[-1])
+        except KeyError:
+            return PlainTextResponse("no such script", status_code=404)
+        return Response(text, media_type="text/javascript")
 
     async def no_icon(request: Request) -> Response:
         return Response(status_code=204)
@@ -232,6 +247,8 @@ def create_app(session: Session, out_dir: Path, *, token: str | None = None) -> 
     routes = [
         Route("/", page),
         Route("/page.js", script),
+        Route("/scene3d.js", module),
+        Route("/three/{name:str}", module),
         Route("/plotly.js", plotly),
         Route("/favicon.ico", no_icon),
         Route("/api/change", change, methods=["POST"]),

@@ -1,13 +1,13 @@
 // refine serve: shows the states the server sends over the websocket and sends the changes.
 // The body's data-revision is the revision of the verdict shown, data-status its status and
-// data-scene the revision of the scene drawn, so a browser test can wait for them.
-(function () {
-  "use strict";
+// data-scene the revision of the scene drawn, so a browser test can wait for them; #scene's
+// data-objects lists the names of what the 3D view draws.
+import { View, poseMatrix, matrixPose, rowMatrix } from "./scene3d.js";
+{
   var params = new URLSearchParams(window.location.search);
   var token = params.get("token") || "";
-  var CONFIG = { responsive: true, displaylogo: false };
+  var CONFIG = { responsive: true, displaylogo: false };   // Plotly's, for the calibration residuals
   var $ = function (id) { return document.getElementById(id); };
-  var parts = null;       // the robot's shapes in their own frames
   var scene = null;       // the last scene
   var values = null;      // the last values of the settings
   var socket = null;
@@ -43,11 +43,13 @@
       var c = {}; c[key] = pose; send(c);
     });
   });
-  function moveValue() {
-    var move = { xyz: [0, 0, 0], rpy_deg: [0, 0, 0] };
+  function moveValue() {   // the sliders' values over the move as last set (the gizmo sets it exactly)
+    var last = values ? values.move : { xyz: [0, 0, 0], rpy_deg: [0, 0, 0] };
+    var move = { xyz: last.xyz.slice(), rpy_deg: last.rpy_deg.slice() };
     document.querySelectorAll("input.move").forEach(function (i) {
-      var v = Number(i.value);
-      move[i.dataset.part][Number(i.dataset.axis)] = i.dataset.part === "xyz" ? v / 1000 : v;
+      var v = Number(i.value), now = move[i.dataset.part][Number(i.dataset.axis)];
+      var shown = i.dataset.part === "xyz" ? Math.round(now * 1000) : Math.round(now);
+      if (v !== shown) { move[i.dataset.part][Number(i.dataset.axis)] = i.dataset.part === "xyz" ? v / 1000 : v; }
       $(i.id + "-value").textContent = i.value;
     });
     return move;
@@ -80,18 +82,36 @@
   });
 
   var calibration = null;
+  function calibrationInputs() {
+    var inputs = $("cal-kind").selectedOptions[0].dataset.inputs.split(" ");
+    ["log", "readings", "six", "points"].forEach(function (name) {
+      document.querySelectorAll(".cal-" + name).forEach(function (row) { row.hidden = inputs.indexOf(name) < 0; });
+    });
+    $("cal-accept").disabled = true;
+  }
+  $("cal-kind").addEventListener("change", calibrationInputs);
   $("cal-fit").addEventListener("click", function () {
     showError(""); $("cal-accept").disabled = true;
-    api("POST", "api/calibrate", { kind: "pivot", file: $("cal-file").value, format: $("cal-format").value,
-      rate_hz: Number($("cal-rate").value) }).then(function (j) {
+    var inputs = $("cal-kind").selectedOptions[0].dataset.inputs.split(" ");
+    var body = { kind: $("cal-kind").value };
+    if (inputs.indexOf("log") >= 0) { body.file = $("cal-file").value; body.format = $("cal-format").value; body.rate_hz = number($("cal-rate")); }
+    if (inputs.indexOf("readings") >= 0) { body.readings = $("cal-readings").value; }
+    if (inputs.indexOf("six") >= 0) { body.six_point = $("cal-six").checked; }
+    if (inputs.indexOf("points") >= 0) { body.points = $("cal-points").value; }
+    api("POST", "api/calibrate", body).then(function (j) {
       calibration = j;
       $("cal-lines").textContent = j.lines.join("\n"); $("cal-lines").hidden = false;
+      var names = j.labels.length ? j.labels : j.residuals_mm.map(function (r, k) { return k; });
       var kept = [], rejected = [];
-      j.residuals_mm.forEach(function (r, k) { (j.rejected.indexOf(k) >= 0 ? rejected : kept).push([k, r]); });
+      j.residuals_mm.forEach(function (r, k) { (j.rejected.indexOf(k) >= 0 ? rejected : kept).push([names[k], r]); });
+      var first = function (p) { return p[0]; }, second = function (p) { return p[1]; };
+      var many = !j.labels.length;
       Plotly.react($("cal-plot"), [
-        { type: "scatter", mode: "markers", name: "kept", x: kept.map(function (p) { return p[0]; }), y: kept.map(function (p) { return p[1]; }), marker: { size: 3 } },
-        { type: "scatter", mode: "markers", name: "rejected", x: rejected.map(function (p) { return p[0]; }), y: rejected.map(function (p) { return p[1]; }), marker: { size: 6, color: "#c0392b" } }
-      ], { height: 220, margin: { l: 50, r: 10, t: 10, b: 40 }, xaxis: { title: { text: "sample" } }, yaxis: { title: { text: "residual [mm]" } } }, CONFIG);
+        { type: "scatter", mode: "markers", name: "kept", x: kept.map(first), y: kept.map(second), marker: { size: many ? 3 : 8 } },
+        { type: "scatter", mode: "markers", name: "rejected", x: rejected.map(first), y: rejected.map(second), marker: { size: many ? 6 : 10, color: "#c0392b" } }
+      ], { height: 220, margin: { l: 50, r: 10, t: 10, b: 40 }, xaxis: { title: { text: many ? "sample" : "point" }, type: many ? "linear" : "category", categoryorder: "array", categoryarray: many ? [] : names },
+        yaxis: { title: { text: "residual [mm]" } } }, CONFIG);
+      $("cal-accept").textContent = "Accept into the problem (" + j.key + ")";
       $("cal-accept").disabled = false;
     }).catch(function (e) { showError(e.message); });
   });
@@ -111,71 +131,72 @@
       i.value = String(i.dataset.part === "xyz" ? Math.round(x * 1000) : Math.round(x));
       $(i.id + "-value").textContent = i.value;
     });
+    showFrames();
   }
 
-  // ---- the 3D view ----------------------------------------------------------------------------
-  var sceneDiv = $("scene"), slider = $("frame"), robotIdx = [];
-  function place(part, m) {
-    var n = part.x.length, x = new Array(n), y = new Array(n), z = new Array(n);
-    for (var a = 0; a < n; a++) {
-      var px = part.x[a], py = part.y[a], pz = part.z[a];
-      x[a] = m[0] * px + m[1] * py + m[2] * pz + m[3];
-      y[a] = m[4] * px + m[5] * py + m[6] * pz + m[7];
-      z[a] = m[8] * px + m[9] * py + m[10] * pz + m[11];
-    }
-    return [x, y, z];
+  // ---- the 3D view and the gizmo --------------------------------------------------------------
+  var slider = $("frame"), view = new View($("scene"), dragged), lastSent = 0, dragTimer = null;
+  $("scene").view = view;   // for a browser test to find the gizmo's handles
+  var DRAG_MS = 120;   // the least time between two changes sent while a frame is dragged [ms]
+  function frameIndex() { return Math.min(Number(slider.value), scene.robot.frames.length - 1); }
+  function tcpWorld(f) { return rowMatrix(scene.robot.flange[f]).multiply(poseMatrix(values.poses["tool.tcp_in_flange"])); }
+  function showFrames() {   // the frames the gizmo may drag, drawn as axes
+    if (!values) { return; }
+    var frames = {};
+    ["frames.cad_in_world", "frames.source_in_world", "robot.base_in_world"].forEach(function (k) { frames[k] = poseMatrix(values.poses[k]); });
+    frames.move = frames["frames.cad_in_world"];
+    if (scene && scene.robot && scene.robot.flange) { frames["tool.tcp_in_flange"] = tcpWorld(frameIndex()); }
+    view.setFrames(frames);
   }
-  function draw() {
-    if (!scene || !parts) { return; }
-    var traces = [], q = $("quantity").value, f = Math.min(Number(slider.value), scene.robot.frames.length - 1);
-    scene.cell.forEach(function (o) {
-      traces.push({ type: "mesh3d", name: o.name, x: o.x, y: o.y, z: o.z, i: o.i, j: o.j, k: o.k,
-        color: o.kind === "workpiece" ? "#7fb3d5" : "#b0b0b0", opacity: o.kind === "workpiece" ? 0.7 : 0.45,
-        flatshading: true, hoverinfo: "name", showlegend: true, legendgroup: "cell" });
-    });
-    robotIdx = [];
-    parts.forEach(function (part, p) {
-      var v = place(part, scene.robot.frames[f][p]);
-      robotIdx.push(traces.length);
-      traces.push({ type: "mesh3d", name: p === 0 ? "robot" : part.name, x: v[0], y: v[1], z: v[2],
-        i: part.i, j: part.j, k: part.k, color: part.kind === "tool" ? "#505050" : "#f39c12", opacity: 1.0,
-        flatshading: true, hoverinfo: "name", hovertext: part.name, showlegend: p === 0, legendgroup: "robot" });
-    });
-    var note = "";
-    scene.paths.forEach(function (path, i) {
-      var entry = path.quantities[q], colours = entry && !entry.missing ? entry.values : null;
-      if (!colours && entry) { note = entry.missing; }
-      traces.push({ type: "scatter3d", mode: "lines", name: path.name + " (" + path.status + ")",
-        x: path.x, y: path.y, z: path.z,
-        line: { width: 7, color: colours || "#1f77b4", colorscale: "Viridis", showscale: i === 0 && colours !== null,
-          colorbar: { title: { text: entry ? entry.title : "" }, len: 0.6 } },
-        text: path.s.map(function (s) { return "s = " + s.toFixed(3) + " m"; }), hoverinfo: "text+name", showlegend: false });
-      traces.push({ type: "scatter3d", mode: "lines", name: "tool axis", x: path.axis.x, y: path.axis.y, z: path.axis.z,
-        line: { width: 2, color: "#555555" }, showlegend: i === 0, legendgroup: "axis", hoverinfo: "skip" });
-      path.marks.forEach(function (mark) {
-        traces.push({ type: "scatter3d", mode: "markers", name: mark.label,
-          x: mark.index.map(function (k) { return path.x[k]; }), y: mark.index.map(function (k) { return path.y[k]; }),
-          z: mark.index.map(function (k) { return path.z[k]; }),
-          marker: { size: 4, color: mark.kind === "infeasible" ? "#e74c3c" : "#e67e22" } });
-      });
-    });
-    $("quantity-note").textContent = note ? "(" + note + ")" : "";
-    var layout = { margin: { l: 0, r: 0, t: 0, b: 0 }, uirevision: "keep",
-      legend: { x: 0, y: 1, bgcolor: "rgba(255,255,255,0.7)" },
-      scene: { aspectmode: "data", xaxis: { title: { text: "x [m]" } }, yaxis: { title: { text: "y [m]" } },
-        zaxis: { title: { text: "z [m]" } }, camera: { eye: { x: 1.4, y: -1.6, z: 1.0 } } } };
-    var rev = scene.revision;
-    return Plotly.react(sceneDiv, traces, layout, CONFIG).then(function () { document.body.dataset.scene = String(rev); });
+  function dragChange(target, m) {   // the change a frame dragged to pose ``m`` (in {F}) asks for
+    var c = {};
+    if (target === "tool.tcp_in_flange") {
+      c[target] = matrixPose(rowMatrix(scene.robot.flange[frameIndex()]).invert().multiply(m));
+    } else if (target === "move") {   // the workpiece: a move about the CAD origin as placed
+      var mv = values.move, cad = poseMatrix(values.poses["frames.cad_in_world"]);
+      var o = new (cad.constructor)().makeTranslation(cad.elements[12] - mv.xyz[0], cad.elements[13] - mv.xyz[1], cad.elements[14] - mv.xyz[2]);
+      var oi = o.clone().invert(), d = o.clone().multiply(poseMatrix(mv)).multiply(oi);
+      var placed = d.invert().multiply(cad);
+      c.move = matrixPose(oi.multiply(m.clone().multiply(placed.invert())).multiply(o));
+    } else {
+      c[target] = matrixPose(m);
+    }
+    return c;
+  }
+  function dragged(target, m, done) {   // while dragging, a change at most every DRAG_MS; the last on release
+    var now = Date.now();
+    clearTimeout(dragTimer);
+    if (done || now - lastSent >= DRAG_MS) { lastSent = now; send(dragChange(target, m)); return; }
+    dragTimer = setTimeout(function () { lastSent = Date.now(); send(dragChange(target, m)); }, DRAG_MS);
+  }
+  function attachGizmo() { view.attach($("gizmo").value || null, $("gizmo-mode").value, $("gizmo").value === "move"); }
+  $("gizmo").addEventListener("change", attachGizmo);
+  $("gizmo-mode").addEventListener("change", attachGizmo);
+  function colourBar(result) {
+    $("quantity-note").textContent = result.note ? "(" + result.note + ")" : "";
+    var bar = $("colour-bar");
+    bar.hidden = !result.range;
+    if (result.range) { $("colour-lo").textContent = result.range.lo.toFixed(2); $("colour-hi").textContent = result.range.hi.toFixed(2); }
+  }
+  function draw(sections) {
+    if (!scene || !scene.parts || !scene.robot) { return; }
+    if (sections.indexOf("cell") >= 0) { view.setCell(scene.cell); }
+    if (sections.indexOf("parts") >= 0) { view.setParts(scene.parts); }
+    if (sections.indexOf("paths") >= 0) { colourBar(view.setPaths(scene.paths, $("quantity").value)); }
+    showFrame();
+    view.fit();
+    $("scene").dataset.objects = JSON.stringify(view.names());
+    document.body.dataset.scene = String(scene.revision);
   }
   function showFrame() {
-    if (!scene || !parts) { return; }
-    var f = Math.min(Number(slider.value), scene.robot.frames.length - 1), xs = [], ys = [], zs = [];
-    parts.forEach(function (part, p) { var v = place(part, scene.robot.frames[f][p]); xs.push(v[0]); ys.push(v[1]); zs.push(v[2]); });
+    if (!scene || !scene.robot) { return; }
+    var f = frameIndex();
+    view.showRobot(scene.robot.frames[f]);
     $("frame-label").textContent = scene.robot.labels[f];
-    return Plotly.restyle(sceneDiv, { x: xs, y: ys, z: zs }, robotIdx);
+    showFrames();
   }
   slider.addEventListener("input", showFrame);
-  $("quantity").addEventListener("change", draw);
+  $("quantity").addEventListener("change", function () { if (scene) { colourBar(view.setPaths(scene.paths, $("quantity").value)); } });
   var timer = null;
   $("play").addEventListener("click", function () {
     if (timer) { clearInterval(timer); timer = null; $("play").textContent = "Play"; return; }
@@ -220,10 +241,9 @@
       return;
     }
     if (msg.type === "scene") {
-      scene = msg.scene; scene.revision = msg.revision; parts = scene.robot.parts;
+      scene = Object.assign(scene || {}, msg.scene); scene.revision = msg.revision;   // the sections that changed
       slider.max = String(scene.robot.frames.length - 1);
-      $("frame-label").textContent = scene.robot.labels[Math.min(Number(slider.value), scene.robot.frames.length - 1)];
-      draw();
+      draw(Object.keys(msg.scene));
     }
   }
   var proto = window.location.protocol === "https:" ? "wss://" : "ws://";
@@ -231,4 +251,4 @@
   socket = new WebSocket(proto + window.location.host + base + url("ws"));
   socket.onmessage = function (ev) { onMessage(JSON.parse(ev.data)); };
   socket.onclose = function () { $("state").textContent = "the server closed the connection"; $("state").className = "busy"; };
-})();
+}

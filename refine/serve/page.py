@@ -2,8 +2,9 @@
 
 The page carries no data of its own: ``page.js`` opens the websocket, shows every state the server
 sends (the verdict as the report draws it, the scene, the values in the controls) and sends the
-changes. Plotly's JavaScript is served by the app from the installed ``plotly`` package, so the
-page works without a network. Uncaught errors and ``console.error`` calls are listed in
+changes; ``scene3d.js`` draws the cell with three.js and holds the gizmo. three.js is shipped in
+``refine/serve/three/`` and Plotly's JavaScript (the calibration's residual plot) comes from the
+installed ``plotly`` package, both served by the app, so the page works without a network. Uncaught errors and ``console.error`` calls are listed in
 ``#js-errors`` (hidden while empty), as in the report.
 """
 
@@ -13,6 +14,8 @@ import html
 from pathlib import Path
 
 from refine.serve.edits import SCALARS
+
+HERE = Path(__file__).parent
 
 LABELS: dict[str, str] = {
     "tolerances.orientation_deg": "orientation cone",
@@ -54,7 +57,10 @@ ul.segments li{margin:.3em 0;cursor:pointer} ul.segments li:hover{text-decoratio
 .controls{display:flex;gap:.6em;align-items:center;flex-wrap:wrap;padding:.3em .6em}
 .controls input[type=range]{width:20em} #frame-label{font-family:monospace;min-width:12em}
 pre#diff{background:#f4f4f4;padding:.5em;white-space:pre-wrap;max-height:20em;overflow:auto}
-button{margin:.2em .2em .2em 0}
+button{margin:.2em .2em .2em 0} .row[hidden]{display:none} pre#cal-lines{white-space:pre-wrap} .note{color:#777}
+#scene{position:relative;overflow:hidden} #scene canvas{display:block}
+.ramp{display:inline-block;width:8em;height:.8em;margin:0 .3em;vertical-align:middle;
+background:linear-gradient(90deg,#440154,#3b528b,#21918c,#5ec962,#fde725)}
 """
 
 
@@ -101,13 +107,47 @@ def _move_rows() -> str:
     )
 
 
+CALIBRATIONS: dict[str, tuple[str, str]] = {
+    "pivot": ("pivot: the tip swung about a divot (tracker log)", "log"),
+    "receiver": ("receiver: the tip resting on known points (tracker log + points)", "log points"),
+    "trace": ("receiver: the tip traced along the CAD path (tracker log)", "log"),
+    "tcp": ("TCP: the robot's tip on one point from four or more poses (robot readings)", "readings six"),
+    "workpiece": ("workpiece: the robot's TCP touched onto CAD points (robot readings + points)", "readings points"),
+}
+"""The calibrations the page offers (:data:`refine.serve.calibration.KINDS`): label and the inputs shown."""
+
+
+def _calibration_options() -> str:
+    return "".join(
+        f"<option value='{kind}' data-inputs='{inputs}'>{html.escape(label)}</option>"
+        for kind, (label, inputs) in CALIBRATIONS.items()
+    )
+
+
+GIZMO: dict[str, str] = {
+    "": "nothing",
+    "move": "the workpiece (CAD path, receiver, workpiece objects; turns about z)",
+    "frames.cad_in_world": "cad_in_world (the CAD path alone)",
+    "frames.source_in_world": "source_in_world (the receiver alone)",
+    "tool.tcp_in_flange": "tcp_in_flange (the TCP, at the robot shown)",
+    "robot.base_in_world": "the robot base (base_in_world)",
+}
+"""What the 3D gizmo can drag: the key it changes and its label."""
+
+
+def _gizmo_options() -> str:
+    return "".join(f"<option value='{k}'>{html.escape(v)}</option>" for k, v in GIZMO.items())
+
+
 def page_html(title: str, errors_js: str) -> str:
     """The whole page (its script and Plotly are separate requests)."""
     return (
         "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
         f"<title>refine serve: {html.escape(title)}</title>"
         f"<script>{errors_js}</script><style>{_CSS}</style>"
-        "<script src='plotly.js'></script></head><body>"
+        "<script src='plotly.js'></script>"
+        "<script type='importmap'>{\"imports\": {\"three\": \"./three/three.module.min.js\", "
+        "\"three/addons/\": \"./three/\"}}</script></head><body>"
         "<div id='side'><ul id='js-errors' hidden></ul>"
         "<div id='state'>connecting...</div><div id='error' hidden></div>"
         "<div id='verdict-box'></div>"
@@ -115,15 +155,23 @@ def page_html(title: str, errors_js: str) -> str:
         f"{_move_rows()}"
         f"<h2>Tolerances, margins, speed</h2>{_scalar_rows()}"
         f"<h2>Frames</h2>{_frame_rows()}"
-        "<h2>Calibration: a pivot log in the problem folder</h2>"
-        "<div class='row'><label for='cal-file'>log (path in the problem folder)</label>"
+        "<h2>Calibration: measurement files in the problem folder</h2>"
+        "<div class='row'><label for='cal-kind'>measurement</label><select id='cal-kind'>"
+        f"{_calibration_options()}</select></div>"
+        "<div class='row cal-log'><label for='cal-file'>tracker log (path in the problem folder)</label>"
         "<input type='text' id='cal-file' placeholder='measurements/pivot.liberty'></div>"
-        "<div class='row'><label for='cal-format'>format</label><select id='cal-format'>"
+        "<div class='row cal-log'><label for='cal-format'>log format</label><select id='cal-format'>"
         "<option>liberty_ascii</option><option>liberty_binary</option><option>csv</option></select></div>"
-        "<div class='row'><label for='cal-rate'>sample rate</label>"
+        "<div class='row cal-log'><label for='cal-rate'>sample rate of the log</label>"
         "<input type='text' inputmode='decimal' id='cal-rate' value='240'><span class='unit'>Hz</span></div>"
+        "<div class='row cal-readings' hidden><label for='cal-readings'>robot readings (CSV of joints [deg] "
+        "or flange poses)</label><input type='text' id='cal-readings' placeholder='measurements/tcp.csv'></div>"
+        "<div class='row cal-six' hidden><label for='cal-six'>six-point method (the last two readings on +z "
+        "and +x): measures the orientation too</label><input type='checkbox' id='cal-six'></div>"
+        "<div class='row cal-points' hidden><label for='cal-points'>touched points (CSV name,x,y,z [m])</label>"
+        "<input type='text' id='cal-points' placeholder='measurements/fixture_points.csv'></div>"
         "<button id='cal-fit' type='button'>Fit</button>"
-        "<button id='cal-accept' type='button' disabled>Accept into the problem (sensor_in_tcp)</button>"
+        "<button id='cal-accept' type='button' disabled>Accept into the problem</button>"
         "<pre id='cal-lines' hidden></pre><div id='cal-plot'></div>"
         "<h2>Save and write</h2>"
         "<button id='reset' type='button'>Undo all changes</button>"
@@ -138,11 +186,34 @@ def page_html(title: str, errors_js: str) -> str:
         "<option value='clearance'>clearance [mm]</option>"
         "<option value='slack'>repair slack [deg]</option>"
         "<option value='speed'>planned TCP speed [mm/s]</option></select></label>"
-        "<span id='quantity-note'></span></div><div id='scene'></div></div>"
-        "<script src='page.js'></script></body></html>"
+        "<span id='colour-bar' hidden><span id='colour-lo'></span><span class='ramp'></span>"
+        "<span id='colour-hi'></span></span><span id='quantity-note'></span></div>"
+        "<div class='controls'><label>drag in the scene <select id='gizmo'>"
+        f"{_gizmo_options()}</select></label><select id='gizmo-mode' aria-label='gizmo mode'>"
+        "<option value='translate'>move</option><option value='rotate'>turn</option></select>"
+        "<span class='note'>(the numbers on the left follow; a drag re-solves as it goes)</span></div>"
+        "<div id='scene'></div></div>"
+        "<script type='module' src='page.js'></script></body></html>"
     )
 
 
 def page_script() -> str:
     """``page.js``."""
     return (Path(__file__).with_name("page.js")).read_text(encoding="utf-8")
+
+
+MODULES: dict[str, Path] = {
+    "scene3d.js": HERE / "scene3d.js",
+    **{name: HERE / "three" / name for name in ("three.module.min.js", "OrbitControls.js", "TransformControls.js")},
+}
+"""The scripts the page imports, by the name it asks for: the 3D view and three.js (MIT, shipped in
+``refine/serve/three/`` with its licence, so the page needs no network)."""
+
+
+def module_script(name: str) -> str:
+    """The text of the page's module ``name`` (only the names of :data:`MODULES`).
+
+    Raises:
+        KeyError: any other name.
+    """
+    return MODULES[name].read_text(encoding="utf-8")

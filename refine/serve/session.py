@@ -8,8 +8,10 @@ only the newest problem asked for, so a drag that sends many changes never queue
 
 A re-solve starts from the previous answer: the fused path is reused when the change leaves the
 CAD path and the demonstration alone, moved rigidly when the workpiece moved with its receiver,
-the built refinement problem is reused where :func:`refine.optimise.problem.reuse_for` allows (same
-robot, base, tool and weights) and the previous joints are the start. Writing saves the problem
+and the solve starts as ``refine.solve(..., previous=...)`` does (:mod:`refine.optimise.warm`:
+the previous joints moved onto the new poses, the previous last problem and multipliers kept where
+robot, base, tool and weights are the same). A solve still running when a newer change comes is
+stopped (:func:`refine.control.controlled`). Writing saves the problem
 file and runs it as ``refine run`` does (:func:`refine.run.write.run`), from the saved file.
 """
 
@@ -27,13 +29,14 @@ from typing import Any
 import numpy as np
 import tomlkit
 
-from refine.errors import InputError
+from refine.control import controlled
+from refine.errors import Cancelled, InputError
 from refine.frames import invert_transform
 from refine.optimise.moves import moved_path
-from refine.optimise.problem import joint_bounds, reuse_for
+from refine.optimise.problem import RefinementNLP, reuse_for
+from refine.optimise.warm import WarmStart
 from refine.paths import FusedPath
 from refine.problem import Problem, load_problem
-from refine.robot.kinematics import TcpKinematics, solve_ik_batch
 from refine.robot.model import Robot
 from refine.robot.registry import robot_for
 from refine.run.result import RunResult
@@ -62,6 +65,11 @@ class Job:
 class LatestSolver:
     """A thread that solves the newest job asked for; jobs superseded while it was busy are dropped.
 
+    A solve under way when a newer job arrives is stopped too, when ``solve`` asks
+    :meth:`superseded` (the session runs it under :func:`refine.control.controlled`, whose cancel
+    ends the solve at its next stage or IPOPT iteration with :class:`refine.errors.Cancelled`):
+    a cancelled job is counted as dropped and never answered.
+
     Args:
         solve: solves a job; what it returns (or the error it raises) goes to ``done``.
         done: called on the solver's thread with the job and ``(answer, error)``.
@@ -77,6 +85,7 @@ class LatestSolver:
         self.busy = False
         self.solved = 0
         self.dropped = 0
+        self.cancelled = 0
         self._thread = threading.Thread(target=self._loop, name="refine-serve-solver", daemon=True)
         self._thread.start()
 
@@ -87,6 +96,10 @@ class LatestSolver:
                 self.dropped += 1
             self._pending = job
             self._wake.notify()
+
+    def superseded(self) -> bool:
+        """Whether a newer job waits than the one being solved (the running solve may stop)."""
+        return self._pending is not None or self._stopping
 
     def idle(self) -> bool:
         """Whether nothing is being solved and nothing waits."""
@@ -113,6 +126,12 @@ class LatestSolver:
             answer, error = None, None
             try:
                 answer = self._solve(job)
+            except Cancelled:  # a newer job came: it is answered instead
+                with self._wake:
+                    self.busy = False
+                    self.cancelled += 1
+                    self.dropped += 1
+                continue
             except Exception as e:  # the error goes to the page; the thread keeps serving
                 error = e
             with self._wake:
@@ -158,64 +177,70 @@ class FusedCache:
         return new
 
 
+WARM_MOVE_M = 0.1
+"""Farthest a waypoint may have moved since the previous answer for that answer to be the start [m]:
+a warm start is for small changes, and a jump beyond it is solved cold at once rather than after a
+warm solve that is not ``ok``."""
+
+
+def near(previous: RunResult, fused: FusedPath) -> bool:
+    """Whether ``fused`` has the previous first pass's waypoints, none moved beyond :data:`WARM_MOVE_M`."""
+    old = previous.first.fused.positions
+    if old.shape != fused.positions.shape:
+        return False
+    return bool(np.linalg.norm(old - fused.positions, axis=1).max() <= WARM_MOVE_M)
+
+
+def warm_start(
+    previous: RunResult, problem: Problem, robot: Robot, fused: FusedPath
+) -> tuple[RefinementNLP | None, WarmStart | None]:
+    """The built problem to reuse and the start :func:`resolve` takes from ``previous`` (its docstring).
+
+    The previous last problem and multipliers are kept only with its built problem, which needs the
+    same base, tool and weights (:func:`refine.optimise.problem.reuse_for` checks the rest).
+    """
+    first = previous.first
+    built = first.nlp
+    setup = built is not None and (
+        np.array_equal(built.base_in_world, problem.robot.base_in_world)
+        and np.array_equal(built.tcp_in_flange, problem.tool.tcp_in_flange)
+        and built.axisymmetric == problem.tool.axisymmetric
+        and built.weights == weights_for(problem, robot)
+    )
+    nlp = reuse_for(built, fused, problem.tolerances) if setup else None
+    if first.refinement.q.shape != (len(fused), robot.nq):
+        return nlp, None
+    kept = nlp is not None
+    return nlp, WarmStart(
+        q=first.refinement.q,
+        rotations=first.fused.rotations if len(first.fused) == len(fused) else None,
+        problem=first.refinement.problem if kept else None,
+        multipliers=first.refinement.multipliers if kept else None,
+        clearance=first.clearance,
+    )
+
+
 def resolve(problem: Problem, fused: FusedPath, previous: RunResult | None) -> RunResult:
     """Solve ``problem`` on ``fused``, from ``previous``'s answer where it applies (module docstring).
 
-    Only an ``ok`` answer is a start: a repaired or failed one holds joints bent by the slack or
-    left where the solver gave up. When the warm solve is not ``ok`` the problem is solved again
-    from the IK seed and that answer is kept, so a verdict never depends on the changes before it
-    (the cold answer is the one ``refine run`` gives).
+    The start is :class:`refine.optimise.warm.WarmStart`, as ``refine.solve(..., previous=...)``
+    re-solves: the previous joints moved onto the new poses and, when robot, base, tool and
+    weights are the same, the previous last problem, its multipliers and its clearance bounds.
+    Only an ``ok`` answer is a start, and only for a path :func:`near` the one it answered: a
+    repaired or failed one holds joints bent by the slack or left where the solver gave up, and a
+    path moved far (a jump of the part) is solved as ``refine run`` solves it. When the warm solve
+    is not ``ok`` the problem is solved again from the IK seed and that answer is kept, so a
+    verdict never depends on the changes before it (the cold answer is the one ``refine run`` gives).
     """
     robot = robot_for(problem.robot)
-    nlp, q0 = None, None
-    if previous is not None and previous.robot is robot and previous.status == "ok":
-        old = previous.first.nlp
-        same = (
-            old is not None
-            and np.array_equal(old.base_in_world, problem.robot.base_in_world)
-            and np.array_equal(old.tcp_in_flange, problem.tool.tcp_in_flange)
-            and old.axisymmetric == problem.tool.axisymmetric
-            and old.weights == weights_for(problem, robot)
-        )
-        nlp = reuse_for(old, fused, problem.tolerances) if same else None
-        if previous.first.refinement.q.shape == (len(fused), robot.nq):
-            q0 = warm_joints(problem, robot, fused, previous.first.refinement.q)
-    result = solve_problem(problem, robot=robot, fused=fused, nlp=nlp, q0=q0)
-    if result.status != "ok" and (nlp is not None or q0 is not None):
+    nlp, warm = None, None
+    if previous is not None and previous.robot is robot and previous.status == "ok" and near(previous, fused):
+        nlp, warm = warm_start(previous, problem, robot, fused)
+    result = solve_problem(problem, robot=robot, fused=fused, nlp=nlp, warm=warm)
+    if result.status != "ok" and warm is not None:
         log.info("serve: the warm solve is %s; solving again from the IK seed", result.status)
         result = solve_problem(problem, robot=robot, fused=fused)
     return result
-
-
-WARM_IK_ITERATIONS = 40
-"""Iterations of the position IK that carries the previous joints onto a moved path."""
-WARM_REACH_M = 1e-5
-"""Largest TCP miss of the carried joints [m] for them to be the start (else the IK seed is built)."""
-
-
-def warm_joints(problem: Problem, robot: Robot, fused: FusedPath, q_prev: np.ndarray) -> np.ndarray | None:
-    """The previous joints as the start of ``problem``: as they are, or carried onto a moved path.
-
-    When the previous joints no longer put the TCP on the path (the part, the base or the tool
-    moved), a position-only IK from them (:func:`refine.robot.kinematics.solve_ik_batch`) carries
-    each waypoint onto its CAD point with the least joint motion. None when that fails, or leaves
-    a joint step above the tolerance: the solve then builds its IK seed (a start that misses the
-    path would send every waypoint through the reach check's multi-start IK).
-    """
-    kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange)
-    miss = np.linalg.norm(kin.poses(q_prev)[:, :3, 3] - fused.positions, axis=1)
-    if miss.max() <= WARM_REACH_M:
-        return q_prev
-    lower, upper = joint_bounds(robot, problem.tolerances)
-    targets = np.tile(np.eye(4), (len(fused), 1, 1))
-    targets[:, :3, 3] = fused.positions
-    q, err = solve_ik_batch(
-        kin, targets, q_prev, lower, upper, max_iterations=WARM_IK_ITERATIONS, position_only=True
-    )
-    step = np.abs(np.diff(q, axis=0)).max(initial=0.0)
-    if err.max() > WARM_REACH_M or step > np.radians(problem.tolerances.joint_step_deg):
-        return None
-    return q
 
 
 @dataclass
@@ -299,7 +324,7 @@ class Session:
     def _solve(self, job: Job) -> RunResult:
         previous = self.answer.result if self.answer is not None else None
         t0 = time.perf_counter()
-        with self._engine:
+        with self._engine, controlled(cancel=self.solver.superseded):
             try:
                 return resolve(job.problem, self._cache.path_for(job.problem), previous)
             finally:
@@ -342,12 +367,15 @@ class Session:
             )
         )
 
-    def save(self) -> Path:
-        """Write the problem file with the changes (comments and order kept) and make it the base."""
-        text = self.current_text()
+    def _replace_file(self, text: str) -> None:
         tmp = self.path.with_name(f".{self.path.name}.saving")
         tmp.write_text(text, encoding="utf-8")
         tmp.replace(self.path)  # a reader never sees half a file
+
+    def save(self) -> Path:
+        """Write the problem file with the changes (comments and order kept) and make it the base."""
+        text = self.current_text()
+        self._replace_file(text)
         with self._lock:
             self.text = text
             self.base = tomlkit.parse(text)
@@ -359,14 +387,24 @@ class Session:
         """Save the problem file and write every output into ``out_dir`` as ``refine run`` does.
 
         The saved file is read back and run by :func:`refine.run.write.run`, the function behind
-        ``refine run``, so the files are those the command would write (all or nothing).
+        ``refine run``, so the files are those the command would write (all or nothing). When the
+        run raises, the problem file is put back as it was and the changes are kept, so the file
+        and the outputs never disagree.
         """
         from refine.run.write import run
 
         with self._engine:
+            on_disk = self.path.read_text(encoding="utf-8")
+            with self._lock:
+                kept = (self.text, self.base, self.doc, dict(self.changes))
             self.save()
-            problem = load_problem(self.path)
-            return run(problem, out_dir)
+            try:
+                return run(load_problem(self.path), out_dir)
+            except BaseException:
+                self._replace_file(on_disk)
+                with self._lock:
+                    self.text, self.base, self.doc, self.changes = kept
+                raise
 
     def close(self) -> None:
         """Stop the solver thread."""

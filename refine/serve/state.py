@@ -7,12 +7,14 @@ so the app and the report never disagree.
 
 from __future__ import annotations
 
+import json
+from collections.abc import Iterable, Mapping
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from refine.export.result_json import result_dict
-from refine.report.scene import scene_data
+from refine.report.scene import rounded, scene_data
 from refine.report.verdict import verdict_html
 from refine.serve.edits import MOVE, POSES, SCALARS, pose_table
 
@@ -71,7 +73,58 @@ def verdict_message(session: Session, answer: Answer) -> dict[str, Any]:
     return out
 
 
-def scene_message(answer: Answer) -> dict[str, Any]:
-    """The 3D scene of ``answer``."""
+SCENE_SECTIONS = ("cell", "parts", "robot", "paths")
+"""The sections of the scene, each sent only when it changed: the cell objects, the robot's shapes
+in their own frames, the robot's poses along the path, the paths and their colours."""
+
+
+def scene_sections(answer: Answer) -> dict[str, str]:
+    """The 3D scene of ``answer`` (:func:`refine.report.scene.scene_data`) as JSON text by section."""
     assert answer.result is not None
-    return {"type": "scene", "revision": answer.revision, "scene": scene_data(answer.result)}
+    scene = scene_data(answer.result)
+    robot = dict(scene["robot"])
+    parts = robot.pop("parts")
+    robot["flange"] = flange_poses(answer.result, robot["where"])
+    sections = {"cell": scene["cell"], "parts": parts, "robot": robot, "paths": scene["paths"]}
+    return {k: json.dumps(sections[k], allow_nan=False, separators=(",", ":")) for k in SCENE_SECTIONS}
+
+
+def flange_poses(result: Any, where: list[list[int]]) -> list[list[float | None]]:
+    """The flange's pose in {F} at each robot frame of the scene (``where``: pass, waypoint), as 12 numbers.
+
+    The page puts the TCP gizmo at the flange times ``tcp_in_flange`` and turns a drag back into
+    ``tcp_in_flange``.
+    """
+    robot = result.robot
+    base = np.asarray(result.problem.robot.base_in_world, dtype=float)
+    out = []
+    for i, k in where:
+        T = base @ robot.link_poses(result.passes[i].refinement.q[k])[robot.spec.flange_frame]
+        out.append(rounded(T[:3, :].ravel(), 6))
+    return out
+
+
+def scene_message(revision: int, sections: Mapping[str, str], keys: Iterable[str]) -> str:
+    """The scene message of ``revision`` with the sections ``keys`` of ``sections`` (JSON text).
+
+    The page keeps the sections it has and replaces those a message carries, so a change that
+    moves only the robot and the path does not resend the cell or the robot's shapes.
+    """
+    body = ",".join(f'"{k}":{sections[k]}' for k in keys)
+    return f'{{"type":"scene","revision":{int(revision)},"scene":{{{body}}}}}'
+
+
+class SceneDiff:
+    """The sections sent last, to send only what changed (a newly opened page gets them all)."""
+
+    def __init__(self) -> None:
+        self.sent: dict[str, str] = {}
+
+    def messages(self, answer: Answer) -> tuple[str, str]:
+        """The message for the open pages (changed sections) and the whole scene for a new page."""
+        sections = scene_sections(answer)
+        changed = [k for k in SCENE_SECTIONS if self.sent.get(k) != sections[k]]
+        self.sent = sections
+        return scene_message(answer.revision, sections, changed), scene_message(
+            answer.revision, sections, SCENE_SECTIONS
+        )

@@ -15,7 +15,7 @@ from refine.serve.session import Session
 
 ROOT = Path(__file__).resolve().parents[2]
 TOKEN = "s3cret-token-for-the-test"
-ROUTES = ("/", "/page.js", "/plotly.js", "/api/diff")
+ROUTES = ("/", "/page.js", "/scene3d.js", "/three/TransformControls.js", "/plotly.js", "/api/diff")
 
 
 @pytest.fixture(scope="module")
@@ -83,6 +83,15 @@ def test_no_file_outside_the_output_folder_is_served(session, folder, name):
     assert "glass_adhesive" not in answer.text  # not the problem file's text
 
 
+@pytest.mark.parametrize("name", ["..%2Fapp.py", "LICENSE.js", "three.module.js", "%2E%2E%2Fsession.py"])
+def test_only_the_pages_own_scripts_are_served_from_the_package(session, folder, name):
+    client = TestClient(create_app(session, folder / "out"), base_url="http://127.0.0.1:8000")
+    assert client.get(f"/three/{name}").status_code == 404, name
+    three = client.get("/three/three.module.min.js")
+    assert three.status_code == 200 and three.headers["content-type"].startswith("text/javascript")
+    assert "Three.js Authors" in three.text[:300]
+
+
 def test_a_file_written_there_is_served(session, folder):
     client = TestClient(create_app(session, folder / "out"), base_url="http://127.0.0.1:8000")
     assert client.get("/files/result.json").text == "{}"
@@ -110,6 +119,10 @@ def test_a_calibration_log_outside_the_problem_folder_is_refused(session, folder
     answer = client.post("/api/calibrate", json={"kind": "pivot", "file": name, "rate_hz": 60})
     assert answer.status_code == 400, name
     assert "problem folder" in answer.json()["error"]
+    points = client.post(  # a points file is named the same way
+        "/api/calibrate", json={"kind": "receiver", "file": "demo.liberty", "points": name, "rate_hz": 60}
+    )
+    assert points.status_code == 400 and "problem folder" in points.json()["error"], name
 
 
 def test_a_pivot_log_in_the_folder_is_fitted_to_the_generators_tip(session, folder):
@@ -121,10 +134,72 @@ def test_a_pivot_log_in_the_folder_is_fitted_to_the_generators_tip(session, fold
     assert answer.status_code == 200, answer.text
     fit = answer.json()
     # the simulated tip (problems/glass_calibrated/README.md, from generate.py): 25.98, 15.00, -250.00 mm
-    assert max(abs(a - b) for a, b in zip(fit["tip_in_sensor_mm"], [25.98, 15.00, -250.00], strict=True)) < 0.5
+    tip_mm = [v * 1e3 for v in fit["values"]["tip_in_sensor_m"]]
+    assert max(abs(a - b) for a, b in zip(tip_mm, [25.98, 15.00, -250.00], strict=True)) < 0.5
     assert len(fit["rejected"]) == 4  # the generator's four spikes
     assert len(fit["residuals_mm"]) == 600
     assert set(fit["change"]) == {"tool.sensor_in_tcp"}
     assert session.revision == 0  # a fit changes nothing until it is accepted
     bad = client.post("/api/calibrate", json={"kind": "pivot", "file": "measurements/pivot.liberty", "rate_hz": 0})
     assert bad.status_code == 400 and "Hz" in bad.json()["error"]
+
+
+TRUTH = ROOT / "problems" / "glass_adhesive"  # the frames the measurements were simulated from
+
+
+@pytest.mark.parametrize(
+    ("request_", "key", "xyz_m", "tol_m", "rejected"),
+    [
+        # the tip resting on six fixture points, the fourth touched 20 mm off (generate.py)
+        (
+            {"kind": "receiver", "file": "measurements/touch.liberty", "points": "measurements/fixture_points.csv",
+             "rate_hz": 60},
+            "frames.source_in_world", [1.30, -0.82, 0.72], 0.002, ["F4"],
+        ),
+        # the six-point TCP method: the nozzle 350 mm along the flange z axis
+        ({"kind": "tcp", "readings": "measurements/tcp.csv", "six_point": True}, "tool.tcp_in_flange",
+         [0.0, 0.0, 0.35], 0.0005, []),
+        # the nozzle touched onto five points of the glass
+        ({"kind": "workpiece", "readings": "measurements/workpiece.csv", "points": "measurements/glass_points.csv"},
+         "frames.cad_in_world", [1.30, 0.0, 0.60], 0.0005, []),
+    ],
+)
+def test_receiver_tcp_and_touched_points_are_fitted_to_the_frames_they_were_simulated_from(
+    session, folder, request_, key, xyz_m, tol_m, rejected
+):
+    shutil.copytree(ROOT / "problems" / "glass_calibrated" / "measurements", folder / "measurements", dirs_exist_ok=True)
+    client = TestClient(create_app(session, folder / "out"), base_url="http://127.0.0.1:8000")
+    answer = client.post("/api/calibrate", json=request_)
+    assert answer.status_code == 200, answer.text
+    fit = answer.json()
+    assert fit["key"] == key and set(fit["change"]) == {key}
+    got = fit["change"][key]["xyz"]
+    assert max(abs(a - b) for a, b in zip(got, xyz_m, strict=True)) < tol_m, got
+    names = fit["labels"] or [str(k) for k in range(len(fit["residuals_mm"]))]
+    assert [names[k] for k in fit["rejected"]] == rejected
+    assert len(fit["residuals_mm"]) >= 4 and fit["rms_residual_mm"] < 1.0
+    assert session.revision == 0  # nothing changes until the fit is accepted
+
+
+def test_a_write_that_fails_leaves_the_problem_file_as_it_was_and_keeps_the_changes(folder, monkeypatch):
+    import refine.run.write
+    from refine.errors import RefineError
+
+    s = Session(folder)
+    s.solver.stop()  # no solve: only the change's check and the write matter here
+    try:
+        before = s.path.read_text(encoding="utf-8")
+        s.change({"tolerances.orientation_deg": 2.5})
+
+        def failing(problem, out_dir):
+            assert "orientation_deg = 2.5" in s.path.read_text(encoding="utf-8")  # saved before the run
+            raise RefineError("the disk is full (a planted failure)")
+
+        monkeypatch.setattr(refine.run.write, "run", failing)
+        answer = TestClient(create_app(s, folder / "out"), base_url="http://127.0.0.1:8000").post("/api/write")
+        assert answer.status_code == 400 and "disk is full" in answer.json()["error"]
+        assert s.path.read_text(encoding="utf-8") == before
+        assert s.changes == {"tolerances.orientation_deg": 2.5}
+        assert "+orientation_deg = 2.5" in s.diff()
+    finally:
+        s.close()

@@ -1,12 +1,16 @@
 """refine serve in Debian's chromium, driven by Playwright: the glass cell's first screen, a bad value,
-a change of the cone seen in a second tab, the part moved out of reach and back, and write.
+a change of the cone seen in a second tab, the part moved out of reach and back, the part dragged
+and turned by the 3D gizmo, a receiver calibration fitted and accepted, and write.
 
-One server for the module (uvicorn on a free port, in a thread) on a copy of the glass cell; the
-tests run in order on it. Screenshots go to tests/artifacts/serve/.
+One server for the module (uvicorn on a free port, in a thread) on a copy of the glass cell (with
+the measurements of problems/glass_calibrated); the steps run in order on it, as one test. Screenshots go to
+tests/artifacts/serve/ (the folder is printed at the end of the run).
 """
 
 from __future__ import annotations
 
+import json
+import os
 import re
 import shutil
 import threading
@@ -36,6 +40,7 @@ def server(tmp_path_factory):
 
     folder = tmp_path_factory.mktemp("serve") / "glass_adhesive"
     shutil.copytree(ROOT / "problems" / "glass_adhesive", folder)
+    shutil.copytree(ROOT / "problems" / "glass_calibrated" / "measurements", folder / "measurements")
     session = Session(folder)
     app = create_app(session, folder / "out")
     server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=0, log_level="warning"))
@@ -52,8 +57,9 @@ def server(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def pages(server):
+def pages(server, summary):
     ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    summary.append(f"refine serve in the browser: screenshots in {ARTIFACTS}")
     with playwright.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=str(CHROMIUM), args=["--no-sandbox"])
         errors: list[str] = []
@@ -83,20 +89,59 @@ def revision(page) -> int:
     return int(page.get_attribute("body", "data-revision"))
 
 
-def test_the_first_screen_shows_the_cell_and_the_verdict(pages):
+def _the_first_screen_shows_the_cell_and_the_verdict(pages):
     page = pages["tabs"][0]
     assert settled(page) == "ok"
     assert page.inner_text("#verdict .badge") == "ok"
     assert "orientation deviation from the demonstration" in page.inner_text("#verdict")
-    traces = page.evaluate("document.getElementById('scene').data.map(t => t.name)")
-    for name in ("table", "glass", "cup_1", "robot"):  # the cell's objects from the problem file, the robot
-        assert name in traces
+    drawn = json.loads(page.get_attribute("#scene", "data-objects"))
+    for name in ("table", "glass", "cup_1", "robot", "pass 1 (ok)"):  # the cell's objects, the robot, the path
+        assert name in drawn
     page.screenshot(path=str(ARTIFACTS / "first-screen.png"))
     assert pages["errors"] == []
     assert page.is_hidden("#js-errors")
 
 
-def test_a_bad_value_is_answered_with_its_unit_and_changes_nothing(pages):
+def _the_tcp_gizmo_sits_where_the_flange_pose_and_tcp_in_flange_put_the_tcp_on_the_path(server, pages):
+    import numpy as np
+
+    from refine.report.scene import robot_frames
+    from refine.serve.state import flange_poses
+
+    result = server["session"].answer.result
+    where = robot_frames(result)["where"]
+    flange = flange_poses(result, where)
+    tcp = np.asarray(result.problem.tool.tcp_in_flange)
+    for (i, k), row in zip(where, flange, strict=True):
+        T = np.vstack([np.reshape(row, (3, 4)), [0, 0, 0, 1]]) @ tcp
+        assert np.linalg.norm(T[:3, 3] - result.passes[i].fused.positions[k]) < 2e-6  # [m]: on the CAD path
+
+
+def _the_frames_drawn_and_dragged_are_those_of_the_problem(server, pages):
+    import numpy as np
+
+    from refine.frames import transform_from_xyz_rpy
+
+    page = pages["tabs"][0]
+    # three.js's Euler "ZYX" against the problem file's fixed-axis X-Y-Z angles, both ways
+    pose = {"xyz": [0.1, -0.2, 0.3], "rpy_deg": [10.0, -35.0, 120.0]}
+    got = page.evaluate(
+        "async (p) => { const m = await import('./scene3d.js'); const T = m.poseMatrix(p);"
+        " return { T: T.clone().transpose().elements, back: m.matrixPose(T) }; }",
+        pose,
+    )
+    T = transform_from_xyz_rpy(pose["xyz"], pose["rpy_deg"])
+    assert np.abs(np.reshape(got["T"], (4, 4)) - T).max() < 1e-6
+    assert np.abs(np.subtract(got["back"]["rpy_deg"], pose["rpy_deg"])).max() < 1e-4
+    # the TCP gizmo sits on the path's first waypoint when the scrubber is at its start
+    page.select_option("#gizmo", "tool.tcp_in_flange")
+    tcp = page.evaluate("document.getElementById('scene').view.frames['tool.tcp_in_flange'].elements.slice(12, 15)")
+    first = server["session"].answer.result.passes[0].fused.positions[0]
+    assert np.linalg.norm(np.subtract(tcp, first)) < 1e-5  # [m]
+    page.select_option("#gizmo", "")
+
+
+def _a_bad_value_is_answered_with_its_unit_and_changes_nothing(pages):
     page = pages["tabs"][0]
     before = revision(page)
     page.fill("[id='tolerances.orientation_deg']", "-1")
@@ -108,7 +153,7 @@ def test_a_bad_value_is_answered_with_its_unit_and_changes_nothing(pages):
     assert revision(page) == before and page.get_attribute("body", "data-status") == "ok"
 
 
-def test_a_change_of_the_cone_resolves_and_both_tabs_show_it(pages):
+def _a_change_of_the_cone_resolves_and_both_tabs_show_it(pages):
     page, other = pages["tabs"]
     before = revision(page)
     page.fill("[id='tolerances.orientation_deg']", "2.5")
@@ -122,32 +167,123 @@ def test_a_change_of_the_cone_resolves_and_both_tabs_show_it(pages):
     assert "<= 2.5 deg" in other.inner_text("#verdict")
 
 
-def _move_z(page, mm: int) -> None:
+def _move_x(page, mm: int) -> None:
     page.eval_on_selector(
-        "#move-z", f"(e) => {{ e.value = '{mm}'; e.dispatchEvent(new Event('input')); }}"
+        "#move-x", f"(e) => {{ e.value = '{mm}'; e.dispatchEvent(new Event('input')); }}"
     )
 
 
-def test_the_part_moved_up_out_of_reach_is_repaired_with_its_cause_and_moved_back_is_ok(pages):
+def _the_part_moved_away_out_of_reach_fails_with_its_cause_and_moved_back_is_ok(pages):
     page = pages["tabs"][0]
     before, placed = revision(page), page.get_attribute("body", "data-status")
-    for mm in (200, 400, 600):  # a drag: the steps before the last may be dropped
-        _move_z(page, mm)
+    for mm in (200, 400, 600):  # a drag away from the robot: the steps before the last may be dropped
+        _move_x(page, mm)
     page.wait_for_function(f"Number(document.body.dataset.latest) >= {before + 3}")
     status = settled(page)
     assert status in ("repaired", "infeasible")
+    page.click("#verdict details summary")  # the solver's diagnosis, one click away
     text = page.inner_text("#verdict")
-    assert "reach" in text, text  # the cause: the wrist centre beyond the arm's reach
+    # the cause: the wrist centre beyond the arm's reach (the part's near edge is then 1.9 m from the base)
+    assert "reach" in text, text
     page.screenshot(path=str(ARTIFACTS / "out-of-reach.png"))
-    _move_z(page, 0)
+    _move_x(page, 0)
     page.wait_for_function(f"Number(document.body.dataset.latest) >= {before + 4}")
     assert settled(page) == placed  # as before the move: the verdict does not depend on the way there
     assert pages["errors"] == []
 
 
-def test_write_saves_the_problem_and_writes_what_refine_run_writes(pages, server, tmp_path):
-    import json
+def _pose(page, key: str) -> list[float]:
+    return [float(page.input_value(f"[aria-label='{key} xyz[{i}]']")) for i in range(3)]
 
+
+def _the_part_dragged_by_the_gizmo_moves_the_cad_frame_and_the_receiver_by_as_much(pages):
+    page = pages["tabs"][0]
+    cad0, source0 = _pose(page, "frames.cad_in_world"), _pose(page, "frames.source_in_world")
+    before = revision(page)
+    page.select_option("#gizmo", "move")
+    x, y = page.evaluate("document.getElementById('scene').view.screenOf([0.35, 0, 0])")  # on the x arrow
+    page.mouse.move(x, y)
+    page.mouse.down()
+    for k in range(1, 9):  # a drag: changes at most every 120 ms, the latest wins
+        page.mouse.move(x + 10 * k, y)
+        time.sleep(0.03)
+    page.mouse.up()
+    page.wait_for_function(f"Number(document.body.dataset.latest) > {before}")
+    assert settled(page) in ("ok", "repaired", "infeasible")
+    moved = float(page.inner_text("#move-x-value"))  # [mm]
+    cad, source = _pose(page, "frames.cad_in_world"), _pose(page, "frames.source_in_world")
+    assert cad[0] - cad0[0] > 0.01  # [m] along world x, the arrow dragged
+    assert abs((cad[0] - cad0[0]) * 1e3 - moved) <= 0.5  # the slider shows the move in whole mm
+    assert abs((source[0] - source0[0]) - (cad[0] - cad0[0])) < 2e-6  # moved together
+    assert abs(cad[1] - cad0[1]) < 2e-6 and abs(cad[2] - cad0[2]) < 2e-6
+    page.screenshot(path=str(ARTIFACTS / "gizmo-drag.png"))
+    page.select_option("#gizmo", "")
+    page.eval_on_selector("#move-x", "(e) => { e.value = '0'; e.dispatchEvent(new Event('input')); }")
+    page.wait_for_function(f"Number(document.body.dataset.latest) > {revision(page)}")
+    assert settled(page) == "ok"
+    assert max(abs(a - b) for a, b in zip(_pose(page, "frames.cad_in_world"), cad0, strict=True)) < 2e-6
+    assert pages["errors"] == []
+
+
+def _the_part_turned_by_the_gizmo_turns_the_receiver_about_the_cad_origin(pages):
+    import math
+
+    page = pages["tabs"][0]
+    cad0, source0 = _pose(page, "frames.cad_in_world"), _pose(page, "frames.source_in_world")
+    rz0 = float(page.input_value("[aria-label='frames.cad_in_world rpy_deg[2]']"))
+    before = revision(page)
+    page.select_option("#gizmo", "move")
+    page.select_option("#gizmo-mode", "rotate")
+    view = "document.getElementById('scene').view"
+    a = page.evaluate(f"{view}.screenOf([0.5, 0, 0])")  # on the z ring, and a little along it
+    b = page.evaluate(f"{view}.screenOf([0.5, 0.1, 0])")
+    page.mouse.move(*a)
+    page.mouse.down()
+    for k in range(1, 9):
+        page.mouse.move(a[0] + (b[0] - a[0]) * 0.4 * k, a[1] + (b[1] - a[1]) * 0.4 * k)
+        time.sleep(0.03)
+    page.mouse.up()
+    page.wait_for_function(f"Number(document.body.dataset.latest) > {before}")
+    assert settled(page) in ("ok", "repaired", "infeasible")
+    turn = float(page.input_value("[aria-label='frames.cad_in_world rpy_deg[2]']")) - rz0
+    assert abs(turn) > 5.0  # [deg]
+    cad, source = _pose(page, "frames.cad_in_world"), _pose(page, "frames.source_in_world")
+    assert max(abs(p - q) for p, q in zip(cad, cad0, strict=True)) < 2e-6  # turned about its own origin
+    c, s_ = math.cos(math.radians(turn)), math.sin(math.radians(turn))
+    dx, dy = source0[0] - cad0[0], source0[1] - cad0[1]
+    expected = [cad0[0] + c * dx - s_ * dy, cad0[1] + s_ * dx + c * dy, source0[2]]  # by hand
+    assert max(abs(p - q) for p, q in zip(source, expected, strict=True)) < 2e-5, (source, expected)
+    page.select_option("#gizmo-mode", "translate")
+    page.select_option("#gizmo", "")
+    page.eval_on_selector("#move-turn", "(e) => { e.value = '0'; e.dispatchEvent(new Event('input')); }")
+    page.wait_for_function(f"Number(document.body.dataset.latest) > {revision(page)}")
+    assert settled(page) == "ok"
+    assert max(abs(p - q) for p, q in zip(_pose(page, "frames.source_in_world"), source0, strict=True)) < 2e-6
+    assert pages["errors"] == []
+
+
+def _a_receiver_calibration_is_fitted_shows_its_rejected_point_and_is_accepted(pages):
+    page = pages["tabs"][0]
+    page.select_option("#cal-kind", "receiver")
+    page.fill("#cal-file", "measurements/touch.liberty")
+    page.fill("#cal-rate", "60")
+    page.fill("#cal-points", "measurements/fixture_points.csv")
+    page.click("#cal-fit")
+    page.wait_for_selector("#cal-lines:not([hidden])", timeout=60_000)
+    lines = page.inner_text("#cal-lines")
+    assert re.search(r"F4 +residual +\d+\.\d+ mm +REJECTED", lines), lines  # touched 20 mm off (generate.py)
+    before = revision(page)
+    page.click("#cal-accept")
+    page.wait_for_function(f"Number(document.body.dataset.latest) > {before}")
+    assert settled(page) == "ok"
+    source = _pose(page, "frames.source_in_world")
+    assert max(abs(a - b) for a, b in zip(source, [1.30, -0.82, 0.72], strict=True)) < 0.002  # the truth [m]
+    page.locator("#cal-plot").scroll_into_view_if_needed()
+    page.screenshot(path=str(ARTIFACTS / "calibration.png"))
+    assert pages["errors"] == []
+
+
+def _write_saves_the_problem_and_writes_what_refine_run_writes(pages, server, tmp_path):
     from refine.cli import main
 
     page = pages["tabs"][0]
@@ -155,6 +291,7 @@ def test_write_saves_the_problem_and_writes_what_refine_run_writes(pages, server
     page.wait_for_selector("#diff:not([hidden])")
     diff = page.inner_text("#diff")
     assert "-orientation_deg = 3.0" in diff and "+orientation_deg = 2.5" in diff
+    assert "+source_in_world = " in diff  # the accepted calibration
     page.click("#write")
     page.wait_for_selector("#write-status", timeout=SOLVE_S * 1000)
     page.locator("#written-files").scroll_into_view_if_needed()
@@ -192,3 +329,33 @@ def test_write_saves_the_problem_and_writes_what_refine_run_writes(pages, server
             stamp = rb'LastWritingDateTime="[^"]*"'  # PathML's time of writing
             assert re.sub(stamp, b"", a) == re.sub(stamp, b"", b), name
     assert pages["errors"] == []
+
+
+STEPS = (
+    _the_first_screen_shows_the_cell_and_the_verdict,
+    _the_tcp_gizmo_sits_where_the_flange_pose_and_tcp_in_flange_put_the_tcp_on_the_path,
+    _the_frames_drawn_and_dragged_are_those_of_the_problem,
+    _a_bad_value_is_answered_with_its_unit_and_changes_nothing,
+    _a_change_of_the_cone_resolves_and_both_tabs_show_it,
+    _the_part_moved_away_out_of_reach_fails_with_its_cause_and_moved_back_is_ok,
+    _the_part_dragged_by_the_gizmo_moves_the_cad_frame_and_the_receiver_by_as_much,
+    _the_part_turned_by_the_gizmo_turns_the_receiver_about_the_cad_origin,
+    _a_receiver_calibration_is_fitted_shows_its_rejected_point_and_is_accepted,
+    _write_saves_the_problem_and_writes_what_refine_run_writes,
+)
+"""What a user does, in order on one server (one test, so that parallel workers never split it)."""
+
+
+def test_a_user_reviews_changes_calibrates_and_writes_the_glass_cell(server, pages, tmp_path, summary):
+    import inspect
+
+    times = []
+    for step in STEPS:
+        given = {"server": server, "pages": pages, "tmp_path": tmp_path}
+        t0, c0 = time.perf_counter(), time.process_time()
+        step(**{name: given[name] for name in inspect.signature(step).parameters})
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        times.append(f"{step.__name__.strip('_')}: {wall:.1f} s ({cpu:.1f} s CPU in this process)")
+    summary.append("refine serve in the browser, each step's wall time: " + "; ".join(times))
+    summary.append(f"load average at the end: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    (ARTIFACTS / "steps.txt").write_text("\n".join(times) + "\n", encoding="utf-8")

@@ -11,7 +11,7 @@ import pytest
 import tomlkit
 
 from refine.serve.edits import apply_changes
-from refine.serve.session import FusedCache, Job, LatestSolver, warm_joints
+from refine.serve.session import WARM_MOVE_M, FusedCache, Job, LatestSolver, near
 
 ROOT = Path(__file__).resolve().parents[2]
 GLASS = ROOT / "problems" / "glass_adhesive" / "problem.toml"
@@ -71,6 +71,69 @@ def test_an_error_in_a_solve_is_handed_on_and_the_thread_keeps_serving():
         solver.stop()
 
 
+def test_a_solve_under_way_stops_when_a_newer_change_comes_and_only_the_newest_is_answered():
+    from refine.control import check_cancelled, controlled
+
+    started, answered = threading.Event(), []
+    finished = threading.Event()
+    solver = None
+
+    def solve(job):  # a long solve that checks for a cancel as the pipeline's stages do
+        with controlled(cancel=solver.superseded):
+            started.set()
+            for _ in range(500):
+                time.sleep(0.01)
+                check_cancelled("solve")
+        return job.revision
+
+    def done(job, answer, error):
+        answered.append(job.revision)
+        finished.set()
+
+    solver = LatestSolver(solve, done)
+    try:
+        solver.submit(Job(1, None, {}))
+        assert started.wait(10)
+        t0 = time.perf_counter()
+        solver.submit(Job(2, None, {}))  # revision 1 is stale now: its solve stops
+        while solver.cancelled == 0 and time.perf_counter() - t0 < 10:
+            time.sleep(0.01)
+        assert solver.cancelled == 1
+        assert time.perf_counter() - t0 < 4.0  # not the 5 s revision 1 would have taken
+        assert not finished.is_set() or answered == [2]
+    finally:
+        solver.stop()
+    assert 1 not in answered  # a stopped solve is never answered
+
+
+def test_the_scene_resends_only_the_sections_that_changed():
+    import json
+    from types import SimpleNamespace
+
+    from refine.serve import state
+
+    scenes = iter(
+        [
+            {"cell": [1], "robot": {"parts": ["p"], "frames": [0], "where": []}, "paths": [7]},
+            {"cell": [1], "robot": {"parts": ["p"], "frames": [1], "where": []}, "paths": [8]},
+        ]
+    )
+    real, flange = state.scene_data, state.flange_poses
+    state.scene_data = lambda result: next(scenes)
+    state.flange_poses = lambda result, where: []
+    try:
+        diff = state.SceneDiff()
+        answer = SimpleNamespace(revision=1, result=object())
+        first, whole = diff.messages(answer)
+        answer.revision = 2
+        second, whole2 = diff.messages(answer)
+    finally:
+        state.scene_data, state.flange_poses = real, flange
+    assert sorted(json.loads(first)["scene"]) == ["cell", "parts", "paths", "robot"]
+    assert json.loads(second) == {"type": "scene", "revision": 2, "scene": {"robot": {"frames": [1], "where": [], "flange": []}, "paths": [8]}}
+    assert json.loads(whole2)["scene"] == {"cell": [1], "parts": ["p"], "robot": {"frames": [1], "where": [], "flange": []}, "paths": [8]}
+
+
 @pytest.fixture(scope="module")
 def moved():
     base = tomlkit.parse(GLASS.read_text(encoding="utf-8"))
@@ -94,30 +157,19 @@ def test_the_fused_path_moves_with_the_workpiece_as_fusing_the_moved_files_gives
     assert np.degrees(angle).max() < 1e-3
 
 
-def test_the_previous_joints_are_carried_onto_the_moved_path(moved):
-    from refine.robot.kinematics import TcpKinematics
-    from refine.robot.registry import robot_for
-    from refine.run.stages import fused_path
 
-    placed, shifted = moved
-    robot = robot_for(placed.robot)
-    kin = TcpKinematics(robot, placed.robot.base_in_world, placed.tool.tcp_in_flange)
-    path = fused_path(shifted)
-    # a start that reaches the path as placed: IK chained along it, each point from the one before
-    from refine.robot.kinematics import solve_ik_batch
+def test_a_previous_answer_is_a_start_only_for_a_path_moved_a_little():
+    from types import SimpleNamespace
 
-    old = fused_path(placed)
-    targets = np.tile(np.eye(4), (len(old), 1, 1))
-    targets[:, :3, :3], targets[:, :3, 3] = old.rotations, old.positions
-    q_placed = np.zeros((len(old), robot.nq))
-    q = np.radians([[0.0, 20.0, 10.0, 0.0, 60.0, 0.0]])
-    for k in range(len(old)):
-        q, err = solve_ik_batch(kin, targets[k : k + 1], q, robot.spec.lower, robot.spec.upper, max_iterations=200)
-        assert err[0] < 1e-5
-        q_placed[k] = q[0]
-    assert np.degrees(np.abs(np.diff(q_placed, axis=0)).max()) < 5.0
-    q = warm_joints(shifted, robot, path, q_placed)
-    assert q is not None
-    miss = np.linalg.norm(kin.poses(q)[:, :3, 3] - path.positions, axis=1)
-    assert miss.max() < 1e-5  # [m], measured by forward kinematics
-    assert warm_joints(placed, robot, old, q_placed) is q_placed  # already on the path: kept as it is
+    line = np.column_stack([np.linspace(0.0, 1.0, 11), np.zeros(11), np.zeros(11)])  # 1 m along x
+    previous = SimpleNamespace(first=SimpleNamespace(fused=SimpleNamespace(positions=line)))
+
+    def path(points):
+        return SimpleNamespace(positions=points)
+
+    assert near(previous, path(line + [0.0, 0.0, 0.05]))  # 50 mm up
+    assert near(previous, path(line + [0.0, 0.59 * WARM_MOVE_M, 0.79 * WARM_MOVE_M]))  # just inside the limit
+    assert not near(previous, path(line + [0.6, 0.0, 0.0]))  # the jump of the browser test
+    turned = line @ np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # 90 deg about z
+    assert not near(previous, path(turned))  # the far end moved by sqrt(2) m
+    assert not near(previous, path(line[:10]))  # another number of waypoints
