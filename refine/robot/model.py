@@ -10,6 +10,7 @@ the URDF. Registry robots are loaded by :func:`refine.robot.registry.load_robot`
 from __future__ import annotations
 
 import logging
+import threading
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +33,7 @@ class Robot:
     Attributes:
         spec: the registry entry.
         model: the Pinocchio model built from the URDF.
-        data: Pinocchio work data for ``model`` (shared; not thread-safe).
+        data: Pinocchio work data for ``model``, one per thread (see :attr:`data`).
         nq: number of configuration variables (the joint count for revolute arms).
         flange_id: Pinocchio frame index of ``spec.flange_frame``.
     """
@@ -40,7 +41,7 @@ class Robot:
     def __init__(self, spec: RobotSpec, model: pin.Model | None = None) -> None:
         self.spec = spec
         self.model = build_model(spec.urdf) if model is None else model
-        self.data = self.model.createData()
+        self._local = threading.local()  # each thread's Pinocchio data
         self.nq = int(self.model.nq)
         self.flange_id = self.frame_id(spec.flange_frame)
         self._shapes: tuple[CollisionShape, ...] | None = None
@@ -48,6 +49,18 @@ class Robot:
 
     def __repr__(self) -> str:
         return f"Robot({self.spec.name!r}, nq={self.nq})"
+
+    @property
+    def data(self) -> pin.Data:
+        """Pinocchio's work data for :attr:`model`, one per thread, made on first use in each thread.
+
+        The model itself is only read, so calls from several threads on one robot never share
+        scratch memory.
+        """
+        data = getattr(self._local, "data", None)
+        if data is None:
+            data = self._local.data = self.model.createData()
+        return data
 
     @classmethod
     def from_urdf(
@@ -126,11 +139,11 @@ class Robot:
 
     def __getstate__(self) -> dict[str, Any]:
         # the parsed collision shapes (FCL geometry) and Pinocchio's data are rebuilt on the other side
-        return {**self.__dict__, "data": None, "_shapes": None}
+        return {**self.__dict__, "_local": None, "_shapes": None}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
-        self.data = self.model.createData()
+        self._local = threading.local()
 
     def collision_shapes(self) -> list[CollisionShape]:
         """Collision primitives of every link, parsed once from the URDF's ``<collision>``."""
