@@ -23,7 +23,7 @@ from __future__ import annotations
 import logging
 from typing import TYPE_CHECKING
 
-from refine.errors import Cancelled, InputError, NotExecutable, RefineError, SolverError
+from refine.errors import ArgumentError, Cancelled, InputError, NotExecutable, RefineError, SolverError
 from refine.lazy import lazy_names
 from refine.version import __version__
 
@@ -54,6 +54,7 @@ _LAZY = {
 
 __all__ = [
     "__version__",
+    "ArgumentError",
     "Cancelled",
     "CollisionSettings",
     "Diagnosis",

@@ -20,7 +20,6 @@ import copy
 import dataclasses
 import threading
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -30,19 +29,24 @@ from numpy.typing import ArrayLike
 
 from refine.arguments import (  # noqa: I001
     arc_length_from,
+    check_hooks,
     check_position_units,
+    check_previous,
+    checked_call,
     finite_array,
+    home_from,
     joints_from,
     rotations_from,
     settings_from,
     shapes_from,
     speeds_from,
     transform_from,
+    typed,
 )
 from refine.control import Progress, controlled
 from refine.errors import InputError, NotExecutable, api_words
 from refine.problem import Problem, load_problem
-from refine.run.typed import Diagnosis, Metrics
+from refine.run.typed import Diagnosis, Metrics, PassArrays
 from refine.settings import (
     CollisionSettings,
     OptimiseSettings,
@@ -61,33 +65,6 @@ if TYPE_CHECKING:
     from refine.run.result import RunResult
 
 __all__ = ["PassArrays", "Result", "load_problem", "refine_path", "solve"]
-
-
-@dataclass(frozen=True)
-class PassArrays:
-    """One pass of a result as arrays (SI units, world frame {F}).
-
-    Attributes:
-        name: ``"pass 1"``, or ``"layer 2 pass 1"`` in a multi-pass weld.
-        status: ``"ok"``, ``"repaired"`` or ``"infeasible"``.
-        reason: empty when ok; otherwise what was repaired or why it is infeasible.
-        joints: joint angles per waypoint [rad], shape (N, n).
-        poses: TCP pose reached per waypoint, T_F_TCP, shape (N, 4, 4) [m].
-        times: time of each waypoint [s], shape (N,); None when infeasible (no timing).
-        speeds: planned TCP speed [m/s], shape (N,); None when infeasible.
-        arc_length: arc length along the path [m], shape (N,).
-        metrics: the pass's verified figures, as in ``result.json``'s ``passes[].metrics``.
-    """
-
-    name: str
-    status: str
-    reason: str
-    joints: Array
-    poses: Array
-    times: Array | None
-    speeds: Array | None
-    arc_length: Array
-    metrics: dict[str, Any]
 
 
 class Result:
@@ -232,6 +209,7 @@ class Result:
         """
         return copy.deepcopy(self._figures()["motions"])
 
+    @checked_call
     def to_dict(self, *, contents: bool = False) -> dict[str, Any]:
         """The ``result.json`` document of this result, as plain Python values.
 
@@ -264,12 +242,13 @@ class Result:
         return out
 
     @classmethod
+    @checked_call
     def from_dict(cls, doc: Mapping[str, Any]) -> Result:
         """Rebuild a result from :meth:`to_dict`'s document (e.g. after JSON across a process boundary).
 
         Its :meth:`to_dict` equals ``doc``. With ``doc`` from ``to_dict(contents=True)`` it also has
         the arrays and the documents (:meth:`program`, :meth:`pathml`, :meth:`contents`); without,
-        those raise :class:`refine.run.contents.NotExecutable`. It has no :attr:`run` (None) and
+        those raise :class:`refine.NotExecutable`. It has no :attr:`run` (None) and
         cannot be written or serve as ``previous=``.
         """
         from refine.run.contents import check_doc
@@ -310,6 +289,7 @@ class Result:
                 self._files[programs] = render(self.run, programs, self._when())
         return self._files[programs]
 
+    @checked_call
     def program(self, kind: str) -> str:
         """The text of one robot program, as :meth:`write` would write it, without touching the disk.
 
@@ -328,12 +308,14 @@ class Result:
         base = check_kind(kind)
         return pick(self._rendered(self._programs(None) if self.run is None else (base,)), kind, self.status)
 
+    @checked_call
     def pathml(self) -> str:
         """The PathML document (``<name>.aml``) as :meth:`write` would write it, without touching the disk."""
         from refine.run.contents import pick
 
         return pick(self._rendered(self._programs(None) if self.run is None else ()), "pathml", self.status)
 
+    @checked_call
     def contents(self, programs: Sequence[str] | None = None) -> dict[str, str]:
         """File name -> text of every file :meth:`write` writes but ``result.json`` and ``report.html``.
 
@@ -344,6 +326,7 @@ class Result:
             name: data.decode("utf-8") for name, data in self._rendered(self._programs(programs)).values()
         }
 
+    @checked_call
     def write(
         self, out_dir: str | Path, programs: Sequence[str] | None = None, *, report: bool = True
     ) -> dict[str, Path]:
@@ -372,11 +355,13 @@ class Result:
                 expected="a result of refine.solve or refine.refine_path",
             )
         chosen = self._programs(programs) if programs is not None else None
+        typed(out_dir, "out_dir", (str, Path), "the path of a folder")
         with api_words(), stamped(self._when()):
             write_run(self.run, Path(out_dir), chosen, report=report)
         return dict(self.run.outputs)
 
 
+@checked_call
 def solve(
     problem: Problem | str | Path,
     *,
@@ -408,8 +393,11 @@ def solve(
     from refine.run.solve import solve_problem
     from refine.run.stages import fused_path
 
+    check_hooks(cancel, progress)
+    check_previous(previous, Result)
     with api_words(), controlled(cancel, progress):
         if not isinstance(problem, Problem):
+            typed(problem, "problem", (str, Path), "a refine.Problem or the path of a problem folder or file")
             problem = load_problem(problem)
         problem = _with_time_limit(problem, time_limit_s)
         if previous is None:
@@ -462,6 +450,7 @@ def _solve_again(
     return Result(solve_problem(problem, robot=robot, fused=fused, nlp=nlp, q0=q0, warm=warm))
 
 
+@checked_call
 def refine_path(
     robot: Robot | str,
     positions: ArrayLike,
@@ -547,14 +536,25 @@ def refine_path(
     from refine.paths import FusedPath
     from refine.robot.model import Robot
     from refine.robot.registry import load_robot
+    from refine.run.contents import check_programs
 
     if isinstance(robot, str):
         robot = load_robot(robot)
     elif not isinstance(robot, Robot):
-        raise InputError(f"robot: expected a refine.Robot or a registry name, got {type(robot).__name__}")
+        typed(robot, "robot", Robot, "a refine.Robot or a registry name")
+    check_hooks(cancel, progress)
+    check_previous(previous, Result)
+    typed(name, "name", str, "a str (the problem name)")
+    typed(tool_name, "tool_name", str, "a str (the tool's name)")
+    typed(axisymmetric, "axisymmetric", (bool, np.bool_), "True or False")
     p = finite_array(positions, "positions", "m")
     if p.ndim != 2 or p.shape[1] != 3 or len(p) < 3:
-        raise InputError(f"positions: expected shape (N, 3) [m] with N >= 3, got {p.shape}")
+        raise InputError(
+            f"positions: expected shape (N, 3) [m] with N >= 3, got {p.shape}",
+            key="positions",
+            value=p.shape,
+            expected="shape (N, 3) [m] with N >= 3",
+        )
     N = len(p)
     base = transform_from(base_in_world, "base_in_world")
     check_position_units(p, robot, base)
@@ -576,7 +576,7 @@ def refine_path(
         robot=RobotSettings(
             model=robot.spec.name,
             base_in_world=base,
-            home_deg=None if home_deg is None else tuple(float(a) for a in home_deg),
+            home_deg=home_from(home_deg, robot.nq),
         ),
         tool=ToolSettings(
             name=tool_name,
@@ -589,7 +589,7 @@ def refine_path(
         tolerances=tolerances,
         process=process or ProcessSettings(),
         output=OutputSettings(
-            programs=tuple(programs) if programs is not None else (robot.spec.default_program,)
+            programs=check_programs(programs) if programs is not None else (robot.spec.default_program,)
         ),
         cell=tuple(cell),
         collision=collision or CollisionSettings(),

@@ -18,7 +18,8 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
-from refine.errors import InputError
+from refine.arguments import typed
+from refine.errors import InputError, checked_call
 from refine.robot.geometry import CollisionShape, collision_shapes_from_urdf
 from refine.robot.self_collision import read_matrix
 from refine.robot.spec import SELF_COLLISION_FILE, RobotSpec, build_model
@@ -63,6 +64,7 @@ class Robot:
         return data
 
     @classmethod
+    @checked_call
     def from_urdf(
         cls, urdf: str | Path, *, controller: str, flange_frame: str = "tool0", **options: Any
     ) -> Robot:
@@ -78,6 +80,7 @@ class Robot:
                 ``reach_m``, ``joint_acceleration_deg_s2``, ``joint_lower_deg``, ``joint_upper_deg``,
                 ``joint_velocity_deg_s``.
         """
+        typed(urdf, "urdf", (str, Path), "the path of a .urdf or .xacro file")
         return robot_from_urdf(urdf, controller=controller, flange_frame=flange_frame, **options)
 
     def frame_id(self, frame_name: str) -> int:
@@ -172,5 +175,5 @@ def robot_from_urdf(
     The spec and model of :func:`refine.robot.urdf.read_urdf`, with the collision geometry of the
     URDF's ``<collision>`` elements. Arguments and errors as :func:`~refine.robot.urdf.read_urdf`.
     """
-    spec, model = read_urdf(urdf, controller=controller, flange_frame=flange_frame, **options)
+    spec, model = checked_call(read_urdf)(urdf, controller=controller, flange_frame=flange_frame, **options)
     return Robot(spec, model)

@@ -15,6 +15,7 @@ from typing import Any
 
 from refine.arguments import settings_from
 from refine.errors import InputError
+from refine.types import Array
 
 
 @dataclass(frozen=True)
@@ -138,3 +139,29 @@ class Diagnosis:
                 expected="a field of it",
             ) from e
 
+
+@dataclass(frozen=True)
+class PassArrays:
+    """One pass of a result as arrays (SI units, world frame {F}).
+
+    Attributes:
+        name: ``"pass 1"``, or ``"layer 2 pass 1"`` in a multi-pass weld.
+        status: ``"ok"``, ``"repaired"`` or ``"infeasible"``.
+        reason: empty when ok; otherwise what was repaired or why it is infeasible.
+        joints: joint angles per waypoint [rad], shape (N, n).
+        poses: TCP pose reached per waypoint, T_F_TCP, shape (N, 4, 4) [m].
+        times: time of each waypoint [s], shape (N,); None when infeasible (no timing).
+        speeds: planned TCP speed [m/s], shape (N,); None when infeasible.
+        arc_length: arc length along the path [m], shape (N,).
+        metrics: the pass's verified figures, as in ``result.json``'s ``passes[].metrics``.
+    """
+
+    name: str
+    status: str
+    reason: str
+    joints: Array
+    poses: Array
+    times: Array | None
+    speeds: Array | None
+    arc_length: Array
+    metrics: dict[str, Any]
