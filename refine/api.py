@@ -271,7 +271,7 @@ class Result:
         if programs is None:
             if self.run is None:
                 return tuple(self._contents["programs"]) if self._contents else ()
-            return tuple(self.run.problem.output.programs)
+            return tuple(self.run.problem.output.programs or (self.run.robot.spec.default_program,))
         from refine.run.contents import check_programs
 
         return check_programs(programs)

@@ -164,3 +164,21 @@ def test_a_diagnosis_entry_reads_as_dataclasses():
     assert (d.pass_name, d.index_start, d.index_end, d.slack_deg) == ("pass 1", 3, 9, 2.5)
     assert d.cause.joint == 5 and d.cause.explains_deg == 6.0
     assert d.causes[1].objects == ("link_6", "table") and d.causes[1].explains_deg is None
+
+
+@pytest.mark.slow
+def test_a_repaired_problem_folder_travels_with_its_diagnosis_and_program(tmp_path):
+    repaired = refine.solve("problems/unreachable/joint_limit")  # joint 5 past its limit: repaired
+    assert repaired.status == "repaired"
+    (finding,) = repaired.findings
+    entry = repaired.diagnosis[0]
+    assert (
+        (finding.cause.cause, finding.cause.joint) == ("joint limit", 5) == (entry["cause"], entry["joint"])
+    )
+    assert finding.slack_deg == entry["slack_deg"] > 0.0
+    files = repaired.write(tmp_path / "out", report=False)  # the problem's own programs: RAPID
+    assert files["rapid"].read_bytes() == repaired.program("rapid").encode("utf-8")
+    back = refine.Result.from_dict(json.loads(json.dumps(repaired.to_dict(contents=True))))
+    assert back.findings == repaired.findings and back.status == "repaired"
+    assert back.program("rapid") == repaired.program("rapid")
+    assert back.passes[0].reason == repaired.passes[0].reason != ""

@@ -32,7 +32,17 @@ def _run(cmd: list[str], cwd: Path, timeout: float = 600.0) -> subprocess.Comple
 @pytest.mark.slow
 def test_an_installed_wheel_runs_the_api_examples_and_a_bundled_problem(tmp_path):
     _run(
-        [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", str(ROOT), "-w", str(tmp_path / "dist")],
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "--no-deps",
+            "-q",
+            str(ROOT),
+            "-w",
+            str(tmp_path / "dist"),
+        ],
         tmp_path,
     )
     (wheel,) = (tmp_path / "dist").glob("refine-*.whl")
@@ -41,10 +51,9 @@ def test_an_installed_wheel_runs_the_api_examples_and_a_bundled_problem(tmp_path
     python = venv / "bin" / "python"
     _run([str(python), "-m", "pip", "install", "-q", "--no-deps", str(wheel)], tmp_path)
 
-    work = tmp_path / "work"  # the user's folder: the bundled problems and robot files beside it, no source tree
+    work = tmp_path / "work"  # the user's folder: the bundled problems beside it, no source tree, no robots/
     work.mkdir()
     (work / "problems").symlink_to(ROOT / "problems")
-    (work / "robots").symlink_to(ROOT / "robots")  # a URDF file an example reads (the registry is the wheel's)
     script = work / "examples.py"
     script.write_text(
         textwrap.dedent(
