@@ -31,9 +31,11 @@ class Metrics:
         min_joint_margin_rad: least distance of a joint from its limit [rad].
         min_singularity_measure: least scaled manipulability [-].
         min_singular_value: least singular value of the Jacobian [-].
-        min_clearance_m: least distance of any checked pair [m]: a cell pair (against the cell
-            margin) or a self pair (robot links and tool shapes among themselves, against the self
-            margin); the summary and the report name the pair and its kind.
+        min_clearance_m: least distance of any checked pair [m], a cell pair or a self pair.
+        min_cell_clearance_m: least distance between the robot or tool and a cell object [m]:
+            the figure to compare with the cell margin.
+        min_self_clearance_m: least distance between robot links and tool shapes among
+            themselves [m]: the figure to compare with the self margin.
         cycle_time_s: time of the timed path [s] (summed over passes).
         speed_tracking_error_rel: how far the planned speed falls short of the demonstration [-].
         fusion_residual_median_m: median residual of the fused path [m].
@@ -48,6 +50,8 @@ class Metrics:
     min_singularity_measure: float | None = None
     min_singular_value: float | None = None
     min_clearance_m: float | None = None
+    min_cell_clearance_m: float | None = None
+    min_self_clearance_m: float | None = None
     cycle_time_s: float | None = None
     speed_tracking_error_rel: float | None = None
     fusion_residual_median_m: float | None = None
