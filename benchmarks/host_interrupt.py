@@ -26,7 +26,9 @@ import sys
 import time
 
 HOST = r"""
-import sys, time
+import signal, sys, time
+signal.signal(signal.SIGINT, signal.default_int_handler)  # Ctrl-C as in a terminal (a shell's
+# background job starts with SIGINT ignored, and Python then keeps it ignored)
 import refine
 import refine.run.solve  # the heavy imports happen before "ready"
 problem, limit = sys.argv[1], (float(sys.argv[2]) if len(sys.argv) > 2 else None)
