@@ -23,7 +23,7 @@ from __future__ import annotations
 import logging
 from typing import TYPE_CHECKING
 
-from refine.errors import Cancelled, InputError, RefineError, SolverError
+from refine.errors import ArgumentError, Cancelled, InputError, NotExecutable, RefineError, SolverError
 from refine.lazy import lazy_names
 from refine.version import __version__
 
@@ -32,6 +32,7 @@ if TYPE_CHECKING:
     from refine.control import Progress
     from refine.problem import Problem, load_problem
     from refine.robot.model import Robot
+    from refine.run.typed import Diagnosis, DiagnosisCause, Metrics
     from refine.settings import CollisionSettings, Shape, Tolerances
 
 _LAZY = {
@@ -46,13 +47,21 @@ _LAZY = {
     "Tolerances": "refine.settings",
     "CollisionSettings": "refine.settings",
     "Progress": "refine.control",
+    "Metrics": "refine.run.typed",
+    "Diagnosis": "refine.run.typed",
+    "DiagnosisCause": "refine.run.typed",
 }
 
 __all__ = [
     "__version__",
+    "ArgumentError",
     "Cancelled",
     "CollisionSettings",
+    "Diagnosis",
+    "DiagnosisCause",
     "InputError",
+    "Metrics",
+    "NotExecutable",
     "PassArrays",
     "Problem",
     "Progress",

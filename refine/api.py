@@ -20,7 +20,7 @@ import copy
 import dataclasses
 import threading
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -29,18 +29,24 @@ from numpy.typing import ArrayLike
 
 from refine.arguments import (  # noqa: I001
     arc_length_from,
+    check_hooks,
     check_position_units,
+    check_previous,
+    checked_call,
     finite_array,
+    home_from,
     joints_from,
     rotations_from,
     settings_from,
     shapes_from,
     speeds_from,
     transform_from,
+    typed,
 )
 from refine.control import Progress, controlled
-from refine.errors import InputError
+from refine.errors import InputError, NotExecutable, api_words
 from refine.problem import Problem, load_problem
+from refine.run.typed import Diagnosis, Metrics, PassArrays
 from refine.settings import (
     CollisionSettings,
     OptimiseSettings,
@@ -56,45 +62,17 @@ from refine.types import Array
 
 if TYPE_CHECKING:
     from refine.robot.model import Robot
-    from refine.run.result import PassResult, RunResult
+    from refine.run.result import RunResult
 
 __all__ = ["PassArrays", "Result", "load_problem", "refine_path", "solve"]
-
-
-
-
-@dataclass(frozen=True)
-class PassArrays:
-    """One pass of a result as arrays (SI units, world frame {F}).
-
-    Attributes:
-        name: ``"pass 1"``, or ``"layer 2 pass 1"`` in a multi-pass weld.
-        status: ``"ok"``, ``"repaired"`` or ``"infeasible"``.
-        reason: empty when ok; otherwise what was repaired or why it is infeasible.
-        joints: joint angles per waypoint [rad], shape (N, n).
-        poses: TCP pose reached per waypoint, T_F_TCP, shape (N, 4, 4) [m].
-        times: time of each waypoint [s], shape (N,); None when infeasible (no timing).
-        speeds: planned TCP speed [m/s], shape (N,); None when infeasible.
-        arc_length: arc length along the path [m], shape (N,).
-        metrics: the pass's verified figures, as in ``result.json``'s ``passes[].metrics``.
-    """
-
-    name: str
-    status: str
-    reason: str
-    joints: Array
-    poses: Array
-    times: Array | None
-    speeds: Array | None
-    arc_length: Array
-    metrics: dict[str, Any]
 
 
 class Result:
     """What a refinement produced, in memory.
 
     The arrays of the first (demonstrated) pass are attributes of the result itself; every pass is
-    in :attr:`passes`. Nothing is written until :meth:`write` is called.
+    in :attr:`passes`. Nothing is written until :meth:`write` is called; :meth:`program`,
+    :meth:`pathml` and :meth:`contents` give the same documents as text without touching the disk.
 
     The figures :attr:`metrics`, :attr:`passes`, :attr:`diagnosis` and :attr:`placement` read
     from ``result.json``'s document are computed once, on first use: they come from the solved
@@ -102,12 +80,16 @@ class Result:
     :meth:`write` adds the files written (``outputs``, ``files``) and their times (``timings_s``).
 
     Attributes:
-        run: the underlying :class:`refine.run.result.RunResult` (problem, robot, per-pass details).
+        run: the underlying :class:`refine.run.result.RunResult` (problem, robot, per-pass details);
+            None for a result rebuilt by :meth:`from_dict`.
     """
 
-    def __init__(self, run: RunResult) -> None:
+    def __init__(self, run: RunResult | None, *, doc: dict[str, Any] | None = None) -> None:
         self.run = run
-        self._doc: dict[str, Any] | None = None
+        self._doc: dict[str, Any] | None = doc
+        self._contents: dict[str, Any] | None = None  # rebuilt from a dictionary: its arrays and texts
+        self._stamp: datetime | None = None  # the documents' time stamp, fixed at the first rendering
+        self._files: dict[tuple[str, ...], dict[str, tuple[str, bytes]]] = {}
 
     def _figures(self) -> dict[str, Any]:
         """``result.json``'s document as first computed, for the figures of the solved passes."""
@@ -116,48 +98,80 @@ class Result:
         return self._doc
 
     def __repr__(self) -> str:
+        doc = self._figures()
         return (
-            f"Result(status={self.status!r}, problem={self.run.problem.name!r}, "
-            f"waypoints={len(self.run.first.fused)}, passes={len(self.run.passes)})"
+            f"Result(status={self.status!r}, problem={doc['problem']!r}, "
+            f"waypoints={doc['n_waypoints']}, passes={doc['n_passes']})"
         )
 
     @property
     def status(self) -> str:
-        """``"ok"``, ``"repaired"`` (within the repair slack) or ``"infeasible"``."""
-        return self.run.status
+        """``"ok"``, ``"repaired"`` (within the repair slack), ``"infeasible"`` or ``"timeout"``."""
+        return self.run.status if self.run is not None else self._figures()["status"]
 
     @property
     def passes(self) -> tuple[PassArrays, ...]:
         """Every pass as arrays, in order (one for a single-pass path)."""
         doc = self._figures()["passes"]
-        return tuple(_pass_arrays(p, d["metrics"]) for p, d in zip(self.run.passes, doc, strict=True))
+        return tuple(
+            PassArrays(
+                name=d["name"],
+                status=d["status"],
+                reason=self._reason(k),
+                metrics=dict(d["metrics"]),
+                **self._arrays(k),
+            )
+            for k, d in enumerate(doc)
+        )
+
+    def _reason(self, k: int) -> str:
+        if self.run is not None:
+            return self.run.passes[k].refinement.reason
+        return self._contents["reasons"][k] if self._contents else ""
+
+    def _arrays(self, k: int) -> dict[str, Any]:
+        if self.run is None:
+            from refine.run.contents import arrays_from
+
+            return arrays_from(self._contents, k)
+        p = self.run.passes[k]
+        return {
+            "joints": p.refinement.q.copy(),
+            "poses": p.refinement.check.poses.copy(),
+            "times": None if p.timing is None else p.timing.t.copy(),
+            "speeds": None if p.timing is None else p.timing.speed.copy(),
+            "arc_length": p.fused.s.copy(),
+        }
 
     @property
     def joints(self) -> Array:
         """Joint angles of the first pass [rad], shape (N, n)."""
-        return self.run.first.refinement.q.copy()
+        return self._arrays(0)["joints"]
 
     @property
     def poses(self) -> Array:
         """TCP poses T_F_TCP of the first pass in the world frame, shape (N, 4, 4) [m]."""
-        return self.run.first.refinement.check.poses.copy()
+        return self._arrays(0)["poses"]
 
     @property
     def times(self) -> Array | None:
         """Time of each waypoint of the first pass [s], shape (N,); None when infeasible."""
-        timing = self.run.first.timing
-        return None if timing is None else timing.t.copy()
+        return self._arrays(0)["times"]
 
     @property
     def speeds(self) -> Array | None:
         """Planned TCP speed of the first pass [m/s], shape (N,); None when infeasible."""
-        timing = self.run.first.timing
-        return None if timing is None else timing.speed.copy()
+        return self._arrays(0)["speeds"]
 
     @property
     def metrics(self) -> dict[str, Any]:
         """The verified figures over all passes (``result.json``'s ``metrics``)."""
         return dict(self._figures()["metrics"])
+
+    @property
+    def figures(self) -> Metrics:
+        """:attr:`metrics` as a dataclass (:class:`refine.run.typed.Metrics`: fields and units)."""
+        return Metrics.from_dict(self._figures()["metrics"])
 
     @property
     def diagnosis(self) -> list[dict[str, Any]]:
@@ -168,6 +182,11 @@ class Result:
         ``docs/outputs.md``.
         """
         return copy.deepcopy(self._figures()["diagnosis"])
+
+    @property
+    def findings(self) -> tuple[Diagnosis, ...]:
+        """:attr:`diagnosis` as dataclasses (:class:`refine.run.typed.Diagnosis`, its causes typed too)."""
+        return tuple(Diagnosis.from_dict(d) for d in self._figures()["diagnosis"])
 
     @property
     def placement(self) -> dict[str, Any] | None:
@@ -190,16 +209,131 @@ class Result:
         """
         return copy.deepcopy(self._figures()["motions"])
 
-    def to_dict(self) -> dict[str, Any]:
-        """The ``result.json`` document of this result, as plain Python values."""
-        from refine.export.result_json import result_dict
+    @checked_call
+    def to_dict(self, *, contents: bool = False) -> dict[str, Any]:
+        """The ``result.json`` document of this result, as plain Python values.
 
-        return result_dict(self.run)
+        Args:
+            contents: also carry, under ``"contents"``, every pass's arrays and the text of every
+                file :meth:`write` writes but ``result.json`` and the report (the problem's
+                programs), so that :meth:`from_dict` rebuilds a result whose :meth:`program`,
+                :meth:`pathml` and arrays are this one's.
+        """
+        if self.run is None:
+            doc = copy.deepcopy(self._figures())
+            if contents and self._contents is None:
+                from refine.run.contents import arrays_from
 
+                arrays_from(None, 0)  # raises: nothing to carry
+        else:
+            from refine.export.result_json import result_dict
+
+            doc = result_dict(self.run)
+        if contents:
+            doc["contents"] = copy.deepcopy(self._contents) if self.run is None else self._contents_now()
+        return doc
+
+    def _contents_now(self) -> dict[str, Any]:
+        from refine.run.contents import contents_dict
+
+        assert self.run is not None
+        out = contents_dict(self.run, self._programs(None), self._when())
+        out["reasons"] = [p.refinement.reason for p in self.run.passes]
+        return out
+
+    @classmethod
+    @checked_call
+    def from_dict(cls, doc: Mapping[str, Any]) -> Result:
+        """Rebuild a result from :meth:`to_dict`'s document (e.g. after JSON across a process boundary).
+
+        Its :meth:`to_dict` equals ``doc``. With ``doc`` from ``to_dict(contents=True)`` it also has
+        the arrays and the documents (:meth:`program`, :meth:`pathml`, :meth:`contents`); without,
+        those raise :class:`refine.NotExecutable`. It has no :attr:`run` (None) and
+        cannot be written or serve as ``previous=``.
+        """
+        from refine.run.contents import check_doc
+
+        check_doc(doc)
+        doc = copy.deepcopy(dict(doc))
+        contents = doc.pop("contents", None)
+        result = cls(None, doc=doc)
+        result._contents = contents
+        if contents:
+            result._stamp = datetime.fromisoformat(contents["stamp"])
+        return result
+
+    def _when(self) -> datetime:
+        if self._stamp is None:
+            self._stamp = datetime.now(timezone.utc)
+        return self._stamp
+
+    def _programs(self, programs: Sequence[str] | None) -> tuple[str, ...]:
+        if programs is None:
+            if self.run is None:
+                return tuple(self._contents["programs"]) if self._contents else ()
+            return tuple(self.run.problem.output.programs or (self.run.robot.spec.default_program,))
+        from refine.run.contents import check_programs
+
+        return check_programs(programs)
+
+    def _rendered(self, programs: tuple[str, ...]) -> dict[str, tuple[str, bytes]]:
+        from refine.run.contents import files_from, render
+
+        if self.run is None:
+            return files_from(self._contents)
+        if programs not in self._files:
+            from refine.run.preflight import check_programs
+
+            with api_words():
+                check_programs(self.run.problem, self.run.robot.spec, programs)
+                self._files[programs] = render(self.run, programs, self._when())
+        return self._files[programs]
+
+    @checked_call
+    def program(self, kind: str) -> str:
+        """The text of one robot program, as :meth:`write` would write it, without touching the disk.
+
+        Args:
+            kind: ``"rapid"``, ``"krl"`` (the ``.src``; ``"krl_dat"`` for the ``.dat``), ``"urscript"``,
+                ``"tp"``, ``"inform"`` or ``"sunrise"``; ``"rapid_1"``, ``"rapid_2"``, ... for the
+                modules of a multi-pass RAPID program.
+
+        Raises:
+            InputError: ``kind`` is not a program format.
+            NotExecutable: no program (an infeasible pass or a failed motion), or a result rebuilt
+                without this format's text.
+        """
+        from refine.run.contents import check_kind, pick
+
+        base = check_kind(kind)
+        return pick(self._rendered(self._programs(None) if self.run is None else (base,)), kind, self.status)
+
+    @checked_call
+    def pathml(self) -> str:
+        """The PathML document (``<name>.aml``) as :meth:`write` would write it, without touching the disk."""
+        from refine.run.contents import pick
+
+        return pick(self._rendered(self._programs(None) if self.run is None else ()), "pathml", self.status)
+
+    @checked_call
+    def contents(self, programs: Sequence[str] | None = None) -> dict[str, str]:
+        """File name -> text of every file :meth:`write` writes but ``result.json`` and ``report.html``.
+
+        Args:
+            programs: program formats; None for the problem's ``[output] programs``.
+        """
+        return {
+            name: data.decode("utf-8") for name, data in self._rendered(self._programs(programs)).values()
+        }
+
+    @checked_call
     def write(
         self, out_dir: str | Path, programs: Sequence[str] | None = None, *, report: bool = True
     ) -> dict[str, Path]:
         """Write the outputs of ``refine run`` into ``out_dir``.
+
+        The documents carry the time stamp of this result's first rendering (this call, or an
+        earlier :meth:`program`, :meth:`pathml` or :meth:`contents`), so that they are the same bytes.
 
         Args:
             out_dir: the folder (created if missing).
@@ -210,26 +344,24 @@ class Result:
         Returns:
             kind -> path of every file written (``result``, ``trajectory``, ``pathml``, ...).
         """
+        from refine.export.sink import stamped
         from refine.run.write import write_run
 
-        write_run(self.run, Path(out_dir), tuple(programs) if programs is not None else None, report=report)
+        if self.run is None:
+            raise NotExecutable(
+                "a result rebuilt from a dictionary cannot be written: use contents()",
+                key="write",
+                value=self.status,
+                expected="a result of refine.solve or refine.refine_path",
+            )
+        chosen = self._programs(programs) if programs is not None else None
+        typed(out_dir, "out_dir", (str, Path), "the path of a folder")
+        with api_words(), stamped(self._when()):
+            write_run(self.run, Path(out_dir), chosen, report=report)
         return dict(self.run.outputs)
 
 
-def _pass_arrays(p: PassResult, metrics: dict[str, Any]) -> PassArrays:
-    return PassArrays(
-        name=p.name,
-        status=p.refinement.status,
-        reason=p.refinement.reason,
-        joints=p.refinement.q.copy(),
-        poses=p.refinement.check.poses.copy(),
-        times=None if p.timing is None else p.timing.t.copy(),
-        speeds=None if p.timing is None else p.timing.speed.copy(),
-        arc_length=p.fused.s.copy(),
-        metrics=dict(metrics),
-    )
-
-
+@checked_call
 def solve(
     problem: Problem | str | Path,
     *,
@@ -261,8 +393,11 @@ def solve(
     from refine.run.solve import solve_problem
     from refine.run.stages import fused_path
 
-    with controlled(cancel, progress):
+    check_hooks(cancel, progress)
+    check_previous(previous, Result)
+    with api_words(), controlled(cancel, progress):
         if not isinstance(problem, Problem):
+            typed(problem, "problem", (str, Path), "a refine.Problem or the path of a problem folder or file")
             problem = load_problem(problem)
         problem = _with_time_limit(problem, time_limit_s)
         if previous is None:
@@ -315,6 +450,7 @@ def _solve_again(
     return Result(solve_problem(problem, robot=robot, fused=fused, nlp=nlp, q0=q0, warm=warm))
 
 
+@checked_call
 def refine_path(
     robot: Robot | str,
     positions: ArrayLike,
@@ -400,14 +536,25 @@ def refine_path(
     from refine.paths import FusedPath
     from refine.robot.model import Robot
     from refine.robot.registry import load_robot
+    from refine.run.contents import check_programs
 
     if isinstance(robot, str):
         robot = load_robot(robot)
     elif not isinstance(robot, Robot):
-        raise InputError(f"robot: expected a refine.Robot or a registry name, got {type(robot).__name__}")
+        typed(robot, "robot", Robot, "a refine.Robot or a registry name")
+    check_hooks(cancel, progress)
+    check_previous(previous, Result)
+    typed(name, "name", str, "a str (the problem name)")
+    typed(tool_name, "tool_name", str, "a str (the tool's name)")
+    typed(axisymmetric, "axisymmetric", (bool, np.bool_), "True or False")
     p = finite_array(positions, "positions", "m")
     if p.ndim != 2 or p.shape[1] != 3 or len(p) < 3:
-        raise InputError(f"positions: expected shape (N, 3) [m] with N >= 3, got {p.shape}")
+        raise InputError(
+            f"positions: expected shape (N, 3) [m] with N >= 3, got {p.shape}",
+            key="positions",
+            value=p.shape,
+            expected="shape (N, 3) [m] with N >= 3",
+        )
     N = len(p)
     base = transform_from(base_in_world, "base_in_world")
     check_position_units(p, robot, base)
@@ -429,7 +576,7 @@ def refine_path(
         robot=RobotSettings(
             model=robot.spec.name,
             base_in_world=base,
-            home_deg=None if home_deg is None else tuple(float(a) for a in home_deg),
+            home_deg=home_from(home_deg, robot.nq),
         ),
         tool=ToolSettings(
             name=tool_name,
@@ -442,12 +589,12 @@ def refine_path(
         tolerances=tolerances,
         process=process or ProcessSettings(),
         output=OutputSettings(
-            programs=tuple(programs) if programs is not None else (robot.spec.default_program,)
+            programs=check_programs(programs) if programs is not None else (robot.spec.default_program,)
         ),
         cell=tuple(cell),
         collision=collision or CollisionSettings(),
         optimise=optimise or OptimiseSettings(),
         repair=repair or RepairSettings(),
     )
-    with controlled(cancel, progress):
+    with api_words(), controlled(cancel, progress):
         return _solve_again(_with_time_limit(problem, time_limit_s), robot, fused, previous, initial_joints)

@@ -7,13 +7,14 @@ Each function turns one argument into what the pipeline takes, or raises an
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+import threading
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from refine.errors import InputError
+from refine.errors import ArgumentError, InputError, NotExecutable, checked_call  # noqa: F401
 from refine.plausible import CAD_SPEED_LIMIT_M_S
 from refine.settings import Shape
 from refine.types import Array
@@ -38,12 +39,15 @@ def joints_from(q: ArrayLike | None, N: int | None, n: int | None) -> Array | No
     q = np.asarray(q, dtype=float)
     if q.ndim != 2 or (N is not None and q.shape != (N, n)):
         want = f"({N}, {n})" if N is not None else "(N, n)"
-        raise InputError(f"initial_joints: expected shape {want} [rad], got {q.shape}")
+        raise InputError(
+            f"initial_joints: expected shape {want} [rad], got {q.shape}",
+            key="initial_joints",
+            value=q.shape,
+            expected=f"joints of shape {want} [rad]",
+        )
     if not np.all(np.isfinite(q)):
         raise InputError("initial_joints: contains NaN or infinite values [rad]")
     return q
-
-
 
 
 def settings_from(value: Any, cls: type, name: str) -> Any:
@@ -76,6 +80,13 @@ def settings_from(value: Any, cls: type, name: str) -> Any:
 
 def shapes_from(shapes: Any, name: str) -> tuple:
     """``shapes`` as a tuple of :class:`refine.settings.Shape`; anything else is an InputError."""
+    if isinstance(shapes, (Mapping, str, Shape)) or not isinstance(shapes or (), Sequence):
+        raise InputError(
+            f"{name}: expected a list of refine.Shape, got {type(shapes).__name__}",
+            key=name,
+            value=shapes,
+            expected="a list of refine.Shape",
+        )
     items = tuple(shapes or ())
     for k, shape in enumerate(items):
         if not isinstance(shape, Shape):
@@ -94,9 +105,16 @@ def finite_array(a: ArrayLike, name: str, unit: str) -> Array:
     try:
         arr = np.asarray(a, dtype=float)
     except (TypeError, ValueError) as e:
-        raise InputError(f"{name}: not an array of numbers [{unit}]: {e}") from e
+        raise InputError(
+            f"{name}: not an array of numbers [{unit}]: {e}", key=name, value=a, expected=f"numbers [{unit}]"
+        ) from e
     if not np.all(np.isfinite(arr)):
-        raise InputError(f"{name}: contains NaN or infinite values [{unit}]")
+        raise InputError(
+            f"{name}: contains NaN or infinite values [{unit}]",
+            key=name,
+            value=a,
+            expected=f"finite numbers [{unit}]",
+        )
     return arr
 
 
@@ -104,6 +122,13 @@ def rotations_from(orientations: ArrayLike, N: int, order: str | None) -> Array:
     """``orientations`` ((N, 4) quaternions in ``order``, or (N, 3, 3) matrices) as (N, 3, 3) rotations."""
     from refine.frames import check_rotation, matrix_from_quaternion
 
+    if order is not None and order not in QUATERNION_ORDERS:
+        raise InputError(
+            f"quaternion_order: expected 'wxyz' (scalar first) or 'xyzw' (scalar last), got {order!r}",
+            key="quaternion_order",
+            value=order,
+            expected="'wxyz' or 'xyzw'",
+        )
     o = finite_array(orientations, "orientations", "-")
     if o.shape == (N, 4):
         if order not in QUATERNION_ORDERS:
@@ -111,7 +136,10 @@ def rotations_from(orientations: ArrayLike, N: int, order: str | None) -> Array:
                 f"orientations: (N, 4) quaternions need quaternion_order='wxyz' (scalar first, as in "
                 f"trajectory.csv) or 'xyzw' (scalar last, as scipy's Rotation.as_quat()), got "
                 f"{order!r}: every unit quaternion is valid in both orders, so the order cannot be "
-                "told from the numbers"
+                "told from the numbers",
+                key="quaternion_order",
+                value=order,
+                expected="'wxyz' or 'xyzw'",
             )
         if order == "xyzw":
             o = np.column_stack([o[:, 3], o[:, :3]])
@@ -194,3 +222,62 @@ def transform_from(T: ArrayLike | None, name: str) -> Array:
     if T is None:
         return np.eye(4)
     return check_transform(finite_array(T, name, "m"), name).copy()
+
+
+def check_hooks(cancel: Any, progress: Any) -> None:
+    """``cancel`` is None, a threading.Event or a callable; ``progress`` None or a callable."""
+    if cancel is not None and not (isinstance(cancel, threading.Event) or callable(cancel)):
+        raise ArgumentError(
+            f"cancel: expected a threading.Event or a callable returning bool, got {type(cancel).__name__}",
+            key="cancel",
+            value=cancel,
+            expected="a threading.Event, a callable returning bool, or None",
+        )
+    if progress is not None and not callable(progress):
+        raise ArgumentError(
+            f"progress: expected a callable taking a refine.Progress, got {type(progress).__name__}",
+            key="progress",
+            value=progress,
+            expected="a callable taking a refine.Progress, or None",
+        )
+
+
+def typed(value: Any, name: str, kind: type | tuple[type, ...], expected: str) -> Any:
+    """``value`` when it is a ``kind``, else an ArgumentError naming ``name`` and ``expected``."""
+    if not isinstance(value, kind):
+        raise ArgumentError(
+            f"{name}: expected {expected}, got {type(value).__name__} {value!r}",
+            key=name,
+            value=value,
+            expected=expected,
+        )
+    return value
+
+
+def home_from(home_deg: Any, n: int) -> tuple[float, ...] | None:
+    """``home_deg`` as ``n`` joint angles [deg], or None."""
+    if home_deg is None:
+        return None
+    h = finite_array(home_deg, "home_deg", "deg")
+    if h.shape != (n,):
+        raise InputError(
+            f"home_deg: expected {n} joint angles [deg], got shape {h.shape}",
+            key="home_deg",
+            value=home_deg,
+            expected=f"{n} joint angles [deg]",
+        )
+    return tuple(float(a) for a in h)
+
+
+def check_previous(previous: Any, result_type: type) -> None:
+    """``previous`` is None or a ``result_type`` (a ``refine.Result``) that holds its run."""
+    if previous is None:
+        return
+    typed(previous, "previous", result_type, "a refine.Result of an earlier call, or None")
+    if previous.run is None:
+        raise NotExecutable(
+            "previous: a result rebuilt from a dictionary holds no run to start from",
+            key="previous",
+            value=previous.status,
+            expected="a result of refine.solve or refine.refine_path (pickled is fine)",
+        )

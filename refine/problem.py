@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from refine.arguments import typed
 from refine.errors import InputError
 from refine.frames import transform_from_xyz_rpy
 from refine.names import comment_text, file_stem
@@ -140,11 +141,14 @@ def load_problem(path: str | Path, *, allow_outside: bool = False) -> Problem:
         InputError: unknown or missing keys, bad values, missing files, files outside the problem
             folder; the message names the file and the key (and the line for TOML syntax).
     """
+    typed(path, "path", (str, Path), "the path of a problem folder or its problem.toml")
     path = Path(path)
     if path.is_dir():
         path = path / "problem.toml"
     if not path.is_file():
-        raise InputError(f"problem file not found: {path}")
+        raise InputError(
+            f"problem file not found: {path}", key="path", value=str(path), expected="a problem folder or file"
+        )
     return problem_from_data(read_problem_toml(path), path, allow_outside=allow_outside)
 
 

@@ -12,6 +12,7 @@ import json
 import os
 import subprocess
 import sys
+import sysconfig
 import textwrap
 from pathlib import Path
 
@@ -32,19 +33,35 @@ def _run(cmd: list[str], cwd: Path, timeout: float = 600.0) -> subprocess.Comple
 @pytest.mark.slow
 def test_an_installed_wheel_runs_the_api_examples_and_a_bundled_problem(tmp_path):
     _run(
-        [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", str(ROOT), "-w", str(tmp_path / "dist")],
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "--no-deps",
+            "-q",
+            str(ROOT),
+            "-w",
+            str(tmp_path / "dist"),
+        ],
         tmp_path,
     )
     (wheel,) = (tmp_path / "dist").glob("refine-*.whl")
     venv = tmp_path / "venv"
     _run([sys.executable, "-m", "venv", "--system-site-packages", str(venv)], tmp_path)
     python = venv / "bin" / "python"
+    # the dependencies: the test environment's packages, also when it is itself a virtual environment
+    # (--system-site-packages then sees the base interpreter's only); a plain path entry, so that
+    # no .pth of the test environment (an editable install of refine) is run
+    site = _run([str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"], tmp_path)
+    roots = tuple(sysconfig.get_paths()[k] for k in ("purelib", "platlib"))
+    here = [p for p in sys.path if p.startswith(roots)]  # site-packages and what its .pth files added
+    (Path(site.stdout.strip()) / "test_environment.pth").write_text("\n".join(here) + "\n")
     _run([str(python), "-m", "pip", "install", "-q", "--no-deps", str(wheel)], tmp_path)
 
-    work = tmp_path / "work"  # the user's folder: the bundled problems and robot files beside it, no source tree
+    work = tmp_path / "work"  # the user's folder: the bundled problems beside it, no source tree, no robots/
     work.mkdir()
     (work / "problems").symlink_to(ROOT / "problems")
-    (work / "robots").symlink_to(ROOT / "robots")  # a URDF file an example reads (the registry is the wheel's)
     script = work / "examples.py"
     script.write_text(
         textwrap.dedent(

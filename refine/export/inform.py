@@ -44,7 +44,6 @@ import logging
 import re
 import textwrap
 from dataclasses import dataclass
-from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
@@ -62,6 +61,8 @@ from refine.export.program import (
     process_summary,
     singular_runs,
 )
+from refine.export.sink import put_text
+from refine.export.sink import stamp as sink_stamp
 from refine.frames import fixed_xyz_from_matrix, invert_transform, make_transform
 from refine.names import comment_text, identifier
 from refine.paths import Trajectory
@@ -324,7 +325,7 @@ def write_inform(
         job.comment(f"no arc within {fixed_decimals(pr.arc_timeout_s, 2)} s")
         job.inst += ["PAUSE", "*DONE"]
     job.inst.append("END")
-    stamp = datetime.now(timezone.utc).strftime("%Y/%m/%d %H:%M")
+    stamp = sink_stamp().strftime("%Y/%m/%d %H:%M")
     lines = [
         "/JOB",
         f"//NAME {name}",
@@ -341,8 +342,7 @@ def write_inform(
         "///GROUP1 RB1",
         *job.inst,
     ]
-    out_path.parent.mkdir(parents=True, exist_ok=True)
-    out_path.write_text("\r\n".join(lines) + "\r\n", encoding="ascii")
+    put_text(out_path, "\r\n".join(lines) + "\r\n", encoding="ascii")
     log.info(
         "wrote INFORM job %s: %d pass(es), %d positions, OT#(%d)",
         out_path,

@@ -62,6 +62,7 @@ from refine.export.program import (
     weld_end,
     weld_start,
 )
+from refine.export.sink import put_text
 from refine.frames import invert_transform, kuka_abc_from_matrix, make_transform, matrix_from_kuka_abc
 from refine.names import comment_text, identifier
 from refine.paths import Trajectory
@@ -404,9 +405,8 @@ def write_krl(
         dat_lines += [f"DECL E6AXIS {v}={{{_e6axis(q)}}}" for v, q in zip(vias, air_out, strict=False)]
         src_lines += [f"PTP {v} ; via point of the planned return" for v in vias]
     src_lines.append("PTP XHOMEPOS")
-    src.parent.mkdir(parents=True, exist_ok=True)
-    src.write_text("\n".join([*src_lines, "END"]) + "\n", encoding="utf-8")
-    dat.write_text("\n".join([*dat_lines, "ENDDAT"]) + "\n", encoding="utf-8")
+    put_text(src, "\n".join([*src_lines, "END"]) + "\n")
+    put_text(dat, "\n".join([*dat_lines, "ENDDAT"]) + "\n")
     log.info("wrote KRL program %s (+ .dat): %d pass(es), $OUT[%d]", src, len(runs), out)
     return src, dat
 

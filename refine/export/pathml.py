@@ -32,13 +32,15 @@ import logging
 import uuid
 from collections.abc import Sequence
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import datetime
 from pathlib import Path
 
 import numpy as np
 from lxml import etree
 
 from refine.errors import InputError
+from refine.export.sink import put_bytes
+from refine.export.sink import stamp as sink_stamp
 from refine.frames import fixed_xyz_from_matrix
 from refine.pathml_format import CAEX_NS, FRAME_KEYS, POINT_VALUES, caex_tag
 from refine.paths import Trajectory
@@ -217,7 +219,7 @@ def write_pathml(
     layers = list(layers) if layers is not None else default_layers(trajectory, problem)
     _check_layers(layers, len(trajectory))
     w = _Writer(problem.name)
-    stamp = (written_at or datetime.now(timezone.utc)).isoformat()
+    stamp = (written_at or sink_stamp()).isoformat()
 
     root = etree.Element(
         caex_tag("CAEXFile"), nsmap={None: CAEX_NS, "xsi": _XSI_NS}, SchemaVersion="3.0", FileName=path.name
@@ -264,9 +266,8 @@ def write_pathml(
     _role(path_el, "Path")
     _role_library(root, w)
 
-    path.parent.mkdir(parents=True, exist_ok=True)
     body = etree.tostring(root, encoding="utf-8", pretty_print=True)
-    path.write_bytes(b'<?xml version="1.0" encoding="utf-8"?>\n' + body)
+    put_bytes(path, b'<?xml version="1.0" encoding="utf-8"?>\n' + body)
     log.info("wrote PathML %s: %d layer(s), %d points", path, len(layers), len(trajectory))
     return path
 

@@ -52,6 +52,7 @@ from refine.export.program import (
     weld_end,
     weld_start,
 )
+from refine.export.sink import put_text
 from refine.frames import continuous_quaternions, invert_transform, quaternion_from_matrix
 from refine.names import comment_text, identifier
 from refine.paths import Trajectory
@@ -389,8 +390,7 @@ def write_rapid(
     for r, chunk in zip(routines, chunks, strict=True):
         lines += ["", f"    PROC {r}()", *(f"        {ln}" for ln in chunk), "    ENDPROC"]
     lines.append("ENDMODULE")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    put_text(path, "\n".join(lines) + "\n")
     log.info(
         "wrote RAPID module %s: %d targets, %d speeddata, %d routines", path, n, len(levels), len(routines)
     )

@@ -57,6 +57,7 @@ from refine.export.program import (
     weld_end,
     weld_start,
 )
+from refine.export.sink import put_text
 from refine.frames import invert_transform, kuka_abc_from_matrix, matrix_from_kuka_abc
 from refine.names import comment_text
 from refine.paths import Trajectory
@@ -421,8 +422,7 @@ def write_sunrise(
         "",
     ]
     lines = ["package application;", "", *imports, "", *head, *body, *methods, "}"]
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    put_text(path, "\n".join(lines) + "\n")
     log.info("wrote Sunrise application %s: %d pass(es)", path, len(runs))
     return path
 

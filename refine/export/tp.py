@@ -70,6 +70,7 @@ from refine.export.program import (
     process_summary,
     singular_runs,
 )
+from refine.export.sink import put_text
 from refine.frames import fixed_xyz_from_matrix, invert_transform, make_transform
 from refine.names import comment_text, identifier
 from refine.paths import Trajectory
@@ -434,8 +435,7 @@ def write_tp(
         "CONTROL_CODE\t= 00000000 00000000;",
     ]
     text = "\n".join([f"/PROG  {name}", *attr, "/MN", *mn, "/POS", *prog.pos, "/END"]) + "\n"
-    out_path.parent.mkdir(parents=True, exist_ok=True)
-    out_path.write_text(text, encoding="ascii")
+    put_text(out_path, text, encoding="ascii")
     log.info(
         "wrote TP program %s: %d pass(es), %d positions, DO[%d]", out_path, len(runs), len(prog.pos), out
     )

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from refine.errors import InputError
+from refine.export.sink import put_text
 from refine.frames import (
     continuous_quaternions,
     make_transform,
@@ -90,8 +91,7 @@ def write_trajectory_csv(path: str | Path, trajectory: Trajectory) -> Path:
     )
     lines = [",".join(trajectory_columns(trajectory.q.shape[1]))]
     lines += [",".join(map(repr, row)) for row in table.tolist()]
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    put_text(path, "\n".join(lines) + "\n")
     log.info("wrote %s: %d rows", path, len(trajectory))
     return path
 

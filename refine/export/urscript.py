@@ -48,6 +48,7 @@ from refine.export.program import (
     weld_end,
     weld_start,
 )
+from refine.export.sink import put_text
 from refine.frames import invert_transform, make_transform, matrix_from_rotvec, rotvec_from_matrix
 from refine.names import comment_text, identifier
 from refine.paths import Trajectory
@@ -357,8 +358,7 @@ def write_urscript(
         lines = [f"def {prog}():", *(f"  {ln}" for ln in body), "end", f"{prog}()"]
     else:
         lines = [f"# PolyScope Script node: {prog}", *body]
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    put_text(path, "\n".join(lines) + "\n")
     log.info("wrote URScript %s (%s): %d pass(es), digital output %d", path, mode, len(runs), out)
     return path
 

@@ -88,7 +88,9 @@ def figure_rows(doc: dict[str, Any]) -> list[tuple[str, str, str, bool | None]]:
         )
     )
     clear, cmargin = m.get("min_clearance_m"), tol.get("clearance_m")
-    if clear is None:
+    if m.get("min_cell_clearance_m") is not None or m.get("min_self_clearance_m") is not None:
+        rows += _kind_rows(m, cmargin, tol.get("self_clearance_m"))  # each kind against its own margin
+    elif clear is None:
         rows.append(("clearance to the cell (min)", "not checked", "no cell objects or tool shapes", None))
     else:
         ok = None if cmargin is None else clear >= cmargin - 1e-6
@@ -188,3 +190,23 @@ def verdict_html(result: RunResult, doc: dict[str, Any]) -> str:
         f"<div><h2>Files written</h2><ul class='files'>{''.join(files)}</ul></div></div>"
         f"{seg_html}{details}</section>"
     )
+
+
+def _kind_rows(
+    m: dict[str, Any], cell_margin: float | None, self_margin: float | None
+) -> list[tuple[str, str, str, bool | None]]:
+    """The verdict rows of the cell pairs and the self pairs, each against its own margin."""
+    rows = []
+    for label, key, margin in (
+        ("clearance to the cell (min)", "min_cell_clearance_m", cell_margin),
+        ("clearance between links and tool (min)", "min_self_clearance_m", self_margin),
+    ):
+        d = m.get(key)
+        if d is None:
+            rows.append((label, "no pair checked", "", None))
+            continue
+        ok = None if margin is None else d >= margin - 1e-6
+        rows.append(
+            (label, f"{d * 1e3:.1f} mm", "collision off" if margin is None else f">= {margin * 1e3:g} mm", ok)
+        )
+    return rows

@@ -10,6 +10,7 @@ the URDF. Registry robots are loaded by :func:`refine.robot.registry.load_robot`
 from __future__ import annotations
 
 import logging
+import threading
 from pathlib import Path
 from typing import Any
 
@@ -17,7 +18,8 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
-from refine.errors import InputError
+from refine.arguments import typed
+from refine.errors import InputError, checked_call
 from refine.robot.geometry import CollisionShape, collision_shapes_from_urdf
 from refine.robot.self_collision import read_matrix
 from refine.robot.spec import SELF_COLLISION_FILE, RobotSpec, build_model
@@ -32,7 +34,7 @@ class Robot:
     Attributes:
         spec: the registry entry.
         model: the Pinocchio model built from the URDF.
-        data: Pinocchio work data for ``model`` (shared; not thread-safe).
+        data: Pinocchio work data for ``model``, one per thread (see :attr:`data`).
         nq: number of configuration variables (the joint count for revolute arms).
         flange_id: Pinocchio frame index of ``spec.flange_frame``.
     """
@@ -40,7 +42,7 @@ class Robot:
     def __init__(self, spec: RobotSpec, model: pin.Model | None = None) -> None:
         self.spec = spec
         self.model = build_model(spec.urdf) if model is None else model
-        self.data = self.model.createData()
+        self._local = threading.local()  # each thread's Pinocchio data
         self.nq = int(self.model.nq)
         self.flange_id = self.frame_id(spec.flange_frame)
         self._shapes: tuple[CollisionShape, ...] | None = None
@@ -49,7 +51,20 @@ class Robot:
     def __repr__(self) -> str:
         return f"Robot({self.spec.name!r}, nq={self.nq})"
 
+    @property
+    def data(self) -> pin.Data:
+        """Pinocchio's work data for :attr:`model`, one per thread, made on first use in each thread.
+
+        The model itself is only read, so calls from several threads on one robot never share
+        scratch memory.
+        """
+        data = getattr(self._local, "data", None)
+        if data is None:
+            data = self._local.data = self.model.createData()
+        return data
+
     @classmethod
+    @checked_call
     def from_urdf(
         cls, urdf: str | Path, *, controller: str, flange_frame: str = "tool0", **options: Any
     ) -> Robot:
@@ -65,6 +80,7 @@ class Robot:
                 ``reach_m``, ``joint_acceleration_deg_s2``, ``joint_lower_deg``, ``joint_upper_deg``,
                 ``joint_velocity_deg_s``.
         """
+        typed(urdf, "urdf", (str, Path), "the path of a .urdf or .xacro file")
         return robot_from_urdf(urdf, controller=controller, flange_frame=flange_frame, **options)
 
     def frame_id(self, frame_name: str) -> int:
@@ -126,11 +142,11 @@ class Robot:
 
     def __getstate__(self) -> dict[str, Any]:
         # the parsed collision shapes (FCL geometry) and Pinocchio's data are rebuilt on the other side
-        return {**self.__dict__, "data": None, "_shapes": None}
+        return {**self.__dict__, "_local": None, "_shapes": None}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
-        self.data = self.model.createData()
+        self._local = threading.local()
 
     def collision_shapes(self) -> list[CollisionShape]:
         """Collision primitives of every link, parsed once from the URDF's ``<collision>``."""
@@ -159,5 +175,5 @@ def robot_from_urdf(
     The spec and model of :func:`refine.robot.urdf.read_urdf`, with the collision geometry of the
     URDF's ``<collision>`` elements. Arguments and errors as :func:`~refine.robot.urdf.read_urdf`.
     """
-    spec, model = read_urdf(urdf, controller=controller, flange_frame=flange_frame, **options)
+    spec, model = checked_call(read_urdf)(urdf, controller=controller, flange_frame=flange_frame, **options)
     return Robot(spec, model)

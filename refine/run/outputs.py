@@ -39,7 +39,7 @@ from collections.abc import Callable
 from pathlib import Path
 from types import TracebackType
 
-from refine.errors import InputError
+from refine.errors import InputError, option
 from refine.interrupt import critical, outputs_complete
 
 log = logging.getLogger(__name__)
@@ -166,7 +166,12 @@ class StagedOutputs:
             remove_stale(self.out_dir)
             self.dir.mkdir()
         except OSError as e:
-            raise InputError(f"--out {str(self.out_dir)!r}: cannot write there: {e.strerror}") from e
+            raise InputError(
+                f"{option('--out', 'out_dir')} {str(self.out_dir)!r}: cannot write there: {e.strerror}",
+                key="out_dir",
+                value=str(self.out_dir),
+                expected="a folder refine may write in",
+            ) from e
         return self
 
     def __exit__(

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from refine.errors import InputError
+from refine.errors import InputError, option
 from refine.names import identifier
 from refine.problem import Problem
 from refine.settings import PROGRAM_FORMATS
@@ -78,7 +78,11 @@ def check_programs(problem: Problem, spec: RobotSpec, programs: tuple[str, ...])
             model = f" ({spec.model})" if spec.model else ""
             raise InputError(
                 f"program format {kind!r} does not run on robot {spec.name!r}{model}: its {spec.controller} "
-                f"controller runs {runs} only; use {runs} ([output] programs or --programs)"
+                f"controller runs {runs} only; use {runs} ([output] programs or "
+                f"{option('--programs', 'programs=')})",
+                key="programs",
+                value=kind,
+                expected=f"one of {runs}",
             )
         check_output_signal(kind, problem.process.output)
 
@@ -120,7 +124,9 @@ def check_arm_programs(problem: Problem, robot: Robot, programs: tuple[str, ...]
     """TP and INFORM: a six-axis arm, and frame and tool numbers the controller has."""
     for kind in ("tp", "inform"):
         if kind in programs and robot.nq != 6:
-            raise InputError(f"program format {kind!r} is for six-axis arms; robot {robot.spec.name!r} has {robot.nq}")
+            raise InputError(
+                f"program format {kind!r} is for six-axis arms; robot {robot.spec.name!r} has {robot.nq}"
+            )
     if "tp" in programs:
         from refine.export.tp import MAX_UFRAME, MAX_UTOOL
 
@@ -181,7 +187,8 @@ def check_home(problem: Problem, robot: Robot) -> None:
         others = "; ".join(f"{b.body} vs {b.other} at {b.distance_m * 1e3:.1f} mm" for b in below[1:4])
         raise InputError(
             f"robot.home_deg = [{', '.join(f'{float(v):g}' for v in home)}] deg puts {c.body} {where} {c.other}: distance {c.distance_m * 1e3:.1f} mm "
-            f"(margin {margin * 1e3:g} mm)" + (f"; also {others}" if others else "")
+            f"(margin {margin * 1e3:g} mm)"
+            + (f"; also {others}" if others else "")
             + "; every motion of the program starts and ends at home: choose a home clear of the cell"
         )
 
@@ -237,15 +244,25 @@ def check_output_dir(problem: Problem, out_dir: Path, outputs: tuple[str, ...]) 
             break
         probe = probe.parent
     if not probe.is_dir():
-        raise InputError(f"--out {str(out_dir)!r}: {probe} is a file, not a folder")
+        raise InputError(
+            f"{option('--out', 'out_dir')} {str(out_dir)!r}: {probe} is a file, not a folder",
+            key="out_dir",
+            value=str(out_dir),
+            expected="a folder refine may write in",
+        )
     if not os.access(probe, os.W_OK | os.X_OK):
-        raise InputError(f"--out {str(out_dir)!r}: no permission to write in {probe}")
+        raise InputError(
+            f"{option('--out', 'out_dir')} {str(out_dir)!r}: no permission to write in {probe}",
+            key="out_dir",
+            value=str(out_dir),
+            expected="a folder refine may write in",
+        )
     inputs = {p.resolve() for p in (*problem.input_files, problem.root / "problem.toml")}
     for name in outputs:
         target = out / name
         if target.resolve() in inputs or (target.is_symlink() or (target.exists() and not target.is_file())):
             raise InputError(
-                f"--out {str(out_dir)!r}: the output {name!r} would replace {target.resolve()}, which is "
+                f"{option('--out', 'out_dir')} {str(out_dir)!r}: the output {name!r} would replace {target.resolve()}, which is "
                 "an input of the problem or not a regular file; choose another output folder"
             )
     return out
@@ -281,7 +298,7 @@ def preflight(
         if programs is None:
             programs = (robot.spec.default_program,)
     else:
-        where = "--programs: "
+        where = f"{option('--programs', 'programs')}: "
     try:
         check_programs(problem, robot.spec, programs)
         if "sunrise" in programs and robot.nq != 7:
@@ -291,7 +308,7 @@ def preflight(
             )
         check_arm_programs(problem, robot, programs)
     except InputError as e:
-        raise InputError(f"{where}{e}") from e
+        raise InputError(f"{where}{e}", key=e.key, value=e.value, expected=e.expected, file=e.file) from e
     try:
         check_joint_lists(problem, robot.nq, robot.spec.name)
         check_home(problem, robot)

@@ -39,6 +39,8 @@ class PassResult:
             process boundary is re-solved from its joints, with the problem built anew.
         line: the controller's straight-line motion between the waypoints, checked
             (:class:`refine.optimise.controller_line.LineCheck`); None when not checked.
+        clearance_kinds: the cell pairs' and the self pairs' least distances apart
+            (:class:`refine.run.clearance_kinds.KindMinima`); None without collision.
     """
 
     name: str
@@ -51,6 +53,7 @@ class PassResult:
     clearance: Any = None
     nlp: Any = None
     line: Any = None
+    clearance_kinds: Any = None
 
     def __getstate__(self) -> dict[str, Any]:
         return {**self.__dict__, "nlp": None}
@@ -168,8 +171,8 @@ def summary_lines(result: RunResult) -> list[str]:
                 c, {o.name for o in result.problem.cell}, col.margin_m, col.self_margin_m
             )
             lines.append(
-                f"clearance    min distance {c.min_distance_m * 1e3:.1f} mm (cell margin {col.margin_m * 1e3:g} mm, "
-                f"self margin {col.self_margin_m * 1e3:g} mm)"
+                f"clearance    min distance {c.min_distance_m * 1e3:.1f} mm"
+                + _kinds_text(p.clearance_kinds, col.margin_m, col.self_margin_m)
                 + (f", {pair}" if pair else "")
                 + f"; checked between waypoints: {c.queries} queries in {c.time_s:.2f} s"
             )
@@ -195,6 +198,20 @@ def summary_lines(result: RunResult) -> list[str]:
     stages = ", ".join(f"{k} {v:.3f}" for k, v in result.timings_s.items() if k != "total")
     lines.append(f"time [s]     {stages}" + (f"; total {total:.2f}" if total else ""))
     return lines
+
+
+def _kinds_text(kinds: Any, margin_m: float, self_margin_m: float) -> str:
+    """``": cell pairs 12.0 mm (margin 10 mm), self pairs 4.7 mm (self margin 2 mm)"``."""
+    if kinds is None:
+        return f" (cell margin {margin_m * 1e3:g} mm, self margin {self_margin_m * 1e3:g} mm)"
+    parts = [
+        f"{what} {'none checked' if d is None else f'{d * 1e3:.1f} mm'} ({label} {m * 1e3:g} mm)"
+        for what, d, label, m in (
+            ("cell pairs", kinds.cell_m, "margin", margin_m),
+            ("self pairs", kinds.self_m, "self margin", self_margin_m),
+        )
+    ]
+    return ": " + ", ".join(parts)
 
 
 def _chord_text(p: PassResult, cad: Any) -> str:

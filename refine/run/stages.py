@@ -20,6 +20,7 @@ from refine.optimise.warm import WarmStart
 from refine.paths import FusedPath, Trajectory
 from refine.problem import Problem
 from refine.robot.model import Robot
+from refine.run.clearance_kinds import kind_minima
 from refine.run.result import EXECUTABLE, PassResult
 from refine.stopwatch import Stopwatch
 from refine.timing import time_parameterise
@@ -216,7 +217,11 @@ def refine_pass(
     if nlp is None:
         nlp = refinement_for(problem, robot, fused)
     watch.lap("build")
-    home = None if problem.robot.home_deg is None else np.radians(robot.spec.from_controller(problem.robot.home_deg))
+    home = (
+        None
+        if problem.robot.home_deg is None
+        else np.radians(robot.spec.from_controller(problem.robot.home_deg))
+    )
     refinement = solve_refinement(
         nlp,
         q0,
@@ -249,9 +254,10 @@ def refine_pass(
             speed=timing.speed,
         )
         watch.lap("timing")
-    clearance = None
+    clearance = kinds = None
     for source in sources:
         clearance = source.clearance(refinement.q)  # the dense check's figures, for the report
+        kinds = kind_minima(source.model, refinement.q, clearance)  # the cell and self pairs apart
     line = None
     if refinement.status in EXECUTABLE:
         line = controller_line_check(problem, robot, refinement.q, fused.s, sources)
@@ -265,9 +271,9 @@ def refine_pass(
                 check=replace(refinement.check, violations=refinement.check.violations + line.violations),
             )
             timing = trajectory = None
-    return PassResult(name, layer, index, fused, refinement, timing, trajectory, clearance, nlp, line)
-
-
+    return PassResult(
+        name, layer, index, fused, refinement, timing, trajectory, clearance, nlp, line, clearance_kinds=kinds
+    )
 
 
 def plan_motions(

@@ -64,3 +64,21 @@ from refine.settings.repair import (  # noqa: F401
     PlacementSettings,
     RepairSettings,
 )
+
+
+def _checked_constructors() -> None:
+    """Every table's constructor refuses an unknown field as a ``refine.errors.ArgumentError``."""
+    import dataclasses
+
+    from refine.errors import checked_call
+
+    for value in list(globals().values()):
+        if (
+            isinstance(value, type)
+            and dataclasses.is_dataclass(value)
+            and value.__module__.startswith(__name__)
+        ):
+            value.__init__ = checked_call(value.__init__)  # type: ignore[method-assign]
+
+
+_checked_constructors()

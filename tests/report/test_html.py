@@ -36,5 +36,7 @@ def test_report_is_one_self_contained_page_with_every_panel(tmp_path):
     assert len(scene["paths"]) == 1 and len(scene["paths"][0]["x"]) == len(result.first.fused)
     verdict = doc.get_element_by_id("verdict")
     assert verdict.xpath(".//span[contains(@class,'badge')]")[0].text_content() == "ok"
-    assert re.search(r"clearance to the cell and between links \(min\)\s*\d+\.\d mm", verdict.text_content())
+    # the cell pairs and the self pairs apart, each against its own margin
+    assert re.search(r"clearance to the cell \(min\)\s*\d+\.\d mm", verdict.text_content())
+    assert re.search(r"clearance between links and tool \(min\)\s*\d+\.\d mm", verdict.text_content())
     assert "ur10e_sealing.script" in verdict.text_content()
