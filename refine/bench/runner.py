@@ -30,13 +30,14 @@ from typing import Any
 import numpy as np
 
 from refine.bench import peers  # noqa: F401  (adds trajopt and descartes to CONTENDERS)
-from refine.bench.contenders import CONTENDERS, Answer, Unavailable, timed_call, verify
+from refine.bench.contenders import CONTENDERS, Answer, Unavailable, verify
 from refine.bench.outcomes import DEFAULT_TIME_LIMIT_S, penalised, score
 from refine.bench.provenance import DEFAULT_BLAS_THREADS, fixed_threads, git_commit, solver_versions
 from refine.bench.provenance import blas_threads as current_blas_threads
 from refine.bench.quality import evaluate
 from refine.bench.suites import BenchProblem, load_suites, problems
 from refine.bench.table import COLUMNS, SCHEMA_VERSION, check_header, new_run_id
+from refine.bench.watchdog import run_limited
 from refine.errors import InputError
 
 log = logging.getLogger(__name__)
@@ -85,9 +86,12 @@ def run_problem(
     repeat: int,
     warmup: int = 0,
     time_limit_s: float = DEFAULT_TIME_LIMIT_S,
+    isolate: bool = True,
 ) -> dict[str, Any] | None:
     """One row for ``contender`` on ``problem`` after ``warmup`` untimed runs (see :func:`run_turns`)."""
-    return run_turns(problem, {contender: function}, repeat, warmup, time_limit_s=time_limit_s).get(contender)
+    return run_turns(
+        problem, {contender: function}, repeat, warmup, time_limit_s=time_limit_s, isolate=isolate
+    ).get(contender)
 
 
 def run_turns(
@@ -98,20 +102,24 @@ def run_turns(
     echo: Callable[[str], None] = print,
     time_limit_s: float = DEFAULT_TIME_LIMIT_S,
     unavailable: dict[str, str] | None = None,
+    isolate: bool = True,
 ) -> dict[str, dict[str, Any]]:
     """One row per contender of ``functions`` on ``problem``, the contenders taking turns.
 
     Each contender runs ``warmup`` times untimed, then the ``repeat`` timed runs go round the
     contenders in turn. A contender that raises :class:`Unavailable` is left out with a message
     (and its reason put in ``unavailable``, by name, when given).
-    A timed run longer than ``time_limit_s`` on the runner's clock (the whole call) times the row
-    out; the run is not interrupted.
+    Every run (warm-up ones included) is held to ``time_limit_s``
+    (:func:`refine.bench.watchdog.run_limited`): refine's contenders stop there themselves, any
+    other is run in a forked child and killed at the limit (``isolate``; with False, or without
+    ``fork``, it runs in this process and a run over the limit is only scored so). A timed run
+    that ends ``timeout``, or takes longer than the limit on its own clock, times the row out.
     """
     functions = dict(functions)
     for name in list(functions):
         try:
             for _ in range(warmup):
-                timed_call(problem, name, functions[name])
+                run_limited(problem, name, functions[name], time_limit_s, isolate)
         except Unavailable as e:
             echo(f"skipping {name}: {e}")
             del functions[name]
@@ -123,7 +131,7 @@ def run_turns(
     for _ in range(repeat):
         for name in list(functions):
             try:
-                answers[name].append(timed_call(problem, name, functions[name]))
+                answers[name].append(run_limited(problem, name, functions[name], time_limit_s, isolate))
             except Unavailable as e:
                 echo(f"skipping {name}: {e}")
                 del functions[name], answers[name]
@@ -163,7 +171,7 @@ def _row(
     walls = [a.times_s for a in runs]
     cpus = [a.cpu_s for a in runs]
     repeat = len(runs)
-    timed_out = any(wall > time_limit_s for _, wall in timed)
+    timed_out = any(wall > time_limit_s or a.status == "timeout" for a, wall in timed)
     verdicts, scores = [], []
     for a in runs:
         verdict = verify(problem, a.q)
@@ -243,6 +251,7 @@ def run_suites(
     run_id: str | None = None,
     blas_threads: int = DEFAULT_BLAS_THREADS,
     solver_options: dict[str, Any] | None = None,
+    isolate: bool = True,
 ) -> list[dict[str, Any]]:
     """Run every contender on every problem of ``suites`` and append the rows to ``csv_path``.
 
@@ -265,7 +274,8 @@ def run_suites(
     in ``blas_threads``); the quality columns are :func:`refine.bench.quality.evaluate`'s.
     ``solver_options`` (keyed with the
     solver's prefix, ``ipopt.max_iter``) go to every problem (``BenchProblem.solver_options``); each
-    row's ``solver_options`` is what its contender reports it used, as JSON.
+    row's ``solver_options`` is what its contender reports it used, as JSON. ``isolate``: run the
+    contenders that do not keep the time limit themselves under the watchdog (:func:`run_turns`).
     """
     contenders = list(contenders)
     unknown = [c for c in contenders if c not in CONTENDERS]
@@ -297,7 +307,9 @@ def run_suites(
                 t0 = time.perf_counter()
                 functions = {name: CONTENDERS[name] for name in contenders if name not in skipped}
                 with fixed_threads(blas_threads):  # libraries loaded by earlier problems included
-                    found = run_turns(problem, functions, repeat, warmup, echo, time_limit_s, skipped)
+                    found = run_turns(
+                        problem, functions, repeat, warmup, echo, time_limit_s, skipped, isolate
+                    )
                     threads = current_blas_threads()  # as they were for these runs
                 for name in contenders:  # a contender that cannot run here still leaves its row
                     if name in skipped and name not in found:

@@ -59,6 +59,9 @@ class BenchProblem:
         tool_in_world: T_F_TCP of a stationary tool (the robot holds the part; ``tcp_in_flange``
             then places the part's frame on the flange and the path is in the part's frame), or
             None (see :class:`refine.robot.kinematics.TcpKinematics`).
+        time_limit_s: wall time one run of a contender may take [s] (``refine bench run
+            --time-limit``); refine's contenders stop their solve at it themselves (status
+            ``timeout``), the runner's watchdog stops any other (:mod:`refine.bench.watchdog`).
     """
 
     suite: str
@@ -79,6 +82,7 @@ class BenchProblem:
     extra: dict[str, Any] = field(default_factory=dict)
     tool_in_world: Array | None = None
     solver_options: dict[str, Any] = field(default_factory=dict)
+    time_limit_s: float | None = None
 
     @property
     def n_waypoints(self) -> int:

@@ -100,6 +100,22 @@ def test_plain_ipopt_from_x0_reaches_refines_objective(exported):
     assert math.isclose(plain["objective"], done.objective, rel_tol=1e-6)
 
 
+def test_the_bench_rows_objective_is_plain_ipopts_on_the_exported_instance(exported, suites, tmp_path):
+    """The CSV's ``objective`` (the shared evaluator at refine's answer in a bench run) and plain
+    IPOPT's optimum of the exported instance, solved outside refine: the same within 1e-6."""
+    import csv
+
+    from refine.bench.runner import run_suites
+
+    _, done = exported
+    out = tmp_path / "bench.csv"
+    run_suites(["tiny"], ["refine"], out, suites_file=suites, echo=lambda _: None)
+    (row,) = [r for r in csv.DictReader(out.open()) if r["problem"] == "wave-20"]
+    plain = solve_instance(done.folder, TOLERANCES)
+    assert plain["status"] == "Solve_Succeeded"
+    assert math.isclose(float(row["objective"]), plain["objective"], rel_tol=1e-6)
+
+
 def test_the_standalone_script_agrees(exported, capsys):
     _, done = exported
     spec = importlib.util.spec_from_file_location("solve_exported", ROOT / "benchmarks" / "solve_exported.py")
