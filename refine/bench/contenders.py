@@ -151,6 +151,8 @@ def _refine(problem: BenchProblem, mode: str, solver: str = "ipopt") -> Answer:
     cpu = build_cpu + sum(t.cpu.get(k, 0.0) for k in ("build", "seed", "solve"))
     slack = result.slack_deg if result.status == "repaired" else None
     solved = result.problem if result.problem is not None else nlp
+    options = refine_options(solved)
+    options["kernels"] = kernel_settings(mode)
     return Answer(
         result.status,
         result.q,
@@ -160,8 +162,21 @@ def _refine(problem: BenchProblem, mode: str, solver: str = "ipopt") -> Answer:
         result.solver_status[:80],
         slack,
         solver_status=result.solver_status.split(";")[0].strip(),
-        solver_options=refine_options(solved),
+        solver_options=options,
     )
+
+
+def kernel_settings(mode: str) -> dict[str, Any]:
+    """How refine's derivatives were made in ``mode``: compiled kernels or CasADi's virtual machine.
+
+    Compiled: the C compiler and its flags (:mod:`refine.optimise.compiled`).
+    """
+    from refine.optimise.compiled import COMPILE_FLAGS, compiler
+
+    cc = compiler() if mode == "assembled" else None
+    if cc is None:
+        return {"mode": mode, "compiled": False}
+    return {"mode": mode, "compiled": True, "compiler": cc, "flags": list(COMPILE_FLAGS)}
 
 
 def refine_assembled(problem: BenchProblem) -> Answer:

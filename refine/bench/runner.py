@@ -103,6 +103,7 @@ def run_turns(
     time_limit_s: float = DEFAULT_TIME_LIMIT_S,
     unavailable: dict[str, str] | None = None,
     isolate: bool = True,
+    log_dir: Path | None = None,
 ) -> dict[str, dict[str, Any]]:
     """One row per contender of ``functions`` on ``problem``, the contenders taking turns.
 
@@ -114,12 +115,18 @@ def run_turns(
     other is run in a forked child and killed at the limit (``isolate``; with False, or without
     ``fork``, it runs in this process and a run over the limit is only scored so). A timed run
     that ends ``timeout``, or takes longer than the limit on its own clock, times the row out.
+    ``log_dir``: a folder for each run's log (``CONTENDER-warmup-K.log``, ``CONTENDER-K.log``, K
+    from 1): what the run printed, the solver's iteration log included.
     """
+
+    def log(name: str, kind: str, k: int) -> Path | None:
+        return None if log_dir is None else log_dir / f"{name}{kind}-{k + 1}.log"
+
     functions = dict(functions)
     for name in list(functions):
         try:
-            for _ in range(warmup):
-                run_limited(problem, name, functions[name], time_limit_s, isolate)
+            for k in range(warmup):
+                run_limited(problem, name, functions[name], time_limit_s, isolate, log(name, "-warmup", k))
         except Unavailable as e:
             echo(f"skipping {name}: {e}")
             del functions[name]
@@ -128,10 +135,12 @@ def run_turns(
     answers: dict[str, list[tuple[Answer, float]]] = {name: [] for name in functions}
     load0 = _load()
     peak0 = _peak_rss_mb()
-    for _ in range(repeat):
+    for k in range(repeat):
         for name in list(functions):
             try:
-                answers[name].append(run_limited(problem, name, functions[name], time_limit_s, isolate))
+                answers[name].append(
+                    run_limited(problem, name, functions[name], time_limit_s, isolate, log(name, "", k))
+                )
             except Unavailable as e:
                 echo(f"skipping {name}: {e}")
                 del functions[name], answers[name]
@@ -252,6 +261,7 @@ def run_suites(
     blas_threads: int = DEFAULT_BLAS_THREADS,
     solver_options: dict[str, Any] | None = None,
     isolate: bool = True,
+    log_dir: Path | None = None,
 ) -> list[dict[str, Any]]:
     """Run every contender on every problem of ``suites`` and append the rows to ``csv_path``.
 
@@ -276,6 +286,8 @@ def run_suites(
     solver's prefix, ``ipopt.max_iter``) go to every problem (``BenchProblem.solver_options``); each
     row's ``solver_options`` is what its contender reports it used, as JSON. ``isolate``: run the
     contenders that do not keep the time limit themselves under the watchdog (:func:`run_turns`).
+    ``log_dir``: each run's log goes to ``log_dir/RUN_ID/SUITE/PROBLEM/`` (:func:`run_turns`), and
+    refine's IPOPT prints its iteration log there (``ipopt.print_level`` 5 unless given).
     """
     contenders = list(contenders)
     unknown = [c for c in contenders if c not in CONTENDERS]
@@ -304,11 +316,14 @@ def run_suites(
         for suite in suites:
             for problem in problems(data, suite):
                 problem.solver_options = dict(solver_options or {})
+                logs = None if log_dir is None else Path(log_dir) / env["run_id"] / suite / problem.name
+                if logs is not None:
+                    problem.solver_options.setdefault("ipopt.print_level", LOG_PRINT_LEVEL)
                 t0 = time.perf_counter()
                 functions = {name: CONTENDERS[name] for name in contenders if name not in skipped}
                 with fixed_threads(blas_threads):  # libraries loaded by earlier problems included
                     found = run_turns(
-                        problem, functions, repeat, warmup, echo, time_limit_s, skipped, isolate
+                        problem, functions, repeat, warmup, echo, time_limit_s, skipped, isolate, logs
                     )
                     threads = current_blas_threads()  # as they were for these runs
                 for name in contenders:  # a contender that cannot run here still leaves its row
@@ -365,6 +380,9 @@ def _unavailable_row(
         "note": reason[:160],
     }
 
+
+LOG_PRINT_LEVEL = 5
+"""IPOPT's print level for the runs of ``bench run --log-dir`` (one line per iteration)."""
 
 EXACT = ("objective", "primal_residual", "dual_residual")
 """Columns written with 15 significant digits (the others with 6): an objective is compared closely."""

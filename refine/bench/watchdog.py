@@ -23,9 +23,14 @@ failure, but it is not interrupted.
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
+import os
 import signal
+import sys
 import time
+from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 from refine.bench.contenders import Answer, Contender, Unavailable, timed_call
@@ -46,16 +51,23 @@ def can_fork() -> bool:
 
 
 def run_limited(
-    problem: BenchProblem, name: str, function: Contender, time_limit_s: float, isolate: bool = True
+    problem: BenchProblem,
+    name: str,
+    function: Contender,
+    time_limit_s: float,
+    isolate: bool = True,
+    log: Path | None = None,
 ) -> tuple[Answer, float]:
     """One run of ``function`` on ``problem`` held to ``time_limit_s`` [s]; the answer and its wall time [s].
 
     See the module's rules. :class:`Unavailable` raised by the contender reaches the caller in
-    either way of running.
+    either way of running. ``log``: a file that receives everything the run prints to the
+    process's standard output and error, the solvers' own iteration logs included (:func:`captured`).
     """
     problem.time_limit_s = time_limit_s
     if keeps_time_limit(function) or not isolate or not can_fork():
-        answer, wall = timed_call(problem, name, function)
+        with captured(log):
+            answer, wall = timed_call(problem, name, function)
         if wall > time_limit_s and answer.status != "timeout":
             answer = _over(
                 answer, f"ran {wall:.3g} s, over the time limit of {time_limit_s:g} s (not interrupted)"
@@ -63,7 +75,7 @@ def run_limited(
         return answer, wall
     context = multiprocessing.get_context("fork")
     receive, send = context.Pipe(duplex=False)
-    child = context.Process(target=_child, args=(send, problem, name, function), daemon=True)
+    child = context.Process(target=_child, args=(send, problem, name, function, log), daemon=True)
     t0 = time.perf_counter()
     child.start()
     send.close()
@@ -104,10 +116,40 @@ def _over(answer: Answer, note: str) -> Answer:
     return answer
 
 
-def _child(send: Any, problem: BenchProblem, name: str, function: Contender) -> None:
+@contextlib.contextmanager
+def captured(log: Path | None) -> Iterator[None]:
+    """Send the process's standard output and error to the file ``log`` while the block runs.
+
+    Python's ``sys.stdout`` and ``sys.stderr`` (where CasADi sends IPOPT's log) and file
+    descriptors 1 and 2 (where other C and C++ libraries print) are redirected; nothing changes
+    for None.
+    """
+    if log is None:
+        yield
+        return
+    log.parent.mkdir(parents=True, exist_ok=True)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
+    with log.open("a", buffering=1) as f:
+        os.dup2(f.fileno(), 1)
+        os.dup2(f.fileno(), 2)
+        try:
+            with contextlib.redirect_stdout(f), contextlib.redirect_stderr(f):
+                yield
+        finally:
+            f.flush()
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            for fd in saved:
+                os.close(fd)
+
+
+def _child(send: Any, problem: BenchProblem, name: str, function: Contender, log: Path | None) -> None:
     """The watchdog's child: one timed call, its answer sent back."""
     try:
-        message = ("answer", timed_call(problem, name, function))
+        with captured(log):
+            message = ("answer", timed_call(problem, name, function))
     except Unavailable as e:
         message = ("unavailable", str(e))
     try:

@@ -63,3 +63,25 @@ def test_refines_contenders_keep_the_limit_themselves(problem):
     answer, _ = run_limited(problem, "refine", contenders_module.CONTENDERS["refine"], 1e-4)
     assert answer.status == "timeout"
     assert answer.solver_options["options"]["ipopt.max_wall_time"] == pytest.approx(1e-4)
+
+
+def test_each_run_leaves_its_log_with_the_solvers_iterations(tmp_path, tiny_wave):
+    suites = tmp_path / "suites.toml"
+    suites.write_text(tiny_wave)
+    rows = run_suites(
+        ["tiny"], ["refine", "greedy-ik"], tmp_path / "b.csv", suites_file=suites, warmup=1,
+        repeat=2, log_dir=tmp_path / "logs", echo=lambda _: None,
+    )  # fmt: skip
+    folder = tmp_path / "logs" / rows[0]["run_id"] / "tiny" / "wave-20"
+    names = sorted(p.name for p in folder.iterdir())
+    assert names == [f"{c}{kind}-{k}.log" for c in ("greedy-ik", "refine") for kind, k in
+                     (("", 1), ("", 2), ("-warmup", 1))]  # fmt: skip
+    text = (folder / "refine-1.log").read_text()
+    # IPOPT's own iteration table (its header and one line per iteration), as IPOPT prints it
+    assert "iter    objective    inf_pr" in text and "EXIT: Optimal Solution Found." in text
+    by = {r["contender"]: r for r in rows}
+    assert by["refine"]["success"] and '"ipopt.print_level": 5' in by["refine"]["solver_options"]
+    assert (
+        '"compiled": true' in by["refine"]["solver_options"]
+        or '"compiled": false' in by["refine"]["solver_options"]
+    )
