@@ -223,6 +223,8 @@ def test_drake_chains_its_ik_on_a_plant_made_once_per_problem(suites_file):
         assert answer.status == "ok", answer.note
         assert verify(problem, answer.q).verified
         assert answer.times_s["build"] > 0 and answer.times_s["solve"] > 0 and answer.times_s["seed"] == 0
+        # SNOPT's result counted over the 20 waypoints, and its settings
+        assert answer.solver_status == "kSolutionFound x20" and "SNOPT" in answer.solver_options["solver"]
     np.testing.assert_allclose(first.q, second.q, atol=1e-9)
 
 
