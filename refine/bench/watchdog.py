@@ -10,7 +10,8 @@ runner has loaded and cached (the problem, its robot, Drake's plant, Tesseract's
 The child times the call on its own clock (:func:`refine.bench.contenders.timed_call`) and sends
 back the answer and its wall time. When the child has not answered by the time limit it is
 killed (SIGKILL, so a C++ solver that never returns to Python stops too) and the run is a
-``timeout`` answer: no joints, a failure, counted at the time limit. A child that dies without
+``timeout`` answer: no joints, a failure, counted at the time limit; its ``solve`` time is the
+runner's wall time until the kill and its CPU time unknown (NaN, an empty cell). A child that dies without
 answering (a C++ ``abort``, a segmentation fault) gives an ``error`` answer naming the signal; the
 benchmark goes on. What the child caches in ``problem.extra`` stays in the child: a contender
 that caches its set-up there (Drake's plant, Tesseract's environment) makes it again in every
@@ -24,6 +25,7 @@ failure, but it is not interrupted.
 from __future__ import annotations
 
 import contextlib
+import math
 import multiprocessing
 import os
 import signal
@@ -100,13 +102,14 @@ def run_limited(
         return answer, own_wall
     if kind == "unavailable":
         raise Unavailable(payload)
+    # no answer: the stage time is the runner's wall time until then, the child's CPU time unknown
     if kind == "timeout":
-        return Answer(
-            "timeout", None, note=f"stopped by the watchdog at the time limit of {time_limit_s:g} s"
-        ), wall
+        note = f"stopped by the watchdog at the time limit of {time_limit_s:g} s"
+        return Answer("timeout", None, {"solve": wall}, math.nan, note=note), wall
     code = child.exitcode
     how = f"signal {signal.Signals(-code).name}" if code is not None and code < 0 else f"exit code {code}"
-    return Answer("error", None, note=f"the contender's process died without an answer ({how})"), wall
+    note = f"the contender's process died without an answer ({how})"
+    return Answer("error", None, {"solve": wall}, math.nan, note=note), wall
 
 
 def _over(answer: Answer, note: str) -> Answer:

@@ -3,6 +3,7 @@ and refine's contenders get the limit and stop there themselves."""
 
 from __future__ import annotations
 
+import math
 import os
 import time
 
@@ -43,6 +44,8 @@ def test_a_contender_past_the_limit_is_killed_and_fails_at_the_limit(tmp_path, m
     assert time.perf_counter() - t0 < 20.0
     assert row["status"] == "timeout" and row["timed_out"] and not row["success"]
     assert not row["verified"] and "watchdog" in row["note"]
+    # the time it ran until stopped, not 0 s; its CPU time is not known
+    assert 0.5 <= row["total_s"] < 20.0 and math.isnan(row["cpu_s"])
     assert row["penalised_total_s"] == 0.5 and row["penalised_cpu_s"] == 0.5
 
 
