@@ -76,7 +76,12 @@ def environment() -> dict[str, str]:
 
 
 def _peak_rss_mb() -> float:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: kilobytes
+    """The peak resident memory [MB] of this process or of the largest child it has waited for.
+
+    The children are the watchdog's (:mod:`refine.bench.watchdog`), which run the forked contenders.
+    """
+    peaks = (resource.getrusage(who).ru_maxrss for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN))
+    return max(peaks) / 1024.0  # Linux: kilobytes
 
 
 def run_problem(
@@ -276,8 +281,8 @@ def run_suites(
     worst position and orientation, least clearance), wall time per stage and in total (median over
     repeats, the minimum total, and the total counted as the time limit for a row that is neither a
     success nor a detection), CPU time (likewise), solver iterations, the repeats and untimed warm-up runs, the 1-minute
-    load average before and after the timed runs, the process's peak resident memory after the row
-    and its growth during it [MB] (memory stays allocated, so the growth is the row's own only
+    load average before and after the timed runs, the peak resident memory of the process or of a
+    watchdog's child after the row and its growth during it [MB] (memory stays allocated, so the growth is the row's own only
     where it sets a new peak), the first broken tolerance, and the machine and versions.
     Contenders take turns on each problem (:func:`run_turns`). Every BLAS runs with
     ``blas_threads`` threads throughout (:func:`refine.bench.provenance.fixed_threads`, recorded
