@@ -17,30 +17,15 @@ from refine.bench.suites import generated_problem, growth_exponent, load_suites,
 from refine.cli import main
 from refine.errors import InputError
 
-SUITES = """
-[suite.tiny]
-generated = ["wave", "wave_box"]
-sizes = [20, 40]
-
-[generated.wave]
-robot = "abb_irb4600_60_205"
-centre_m = [1.3, 0.0, 0.6]
-length_m = 0.3
-tool_length_m = 0.35
-
-[generated.wave_box]
-robot = "abb_irb4600_60_205"
-centre_m = [1.3, 0.0, 0.6]
-length_m = 0.3
-tool_length_m = 0.35
-boxes = [{ name = "post", centre_m = [1.5, 0.0, 0.55], size_m = [0.1, 0.1, 0.3] }]
-"""
+WAVE_BOX = """boxes = [{ name = "post", centre_m = [1.5, 0.0, 0.55], size_m = [0.1, 0.1, 0.3] }]\n"""
+"""The post beside the wave of the ``wave_box`` family (its other keys: the wave's)."""
 
 
 @pytest.fixture
-def suites_file(tmp_path):
+def suites_file(tmp_path, tiny_wave_with, wave_family):
+    """The wave and the wave beside a post, 20 and 40 waypoints each."""
     path = tmp_path / "suites.toml"
-    path.write_text(SUITES)
+    path.write_text(tiny_wave_with(["wave", "wave_box"], [20, 40], wave_family("wave_box", WAVE_BOX)))
     return path
 
 

@@ -16,11 +16,6 @@ from refine.cli import main
 from refine.errors import InputError
 
 WAVE_BOX = """
-[generated.wave_box]
-robot = "abb_irb4600_60_205"
-centre_m = [1.3, 0.0, 0.6]
-length_m = 0.3
-tool_length_m = 0.35
 # 2 cm from the tool where the wave is farthest out: the seed brings clearance rows
 boxes = [{ name = "post", centre_m = [1.41, 0.125, 0.65], size_m = [0.06, 0.06, 0.2] }]
 
@@ -34,9 +29,9 @@ TOLERANCES = {"ipopt.tol": 1e-9, "ipopt.constr_viol_tol": 1e-10}
 
 
 @pytest.fixture(scope="module")
-def suites(tmp_path_factory, tiny_wave):
+def suites(tmp_path_factory, tiny_wave_with, wave_family):
     path = tmp_path_factory.mktemp("suites") / "suites.toml"
-    path.write_text(tiny_wave.replace('generated = ["wave"]', 'generated = ["wave", "wave_box"]') + WAVE_BOX)
+    path.write_text(tiny_wave_with(["wave", "wave_box"], [20], wave_family("wave_box", WAVE_BOX)))
     return path
 
 

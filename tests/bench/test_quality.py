@@ -20,15 +20,9 @@ from refine.robot.kinematics import TcpKinematics
 
 
 @pytest.fixture(scope="module")
-def wave():
+def wave(wave_spec):
     """A 20-waypoint, 0.3 m sine wave in front of the IRB 4600 (a generated family of the suites)."""
-    spec = {
-        "robot": "abb_irb4600_60_205",
-        "centre_m": [1.3, 0.0, 0.6],
-        "length_m": 0.3,
-        "tool_length_m": 0.35,
-    }
-    return generated_problem("tiny", "wave", spec, 20)
+    return generated_problem("tiny", "wave", wave_spec, 20)
 
 
 def test_dual_residual_of_a_one_variable_problem_by_hand():
