@@ -95,7 +95,7 @@ def test_plain_ipopt_from_x0_reaches_refines_objective(exported):
     assert math.isclose(plain["objective"], done.objective, rel_tol=1e-6)
 
 
-def test_the_bench_rows_objective_is_plain_ipopts_on_the_exported_instance(exported, suites, tmp_path):
+def test_the_bench_rows_objective_is_plain_ipopts_on_the_exported_instance(exported, tiny_wave, tmp_path):
     """The CSV's ``objective`` (the shared evaluator at refine's answer in a bench run) and plain
     IPOPT's optimum of the exported instance, solved outside refine: the same within 1e-6."""
     import csv
@@ -103,7 +103,8 @@ def test_the_bench_rows_objective_is_plain_ipopts_on_the_exported_instance(expor
     from refine.bench.runner import run_suites
 
     _, done = exported
-    out = tmp_path / "bench.csv"
+    out, suites = tmp_path / "bench.csv", tmp_path / "suites.toml"
+    suites.write_text(tiny_wave)  # the exported wave alone
     run_suites(["tiny"], ["refine"], out, suites_file=suites, echo=lambda _: None)
     (row,) = [r for r in csv.DictReader(out.open()) if r["problem"] == "wave-20"]
     plain = solve_instance(done.folder, TOLERANCES)
