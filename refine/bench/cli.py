@@ -69,6 +69,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         f"recorded per row (default {DEFAULT_BLAS_THREADS})",
     )
     run.add_argument("--suites-file", type=Path, default=DEFAULT_SUITES, help="the suites' TOML file")
+    run.add_argument(
+        "--log-dir",
+        type=Path,
+        default=None,
+        help="write each run's log (the solver's iteration log) to DIR/RUN_ID/SUITE/PROBLEM/CONTENDER-K.log",
+    )
     listing = actions.add_parser("list", help="list the suites and contenders")
     listing.add_argument("--suites-file", type=Path, default=DEFAULT_SUITES)
     report = actions.add_parser(
@@ -150,6 +156,7 @@ def run(args: argparse.Namespace) -> int:
         time_limit_s=args.time_limit,
         blas_threads=args.blas_threads,
         solver_options=dict(parse_solver_option(text) for text in args.solver_option),
+        log_dir=args.log_dir,
     )
     run_id = rows[0]["run_id"] if rows else "-"
     print(f"{len(rows)} row(s) of run {run_id} appended to {args.csv}")

@@ -66,7 +66,9 @@ def solve_as_refine(
     """Build ``problem``'s refinement and solve it as ``refine run`` does (the refine contenders' call).
 
     The solver options are the problem's (``problem.solver_options``, those of ``solver``'s prefix)
-    updated with ``solver_options``; refine's defaults fill in the rest.
+    updated with ``solver_options``; refine's defaults fill in the rest. With a time limit
+    (``problem.time_limit_s``) the refinement stops its solves when the limit less the build's
+    time runs out (status ``timeout``), and IPOPT gets it as ``ipopt.max_wall_time`` unless given.
 
     Returns:
         the :class:`refine.optimise.outcome.Refinement`, the first round's problem, and the build's
@@ -82,8 +84,11 @@ def solve_as_refine(
     prefix = FATROP_PREFIX if solver == "fatrop" else "ipopt."
     given = {k: v for k, v in problem.solver_options.items() if k.startswith(prefix)}
     given.update(solver_options or {})
+    options = dict(given)
+    if problem.time_limit_s is not None and solver != "fatrop":  # one solve cannot overrun the limit
+        options.setdefault("ipopt.max_wall_time", float(problem.time_limit_s))
     w0, c0 = time.perf_counter(), time.process_time()
-    nlp = problem.refinement(mode, solver, solver_options=given)
+    nlp = problem.refinement(mode, solver, solver_options=options)
     build = time.perf_counter() - w0
     build_cpu = time.process_time() - c0
     result = solve_refinement(
@@ -92,6 +97,7 @@ def solve_as_refine(
         sources=problem.sources,
         repair_max_slack_deg=problem.repair_max_slack_deg,
         max_rounds=problem.max_rounds,
+        time_limit_s=None if problem.time_limit_s is None else max(problem.time_limit_s - build, 0.0),
     )
     return result, nlp, build, build_cpu
 
@@ -145,6 +151,8 @@ def _refine(problem: BenchProblem, mode: str, solver: str = "ipopt") -> Answer:
     cpu = build_cpu + sum(t.cpu.get(k, 0.0) for k in ("build", "seed", "solve"))
     slack = result.slack_deg if result.status == "repaired" else None
     solved = result.problem if result.problem is not None else nlp
+    options = refine_options(solved)
+    options["kernels"] = kernel_settings(mode)
     return Answer(
         result.status,
         result.q,
@@ -154,8 +162,21 @@ def _refine(problem: BenchProblem, mode: str, solver: str = "ipopt") -> Answer:
         result.solver_status[:80],
         slack,
         solver_status=result.solver_status.split(";")[0].strip(),
-        solver_options=refine_options(solved),
+        solver_options=options,
     )
+
+
+def kernel_settings(mode: str) -> dict[str, Any]:
+    """How refine's derivatives were made in ``mode``: compiled kernels or CasADi's virtual machine.
+
+    Compiled: the C compiler and its flags (:mod:`refine.optimise.compiled`).
+    """
+    from refine.optimise.compiled import COMPILE_FLAGS, compiler
+
+    cc = compiler() if mode == "assembled" else None
+    if cc is None:
+        return {"mode": mode, "compiled": False}
+    return {"mode": mode, "compiled": True, "compiler": cc, "flags": list(COMPILE_FLAGS)}
 
 
 def refine_assembled(problem: BenchProblem) -> Answer:
@@ -206,10 +227,21 @@ def greedy_ik(problem: BenchProblem) -> Answer:
         prefer_first=problem.home is not None,
     )
     seconds = time.perf_counter() - w0
-    status = "ok" if float(errors.max()) < 1e-6 else "infeasible"
+    status = "ok" if float(errors.max()) < GREEDY_POSE_ERROR else "infeasible"
     return Answer(
-        status, q, {"seed": seconds}, time.process_time() - c0, 0, f"max pose error {errors.max():.2e}"
+        status,
+        q,
+        {"seed": seconds},
+        time.process_time() - c0,
+        0,
+        f"max pose error {errors.max():.2e}",
+        solver_options={"ik": "refine.optimise.seed.ik_chain", "ok_below_pose_error": GREEDY_POSE_ERROR},
     )
+
+
+GREEDY_POSE_ERROR = 1e-6
+"""The chained IK's largest pose error (as :func:`refine.optimise.seed.ik_chain` measures it) below
+which greedy IK answers ``ok``."""
 
 
 def drake_chained_ik(problem: BenchProblem) -> Answer:
@@ -254,6 +286,7 @@ def drake_chained_ik(problem: BenchProblem) -> Answer:
     build = solve = 0.0
     out = np.empty((problem.n_waypoints, robot.nq))
     failed = 0
+    results: dict[str, int] = {}  # SNOPT's solution result -> waypoints
     guess = np.zeros(plant.num_positions())
     for k in range(problem.n_waypoints):
         t0 = time.perf_counter()
@@ -278,6 +311,8 @@ def drake_chained_ik(problem: BenchProblem) -> Answer:
         result = snopt.Solve(prog, guess)
         t2 = time.perf_counter()
         build, solve = build + t1 - t0, solve + t2 - t1
+        word = str(result.get_solution_result()).rpartition(".")[2]
+        results[word] = results.get(word, 0) + 1
         if not result.is_success():
             failed += 1
             log.debug("drake-ik: waypoint %d: %s", k, result.get_solution_result())
@@ -291,6 +326,12 @@ def drake_chained_ik(problem: BenchProblem) -> Answer:
         time.process_time() - c0,
         0,
         f"{failed} waypoint(s) failed" if failed else "",
+        solver_status=", ".join(f"{word} x{n}" for word, n in sorted(results.items(), key=lambda r: -r[1])),
+        solver_options={
+            "solver": "SNOPT (Drake's defaults)",
+            "cone_backoff_deg": DRAKE_CONE_BACKOFF_DEG,
+            "cost": "squared joint change from the previous waypoint",
+        },
     )
 
 
@@ -326,6 +367,9 @@ DRAKE_CONE_BACKOFF_DEG = 1e-3
 
 Contender = Callable[[BenchProblem], Answer]
 """A contender: called with one problem, returns its :class:`Answer` (docs/bench.md, "Plug-in contenders")."""
+
+for _keeper in (refine_assembled, refine_casadi_ad, refine_fatrop):
+    _keeper.keeps_time_limit = True  # they stop at problem.time_limit_s (refine.bench.watchdog)
 
 CONTENDERS: dict[str, Contender] = {
     "refine": refine_assembled,

@@ -67,16 +67,20 @@ def shifted_geometric_mean(values: list[float], shift: float = SHIFT_S) -> float
     return float(np.exp(np.mean(np.log(v + shift))) - shift)
 
 
-def performance_ratios(rows: list[Row], key: str = "cpu_s") -> dict[str, list[float]]:
+def performance_ratios(
+    rows: list[Row], key: str = "cpu_s", passes: Callable[[Row], bool] | None = None
+) -> dict[str, list[float]]:
     """Dolan-Moré ratios per contender: its time on a problem over the least of any contender's.
 
-    Only a solved row (:func:`solved`) has a time; an unsolved one, or a problem no contender
-    solved, gives ``inf``. One ratio per problem of ``rows`` for every contender in them (a
-    contender without a row on a problem also gets ``inf``).
+    Only a row that ``passes`` (default :func:`solved`; a tolerance profile's test, see
+    :data:`PROFILE_TESTS`) has a time; any other, or a problem no contender passed, gives ``inf``.
+    One ratio per problem of ``rows`` for every contender in them (a contender without a row on a
+    problem also gets ``inf``).
     """
+    passes = solved if passes is None else passes
     problems = sorted({r["problem"] for r in rows})
     contenders = sorted({r["contender"] for r in rows})
-    times = {(r["problem"], r["contender"]): (number(r, key) if solved(r) else math.inf) for r in rows}
+    times = {(r["problem"], r["contender"]): (number(r, key) if passes(r) else math.inf) for r in rows}
     ratios: dict[str, list[float]] = {c: [] for c in contenders}
     for p in problems:
         best = min((times.get((p, c), math.inf) for c in contenders), default=math.inf)
@@ -96,40 +100,63 @@ def profile_curve(ratios: list[float], taus: np.ndarray) -> np.ndarray:
     return np.array([(r <= tau).mean() for tau in taus])
 
 
-def plot_profile(rows: list[Row], title: str, path: Path, key: str = "cpu_s") -> list[Path]:
-    """Draw the performance profile of ``rows`` into ``path`` (PNG) and beside it as SVG; the files."""
+PROFILE_TESTS: dict[str, Callable[[Row], bool]] = {
+    "verified": solved,
+    **{name: test for name, (_, test) in PROFILES.items() if name != "verified"},
+}
+"""The rows that count in each tolerance profile's performance profile: for ``verified`` a success or
+a detection (the rows the time summaries do not penalise), for a KKT profile its test."""
+
+
+def plot_profile(
+    rows: list[Row], title: str, path: Path, key: str = "cpu_s", profiles: tuple[str, ...] | None = None
+) -> list[Path]:
+    """Draw the performance profiles of ``rows`` into ``path`` (PNG) and beside it as SVG; the files.
+
+    One panel per tolerance profile of ``profiles`` (default: every one of :data:`PROFILE_TESTS`),
+    the ratios of each taken against the best contender *within that profile*.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import matplotlib.ticker
 
-    ratios = performance_ratios(rows, key)
-    finite = [x for rs in ratios.values() for x in rs if math.isfinite(x)]
-    top = max(2.0, max(finite, default=2.0) * 1.5)
-    taus = np.logspace(0.0, math.log10(top), 400)
-    fig, ax = plt.subplots(figsize=(8.4, 4.0))
+    names = tuple(PROFILE_TESTS) if profiles is None else profiles
+    fig, axes = plt.subplots(len(names), 1, figsize=(8.4, 0.6 + 3.0 * len(names)), squeeze=False)
     styles = ["-", "--", "-.", ":"]
-    for i, (contender, rs) in enumerate(ratios.items()):
-        count = sum(map(math.isfinite, rs))
-        ax.step(
-            taus,
-            profile_curve(rs, taus),
-            where="post",
-            linestyle=styles[(i // 10) % len(styles)] if count else ":",
-            linewidth=1.8 if count else 1.0,
-            label=f"{contender} ({count}/{len(rs)})",
+    for ax, name in zip(axes[:, 0], names, strict=True):
+        ratios = performance_ratios(rows, key, PROFILE_TESTS[name])
+        finite = [x for rs in ratios.values() for x in rs if math.isfinite(x)]
+        top = max(2.0, max(finite, default=2.0) * 1.5)
+        taus = np.logspace(0.0, math.log10(top), 400)
+        for i, (contender, rs) in enumerate(ratios.items()):
+            count = sum(map(math.isfinite, rs))
+            ax.step(
+                taus,
+                profile_curve(rs, taus),
+                where="post",
+                linestyle=styles[(i // 10) % len(styles)] if count else ":",
+                linewidth=1.8 if count else 1.0,
+                label=f"{contender} ({count}/{len(rs)})",
+                color=f"C{i % 10}",
+            )
+        ax.set_xscale("log", base=2)
+        ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}"))
+        ax.set_xlim(1.0, top)
+        ax.set_ylim(-0.02, 1.02)
+        ax.set_ylabel("share of problems within τ")
+        ax.set_title(f"{title}: profile {name}", fontsize=10)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(
+            fontsize=8,
+            loc="upper left",
+            bbox_to_anchor=(1.01, 1.0),
+            title="counted / problems",
+            title_fontsize=8,
         )
-    ax.set_xscale("log", base=2)
-    ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}"))
-    ax.set_xlim(1.0, top)
-    ax.set_ylim(-0.02, 1.02)
-    ax.set_xlabel(f"τ: {'CPU' if key == 'cpu_s' else 'wall'} time over the best contender's on the problem")
-    ax.set_ylabel("share of problems within τ")
-    ax.set_title(title, fontsize=10)
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(
-        fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), title="solved / problems", title_fontsize=8
+    axes[-1, 0].set_xlabel(
+        f"τ: {'CPU' if key == 'cpu_s' else 'wall'} time over the best contender's on the problem (in the profile)"
     )
     fig.tight_layout()
     paths = [path.with_suffix(".png"), path.with_suffix(".svg")]

@@ -434,6 +434,13 @@ def trajopt(problem: BenchProblem) -> Answer:
     w3 = time.perf_counter()
     q = _joints(t, response.results, problem.n_waypoints, problem.robot.nq) if response.successful else None
     note = "" if response.successful else f"TrajOpt: {response.message}"[:80]
+    options = {
+        "sqp": _settings(T.BasicTrustRegionSQPParameters(), SQP_SETTINGS),  # no solver profile: its defaults
+        "orientation_box_rad": [float(v) for v in box[3:]],
+        **_settings(composite, COMPOSITE_SETTINGS),
+        "collision_constraint": bool(composite.collision_constraint_config.enabled),
+        "safety_margin_m": float(model.margin_m) if model is not None else None,
+    }
     return Answer(
         "ok" if q is not None else "failed",
         q,
@@ -441,6 +448,8 @@ def trajopt(problem: BenchProblem) -> Answer:
         time.process_time() - c0,
         0,
         note,
+        solver_status=_status(response),
+        solver_options=options,
     )
 
 
@@ -489,6 +498,9 @@ def descartes(problem: BenchProblem) -> Answer:
     w2 = time.perf_counter()
     q = _joints(t, response.results, problem.n_waypoints, problem.robot.nq) if response.successful else None
     note = "" if response.successful else f"Descartes: {response.message}"[:80]
+    options = _settings(profile, DESCARTES_SETTINGS)
+    options["target_pose_sample_axis"] = [float(v) for v in np.ravel(profile.target_pose_sample_axis)]
+    options["collision_margin_m"] = float(model.margin_m) if model is not None else None
     return Answer(
         "ok" if q is not None else "failed",
         q,
@@ -496,7 +508,47 @@ def descartes(problem: BenchProblem) -> Answer:
         time.process_time() - c0,
         0,
         note,
+        solver_status=_status(response),
+        solver_options=options,
     )
+
+
+SQP_SETTINGS = (
+    "max_iter", "max_time", "cnt_tolerance", "min_approx_improve", "min_trust_box_size", "trust_box_size",
+    "improve_ratio_threshold", "trust_shrink_ratio", "trust_expand_ratio", "max_merit_coeff_increases",
+    "merit_coeff_increase_ratio", "initial_merit_error_coeff",
+)  # fmt: skip
+"""TrajOpt's trust-region SQP settings recorded in a row's ``solver_options`` (``sqp``)."""
+
+COMPOSITE_SETTINGS = ("smooth_velocities", "velocity_coeff", "smooth_accelerations", "smooth_jerks",
+                      "avoid_singularity", "longest_valid_segment_length")  # fmt: skip
+"""TrajOpt's composite-profile settings recorded in a row's ``solver_options``."""
+
+DESCARTES_SETTINGS = (
+    "target_pose_fixed", "target_pose_sample_min", "target_pose_sample_max", "target_pose_sample_resolution",
+    "enable_collision", "allow_collision", "enable_edge_collision", "use_redundant_joint_solutions",
+)  # fmt: skip
+"""Descartes' plan-profile settings recorded in a row's ``solver_options``."""
+
+
+def _settings(source: Any, names: tuple[str, ...]) -> dict[str, Any]:
+    """The named attributes of a Tesseract profile or parameter set, as JSON-ready numbers and flags."""
+    found = {}
+    for name in names:
+        value = getattr(source, name)
+        if isinstance(value, float) and not math.isfinite(value):
+            value = str(value)  # TrajOpt's "no limit" is the largest double
+        elif isinstance(value, float) and abs(value) > 1e300:
+            value = "unlimited"
+        elif hasattr(value, "tolist"):
+            value = np.asarray(value).tolist()
+        found[name] = value
+    return found
+
+
+def _status(response: Any) -> str:
+    """The planner's own word on its solve: ``successful`` or its message (Tesseract has no status code)."""
+    return "successful" if response.successful else str(response.message)[:80]
 
 
 def _set_margin(t: dict[str, Any], config: Any, margin_m: float) -> None:

@@ -314,13 +314,13 @@ def run_section(run_id: str, rows: list[Row], out_dir: Path, prefix: str = "") -
         )
         lines += ["", f"### Suite `{suite}`", ""]
         if len({r["contender"] for r in srows}) > 1 and len({r["problem"] for r in srows}) > 1:
-            paths = plot_profile(
-                srows, f"performance profile, suite {suite} (CPU time)", out_dir / f"{prefix}{suite}-profile"
-            )
+            paths = plot_profile(srows, f"suite {suite} (CPU time)", out_dir / f"{prefix}{suite}-profile")
             lines += [
-                f"![performance profile of suite {suite}]({paths[0].name}) ([SVG]({paths[1].name})): "
-                "the share of the suite's problems each contender solved within τ times the best "
-                "contender's CPU time on that problem (Dolan and Moré); a failed row is never within.",
+                f"![performance profiles of suite {suite}]({paths[0].name}) ([SVG]({paths[1].name})): "
+                "one panel per tolerance profile, each the share of the suite's problems a contender "
+                "passed within τ times the CPU time of the fastest contender that passed it in that "
+                "profile (Dolan and Moré); `verified` counts successes and detections, a KKT profile "
+                "its successes within the residuals; a failed row is never within.",
                 "",
             ]
         lines += [

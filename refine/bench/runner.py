@@ -30,13 +30,14 @@ from typing import Any
 import numpy as np
 
 from refine.bench import peers  # noqa: F401  (adds trajopt and descartes to CONTENDERS)
-from refine.bench.contenders import CONTENDERS, Answer, Unavailable, timed_call, verify
+from refine.bench.contenders import CONTENDERS, Answer, Unavailable, verify
 from refine.bench.outcomes import DEFAULT_TIME_LIMIT_S, penalised, score
 from refine.bench.provenance import DEFAULT_BLAS_THREADS, fixed_threads, git_commit, solver_versions
 from refine.bench.provenance import blas_threads as current_blas_threads
 from refine.bench.quality import evaluate
 from refine.bench.suites import BenchProblem, load_suites, problems
 from refine.bench.table import COLUMNS, SCHEMA_VERSION, check_header, new_run_id
+from refine.bench.watchdog import run_limited
 from refine.errors import InputError
 
 log = logging.getLogger(__name__)
@@ -75,7 +76,12 @@ def environment() -> dict[str, str]:
 
 
 def _peak_rss_mb() -> float:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: kilobytes
+    """The peak resident memory [MB] of this process or of the largest child it has waited for.
+
+    The children are the watchdog's (:mod:`refine.bench.watchdog`), which run the forked contenders.
+    """
+    peaks = (resource.getrusage(who).ru_maxrss for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN))
+    return max(peaks) / 1024.0  # Linux: kilobytes
 
 
 def run_problem(
@@ -85,9 +91,12 @@ def run_problem(
     repeat: int,
     warmup: int = 0,
     time_limit_s: float = DEFAULT_TIME_LIMIT_S,
+    isolate: bool = True,
 ) -> dict[str, Any] | None:
     """One row for ``contender`` on ``problem`` after ``warmup`` untimed runs (see :func:`run_turns`)."""
-    return run_turns(problem, {contender: function}, repeat, warmup, time_limit_s=time_limit_s).get(contender)
+    return run_turns(
+        problem, {contender: function}, repeat, warmup, time_limit_s=time_limit_s, isolate=isolate
+    ).get(contender)
 
 
 def run_turns(
@@ -98,20 +107,31 @@ def run_turns(
     echo: Callable[[str], None] = print,
     time_limit_s: float = DEFAULT_TIME_LIMIT_S,
     unavailable: dict[str, str] | None = None,
+    isolate: bool = True,
+    log_dir: Path | None = None,
 ) -> dict[str, dict[str, Any]]:
     """One row per contender of ``functions`` on ``problem``, the contenders taking turns.
 
     Each contender runs ``warmup`` times untimed, then the ``repeat`` timed runs go round the
     contenders in turn. A contender that raises :class:`Unavailable` is left out with a message
     (and its reason put in ``unavailable``, by name, when given).
-    A timed run longer than ``time_limit_s`` on the runner's clock (the whole call) times the row
-    out; the run is not interrupted.
+    Every run (warm-up ones included) is held to ``time_limit_s``
+    (:func:`refine.bench.watchdog.run_limited`): refine's contenders stop there themselves, any
+    other is run in a forked child and killed at the limit (``isolate``; with False, or without
+    ``fork``, it runs in this process and a run over the limit is only scored so). A timed run
+    that ends ``timeout``, or takes longer than the limit on its own clock, times the row out.
+    ``log_dir``: a folder for each run's log (``CONTENDER-warmup-K.log``, ``CONTENDER-K.log``, K
+    from 1): what the run printed, the solver's iteration log included.
     """
+
+    def log(name: str, kind: str, k: int) -> Path | None:
+        return None if log_dir is None else log_dir / f"{name}{kind}-{k + 1}.log"
+
     functions = dict(functions)
     for name in list(functions):
         try:
-            for _ in range(warmup):
-                timed_call(problem, name, functions[name])
+            for k in range(warmup):
+                run_limited(problem, name, functions[name], time_limit_s, isolate, log(name, "-warmup", k))
         except Unavailable as e:
             echo(f"skipping {name}: {e}")
             del functions[name]
@@ -120,10 +140,12 @@ def run_turns(
     answers: dict[str, list[tuple[Answer, float]]] = {name: [] for name in functions}
     load0 = _load()
     peak0 = _peak_rss_mb()
-    for _ in range(repeat):
+    for k in range(repeat):
         for name in list(functions):
             try:
-                answers[name].append(timed_call(problem, name, functions[name]))
+                answers[name].append(
+                    run_limited(problem, name, functions[name], time_limit_s, isolate, log(name, "", k))
+                )
             except Unavailable as e:
                 echo(f"skipping {name}: {e}")
                 del functions[name], answers[name]
@@ -163,7 +185,7 @@ def _row(
     walls = [a.times_s for a in runs]
     cpus = [a.cpu_s for a in runs]
     repeat = len(runs)
-    timed_out = any(wall > time_limit_s for _, wall in timed)
+    timed_out = any(wall > time_limit_s or a.status == "timeout" for a, wall in timed)
     verdicts, scores = [], []
     for a in runs:
         verdict = verify(problem, a.q)
@@ -243,6 +265,8 @@ def run_suites(
     run_id: str | None = None,
     blas_threads: int = DEFAULT_BLAS_THREADS,
     solver_options: dict[str, Any] | None = None,
+    isolate: bool = True,
+    log_dir: Path | None = None,
 ) -> list[dict[str, Any]]:
     """Run every contender on every problem of ``suites`` and append the rows to ``csv_path``.
 
@@ -257,15 +281,18 @@ def run_suites(
     worst position and orientation, least clearance), wall time per stage and in total (median over
     repeats, the minimum total, and the total counted as the time limit for a row that is neither a
     success nor a detection), CPU time (likewise), solver iterations, the repeats and untimed warm-up runs, the 1-minute
-    load average before and after the timed runs, the process's peak resident memory after the row
-    and its growth during it [MB] (memory stays allocated, so the growth is the row's own only
+    load average before and after the timed runs, the peak resident memory of the process or of a
+    watchdog's child after the row and its growth during it [MB] (memory stays allocated, so the growth is the row's own only
     where it sets a new peak), the first broken tolerance, and the machine and versions.
     Contenders take turns on each problem (:func:`run_turns`). Every BLAS runs with
     ``blas_threads`` threads throughout (:func:`refine.bench.provenance.fixed_threads`, recorded
     in ``blas_threads``); the quality columns are :func:`refine.bench.quality.evaluate`'s.
     ``solver_options`` (keyed with the
     solver's prefix, ``ipopt.max_iter``) go to every problem (``BenchProblem.solver_options``); each
-    row's ``solver_options`` is what its contender reports it used, as JSON.
+    row's ``solver_options`` is what its contender reports it used, as JSON. ``isolate``: run the
+    contenders that do not keep the time limit themselves under the watchdog (:func:`run_turns`).
+    ``log_dir``: each run's log goes to ``log_dir/RUN_ID/SUITE/PROBLEM/`` (:func:`run_turns`), and
+    refine's IPOPT prints its iteration log there (``ipopt.print_level`` 5 unless given).
     """
     contenders = list(contenders)
     unknown = [c for c in contenders if c not in CONTENDERS]
@@ -294,10 +321,15 @@ def run_suites(
         for suite in suites:
             for problem in problems(data, suite):
                 problem.solver_options = dict(solver_options or {})
+                logs = None if log_dir is None else Path(log_dir) / env["run_id"] / suite / problem.name
+                if logs is not None:
+                    problem.solver_options.setdefault("ipopt.print_level", LOG_PRINT_LEVEL)
                 t0 = time.perf_counter()
                 functions = {name: CONTENDERS[name] for name in contenders if name not in skipped}
                 with fixed_threads(blas_threads):  # libraries loaded by earlier problems included
-                    found = run_turns(problem, functions, repeat, warmup, echo, time_limit_s, skipped)
+                    found = run_turns(
+                        problem, functions, repeat, warmup, echo, time_limit_s, skipped, isolate, logs
+                    )
                     threads = current_blas_threads()  # as they were for these runs
                 for name in contenders:  # a contender that cannot run here still leaves its row
                     if name in skipped and name not in found:
@@ -353,6 +385,9 @@ def _unavailable_row(
         "note": reason[:160],
     }
 
+
+LOG_PRINT_LEVEL = 5
+"""IPOPT's print level for the runs of ``bench run --log-dir`` (one line per iteration)."""
 
 EXACT = ("objective", "primal_residual", "dual_residual")
 """Columns written with 15 significant digits (the others with 6): an objective is compared closely."""

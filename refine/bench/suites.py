@@ -59,6 +59,9 @@ class BenchProblem:
         tool_in_world: T_F_TCP of a stationary tool (the robot holds the part; ``tcp_in_flange``
             then places the part's frame on the flange and the path is in the part's frame), or
             None (see :class:`refine.robot.kinematics.TcpKinematics`).
+        time_limit_s: wall time one run of a contender may take [s] (``refine bench run
+            --time-limit``); refine's contenders stop their solve at it themselves (status
+            ``timeout``), the runner's watchdog stops any other (:mod:`refine.bench.watchdog`).
     """
 
     suite: str
@@ -79,6 +82,7 @@ class BenchProblem:
     extra: dict[str, Any] = field(default_factory=dict)
     tool_in_world: Array | None = None
     solver_options: dict[str, Any] = field(default_factory=dict)
+    time_limit_s: float | None = None
 
     @property
     def n_waypoints(self) -> int:
@@ -202,7 +206,9 @@ def check_family(where: str, family: dict[str, Any]) -> None:
         r = family.get("corner_radius_m", FAMILY_KEYS["corner_radius_m"])
         for key in ("length_m", "width_m"):
             if not family.get(key, FAMILY_KEYS[key]) > 2 * r:
-                raise InputError(f"{where}: a loop's {key} must exceed twice corner_radius_m ({2 * r:g} m)", key=key)
+                raise InputError(
+                    f"{where}: a loop's {key} must exceed twice corner_radius_m ({2 * r:g} m)", key=key
+                )
     numbers = [k for k, v in FAMILY_KEYS.items() if isinstance(v, float)] + ["noise_seed"]
     for key in numbers:
         value = family.get(key, FAMILY_KEYS[key])
@@ -210,7 +216,11 @@ def check_family(where: str, family: dict[str, Any]) -> None:
             raise InputError(f"{where}: {key} = {value!r} is not a number", key=key, value=value)
         positive = ("length_m", "tool_length_m", "wavelength_m", "speed_m_s", "width_m", "corner_radius_m")
         if value < 0 or (value == 0 and key in positive):
-            raise InputError(f"{where}: {key} = {value!r} must be > 0 (>= 0 for amplitude, tilt, noise)", key=key, value=value)
+            raise InputError(
+                f"{where}: {key} = {value!r} must be > 0 (>= 0 for amplitude, tilt, noise)",
+                key=key,
+                value=value,
+            )
 
 
 TOP_KEYS = ("suite", "generated", "instances")
@@ -421,7 +431,9 @@ def tesseract_puzzle(suite: str, support: Path) -> BenchProblem:
 
     urdf = support / "urdf" / "puzzle_piece_workcell.urdf"
     if not urdf.is_file():
-        raise InputError(f"the puzzle piece's files are not at {support} (tesseract_support of Tesseract's example)")
+        raise InputError(
+            f"the puzzle piece's files are not at {support} (tesseract_support of Tesseract's example)"
+        )
     folder = Path(tempfile.mkdtemp(prefix="refine-puzzle-"))
     text = urdf.read_text().replace("package://tesseract_support/", f"{support.resolve()}/")
     (folder / urdf.name).write_text(text)
@@ -437,7 +449,9 @@ def tesseract_puzzle(suite: str, support: Path) -> BenchProblem:
     import pinocchio as pin
 
     pin.framesForwardKinematics(model, data, pin.neutral(model))
-    T_base = {name: data.oMf[model.getFrameId(name)].homogeneous for name in ("tool0", "part", "grinder_frame")}
+    T_base = {
+        name: data.oMf[model.getFrameId(name)].homogeneous for name in ("tool0", "part", "grinder_frame")
+    }
     base_in_world = np.eye(4)
     base_in_world[2, 3] = 0.5  # world -> table -> base_link
     fused = fused_from_toolpath(

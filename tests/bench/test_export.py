@@ -16,11 +16,6 @@ from refine.cli import main
 from refine.errors import InputError
 
 WAVE_BOX = """
-[generated.wave_box]
-robot = "abb_irb4600_60_205"
-centre_m = [1.3, 0.0, 0.6]
-length_m = 0.3
-tool_length_m = 0.35
 # 2 cm from the tool where the wave is farthest out: the seed brings clearance rows
 boxes = [{ name = "post", centre_m = [1.41, 0.125, 0.65], size_m = [0.06, 0.06, 0.2] }]
 
@@ -34,9 +29,9 @@ TOLERANCES = {"ipopt.tol": 1e-9, "ipopt.constr_viol_tol": 1e-10}
 
 
 @pytest.fixture(scope="module")
-def suites(tmp_path_factory, tiny_wave):
+def suites(tmp_path_factory, tiny_wave_with, wave_family):
     path = tmp_path_factory.mktemp("suites") / "suites.toml"
-    path.write_text(tiny_wave.replace('generated = ["wave"]', 'generated = ["wave", "wave_box"]') + WAVE_BOX)
+    path.write_text(tiny_wave_with(["wave", "wave_box"], [20], wave_family("wave_box", WAVE_BOX)))
     return path
 
 
@@ -98,6 +93,23 @@ def test_plain_ipopt_from_x0_reaches_refines_objective(exported):
     plain = solve_instance(done.folder, TOLERANCES)
     assert plain["status"] == "Solve_Succeeded" and plain["max_violation"] < 1e-7
     assert math.isclose(plain["objective"], done.objective, rel_tol=1e-6)
+
+
+def test_the_bench_rows_objective_is_plain_ipopts_on_the_exported_instance(exported, tiny_wave, tmp_path):
+    """The CSV's ``objective`` (the shared evaluator at refine's answer in a bench run) and plain
+    IPOPT's optimum of the exported instance, solved outside refine: the same within 1e-6."""
+    import csv
+
+    from refine.bench.runner import run_suites
+
+    _, done = exported
+    out, suites = tmp_path / "bench.csv", tmp_path / "suites.toml"
+    suites.write_text(tiny_wave)  # the exported wave alone
+    run_suites(["tiny"], ["refine"], out, suites_file=suites, echo=lambda _: None)
+    (row,) = [r for r in csv.DictReader(out.open()) if r["problem"] == "wave-20"]
+    plain = solve_instance(done.folder, TOLERANCES)
+    assert plain["status"] == "Solve_Succeeded"
+    assert math.isclose(float(row["objective"]), plain["objective"], rel_tol=1e-6)
 
 
 def test_the_standalone_script_agrees(exported, capsys):

@@ -17,18 +17,6 @@ from refine.bench.table import COLUMNS, SCHEMA_VERSION
 from refine.cli import main
 from refine.errors import InputError
 
-TINY = """
-[suite.tiny]
-generated = ["wave"]
-sizes = [20]
-
-[generated.wave]
-robot = "abb_irb4600_60_205"
-centre_m = [1.3, 0.0, 0.6]
-length_m = 0.3
-tool_length_m = 0.35
-"""
-
 # the 37 columns the benchmark wrote before run ids and outcome columns (schema 1)
 OLD_COLUMNS = [
     "suite", "problem", "robot", "n_waypoints", "obstacles", "expected", "contender", "status", "verified",
@@ -136,9 +124,9 @@ def test_the_scoring_rules_by_hand():
     assert rule(stated, "infeasible", None).failed
 
 
-def test_a_run_over_the_time_limit_is_a_timeout_whatever_its_answer(tmp_path, monkeypatch):
+def test_a_run_over_the_time_limit_is_a_timeout_whatever_its_answer(tmp_path, monkeypatch, tiny_wave):
     suites = tmp_path / "suites.toml"
-    suites.write_text(TINY)
+    suites.write_text(tiny_wave)
 
     def slow(problem):
         answer = contenders_module.greedy_ik(problem)
@@ -154,9 +142,9 @@ def test_a_run_over_the_time_limit_is_a_timeout_whatever_its_answer(tmp_path, mo
     assert not row["success"] and row["penalised_total_s"] == 0.1
 
 
-def test_a_csv_with_another_header_is_refused_before_anything_runs(tmp_path, monkeypatch):
+def test_a_csv_with_another_header_is_refused_before_anything_runs(tmp_path, monkeypatch, tiny_wave):
     suites = tmp_path / "suites.toml"
-    suites.write_text(TINY)
+    suites.write_text(tiny_wave)
     calls = []
     monkeypatch.setitem(contenders_module.CONTENDERS, "greedy-ik", lambda p: calls.append(p))
     old = tmp_path / "old.csv"
@@ -252,9 +240,11 @@ def test_the_report_uses_the_rows_of_one_run_and_pairs_rows_within_a_suite(tmp_p
         write_report(path, tmp_path / "x", "nope")
 
 
-def test_every_timed_run_is_verified_and_an_unconverged_solver_is_no_success(tmp_path, monkeypatch):
+def test_every_timed_run_is_verified_and_an_unconverged_solver_is_no_success(
+    tmp_path, monkeypatch, tiny_wave
+):
     suites = tmp_path / "suites.toml"
-    suites.write_text(TINY)
+    suites.write_text(tiny_wave)
     calls = []
 
     def flaky(problem):
@@ -274,7 +264,7 @@ def test_every_timed_run_is_verified_and_an_unconverged_solver_is_no_success(tmp
     monkeypatch.setitem(contenders_module.CONTENDERS, "drake-ik", out_of_iterations)
     rows = run_suites(
         ["tiny"], ["greedy-ik", "drake-ik"], tmp_path / "b.csv", suites_file=suites, repeat=2,
-        time_limit_s=50.0, echo=lambda _: None,
+        time_limit_s=50.0, echo=lambda _: None, isolate=False,  # flaky counts its calls here
     )  # fmt: skip
     by = {r["contender"]: r for r in rows}
     # the last answer alone would not verify, the first did: 1 of 2, no success, the limit counted
@@ -288,3 +278,16 @@ def test_every_timed_run_is_verified_and_an_unconverged_solver_is_no_success(tmp
         and out["solver_status"] == "Maximum_Iterations_Exceeded"
     )
     assert not out["success"] and out["penalised_total_s"] == 50.0
+
+
+def test_ipopt_out_of_iterations_on_the_glass_cell_is_no_success(tmp_path):
+    """A real ``Maximum_Iterations_Exceeded``: refine's IPOPT held to 2 iterations on the glass cell
+    (refine needs 3 there). The path may still verify; the row is no success all the same."""
+    out = tmp_path / "bench.csv"
+    code = main(["bench", "run", "--suite", "glass", "--contender", "refine", "--solver-option",
+                 "max_iter=2", "--warmup", "0", "--csv", str(out)])  # fmt: skip
+    assert code == 0
+    (row,) = csv.DictReader(out.open())
+    assert row["solver_status"] == "Maximum_Iterations_Exceeded"
+    assert row["success"] == "False" and row["penalised_total_s"] == row["time_limit_s"]
+    assert '"ipopt.max_iter": 2' in row["solver_options"]

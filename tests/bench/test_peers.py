@@ -79,8 +79,15 @@ def test_trajopt_and_descartes_answer_a_short_wave_and_the_shared_check_grades_t
     verdict = verify(problem, answer.q)
     assert verdict.max_position_error_m < 1e-5
     assert verdict.max_orientation_deviation_deg <= problem.tolerances.orientation_deg
+    # its status and settings: TrajOpt's default SQP (50 iterations), the box inside the cone (the
+    # nozzle of the generated wave is not axisymmetric: cone/sqrt(3) on each of the three axes)
+    assert answer.solver_status == "successful" and answer.solver_options["sqp"]["max_iter"] == 50
+    assert not problem.axisymmetric
+    box = answer.solver_options["orientation_box_rad"]
+    assert box == pytest.approx([math.radians(problem.tolerances.orientation_deg - 1e-3) / math.sqrt(3)] * 3)
     answer = descartes(problem)
     assert answer.status == "ok" and answer.q.shape == (8, 6)
+    assert answer.solver_status == "successful" and answer.solver_options["use_redundant_joint_solutions"]
     verdict = verify(problem, answer.q)
     assert verdict.max_position_error_m < 1e-6  # the verifier's limit: KDL's IK is asked for 1e-10
     # its samples turn about the tool axis by at most half the cone
@@ -101,6 +108,7 @@ def test_the_puzzle_piece_as_tesseract_poses_it(require):
     # by hand from the URDF: world -> link_grinder (0.35, -0.35, 0.6) -> grinder_frame (0, 0, 0.1), turned pi about y
     assert problem.tool_in_world[:3, 3] == pytest.approx([0.35, -0.35, 0.7])
     assert problem.tool_in_world[:3, 2] == pytest.approx([0.0, 0.0, -1.0], abs=1e-5)
+
     # tool0 -> ee_mount -> tool1 -> part, the URDF's three origins
     def rpy(r):
         return matrix_from_fixed_xyz(r, degrees=False)

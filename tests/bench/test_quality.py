@@ -20,15 +20,9 @@ from refine.robot.kinematics import TcpKinematics
 
 
 @pytest.fixture(scope="module")
-def wave():
+def wave(wave_spec):
     """A 20-waypoint, 0.3 m sine wave in front of the IRB 4600 (a generated family of the suites)."""
-    spec = {
-        "robot": "abb_irb4600_60_205",
-        "centre_m": [1.3, 0.0, 0.6],
-        "length_m": 0.3,
-        "tool_length_m": 0.35,
-    }
-    return generated_problem("tiny", "wave", spec, 20)
+    return generated_problem("tiny", "wave", wave_spec, 20)
 
 
 def test_dual_residual_of_a_one_variable_problem_by_hand():
@@ -120,6 +114,28 @@ def test_performance_ratios_and_profile_by_hand():
     assert ratios["b"] == [2.0, 1.0, 1.0, math.inf]
     curve = profile_curve(ratios["b"], np.array([1.0, 1.9, 2.0, 1e9]))
     assert curve.tolist() == [0.5, 0.5, 0.75, 0.75]
+
+
+def test_a_kkt_profile_takes_its_ratios_against_the_best_row_within_it(tmp_path):
+    """a is fastest but its answers are no optimum (dual residual 1e-2): within kkt-1e-4 the best on
+    p1 is b, so b's ratio there is 1, not 2; a counts nowhere."""
+    from refine.bench.figures import PROFILE_TESTS, plot_profile
+
+    def r(problem, contender, cpu, dual):
+        return {**_r(problem, contender, cpu), "primal_residual": "1e-9", "dual_residual": str(dual)}
+
+    rows = [
+        r("p1", "a", 1.0, 1e-2),
+        r("p1", "b", 2.0, 1e-7),
+        r("p2", "a", 1.0, 1e-2),
+        r("p2", "b", 3.0, 1e-7),
+    ]
+    assert performance_ratios(rows, passes=PROFILE_TESTS["verified"]) == {"a": [1.0, 1.0], "b": [2.0, 3.0]}
+    kkt = performance_ratios(rows, passes=PROFILE_TESTS["kkt-1e-4"])
+    assert kkt == {"a": [math.inf, math.inf], "b": [1.0, 1.0]}
+    # the plot holds one panel per profile
+    png, svg = plot_profile(rows, "t", tmp_path / "profile")
+    assert png.stat().st_size > 1000 and svg.read_text().count("profile kkt-1e-") == 2
 
 
 def test_growth_of_a_power_law_with_a_kink():
