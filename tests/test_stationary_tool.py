@@ -56,3 +56,63 @@ def test_ik_brings_the_part_point_to_the_tool(kin):
     # the point of the part at the target, carried by the robot, is where the tool stands
     held = TcpKinematics(kin.robot, BASE, PART_IN_FLANGE)
     assert (held.pose(q) @ target) == pytest.approx(TOOL_IN_WORLD, abs=1e-6)
+
+
+def test_axis_only_ik_leaves_the_spin_free(kin):
+    # a target turned 90 deg about its own z: the same tool axis and point, another spin
+    spun = kin.pose(Q) @ make_transform(matrix_from_fixed_xyz([0.0, 0.0, 90.0], degrees=True), [0.0, 0.0, 0.0])
+    spec = kin.robot.spec
+    q, error = solve_ik(kin, spun, Q, spec.lower, spec.upper, axis_only=True)
+    assert error < 1e-9  # nothing to do: the start already has that point and axis
+    assert q == pytest.approx(Q, abs=1e-12)
+    tilted = spun @ make_transform(matrix_from_fixed_xyz([4.0, -3.0, 0.0], degrees=True), [0.01, 0.0, -0.02])
+    q, error = solve_ik(kin, tilted, Q, spec.lower, spec.upper, axis_only=True)
+    reached = kin.pose(q)
+    assert error < 1e-6
+    assert reached[:3, 3] == pytest.approx(tilted[:3, 3], abs=1e-6)
+    assert reached[:3, 2] == pytest.approx(tilted[:3, 2], abs=1e-6)
+    # the spin kept is the start's (about 90 deg off the target's), not the target's
+    assert abs(float(reached[:3, 0] @ tilted[:3, 0])) < 0.2
+
+
+def test_the_symbolic_pose_is_the_part_seen_by_the_tool(kin):
+    from refine.optimise.kinematics import fk_function
+
+    p, R = fk_function(kin.robot, BASE, PART_IN_FLANGE, TOOL_IN_WORLD)(Q)
+    T_world_part = BASE @ kin.robot.fk(Q) @ PART_IN_FLANGE  # by hand: base, flange, part
+    expected = np.linalg.inv(T_world_part) @ TOOL_IN_WORLD
+    assert np.array(R) == pytest.approx(expected[:3, :3], abs=1e-12)
+    assert np.array(p).ravel() == pytest.approx(expected[:3, 3], abs=1e-12)
+
+
+def test_the_refinement_puts_the_held_part_on_the_fixed_tool(kin):
+    """Known part poses seen from the tool => known flange poses: T_F_flange = T_F_tool · T_part_tool⁻¹ · T_flange_part⁻¹.
+
+    Exactly for the position of each path point (carried by the flange onto the tool's point), within
+    the cone for the orientation (the answer trades the demonstrated orientation against smoothness).
+    """
+    from refine.optimise.problem import build_refinement
+    from refine.optimise.solve import solve_refinement
+    from refine.paths import FusedPath
+    from refine.settings import Tolerances
+
+    robot = kin.robot
+    t = np.linspace(0.0, 1.0, 60)[:, None]
+    qs = Q + 0.1 * np.sin(2 * np.pi * t * np.array([1.0, 0.5, 0.7, 0.3, 0.9, 0.4]))
+    targets = kin.poses(qs)  # a path of the part the robot can follow
+    s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(targets[:, :3, 3], axis=0), axis=1))]
+    fused = FusedPath(s, targets[:, :3, 3], targets[:, :3, :3], np.full(60, 0.05), s / 0.05, np.zeros(60))
+    nlp = build_refinement(
+        robot, fused, BASE, PART_IN_FLANGE, Tolerances(), tool_in_world=TOOL_IN_WORLD, joint_steps=()
+    )
+    result = solve_refinement(nlp)
+    assert result.status == "ok"
+    cone = np.radians(Tolerances().orientation_deg)
+    for q, T in zip(result.q, targets, strict=True):
+        flange = BASE @ robot.fk(q)
+        expected = TOOL_IN_WORLD @ np.linalg.inv(T) @ np.linalg.inv(PART_IN_FLANGE)
+        point = PART_IN_FLANGE @ np.append(T[:3, 3], 1.0)  # the path point, in the flange frame
+        assert (flange @ point)[:3] == pytest.approx((expected @ point)[:3], abs=1e-6)
+        assert (flange @ point)[:3] == pytest.approx(TOOL_IN_WORLD[:3, 3], abs=1e-6)
+        turn = np.arccos(np.clip((np.trace(flange[:3, :3].T @ expected[:3, :3]) - 1.0) / 2.0, -1.0, 1.0))
+        assert turn <= cone + 1e-6

@@ -100,6 +100,7 @@ class BenchProblem:
             weights=self.weights,
             derivative_mode=derivative_mode,
             solver=solver,
+            tool_in_world=self.tool_in_world,
             **{"joint_steps": (), **options},
         )
 

@@ -127,6 +127,7 @@ class RefinementNLP:
     tolerances: Tolerances
     axisymmetric: bool
     weights: Weights = field(default_factory=Weights)
+    tool_in_world: Array | None = None  # T_F_TCP of a stationary tool
     active: ActiveSet = field(default_factory=lambda: ActiveSet())
     elastic_deg: float | None = None
     build_time_s: float = 0.0
@@ -166,6 +167,7 @@ class RefinementNLP:
             singularity_hessian=self.singularity_hessian,
             joint_steps=self.joint_steps if joint_steps is None else joint_steps,
             solver=self.solver_name,
+            tool_in_world=self.tool_in_world,
         )
 
     def step_rows(self) -> Array:
@@ -281,6 +283,7 @@ def build_refinement(
     singularity_hessian: bool = False,
     joint_steps: str | Sequence[int] = "all",
     solver: str = "ipopt",
+    tool_in_world: Array | None = None,
 ) -> RefinementNLP:
     """Build the refinement NLP for ``fused`` on ``robot`` (no solve).
 
@@ -314,6 +317,7 @@ def build_refinement(
             :mod:`refine.optimise.stagewise`; at most
             :data:`refine.optimise.stagewise.MAX_FATROP_WAYPOINTS` waypoints). Options for fatrop
             in ``solver_options`` carry the prefix ``"fatrop."``; IPOPT's (``"ipopt."``) are then ignored.
+        tool_in_world: T_F_TCP of a stationary tool (``tcp_in_flange`` T_flange_part, ``fused`` in the part).
 
     Returns:
         The problem with bounds and parameters filled in.
@@ -346,10 +350,10 @@ def build_refinement(
     if derivative_mode not in ("assembled", "casadi"):
         raise InputError(f"derivative_mode must be 'assembled' or 'casadi', got {derivative_mode!r}")
     if derivative_mode == "assembled":
-        kernels = waypoint_kernels(robot, base_in_world, tcp_in_flange, axisymmetric)
+        kernels = waypoint_kernels(robot, base_in_world, tcp_in_flange, axisymmetric, tool_in_world)
     else:
         kernels = {
-            "waypoint": waypoint_function(robot, base_in_world, tcp_in_flange, axisymmetric),
+            "waypoint": waypoint_function(robot, base_in_world, tcp_in_flange, axisymmetric, tool_in_world),
             "singularity": singularity_function(robot, base_in_world, tcp_in_flange),
         }
     G, cost = kernels["waypoint"].map(N)(Q, P_ref, R_demo)
@@ -429,7 +433,7 @@ def build_refinement(
     if solver == "fatrop":
         options = dict(solver_options or {})
         built: Any = StagewiseSolver(
-            waypoint_function(robot, base_in_world, tcp_in_flange, axisymmetric),
+            waypoint_function(robot, base_in_world, tcp_in_flange, axisymmetric, tool_in_world),
             singularity_function(robot, base_in_world, tcp_in_flange),
             N=N,
             n=n,
@@ -467,6 +471,7 @@ def build_refinement(
         robot=robot,
         base_in_world=np.asarray(base_in_world, dtype=float),
         tcp_in_flange=np.asarray(tcp_in_flange, dtype=float),
+        tool_in_world=None if tool_in_world is None else np.asarray(tool_in_world, dtype=float),
         fused=fused,
         tolerances=tolerances,
         axisymmetric=axisymmetric,
