@@ -290,6 +290,10 @@ def preflight(
                 f"{robot.nq} axes; use krl"
             )
         check_arm_programs(problem, robot, programs)
+        if problem.tool.stationary:
+            from refine.settings.stationary import check_stationary_programs
+
+            check_stationary_programs(programs)
     except InputError as e:
         raise InputError(f"{where}{e}") from e
     try:

@@ -161,6 +161,7 @@ def refinement_for(problem: Problem, robot: Robot, fused: FusedPath) -> Refineme
         solver_options={"ipopt.max_wall_time": problem.repair.time_limit_s},
         joint_steps=(),  # the solve adds the joint-step rows that come near their bound
         solver=problem.optimise.solver,
+        tool_in_world=problem.tool.tcp_in_world,
     )
 
 
@@ -285,7 +286,7 @@ def plan_motions(
     from refine.robot.kinematics import TcpKinematics
 
     model = next((getattr(s, "model", None) for s in sources if getattr(s, "model", None) is not None), None)
-    kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange)
+    kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange, problem.tool.tcp_in_world)
     checker = MotionChecker(kin, model, problem.tolerances, problem.collision.check_step_m)
     planned = []
     for p in passes:
@@ -338,7 +339,7 @@ def controller_line_check(
     from refine.optimise.controller_line import check_controller_lines
     from refine.robot.kinematics import TcpKinematics
 
-    kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange)
+    kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange, problem.tool.tcp_in_world)
     wrist = np.zeros(len(q) - 1, dtype=bool)
     if {"rapid", "krl"} & set(program_formats(problem, robot)):
         for a, b in singular_runs(robot, q):
