@@ -116,3 +116,96 @@ def test_the_refinement_puts_the_held_part_on_the_fixed_tool(kin):
         assert (flange @ point)[:3] == pytest.approx(TOOL_IN_WORLD[:3, 3], abs=1e-6)
         turn = np.arccos(np.clip((np.trace(flange[:3, :3].T @ expected[:3, :3]) - 1.0) / 2.0, -1.0, 1.0))
         assert turn <= cone + 1e-6
+
+
+# ---- the problem file: [tool] tcp_in_world with part_in_flange
+
+
+@pytest.fixture
+def puzzle(tmp_path):
+    import shutil
+    from pathlib import Path
+
+    folder = tmp_path / "puzzle_piece"
+    shutil.copytree(Path(__file__).parent.parent / "problems" / "puzzle_piece", folder)
+    return folder / "problem.toml"
+
+
+def _edit(toml, old, new):
+    text = toml.read_text()
+    assert old in text
+    toml.write_text(text.replace(old, new, 1))
+
+
+def test_a_stationary_tool_is_read_with_the_held_part_as_the_flange_frame(puzzle):
+    from refine.frames import transform_from_xyz_rpy
+    from refine.problem import load_problem
+
+    tool = load_problem(puzzle).tool
+    assert tool.stationary
+    # the example's grinder_frame: 0.1 m above (0.35, -0.35, 0.6), turned over about y
+    assert tool.tcp_in_world[:3, 3] == pytest.approx([0.35, -0.35, 0.7])
+    assert tool.tcp_in_world[:3, 2] == pytest.approx([0.0, 0.0, -1.0])
+    part = transform_from_xyz_rpy([0.016887, 0.007326, 0.075648], [119.147590, 7.435636, -43.064335])
+    assert tool.tcp_in_flange == pytest.approx(part)
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "said"),
+    [
+        ("part_in_flange = {", "tcp_in_flange = {", "needs part_in_flange"),
+        ('[frames]\n', None, None),
+    ],
+)
+def test_a_stationary_tool_refuses_what_it_cannot_mean(puzzle, old, new, said):
+    from refine.errors import InputError
+    from refine.problem import load_problem
+
+    if new is None:  # a CAD frame in the world: the path is in the held part's frame
+        puzzle.write_text(
+            puzzle.read_text() + '\n[frames]\ncad_in_world = { xyz = [0.1, 0.0, 0.0], rpy_deg = [0.0, 0.0, 0.0] }\n'
+        )
+        said = "cad_in_world"
+    else:
+        _edit(puzzle, old, new)
+    with pytest.raises(InputError, match=said):
+        load_problem(puzzle)
+
+
+def test_a_tool_on_the_flange_takes_no_part_in_flange(puzzle):
+    from refine.errors import InputError
+    from refine.problem import load_problem
+
+    _edit(puzzle, "tcp_in_world = {", "tcp_in_flange = {")
+    with pytest.raises(InputError, match="part_in_flange is for a stationary tool"):
+        load_problem(puzzle)
+
+
+@pytest.mark.parametrize(
+    ("kind", "said"),
+    [
+        ("rapid", "robhold FALSE"),
+        ("krl", "IPO_MODE"),
+        ("sunrise", "workpiece"),
+        ("urscript", "has no external-TCP"),
+        ("tp", "remote TCP"),
+        ("inform", "stationary-tool"),
+    ],
+)
+def test_programs_are_refused_by_name_with_a_stationary_tool(kind, said):
+    from refine.errors import InputError
+    from refine.settings.stationary import check_stationary_programs
+
+    with pytest.raises(InputError, match=f"program format '{kind}' with a stationary tool.*{said}.*programs = \\[\\]"):
+        check_stationary_programs((kind,))
+    check_stationary_programs(())
+
+
+def test_the_run_refuses_the_robots_own_program_before_solving(puzzle):
+    from refine.errors import InputError
+    from refine.problem import load_problem
+    from refine.run.preflight import preflight
+
+    _edit(puzzle, "programs = []", 'programs = ["sunrise"]')
+    with pytest.raises(InputError, match="'sunrise' with a stationary tool"):
+        preflight(load_problem(puzzle))

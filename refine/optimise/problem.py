@@ -349,13 +349,12 @@ def build_refinement(
     # ---- path constraints and orientation cost, mapped over the waypoints (compiled kernels)
     if derivative_mode not in ("assembled", "casadi"):
         raise InputError(f"derivative_mode must be 'assembled' or 'casadi', got {derivative_mode!r}")
-    if derivative_mode == "assembled":
-        kernels = waypoint_kernels(robot, base_in_world, tcp_in_flange, axisymmetric, tool_in_world)
-    else:
-        kernels = {
-            "waypoint": waypoint_function(robot, base_in_world, tcp_in_flange, axisymmetric, tool_in_world),
-            "singularity": singularity_function(robot, base_in_world, tcp_in_flange),
-        }
+    chain = (robot, base_in_world, tcp_in_flange)
+    kernels = (
+        waypoint_kernels(*chain, axisymmetric, tool_in_world)
+        if derivative_mode == "assembled"
+        else {"waypoint": waypoint_function(*chain, axisymmetric, tool_in_world), "singularity": singularity_function(*chain)}
+    )
     G, cost = kernels["waypoint"].map(N)(Q, P_ref, R_demo)
     if elastic:
         G = ca.vertcat(G[:3, :], G[3, :] + sigma.T)  # cos θ_k + σ_k >= cos α
@@ -412,12 +411,7 @@ def build_refinement(
         if derivative_mode == "casadi" or solver == "fatrop"
         else derivative_functions(
             kernels,
-            N=N,
-            n=n,
-            x=x,
-            p=p,
-            f=f,
-            g=g,
+            N=N, n=n, x=x, p=p, f=f, g=g,  # fmt: skip
             orientation_coef=coef,
             K=K,
             b=b,

@@ -68,7 +68,7 @@ class TcpKinematics:
         T_wp = T_wf @ self.tcp_in_flange
         tool = self.tool_in_world
         r = tool[:3, 3] - T_wf[..., :3, 3]  # flange origin -> tool TCP, world axes (..., 3)
-        Jv_point = Jv - np.cross(r[..., :, None], Jw, axis=-2)
+        Jv_point = Jv - _cross_columns(r, Jw)
         Rt = np.swapaxes(T_wp[..., :3, :3], -1, -2)
         J = -np.concatenate([Rt @ Jv_point, Rt @ Jw], axis=-2)
         return _rigid_inverse(T_wp) @ tool, J
@@ -133,6 +133,13 @@ class TcpKinematics:
             return self._stationary(T_wf, Jv, Jw)[1]
         r = T_wf[:3, :3] @ self.tcp_in_flange[:3, 3]  # flange origin -> TCP, world axes
         return np.vstack([Jv - np.cross(r, Jw.T).T, Jw])
+
+
+def _cross_columns(r: Array, M: Array) -> Array:
+    """``r × M[..., :, k]`` for every column k: r (..., 3), M (..., 3, n) (np.cross is slow on small arrays)."""
+    x, y, z = r[..., 0, None], r[..., 1, None], r[..., 2, None]
+    a, b, c = M[..., 0, :], M[..., 1, :], M[..., 2, :]
+    return np.stack([y * c - z * b, z * a - x * c, x * b - y * a], axis=-2)
 
 
 def _rigid_inverse(T: Array) -> Array:
@@ -216,7 +223,7 @@ def axis_error(T: Array, T_target: Array, J: Array) -> Array:
     current z axis, so a step never spends effort on the free spin.
     """
     z, zt = T[:, :3, 2], T_target[:, :3, 2]
-    cross = np.cross(z, zt)
+    cross = _cross_columns(z, zt[:, :, None])[:, :, 0]
     sin = np.linalg.norm(cross, axis=1)
     angle = np.arctan2(sin, np.einsum("ki,ki->k", z, zt))
     flipped = (sin <= 1e-12) & (angle > 1.0)  # opposite axes: any axis normal to z turns it over

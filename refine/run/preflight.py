@@ -283,6 +283,10 @@ def preflight(
     else:
         where = "--programs: "
     try:
+        if problem.tool.stationary:
+            from refine.settings.stationary import check_stationary_programs
+
+            check_stationary_programs(programs)
         check_programs(problem, robot.spec, programs)
         if "sunrise" in programs and robot.nq != 7:
             raise InputError(
@@ -290,10 +294,6 @@ def preflight(
                 f"{robot.nq} axes; use krl"
             )
         check_arm_programs(problem, robot, programs)
-        if problem.tool.stationary:
-            from refine.settings.stationary import check_stationary_programs
-
-            check_stationary_programs(programs)
     except InputError as e:
         raise InputError(f"{where}{e}") from e
     try:

@@ -15,15 +15,17 @@ import numpy as np
 
 from refine.errors import InputError
 
-STATIONARY_PROGRAMS = ("rapid", "krl")
-"""The program formats written for a stationary tool: RAPID (a stationary TCP, ``tooldata`` with
-``robhold`` FALSE, and a robot-held work object, ``wobjdata`` with ``robhold`` TRUE) and KRL
-(external TCP, ``$IPO_MODE = #TCP``: the fixed tool as the BASE, the part as the TOOL)."""
+STATIONARY_PROGRAMS: tuple[str, ...] = ()
+"""The program formats written for a stationary tool: none yet. A program written for a tool on the
+flange would move the wrong frame, so every format is refused before solving, saying what the
+controller offers."""
 
 _NOT_WRITTEN = {
+    "rapid": "refine does not write RAPID's stationary TCP (tooldata robhold FALSE with a robot-held wobjdata) yet",
+    "krl": "refine does not write KRL's external TCP ($IPO_MODE = #TCP, the fixed tool as BASE) yet",
     "urscript": "URScript has no external-TCP motion (a UR moves its own TCP only)",
     "sunrise": "refine does not write a Sunrise program moving a held workpiece's frame yet",
-    "tp": "refine does not write FANUC's remote TCP (option J...) motions yet",
+    "tp": "refine does not write FANUC's remote TCP motions yet",
     "inform": "refine does not write Yaskawa's stationary-tool (external reference point) motions yet",
 }
 
@@ -57,12 +59,11 @@ def check_stationary_programs(programs: tuple[str, ...]) -> None:
     """Every program format can carry a stationary tool (:data:`STATIONARY_PROGRAMS`).
 
     Raises:
-        InputError: naming the format, why not, and the formats that can.
+        InputError: naming the format and what its controller offers.
     """
     for kind in programs:
         if kind not in STATIONARY_PROGRAMS:
             raise InputError(
                 f"program format {kind!r} with a stationary tool ([tool] tcp_in_world): {_NOT_WRITTEN[kind]}; "
-                f"the formats written for a stationary tool are {', '.join(STATIONARY_PROGRAMS)} "
-                "([output] programs = [] writes none)"
+                "write none with [output] programs = [] (the trajectory, PathML and result.json are written)"
             )
