@@ -184,7 +184,6 @@ def test_a_tool_on_the_flange_takes_no_part_in_flange(puzzle):
 @pytest.mark.parametrize(
     ("kind", "said"),
     [
-        ("rapid", "robhold FALSE"),
         ("krl", "IPO_MODE"),
         ("sunrise", "workpiece"),
         ("urscript", "has no external-TCP"),
@@ -196,9 +195,9 @@ def test_programs_are_refused_by_name_with_a_stationary_tool(kind, said):
     from refine.errors import InputError
     from refine.settings.stationary import check_stationary_programs
 
-    with pytest.raises(InputError, match=f"program format '{kind}' with a stationary tool.*{said}.*programs = \\[\\]"):
-        check_stationary_programs((kind,))
-    check_stationary_programs(())
+    with pytest.raises(InputError, match=f"program format '{kind}' with a stationary tool.*{said}.*are rapid;"):
+        check_stationary_programs(("rapid", kind))
+    check_stationary_programs(("rapid",))
 
 
 def test_the_run_refuses_the_robots_own_program_before_solving(puzzle):
@@ -209,3 +208,54 @@ def test_the_run_refuses_the_robots_own_program_before_solving(puzzle):
     _edit(puzzle, "programs = []", 'programs = ["sunrise"]')
     with pytest.raises(InputError, match="'sunrise' with a stationary tool"):
         preflight(load_problem(puzzle))
+
+
+def test_rapid_writes_a_stationary_tcp_and_the_held_part_as_a_robot_held_work_object(tmp_path):
+    """Re-read: fk(q) · wobj uframe · target == tooldata tframe (all in the base), at every target."""
+    import re
+
+    from refine.export.rapid import parse_rapid_targets, write_rapid
+    from refine.frames import matrix_from_quaternion
+    from refine.paths import Trajectory
+    from refine.problem import Problem
+    from refine.settings import CadSettings, ProcessSettings, RobotSettings, ToolSettings
+
+    robot = load_robot("abb_irb4600_60_205")
+    problem = Problem(
+        name="grind",
+        root=tmp_path,
+        robot=RobotSettings(model="abb_irb4600_60_205", base_in_world=BASE),
+        tool=ToolSettings(name="grinder", tcp_in_flange=PART_IN_FLANGE, tcp_in_world=TOOL_IN_WORLD),
+        cad=CadSettings(file=tmp_path / "path.csv", format="toolpath", speed_m_s=0.05),
+        demonstration=None,
+        process=ProcessSettings(kind="other", output="doGrind"),
+    )
+    t = np.linspace(0.0, 1.0, 30)[:, None]
+    qs = Q + 0.1 * np.sin(2 * np.pi * t * np.array([1.0, 0.5, 0.7, 0.3, 0.9, 0.4]))
+    # by hand: the part's frame in the world, then the tool seen from it
+    poses = np.array([np.linalg.inv(BASE @ robot.fk(q) @ PART_IN_FLANGE) @ TOOL_IN_WORLD for q in qs])
+    s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1))]
+    trajectory = Trajectory(
+        t=s / 0.05, s=s, q=qs, positions_ref=poses[:, :3, 3], poses=poses, rotations_demo=poses[:, :3, :3],
+        speed=np.full(30, 0.05),
+    )
+    module = write_rapid(tmp_path / "grind.mod", trajectory, problem, robot)
+    text = module.read_text()
+    nums = r"\[([^\]]*)\]"
+
+    def pose(trans, quat):
+        return make_transform(
+            matrix_from_quaternion([float(v) for v in quat.split(",")]),
+            np.array([float(v) for v in trans.split(",")]) / 1000.0,
+        )
+
+    tool = re.search(rf"PERS tooldata grinder:=\[FALSE,\[{nums},{nums}\]", text)
+    wobj = re.search(rf"PERS wobjdata wobjPart:=\[TRUE,TRUE,\"\",\[{nums},{nums}\]", text)
+    assert tool and wobj
+    tframe, uframe = pose(tool[1], tool[2]), pose(wobj[1], wobj[2])
+    positions, quats, _, _ = parse_rapid_targets(module)
+    for k in range(len(qs)):
+        target = make_transform(matrix_from_quaternion(quats[k]), positions[k])
+        assert robot.fk(qs[k]) @ uframe @ target == pytest.approx(tframe, abs=1e-6)
+    moves = [ln.strip() for ln in text.splitlines() if ln.strip().startswith(("MoveL", "MoveAbsJ", "TriggL"))]
+    assert moves and all("\\WObj:=wobjPart" in m for m in moves)

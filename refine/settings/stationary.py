@@ -15,13 +15,13 @@ import numpy as np
 
 from refine.errors import InputError
 
-STATIONARY_PROGRAMS: tuple[str, ...] = ()
-"""The program formats written for a stationary tool: none yet. A program written for a tool on the
-flange would move the wrong frame, so every format is refused before solving, saying what the
-controller offers."""
+STATIONARY_PROGRAMS = ("rapid",)
+"""The program formats written for a stationary tool: RAPID (a stationary TCP, ``tooldata`` with
+``robhold`` FALSE, and the held part as a robot-held work object, ``wobjdata`` with ``robhold``
+TRUE). A program written for a tool on the flange would move the wrong frame, so the other formats
+are refused before solving, saying what the controller offers."""
 
 _NOT_WRITTEN = {
-    "rapid": "refine does not write RAPID's stationary TCP (tooldata robhold FALSE with a robot-held wobjdata) yet",
     "krl": "refine does not write KRL's external TCP ($IPO_MODE = #TCP, the fixed tool as BASE) yet",
     "urscript": "URScript has no external-TCP motion (a UR moves its own TCP only)",
     "sunrise": "refine does not write a Sunrise program moving a held workpiece's frame yet",
@@ -65,5 +65,6 @@ def check_stationary_programs(programs: tuple[str, ...]) -> None:
         if kind not in STATIONARY_PROGRAMS:
             raise InputError(
                 f"program format {kind!r} with a stationary tool ([tool] tcp_in_world): {_NOT_WRITTEN[kind]}; "
-                "write none with [output] programs = [] (the trajectory, PathML and result.json are written)"
+                f"the formats written for one are {', '.join(STATIONARY_PROGRAMS)}; [output] programs = [] writes "
+                "none (the trajectory, PathML and result.json are written)"
             )
