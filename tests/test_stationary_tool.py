@@ -259,3 +259,74 @@ def test_rapid_writes_a_stationary_tcp_and_the_held_part_as_a_robot_held_work_ob
         assert robot.fk(qs[k]) @ uframe @ target == pytest.approx(tframe, abs=1e-6)
     moves = [ln.strip() for ln in text.splitlines() if ln.strip().startswith(("MoveL", "MoveAbsJ", "TriggL"))]
     assert moves and all("\\WObj:=wobjPart" in m for m in moves)
+
+
+@pytest.mark.slow
+def test_a_held_part_on_a_standing_grinder_runs_end_to_end(tmp_path):
+    """A toolpath in the part's frame, followed by an IRB 4600 holding the part: ok, timed relative to
+    the part, and a RAPID module whose targets re-read against forward kinematics meet the toolpath."""
+    import re
+
+    import refine
+    from refine.export.rapid import parse_rapid_targets
+    from refine.frames import matrix_from_quaternion
+
+    robot = load_robot("abb_irb4600_60_205")
+    held = TcpKinematics(robot, np.eye(4), PART_IN_FLANGE, TOOL_IN_WORLD)
+    t = np.linspace(0.0, 1.0, 40)[:, None]
+    poses = held.poses(Q + 0.08 * np.sin(np.pi * t * np.array([1.0, 0.5, 0.7, 0.3, 0.9, 0.4])))
+    rows = [f"{k + 1},{p[0] * 1e3:.6f},{p[1] * 1e3:.6f},{p[2] * 1e3:.6f},{a[0]:.9f},{a[1]:.9f},{a[2]:.9f}"
+            for k, (p, a) in enumerate(zip(poses[:, :3, 3], poses[:, :3, 2], strict=True))]
+    (tmp_path / "path.csv").write_text("\n".join(rows) + "\n")
+
+    def pose(T):
+        from refine.frames import fixed_xyz_from_matrix
+
+        return f"{{ xyz = {list(map(float, T[:3, 3]))}, rpy_deg = {list(map(float, fixed_xyz_from_matrix(T[:3, :3])))} }}"
+
+    (tmp_path / "problem.toml").write_text(
+        f'''name = "held"
+[robot]
+model = "abb_irb4600_60_205"
+[tool]
+name = "grinder"
+tcp_in_world = {pose(TOOL_IN_WORLD)}
+part_in_flange = {pose(PART_IN_FLANGE)}
+axisymmetric = true
+[cad]
+file = "path.csv"
+format = "toolpath"
+units = "mm"
+spacing_m = 0.005
+speed_m_s = 0.05
+[process]
+kind = "other"
+output = "doGrind"
+[output]
+programs = ["rapid"]
+'''
+    )
+    result = refine.solve(tmp_path)
+    assert result.status == "ok"
+    written = result.write(tmp_path / "out")
+    module = next(p for p in written.values() if str(p).endswith(".mod"))
+    text = module.read_text()
+    nums = r"\[([^\]]*)\]"
+    uf = re.search(rf"wobjdata wobjPart:=\[TRUE,TRUE,\"\",\[{nums},{nums}\]", text)
+    uframe = make_transform(matrix_from_quaternion([float(v) for v in uf[2].split(",")]),
+                            np.array([float(v) for v in uf[1].split(",")]) / 1e3)
+    positions, quats, _, _ = parse_rapid_targets(module)
+    trajectory = result.run.passes[0].trajectory
+    q = trajectory.q
+    # the speed is the part's past the tool: the toolpath's arc length over time, at most speed_m_s
+    part_moves = np.linalg.norm(np.diff(held.poses(q)[:, :3, 3], axis=0), axis=1) / np.diff(trajectory.t)
+    assert part_moves.max() <= 0.05 * 1.01 and np.median(part_moves) > 0.04
+    for k in (0, len(q) // 2, len(q) - 1):
+        target = make_transform(matrix_from_quaternion(quats[k]), positions[k])
+        # the TCP's place in the world, by hand: base (identity), flange, part, target
+        assert (robot.fk(q[k]) @ uframe @ target)[:3, 3] == pytest.approx(TOOL_IN_WORLD[:3, 3], abs=1e-5)
+    # each target's position in the part lies on the toolpath's chords (resampled along them)
+    a, b = poses[:-1, :3, 3], poses[1:, :3, 3]
+    u = np.clip(np.einsum("mkj,kj->mk", positions[:, None] - a, b - a) / np.einsum("kj,kj->k", b - a, b - a), 0, 1)
+    gaps = np.linalg.norm(positions[:, None] - (a + u[..., None] * (b - a)), axis=2).min(axis=1)
+    assert gaps.max() < 1e-6
