@@ -184,7 +184,6 @@ def test_a_tool_on_the_flange_takes_no_part_in_flange(puzzle):
 @pytest.mark.parametrize(
     ("kind", "said"),
     [
-        ("krl", "IPO_MODE"),
         ("sunrise", "workpiece"),
         ("urscript", "has no external-TCP"),
         ("tp", "remote TCP"),
@@ -195,9 +194,9 @@ def test_programs_are_refused_by_name_with_a_stationary_tool(kind, said):
     from refine.errors import InputError
     from refine.settings.stationary import check_stationary_programs
 
-    with pytest.raises(InputError, match=f"program format '{kind}' with a stationary tool.*{said}.*are rapid;"):
+    with pytest.raises(InputError, match=f"program format '{kind}' with a stationary tool.*{said}.*are rapid, krl;"):
         check_stationary_programs(("rapid", kind))
-    check_stationary_programs(("rapid",))
+    check_stationary_programs(("rapid", "krl"))
 
 
 def test_the_run_refuses_the_robots_own_program_before_solving(puzzle):
@@ -330,3 +329,49 @@ programs = ["rapid"]
     u = np.clip(np.einsum("mkj,kj->mk", positions[:, None] - a, b - a) / np.einsum("kj,kj->k", b - a, b - a), 0, 1)
     gaps = np.linalg.norm(positions[:, None] - (a + u[..., None] * (b - a)), axis=2).min(axis=1)
     assert gaps.max() < 1e-6
+
+
+def test_krl_writes_an_external_tcp_the_standing_tool_as_base_and_the_part_as_tool(tmp_path):
+    """Re-read: BASE_DATA · point == fk(q) · TOOL_DATA (all in the base), at every point."""
+    import re
+
+    from refine.export.krl import parse_krl, write_krl
+    from refine.frames import matrix_from_kuka_abc
+    from refine.paths import Trajectory
+    from refine.problem import Problem
+    from refine.settings import CadSettings, ProcessSettings, RobotSettings, ToolSettings
+
+    robot = load_robot("kuka_kr8_r1440_2_arc_hw")
+    part = make_transform(matrix_from_fixed_xyz([10.0, 20.0, -30.0], degrees=True), [0.02, 0.01, 0.12])
+    tool_in_world = make_transform(matrix_from_fixed_xyz([170.0, 5.0, 0.0], degrees=True), [0.9, 0.2, 0.6])
+    problem = Problem(
+        name="grind",
+        root=tmp_path,
+        robot=RobotSettings(model="kuka_kr8_r1440_2_arc_hw", base_in_world=BASE),
+        tool=ToolSettings(name="grinder", tcp_in_flange=part, tcp_in_world=tool_in_world),
+        cad=CadSettings(file=tmp_path / "path.csv", format="toolpath", speed_m_s=0.05),
+        demonstration=None,
+        process=ProcessSettings(kind="other", output="3"),
+    )
+    t = np.linspace(0.0, 1.0, 20)[:, None]
+    qs = np.radians([10.0, -80.0, 90.0, 5.0, 40.0, 10.0]) + 0.1 * np.sin(2 * np.pi * t * np.array([1.0, 0.5, 0.7, 0.3, 0.9, 0.4]))
+    poses = np.array([np.linalg.inv(BASE @ robot.fk(q) @ part) @ tool_in_world for q in qs])  # by hand
+    s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1))]
+    trajectory = Trajectory(
+        t=s / 0.05, s=s, q=qs, positions_ref=poses[:, :3, 3], poses=poses, rotations_demo=poses[:, :3, :3],
+        speed=np.full(20, 0.05),
+    )
+    src, dat = write_krl(tmp_path / "grind.src", trajectory, problem, robot)
+    assert "$IPO_MODE = #TCP" in src.read_text()
+    text = dat.read_text()
+
+    def frame(which):
+        m = re.search(rf"; {which}\[1\] \([^)]*\) must be \{{X ([-\d.]+),Y ([-\d.]+),Z ([-\d.]+),A ([-\d.]+),B ([-\d.]+),C ([-\d.]+)\}}", text)
+        v = [float(x) for x in m.groups()]
+        return make_transform(matrix_from_kuka_abc(v[3:]), np.array(v[:3]) / 1e3)
+
+    base_data, tool_data = frame("BASE_DATA"), frame("TOOL_DATA")
+    (read,) = parse_krl(src, dat)
+    for k in range(len(qs)):
+        point = make_transform(read.rotations[k], read.positions[k])
+        assert base_data @ point == pytest.approx(robot.fk(qs[k]) @ tool_data, abs=1e-5)

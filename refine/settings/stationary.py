@@ -15,14 +15,14 @@ import numpy as np
 
 from refine.errors import InputError
 
-STATIONARY_PROGRAMS = ("rapid",)
+STATIONARY_PROGRAMS = ("rapid", "krl")
 """The program formats written for a stationary tool: RAPID (a stationary TCP, ``tooldata`` with
 ``robhold`` FALSE, and the held part as a robot-held work object, ``wobjdata`` with ``robhold``
-TRUE). A program written for a tool on the flange would move the wrong frame, so the other formats
+TRUE) and KRL (external TCP, ``$IPO_MODE = #TCP``: the standing tool as the BASE, the held part as
+the TOOL). A program written for a tool on the flange would move the wrong frame, so the other formats
 are refused before solving, saying what the controller offers."""
 
 _NOT_WRITTEN = {
-    "krl": "refine does not write KRL's external TCP ($IPO_MODE = #TCP, the fixed tool as BASE) yet",
     "urscript": "URScript has no external-TCP motion (a UR moves its own TCP only)",
     "sunrise": "refine does not write a Sunrise program moving a held workpiece's frame yet",
     "tp": "refine does not write FANUC's remote TCP motions yet",
