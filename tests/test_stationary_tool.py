@@ -209,34 +209,45 @@ def test_the_run_refuses_the_robots_own_program_before_solving(puzzle):
         preflight(load_problem(puzzle))
 
 
+def _held_part(tmp_path, model, part, tool_in_world, q0, output, n):
+    """A problem with a stationary tool and a timed path of ``n`` points swept about ``q0``.
+
+    The poses by hand: the part's frame in the world, then the standing tool seen from it.
+    """
+    from refine.paths import Trajectory
+    from refine.problem import Problem
+    from refine.settings import CadSettings, ProcessSettings, RobotSettings, ToolSettings
+
+    robot = load_robot(model)
+    problem = Problem(
+        name="grind",
+        root=tmp_path,
+        robot=RobotSettings(model=model, base_in_world=BASE),
+        tool=ToolSettings(name="grinder", tcp_in_flange=part, tcp_in_world=tool_in_world),
+        cad=CadSettings(file=tmp_path / "path.csv", format="toolpath", speed_m_s=0.05),
+        demonstration=None,
+        process=ProcessSettings(kind="other", output=output),
+    )
+    t = np.linspace(0.0, 1.0, n)[:, None]
+    qs = q0 + 0.1 * np.sin(2 * np.pi * t * np.array([1.0, 0.5, 0.7, 0.3, 0.9, 0.4]))
+    poses = np.array([np.linalg.inv(BASE @ robot.fk(q) @ part) @ tool_in_world for q in qs])
+    s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1))]
+    trajectory = Trajectory(
+        t=s / 0.05, s=s, q=qs, positions_ref=poses[:, :3, 3], poses=poses, rotations_demo=poses[:, :3, :3],
+        speed=np.full(n, 0.05),
+    )
+    return robot, problem, trajectory, qs
+
+
 def test_rapid_writes_a_stationary_tcp_and_the_held_part_as_a_robot_held_work_object(tmp_path):
     """Re-read: fk(q) · wobj uframe · target == tooldata tframe (all in the base), at every target."""
     import re
 
     from refine.export.rapid import parse_rapid_targets, write_rapid
     from refine.frames import matrix_from_quaternion
-    from refine.paths import Trajectory
-    from refine.problem import Problem
-    from refine.settings import CadSettings, ProcessSettings, RobotSettings, ToolSettings
 
-    robot = load_robot("abb_irb4600_60_205")
-    problem = Problem(
-        name="grind",
-        root=tmp_path,
-        robot=RobotSettings(model="abb_irb4600_60_205", base_in_world=BASE),
-        tool=ToolSettings(name="grinder", tcp_in_flange=PART_IN_FLANGE, tcp_in_world=TOOL_IN_WORLD),
-        cad=CadSettings(file=tmp_path / "path.csv", format="toolpath", speed_m_s=0.05),
-        demonstration=None,
-        process=ProcessSettings(kind="other", output="doGrind"),
-    )
-    t = np.linspace(0.0, 1.0, 30)[:, None]
-    qs = Q + 0.1 * np.sin(2 * np.pi * t * np.array([1.0, 0.5, 0.7, 0.3, 0.9, 0.4]))
-    # by hand: the part's frame in the world, then the tool seen from it
-    poses = np.array([np.linalg.inv(BASE @ robot.fk(q) @ PART_IN_FLANGE) @ TOOL_IN_WORLD for q in qs])
-    s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1))]
-    trajectory = Trajectory(
-        t=s / 0.05, s=s, q=qs, positions_ref=poses[:, :3, 3], poses=poses, rotations_demo=poses[:, :3, :3],
-        speed=np.full(30, 0.05),
+    robot, problem, trajectory, qs = _held_part(
+        tmp_path, "abb_irb4600_60_205", PART_IN_FLANGE, TOOL_IN_WORLD, Q, "doGrind", 30
     )
     module = write_rapid(tmp_path / "grind.mod", trajectory, problem, robot)
     text = module.read_text()
@@ -337,30 +348,11 @@ def test_krl_writes_an_external_tcp_the_standing_tool_as_base_and_the_part_as_to
 
     from refine.export.krl import parse_krl, write_krl
     from refine.frames import matrix_from_kuka_abc
-    from refine.paths import Trajectory
-    from refine.problem import Problem
-    from refine.settings import CadSettings, ProcessSettings, RobotSettings, ToolSettings
 
-    robot = load_robot("kuka_kr8_r1440_2_arc_hw")
     part = make_transform(matrix_from_fixed_xyz([10.0, 20.0, -30.0], degrees=True), [0.02, 0.01, 0.12])
     tool_in_world = make_transform(matrix_from_fixed_xyz([170.0, 5.0, 0.0], degrees=True), [0.9, 0.2, 0.6])
-    problem = Problem(
-        name="grind",
-        root=tmp_path,
-        robot=RobotSettings(model="kuka_kr8_r1440_2_arc_hw", base_in_world=BASE),
-        tool=ToolSettings(name="grinder", tcp_in_flange=part, tcp_in_world=tool_in_world),
-        cad=CadSettings(file=tmp_path / "path.csv", format="toolpath", speed_m_s=0.05),
-        demonstration=None,
-        process=ProcessSettings(kind="other", output="3"),
-    )
-    t = np.linspace(0.0, 1.0, 20)[:, None]
-    qs = np.radians([10.0, -80.0, 90.0, 5.0, 40.0, 10.0]) + 0.1 * np.sin(2 * np.pi * t * np.array([1.0, 0.5, 0.7, 0.3, 0.9, 0.4]))
-    poses = np.array([np.linalg.inv(BASE @ robot.fk(q) @ part) @ tool_in_world for q in qs])  # by hand
-    s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1))]
-    trajectory = Trajectory(
-        t=s / 0.05, s=s, q=qs, positions_ref=poses[:, :3, 3], poses=poses, rotations_demo=poses[:, :3, :3],
-        speed=np.full(20, 0.05),
-    )
+    q0 = np.radians([10.0, -80.0, 90.0, 5.0, 40.0, 10.0])
+    robot, problem, trajectory, qs = _held_part(tmp_path, "kuka_kr8_r1440_2_arc_hw", part, tool_in_world, q0, "3", 20)
     src, dat = write_krl(tmp_path / "grind.src", trajectory, problem, robot)
     assert "$IPO_MODE = #TCP" in src.read_text()
     text = dat.read_text()
