@@ -367,3 +367,32 @@ def test_krl_writes_an_external_tcp_the_standing_tool_as_base_and_the_part_as_to
     for k in range(len(qs)):
         point = make_transform(read.rotations[k], read.positions[k])
         assert base_data @ point == pytest.approx(robot.fk(qs[k]) @ tool_data, abs=1e-5)
+
+
+def test_the_puzzle_seed_turns_the_part_about_the_grinder_to_keep_the_elbow_in_range():
+    """The toolpath's own spin would drive the iiwa's elbow into its limit; the chosen spins reach every point."""
+    from pathlib import Path
+
+    from refine.optimise.outcome import problem_bounds, problem_kinematics, problem_targets
+    from refine.optimise.seed import initial_guess
+    from refine.optimise.spin import path_spins, spun
+    from refine.problem import load_problem
+    from refine.robot.registry import robot_for
+    from refine.run.stages import fused_path, refinement_for
+
+    problem = load_problem(Path(__file__).parent.parent / "problems" / "puzzle_piece")
+    robot = robot_for(problem.robot)
+    nlp = refinement_for(problem, robot, fused_path(problem))
+    q = initial_guess(nlp)
+    reached, targets = problem_kinematics(nlp).poses(q), problem_targets(nlp)
+    lower, upper = problem_bounds(nlp)
+    assert np.abs(reached[:, :3, 3] - targets[:, :3, 3]).max() < 1e-5
+    assert np.einsum("ki,ki->k", reached[:, :3, 2], targets[:, :3, 2]).min() > np.cos(np.radians(0.01))
+    assert np.all((q >= lower - 1e-9) & (q <= upper + 1e-9))
+    # the spins are a turn about each target's own axis: the axis and the point stay
+    from refine.optimise.reach import reach_model
+
+    spins = path_spins(reach_model(robot, np.radians(2.0)), targets, nlp.base_in_world, nlp.tcp_in_flange, nlp.tool_in_world)
+    turned = spun(targets, spins)
+    assert turned[:, :3, 2:] == pytest.approx(targets[:, :3, 2:], abs=1e-12)
+    assert np.abs(spins).max() > 0.1  # the toolpath's own spin is not kept

@@ -11,6 +11,7 @@ from there.
 from __future__ import annotations
 
 import logging
+import math
 
 import numpy as np
 
@@ -324,6 +325,15 @@ def initial_guess(problem: RefinementNLP, home: Array | None = None, rotations: 
     targets = problem_targets(problem)
     if rotations is not None:
         targets[:, :3, :3] = rotations
+    axis_only = seed_axis_only(problem)
+    if axis_only:  # turn each target about the tool axis to keep the elbow in range, then reach it
+        from refine.optimise.reach import reach_model
+        from refine.optimise.spin import path_spins, spun
+
+        reach = reach_model(problem.robot, math.radians(problem.tolerances.joint_margin_deg))
+        if reach.spherical:
+            spins = path_spins(reach, targets, problem.base_in_world, problem.tcp_in_flange, problem.tool_in_world)
+            targets, axis_only = spun(targets, spins), False
     qs, _ = ik_chain(
         problem_kinematics(problem),
         targets,
@@ -331,7 +341,7 @@ def initial_guess(problem: RefinementNLP, home: Array | None = None, rotations: 
         upper,
         starts,
         prefer_first=home is not None,
-        axis_only=seed_axis_only(problem),
+        axis_only=axis_only,
     )
     return qs
 
