@@ -214,6 +214,7 @@ rather than letting it choose: its automatic choice took 2.5 times as long at 6,
 
 
 REDUNDANT_IPOPT: dict[str, Any] = {"ipopt.acceptable_iter": 2, "ipopt.acceptable_constr_viol_tol": 1e-10}
+HELD_PART_IPOPT = {"ipopt.max_iter": 1000}  # a redundant arm turning a held part: 357 iterations on the puzzle
 """IPOPT settings added for an arm of more than six joints: stop after two consecutive iterations at
 the acceptable level (error 1e-6, constraints met to 1e-10) instead of fifteen. On the LBR iiwa at
 6,400 waypoints the full solve reaches that level one iteration after the coarse seed and then
@@ -444,7 +445,8 @@ def build_refinement(
             options=fatrop_options(options),
         )
     else:
-        options = {**IPOPT_DEFAULTS, **(REDUNDANT_IPOPT if n > 6 else {}), **(solver_options or {})}
+        held = HELD_PART_IPOPT if n > 6 and tool_in_world is not None else {}
+        options = {**IPOPT_DEFAULTS, **(REDUNDANT_IPOPT if n > 6 else {}), **held, **(solver_options or {})}
         ipopt = {k: v for k, v in options.items() if not k.startswith(FATROP_PREFIX)}
         watch = iteration_watch(x.numel(), g.numel(), p.numel())
         built = ca.nlpsol("refine", "ipopt", nlp, {**derivatives, **ipopt, "iteration_callback": watch})
