@@ -202,7 +202,7 @@ def warm_joints(problem: Problem, robot: Robot, fused: FusedPath, q_prev: np.nda
     a joint step above the tolerance: the solve then builds its IK seed (a start that misses the
     path would send every waypoint through the reach check's multi-start IK).
     """
-    kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange)
+    kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange, problem.tool.tcp_in_world)
     miss = np.linalg.norm(kin.poses(q_prev)[:, :3, 3] - fused.positions, axis=1)
     if miss.max() <= WARM_REACH_M:
         return q_prev
