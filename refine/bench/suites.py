@@ -161,6 +161,7 @@ def bundled_problem(suite: str, folder: Path) -> BenchProblem:
         fused=fused_path(problem),
         base_in_world=problem.robot.base_in_world,
         tcp_in_flange=problem.tool.tcp_in_flange,
+        tool_in_world=problem.tool.tcp_in_world,
         tolerances=problem.tolerances,
         axisymmetric=problem.tool.axisymmetric,
         home=None if problem.robot.home_deg is None else np.radians(problem.robot.home_deg),
