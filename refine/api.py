@@ -417,7 +417,7 @@ def _solve_again(
     problem: Problem, robot: Robot, fused: Any, previous: Result | None, initial_joints: ArrayLike | None
 ) -> Result:
     from refine.optimise.problem import reuse_for
-    from refine.optimise.warm import WarmStart
+    from refine.optimise.warm import WarmStart, built_for
     from refine.run.solve import solve_problem
     from refine.run.stages import weights_for
 
@@ -428,13 +428,8 @@ def _solve_again(
     if previous is not None:
         first = previous.run.first
         old = first.nlp
-        same = (
-            old is not None
-            and previous.run.robot is robot
-            and np.array_equal(old.base_in_world, problem.robot.base_in_world)
-            and np.array_equal(old.tcp_in_flange, problem.tool.tcp_in_flange)
-            and old.axisymmetric == problem.tool.axisymmetric
-            and old.weights == weights_for(problem, robot)
+        same = previous.run.robot is robot and built_for(
+            old, problem.robot.base_in_world, problem.tool, weights_for(problem, robot)
         )
         nlp = reuse_for(old, fused, problem.tolerances) if same else None
         if q0 is None and previous.run.robot is robot and first.refinement.q.shape == (len(fused), n):

@@ -109,6 +109,10 @@ class Problem:
                 "missing required table [demonstration] (only a PathML path or a CAM toolpath, "
                 '[cad] format = "pathml" or "toolpath", may go without)'
             )
+        if self.tool.stationary:
+            from refine.settings.stationary import check_stationary
+
+            check_stationary(self)
 
     @property
     def file_stem(self) -> str:
@@ -412,7 +416,17 @@ def _robot_model(value: Any) -> str:
 
 
 def _tool(t: dict[str, Any], path: Path, root: Path, inside: Path | None) -> ToolSettings:
-    _check_keys(t, "tool", _fields(ToolSettings), path)
+    _check_keys(t, "tool", _fields(ToolSettings) | {"part_in_flange"}, path)
+    if "tcp_in_world" in t:  # a stationary tool: the robot holds the part, whose frame the path is in
+        if "tcp_in_flange" in t or "part_in_flange" not in t:
+            raise InputError(
+                "[tool] tcp_in_world (a stationary tool) needs part_in_flange (the held part's frame on the "
+                "flange, the frame the path is given in) instead of tcp_in_flange"
+            )
+        t = {**{k: v for k, v in t.items() if k != "part_in_flange"}, "tcp_in_flange": t["part_in_flange"]}
+        t["tcp_in_world"] = _pose(t["tcp_in_world"], "tool.tcp_in_world")
+    elif "part_in_flange" in t:
+        raise InputError("[tool] part_in_flange is for a stationary tool: give tcp_in_world too, or tcp_in_flange")
     for key in ("name", "tcp_in_flange"):
         if key not in t:
             raise InputError(f"[tool] missing required key {key!r}")

@@ -335,7 +335,7 @@ def problem_reachability(problem, targets: ArrayLike, seed: int) -> tuple[Reacha
     from refine.robot.registry import load_robot
 
     robot = load_robot(problem.robot.model)
-    kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange)
+    kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange, problem.tool.tcp_in_world)
     margin = math.radians(problem.tolerances.joint_margin_deg)
     collision = CollisionModel.for_problem(problem, robot)
     starts = start_candidates(

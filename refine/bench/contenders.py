@@ -134,10 +134,6 @@ def refine_options(nlp: Any) -> dict[str, Any]:
 def _refine(problem: BenchProblem, mode: str, solver: str = "ipopt") -> Answer:
     from refine.optimise.stagewise import MAX_FATROP_WAYPOINTS
 
-    if problem.tool_in_world is not None:
-        return Answer(
-            "failed", None, note="not run: refine's refinement does not state a stationary tool yet"
-        )
     if solver == "fatrop" and problem.n_waypoints > MAX_FATROP_WAYPOINTS:
         return Answer(
             "failed",

@@ -403,6 +403,10 @@ def trajopt(problem: BenchProblem) -> Answer:
     Timed: the chained IK (``seed``), making the program and profiles (``build``) and TrajOpt's
     solve, which builds its own problem (``solve``). Raises :class:`Unavailable` without the extra.
     """
+    if problem.tool_in_world is not None and "tesseract_files" not in problem.extra:
+        return Answer(
+            "failed", None, note="not run: a problem file's stationary tool is not composed into a Tesseract workcell"
+        )
     t, env, manip, _, names, _ = tesseract_environment(problem)
     T = t["trajopt"]
     c0 = time.process_time()

@@ -108,6 +108,7 @@ class BenchProblem:
             weights=self.weights,
             derivative_mode=derivative_mode,
             solver=solver,
+            tool_in_world=self.tool_in_world,
             **{"joint_steps": (), **options},
         )
 
@@ -262,6 +263,7 @@ def bundled_problem(suite: str, folder: Path) -> BenchProblem:
         fused=fused_path(problem),
         base_in_world=problem.robot.base_in_world,
         tcp_in_flange=problem.tool.tcp_in_flange,
+        tool_in_world=problem.tool.tcp_in_world,
         tolerances=problem.tolerances,
         axisymmetric=problem.tool.axisymmetric,
         home=None if problem.robot.home_deg is None else np.radians(problem.robot.home_deg),

@@ -153,12 +153,18 @@ def krl_io_number(name: str, kind: str, default: int) -> tuple[int, str]:
 
 
 def _declarations(
-    names: list[str], tr: Trajectory, robot: Any, back: Array, q_approach: Array | None = None
+    names: list[str],
+    tr: Trajectory,
+    robot: Any,
+    back: Array,
+    q_approach: Array | None = None,
+    stationary: bool = False,
 ) -> list[str]:
     """``DECL E6POS`` of the approach point, every waypoint and the retract point of one pass.
 
     ``q_approach``: the planned joints at the approach point [rad], whose Status and Turn the
-    approach point gets (else the first waypoint's).
+    approach point gets (else the first waypoint's). ``stationary``: an external TCP, each point the
+    held part ($TOOL) in the standing tool's frame ($BASE), the inverse of the tool seen from the part.
     """
     n = len(tr)
     status, turn = kuka_status_turn(robot, tr.q)
@@ -169,6 +175,8 @@ def _declarations(
         log.warning("KRL: Status changes along a LIN pass (%s): a singularity", sorted(set(status.tolist())))
     e1 = np.degrees(tr.q[:, 2]) if robot.nq == 7 else np.zeros(n)
     poses, rows = [tr.poses[0] @ back, *tr.poses, tr.poses[-1] @ back], [0, *range(n), n - 1]
+    if stationary:
+        poses = [invert_transform(T) for T in poses]
     tail = ",".join(f"E{i} 0.0" for i in range(2, 7))
     out = [
         f"DECL E6POS {name}={{{_xyzabc(T)},S {status[r]},T {turn[r]},E1 {_real(e1[r], 6)},{tail}}}"
@@ -181,6 +189,17 @@ def _declarations(
             f"E1 {_real(e1_app, 6)},{tail}}}"
         )
     return out
+
+
+def _frames_stationary(problem: Problem, tool_n: int, base_n: int) -> tuple[str, ...]:
+    """The frames of an external TCP: BASE_DATA the standing tool, TOOL_DATA the held part."""
+    tool_in_base = invert_transform(problem.robot.base_in_world) @ problem.tool.tcp_in_world
+    return (
+        f"; E6POS: the held part ($TOOL = TOOL_DATA[{tool_n}]) in the standing tool's frame ($BASE = "
+        f"BASE_DATA[{base_n}]), $IPO_MODE = #TCP, X Y Z [mm], A B C [deg], S T (E1 = A3 [deg] on an LBR)",
+        f"; TOOL_DATA[{tool_n}] (the held part's frame on the flange) must be {{{_xyzabc(problem.tool.tcp_in_flange)}}}",
+        f"; BASE_DATA[{base_n}] ({comment_text(problem.tool.name)}, the standing tool) must be {{{_xyzabc(tool_in_base)}}}",
+    )
 
 
 def _e6axis(q: Array) -> str:
@@ -344,13 +363,16 @@ def write_krl(
     tool_n, base_n = problem.tool.number, problem.frames.base_number
     cog = [_real(v * 1000.0, 4) for v in problem.tool.cog_in_flange_m]
     header = f"; Written by refine {__version__} for problem '{comment_text(problem.name)}', robot {problem.robot.model}."
+    stationary = problem.tool.stationary
     dat_lines = [
         *("&ACCESS RVP", "&REL 1", f"DEFDAT {prog}", header),
-        f"; E6POS: TCP in {{F}} ($BASE = BASE_DATA[{base_n}]), X Y Z [mm], A B C [deg], S T "
-        "(E1 = A3 [deg] on an LBR)",
-        f"; TOOL_DATA[{tool_n}] ({comment_text(problem.tool.name)}) must be {{{_xyzabc(problem.tool.tcp_in_flange)}}}",
-        f"; BASE_DATA[{base_n}] (world {{F}}) must be "
-        f"{{{_xyzabc(invert_transform(problem.robot.base_in_world))}}}",
+        *(_frames_stationary(problem, tool_n, base_n) if stationary else (
+            f"; E6POS: TCP in {{F}} ($BASE = BASE_DATA[{base_n}]), X Y Z [mm], A B C [deg], S T "
+            "(E1 = A3 [deg] on an LBR)",
+            f"; TOOL_DATA[{tool_n}] ({comment_text(problem.tool.name)}) must be {{{_xyzabc(problem.tool.tcp_in_flange)}}}",
+            f"; BASE_DATA[{base_n}] (world {{F}}) must be "
+            f"{{{_xyzabc(invert_transform(problem.robot.base_in_world))}}}",
+        )),
         f"; LOAD_DATA[{tool_n}] must be {{M {_real(problem.tool.mass_kg, 4)},CM {{X {cog[0]},Y {cog[1]},"
         f"Z {cog[2]},A 0.0,B 0.0,C 0.0}},J {{X 0.0,Y 0.0,Z 0.0}}}}",
         f"DECL E6AXIS XHOMEPOS={{{_e6axis(home_joints(problem, robot, runs[0].trajectory.q[0]))}}}",
@@ -367,6 +389,7 @@ def write_krl(
         f"$BASE = BASE_DATA[{base_n}]",
         f"$TOOL = TOOL_DATA[{tool_n}]",
         f"$LOAD = LOAD_DATA[{tool_n}]",
+        *(["$IPO_MODE = #TCP ; external TCP: the tool stands, the robot moves the part"] if stationary else []),
     ]
     src_lines += [f"$APO.CDIS = {_real(approximation_m * 1000.0, 4)}", f"BAS (#VEL_PTP,{int(ptp_percent)} )"]
     src_lines.append("PTP XHOMEPOS")
@@ -376,7 +399,7 @@ def write_krl(
         points = [f"XP{k}" if len(runs) == 1 else f"XP{i}_{k}" for k in range(1, len(tr) + 1)]
         names = [f"XAPP{i}", *points, f"XRET{i}"]
         air_in = getattr(p, "air_in", None)
-        dat_lines += _declarations(names, tr, robot, back, None if air_in is None else air_in[-1])
+        dat_lines += _declarations(names, tr, robot, back, None if air_in is None else air_in[-1], stationary)
         head = f"pass {i} of {len(runs)}: " + comment_text(str(p.name)).replace(";", ",")
         zones = program_motion(
             "krl",

@@ -177,6 +177,29 @@ def _weld_end(problem: Problem, output: str) -> list[str]:
     return weld_end(problem, *_weld_io(problem, output))
 
 
+def _tool_and_wobj(problem: Problem, tool: str, wobj: str, cog: str) -> list[str]:
+    """The ``tooldata`` and ``wobjdata`` declarations.
+
+    A tool on the flange: ``robhold`` TRUE, its TCP in the flange; the work object is the world {F}
+    in the robot base. A stationary tool: ``robhold`` FALSE, its TCP in the base (the controller's
+    world); the work object is the held part, ``robhold`` TRUE, its user frame in the flange (wrist)
+    frame, so each target is the stationary TCP seen from the part.
+    """
+    t = problem.tool
+    load = f"[{_num(t.mass_kg, 3)},[{cog}],[1,0,0,0],0,0,0]"
+    if not t.stationary:
+        return [
+            f"    PERS tooldata {tool}:=[TRUE,{_pose(t.tcp_in_flange)},{load}];",
+            f'    PERS wobjdata {wobj}:=[FALSE,TRUE,"",'
+            f"{_pose(invert_transform(problem.robot.base_in_world))},[[0,0,0],[1,0,0,0]]];",
+        ]
+    tcp_in_base = invert_transform(problem.robot.base_in_world) @ t.tcp_in_world
+    return [
+        f"    PERS tooldata {tool}:=[FALSE,{_pose(tcp_in_base)},{load}];",
+        f'    PERS wobjdata {wobj}:=[TRUE,TRUE,"",{_pose(t.tcp_in_flange)},[[0,0,0],[1,0,0,0]]];',
+    ]
+
+
 def write_rapid(
     path: str | Path,
     trajectory: Trajectory,
@@ -242,7 +265,8 @@ def write_rapid(
         raise InputError(f"speed_resolution_m_s must be > 0, got {speed_resolution_m_s}")
     module = _identifier(problem.name, "m")
     tool = _identifier(problem.tool.name, "t")
-    wobj = "wobjWorld"
+    stationary = problem.tool.stationary
+    wobj = "wobjPart" if stationary else "wobjWorld"
     pr, weld = problem.process, problem.process.kind == "weld"
     signals = [pr.output] + ([pr.gas_output, pr.arc_ok_input] if weld else [])
     for signal in signals:
@@ -302,8 +326,13 @@ def write_rapid(
         f"MODULE {module}",
         f"    ! Written by refine {__version__} for problem '{comment_text(problem.name)}', robot "
         f"{problem.robot.model}, {n} targets, {float(trajectory.t[-1]):.3f} s planned.",
-        f"    ! Targets: TCP poses in the world frame {{F}} ({wobj}); trans [mm], "
-        "rot [q1,q2,q3,q4], robconf [cf1,cf4,cf6,cfx] of the refined joints.",
+        (
+            f"    ! Targets: the stationary TCP ({tool}, robhold FALSE) in the frame of the part the robot holds "
+            f"({wobj}, robhold TRUE, on the flange); trans [mm], "
+            if stationary
+            else f"    ! Targets: TCP poses in the world frame {{F}} ({wobj}); trans [mm], "
+        )
+        + "rot [q1,q2,q3,q4], robconf [cf1,cf4,cf6,cfx] of the refined joints.",
         f"    ! Process: {process_note}.",
         f"    ! Speeds: {len(levels)} speeddata levels, each segment at the fastest level not above its "
         f"planned speed and within {problem.output.speed_share:.1%} of it: {extra_s:+.3f} s on the planned path.",
@@ -311,10 +340,7 @@ def write_rapid(
         f"the path tolerance {zones.tolerance_m * 1e3:g} mm; largest corner deviation "
         f"{zones.largest_deviation_m * 1e3:.3f} mm.",
         *(f"    ! {line}" for line in notes),
-        f"    PERS tooldata {tool}:=[TRUE,{_pose(tool_t.tcp_in_flange)},"
-        f"[{_num(tool_t.mass_kg, 3)},[{cog}],[1,0,0,0],0,0,0]];",
-        f'    PERS wobjdata {wobj}:=[FALSE,TRUE,"",'
-        f"{_pose(invert_transform(problem.robot.base_in_world))},[[0,0,0],[1,0,0,0]]];",
+        *_tool_and_wobj(problem, tool, wobj, cog),
         f"    CONST jointtarget jHome:=[[{','.join(_num(v, 4) for v in np.degrees(home_joints(problem, robot, trajectory.q[0])))}],{_EXTAX}];",
         f"    CONST speeddata vAir:=[{_num(approach_speed_m_s * 1000.0, 3)},{_SPEED_TAIL}];",
     ]
@@ -351,7 +377,8 @@ def write_rapid(
     routines = [f"path_{i + 1}" for i in range(len(chunks))]
 
     main = ["ConfJ \\On;", "ConfL \\On;"]
-    home_move = f"MoveAbsJ jHome\\NoEOffs, vAir, fine, {tool};"
+    abs_tail = f"{tool} \\WObj:={wobj};" if stationary else f"{tool};"  # a stationary tool needs its wobj
+    home_move = f"MoveAbsJ jHome\\NoEOffs, vAir, fine, {abs_tail}"
     main.append(home_move if start_home else "! runs after the previous pass's module, from its retract point")
     air_zone = "z10" if air_in is None else "fine"  # planned motions: exact stops, as verified
     air_decls: list[str] = []
@@ -361,7 +388,7 @@ def write_rapid(
         air_names = [f"jIn{k + 1}" for k in range(len(air_in))]
         air_decls += [_jointtarget(a, q) for a, q in zip(air_names, air_in, strict=True)]
         main += [
-            f"MoveAbsJ {a}\\NoEOffs, {_air_speed(air_in_s, k)}, fine, {tool};" for k, a in enumerate(air_names)
+            f"MoveAbsJ {a}\\NoEOffs, {_air_speed(air_in_s, k)}, fine, {abs_tail}" for k, a in enumerate(air_names)
         ]
         main[-1] += "  ! the approach point"
     if weld:
@@ -379,10 +406,10 @@ def write_rapid(
         out_names = [f"jOut{k + 1}" for k in range(len(air_out) - 1)]  # the last row is home
         air_decls += [_jointtarget(a, q) for a, q in zip(out_names, air_out[:-1], strict=True)]
         main += [
-            f"MoveAbsJ {a}\\NoEOffs, {_air_speed(air_out_s, k)}, fine, {tool};" for k, a in enumerate(out_names)
+            f"MoveAbsJ {a}\\NoEOffs, {_air_speed(air_out_s, k)}, fine, {abs_tail}" for k, a in enumerate(out_names)
         ]
     if air_out is not None and air_out_s is not None:
-        home_move = f"MoveAbsJ jHome\\NoEOffs, {_air_speed(air_out_s, len(air_out) - 1)}, fine, {tool};"
+        home_move = f"MoveAbsJ jHome\\NoEOffs, {_air_speed(air_out_s, len(air_out) - 1)}, fine, {abs_tail}"
     main.append(home_move if end_home else "! the next pass's module follows")
     home_at = next(k for k, ln in enumerate(lines) if ln.startswith("    CONST jointtarget jHome"))
     lines[home_at + 1 : home_at + 1] = air_decls

@@ -168,6 +168,7 @@ def result_dict(result: RunResult) -> dict[str, Any]:
             "name": problem.tool.name,
             "tcp_in_flange": np.asarray(problem.tool.tcp_in_flange).tolist(),
             "axisymmetric": problem.tool.axisymmetric,
+            "tcp_in_world": None if problem.tool.tcp_in_world is None else np.asarray(problem.tool.tcp_in_world).tolist(),
         },
         "tolerances": {
             "position_m": problem.tolerances.position_m,

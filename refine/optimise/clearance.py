@@ -69,7 +69,7 @@ class ClearanceSource:
     def for_problem(cls, problem: Problem, robot: Robot) -> ClearanceSource:
         """The source for a problem's robot placement, tool shapes, cell and ``[collision]``."""
         model = CollisionModel.for_problem(problem, robot)
-        kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange)
+        kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange, problem.tool.tcp_in_world)
         return cls(model, kin, problem.collision.check_step_m)
 
     def forget(self) -> None:

@@ -38,7 +38,7 @@ dropped first."""
 
 
 def waypoint_kernels(
-    robot, base_in_world: Array, tcp_in_flange: Array, axisymmetric: bool
+    robot, base_in_world: Array, tcp_in_flange: Array, axisymmetric: bool, tool_in_world: Array | None = None
 ) -> dict[str, ca.Function]:
     """The per-waypoint functions of the refinement, compiled when a C compiler is present.
 
@@ -52,12 +52,14 @@ def waypoint_kernels(
 
     Plus ``jac_waypoint``, which CasADi picks up when the symbolic problem is differentiated for
     inspection. The waypoint functions are compiled; the singularity functions run in CasADi's
-    virtual machine.
+    virtual machine. With a stationary tool (``tool_in_world``) the pose is the tool's in the held
+    part's frame (:func:`refine.optimise.kinematics.fk_function`).
     """
     key = (
         id(robot),
         np.asarray(base_in_world, float).tobytes(),
         np.asarray(tcp_in_flange, float).tobytes(),
+        None if tool_in_world is None else np.asarray(tool_in_world, float).tobytes(),
         bool(axisymmetric),
         compiler(),
     )
@@ -66,8 +68,8 @@ def waypoint_kernels(
         return _kernel_cache[key][1]
     kernels = compiled(
         "refine_kernels",
-        _kernel_key(robot, base_in_world, tcp_in_flange, axisymmetric),
-        lambda: _waypoint_kernels(robot, base_in_world, tcp_in_flange, axisymmetric),
+        _kernel_key(robot, base_in_world, tcp_in_flange, axisymmetric, tool_in_world),
+        lambda: _waypoint_kernels(robot, base_in_world, tcp_in_flange, axisymmetric, tool_in_world),
     )
     # the singularity measure's Hessian is a 6x6 determinant differentiated twice, 2 MB of C that
     # takes minutes to compile; its rows are few (where the outer loop adds them), so it runs in
@@ -79,7 +81,9 @@ def waypoint_kernels(
     return kernels
 
 
-def _kernel_key(robot, base_in_world: Array, tcp_in_flange: Array, axisymmetric: bool | str) -> str:
+def _kernel_key(
+    robot, base_in_world: Array, tcp_in_flange: Array, axisymmetric: bool | str, tool_in_world: Array | None = None
+) -> str:
     """Everything the kernels are made from: the code making them and the numbers of the chain."""
     model = robot.model
     frame = model.frames[robot.flange_id]
@@ -94,6 +98,8 @@ def _kernel_key(robot, base_in_world: Array, tcp_in_flange: Array, axisymmetric:
         np.asarray(tcp_in_flange, float).tobytes().hex(),
         np.asarray(frame.placement.homogeneous).tobytes().hex(),
     ]
+    if tool_in_world is not None:
+        parts.append("stationary " + np.asarray(tool_in_world, float).tobytes().hex())
     for jid in list(model.supports[frame.parentJoint])[1:]:
         joint = model.joints[jid]
         parts += [
@@ -107,7 +113,7 @@ def _kernel_key(robot, base_in_world: Array, tcp_in_flange: Array, axisymmetric:
 
 
 def _waypoint_kernels(
-    robot, base_in_world: Array, tcp_in_flange: Array, axisymmetric: bool
+    robot, base_in_world: Array, tcp_in_flange: Array, axisymmetric: bool, tool_in_world: Array | None = None
 ) -> list[ca.Function]:
     n = robot.nq
     q = ca.SX.sym("q", n)
@@ -115,7 +121,7 @@ def _waypoint_kernels(
     r_demo = ca.SX.sym("R_demo", 9)
     lam = ca.SX.sym("lam", 4)
     weight = ca.SX.sym("w")
-    p, R = fk_function(robot, base_in_world, tcp_in_flange)(q)
+    p, R = fk_function(robot, base_in_world, tcp_in_flange, tool_in_world)(q)
     R_demo = ca.reshape(r_demo, 3, 3)
     if axisymmetric:
         cos_theta = ca.dot(R[:, 2], R_demo[:, 2])

@@ -210,6 +210,8 @@ class Diagnoser:
         self.margin = math.radians(self.tolerances.joint_margin_deg)
         self.lower, self.upper = spec.lower + self.margin, spec.upper - self.margin
         self.reach = reach_model(self.kin.robot, self.margin)
+        if self.kin.tool_in_world is not None:  # the targets are in the held part: no wrist-centre geometry
+            self.reach = replace(self.reach, spherical=False)
         self.cell = set() if self.model is None else {b.name for b in self.model.bodies if b.kind == "cell"}
 
     # -- the demonstrated pose and configuration -------------------------------------------------
@@ -526,7 +528,7 @@ def reach_gap(kin: TcpKinematics, positions: Array, joint_margin_deg: float) -> 
     """
     reach = reach_model(kin.robot, math.radians(joint_margin_deg))
     out = np.zeros(len(positions))
-    if not reach.spherical:
+    if not reach.spherical or kin.tool_in_world is not None:
         return out
     T_inv = np.linalg.inv(kin.base_in_world)
     p = positions @ T_inv[:3, :3].T + T_inv[:3, 3]

@@ -95,13 +95,18 @@ def _chain(
     return p + R @ ca.DM(T_jt[:3, 3]), R @ ca.DM(_snap(T_jt[:3, :3])), joints
 
 
-def fk_function(robot: Robot, base_in_world: ArrayLike, tcp_in_flange: ArrayLike) -> ca.Function:
-    """Symbolic TCP pose in the world frame.
+def fk_function(
+    robot: Robot, base_in_world: ArrayLike, tcp_in_flange: ArrayLike, tool_in_world: ArrayLike | None = None
+) -> ca.Function:
+    """Symbolic TCP pose in the world frame (with a stationary tool: in the held part's frame).
 
     Args:
         robot: a loaded robot (revolute joints only).
         base_in_world: T_world_base, the robot base in the world frame, (4, 4) [m].
-        tcp_in_flange: T_flange_tcp, the tool centre point in the flange frame, (4, 4) [m].
+        tcp_in_flange: T_flange_tcp, the tool centre point in the flange frame, (4, 4) [m]; with a
+            stationary tool, T_flange_part, the held part's frame on the flange.
+        tool_in_world: T_world_tcp of a stationary tool (4, 4) [m], or None for a tool on the
+            flange. With it the pose is the tool's seen from the part, ``T_world_part(q)⁻¹ · T_world_tcp``.
 
     Returns:
         ``ca.Function("fk", [q], [p, R], ["q"], ["p", "R"])`` with q the joints [rad] (n, 1),
@@ -112,6 +117,9 @@ def fk_function(robot: Robot, base_in_world: ArrayLike, tcp_in_flange: ArrayLike
     """
     q = ca.SX.sym("q", robot.nq)
     p, R, _ = _chain(robot, q, base_in_world, tcp_in_flange)
+    if tool_in_world is not None:
+        T_wt = _snap(check_transform(tool_in_world, "tool_in_world"))
+        p, R = R.T @ (ca.DM(T_wt[:3, 3]) - p), R.T @ ca.DM(T_wt[:3, :3])
     return ca.Function("fk", [q], [p, R], ["q"], ["p", "R"])
 
 

@@ -116,8 +116,8 @@ def problem_targets(problem: RefinementNLP) -> Array:
 
 
 def problem_kinematics(problem: RefinementNLP) -> TcpKinematics:
-    """The numeric TCP kinematics of the refinement's robot, base and tool."""
-    return TcpKinematics(problem.robot, problem.base_in_world, problem.tcp_in_flange)
+    """The numeric TCP kinematics of the refinement's robot, base and tool (stationary or not)."""
+    return TcpKinematics(problem.robot, problem.base_in_world, problem.tcp_in_flange, problem.tool_in_world)
 
 
 def problem_bounds(problem: RefinementNLP) -> tuple[Array, Array]:

@@ -128,6 +128,7 @@ class RefinementNLP:
     tolerances: Tolerances
     axisymmetric: bool
     weights: Weights = field(default_factory=Weights)
+    tool_in_world: Array | None = None  # T_F_TCP of a stationary tool
     active: ActiveSet = field(default_factory=lambda: ActiveSet())
     elastic_deg: float | None = None
     build_time_s: float = 0.0
@@ -168,6 +169,7 @@ class RefinementNLP:
             singularity_hessian=self.singularity_hessian,
             joint_steps=self.joint_steps if joint_steps is None else joint_steps,
             solver=self.solver_name,
+            tool_in_world=self.tool_in_world,
         )
         return replace(built, given_options=self.given_options)
 
@@ -215,6 +217,7 @@ rather than letting it choose: its automatic choice took 2.5 times as long at 6,
 
 
 REDUNDANT_IPOPT: dict[str, Any] = {"ipopt.acceptable_iter": 2, "ipopt.acceptable_constr_viol_tol": 1e-10}
+HELD_PART_IPOPT = {"ipopt.max_iter": 1000}  # a redundant arm turning a held part: 357 iterations on the puzzle
 """IPOPT settings added for an arm of more than six joints: stop after two consecutive iterations at
 the acceptable level (error 1e-6, constraints met to 1e-10) instead of fifteen. On the LBR iiwa at
 6,400 waypoints the full solve reaches that level one iteration after the coarse seed and then
@@ -284,6 +287,7 @@ def build_refinement(
     singularity_hessian: bool = False,
     joint_steps: str | Sequence[int] = "all",
     solver: str = "ipopt",
+    tool_in_world: Array | None = None,
 ) -> RefinementNLP:
     """Build the refinement NLP for ``fused`` on ``robot`` (no solve).
 
@@ -317,6 +321,7 @@ def build_refinement(
             :mod:`refine.optimise.stagewise`; at most
             :data:`refine.optimise.stagewise.MAX_FATROP_WAYPOINTS` waypoints). Options for fatrop
             in ``solver_options`` carry the prefix ``"fatrop."``; IPOPT's (``"ipopt."``) are then ignored.
+        tool_in_world: T_F_TCP of a stationary tool (``tcp_in_flange`` T_flange_part, ``fused`` in the part).
 
     Returns:
         The problem with bounds and parameters filled in.
@@ -348,13 +353,12 @@ def build_refinement(
     # ---- path constraints and orientation cost, mapped over the waypoints (compiled kernels)
     if derivative_mode not in ("assembled", "casadi"):
         raise InputError(f"derivative_mode must be 'assembled' or 'casadi', got {derivative_mode!r}")
-    if derivative_mode == "assembled":
-        kernels = waypoint_kernels(robot, base_in_world, tcp_in_flange, axisymmetric)
-    else:
-        kernels = {
-            "waypoint": waypoint_function(robot, base_in_world, tcp_in_flange, axisymmetric),
-            "singularity": singularity_function(robot, base_in_world, tcp_in_flange),
-        }
+    chain = (robot, base_in_world, tcp_in_flange)
+    kernels = (
+        waypoint_kernels(*chain, axisymmetric, tool_in_world)
+        if derivative_mode == "assembled"
+        else {"waypoint": waypoint_function(*chain, axisymmetric, tool_in_world), "singularity": singularity_function(*chain)}
+    )
     G, cost = kernels["waypoint"].map(N)(Q, P_ref, R_demo)
     if elastic:
         G = ca.vertcat(G[:3, :], G[3, :] + sigma.T)  # cos θ_k + σ_k >= cos α
@@ -411,12 +415,7 @@ def build_refinement(
         if derivative_mode == "casadi" or solver == "fatrop"
         else derivative_functions(
             kernels,
-            N=N,
-            n=n,
-            x=x,
-            p=p,
-            f=f,
-            g=g,
+            N=N, n=n, x=x, p=p, f=f, g=g,  # fmt: skip
             orientation_coef=coef,
             K=K,
             b=b,
@@ -432,7 +431,7 @@ def build_refinement(
     if solver == "fatrop":
         options = dict(solver_options or {})
         built: Any = StagewiseSolver(
-            waypoint_function(robot, base_in_world, tcp_in_flange, axisymmetric),
+            waypoint_function(robot, base_in_world, tcp_in_flange, axisymmetric, tool_in_world),
             singularity_function(robot, base_in_world, tcp_in_flange),
             N=N,
             n=n,
@@ -449,7 +448,8 @@ def build_refinement(
             options=fatrop_options(options),
         )
     else:
-        options = {**IPOPT_DEFAULTS, **(REDUNDANT_IPOPT if n > 6 else {}), **(solver_options or {})}
+        held = HELD_PART_IPOPT if n > 6 and tool_in_world is not None else {}
+        options = {**IPOPT_DEFAULTS, **(REDUNDANT_IPOPT if n > 6 else {}), **held, **(solver_options or {})}
         ipopt = {k: v for k, v in options.items() if not k.startswith(FATROP_PREFIX)}
         watch = iteration_watch(x.numel(), g.numel(), p.numel())
         built = ca.nlpsol("refine", "ipopt", nlp, {**derivatives, **ipopt, "iteration_callback": watch})
@@ -471,6 +471,7 @@ def build_refinement(
         robot=robot,
         base_in_world=np.asarray(base_in_world, dtype=float),
         tcp_in_flange=np.asarray(tcp_in_flange, dtype=float),
+        tool_in_world=None if tool_in_world is None else np.asarray(tool_in_world, dtype=float),
         fused=fused,
         tolerances=tolerances,
         axisymmetric=axisymmetric,

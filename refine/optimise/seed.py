@@ -11,6 +11,7 @@ from there.
 from __future__ import annotations
 
 import logging
+import math
 
 import numpy as np
 
@@ -21,7 +22,7 @@ from refine.optimise.verify import (
     Violation,
     runs,
 )
-from refine.robot.kinematics import CONVERGED, TcpKinematics, pose_error, solve_ik, solve_ik_batch
+from refine.robot.kinematics import CONVERGED, TcpKinematics, axis_error, pose_error, solve_ik, solve_ik_batch
 from refine.types import Array
 
 log = logging.getLogger(__name__)
@@ -33,11 +34,13 @@ COARSE_STEP_RAD = 0.05
 between them start from the joints interpolated between their neighbours and are solved together."""
 
 
-def _coarse(targets: Array) -> Array:
+def _coarse(targets: Array, axis_only: bool = False) -> Array:
     """Indices of the waypoints to chain one by one: the first, the last, and enough between."""
     dp = np.linalg.norm(np.diff(targets[:, :3, 3], axis=0), axis=1)
     R = targets[:, :3, :3]
     cos = (np.einsum("kij,kij->k", R[1:], R[:-1]) - 1.0) / 2.0
+    if axis_only:  # the turn of the tool axis alone
+        cos = np.einsum("ki,ki->k", R[1:, :, 2], R[:-1, :, 2])
     dtheta = np.arccos(np.clip(cos, -1.0, 1.0))
     travel = np.concatenate([[0.0], np.cumsum(np.maximum(dp / COARSE_STEP_M, dtheta / COARSE_STEP_RAD))])
     # a new chained waypoint wherever the travel since the last one would exceed one step
@@ -51,7 +54,7 @@ def _coarse(targets: Array) -> Array:
 
 
 def _chain(
-    kin: TcpKinematics, targets: Array, q_first: Array, lower: Array, upper: Array
+    kin: TcpKinematics, targets: Array, q_first: Array, lower: Array, upper: Array, axis_only: bool = False
 ) -> tuple[Array, Array]:
     """IK chained along ``targets`` from ``q_first``.
 
@@ -60,13 +63,14 @@ def _chain(
     interpolated between their chained neighbours. A span whose waypoints do not all converge
     close to the interpolation, or a coarse chain that does not converge everywhere, is chained
     one waypoint at a time instead, so the answer stays on the branch a full chain would follow.
+    ``axis_only``: the spin about the tool axis is free (:func:`refine.robot.kinematics.solve_ik`).
     """
-    coarse = _coarse(targets)
+    coarse = _coarse(targets, axis_only)
     if len(coarse) >= 0.5 * len(targets):
-        return _chain_each(kin, targets, q_first, lower, upper)
-    qs_c, err_c = _chain_each(kin, targets[coarse], q_first, lower, upper)
+        return _chain_each(kin, targets, q_first, lower, upper, axis_only)
+    qs_c, err_c = _chain_each(kin, targets[coarse], q_first, lower, upper, axis_only)
     if float(err_c.max()) > CONVERGED:
-        return _chain_each(kin, targets, q_first, lower, upper)
+        return _chain_each(kin, targets, q_first, lower, upper, axis_only)
     N = len(targets)
     qs, errors = np.empty((N, len(q_first))), np.zeros(N)
     qs[coarse], errors[coarse] = qs_c, err_c
@@ -75,18 +79,20 @@ def _chain(
     a, b = coarse[seg], coarse[seg + 1]
     t = ((inner - a) / (b - a))[:, None]
     guess = qs[a] + t * (qs[b] - qs[a])
-    qs[inner], errors[inner] = solve_ik_batch(kin, targets[inner], guess, lower, upper)
+    qs[inner], errors[inner] = solve_ik_batch(kin, targets[inner], guess, lower, upper, axis_only=axis_only)
     span = np.abs(qs_c[1:] - qs_c[:-1]).max(axis=1)  # per coarse span
     off = np.abs(qs[inner] - guess).max(axis=1)
     bad = (errors[inner] > CONVERGED) | (off > np.maximum(span[seg], 0.05))
     for j in np.unique(seg[bad]):
         lo, hi = coarse[j], coarse[j + 1]
-        qs[lo : hi + 1], errors[lo : hi + 1] = _chain_each(kin, targets[lo : hi + 1], qs[lo], lower, upper)
+        qs[lo : hi + 1], errors[lo : hi + 1] = _chain_each(
+            kin, targets[lo : hi + 1], qs[lo], lower, upper, axis_only
+        )
     return qs, errors
 
 
 def _chain_each(
-    kin: TcpKinematics, targets: Array, q_first: Array, lower: Array, upper: Array
+    kin: TcpKinematics, targets: Array, q_first: Array, lower: Array, upper: Array, axis_only: bool = False
 ) -> tuple[Array, Array]:
     qs = np.empty((len(targets), len(q_first)))
     errors = np.empty(len(targets))
@@ -97,7 +103,7 @@ def _chain_each(
             last = q - qs[k - 2]
             if float(np.max(np.abs(last))) <= PREDICT_STEP_MAX:
                 guess = q + last
-        q, errors[k] = solve_ik(kin, T, guess, lower, upper)
+        q, errors[k] = solve_ik(kin, T, guess, lower, upper, axis_only=axis_only)
         qs[k] = q
     return qs, errors
 
@@ -132,6 +138,7 @@ def ik_chain(
     *,
     max_chains: int = 4,
     prefer_first: bool = False,
+    axis_only: bool = False,
 ) -> tuple[Array, Array]:
     """IK chained along ``targets`` (N, 4, 4), trying the distinct first-waypoint solutions of ``starts``.
 
@@ -149,15 +156,20 @@ def ik_chain(
         max_chains: how many distinct first-waypoint solutions to chain at most.
         prefer_first: chain the first start's branch first (the problem's home), whatever its
             joint margin; otherwise branches are tried by decreasing joint margin.
+        axis_only: reach the targets' positions and tool axes, the spin about the axis free.
 
     Returns:
         joints (N, n) [rad] and the pose error norm per waypoint (N,).
     """
-    firsts = first_solutions(kin, targets[0], lower, upper, starts, prefer_first=prefer_first)
+    firsts = first_solutions(
+        kin, targets[0], lower, upper, starts, prefer_first=prefer_first, axis_only=axis_only
+    )
     if not firsts:  # nothing converged: chain from the closest attempt and let the NLP decide
-        firsts = [solve_ik(kin, targets[0], starts[0], lower, upper, max_iterations=300)[0]]
+        firsts = [
+            solve_ik(kin, targets[0], starts[0], lower, upper, max_iterations=300, axis_only=axis_only)[0]
+        ]
     best: tuple[float, Array, Array] | None = None
-    for qs, errors in _chains(kin, targets, lower, upper, firsts[:max_chains]):
+    for qs, errors in _chains(kin, targets, lower, upper, firsts[:max_chains], axis_only):
         score = float(errors.max())
         if best is None or score < best[0]:
             best = (score, qs, errors)
@@ -176,6 +188,7 @@ def first_solutions(
     starts: list[Array],
     *,
     prefer_first: bool = False,
+    axis_only: bool = False,
 ) -> list[Array]:
     """The distinct IK solutions of the first pose from ``starts``, multi-turn joints unbounded.
 
@@ -191,6 +204,7 @@ def first_solutions(
         free_lower,
         free_upper,
         max_iterations=300,
+        axis_only=axis_only,
     )
     for i, (q, err) in enumerate(zip(solutions, errors, strict=True)):
         if err > CONVERGED:
@@ -204,16 +218,23 @@ def first_solutions(
     return [q for _, q in found]
 
 
-def _chains(kin: TcpKinematics, targets: Array, lower: Array, upper: Array, firsts: list[Array]):
+def _chains(
+    kin: TcpKinematics,
+    targets: Array,
+    lower: Array,
+    upper: Array,
+    firsts: list[Array],
+    axis_only: bool = False,
+):
     """Chain IK from each first-waypoint solution in turn (a generator: chains cost time)."""
     wraps = upper - lower > 2 * np.pi
     free_lower, free_upper = np.where(wraps, -np.inf, lower), np.where(wraps, np.inf, upper)
     for q_first in firsts:
-        qs, errors = _chain(kin, targets, q_first, free_lower, free_upper)
+        qs, errors = _chain(kin, targets, q_first, free_lower, free_upper, axis_only)
         qs = shift_turns(qs, lower, upper)
         outside = np.any(qs < lower - 1e-9, axis=0) | np.any(qs > upper + 1e-9, axis=0)
         if np.any(outside & ~wraps):
-            qs, errors = _chain(kin, targets, np.clip(qs[0], lower, upper), lower, upper)
+            qs, errors = _chain(kin, targets, np.clip(qs[0], lower, upper), lower, upper, axis_only)
         elif np.any(outside):
             # a multi-turn joint whose excursion exceeds its range: no whole-turn shift fits it, so
             # centre it exactly (turning the tool by the shift) and clip both ends; the strict
@@ -221,9 +242,15 @@ def _chains(kin: TcpKinematics, targets: Array, lower: Array, upper: Array, firs
             for j in np.flatnonzero(outside):
                 qs[:, j] += 0.5 * (lower[j] + upper[j]) - 0.5 * (qs[:, j].max() + qs[:, j].min())
             qs = np.clip(qs, lower, upper)
-            errors = np.array(
-                [np.linalg.norm(pose_error(kin.pose(q), T)) for q, T in zip(qs, targets, strict=True)]
-            )
+            reached = kin.poses(qs)
+            if axis_only:  # the poses' errors only (the Jacobians passed are placeholders)
+                errors = np.linalg.norm(
+                    axis_error(reached, targets, np.zeros((len(qs), 6, qs.shape[1]))), axis=1
+                )
+            else:
+                errors = np.array(
+                    [np.linalg.norm(pose_error(P, T)) for P, T in zip(reached, targets, strict=True)]
+                )
         yield qs, errors
 
 
@@ -236,16 +263,17 @@ def alternative_seeds(
     *,
     skip: Array,
     count: int = 2,
+    axis_only: bool = False,
 ) -> list[Array]:
     """Up to ``count`` seeds chained from other IK branches of the first waypoint than ``skip``'s."""
     wraps = upper - lower > 2 * np.pi
     key = np.where(wraps, np.mod(skip[0], 2 * np.pi), skip[0])
     others = [
         q
-        for q in first_solutions(kin, targets[0], lower, upper, starts)
+        for q in first_solutions(kin, targets[0], lower, upper, starts, axis_only=axis_only)
         if not np.allclose(np.where(wraps, np.mod(q, 2 * np.pi), q), key, atol=1e-2)
     ]
-    return [qs for qs, _ in _chains(kin, targets, lower, upper, others[:count])]
+    return [qs for qs, _ in _chains(kin, targets, lower, upper, others[:count], axis_only)]
 
 
 def start_candidates(
@@ -297,10 +325,34 @@ def initial_guess(problem: RefinementNLP, home: Array | None = None, rotations: 
     targets = problem_targets(problem)
     if rotations is not None:
         targets[:, :3, :3] = rotations
+    axis_only = seed_axis_only(problem)
+    if axis_only:  # turn each target about the tool axis to keep the elbow in range, then reach it
+        from refine.optimise.reach import reach_model
+        from refine.optimise.spin import path_spins, spun
+
+        reach = reach_model(problem.robot, math.radians(problem.tolerances.joint_margin_deg))
+        if reach.spherical:
+            spins = path_spins(reach, targets, problem.base_in_world, problem.tcp_in_flange, problem.tool_in_world)
+            targets, axis_only = spun(targets, spins), False
     qs, _ = ik_chain(
-        problem_kinematics(problem), targets, lower, upper, starts, prefer_first=home is not None
+        problem_kinematics(problem),
+        targets,
+        lower,
+        upper,
+        starts,
+        prefer_first=home is not None,
+        axis_only=axis_only,
     )
     return qs
+
+
+def seed_axis_only(problem: RefinementNLP) -> bool:
+    """Whether the IK seed leaves the spin about the tool axis free: an axisymmetric stationary tool.
+
+    A CAM toolpath gives the tool axis with an arbitrary spin about it (the puzzle piece's turns by
+    up to 49 deg from one point to the next), which a robot holding the part would have to follow.
+    """
+    return problem.axisymmetric and problem.tool_in_world is not None
 
 
 def out_of_reach(problem: RefinementNLP, q_seed: Array, home: Array | None) -> list[Violation]:

@@ -37,6 +37,7 @@ from refine.optimise.seed import (
     alternative_seeds,
     initial_guess,
     out_of_reach,
+    seed_axis_only,
     start_candidates,
 )
 from refine.optimise.verify import (
@@ -404,7 +405,13 @@ def coarse_seed(problem: RefinementNLP, q_seed: Array) -> tuple[Array | None, in
     q = np.column_stack([np.interp(f.s, f.s[idx], answer.q[:, j]) for j in range(problem.dof)])
     lower, upper = problem_bounds(problem)
     q, err = solve_ik_batch(
-        problem_kinematics(problem), problem_targets(problem), q, lower, upper, nullspace_gain=0.0
+        problem_kinematics(problem),
+        problem_targets(problem),
+        q,
+        lower,
+        upper,
+        nullspace_gain=0.0,
+        axis_only=seed_axis_only(problem),  # a stationary tool's spin stays where the coarse answer has it
     )
     if not np.all(err < 10.0 * CONVERGED):
         log.info(

@@ -127,3 +127,25 @@ def reuse_final(
         tolerances=tolerances,
         build_time_s=0.0,
     )
+
+
+def built_for(built: RefinementNLP | None, base_in_world: Array, tool: object, weights: object) -> bool:
+    """Whether ``built`` was made for this base, tool (``ToolSettings``) and cost weights, so it can be reused.
+
+    The base, the flange-side frame (``tcp_in_flange``), a stationary tool's frame in the world
+    (``tcp_in_world``, or none on either side), the tool's symmetry and the weights must all be
+    the same; :func:`refine.optimise.problem.reuse_for` checks the rest.
+    """
+    if built is None:
+        return False
+    fixed = getattr(tool, "tcp_in_world", None)
+    same_fixed = (built.tool_in_world is None and fixed is None) or (
+        built.tool_in_world is not None and fixed is not None and np.array_equal(built.tool_in_world, fixed)
+    )
+    return bool(
+        same_fixed
+        and np.array_equal(built.base_in_world, base_in_world)
+        and np.array_equal(built.tcp_in_flange, tool.tcp_in_flange)
+        and built.axisymmetric == tool.axisymmetric
+        and built.weights == weights
+    )

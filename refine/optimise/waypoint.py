@@ -19,16 +19,17 @@ ROW_NAMES = ("position x", "position y", "position z", "orientation cone")
 
 
 def waypoint_function(
-    robot: Robot, base_in_world: Array, tcp_in_flange: Array, axisymmetric: bool
+    robot: Robot, base_in_world: Array, tcp_in_flange: Array, axisymmetric: bool, tool_in_world: Array | None = None
 ) -> ca.Function:
     """Per-waypoint constraints ``g`` (4,) and orientation cost for joints ``q``.
 
     Inputs: ``q`` (n,), ``p_ref`` (3,) CAD point [m], ``R_demo`` (9,) demonstrated rotation
     (column-major). Outputs: ``g`` = [TCP position - p_ref (3), cos θ] and ``cost`` = 1 - cos θ,
     θ the angle between the reached and demonstrated orientations (between the tool axes for an
-    axisymmetric tool).
+    axisymmetric tool). With a stationary tool (``tool_in_world``, T_F_TCP) the pose is the tool's
+    in the held part's frame (``tcp_in_flange`` is then T_flange_part) and ``p_ref`` is in that frame.
     """
-    fk = fk_function(robot, base_in_world, tcp_in_flange)
+    fk = fk_function(robot, base_in_world, tcp_in_flange, tool_in_world)
     q = ca.SX.sym("q", robot.nq)
     p_ref = ca.SX.sym("p_ref", 3)
     r_demo = ca.SX.sym("R_demo", 9)
@@ -48,7 +49,9 @@ def singularity_function(robot: Robot, base_in_world: Array, tcp_in_flange: Arra
     """Scaled manipulability ``sqrt(det(Js Jsᵀ))`` of joints ``q`` [-].
 
     ``Js`` is the TCP Jacobian with its linear rows divided by the robot's reach, so both halves are
-    unitless and the measure compares across robots.
+    unitless and the measure compares across robots. The measure does not depend on the point or
+    frame the Jacobian is taken at (a change of either multiplies ``Js`` by a matrix of determinant
+    one), so a stationary tool uses the held part's Jacobian.
     """
     jac = jacobian_function(robot, base_in_world, tcp_in_flange)
     q = ca.SX.sym("q", robot.nq)

@@ -68,7 +68,7 @@ class TcpKinematics:
         T_wp = T_wf @ self.tcp_in_flange
         tool = self.tool_in_world
         r = tool[:3, 3] - T_wf[..., :3, 3]  # flange origin -> tool TCP, world axes (..., 3)
-        Jv_point = Jv - np.cross(r[..., :, None], Jw, axis=-2)
+        Jv_point = Jv - _cross_columns(r, Jw)
         Rt = np.swapaxes(T_wp[..., :3, :3], -1, -2)
         J = -np.concatenate([Rt @ Jv_point, Rt @ Jw], axis=-2)
         return _rigid_inverse(T_wp) @ tool, J
@@ -135,6 +135,13 @@ class TcpKinematics:
         return np.vstack([Jv - np.cross(r, Jw.T).T, Jw])
 
 
+def _cross_columns(r: Array, M: Array) -> Array:
+    """``r × M[..., :, k]`` for every column k: r (..., 3), M (..., 3, n) (np.cross is slow on small arrays)."""
+    x, y, z = r[..., 0, None], r[..., 1, None], r[..., 2, None]
+    a, b, c = M[..., 0, :], M[..., 1, :], M[..., 2, :]
+    return np.stack([y * c - z * b, z * a - x * c, x * b - y * a], axis=-2)
+
+
 def _rigid_inverse(T: Array) -> Array:
     """The inverse of rigid transforms (..., 4, 4)."""
     inv = np.zeros_like(T)
@@ -163,6 +170,7 @@ def solve_ik(
     damping: float = 1e-3,
     tol: float = CONVERGED,
     position_only: bool = False,
+    axis_only: bool = False,
 ) -> tuple[Array, float]:
     """Damped least-squares IK for one TCP pose, clamped to [lower, upper].
 
@@ -176,6 +184,8 @@ def solve_ik(
         damping: DLS damping λ [-] (on a Jacobian with rows in m and rad).
         tol: stop when the pose error norm is below this [m and rad stacked].
         position_only: solve for the TCP position alone (orientation free).
+        axis_only: solve for the TCP position and its z axis (the spin about the axis free, as for
+            an axisymmetric tool); the angle counted is the one between the axes.
 
     Returns:
         joints [rad] (n,) and the remaining pose error norm (position [m] and angle [rad] stacked).
@@ -183,7 +193,7 @@ def solve_ik(
     rows = slice(0, 3) if position_only else slice(0, 6)
     q = np.clip(np.asarray(q0, dtype=float), lower, upper)
     T, J = kin.pose_jacobian(q)
-    err = pose_error(T, T_target)[rows]
+    err = (axis_error(T[None], T_target[None], J[None])[0] if axis_only else pose_error(T, T_target))[rows]
     for _ in range(max_iterations):
         if float(err @ err) < tol * tol:
             break
@@ -199,8 +209,32 @@ def solve_ik(
             dq *= 0.3 / step
         q = np.clip(q + dq, lower, upper)
         T, J = kin.pose_jacobian(q)
-        err = pose_error(T, T_target)[rows]
+        err = (axis_error(T[None], T_target[None], J[None])[0] if axis_only else pose_error(T, T_target))[
+            rows
+        ]
     return q, float(np.linalg.norm(err))
+
+
+def axis_error(T: Array, T_target: Array, J: Array) -> Array:
+    """The pose errors (M, 6) of poses ``T`` to ``T_target`` (M, 4, 4) with the spin about z free.
+
+    The rotation part is the rotation vector turning each z axis onto its target's by the shortest
+    way; the Jacobians ``J`` (M, 6, n) lose, in place, their angular rows' component about the
+    current z axis, so a step never spends effort on the free spin.
+    """
+    z, zt = T[:, :3, 2], T_target[:, :3, 2]
+    cross = _cross_columns(z, zt[:, :, None])[:, :, 0]
+    sin = np.linalg.norm(cross, axis=1)
+    angle = np.arctan2(sin, np.einsum("ki,ki->k", z, zt))
+    flipped = (sin <= 1e-12) & (angle > 1.0)  # opposite axes: any axis normal to z turns it over
+    cross[flipped] = np.cross(
+        z[flipped], np.where(np.abs(z[flipped, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    )
+    sin = np.where(flipped, np.linalg.norm(cross, axis=1), sin)
+    safe = np.where(sin > 1e-12, sin, 1.0)
+    e_r = np.where((sin > 1e-12)[:, None], cross * (angle / safe)[:, None], 0.0)
+    J[:, 3:] -= z[:, :, None] * np.einsum("ki,kin->kn", z, J[:, 3:])[:, None, :]
+    return np.concatenate([T_target[:, :3, 3] - T[:, :3, 3], e_r], axis=1)
 
 
 def solve_ik_batch(
@@ -215,6 +249,7 @@ def solve_ik_batch(
     tol: float = CONVERGED,
     position_only: bool = False,
     nullspace_gain: float = NULLSPACE_GAIN,
+    axis_only: bool = False,
 ) -> tuple[Array, Array]:
     """:func:`solve_ik` for many independent poses at once, vectorised over them.
 
@@ -242,7 +277,11 @@ def solve_ik_batch(
         p, R, J = kin.batch(q[active])
         T = targets[active]
         e = T[:, :3, 3] - p
-        if not position_only:
+        if axis_only:
+            reached = np.zeros_like(T)
+            reached[:, :3, :3], reached[:, :3, 3] = R, p
+            e = axis_error(reached, T, J)
+        elif not position_only:
             e = np.concatenate([e, rotation_vectors(T[:, :3, :3] @ np.transpose(R, (0, 2, 1)))], axis=1)
         J = J[:, :rows]
         norm = np.linalg.norm(e, axis=1)

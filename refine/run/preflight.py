@@ -300,6 +300,10 @@ def preflight(
     else:
         where = f"{option('--programs', 'programs')}: "
     try:
+        if problem.tool.stationary:
+            from refine.settings.stationary import check_stationary_programs
+
+            check_stationary_programs(programs)
         check_programs(problem, robot.spec, programs)
         if "sunrise" in programs and robot.nq != 7:
             raise InputError(

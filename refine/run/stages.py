@@ -162,6 +162,7 @@ def refinement_for(problem: Problem, robot: Robot, fused: FusedPath) -> Refineme
         solver_options={"ipopt.max_wall_time": problem.repair.time_limit_s},
         joint_steps=(),  # the solve adds the joint-step rows that come near their bound
         solver=problem.optimise.solver,
+        tool_in_world=problem.tool.tcp_in_world,
     )
 
 
@@ -291,7 +292,7 @@ def plan_motions(
     from refine.robot.kinematics import TcpKinematics
 
     model = next((getattr(s, "model", None) for s in sources if getattr(s, "model", None) is not None), None)
-    kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange)
+    kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange, problem.tool.tcp_in_world)
     checker = MotionChecker(kin, model, problem.tolerances, problem.collision.check_step_m)
     planned = []
     for p in passes:
@@ -343,7 +344,7 @@ def line_source(problem: Problem, robot: Robot) -> Any:
     from refine.optimise.controller_line import ControllerLineSource
     from refine.robot.kinematics import TcpKinematics
 
-    kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange)
+    kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange, problem.tool.tcp_in_world)
     return ControllerLineSource(kin, problem.tolerances, lambda q: wrist_segments(problem, robot, q))
 
 
@@ -366,7 +367,7 @@ def controller_line_check(
     from refine.optimise.controller_line import check_controller_lines
     from refine.robot.kinematics import TcpKinematics
 
-    kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange)
+    kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange, problem.tool.tcp_in_world)
     wrist = wrist_segments(problem, robot, q)
     source = next((src for src in sources if getattr(src, "model", None) is not None), None)
     model = None if source is None else source.model

@@ -34,7 +34,7 @@ from refine.errors import Cancelled, InputError
 from refine.frames import invert_transform
 from refine.optimise.moves import moved_path
 from refine.optimise.problem import RefinementNLP, reuse_for
-from refine.optimise.warm import WarmStart
+from refine.optimise.warm import WarmStart, built_for
 from refine.paths import FusedPath
 from refine.problem import Problem, load_problem
 from refine.robot.model import Robot
@@ -201,12 +201,7 @@ def warm_start(
     """
     first = previous.first
     built = first.nlp
-    setup = built is not None and (
-        np.array_equal(built.base_in_world, problem.robot.base_in_world)
-        and np.array_equal(built.tcp_in_flange, problem.tool.tcp_in_flange)
-        and built.axisymmetric == problem.tool.axisymmetric
-        and built.weights == weights_for(problem, robot)
-    )
+    setup = built_for(built, problem.robot.base_in_world, problem.tool, weights_for(problem, robot))
     nlp = reuse_for(built, fused, problem.tolerances) if setup else None
     if first.refinement.q.shape != (len(fused), robot.nq):
         return nlp, None

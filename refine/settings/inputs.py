@@ -107,7 +107,12 @@ class ToolSettings:
 
     Attributes:
         name: tool name, used for RAPID tooldata / KRL tool names.
-        tcp_in_flange: T_flange_TCP, (4, 4); the TCP z axis points along the nozzle/torch.
+        tcp_in_flange: T_flange_TCP, (4, 4); the TCP z axis points along the nozzle/torch. With a
+            stationary tool, T_flange_part: the held part's frame, the path's frame (TOML key
+            ``part_in_flange``).
+        tcp_in_world: T_F_TCP of a stationary tool (the tool stands in the world and the robot
+            holds the part: glazing, sealing or grinding a small part), or None for a tool on the
+            flange. The path is then given in the held part's frame.
         sensor_in_tcp: T_TCP_E, pose of the tracker sensor {E} in the TCP frame of the hand
             tool the worker used, (4, 4).
         axisymmetric: the spin about the TCP z axis is free (it is not constrained to the demo).
@@ -126,9 +131,17 @@ class ToolSettings:
     cog_in_flange_m: tuple[float, float, float] = (0.0, 0.0, 0.1)
     collision: tuple[Shape, ...] = ()
     number: int = 1
+    tcp_in_world: Matrix4 | None = None
+
+    @property
+    def stationary(self) -> bool:
+        """The tool stands in the world and the robot holds the part (``tcp_in_world`` given)."""
+        return self.tcp_in_world is not None
 
     def __post_init__(self) -> None:
         check_transform(self.tcp_in_flange, "tool.tcp_in_flange")
+        if self.tcp_in_world is not None:
+            check_transform(self.tcp_in_world, "tool.tcp_in_world")
         check_transform(self.sensor_in_tcp, "tool.sensor_in_tcp")
         positive("tool", "mass_kg", self.mass_kg)
         in_range("tool", "mass_kg", self.mass_kg, 0.0, 2000.0, "kg")
