@@ -281,8 +281,17 @@ def check_controller_lines(
     spec = kin.robot.spec
     lin_poses = kin.poses(q_lin)
     start = _newton_start(kin, q, segment, t, q_lin, lin_poses, targets)
+    J_line = np.empty((len(t), 6, q.shape[1]))
     q_line, err = solve_ik_batch(
-        kin, targets, start, spec.lower, spec.upper, tol=IK_TOLERANCE, max_iterations=60, nullspace_gain=0.0
+        kin,
+        targets,
+        start,
+        spec.lower,
+        spec.upper,
+        tol=IK_TOLERANCE,
+        max_iterations=60,
+        nullspace_gain=0.0,
+        jacobians_out=J_line,
     )
     a, b = poses[segment, :3, 3], poses[segment + 1, :3, 3]
     chord = b - a
@@ -297,7 +306,7 @@ def check_controller_lines(
     angle = np.degrees(Rotation.from_matrix(rel).magnitude())
     joint_diff = np.degrees(np.abs(q_line - q_lin).max(axis=1))
     margins = np.minimum(q_line - spec.lower, spec.upper - q_line)
-    sing, _ = singularity_measures(kin, q_line, smallest=False)
+    sing, _ = singularity_measures(kin, q_line, smallest=False, jacobians=J_line)
 
     violations: list[Violation] = []
 
@@ -411,9 +420,14 @@ def line_rows(kin: TcpKinematics, q: Array, line: LineCheck, tolerances: Toleran
         for i in np.flatnonzero(spec.upper[j] - line.q[:, j] < margin - JOINT_TOLERANCE_RAD):
             lower = -(spec.upper[j] - margin - bow[i, j])
             rows.append(LinearRow(int(seg[i]), float(t[i]), -e, float(lower), f"{LINE_LABEL} joint {j + 1} upper"))
-    if tolerances.singularity_margin > 0:
-        w, _ = singularity_measures(kin, line.q, smallest=False)
-        low = np.flatnonzero(w < tolerances.singularity_margin - SINGULARITY_TOLERANCE)
+    sing_limit = tolerances.singularity_margin - SINGULARITY_TOLERANCE
+    if tolerances.singularity_margin > 0 and (line.singularity < sing_limit).any():
+        # only the segments whose least measure (the same function of the same joints) is low
+        # hold a sample under the margin
+        near = np.flatnonzero(line.singularity[seg] < sing_limit)
+        w = np.full(len(t), np.inf)
+        w[near], _ = singularity_measures(kin, line.q[near], smallest=False)
+        low = np.flatnonzero(w < sing_limit)
         if low.size:
             at = line.q[low]
             stepped = (at[:, None, :] + GRADIENT_STEP_RAD * np.eye(n)[None]).reshape(-1, n)

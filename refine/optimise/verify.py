@@ -96,19 +96,23 @@ def runs(mask: Array) -> list[tuple[int, int]]:
     return list(zip(starts.tolist(), ends.tolist(), strict=True))
 
 
-def singularity_measures(kin: TcpKinematics, q: Array, *, smallest: bool = True) -> tuple[Array, Array]:
+def singularity_measures(
+    kin: TcpKinematics, q: Array, *, smallest: bool = True, jacobians: Array | None = None
+) -> tuple[Array, Array]:
     """Scaled manipulability and smallest singular value of the scaled TCP Jacobian per row of ``q``.
 
     The Jacobian's linear rows are divided by the robot's reach so both halves are unitless.
     ``smallest=False`` skips the singular values (most of the cost) for callers that only need the
-    manipulability; the second array is then NaN.
+    manipulability; the second array is then NaN. ``jacobians``: the TCP Jacobians (N, 6, n) at
+    ``q`` when the caller has them already (:func:`refine.robot.kinematics.solve_ik_batch`'s
+    ``jacobians_out``), else None to compute them.
 
     Returns:
         ``sqrt(det(Js Jsᵀ))`` (N,) and the smallest singular value of ``Js`` (N,) [-]
         (0 for a robot with fewer than 6 joints).
     """
     scale = np.array([1.0 / kin.robot.spec.reach_m] * 3 + [1.0] * 3)[:, None]
-    Js = scale * kin.jacobians(q)
+    Js = scale * (kin.jacobians(q) if jacobians is None else jacobians)
     w = np.sqrt(np.clip(np.linalg.det(Js @ np.swapaxes(Js, 1, 2)), 0.0, None))
     if not smallest:
         return w, np.full(len(Js), np.nan)
