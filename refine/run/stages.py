@@ -272,12 +272,17 @@ def refine_pass(
 
 
 def plan_motions(
-    problem: Problem, robot: Robot, passes: list[PassResult], sources: tuple[ConstraintSource, ...]
+    problem: Problem,
+    robot: Robot,
+    passes: list[PassResult],
+    sources: tuple[ConstraintSource, ...],
+    previous: tuple[Any, ...] = (),
 ) -> tuple[Any, ...]:
     """Every motion of the program (``refine.plan.program``), verified; () when a pass is not executable.
 
     The collision model is the run's own (the clearance source's, with its margins) when the run
-    checks collision, else the motions are checked for limits and singularity only.
+    checks collision, else the motions are checked for limits and singularity only. ``previous``:
+    a previous answer's motions, whose lines' clearance bounds the same lines' checks start from.
     """
     if not passes or any(p.trajectory is None for p in passes):
         return ()
@@ -287,7 +292,8 @@ def plan_motions(
 
     model = next((getattr(s, "model", None) for s in sources if getattr(s, "model", None) is not None), None)
     kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange)
-    checker = MotionChecker(kin, model, problem.tolerances, problem.collision.check_step_m)
+    known = {m.name: m.clearance_bounds for m in previous if m.clearance_bounds is not None}
+    checker = MotionChecker(kin, model, problem.tolerances, problem.collision.check_step_m, known)
     planned = []
     for p in passes:
         assert p.trajectory is not None and p.timing is not None

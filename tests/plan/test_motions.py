@@ -283,3 +283,41 @@ def test_an_air_speed_share_off_whole_percents_is_an_input_error(share):
 
     with pytest.raises(InputError, match="air_speed_share"):
         OutputSettings(air_speed_share=share)
+
+
+def test_a_line_re_planned_after_a_small_move_starts_from_its_bounds_and_reports_the_cold_figures(glass):
+    """The clamp beside the retract moved 2 mm, the anchor 1 mm: the warm check measures less, the
+    figures are those of a check from nothing; the clamp moved onto the line is still caught."""
+    problem, robot = glass
+    q = joints_at(problem, robot, np.array([1.2, 0.0, 0.66]))
+    kin = kinematics(problem, robot)
+    T = kin.pose(q)
+    on_line = T[:3, 3] - 0.07 * T[:3, 2]
+    near = on_line + [0.0, 0.06, 0.0]  # the clamp 60 mm beside the line: inside the margin's reach
+    first = plan_line(
+        checker_with(problem, robot, [box("clamp", near, (0.03, 0.03, 0.03))]),
+        "retract",
+        "r",
+        q,
+        T,
+        retract_m=0.1,
+    )
+    assert first.ok and first.clearance_bounds is not None
+    q2 = joints_at(problem, robot, np.array([1.201, 0.0, 0.66]), q0=q)
+    T2 = kin.pose(q2)
+    cells = {
+        "beside": [box("clamp", near + [0.002, 0.0, 0.0], (0.03, 0.03, 0.03))],
+        "onto": [box("clamp", T2[:3, 3] - 0.07 * T2[:3, 2], (0.03, 0.03, 0.03))],
+    }
+    for where, cell in cells.items():
+        cold_checker, warm_checker = checker_with(problem, robot, cell), checker_with(problem, robot, cell)
+        warm_checker.previous = {"r": first.clearance_bounds}
+        cold = plan_line(cold_checker, "retract", "r", q2, T2, retract_m=0.1)
+        warm = plan_line(warm_checker, "retract", "r", q2, T2, retract_m=0.1)
+        assert (warm.status, warm.closest) == (cold.status, cold.closest)
+        assert warm.min_distance_m == pytest.approx(cold.min_distance_m, abs=1e-9)
+        assert [i.cause for i in warm.issues] == [i.cause for i in cold.issues]
+        if where == "beside":
+            assert warm.ok and warm_checker.model.queries < cold_checker.model.queries
+        else:
+            assert not warm.ok and "clamp" in warm.issues[0].objects
