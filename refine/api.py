@@ -311,7 +311,6 @@ def _solve_again(
                 first.refinement.problem if nlp is not None else None,
                 first.refinement.multipliers if nlp is not None else None,
                 first.clearance,
-                previous.run.motions,
             )
     return Result(solve_problem(problem, robot=robot, fused=fused, nlp=nlp, q0=q0, warm=warm))
 

@@ -46,8 +46,6 @@ class WarmStart:
             :class:`refine.optimise.rounds.RoundLoop` (by row, and of the variable bounds), or None.
         clearance: the previous answer's dense clearance check (a ``PathClearance``), whose bounds
             the new checks start from (:mod:`refine.collision.carry`), or None.
-        motions: the previous answer's planned motions (``refine.plan.motion.Motion``), whose
-            lines' clearance checks start from their bounds (``Motion.clearance_bounds``).
     """
 
     q: Array
@@ -55,7 +53,6 @@ class WarmStart:
     problem: RefinementNLP | None = None
     multipliers: tuple[dict[tuple, float], Array] | None = None
     clearance: object = None
-    motions: tuple = ()
 
 
 def warm_seed(problem: RefinementNLP, warm: WarmStart) -> Array:

@@ -155,7 +155,7 @@ def plan_line(
                 tcp_m=poses[k, :3, 3],
             )
         )
-    check = checker.clearance(q, name)
+    check = checker.clearance(q)
     issues += checker.clearance_issues(q, check)
     return Motion(
         kind=kind,
@@ -174,7 +174,6 @@ def plan_line(
         min_singularity=least,
         line_deviation_m=deviation,
         issues=tuple(issues),
-        clearance_bounds=None if check is None else check.bounds,
     )
 
 

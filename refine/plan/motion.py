@@ -103,9 +103,6 @@ class Motion:
         direct_issues: for an air move planned around the cell, what the direct joint move hit.
         move_s: an air move's time per joint move between its rows [s], (K-1,) (what the programs
             command for each: RAPID's time argument ``T``, URScript's ``t``); () for other kinds.
-        clearance_bounds: a line's dense clearance check's lower bounds on every pair's distance
-            at its rows (``refine.collision.carry.CheckedBounds``), which the check of the same
-            line re-planned after a small change starts from; None without one.
     """
 
     kind: str
@@ -126,7 +123,6 @@ class Motion:
     issues: tuple[MotionIssue, ...] = ()
     direct_issues: tuple[MotionIssue, ...] = ()
     move_s: tuple[float, ...] = ()
-    clearance_bounds: Any = None
 
     @property
     def ok(self) -> bool:

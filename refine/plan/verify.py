@@ -11,13 +11,11 @@ objects, the share of the motion and the TCP position where the worst pair is.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import dataclass
 
 import numpy as np
 
 from refine.collision import CollisionModel, PathClearance, check_path_clearance
-from refine.collision.carry import carried_bounds
 from refine.optimise.verify import segment_singularity, singularity_measures
 from refine.plan.motion import MotionIssue
 from refine.robot.kinematics import TcpKinematics
@@ -37,16 +35,12 @@ class MotionChecker:
         model: the collision model with the run's margins; None when collision is off.
         tolerances: the problem's tolerances (joint margin, singularity margin, joint step).
         check_step_m: largest TCP travel between two poses of the dense clearance check [m].
-        previous: per motion name, the clearance bounds of the same motion in a previous plan
-            (``Motion.clearance_bounds``), which :meth:`clearance` starts from where the rows
-            correspond (:func:`refine.collision.carry.carried_bounds`); empty for none.
     """
 
     kin: TcpKinematics
     model: CollisionModel | None
     tolerances: Tolerances
     check_step_m: float
-    previous: dict[str, Any] = field(default_factory=dict)
 
     @property
     def lower(self) -> Array:
@@ -72,19 +66,11 @@ class MotionChecker:
             return math.inf, math.inf, ("", "")
         return worst.clearance_m, worst.distance_m, (worst.body, worst.other)
 
-    def clearance(self, q: Array, name: str | None = None) -> PathClearance | None:
-        """The continuous clearance check of the joint-interpolated rows ``q`` (K, n); None without a model.
-
-        ``name``: the motion's, to start from its bounds in :attr:`previous` (a pair is measured
-        wherever the carried lower bound does not prove its margin; the figures reported are
-        measured as in a check from nothing).
-        """
+    def clearance(self, q: Array) -> PathClearance | None:
+        """The continuous clearance check of the joint-interpolated rows ``q`` (K, n); None without a model."""
         if self.model is None:
             return None
-        q = np.atleast_2d(q)
-        before = self.previous.get(name) if name is not None else None
-        prior = None if before is None else carried_bounds(self.model, before, q)
-        return check_path_clearance(self.model, q, self.kin, self.check_step_m, prior=prior)
+        return check_path_clearance(self.model, np.atleast_2d(q), self.kin, self.check_step_m)
 
     def limit_issues(self, q: Array, margin_rad: float) -> list[MotionIssue]:
         """A joint outside [lower + margin, upper - margin] anywhere in the rows of ``q`` (K, n).

@@ -86,7 +86,7 @@ def solve_problem(
             passes.append(refine_pass(problem, robot, p.path, watch, name, p.layer, p.index, sources))
     from refine.run.stages import plan_motions
 
-    motions = plan_motions(problem, robot, passes, sources, () if warm is None else warm.motions)
+    motions = plan_motions(problem, robot, passes, sources)
     watch.lap("motions")
     truth = None
     first = passes[0]

@@ -272,17 +272,12 @@ def refine_pass(
 
 
 def plan_motions(
-    problem: Problem,
-    robot: Robot,
-    passes: list[PassResult],
-    sources: tuple[ConstraintSource, ...],
-    previous: tuple[Any, ...] = (),
+    problem: Problem, robot: Robot, passes: list[PassResult], sources: tuple[ConstraintSource, ...]
 ) -> tuple[Any, ...]:
     """Every motion of the program (``refine.plan.program``), verified; () when a pass is not executable.
 
     The collision model is the run's own (the clearance source's, with its margins) when the run
-    checks collision, else the motions are checked for limits and singularity only. ``previous``:
-    a previous answer's motions, whose lines' clearance bounds the same lines' checks start from.
+    checks collision, else the motions are checked for limits and singularity only.
     """
     if not passes or any(p.trajectory is None for p in passes):
         return ()
@@ -292,8 +287,7 @@ def plan_motions(
 
     model = next((getattr(s, "model", None) for s in sources if getattr(s, "model", None) is not None), None)
     kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange)
-    known = {m.name: m.clearance_bounds for m in previous if m.clearance_bounds is not None}
-    checker = MotionChecker(kin, model, problem.tolerances, problem.collision.check_step_m, known)
+    checker = MotionChecker(kin, model, problem.tolerances, problem.collision.check_step_m)
     planned = []
     for p in passes:
         assert p.trajectory is not None and p.timing is not None
