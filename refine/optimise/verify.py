@@ -68,6 +68,8 @@ class PathCheck:
         singularity_between: smallest scaled manipulability inside each segment, joints
             interpolated linearly (:func:`segment_singularity`) [-], shape (N-1,).
         violations: the runs that break a tolerance (empty when the path passes).
+        singularity_between_at: where in each segment that least measure is, as a fraction in
+            (0, 1), shape (N-1,); None where not kept.
     """
 
     poses: Array
@@ -78,6 +80,7 @@ class PathCheck:
     sigma_min: Array
     singularity_between: Array
     violations: tuple[Violation, ...]
+    singularity_between_at: Array | None = None
 
     @property
     def ok(self) -> bool:
@@ -198,7 +201,7 @@ def check_path(
         )
     sing_tol = tolerances.singularity_margin - 1e-9
     add(sing < sing_tol, "singularity", sing, "-", tolerances.singularity_margin, False)
-    between, _ = segment_singularity(kin, q)
+    between, between_at = segment_singularity(kin, q)
     add(
         np.append(between < sing_tol, False),
         "singularity between waypoints",
@@ -207,4 +210,4 @@ def check_path(
         tolerances.singularity_margin,
         False,
     )
-    return PathCheck(poses, pos_err, ori, joint_margin, sing, smin, between, tuple(violations))
+    return PathCheck(poses, pos_err, ori, joint_margin, sing, smin, between, tuple(violations), between_at)
