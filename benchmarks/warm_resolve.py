@@ -16,8 +16,11 @@ check's bounds; :mod:`refine.optimise.warm`). The changes:
 Each is repeated ``--repeat`` times, cold and warm alternating; printed per change: the median wall
 and CPU time of the whole call, the median CPU time of the warm call's stages, the status, the
 largest joint difference between the warm and the cold answer, and the 1-minute load average.
+``--stages`` also prints the median CPU time of each top-level stage of the whole call, cold and
+warm: the refinement (seed, solve, verify), the controller line's final check, TOPP-RA, the planned
+motions and the collision model (each function wrapped in a CPU stopwatch).
 
-    python3 benchmarks/warm_resolve.py [--repeat 7] [--changes part,cone]
+    python3 benchmarks/warm_resolve.py [--repeat 7] [--changes part,cone] [--stages]
 """
 
 from __future__ import annotations
@@ -33,6 +36,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 import refine
+import refine.run.solve
+import refine.run.stages
 from refine.frames import make_transform
 from refine.run.stages import fused_path
 
@@ -40,11 +45,40 @@ ROOT = Path(__file__).resolve().parents[1]
 ROBOT = "abb_irb4600_60_205"
 
 
+STAGE_CPU: dict[str, float] = {}
+"""CPU seconds per top-level stage of the call being timed (``--stages``)."""
+
+
+def _timed(name: str, fn):  # noqa: ANN001, ANN202 - any callable
+    def wrapper(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+        c0 = time.process_time()
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            STAGE_CPU[name] = STAGE_CPU.get(name, 0.0) + time.process_time() - c0
+
+    return wrapper
+
+
+def time_stages() -> None:
+    """Wrap the pipeline's top-level stages in CPU stopwatches (into :data:`STAGE_CPU`)."""
+    stages = refine.run.stages
+    refinement = stages.solve_refinement
+    stages.solve_refinement = _timed("refinement", refinement)
+    stages.controller_line_check = _timed("line", stages.controller_line_check)
+    stages.time_parameterise = _timed("toppra", stages.time_parameterise)
+    stages.plan_motions = _timed("motions", stages.plan_motions)
+    refine.run.solve.constraint_sources = _timed("collision model", stages.constraint_sources)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=7)
     parser.add_argument("--changes", default="part,cone,tool,base")
+    parser.add_argument("--stages", action="store_true", help="time the top-level stages in CPU too")
     args = parser.parse_args()
+    if args.stages:
+        time_stages()
     p = refine.load_problem(ROOT / "problems" / "glass_adhesive")
     f = fused_path(p)
     common = {
@@ -80,14 +114,17 @@ def main() -> int:
         positions, orientations = change.pop("positions"), change.pop("orientations")
         times: dict[str, list[tuple[float, float]]] = {"cold": [], "warm": []}
         stages: list[dict[str, float]] = []
+        top: dict[str, list[dict[str, float]]] = {"cold": [], "warm": []}
         answers = {}
         loads = []
         for _ in range(args.repeat):
             for way in ("cold", "warm"):
                 extra = {"previous": first} if way == "warm" else {}
+                STAGE_CPU.clear()
                 w0, c0 = time.perf_counter(), time.process_time()
                 r = refine.refine_path(ROBOT, positions, orientations, **change, **extra)
                 times[way].append((time.perf_counter() - w0, time.process_time() - c0))
+                top[way].append(dict(STAGE_CPU))
                 answers[way] = r
                 if way == "warm":
                     stages.append(dict(r.run.first.refinement.timings_s.cpu))
@@ -104,6 +141,13 @@ def main() -> int:
             "        warm stages, median CPU [ms]: "
             + ", ".join(f"{k} {statistics.median(s.get(k, 0.0) for s in stages) * 1e3:.1f}" for k in keys)
         )
+        if args.stages:
+            for way in ("cold", "warm"):
+                names = list(top[way][0])
+                print(
+                    f"        {way} top-level stages, median CPU [ms]: "
+                    + ", ".join(f"{k} {statistics.median(d[k] for d in top[way]) * 1e3:.1f}" for k in names)
+                )
     return 0
 
 

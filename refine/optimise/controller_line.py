@@ -241,6 +241,55 @@ def _segment_min(values: Array, segment: Array, count: int) -> Array:
     return out
 
 
+def _solve_line(
+    kin: TcpKinematics, q: Array, segment: Array, t: Array, q_lin: Array, wrist: Array
+) -> tuple[Array, Array, Array, Array, Array]:
+    """The line's IK at the samples and what depends on it and on ``q`` alone.
+
+    Returns:
+        the line's joints (M, n) [rad], the IK residual per sample (M,), and per segment the least
+        scaled manipulability [-], the largest distance of the joint-linear TCP from the chord [m]
+        and the largest angle between its orientation and the line's [deg], each (N-1,).
+    """
+    n_seg = len(q) - 1
+    spec = kin.robot.spec
+    poses = kin.poses(q)
+    targets = line_poses(poses, q, segment, t, kin, wrist)
+    lin_poses = kin.poses(q_lin)
+    start = _newton_start(kin, q, segment, t, q_lin, lin_poses, targets)
+    J_line = np.empty((len(t), 6, q.shape[1]))
+    q_line, err = solve_ik_batch(
+        kin,
+        targets,
+        start,
+        spec.lower,
+        spec.upper,
+        tol=IK_TOLERANCE,
+        max_iterations=60,
+        nullspace_gain=0.0,
+        jacobians_out=J_line,
+    )
+    sing = singularity_measures(kin, q_line, smallest=False, jacobians=J_line)[0]
+    a, b = poses[segment, :3, 3], poses[segment + 1, :3, 3]
+    chord = b - a
+    along = np.clip(
+        np.einsum("ij,ij->i", lin_poses[:, :3, 3] - a, chord)
+        / np.maximum(np.einsum("ij,ij->i", chord, chord), 1e-300),
+        0.0,
+        1.0,
+    )
+    off_line = np.linalg.norm(lin_poses[:, :3, 3] - (a + along[:, None] * chord), axis=1)
+    rel = np.einsum("kji,kjl->kil", lin_poses[:, :3, :3], targets[:, :3, :3])
+    angle = np.degrees(Rotation.from_matrix(rel).magnitude())
+    return (
+        q_line,
+        err,
+        _segment_min(sing, segment, n_seg),
+        _segment_max(off_line, segment, n_seg, 0.0),
+        _segment_max(angle, segment, n_seg, 0.0),
+    )
+
+
 def check_controller_lines(
     kin: TcpKinematics,
     q: Array,
@@ -250,6 +299,7 @@ def check_controller_lines(
     wrist: Array | None = None,
     clearance: Callable[[Array], tuple[Array | None, float]] | None = None,
     reach: Array | None = None,
+    known: LineCheck | None = None,
 ) -> LineCheck:
     """Check the controller's straight-line motion between the waypoints of joint path ``q``.
 
@@ -267,6 +317,12 @@ def check_controller_lines(
             collision check.
         reach: per joint, the largest distance of any robot or tool point from its axis [m], (n,),
             for ``clearance_change_m``; None without a collision check.
+        known: a check of the same joints ``q`` with the same kinematics and ``wrist`` (e.g. the
+            refinement's own of its answer, :meth:`ControllerLineSource.checked`): its line joints,
+            IK residuals and singularity measures are the same function of the same arguments, so
+            they are taken as they are, with its per-segment differences to the joint-linear
+            motion, and only the limits, the violations (at ``s``) and the clearance are done;
+            None to solve the line's IK.
 
     Returns:
         The per-segment figures and the violations.
@@ -274,30 +330,16 @@ def check_controller_lines(
     q = np.asarray(q, dtype=float)
     n_seg = len(q) - 1
     wrist = np.zeros(n_seg, dtype=bool) if wrist is None else np.asarray(wrist, dtype=bool)
-    poses = kin.poses(q)
     m, segment, t = sample_parameters(q)
     q_lin = q[segment] + t[:, None] * (q[segment + 1] - q[segment])
-    targets = line_poses(poses, q, segment, t, kin, wrist)
     spec = kin.robot.spec
-    lin_poses = kin.poses(q_lin)
-    start = _newton_start(kin, q, segment, t, q_lin, lin_poses, targets)
-    q_line, err = solve_ik_batch(
-        kin, targets, start, spec.lower, spec.upper, tol=IK_TOLERANCE, max_iterations=60, nullspace_gain=0.0
-    )
-    a, b = poses[segment, :3, 3], poses[segment + 1, :3, 3]
-    chord = b - a
-    along = np.clip(
-        np.einsum("ij,ij->i", lin_poses[:, :3, 3] - a, chord)
-        / np.maximum(np.einsum("ij,ij->i", chord, chord), 1e-300),
-        0.0,
-        1.0,
-    )
-    off_line = np.linalg.norm(lin_poses[:, :3, 3] - (a + along[:, None] * chord), axis=1)
-    rel = np.einsum("kji,kjl->kil", lin_poses[:, :3, :3], targets[:, :3, :3])
-    angle = np.degrees(Rotation.from_matrix(rel).magnitude())
+    if known is not None and known.q.shape == q_lin.shape:
+        q_line, err, sing_seg = known.q, known.ik_error, known.singularity
+        off_seg, angle_seg = known.position_difference_m, known.orientation_difference_deg
+    else:
+        q_line, err, sing_seg, off_seg, angle_seg = _solve_line(kin, q, segment, t, q_lin, wrist)
     joint_diff = np.degrees(np.abs(q_line - q_lin).max(axis=1))
     margins = np.minimum(q_line - spec.lower, spec.upper - q_line)
-    sing, _ = singularity_measures(kin, q_line, smallest=False)
 
     violations: list[Violation] = []
 
@@ -321,7 +363,6 @@ def check_controller_lines(
             margin,
             False,
         )
-    sing_seg = _segment_min(sing, segment, n_seg)
     sing_tol = tolerances.singularity_margin - SINGULARITY_TOLERANCE
     add(
         sing_seg < sing_tol,
@@ -352,8 +393,8 @@ def check_controller_lines(
         segment=segment,
         q=q_line,
         ik_error=err,
-        position_difference_m=_segment_max(off_line, segment, n_seg, 0.0),
-        orientation_difference_deg=_segment_max(angle, segment, n_seg, 0.0),
+        position_difference_m=off_seg,
+        orientation_difference_deg=angle_seg,
         joint_difference_deg=_segment_max(joint_diff, segment, n_seg, 0.0),
         joint_margin_rad=_segment_min(margins.min(axis=1), segment, n_seg),
         singularity=sing_seg,
@@ -411,9 +452,14 @@ def line_rows(kin: TcpKinematics, q: Array, line: LineCheck, tolerances: Toleran
         for i in np.flatnonzero(spec.upper[j] - line.q[:, j] < margin - JOINT_TOLERANCE_RAD):
             lower = -(spec.upper[j] - margin - bow[i, j])
             rows.append(LinearRow(int(seg[i]), float(t[i]), -e, float(lower), f"{LINE_LABEL} joint {j + 1} upper"))
-    if tolerances.singularity_margin > 0:
-        w, _ = singularity_measures(kin, line.q, smallest=False)
-        low = np.flatnonzero(w < tolerances.singularity_margin - SINGULARITY_TOLERANCE)
+    sing_limit = tolerances.singularity_margin - SINGULARITY_TOLERANCE
+    if tolerances.singularity_margin > 0 and (line.singularity < sing_limit).any():
+        # only the segments whose least measure (the same function of the same joints) is low
+        # hold a sample under the margin
+        near = np.flatnonzero(line.singularity[seg] < sing_limit)
+        w = np.full(len(t), np.inf)
+        w[near], _ = singularity_measures(kin, line.q[near], smallest=False)
+        low = np.flatnonzero(w < sing_limit)
         if low.size:
             at = line.q[low]
             stepped = (at[:, None, :] + GRADIENT_STEP_RAD * np.eye(n)[None]).reshape(-1, n)
@@ -448,18 +494,42 @@ class ControllerLineSource:
     wrist: Callable[[Array], Array] | None = None
     checks: int = 0
     _last: tuple[Array, LineCheck] | None = None
+    _last_wrist: Array | None = None
 
     def _check(self, q: Array) -> LineCheck:
         q = np.asarray(q, dtype=float)
         if self._last is not None and self._last[0].shape == q.shape and np.array_equal(self._last[0], q):
             return self._last[1]
         s = np.arange(len(q), dtype=float)
-        line = check_controller_lines(
-            self.kin, q, s, self.tolerances, wrist=None if self.wrist is None else self.wrist(q)
-        )
+        wrist = np.zeros(len(q) - 1, dtype=bool) if self.wrist is None else np.asarray(self.wrist(q), dtype=bool)
+        line = check_controller_lines(self.kin, q, s, self.tolerances, wrist=wrist)
         self.checks += 1
-        self._last = (q.copy(), line)
+        self._last, self._last_wrist = (q.copy(), line), wrist
         return line
+
+    def checked(self, q: Array, kin: TcpKinematics, wrist: Array) -> LineCheck | None:
+        """This source's line check of joints ``q`` (N, n), or None.
+
+        Given only when ``q`` are the last joints it checked, with kinematics equal to ``kin`` (the
+        robot, base, TCP and stationary tool) and the same ``wrist`` segments (N-1,): the check
+        :func:`check_controller_lines` would make of those arguments (its ``known``).
+        """
+        q = np.asarray(q, dtype=float)
+        if self._last is None or self._last[0].shape != q.shape or not np.array_equal(self._last[0], q):
+            return None
+        mine = self.kin
+        same_tool = (mine.tool_in_world is None) == (kin.tool_in_world is None) and (
+            kin.tool_in_world is None or np.array_equal(mine.tool_in_world, kin.tool_in_world)
+        )
+        if not (
+            mine.robot is kin.robot
+            and np.array_equal(mine.base_in_world, kin.base_in_world)
+            and np.array_equal(mine.tcp_in_flange, kin.tcp_in_flange)
+            and same_tool
+            and np.array_equal(self._last_wrist, np.asarray(wrist, dtype=bool))
+        ):
+            return None
+        return self._last[1]
 
     def violations(self, problem: object, q: Array) -> list[Violation]:
         """The line's joint-margin and singularity breaks of joints ``q`` (N, n), with the path's arc lengths."""

@@ -55,15 +55,25 @@ outside the rows is solved again with them. Steps under the bound do not bind, s
 complete problem's."""
 
 
-def new_singular_points(kin: TcpKinematics, q: Array, margin: float, active: ActiveSet) -> ActiveSet:
-    """Waypoints and segment points near the singularity not yet bounded in ``active``."""
+def new_singular_points(
+    kin: TcpKinematics, q: Array, margin: float, active: ActiveSet, check: PathCheck | None = None
+) -> ActiveSet:
+    """Waypoints and segment points near the singularity not yet bounded in ``active``.
+
+    ``check``: the check of ``q`` (:func:`refine.optimise.verify.check_path`), whose measures at the
+    waypoints and inside the segments are these (the same functions of the same joints), or None
+    to compute them.
+    """
     if margin <= 0:
         return ActiveSet()
-    w, _ = singularity_measures(kin, q, smallest=False)
+    if check is not None and check.singularity_between_at is not None:
+        w, w_between, frac = check.singularity, check.singularity_between, check.singularity_between_at
+    else:
+        w = singularity_measures(kin, q, smallest=False)[0]
+        w_between, frac = segment_singularity(kin, q)
     near = np.flatnonzero(w < 1.5 * margin)
     widened = np.unique(np.clip(near[:, None] + np.arange(-2, 3), 0, len(q) - 1)) if near.size else near
     waypoints = tuple(sorted(set(widened.tolist()) - set(active.singular_waypoints)))
-    w_between, frac = segment_singularity(kin, q)
     points = {(int(k), float(frac[k])) for k in np.flatnonzero(w_between < 1.5 * margin)}
     return ActiveSet(waypoints, tuple(sorted(points - set(active.singular_segments))))
 
@@ -206,7 +216,7 @@ def run_rounds(
         if not stats.get("success", False) or loop.outer >= loop.max_rounds:
             return x, stats, check, slack
         start = StageTimes.clock()  # finding what the next round adds is the outer loop's solving
-        more = new_singular_points(kin, q, margin, p.active)
+        more = new_singular_points(kin, q, margin, p.active, check)
         rows = tuple(r for src in sources for r in src.rows(p, q))
         steps = new_joint_steps(p, q)
         add_time(loop.timings, "solve", start)

@@ -68,6 +68,8 @@ class PathCheck:
         singularity_between: smallest scaled manipulability inside each segment, joints
             interpolated linearly (:func:`segment_singularity`) [-], shape (N-1,).
         violations: the runs that break a tolerance (empty when the path passes).
+        singularity_between_at: where in each segment that least measure is, as a fraction in
+            (0, 1), shape (N-1,); None where not kept.
     """
 
     poses: Array
@@ -78,6 +80,7 @@ class PathCheck:
     sigma_min: Array
     singularity_between: Array
     violations: tuple[Violation, ...]
+    singularity_between_at: Array | None = None
 
     @property
     def ok(self) -> bool:
@@ -96,19 +99,23 @@ def runs(mask: Array) -> list[tuple[int, int]]:
     return list(zip(starts.tolist(), ends.tolist(), strict=True))
 
 
-def singularity_measures(kin: TcpKinematics, q: Array, *, smallest: bool = True) -> tuple[Array, Array]:
+def singularity_measures(
+    kin: TcpKinematics, q: Array, *, smallest: bool = True, jacobians: Array | None = None
+) -> tuple[Array, Array]:
     """Scaled manipulability and smallest singular value of the scaled TCP Jacobian per row of ``q``.
 
     The Jacobian's linear rows are divided by the robot's reach so both halves are unitless.
     ``smallest=False`` skips the singular values (most of the cost) for callers that only need the
-    manipulability; the second array is then NaN.
+    manipulability; the second array is then NaN. ``jacobians``: the TCP Jacobians (N, 6, n) at
+    ``q`` when the caller has them already (:func:`refine.robot.kinematics.solve_ik_batch`'s
+    ``jacobians_out``), else None to compute them.
 
     Returns:
         ``sqrt(det(Js Jsᵀ))`` (N,) and the smallest singular value of ``Js`` (N,) [-]
         (0 for a robot with fewer than 6 joints).
     """
     scale = np.array([1.0 / kin.robot.spec.reach_m] * 3 + [1.0] * 3)[:, None]
-    Js = scale * kin.jacobians(q)
+    Js = scale * (kin.jacobians(q) if jacobians is None else jacobians)
     w = np.sqrt(np.clip(np.linalg.det(Js @ np.swapaxes(Js, 1, 2)), 0.0, None))
     if not smallest:
         return w, np.full(len(Js), np.nan)
@@ -194,7 +201,7 @@ def check_path(
         )
     sing_tol = tolerances.singularity_margin - 1e-9
     add(sing < sing_tol, "singularity", sing, "-", tolerances.singularity_margin, False)
-    between, _ = segment_singularity(kin, q)
+    between, between_at = segment_singularity(kin, q)
     add(
         np.append(between < sing_tol, False),
         "singularity between waypoints",
@@ -203,4 +210,4 @@ def check_path(
         tolerances.singularity_margin,
         False,
     )
-    return PathCheck(poses, pos_err, ori, joint_margin, sing, smin, between, tuple(violations))
+    return PathCheck(poses, pos_err, ori, joint_margin, sing, smin, between, tuple(violations), between_at)

@@ -250,6 +250,7 @@ def solve_ik_batch(
     position_only: bool = False,
     nullspace_gain: float = NULLSPACE_GAIN,
     axis_only: bool = False,
+    jacobians_out: Array | None = None,
 ) -> tuple[Array, Array]:
     """:func:`solve_ik` for many independent poses at once, vectorised over them.
 
@@ -257,7 +258,10 @@ def solve_ik_batch(
     pose and start per row. A pose whose error stalls (:data:`STALL_ITERATIONS`) is given up before
     ``max_iterations``. ``nullspace_gain``: a redundant arm's step toward mid-range in the task's
     null space per iteration [rad·rad]; 0 to keep the start's redundancy (a projection onto the
-    poses that moves the joints the least).
+    poses that moves the joints the least). ``jacobians_out``: an array (M, 6, n) to receive the
+    TCP Jacobian (:meth:`TcpKinematics.jacobian`) at each returned row, or None; every row's last
+    evaluation is at the joints returned (a row is never moved after its last check), so a caller
+    needing the Jacobians of the answer gets them without another pass.
 
     Returns:
         joints [rad] (M, n) and the remaining pose error norm per pose (M,).
@@ -275,6 +279,8 @@ def solve_ik_batch(
         if not active.size:
             break
         p, R, J = kin.batch(q[active])
+        if jacobians_out is not None:
+            jacobians_out[active] = J
         T = targets[active]
         e = T[:, :3, 3] - p
         if axis_only:

@@ -223,11 +223,12 @@ def refine_pass(
         if problem.robot.home_deg is None
         else np.radians(robot.spec.from_controller(problem.robot.home_deg))
     )
+    lines = line_source(problem, robot)
     refinement = solve_refinement(
         nlp,
         q0,
         home=home,
-        sources=sources + (line_source(problem, robot),),
+        sources=sources + (lines,),
         repair_max_slack_deg=problem.repair.max_slack_deg if problem.repair.enabled else None,
         time_limit_s=problem.repair.time_limit_s,
         warm=warm,
@@ -261,7 +262,7 @@ def refine_pass(
         kinds = kind_minima(source.model, refinement.q, clearance)  # the cell and self pairs apart
     line = None
     if refinement.status in EXECUTABLE:
-        line = controller_line_check(problem, robot, refinement.q, fused.s, sources)
+        line = controller_line_check(problem, robot, refinement.q, fused.s, sources, lines)
         watch.lap("line_check")
         if not line.ok:
             found = "; ".join(v.describe() for v in line.violations)
@@ -349,7 +350,12 @@ def line_source(problem: Problem, robot: Robot) -> Any:
 
 
 def controller_line_check(
-    problem: Problem, robot: Robot, q: np.ndarray, s: np.ndarray, sources: tuple[ConstraintSource, ...] = ()
+    problem: Problem,
+    robot: Robot,
+    q: np.ndarray,
+    s: np.ndarray,
+    sources: tuple[ConstraintSource, ...] = (),
+    lines: Any = None,
 ) -> Any:
     r"""The controller's straight-line motion between the waypoints of ``q``, checked.
 
@@ -358,6 +364,10 @@ def controller_line_check(
     ``$ORI_TYPE = #JOINT``), the wrist's joint-linear orientation. Clearance comes from the
     problem's collision source (the first that has a collision model): proved along the joints
     through the samples of the line, checked densely where the proof falls short.
+
+    ``lines``: the refinement's own line source (:func:`line_source`); where it checked these joints
+    with the same kinematics and wrist (:meth:`ControllerLineSource.checked`), the line's IK and
+    singularity measures are its, not solved again; None to solve them.
 
     Returns:
         a :class:`refine.optimise.controller_line.LineCheck`.
@@ -389,4 +399,5 @@ def controller_line_check(
         wrist=wrist,
         clearance=None if model is None else clearance,
         reach=None if model is None else joint_reach(model),
+        known=None if lines is None else lines.checked(q, kin, wrist),
     )

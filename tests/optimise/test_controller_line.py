@@ -155,3 +155,32 @@ def test_a_re_solve_of_a_moved_path_drops_the_line_s_rows_and_keeps_the_others(u
     )
     kept = ControllerLineSource(ur10e_kin, Tolerances()).refresh_rows(rows, np.zeros((3, 6)))
     assert [r.label for r in kept] == ["link_3 / table"]
+
+
+def test_the_final_check_takes_the_line_source_s_ik_only_for_the_same_joints_kinematics_and_wrist(ur10e_kin):
+    """The refinement's own line check of its answer stands in for the final check's IK, and gives
+    the final check what it finds by itself; other joints, another TCP or another wrist get none."""
+    from types import SimpleNamespace
+
+    from refine.optimise.controller_line import ControllerLineSource
+
+    q = np.array([Q0, Q0 + np.radians([150.0, 0, 0, 0, 0, 0]), Q0 + np.radians([150.0, 5.0, 0, 0, 0, 0])])
+    tol = Tolerances(joint_step_deg=360.0)
+    source = ControllerLineSource(ur10e_kin, tol)
+    source.violations(SimpleNamespace(fused=SimpleNamespace(s=np.arange(3.0))), q)
+    no_wrist = np.zeros(2, dtype=bool)
+    known = source.checked(q, ur10e_kin, no_wrist)
+    assert known is not None
+    s = np.array([0.0, 0.4, 0.5])
+    alone = check_controller_lines(ur10e_kin, q, s, tol)
+    taken = check_controller_lines(ur10e_kin, q, s, tol, known=known)
+    assert not alone.ok and taken.violations == alone.violations
+    np.testing.assert_array_equal(taken.q, alone.q)
+    for field in ("singularity", "ik_error", "position_difference_m", "orientation_difference_deg", "joint_margin_rad"):
+        np.testing.assert_array_equal(getattr(taken, field), getattr(alone, field))
+    tcp = np.eye(4)
+    tcp[2, 3] = 0.001
+    other_tcp = TcpKinematics(ur10e_kin.robot, np.eye(4), tcp)
+    assert source.checked(q, other_tcp, no_wrist) is None
+    assert source.checked(q, ur10e_kin, np.array([True, False])) is None
+    assert source.checked(q + 1e-9, ur10e_kin, no_wrist) is None

@@ -159,3 +159,26 @@ def test_jacobians_of_many_rows_equal_the_jacobian_of_each_and_finite_difference
         [(kin.pose(q + h * e)[:3, 3] - kin.pose(q - h * e)[:3, 3]) / (2 * h) for e in np.eye(6)]
     )
     np.testing.assert_allclose(J[0, :3], fd, atol=1e-6)
+
+
+def test_batched_ik_hands_back_the_jacobians_at_the_joints_it_returns(kin):
+    from scipy.spatial.transform import Rotation
+
+    from refine.robot.kinematics import solve_ik_batch
+
+    rng = np.random.default_rng(7)
+    lower, upper = kin.robot.spec.lower, kin.robot.spec.upper
+    q_true = rng.uniform(0.5 * lower, 0.5 * upper, size=(6, 6))
+    targets = kin.poses(q_true)
+    targets[5, :3, 3] += [5.0, 0.0, 0.0]  # out of reach: this row stalls, the others converge
+    starts = q_true + rng.normal(scale=[[0.0], [1e-4], [0.02], [0.1], [0.2], [0.05]], size=q_true.shape)
+    J_out = np.full((6, 6, 6), np.nan)
+    q, _ = solve_ik_batch(kin, targets, starts, lower, upper, jacobians_out=J_out)
+    h = 1e-7
+    for k in range(len(q)):  # the Jacobian by central differences of the forward kinematics at q[k]
+        J_fd = np.zeros((6, 6))
+        for j in range(6):
+            Tp, Tm = kin.pose(q[k] + h * np.eye(6)[j]), kin.pose(q[k] - h * np.eye(6)[j])
+            J_fd[:3, j] = (Tp[:3, 3] - Tm[:3, 3]) / (2 * h)
+            J_fd[3:, j] = Rotation.from_matrix(Tp[:3, :3] @ Tm[:3, :3].T).as_rotvec() / (2 * h)
+        np.testing.assert_allclose(J_out[k], J_fd, atol=1e-6)

@@ -369,3 +369,23 @@ def test_segment_samples_are_at_whole_fractions_of_each_segment(kin):
     np.testing.assert_allclose(frac, [2 / 3, 0.5])
     expected = singularity_measures(kin, np.array([q[0] + 2 / 3 * (q[1] - q[0]), 0.5 * (q[1] + q[2])]))[0]
     np.testing.assert_allclose(w, expected, rtol=1e-12)
+
+
+def test_the_rounds_take_the_singular_points_from_the_check_of_the_same_joints(kin):
+    """The wrist flip of the test above: the check keeps where in segment 1 the least measure is
+    (a third or two thirds of the way, +-0.4167 deg), and the rounds' new singular points taken
+    from it are those computed afresh."""
+    from refine.optimise.problem import ActiveSet
+    from refine.optimise.rounds import new_singular_points
+
+    rows = np.tile(Q0_DEG, (4, 1))
+    rows[:, 4] = [10.0, 1.25, -1.25, -10.0]
+    q = path(rows)
+    inner = np.array(Q0_DEG)
+    inner[4] = 1.25 - 2.5 / 3.0
+    margin = 1.001 * manipulability(np.radians(inner))
+    check = check_path(kin, q, fused_on(q), Tolerances(**{**LOOSE, "singularity_margin": margin}), False)
+    assert min(abs(check.singularity_between_at[1] - f) for f in (1 / 3, 2 / 3)) < 1e-12
+    fresh = new_singular_points(kin, q, margin, ActiveSet())
+    taken = new_singular_points(kin, q, margin, ActiveSet(), check)
+    assert taken == fresh and any(k == 1 for k, _ in taken.singular_segments)
