@@ -183,6 +183,9 @@ import { View, poseMatrix, matrixPose, rowMatrix } from "./scene3d.js";
     if (sections.indexOf("cell") >= 0) { view.setCell(scene.cell); }
     if (sections.indexOf("parts") >= 0) { view.setParts(scene.parts); }
     if (sections.indexOf("paths") >= 0) { colourBar(view.setPaths(scene.paths, $("quantity").value)); }
+    if (sections.indexOf("motions") >= 0) { view.setMotions(scene.motions || []); listMotions(); }
+    if (sections.indexOf("demo") >= 0) { view.setDemo(scene.demo || {}); }
+    ["recorded", "aligned", "motions"].forEach(function (k) { view.showLayer(k, $("show-" + k).checked); });
     showFrame();
     view.fit();
     $("scene").dataset.objects = JSON.stringify(view.names());
@@ -196,6 +199,40 @@ import { View, poseMatrix, matrixPose, rowMatrix } from "./scene3d.js";
     showFrames();
   }
   slider.addEventListener("input", showFrame);
+  ["recorded", "aligned", "motions"].forEach(function (k) {
+    $("show-" + k).addEventListener("change", function () { view.showLayer(k, $("show-" + k).checked); });
+  });
+  var selectedMotion = null;   // the name of the motion selected in the list (kept over re-solves)
+  function listMotions() {   // the planned motions, each a button: a click selects it in the 3D view
+    var ul = $("motions"), motions = scene.motions || [];
+    ul.textContent = "";
+    var n = motions.findIndex(function (m) { return m.name === selectedMotion; });
+    motions.forEach(function (m, k) {
+      var li = document.createElement("li");
+      li.dataset.index = String(k); li.className = "motion st-" + m.status + (k === n ? " selected" : "");
+      li.textContent = m.name + " (" + m.kind + ", " + m.status + ")";
+      li.addEventListener("click", function () { selectedMotion = k === n ? null : m.name; listMotions(); });
+      ul.appendChild(li);
+    });
+    $("motion-figures").textContent = n >= 0 ? motions[n].figures.join("\n") : "";
+    $("motion-figures").hidden = n < 0;
+    $("motions-none").hidden = motions.length > 0;
+    view.select(n >= 0 ? n : null);
+  }
+  view.onHover = function (hit, x, y) {   // the waypoint under the pointer: its index and figures
+    var box = $("hover");
+    if (!hit || !scene) { box.hidden = true; delete box.dataset.index; return; }
+    var path = scene.paths[hit.path], q = path.quantities, lines = [path.name + ", waypoint " + hit.index];
+    [["deviation", "deviation", "deg", 2], ["clearance", "clearance", "mm", 1], ["speed", "speed", "mm/s", 1], ["slack", "repair slack", "deg", 2]].forEach(function (row) {
+      var e = q[row[0]], v = e && e.values ? e.values[hit.index] : null;
+      lines.push(row[1] + " " + (v === null || v === undefined ? "-" : v.toFixed(row[3]) + " " + row[2]));
+    });
+    box.textContent = lines.join("\n");
+    box.dataset.index = String(hit.index);
+    var r = $("scene").getBoundingClientRect();
+    box.style.left = (x - r.left + 12) + "px"; box.style.top = (y - r.top + 12) + "px";
+    box.hidden = false;
+  };
   $("quantity").addEventListener("change", function () { if (scene) { colourBar(view.setPaths(scene.paths, $("quantity").value)); } });
   var timer = null;
   $("play").addEventListener("click", function () {

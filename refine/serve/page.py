@@ -59,6 +59,12 @@ ul.segments li{margin:.3em 0;cursor:pointer} ul.segments li:hover{text-decoratio
 pre#diff{background:#f4f4f4;padding:.5em;white-space:pre-wrap;max-height:20em;overflow:auto}
 button{margin:.2em .2em .2em 0} .row[hidden]{display:none} pre#cal-lines{white-space:pre-wrap} .note{color:#777}
 #scene{position:relative;overflow:hidden} #scene canvas{display:block}
+#hover{position:absolute;pointer-events:none;background:rgba(255,255,255,.92);border:1px solid #999;
+padding:.2em .4em;margin:0;font-size:.8em} #hover[hidden]{display:none}
+ul#motions{display:flex;flex-wrap:wrap;gap:.3em;list-style:none;padding:0;margin:.2em 0}
+li.motion{cursor:pointer;padding:.1em .4em;border:1px solid #8e44ad;border-radius:.3em}
+li.motion.st-failed{border-color:#c0392b;color:#c0392b} li.motion.selected{background:#8e44ad;color:#fff}
+pre#motion-figures{margin:.2em 0;font-size:.85em} #motion-box{padding:0 .6em}
 .ramp{display:inline-block;width:8em;height:.8em;margin:0 .3em;vertical-align:middle;
 background:linear-gradient(90deg,#440154,#3b528b,#21918c,#5ec962,#fde725)}
 """
@@ -192,7 +198,14 @@ def page_html(title: str, errors_js: str) -> str:
         f"{_gizmo_options()}</select></label><select id='gizmo-mode' aria-label='gizmo mode'>"
         "<option value='translate'>move</option><option value='rotate'>turn</option></select>"
         "<span class='note'>(the numbers on the left follow; a drag re-solves as it goes)</span></div>"
-        "<div id='scene'></div></div>"
+        "<div class='controls'><span>show</span>"
+        "<label><input type='checkbox' id='show-motions' checked> the planned motions (purple)</label>"
+        "<label><input type='checkbox' id='show-recorded' checked> the demonstration as recorded (green)</label>"
+        "<label><input type='checkbox' id='show-aligned'> as aligned in time to the CAD path (brown)</label></div>"
+        "<div id='scene'><pre id='hover' hidden></pre></div>"
+        "<div id='motion-box'><h2>Planned motions (a click selects one)</h2>"
+        "<p id='motions-none' class='note' hidden>no motions: a pass is not executable</p>"
+        "<ul id='motions'></ul><pre id='motion-figures' hidden></pre></div></div>"
         "<script type='module' src='page.js'></script></body></html>"
     )
 

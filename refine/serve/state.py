@@ -17,6 +17,7 @@ from refine.export.result_json import result_dict
 from refine.report.scene import rounded, scene_data
 from refine.report.verdict import verdict_html
 from refine.serve.edits import MOVE, POSES, SCALARS, pose_table
+from refine.serve.overlays import DemoCache, demonstration_lines, motion_lines
 
 if TYPE_CHECKING:
     from refine.serve.session import Answer, Session
@@ -73,19 +74,27 @@ def verdict_message(session: Session, answer: Answer) -> dict[str, Any]:
     return out
 
 
-SCENE_SECTIONS = ("cell", "parts", "robot", "paths")
+SCENE_SECTIONS = ("cell", "parts", "robot", "paths", "motions", "demo")
 """The sections of the scene, each sent only when it changed: the cell objects, the robot's shapes
-in their own frames, the robot's poses along the path, the paths and their colours."""
+in their own frames, the robot's poses along the path, the paths and their colours, the planned
+motions and the demonstration recorded and aligned (:mod:`refine.serve.overlays`)."""
 
 
-def scene_sections(answer: Answer) -> dict[str, str]:
+def scene_sections(answer: Answer, demos: DemoCache | None = None) -> dict[str, str]:
     """The 3D scene of ``answer`` (:func:`refine.report.scene.scene_data`) as JSON text by section."""
     assert answer.result is not None
     scene = scene_data(answer.result)
     robot = dict(scene["robot"])
     parts = robot.pop("parts")
     robot["flange"] = flange_poses(answer.result, robot["where"])
-    sections = {"cell": scene["cell"], "parts": parts, "robot": robot, "paths": scene["paths"]}
+    sections = {
+        "cell": scene["cell"],
+        "parts": parts,
+        "robot": robot,
+        "paths": scene["paths"],
+        "motions": motion_lines(answer.result),
+        "demo": demonstration_lines(answer.result, demos or DemoCache()),
+    }
     return {k: json.dumps(sections[k], allow_nan=False, separators=(",", ":")) for k in SCENE_SECTIONS}
 
 
@@ -119,10 +128,11 @@ class SceneDiff:
 
     def __init__(self) -> None:
         self.sent: dict[str, str] = {}
+        self.demos = DemoCache()
 
     def messages(self, answer: Answer) -> tuple[str, str]:
         """The message for the open pages (changed sections) and the whole scene for a new page."""
-        sections = scene_sections(answer)
+        sections = scene_sections(answer, self.demos)
         changed = [k for k in SCENE_SECTIONS if self.sent.get(k) != sections[k]]
         self.sent = sections
         return scene_message(answer.revision, sections, changed), scene_message(
