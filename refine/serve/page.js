@@ -1,7 +1,9 @@
 // refine serve: shows the states the server sends over the websocket and sends the changes.
 // The body's data-revision is the revision of the verdict shown, data-status its status and
 // data-scene the revision of the scene drawn, so a browser test can wait for them; #scene's
-// data-objects lists the names of what the 3D view draws.
+// data-objects lists the names of what the 3D view draws; data-first-scene-bytes and
+// data-first-scene-ms the size of the first scene message [characters] and when it was drawn
+// [ms after the page's start].
 import { View, poseMatrix, matrixPose, rowMatrix } from "./scene3d.js";
 {
   var params = new URLSearchParams(window.location.search);
@@ -286,6 +288,11 @@ import { View, poseMatrix, matrixPose, rowMatrix } from "./scene3d.js";
   var proto = window.location.protocol === "https:" ? "wss://" : "ws://";
   var base = window.location.pathname.replace(/[^/]*$/, "");
   socket = new WebSocket(proto + window.location.host + base + url("ws"));
-  socket.onmessage = function (ev) { onMessage(JSON.parse(ev.data)); };
+  socket.onmessage = function (ev) {
+    var msg = JSON.parse(ev.data);
+    if (msg.type === "scene" && !document.body.dataset.firstSceneBytes) { document.body.dataset.firstSceneBytes = String(ev.data.length); }
+    onMessage(msg);
+    if (msg.type === "scene" && !document.body.dataset.firstSceneMs) { document.body.dataset.firstSceneMs = String(Math.round(performance.now())); }
+  };
   socket.onclose = function () { $("state").textContent = "the server closed the connection"; $("state").className = "busy"; };
 }

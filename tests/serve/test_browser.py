@@ -71,7 +71,7 @@ def pages(server, summary):
             page.set_default_timeout(SOLVE_S * 1000)  # a loaded machine: the server shares two cores
             page.goto(server["url"], wait_until="domcontentloaded")
             tabs.append(page)
-        yield {"tabs": tabs, "errors": errors}
+        yield {"tabs": tabs, "errors": errors, "summary": summary}
         browser.close()
 
 
@@ -100,6 +100,21 @@ def _the_first_screen_shows_the_cell_and_the_verdict(pages):
     page.screenshot(path=str(ARTIFACTS / "first-screen.png"))
     assert pages["errors"] == []
     assert page.is_hidden("#js-errors")
+    # what the first screen cost: every file the page loaded and the first scene over the websocket
+    files = page.evaluate(
+        "() => performance.getEntriesByType('navigation').concat(performance.getEntriesByType('resource'))"
+        ".map((e) => [e.name, e.decodedBodySize])"
+    )
+    scene_bytes = int(page.get_attribute("body", "data-first-scene-bytes"))
+    total = sum(size for _, size in files) + scene_bytes
+    shown_ms = int(page.get_attribute("body", "data-first-scene-ms"))
+    largest = max(files, key=lambda f: f[1])
+    pages["summary"].append(
+        f"refine serve first screen: {total / 1e6:.2f} MB ({len(files)} files, the largest "
+        f"{largest[0].rsplit('/', 1)[-1]} {largest[1] / 1e6:.2f} MB; the first scene message "
+        f"{scene_bytes / 1e6:.3f} MB), its scene drawn {shown_ms / 1e3:.1f} s after the page opened "
+        f"(the first solve included; load {os.getloadavg()[0]:.1f})"
+    )
 
 
 def _the_tcp_gizmo_sits_where_the_flange_pose_and_tcp_in_flange_put_the_tcp_on_the_path(server, pages):
