@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 import threading
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -102,7 +103,7 @@ def motion_lines(result: Any) -> list[dict[str, Any]]:
 
 
 class DemoCache:
-    """The raw and the cleaned demonstration, read once per demonstration settings (a file changed is read again)."""
+    """The raw and the cleaned demonstration and the robot's visual meshes, each read once per file (a file changed is read again)."""
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
@@ -120,6 +121,15 @@ class DemoCache:
                 raw = read_tracker_log(settings)
                 self._logs, self._key = (raw, clean_demonstration(raw, settings)), key
             return self._logs
+
+    def visual(self, robot: Any) -> tuple[list[Any], str]:
+        """:func:`visual_meshes` of ``robot``'s URDF, read once per file."""
+        path = Path(robot.spec.urdf)
+        key = (str(path), path.stat().st_mtime_ns if path.exists() else None)
+        with self._lock:
+            if getattr(self, "_visual_key", None) != key:
+                self._visual, self._visual_key = visual_meshes(path), key
+            return self._visual
 
 
 def demonstration_lines(result: Any, cache: DemoCache) -> dict[str, Any]:
@@ -143,3 +153,86 @@ def demonstration_lines(result: Any, cache: DemoCache) -> dict[str, Any]:
         "recorded": {"title": f"recorded ({problem.demonstration.file.name})", **_xyz(recorded)},
         "aligned": {"title": "aligned in time to the CAD path (before the tracker correction)", **_xyz(np.vstack(aligned))},
     }
+
+
+VISUAL_FACES = 60_000
+"""Most triangles of a robot's visual meshes the page is sent (sent once, with the robot's shapes):
+a mesh is decimated to its share of them (quadric decimation, trimesh)."""
+
+
+def _origin(element: Any) -> np.ndarray:
+    from refine.frames import make_transform, matrix_from_fixed_xyz
+
+    origin = element.find("origin")
+    if origin is None:
+        return np.eye(4)
+    xyz = [float(v) for v in (origin.get("xyz") or "0 0 0").split()]
+    rpy = [float(v) for v in (origin.get("rpy") or "0 0 0").split()]
+    return make_transform(matrix_from_fixed_xyz(rpy, degrees=False), xyz)
+
+
+def _meshes(root: Any, tag: str) -> list[tuple[str, str, str, np.ndarray, list[float]]]:
+    """(link, name, filename, link_T_mesh, scale) of every ``<tag>`` mesh of the URDF."""
+    out = []
+    for link in root.iter("link"):
+        for k, element in enumerate(link.findall(tag)):
+            mesh = element.find("geometry/mesh")
+            if mesh is None or not mesh.get("filename"):
+                continue
+            scale = [float(v) for v in (mesh.get("scale") or "1 1 1").split()]
+            name = element.get("name") or f"{link.get('name')}_{k}"
+            out.append((link.get("name", ""), name, mesh.get("filename"), _origin(element), scale))
+    return out
+
+
+def visual_meshes(urdf: Any) -> tuple[list[tuple[str, str, Any, np.ndarray]], str]:
+    """The ``<visual>`` meshes of a robot's URDF where they are not its collision meshes, and a note.
+
+    Returns:
+        ``[(name, link, trimesh mesh in the link's mesh frame, link_T_mesh)]`` read by the loader
+        the collision side uses (:func:`refine.robot.geometry.read_mesh`, scaled, decimated to
+        :data:`VISUAL_FACES` in all), or ``[]`` with why none is drawn: every visual names the same
+        file at the same place as a collision element (the registry's robots: their visual meshes
+        are their convex collision pieces), a URL (``package://``) rather than a path beside the
+        URDF, or a file that cannot be read.
+    """
+    from lxml import etree
+
+    from refine.errors import InputError
+    from refine.robot.geometry import read_mesh
+
+    root = etree.parse(str(urdf)).getroot()
+    visual, collision = _meshes(root, "visual"), _meshes(root, "collision")
+    if not visual:
+        return [], "the robot's URDF has no visual meshes: its collision shapes are drawn"
+
+    def key(m: tuple[str, str, str, np.ndarray, list[float]]) -> tuple[Any, ...]:
+        return (m[0], m[2], tuple(np.round(m[3], 9).ravel()), tuple(m[4]))
+
+    if {key(m) for m in visual} <= {key(m) for m in collision}:
+        return [], "the robot's visual meshes are its collision shapes (drawn)"
+    folder = Path(urdf).parent
+    loaded = []
+    for link, name, filename, T, scale in visual:
+        if "://" in filename:
+            return [], f"visual mesh {filename!r} is a URL, not a file beside the URDF: the collision shapes are drawn"
+        try:
+            mesh = read_mesh(folder / filename, f"{Path(urdf).name}: link {link!r}, visual {name!r}")
+        except InputError as e:
+            return [], f"{e}: the collision shapes are drawn"
+        mesh.apply_transform(np.diag([*scale, 1.0]))
+        loaded.append((f"{link}/{name} (visual)", link, mesh, T))
+    total = sum(len(m.faces) for _, _, m, _ in loaded)
+    if total > VISUAL_FACES:
+        share = VISUAL_FACES / total
+        loaded = [(n, link, _decimated(m, share), T) for n, link, m, T in loaded]
+    faces = sum(len(m.faces) for _, _, m, _ in loaded)
+    return loaded, f"visual meshes: {len(loaded)} ({faces} triangles)"
+
+
+def _decimated(mesh: Any, share: float) -> Any:
+    """``mesh`` with about ``share`` of its triangles (trimesh's quadric decimation), or as it is."""
+    try:
+        return mesh.simplify_quadric_decimation(percent=1.0 - share)
+    except Exception:  # the decimation's optional package is missing: the mesh is sent whole
+        return mesh

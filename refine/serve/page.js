@@ -83,7 +83,17 @@ import { View, poseMatrix, matrixPose, rowMatrix } from "./scene3d.js";
     }).catch(function (e) { $("written").textContent = ""; showError(e.message); });
   });
 
-  var calibration = null;
+  var calibration = null, plotlyLoaded = null;
+  function withPlotly() {   // Plotly (4.8 MB) is loaded when the first calibration is fitted, not with the page
+    if (!plotlyLoaded) {
+      plotlyLoaded = new Promise(function (resolve, reject) {
+        var tag = document.createElement("script");
+        tag.src = url("plotly.js"); tag.onload = resolve; tag.onerror = function () { reject(new Error("plotly.js did not load")); };
+        document.head.appendChild(tag);
+      });
+    }
+    return plotlyLoaded;
+  }
   function calibrationInputs() {
     var inputs = $("cal-kind").selectedOptions[0].dataset.inputs.split(" ");
     ["log", "readings", "six", "points"].forEach(function (name) {
@@ -100,7 +110,8 @@ import { View, poseMatrix, matrixPose, rowMatrix } from "./scene3d.js";
     if (inputs.indexOf("readings") >= 0) { body.readings = $("cal-readings").value; }
     if (inputs.indexOf("six") >= 0) { body.six_point = $("cal-six").checked; }
     if (inputs.indexOf("points") >= 0) { body.points = $("cal-points").value; }
-    api("POST", "api/calibrate", body).then(function (j) {
+    Promise.all([api("POST", "api/calibrate", body), withPlotly()]).then(function (both) {
+      var j = both[0];
       calibration = j;
       $("cal-lines").textContent = j.lines.join("\n"); $("cal-lines").hidden = false;
       var names = j.labels.length ? j.labels : j.residuals_mm.map(function (r, k) { return k; });
@@ -183,11 +194,17 @@ import { View, poseMatrix, matrixPose, rowMatrix } from "./scene3d.js";
   function draw(sections) {
     if (!scene || !scene.parts || !scene.robot) { return; }
     if (sections.indexOf("cell") >= 0) { view.setCell(scene.cell); }
-    if (sections.indexOf("parts") >= 0) { view.setParts(scene.parts); }
+    if (sections.indexOf("parts") >= 0) {
+      view.setParts(scene.parts);
+      var visual = scene.parts.some(function (p) { return p.kind === "visual"; });
+      $("show-collision").disabled = !visual;
+      if (!visual) { $("show-collision").checked = true; }
+    }
+    if (sections.indexOf("robot") >= 0) { $("visual-note").textContent = "(" + (scene.robot.visual_note || "") + ")"; }
     if (sections.indexOf("paths") >= 0) { colourBar(view.setPaths(scene.paths, $("quantity").value)); }
     if (sections.indexOf("motions") >= 0) { view.setMotions(scene.motions || []); listMotions(); }
     if (sections.indexOf("demo") >= 0) { view.setDemo(scene.demo || {}); }
-    ["recorded", "aligned", "motions"].forEach(function (k) { view.showLayer(k, $("show-" + k).checked); });
+    ["recorded", "aligned", "motions", "collision"].forEach(function (k) { view.showLayer(k, $("show-" + k).checked); });
     showFrame();
     view.fit();
     $("scene").dataset.objects = JSON.stringify(view.names());
@@ -201,7 +218,7 @@ import { View, poseMatrix, matrixPose, rowMatrix } from "./scene3d.js";
     showFrames();
   }
   slider.addEventListener("input", showFrame);
-  ["recorded", "aligned", "motions"].forEach(function (k) {
+  ["recorded", "aligned", "motions", "collision"].forEach(function (k) {
     $("show-" + k).addEventListener("change", function () { view.showLayer(k, $("show-" + k).checked); });
   });
   var selectedMotion = null;   // the name of the motion selected in the list (kept over re-solves)

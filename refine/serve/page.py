@@ -4,8 +4,9 @@ The page carries no data of its own: ``page.js`` opens the websocket, shows ever
 sends (the verdict as the report draws it, the scene, the values in the controls) and sends the
 changes; ``scene3d.js`` draws the cell with three.js and holds the gizmo. three.js is shipped in
 ``refine/serve/three/`` and Plotly's JavaScript (the calibration's residual plot) comes from the
-installed ``plotly`` package, both served by the app, so the page works without a network. Uncaught errors and ``console.error`` calls are listed in
-``#js-errors`` (hidden while empty), as in the report.
+installed ``plotly`` package (loaded when the first calibration is fitted, not with the page),
+both served by the app, so the page works without a network. Uncaught errors and ``console.error``
+calls are listed in ``#js-errors`` (hidden while empty), as in the report.
 """
 
 from __future__ import annotations
@@ -151,8 +152,7 @@ def page_html(title: str, errors_js: str) -> str:
         "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
         f"<title>refine serve: {html.escape(title)}</title>"
         f"<script>{errors_js}</script><style>{_CSS}</style>"
-        "<script src='plotly.js'></script>"
-        "<script type='importmap'>{\"imports\": {\"three\": \"./three/three.module.min.js\", "
+                "<script type='importmap'>{\"imports\": {\"three\": \"./three/three.module.min.js\", "
         "\"three/addons/\": \"./three/\"}}</script></head><body>"
         "<div id='side'><ul id='js-errors' hidden></ul>"
         "<div id='state'>connecting...</div><div id='error' hidden></div>"
@@ -201,7 +201,9 @@ def page_html(title: str, errors_js: str) -> str:
         "<div class='controls'><span>show</span>"
         "<label><input type='checkbox' id='show-motions' checked> the planned motions (purple)</label>"
         "<label><input type='checkbox' id='show-recorded' checked> the demonstration as recorded (green)</label>"
-        "<label><input type='checkbox' id='show-aligned'> as aligned in time to the CAD path (brown)</label></div>"
+        "<label><input type='checkbox' id='show-aligned'> as aligned in time to the CAD path (brown)</label>"
+        "<label><input type='checkbox' id='show-collision' disabled> the robot's collision shapes</label>"
+        "<span id='visual-note' class='note'></span></div>"
         "<div id='scene'><pre id='hover' hidden></pre></div>"
         "<div id='motion-box'><h2>Planned motions (a click selects one)</h2>"
         "<p id='motions-none' class='note' hidden>no motions: a pass is not executable</p>"

@@ -129,8 +129,12 @@ export class View {
   setParts(parts) {
     dispose(this.groups.robot);
     this.robotMeshes = parts.map((part) => {
-      const mesh = new THREE.Mesh(meshGeometry(part), new THREE.MeshLambertMaterial({ color: part.kind === "tool" ? 0x505050 : 0xf39c12 }));
+      const collision = part.kind === "robot" && parts.some((p) => p.kind === "visual");
+      const mesh = new THREE.Mesh(meshGeometry(part), new THREE.MeshLambertMaterial({ color: part.kind === "tool" ? 0x505050 : (collision ? 0x5dade2 : 0xf39c12),
+        transparent: collision, opacity: collision ? 0.5 : 1 }));
       mesh.name = part.name;
+      mesh.userData.collision = collision;   // a collision shape drawn beside the visual meshes: on demand
+      mesh.visible = !collision || this.showCollision === true;
       mesh.matrixAutoUpdate = false;
       this.groups.robot.add(mesh);
       return mesh;
@@ -242,7 +246,13 @@ export class View {
     this.render();
   }
 
-  showLayer(what, on) {   // "recorded", "aligned" or "motions" on or off
+  showLayer(what, on) {   // "recorded", "aligned", "motions" or "collision" (beside visual meshes) on or off
+    if (what === "collision") {
+      this.showCollision = on;
+      this.robotMeshes.forEach((m) => { if (m.userData.collision) { m.visible = on; } });
+      this.render();
+      return;
+    }
     const o = what === "motions" ? this.groups.motions : (this.demoLines || {})[what];
     if (o) { o.visible = on; this.render(); }
   }

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from refine.export.result_json import result_dict
-from refine.report.scene import rounded, scene_data
+from refine.report.scene import _mesh_json, rounded, scene_data
 from refine.report.verdict import verdict_html
 from refine.serve.edits import MOVE, POSES, SCALARS, pose_table
 from refine.serve.overlays import DemoCache, demonstration_lines, motion_lines
@@ -87,6 +87,11 @@ def scene_sections(answer: Answer, demos: DemoCache | None = None) -> dict[str, 
     robot = dict(scene["robot"])
     parts = robot.pop("parts")
     robot["flange"] = flange_poses(answer.result, robot["where"])
+    visual, robot["visual_note"] = (demos or DemoCache()).visual(answer.result.robot)
+    if visual:  # the visual meshes after the collision shapes, their poses after theirs in every frame
+        parts = parts + [_mesh_json(name, mesh, np.eye(4), "visual") for name, _, mesh, _ in visual]
+        extra = visual_poses(answer.result, robot["where"], visual)
+        robot["frames"] = [f + e for f, e in zip(robot["frames"], extra, strict=True)]
     sections = {
         "cell": scene["cell"],
         "parts": parts,
@@ -110,6 +115,16 @@ def flange_poses(result: Any, where: list[list[int]]) -> list[list[float | None]
     for i, k in where:
         T = base @ robot.link_poses(result.passes[i].refinement.q[k])[robot.spec.flange_frame]
         out.append(rounded(T[:3, :].ravel(), 6))
+    return out
+
+
+def visual_poses(result: Any, where: list[list[int]], visual: list[Any]) -> list[list[list[float | None]]]:
+    """Each visual mesh's pose in {F} at each robot frame of the scene, as 12 numbers."""
+    base = np.asarray(result.problem.robot.base_in_world, dtype=float)
+    out = []
+    for i, k in where:
+        links = result.robot.link_poses(result.passes[i].refinement.q[k])
+        out.append([rounded((base @ links[link] @ T)[:3, :].ravel(), 5) for _, link, _, T in visual])
     return out
 
 
