@@ -404,6 +404,9 @@ def _the_demonstration_is_drawn_as_recorded_and_as_aligned_beside_the_path(pages
     page.screenshot(path=str(ARTIFACTS / "demonstration-aligned.png"))
     page.check("#show-recorded")
     page.uncheck("#show-aligned")
+    # the registry's ABB has no visual meshes of its own (its <visual> elements name its collision pieces)
+    assert page.is_disabled("#show-collision")
+    assert "visual meshes are its collision shapes" in page.inner_text("#visual-note")
 
 
 def _hovering_a_waypoint_labels_its_index_deviation_clearance_and_speed(server, pages):
