@@ -455,6 +455,22 @@ def _every_planned_motion_of_result_json_is_drawn_and_selectable(server, pages):
     page.uncheck("#show-motions")
     assert not page.evaluate("() => document.getElementById('scene').view.groups.motions.visible")
     page.check("#show-motions")
+    # the path coloured by each of the four quantities, with its colour bar; the ranges against result.json
+    metrics = doc["metrics"]
+    for quantity in ("deviation", "clearance", "slack", "speed"):
+        page.select_option("#quantity", quantity)
+        assert page.is_visible("#colour-bar"), quantity
+        assert page.inner_text("#quantity-note") == "", quantity
+        lo, hi = float(page.inner_text("#colour-lo")), float(page.inner_text("#colour-hi"))
+        if quantity == "deviation":  # the app's warm solve and the written run's agree to 0.02 deg
+            assert abs(hi - metrics["max_orientation_deviation_deg"]) < 0.02
+        elif quantity == "slack":  # the glass cell needed no repair
+            assert lo == hi == 0.0 == metrics["max_slack_deg"]
+        elif quantity == "clearance":
+            assert 0.0 < lo < hi
+        else:  # the planned speed, from rest at the path's ends
+            assert lo == 0.0 < hi
+    page.select_option("#quantity", "deviation")
     assert pages["errors"] == []
 
 
