@@ -200,7 +200,7 @@ import { View, poseMatrix, matrixPose, rowMatrix } from "./scene3d.js";
       $("show-collision").disabled = !visual;
       if (!visual) { $("show-collision").checked = true; }
     }
-    if (sections.indexOf("robot") >= 0) { $("visual-note").textContent = "(" + (scene.robot.visual_note || "") + ")"; }
+    if (sections.indexOf("robot") >= 0) { $("visual-note").textContent = scene.robot.visual_note || ""; }
     if (sections.indexOf("paths") >= 0) { colourBar(view.setPaths(scene.paths, $("quantity").value)); }
     if (sections.indexOf("motions") >= 0) { view.setMotions(scene.motions || []); listMotions(); }
     if (sections.indexOf("demo") >= 0) { view.setDemo(scene.demo || {}); }
