@@ -1,7 +1,9 @@
 // refine serve: shows the states the server sends over the websocket and sends the changes.
 // The body's data-revision is the revision of the verdict shown, data-status its status and
 // data-scene the revision of the scene drawn, so a browser test can wait for them; #scene's
-// data-objects lists the names of what the 3D view draws.
+// data-objects lists the names of what the 3D view draws; data-first-scene-bytes and
+// data-first-scene-ms the size of the first scene message [characters] and when it was drawn
+// [ms after the page's start].
 import { View, poseMatrix, matrixPose, rowMatrix } from "./scene3d.js";
 {
   var params = new URLSearchParams(window.location.search);
@@ -81,7 +83,17 @@ import { View, poseMatrix, matrixPose, rowMatrix } from "./scene3d.js";
     }).catch(function (e) { $("written").textContent = ""; showError(e.message); });
   });
 
-  var calibration = null;
+  var calibration = null, plotlyLoaded = null;
+  function withPlotly() {   // Plotly (4.8 MB) is loaded when the first calibration is fitted, not with the page
+    if (!plotlyLoaded) {
+      plotlyLoaded = new Promise(function (resolve, reject) {
+        var tag = document.createElement("script");
+        tag.src = url("plotly.js"); tag.onload = resolve; tag.onerror = function () { reject(new Error("plotly.js did not load")); };
+        document.head.appendChild(tag);
+      });
+    }
+    return plotlyLoaded;
+  }
   function calibrationInputs() {
     var inputs = $("cal-kind").selectedOptions[0].dataset.inputs.split(" ");
     ["log", "readings", "six", "points"].forEach(function (name) {
@@ -98,7 +110,8 @@ import { View, poseMatrix, matrixPose, rowMatrix } from "./scene3d.js";
     if (inputs.indexOf("readings") >= 0) { body.readings = $("cal-readings").value; }
     if (inputs.indexOf("six") >= 0) { body.six_point = $("cal-six").checked; }
     if (inputs.indexOf("points") >= 0) { body.points = $("cal-points").value; }
-    api("POST", "api/calibrate", body).then(function (j) {
+    Promise.all([api("POST", "api/calibrate", body), withPlotly()]).then(function (both) {
+      var j = both[0];
       calibration = j;
       $("cal-lines").textContent = j.lines.join("\n"); $("cal-lines").hidden = false;
       var names = j.labels.length ? j.labels : j.residuals_mm.map(function (r, k) { return k; });
@@ -181,8 +194,17 @@ import { View, poseMatrix, matrixPose, rowMatrix } from "./scene3d.js";
   function draw(sections) {
     if (!scene || !scene.parts || !scene.robot) { return; }
     if (sections.indexOf("cell") >= 0) { view.setCell(scene.cell); }
-    if (sections.indexOf("parts") >= 0) { view.setParts(scene.parts); }
+    if (sections.indexOf("parts") >= 0) {
+      view.setParts(scene.parts);
+      var visual = scene.parts.some(function (p) { return p.kind === "visual"; });
+      $("show-collision").disabled = !visual;
+      if (!visual) { $("show-collision").checked = true; }
+    }
+    if (sections.indexOf("robot") >= 0) { $("visual-note").textContent = scene.robot.visual_note || ""; }
     if (sections.indexOf("paths") >= 0) { colourBar(view.setPaths(scene.paths, $("quantity").value)); }
+    if (sections.indexOf("motions") >= 0) { view.setMotions(scene.motions || []); listMotions(); }
+    if (sections.indexOf("demo") >= 0) { view.setDemo(scene.demo || {}); }
+    ["recorded", "aligned", "motions", "collision"].forEach(function (k) { view.showLayer(k, $("show-" + k).checked); });
     showFrame();
     view.fit();
     $("scene").dataset.objects = JSON.stringify(view.names());
@@ -196,6 +218,40 @@ import { View, poseMatrix, matrixPose, rowMatrix } from "./scene3d.js";
     showFrames();
   }
   slider.addEventListener("input", showFrame);
+  ["recorded", "aligned", "motions", "collision"].forEach(function (k) {
+    $("show-" + k).addEventListener("change", function () { view.showLayer(k, $("show-" + k).checked); });
+  });
+  var selectedMotion = null;   // the name of the motion selected in the list (kept over re-solves)
+  function listMotions() {   // the planned motions, each a button: a click selects it in the 3D view
+    var ul = $("motions"), motions = scene.motions || [];
+    ul.textContent = "";
+    var n = motions.findIndex(function (m) { return m.name === selectedMotion; });
+    motions.forEach(function (m, k) {
+      var li = document.createElement("li");
+      li.dataset.index = String(k); li.className = "motion st-" + m.status + (k === n ? " selected" : "");
+      li.textContent = m.name + " (" + m.kind + ", " + m.status + ")";
+      li.addEventListener("click", function () { selectedMotion = k === n ? null : m.name; listMotions(); });
+      ul.appendChild(li);
+    });
+    $("motion-figures").textContent = n >= 0 ? motions[n].figures.join("\n") : "";
+    $("motion-figures").hidden = n < 0;
+    $("motions-none").hidden = motions.length > 0;
+    view.select(n >= 0 ? n : null);
+  }
+  view.onHover = function (hit, x, y) {   // the waypoint under the pointer: its index and figures
+    var box = $("hover");
+    if (!hit || !scene) { box.hidden = true; delete box.dataset.index; return; }
+    var path = scene.paths[hit.path], q = path.quantities, lines = [path.name + ", waypoint " + hit.index];
+    [["deviation", "deviation", "deg", 2], ["clearance", "clearance", "mm", 1], ["speed", "speed", "mm/s", 1], ["slack", "repair slack", "deg", 2]].forEach(function (row) {
+      var e = q[row[0]], v = e && e.values ? e.values[hit.index] : null;
+      lines.push(row[1] + " " + (v === null || v === undefined ? "-" : v.toFixed(row[3]) + " " + row[2]));
+    });
+    box.textContent = lines.join("\n");
+    box.dataset.index = String(hit.index);
+    var r = $("scene").getBoundingClientRect();
+    box.style.left = (x - r.left + 12) + "px"; box.style.top = (y - r.top + 12) + "px";
+    box.hidden = false;
+  };
   $("quantity").addEventListener("change", function () { if (scene) { colourBar(view.setPaths(scene.paths, $("quantity").value)); } });
   var timer = null;
   $("play").addEventListener("click", function () {
@@ -249,6 +305,11 @@ import { View, poseMatrix, matrixPose, rowMatrix } from "./scene3d.js";
   var proto = window.location.protocol === "https:" ? "wss://" : "ws://";
   var base = window.location.pathname.replace(/[^/]*$/, "");
   socket = new WebSocket(proto + window.location.host + base + url("ws"));
-  socket.onmessage = function (ev) { onMessage(JSON.parse(ev.data)); };
+  socket.onmessage = function (ev) {
+    var msg = JSON.parse(ev.data);
+    if (msg.type === "scene" && !document.body.dataset.firstSceneBytes) { document.body.dataset.firstSceneBytes = String(ev.data.length); }
+    onMessage(msg);
+    if (msg.type === "scene" && !document.body.dataset.firstSceneMs) { document.body.dataset.firstSceneMs = String(Math.round(performance.now())); }
+  };
   socket.onclose = function () { $("state").textContent = "the server closed the connection"; $("state").className = "busy"; };
 }

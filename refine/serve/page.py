@@ -4,8 +4,9 @@ The page carries no data of its own: ``page.js`` opens the websocket, shows ever
 sends (the verdict as the report draws it, the scene, the values in the controls) and sends the
 changes; ``scene3d.js`` draws the cell with three.js and holds the gizmo. three.js is shipped in
 ``refine/serve/three/`` and Plotly's JavaScript (the calibration's residual plot) comes from the
-installed ``plotly`` package, both served by the app, so the page works without a network. Uncaught errors and ``console.error`` calls are listed in
-``#js-errors`` (hidden while empty), as in the report.
+installed ``plotly`` package (loaded when the first calibration is fitted, not with the page),
+both served by the app, so the page works without a network. Uncaught errors and ``console.error``
+calls are listed in ``#js-errors`` (hidden while empty), as in the report.
 """
 
 from __future__ import annotations
@@ -59,6 +60,12 @@ ul.segments li{margin:.3em 0;cursor:pointer} ul.segments li:hover{text-decoratio
 pre#diff{background:#f4f4f4;padding:.5em;white-space:pre-wrap;max-height:20em;overflow:auto}
 button{margin:.2em .2em .2em 0} .row[hidden]{display:none} pre#cal-lines{white-space:pre-wrap} .note{color:#777}
 #scene{position:relative;overflow:hidden} #scene canvas{display:block}
+#hover{position:absolute;pointer-events:none;background:rgba(255,255,255,.92);border:1px solid #999;
+padding:.2em .4em;margin:0;font-size:.8em} #hover[hidden]{display:none}
+ul#motions{display:flex;flex-wrap:wrap;gap:.3em;list-style:none;padding:0;margin:.2em 0}
+li.motion{cursor:pointer;padding:.1em .4em;border:1px solid #8e44ad;border-radius:.3em}
+li.motion.st-failed{border-color:#c0392b;color:#c0392b} li.motion.selected{background:#8e44ad;color:#fff}
+pre#motion-figures{margin:.2em 0;font-size:.85em} #motion-box{padding:0 .6em}
 .ramp{display:inline-block;width:8em;height:.8em;margin:0 .3em;vertical-align:middle;
 background:linear-gradient(90deg,#440154,#3b528b,#21918c,#5ec962,#fde725)}
 """
@@ -145,8 +152,7 @@ def page_html(title: str, errors_js: str) -> str:
         "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
         f"<title>refine serve: {html.escape(title)}</title>"
         f"<script>{errors_js}</script><style>{_CSS}</style>"
-        "<script src='plotly.js'></script>"
-        "<script type='importmap'>{\"imports\": {\"three\": \"./three/three.module.min.js\", "
+                "<script type='importmap'>{\"imports\": {\"three\": \"./three/three.module.min.js\", "
         "\"three/addons/\": \"./three/\"}}</script></head><body>"
         "<div id='side'><ul id='js-errors' hidden></ul>"
         "<div id='state'>connecting...</div><div id='error' hidden></div>"
@@ -192,7 +198,16 @@ def page_html(title: str, errors_js: str) -> str:
         f"{_gizmo_options()}</select></label><select id='gizmo-mode' aria-label='gizmo mode'>"
         "<option value='translate'>move</option><option value='rotate'>turn</option></select>"
         "<span class='note'>(the numbers on the left follow; a drag re-solves as it goes)</span></div>"
-        "<div id='scene'></div></div>"
+        "<div class='controls'><span>show</span>"
+        "<label><input type='checkbox' id='show-motions' checked> the planned motions (purple)</label>"
+        "<label><input type='checkbox' id='show-recorded' checked> the demonstration as recorded (green)</label>"
+        "<label><input type='checkbox' id='show-aligned'> as aligned in time to the CAD path (brown)</label>"
+        "<label><input type='checkbox' id='show-collision' disabled> the robot's collision shapes</label>"
+        "<span id='visual-note' class='note'></span></div>"
+        "<div id='scene'><pre id='hover' hidden></pre></div>"
+        "<div id='motion-box'><h2>Planned motions (a click selects one)</h2>"
+        "<p id='motions-none' class='note' hidden>no motions: a pass is not executable</p>"
+        "<ul id='motions'></ul><pre id='motion-figures' hidden></pre></div></div>"
         "<script type='module' src='page.js'></script></body></html>"
     )
 

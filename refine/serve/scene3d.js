@@ -69,7 +69,7 @@ export class View {
     this.scene.add(sun);
     this.scene.add(new THREE.AxesHelper(0.3));
     this.groups = {};
-    for (const name of ["cell", "robot", "paths", "frames"]) { this.groups[name] = new THREE.Group(); this.scene.add(this.groups[name]); }
+    for (const name of ["cell", "robot", "paths", "frames", "motions", "demo"]) { this.groups[name] = new THREE.Group(); this.scene.add(this.groups[name]); }
     this.orbit = new OrbitControls(this.camera, this.renderer.domElement);
     this.orbit.addEventListener("change", () => this.render());
     this.handle = new THREE.Object3D();
@@ -89,6 +89,10 @@ export class View {
     });
     this.target = null;
     this.fitted = false;
+    this.hover = null;              // (text, x, y) for the label of the waypoint under the pointer, or null
+    this.ray = new THREE.Raycaster();
+    this.ray.params.Points.threshold = 0.006;
+    this.renderer.domElement.addEventListener("pointermove", (ev) => this.pointed(ev));
     this.robotMeshes = [];
     new ResizeObserver(() => this.resize()).observe(div);
     this.resize();
@@ -125,8 +129,12 @@ export class View {
   setParts(parts) {
     dispose(this.groups.robot);
     this.robotMeshes = parts.map((part) => {
-      const mesh = new THREE.Mesh(meshGeometry(part), new THREE.MeshLambertMaterial({ color: part.kind === "tool" ? 0x505050 : 0xf39c12 }));
+      const collision = part.kind === "robot" && parts.some((p) => p.kind === "visual");
+      const mesh = new THREE.Mesh(meshGeometry(part), new THREE.MeshLambertMaterial({ color: part.kind === "tool" ? 0x505050 : (collision ? 0x5dade2 : 0xf39c12),
+        transparent: collision, opacity: collision ? 0.5 : 1 }));
       mesh.name = part.name;
+      mesh.userData.collision = collision;   // a collision shape drawn beside the visual meshes: on demand
+      mesh.visible = !collision || this.showCollision === true;
       mesh.matrixAutoUpdate = false;
       this.groups.robot.add(mesh);
       return mesh;
@@ -185,6 +193,93 @@ export class View {
     return { note, range };
   }
 
+  polyline(o, color, name) {   // a THREE.Line through o.x, o.y, o.z
+    const p = [];
+    for (let a = 0; a < o.x.length; a++) { p.push(o.x[a], o.y[a], o.z[a]); }
+    const g = new THREE.BufferGeometry();
+    g.setAttribute("position", new THREE.Float32BufferAttribute(p, 3));
+    const line = new THREE.Line(g, new THREE.LineBasicMaterial({ color }));
+    line.name = name;
+    return line;
+  }
+
+  setMotions(motions) {   // every planned motion, its via points as dots; one may be selected
+    dispose(this.groups.motions);
+    this.motionLines = motions.map((m, n) => {
+      const line = this.polyline(m, m.status === "ok" ? 0x8e44ad : 0xe74c3c, "motion: " + m.name + " (" + m.status + ")");
+      line.userData = { index: n };
+      this.groups.motions.add(line);
+      if (m.via.x.length) {
+        const g = new THREE.BufferGeometry();
+        const p = [];
+        for (let a = 0; a < m.via.x.length; a++) { p.push(m.via.x[a], m.via.y[a], m.via.z[a]); }
+        g.setAttribute("position", new THREE.Float32BufferAttribute(p, 3));
+        const dots = new THREE.Points(g, new THREE.PointsMaterial({ color: 0x8e44ad, size: 7, sizeAttenuation: false }));
+        dots.name = "via points: " + m.name;
+        this.groups.motions.add(dots);
+      }
+      return line;
+    });
+    this.select(this.selected === undefined ? null : this.selected);
+  }
+
+  select(n) {   // the motion ``n`` drawn bright, the others faint (null: all as they are)
+    this.selected = n;
+    (this.motionLines || []).forEach((line, k) => {
+      const ok = line.name.endsWith("(ok)");
+      line.material.color.set(n === null || n === k ? (ok ? 0x8e44ad : 0xe74c3c) : 0xd7c8e0);
+      line.renderOrder = n === k ? 1 : 0;
+    });
+    this.render();
+  }
+
+  setDemo(demo) {   // the demonstration as recorded (green) and as aligned (brown)
+    dispose(this.groups.demo);
+    this.demoLines = {};
+    const colours = { recorded: 0x27ae60, aligned: 0x8d6e63 };
+    for (const key of ["recorded", "aligned"]) {
+      if (!demo || !demo[key]) { continue; }
+      const line = this.polyline(demo[key], colours[key], "demonstration " + key);
+      this.demoLines[key] = line;
+      this.groups.demo.add(line);
+    }
+    this.render();
+  }
+
+  showLayer(what, on) {   // "recorded", "aligned", "motions" or "collision" (beside visual meshes) on or off
+    if (what === "collision") {
+      this.showCollision = on;
+      this.robotMeshes.forEach((m) => { if (m.userData.collision) { m.visible = on; } });
+      this.render();
+      return;
+    }
+    const o = what === "motions" ? this.groups.motions : (this.demoLines || {})[what];
+    if (o) { o.visible = on; this.render(); }
+  }
+
+  waypointAt(clientX, clientY) {   // the (path, waypoint) nearest the pointer within a few pixels, or null
+    const r = this.renderer.domElement.getBoundingClientRect();
+    this.ray.setFromCamera(new THREE.Vector2((clientX - r.left) / r.width * 2 - 1, -(clientY - r.top) / r.height * 2 + 1), this.camera);
+    const dots = this.groups.paths.children.filter((o) => o.name === "waypoints");
+    const hits = this.ray.intersectObjects(dots, false);
+    if (!hits.length) { return null; }
+    hits.sort((a, b) => a.distanceToRay - b.distanceToRay);
+    return { path: dots.indexOf(hits[0].object), index: hits[0].index };
+  }
+
+  screenOfWaypoint(path, index) {   // where waypoint ``index`` of path ``path`` is on the page [px], for tests
+    const dots = this.groups.paths.children.filter((o) => o.name === "waypoints")[path];
+    const a = dots.geometry.getAttribute("position");
+    const p = new THREE.Vector3(a.getX(index), a.getY(index), a.getZ(index)).project(this.camera);
+    const r = this.renderer.domElement.getBoundingClientRect();
+    return [r.left + (p.x + 1) / 2 * r.width, r.top + (1 - p.y) / 2 * r.height];
+  }
+
+  pointed(ev) {
+    if (this.gizmo.dragging || !this.onHover) { return; }
+    this.onHover(this.waypointAt(ev.clientX, ev.clientY), ev.clientX, ev.clientY);
+  }
+
   setFrames(frames) {   // name -> 4x4 Matrix4 of the frames drawn as axes (and dragged by the gizmo)
     dispose(this.groups.frames);
     this.frames = frames;
@@ -223,7 +318,7 @@ export class View {
     return [r.left + (p.x + 1) / 2 * r.width, r.top + (1 - p.y) / 2 * r.height];
   }
 
-  names() { return [...this.groups.cell.children, ...this.groups.paths.children].map((o) => o.name).concat(this.robotMeshes.length ? ["robot"] : []); }
+  names() { return [...this.groups.cell.children, ...this.groups.paths.children, ...this.groups.motions.children, ...this.groups.demo.children].map((o) => o.name).concat(this.robotMeshes.length ? ["robot"] : []); }
 
   fit() {   // the camera on everything drawn, once
     if (this.fitted) { return; }

@@ -14,9 +14,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from refine.export.result_json import result_dict
-from refine.report.scene import rounded, scene_data
+from refine.report.scene import _mesh_json, rounded, scene_data
 from refine.report.verdict import verdict_html
 from refine.serve.edits import MOVE, POSES, SCALARS, pose_table
+from refine.serve.overlays import DemoCache, demonstration_lines, motion_lines
 
 if TYPE_CHECKING:
     from refine.serve.session import Answer, Session
@@ -73,19 +74,32 @@ def verdict_message(session: Session, answer: Answer) -> dict[str, Any]:
     return out
 
 
-SCENE_SECTIONS = ("cell", "parts", "robot", "paths")
+SCENE_SECTIONS = ("cell", "parts", "robot", "paths", "motions", "demo")
 """The sections of the scene, each sent only when it changed: the cell objects, the robot's shapes
-in their own frames, the robot's poses along the path, the paths and their colours."""
+in their own frames, the robot's poses along the path, the paths and their colours, the planned
+motions and the demonstration recorded and aligned (:mod:`refine.serve.overlays`)."""
 
 
-def scene_sections(answer: Answer) -> dict[str, str]:
+def scene_sections(answer: Answer, demos: DemoCache | None = None) -> dict[str, str]:
     """The 3D scene of ``answer`` (:func:`refine.report.scene.scene_data`) as JSON text by section."""
     assert answer.result is not None
     scene = scene_data(answer.result)
     robot = dict(scene["robot"])
     parts = robot.pop("parts")
     robot["flange"] = flange_poses(answer.result, robot["where"])
-    sections = {"cell": scene["cell"], "parts": parts, "robot": robot, "paths": scene["paths"]}
+    visual, robot["visual_note"] = (demos or DemoCache()).visual(answer.result.robot)
+    if visual:  # the visual meshes after the collision shapes, their poses after theirs in every frame
+        parts = parts + [_mesh_json(name, mesh, np.eye(4), "visual") for name, _, mesh, _ in visual]
+        extra = visual_poses(answer.result, robot["where"], visual)
+        robot["frames"] = [f + e for f, e in zip(robot["frames"], extra, strict=True)]
+    sections = {
+        "cell": scene["cell"],
+        "parts": parts,
+        "robot": robot,
+        "paths": scene["paths"],
+        "motions": motion_lines(answer.result),
+        "demo": demonstration_lines(answer.result, demos or DemoCache()),
+    }
     return {k: json.dumps(sections[k], allow_nan=False, separators=(",", ":")) for k in SCENE_SECTIONS}
 
 
@@ -104,6 +118,16 @@ def flange_poses(result: Any, where: list[list[int]]) -> list[list[float | None]
     return out
 
 
+def visual_poses(result: Any, where: list[list[int]], visual: list[Any]) -> list[list[list[float | None]]]:
+    """Each visual mesh's pose in {F} at each robot frame of the scene, as 12 numbers."""
+    base = np.asarray(result.problem.robot.base_in_world, dtype=float)
+    out = []
+    for i, k in where:
+        links = result.robot.link_poses(result.passes[i].refinement.q[k])
+        out.append([rounded((base @ links[link] @ T)[:3, :].ravel(), 5) for _, link, _, T in visual])
+    return out
+
+
 def scene_message(revision: int, sections: Mapping[str, str], keys: Iterable[str]) -> str:
     """The scene message of ``revision`` with the sections ``keys`` of ``sections`` (JSON text).
 
@@ -119,10 +143,11 @@ class SceneDiff:
 
     def __init__(self) -> None:
         self.sent: dict[str, str] = {}
+        self.demos = DemoCache()
 
     def messages(self, answer: Answer) -> tuple[str, str]:
         """The message for the open pages (changed sections) and the whole scene for a new page."""
-        sections = scene_sections(answer)
+        sections = scene_sections(answer, self.demos)
         changed = [k for k in SCENE_SECTIONS if self.sent.get(k) != sections[k]]
         self.sent = sections
         return scene_message(answer.revision, sections, changed), scene_message(

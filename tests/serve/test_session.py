@@ -118,20 +118,26 @@ def test_the_scene_resends_only_the_sections_that_changed():
             {"cell": [1], "robot": {"parts": ["p"], "frames": [1], "where": []}, "paths": [8]},
         ]
     )
-    real, flange = state.scene_data, state.flange_poses
+    real = state.scene_data, state.flange_poses, state.motion_lines, state.demonstration_lines
     state.scene_data = lambda result: next(scenes)
     state.flange_poses = lambda result, where: []
+    state.motion_lines = lambda result: [{"name": "home"}]
+    state.demonstration_lines = lambda result, cache: {}
     try:
         diff = state.SceneDiff()
-        answer = SimpleNamespace(revision=1, result=object())
+        diff.demos.visual = lambda robot: ([], "none")
+        answer = SimpleNamespace(revision=1, result=SimpleNamespace(robot=None))
         first, whole = diff.messages(answer)
         answer.revision = 2
         second, whole2 = diff.messages(answer)
     finally:
-        state.scene_data, state.flange_poses = real, flange
-    assert sorted(json.loads(first)["scene"]) == ["cell", "parts", "paths", "robot"]
-    assert json.loads(second) == {"type": "scene", "revision": 2, "scene": {"robot": {"frames": [1], "where": [], "flange": []}, "paths": [8]}}
-    assert json.loads(whole2)["scene"] == {"cell": [1], "parts": ["p"], "robot": {"frames": [1], "where": [], "flange": []}, "paths": [8]}
+        state.scene_data, state.flange_poses, state.motion_lines, state.demonstration_lines = real
+    assert sorted(json.loads(first)["scene"]) == ["cell", "demo", "motions", "parts", "paths", "robot"]
+    robot = {"frames": [1], "where": [], "flange": [], "visual_note": "none"}
+    assert json.loads(second) == {"type": "scene", "revision": 2, "scene": {"robot": robot, "paths": [8]}}
+    assert json.loads(whole2)["scene"] == {
+        "cell": [1], "parts": ["p"], "robot": robot, "paths": [8], "motions": [{"name": "home"}], "demo": {}
+    }
 
 
 @pytest.fixture(scope="module")
