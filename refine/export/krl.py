@@ -54,6 +54,7 @@ from refine.export.program import (
     Wait,
     arc_abort,
     as_passes,
+    circular_pieces,
     header_notes,
     home_joints,
     lead_point,
@@ -271,12 +272,25 @@ def _moves(
     for a, b in singular_runs(robot, tr.q):
         sing_on[max(a, 1)] = f"$ORI_TYPE = #JOINT ; near the wrist singularity at points {a + 1}-{b + 1}"
         sing_off[min(b + 1, len(tr) - 1)] = "$ORI_TYPE = #VAR"
+    arcs = {a.start + 1: a for a in circular_pieces(tr, sing_on, sing_off, off_k if not weld else None)}
+    skip_to = 0
+    if arcs:  # CIRC's orientation: from the start's to the end's at a constant rate, in the base
+        lines.insert(2, "$CIRC_TYPE = #BASE")
     for k, v in enumerate(segment_speeds(tr), start=1):
+        if k <= skip_to:
+            continue
+        arc = arcs.get(k)
+        if arc is not None:
+            v = arc.speed_m_s
         text = _real(max(round(v / step), 1) * step, 6)
         lines += [f"$VEL.CP = {text}"] if text != current else []
         current = text
         lines += [sing_on[k]] if k in sing_on else []
         lines += [_trigger(problem, io, "FALSE", off_lead)] if k == off_k and not weld else []
+        if arc is not None:  # the CAD's arc: one circular move through the via point (see the header)
+            lines.append(f"CIRC {path[arc.via]}, {path[arc.end]}" + _zone(zones, arc.end))
+            skip_to = arc.end
+            continue
         lines.append(f"LIN {path[k]}" + _zone(zones, k))
         lines += [sing_off[k]] if k in sing_off else []
     lines += _weld_end(io, problem) if weld else []
@@ -481,6 +495,13 @@ def parse_krl(path_src: str | Path, path_dat: str | Path) -> list[KrlPass]:
             if m.group(1).upper() not in points:
                 raise InputError(f"KRL {path_src}: point {m.group(1)} is not declared in {path_dat}")
             passes[-1]["moves"].append((m.group(1).upper(), speed))
+        elif re.match(r"CIRC\s", code, re.IGNORECASE) and passes:  # the via point and the end point
+            if not (m := re.fullmatch(r"CIRC\s+(\w+)\s*,\s*(\w+)(\s+C_DIS)?", code, re.IGNORECASE)):
+                raise InputError(f"KRL {path_src}: cannot read {code!r}")
+            for name in (m.group(1).upper(), m.group(2).upper()):
+                if name not in points:
+                    raise InputError(f"KRL {path_src}: point {name} is not declared in {path_dat}")
+                passes[-1]["moves"].append((name, speed))
         elif switch and passes:
             key = "on" if switch.group(1).upper() == "TRUE" else "off"
             after = 0 if code.upper().startswith("TRIGGER") else -1  # a TRIGGER acts on the next move

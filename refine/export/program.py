@@ -471,3 +471,32 @@ def corner_zones(
         labels.append(chosen[0])
         radius[k], deviation[k] = chosen[1], chosen[2]
     return Zones(radius, deviation, tuple(labels), tolerance_m, tuple(narrowed))
+
+
+def circular_pieces(
+    tr: Trajectory, *marks: dict[int, str] | int | None
+) -> list[Any]:
+    """The trajectory's verified circular moves a program writes (``Trajectory.arcs``).
+
+    A piece is left to straight moves where the program switches something inside it: a segment
+    number of ``marks`` (the keys of a dict, or an int; None for nothing) in ``start + 1 .. end``
+    other than ``end`` itself for a switch after the move (the wrist handling, a process output).
+    """
+    taken: set[int] = set()
+    for m in marks:
+        if isinstance(m, dict):
+            taken.update(m)
+        elif m is not None:
+            taken.add(int(m))
+    return [a for a in getattr(tr, "arcs", ()) if not any(a.start < k <= a.end for k in taken)]
+
+
+def circular_note(pieces: list[Any], controller_model: str) -> list[str]:
+    """Header lines on the circular moves written (none when there are none)."""
+    if not pieces:
+        return []
+    sweep = max(math.degrees(a.sweep_rad) for a in pieces)
+    return [
+        f"{len(pieces)} circular move(s) on the CAD's arcs (up to {sweep:.1f} deg each), verified with the "
+        f"{controller_model} orientation model"
+    ]

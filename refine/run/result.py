@@ -39,6 +39,9 @@ class PassResult:
             process boundary is re-solved from its joints, with the problem built anew.
         line: the controller's straight-line motion between the waypoints, checked
             (:class:`refine.optimise.controller_line.LineCheck`); None when not checked.
+        circular: the circular moves on the CAD's arcs, each checked in every controller's
+            orientation model (:class:`refine.optimise.controller_arc.ArcCheck`, ``[output]
+            circular_moves``); None when not asked for.
     """
 
     name: str
@@ -51,6 +54,7 @@ class PassResult:
     clearance: Any = None
     nlp: Any = None
     line: Any = None
+    circular: Any = None
 
     def __getstate__(self) -> dict[str, Any]:
         return {**self.__dict__, "nlp": None}

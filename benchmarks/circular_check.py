@@ -1,0 +1,83 @@
+"""Circular moves on the CAD's arcs, written and checked: the figures per problem.
+
+For each problem (a folder, run with ``[output] circular_moves = true``) it solves the path
+(``refine.solve``), then prints per circular move the controller's figures in each orientation
+model (``refine.optimise.controller_arc``): radius, sweep, the largest distance from the CAD arc,
+the tool axis's and the whole orientation's angle from the refined ones, the angle from the
+demonstration (the cone), the least joint margin and singularity measure, the verdict; then the
+pass's targets and its program time with straight moves only and with the circular moves (each
+move's length over its programmed speed: the planned segment speed for a straight move, the
+slowest of its segments' for a circular one), and the CPU time of the check.
+
+    python3 benchmarks/circular_check.py DIR [DIR ...]
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from refine import solve  # noqa: E402
+from refine.export.motion import segment_speeds  # noqa: E402
+from refine.optimise.controller_arc import MODELS, arc_pieces, check_circular_moves  # noqa: E402
+from refine.problem import load_problem  # noqa: E402
+from refine.robot.kinematics import TcpKinematics  # noqa: E402
+
+
+def main() -> None:
+    for folder in sys.argv[1:]:
+        problem = load_problem(Path(folder))
+        problem = replace(problem, output=replace(problem.output, circular_moves=True))
+        result = solve(problem).run
+        print(f"== {problem.name}: {result.passes[0].refinement.status}")
+        for p in result.passes:
+            tr = p.trajectory
+            if tr is None:
+                print("   no trajectory")
+                continue
+            kin = TcpKinematics(result.robot, problem.robot.base_in_world, problem.tool.tcp_in_flange)
+            v = segment_speeds(tr)
+            pieces = arc_pieces(tr.positions_ref, v, problem.output.speed_share)
+            t0 = time.process_time()
+            for model in MODELS:
+                for c in check_circular_moves(
+                    kin, tr.q, tr.poses, pieces, model, problem.tolerances,
+                    rotations_demo=tr.rotations_demo, axisymmetric=problem.tool.axisymmetric,
+                    exact=p.fused.exact,
+                ):
+                    a = c.piece
+                    print(
+                        f"   {model:10s} {a.start:4d}-{a.via:4d}-{a.end:4d} r {a.radius_m * 1e3:6.2f} mm "
+                        f"sweep {math.degrees(a.sweep_rad):5.1f} deg v {a.speed_m_s * 1e3:5.2f} mm/s | CAD "
+                        f"{c.cad_deviation_m * 1e3:.5f} mm, axis {c.axis_vs_refined_deg:.3f} deg, whole "
+                        f"{c.rotation_vs_refined_deg:.3f} deg vs refined, {c.vs_demo_deg:.3f} deg vs demo "
+                        f"(cone {problem.tolerances.orientation_deg:g}), margin {math.degrees(c.joint_margin_rad):.2f} deg, "
+                        f"sing {c.singularity:.4f}, IK {c.ik_error:.1e} | {'ok' if c.ok else '; '.join(c.reasons)}"
+                    )
+            cpu = time.process_time() - t0
+            L = np.linalg.norm(np.diff(tr.poses[:, :3, 3], axis=0), axis=1)
+            straight = float(np.sum(L / v))
+            written = tr.arcs
+            with_arcs = straight
+            replaced = 0
+            for a in written:
+                with_arcs += a.length_m / a.speed_m_s - float(np.sum(L[a.start : a.end] / v[a.start : a.end]))
+                replaced += a.end - a.start - 2
+            print(
+                f"   pieces {len(pieces)}, written {len(written)}; targets {len(tr)} -> {len(tr) - replaced} "
+                f"path moves {len(tr) - 1} -> {len(tr) - 1 - sum(a.end - a.start - 1 for a in written)}; "
+                f"program path time {straight:.3f} s -> {with_arcs:.3f} s (planned {float(tr.t[-1]):.3f} s); "
+                f"check CPU {cpu:.2f} s"
+            )
+
+
+if __name__ == "__main__":
+    main()
