@@ -280,9 +280,10 @@ def _moves(
         if k <= skip_to:
             continue
         arc = arcs.get(k)
-        if arc is not None:
-            v = arc.speed_m_s
-        text = _real(max(round(v / step), 1) * step, 6)
+        steps = max(round(v / step), 1)
+        if arc is not None:  # one speed for the circular move, not above its slowest segment's
+            steps = max(math.floor(arc.speed_m_s / step + 1e-9), 1)
+        text = _real(steps * step, 6)
         lines += [f"$VEL.CP = {text}"] if text != current else []
         current = text
         lines += [sing_on[k]] if k in sing_on else []

@@ -346,7 +346,7 @@ def write_urscript(
                 body += [f"off_target = {_pose(poses[n - 1], rv[n - 1])}", f"off_lead = {_num(off_lead, 6)}"]
                 body.append("run process_off()")
             if (c := arcs.get(k)) is not None:  # the CAD's arc: one circular move, orientation start -> end
-                speed = _num(max(round(c.speed_m_s / step), 1) * step, 6)
+                speed = _num(max(math.floor(c.speed_m_s / step + 1e-9), 1) * step, 6)  # not above its slowest
                 body.append(
                     f"movec({_pose(poses[c.via], rv[c.via])}, {_pose(poses[c.end], rv[c.end])}, a={a}, "
                     f"v={speed}, r={_num(blends[c.end], 6)}, mode=0)"
