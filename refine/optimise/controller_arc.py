@@ -196,7 +196,7 @@ def arc_pieces(positions: Array, segment_speeds: Array, speed_share: float) -> l
             k1 = k0 + 1
             while (
                 k1 + 1 <= b
-                and ang[k1 + 1 - a] - ang[k0 - a] <= max_sweep + 1e-12
+                and ang[k1 + 1 - a] - ang[k0 - a] <= max_sweep * (1.0 + 1e-9)
                 and v[k0 : k1 + 1].min() >= (1.0 - speed_share) * v[k0 : k1 + 1].max()
             ):
                 k1 += 1
