@@ -6,7 +6,7 @@ program may write one circular move (RAPID ``MoveC``, KRL ``CIRC``, URScript ``m
 via target to an end target instead of the straight moves between the waypoints.
 
 **Where** (:func:`arc_pieces`): maximal runs of at least four consecutive waypoints on one circle
-(within :data:`ON_CIRCLE_M`, not on a line), cut into pieces whose sweep is at most
+(within :data:`ON_CIRCLE_M`, not on a line) that is one of the CAD's arcs (:data:`CIRCLE_MATCH_M`), cut into pieces whose sweep is at most
 :data:`MAX_SWEEP_DEG` (below every controller's limit) and whose planned segment speeds stay
 within ``speed_share`` of the slowest (a circular move runs at one speed: the slowest segment's).
 Each piece runs from waypoint ``start`` through ``via`` (its middle waypoint) to ``end``.
@@ -171,13 +171,31 @@ def arc_runs(positions: Array) -> list[tuple[int, int]]:
     return runs
 
 
-def arc_pieces(positions: Array, segment_speeds: Array, speed_share: float) -> list[ArcPiece]:
+CIRCLE_MATCH_M = 1e-5
+"""A run's circle is the CAD's arc when their centres and radii agree to this [m] (and their planes)."""
+
+
+def _is_cad_circle(centre: Array, radius: float, normal: Array, circles: list) -> bool:
+    return any(
+        np.linalg.norm(centre - c) <= CIRCLE_MATCH_M
+        and abs(radius - r) <= CIRCLE_MATCH_M
+        and np.linalg.norm(np.cross(normal, n / np.linalg.norm(n))) <= CIRCLE_MATCH_M / max(radius, 1e-3)
+        for c, r, n in circles
+    )
+
+
+def arc_pieces(
+    positions: Array, segment_speeds: Array, speed_share: float, circles: list | None = None
+) -> list[ArcPiece]:
     """The circular moves of a path: its arcs cut by sweep and speed (see the module notes).
 
     Args:
         positions: the waypoints' CAD positions in {F} [m], (N, 3).
         segment_speeds: planned speed of every segment k -> k+1 [m/s], (N-1,).
         speed_share: largest shortfall of the move's one speed below a segment's planned speed [-].
+        circles: the CAD's arcs, ``(centre [m] (3,), radius [m], normal (3,))`` each
+            (:func:`refine.cad.cad_circles`): only runs on one of them become pieces (waypoints on a
+            spline or a mesh boundary that happen to lie on a circle do not); None for every run.
 
     Returns:
         The pieces in path order; waypoints outside them keep their straight moves.
@@ -189,7 +207,9 @@ def arc_pieces(positions: Array, segment_speeds: Array, speed_share: float) -> l
     for a, b in arc_runs(positions):
         found = _on_circle(positions[a : b + 1])
         assert found is not None
-        centre, _, normal, _ = found
+        centre, radius, normal, _ = found
+        if circles is not None and not _is_cad_circle(centre, radius, normal, circles):
+            continue
         ang = _angles(positions[a : b + 1], centre, normal)
         k0 = a
         while k0 + 2 <= b:

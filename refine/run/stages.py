@@ -302,7 +302,10 @@ def circular_moves(
         found = check_path_clearance(model, dense, kin, problem.collision.check_step_m)
         return float(np.min(found.segment_clearance_m)), found.tolerance_m
 
-    pieces = arc_pieces(trajectory.positions_ref, segment_speeds(trajectory), problem.output.speed_share)
+    from refine.cad import cad_circles
+
+    circles = cad_circles(problem.cad, problem.frames.cad_in_world)
+    pieces = arc_pieces(trajectory.positions_ref, segment_speeds(trajectory), problem.output.speed_share, circles)
     ok = [True] * len(pieces)
     done: list[Any] = []
     for kind in MODELS:

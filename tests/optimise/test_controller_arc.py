@@ -156,3 +156,38 @@ def test_a_circle_off_the_cad_and_one_past_the_cone_are_refused(ur10e_arc):
     demo = np.einsum("ij,kjl->kil", tilted, R)
     (c,) = check_circular_moves(kin, q, poses, pieces, SLERP, Tolerances(orientation_deg=3.0), rotations_demo=demo)
     assert not c.ok and c.vs_demo_deg == pytest.approx(4.0, abs=1e-6)
+
+
+def test_only_runs_on_one_of_the_cad_s_arcs_become_pieces():
+    p = path_line_arc_line()
+    v = np.full(len(p) - 1, 0.01)
+    assert len(arc_pieces(p, v, 0.02, [(CENTRE, RADIUS, -NORMAL)])) == 1  # either sense of the normal
+    assert arc_pieces(p, v, 0.02, []) == []  # a spline or a mesh boundary: no arc of the CAD
+    assert arc_pieces(p, v, 0.02, [(CENTRE + [0.0, 0.0, 1e-4], RADIUS, NORMAL)]) == []
+    assert arc_pieces(p, v, 0.02, [(CENTRE, RADIUS + 1e-4, NORMAL)]) == []
+
+
+def test_the_cad_circles_are_the_drawing_s_arcs_and_the_program_s_arc_moves(tmp_path):
+    import ezdxf
+
+    from refine.cad.dxf import dxf_circles
+    from refine.cad.gcode import gcode_circles
+
+    doc = ezdxf.new()
+    msp = doc.modelspace()
+    msp.add_line((0, 0), (100, 0))
+    msp.add_arc((100, 20), 20.0, -90.0, 0.0)
+    # a quarter-circle bulge from (120, 20) to (100, 40): centre (100, 20), radius 20 mm
+    msp.add_lwpolyline([(120, 20, math.tan(math.pi / 8)), (100, 40, 0.0)], format="xyb")
+    doc.saveas(tmp_path / "p.dxf")
+    found = dxf_circles(tmp_path / "p.dxf", "mm", layer="0")
+    assert len(found) == 2
+    for c, r, n in found:
+        np.testing.assert_allclose(c, [0.1, 0.02, 0.0], atol=1e-12)
+        assert r == pytest.approx(0.02, abs=1e-12)
+        np.testing.assert_allclose(n, [0.0, 0.0, 1.0], atol=1e-12)
+    (tmp_path / "p.nc").write_text("G21 G90 G17\nG1 X0 Y0 Z5\nG1 X10 Y0\nG3 X20 Y10 I0 J10\nG2 X30 Y20 Z8 I10 J0\n")
+    (c, r, n), = gcode_circles(tmp_path / "p.nc", "mm")  # the second arc is a helix: no circle
+    np.testing.assert_allclose(c, [0.01, 0.01, 0.005], atol=1e-12)
+    assert r == pytest.approx(0.01, abs=1e-12)
+    np.testing.assert_allclose(np.abs(n), [0.0, 0.0, 1.0], atol=1e-12)
