@@ -12,7 +12,7 @@ slowest of its segments' for a circular one), and the CPU time of the check.
     python3 benchmarks/circular_check.py DIR [DIR ...]
     python3 benchmarks/circular_check.py --arc ROBOT PROGRAM X Y Z [--arc ...]
 
-``--arc`` writes a problem first (:func:`write_arc_problem`: a DXF of a 40 mm line, a 20 mm
+``--arc`` writes a problem first (:func:`refine.synthetic.write_arc_problem`: a DXF of a 40 mm line, a 20 mm
 quarter ARC and a 40 mm line at (X, Y, Z) m in the world, and a clean demonstration along it) for
 the robot, asking for the program.
 """
@@ -36,52 +36,7 @@ from refine.export.motion import segment_speeds  # noqa: E402
 from refine.optimise.controller_arc import MODELS, arc_pieces, check_circular_moves  # noqa: E402
 from refine.problem import load_problem  # noqa: E402
 from refine.robot.kinematics import TcpKinematics  # noqa: E402
-
-
-def write_arc_problem(folder: Path, robot: str, program: str, corner: np.ndarray) -> Path:
-    """A problem folder: line, 20 mm quarter arc, line in the plane z = corner[2], with a demonstration.
-
-    The path runs 40 mm along +y to the arc's start at ``corner``, turns 90 deg left about +z on a
-    20 mm radius and runs 40 mm along -x. The demonstration is the TCP along it at 10 mm/s after a
-    0.5 s pause (tracker at the world origin, sensor at the TCP), the tool pointing down, its x axis
-    along the travel, tilted 10 deg about it; 1e-5 m and 0.005 deg of noise.
-    """
-    import ezdxf
-
-    from refine.frames import rotation_about, tracker_angles_from_matrix
-    from refine.synthetic import write_line_problem
-
-    folder.mkdir(parents=True, exist_ok=True)
-    file = write_line_problem(folder, robot=robot, program=program)
-    r, c = 0.02, corner + np.array([-0.02, 0.0, 0.0])  # the arc's centre
-    doc = ezdxf.new()
-    msp = doc.modelspace()
-    mm = 1e3
-    msp.add_line(((corner[0]) * mm, (corner[1] - 0.04) * mm, corner[2] * mm), (corner[0] * mm, corner[1] * mm, corner[2] * mm))
-    msp.add_arc((c[0] * mm, c[1] * mm, c[2] * mm), r * mm, 0.0, 90.0)
-    msp.add_line(((c[0]) * mm, (c[1] + r) * mm, c[2] * mm), ((c[0] - 0.04) * mm, (c[1] + r) * mm, c[2] * mm))
-    doc.saveas(folder / "path.dxf")
-    L = 0.08 + r * math.pi / 2
-    t = np.arange(0.0, 0.5 + L / 0.01 + 1e-9, 0.01)
-    s = np.clip((t - 0.5) * 0.01, 0.0, L)
-    heading = np.where(s < 0.04, 0.0, np.where(s < 0.04 + r * math.pi / 2, (s - 0.04) / r, math.pi / 2))
-    arc_s = np.clip(s - 0.04, 0.0, r * math.pi / 2) / r
-    p = np.column_stack([np.where(s < 0.04, corner[0], c[0] + r * np.cos(arc_s)), np.zeros_like(s), np.full_like(s, corner[2])])
-    p[:, 1] = np.where(s < 0.04, corner[1] - 0.04 + s, c[1] + r * np.sin(arc_s))
-    past = s > 0.04 + r * math.pi / 2
-    p[past, 0] = c[0] - (s[past] - 0.04 - r * math.pi / 2)
-    travel = np.column_stack([-np.sin(heading), np.cos(heading), np.zeros_like(heading)])
-    R = np.stack([np.column_stack([d, np.cross([0.0, 0.0, -1.0], d), [0.0, 0.0, -1.0]]) @ rotation_about("x", math.radians(10.0)) for d in travel])
-    rng = np.random.default_rng(0)
-    angles = tracker_angles_from_matrix(R) + rng.normal(0.0, 0.005, (len(t), 3))
-    rows = np.column_stack([t, p + rng.normal(0.0, 1e-5, p.shape), angles])
-    (folder / "demo.csv").write_text(
-        "t,x,y,z,azimuth,elevation,roll\n" + "\n".join(",".join(f"{v:.9g}" for v in row) for row in rows) + "\n"
-    )
-    text = file.read_text().replace('file = "path.csv"', 'file = "path.dxf"\nformat = "dxf"\nspacing_m_unused = 0')
-    text = text.replace("spacing_m_unused = 0\n", "").replace("spacing_m = 0.005", "spacing_m = 0.002")
-    file.write_text(text.replace('description = "Straight bead', 'description = "Line, 20 mm arc, line; was: straight bead'))
-    return file
+from refine.synthetic import write_arc_problem  # noqa: E402
 
 
 def main() -> None:
@@ -89,7 +44,11 @@ def main() -> None:
     while args:
         if args[0] == "--arc":
             robot, program, *xyz = args[1:6]
-            folders.append(write_arc_problem(Path(f"/tmp/circular_{program}"), robot, program, np.array([float(v) for v in xyz])).parent)
+            folders.append(
+                write_arc_problem(
+                    Path(f"/tmp/circular_{program}"), robot, program, np.array([float(v) for v in xyz])
+                ).parent
+            )
             args = args[6:]
         else:
             folders.append(Path(args.pop(0)))
@@ -110,8 +69,14 @@ def main() -> None:
             t0 = time.process_time()
             for model in MODELS:
                 for c in check_circular_moves(
-                    kin, tr.q, tr.poses, pieces, model, problem.tolerances,
-                    rotations_demo=tr.rotations_demo, axisymmetric=problem.tool.axisymmetric,
+                    kin,
+                    tr.q,
+                    tr.poses,
+                    pieces,
+                    model,
+                    problem.tolerances,
+                    rotations_demo=tr.rotations_demo,
+                    axisymmetric=problem.tool.axisymmetric,
                     exact=p.fused.exact,
                 ):
                     a = c.piece

@@ -227,7 +227,9 @@ def arc_pieces(
             circle = circle_through(positions[k0], positions[via], positions[k1])
             assert circle is not None
             c, r, nrm, sweep = circle
-            pieces.append(ArcPiece(k0, via, k1, c, r, nrm, sweep, float(v[k0:k1].min()), positions[k0].copy()))
+            pieces.append(
+                ArcPiece(k0, via, k1, c, r, nrm, sweep, float(v[k0:k1].min()), positions[k0].copy())
+            )
             k0 = k1
     return pieces
 
@@ -390,21 +392,42 @@ def check_circular_moves(
         # the refined joints at the same place of the arc: the IK's start, on the refined branch
         seed = np.column_stack([np.interp(f, share, q[k, j]) for j in range(q.shape[1])])
         q_arc, err = solve_ik_batch(
-            kin, targets, seed, spec.lower, spec.upper, tol=IK_TOLERANCE, max_iterations=60, nullspace_gain=0.0
+            kin,
+            targets,
+            seed,
+            spec.lower,
+            spec.upper,
+            tol=IK_TOLERANCE,
+            max_iterations=60,
+            nullspace_gain=0.0,
         )
         margins = float(np.minimum(q_arc - spec.lower, spec.upper - q_arc).min())
         sing, _ = singularity_measures(kin, q_arc, smallest=False)
         held = arc_poses(piece, poses[piece.start, :3, :3], poses[piece.end, :3, :3], share, model)[:, :3, :3]
-        axis = np.degrees(np.arccos(np.clip(np.einsum("ki,ki->k", held[:, :, 2], poses[k, :3, 2]), -1.0, 1.0)))
-        whole = np.degrees(Rotation.from_matrix(np.einsum("kji,kjl->kil", held, poses[k, :3, :3])).magnitude())
+        axis = np.degrees(
+            np.arccos(np.clip(np.einsum("ki,ki->k", held[:, :, 2], poses[k, :3, 2]), -1.0, 1.0))
+        )
+        whole = np.degrees(
+            Rotation.from_matrix(np.einsum("kji,kjl->kil", held, poses[k, :3, :3])).magnitude()
+        )
         demo = math.nan
         if rotations_demo is not None:
             Rd = np.asarray(rotations_demo)[k]
             if axisymmetric:
-                demo = float(np.degrees(np.arccos(np.clip(np.einsum("ki,ki->k", held[:, :, 2], Rd[:, :, 2]), -1, 1))).max())
+                demo = float(
+                    np.degrees(
+                        np.arccos(np.clip(np.einsum("ki,ki->k", held[:, :, 2], Rd[:, :, 2]), -1, 1))
+                    ).max()
+                )
             else:
-                demo = float(np.degrees(Rotation.from_matrix(np.einsum("kji,kjl->kil", held, Rd)).magnitude()).max())
-        cad = math.nan if exact is None else float(distance_to_polyline(targets[:, :3, 3], np.asarray(exact)).max())
+                demo = float(
+                    np.degrees(Rotation.from_matrix(np.einsum("kji,kjl->kil", held, Rd)).magnitude()).max()
+                )
+        cad = (
+            math.nan
+            if exact is None
+            else float(distance_to_polyline(targets[:, :3, 3], np.asarray(exact)).max())
+        )
         clear = None
         reasons = []
         if clearance is not None:
@@ -418,15 +441,27 @@ def check_circular_moves(
         if float(sing.min()) < tolerances.singularity_margin - SINGULARITY_TOLERANCE:
             reasons.append(f"singularity on the circular move (measure {float(sing.min()):.4g})")
         if not (cad <= CAD_TOLERANCE_M) and exact is not None:
-            reasons.append(f"circular move {cad * 1e3:.4f} mm off the CAD arc (limit {CAD_TOLERANCE_M * 1e3:g} mm)")
+            reasons.append(
+                f"circular move {cad * 1e3:.4f} mm off the CAD arc (limit {CAD_TOLERANCE_M * 1e3:g} mm)"
+            )
         if demo > tolerances.orientation_deg + 1e-9:
             reasons.append(
                 f"circular move's orientation {demo:.3f} deg from the demonstration (cone {tolerances.orientation_deg:g} deg)"
             )
         out.append(
             ArcCheck(
-                piece, model, float(err.max()), margins, float(sing.min()), cad,
-                float(axis.max()), float(whole.max()), demo, clear, q_arc, tuple(reasons),
+                piece,
+                model,
+                float(err.max()),
+                margins,
+                float(sing.min()),
+                cad,
+                float(axis.max()),
+                float(whole.max()),
+                demo,
+                clear,
+                q_arc,
+                tuple(reasons),
             )
         )
     return out

@@ -46,7 +46,9 @@ def _problem(model: str) -> Problem:
         name="arc",
         root=Path("."),
         robot=RobotSettings(model=model),
-        tool=ToolSettings(name="torch", tcp_in_flange=transform_from_xyz_rpy([0.0, 0.0, 0.2], [0.0, 0.0, 0.0])),
+        tool=ToolSettings(
+            name="torch", tcp_in_flange=transform_from_xyz_rpy([0.0, 0.0, 0.2], [0.0, 0.0, 0.0])
+        ),
         cad=CadSettings(file=Path("part.dxf")),
         demonstration=DemoSettings(file=Path("demo.txt")),
         process=ProcessSettings(kind="glue", output="doGlue", lead_m=0.002, path_tolerance_m=0.05),
@@ -113,7 +115,9 @@ def _moves(lang: str, files: list[Path]) -> list[tuple[str, list[np.ndarray]]]:
         return out
     out = []
     for m in re.finditer(r"^\s*(movel|movec)\((p\[[^\]]*\])(?:,\s*(p\[[^\]]*\]))?", text, re.MULTILINE):
-        out.append((m.group(1), [np.array([float(v) for v in p[2:-1].split(",")][:3]) for p in m.group(2, 3) if p]))
+        out.append(
+            (m.group(1), [np.array([float(v) for v in p[2:-1].split(",")][:3]) for p in m.group(2, 3) if p])
+        )
     return out
 
 
@@ -178,3 +182,35 @@ def test_without_arcs_the_programs_move_straight(tmp_path):
     tr, _ = _trajectory(robot, problem, q_mid)
     src, dat = write_krl(tmp_path / "arc.src", replace(tr, arcs=()), problem, robot)
     assert "CIRC" not in src.read_text()
+
+
+@pytest.mark.slow
+def test_a_run_writes_the_cad_arc_as_one_verified_movec_and_keeps_its_verdict(tmp_path):
+    import json
+
+    from refine import solve
+    from refine.synthetic import write_arc_problem
+
+    file = write_arc_problem(tmp_path / "arc", "ur10e", "urscript", [0.6, -0.05, 0.3])
+    text = file.read_text()
+    file.write_text(text.replace('programs = ["urscript"]', 'programs = ["urscript"]\ncircular_moves = true'))
+    on = solve(file)
+    on.write(tmp_path / "on")
+    file.write_text(text)
+    off = solve(file)
+    off.write(tmp_path / "off")
+    doc = json.loads((tmp_path / "on" / "result.json").read_text())
+    assert (
+        doc["passes"][0]["status"]
+        == json.loads((tmp_path / "off" / "result.json").read_text())["passes"][0]["status"]
+        == "ok"
+    )
+    # the 40 mm lead-in in 20 steps of 2 mm, then the quarter arc (31.4 mm) in 16 steps: waypoints 20..36
+    moves = doc["passes"][0]["circular_moves"]
+    assert moves["written"] == [[20, 28, 36]]
+    assert all(c["ok"] and c["max_cad_deviation_m"] < 2e-6 for c in moves["checks"])
+    script = next((tmp_path / "on").glob("*.script")).read_text()
+    assert (
+        script.count("movec(") == 1 and "movec(" not in next((tmp_path / "off").glob("*.script")).read_text()
+    )
+    assert json.loads((tmp_path / "off" / "result.json").read_text())["passes"][0]["circular_moves"] is None

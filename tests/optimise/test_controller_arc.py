@@ -133,8 +133,16 @@ def ur10e_arc():
 def test_a_verified_arc_has_no_cad_deviation_and_the_refined_orientation(ur10e_arc):
     kin, q, poses, R = ur10e_arc
     pieces = arc_pieces(poses[:, :3, 3], np.full(len(q) - 1, 0.01), 0.02)
-    exact = np.array([CENTRE + TILT.apply([RADIUS * math.cos(a), RADIUS * math.sin(a), 0.0]) for a in
-                      np.linspace(0.0, math.pi / 2, 2001)]) - CENTRE + np.array([0.5, 0.2, 0.3])
+    exact = (
+        np.array(
+            [
+                CENTRE + TILT.apply([RADIUS * math.cos(a), RADIUS * math.sin(a), 0.0])
+                for a in np.linspace(0.0, math.pi / 2, 2001)
+            ]
+        )
+        - CENTRE
+        + np.array([0.5, 0.2, 0.3])
+    )
     for model in (SLERP, PATH_FRAME):
         (c,) = check_circular_moves(kin, q, poses, pieces, model, Tolerances(), rotations_demo=R, exact=exact)
         assert c.ok, c.reasons
@@ -154,7 +162,9 @@ def test_a_circle_off_the_cad_and_one_past_the_cone_are_refused(ur10e_arc):
     assert not c.ok and c.cad_deviation_m == pytest.approx(0.001, abs=1e-7)
     tilted = Rotation.from_rotvec([0.0, math.radians(4.0), 0.0]).apply(np.eye(3))  # 4 deg off the demo
     demo = np.einsum("ij,kjl->kil", tilted, R)
-    (c,) = check_circular_moves(kin, q, poses, pieces, SLERP, Tolerances(orientation_deg=3.0), rotations_demo=demo)
+    (c,) = check_circular_moves(
+        kin, q, poses, pieces, SLERP, Tolerances(orientation_deg=3.0), rotations_demo=demo
+    )
     assert not c.ok and c.vs_demo_deg == pytest.approx(4.0, abs=1e-6)
 
 
@@ -186,8 +196,10 @@ def test_the_cad_circles_are_the_drawing_s_arcs_and_the_program_s_arc_moves(tmp_
         np.testing.assert_allclose(c, [0.1, 0.02, 0.0], atol=1e-12)
         assert r == pytest.approx(0.02, abs=1e-12)
         np.testing.assert_allclose(n, [0.0, 0.0, 1.0], atol=1e-12)
-    (tmp_path / "p.nc").write_text("G21 G90 G17\nG1 X0 Y0 Z5\nG1 X10 Y0\nG3 X20 Y10 I0 J10\nG2 X30 Y20 Z8 I10 J0\n")
-    (c, r, n), = gcode_circles(tmp_path / "p.nc", "mm")  # the second arc is a helix: no circle
+    (tmp_path / "p.nc").write_text(
+        "G21 G90 G17\nG1 X0 Y0 Z5\nG1 X10 Y0\nG3 X20 Y10 I0 J10\nG2 X30 Y20 Z8 I10 J0\n"
+    )
+    ((c, r, n),) = gcode_circles(tmp_path / "p.nc", "mm")  # the second arc is a helix: no circle
     np.testing.assert_allclose(c, [0.01, 0.01, 0.005], atol=1e-12)
     assert r == pytest.approx(0.01, abs=1e-12)
     np.testing.assert_allclose(np.abs(n), [0.0, 0.0, 1.0], atol=1e-12)
