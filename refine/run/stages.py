@@ -281,7 +281,8 @@ def circular_moves(
     The pieces (:func:`refine.optimise.controller_arc.arc_pieces`) are checked as each circular
     move's controller runs it (:func:`refine.optimise.controller_arc.check_circular_moves`, both
     orientation models), with the problem's collision model where it has one; a piece that fails
-    in either keeps its straight moves (logged).
+    in either keeps its straight moves (logged), as does one inside a run the programs hand to the
+    controller's wrist handling (:func:`wrist_segments`).
 
     Returns:
         The pieces that pass (``Trajectory.arcs``) and every check, per model in turn.
@@ -306,6 +307,8 @@ def circular_moves(
 
     circles = cad_circles(problem.cad, problem.frames.cad_in_world)
     pieces = arc_pieces(trajectory.positions_ref, segment_speeds(trajectory), problem.output.speed_share, circles)
+    wrist = wrist_segments(problem, robot, trajectory.q)  # the programs keep straight moves there
+    pieces = [a for a in pieces if not wrist[a.start : a.end].any()]
     ok = [True] * len(pieces)
     done: list[Any] = []
     for kind in MODELS:

@@ -214,3 +214,21 @@ def test_a_run_writes_the_cad_arc_as_one_verified_movec_and_keeps_its_verdict(tm
         script.count("movec(") == 1 and "movec(" not in next((tmp_path / "off").glob("*.script")).read_text()
     )
     assert json.loads((tmp_path / "off" / "result.json").read_text())["passes"][0]["circular_moves"] is None
+
+
+@pytest.mark.parametrize("lang", ["krl", "urscript"])
+def test_the_writers_parsers_read_the_circular_move_s_via_and_end_as_path_points(lang, tmp_path):
+    from refine.export.krl import parse_krl
+    from refine.export.urscript import parse_urscript
+
+    model, q_mid = CASES[lang]
+    robot = load_robot(model)
+    problem = _problem(model)
+    tr, _ = _trajectory(robot, problem, q_mid)
+    if lang == "krl":
+        (read,) = parse_krl(*write_krl(tmp_path / "arc.src", tr, problem, robot))
+    else:
+        (read,) = parse_urscript(write_urscript(tmp_path / "arc.script", tr, problem, robot))
+    keep = [k for k in range(len(tr)) if not (4 < k < 20 and k != 12)]  # the arc: start 4, via 12, end 20
+    got = read.positions if lang == "krl" else read.poses[:, :3, 3]  # base = world here
+    np.testing.assert_allclose(got, tr.poses[keep, :3, 3], atol=2e-6)
