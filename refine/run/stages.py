@@ -266,7 +266,11 @@ def refine_pass(
             )
             timing = trajectory = None
     circular = None
-    if trajectory is not None and problem.output.circular_moves:
+    if (
+        trajectory is not None
+        and problem.output.circular_moves
+        and set(program_formats(problem, robot)) & {"rapid", "krl", "urscript"}
+    ):
         arcs, circular = circular_moves(problem, robot, trajectory, fused, sources)
         trajectory = replace(trajectory, arcs=arcs)
         watch.lap("arc_check")

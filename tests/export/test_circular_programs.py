@@ -186,6 +186,7 @@ def test_without_arcs_the_programs_move_straight(tmp_path):
 
 @pytest.mark.slow
 def test_a_run_writes_the_cad_arc_as_one_verified_movec_and_keeps_its_verdict(tmp_path):
+    """With ``circular_moves`` (the default) and without."""
     import json
 
     from refine import solve
@@ -196,7 +197,7 @@ def test_a_run_writes_the_cad_arc_as_one_verified_movec_and_keeps_its_verdict(tm
     file.write_text(text.replace('programs = ["urscript"]', 'programs = ["urscript"]\ncircular_moves = true'))
     on = solve(file)
     on.write(tmp_path / "on")
-    file.write_text(text)
+    file.write_text(text.replace('programs = ["urscript"]', 'programs = ["urscript"]\ncircular_moves = false'))
     off = solve(file)
     off.write(tmp_path / "off")
     doc = json.loads((tmp_path / "on" / "result.json").read_text())
