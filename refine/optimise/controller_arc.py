@@ -86,7 +86,8 @@ class ArcPiece:
         radius_m: its radius [m].
         normal: the unit axis the motion turns about (right hand), (3,).
         sweep_rad: the angle swept from start to end [rad], in (0, 2 pi).
-        speed_m_s: the move's one programmed speed, the slowest of its segments' planned [m/s].
+        speed_m_s: the move's one programmed speed, the slowest of its segments' planned rounded
+            down to the programs' speed step [m/s].
         start_point: the start target's position in {F} [m], (3,) (where the sweep is counted from).
     """
 
@@ -184,8 +185,21 @@ def _is_cad_circle(centre: Array, radius: float, normal: Array, circles: list) -
     )
 
 
+SPEED_RESOLUTION_M_S = 1e-4
+"""The programs' speed step [m/s]: a circular move's speed is its slowest segment's rounded down to it."""
+
+
+def _one_speed(v: Array, step: float) -> float:
+    """A circular move's one speed: the slowest of ``v`` rounded down to ``step`` (at least one step)."""
+    return max(math.floor(float(v.min()) / step + 1e-9), 1) * step
+
+
 def arc_pieces(
-    positions: Array, segment_speeds: Array, speed_share: float, circles: list | None = None
+    positions: Array,
+    segment_speeds: Array,
+    speed_share: float,
+    circles: list | None = None,
+    speed_resolution_m_s: float = SPEED_RESOLUTION_M_S,
 ) -> list[ArcPiece]:
     """The circular moves of a path: its arcs cut by sweep and speed (see the module notes).
 
@@ -196,6 +210,8 @@ def arc_pieces(
         circles: the CAD's arcs, ``(centre [m] (3,), radius [m], normal (3,))`` each
             (:func:`refine.cad.cad_circles`): only runs on one of them become pieces (waypoints on a
             spline or a mesh boundary that happen to lie on a circle do not); None for every run.
+        speed_resolution_m_s: the programs' speed step [m/s]: the move's speed, its slowest
+            segment's rounded down to it, must stay within ``speed_share`` of every segment's.
 
     Returns:
         The pieces in path order; waypoints outside them keep their straight moves.
@@ -217,7 +233,8 @@ def arc_pieces(
             while (
                 k1 + 1 <= b
                 and ang[k1 + 1 - a] - ang[k0 - a] <= max_sweep * (1.0 + 1e-9)
-                and v[k0 : k1 + 1].min() >= (1.0 - speed_share) * v[k0 : k1 + 1].max()
+                and _one_speed(v[k0 : k1 + 1], speed_resolution_m_s)
+                >= (1.0 - speed_share) * v[k0 : k1 + 1].max()
             ):
                 k1 += 1
             if k1 - k0 < 2:
@@ -228,7 +245,17 @@ def arc_pieces(
             assert circle is not None
             c, r, nrm, sweep = circle
             pieces.append(
-                ArcPiece(k0, via, k1, c, r, nrm, sweep, float(v[k0:k1].min()), positions[k0].copy())
+                ArcPiece(
+                    k0,
+                    via,
+                    k1,
+                    c,
+                    r,
+                    nrm,
+                    sweep,
+                    _one_speed(v[k0:k1], speed_resolution_m_s),
+                    positions[k0].copy(),
+                )
             )
             k0 = k1
     return pieces

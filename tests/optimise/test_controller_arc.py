@@ -203,3 +203,13 @@ def test_the_cad_circles_are_the_drawing_s_arcs_and_the_program_s_arc_moves(tmp_
     np.testing.assert_allclose(c, [0.01, 0.01, 0.005], atol=1e-12)
     assert r == pytest.approx(0.01, abs=1e-12)
     np.testing.assert_allclose(np.abs(n), [0.0, 0.0, 1.0], atol=1e-12)
+
+
+def test_a_piece_s_speed_rounded_down_to_the_programs_step_stays_within_the_share():
+    p = path_line_arc_line()
+    v = np.full(len(p) - 1, 0.00675)
+    v[13:] = 0.00665  # 1.5 % slower: within 2 % ... until 6.65 mm/s is written as 6.6 mm/s (2.2 %)
+    assert [(a.start, a.end) for a in arc_pieces(p, v, 0.02, speed_resolution_m_s=1e-6)] == [(5, 21)]
+    pieces = arc_pieces(p, v, 0.02)  # the programs' 0.1 mm/s
+    assert [(a.start, a.end) for a in pieces] == [(5, 13), (13, 21)]
+    assert [round(a.speed_m_s * 1e4) for a in pieces] == [67, 66]  # 6.7 and 6.6 mm/s, never above
