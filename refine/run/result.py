@@ -179,6 +179,12 @@ def summary_lines(result: RunResult) -> list[str]:
             )
         if p.line is not None:
             lines.append(f"line         {p.line.describe()}" + ("" if p.line.ok else " (broken)"))
+        if p.circular and p.trajectory is not None:
+            arcs, worst = p.trajectory.arcs, max(c.cad_deviation_m for c in p.circular)
+            lines.append(
+                f"arcs         {len(arcs)} of {len(p.circular) // 2} circular move(s) written, up to "
+                f"{worst * 1e3:.4f} mm from the CAD arc"
+            )
         if p.timing is not None:
             lines.append(
                 f"timing       cycle {p.timing.cycle_time_s:.2f} s, "
