@@ -187,13 +187,9 @@ def program_motion(
         levels = np.unique(programmed)
     else:
         raise InputError(f"program_motion: no zone and speed rules for program format {kind!r}")
-    if kind != "sunrise":  # a circular move runs its segments at one speed: its slowest segment's
+    if kind != "sunrise":  # a circular move runs its segments at one speed (RAPID: its own speeddata)
         programmed = programmed.copy()
         for arc in getattr(trajectory, "arcs", ()):
-            part = slice(arc.start, arc.end)
-            if kind == "rapid":
-                programmed[part] = programmed[part].min()
-            else:
-                steps = max(math.floor(arc.speed_m_s / speed_resolution_m_s + 1e-9), 1)
-                programmed[part] = steps * speed_resolution_m_s
+            steps = max(math.floor(arc.speed_m_s / speed_resolution_m_s + 1e-9), 1)
+            programmed[arc.start : arc.end] = steps * speed_resolution_m_s
     return ProgramMotion(kind, zones, planned, programmed, lengths, share, levels)

@@ -322,6 +322,7 @@ def write_rapid(
         f"    CONST speeddata {name}:=[{_num(v * 1000.0, 6)},{_SPEED_TAIL}];"
         for name, v in zip(speed_name, levels, strict=True)
     ]
+    speed_at = len(lines)  # each circular move's own speeddata goes here
     lines += ["    VAR bool arcTimeout;"] if weld else ["    VAR triggdata trOn;", "    VAR triggdata trOff;"]
     for k in range(n):
         trans = ",".join(_num(v * 1000.0, 4) for v in trajectory.poses[k, :3, 3])
@@ -336,7 +337,7 @@ def write_rapid(
         sing_off[min(b + 1, n - 1)] = "SingArea \\Off;"
     moves = []
     arcs = {a.start + 1: a for a in circular_pieces(trajectory, sing_on, sing_off, off_k if not weld else None)}
-    skip_to = 0
+    skip_to, arc_speeds = 0, []
     for k in range(1, n):
         if k <= skip_to:
             continue
@@ -344,9 +345,9 @@ def write_rapid(
             moves.append(sing_on[k])
         z = zones.label[k]
         v = speed_name[level_of[k - 1]]
-        if (arc := arcs.get(k)) is not None:  # the CAD's arc: one circular move at its slowest segment's level
-            slowest = arc.start + int(np.argmin(np.asarray(levels)[level_of[arc.start : arc.end]]))
-            v = speed_name[level_of[slowest]]
+        if (arc := arcs.get(k)) is not None:  # the CAD's arc: one circular move at its own speed
+            v = f"vArc{len(arc_speeds) + 1}"
+            arc_speeds.append(f"    CONST speeddata {v}:=[{_num(arc.speed_m_s * 1000.0, 6)},{_SPEED_TAIL}];")
             moves.append(f"MoveC {names[arc.via]}, {names[arc.end]}, {v}, {zones.label[arc.end]}, {move_tail}")
             skip_to = arc.end
             continue
@@ -356,6 +357,7 @@ def write_rapid(
             moves.append(f"MoveL {names[k]}, {v}, {z}, {move_tail}")
         if k in sing_off:
             moves.append(sing_off[k])
+    lines[speed_at:speed_at] = arc_speeds
     size = problem.output.moves_per_routine
     chunks = [moves[i : i + size] for i in range(0, len(moves), size)]
     routines = [f"path_{i + 1}" for i in range(len(chunks))]
