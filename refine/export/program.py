@@ -478,9 +478,9 @@ def circular_pieces(
 ) -> list[Any]:
     """The trajectory's verified circular moves a program writes (``Trajectory.arcs``).
 
-    A piece is left to straight moves where the program switches something inside it: a segment
-    number of ``marks`` (the keys of a dict, or an int; None for nothing) in ``start + 1 .. end``
-    other than ``end`` itself for a switch after the move (the wrist handling, a process output).
+    A piece is left to straight moves where the program switches something on one of its
+    segments: a segment number of ``marks`` (the keys of a dict, or an int; None for nothing) in
+    ``start + 1 .. end`` (the wrist handling on or off, the process output's switch point).
     """
     taken: set[int] = set()
     for m in marks:

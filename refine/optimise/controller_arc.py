@@ -6,9 +6,10 @@ program may write one circular move (RAPID ``MoveC``, KRL ``CIRC``, URScript ``m
 via target to an end target instead of the straight moves between the waypoints.
 
 **Where** (:func:`arc_pieces`): maximal runs of at least four consecutive waypoints on one circle
-(within :data:`ON_CIRCLE_M`, not on a line) that is one of the CAD's arcs (:data:`CIRCLE_MATCH_M`), cut into pieces whose sweep is at most
-:data:`MAX_SWEEP_DEG` (below every controller's limit) and whose planned segment speeds stay
-within ``speed_share`` of the slowest (a circular move runs at one speed: the slowest segment's).
+(within :data:`ON_CIRCLE_M`, not on a line) that is one of the CAD's arcs
+(:data:`CIRCLE_MATCH_M`), cut into pieces whose sweep is at most :data:`MAX_SWEEP_DEG` (below
+every controller's limit) and whose one speed (a circular move runs at one: the slowest
+segment's, rounded down to the programs' step) stays within ``speed_share`` of every segment's.
 Each piece runs from waypoint ``start`` through ``via`` (its middle waypoint) to ``end``.
 
 **The model** (per controller in ``docs/outputs.md``), at the share ``f`` in [0, 1] of the sweep
