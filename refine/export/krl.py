@@ -54,6 +54,7 @@ from refine.export.program import (
     Wait,
     arc_abort,
     as_passes,
+    circular_note,
     circular_pieces,
     header_notes,
     home_joints,
@@ -411,6 +412,8 @@ def write_krl(
             dat_lines += [f"DECL E6AXIS {v}={{{_e6axis(q)}}}" for v, q in zip(vias, air_in, strict=False)]
             src_lines += [f"  PTP {v} ; via point of the planned move to pass {i}" for v in vias]
         moves = _moves(names, tr, robot, problem, io, air, speed_resolution_m_s, zones)
+        circular = sum(ln.startswith("CIRC ") for ln in moves)
+        src_lines += [f"  ; {n}" for n in circular_note(circular, "slerp ($CIRC_TYPE = #BASE)")]
         src_lines += [f"  {line}" for line in moves]
         src_lines.append(";ENDFOLD")
     air_out = getattr(runs[-1], "air_out", None)

@@ -491,12 +491,8 @@ def circular_pieces(
     return [a for a in getattr(tr, "arcs", ()) if not any(a.start < k <= a.end for k in taken)]
 
 
-def circular_note(pieces: list[Any], controller_model: str) -> list[str]:
-    """Header lines on the circular moves written (none when there are none)."""
-    if not pieces:
+def circular_note(count: int, model: str) -> list[str]:
+    """Header lines on the ``count`` circular moves a program writes (none when there are none)."""
+    if not count:
         return []
-    sweep = max(math.degrees(a.sweep_rad) for a in pieces)
-    return [
-        f"{len(pieces)} circular move(s) on the CAD's arcs (up to {sweep:.1f} deg each), verified with the "
-        f"{controller_model} orientation model"
-    ]
+    return [f"{count} circular move(s) on the CAD's arcs, checked with the controller's {model} orientation model"]

@@ -44,6 +44,7 @@ from refine.export.program import (
     Switch,
     Wait,
     arc_abort,
+    circular_note,
     circular_pieces,
     header_notes,
     home_joints,
@@ -357,7 +358,8 @@ def write_rapid(
             moves.append(f"MoveL {names[k]}, {v}, {z}, {move_tail}")
         if k in sing_off:
             moves.append(sing_off[k])
-    lines[speed_at:speed_at] = arc_speeds
+    notes_arc = [f"    ! {n}" for n in circular_note(len(arc_speeds), "path frame (CirPathMode \\PathFrame)")]
+    lines[speed_at:speed_at] = notes_arc + arc_speeds
     size = problem.output.moves_per_routine
     chunks = [moves[i : i + size] for i in range(0, len(moves), size)]
     routines = [f"path_{i + 1}" for i in range(len(chunks))]

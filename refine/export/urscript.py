@@ -42,6 +42,7 @@ from refine.export.program import (
     Wait,
     arc_abort,
     as_passes,
+    circular_note,
     circular_pieces,
     header_notes,
     home_joints,
@@ -338,7 +339,7 @@ def write_urscript(
                 f"movel({_pose(poses[0], rv[0])}, a={a}, v={air}, r={_num(blends[0], 6)})",
             ]
         arcs = {c.start + 1: c for c in circular_pieces(tr, off_k if not weld else None)}
-        skip_to = 0
+        skip_to = written_arcs = 0
         for k, v in enumerate(segment_speeds(tr), start=1):
             if k <= skip_to:
                 continue
@@ -351,10 +352,11 @@ def write_urscript(
                     f"movec({_pose(poses[c.via], rv[c.via])}, {_pose(poses[c.end], rv[c.end])}, a={a}, "
                     f"v={speed}, r={_num(blends[c.end], 6)}, mode=0)"
                 )
-                skip_to = c.end
+                skip_to, written_arcs = c.end, written_arcs + 1
                 continue
             speed = _num(max(round(v / step), 1) * step, 6)
             body.append(f"movel({_pose(poses[k], rv[k])}, a={a}, v={speed}, r={_num(blends[k], 6)})")
+        body += [f"# {n}" for n in circular_note(written_arcs, "slerp (mode=0)")]
         body += _weld_end(out, gas, problem) if weld else []
         body.append(f"movel({_pose(poses[n], rv[n])}, a={a}, v={air}, r=0)")
     air_out = getattr(runs[-1], "air_out", None)
