@@ -40,6 +40,7 @@ class Progress:
     Attributes:
         stage: the stage that has just finished (``"load"``, ``"cad"``, ``"demo"``, ``"fuse"``,
             ``"build"``, ``"verify"`` (one per round), ``"refine"``, ``"timing"``, ``"line_check"``,
+            ``"arc_check"`` (with ``[output] circular_moves``),
             ``"motions"``: the stage names of
             ``result.json``'s ``timings_s``), or ``"solve"`` for each IPOPT iteration.
         round: the solve -> verify round of the current pass, from 1 (0 outside the rounds).

@@ -331,6 +331,9 @@ class Trajectory:
         poses: TCP pose reached, T_F_TCP, shape (N, 4, 4) (verified with Pinocchio).
         rotations_demo: fused demonstrated orientation R_F_TCP, shape (N, 3, 3).
         speed: planned TCP speed [m/s], shape (N,).
+        arcs: the circular moves the programs write on the CAD's arcs, verified
+            (:class:`refine.optimise.controller_arc.ArcPiece`, ``[output] circular_moves``); empty
+            for straight moves everywhere.
     """
 
     t: Array
@@ -340,6 +343,7 @@ class Trajectory:
     poses: Array
     rotations_demo: Array
     speed: Array
+    arcs: tuple = ()
 
     def __post_init__(self) -> None:
         n = len(self.t)

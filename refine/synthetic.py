@@ -451,3 +451,72 @@ programs = ["{program}"]
         encoding="utf-8",
     )
     return problem
+
+
+def write_arc_problem(folder: str | Path, robot: str, program: str, corner: Sequence[float]) -> Path:
+    """Write a problem folder: a line, a 20 mm quarter ``ARC`` and a line in a DXF, with a demonstration.
+
+    The path runs 40 mm along +y to the arc's start at ``corner``, turns 90 deg left about +z on a
+    20 mm radius and runs 40 mm along -x. The demonstration is the TCP along it at 10 mm/s after a
+    0.5 s pause (tracker at the world origin, sensor at the TCP), the tool pointing down, its x axis
+    along the travel, tilted 10 deg about it; 1e-5 m and 0.005 deg of noise.
+    """
+    import ezdxf
+
+    from refine.frames import tracker_angles_from_matrix
+
+    folder, corner = Path(folder), np.asarray(corner, dtype=float)
+    folder.mkdir(parents=True, exist_ok=True)
+    file = write_line_problem(folder, robot=robot, program=program)
+    r, c = 0.02, corner + np.array([-0.02, 0.0, 0.0])  # the arc's centre
+    doc = ezdxf.new()
+    msp = doc.modelspace()
+    mm = 1e3
+    msp.add_line(
+        ((corner[0]) * mm, (corner[1] - 0.04) * mm, corner[2] * mm),
+        (corner[0] * mm, corner[1] * mm, corner[2] * mm),
+    )
+    msp.add_arc((c[0] * mm, c[1] * mm, c[2] * mm), r * mm, 0.0, 90.0)
+    msp.add_line(((c[0]) * mm, (c[1] + r) * mm, c[2] * mm), ((c[0] - 0.04) * mm, (c[1] + r) * mm, c[2] * mm))
+    doc.saveas(folder / "path.dxf")
+    L = 0.08 + r * math.pi / 2
+    t = np.arange(0.0, 0.5 + L / 0.01 + 1e-9, 0.01)
+    s = np.clip((t - 0.5) * 0.01, 0.0, L)
+    heading = np.where(s < 0.04, 0.0, np.where(s < 0.04 + r * math.pi / 2, (s - 0.04) / r, math.pi / 2))
+    arc_s = np.clip(s - 0.04, 0.0, r * math.pi / 2) / r
+    p = np.column_stack(
+        [
+            np.where(s < 0.04, corner[0], c[0] + r * np.cos(arc_s)),
+            np.zeros_like(s),
+            np.full_like(s, corner[2]),
+        ]
+    )
+    p[:, 1] = np.where(s < 0.04, corner[1] - 0.04 + s, c[1] + r * np.sin(arc_s))
+    past = s > 0.04 + r * math.pi / 2
+    p[past, 0] = c[0] - (s[past] - 0.04 - r * math.pi / 2)
+    travel = np.column_stack([-np.sin(heading), np.cos(heading), np.zeros_like(heading)])
+    R = np.stack(
+        [
+            np.column_stack([d, np.cross([0.0, 0.0, -1.0], d), [0.0, 0.0, -1.0]])
+            @ rotation_about("x", math.radians(10.0))
+            for d in travel
+        ]
+    )
+    rng = np.random.default_rng(0)
+    angles = tracker_angles_from_matrix(R) + rng.normal(0.0, 0.005, (len(t), 3))
+    rows = np.column_stack([t, p + rng.normal(0.0, 1e-5, p.shape), angles])
+    (folder / "demo.csv").write_text(
+        "t,x,y,z,azimuth,elevation,roll\n"
+        + "\n".join(",".join(f"{v:.9g}" for v in row) for row in rows)
+        + "\n"
+    )
+    text = file.read_text().replace(
+        'file = "path.csv"', 'file = "path.dxf"\nformat = "dxf"\nspacing_m_unused = 0'
+    )
+    text = text.replace("spacing_m_unused = 0\n", "").replace("spacing_m = 0.005", "spacing_m = 0.002")
+    file.write_text(
+        text.replace(
+            'description = "Straight bead', 'description = "Line, 20 mm arc, line; was: straight bead'
+        )
+    )
+    return file

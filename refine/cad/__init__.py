@@ -244,3 +244,26 @@ def read_cad_path(settings: CadSettings, cad_in_world: NDArray) -> CadPath:
             'choose one with cad.track = "<number>" or read them all with read_cad_tracks'
         )
     return paths[0]
+
+
+def cad_circles(settings: CadSettings, cad_in_world: NDArray) -> list[tuple[NDArray, float, NDArray]]:
+    """The circles of the CAD's arcs in the world frame {F}: where a program may write circular moves.
+
+    DXF: ``ARC`` and ``CIRCLE`` entities and polyline bulges of the entities the reader chooses;
+    G-code: the planar ``G2``/``G3`` moves; the other formats hold no arcs (an empty list).
+
+    Returns:
+        ``(centre [m] (3,), radius [m], unit normal (3,))`` per arc.
+    """
+    T = check_transform(cad_in_world, "frames.cad_in_world")
+    if settings.format == "dxf":
+        from refine.cad.dxf import dxf_circles
+
+        found = dxf_circles(settings.file, settings.units, settings.layer)
+    elif settings.format == "gcode":
+        from refine.cad.gcode import gcode_circles
+
+        found = gcode_circles(settings.file, settings.units)
+    else:
+        return []
+    return [(transform_points(T, c[None])[0], r, T[:3, :3] @ n) for c, r, n in found]

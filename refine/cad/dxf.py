@@ -415,3 +415,43 @@ def tracks_from_dxf(
         tracks.append(CadTrack(points * scale, kinds, bool(closed), ", ".join(labels)))
     logger.debug("%s: %d track(s)", source, len(tracks))
     return tracks
+
+
+def dxf_circles(path: str | Path, units: str = "mm", layer: str | None = None) -> list:
+    """The circles of the drawing's arcs: ``ARC`` and ``CIRCLE`` entities and polyline bulges.
+
+    The entities are those the reader chooses (the path entities, on ``layer`` when given).
+
+    Returns:
+        ``(centre [m] (3,), radius [m], unit normal (3,))`` per arc, in the drawing's frame.
+    """
+    path = Path(path)
+    source = f"DXF file {str(path)!r}"
+    scale = metres_per_unit(units, str(path))
+    try:
+        doc = ezdxf.readfile(path)
+    except (OSError, ezdxf.DXFError) as e:
+        raise InputError(f"{source} cannot be read: {e}") from e
+    entities = [e for e in doc.modelspace() if e.dxftype() in PATH_TYPES]
+    circles = []
+    for e in _select(entities, layer, source):
+        ocs = e.ocs()
+        normal = np.asarray(ocs.uz, dtype=float)
+        if e.dxftype() in ("ARC", "CIRCLE"):
+            centre = np.asarray(ocs.to_wcs(e.dxf.center), dtype=float)
+            circles.append((centre * scale, float(e.dxf.radius) * scale, normal))
+            continue
+        xyb = _xyb(e)
+        if xyb is None:
+            continue
+        elevation = float(e.dxf.elevation) if e.dxftype() == "LWPOLYLINE" else float(e.dxf.elevation.z)
+        n = len(xyb)
+        for i in range(n if _is_closed(e) else n - 1):
+            a, b, bulge = xyb[i, :2], xyb[(i + 1) % n, :2], xyb[i, 2]
+            if bulge == 0.0 or np.allclose(a, b):
+                continue
+            c = bulge_center(tuple(a), tuple(b), bulge)
+            radius = float(np.linalg.norm(b - a)) / 4.0 * (1.0 / abs(bulge) + abs(bulge))
+            centre = np.asarray(ocs.to_wcs((c[0], c[1], elevation)), dtype=float)
+            circles.append((centre * scale, radius * scale, normal))
+    return circles

@@ -191,7 +191,9 @@ def _program_index(program: int | str | None, n: int, source: str) -> int | None
     return k - 1
 
 
-def _parse(path: Path, units: str, arc_tolerance_m: float) -> tuple[list[_Sequence], str]:
+def _parse(
+    path: Path, units: str, arc_tolerance_m: float, circles: list | None = None
+) -> tuple[list[_Sequence], str]:
     """The feed tracks of a G-code file (see the module docstring) and the file's name for messages."""
     path = Path(path)
     source = f"G-code file {str(path)!r}"
@@ -287,6 +289,12 @@ def _parse(path: Path, units: str, arc_tolerance_m: float) -> tuple[list[_Sequen
                 raise InputError(f"{where}: arc G{motion} needs I/J/K or R: {text!r}")
             check_point(centre, CAD_COORDINATE_LIMIT_M, where, "arc centre")
             new = _arc_points(pos, end, centre, plane, ccw, turns, arc_tolerance_m, where)
+            if circles is not None and abs(end[plane[2]] - pos[plane[2]]) <= 1e-12:  # a planar arc, not a helix
+                c3 = np.zeros(3)
+                c3[plane[0]], c3[plane[1]], c3[plane[2]] = centre[0], centre[1], pos[plane[2]]
+                axis = np.zeros(3)
+                axis[plane[2]] = 1.0
+                circles.append((c3, math.hypot(pos[plane[0]] - centre[0], pos[plane[1]] - centre[1]), axis))
             check_coordinates(new, CAD_COORDINATE_LIMIT_M, lambda _k, at=where: at, "arc point")
             new_kinds = [FLATTENING] * (len(new) - 1) + [FEATURE]
         if np.linalg.norm(new[-1] - pos) <= 1e-12 and len(new) == 1:
@@ -384,3 +392,14 @@ def tracks_from_gcode(
         )
         for s in sequences
     ]
+
+
+def gcode_circles(path: str | Path, units: str = "mm", arc_tolerance_m: float = FLATTEN_TOLERANCE_M) -> list:
+    """The circles of the program's planar arc moves (G2/G3 without a helix's travel).
+
+    Returns:
+        ``(centre [m] (3,), radius [m], unit normal (3,))`` per arc, in the program's frame.
+    """
+    circles: list = []
+    _parse(Path(path), units, arc_tolerance_m, circles)
+    return circles

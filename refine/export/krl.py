@@ -54,6 +54,8 @@ from refine.export.program import (
     Wait,
     arc_abort,
     as_passes,
+    circular_note,
+    circular_pieces,
     header_notes,
     home_joints,
     lead_point,
@@ -291,12 +293,26 @@ def _moves(
     for a, b in singular_runs(robot, tr.q):
         sing_on[max(a, 1)] = f"$ORI_TYPE = #JOINT ; near the wrist singularity at points {a + 1}-{b + 1}"
         sing_off[min(b + 1, len(tr) - 1)] = "$ORI_TYPE = #VAR"
+    arcs = {a.start + 1: a for a in circular_pieces(tr, sing_on, sing_off, off_k if not weld else None)}
+    skip_to = 0
+    if arcs:  # CIRC's orientation: from the start's to the end's at a constant rate, in the base
+        lines.insert(2, "$CIRC_TYPE = #BASE")
     for k, v in enumerate(segment_speeds(tr), start=1):
-        text = _real(max(round(v / step), 1) * step, 6)
+        if k <= skip_to:
+            continue
+        arc = arcs.get(k)
+        steps = max(round(v / step), 1)
+        if arc is not None:  # one speed for the circular move, not above its slowest segment's
+            steps = max(math.floor(arc.speed_m_s / step + 1e-9), 1)
+        text = _real(steps * step, 6)
         lines += [f"$VEL.CP = {text}"] if text != current else []
         current = text
         lines += [sing_on[k]] if k in sing_on else []
         lines += [_trigger(problem, io, "FALSE", off_lead)] if k == off_k and not weld else []
+        if arc is not None:  # the CAD's arc: one circular move through the via point (see the header)
+            lines.append(f"CIRC {path[arc.via]}, {path[arc.end]}" + _zone(zones, arc.end))
+            skip_to = arc.end
+            continue
         lines.append(f"LIN {path[k]}" + _zone(zones, k))
         lines += [sing_off[k]] if k in sing_off else []
     lines += _weld_end(io, problem) if weld else []
@@ -420,6 +436,8 @@ def write_krl(
             dat_lines += [f"DECL E6AXIS {v}={{{_e6axis(q)}}}" for v, q in zip(vias, air_in, strict=False)]
             src_lines += [f"  PTP {v} ; via point of the planned move to pass {i}" for v in vias]
         moves = _moves(names, tr, robot, problem, io, air, speed_resolution_m_s, zones)
+        circular = sum(ln.startswith("CIRC ") for ln in moves)
+        src_lines += [f"  ; {n}" for n in circular_note(circular, "slerp ($CIRC_TYPE = #BASE)")]
         src_lines += [f"  {line}" for line in moves]
         src_lines.append(";ENDFOLD")
     air_out = getattr(runs[-1], "air_out", None)
@@ -504,6 +522,13 @@ def parse_krl(path_src: str | Path, path_dat: str | Path) -> list[KrlPass]:
             if m.group(1).upper() not in points:
                 raise InputError(f"KRL {path_src}: point {m.group(1)} is not declared in {path_dat}")
             passes[-1]["moves"].append((m.group(1).upper(), speed))
+        elif re.match(r"CIRC\s", code, re.IGNORECASE) and passes:  # the via point and the end point
+            if not (m := re.fullmatch(r"CIRC\s+(\w+)\s*,\s*(\w+)(\s+C_DIS)?", code, re.IGNORECASE)):
+                raise InputError(f"KRL {path_src}: cannot read {code!r}")
+            for name in (m.group(1).upper(), m.group(2).upper()):
+                if name not in points:
+                    raise InputError(f"KRL {path_src}: point {name} is not declared in {path_dat}")
+                passes[-1]["moves"].append((name, speed))
         elif switch and passes:
             key = "on" if switch.group(1).upper() == "TRUE" else "off"
             after = 0 if code.upper().startswith("TRIGGER") else -1  # a TRIGGER acts on the next move

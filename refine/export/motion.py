@@ -21,6 +21,7 @@ the report state the same figures, so what is reported is what is written:
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -302,4 +303,9 @@ def program_motion(
         programmed = levels[level_of]
     else:
         raise InputError(f"program_motion: no zone and speed rules for program format {kind!r}")
+    if kind != "sunrise":  # a circular move runs its segments at one speed (RAPID: its own speeddata)
+        programmed = programmed.copy()
+        for arc in getattr(trajectory, "arcs", ()):
+            steps = max(math.floor(arc.speed_m_s / speed_resolution_m_s + 1e-9), 1)
+            programmed[arc.start : arc.end] = steps * speed_resolution_m_s
     return ProgramMotion(kind, zones, planned, programmed, lengths, share, levels)

@@ -476,3 +476,28 @@ def corner_zones(
         labels.append(chosen[0])
         radius[k], deviation[k] = chosen[1], chosen[2]
     return Zones(radius, deviation, tuple(labels), tolerance_m, tuple(narrowed))
+
+
+def circular_pieces(
+    tr: Trajectory, *marks: dict[int, str] | int | None
+) -> list[Any]:
+    """The trajectory's verified circular moves a program writes (``Trajectory.arcs``).
+
+    A piece is left to straight moves where the program switches something on one of its
+    segments: a segment number of ``marks`` (the keys of a dict, or an int; None for nothing) in
+    ``start + 1 .. end`` (the wrist handling on or off, the process output's switch point).
+    """
+    taken: set[int] = set()
+    for m in marks:
+        if isinstance(m, dict):
+            taken.update(m)
+        elif m is not None:
+            taken.add(int(m))
+    return [a for a in getattr(tr, "arcs", ()) if not any(a.start < k <= a.end for k in taken)]
+
+
+def circular_note(count: int, model: str) -> list[str]:
+    """Header lines on the ``count`` circular moves a program writes (none when there are none)."""
+    if not count:
+        return []
+    return [f"{count} circular move(s) on the CAD's arcs, checked with the controller's {model} orientation model"]

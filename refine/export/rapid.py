@@ -44,6 +44,8 @@ from refine.export.program import (
     Switch,
     Wait,
     arc_abort,
+    circular_note,
+    circular_pieces,
     header_notes,
     home_joints,
     lead_point,
@@ -348,6 +350,7 @@ def write_rapid(
         f"    CONST speeddata {name}:=[{_num(v * 1000.0, 6)},{_SPEED_TAIL}];"
         for name, v in zip(speed_name, levels, strict=True)
     ]
+    speed_at = len(lines)  # each circular move's own speeddata goes here
     lines += ["    VAR bool arcTimeout;"] if weld else ["    VAR triggdata trOn;", "    VAR triggdata trOff;"]
     for k in range(n):
         trans = ",".join(_num(v * 1000.0, 4) for v in trajectory.poses[k, :3, 3])
@@ -361,23 +364,37 @@ def write_rapid(
         sing_on[max(a, 1)] = f"SingArea \\Wrist;  ! near the wrist singularity at targets {a}-{b}"
         sing_off[min(b + 1, n - 1)] = "SingArea \\Off;"
     moves = []
+    arcs = {a.start + 1: a for a in circular_pieces(trajectory, sing_on, sing_off, off_k if not weld else None)}
+    skip_to, arc_speeds = 0, []
     for k in range(1, n):
+        if k <= skip_to:
+            continue
         if k in sing_on:
             moves.append(sing_on[k])
         z = zones.label[k]
         v = speed_name[level_of[k - 1]]
+        if (arc := arcs.get(k)) is not None:  # the CAD's arc: one circular move at its own speed
+            v = f"vArc{len(arc_speeds) + 1}"
+            arc_speeds.append(f"    CONST speeddata {v}:=[{_num(arc.speed_m_s * 1000.0, 6)},{_SPEED_TAIL}];")
+            moves.append(f"MoveC {names[arc.via]}, {names[arc.end]}, {v}, {zones.label[arc.end]}, {move_tail}")
+            skip_to = arc.end
+            continue
         if k == off_k and not weld:
             moves.append(f"TriggL {names[k]}, {v}, trOff, {z}, {move_tail}")
         else:
             moves.append(f"MoveL {names[k]}, {v}, {z}, {move_tail}")
         if k in sing_off:
             moves.append(sing_off[k])
+    notes_arc = [f"    ! {n}" for n in circular_note(len(arc_speeds), "path frame (CirPathMode \\PathFrame)")]
+    lines[speed_at:speed_at] = notes_arc + arc_speeds
     size = problem.output.moves_per_routine
     chunks = [moves[i : i + size] for i in range(0, len(moves), size)]
     routines = [f"path_{i + 1}" for i in range(len(chunks))]
 
     main = ["ConfJ \\On;", "ConfL \\On;"]
     abs_tail = f"{tool} \\WObj:={wobj};" if stationary else f"{tool};"  # a stationary tool needs its wobj
+    if arcs:  # MoveC's orientation: in the circle's path frame, from the start's to the end's
+        main.append("CirPathMode \\PathFrame;")
     home_move = f"MoveAbsJ jHome\\NoEOffs, vAir, fine, {abs_tail}"
     main.append(home_move if start_home else "! runs after the previous pass's module, from its retract point")
     air_zone = "z10" if air_in is None else "fine"  # planned motions: exact stops, as verified
@@ -431,6 +448,7 @@ _TARGET_RE = re.compile(
 )
 _SPEED_RE = re.compile(rf"CONST\s+speeddata\s+(\w+)\s*:=\s*{_NUMS}\s*;")
 _MOVE_RE = re.compile(r"\b(?:Move[LJ]|TriggL)\s+(\w+)\s*,\s*(\w+)\s*,")
+_MOVEC_RE = re.compile(r"\bMoveC\s+(\w+)\s*,\s*(\w+)\s*,\s*(\w+)\s*,")
 
 
 def _floats(text: str, count: int, where: str) -> list[float]:
@@ -472,4 +490,9 @@ def parse_rapid_targets(path: str | Path) -> tuple[Array, Array, NDArray[np.int6
         k = index.get(m.group(1))
         if k is not None and math.isnan(target_speed[k]):
             target_speed[k] = speeds.get(m.group(2), math.nan)
+    for m in _MOVEC_RE.finditer(text):  # the via and the end point run at the circular move's speed
+        for name in m.group(1, 2):
+            k = index.get(name)
+            if k is not None and math.isnan(target_speed[k]):
+                target_speed[k] = speeds.get(m.group(3), math.nan)
     return positions, quats, confs.astype(np.int64), target_speed

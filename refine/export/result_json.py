@@ -229,6 +229,12 @@ def result_dict(result: RunResult) -> dict[str, Any]:
                 if p.line is None
                 else p.line.as_json(None if p.clearance is None else p.clearance.segment_clearance_m),
                 "programs": {kind: motion.as_json() for kind, motion in program_motions(result, p).items()},
+                "circular_moves": None
+                if getattr(p, "circular", None) is None
+                else {
+                    "written": [[a.start, a.via, a.end] for a in getattr(p.trajectory, "arcs", ())],
+                    "checks": [c.as_json() for c in p.circular],
+                },
             }
             for p, m in zip(result.passes, per_pass, strict=True)
         ],

@@ -42,6 +42,8 @@ from refine.export.program import (
     Wait,
     arc_abort,
     as_passes,
+    circular_note,
+    circular_pieces,
     header_notes,
     home_joints,
     process_summary,
@@ -337,12 +339,25 @@ def write_urscript(
                 "run process_on()",
                 f"movel({_pose(poses[0], rv[0])}, a={a}, v={air}, r={_num(blends[0], 6)})",
             ]
+        arcs = {c.start + 1: c for c in circular_pieces(tr, off_k if not weld else None)}
+        skip_to = written_arcs = 0
         for k, v in enumerate(segment_speeds(tr), start=1):
+            if k <= skip_to:
+                continue
             if k == off_k and not weld:
                 body += [f"off_target = {_pose(poses[n - 1], rv[n - 1])}", f"off_lead = {_num(off_lead, 6)}"]
                 body.append("run process_off()")
+            if (c := arcs.get(k)) is not None:  # the CAD's arc: one circular move, orientation start -> end
+                speed = _num(max(math.floor(c.speed_m_s / step + 1e-9), 1) * step, 6)  # not above its slowest
+                body.append(
+                    f"movec({_pose(poses[c.via], rv[c.via])}, {_pose(poses[c.end], rv[c.end])}, a={a}, "
+                    f"v={speed}, r={_num(blends[c.end], 6)}, mode=0)"
+                )
+                skip_to, written_arcs = c.end, written_arcs + 1
+                continue
             speed = _num(max(round(v / step), 1) * step, 6)
             body.append(f"movel({_pose(poses[k], rv[k])}, a={a}, v={speed}, r={_num(blends[k], 6)})")
+        body += [f"# {n}" for n in circular_note(written_arcs, "slerp (mode=0)")]
         body += _weld_end(out, gas, problem) if weld else []
         body.append(f"movel({_pose(poses[n], rv[n])}, a={a}, v={air}, r=0)")
     air_out = getattr(runs[-1], "air_out", None)
@@ -390,6 +405,9 @@ class UrPass:
 
 _NUMS = r"\[([^\[\]]*)\]"
 _MOVEL_RE = re.compile(rf"movel\(p{_NUMS}\s*,\s*a=([^,]+),\s*v=([^,]+),\s*r=([^)]+)\)")
+_MOVEC_RE = re.compile(
+    rf"movec\(p{_NUMS}\s*,\s*p{_NUMS}\s*,\s*a=([^,]+),\s*v=([^,]+),\s*r=([^,]+),\s*mode=0\)"
+)
 
 
 def _vector(text: str, count: int | None, where: str) -> Array:
@@ -431,6 +449,10 @@ def parse_urscript(path: str | Path) -> list[UrPass]:
             tcp = _transform(m.group(1), "set_tcp")
         elif (m := re.match(rf"movej\({_NUMS}", line)) and passes and passes[-1]["q"] is None:
             passes[-1]["q"] = _vector(m.group(1), None, "movej")
+        elif line.startswith("movec(") and passes:  # the via point and the end point
+            if not (m := _MOVEC_RE.fullmatch(line)):
+                raise InputError(f"URScript {path}: cannot read {line!r}")
+            passes[-1]["moves"] += [(m.group(1), float(m.group(4)), 0.0), (m.group(2), float(m.group(4)), float(m.group(5)))]
         elif line.startswith("movel(") and passes:
             if not (m := _MOVEL_RE.fullmatch(line)):
                 raise InputError(f"URScript {path}: cannot read {line!r}")

@@ -146,6 +146,23 @@ def _controller_html(doc: dict) -> str:
                 + "".join(f"; {html.escape(v)}" for v in line["violations"])
                 + ".</p>"
             )
+        circular = p.get("circular_moves")
+        if circular and circular["checks"]:
+            checks = circular["checks"]
+            parts.append(
+                f"<p>{html.escape(p['name'])}: {len(circular['written'])} of {len(checks) // 2} circular "
+                f"move(s) on the CAD's arcs written; in the controllers' orientation models at most "
+                f"{max(c['max_cad_deviation_m'] for c in checks) * 1e3:.4f} mm from the CAD arc, "
+                f"{max(c['max_axis_vs_refined_deg'] for c in checks):.2f} deg (tool axis) and "
+                f"{max(c['max_rotation_vs_refined_deg'] for c in checks):.2f} deg (whole) from the refined "
+                f"orientation, {max(c['max_vs_demo_deg'] for c in checks):.2f} deg from the demonstration"
+                + "".join(
+                    f"; waypoints {c['start']}-{c['end']} ({html.escape(c['model'])}): {html.escape(r)}"
+                    for c in checks
+                    for r in c["reasons"]
+                )
+                + ".</p>"
+            )
         for kind, m in p.get("programs", {}).items():
             rows = []
             for k, (zone, dev) in enumerate(zip(m["zones"], m["zone_deviation_m"], strict=True)):

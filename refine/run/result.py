@@ -41,6 +41,9 @@ class PassResult:
             (:class:`refine.optimise.controller_line.LineCheck`); None when not checked.
         clearance_kinds: the cell pairs' and the self pairs' least distances apart
             (:class:`refine.run.clearance_kinds.KindMinima`); None without collision.
+        circular: the circular moves on the CAD's arcs, each checked in every controller's
+            orientation model (:class:`refine.optimise.controller_arc.ArcCheck`, ``[output]
+            circular_moves``); None when not asked for.
     """
 
     name: str
@@ -54,6 +57,7 @@ class PassResult:
     nlp: Any = None
     line: Any = None
     clearance_kinds: Any = None
+    circular: Any = None
 
     def __getstate__(self) -> dict[str, Any]:
         return {**self.__dict__, "nlp": None}
@@ -178,6 +182,12 @@ def summary_lines(result: RunResult) -> list[str]:
             )
         if p.line is not None:
             lines.append(f"line         {p.line.describe()}" + ("" if p.line.ok else " (broken)"))
+        if p.circular and p.trajectory is not None:
+            arcs, worst = p.trajectory.arcs, max(c.cad_deviation_m for c in p.circular)
+            lines.append(
+                f"arcs         {len(arcs)} of {len(p.circular) // 2} circular move(s) written, up to "
+                f"{worst * 1e3:.4f} mm from the CAD arc"
+            )
         if p.timing is not None:
             lines.append(
                 f"timing       cycle {p.timing.cycle_time_s:.2f} s, "

@@ -273,9 +273,91 @@ def refine_pass(
                 check=replace(refinement.check, violations=refinement.check.violations + line.violations),
             )
             timing = trajectory = None
+    circular = None
+    if (
+        trajectory is not None
+        and problem.output.circular_moves
+        and not problem.tool.stationary  # a held part keeps straight moves
+        and set(program_formats(problem, robot)) & {"rapid", "krl", "urscript"}
+    ):
+        arcs, circular = circular_moves(problem, robot, trajectory, fused, sources)
+        trajectory = replace(trajectory, arcs=arcs)
+        watch.lap("arc_check")
     return PassResult(
-        name, layer, index, fused, refinement, timing, trajectory, clearance, nlp, line, clearance_kinds=kinds
+        name,
+        layer,
+        index,
+        fused,
+        refinement,
+        timing,
+        trajectory,
+        clearance,
+        nlp,
+        line,
+        clearance_kinds=kinds,
+        circular=circular,
     )
+
+
+def circular_moves(
+    problem: Problem, robot: Robot, trajectory: Trajectory, fused: Any, sources: tuple[ConstraintSource, ...]
+) -> tuple[tuple[Any, ...], tuple[Any, ...]]:
+    """The CAD's arcs as circular moves that pass their checks in every controller's model.
+
+    The pieces (:func:`refine.optimise.controller_arc.arc_pieces`) are checked as each circular
+    move's controller runs it (:func:`refine.optimise.controller_arc.check_circular_moves`, both
+    orientation models), with the problem's collision model where it has one; a piece that fails
+    in either keeps its straight moves (logged), as does one inside a run the programs hand to the
+    controller's wrist handling (:func:`wrist_segments`).
+
+    Returns:
+        The pieces that pass (``Trajectory.arcs``) and every check, per model in turn.
+    """
+    from refine.collision.check import check_path_clearance, margins_proved
+    from refine.export.motion import segment_speeds
+    from refine.optimise.controller_arc import MODELS, arc_pieces, check_circular_moves
+    from refine.robot.kinematics import TcpKinematics
+
+    kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange)
+    model = next(
+        (getattr(src, "model", None) for src in sources if getattr(src, "model", None) is not None), None
+    )
+
+    def clearance(dense: np.ndarray) -> tuple[float | None, float]:
+        if margins_proved(model, dense):
+            return None, 1e-4
+        found = check_path_clearance(model, dense, kin, problem.collision.check_step_m)
+        return float(np.min(found.segment_clearance_m)), found.tolerance_m
+
+    from refine.cad import cad_circles
+
+    circles = [] if problem.cad is None else cad_circles(problem.cad, problem.frames.cad_in_world)  # no CAD: no arcs
+    pieces = arc_pieces(trajectory.positions_ref, segment_speeds(trajectory), problem.output.speed_share, circles)
+    wrist = wrist_segments(problem, robot, trajectory.q)  # the programs keep straight moves there
+    pieces = [a for a in pieces if not wrist[a.start : a.end].any()]
+    ok = [True] * len(pieces)
+    done: list[Any] = []
+    for kind in MODELS:
+        checks = check_circular_moves(
+            kin,
+            trajectory.q,
+            trajectory.poses,
+            pieces,
+            kind,
+            problem.tolerances,
+            rotations_demo=trajectory.rotations_demo,
+            axisymmetric=problem.tool.axisymmetric,
+            exact=getattr(fused, "exact", None),
+            clearance=None if model is None else clearance,
+        )
+        done += checks
+        for i, c in enumerate(checks):
+            if not c.ok:
+                ok[i] = False
+                log.info("circular move at waypoints %d-%d kept straight: %s", c.piece.start, c.piece.end, "; ".join(c.reasons))
+    return tuple(p for p, good in zip(pieces, ok, strict=True) if good), tuple(done)
+
+
 
 
 def plan_motions(

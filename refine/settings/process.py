@@ -146,6 +146,9 @@ class OutputSettings:
             ``MoveAbsJ``, KRL and FANUC ``PTP``/``J``, INFORM ``MOVJ``, URScript ``movej``, Sunrise
             ``ptp``) as a share of each joint's maximum speed, in whole percent [-]; the planned
             durations and the programs use the same.
+        circular_moves: write the CAD's arcs as circular moves (RAPID ``MoveC``, KRL ``CIRC``,
+            URScript ``movec``) where the controller's circle passes its checks; the other
+            formats, and every arc piece that fails, keep straight moves. On by default.
     """
 
     programs: tuple[str, ...] | None = None
@@ -154,6 +157,7 @@ class OutputSettings:
     speed_share: float = 0.02
     moves_per_routine: int = 500
     air_speed_share: float = 0.2
+    circular_moves: bool = True
 
     def __post_init__(self) -> None:
         for p in self.programs or ():

@@ -40,3 +40,38 @@ def test_report_is_one_self_contained_page_with_every_panel(tmp_path):
     assert re.search(r"clearance to the cell \(min\)\s*\d+\.\d mm", verdict.text_content())
     assert re.search(r"clearance between links and tool \(min\)\s*\d+\.\d mm", verdict.text_content())
     assert "ur10e_sealing.script" in verdict.text_content()
+
+
+def test_the_report_states_the_circular_moves_and_why_one_was_not_written():
+    from refine.report.html import _controller_html
+
+    def check(model, ok, cad_mm):
+        return {
+            "start": 4,
+            "via": 12,
+            "end": 20,
+            "model": model,
+            "max_cad_deviation_m": cad_mm / 1e3,
+            "max_axis_vs_refined_deg": 0.4,
+            "max_rotation_vs_refined_deg": 1.9,
+            "max_vs_demo_deg": 2.0,
+            "ok": ok,
+            "reasons": [] if ok else ["circular move 0.0124 mm off the CAD arc (limit 0.01 mm)"],
+        }
+
+    doc = {
+        "passes": [
+            {
+                "name": "pass 1",
+                "line": None,
+                "programs": {},
+                "circular_moves": {
+                    "written": [],
+                    "checks": [check("slerp", False, 0.0124), check("path_frame", True, 0.0009)],
+                },
+            }
+        ]
+    }
+    text = _controller_html(doc)
+    assert "0 of 1 circular move(s)" in text and "0.0124 mm from the CAD arc" in text
+    assert "waypoints 4-20 (slerp): circular move 0.0124 mm off the CAD arc" in text
