@@ -17,7 +17,6 @@ call can start from a previous answer: ``initial_joints=`` warm-starts the solve
 from __future__ import annotations
 
 import copy
-import dataclasses
 import threading
 from collections.abc import Callable, Mapping, Sequence
 from datetime import datetime, timezone
@@ -46,6 +45,7 @@ from refine.arguments import (  # noqa: I001
 from refine.control import Progress, controlled
 from refine.errors import InputError, NotExecutable, api_words
 from refine.problem import Problem, load_problem
+from refine.run.timeout import checked_limit, timed_call, with_time_limit
 from refine.run.typed import Diagnosis, Metrics, PassArrays
 from refine.settings import (
     CollisionSettings,
@@ -378,8 +378,9 @@ def solve(
         initial_joints: joints (N, n) [rad] to start the first pass from instead of the IK seed.
         previous: an earlier result of the same problem with a small change (tolerances, weights):
             its built problem is reused where it can be and its joints are the start.
-        time_limit_s: wall-time budget [s] of each pass's refinement, instead of the problem's
-            ``[repair] time_limit_s``; when it runs out before a verdict the status is ``"timeout"``.
+        time_limit_s: wall-time budget [s] of the whole call, every stage (and instead of ``[repair]
+            time_limit_s``); past it the result's status is ``"timeout"`` and ``reason`` and
+            ``to_dict()["stopped_stage"]`` name the stage that stopped (docs/api.md, "Time limit").
         cancel: a :class:`threading.Event` (or a callable returning True) that stops the call:
             checked after every stage, every solve -> verify round and every IPOPT iteration; the
             call then raises :class:`refine.Cancelled`. Ctrl-C raises ``KeyboardInterrupt``, also
@@ -390,27 +391,23 @@ def solve(
     Returns:
         The result; ``result.write(out_dir)`` writes the files ``refine run`` writes.
     """
-    from refine.run.solve import solve_problem
-    from refine.run.stages import fused_path
-
     check_hooks(cancel, progress)
     check_previous(previous, Result)
-    with api_words(), controlled(cancel, progress):
+
+    def call(problem: Problem | str | Path = problem) -> Result:
+        from refine.run.solve import solve_problem  # imported within the call's time limit
+        from refine.run.stages import fused_path
+
         if not isinstance(problem, Problem):
             typed(problem, "problem", (str, Path), "a refine.Problem or the path of a problem folder or file")
             problem = load_problem(problem)
-        problem = _with_time_limit(problem, time_limit_s)
+        problem = with_time_limit(problem, time_limit_s)
         if previous is None:
-            q0 = joints_from(initial_joints, None, None)
-            return Result(solve_problem(problem, q0=q0))
-        fused = fused_path(problem)
-        return _solve_again(problem, previous.run.robot, fused, previous, initial_joints)
+            return Result(solve_problem(problem, q0=joints_from(initial_joints, None, None)))
+        return _solve_again(problem, previous.run.robot, fused_path(problem), previous, initial_joints)
 
-
-def _with_time_limit(problem: Problem, time_limit_s: float | None) -> Problem:
-    if time_limit_s is None:
-        return problem
-    return dataclasses.replace(problem, repair=dataclasses.replace(problem.repair, time_limit_s=time_limit_s))
+    with api_words(), controlled(cancel, progress, checked_limit(time_limit_s)):
+        return timed_call(getattr(problem, "name", Path(str(problem)).name), call, Result)
 
 
 def _solve_again(
@@ -516,8 +513,10 @@ def refine_path(
         quaternion_order: ``"wxyz"`` (scalar first, as ``trajectory.csv``) or ``"xyzw"`` (scalar
             last, as scipy's ``Rotation.as_quat()``); required with quaternions, since both orders
             read any unit quaternion.
-        time_limit_s: wall-time budget [s] of each pass's refinement, instead of the problem's
-            ``[repair] time_limit_s``; when it runs out before a verdict the status is ``"timeout"``.
+        time_limit_s: wall-time budget [s] of the whole call (every stage, not only the solves;
+            each pass's refinement also keeps within it instead of ``[repair] time_limit_s``); when
+            it runs out the call returns a result with status ``"timeout"`` whose ``reason`` and
+            ``to_dict()["stopped_stage"]`` name the stage that stopped (docs/api.md, "Time limit").
         cancel: a :class:`threading.Event` (or a callable returning True) that stops the call:
             checked after every stage, every solve -> verify round and every IPOPT iteration; the
             call then raises :class:`refine.Cancelled`. Ctrl-C raises ``KeyboardInterrupt``, also
@@ -596,5 +595,6 @@ def refine_path(
         optimise=optimise or OptimiseSettings(),
         repair=repair or RepairSettings(),
     )
-    with api_words(), controlled(cancel, progress):
-        return _solve_again(_with_time_limit(problem, time_limit_s), robot, fused, previous, initial_joints)
+    with api_words(), controlled(cancel, progress, checked_limit(time_limit_s)):
+        problem = with_time_limit(problem, time_limit_s)
+        return timed_call(name, lambda: _solve_again(problem, robot, fused, previous, initial_joints), Result)
