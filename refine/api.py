@@ -370,6 +370,7 @@ def solve(
     time_limit_s: float | None = None,
     cancel: threading.Event | Callable[[], bool] | None = None,
     progress: Callable[[Progress], Any] | None = None,
+    accept_frame_error: bool = False,
 ) -> Result:
     """Run a problem through every stage up to the verified, timed path, writing no file.
 
@@ -387,6 +388,7 @@ def solve(
             from inside IPOPT; neither ever becomes a verdict.
         progress: called with a :class:`refine.control.Progress` after every stage and every IPOPT
             iteration, in the calling thread; what it raises ends the call.
+        accept_frame_error: warn instead of stopping when the tracker frame looks wrong.
 
     Returns:
         The result; ``result.write(out_dir)`` writes the files ``refine run`` writes.
@@ -403,8 +405,10 @@ def solve(
             problem = load_problem(problem)
         problem = with_time_limit(problem, time_limit_s)
         if previous is None:
-            return Result(solve_problem(problem, q0=joints_from(initial_joints, None, None)))
-        return _solve_again(problem, previous.run.robot, fused_path(problem), previous, initial_joints)
+            q0 = joints_from(initial_joints, None, None)
+            return Result(solve_problem(problem, q0=q0, accept_frame_error=accept_frame_error))
+        fused = fused_path(problem, accept_frame_error=accept_frame_error)
+        return _solve_again(problem, previous.run.robot, fused, previous, initial_joints)
 
     with api_words(), controlled(cancel, progress, checked_limit(time_limit_s)):
         return timed_call(getattr(problem, "name", Path(str(problem)).name), call, Result)
@@ -533,14 +537,10 @@ def refine_path(
             ten reaches of the base), speeds above 10 m/s; the message names the argument and the unit.
     """
     from refine.paths import FusedPath
-    from refine.robot.model import Robot
-    from refine.robot.registry import load_robot
+    from refine.robot.registry import robot_argument
     from refine.run.contents import check_programs
 
-    if isinstance(robot, str):
-        robot = load_robot(robot)
-    elif not isinstance(robot, Robot):
-        typed(robot, "robot", Robot, "a refine.Robot or a registry name")
+    robot = robot_argument(robot)
     check_hooks(cancel, progress)
     check_previous(previous, Result)
     typed(name, "name", str, "a str (the problem name)")
