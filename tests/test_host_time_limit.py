@@ -66,6 +66,7 @@ def test_a_limit_that_runs_out_inside_ipopt_stops_it_at_that_iteration(tmp_path)
     assert [p.iteration for p in seen if p.stage == "solve"] == [1]
     first = result.run.first.refinement
     assert first.time_limit_reached and "time limit of 60 s" in first.reason
+    assert result.to_dict()["stopped_stage"] == "refine"
     assert not any(s.stage == "timing" for s in seen)  # no verdict, so no timing
 
 
