@@ -18,9 +18,11 @@ IPOPT returns ``NonIpopt_Exception_Thrown``, which the solve turns back into ``K
 A call's ``time_limit_s`` is one deadline for the whole call (:func:`controlled`): every place that
 checks for a cancel (the end of each stage, each solve -> verify round, each IPOPT iteration) also
 checks the clock, and past the deadline raises :class:`OutOfTime` naming the stage that stopped;
-IPOPT's iteration callback stops the solver there, and a solve is started with at most the time
-left (:func:`remaining_s`) as ``max_wall_time``. The library call turns :class:`OutOfTime` into a
-result whose status is ``"timeout"`` (:mod:`refine.run.timeout`), never a verdict.
+IPOPT's iteration callback stops the solver there, and a pass's solver is built with the time then
+left (:func:`budget_s`) as ``max_wall_time``. Inside a pass's refinement the limit ends
+that pass as ``timeout`` (:func:`out_of_time`, :func:`note_timeout`) and the run is returned whole;
+elsewhere the library call turns :class:`OutOfTime` into a result whose status is ``"timeout"``
+(:mod:`refine.run.timeout`). Never a verdict.
 """
 
 from __future__ import annotations
