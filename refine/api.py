@@ -44,7 +44,9 @@ from refine.arguments import (  # noqa: I001
 )
 from refine.control import Progress, controlled
 from refine.errors import InputError, NotExecutable, api_words
-from refine.problem import Problem, load_problem
+from refine.problem import Problem
+from refine.problem import load_problem as read_problem
+from refine.run.again import solve_again
 from refine.run.timeout import checked_limit, timed_call, with_time_limit
 from refine.run.typed import Diagnosis, Metrics, PassArrays
 from refine.settings import (
@@ -402,53 +404,28 @@ def solve(
 
         if not isinstance(problem, Problem):
             typed(problem, "problem", (str, Path), "a refine.Problem or the path of a problem folder or file")
-            problem = load_problem(problem)
+            problem = read_problem(problem)
         problem = with_time_limit(problem, time_limit_s)
         if previous is None:
             q0 = joints_from(initial_joints, None, None)
             return Result(solve_problem(problem, q0=q0, accept_frame_error=accept_frame_error))
         fused = fused_path(problem, accept_frame_error=accept_frame_error)
-        return _solve_again(problem, previous.run.robot, fused, previous, initial_joints)
+        return Result(solve_again(problem, previous.run.robot, fused, previous.run, initial_joints))
 
     with api_words(), controlled(cancel, progress, checked_limit(time_limit_s)):
         return timed_call(getattr(problem, "name", Path(str(problem)).name), call, Result)
 
 
-def _solve_again(
-    problem: Problem, robot: Robot, fused: Any, previous: Result | None, initial_joints: ArrayLike | None
-) -> Result:
-    from refine.optimise.problem import reuse_for
-    from refine.optimise.warm import WarmStart
-    from refine.run.solve import solve_problem
-    from refine.run.stages import weights_for
+@checked_call
+def load_problem(path: str | Path, *, allow_outside: bool = False) -> Problem:
+    """Read a problem folder or ``problem.toml`` (:func:`refine.problem.load_problem`), errors in the API's words.
 
-    nlp = None
-    warm = None
-    n = robot.nq
-    q0 = joints_from(initial_joints, len(fused), n)
-    if previous is not None:
-        first = previous.run.first
-        old = first.nlp
-        same = (
-            old is not None
-            and previous.run.robot is robot
-            and np.array_equal(old.base_in_world, problem.robot.base_in_world)
-            and np.array_equal(old.tcp_in_flange, problem.tool.tcp_in_flange)
-            and old.axisymmetric == problem.tool.axisymmetric
-            and old.weights == weights_for(problem, robot)
-        )
-        nlp = reuse_for(old, fused, problem.tolerances) if same else None
-        if q0 is None and previous.run.robot is robot and first.refinement.q.shape == (len(fused), n):
-            # the previous joints moved onto the new poses, and its last problem and multipliers
-            # where the robot, tool and weights are the same (refine.optimise.warm)
-            warm = WarmStart(
-                first.refinement.q,
-                first.fused.rotations if len(first.fused) == len(fused) else None,
-                first.refinement.problem if nlp is not None else None,
-                first.refinement.multipliers if nlp is not None else None,
-                first.clearance,
-            )
-    return Result(solve_problem(problem, robot=robot, fused=fused, nlp=nlp, q0=q0, warm=warm))
+    Args:
+        path: the problem folder, or its TOML file.
+        allow_outside: accept data files outside the problem folder.
+    """
+    with api_words():
+        return read_problem(path, allow_outside=allow_outside)
 
 
 @checked_call
@@ -597,4 +574,7 @@ def refine_path(
     )
     with api_words(), controlled(cancel, progress, checked_limit(time_limit_s)):
         problem = with_time_limit(problem, time_limit_s)
-        return timed_call(name, lambda: _solve_again(problem, robot, fused, previous, initial_joints), Result)
+        run = previous.run if previous is not None else None
+        return timed_call(
+            name, lambda: Result(solve_again(problem, robot, fused, run, initial_joints)), Result
+        )

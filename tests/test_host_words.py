@@ -51,3 +51,18 @@ def test_a_wrong_tracker_frame_through_the_api_names_the_keyword_not_the_flag():
 
 # the command line's own wording of the same stop (its --accept-frame-error flag) is tested in
 # tests/demo/test_frame_distortion.py
+
+
+def test_a_data_file_outside_the_folder_through_load_problem_names_its_keyword(tmp_path):
+    shutil.copytree("problems/tig_weld", tmp_path / "p")
+    toml = tmp_path / "p" / "problem.toml"
+    text = toml.read_text()
+    cad = text.split("[cad]", 1)[1].split('file = "', 1)[1].split('"', 1)[0]
+    shutil.move(tmp_path / "p" / cad, tmp_path / cad)  # the CAD file one folder up
+    toml.write_text(text.replace(f'file = "{cad}"', f'file = "../{cad}"', 1))
+    with pytest.raises(refine.InputError) as e:
+        refine.load_problem(tmp_path / "p")
+    msg = str(e.value)
+    assert "allow_outside=True" in msg and "--allow-outside" not in msg
+    assert e.value.key == "cad.file" and e.value.value == f"../{cad}"
+    assert refine.load_problem(tmp_path / "p", allow_outside=True).cad is not None
