@@ -28,15 +28,15 @@ from refine.lazy import lazy_names
 from refine.version import __version__
 
 if TYPE_CHECKING:
-    from refine.api import PassArrays, Result, refine_path, solve
+    from refine.api import PassArrays, Result, load_problem, refine_path, solve
     from refine.control import Progress
-    from refine.problem import Problem, load_problem
+    from refine.problem import Problem
     from refine.robot.model import Robot
     from refine.run.typed import Diagnosis, DiagnosisCause, Metrics
     from refine.settings import CollisionSettings, Shape, Tolerances
 
 _LAZY = {
-    "load_problem": "refine.problem",
+    "load_problem": "refine.api",
     "Problem": "refine.problem",
     "solve": "refine.api",
     "refine_path": "refine.api",

@@ -17,7 +17,6 @@ call can start from a previous answer: ``initial_joints=`` warm-starts the solve
 from __future__ import annotations
 
 import copy
-import dataclasses
 import threading
 from collections.abc import Callable, Mapping, Sequence
 from datetime import datetime, timezone
@@ -45,7 +44,10 @@ from refine.arguments import (  # noqa: I001
 )
 from refine.control import Progress, controlled
 from refine.errors import InputError, NotExecutable, api_words
-from refine.problem import Problem, load_problem
+from refine.problem import Problem
+from refine.problem import load_problem as read_problem
+from refine.run.again import solve_again
+from refine.run.timeout import checked_limit, timed_call, with_time_limit
 from refine.run.typed import Diagnosis, Metrics, PassArrays
 from refine.settings import (
     CollisionSettings,
@@ -370,6 +372,7 @@ def solve(
     time_limit_s: float | None = None,
     cancel: threading.Event | Callable[[], bool] | None = None,
     progress: Callable[[Progress], Any] | None = None,
+    accept_frame_error: bool = False,
 ) -> Result:
     """Run a problem through every stage up to the verified, timed path, writing no file.
 
@@ -378,71 +381,51 @@ def solve(
         initial_joints: joints (N, n) [rad] to start the first pass from instead of the IK seed.
         previous: an earlier result of the same problem with a small change (tolerances, weights):
             its built problem is reused where it can be and its joints are the start.
-        time_limit_s: wall-time budget [s] of each pass's refinement, instead of the problem's
-            ``[repair] time_limit_s``; when it runs out before a verdict the status is ``"timeout"``.
+        time_limit_s: wall-time budget [s] of the whole call, every stage (and instead of ``[repair]
+            time_limit_s``); past it the result's status is ``"timeout"`` and ``reason`` and
+            ``to_dict()["stopped_stage"]`` name the stage that stopped (docs/api.md, "Time limit").
         cancel: a :class:`threading.Event` (or a callable returning True) that stops the call:
             checked after every stage, every solve -> verify round and every IPOPT iteration; the
             call then raises :class:`refine.Cancelled`. Ctrl-C raises ``KeyboardInterrupt``, also
             from inside IPOPT; neither ever becomes a verdict.
         progress: called with a :class:`refine.control.Progress` after every stage and every IPOPT
             iteration, in the calling thread; what it raises ends the call.
+        accept_frame_error: warn instead of stopping when the tracker frame looks wrong.
 
     Returns:
         The result; ``result.write(out_dir)`` writes the files ``refine run`` writes.
     """
-    from refine.run.solve import solve_problem
-    from refine.run.stages import fused_path
-
     check_hooks(cancel, progress)
     check_previous(previous, Result)
-    with api_words(), controlled(cancel, progress):
+
+    def call(problem: Problem | str | Path = problem) -> Result:
+        from refine.run.solve import solve_problem  # imported within the call's time limit
+        from refine.run.stages import fused_path
+
         if not isinstance(problem, Problem):
             typed(problem, "problem", (str, Path), "a refine.Problem or the path of a problem folder or file")
-            problem = load_problem(problem)
-        problem = _with_time_limit(problem, time_limit_s)
+            problem = read_problem(problem)
+        problem = with_time_limit(problem, time_limit_s)
         if previous is None:
             q0 = joints_from(initial_joints, None, None)
-            return Result(solve_problem(problem, q0=q0))
-        fused = fused_path(problem)
-        return _solve_again(problem, previous.run.robot, fused, previous, initial_joints)
+            return Result(solve_problem(problem, q0=q0, accept_frame_error=accept_frame_error))
+        fused = fused_path(problem, accept_frame_error=accept_frame_error)
+        return Result(solve_again(problem, previous.run.robot, fused, previous.run, initial_joints))
+
+    with api_words(), controlled(cancel, progress, checked_limit(time_limit_s)):
+        return timed_call(getattr(problem, "name", Path(str(problem)).name), call, Result)
 
 
-def _with_time_limit(problem: Problem, time_limit_s: float | None) -> Problem:
-    if time_limit_s is None:
-        return problem
-    return dataclasses.replace(problem, repair=dataclasses.replace(problem.repair, time_limit_s=time_limit_s))
+@checked_call
+def load_problem(path: str | Path, *, allow_outside: bool = False) -> Problem:
+    """Read a problem folder or ``problem.toml`` (:func:`refine.problem.load_problem`), errors in the API's words.
 
-
-def _solve_again(
-    problem: Problem, robot: Robot, fused: Any, previous: Result | None, initial_joints: ArrayLike | None
-) -> Result:
-    from refine.optimise.problem import reuse_for
-    from refine.optimise.warm import WarmStart, built_for
-    from refine.run.solve import solve_problem
-    from refine.run.stages import weights_for
-
-    nlp = None
-    warm = None
-    n = robot.nq
-    q0 = joints_from(initial_joints, len(fused), n)
-    if previous is not None:
-        first = previous.run.first
-        old = first.nlp
-        same = previous.run.robot is robot and built_for(
-            old, problem.robot.base_in_world, problem.tool, weights_for(problem, robot)
-        )
-        nlp = reuse_for(old, fused, problem.tolerances) if same else None
-        if q0 is None and previous.run.robot is robot and first.refinement.q.shape == (len(fused), n):
-            # the previous joints moved onto the new poses, and its last problem and multipliers
-            # where the robot, tool and weights are the same (refine.optimise.warm)
-            warm = WarmStart(
-                first.refinement.q,
-                first.fused.rotations if len(first.fused) == len(fused) else None,
-                first.refinement.problem if nlp is not None else None,
-                first.refinement.multipliers if nlp is not None else None,
-                first.clearance,
-            )
-    return Result(solve_problem(problem, robot=robot, fused=fused, nlp=nlp, q0=q0, warm=warm))
+    Args:
+        path: the problem folder, or its TOML file.
+        allow_outside: accept data files outside the problem folder.
+    """
+    with api_words():
+        return read_problem(path, allow_outside=allow_outside)
 
 
 @checked_call
@@ -511,8 +494,10 @@ def refine_path(
         quaternion_order: ``"wxyz"`` (scalar first, as ``trajectory.csv``) or ``"xyzw"`` (scalar
             last, as scipy's ``Rotation.as_quat()``); required with quaternions, since both orders
             read any unit quaternion.
-        time_limit_s: wall-time budget [s] of each pass's refinement, instead of the problem's
-            ``[repair] time_limit_s``; when it runs out before a verdict the status is ``"timeout"``.
+        time_limit_s: wall-time budget [s] of the whole call (every stage, not only the solves;
+            each pass's refinement also keeps within it instead of ``[repair] time_limit_s``); when
+            it runs out the call returns a result with status ``"timeout"`` whose ``reason`` and
+            ``to_dict()["stopped_stage"]`` name the stage that stopped (docs/api.md, "Time limit").
         cancel: a :class:`threading.Event` (or a callable returning True) that stops the call:
             checked after every stage, every solve -> verify round and every IPOPT iteration; the
             call then raises :class:`refine.Cancelled`. Ctrl-C raises ``KeyboardInterrupt``, also
@@ -529,14 +514,10 @@ def refine_path(
             ten reaches of the base), speeds above 10 m/s; the message names the argument and the unit.
     """
     from refine.paths import FusedPath
-    from refine.robot.model import Robot
-    from refine.robot.registry import load_robot
+    from refine.robot.registry import robot_argument
     from refine.run.contents import check_programs
 
-    if isinstance(robot, str):
-        robot = load_robot(robot)
-    elif not isinstance(robot, Robot):
-        typed(robot, "robot", Robot, "a refine.Robot or a registry name")
+    robot = robot_argument(robot)
     check_hooks(cancel, progress)
     check_previous(previous, Result)
     typed(name, "name", str, "a str (the problem name)")
@@ -591,5 +572,9 @@ def refine_path(
         optimise=optimise or OptimiseSettings(),
         repair=repair or RepairSettings(),
     )
-    with api_words(), controlled(cancel, progress):
-        return _solve_again(_with_time_limit(problem, time_limit_s), robot, fused, previous, initial_joints)
+    with api_words(), controlled(cancel, progress, checked_limit(time_limit_s)):
+        problem = with_time_limit(problem, time_limit_s)
+        run = previous.run if previous is not None else None
+        return timed_call(
+            name, lambda: Result(solve_again(problem, robot, fused, run, initial_joints)), Result
+        )

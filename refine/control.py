@@ -14,12 +14,23 @@ solver. A cancelled call raises :class:`refine.errors.Cancelled`, never a verdic
 Ctrl-C is Python's ``KeyboardInterrupt`` as everywhere else; inside IPOPT, CasADi catches it and
 IPOPT returns ``NonIpopt_Exception_Thrown``, which the solve turns back into ``KeyboardInterrupt``
 (:func:`interrupted_status`). Nothing here touches a signal handler, timer or mask.
+
+A call's ``time_limit_s`` is one deadline for the whole call (:func:`controlled`): every place that
+checks for a cancel (the end of each stage, each solve -> verify round, each IPOPT iteration) also
+checks the clock, and past the deadline raises :class:`OutOfTime` naming the stage that stopped;
+IPOPT's iteration callback stops the solver there, and a pass's solver is built with the time then
+left (:func:`budget_s`) as ``max_wall_time``. Inside a pass's refinement the limit ends
+that pass as ``timeout`` (:func:`out_of_time`, :func:`note_timeout`) and the run is returned whole;
+elsewhere the library call turns :class:`OutOfTime` into a result whose status is ``"timeout"``
+(:mod:`refine.run.timeout`). Never a verdict.
 """
 
 from __future__ import annotations
 
 import contextvars
+import math
 import threading
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -63,6 +74,24 @@ class Control:
     stage: str = ""
     round: int = 0
     cancelled_in_solver: bool = False
+    deadline: float = math.inf
+    time_limit_s: float | None = None
+    timed_out_in_solver: bool = False
+    timed_out: bool = False
+
+
+class OutOfTime(Exception):
+    """The current call's ``time_limit_s`` ran out; caught by the library call (status ``"timeout"``).
+
+    Attributes:
+        stage: the stage that noticed (``"load"``, ``"fuse"``, ``"solve"``, ...).
+        time_limit_s: the call's budget [s].
+    """
+
+    def __init__(self, stage: str, time_limit_s: float | None) -> None:
+        super().__init__(f"time limit of {time_limit_s:g} s reached during the {stage} stage")
+        self.stage = stage
+        self.time_limit_s = time_limit_s
 
 
 _current: contextvars.ContextVar[Control | None] = contextvars.ContextVar("refine_control", default=None)
@@ -84,8 +113,11 @@ def _as_predicate(cancel: threading.Event | Callable[[], bool] | None) -> Callab
 def controlled(
     cancel: threading.Event | Callable[[], bool] | None = None,
     progress: Callable[[Progress], Any] | None = None,
+    time_limit_s: float | None = None,
 ) -> Iterator[Control]:
     """Run the block as one host call with these hooks (see the module docstring).
+
+    ``time_limit_s``: the call's wall-time budget [s] from now; None for none.
 
     Raises:
         TypeError: ``cancel`` is neither an event nor callable, or ``progress`` is not callable.
@@ -94,7 +126,9 @@ def controlled(
         raise TypeError(
             f"progress must be a callable taking a refine.control.Progress, not {type(progress).__name__}"
         )
-    control = Control(cancel=_as_predicate(cancel), progress=progress)
+    control = Control(cancel=_as_predicate(cancel), progress=progress, time_limit_s=time_limit_s)
+    if time_limit_s is not None:
+        control.deadline = time.perf_counter() + float(time_limit_s)
     token = _current.set(control)
     try:
         yield control
@@ -113,14 +147,67 @@ def cancel_requested() -> bool:
     return bool(control is not None and control.cancel is not None and control.cancel())
 
 
+def remaining_s() -> float | None:
+    """Seconds left of the current call's ``time_limit_s`` (0 once past it), or None without one."""
+    control = _current.get()
+    if control is None or control.time_limit_s is None:
+        return None
+    return max(0.0, control.deadline - time.perf_counter())
+
+
+def budget_s(limit_s: float) -> float:
+    """``limit_s`` [s], or the current call's time left when less (at least 1 ms: IPOPT wants > 0)."""
+    left = remaining_s()
+    return limit_s if left is None else max(1e-3, min(limit_s, left))
+
+
 def check_cancelled(where: str) -> None:
-    """Raise :class:`Cancelled` if the host asked the current call to stop.
+    """Raise :class:`Cancelled` if the host asked the current call to stop, :class:`OutOfTime` past its limit.
 
     Args:
         where: the stage that noticed, for the message (e.g. ``"seed"``).
     """
     if cancel_requested():
         raise Cancelled(f"cancelled by the caller during the {where} stage")
+    control = _current.get()
+    if control is not None and not control.timed_out and time.perf_counter() >= control.deadline:
+        raise OutOfTime(where, control.time_limit_s)
+
+
+def out_of_time() -> bool:
+    """Whether the current call is past its ``time_limit_s``."""
+    control = _current.get()
+    return control is not None and time.perf_counter() >= control.deadline
+
+
+def stop_if_out_of_time(where: str) -> None:
+    """Raise :class:`OutOfTime` past the current call's limit, even after a pass's ``timeout``.
+
+    For a stage whose own runs (the placement repair's strict runs) may have noted a timeout that
+    is not the call's verdict.
+    """
+    control = _current.get()
+    if control is not None and time.perf_counter() >= control.deadline:
+        raise OutOfTime(where, control.time_limit_s)
+
+
+def note_timeout() -> float | None:
+    """Note that a pass of the current call has the status ``timeout``; the call's limit [s] or None.
+
+    From then on the call's stages finish without :class:`OutOfTime` (the run has its verdict-free
+    status, and is returned whole), and no further pass is started (:func:`timed_out`).
+    """
+    control = _current.get()
+    if control is None:
+        return None
+    control.timed_out = True
+    return control.time_limit_s
+
+
+def timed_out() -> bool:
+    """Whether a pass of the current call has the status ``timeout`` (:func:`note_timeout`)."""
+    control = _current.get()
+    return control is not None and control.timed_out
 
 
 def stage_done(name: str, **figures: float) -> None:
@@ -155,6 +242,9 @@ def solver_iteration(iteration: int, **figures: float) -> bool:
     if control.cancel is not None and control.cancel():
         control.cancelled_in_solver = True
         return True
+    if time.perf_counter() >= control.deadline:
+        control.timed_out_in_solver = True
+        return True
     return False
 
 
@@ -163,10 +253,14 @@ def after_solve(return_status: str, interrupted: bool = False) -> None:
 
     Called with IPOPT's return status right after each solve, before the status could become a
     verdict; ``interrupted``: a ``KeyboardInterrupt`` stopped the solver's iteration callback.
+    A solve the callback stopped at the call's time limit returns: the refinement ends as ``timeout``.
     """
     control = _current.get()
     if control is not None and control.cancelled_in_solver:
         control.cancelled_in_solver = False
         raise Cancelled(f"cancelled by the caller inside the solver (IPOPT: {return_status})")
+    if control is not None and control.timed_out_in_solver:
+        control.timed_out_in_solver = False  # the refinement ends as timeout (its own deadline check)
+        return
     if interrupted or return_status in INTERRUPTED_STATUSES:
         raise KeyboardInterrupt(f"interrupted inside the solver (IPOPT: {return_status})")

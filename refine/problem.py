@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from refine.arguments import typed
-from refine.errors import InputError
+from refine.errors import InputError, option
 from refine.frames import transform_from_xyz_rpy
 from refine.names import comment_text, file_stem
 from refine.problem_toml import read_problem_toml
@@ -328,7 +328,11 @@ def _file(root: Path, value: Any, key: str, inside: Path | None) -> Path:
     if inside is not None and not f.is_relative_to(inside):
         raise InputError(
             f"{key} = {value!r} lies outside the problem folder {inside} (resolved to {f}); "
-            "copy the file into the folder, or pass --allow-outside"
+            "copy the file into the folder, or "
+            + option("pass --allow-outside", "load it with refine.load_problem(path, allow_outside=True)"),
+            key=key,
+            value=value,
+            expected=f"a file inside the problem folder {inside}",
         )
     if not f.is_file():
         raise InputError(f"{key} = {value!r}: not a regular file at {f}")
@@ -410,7 +414,10 @@ def _robot_model(value: Any) -> str:
     known = available_robots()
     if not isinstance(value, str) or value not in known:
         raise InputError(
-            f"robot.model = {value!r} is not a robot of the registry; available: {', '.join(known)}"
+            f"robot.model = {value!r} is not a robot of the registry; available: {', '.join(known)}",
+            key="robot.model",
+            value=value,
+            expected=f"a robot of the registry: {', '.join(known)}",
         )
     return value
 

@@ -64,7 +64,7 @@ CASES = [  # (what was given, keyword arguments, error class, key)
         refine.InputError,
         "quaternion_order",
     ),
-    ("a time limit as a word", {"time_limit_s": "1"}, refine.InputError, "repair.time_limit_s"),
+    ("a time limit as a word", {"time_limit_s": "1"}, refine.InputError, "time_limit_s"),
 ]
 
 

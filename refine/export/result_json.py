@@ -188,6 +188,9 @@ def result_dict(result: RunResult) -> dict[str, Any]:
             "outer_iterations": sum(p.refinement.outer_iterations for p in result.passes),
             "time_limit_reached": any(p.refinement.time_limit_reached for p in result.passes),
         },
+        # the stage a time limit stopped: a pass's refinement here (a library call stopped by its
+        # limit elsewhere returns a result without a run, refine.run.timeout)
+        "stopped_stage": "refine" if any(p.refinement.status == "timeout" for p in result.passes) else None,
         "violations": [v.describe() for p in result.passes for v in p.refinement.check.violations],
         "slow_segments": [
             {

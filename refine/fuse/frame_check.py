@@ -81,7 +81,7 @@ from refine.demo.quality import (
     DemoQuality,
     FrameEstimate,
 )
-from refine.errors import InputError
+from refine.errors import InputError, option
 from refine.frames import check_transform, invert_transform, matrix_from_rotvec, rotvec_from_matrix
 from refine.paths import Demonstration, FusedPath
 from refine.types import Array
@@ -440,9 +440,14 @@ def gate_frame(
     )
     significant = frame_error_significant(est)
     if est.observable_rotation_deg > FRAME_STOP_DEG and significant and not accept:
+        go_on = option("pass --accept-frame-error", "pass accept_frame_error=True to refine.solve")
         raise InputError(
             f"{demo.source or 'demonstration'}: {text}: frames.source_in_world looks wrong (limit "
-            f"{FRAME_STOP_DEG:g} deg); check it, or pass --accept-frame-error to go on with a warning"
+            f"{FRAME_STOP_DEG:g} deg); check it, or {go_on} to go on with a warning",
+            key="frames.source_in_world",
+            value=round(float(est.observable_rotation_deg), 3),
+            expected=f"a tracker frame within {FRAME_STOP_DEG:g} deg of the demonstration's fit to the CAD path",
+            file=str(demo.source) if demo.source else None,
         )
     if est.observable_rotation_deg > FRAME_WARN_DEG and significant:
         warnings.append(f"{text}; frames.source_in_world may be off (warning above {FRAME_WARN_DEG:g} deg)")

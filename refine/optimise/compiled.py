@@ -13,7 +13,9 @@ Cache folder: ``$REFINE_CACHE_DIR`` when set, else ``$XDG_CACHE_HOME/refine``, e
 new library the least recently used pairs are removed until the folder holds at most
 ``$REFINE_CACHE_MAX_MB`` megabytes (default :data:`DEFAULT_CACHE_MAX_MB`; a library in use stays
 loaded). In the process, at most :data:`LOADED_MAX` libraries stay loaded, least recently used
-dropped first. ``REFINE_COMPILE=0`` turns compilation off (nothing is written at all). Without a C compiler (``$CC``,
+dropped first (a :class:`BoundedCache`, safe to use from several threads: a lock guards each
+look-up and each insertion, and one per cache serialises building what is missing, so two threads
+that want the same library compile it once). ``REFINE_COMPILE=0`` turns compilation off (nothing is written at all). Without a C compiler (``$CC``,
 else ``cc``, ``gcc`` or ``clang`` on the ``PATH``), or when compiling fails, the same functions run in
 CasADi's virtual machine: slower, same results.
 """
@@ -27,9 +29,11 @@ import os
 import shutil
 import subprocess
 import tempfile
+import threading
 from collections import OrderedDict
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 from pathlib import Path
+from typing import Any
 
 import casadi as ca
 
@@ -48,7 +52,57 @@ COMPILE_FLAGS = ("-O1", "-fPIC", "-shared")
 """-O1: the generated code is straight-line arithmetic; -O2/-O3 compile several times longer for a
 few per cent of run time."""
 
-_loaded: OrderedDict[str, dict[str, ca.Function]] = OrderedDict()
+
+class BoundedCache:
+    """A least-recently-used map of at most ``max_entries`` entries, safe to share between threads.
+
+    :meth:`get` and :meth:`put` each hold the cache's lock; :meth:`get_or_make` holds it while it
+    looks up, makes and inserts an entry, so a value is made once however many threads ask for it
+    at the same time, and making is serialised (kernels are built and compiled one at a time).
+    The lock (:attr:`lock`) is re-entrant: ``make`` may use this cache again.
+    """
+
+    def __init__(self, max_entries: int) -> None:
+        self.max_entries = max_entries
+        self._entries: OrderedDict[Hashable, Any] = OrderedDict()
+        self.lock = threading.RLock()
+
+    def get(self, key: Hashable) -> Any:
+        """The value under ``key`` (now the most recently used), or None."""
+        with self.lock:
+            if key not in self._entries:
+                return None
+            self._entries.move_to_end(key)
+            return self._entries[key]
+
+    def put(self, key: Hashable, value: Any) -> None:
+        """Keep ``value`` under ``key``, dropping the least recently used entries past the bound."""
+        with self.lock:
+            self._entries[key] = value
+            self._entries.move_to_end(key)
+            while len(self._entries) > self.max_entries:
+                self._entries.popitem(last=False)
+
+    def get_or_make(self, key: Hashable, make: Callable[[], Any]) -> Any:
+        """The value under ``key``, made by ``make()`` and kept when it is not there yet."""
+        with self.lock:
+            if key in self._entries:
+                return self.get(key)
+            value = make()
+            self.put(key, value)
+            return value
+
+    def __len__(self) -> int:
+        with self.lock:
+            return len(self._entries)
+
+    def clear(self) -> None:
+        """Drop every entry."""
+        with self.lock:
+            self._entries.clear()
+
+
+_loaded = BoundedCache(LOADED_MAX)
 
 
 def cache_dir() -> Path:
@@ -99,9 +153,13 @@ def compiled(name: str, key: str, make: Callable[[], list[ca.Function]]) -> dict
     digest = hashlib.sha256(
         "\n".join([ca.__version__, cc, version, *COMPILE_FLAGS, key]).encode()
     ).hexdigest()[:24]
-    if digest in _loaded:
-        _loaded[digest] = _loaded.pop(digest)  # the most recently used goes last
-        return _loaded[digest]
+    with _loaded.lock:  # one thread at a time looks up, compiles and loads (BoundedCache)
+        hit = _loaded.get(digest)
+        return hit if hit is not None else _load(name, cc, digest, make)
+
+
+def _load(name: str, cc: str, digest: str, make: Callable[[], list[ca.Function]]) -> dict[str, ca.Function]:
+    """The library ``digest`` from the cache folder, compiled first when it is not there; kept loaded."""
     library = cache_dir() / f"{name}-{digest}.so"
     names = library.with_suffix(".names")
     functions: list[ca.Function] | None = None
@@ -119,9 +177,7 @@ def compiled(name: str, key: str, make: Callable[[], list[ca.Function]]) -> dict
     except (OSError, RuntimeError) as e:
         log.warning("compiling %s failed (%s); using CasADi's virtual machine", name, e)
         return {f.name(): f for f in (functions or make())}
-    _loaded[digest] = loaded
-    while len(_loaded) > LOADED_MAX:
-        del _loaded[next(iter(_loaded))]
+    _loaded.put(digest, loaded)
     return loaded
 
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import hashlib
 import math
-from collections import OrderedDict
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,16 +25,19 @@ import scipy.sparse as sps
 from numpy.typing import NDArray
 
 from refine.optimise import kinematics
-from refine.optimise.compiled import compiled, compiler
+from refine.optimise.compiled import BoundedCache, compiled, compiler
 from refine.optimise.kinematics import fk_function, jacobian_function
 from refine.types import Array
 
 Index = NDArray[np.int64]
 
-_kernel_cache: OrderedDict[tuple, tuple[object, dict[str, ca.Function]]] = OrderedDict()
 KERNELS_MAX = 64
 """Kernel sets kept in the process (one per robot, base placement and tool), least recently used
 dropped first."""
+_kernel_cache = BoundedCache(KERNELS_MAX)
+"""(robot, kernels) by robot, placement, tool and compiler; shared by the process's threads, under
+its lock (:class:`refine.optimise.compiled.BoundedCache`): a set is built once however many threads
+ask for it."""
 
 
 def waypoint_kernels(
@@ -63,9 +66,13 @@ def waypoint_kernels(
         bool(axisymmetric),
         compiler(),
     )
-    if key in _kernel_cache:
-        _kernel_cache.move_to_end(key)
-        return _kernel_cache[key][1]
+    return _kernel_cache.get_or_make(
+        key, lambda: _make_kernels(robot, base_in_world, tcp_in_flange, axisymmetric)
+    )[1]
+
+
+def _make_kernels(robot, base_in_world: Array, tcp_in_flange: Array, axisymmetric: bool) -> tuple:
+    """(robot, kernels) for :func:`waypoint_kernels`'s cache: the robot is held so its id is not reused."""
     kernels = compiled(
         "refine_kernels",
         _kernel_key(robot, base_in_world, tcp_in_flange, axisymmetric, tool_in_world),
@@ -75,10 +82,7 @@ def waypoint_kernels(
     # takes minutes to compile; its rows are few (where the outer loop adds them), so it runs in
     # CasADi's virtual machine, and is only built when a problem has such rows
     kernels = _Kernels(kernels, lambda: _singularity_kernels(robot, base_in_world, tcp_in_flange))
-    _kernel_cache[key] = (robot, kernels)  # the robot is held so that its id is not reused
-    while len(_kernel_cache) > KERNELS_MAX:
-        _kernel_cache.popitem(last=False)
-    return kernels
+    return robot, kernels
 
 
 def _kernel_key(
@@ -159,9 +163,12 @@ class _Kernels(dict):
     def __init__(self, functions: dict[str, ca.Function], more: Callable[[], list[ca.Function]]) -> None:
         super().__init__(functions)
         self._more = more
+        self._lock = threading.Lock()  # two threads asking at once build them once
 
     def __missing__(self, name: str) -> ca.Function:
-        self.update({f.name(): f for f in self._more()})
+        with self._lock:
+            if name not in self:
+                self.update({f.name(): f for f in self._more()})
         if name not in self:
             raise KeyError(name)
         return self[name]

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from refine.control import note_timeout
 from refine.optimise.diagnosis import Diagnoser, Finding, segments
 from refine.optimise.problem import ActiveSet, ConstraintSource, RefinementNLP
 from refine.optimise.verify import (
@@ -134,6 +135,8 @@ def timed_out(
     problem: RefinementNLP, q_seed: Array, time_limit_s: float | None, timings: dict[str, float]
 ) -> Refinement:
     """The answer when the time budget ran out before any verdict: status ``timeout``, saying so."""
+    call_limit_s = note_timeout()  # a library call's own limit, for the message
+    time_limit_s = call_limit_s if call_limit_s is not None else time_limit_s
     reason = (
         f"time limit of {time_limit_s:g} s ([repair] time_limit_s, or the call's time_limit_s) reached "
         "before a verdict: neither an "

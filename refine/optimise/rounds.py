@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from refine.control import after_solve, check_cancelled, enter_round, stage_done
+from refine.control import after_solve, check_cancelled, enter_round, out_of_time, stage_done
 from refine.errors import SolverError
 from refine.optimise.outcome import TimeLimitReached, problem_kinematics
 from refine.optimise.problem import ActiveSet, ConstraintSource, LinearRow, RefinementNLP
@@ -141,8 +141,9 @@ class RoundLoop:
     def solve(self, x0: Array, warm: bool = False) -> tuple[Array, dict]:
         """Solve from ``x0``; ``warm``: with the last solve's multipliers, row by row."""
         start = StageTimes.clock()
-        if start[0] >= self.deadline:
+        if start[0] >= self.deadline or out_of_time():
             raise TimeLimitReached
+        check_cancelled("solve")
         p = self.problem
         extra = {}
         if warm and self.multipliers is not None:
@@ -151,7 +152,6 @@ class RoundLoop:
             if len(lam_x) == len(p.lbx):
                 extra["lam_x0"] = lam_x
         name = SOLVER_LABELS[p.solver_name]
-        check_cancelled("solve")
         if p.watch is not None:
             p.watch.iteration, p.watch.interrupted = 0, False
         try:
@@ -167,7 +167,7 @@ class RoundLoop:
         status = str(stats.get("return_status", "unknown"))
         if status in {"Invalid_Option", "Invalid_Problem_Definition", "Insufficient_Memory"}:
             raise SolverError(f"{name} could not solve the refinement: {status}")
-        if status == "Maximum_WallTime_Exceeded" or time.perf_counter() >= self.deadline:
+        if status == "Maximum_WallTime_Exceeded" or time.perf_counter() >= self.deadline or out_of_time():
             add_time(self.timings, "solve", start)
             raise TimeLimitReached
         self.iterations += int(stats.get("iter_count", 0))

@@ -65,12 +65,38 @@ def load_robot(name: str) -> Robot:
     return _load_robot(name, str(robots_dir().resolve()))
 
 
+def robot_argument(robot: object) -> Robot:
+    """A library call's ``robot`` argument: a :class:`Robot` as given, or the registry's by name.
+
+    Raises:
+        InputError: an unknown name, with ``key`` ``"robot"`` (the argument), the name as ``value``
+            and the registry's robots as ``expected``.
+        ArgumentError: neither a Robot nor a str.
+    """
+    if isinstance(robot, Robot):
+        return robot
+    if not isinstance(robot, str):
+        from refine.arguments import typed
+
+        typed(robot, "robot", Robot, "a refine.Robot or a registry name")
+    try:
+        return load_robot(robot)
+    except InputError as e:
+        if e.key != "robot.model":
+            raise
+        raise InputError(str(e), key="robot", value=e.value, expected=e.expected, file=e.file) from None
+
+
 @functools.cache
 def _load_robot(name: str, root: str) -> Robot:
     folder = Path(root) / name
     if not (folder / "robot.toml").is_file():
+        known = ", ".join(available_robots()) or "none"
         raise InputError(
-            f"unknown robot {name!r}; available robots: {', '.join(available_robots()) or 'none'}"
+            f"unknown robot {name!r}; available robots: {known}",
+            key="robot.model",
+            value=name,
+            expected=f"a robot of the registry {root}: {known}",
         )
     meta = read_registry_toml(folder / "robot.toml")
     urdf = (folder / str(meta["urdf"])).resolve()

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from refine.control import budget_s, stop_if_out_of_time, timed_out
 from refine.optimise.moves import (
     CLEARANCE_ROUNDS,
     ClearanceRow,
@@ -77,11 +78,15 @@ def solve_problem(
     first_name = "pass 1" if len(tracks) == 1 else "track 1"
     passes = [refine_pass(problem, robot, fused, watch, first_name, sources=sources, nlp=nlp, q0=q0, warm=warm)]
     for k, track in enumerate(tracks[1:], start=2):  # each further track of the CAD file is a pass
+        if timed_out():  # a pass ran out of the call's time limit: no further pass is started
+            break
         passes.append(refine_pass(problem, robot, track, watch, f"track {k}", 1, k, sources))
     if problem.multipass is not None and problem.multipass.layers > 1:
         from refine.fuse.passes import generate_passes
 
         for p in generate_passes(fused, problem.multipass)[1:]:
+            if timed_out():
+                break
             name = f"layer {p.layer} pass {p.index}"
             passes.append(refine_pass(problem, robot, p.path, watch, name, p.layer, p.index, sources))
     from refine.run.stages import plan_motions
@@ -109,6 +114,8 @@ def solve_problem(
         from refine.run.solve import placement_repair
 
         placement = placement_repair(problem, robot, passes)
+        if all(p.refinement.status != "timeout" for p in passes):
+            stop_if_out_of_time("placement")  # the search or its strict run may have run out of it
         watch.add({"placement": sum(placement.timings_s.values())})
     return RunResult(
         problem,
@@ -202,7 +209,7 @@ def repair_by_placement(problem: Problem, robot: Robot, first: PassResult) -> Pl
             first.refinement.q,
             axisymmetric=problem.tool.axisymmetric,
             weights=weights_for(problem, robot),
-            time_limit_s=problem.repair.time_limit_s,
+            time_limit_s=budget_s(problem.repair.time_limit_s),
             support=support,
             rows=tuple(rows),
             start=found,

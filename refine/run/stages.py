@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from refine.control import budget_s
 from refine.errors import InputError
 from refine.optimise.problem import ConstraintSource, RefinementNLP, Weights, build_refinement
 from refine.optimise.solve import solve_refinement
@@ -159,7 +160,7 @@ def refinement_for(problem: Problem, robot: Robot, fused: FusedPath) -> Refineme
         problem.tolerances,
         axisymmetric=problem.tool.axisymmetric,
         weights=weights_for(problem, robot),
-        solver_options={"ipopt.max_wall_time": problem.repair.time_limit_s},
+        solver_options={"ipopt.max_wall_time": budget_s(problem.repair.time_limit_s)},
         joint_steps=(),  # the solve adds the joint-step rows that come near their bound
         solver=problem.optimise.solver,
         tool_in_world=problem.tool.tcp_in_world,
@@ -230,7 +231,7 @@ def refine_pass(
         home=home,
         sources=sources + (lines,),
         repair_max_slack_deg=problem.repair.max_slack_deg if problem.repair.enabled else None,
-        time_limit_s=problem.repair.time_limit_s,
+        time_limit_s=budget_s(problem.repair.time_limit_s),
         warm=warm,
         **({"max_rounds": problem.collision.max_outer_iterations} if sources else {}),
     )

@@ -117,7 +117,7 @@ def test_compiled_kernels_give_the_virtual_machine_values(irb4600, straight_tool
 @pytest.mark.skipif(compiler() is None, reason="no C compiler")
 def test_compiled_library_is_cached_on_disk_by_key(tmp_path, monkeypatch):
     monkeypatch.setenv("REFINE_CACHE_DIR", str(tmp_path))
-    monkeypatch.setattr(compiled_module, "_loaded", {})
+    monkeypatch.setattr(compiled_module, "_loaded", compiled_module.BoundedCache(compiled_module.LOADED_MAX))
     made = []
 
     def make(scale):
@@ -130,7 +130,9 @@ def test_compiled_library_is_cached_on_disk_by_key(tmp_path, monkeypatch):
 
     assert float(compiled("t", "key-a", make(2.0))["twice"](3.0)) == 6.0
     assert len(list(tmp_path.glob("t-*.so"))) == 1 and made == [2.0]
-    monkeypatch.setattr(compiled_module, "_loaded", {})  # a new process: only the disk remains
+    monkeypatch.setattr(
+        compiled_module, "_loaded", compiled_module.BoundedCache(compiled_module.LOADED_MAX)
+    )  # a new process: only the disk remains
     assert float(compiled("t", "key-a", make(2.0))["twice"](3.0)) == 6.0
     assert made == [2.0]  # loaded from disk, not built again
     assert float(compiled("t", "key-b", make(5.0))["twice"](3.0)) == 15.0  # another key, another library
@@ -150,7 +152,7 @@ def test_without_compilation_the_functions_themselves_are_used(tmp_path, monkeyp
 @pytest.mark.skipif(compiler() is None, reason="no C compiler")
 def test_the_cache_folder_keeps_its_bound_dropping_the_least_recently_used(tmp_path, monkeypatch):
     monkeypatch.setenv("REFINE_CACHE_DIR", str(tmp_path))
-    monkeypatch.setattr(compiled_module, "_loaded", {})
+    monkeypatch.setattr(compiled_module, "_loaded", compiled_module.BoundedCache(compiled_module.LOADED_MAX))
 
     def make(scale):
         x = ca.SX.sym("x")
@@ -169,7 +171,9 @@ def test_the_cache_folder_keeps_its_bound_dropping_the_least_recently_used(tmp_p
         libraries.append(new)
         os.utime(new, (1e9 + k, 1e9 + k))  # distinct use times, in the order made
         if k == 3:  # the first library is used again: it becomes the most recent
-            monkeypatch.setattr(compiled_module, "_loaded", {})
+            monkeypatch.setattr(
+                compiled_module, "_loaded", compiled_module.BoundedCache(compiled_module.LOADED_MAX)
+            )
             compiled("t", "key-0", make(0.0))
             os.utime(first, (1e9 + 3.5, 1e9 + 3.5))
     left = set(tmp_path.glob("t-*.so"))
