@@ -46,6 +46,8 @@ if TYPE_CHECKING:
 Matrix4 = np.ndarray
 MAX_POSE_M = 100.0
 """Largest pose translation accepted [m]: a robot cell fits in 100 m."""
+MAX_INPUT_FILE_BYTES = 1 << 30
+"""Largest data file a problem may name [bytes] (1 GiB; a 2-million-line Liberty log is 130 MB)."""
 
 __all__ = [
     "CadSettings",
@@ -60,9 +62,6 @@ __all__ = [
     "ToolSettings",
     "load_problem",
 ]
-
-MAX_INPUT_FILE_BYTES = 1 << 30
-"""Largest data file a problem may name [bytes] (1 GiB; a 2-million-line Liberty log is 130 MB)."""
 
 
 @dataclass(frozen=True)
@@ -413,12 +412,8 @@ def _robot_model(value: Any) -> str:
 
     known = available_robots()
     if not isinstance(value, str) or value not in known:
-        raise InputError(
-            f"robot.model = {value!r} is not a robot of the registry; available: {', '.join(known)}",
-            key="robot.model",
-            value=value,
-            expected=f"a robot of the registry: {', '.join(known)}",
-        )
+        names = f"a robot of the registry: {', '.join(known)}"
+        raise InputError(f"robot.model = {value!r} is not {names}", key="robot.model", value=value, expected=names)
     return value
 
 

@@ -67,11 +67,13 @@ def waypoint_kernels(
         compiler(),
     )
     return _kernel_cache.get_or_make(
-        key, lambda: _make_kernels(robot, base_in_world, tcp_in_flange, axisymmetric)
+        key, lambda: _make_kernels(robot, base_in_world, tcp_in_flange, axisymmetric, tool_in_world)
     )[1]
 
 
-def _make_kernels(robot, base_in_world: Array, tcp_in_flange: Array, axisymmetric: bool) -> tuple:
+def _make_kernels(
+    robot, base_in_world: Array, tcp_in_flange: Array, axisymmetric: bool, tool_in_world: Array | None
+) -> tuple:
     """(robot, kernels) for :func:`waypoint_kernels`'s cache: the robot is held so its id is not reused."""
     kernels = compiled(
         "refine_kernels",
