@@ -100,7 +100,7 @@ def test_kernel_sets_from_two_threads(busy_switching, monkeypatch):
     monkeypatch.setattr(derivatives, "_kernel_cache", BoundedCache(BOUND))
     monkeypatch.setattr(derivatives, "compiler", lambda: None)
     monkeypatch.setattr(
-        derivatives, "_make_kernels", lambda robot, base, tcp, axisymmetric: (robot, {"x": float(base[0, 3])})
+        derivatives, "_make_kernels", lambda robot, base, tcp, axisymmetric, tool_in_world: (robot, {"x": float(base[0, 3])})
     )
     robot = object()
 

@@ -19,7 +19,7 @@ from scipy.spatial.transform import Rotation
 import refine
 from refine.control import after_solve
 
-STAGES = {"load", "cad", "demo", "fuse", "build", "verify", "refine", "timing", "line_check", "motions", "solve"}
+STAGES = {"load", "cad", "demo", "fuse", "build", "verify", "refine", "timing", "line_check", "arc_check", "motions", "solve"}
 """The stage names docs/api.md gives for ``Progress.stage``."""
 
 
