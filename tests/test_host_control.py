@@ -106,12 +106,17 @@ def test_ipopt_stopped_by_an_exception_of_casadi_is_an_interrupt():
 
 def test_ctrl_c_from_another_thread_during_a_solve_interrupts_the_call():
     positions, R = _line(60)
-    fired = threading.Event()
+    fired, sent = threading.Event(), threading.Event()
+
+    def interrupt() -> None:
+        os.kill(os.getpid(), signal.SIGINT)
+        sent.set()
 
     def progress(p: refine.Progress) -> None:
         if p.stage == "solve" and p.iteration == 1 and not fired.is_set():
             fired.set()
-            threading.Timer(0.002, os.kill, (os.getpid(), signal.SIGINT)).start()
+            threading.Timer(0.002, interrupt).start()
+            sent.wait(10.0)  # the solve goes on only once the other thread has sent Ctrl-C, however loaded
 
     with pytest.raises(KeyboardInterrupt):
         result = refine.refine_path("ur10e", positions, R, speeds=0.1, progress=progress)
