@@ -95,6 +95,12 @@ def main(argv: list[str] | None = None) -> int:
                 hold_signals()
     except KeyboardInterrupt:
         status = _interrupted()
+    except SystemError as e:
+        from refine.control import ctrl_c_inside
+
+        if not ctrl_c_inside(e):
+            raise
+        status = _interrupted()
     return _exit_now(status) if program else status
 
 

@@ -132,8 +132,27 @@ def controlled(
     token = _current.set(control)
     try:
         yield control
+    except SystemError as e:  # Ctrl-C that landed inside a compiled call (CasADi's SWIG layer)
+        if ctrl_c_inside(e):
+            raise KeyboardInterrupt from e
+        raise
     finally:
         _current.reset(token)
+
+
+def ctrl_c_inside(error: BaseException) -> bool:
+    """Whether ``error`` is a ``SystemError`` a Ctrl-C caused inside a compiled call.
+
+    A SIGINT whose Python handler runs while a compiled function (CasADi's SWIG wrappers, such as
+    ``DM.__array__``) is returning makes CPython raise ``SystemError("... returned a result with an
+    exception set")`` with the ``KeyboardInterrupt`` as its cause; a host must see the interrupt.
+    """
+    seen: BaseException | None = error
+    while seen is not None:
+        if isinstance(seen, KeyboardInterrupt):
+            return True
+        seen = seen.__cause__ or seen.__context__
+    return False
 
 
 def current() -> Control | None:

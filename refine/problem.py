@@ -410,10 +410,10 @@ def _robot(t: dict[str, Any], path: Path, inside: Path | None = None) -> RobotSe
 def _robot_model(value: Any) -> str:
     from refine.robot.registry import available_robots
 
-    known = available_robots()
-    if not isinstance(value, str) or value not in known:
-        names = f"a robot of the registry: {', '.join(known)}"
-        raise InputError(f"robot.model = {value!r} is not {names}", key="robot.model", value=value, expected=names)
+    if not isinstance(value, str) or value not in (known := available_robots()):
+        names = ", ".join(known)
+        message = f"robot.model = {value!r} is not a robot of the registry; available: {names}"
+        raise InputError(message, key="robot.model", value=value, expected=f"a robot of the registry: {names}")
     return value
 
 

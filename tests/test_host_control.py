@@ -17,7 +17,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import refine
-from refine.control import after_solve
+from refine.control import after_solve, controlled
 
 STAGES = {"load", "cad", "demo", "fuse", "build", "verify", "refine", "timing", "line_check", "arc_check", "motions", "solve"}
 """The stage names docs/api.md gives for ``Progress.stage``."""
@@ -122,3 +122,17 @@ def test_ctrl_c_from_another_thread_during_a_solve_interrupts_the_call():
         result = refine.refine_path("ur10e", positions, R, speeds=0.1, progress=progress)
         # the signal may land after the last solve, in plain Python: then it raises there
         raise AssertionError(f"returned {result.status} after Ctrl-C")  # pragma: no cover
+
+
+def test_a_ctrl_c_inside_a_compiled_call_reaches_the_host_as_keyboard_interrupt():
+    # CPython's own wording when a handler raises while a C function returns: the interrupt is the cause
+    def compiled_call_interrupted() -> None:
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as e:
+            raise SystemError("<function DM.__array__> returned a result with an exception set") from e
+
+    with pytest.raises(KeyboardInterrupt), controlled():
+        compiled_call_interrupted()
+    with pytest.raises(SystemError), controlled():  # any other SystemError is left as it is
+        raise SystemError("something else")
