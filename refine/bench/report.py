@@ -27,6 +27,7 @@ from refine.bench.figures import (
 )
 from refine.bench.figures import number as _f
 from refine.bench.figures import yes as _yes
+from refine.bench.rules import RULES, UNSTATED
 from refine.bench.table import Row, read_runs
 
 
@@ -295,6 +296,7 @@ def run_section(run_id: str, rows: list[Row], out_dir: Path, prefix: str = "") -
     for r in rows:
         groups[(r["suite"], r["contender"])].append(r)
     lines += _profiles_table(groups)
+    lines += ["", "### Rules kept", "", *rules_table(rows)]
     lines += [
         "",
         "### Times",
@@ -325,8 +327,9 @@ def run_section(run_id: str, rows: list[Row], out_dir: Path, prefix: str = "") -
             ]
         lines += [
             "| problem | N | contender | status | solver status | verified | success | detected | total s | "
-            "CPU s | iter | objective | primal res. | dual res. | max dev deg | min clearance mm | note |",
-            "|---|---:|---|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+            "CPU s | iter | objective | primal res. | dual res. | max dev deg | max step deg | min clearance mm | "
+            "rules not kept | note |",
+            "|---|---:|---|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---|",
         ]
         for r in srows:
             clearance = _f(r, "min_clearance_m") * 1e3
@@ -337,7 +340,8 @@ def run_section(run_id: str, rows: list[Row], out_dir: Path, prefix: str = "") -
                 f"{'yes' if _yes(r, 'detected_infeasible') else ('no' if r['expected'] == 'infeasible' else '–')} | "
                 f"{_fmt(_f(r, 'total_s'))} | {_fmt(_f(r, 'cpu_s'))} | {r.get('iterations', '')} | "
                 f"{_sci(_f(r, 'objective'), 6)} | {_sci(_f(r, 'primal_residual'))} | {_sci(_f(r, 'dual_residual'))} | "
-                f"{_fmt(_f(r, 'max_orientation_deviation_deg'), 2)} | {_fmt(clearance, 1)} | "
+                f"{_fmt(_f(r, 'max_orientation_deviation_deg'), 2)} | {_fmt(_f(r, 'max_joint_step_deg'), 2)} | "
+                f"{_fmt(clearance, 1)} | {(r.get('rules_not_kept') or '–').replace(';', ', ')} | "
                 f"{(r.get('reason') or r.get('note', ''))[:60]} |"
             )
         families = sorted({r["problem"].rsplit("-", 1)[0] for r in srows if "-" in r["problem"]})
@@ -348,6 +352,24 @@ def run_section(run_id: str, rows: list[Row], out_dir: Path, prefix: str = "") -
             png = out_dir / f"{prefix}{suite}-{family}.png"
             plot_growth(frows, family, png)
             lines += ["", f"![{family}: time against waypoints, log-log]({png.name})"]
+    return lines
+
+
+def rules_table(rows: list[Row]) -> list[str]:
+    """Which of refine's rules each contender of ``rows`` poses (the verification checks them all)."""
+    lines = [
+        "What each contender poses (docs/bench.md, \"Rules kept\"); the verification checks every rule "
+        "of every answer, so a rule a contender does not pose is one its answers may break: "
+        + "; ".join(f"`{k}`: {v}" for k, v in RULES.items())
+        + ".",
+        "",
+        "| contender | keeps | does not keep |",
+        "|---|---|---|",
+    ]
+    for name in sorted({r["contender"] for r in rows}):
+        r = next(r for r in rows if r["contender"] == name)
+        kept, missing = r.get("rules_kept", UNSTATED), r.get("rules_not_kept", UNSTATED)
+        lines.append(f"| {name} | {kept.replace(';', ', ') or '–'} | {missing.replace(';', ', ') or '–'} |")
     return lines
 
 
