@@ -358,7 +358,7 @@ def run_section(run_id: str, rows: list[Row], out_dir: Path, prefix: str = "") -
 def rules_table(rows: list[Row]) -> list[str]:
     """Which of refine's rules each contender of ``rows`` poses (the verification checks them all)."""
     lines = [
-        "What each contender poses (docs/bench.md, \"Rules kept\"); the verification checks every rule "
+        'What each contender poses (docs/bench.md, "Rules kept"); the verification checks every rule '
         "of every answer, so a rule a contender does not pose is one its answers may break: "
         + "; ".join(f"`{k}`: {v}" for k, v in RULES.items())
         + ".",
