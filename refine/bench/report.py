@@ -75,16 +75,18 @@ def _suite_targets(suite: str, rows: list[Row]) -> list[str]:
         line = (
             f"- Glass cell (suite `{suite}`), refine build + seed + solve: {_fmt(total)} s wall ({_fmt(_f(glass, 'cpu_s'))} s CPU), "
             f"verified {'yes' if _yes(glass, 'verified') else 'no'}, largest deviation "
-            f"{_fmt(_f(glass, 'max_orientation_deviation_deg'), 2)} deg"
+            f"{_fmt(_f(glass, 'max_orientation_deviation_deg'), 2)} deg, largest joint step "
+            f"{_fmt(_f(glass, 'max_joint_step_deg'), 2)} deg"
         )
-        for other in ("drake-ik", "greedy-ik", "refine-casadi-ad", "refine-fatrop"):
+        for other in ("trajopt", "descartes", "drake-ik", "greedy-ik", "refine-casadi-ad", "refine-fatrop"):
             peer = by.get(("glass_adhesive", other))
             if peer:
                 line += (
                     f"; {other} {_fmt(_f(peer, 'total_s'))} s wall ({_fmt(_f(peer, 'cpu_s'))} s CPU), ratio refine / "
                     f"{other} {_fmt(total / _f(peer, 'total_s'), 2)} (wall), "
                     f"{_fmt(_f(glass, 'cpu_s') / _f(peer, 'cpu_s'), 2)} (CPU), deviation "
-                    f"{_fmt(_f(peer, 'max_orientation_deviation_deg'), 2)} deg, verified "
+                    f"{_fmt(_f(peer, 'max_orientation_deviation_deg'), 2)} deg, largest joint step "
+                    f"{_fmt(_f(peer, 'max_joint_step_deg'), 2)} deg, verified "
                     f"{'yes' if _yes(peer, 'verified') else 'no'}"
                 )
         if glass.get("load_1min"):
