@@ -523,6 +523,7 @@ class Verdict:
         max_position_error_m: largest TCP position error [m].
         max_orientation_deviation_deg: largest deviation from the demonstrated orientation [deg].
         min_clearance_m: least clearance (distance minus margin) in the dense check [m], NaN without a cell.
+        max_joint_step_deg: largest change of any joint between neighbouring waypoints [deg].
         reason: the first broken tolerance, empty when verified.
         broken_s_m: arc-length range [m] of each stretch that breaks a tolerance (collisions included).
     """
@@ -531,6 +532,7 @@ class Verdict:
     max_position_error_m: float
     max_orientation_deviation_deg: float
     min_clearance_m: float
+    max_joint_step_deg: float
     reason: str
     broken_s_m: list[tuple[float, float]] = field(default_factory=list)
 
@@ -541,7 +543,7 @@ def verify(problem: BenchProblem, q: Array | None, slack_deg: Array | None = Non
     from refine.robot.kinematics import TcpKinematics
 
     if q is None or not np.all(np.isfinite(q)):
-        return Verdict(False, np.nan, np.nan, np.nan, "no answer")
+        return Verdict(False, np.nan, np.nan, np.nan, np.nan, "no answer")
     kin = TcpKinematics(problem.robot, problem.base_in_world, problem.tcp_in_flange, problem.tool_in_world)
     check = check_path(kin, q, problem.fused, problem.tolerances, problem.axisymmetric, slack_deg)
     violations = list(check.violations)
@@ -559,6 +561,7 @@ def verify(problem: BenchProblem, q: Array | None, slack_deg: Array | None = Non
         float(check.position_error_m.max()),
         float(check.orientation_deviation_deg.max()),
         float(clearance),
+        float(np.degrees(np.abs(np.diff(q, axis=0)).max(initial=0.0))),
         first if isinstance(first, str) else first.describe(),
         broken,
     )

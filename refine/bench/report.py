@@ -27,6 +27,7 @@ from refine.bench.figures import (
 )
 from refine.bench.figures import number as _f
 from refine.bench.figures import yes as _yes
+from refine.bench.rules import RULES, UNSTATED
 from refine.bench.table import Row, read_runs
 
 
@@ -74,16 +75,18 @@ def _suite_targets(suite: str, rows: list[Row]) -> list[str]:
         line = (
             f"- Glass cell (suite `{suite}`), refine build + seed + solve: {_fmt(total)} s wall ({_fmt(_f(glass, 'cpu_s'))} s CPU), "
             f"verified {'yes' if _yes(glass, 'verified') else 'no'}, largest deviation "
-            f"{_fmt(_f(glass, 'max_orientation_deviation_deg'), 2)} deg"
+            f"{_fmt(_f(glass, 'max_orientation_deviation_deg'), 2)} deg, largest joint step "
+            f"{_fmt(_f(glass, 'max_joint_step_deg'), 2)} deg"
         )
-        for other in ("drake-ik", "greedy-ik", "refine-casadi-ad", "refine-fatrop"):
+        for other in ("trajopt", "descartes", "drake-ik", "greedy-ik", "refine-casadi-ad", "refine-fatrop"):
             peer = by.get(("glass_adhesive", other))
             if peer:
                 line += (
                     f"; {other} {_fmt(_f(peer, 'total_s'))} s wall ({_fmt(_f(peer, 'cpu_s'))} s CPU), ratio refine / "
                     f"{other} {_fmt(total / _f(peer, 'total_s'), 2)} (wall), "
                     f"{_fmt(_f(glass, 'cpu_s') / _f(peer, 'cpu_s'), 2)} (CPU), deviation "
-                    f"{_fmt(_f(peer, 'max_orientation_deviation_deg'), 2)} deg, verified "
+                    f"{_fmt(_f(peer, 'max_orientation_deviation_deg'), 2)} deg, largest joint step "
+                    f"{_fmt(_f(peer, 'max_joint_step_deg'), 2)} deg, verified "
                     f"{'yes' if _yes(peer, 'verified') else 'no'}"
                 )
         if glass.get("load_1min"):
@@ -295,6 +298,7 @@ def run_section(run_id: str, rows: list[Row], out_dir: Path, prefix: str = "") -
     for r in rows:
         groups[(r["suite"], r["contender"])].append(r)
     lines += _profiles_table(groups)
+    lines += ["", "### Rules kept", "", *rules_table(rows)]
     lines += [
         "",
         "### Times",
@@ -325,8 +329,9 @@ def run_section(run_id: str, rows: list[Row], out_dir: Path, prefix: str = "") -
             ]
         lines += [
             "| problem | N | contender | status | solver status | verified | success | detected | total s | "
-            "CPU s | iter | objective | primal res. | dual res. | max dev deg | min clearance mm | note |",
-            "|---|---:|---|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+            "CPU s | iter | objective | primal res. | dual res. | max dev deg | max step deg | min clearance mm | "
+            "rules not kept | note |",
+            "|---|---:|---|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---|",
         ]
         for r in srows:
             clearance = _f(r, "min_clearance_m") * 1e3
@@ -337,7 +342,8 @@ def run_section(run_id: str, rows: list[Row], out_dir: Path, prefix: str = "") -
                 f"{'yes' if _yes(r, 'detected_infeasible') else ('no' if r['expected'] == 'infeasible' else '–')} | "
                 f"{_fmt(_f(r, 'total_s'))} | {_fmt(_f(r, 'cpu_s'))} | {r.get('iterations', '')} | "
                 f"{_sci(_f(r, 'objective'), 6)} | {_sci(_f(r, 'primal_residual'))} | {_sci(_f(r, 'dual_residual'))} | "
-                f"{_fmt(_f(r, 'max_orientation_deviation_deg'), 2)} | {_fmt(clearance, 1)} | "
+                f"{_fmt(_f(r, 'max_orientation_deviation_deg'), 2)} | {_fmt(_f(r, 'max_joint_step_deg'), 2)} | "
+                f"{_fmt(clearance, 1)} | {(r.get('rules_not_kept') or '–').replace(';', ', ')} | "
                 f"{(r.get('reason') or r.get('note', ''))[:60]} |"
             )
         families = sorted({r["problem"].rsplit("-", 1)[0] for r in srows if "-" in r["problem"]})
@@ -348,6 +354,24 @@ def run_section(run_id: str, rows: list[Row], out_dir: Path, prefix: str = "") -
             png = out_dir / f"{prefix}{suite}-{family}.png"
             plot_growth(frows, family, png)
             lines += ["", f"![{family}: time against waypoints, log-log]({png.name})"]
+    return lines
+
+
+def rules_table(rows: list[Row]) -> list[str]:
+    """Which of refine's rules each contender of ``rows`` poses (the verification checks them all)."""
+    lines = [
+        'What each contender poses (docs/bench.md, "Rules kept"); the verification checks every rule '
+        "of every answer, so a rule a contender does not pose is one its answers may break: "
+        + "; ".join(f"`{k}`: {v}" for k, v in RULES.items())
+        + ".",
+        "",
+        "| contender | keeps | does not keep |",
+        "|---|---|---|",
+    ]
+    for name in sorted({r["contender"] for r in rows}):
+        r = next(r for r in rows if r["contender"] == name)
+        kept, missing = r.get("rules_kept", UNSTATED), r.get("rules_not_kept", UNSTATED)
+        lines.append(f"| {name} | {kept.replace(';', ', ') or '–'} | {missing.replace(';', ', ') or '–'} |")
     return lines
 
 

@@ -35,6 +35,7 @@ from refine.bench.outcomes import DEFAULT_TIME_LIMIT_S, penalised, score
 from refine.bench.provenance import DEFAULT_BLAS_THREADS, fixed_threads, git_commit, solver_versions
 from refine.bench.provenance import blas_threads as current_blas_threads
 from refine.bench.quality import evaluate
+from refine.bench.rules import columns as rules_columns
 from refine.bench.suites import BenchProblem, load_suites, problems
 from refine.bench.table import COLUMNS, SCHEMA_VERSION, check_header, new_run_id
 from refine.bench.watchdog import run_limited
@@ -229,6 +230,8 @@ def _row(
         "max_position_error_m": verdict.max_position_error_m,
         "max_orientation_deviation_deg": verdict.max_orientation_deviation_deg,
         "min_clearance_m": verdict.min_clearance_m,
+        "max_joint_step_deg": verdict.max_joint_step_deg,
+        **rules_columns(contender, CONTENDERS.get(contender)),
         "build_s": stage["build"],
         "seed_s": stage["seed"],
         "solve_s": stage["solve"],
@@ -278,7 +281,8 @@ def run_suites(
     outcome it is built for), the contender, its own status (``error`` when it raised, ``timeout``
     when a timed run took longer than ``time_limit_s``), the shared verification (``verified``:
     every tolerance kept; ``success`` and ``detected_infeasible``: :mod:`refine.bench.outcomes`;
-    worst position and orientation, least clearance), wall time per stage and in total (median over
+    worst position and orientation, least clearance, largest joint step between waypoints), the
+    rules the contender poses and those it does not (:func:`refine.bench.rules.columns`), wall time per stage and in total (median over
     repeats, the minimum total, and the total counted as the time limit for a row that is neither a
     success nor a detection), CPU time (likewise), solver iterations, the repeats and untimed warm-up runs, the 1-minute
     load average before and after the timed runs, the peak resident memory of the process or of a

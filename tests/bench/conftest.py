@@ -6,6 +6,8 @@ import json
 
 import pytest
 
+from refine.bench.contenders import CONTENDERS
+
 WAVE = {"robot": "abb_irb4600_60_205", "centre_m": [1.3, 0.0, 0.6], "length_m": 0.3, "tool_length_m": 0.35}
 """A generated family's keys: a sine wave 0.3 m long in front of the IRB 4600 (a few seconds for refine)."""
 
@@ -51,3 +53,12 @@ def tiny_wave_with(tiny_wave):
         return tiny_wave.replace('generated = ["wave"]\nsizes = [20]', head) + extra
 
     return make
+
+
+@pytest.fixture
+def registry():
+    """CONTENDERS as it was, restored after the test."""
+    saved = dict(CONTENDERS)
+    yield CONTENDERS
+    CONTENDERS.clear()
+    CONTENDERS.update(saved)

@@ -46,15 +46,6 @@ def zeros(problem):
 
 
 @pytest.fixture
-def registry():
-    """CONTENDERS as it was, restored after the test."""
-    saved = dict(CONTENDERS)
-    yield CONTENDERS
-    CONTENDERS.clear()
-    CONTENDERS.update(saved)
-
-
-@pytest.fixture
 def suites_file(tmp_path, tiny_wave):
     path = tmp_path / "suites.toml"
     path.write_text(tiny_wave)
