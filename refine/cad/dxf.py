@@ -34,6 +34,7 @@ import logging
 import math
 from collections import defaultdict
 from pathlib import Path
+from typing import Any
 
 import ezdxf
 import numpy as np
@@ -243,12 +244,7 @@ def _read_pieces(
     path: Path, units: str, layer: str | None, flatten_tolerance_m: float
 ) -> tuple[list[tuple[NDArray, NDArray, bool, str]], float, str]:
     """The chosen path entities as (points [drawing units], kinds, closed, label), the scale and the source."""
-    source = f"DXF file {str(path)!r}"
-    scale = metres_per_unit(units, str(path))
-    try:
-        doc = ezdxf.readfile(path)
-    except (OSError, ezdxf.DXFError) as e:
-        raise InputError(f"{source} cannot be read: {e}") from e
+    doc, source, scale = _open(path, units)
     insunits = _INSUNITS.get(doc.header.get("$INSUNITS", 0))
     if insunits is not None and insunits != units:
         logger.warning("%s says $INSUNITS=%s but cad.units=%s; using %s", source, insunits, units, units)
@@ -425,13 +421,7 @@ def dxf_circles(path: str | Path, units: str = "mm", layer: str | None = None) -
     Returns:
         ``(centre [m] (3,), radius [m], unit normal (3,))`` per arc, in the drawing's frame.
     """
-    path = Path(path)
-    source = f"DXF file {str(path)!r}"
-    scale = metres_per_unit(units, str(path))
-    try:
-        doc = ezdxf.readfile(path)
-    except (OSError, ezdxf.DXFError) as e:
-        raise InputError(f"{source} cannot be read: {e}") from e
+    doc, source, scale = _open(Path(path), units)
     entities = [e for e in doc.modelspace() if e.dxftype() in PATH_TYPES]
     circles = []
     for e in _select(entities, layer, source):
@@ -455,3 +445,13 @@ def dxf_circles(path: str | Path, units: str = "mm", layer: str | None = None) -
             centre = np.asarray(ocs.to_wcs((c[0], c[1], elevation)), dtype=float)
             circles.append((centre * scale, radius * scale, normal))
     return circles
+
+
+def _open(path: Path, units: str) -> tuple[Any, str, float]:
+    """The drawing read by ezdxf, its name for messages and the metres per drawing unit."""
+    source = f"DXF file {str(path)!r}"
+    scale = metres_per_unit(units, str(path))
+    try:
+        return ezdxf.readfile(path), source, scale
+    except (OSError, ezdxf.DXFError) as e:
+        raise InputError(f"{source} cannot be read: {e}") from e

@@ -43,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from refine.optimise.controller_line import IK_TOLERANCE, JOINT_TOLERANCE_RAD, SINGULARITY_TOLERANCE
 from refine.optimise.verify import singularity_measures
 from refine.robot.kinematics import TcpKinematics, solve_ik_batch
 from refine.settings import Tolerances
@@ -65,14 +66,8 @@ MAX_SWEEP_DEG = 90.0
 """Largest sweep of one circular move [deg]: below ABB's 240 deg and KUKA's and UR's 360 deg."""
 SAMPLES_PER_SEGMENT = 8
 """Samples of the circle per refined segment the piece replaces."""
-IK_TOLERANCE = 1e-9
-"""Pose error [m and rad stacked] the IK along the circle must reach."""
 IK_FAILED = 1e-6
 """A sample whose IK stays further than this from the circle [m and rad stacked] has no answer."""
-JOINT_TOLERANCE_RAD = 1e-7
-"""Rounding a joint margin on the circle may show [rad], as the waypoints' check allows."""
-SINGULARITY_TOLERANCE = 1e-9
-"""Rounding the singularity measure on the circle may show [-]."""
 CAD_TOLERANCE_M = 1e-5
 """Largest distance of the circle from the CAD geometry a piece may have [m]."""
 
