@@ -41,6 +41,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from refine.optimise.controller_line import IK_TOLERANCE, JOINT_TOLERANCE_RAD, SINGULARITY_TOLERANCE
@@ -151,13 +152,40 @@ def _on_circle(points: Array) -> tuple[Array, float, Array, float] | None:
     return centre, radius, normal, float(ang[-1])
 
 
+def _four_on_circle(positions: Array) -> NDArray[np.bool_]:
+    """Which windows of four waypoints ``a..a+3`` may lie on one circle, all at once, (N-3,).
+
+    The distances of :func:`_on_circle` for every window, vectorised; a window is kept unless it
+    is off its circle by twice :data:`ON_CIRCLE_M` or its radius is twice :data:`MAX_RADIUS_M`
+    (rounding cannot move a figure that far), so every window :func:`_on_circle` accepts is kept
+    and the kept ones are decided by it.
+    """
+    p0, pv, p1 = positions[:-3], positions[2:-1], positions[3:]  # _on_circle's three: first, middle, last
+    b, c = pv - p0, p1 - p0
+    w = np.cross(b, c)
+    ww = np.einsum("ij,ij->i", w, w)
+    safe = np.where(ww > 0.0, ww, 1.0)
+    bb, cc = np.einsum("ij,ij->i", b, b), np.einsum("ij,ij->i", c, c)
+    centre = p0 + np.cross(bb[:, None] * c - cc[:, None] * b, w) / (2.0 * safe[:, None])
+    radius = np.linalg.norm(p0 - centre, axis=1)
+    normal = w / np.sqrt(safe)[:, None]
+    windows = np.stack([positions[i : len(positions) - 3 + i] for i in range(4)], axis=1)  # (N-3, 4, 3)
+    d = windows - centre[:, None, :]
+    along = np.einsum("kij,kj->ki", d, normal)
+    off = np.maximum(
+        np.abs(along), np.abs(np.linalg.norm(d - along[..., None] * normal[:, None, :], axis=2) - radius[:, None])
+    ).max(axis=1)
+    return (ww > 0.0) & (radius <= 2.0 * MAX_RADIUS_M) & (off <= 2.0 * ON_CIRCLE_M)
+
+
 def arc_runs(positions: Array) -> list[tuple[int, int]]:
     """Maximal runs ``(a, b)`` of at least four waypoints ``a..b`` (b - a >= 3) on one circle, in order."""
     positions = np.asarray(positions, dtype=float)
     runs: list[tuple[int, int]] = []
     a, n = 0, len(positions)
+    maybe = _four_on_circle(positions) if n >= 4 else np.zeros(0, dtype=bool)
     while a + 3 < n:
-        if _on_circle(positions[a : a + 4]) is None:  # any three points are on a circle: four tell
+        if not maybe[a] or _on_circle(positions[a : a + 4]) is None:  # any three points are on a circle: four tell
             a += 1
             continue
         b = a + 3
@@ -212,6 +240,8 @@ def arc_pieces(
     Returns:
         The pieces in path order; waypoints outside them keep their straight moves.
     """
+    if circles is not None and not circles:
+        return []  # no CAD arc: no run can match one (the filter below drops every run)
     positions = np.asarray(positions, dtype=float)
     v = np.asarray(segment_speeds, dtype=float)
     pieces: list[ArcPiece] = []

@@ -334,8 +334,9 @@ def circular_moves(
 
     circles = [] if problem.cad is None else cad_circles(problem.cad, problem.frames.cad_in_world)  # no CAD: no arcs
     pieces = arc_pieces(trajectory.positions_ref, segment_speeds(trajectory), problem.output.speed_share, circles)
-    wrist = wrist_segments(problem, robot, trajectory.q)  # the programs keep straight moves there
-    pieces = [a for a in pieces if not wrist[a.start : a.end].any()]
+    if pieces:
+        wrist = wrist_segments(problem, robot, trajectory.q)  # the programs keep straight moves there
+        pieces = [a for a in pieces if not wrist[a.start : a.end].any()]
     ok = [True] * len(pieces)
     done: list[Any] = []
     for kind in MODELS:

@@ -69,6 +69,39 @@ def test_the_arc_is_found_between_its_ends_and_no_straight_waypoint_joins_it():
     assert runs == [(5, 21)]  # the arc's 17 waypoints, from its start to its end
 
 
+def _runs_window_by_window(p: np.ndarray) -> list[tuple[int, int]]:
+    """The runs with every window of four tested on its own (no all-at-once screen)."""
+    from refine.optimise.controller_arc import _on_circle
+
+    runs, a = [], 0
+    while a + 3 < len(p):
+        if _on_circle(p[a : a + 4]) is None:
+            a += 1
+            continue
+        b = a + 3
+        while b + 1 < len(p) and _on_circle(p[a : b + 2]) is not None:
+            b += 1
+        runs.append((a, b))
+        a = b
+    return runs
+
+
+def test_a_waypoint_off_the_arc_splits_it_and_the_screen_drops_no_window():
+    p = path_line_arc_line()
+    radial = (p[13] - CENTRE) / RADIUS
+    off = p.copy()
+    off[13] += 1e-3 * radial  # 1 mm outwards: every window holding waypoint 13 is off the circle
+    assert arc_runs(off) == [(5, 12), (14, 21)]
+    near = p.copy()
+    near[13] += 4e-7 * radial  # well inside the 5 um a waypoint may sit off its circle
+    assert arc_runs(near) == [(5, 21)]
+    rng = np.random.default_rng(3)
+    for scale in (1e-6, 3e-6, 6e-6):  # noise about the threshold: the screen keeps what the test keeps
+        noisy = np.vstack([p, p[::-1] + [0.0, 0.0, 0.01]]) + rng.normal(0.0, scale, (2 * len(p), 3))
+        assert arc_runs(noisy) == _runs_window_by_window(noisy)
+    assert arc_runs(p[:3]) == []
+
+
 def test_pieces_keep_under_the_sweep_limit_and_the_speed_share():
     p = path_line_arc_line()
     same = np.full(len(p) - 1, 0.01)
