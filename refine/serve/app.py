@@ -37,7 +37,7 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from refine.errors import InputError, RefineError
 from refine.report.html import ERRORS_JS
-from refine.serve.session import Answer, Session
+from refine.serve.session import Answer, LatestSolver, Session
 from refine.serve.state import SceneDiff, values_of, verdict_message
 
 log = logging.getLogger(__name__)
@@ -71,6 +71,47 @@ class Hub:
             return
         for q in queues:
             loop.call_soon_threadsafe(q.put_nowait, text)
+
+
+class SceneBuilder:
+    """Builds and publishes the scene of the newest answer on its own thread; older ones waiting are skipped.
+
+    The verdict is published on the solver's thread as soon as the solve ends; the scene (paths,
+    robot poses, motions, about 50 ms of CPU on the glass cell) follows from here, so a change made
+    meanwhile is solved at once and a scene overtaken by a newer answer is never built. The thread
+    is a :class:`refine.serve.session.LatestSolver` whose job is an :class:`Answer`.
+    """
+
+    def __init__(self, hub: Hub) -> None:
+        self.hub, self.scenes = hub, SceneDiff()
+        self._worker = LatestSolver(
+            lambda answer: self.scenes.messages(answer), self._built, name="refine-serve-scene"
+        )
+
+    @property
+    def built(self) -> int:
+        """How many scenes were built."""
+        return self._worker.solved
+
+    @property
+    def skipped(self) -> int:
+        """How many answers were overtaken before their scene was built."""
+        return self._worker.dropped
+
+    def submit(self, answer: Answer) -> None:
+        """Build the scene of ``answer`` next (an answer still waiting is skipped)."""
+        self._worker.submit(answer)
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        """End the thread after the scene under way [s to wait for it]."""
+        self._worker.stop(timeout_s)
+
+    def _built(self, answer: Answer, messages: tuple[str, str] | None, error: BaseException | None) -> None:
+        if error is not None:  # the verdict is out already; the page keeps the scene it has
+            log.error("serve: the scene of revision %d failed", answer.revision, exc_info=error)
+            return
+        changed, whole = messages
+        self.hub.publish("scene", changed, keep=whole)
 
 
 class Guard:
@@ -125,13 +166,12 @@ def create_app(session: Session, out_dir: Path, *, token: str | None = None) -> 
     out_dir = Path(out_dir).resolve()
     plotly_js = get_plotlyjs()
 
-    scenes = SceneDiff()
+    scenes = SceneBuilder(hub)
 
     def answered(answer: Answer) -> None:  # on the solver's thread
         hub.publish("verdict", json.dumps(verdict_message(session, answer), allow_nan=False))
         if answer.error is None and answer.result is not None:
-            changed, whole = scenes.messages(answer)
-            hub.publish("scene", changed, keep=whole)
+            scenes.submit(answer)  # built on its own thread: the next solve need not wait for it
 
     session.on_answer(answered)
 
@@ -243,6 +283,7 @@ def create_app(session: Session, out_dir: Path, *, token: str | None = None) -> 
             yield
         finally:
             session.close()
+            scenes.stop()
 
     routes = [
         Route("/", page),
@@ -278,7 +319,9 @@ async def _body(request: Request) -> dict[str, Any]:
 
 
 def _pending(hub: Hub, session: Session, revision: int) -> None:
-    hub.publish("pending", json.dumps({"type": "pending", "revision": revision, "values": values_of(session)}))
+    hub.publish(
+        "pending", json.dumps({"type": "pending", "revision": revision, "values": values_of(session)})
+    )
 
 
 async def _on_message(session: Session, hub: Hub, text: str) -> dict[str, Any] | None:

@@ -71,12 +71,17 @@ class LatestSolver:
     a cancelled job is counted as dropped and never answered.
 
     Args:
-        solve: solves a job; what it returns (or the error it raises) goes to ``done``.
+        solve: solves a job (a :class:`Job`, or any value for another kind of work, such as
+            building the scene of an answer); what it returns (or the error it raises) goes to ``done``.
         done: called on the solver's thread with the job and ``(answer, error)``.
+        name: the thread's name.
     """
 
     def __init__(
-        self, solve: Callable[[Job], Any], done: Callable[[Job, Any, BaseException | None], None]
+        self,
+        solve: Callable[[Any], Any],
+        done: Callable[[Any, Any, BaseException | None], None],
+        name: str = "refine-serve-solver",
     ) -> None:
         self._solve, self._done = solve, done
         self._wake = threading.Condition()
@@ -86,7 +91,7 @@ class LatestSolver:
         self.solved = 0
         self.dropped = 0
         self.cancelled = 0
-        self._thread = threading.Thread(target=self._loop, name="refine-serve-solver", daemon=True)
+        self._thread = threading.Thread(target=self._loop, name=name, daemon=True)
         self._thread.start()
 
     def submit(self, job: Job) -> None:
