@@ -35,6 +35,7 @@ from refine.arguments import (  # noqa: I001
     finite_array,
     home_from,
     joints_from,
+    require_run,
     rotations_from,
     settings_from,
     shapes_from,
@@ -43,7 +44,7 @@ from refine.arguments import (  # noqa: I001
     typed,
 )
 from refine.control import Progress, controlled
-from refine.errors import InputError, NotExecutable, api_words
+from refine.errors import InputError, api_words
 from refine.problem import Problem
 from refine.problem import load_problem as read_problem
 from refine.run.again import solve_again
@@ -349,13 +350,7 @@ class Result:
         from refine.export.sink import stamped
         from refine.run.write import write_run
 
-        if self.run is None:
-            raise NotExecutable(
-                "a result rebuilt from a dictionary cannot be written: use contents()",
-                key="write",
-                value=self.status,
-                expected="a result of refine.solve or refine.refine_path",
-            )
+        require_run(self, "write", "a result rebuilt from a dictionary cannot be written: use contents()")
         chosen = self._programs(programs) if programs is not None else None
         typed(out_dir, "out_dir", (str, Path), "the path of a folder")
         with api_words(), stamped(self._when()):

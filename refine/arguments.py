@@ -274,10 +274,18 @@ def check_previous(previous: Any, result_type: type) -> None:
     if previous is None:
         return
     typed(previous, "previous", result_type, "a refine.Result of an earlier call, or None")
-    if previous.run is None:
+    require_run(previous, "previous", "previous: a result rebuilt from a dictionary holds no run to start from")
+
+
+def require_run(result: Any, key: str, message: str) -> None:
+    """:class:`NotExecutable` with ``message`` when ``result`` (a ``refine.Result``) holds no run.
+
+    A result rebuilt by ``Result.from_dict`` holds its figures but not the run they came from.
+    """
+    if result.run is None:
         raise NotExecutable(
-            "previous: a result rebuilt from a dictionary holds no run to start from",
-            key="previous",
-            value=previous.status,
+            message,
+            key=key,
+            value=result.status,
             expected="a result of refine.solve or refine.refine_path (pickled is fine)",
         )
