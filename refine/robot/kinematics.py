@@ -15,6 +15,7 @@ import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
 from refine.errors import InputError
+from refine.robot.chain import MIN_ROWS
 from refine.robot.model import Robot
 from refine.types import Array
 
@@ -76,19 +77,24 @@ class TcpKinematics:
     def batch(self, qs: Array) -> tuple[Array, Array, Array]:
         """TCP positions (M, 3), rotations (M, 3, 3) and Jacobians (M, 6, n) for joint rows ``qs`` (M, n).
 
-        One pass of Pinocchio per row gives the flange's placement with its Jacobian; the change to
-        the base placement and the TCP is done for all rows at once. The Jacobian as :meth:`jacobian`.
+        The flange's placements and Jacobians come from the robot's batched chain
+        (:class:`refine.robot.chain.BatchChain`) for :data:`~refine.robot.chain.MIN_ROWS` rows or
+        more, else from one pass of Pinocchio per row; the change to the base placement and the TCP
+        is done for all rows at once. The Jacobian as :meth:`jacobian`.
         """
         qs = np.atleast_2d(np.asarray(qs, dtype=float))
         robot = self.robot
         model, data, fid = robot.model, robot.data, robot.flange_id
         if qs.ndim != 2 or qs.shape[1] != robot.nq:
             raise InputError(f"qs: expected shape (M, {robot.nq}) [rad], got {qs.shape}")
-        J = np.empty((len(qs), 6, robot.nq))
-        T_bf = np.empty((len(qs), 4, 4))
-        for k, q in enumerate(qs):
-            J[k] = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
-            T_bf[k] = data.oMf[fid].homogeneous
+        if robot.chain is not None and len(qs) >= MIN_ROWS:
+            T_bf, J = robot.chain.frame(qs, fid)
+        else:
+            J = np.empty((len(qs), 6, robot.nq))
+            T_bf = np.empty((len(qs), 4, 4))
+            for k, q in enumerate(qs):
+                J[k] = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
+                T_bf[k] = data.oMf[fid].homogeneous
         T_wf = self.base_in_world @ T_bf
         R_wb = self.base_in_world[:3, :3]
         Jv, Jw = R_wb @ J[:, :3], R_wb @ J[:, 3:]

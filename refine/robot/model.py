@@ -20,6 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from refine.arguments import typed
 from refine.errors import InputError, checked_call
+from refine.robot.chain import MIN_ROWS, BatchChain
 from refine.robot.geometry import CollisionShape, collision_shapes_from_urdf
 from refine.robot.self_collision import read_matrix
 from refine.robot.spec import SELF_COLLISION_FILE, RobotSpec, build_model
@@ -47,6 +48,8 @@ class Robot:
         self.flange_id = self.frame_id(spec.flange_frame)
         self._shapes: tuple[CollisionShape, ...] | None = None
         self._matrix: dict[frozenset[str], str] | None = None
+        self.chain = BatchChain.from_model(self.model)
+        """The model's batched kinematics (:class:`~refine.robot.chain.BatchChain`), or None for joints it does not take."""
 
     def __repr__(self) -> str:
         return f"Robot({self.spec.name!r}, nq={self.nq})"
@@ -108,10 +111,13 @@ class Robot:
         qs = np.asarray(qs, dtype=float)
         if qs.ndim != 2 or qs.shape[1] != self.nq:
             raise InputError(f"qs: expected shape (N, {self.nq}) [rad], got {qs.shape}")
+        if self.chain is not None and len(qs) >= MIN_ROWS:
+            return self.chain.frame(qs, self.flange_id, jacobian=False)[0]
         out = np.empty((len(qs), 4, 4))
+        model, data = self.model, self.data
         for k, q in enumerate(qs):
-            pin.forwardKinematics(self.model, self.data, q)
-            out[k] = pin.updateFramePlacement(self.model, self.data, self.flange_id).homogeneous
+            pin.forwardKinematics(model, data, q)
+            out[k] = pin.updateFramePlacement(model, data, self.flange_id).homogeneous
         return out
 
     def frame_pose(self, q: ArrayLike, frame_name: str) -> NDArray[np.float64]:
@@ -147,6 +153,8 @@ class Robot:
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
         self._local = threading.local()
+        if "chain" not in state:
+            self.chain = BatchChain.from_model(self.model)
 
     def collision_shapes(self) -> list[CollisionShape]:
         """Collision primitives of every link, parsed once from the URDF's ``<collision>``."""
