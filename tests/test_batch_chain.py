@@ -111,3 +111,15 @@ def test_a_batch_of_many_rows_equals_pinocchios_pose_and_jacobian_row_by_row(nam
         np.testing.assert_allclose(R[k], T_pin[:3, :3], rtol=0, atol=1e-12)
         np.testing.assert_allclose(J[k], J_pin, rtol=0, atol=1e-12)
         np.testing.assert_allclose(poses[k], T_pin, rtol=0, atol=1e-12)
+
+
+def test_the_collision_models_moving_poses_of_many_rows_equal_its_row_by_row_ones() -> None:
+    from refine.collision.model import CollisionModel
+
+    robot = load_robot("kuka_iiwa14_r820")
+    model = CollisionModel(robot, BASE, TCP, (), (), margin_m=0.01, self_margin_m=0.005)
+    qs = np.random.default_rng(5).uniform(robot.spec.lower, robot.spec.upper, (ROWS, robot.nq))
+    many = model.moving_poses(qs)
+    one_by_one = np.concatenate([model.moving_poses(q[None]) for q in qs])  # one row: Pinocchio's loop
+    assert many.shape == one_by_one.shape and many.shape[1] > 5
+    np.testing.assert_allclose(many, one_by_one, rtol=0, atol=1e-12)

@@ -27,6 +27,7 @@ from refine.collision.geometry import Body, link_body, shape_body, world_aabb
 from refine.collision.pairs import exclusion, joint_axes
 from refine.errors import InputError
 from refine.frames import check_transform
+from refine.robot.chain import MIN_ROWS
 from refine.robot.model import Robot
 from refine.settings import Shape
 from refine.types import Array
@@ -210,6 +211,10 @@ class CollisionModel:
     def moving_poses(self, qs: ArrayLike) -> Array:
         """World poses (N, M, 4, 4) of the M moving bodies' shape frames for joint rows qs (N, n)."""
         qs = np.asarray(qs, dtype=float)
+        chain = getattr(self.robot, "chain", None)
+        if chain is not None and len(qs) >= MIN_ROWS:
+            T_joint = chain.joint_placements(qs, self._joints)
+            return self.base_in_world @ T_joint[:, self._joint_slot] @ self._joint_T_shape
         T_joint = np.empty((len(qs), len(self._joints), 4, 4))
         for k, q in enumerate(qs):
             pin.forwardKinematics(self._model, self._data, q)
