@@ -36,9 +36,10 @@ import pinocchio as pin
 
 from refine.types import Array
 
-MIN_ROWS = 64
-"""Rows from which :class:`BatchChain` beats Pinocchio's row loop (its cost per batch is about 25
-array operations per joint, Pinocchio's about 3 µs a row; measured in ``benchmarks/batch_kinematics.py``)."""
+MIN_ROWS = 96
+"""Rows from which :class:`BatchChain` beats Pinocchio's row loop: its cost per batch is about
+0.3 ms plus 1 µs a row, Pinocchio's about 6 µs a row with the Jacobian and 3 µs without it
+(``benchmarks/batch_kinematics.py``)."""
 
 _REVOLUTE = {"JointModelRX": 0, "JointModelRY": 1, "JointModelRZ": 2, "JointModelRevoluteUnaligned": -1}
 _PRISMATIC = {"JointModelPX": 0, "JointModelPY": 1, "JointModelPZ": 2, "JointModelPrismaticUnaligned": -1}

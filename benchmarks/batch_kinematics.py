@@ -1,0 +1,85 @@
+"""The flange's placements and Jacobians of N joint rows: the batched NumPy chain against Pinocchio's row loop.
+
+For each robot and batch size, the median CPU time (``time.process_time``, 7 medians of repeated
+calls) of
+
+* Pinocchio: ``computeFrameJacobian(..., LOCAL_WORLD_ALIGNED)`` and ``data.oMf`` row by row (what
+  ``TcpKinematics.batch`` does under ``MIN_ROWS`` rows), and ``forwardKinematics`` with
+  ``updateFramePlacement`` (``Robot.fk_many``'s loop);
+* the chain: ``BatchChain.frame`` with and without the Jacobian (:mod:`refine.robot.chain`);
+
+and the largest difference between the two. Run with one BLAS thread:
+
+    OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python3 benchmarks/batch_kinematics.py [--robots abb_irb4600_60_205,kuka_iiwa14_r820]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import time
+
+import numpy as np
+import pinocchio as pin
+
+from refine.robot.chain import MIN_ROWS, BatchChain
+from refine.robot.registry import load_robot
+
+SIZES = (1, 8, 16, 32, 64, 128, 618, 4319)
+
+
+def _cpu_ms(fn, rows: int) -> float:  # noqa: ANN001 - any callable
+    calls = max(1, 4000 // rows)
+    times = []
+    for _ in range(7):
+        c0 = time.process_time()
+        for _ in range(calls):
+            fn()
+        times.append((time.process_time() - c0) / calls)
+    return statistics.median(times) * 1e3
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--robots", default="abb_irb4600_60_205,kuka_iiwa14_r820")
+    args = parser.parse_args()
+    rng = np.random.default_rng(0)
+    print(f"MIN_ROWS = {MIN_ROWS}; load {os.getloadavg()[0]:.1f}")
+    for name in args.robots.split(","):
+        robot = load_robot(name)
+        model, data, fid = robot.model, robot.model.createData(), robot.flange_id
+        chain = BatchChain.from_model(model)
+        print(f"{name} ({robot.nq} joints): rows, CPU [ms] of pinocchio J / chain J / pinocchio fk / chain fk, largest difference")
+        for rows in SIZES:
+            qs = rng.uniform(robot.spec.lower, robot.spec.upper, (rows, robot.nq))
+
+            def loop_jacobian(qs=qs):  # noqa: ANN001, ANN202
+                J, T = np.empty((len(qs), 6, model.nv)), np.empty((len(qs), 4, 4))
+                for k, q in enumerate(qs):
+                    J[k] = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
+                    T[k] = data.oMf[fid].homogeneous
+                return T, J
+
+            def loop_fk(qs=qs):  # noqa: ANN001, ANN202
+                T = np.empty((len(qs), 4, 4))
+                for k, q in enumerate(qs):
+                    pin.forwardKinematics(model, data, q)
+                    T[k] = pin.updateFramePlacement(model, data, fid).homogeneous
+                return T
+
+            T0, J0 = loop_jacobian()
+            T1, J1 = chain.frame(qs, fid)
+            diff = max(np.abs(T0 - T1).max(), np.abs(J0 - J1).max())
+            figures = [
+                _cpu_ms(loop_jacobian, rows),
+                _cpu_ms(lambda qs=qs: chain.frame(qs, fid), rows),
+                _cpu_ms(loop_fk, rows),
+                _cpu_ms(lambda qs=qs: chain.frame(qs, fid, jacobian=False), rows),
+            ]
+            print(f"  {rows:5d}  " + " / ".join(f"{x:7.3f}" for x in figures) + f"  {diff:.1e}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
