@@ -106,7 +106,7 @@ class TcpKinematics:
         return (
             T[:, :3, 3],
             T[:, :3, :3],
-            np.concatenate([Jv - np.cross(r[:, :, None], Jw, axis=1), Jw], axis=1),
+            np.concatenate([Jv - _cross_columns(r, Jw), Jw], axis=1),
         )
 
     def jacobians(self, qs: Array) -> Array:
