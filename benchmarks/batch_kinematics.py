@@ -29,13 +29,31 @@ from refine.robot.registry import load_robot
 SIZES = (1, 8, 16, 32, 64, 128, 618, 4319)
 
 
-def _cpu_ms(fn, rows: int) -> float:  # noqa: ANN001 - any callable
+def _loop_jacobian(model: pin.Model, data: pin.Data, fid: int, qs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pinocchio row by row: the flange's placements (N, 4, 4) and Jacobians (N, 6, nv)."""
+    J, T = np.empty((len(qs), 6, model.nv)), np.empty((len(qs), 4, 4))
+    for k, q in enumerate(qs):
+        J[k] = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
+        T[k] = data.oMf[fid].homogeneous
+    return T, J
+
+
+def _loop_fk(model: pin.Model, data: pin.Data, fid: int, qs: np.ndarray) -> np.ndarray:
+    """Pinocchio row by row: the flange's placements (N, 4, 4)."""
+    T = np.empty((len(qs), 4, 4))
+    for k, q in enumerate(qs):
+        pin.forwardKinematics(model, data, q)
+        T[k] = pin.updateFramePlacement(model, data, fid).homogeneous
+    return T
+
+
+def _cpu_ms(rows: int, fn, *args) -> float:  # noqa: ANN001, ANN002 - any callable and its arguments
     calls = max(1, 4000 // rows)
     times = []
     for _ in range(7):
         c0 = time.process_time()
         for _ in range(calls):
-            fn()
+            fn(*args)
         times.append((time.process_time() - c0) / calls)
     return statistics.median(times) * 1e3
 
@@ -50,32 +68,20 @@ def main() -> int:
         robot = load_robot(name)
         model, data, fid = robot.model, robot.model.createData(), robot.flange_id
         chain = BatchChain.from_model(model)
-        print(f"{name} ({robot.nq} joints): rows, CPU [ms] of pinocchio J / chain J / pinocchio fk / chain fk, largest difference")
+        print(
+            f"{name} ({robot.nq} joints): rows, CPU [ms] of pinocchio J / chain J / pinocchio fk / chain fk, largest difference"
+        )
         for rows in SIZES:
             qs = rng.uniform(robot.spec.lower, robot.spec.upper, (rows, robot.nq))
 
-            def loop_jacobian(qs=qs):  # noqa: ANN001, ANN202
-                J, T = np.empty((len(qs), 6, model.nv)), np.empty((len(qs), 4, 4))
-                for k, q in enumerate(qs):
-                    J[k] = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
-                    T[k] = data.oMf[fid].homogeneous
-                return T, J
-
-            def loop_fk(qs=qs):  # noqa: ANN001, ANN202
-                T = np.empty((len(qs), 4, 4))
-                for k, q in enumerate(qs):
-                    pin.forwardKinematics(model, data, q)
-                    T[k] = pin.updateFramePlacement(model, data, fid).homogeneous
-                return T
-
-            T0, J0 = loop_jacobian()
+            T0, J0 = _loop_jacobian(model, data, fid, qs)
             T1, J1 = chain.frame(qs, fid)
             diff = max(np.abs(T0 - T1).max(), np.abs(J0 - J1).max())
             figures = [
-                _cpu_ms(loop_jacobian, rows),
-                _cpu_ms(lambda qs=qs: chain.frame(qs, fid), rows),
-                _cpu_ms(loop_fk, rows),
-                _cpu_ms(lambda qs=qs: chain.frame(qs, fid, jacobian=False), rows),
+                _cpu_ms(rows, _loop_jacobian, model, data, fid, qs),
+                _cpu_ms(rows, chain.frame, qs, fid, True),
+                _cpu_ms(rows, _loop_fk, model, data, fid, qs),
+                _cpu_ms(rows, chain.frame, qs, fid, False),
             ]
             print(f"  {rows:5d}  " + " / ".join(f"{x:7.3f}" for x in figures) + f"  {diff:.1e}")
     return 0

@@ -99,7 +99,9 @@ TOOL_IN_WORLD = _pose([1.4, 0.3, 0.9], [180.0, 0.0, 10.0])
 
 @pytest.mark.parametrize("name", ["abb_irb4600_60_205", "kuka_iiwa14_r820"])
 @pytest.mark.parametrize("stationary", [False, True])
-def test_a_batch_of_many_rows_equals_pinocchios_pose_and_jacobian_row_by_row(name: str, stationary: bool) -> None:
+def test_a_batch_of_many_rows_equals_pinocchios_pose_and_jacobian_row_by_row(
+    name: str, stationary: bool
+) -> None:
     robot = load_robot(name)
     kin = TcpKinematics(robot, BASE, TCP, TOOL_IN_WORLD if stationary else None)
     qs = np.random.default_rng(3).uniform(robot.spec.lower, robot.spec.upper, (ROWS, robot.nq))

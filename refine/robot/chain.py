@@ -123,7 +123,9 @@ class BatchChain:
             parent = int(model.parents[i])
             P = model.jointPlacements[i]
             Ap = axes[parent]
-            joints.append(_Joint(parent, int(jm.idx_q), revolute, Ap.T @ P.rotation @ A, Ap.T @ P.translation, A))
+            joints.append(
+                _Joint(parent, int(jm.idx_q), revolute, Ap.T @ P.rotation @ A, Ap.T @ P.translation, A)
+            )
             axes.append(A)
         return cls(model, tuple(joints[1:]))
 
@@ -138,8 +140,16 @@ class BatchChain:
         p = [np.zeros((N, 3))]
         for jt in self._joints:
             Rp = R[jt.parent]
-            Ri = (Rp.reshape(3 * N, 3) @ jt.C).reshape(N, 3, 3) if jt.parent else np.broadcast_to(jt.C, (N, 3, 3)).copy()
-            pi = p[jt.parent] + (Rp.reshape(3 * N, 3) @ jt.t).reshape(N, 3) if jt.parent else np.broadcast_to(jt.t, (N, 3)).copy()
+            Ri = (
+                (Rp.reshape(3 * N, 3) @ jt.C).reshape(N, 3, 3)
+                if jt.parent
+                else np.broadcast_to(jt.C, (N, 3, 3)).copy()
+            )
+            pi = (
+                p[jt.parent] + (Rp.reshape(3 * N, 3) @ jt.t).reshape(N, 3)
+                if jt.parent
+                else np.broadcast_to(jt.t, (N, 3)).copy()
+            )
             q = qs[:, jt.q, None]
             if jt.revolute:
                 c, s = np.cos(q), np.sin(q)
