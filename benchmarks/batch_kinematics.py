@@ -29,7 +29,9 @@ from refine.robot.registry import load_robot
 SIZES = (1, 8, 16, 32, 64, 128, 618, 4319)
 
 
-def _loop_jacobian(model: pin.Model, data: pin.Data, fid: int, qs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _loop_jacobian(
+    model: pin.Model, data: pin.Data, fid: int, qs: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Pinocchio row by row: the flange's placements (N, 4, 4) and Jacobians (N, 6, nv)."""
     J, T = np.empty((len(qs), 6, model.nv)), np.empty((len(qs), 4, 4))
     for k, q in enumerate(qs):
