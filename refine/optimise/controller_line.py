@@ -182,9 +182,10 @@ def line_poses(poses: Array, q: Array, segment: Array, t: Array, kin: TcpKinemat
     out = np.zeros((len(t), 4, 4))
     out[:, 3, 3] = 1.0
     out[:, :3, 3] = a[:, :3, 3] + t[:, None] * (b[:, :3, 3] - a[:, :3, 3])
-    R_a = Rotation.from_matrix(a[:, :3, :3])
-    step = (R_a.inv() * Rotation.from_matrix(b[:, :3, :3])).as_rotvec()
-    out[:, :3, :3] = (R_a * Rotation.from_rotvec(t[:, None] * step)).as_matrix()
+    R_start = Rotation.from_matrix(poses[:-1, :3, :3])  # per segment, then per sample: the same rows
+    steps = (R_start.inv() * Rotation.from_matrix(poses[1:, :3, :3])).as_rotvec()
+    R_a = R_start[segment]
+    out[:, :3, :3] = (R_a * Rotation.from_rotvec(t[:, None] * steps[segment])).as_matrix()
     on_wrist = wrist[segment]
     if on_wrist.any():
         q_lin = q[segment] + t[:, None] * (q[segment + 1] - q[segment])
