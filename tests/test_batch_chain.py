@@ -107,6 +107,8 @@ def test_a_batch_of_many_rows_equals_pinocchios_pose_and_jacobian_row_by_row(
     qs = np.random.default_rng(3).uniform(robot.spec.lower, robot.spec.upper, (ROWS, robot.nq))
     p, R, J = kin.batch(qs)
     poses = kin.poses(qs)
+    T_both, J_both = kin.poses_jacobians(qs)
+    assert np.array_equal(T_both, poses) and np.array_equal(J_both, J)  # the same products, the same bits
     for k, q in enumerate(qs):
         T_pin, J_pin = kin.pose_jacobian(q)  # one pass of Pinocchio
         np.testing.assert_allclose(p[k], T_pin[:3, 3], rtol=0, atol=1e-12)

@@ -205,16 +205,16 @@ def sample_parameters(q: Array) -> tuple[Array, Array, Array]:
 
 
 def _newton_start(
-    kin: TcpKinematics, q: Array, segment: Array, t: Array, q_lin: Array, lin_poses: Array, targets: Array
+    J_wp: Array, segment: Array, t: Array, q_lin: Array, lin_poses: Array, targets: Array
 ) -> Array:
     """The IK's start on the line: the joint-linear joints ``q_lin`` moved by one damped Newton step.
 
-    The step takes the Jacobian interpolated between the two waypoints' (the line lies within the
+    The step takes the Jacobian interpolated between the two waypoints' (``J_wp`` (N, 6, n), the
+    TCP Jacobians at the waypoints; the line lies within the
     square of the step of the joint-linear motion, so that step leaves about the IK's tolerance and
     saves it one pass over every sample). A row whose step exceeds :data:`NEWTON_STEP_MAX` (near a
     singularity) starts from ``q_lin`` as it is, so every start stays on the refined joints' branch.
     """
-    J_wp = kin.jacobians(q)
     J = J_wp[segment] + t[:, None, None] * (J_wp[segment + 1] - J_wp[segment])
     R = targets[:, :3, :3] @ np.transpose(lin_poses[:, :3, :3], (0, 2, 1))
     e = np.concatenate([targets[:, :3, 3] - lin_poses[:, :3, 3], rotation_vectors(R)], axis=1)
@@ -254,10 +254,10 @@ def _solve_line(
     """
     n_seg = len(q) - 1
     spec = kin.robot.spec
-    poses = kin.poses(q)
+    poses, J_wp = kin.poses_jacobians(q)
     targets = line_poses(poses, q, segment, t, kin, wrist)
     lin_poses = kin.poses(q_lin)
-    start = _newton_start(kin, q, segment, t, q_lin, lin_poses, targets)
+    start = _newton_start(J_wp, segment, t, q_lin, lin_poses, targets)
     J_line = np.empty((len(t), 6, q.shape[1]))
     q_line, err = solve_ik_batch(
         kin,
@@ -449,10 +449,14 @@ def line_rows(kin: TcpKinematics, q: Array, line: LineCheck, tolerances: Toleran
         e[j] = 1.0
         for i in np.flatnonzero(line.q[:, j] - spec.lower[j] < margin - JOINT_TOLERANCE_RAD):
             lower = spec.lower[j] + margin - bow[i, j]
-            rows.append(LinearRow(int(seg[i]), float(t[i]), e, float(lower), f"{LINE_LABEL} joint {j + 1} lower"))
+            rows.append(
+                LinearRow(int(seg[i]), float(t[i]), e, float(lower), f"{LINE_LABEL} joint {j + 1} lower")
+            )
         for i in np.flatnonzero(spec.upper[j] - line.q[:, j] < margin - JOINT_TOLERANCE_RAD):
             lower = -(spec.upper[j] - margin - bow[i, j])
-            rows.append(LinearRow(int(seg[i]), float(t[i]), -e, float(lower), f"{LINE_LABEL} joint {j + 1} upper"))
+            rows.append(
+                LinearRow(int(seg[i]), float(t[i]), -e, float(lower), f"{LINE_LABEL} joint {j + 1} upper")
+            )
     sing_limit = tolerances.singularity_margin - SINGULARITY_TOLERANCE
     if tolerances.singularity_margin > 0 and (line.singularity < sing_limit).any():
         # only the segments whose least measure (the same function of the same joints) is low
@@ -502,7 +506,9 @@ class ControllerLineSource:
         if self._last is not None and self._last[0].shape == q.shape and np.array_equal(self._last[0], q):
             return self._last[1]
         s = np.arange(len(q), dtype=float)
-        wrist = np.zeros(len(q) - 1, dtype=bool) if self.wrist is None else np.asarray(self.wrist(q), dtype=bool)
+        wrist = (
+            np.zeros(len(q) - 1, dtype=bool) if self.wrist is None else np.asarray(self.wrist(q), dtype=bool)
+        )
         line = check_controller_lines(self.kin, q, s, self.tolerances, wrist=wrist)
         self.checks += 1
         self._last, self._last_wrist = (q.copy(), line), wrist

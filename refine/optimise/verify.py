@@ -157,7 +157,7 @@ def check_path(
 
     ``slack_deg`` (N,) widens the orientation cone per waypoint (a repaired path) [deg].
     """
-    poses = kin.poses(q)
+    poses, jacobians = kin.poses_jacobians(q)
     pos_err = np.linalg.norm(poses[:, :3, 3] - fused.positions, axis=1)
     if axisymmetric:
         cosines = np.einsum("ij,ij->i", poses[:, :3, 2], fused.rotations[:, :, 2])
@@ -169,7 +169,7 @@ def check_path(
     A, lower, upper = interaction_rows(spec.joint_coupling, spec.joint_interaction, q.shape[1])
     inter = np.minimum(q @ A.T - lower, upper - q @ A.T)  # (N, m): the controller's interaction limits
     joint_margin = np.minimum(margins.min(axis=1), inter.min(axis=1, initial=np.inf))
-    sing, smin = singularity_measures(kin, q)
+    sing, smin = singularity_measures(kin, q, jacobians=jacobians)
 
     s = fused.s
     violations: list[Violation] = []

@@ -77,6 +77,14 @@ class TcpKinematics:
     def batch(self, qs: Array) -> tuple[Array, Array, Array]:
         """TCP positions (M, 3), rotations (M, 3, 3) and Jacobians (M, 6, n) for joint rows ``qs`` (M, n).
 
+        The parts of :meth:`poses_jacobians`.
+        """
+        T, J = self.poses_jacobians(qs)
+        return T[:, :3, 3], T[:, :3, :3], J
+
+    def poses_jacobians(self, qs: Array) -> tuple[Array, Array]:
+        """:meth:`poses` (M, 4, 4) and :meth:`jacobians` (M, 6, n) of joint rows ``qs`` (M, n) in one pass.
+
         The flange's placements and Jacobians come from the robot's batched chain
         (:class:`refine.robot.chain.BatchChain`) for :data:`~refine.robot.chain.MIN_ROWS` rows or
         more, else from one pass of Pinocchio per row; the change to the base placement and the TCP
@@ -99,15 +107,9 @@ class TcpKinematics:
         R_wb = self.base_in_world[:3, :3]
         Jv, Jw = R_wb @ J[:, :3], R_wb @ J[:, 3:]
         if self.tool_in_world is not None:
-            T, J_rel = self._stationary(T_wf, Jv, Jw)
-            return T[:, :3, 3], T[:, :3, :3], J_rel
+            return self._stationary(T_wf, Jv, Jw)
         r = T_wf[:, :3, :3] @ self.tcp_in_flange[:3, 3]  # flange origin -> TCP, world axes (M, 3)
-        T = T_wf @ self.tcp_in_flange
-        return (
-            T[:, :3, 3],
-            T[:, :3, :3],
-            np.concatenate([Jv - _cross_columns(r, Jw), Jw], axis=1),
-        )
+        return T_wf @ self.tcp_in_flange, np.concatenate([Jv - _cross_columns(r, Jw), Jw], axis=1)
 
     def jacobians(self, qs: Array) -> Array:
         """:meth:`jacobian` for joint rows ``qs`` (N, n), shape (N, 6, n) (see :meth:`batch`)."""
