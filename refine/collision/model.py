@@ -324,6 +324,15 @@ class CollisionModel:
         """Signed distances [m] of the pairs measured at the current configuration, by pair index."""
         return {k: c.distance_m for k, c in self._exact.items()}
 
+    def witnesses(self, q: Array) -> dict[int, tuple[float, Array]]:
+        """The pairs measured at joints q (n,) so far, by pair index: signed distance [m] and unit normal.
+
+        Empty when the model has been placed elsewhere since (nothing measured at q is then known).
+        """
+        if self._q is None or not np.array_equal(self._q, q):
+            return {}
+        return {k: (c.distance_m, c.normal) for k, c in self._exact.items()}
+
     def pair_distance(self, q: ArrayLike, k: int, poses: Array | None = None) -> float:
         """The signed distance [m] of checked pair k (index into :attr:`pairs`) at joints q.
 
@@ -366,14 +375,15 @@ class CollisionModel:
         a, b = int(self._pa[k]), int(self._pb[k])
         return -self.bodies[a].reach(self._poses[a], -n) - self.bodies[b].reach(self._poses[b], n)
 
-    def plane_bounds(self, k: int, poses: Array) -> Array | None:
+    def plane_bounds(self, k: int, poses: Array, normals: Array | None = None) -> Array | None:
         """Lower bounds [m] on pair k's distance at rows of moving-body poses (K, M, 4, 4), (K,).
 
-        The gap along the pair's last witness normal (:meth:`_plane_bound`) at every row at once;
-        None for a pair with a mesh or one never measured.
+        The gap along the pair's last witness normal (:meth:`_plane_bound`) at every row at once,
+        or along ``normals``: one unit vector (3,) or one per row (K, 3) (any unit vector gives a
+        lower bound); None for a pair with a mesh or, without ``normals``, one never measured.
         """
-        n = self._normals[k]
-        if not self._bounded[k] or np.isnan(n[0]):
+        n = self._normals[k] if normals is None else np.asarray(normals, dtype=float)
+        if not self._bounded[k] or np.isnan(n).any():
             return None
         a, b = int(self._pa[k]), int(self._pb[k])
         m = self._n_moving
