@@ -77,6 +77,7 @@ from refine.collision.carry import (
     tightener,
 )
 from refine.collision.model import CollisionModel
+from refine.collision.motion import joint_reach
 from refine.errors import InputError
 from refine.robot.kinematics import TcpKinematics
 from refine.types import Array
@@ -203,29 +204,6 @@ class _Sample(NamedTuple):
     below: frozenset[str]  # every body and object below its margin
 
 
-def joint_reach(model: CollisionModel) -> Array:
-    """Per joint, the largest distance [m] any body downstream of it can have from its axis, (n,).
-
-    A bound that holds at every configuration: the joint offsets along the chain from the joint to
-    the body's joint, plus the body's extent from its own joint's origin.
-    """
-    pm = model.robot.model
-    offset = [float(np.linalg.norm(pm.jointPlacements[j].translation)) for j in range(pm.njoints)]
-    reach = np.zeros(model.robot.nq)
-    for body in model.bodies:
-        if body.kind == "cell" or body.joint <= 0:
-            continue
-        jMs = pm.frames[body.frame_id].placement.homogeneous @ body.link_T_shape
-        centre = jMs[:3, :3] @ body.centre + jMs[:3, 3]
-        extent = float(np.linalg.norm(centre) + np.linalg.norm(body.half_extent))
-        chain = list(pm.supports[body.joint])[1:]  # joints from the base to the body's joint
-        for i, j in enumerate(chain):
-            along = sum(offset[k] for k in chain[i + 1 :])
-            v = pm.joints[j].idx_v
-            reach[v] = max(reach[v], along + extent)
-    return reach
-
-
 def _interpolate(q0: Array, q1: Array, m: int) -> Array:
     t = np.arange(1, m)[:, None] / m
     return q0 + t * (q1 - q0)
@@ -320,17 +298,9 @@ def check_path_clearance(
     carry = (prior is not None or not every_waypoint) and method == "bound" and len(model.pairs) > 0
     at_waypoint = None if carry else lambda q, poses, boxes: points.append(sample(q, poses, boxes))
     normals = np.full((len(q_path), len(model.pairs), 3), np.nan) if directions is None else directions.copy()
-    by_bound = method == "bound"
+    known = {"prior": prior, "directions": directions, "out": normals}
     poses, boxes, bounds, exact = _waypoint_bounds(
-        model,
-        q_path,
-        tolerance_m,
-        by_bound,
-        at_waypoint,
-        plane=carry,
-        prior=prior,
-        directions=directions,
-        out=normals,
+        model, q_path, tolerance_m, method == "bound", at_waypoint, plane=carry, **known
     )
     measured = None  # every waypoint measured, unless the check starts from known bounds:
     if carry:  # then exact where they can be the least or a margin is not proved, bounds elsewhere
@@ -350,15 +320,10 @@ def check_path_clearance(
         clear = bounds - model.pair_margins
         least = np.argmin(clear, axis=1)  # per waypoint, the pair of least clearance bound
         rows = np.arange(len(q_path))
-        figures = zip(
-            bounds.min(axis=1).tolist(),
-            clear[rows, least].tolist(),
-            bounds[rows, least].tolist(),
-            strict=True,
-        )
-        points = [
+        figures = zip(bounds.min(axis=1).tolist(), clear[rows, least].tolist(), bounds[rows, least].tolist())  # noqa: B905
+        points = [  # the same lengths: least and the figures are one per waypoint
             at.get(k, _Sample(d, c, model.pairs[p], dp, _NONE))
-            for k, (p, (d, c, dp)) in enumerate(zip(least, figures, strict=True))
+            for k, (p, (d, c, dp)) in enumerate(zip(least, figures))  # noqa: B905
         ]
     wp_dist = np.array([p.distance for p in points])
     wp_clear = np.array([p.clearance for p in points])
