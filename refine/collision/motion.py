@@ -26,7 +26,7 @@ value over a shape is reached at a corner of any convex set holding the shape.
 from __future__ import annotations
 
 import weakref
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -35,9 +35,6 @@ from refine.collision.geometry import Body
 from refine.collision.pairs import joint_axes
 from refine.errors import InputError
 from refine.types import Array
-
-if TYPE_CHECKING:
-    from refine.collision.model import CollisionModel
 
 _JOINT_REACH: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 """:func:`joint_reach` per collision model."""
@@ -131,7 +128,7 @@ def pair_reach(model: pin.Model, pairs: list[tuple[Body, Body]]) -> Array:
     return out
 
 
-def joint_reach(model: CollisionModel) -> Array:
+def joint_reach(model: Any) -> Array:  # a CollisionModel (which imports this module)
     """Per joint, the largest distance [m] any body downstream of it can have from its axis, (n,).
 
     A bound that holds at every configuration: the joint offsets along the chain from the joint to
