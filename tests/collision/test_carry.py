@@ -259,3 +259,31 @@ def test_the_warm_glass_check_reports_the_least_distance_and_pair_of_every_waypo
     names = {b.label: b.name for b in model.bodies}
     assert got_pair == (names[c_pair[0]], names[c_pair[1]]) and check.waypoint_measured[k]
     assert np.all(check.bounds.bounds <= truth + 1e-9)
+
+
+@pytest.mark.parametrize("margin_m", [0.01, 0.034])
+def test_a_check_measuring_only_the_waypoints_that_can_hold_the_least_reports_the_full_checks_figures(
+    margin_m,
+):
+    """``every_waypoint=False`` (the planned motions' lines) on the random path, with a margin kept
+    and one broken at some waypoints: the least distance, the least clearance, its pair and the runs
+    are those of the check measuring every waypoint, with fewer FCL queries."""
+    robot = load_robot("abb_irb4600_60_205")
+    shapes, tool = cell()
+    q = random_path()
+    kin = TcpKinematics(robot, np.eye(4), TCP)
+
+    def check(every):
+        model = refine.collision.CollisionModel(
+            robot, np.eye(4), TCP, tool, shapes, margin_m=margin_m, self_margin_m=0.005
+        )
+        return check_path_clearance(model, q, kin, 0.005, every_waypoint=every)
+
+    full, least_only = check(True), check(False)
+    assert least_only.waypoint_measured is not None and least_only.waypoint_measured.sum() < len(q)
+    assert least_only.min_distance_m == full.min_distance_m
+    assert least_only.min_clearance_m == full.min_clearance_m
+    assert reported(least_only) == reported(full)
+    assert [r.describe() for r in least_only.runs] == [r.describe() for r in full.runs]
+    assert bool(full.runs) == (margin_m > 0.03)
+    assert least_only.queries < full.queries
