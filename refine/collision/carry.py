@@ -130,17 +130,21 @@ def carried_directions(model: CollisionModel, prior: CheckedBounds, q: Array) ->
     return out
 
 
-def direction_bounds(model: CollisionModel, poses: Array, normals: Array) -> Array:
+def direction_bounds(
+    model: CollisionModel, poses: Array, normals: Array, columns: NDArray[np.bool_] | None = None
+) -> Array:
     """Lower bounds (N, P) [m] on the pairs' distances from the gaps along given directions.
 
     ``poses``: the moving bodies' poses at the waypoints (N, M, 4, 4) from
     :meth:`CollisionModel.moving_poses`; ``normals`` (N, P, 3): a unit direction per waypoint and
     pair, NaN where there is none. The gap between a pair's bodies along a unit direction bounds
     their distance from below (see the module notes); ``-inf`` where there is no direction, where a
-    body is a mesh, or where the gap is not positive.
+    body is a mesh, or where the gap is not positive; ``columns`` (P,): the pairs to bound (all if None).
     """
     out = np.full(normals.shape[:2], -np.inf)
     have = ~np.isnan(normals[:, :, 0])
+    if columns is not None:
+        have &= columns
     for p in np.flatnonzero(have.any(axis=0)):
         ks = np.flatnonzero(have[:, p])
         n = normals[ks, p]

@@ -455,8 +455,11 @@ def _waypoint_bounds(
     poses = model.moving_poses(q_path)
     boxes = model.box_bounds(poses)  # lower bounds on each pair's distance per waypoint (N, P) [m]
     bounds = boxes.copy() if prior is None else np.maximum(boxes, prior)  # and the better ones found
-    if directions is not None:
-        bounds = np.maximum(bounds, direction_bounds(model, poses, directions))
+    if directions is not None:  # the proof alone (no figures written) bounds only the pairs left short
+        short = _short(bounds - model.pair_margins + tolerance_m, _pair_motion(model, q_path)).any(0)
+        bounds = np.maximum(
+            bounds, direction_bounds(model, poses, directions, None if out is not None else short)
+        )
     exact = np.zeros(bounds.shape, dtype=bool)
     need = np.zeros(bounds.shape, dtype=bool)  # pairs to measure at each waypoint
     if by_bound and len(q_path) > 1:
