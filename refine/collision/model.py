@@ -93,6 +93,7 @@ class CollisionModel:
         self._q: Array | None = None
         self._exact: dict[int, Contact] = {}  # pairs measured at the current configuration
         self._motion: Array | None = None
+        self._recent_poses: dict[bytes, Array] = {}  # moving_poses of the last few joint paths
 
     # ---- building ----------------------------------------------------------------------------
 
@@ -208,8 +209,24 @@ class CollisionModel:
         self._exact = {}
 
     def moving_poses(self, qs: ArrayLike) -> Array:
-        """World poses (N, M, 4, 4) of the M moving bodies' shape frames for joint rows qs (N, n)."""
+        """World poses (N, M, 4, 4) of the M moving bodies' shape frames for joint rows qs (N, n).
+
+        The answer for a path of several rows is kept for the next few calls with the same joints
+        (the proof, the check and the figures of one path each ask for them), read-only.
+        """
         qs = np.asarray(qs, dtype=float)
+        key = qs.shape[0].to_bytes(8, "little") + qs.tobytes() if qs.ndim == 2 and len(qs) > 1 else None
+        if key is not None and key in self._recent_poses:
+            return self._recent_poses[key]
+        poses = self._moving_poses(qs)
+        if key is not None:
+            poses.flags.writeable = False
+            self._recent_poses[key] = poses
+            while len(self._recent_poses) > 4:
+                del self._recent_poses[next(iter(self._recent_poses))]
+        return poses
+
+    def _moving_poses(self, qs: Array) -> Array:
         T_joint = np.empty((len(qs), len(self._joints), 4, 4))
         for k, q in enumerate(qs):
             pin.forwardKinematics(self._model, self._data, q)
