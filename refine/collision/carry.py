@@ -32,9 +32,10 @@ is a lower bound on their distance whatever ``n`` is: for every a in A and b in 
 apart by at least ``g``. It is computed from the bodies as they are now (their poses at the new
 joints, the cell where it is now), so nothing about the old check has to hold for it to be a
 bound: the old normal only chooses the direction. Near the old configuration the gap falls short
-of the distance only by the second-order turn of the normal, so the least distance is bounded
-within micrometres where the displacement bound above is millimetres off
-(:func:`direction_bounds`; ``tests/collision/test_carry.py`` compares with every pair measured).
+of the distance only by the second-order turn of the normal (for most pairs micrometres, where the
+displacement bound above is millimetres off; more where the nearest features change), so few
+waypoints are left that can hold the least distance (:func:`direction_bounds`;
+``tests/collision/test_carry.py`` compares with every pair measured at every waypoint).
 """
 
 from __future__ import annotations

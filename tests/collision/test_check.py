@@ -280,7 +280,9 @@ def test_the_proofs_bounds_are_those_waypoint_by_waypoint_and_below_every_distan
         for p in np.flatnonzero(need[k]):
             gap = reference.plane_bounds(int(p), poses[k : k + 1])
             if gap is None:
-                expected[k, p], expected_exact[k, p] = reference.pair_bound(q[k], int(p), poses[k], plane=True)
+                expected[k, p], expected_exact[k, p] = reference.pair_bound(
+                    q[k], int(p), poses[k], plane=True
+                )
             elif gap[0] > margins[p]:
                 expected[k, p] = max(expected[k, p], gap[0])
             else:
