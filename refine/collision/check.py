@@ -253,8 +253,8 @@ def check_path_clearance(
             (:mod:`refine.collision.carry`): what they prove is not measured again.
         directions: unit vectors (N, P, 3), NaN for none, along which the pairs' gaps bound their
             distances at the waypoints (:func:`refine.collision.carry.direction_bounds`).
-        every_waypoint: False to measure, as from ``prior``, only the waypoints that can hold the
-            least distance or clearance or whose margins the bounds leave unproved.
+        every_waypoint: False to measure, as with ``prior`` or ``directions``, only the waypoints that
+            can hold the least distance or clearance or whose margins the bounds leave unproved.
 
     Returns:
         The per-waypoint and per-segment figures and the runs below the margin.
@@ -295,7 +295,8 @@ def check_path_clearance(
         )
 
     points: list[_Sample] = []
-    carry = (prior is not None or not every_waypoint) and method == "bound" and len(model.pairs) > 0
+    given = prior is not None or directions is not None  # then, or without every_waypoint, the least only
+    carry = (given or not every_waypoint) and method == "bound" and len(model.pairs) > 0
     at_waypoint = None if carry else lambda q, poses, boxes: points.append(sample(q, poses, boxes))
     normals = np.full((len(q_path), len(model.pairs), 3), np.nan) if directions is None else directions.copy()
     known = {"prior": prior, "directions": directions, "out": normals}
