@@ -123,6 +123,11 @@ def test_a_check_from_carried_bounds_and_directions_reports_what_measuring_every
     assert np.all(warm.waypoint_distance_m <= truth.min(axis=1) + 1e-12)
     assert np.all(warm.bounds.bounds <= truth + 1e-9)
     assert warm_queries < cold.queries
+    # the directions alone (no carried bound: another base, say) give the same figures
+    alone = check_path_clearance(model_of(moved, margin), q1, kin, 0.005, directions=directions)
+    assert alone.waypoint_measured is not None
+    assert reported(alone)[:2] == pytest.approx((d, c), abs=1e-12) and reported(alone)[2] == got_pair
+    assert [r.describe() for r in alone.runs] == [r.describe() for r in cold.runs]
 
 
 def test_the_gap_along_any_direction_bounds_every_distance_and_along_the_witness_normal_nearly_equals_it():
