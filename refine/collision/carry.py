@@ -18,6 +18,24 @@ A pair keeps its bound only when both its bodies are the same shapes as before (
 and the tool on the same joints and frames, the base in the same place); a bound that is not
 positive is dropped (penetration is not carried). The check of the new path then measures only
 the pairs the carried bounds leave short, and the figures it reports are measured as before.
+
+**Witness directions.** That bound loses the whole motion: a pair whose bodies slide past each
+other at a constant distance keeps its distance, yet its bound drops by the sliding. The check
+also keeps, where it measured a pair, the witness normal ``n`` (a unit vector from the second body
+towards the first). At the new path's waypoint the gap between the two bodies along that
+direction,
+
+    g = min_{a in A, b in B} n · (a - b) = -reach_A(-n) - reach_B(n),
+
+is a lower bound on their distance whatever ``n`` is: for every a in A and b in B,
+``|a - b| >= n · (a - b) >= g`` (Cauchy-Schwarz, ``|n| = 1``), so when ``g > 0`` the bodies are
+apart by at least ``g``. It is computed from the bodies as they are now (their poses at the new
+joints, the cell where it is now), so nothing about the old check has to hold for it to be a
+bound: the old normal only chooses the direction. Near the old configuration the gap falls short
+of the distance only by the second-order turn of the normal (for most pairs micrometres, where the
+displacement bound above is millimetres off; more where the nearest features change), so few
+waypoints are left that can hold the least distance (:func:`direction_bounds`;
+``tests/collision/test_carry.py`` compares with every pair measured at every waypoint).
 """
 
 from __future__ import annotations
@@ -33,6 +51,9 @@ from refine.collision.model import CollisionModel
 from refine.collision.motion import corners
 from refine.types import Array
 
+NEAR = 24
+"""A measured waypoint's witness normals bound the pairs this many waypoints either side of it."""
+
 
 @dataclass(frozen=True, eq=False)
 class CheckedBounds:
@@ -45,6 +66,8 @@ class CheckedBounds:
         shapes: per body label, its hull's corners: in its joint's frame for a moving body (with
             the joint's index), in the world for a cell object [m].
         base_in_world: the robot base T_F_R (4, 4) of the check.
+        normals: per waypoint and pair, a unit witness normal where one is known (N, P, 3), NaN
+            elsewhere; None for none.
     """
 
     q: Array
@@ -52,6 +75,7 @@ class CheckedBounds:
     bounds: Array
     shapes: dict[str, tuple[int, Array]]
     base_in_world: Array
+    normals: Array | None = None
 
 
 def _shape(model: CollisionModel, body: Body) -> tuple[int, Array]:
@@ -64,15 +88,72 @@ def _shape(model: CollisionModel, body: Body) -> tuple[int, Array]:
     return int(body.joint), c @ T[:3, :3].T + T[:3, 3]
 
 
-def checked_bounds(model: CollisionModel, q: Array, bounds: Array) -> CheckedBounds:
-    """The bounds ``bounds`` (N, P) [m] of a check of joints ``q`` (N, n) in ``model``, to carry."""
+def checked_bounds(
+    model: CollisionModel, q: Array, bounds: Array, normals: Array | None = None
+) -> CheckedBounds:
+    """The bounds ``bounds`` (N, P) [m] of a check of joints ``q`` (N, n) in ``model``, to carry.
+
+    ``normals`` (N, P, 3): unit witness normals where the check measured a pair (NaN elsewhere).
+    """
     return CheckedBounds(
         np.array(q, dtype=float),
         tuple(model.pairs),
         np.array(bounds, dtype=float),
         {b.label: _shape(model, b) for b in model.bodies},
         model.base_in_world.copy(),
+        None if normals is None else np.array(normals, dtype=float),
     )
+
+
+def carried_directions(model: CollisionModel, prior: CheckedBounds, q: Array) -> Array | None:
+    """The witness normals of ``prior`` (N, P, 3) in the order of ``model``'s pairs, for joints ``q``.
+
+    A waypoint where ``prior`` has no normal of a pair takes the pair's normal at the nearest
+    waypoint that has one (the pair was bounded there without a query); NaN for a pair ``prior``
+    has no normal of. None when it has none or the paths differ in length. Any unit vector serves
+    :func:`direction_bounds`, so neither the robot nor the cell need be the same.
+    """
+    if prior.normals is None or np.shape(q)[0] != len(prior.q):
+        return None
+    old = {pair: p for p, pair in enumerate(prior.pairs)}
+    out = np.full((len(prior.q), len(model.pairs), 3), np.nan)
+    rows = np.arange(len(prior.q))
+    for p, pair in enumerate(model.pairs):
+        k = old.get(pair)
+        known = np.array([], dtype=int) if k is None else np.flatnonzero(~np.isnan(prior.normals[:, k, 0]))
+        if known.size:
+            after = np.minimum(np.searchsorted(known, rows), len(known) - 1)
+            before = np.maximum(after - 1, 0)
+            near = np.where(
+                np.abs(known[before] - rows) <= np.abs(known[after] - rows), known[before], known[after]
+            )
+            out[:, p] = prior.normals[near, k]
+    return out
+
+
+def direction_bounds(
+    model: CollisionModel, poses: Array, normals: Array, columns: NDArray[np.bool_] | None = None
+) -> Array:
+    """Lower bounds (N, P) [m] on the pairs' distances from the gaps along given directions.
+
+    ``poses``: the moving bodies' poses at the waypoints (N, M, 4, 4) from
+    :meth:`CollisionModel.moving_poses`; ``normals`` (N, P, 3): a unit direction per waypoint and
+    pair, NaN where there is none. The gap between a pair's bodies along a unit direction bounds
+    their distance from below (see the module notes); ``-inf`` where there is no direction, where a
+    body is a mesh, or where the gap is not positive; ``columns`` (P,): the pairs to bound (all if None).
+    """
+    out = np.full(normals.shape[:2], -np.inf)
+    have = ~np.isnan(normals[:, :, 0])
+    if columns is not None:
+        have &= columns
+    for p in np.flatnonzero(have.any(axis=0)):
+        ks = np.flatnonzero(have[:, p])
+        n = normals[ks, p]
+        n = n / np.linalg.norm(n, axis=1, keepdims=True)  # unit, whatever rounding left
+        gaps = model.plane_bounds(int(p), poses[ks], n)
+        if gaps is not None:
+            out[ks, p] = np.where(gaps > 0.0, gaps, -np.inf)
+    return out
 
 
 def carried_bounds(model: CollisionModel, prior: CheckedBounds, q: Array) -> Array | None:
@@ -150,38 +231,145 @@ def bounds_between(model: CollisionModel, checked: CheckedBounds, q: Array, plac
     )
 
 
+def bounds_along_normals(
+    model: CollisionModel,
+    q_path: Array,
+    poses: Array,
+    need: NDArray[np.bool_],
+    bounds: Array,
+    exact: NDArray[np.bool_],
+    out: Array | None = None,
+) -> None:
+    """Bound the pairs ``need`` (N, P) marks, pair by pair along the path, into ``bounds`` and ``exact``.
+
+    What :meth:`CollisionModel.pair_bound` with ``plane`` gives waypoint by waypoint, with the gaps
+    along a pair's last witness normal taken at all its waypoints at once
+    (:meth:`CollisionModel.plane_bounds`): up to the first waypoint where the gap does not keep
+    the pair's margin, which is then measured (and gives the next normal). A pair without a normal
+    yet, or with a mesh, is bounded one waypoint at a time. A bound already in ``bounds`` is kept
+    where it is larger. ``out`` (N, P, 3): where the witness normals of the pairs measured are written.
+    """
+    margins = model.pair_margins
+    for p in np.flatnonzero(need.any(axis=0)):
+        p = int(p)
+        ks = np.flatnonzero(need[:, p])
+        i = 0
+        while i < len(ks):
+            gaps = model.plane_bounds(p, poses[ks[i:]])
+            if gaps is not None:
+                short = np.flatnonzero(gaps <= margins[p])
+                stop = int(short[0]) if short.size else len(gaps)
+                rows = ks[i : i + stop]
+                bounds[rows, p] = np.maximum(bounds[rows, p], gaps[:stop])
+                i += stop
+            if i < len(ks):
+                k = ks[i]
+                if gaps is not None:  # the gap there leaves the margin unproved: measure it
+                    bounds[k, p], exact[k, p] = model.pair_distance(q_path[k], p, poses[k]), True
+                else:
+                    bounds[k, p], exact[k, p] = model.pair_bound(q_path[k], p, poses[k], plane=True)
+                if exact[k, p] and out is not None:
+                    out[k, p] = model.witnesses(q_path[k])[p][1]
+                i += 1
+
+
+def raise_near(
+    model: CollisionModel, poses: Array, bounds: Array, k: int, found: dict[int, tuple[float, Array]]
+) -> None:
+    """Raise the bounds (N, P) [m] of the waypoints within :data:`NEAR` of waypoint k, in place.
+
+    ``found``: the pairs measured at k, by pair index, with their unit witness normals
+    (:meth:`CollisionModel.witnesses`); ``poses`` (N, M, 4, 4): the moving bodies at every waypoint.
+    Each pair's gap along its normal at k bounds its distance at the other waypoints from below
+    (any unit direction does, see the module notes); near k the joints, hence the normal, have
+    turned little, so the gap is close to the distance there. Waypoint k keeps its own figures.
+    """
+    near = np.arange(max(k - NEAR, 0), min(k + NEAR + 1, len(bounds)))
+    near = near[near != k]
+    for p, (_, n) in found.items():
+        gaps = model.plane_bounds(p, poses[near], n)
+        if gaps is not None:
+            bounds[near, p] = np.maximum(bounds[near, p], np.where(gaps > 0.0, gaps, -np.inf))
+
+
+def tightener(
+    model: CollisionModel, poses: Array, bounds: Array, exact: NDArray[np.bool_]
+) -> Callable[[int], bool]:
+    """A ``tighten(k)`` for :func:`measure_least`: raise the bounds that hold waypoint k's lower bound.
+
+    The pairs holding waypoint k's least distance bound and least clearance bound, if not measured
+    there, are bounded at every waypoint by their gap along the pair's last witness normal
+    (:meth:`CollisionModel.plane_bounds`, a lower bound whatever the normal, see the module notes),
+    each pair once per check; ``bounds`` (N, P) [m] is raised in place where that gap is larger,
+    ``exact`` (N, P) entries are kept. ``tighten(k)`` is True when it tried a pair (finitely often).
+    """
+    tried = np.zeros(bounds.shape[1], dtype=bool)
+    margins = model.pair_margins
+
+    def tighten(k: int) -> bool:
+        pairs = {int(np.argmin(bounds[k])), int(np.argmin(bounds[k] - margins))}
+        pairs = {p for p in pairs if not (tried[p] or exact[k, p])}
+        for p in pairs:
+            tried[p] = True
+            gaps = model.plane_bounds(p, poses)
+            if gaps is not None:
+                raised = np.maximum(bounds[:, p], np.where(gaps > 0.0, gaps, -np.inf))
+                bounds[:, p] = np.where(exact[:, p], bounds[:, p], raised)
+        return bool(pairs)
+
+    return tighten
+
+
 def measure_least(
-    bounds: Array, margins: Array, measure: Callable[[int], tuple[float, float]]
+    bounds: Array,
+    margins: Array,
+    measure: Callable[[int], tuple[float, float]],
+    window: int = 0,
+    tighten: Callable[[int], bool] | None = None,
 ) -> NDArray[np.bool_]:
     """Measure the waypoints that can hold the path's least distance or clearance, or break a margin.
 
     ``bounds`` (N, P): lower bounds [m] on every pair's distance at each waypoint (complete: no
     pair left without one, or that waypoint has ``-inf`` and is measured); ``margins`` (P,) [m].
     ``measure(k)`` measures waypoint k exactly and returns its least distance and least clearance
-    [m]. Every waypoint whose bounds do not prove every margin is measured; then the waypoints in
-    order of their lower bound, until the next bound is no smaller than the least measured (the
-    least distance and the least clearance over the waypoints are then exact: every waypoint not
-    measured is at least as far as the one measured).
+    [m]; it may raise the bounds of the waypoints within ``window`` of k in ``bounds`` (lower
+    bounds still), which are read again after it. ``tighten(k)``, tried before waypoint k is
+    measured, may raise any bounds (lower bounds still); it returns True when it did something,
+    which it may do only finitely often. Every waypoint whose bounds do not prove every margin is
+    measured; then, for the distance and then the clearance, the waypoint of least lower bound not
+    yet measured, until that bound is no smaller than the least measured. The least distance and
+    the least clearance over the waypoints are then exact: every waypoint not measured has a lower
+    bound, hence a value, at least the least measured.
 
     Returns:
         Which waypoints were measured, (N,).
     """
-    lower_d = bounds.min(axis=1)
-    lower_c = (bounds - margins).min(axis=1)
-    measured = np.zeros(len(bounds), dtype=bool)
+    N = len(bounds)
+    measured = np.zeros(N, dtype=bool)
+
+    def read(rows: slice) -> None:
+        lower[0][rows] = np.where(measured[rows], np.inf, bounds[rows].min(axis=1))
+        lower[1][rows] = np.where(measured[rows], np.inf, (bounds[rows] - margins).min(axis=1))
+
+    lower = [np.empty(N), np.empty(N)]  # per waypoint not measured: distance, clearance bounds
+    read(slice(None))
     best = [np.inf, np.inf]  # least distance, least clearance measured
 
     def visit(k: int) -> None:
         d, c = measure(k)
         measured[k] = True
         best[0], best[1] = min(best[0], d), min(best[1], c)
+        read(slice(max(k - window, 0), k + window + 1))
 
-    for k in np.flatnonzero(lower_c < 0.0):
+    for k in np.flatnonzero(lower[1] < 0.0):
         visit(int(k))
-    for which, lower in enumerate((lower_d, lower_c)):
-        for k in np.argsort(lower, kind="stable"):
-            if lower[k] >= best[which]:
+    for which in (0, 1):
+        while True:
+            k = int(np.argmin(lower[which]))
+            if lower[which][k] >= best[which]:
                 break
-            if not measured[k]:
-                visit(int(k))
+            if tighten is not None and tighten(k):
+                read(slice(None))
+                continue
+            visit(k)
     return measured

@@ -66,8 +66,18 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from refine.collision.carry import CheckedBounds, checked_bounds, measure_least
+from refine.collision.carry import (
+    NEAR,
+    CheckedBounds,
+    bounds_along_normals,
+    checked_bounds,
+    direction_bounds,
+    measure_least,
+    raise_near,
+    tightener,
+)
 from refine.collision.model import CollisionModel
+from refine.collision.motion import joint_reach
 from refine.errors import InputError
 from refine.robot.kinematics import TcpKinematics
 from refine.types import Array
@@ -183,35 +193,15 @@ class PathClearance:
         )
 
 
+_NONE: frozenset[str] = frozenset()
+
+
 class _Sample(NamedTuple):
     distance: float  # least distance over all pairs [m]
     clearance: float  # least distance minus margin [m]
     pair: tuple[str, str]  # the pair with the least clearance
     pair_distance: float  # its distance [m]
     below: frozenset[str]  # every body and object below its margin
-
-
-def joint_reach(model: CollisionModel) -> Array:
-    """Per joint, the largest distance [m] any body downstream of it can have from its axis, (n,).
-
-    A bound that holds at every configuration: the joint offsets along the chain from the joint to
-    the body's joint, plus the body's extent from its own joint's origin.
-    """
-    pm = model.robot.model
-    offset = [float(np.linalg.norm(pm.jointPlacements[j].translation)) for j in range(pm.njoints)]
-    reach = np.zeros(model.robot.nq)
-    for body in model.bodies:
-        if body.kind == "cell" or body.joint <= 0:
-            continue
-        jMs = pm.frames[body.frame_id].placement.homogeneous @ body.link_T_shape
-        centre = jMs[:3, :3] @ body.centre + jMs[:3, 3]
-        extent = float(np.linalg.norm(centre) + np.linalg.norm(body.half_extent))
-        chain = list(pm.supports[body.joint])[1:]  # joints from the base to the body's joint
-        for i, j in enumerate(chain):
-            along = sum(offset[k] for k in chain[i + 1 :])
-            v = pm.joints[j].idx_v
-            reach[v] = max(reach[v], along + extent)
-    return reach
 
 
 def _interpolate(q0: Array, q1: Array, m: int) -> Array:
@@ -245,6 +235,8 @@ def check_path_clearance(
     tolerance_m: float = 1e-4,
     method: str = "bound",
     prior: Array | None = None,
+    directions: Array | None = None,
+    every_waypoint: bool = True,
 ) -> PathClearance:
     """Check a joint path densely against the collision model.
 
@@ -259,6 +251,10 @@ def check_path_clearance(
             densely only segments with a broken margin, ``"sample"`` to sample every segment densely.
         prior: lower bounds (N, P) [m] on the pairs' distances at the waypoints known beforehand
             (:mod:`refine.collision.carry`): what they prove is not measured again.
+        directions: unit vectors (N, P, 3), NaN for none, along which the pairs' gaps bound their
+            distances at the waypoints (:func:`refine.collision.carry.direction_bounds`).
+        every_waypoint: False to measure, as with ``prior`` or ``directions``, only the waypoints that
+            can hold the least distance or clearance or whose margins the bounds leave unproved.
 
     Returns:
         The per-waypoint and per-segment figures and the runs below the margin.
@@ -299,10 +295,13 @@ def check_path_clearance(
         )
 
     points: list[_Sample] = []
-    carry = prior is not None and method == "bound" and len(model.pairs) > 0
+    given = prior is not None or directions is not None  # then, or without every_waypoint, the least only
+    carry = (given or not every_waypoint) and method == "bound" and len(model.pairs) > 0
     at_waypoint = None if carry else lambda q, poses, boxes: points.append(sample(q, poses, boxes))
+    normals = np.full((len(q_path), len(model.pairs), 3), np.nan) if directions is None else directions.copy()
+    known = {"prior": prior, "directions": directions, "out": normals}
     poses, boxes, bounds, exact = _waypoint_bounds(
-        model, q_path, tolerance_m, method == "bound", at_waypoint, prior=prior
+        model, q_path, tolerance_m, method == "bound", at_waypoint, plane=carry, **known
     )
     measured = None  # every waypoint measured, unless the check starts from known bounds:
     if carry:  # then exact where they can be the least or a margin is not proved, bounds elsewhere
@@ -310,16 +309,22 @@ def check_path_clearance(
 
         def measure(k: int) -> tuple[float, float]:
             at[k] = sample(q_path[k], poses[k], bounds[k].copy())
-            for p, d in model.measured().items():
-                bounds[k, p], exact[k, p] = d, True
+            found = model.witnesses(q_path[k])
+            for p, (d, n) in found.items():
+                bounds[k, p], exact[k, p], normals[k, p] = d, True, n
+            raise_near(model, poses, bounds, k, found)
             return at[k].distance, at[k].clearance
 
-        measured = measure_least(bounds, model.pair_margins, measure)
+        measured = measure_least(
+            bounds, model.pair_margins, measure, NEAR, tightener(model, poses, bounds, exact)
+        )
         clear = bounds - model.pair_margins
         least = np.argmin(clear, axis=1)  # per waypoint, the pair of least clearance bound
-        points = [
-            at.get(k, _Sample(bounds[k].min(), clear[k, p], model.pairs[p], bounds[k, p], frozenset()))
-            for k, p in enumerate(least)
+        rows = np.arange(len(q_path))
+        figures = zip(bounds.min(axis=1).tolist(), clear[rows, least].tolist(), bounds[rows, least].tolist())  # noqa: B905
+        points = [  # the same lengths: least and the figures are one per waypoint
+            at.get(k, _Sample(d, c, model.pairs[p], dp, _NONE))
+            for k, (p, (d, c, dp)) in enumerate(zip(least, figures))  # noqa: B905
         ]
     wp_dist = np.array([p.distance for p in points])
     wp_clear = np.array([p.clearance for p in points])
@@ -342,11 +347,17 @@ def check_path_clearance(
             found_by_segment[k] = [sample(q) for q in _interpolate(q_path[k], q_path[k + 1], int(steps[k]))]
     worst: list[_Sample] = []
     seg_dist = np.empty(len(sweep))
+    sampled = set(dense)
     for k, found_inside in enumerate(found_by_segment):
         assert found_inside is not None
-        if k not in dense:
+        a, b = points[k], points[k + 1]
+        if not (found_inside or inner[k] or a.below or b.below):  # the two ends alone, nothing below
+            seg_dist[k] = min(a.distance, b.distance)
+            worst.append(a if a.clearance <= b.clearance else b)  # as min() picks: the first of a tie
+            continue
+        if k not in sampled:
             steps[k] = len(inner[k]) + 1
-        found = [points[k], points[k + 1], *found_inside, *inner[k]]
+        found = [a, b, *found_inside, *inner[k]]
         seg_dist[k] = min(s.distance for s in found)
         worst.append(
             min(found, key=lambda s: s.clearance)._replace(below=frozenset().union(*(s.below for s in found)))
@@ -366,14 +377,19 @@ def check_path_clearance(
         tolerance_m=tolerance_m,
         certified_segments=len(sweep) - len(dense),
         waypoint_measured=measured,
-        bounds=checked_bounds(model, q_path, bounds) if method == "bound" else None,
+        bounds=checked_bounds(model, q_path, bounds, normals) if method == "bound" else None,
     )
     log.info("%s", result.summary())
     return result
 
 
 def margins_proved(
-    model: CollisionModel, q_path: ArrayLike, *, tolerance_m: float = 1e-4, prior: Array | None = None
+    model: CollisionModel,
+    q_path: ArrayLike,
+    *,
+    tolerance_m: float = 1e-4,
+    prior: Array | None = None,
+    directions: Array | None = None,
 ) -> bool:
     """True when the motion bound proves that the joint path keeps every pair's margin.
 
@@ -390,6 +406,7 @@ def margins_proved(
         q_path: joints per waypoint [rad], shape (N, n).
         tolerance_m: clearances down to ``-tolerance_m`` still count as kept [m].
         prior: lower bounds (N, P) [m] on the pairs' distances at the waypoints, known beforehand.
+        directions: unit vectors (N, P, 3) to bound the pairs' gaps along, as in the check.
     """
     q_path = np.asarray(q_path, dtype=float)
     if q_path.ndim != 2 or q_path.shape[1] != model.robot.nq or not np.all(np.isfinite(q_path)):
@@ -401,7 +418,9 @@ def margins_proved(
     budget = None if prior is None else prior - model.pair_margins + tolerance_m
     if budget is not None and not _short(budget, _pair_motion(model, q_path)).any():
         return True  # the known bounds certify every segment: no pose or distance is needed
-    poses, _, bounds, exact = _waypoint_bounds(model, q_path, tolerance_m, True, plane=True, prior=prior)
+    poses, _, bounds, exact = _waypoint_bounds(
+        model, q_path, tolerance_m, True, plane=True, prior=prior, directions=directions
+    )
     found_by_segment: list[list[_Sample] | None] = [None] * (len(q_path) - 1)
     inner: list[list[_Sample]] = [[] for _ in found_by_segment]
     _advance_pairs(model, q_path, poses, bounds, exact, inner, found_by_segment, tolerance_m)
@@ -417,6 +436,8 @@ def _waypoint_bounds(
     *,
     plane: bool = False,
     prior: Array | None = None,
+    directions: Array | None = None,
+    out: Array | None = None,
 ) -> tuple[Array, Array, Array, NDArray[np.bool_]]:
     """The moving bodies' poses and each pair's distance bounds at every waypoint.
 
@@ -424,7 +445,9 @@ def _waypoint_bounds(
     bounded better there (:meth:`CollisionModel.pair_bound`, with ``plane`` the gap along the last
     witness normal before an FCL query). ``at_waypoint(q, poses, boxes)`` runs at each waypoint
     with the model placed there (given ``prior``, the best bounds known there); the pairs it
-    measures improve the bounds. ``prior`` (N, P): lower bounds known beforehand [m].
+    measures improve the bounds. ``prior`` (N, P): lower bounds known beforehand [m];
+    ``directions`` (N, P, 3): unit vectors whose gaps bound the pairs too; ``out`` (N, P, 3): where
+    the witness normals of the pairs measured are written.
 
     Returns:
         poses (N, M, 4, 4), box bounds (N, P) [m], the better bounds (N, P) [m], and which of
@@ -433,6 +456,11 @@ def _waypoint_bounds(
     poses = model.moving_poses(q_path)
     boxes = model.box_bounds(poses)  # lower bounds on each pair's distance per waypoint (N, P) [m]
     bounds = boxes.copy() if prior is None else np.maximum(boxes, prior)  # and the better ones found
+    if directions is not None:  # the proof alone (no figures written) bounds only the pairs left short
+        short = _short(bounds - model.pair_margins + tolerance_m, _pair_motion(model, q_path)).any(0)
+        bounds = np.maximum(
+            bounds, direction_bounds(model, poses, directions, None if out is not None else short)
+        )
     exact = np.zeros(bounds.shape, dtype=bool)
     need = np.zeros(bounds.shape, dtype=bool)  # pairs to measure at each waypoint
     if by_bound and len(q_path) > 1:
@@ -440,49 +468,19 @@ def _waypoint_bounds(
         need[:-1] |= short
         need[1:] |= short
     if plane and at_waypoint is None:
-        _plane_bounds(model, q_path, poses, need, bounds, exact)
+        bounds_along_normals(model, q_path, poses, need, bounds, exact, out)
         return poses, boxes, bounds, exact
-    for k, q in enumerate(q_path):
+    for k in range(len(q_path)) if at_waypoint else np.flatnonzero(need.any(axis=1)):
+        q = q_path[k]
         for p in np.flatnonzero(need[k]):
             bounds[k, p], exact[k, p] = model.pair_bound(q, int(p), poses[k], plane=plane)
         if at_waypoint is not None:
             at_waypoint(q, poses[k], boxes[k] if prior is None else bounds[k].copy())
-            for p, d in model.measured().items():
-                bounds[k, p], exact[k, p] = d, True
+        for p, (d, n) in model.witnesses(q).items():
+            bounds[k, p], exact[k, p] = d, True
+            if out is not None:
+                out[k, p] = n
     return poses, boxes, bounds, exact
-
-
-def _plane_bounds(
-    model: CollisionModel,
-    q_path: Array,
-    poses: Array,
-    need: NDArray[np.bool_],
-    bounds: Array,
-    exact: NDArray[np.bool_],
-) -> None:
-    """Bound the pairs ``need`` (N, P) marks, pair by pair along the path, into ``bounds`` and ``exact``.
-
-    What :meth:`CollisionModel.pair_bound` with ``plane`` gives waypoint by waypoint, with the gaps
-    along a pair's last witness normal taken at all its waypoints at once
-    (:meth:`CollisionModel.plane_bounds`): up to the first waypoint where the gap is not positive,
-    which is then measured (and gives the next normal). A pair without a normal yet, or with a mesh,
-    is bounded one waypoint at a time.
-    """
-    for p in np.flatnonzero(need.any(axis=0)):
-        p = int(p)
-        ks = np.flatnonzero(need[:, p])
-        i = 0
-        while i < len(ks):
-            gaps = model.plane_bounds(p, poses[ks[i:]])
-            if gaps is not None:
-                short = np.flatnonzero(gaps <= 0.0)
-                stop = int(short[0]) if short.size else len(gaps)
-                bounds[ks[i : i + stop], p] = gaps[:stop]
-                i += stop
-            if i < len(ks):
-                k = ks[i]
-                bounds[k, p], exact[k, p] = model.pair_bound(q_path[k], p, poses[k], plane=True)
-                i += 1
 
 
 def _advance_pairs(

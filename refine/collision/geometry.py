@@ -138,17 +138,21 @@ class Body:
         return base + dims[1] * abs(uz) + dims[0] * math.hypot(ux, uy)
 
     def reach_many(self, Ts: Array, direction: Array) -> Array:
-        """:meth:`reach` at every pose of ``Ts`` (K, 4, 4) for one ``direction`` (3,), (K,) [m]."""
+        """:meth:`reach` at every pose of ``Ts`` (K, 4, 4), (K,) [m].
+
+        ``direction``: one (3,) for every pose, or one per pose (K, 3).
+        """
         d = np.asarray(direction, dtype=float)
-        base = Ts[:, :3, 3] @ d
-        local = np.einsum("kij,i->kj", Ts[:, :3, :3], d)  # the direction in each pose's shape frame
+        rows = d.ndim == 2
+        base = np.einsum("ki,ki->k", Ts[:, :3, 3], d) if rows else Ts[:, :3, 3] @ d
+        local = np.einsum("kij,ki->kj" if rows else "kij,i->kj", Ts[:, :3, :3], d)  # in each shape frame
         if self.vertices is not None:
             return base + (local @ self.vertices.T).max(axis=1)
         tag, *dims = self.kind_params
         if tag == "convex":
             return base + (local @ dims[0].T).max(axis=1)
         if tag == "sphere":
-            return base + dims[0] * float(np.linalg.norm(d))
+            return base + dims[0] * np.linalg.norm(d, axis=-1)
         if tag == "box":
             return base + np.abs(local) @ dims[0]
         return base + dims[1] * np.abs(local[:, 2]) + dims[0] * np.hypot(local[:, 0], local[:, 1])

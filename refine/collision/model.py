@@ -94,6 +94,7 @@ class CollisionModel:
         self._q: Array | None = None
         self._exact: dict[int, Contact] = {}  # pairs measured at the current configuration
         self._motion: Array | None = None
+        self._recent_poses: dict[bytes, Array] = {}  # moving_poses of the last few joint paths
 
     # ---- building ----------------------------------------------------------------------------
 
@@ -209,8 +210,24 @@ class CollisionModel:
         self._exact = {}
 
     def moving_poses(self, qs: ArrayLike) -> Array:
-        """World poses (N, M, 4, 4) of the M moving bodies' shape frames for joint rows qs (N, n)."""
+        """World poses (N, M, 4, 4) of the M moving bodies' shape frames for joint rows qs (N, n).
+
+        The answer for a path of several rows is kept for the next few calls with the same joints
+        (the proof, the check and the figures of one path each ask for them), read-only.
+        """
         qs = np.asarray(qs, dtype=float)
+        key = qs.shape[0].to_bytes(8, "little") + qs.tobytes() if qs.ndim == 2 and len(qs) > 1 else None
+        if key is not None and key in self._recent_poses:
+            return self._recent_poses[key]
+        poses = self._moving_poses(qs)
+        if key is not None:
+            poses.flags.writeable = False
+            self._recent_poses[key] = poses
+            while len(self._recent_poses) > 4:
+                del self._recent_poses[next(iter(self._recent_poses))]
+        return poses
+
+    def _moving_poses(self, qs: Array) -> Array:
         chain = getattr(self.robot, "chain", None)
         if chain is not None and len(qs) >= MIN_ROWS:
             T_joint = chain.joint_placements(qs, self._joints)
@@ -329,6 +346,15 @@ class CollisionModel:
         """Signed distances [m] of the pairs measured at the current configuration, by pair index."""
         return {k: c.distance_m for k, c in self._exact.items()}
 
+    def witnesses(self, q: Array) -> dict[int, tuple[float, Array]]:
+        """The pairs measured at joints q (n,) so far, by pair index: signed distance [m] and unit normal.
+
+        Empty when the model has been placed elsewhere since (nothing measured at q is then known).
+        """
+        if self._q is None or not np.array_equal(self._q, q):
+            return {}
+        return {k: (c.distance_m, c.normal) for k, c in self._exact.items()}
+
     def pair_distance(self, q: ArrayLike, k: int, poses: Array | None = None) -> float:
         """The signed distance [m] of checked pair k (index into :attr:`pairs`) at joints q.
 
@@ -371,14 +397,15 @@ class CollisionModel:
         a, b = int(self._pa[k]), int(self._pb[k])
         return -self.bodies[a].reach(self._poses[a], -n) - self.bodies[b].reach(self._poses[b], n)
 
-    def plane_bounds(self, k: int, poses: Array) -> Array | None:
+    def plane_bounds(self, k: int, poses: Array, normals: Array | None = None) -> Array | None:
         """Lower bounds [m] on pair k's distance at rows of moving-body poses (K, M, 4, 4), (K,).
 
-        The gap along the pair's last witness normal (:meth:`_plane_bound`) at every row at once;
-        None for a pair with a mesh or one never measured.
+        The gap along the pair's last witness normal (:meth:`_plane_bound`) at every row at once,
+        or along ``normals``: one unit vector (3,) or one per row (K, 3) (any unit vector gives a
+        lower bound); None for a pair with a mesh or, without ``normals``, one never measured.
         """
-        n = self._normals[k]
-        if not self._bounded[k] or np.isnan(n[0]):
+        n = self._normals[k] if normals is None else np.asarray(normals, dtype=float)
+        if not self._bounded[k] or np.isnan(n).any():
             return None
         a, b = int(self._pa[k]), int(self._pb[k])
         m = self._n_moving

@@ -25,6 +25,9 @@ value over a shape is reached at a corner of any convex set holding the shape.
 
 from __future__ import annotations
 
+import weakref
+from typing import Any
+
 import numpy as np
 import pinocchio as pin
 
@@ -32,6 +35,9 @@ from refine.collision.geometry import Body
 from refine.collision.pairs import joint_axes
 from refine.errors import InputError
 from refine.types import Array
+
+_JOINT_REACH: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+""":func:`joint_reach` per collision model."""
 
 
 def corners(body: Body) -> Array:
@@ -120,3 +126,31 @@ def pair_reach(model: pin.Model, pairs: list[tuple[Body, Body]]) -> Array:
             for v, r in cache[key].items():
                 out[p, v] += r
     return out
+
+
+def joint_reach(model: Any) -> Array:  # a CollisionModel (which imports this module)
+    """Per joint, the largest distance [m] any body downstream of it can have from its axis, (n,).
+
+    A bound that holds at every configuration: the joint offsets along the chain from the joint to
+    the body's joint, plus the body's extent from its own joint's origin. A constant of the model
+    (its robot and bodies do not change), worked out once per model.
+    """
+    known = _JOINT_REACH.get(model)
+    if known is not None:
+        return known.copy()
+    pm = model.robot.model
+    offset = [float(np.linalg.norm(pm.jointPlacements[j].translation)) for j in range(pm.njoints)]
+    reach = np.zeros(model.robot.nq)
+    for body in model.bodies:
+        if body.kind == "cell" or body.joint <= 0:
+            continue
+        jMs = pm.frames[body.frame_id].placement.homogeneous @ body.link_T_shape
+        centre = jMs[:3, :3] @ body.centre + jMs[:3, 3]
+        extent = float(np.linalg.norm(centre) + np.linalg.norm(body.half_extent))
+        chain = list(pm.supports[body.joint])[1:]  # joints from the base to the body's joint
+        for i, j in enumerate(chain):
+            along = sum(offset[k] for k in chain[i + 1 :])
+            v = pm.joints[j].idx_v
+            reach[v] = max(reach[v], along + extent)
+    _JOINT_REACH[model] = reach
+    return reach.copy()

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from refine.collision import CollisionModel, Contact, PathClearance, check_path_clearance, margins_proved
-from refine.collision.carry import CheckedBounds, carried_bounds
+from refine.collision.carry import CheckedBounds, carried_bounds, carried_directions
 from refine.optimise.problem import LinearRow, RefinementNLP
 from refine.optimise.verify import Violation
 from refine.problem import Problem
@@ -69,7 +69,9 @@ class ClearanceSource:
     def for_problem(cls, problem: Problem, robot: Robot) -> ClearanceSource:
         """The source for a problem's robot placement, tool shapes, cell and ``[collision]``."""
         model = CollisionModel.for_problem(problem, robot)
-        kin = TcpKinematics(robot, problem.robot.base_in_world, problem.tool.tcp_in_flange, problem.tool.tcp_in_world)
+        kin = TcpKinematics(
+            robot, problem.robot.base_in_world, problem.tool.tcp_in_flange, problem.tool.tcp_in_world
+        )
         return cls(model, kin, problem.collision.check_step_m)
 
     def forget(self) -> None:
@@ -90,7 +92,14 @@ class ClearanceSource:
         found = self._recent.pop(key, None)
         if found is None:
             t0 = time.perf_counter()
-            found = check_path_clearance(self.model, q, self.kin, self.check_step_m, prior=self._carried(q))
+            found = check_path_clearance(
+                self.model,
+                q,
+                self.kin,
+                self.check_step_m,
+                prior=self._carried(q),
+                directions=self._directions(q),
+            )
             self.stats["check_s"] += time.perf_counter() - t0
         self._recent[key] = found  # most recent last
         while len(self._recent) > RECENT_CHECKS:
@@ -104,6 +113,9 @@ class ClearanceSource:
 
     def _carried(self, q: Array) -> Array | None:
         return None if self.prior is None else carried_bounds(self.model, self.prior, q)
+
+    def _directions(self, q: Array) -> Array | None:
+        return None if self.prior is None else carried_directions(self.model, self.prior, q)
 
     @staticmethod
     def _key(q: Array) -> tuple:
@@ -142,7 +154,7 @@ class ClearanceSource:
         q = np.asarray(q, dtype=float)
         if self._key(q) not in self._recent:
             t0 = time.perf_counter()
-            proved = margins_proved(self.model, q, prior=self._carried(q))
+            proved = margins_proved(self.model, q, prior=self._carried(q), directions=self._directions(q))
             self.stats["check_s"] += time.perf_counter() - t0
             if proved:
                 return ()

@@ -67,10 +67,16 @@ class MotionChecker:
         return worst.clearance_m, worst.distance_m, (worst.body, worst.other)
 
     def clearance(self, q: Array) -> PathClearance | None:
-        """The continuous clearance check of the joint-interpolated rows ``q`` (K, n); None without a model."""
+        """The continuous clearance check of the joint-interpolated rows ``q`` (K, n); None without a model.
+
+        Its least distance and clearance are exact; a row's own figures are exact only where they
+        can be those (elsewhere lower bounds: a motion reports its least only).
+        """
         if self.model is None:
             return None
-        return check_path_clearance(self.model, np.atleast_2d(q), self.kin, self.check_step_m)
+        return check_path_clearance(
+            self.model, np.atleast_2d(q), self.kin, self.check_step_m, every_waypoint=False
+        )
 
     def limit_issues(self, q: Array, margin_rad: float) -> list[MotionIssue]:
         """A joint outside [lower + margin, upper - margin] anywhere in the rows of ``q`` (K, n).

@@ -251,8 +251,10 @@ def test_the_proofs_bounds_are_those_waypoint_by_waypoint_and_below_every_distan
     links, irb4600, nozzle, make_model
 ):
     """The proof bounds the short pairs pair by pair along the path, the gaps along a normal taken
-    at many waypoints at once. Reference: a fresh model bounding the same pairs waypoint by
-    waypoint with ``pair_bound``, as the dense check does, and FCL's distance of every pair."""
+    at many waypoints at once, a pair measured where its gap does not keep its margin. Reference:
+    a fresh model bounding the same pairs waypoint by waypoint (the gap along the pair's last
+    normal, kept when above the margin, else FCL; ``pair_bound`` for a pair without a normal), and
+    FCL's distance of every pair."""
     from refine.collision import check as check_module
 
     sphere = Shape("ball", "sphere", pose=make_transform(p=[1.05, -0.3, 1.1]), radius_m=0.08)
@@ -273,9 +275,18 @@ def test_the_proofs_bounds_are_those_waypoint_by_waypoint_and_below_every_distan
     need[1:] |= short
     assert need.sum() > 50  # the path passes close enough for many pairs to need more than boxes
     expected, expected_exact = boxes.copy(), np.zeros(boxes.shape, dtype=bool)
+    margins = reference.pair_margins
     for k in range(len(q)):
         for p in np.flatnonzero(need[k]):
-            expected[k, p], expected_exact[k, p] = reference.pair_bound(q[k], int(p), poses[k], plane=True)
+            gap = reference.plane_bounds(int(p), poses[k : k + 1])
+            if gap is None:
+                expected[k, p], expected_exact[k, p] = reference.pair_bound(
+                    q[k], int(p), poses[k], plane=True
+                )
+            elif gap[0] > margins[p]:
+                expected[k, p] = max(expected[k, p], gap[0])
+            else:
+                expected[k, p], expected_exact[k, p] = reference.pair_distance(q[k], int(p), poses[k]), True
     np.testing.assert_array_equal(exact, expected_exact)
     np.testing.assert_allclose(bounds, expected, rtol=0.0, atol=1e-12)
     truth = np.array([[reference.pair_distance(qk, p) for p in range(len(reference.pairs))] for qk in q])
