@@ -209,6 +209,24 @@ def _toppra():
     return toppra, _PathSpeedConstraint, _FreeEndTOPPRA
 
 
+@functools.lru_cache(maxsize=32)
+def _joint_constraints(velocity_limits: tuple[float, ...], acceleration_limits: tuple[float, ...]):
+    """TOPPRA's joint velocity and acceleration constraints for these limits, made once per limits.
+
+    Both hold only their limits (and the discretisation scheme): what they give TOPPRA is computed
+    from the path and gridpoints of each call (``compute_constraint_params``), so the same objects
+    serve every path with the same limits. Making them checks and formats every limit into a
+    description string, for each of the up to :data:`_BETWEEN_ROUNDS` instances of a call.
+    """
+    toppra = _toppra()[0]
+    return (
+        toppra.constraint.JointVelocityConstraint(np.array(velocity_limits)),
+        toppra.constraint.JointAccelerationConstraint(
+            np.array(acceleration_limits), toppra.constraint.DiscretizationType.Interpolation
+        ),
+    )
+
+
 def build_toppra(s, q, speed_cap, velocity_limits, acceleration_limits, *, free_end=False):
     """Build the TOPPRA instance without solving it (for inspection and benchmarks).
 
@@ -226,13 +244,11 @@ def build_toppra(s, q, speed_cap, velocity_limits, acceleration_limits, *, free_
     """
     toppra, _PathSpeedConstraint, _FreeEndTOPPRA = _toppra()
     path = toppra.SplineInterpolator(s, q)
-    constraints = [
-        toppra.constraint.JointVelocityConstraint(velocity_limits),
-        toppra.constraint.JointAccelerationConstraint(
-            acceleration_limits, toppra.constraint.DiscretizationType.Interpolation
-        ),
-        _PathSpeedConstraint(s, speed_cap),
-    ]
+    velocity, acceleration = _joint_constraints(
+        tuple(np.asarray(velocity_limits, dtype=float).tolist()),
+        tuple(np.asarray(acceleration_limits, dtype=float).tolist()),
+    )
+    constraints = [velocity, acceleration, _PathSpeedConstraint(s, speed_cap)]
     algorithm = _FreeEndTOPPRA if free_end else toppra.algorithm.TOPPRA
     return algorithm(constraints, path, gridpoints=s, solver_wrapper="seidel")
 

@@ -373,3 +373,32 @@ def test_a_timing_that_breaks_a_joint_speed_is_refused_naming_the_joint_and_wher
         time_parameterise(
             s, q, np.full(len(s), 0.2), np.array([3.0, 0.2]), np.full(2, 50.0), start_stop=False
         )
+
+
+def test_joint_constraints_kept_between_calls_time_as_toppra_built_afresh():
+    """TOPPRA built with the constraint objects of earlier calls (other limits between) equals one built from nothing."""
+    s, q = smooth_path(n_pts=201, seed=3)
+    cap = np.full(len(s), 0.3)
+    vlim, alim = np.full(N_JOINTS, 0.8), np.full(N_JOINTS, 4.0)
+    time_parameterise(s, q, cap, vlim, alim)
+    time_parameterise(s, q, cap, 2.0 * vlim, 0.5 * alim)  # other limits: other constraint objects
+    kept = timing.build_toppra(s, q, cap, vlim, alim)
+    other = timing.build_toppra(s, q, cap, 2.0 * vlim, 0.5 * alim)
+    # the reference: toppra's own constraints made for this call only, on the same spline and grid
+    fresh = toppra.algorithm.TOPPRA(
+        [
+            toppra.constraint.JointVelocityConstraint(vlim),
+            toppra.constraint.JointAccelerationConstraint(
+                alim, toppra.constraint.DiscretizationType.Interpolation
+            ),
+            timing._toppra()[1](s, cap),
+        ],
+        toppra.SplineInterpolator(s, q),
+        gridpoints=s,
+        solver_wrapper="seidel",
+    )
+    sd_fresh = fresh.compute_parameterization(0.0, 0.0)[1]
+    sd_kept = kept.compute_parameterization(0.0, 0.0)[1]
+    sd_other = other.compute_parameterization(0.0, 0.0)[1]
+    np.testing.assert_array_equal(sd_kept, sd_fresh)
+    assert not np.allclose(sd_other, sd_fresh)  # the limits bind: other limits, another timing

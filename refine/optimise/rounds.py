@@ -145,10 +145,11 @@ class RoundLoop:
             raise TimeLimitReached
         check_cancelled("solve")
         p = self.problem
+        keys = _row_keys(p)  # the same rows name the start multipliers and the answer's
         extra = {}
         if warm and self.multipliers is not None:
             lam_g, lam_x = self.multipliers
-            extra["lam_g0"] = np.array([lam_g.get(key, 0.0) for key in _row_keys(p)])
+            extra["lam_g0"] = np.array([lam_g.get(key, 0.0) for key in keys])
             if len(lam_x) == len(p.lbx):
                 extra["lam_x0"] = lam_x
         name = SOLVER_LABELS[p.solver_name]
@@ -161,7 +162,7 @@ class RoundLoop:
         stats = {**p.solver.stats(), "solver": name}
         after_solve(str(stats.get("return_status", "unknown")), p.watch is not None and p.watch.interrupted)
         self.multipliers = (
-            dict(zip(_row_keys(p), np.asarray(sol["lam_g"]).ravel().tolist(), strict=True)),
+            dict(zip(keys, np.asarray(sol["lam_g"]).ravel().tolist(), strict=True)),
             np.asarray(sol["lam_x"]).ravel(),
         )
         status = str(stats.get("return_status", "unknown"))
