@@ -16,6 +16,7 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from refine.fuse.align import align, demo_tcp_poses
 from refine.fuse.order import orient, reorder
+from refine.frames import transform_points
 from refine.paths import CadPath, Demonstration, FusedPath
 
 logger = logging.getLogger(__name__)
@@ -80,4 +81,5 @@ def fuse(
         order,
         exact_s=cad.exact_s,
         exact=cad.exact,
+        demo_positions=None if a.corrected is None else transform_points(source_in_world, a.corrected),
     )

@@ -220,8 +220,13 @@ def page_script() -> str:
 MODULES: dict[str, Path] = {
     "scene3d.js": HERE / "scene3d.js",
     **{name: HERE / "three" / name for name in ("three.module.min.js", "OrbitControls.js", "TransformControls.js")},
+    **{
+        f"lines/{name}.js": HERE / "three" / "lines" / f"{name}.js"
+        for name in ("Line2", "LineGeometry", "LineMaterial", "LineSegments2", "LineSegmentsGeometry")
+    },
 }
-"""The scripts the page imports, by the name it asks for: the 3D view and three.js (MIT, shipped in
+"""The scripts the page imports, by the name it asks for: the 3D view and three.js with its fat lines
+(``lines/``: lines of a width in pixels, which WebGL's own lines do not have) (MIT, shipped in
 ``refine/serve/three/`` with its licence, so the page needs no network)."""
 
 
