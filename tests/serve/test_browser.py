@@ -435,10 +435,10 @@ def _the_demonstration_is_drawn_as_recorded_and_as_the_fusion_uses_it_beside_the
 
 LINE_WIDTH_JS = """async ([factor]) => {
   const m = await import('./scene3d.js');
-  const view = document.getElementById('scene').view, line = view.demoLines.recorded;
+  const view = document.getElementById('scene').view, line = view.demoLines.aligned;
   const shown = view.scene.children.map((o) => o.visible);
   view.scene.children.forEach((o) => { o.visible = o === view.groups.demo; });
-  view.demoLines.aligned.visible = false;
+  line.visible = true; view.demoLines.recorded.visible = false;
   const eye = view.camera.position.clone();
   view.camera.position.sub(view.orbit.target).multiplyScalar(factor).add(view.orbit.target);
   view.camera.updateMatrixWorld();
@@ -452,11 +452,14 @@ LINE_WIDTH_JS = """async ([factor]) => {
   view.camera.position.copy(eye); view.camera.updateMatrixWorld();
   view.scene.children.forEach((o, k) => { o.visible = shown[k]; });
   view.demoLines.aligned.visible = document.getElementById('show-aligned').checked;
+  view.demoLines.recorded.visible = document.getElementById('show-recorded').checked;
   view.render();
   return { url, length, width: line.material.linewidth };
 }"""
-"""The recorded demonstration drawn alone, the camera ``factor`` times as far from its target: the
-canvas as a PNG, the line's length on the screen [px] and the width its material asks for [px]."""
+"""The demonstration as fused drawn alone (one point per waypoint, 5 mm apart: the recorded one's
+noise of a millimetre between samples a millimetre apart would make its length on the screen
+twice its path's), the camera ``factor`` times as far from its target: the canvas as a PNG, the
+line's length on the screen [px] and the width its material asks for [px]."""
 
 
 def _lines_are_drawn_as_wide_in_pixels_at_any_zoom(pages):
@@ -473,13 +476,13 @@ def _lines_are_drawn_as_wide_in_pixels_at_any_zoom(pages):
         png = base64.b64decode(got["url"].split(",", 1)[1])
         image = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=float)
         Image.fromarray(image.astype(np.uint8)).save(ARTIFACTS / f"line-width-{factor:g}.png")
-        green = np.linalg.norm(image - [0x27, 0xAE, 0x60], axis=2) < 80  # the recorded line's colour
-        widths.append(green.sum() / got["length"])  # its pixels over its length: its width [px]
+        brown = np.linalg.norm(image - [0x8D, 0x6E, 0x63], axis=2) < 80  # the line's colour
+        widths.append(brown.sum() / got["length"])  # its pixels over its length: its width [px]
     # the width asked (3 px) at both distances; WebGL's own lines would be 1 px wide
     assert got["width"] == 3
     assert all(2.2 < w < 4.0 for w in widths), widths
     assert abs(widths[1] / widths[0] - 1.0) < 0.2, widths
-    pages["summary"].append(f"refine serve: the recorded demonstration drawn {widths[0]:.2f} px wide, {widths[1]:.2f} px twice as far")
+    pages["summary"].append(f"refine serve: the demonstration as fused drawn {widths[0]:.2f} px wide, {widths[1]:.2f} px twice as far")
 
 
 def _hovering_a_waypoint_labels_its_index_deviation_clearance_and_speed(server, pages):

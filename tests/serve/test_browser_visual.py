@@ -160,7 +160,7 @@ def test_the_robot_is_drawn_by_its_visual_meshes_where_its_links_are_and_by_its_
             "async () => { const THREE = await import('three'); const v = document.getElementById('scene').view;"
             " v.robotMeshes.forEach((m) => m.updateMatrixWorld(true)); const out = {};"
             " v.robotMeshes.filter((m) => m.userData.shown === 'visual').forEach((m) => {"
-            " const b = new THREE.Box3().setFromObject(m); out[m.name.split('/')[0]] = [b.min.toArray(), b.max.toArray()]; });"
+            " const b = new THREE.Box3().setFromObject(m, true); out[m.name.split('/')[0]] = [b.min.toArray(), b.max.toArray()]; });"
             " return out; }"
         )
         for link in LINKS:
