@@ -14,9 +14,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation, Slerp
 
+from refine.frames import transform_points
 from refine.fuse.align import align, demo_tcp_poses
 from refine.fuse.order import orient, reorder
-from refine.frames import transform_points
 from refine.paths import CadPath, Demonstration, FusedPath
 
 logger = logging.getLogger(__name__)

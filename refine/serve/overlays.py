@@ -217,7 +217,10 @@ def visual_meshes(urdf: Any) -> tuple[list[tuple[str, str, Any, np.ndarray]], st
     loaded = []
     for link, name, filename, T, scale in visual:
         if "://" in filename:
-            return [], f"visual mesh {filename!r} is a URL, not a file beside the URDF: the collision shapes are drawn"
+            return (
+                [],
+                f"visual mesh {filename!r} is a URL, not a file beside the URDF: the collision shapes are drawn",
+            )
         try:
             mesh = read_mesh(folder / filename, f"{Path(urdf).name}: link {link!r}, visual {name!r}")
         except InputError as e:

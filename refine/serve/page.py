@@ -119,7 +119,10 @@ CALIBRATIONS: dict[str, tuple[str, str]] = {
     "receiver": ("receiver: the tip resting on known points (tracker log + points)", "log points"),
     "trace": ("receiver: the tip traced along the CAD path (tracker log)", "log"),
     "tcp": ("TCP: the robot's tip on one point from four or more poses (robot readings)", "readings six"),
-    "workpiece": ("workpiece: the robot's TCP touched onto CAD points (robot readings + points)", "readings points"),
+    "workpiece": (
+        "workpiece: the robot's TCP touched onto CAD points (robot readings + points)",
+        "readings points",
+    ),
 }
 """The calibrations the page offers (:data:`refine.serve.calibration.KINDS`): label and the inputs shown."""
 
@@ -152,8 +155,8 @@ def page_html(title: str, errors_js: str) -> str:
         "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
         f"<title>refine serve: {html.escape(title)}</title>"
         f"<script>{errors_js}</script><style>{_CSS}</style>"
-                "<script type='importmap'>{\"imports\": {\"three\": \"./three/three.module.min.js\", "
-        "\"three/addons/\": \"./three/\"}}</script></head><body>"
+        '<script type=\'importmap\'>{"imports": {"three": "./three/three.module.min.js", '
+        '"three/addons/": "./three/"}}</script></head><body>'
         "<div id='side'><ul id='js-errors' hidden></ul>"
         "<div id='state'>connecting...</div><div id='error' hidden></div>"
         "<div id='verdict-box'></div>"
@@ -222,7 +225,10 @@ def page_script() -> str:
 
 MODULES: dict[str, Path] = {
     "scene3d.js": HERE / "scene3d.js",
-    **{name: HERE / "three" / name for name in ("three.module.min.js", "OrbitControls.js", "TransformControls.js")},
+    **{
+        name: HERE / "three" / name
+        for name in ("three.module.min.js", "OrbitControls.js", "TransformControls.js")
+    },
     **{
         f"lines/{name}.js": HERE / "three" / "lines" / f"{name}.js"
         for name in ("Line2", "LineGeometry", "LineMaterial", "LineSegments2", "LineSegmentsGeometry")

@@ -95,7 +95,13 @@ def _the_first_screen_shows_the_cell_and_the_verdict(pages):
     assert page.inner_text("#verdict .badge") == "ok"
     assert "orientation deviation from the demonstration" in page.inner_text("#verdict")
     drawn = json.loads(page.get_attribute("#scene", "data-objects"))
-    for name in ("table", "glass", "cup_1", "robot", "pass 1 (ok)"):  # the cell's objects, the robot, the path
+    for name in (
+        "table",
+        "glass",
+        "cup_1",
+        "robot",
+        "pass 1 (ok)",
+    ):  # the cell's objects, the robot, the path
         assert name in drawn
     page.screenshot(path=str(ARTIFACTS / "first-screen.png"))
     assert pages["errors"] == []
@@ -150,7 +156,9 @@ def _the_frames_drawn_and_dragged_are_those_of_the_problem(server, pages):
     assert np.abs(np.subtract(got["back"]["rpy_deg"], pose["rpy_deg"])).max() < 1e-4
     # the TCP gizmo sits on the path's first waypoint when the scrubber is at its start
     page.select_option("#gizmo", "tool.tcp_in_flange")
-    tcp = page.evaluate("document.getElementById('scene').view.frames['tool.tcp_in_flange'].elements.slice(12, 15)")
+    tcp = page.evaluate(
+        "document.getElementById('scene').view.frames['tool.tcp_in_flange'].elements.slice(12, 15)"
+    )
     first = server["session"].answer.result.passes[0].fused.positions[0]
     assert np.linalg.norm(np.subtract(tcp, first)) < 1e-5  # [m]
     page.select_option("#gizmo", "")
@@ -183,9 +191,7 @@ def _a_change_of_the_cone_resolves_and_both_tabs_show_it(pages):
 
 
 def _move_x(page, mm: int) -> None:
-    page.eval_on_selector(
-        "#move-x", f"(e) => {{ e.value = '{mm}'; e.dispatchEvent(new Event('input')); }}"
-    )
+    page.eval_on_selector("#move-x", f"(e) => {{ e.value = '{mm}'; e.dispatchEvent(new Event('input')); }}")
 
 
 def _the_part_moved_away_out_of_reach_fails_with_its_cause_and_moved_back_is_ok(pages):
@@ -330,14 +336,17 @@ def _write_saves_the_problem_and_writes_what_refine_run_writes(pages, server, tm
                 # the files' checksums cover PathML's time of writing and the report's timings: the
                 # contents are compared one by one here, the other files' sizes in result.json
                 d["files"] = {
-                    e: f["bytes"] for e, f in d.get("files", {}).items() if e not in ("report.html", "motions.csv")
+                    e: f["bytes"]
+                    for e, f in d.get("files", {}).items()
+                    if e not in ("report.html", "motions.csv")
                 }
                 for m in d.get("motions", []):
                     m.pop("planner_time_s", None)  # a time measured, not a result
             assert da == db
         elif name == "motions.csv":  # every column but the planner's time
             rows = [
-                [line.split(",")[:8] + line.split(",")[9:] for line in x.decode().splitlines()] for x in (a, b)
+                [line.split(",")[:8] + line.split(",")[9:] for line in x.decode().splitlines()]
+                for x in (a, b)
             ]
             assert rows[0] == rows[1], name
         elif name != "report.html":  # the report shows the run's timings
@@ -384,7 +393,8 @@ def _the_demonstration_is_drawn_as_recorded_and_as_the_fusion_uses_it_beside_the
     # the log's first record by hand: inches, R_S_E = Rz(azimuth) Ry(elevation) Rx(roll); the TCP is
     # T_F_S T_S_E inv(T_TCP_E) with problem.toml's source_in_world and sensor_in_tcp
     rows = [
-        line.split() for line in (ROOT / "problems/glass_adhesive/demo.liberty").read_text().splitlines()
+        line.split()
+        for line in (ROOT / "problems/glass_adhesive/demo.liberty").read_text().splitlines()
         if line and not line.startswith("#")
     ]
     first = rows[0]
@@ -418,7 +428,10 @@ def _the_demonstration_is_drawn_as_recorded_and_as_the_fusion_uses_it_beside_the
         d = np.linalg.norm(sensor - np.outer(_smoothstep_z_m(d), [0.0, 0.0, 1.0]), axis=1)
     off = raw - aligned - np.outer(_smoothstep_z_m(d), [0.0, 0.0, 1.0])  # {S} z is {F} z here
     miss = np.linalg.norm(off, axis=1)
-    assert np.median(miss) < 0.003 and np.percentile(miss, 95) < 0.006, (np.median(miss), np.percentile(miss, 95))
+    assert np.median(miss) < 0.003 and np.percentile(miss, 95) < 0.006, (
+        np.median(miss),
+        np.percentile(miss, 95),
+    )
     assert np.median(raw[:, 2] - aligned[:, 2]) > 0.02  # the correction is no small one
     assert page.is_checked("#show-recorded") and not page.is_checked("#show-aligned")
     visible = "(n) => document.getElementById('scene').view.demoLines[n].visible"
@@ -482,7 +495,9 @@ def _lines_are_drawn_as_wide_in_pixels_at_any_zoom(pages):
     assert got["width"] == 3
     assert all(2.2 < w < 4.0 for w in widths), widths
     assert abs(widths[1] / widths[0] - 1.0) < 0.2, widths
-    pages["summary"].append(f"refine serve: the demonstration as fused drawn {widths[0]:.2f} px wide, {widths[1]:.2f} px twice as far")
+    pages["summary"].append(
+        f"refine serve: the demonstration as fused drawn {widths[0]:.2f} px wide, {widths[1]:.2f} px twice as far"
+    )
 
 
 def _hovering_a_waypoint_labels_its_index_deviation_clearance_and_speed(server, pages):

@@ -31,7 +31,9 @@ playwright = pytest.importorskip("playwright.sync_api", reason="playwright is in
 pytestmark = [
     pytest.mark.slow,
     pytest.mark.skipif(not CHROMIUM.exists(), reason="chromium is not installed (.ci/run installs it)"),
-    pytest.mark.skipif(not MESHES.is_dir(), reason="the reference meshes (../shared/robot-meshes) are not here"),
+    pytest.mark.skipif(
+        not MESHES.is_dir(), reason="the reference meshes (../shared/robot-meshes) are not here"
+    ),
 ]
 
 
@@ -96,7 +98,9 @@ def _scene_pixels(page) -> np.ndarray:
         "() => { const v = document.getElementById('scene').view; v.renderer.render(v.scene, v.camera);"
         " return v.renderer.domElement.toDataURL('image/png'); }"
     )
-    return np.asarray(Image.open(io.BytesIO(base64.b64decode(url.split(",", 1)[1]))).convert("RGB"), dtype=float)
+    return np.asarray(
+        Image.open(io.BytesIO(base64.b64decode(url.split(",", 1)[1]))).convert("RGB"), dtype=float
+    )
 
 
 def _share_of(image: np.ndarray, colour: int) -> float:
@@ -142,9 +146,7 @@ def test_the_robot_is_drawn_by_its_visual_meshes_where_its_links_are_and_by_its_
         assert note.startswith("visual meshes: 7 ("), note
         assert page.is_enabled("#show-collision") and not page.is_checked("#show-collision")
         view = "document.getElementById('scene').view"
-        shown = page.evaluate(
-            f"() => {view}.robotMeshes.map((m) => [m.name, m.userData.shown, m.visible])"
-        )
+        shown = page.evaluate(f"() => {view}.robotMeshes.map((m) => [m.name, m.userData.shown, m.visible])")
         visual = [name for name, kind, visible in shown if kind == "visual" and visible]
         assert sorted(visual) == sorted(f"{link}/{link}_mesh (visual)" for link in LINKS)
         assert not any(visible for _, kind, visible in shown if kind == "collision")
@@ -178,4 +180,6 @@ def test_the_robot_is_drawn_by_its_visual_meshes_where_its_links_are_and_by_its_
         assert _share_of(_scene_pixels(page), 0xF39C12) > 0.5 * orange
         assert errors == [], errors
         browser.close()
-    summary.append(f"refine serve with visual meshes ({note}): screenshots visual-meshes.png, collision-shapes.png")
+    summary.append(
+        f"refine serve with visual meshes ({note}): screenshots visual-meshes.png, collision-shapes.png"
+    )
