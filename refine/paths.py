@@ -292,6 +292,10 @@ class FusedPath:
             (a path without CAD geometry: arrays, the later passes of a multi-pass weld; a PathML
             track's geometry is its polyline).
         exact: the CAD geometry in {F} [m], shape (M, 3) (see :class:`CadPath`).
+        demo_positions: the demonstrated TCP at ``t_demo`` after the fusion's tracker position
+            correction, in {F} [m], shape (N, 3): the demonstration as the fusion matched it (its
+            distance to ``positions`` is ``residual``), or None (a path not aligned to a
+            demonstration: arrays, PathML, the later passes of a multi-pass weld).
     """
 
     s: Array
@@ -303,6 +307,7 @@ class FusedPath:
     order: PathOrder | None = None
     exact_s: Array | None = None
     exact: Array | None = None
+    demo_positions: Array | None = None
 
     def __post_init__(self) -> None:
         n = len(self.s)
@@ -312,6 +317,8 @@ class FusedPath:
         _check_rows("FusedPath.speed", self.speed, n, ())
         _check_rows("FusedPath.t_demo", self.t_demo, n, ())
         _check_rows("FusedPath.residual", self.residual, n, ())
+        if self.demo_positions is not None:
+            _check_rows("FusedPath.demo_positions", self.demo_positions, n, (3,))
         if np.any(self.speed <= 0.0):
             raise InputError("FusedPath.speed: every demonstrated speed must be > 0 m/s")
 

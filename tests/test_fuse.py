@@ -299,3 +299,30 @@ def test_non_increasing_demo_times_are_rejected(loop):
     t[-5] = t[-6]
     with pytest.raises(InputError, match="strictly increasing"):
         fuse(case.cad, replace(case.demo, t=t), T_F_S, T_TCP_E)
+
+
+def test_the_demonstration_as_fused_is_the_true_tool_path_once_the_distortion_is_corrected(loop):
+    case, fused = loop
+    # the worker's true TCP at each matched time, from the simulation itself
+    truth = case.position_of_s(case.s_of_t(fused.t_demo))
+    # the demonstrated TCP at the matched times before any correction, by hand: the positions in {S}
+    # moved by the sensor's lever, interpolated in time, into {F}
+    p = case.demo.positions + np.einsum("mij,j->mi", case.demo.rotations, invert_transform(T_TCP_E)[:3, 3])
+    raw = (
+        np.column_stack([np.interp(fused.t_demo, case.demo.t, c) for c in p.T]) @ T_F_S[:3, :3].T
+        + T_F_S[:3, 3]
+    )
+    corrected = np.linalg.norm(fused.demo_positions - truth, axis=1)
+    uncorrected = np.linalg.norm(raw - truth, axis=1)
+    log.info(
+        "demo as fused: %.2f mm median, %.2f mm max from the truth (%.1f mm before the correction)",
+        1e3 * np.median(corrected),
+        1e3 * corrected.max(),
+        1e3 * np.median(uncorrected),
+    )
+    assert float(np.median(uncorrected)) > 0.02  # the z distortion (60 mm far from the receiver)
+    assert float(np.median(corrected)) < 2e-3 and float(corrected.max()) < 6e-3
+    # the fusion's residual is the distance of this demonstration to the CAD point
+    np.testing.assert_allclose(
+        np.linalg.norm(fused.demo_positions - fused.positions, axis=1), fused.residual, atol=1e-12
+    )

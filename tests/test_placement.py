@@ -143,6 +143,8 @@ def test_fusing_the_moved_problem_gives_the_path_moved(tmp_path):
     angle = Rotation.from_matrix(np.einsum("nji,njk->nik", direct.rotations, moved.rotations)).magnitude()
     assert np.degrees(angle).max() < 1e-6
     assert np.allclose(direct.speed, moved.speed) and np.allclose(direct.s, moved.s)
+    assert direct.demo_positions is not None  # the demonstration as fused moves with the path
+    assert np.allclose(direct.demo_positions, moved.demo_positions, atol=1e-9)
 
 
 # ---- the case: a part 0.15 m too far ------------------------------------------------------------

@@ -83,6 +83,8 @@ class Alignment:
             path point of the corrected demo's mean position in the start pause, signed along the
             path [m]; 0 on an open path. The demo's start position is its mean over the first
             ``START_WINDOW_S`` (the start pause), but not past ``motion_start``.
+        corrected: the demo TCP at ``t`` after the tracker position correction, in the receiver
+            frame {S} [m], shape (N, 3) (``residual`` is its distance to the CAD point), or None.
     """
 
     t: Array
@@ -92,6 +94,7 @@ class Alignment:
     raw_median_residual: float
     max_correction: float
     start_shift_m: float = 0.0
+    corrected: Array | None = None
 
 
 def demo_tcp_poses(demo: Demonstration, source_in_world: ArrayLike, sensor_in_tcp: ArrayLike) -> Array:
@@ -345,7 +348,8 @@ def align(
     s_raw = _project(pc, np.interp(t, tg, sg), cad_s, cad_S, 0.5 * h + 0.005)[0]
     v, t_match = _time_law(t, s_raw, cad_s, speed_smoothing_m)
     floor = SPEED_FLOOR_FRACTION * float(np.nanmedian(v)) if np.any(np.isfinite(v)) else np.nan
-    residual = np.linalg.norm(resample_in_time(t, pc, t_match) - cad_S, axis=1)
+    corrected = resample_in_time(t, pc, t_match)
+    residual = np.linalg.norm(corrected - cad_S, axis=1)
 
     # ---- does the demonstration cover the path?
     span, max_corr = float(t_match[-1] - t_match[0]), float(np.linalg.norm(correction, axis=1).max())
@@ -385,4 +389,4 @@ def align(
         residual.max() * 1e3,
         100 * np.mean(speed == floor),
     )
-    return Alignment(t_match, speed, floor, residual, raw_median, max_corr, shift)
+    return Alignment(t_match, speed, floor, residual, raw_median, max_corr, shift, corrected)

@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation, Slerp
 
+from refine.frames import transform_points
 from refine.fuse.align import align, demo_tcp_poses
 from refine.fuse.order import orient, reorder
 from refine.paths import CadPath, Demonstration, FusedPath
@@ -80,4 +81,5 @@ def fuse(
         order,
         exact_s=cad.exact_s,
         exact=cad.exact,
+        demo_positions=None if a.corrected is None else transform_points(source_in_world, a.corrected),
     )

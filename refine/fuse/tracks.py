@@ -100,6 +100,7 @@ def split_tracks(fused: FusedPath, tracks: list[CadPath], ranges: list[tuple[int
                 order=fused.order,
                 exact_s=track.exact_s,
                 exact=track.exact,
+                demo_positions=None if fused.demo_positions is None else fused.demo_positions[k].copy(),
             )
         )
     return out

@@ -435,4 +435,7 @@ def moved_path(fused: FusedPath, transform: Array) -> FusedPath:
         positions=fused.positions @ D[:3, :3].T + D[:3, 3],
         rotations=np.einsum("ij,njk->nik", D[:3, :3], fused.rotations),
         exact=None if fused.exact is None else fused.exact @ D[:3, :3].T + D[:3, 3],
+        demo_positions=None
+        if fused.demo_positions is None
+        else fused.demo_positions @ D[:3, :3].T + D[:3, 3],
     )

@@ -289,7 +289,7 @@ def create_app(session: Session, out_dir: Path, *, token: str | None = None) -> 
         Route("/", page),
         Route("/page.js", script),
         Route("/scene3d.js", module),
-        Route("/three/{name:str}", module),
+        Route("/three/{name:path}", module),
         Route("/plotly.js", plotly),
         Route("/favicon.ico", no_icon),
         Route("/api/change", change, methods=["POST"]),

@@ -6,11 +6,12 @@
   path's rows thinned to at most :data:`MOTION_POINTS`), its via points' TCP, its status and the
   figures the page lists when the motion is selected.
 * :func:`demonstration_lines`: the demonstrated TCP in {F} [m] as the tracker log records it
-  (every sample, thinned to at most :data:`DEMO_POINTS`, the first always kept) and as aligned to
-  the CAD path (the cleaned demonstration at the time matched to each waypoint, ``t_demo``: one
-  point per waypoint, before the fusion's tracker position correction, so its gap to the CAD
-  point shows the tracker's error), through the problem's ``source_in_world`` and ``sensor_in_tcp``. The logs are read once per
-  file and settings and kept (:class:`DemoCache`); a frame change only moves them.
+  (every sample, thinned to at most :data:`DEMO_POINTS`, the first always kept, through the
+  problem's ``source_in_world`` and ``sensor_in_tcp``: the tracker's positions as measured, with
+  their distortion) and as the fusion uses it (``FusedPath.demo_positions``: the cleaned
+  demonstration at the time matched to each waypoint, ``t_demo``, after the fusion's tracker
+  position correction, one point per waypoint; its gap to the CAD point is the fusion's
+  residual). The log is read once per file and settings and kept (:class:`DemoCache`).
 """
 
 from __future__ import annotations
@@ -103,24 +104,23 @@ def motion_lines(result: Any) -> list[dict[str, Any]]:
 
 
 class DemoCache:
-    """The raw and the cleaned demonstration and the robot's visual meshes, each read once per file (a file changed is read again)."""
+    """The tracker log and the robot's visual meshes, each read once per file (a file changed is read again)."""
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self._key: str | None = None
-        self._logs: tuple[Any, Any] | None = None
+        self._log: Any = None
 
-    def logs(self, settings: Any) -> tuple[Any, Any]:
-        """(raw tracker log, cleaned demonstration) of ``settings`` (``problem.demonstration``)."""
-        from refine.demo import clean_demonstration, read_tracker_log
+    def log(self, settings: Any) -> Any:
+        """The tracker log of ``settings`` (``problem.demonstration``) as read, before cleaning."""
+        from refine.demo import read_tracker_log
 
         path = settings.file
         key = repr((settings, path.stat().st_mtime_ns if path.exists() else None))
         with self._lock:
-            if self._key != key or self._logs is None:
-                raw = read_tracker_log(settings)
-                self._logs, self._key = (raw, clean_demonstration(raw, settings)), key
-            return self._logs
+            if self._key != key or self._log is None:
+                self._log, self._key = read_tracker_log(settings), key
+            return self._log
 
     def visual(self, robot: Any) -> tuple[list[Any], str]:
         """:func:`visual_meshes` of ``robot``'s URDF, read once per file."""
@@ -140,19 +140,21 @@ def demonstration_lines(result: Any, cache: DemoCache) -> dict[str, Any]:
         return {}
     from refine.fuse.align import demo_tcp_poses
 
-    raw, demo = cache.logs(problem.demonstration)
-    source, sensor = problem.frames.source_in_world, problem.tool.sensor_in_tcp
-    recorded = demo_tcp_poses(raw, source, sensor)[:, :3, 3]
-    recorded = recorded[_thin(len(recorded), DEMO_POINTS)]
-    cleaned = demo_tcp_poses(demo, source, sensor)[:, :3, 3]
-    aligned = []
-    for p in result.passes:
-        t = np.clip(p.fused.t_demo, demo.t[0], demo.t[-1])
-        aligned.append(np.column_stack([np.interp(t, demo.t, cleaned[:, a]) for a in range(3)]))
-    return {
-        "recorded": {"title": f"recorded ({problem.demonstration.file.name})", **_xyz(recorded)},
-        "aligned": {"title": "aligned in time to the CAD path (before the tracker correction)", **_xyz(np.vstack(aligned))},
+    raw = cache.log(problem.demonstration)
+    recorded = demo_tcp_poses(raw, problem.frames.source_in_world, problem.tool.sensor_in_tcp)[:, :3, 3]
+    out = {
+        "recorded": {
+            "title": f"as recorded ({problem.demonstration.file.name}, before the tracker correction)",
+            **_xyz(recorded[_thin(len(recorded), DEMO_POINTS)]),
+        }
     }
+    aligned = [p.fused.demo_positions for p in result.passes if p.fused.demo_positions is not None]
+    if aligned:
+        out["aligned"] = {
+            "title": "as the fusion uses it (at each waypoint's matched time, after the tracker correction)",
+            **_xyz(np.vstack(aligned)),
+        }
+    return out
 
 
 VISUAL_FACES = 60_000
@@ -215,7 +217,10 @@ def visual_meshes(urdf: Any) -> tuple[list[tuple[str, str, Any, np.ndarray]], st
     loaded = []
     for link, name, filename, T, scale in visual:
         if "://" in filename:
-            return [], f"visual mesh {filename!r} is a URL, not a file beside the URDF: the collision shapes are drawn"
+            return (
+                [],
+                f"visual mesh {filename!r} is a URL, not a file beside the URDF: the collision shapes are drawn",
+            )
         try:
             mesh = read_mesh(folder / filename, f"{Path(urdf).name}: link {link!r}, visual {name!r}")
         except InputError as e:

@@ -119,7 +119,10 @@ CALIBRATIONS: dict[str, tuple[str, str]] = {
     "receiver": ("receiver: the tip resting on known points (tracker log + points)", "log points"),
     "trace": ("receiver: the tip traced along the CAD path (tracker log)", "log"),
     "tcp": ("TCP: the robot's tip on one point from four or more poses (robot readings)", "readings six"),
-    "workpiece": ("workpiece: the robot's TCP touched onto CAD points (robot readings + points)", "readings points"),
+    "workpiece": (
+        "workpiece: the robot's TCP touched onto CAD points (robot readings + points)",
+        "readings points",
+    ),
 }
 """The calibrations the page offers (:data:`refine.serve.calibration.KINDS`): label and the inputs shown."""
 
@@ -152,8 +155,8 @@ def page_html(title: str, errors_js: str) -> str:
         "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
         f"<title>refine serve: {html.escape(title)}</title>"
         f"<script>{errors_js}</script><style>{_CSS}</style>"
-                "<script type='importmap'>{\"imports\": {\"three\": \"./three/three.module.min.js\", "
-        "\"three/addons/\": \"./three/\"}}</script></head><body>"
+        '<script type=\'importmap\'>{"imports": {"three": "./three/three.module.min.js", '
+        '"three/addons/": "./three/"}}</script></head><body>'
         "<div id='side'><ul id='js-errors' hidden></ul>"
         "<div id='state'>connecting...</div><div id='error' hidden></div>"
         "<div id='verdict-box'></div>"
@@ -200,9 +203,12 @@ def page_html(title: str, errors_js: str) -> str:
         "<span class='note'>(the numbers on the left follow; a drag re-solves as it goes)</span></div>"
         "<div class='controls'><span>show</span>"
         "<label><input type='checkbox' id='show-motions' checked> the planned motions (purple)</label>"
-        "<label><input type='checkbox' id='show-recorded' checked> the demonstration as recorded (green)</label>"
-        "<label><input type='checkbox' id='show-aligned'> as aligned in time to the CAD path (brown)</label>"
-        "<label><input type='checkbox' id='show-collision' disabled> the robot's collision shapes</label>"
+        "<label><input type='checkbox' id='show-recorded' checked> the demonstration as recorded (green: "
+        "the tracker's positions, before the correction of its distortion)</label>"
+        "<label><input type='checkbox' id='show-aligned'> the demonstration as the fusion uses it (brown: "
+        "at each waypoint's matched time, the tracker's distortion corrected)</label>"
+        "<label><input type='checkbox' id='show-collision' disabled> the robot's collision shapes instead of "
+        "its visual meshes</label>"
         "<span id='visual-note' class='note'></span></div>"
         "<div id='scene'><pre id='hover' hidden></pre></div>"
         "<div id='motion-box'><h2>Planned motions (a click selects one)</h2>"
@@ -219,9 +225,17 @@ def page_script() -> str:
 
 MODULES: dict[str, Path] = {
     "scene3d.js": HERE / "scene3d.js",
-    **{name: HERE / "three" / name for name in ("three.module.min.js", "OrbitControls.js", "TransformControls.js")},
+    **{
+        name: HERE / "three" / name
+        for name in ("three.module.min.js", "OrbitControls.js", "TransformControls.js")
+    },
+    **{
+        f"lines/{name}.js": HERE / "three" / "lines" / f"{name}.js"
+        for name in ("Line2", "LineGeometry", "LineMaterial", "LineSegments2", "LineSegmentsGeometry")
+    },
 }
-"""The scripts the page imports, by the name it asks for: the 3D view and three.js (MIT, shipped in
+"""The scripts the page imports, by the name it asks for: the 3D view and three.js with its fat lines
+(``lines/``: lines of a width in pixels, which WebGL's own lines do not have) (MIT, shipped in
 ``refine/serve/three/`` with its licence, so the page needs no network)."""
 
 

@@ -2,9 +2,45 @@
 // Positions are in the world frame {F} [m], z up. A robot shape's pose arrives as the 12 numbers of
 // the top three rows of its 4x4 transform (row-major); a frame's pose as {xyz [m], rpy_deg [deg]}
 // with fixed-axis X-Y-Z angles, R = Rz(rz) Ry(ry) Rx(rx), which is three.js's Euler order "ZYX".
+// Lines are three.js's fat lines (Line2, LineSegments2): WebGL draws its own lines 1 px wide
+// whatever the width asked; these are quads of WIDTH_PX pixels on the screen at any zoom.
 import * as THREE from "three";
 import { OrbitControls } from "three/addons/OrbitControls.js";
 import { TransformControls } from "three/addons/TransformControls.js";
+import { Line2 } from "three/addons/lines/Line2.js";
+import { LineGeometry } from "three/addons/lines/LineGeometry.js";
+import { LineMaterial } from "three/addons/lines/LineMaterial.js";
+import { LineSegments2 } from "three/addons/lines/LineSegments2.js";
+import { LineSegmentsGeometry } from "three/addons/lines/LineSegmentsGeometry.js";
+
+export const WIDTH_PX = { path: 4, demo: 3, motion: 3, axis: 1.5 };   // line widths on the screen [px]
+
+function fatLine(points, width, color, colors) {   // a Line2 through points [x0, y0, z0, x1, ...]
+  const p = points.length >= 6 ? points : points.concat(points);   // one point: a dot of zero length
+  const g = new LineGeometry();
+  g.setPositions(p);
+  if (colors) { g.setColors(colors.length === p.length ? colors : colors.concat(colors)); }
+  return new Line2(g, new LineMaterial({ color: colors ? 0xffffff : color, linewidth: width, vertexColors: !!colors, worldUnits: false }));
+}
+
+function fatSegments(points, width, color) {   // LineSegments2 of the pairs of points
+  const g = new LineSegmentsGeometry();
+  g.setPositions(points);
+  return new LineSegments2(g, new LineMaterial({ color, linewidth: width, worldUnits: false }));
+}
+
+export function linePoints(o) {   // the points a line (fat or not) is drawn through, [[x, y, z], ...]
+  const start = o.geometry.getAttribute("instanceStart"), end = o.geometry.getAttribute("instanceEnd");
+  const p = [];
+  if (!start) {
+    const a = o.geometry.getAttribute("position");
+    for (let k = 0; k < a.count; k++) { p.push([a.getX(k), a.getY(k), a.getZ(k)]); }
+    return p;
+  }
+  for (let k = 0; k < start.count; k++) { p.push([start.getX(k), start.getY(k), start.getZ(k)]); }
+  if (start.count) { p.push([end.getX(start.count - 1), end.getY(start.count - 1), end.getZ(start.count - 1)]); }
+  return p;
+}
 
 const VIRIDIS = [[68, 1, 84], [72, 40, 120], [62, 74, 137], [49, 104, 142], [38, 130, 142],
   [31, 158, 137], [53, 183, 121], [109, 205, 89], [180, 222, 44], [253, 231, 37]];
@@ -128,17 +164,24 @@ export class View {
 
   setParts(parts) {
     dispose(this.groups.robot);
+    const visual = parts.some((p) => p.kind === "visual");
     this.robotMeshes = parts.map((part) => {
-      const collision = part.kind === "robot" && parts.some((p) => p.kind === "visual");
+      const collision = part.kind === "robot" && visual;
       const mesh = new THREE.Mesh(meshGeometry(part), new THREE.MeshLambertMaterial({ color: part.kind === "tool" ? 0x505050 : (collision ? 0x5dade2 : 0xf39c12),
-        transparent: collision, opacity: collision ? 0.5 : 1 }));
+        transparent: collision, opacity: collision ? 0.75 : 1 }));
       mesh.name = part.name;
-      mesh.userData.collision = collision;   // a collision shape drawn beside the visual meshes: on demand
-      mesh.visible = !collision || this.showCollision === true;
+      // with visual meshes, the robot is drawn either by them or by its collision shapes (on demand)
+      mesh.userData.shown = part.kind === "visual" ? "visual" : (collision ? "collision" : "always");
+      mesh.visible = this.robotShown(mesh);
       mesh.matrixAutoUpdate = false;
       this.groups.robot.add(mesh);
       return mesh;
     });
+  }
+
+  robotShown(mesh) {
+    const kind = mesh.userData.shown;
+    return kind === "always" || (kind === "collision") === (this.showCollision === true);
   }
 
   showRobot(frame) {   // frame: one 12-number pose per part
@@ -161,24 +204,24 @@ export class View {
         const c = values && values[a] !== null ? viridis(hi > lo ? (values[a] - lo) / (hi - lo) : 0.5) : new THREE.Color(0x1f77b4);
         col.set([c.r, c.g, c.b], 3 * a);
       }
+      const line = fatLine(Array.from(pos), WIDTH_PX.path, null, Array.from(col));   // coloured per waypoint
+      line.name = path.name + " (" + path.status + ")";
+      this.groups.paths.add(line);
       const g = new THREE.BufferGeometry();
       g.setAttribute("position", new THREE.BufferAttribute(pos, 3));
       g.setAttribute("color", new THREE.BufferAttribute(col, 3));
-      const line = new THREE.Line(g, new THREE.LineBasicMaterial({ vertexColors: true }));
-      line.name = path.name + " (" + path.status + ")";
-      this.groups.paths.add(line);
-      const dots = new THREE.Points(g.clone(), new THREE.PointsMaterial({ vertexColors: true, size: 4, sizeAttenuation: false }));
-      dots.name = "waypoints";
+      const dots = new THREE.Points(g, new THREE.PointsMaterial({ vertexColors: true, size: 6, sizeAttenuation: false }));
+      dots.name = "waypoints";   // what the pointer picks (and a dot at each waypoint)
       this.groups.paths.add(dots);
       const axis = [];
       for (let a = 0; a + 1 < path.axis.x.length; a += 3) {
         axis.push(path.axis.x[a], path.axis.y[a], path.axis.z[a], path.axis.x[a + 1], path.axis.y[a + 1], path.axis.z[a + 1]);
       }
-      const ga = new THREE.BufferGeometry();
-      ga.setAttribute("position", new THREE.Float32BufferAttribute(axis, 3));
-      const axes = new THREE.LineSegments(ga, new THREE.LineBasicMaterial({ color: 0x555555 }));
-      axes.name = "tool axis";
-      this.groups.paths.add(axes);
+      if (axis.length) {
+        const axes = fatSegments(axis, WIDTH_PX.axis, 0x555555);
+        axes.name = "tool axis";
+        this.groups.paths.add(axes);
+      }
       for (const mark of path.marks) {
         const p = [];
         for (const k of mark.index) { p.push(path.x[k], path.y[k], path.z[k]); }
@@ -193,12 +236,10 @@ export class View {
     return { note, range };
   }
 
-  polyline(o, color, name) {   // a THREE.Line through o.x, o.y, o.z
+  polyline(o, color, name, width) {   // a fat line ``width`` px wide through o.x, o.y, o.z
     const p = [];
     for (let a = 0; a < o.x.length; a++) { p.push(o.x[a], o.y[a], o.z[a]); }
-    const g = new THREE.BufferGeometry();
-    g.setAttribute("position", new THREE.Float32BufferAttribute(p, 3));
-    const line = new THREE.Line(g, new THREE.LineBasicMaterial({ color }));
+    const line = fatLine(p, width, color, null);
     line.name = name;
     return line;
   }
@@ -206,7 +247,7 @@ export class View {
   setMotions(motions) {   // every planned motion, its via points as dots; one may be selected
     dispose(this.groups.motions);
     this.motionLines = motions.map((m, n) => {
-      const line = this.polyline(m, m.status === "ok" ? 0x8e44ad : 0xe74c3c, "motion: " + m.name + " (" + m.status + ")");
+      const line = this.polyline(m, m.status === "ok" ? 0x8e44ad : 0xe74c3c, "motion: " + m.name + " (" + m.status + ")", WIDTH_PX.motion);
       line.userData = { index: n };
       this.groups.motions.add(line);
       if (m.via.x.length) {
@@ -233,23 +274,23 @@ export class View {
     this.render();
   }
 
-  setDemo(demo) {   // the demonstration as recorded (green) and as aligned (brown)
+  setDemo(demo) {   // the demonstration as recorded (green) and as the fusion uses it (brown)
     dispose(this.groups.demo);
     this.demoLines = {};
     const colours = { recorded: 0x27ae60, aligned: 0x8d6e63 };
     for (const key of ["recorded", "aligned"]) {
       if (!demo || !demo[key]) { continue; }
-      const line = this.polyline(demo[key], colours[key], "demonstration " + key);
+      const line = this.polyline(demo[key], colours[key], "demonstration " + key, WIDTH_PX.demo);
       this.demoLines[key] = line;
       this.groups.demo.add(line);
     }
     this.render();
   }
 
-  showLayer(what, on) {   // "recorded", "aligned", "motions" or "collision" (beside visual meshes) on or off
+  showLayer(what, on) {   // "recorded", "aligned", "motions" on or off; "collision": the robot's collision shapes instead of its visual meshes
     if (what === "collision") {
       this.showCollision = on;
-      this.robotMeshes.forEach((m) => { if (m.userData.collision) { m.visible = on; } });
+      this.robotMeshes.forEach((m) => { m.visible = this.robotShown(m); });
       this.render();
       return;
     }

@@ -83,13 +83,18 @@ def test_no_file_outside_the_output_folder_is_served(session, folder, name):
     assert "glass_adhesive" not in answer.text  # not the problem file's text
 
 
-@pytest.mark.parametrize("name", ["..%2Fapp.py", "LICENSE.js", "three.module.js", "%2E%2E%2Fsession.py"])
+@pytest.mark.parametrize(
+    "name",
+    ["..%2Fapp.py", "LICENSE.js", "three.module.js", "%2E%2E%2Fsession.py", "lines/..%2F..%2Fapp.py", "lines/Wireframe.js"],
+)
 def test_only_the_pages_own_scripts_are_served_from_the_package(session, folder, name):
     client = TestClient(create_app(session, folder / "out"), base_url="http://127.0.0.1:8000")
     assert client.get(f"/three/{name}").status_code == 404, name
     three = client.get("/three/three.module.min.js")
     assert three.status_code == 200 and three.headers["content-type"].startswith("text/javascript")
     assert "Three.js Authors" in three.text[:300]
+    line = client.get("/three/lines/Line2.js")  # three.js's fat lines, which import each other as ../lines/
+    assert line.status_code == 200 and "class Line2 extends LineSegments2" in line.text
 
 
 def test_a_file_written_there_is_served(session, folder):

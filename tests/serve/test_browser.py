@@ -95,7 +95,13 @@ def _the_first_screen_shows_the_cell_and_the_verdict(pages):
     assert page.inner_text("#verdict .badge") == "ok"
     assert "orientation deviation from the demonstration" in page.inner_text("#verdict")
     drawn = json.loads(page.get_attribute("#scene", "data-objects"))
-    for name in ("table", "glass", "cup_1", "robot", "pass 1 (ok)"):  # the cell's objects, the robot, the path
+    for name in (
+        "table",
+        "glass",
+        "cup_1",
+        "robot",
+        "pass 1 (ok)",
+    ):  # the cell's objects, the robot, the path
         assert name in drawn
     page.screenshot(path=str(ARTIFACTS / "first-screen.png"))
     assert pages["errors"] == []
@@ -150,7 +156,9 @@ def _the_frames_drawn_and_dragged_are_those_of_the_problem(server, pages):
     assert np.abs(np.subtract(got["back"]["rpy_deg"], pose["rpy_deg"])).max() < 1e-4
     # the TCP gizmo sits on the path's first waypoint when the scrubber is at its start
     page.select_option("#gizmo", "tool.tcp_in_flange")
-    tcp = page.evaluate("document.getElementById('scene').view.frames['tool.tcp_in_flange'].elements.slice(12, 15)")
+    tcp = page.evaluate(
+        "document.getElementById('scene').view.frames['tool.tcp_in_flange'].elements.slice(12, 15)"
+    )
     first = server["session"].answer.result.passes[0].fused.positions[0]
     assert np.linalg.norm(np.subtract(tcp, first)) < 1e-5  # [m]
     page.select_option("#gizmo", "")
@@ -183,9 +191,7 @@ def _a_change_of_the_cone_resolves_and_both_tabs_show_it(pages):
 
 
 def _move_x(page, mm: int) -> None:
-    page.eval_on_selector(
-        "#move-x", f"(e) => {{ e.value = '{mm}'; e.dispatchEvent(new Event('input')); }}"
-    )
+    page.eval_on_selector("#move-x", f"(e) => {{ e.value = '{mm}'; e.dispatchEvent(new Event('input')); }}")
 
 
 def _the_part_moved_away_out_of_reach_fails_with_its_cause_and_moved_back_is_ok(pages):
@@ -330,14 +336,17 @@ def _write_saves_the_problem_and_writes_what_refine_run_writes(pages, server, tm
                 # the files' checksums cover PathML's time of writing and the report's timings: the
                 # contents are compared one by one here, the other files' sizes in result.json
                 d["files"] = {
-                    e: f["bytes"] for e, f in d.get("files", {}).items() if e not in ("report.html", "motions.csv")
+                    e: f["bytes"]
+                    for e, f in d.get("files", {}).items()
+                    if e not in ("report.html", "motions.csv")
                 }
                 for m in d.get("motions", []):
                     m.pop("planner_time_s", None)  # a time measured, not a result
             assert da == db
         elif name == "motions.csv":  # every column but the planner's time
             rows = [
-                [line.split(",")[:8] + line.split(",")[9:] for line in x.decode().splitlines()] for x in (a, b)
+                [line.split(",")[:8] + line.split(",")[9:] for line in x.decode().splitlines()]
+                for x in (a, b)
             ]
             assert rows[0] == rows[1], name
         elif name != "report.html":  # the report shows the run's timings
@@ -358,16 +367,23 @@ def _pose_matrix(xyz, rpy_deg):
 
 
 def _drawn(page, group: str, name: str) -> list[list[float]]:
-    """The points of the line ``name`` in the 3D view's group ``group`` [m]."""
+    """The points of the line ``name`` in the 3D view's group ``group`` [m] (a fat line's segments' ends)."""
     return page.evaluate(
-        "([g, n]) => { const o = document.getElementById('scene').view.groups[g].getObjectByName(n);"
-        " const a = o.geometry.getAttribute('position'); const p = [];"
-        " for (let k = 0; k < a.count; k++) { p.push([a.getX(k), a.getY(k), a.getZ(k)]); } return p; }",
+        "async ([g, n]) => { const m = await import('./scene3d.js');"
+        " return m.linePoints(document.getElementById('scene').view.groups[g].getObjectByName(n)); }",
         [group, name],
     )
 
 
-def _the_demonstration_is_drawn_as_recorded_and_as_aligned_beside_the_path(pages):
+def _smoothstep_z_m(d):
+    """The simulated tracker's z error at a sensor ``d`` m from the receiver (problem README: 60 mm at 1.2 m)."""
+    import numpy as np
+
+    u = np.clip(np.asarray(d) / 1.2, 0.0, 1.0)
+    return 0.060 * u * u * (3.0 - 2.0 * u)
+
+
+def _the_demonstration_is_drawn_as_recorded_and_as_the_fusion_uses_it_beside_the_path(server, pages):
     import numpy as np
     from scipy.spatial.transform import Rotation
 
@@ -376,10 +392,12 @@ def _the_demonstration_is_drawn_as_recorded_and_as_aligned_beside_the_path(pages
     assert "demonstration recorded" in drawn and "demonstration aligned" in drawn
     # the log's first record by hand: inches, R_S_E = Rz(azimuth) Ry(elevation) Rx(roll); the TCP is
     # T_F_S T_S_E inv(T_TCP_E) with problem.toml's source_in_world and sensor_in_tcp
-    first = next(
-        line.split() for line in (ROOT / "problems/glass_adhesive/demo.liberty").read_text().splitlines()
+    rows = [
+        line.split()
+        for line in (ROOT / "problems/glass_adhesive/demo.liberty").read_text().splitlines()
         if line and not line.startswith("#")
-    )
+    ]
+    first = rows[0]
     T_S_E = np.eye(4)
     T_S_E[:3, 3] = np.array([float(v) for v in first[1:4]]) * 0.0254
     T_S_E[:3, :3] = Rotation.from_euler("ZYX", [float(v) for v in first[4:7]], degrees=True).as_matrix()
@@ -388,14 +406,33 @@ def _the_demonstration_is_drawn_as_recorded_and_as_aligned_beside_the_path(pages
     expected = (T_F_S @ T_S_E @ np.linalg.inv(T_TCP_E))[:3, 3]
     recorded = _drawn(page, "demo", "demonstration recorded")
     assert np.allclose(recorded[0], expected, atol=2e-5)  # the scene's rounding (10 um) and float32
-    # aligned: one point per waypoint, beside its CAD point across the path by a few mm and above it by
-    # the tracker's z distortion the problem's README gives (13 mm near the receiver to 60 mm far from it)
+    # as the fusion uses it: one point per waypoint, at the time matched to it, after the tracker
+    # correction: the worker laid the bead on the CAD path (the README: tremor 0.3 mm), so it lies
+    # within the tracker's noise of its CAD point ...
     aligned = np.array(_drawn(page, "demo", "demonstration aligned"))
     cad = np.array(_drawn(page, "paths", "pass 1 (ok)"))
     assert aligned.shape == cad.shape
-    gap = aligned - cad
-    assert np.median(np.linalg.norm(gap[:, :2], axis=1)) < 0.005
-    assert 0.010 < gap[:, 2].min() and gap[:, 2].max() < 0.065
+    gap = np.linalg.norm(aligned - cad, axis=1)
+    assert np.median(gap) < 0.003 and np.percentile(gap, 95) < 0.006, (np.median(gap), gap.max())
+    # ... and the log's own TCP at those times (by hand, the rows 1/240 s apart) lies above it by the
+    # README's z distortion of the sensor's distance from the receiver (13 mm near it, 60 mm far)
+    t = server["session"].answer.result.passes[0].fused.t_demo
+    log = np.array([[float(v) for v in r[1:7]] for r in rows])
+    k = np.clip(np.round(t * 240.0).astype(int), 0, len(log) - 1)
+    R_S_E = Rotation.from_euler("ZYX", log[k, 3:6], degrees=True).as_matrix()
+    sensor = log[k, :3] * 0.0254  # in the receiver frame {S} [m], with the tracker's error
+    tcp_S = sensor + np.einsum("mij,j->mi", R_S_E, np.linalg.inv(T_TCP_E)[:3, 3])
+    raw = tcp_S @ T_F_S[:3, :3].T + T_F_S[:3, 3]
+    d = np.linalg.norm(sensor, axis=1)
+    for _ in range(3):  # the distance of the true sensor (the z error taken off), by fixed point
+        d = np.linalg.norm(sensor - np.outer(_smoothstep_z_m(d), [0.0, 0.0, 1.0]), axis=1)
+    off = raw - aligned - np.outer(_smoothstep_z_m(d), [0.0, 0.0, 1.0])  # {S} z is {F} z here
+    miss = np.linalg.norm(off, axis=1)
+    assert np.median(miss) < 0.003 and np.percentile(miss, 95) < 0.006, (
+        np.median(miss),
+        np.percentile(miss, 95),
+    )
+    assert np.median(raw[:, 2] - aligned[:, 2]) > 0.02  # the correction is no small one
     assert page.is_checked("#show-recorded") and not page.is_checked("#show-aligned")
     visible = "(n) => document.getElementById('scene').view.demoLines[n].visible"
     page.check("#show-aligned")
@@ -407,6 +444,60 @@ def _the_demonstration_is_drawn_as_recorded_and_as_aligned_beside_the_path(pages
     # the registry's ABB has no visual meshes of its own (its <visual> elements name its collision pieces)
     assert page.is_disabled("#show-collision")
     assert "visual meshes are its collision shapes" in page.inner_text("#visual-note")
+
+
+LINE_WIDTH_JS = """async ([factor]) => {
+  const m = await import('./scene3d.js');
+  const view = document.getElementById('scene').view, line = view.demoLines.aligned;
+  const shown = view.scene.children.map((o) => o.visible);
+  view.scene.children.forEach((o) => { o.visible = o === view.groups.demo; });
+  line.visible = true; view.demoLines.recorded.visible = false;
+  const eye = view.camera.position.clone();
+  view.camera.position.sub(view.orbit.target).multiplyScalar(factor).add(view.orbit.target);
+  view.camera.updateMatrixWorld();
+  view.renderer.render(view.scene, view.camera);
+  const r = view.renderer.domElement.getBoundingClientRect();
+  const screen = m.linePoints(line).map((p) => { const v = view.camera.position.clone().set(p[0], p[1], p[2]).project(view.camera);
+    return [(v.x + 1) / 2 * r.width, (1 - v.y) / 2 * r.height]; });
+  let length = 0;
+  for (let k = 1; k < screen.length; k++) { length += Math.hypot(screen[k][0] - screen[k - 1][0], screen[k][1] - screen[k - 1][1]); }
+  const url = view.renderer.domElement.toDataURL('image/png');
+  view.camera.position.copy(eye); view.camera.updateMatrixWorld();
+  view.scene.children.forEach((o, k) => { o.visible = shown[k]; });
+  view.demoLines.aligned.visible = document.getElementById('show-aligned').checked;
+  view.demoLines.recorded.visible = document.getElementById('show-recorded').checked;
+  view.render();
+  return { url, length, width: line.material.linewidth };
+}"""
+"""The demonstration as fused drawn alone (one point per waypoint, 5 mm apart: the recorded one's
+noise of a millimetre between samples a millimetre apart would make its length on the screen
+twice its path's), the camera ``factor`` times as far from its target: the canvas as a PNG, the
+line's length on the screen [px] and the width its material asks for [px]."""
+
+
+def _lines_are_drawn_as_wide_in_pixels_at_any_zoom(pages):
+    import base64
+    import io
+
+    import numpy as np
+    from PIL import Image
+
+    page = pages["tabs"][0]
+    widths = []
+    for factor in (1.0, 2.0):  # as fitted, and twice as far: a line of world width would be half as wide
+        got = page.evaluate(LINE_WIDTH_JS, [factor])
+        png = base64.b64decode(got["url"].split(",", 1)[1])
+        image = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=float)
+        Image.fromarray(image.astype(np.uint8)).save(ARTIFACTS / f"line-width-{factor:g}.png")
+        brown = np.linalg.norm(image - [0x8D, 0x6E, 0x63], axis=2) < 80  # the line's colour
+        widths.append(brown.sum() / got["length"])  # its pixels over its length: its width [px]
+    # the width asked (3 px) at both distances; WebGL's own lines would be 1 px wide
+    assert got["width"] == 3
+    assert all(2.2 < w < 4.0 for w in widths), widths
+    assert abs(widths[1] / widths[0] - 1.0) < 0.2, widths
+    pages["summary"].append(
+        f"refine serve: the demonstration as fused drawn {widths[0]:.2f} px wide, {widths[1]:.2f} px twice as far"
+    )
 
 
 def _hovering_a_waypoint_labels_its_index_deviation_clearance_and_speed(server, pages):
@@ -476,7 +567,8 @@ def _every_planned_motion_of_result_json_is_drawn_and_selectable(server, pages):
 
 STEPS = (
     _the_first_screen_shows_the_cell_and_the_verdict,
-    _the_demonstration_is_drawn_as_recorded_and_as_aligned_beside_the_path,
+    _the_demonstration_is_drawn_as_recorded_and_as_the_fusion_uses_it_beside_the_path,
+    _lines_are_drawn_as_wide_in_pixels_at_any_zoom,
     _hovering_a_waypoint_labels_its_index_deviation_clearance_and_speed,
     _the_tcp_gizmo_sits_where_the_flange_pose_and_tcp_in_flange_put_the_tcp_on_the_path,
     _the_frames_drawn_and_dragged_are_those_of_the_problem,
