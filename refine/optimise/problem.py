@@ -217,12 +217,13 @@ rather than letting it choose: its automatic choice took 2.5 times as long at 6,
 
 
 REDUNDANT_IPOPT: dict[str, Any] = {"ipopt.acceptable_iter": 2, "ipopt.acceptable_constr_viol_tol": 1e-10}
-HELD_PART_IPOPT = {"ipopt.max_iter": 1000}  # a redundant arm turning a held part: 357 iterations on the puzzle
 """IPOPT settings added for an arm of more than six joints: stop after two consecutive iterations at
 the acceptable level (error 1e-6, constraints met to 1e-10) instead of fifteen. On the LBR iiwa at
 6,400 waypoints the full solve reaches that level one iteration after the coarse seed and then
 cannot reach 1e-9: it spent 15 more iterations (0.14 s each) before stopping there anyway (42 in
 all, coarse copy included; with these 30, solve CPU 1.6 s against 6.4 s). Verified as any answer."""
+HELD_PART_IPOPT = {"ipopt.max_iter": 1000, "ipopt.mu_strategy": "monotone"}
+"""A redundant arm turning a held part: the monotone barrier, 274 iterations on the puzzle, 323 adaptive."""
 
 
 @dataclass(frozen=True)
@@ -357,7 +358,10 @@ def build_refinement(
     kernels = (
         waypoint_kernels(*chain, axisymmetric, tool_in_world)
         if derivative_mode == "assembled"
-        else {"waypoint": waypoint_function(*chain, axisymmetric, tool_in_world), "singularity": singularity_function(*chain)}
+        else {
+            "waypoint": waypoint_function(*chain, axisymmetric, tool_in_world),
+            "singularity": singularity_function(*chain),
+        }
     )
     G, cost = kernels["waypoint"].map(N)(Q, P_ref, R_demo)
     if elastic:
@@ -415,7 +419,12 @@ def build_refinement(
         if derivative_mode == "casadi" or solver == "fatrop"
         else derivative_functions(
             kernels,
-            N=N, n=n, x=x, p=p, f=f, g=g,  # fmt: skip
+            N=N,
+            n=n,
+            x=x,
+            p=p,
+            f=f,
+            g=g,  # fmt: skip
             orientation_coef=coef,
             K=K,
             b=b,
@@ -553,7 +562,13 @@ def reuse_for(problem: RefinementNLP, fused: FusedPath, tolerances: Tolerances) 
     """
     N = problem.n_waypoints
     a = problem.active
-    if problem.elastic_deg is not None or a.singular_waypoints or a.singular_segments or a.linear_rows or len(fused) != N:
+    if (
+        problem.elastic_deg is not None
+        or a.singular_waypoints
+        or a.singular_segments
+        or a.linear_rows
+        or len(fused) != N
+    ):
         return None
     h_old, h_new = float(np.mean(np.diff(problem.fused.s))), float(np.mean(np.diff(fused.s)))
     if abs(h_new / h_old - 1.0) > SPACING_REUSE_REL:
@@ -562,7 +577,17 @@ def reuse_for(problem: RefinementNLP, fused: FusedPath, tolerances: Tolerances) 
     lbg, ubg = path_row_bounds(tolerances, N, problem.dof, steps=problem.step_rows())
     lbx, ubx = np.tile(lower, N), np.tile(upper, N)
     params = path_params(fused)
-    return replace(problem, params=params, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, fused=fused, tolerances=tolerances, build_time_s=0.0)
+    return replace(
+        problem,
+        params=params,
+        lbx=lbx,
+        ubx=ubx,
+        lbg=lbg,
+        ubg=ubg,
+        fused=fused,
+        tolerances=tolerances,
+        build_time_s=0.0,
+    )
 
 
 ELASTIC_WEIGHT = 1e4
