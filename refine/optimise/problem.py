@@ -358,10 +358,7 @@ def build_refinement(
     kernels = (
         waypoint_kernels(*chain, axisymmetric, tool_in_world)
         if derivative_mode == "assembled"
-        else {
-            "waypoint": waypoint_function(*chain, axisymmetric, tool_in_world),
-            "singularity": singularity_function(*chain),
-        }
+        else {"waypoint": waypoint_function(*chain, axisymmetric, tool_in_world), "singularity": singularity_function(*chain)}
     )
     G, cost = kernels["waypoint"].map(N)(Q, P_ref, R_demo)
     if elastic:
@@ -419,12 +416,7 @@ def build_refinement(
         if derivative_mode == "casadi" or solver == "fatrop"
         else derivative_functions(
             kernels,
-            N=N,
-            n=n,
-            x=x,
-            p=p,
-            f=f,
-            g=g,  # fmt: skip
+            N=N, n=n, x=x, p=p, f=f, g=g,  # fmt: skip
             orientation_coef=coef,
             K=K,
             b=b,
@@ -562,13 +554,7 @@ def reuse_for(problem: RefinementNLP, fused: FusedPath, tolerances: Tolerances) 
     """
     N = problem.n_waypoints
     a = problem.active
-    if (
-        problem.elastic_deg is not None
-        or a.singular_waypoints
-        or a.singular_segments
-        or a.linear_rows
-        or len(fused) != N
-    ):
+    if problem.elastic_deg is not None or a.singular_waypoints or a.singular_segments or a.linear_rows or len(fused) != N:
         return None
     h_old, h_new = float(np.mean(np.diff(problem.fused.s))), float(np.mean(np.diff(fused.s)))
     if abs(h_new / h_old - 1.0) > SPACING_REUSE_REL:
@@ -577,17 +563,7 @@ def reuse_for(problem: RefinementNLP, fused: FusedPath, tolerances: Tolerances) 
     lbg, ubg = path_row_bounds(tolerances, N, problem.dof, steps=problem.step_rows())
     lbx, ubx = np.tile(lower, N), np.tile(upper, N)
     params = path_params(fused)
-    return replace(
-        problem,
-        params=params,
-        lbx=lbx,
-        ubx=ubx,
-        lbg=lbg,
-        ubg=ubg,
-        fused=fused,
-        tolerances=tolerances,
-        build_time_s=0.0,
-    )
+    return replace(problem, params=params, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, fused=fused, tolerances=tolerances, build_time_s=0.0)
 
 
 ELASTIC_WEIGHT = 1e4
