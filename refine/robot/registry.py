@@ -151,7 +151,11 @@ def robot_for(settings: RobotSettings) -> Robot:
             settings.locked_joints_deg,
         )
     return _registry_robot(
-        settings.model, settings.joint_lower_deg, settings.joint_upper_deg, settings.joint_velocity_deg_s
+        settings.model,
+        settings.joint_lower_deg,
+        settings.joint_upper_deg,
+        settings.joint_velocity_deg_s,
+        str(robots_dir()),
     )
 
 
@@ -192,7 +196,9 @@ def _registry_robot(
     lower: tuple[float, ...] | None,
     upper: tuple[float, ...] | None,
     velocity: tuple[float, ...] | None,
+    root: str,
 ) -> Robot:
+    del root  # part of the cache key only: a robot of another registry folder is another robot
     robot = load_robot(name)
     spec = with_overrides(robot.spec, lower, upper, velocity, None)
     return robot if spec is robot.spec else Robot(spec, robot.model)
