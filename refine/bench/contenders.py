@@ -358,6 +358,8 @@ def _drake_plant(problem: BenchProblem):
     return problem.extra["drake_plant"]
 
 
+drake_chained_ik.setup = _drake_plant  # made once per problem, before the runs (refine.bench.watchdog)
+
 DRAKE_CONE_BACKOFF_DEG = 1e-3
 """How much narrower the cone given to Drake is than the problem's [deg]."""
 

@@ -562,6 +562,9 @@ def _set_margin(t: dict[str, Any], config: Any, margin_m: float) -> None:
     manager.margin_data_override_type = t["common"].CollisionMarginOverrideType_OVERRIDE_DEFAULT_MARGIN
 
 
+for _peer in (trajopt, descartes):
+    _peer.setup = tesseract_environment  # made once per problem, before the runs (refine.bench.watchdog)
+
 PEERS = {"trajopt": trajopt, "descartes": descartes}
 """The peers by name; they join :data:`refine.bench.contenders.CONTENDERS` when this module is imported."""
 
