@@ -358,8 +358,6 @@ def _drake_plant(problem: BenchProblem):
     return problem.extra["drake_plant"]
 
 
-
-
 def _drake_setup(problem: BenchProblem) -> None:
     """The Drake contender's set-up: its plant (:func:`_drake_plant`); :class:`Unavailable` without pydrake."""
     try:

@@ -405,7 +405,9 @@ def trajopt(problem: BenchProblem) -> Answer:
     """
     if problem.tool_in_world is not None and "tesseract_files" not in problem.extra:
         return Answer(
-            "failed", None, note="not run: a problem file's stationary tool is not composed into a Tesseract workcell"
+            "failed",
+            None,
+            note="not run: a problem file's stationary tool is not composed into a Tesseract workcell",
         )
     t, env, manip, _, names, _ = tesseract_environment(problem)
     T = t["trajopt"]

@@ -146,7 +146,9 @@ def run_turns(
             try:
                 setups[name] = prepare(problem, functions[name])
                 for k in range(warmup):
-                    workers.run(problem, name, functions[name], time_limit_s, isolate, log(name, "-warmup", k))
+                    workers.run(
+                        problem, name, functions[name], time_limit_s, isolate, log(name, "-warmup", k)
+                    )
             except Unavailable as e:
                 drop(name, e)
         answers = {name: [] for name in functions}

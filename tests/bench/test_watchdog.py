@@ -117,16 +117,16 @@ def set_up_then_solve(problem):
         _burn(FIRST_CALL_CPU_S)
         _first_call_done = True
     _burn(SOLVE_CPU_S)
-    return contenders_module.Answer(
-        "ok", None, {"solve": time.perf_counter() - w0}, time.process_time() - c0
-    )
+    return contenders_module.Answer("ok", None, {"solve": time.perf_counter() - w0}, time.process_time() - c0)
 
 
 set_up_then_solve.setup = _make_setup
 
 
 @pytest.mark.parametrize("isolate", [True, False])
-def test_the_timed_window_holds_the_solve_and_not_the_declared_set_up(tmp_path, monkeypatch, tiny_wave, isolate):
+def test_the_timed_window_holds_the_solve_and_not_the_declared_set_up(
+    tmp_path, monkeypatch, tiny_wave, isolate
+):
     suites = tmp_path / "suites.toml"
     suites.write_text(tiny_wave)
     monkeypatch.setitem(contenders_module.CONTENDERS, "greedy-ik", set_up_then_solve)
@@ -142,7 +142,9 @@ def test_the_timed_window_holds_the_solve_and_not_the_declared_set_up(tmp_path, 
     assert row["max_total_s"] >= 0.5 * SOLVE_CPU_S  # wall: the solve was inside the window
 
 
-def test_without_a_declared_set_up_the_warm_up_run_pays_it_for_the_timed_runs(tmp_path, monkeypatch, tiny_wave):
+def test_without_a_declared_set_up_the_warm_up_run_pays_it_for_the_timed_runs(
+    tmp_path, monkeypatch, tiny_wave
+):
     suites = tmp_path / "suites.toml"
     suites.write_text(tiny_wave)
 
