@@ -8,7 +8,9 @@ IK seed, program and solve; Descartes' program and solve. The peers' environment
 the timed runs (as ``refine bench`` does). Contenders take turns within each repeat, so load
 changes reach them alike; printed per contender: the median and least CPU time, the median wall
 time, the answer's status and whether refine's verifier accepts it, and the ratio of each median
-CPU time to refine's; then the 1-minute load average over the runs.
+CPU time to refine's, and the median of the CPU time the contender reports for its own stages
+(``Answer.cpu_s``, the ``cpu_s`` of a ``refine bench`` row: the same as the outside figure for the
+peers, refine's without its verification); then the 1-minute load average over the runs.
 
     python3 benchmarks/peers_glass.py [--repeat 7] [--suite glass] [--contenders refine,trajopt,descartes]
 """
@@ -46,7 +48,7 @@ def main() -> int:
             for name in names:
                 w0, c0 = time.perf_counter(), time.process_time()
                 answer = CONTENDERS[name](problem)
-                times[name].append((time.process_time() - c0, time.perf_counter() - w0))
+                times[name].append((time.process_time() - c0, time.perf_counter() - w0, answer.cpu_s))
                 verdict = verify(problem, answer.q) if answer.q is not None else None
                 verdicts[name] = f"{answer.status}, " + (
                     "no answer"
@@ -65,7 +67,8 @@ def main() -> int:
             print(
                 f"  {name:10s} CPU median {cpu * 1e3:8.1f} ms, least {min(t[0] for t in times[name]) * 1e3:8.1f} ms; "
                 f"wall median {statistics.median(t[1] for t in times[name]) * 1e3:8.1f} ms; "
-                f"{cpu / base:5.2f}x {names[0]}'s CPU; {verdicts[name]}"
+                f"{cpu / base:5.2f}x {names[0]}'s CPU; own CPU (refine bench's cpu_s) median "
+                f"{statistics.median(t[2] for t in times[name]) * 1e3:8.1f} ms; {verdicts[name]}"
             )
         print(f"  load (1 min) {min(loads):.1f}-{max(loads):.1f}")
     return 0

@@ -358,6 +358,17 @@ def _drake_plant(problem: BenchProblem):
     return problem.extra["drake_plant"]
 
 
+def _drake_setup(problem: BenchProblem) -> None:
+    """The Drake contender's set-up: its plant (:func:`_drake_plant`); :class:`Unavailable` without pydrake."""
+    try:
+        import pydrake  # noqa: F401
+    except ImportError as e:
+        raise Unavailable(f"pydrake is not installed ({e}); pip install '.[bench]'") from e
+    _drake_plant(problem)
+
+
+drake_chained_ik.setup = _drake_setup  # made once per problem, before the runs (refine.bench.watchdog)
+
 DRAKE_CONE_BACKOFF_DEG = 1e-3
 """How much narrower the cone given to Drake is than the problem's [deg]."""
 

@@ -405,7 +405,9 @@ def trajopt(problem: BenchProblem) -> Answer:
     """
     if problem.tool_in_world is not None and "tesseract_files" not in problem.extra:
         return Answer(
-            "failed", None, note="not run: a problem file's stationary tool is not composed into a Tesseract workcell"
+            "failed",
+            None,
+            note="not run: a problem file's stationary tool is not composed into a Tesseract workcell",
         )
     t, env, manip, _, names, _ = tesseract_environment(problem)
     T = t["trajopt"]
@@ -561,6 +563,9 @@ def _set_margin(t: dict[str, Any], config: Any, margin_m: float) -> None:
     manager.margin_data = t["common"].CollisionMarginData(margin_m)
     manager.margin_data_override_type = t["common"].CollisionMarginOverrideType_OVERRIDE_DEFAULT_MARGIN
 
+
+for _peer in (trajopt, descartes):
+    _peer.setup = tesseract_environment  # made once per problem, before the runs (refine.bench.watchdog)
 
 PEERS = {"trajopt": trajopt, "descartes": descartes}
 """The peers by name; they join :data:`refine.bench.contenders.CONTENDERS` when this module is imported."""

@@ -38,7 +38,7 @@ from refine.bench.quality import evaluate
 from refine.bench.rules import columns as rules_columns
 from refine.bench.suites import BenchProblem, load_suites, problems
 from refine.bench.table import COLUMNS, SCHEMA_VERSION, check_header, new_run_id
-from refine.bench.watchdog import run_limited
+from refine.bench.watchdog import Workers, prepare
 from refine.errors import InputError
 
 log = logging.getLogger(__name__)
@@ -113,12 +113,14 @@ def run_turns(
 ) -> dict[str, dict[str, Any]]:
     """One row per contender of ``functions`` on ``problem``, the contenders taking turns.
 
-    Each contender runs ``warmup`` times untimed, then the ``repeat`` timed runs go round the
-    contenders in turn. A contender that raises :class:`Unavailable` is left out with a message
+    Each contender first makes its declared set-up (:func:`refine.bench.watchdog.prepare`, in this
+    process, untimed; its wall and CPU time go to ``setup_s`` and ``setup_cpu_s``) and runs
+    ``warmup`` times untimed, then the ``repeat`` timed runs go round the contenders in turn. A contender that raises :class:`Unavailable` is left out with a message
     (and its reason put in ``unavailable``, by name, when given).
     Every run (warm-up ones included) is held to ``time_limit_s``
-    (:func:`refine.bench.watchdog.run_limited`): refine's contenders stop there themselves, any
-    other is run in a forked child and killed at the limit (``isolate``; with False, or without
+    (:class:`refine.bench.watchdog.Workers`): refine's contenders stop there themselves, any
+    other runs in its worker, a child forked once for the problem that makes all its runs, warm-up
+    ones included, and is killed at the limit (``isolate``; with False, or without
     ``fork``, it runs in this process and a run over the limit is only scored so). A timed run
     that ends ``timeout``, or takes longer than the limit on its own clock, times the row out.
     ``log_dir``: a folder for each run's log (``CONTENDER-warmup-K.log``, ``CONTENDER-K.log``, K
@@ -129,32 +131,40 @@ def run_turns(
         return None if log_dir is None else log_dir / f"{name}{kind}-{k + 1}.log"
 
     functions = dict(functions)
-    for name in list(functions):
-        try:
-            for k in range(warmup):
-                run_limited(problem, name, functions[name], time_limit_s, isolate, log(name, "-warmup", k))
-        except Unavailable as e:
-            echo(f"skipping {name}: {e}")
-            del functions[name]
-            if unavailable is not None:
-                unavailable[name] = str(e)
-    answers: dict[str, list[tuple[Answer, float]]] = {name: [] for name in functions}
-    load0 = _load()
-    peak0 = _peak_rss_mb()
-    for k in range(repeat):
+    setups: dict[str, tuple[float, float]] = {}  # name -> the declared set-up's wall and CPU time [s]
+    answers: dict[str, list[tuple[Answer, float]]] = {}
+
+    def drop(name: str, e: Unavailable) -> None:
+        echo(f"skipping {name}: {e}")
+        del functions[name]
+        answers.pop(name, None)
+        if unavailable is not None:
+            unavailable[name] = str(e)
+
+    with Workers() as workers:
         for name in list(functions):
             try:
-                answers[name].append(
-                    run_limited(problem, name, functions[name], time_limit_s, isolate, log(name, "", k))
-                )
+                setups[name] = prepare(problem, functions[name])
+                for k in range(warmup):
+                    workers.run(
+                        problem, name, functions[name], time_limit_s, isolate, log(name, "-warmup", k)
+                    )
             except Unavailable as e:
-                echo(f"skipping {name}: {e}")
-                del functions[name], answers[name]
-                if unavailable is not None:
-                    unavailable[name] = str(e)
+                drop(name, e)
+        answers = {name: [] for name in functions}
+        load0 = _load()
+        peak0 = _peak_rss_mb()
+        for k in range(repeat):
+            for name in list(functions):
+                try:
+                    answers[name].append(
+                        workers.run(problem, name, functions[name], time_limit_s, isolate, log(name, "", k))
+                    )
+                except Unavailable as e:
+                    drop(name, e)
     load = f"{load0:.2f}-{_load():.2f}"
     return {
-        name: _row(problem, name, runs, warmup, load, peak0, time_limit_s)
+        name: _row(problem, name, runs, warmup, load, peak0, time_limit_s, setups.get(name, (0.0, 0.0)))
         for name, runs in answers.items()
         if runs
     }
@@ -175,6 +185,7 @@ def _row(
     load: str,
     peak0: float,
     time_limit_s: float,
+    setup: tuple[float, float] = (0.0, 0.0),
 ) -> dict[str, Any]:
     """The CSV row of ``contender``'s timed runs on ``problem``: every answer verified and scored.
 
@@ -232,6 +243,8 @@ def _row(
         "min_clearance_m": verdict.min_clearance_m,
         "max_joint_step_deg": verdict.max_joint_step_deg,
         **rules_columns(contender, CONTENDERS.get(contender)),
+        "setup_s": setup[0],
+        "setup_cpu_s": setup[1],
         "build_s": stage["build"],
         "seed_s": stage["seed"],
         "solve_s": stage["solve"],
@@ -348,7 +361,7 @@ def run_suites(
                         f"{suite:11s} {problem.name:28s} {name:16s} {row['status']:10s} "
                         f"verified {'yes' if row['verified'] else 'no ':3s} success {'yes' if row['success'] else 'no '} "
                         f"detected {'yes' if row['detected_infeasible'] else 'no '} "
-                        f"total {row['total_s']:7.3f} s cpu {row['cpu_s']:7.3f} s load {row.get('load_1min', '')} "
+                        f"total {row['total_s']:7.3f} s cpu {row['cpu_s']:7.3f} s set-up {row.get('setup_s', 0.0):6.3f} s load {row.get('load_1min', '')} "
                         f"({time.perf_counter() - t0:.1f} s for the problem's runs)"
                     )
     return rows

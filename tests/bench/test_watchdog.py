@@ -88,3 +88,74 @@ def test_each_run_leaves_its_log_with_the_solvers_iterations(tmp_path, tiny_wave
         '"compiled": true' in by["refine"]["solver_options"]
         or '"compiled": false' in by["refine"]["solver_options"]
     )
+
+
+SETUP_CPU_S, SOLVE_CPU_S, FIRST_CALL_CPU_S = 0.6, 0.2, 0.4
+"""CPU seconds the fake contender burns in its declared set-up, in each solve, and once per process."""
+
+_first_call_done = False  # a process-wide one-off, as a library's lazy initialisation or fresh pages
+
+
+def _burn(seconds: float) -> None:
+    t0 = time.process_time()
+    while time.process_time() - t0 < seconds:
+        pass
+
+
+def _make_setup(problem) -> None:
+    if "fake_setup" not in problem.extra:  # made by the contender itself when nobody made it before
+        _burn(SETUP_CPU_S)
+        problem.extra["fake_setup"] = True
+
+
+def set_up_then_solve(problem):
+    """A contender timing its whole call on the process clock: its set-up (if not made), a one-off, its solve."""
+    global _first_call_done
+    c0, w0 = time.process_time(), time.perf_counter()
+    _make_setup(problem)
+    if not _first_call_done:
+        _burn(FIRST_CALL_CPU_S)
+        _first_call_done = True
+    _burn(SOLVE_CPU_S)
+    return contenders_module.Answer("ok", None, {"solve": time.perf_counter() - w0}, time.process_time() - c0)
+
+
+set_up_then_solve.setup = _make_setup
+
+
+@pytest.mark.parametrize("isolate", [True, False])
+def test_the_timed_window_holds_the_solve_and_not_the_declared_set_up(
+    tmp_path, monkeypatch, tiny_wave, isolate
+):
+    suites = tmp_path / "suites.toml"
+    suites.write_text(tiny_wave)
+    monkeypatch.setitem(contenders_module.CONTENDERS, "greedy-ik", set_up_then_solve)
+    (row,) = run_suites(
+        ["tiny"], ["greedy-ik"], tmp_path / "b.csv", suites_file=suites, warmup=1, repeat=3,
+        echo=lambda _: None, isolate=isolate,
+    )  # fmt: skip
+    # the set-up was made once, before the runs, in the runner's process, and measured apart
+    assert row["setup_cpu_s"] >= SETUP_CPU_S and row["setup_s"] > 0.0
+    # every timed run holds its solve only: neither the set-up nor the one-off of the warm-up run
+    # (the worker that made the warm-up run makes the timed ones too)
+    assert SOLVE_CPU_S <= row["min_cpu_s"] <= row["max_cpu_s"] < SOLVE_CPU_S + 0.5 * FIRST_CALL_CPU_S
+    assert row["max_total_s"] >= 0.5 * SOLVE_CPU_S  # wall: the solve was inside the window
+
+
+def test_without_a_declared_set_up_the_warm_up_run_pays_it_for_the_timed_runs(
+    tmp_path, monkeypatch, tiny_wave
+):
+    suites = tmp_path / "suites.toml"
+    suites.write_text(tiny_wave)
+
+    def solve_only(problem):
+        return set_up_then_solve(problem)
+
+    monkeypatch.setitem(contenders_module.CONTENDERS, "greedy-ik", solve_only)
+    (row,) = run_suites(
+        ["tiny"], ["greedy-ik"], tmp_path / "b.csv", suites_file=suites, warmup=1, repeat=2,
+        echo=lambda _: None,
+    )  # fmt: skip
+    assert row["setup_s"] == 0.0 and row["setup_cpu_s"] == 0.0
+    # what the warm-up run cached in problem.extra is kept in the worker for the timed runs
+    assert row["max_cpu_s"] < SOLVE_CPU_S + 0.5 * FIRST_CALL_CPU_S
