@@ -424,12 +424,16 @@ def tesseract_puzzle(suite: str, support: Path) -> BenchProblem:
     spin about the tool axis free. The URDF's ``package://`` mesh paths are written out absolute
     into a copy beside a temporary folder. No clearance is checked: refine's URDF reader takes each
     link's convex hull, and the concave part's hull reaches into the grinder at the grinding point;
-    the contenders are told so and check none either.
+    the contenders are told so and check none either. refine's cost weights are those ``refine run``
+    gives a redundant arm: the defaults with the mid-range cost of
+    :data:`refine.run.stages.REDUNDANT_MID_RANGE_WEIGHT`.
     """
     import tempfile
 
     from refine.cad.toolpath import fused_from_toolpath
+    from refine.optimise.problem import Weights
     from refine.robot.model import robot_from_urdf
+    from refine.run.stages import REDUNDANT_MID_RANGE_WEIGHT
 
     urdf = support / "urdf" / "puzzle_piece_workcell.urdf"
     if not urdf.is_file():
@@ -468,6 +472,7 @@ def tesseract_puzzle(suite: str, support: Path) -> BenchProblem:
         tcp_in_flange=np.linalg.inv(T_base["tool0"]) @ T_base["part"],
         tolerances=Tolerances(),
         axisymmetric=True,
+        weights=Weights(mid_range=REDUNDANT_MID_RANGE_WEIGHT if robot.nq > 6 else 0.0),
         tool_in_world=base_in_world @ T_base["grinder_frame"],
         extra={
             "tesseract_files": {

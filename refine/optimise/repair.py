@@ -50,6 +50,7 @@ def solve_with_repair(
     skip_strict: str = "",
     stretched: Array | None = None,
     multipliers: tuple[dict[tuple, float], Array] | None = None,
+    first_options: dict | None = None,
 ) -> Refinement:
     """Strict solve from ``q_seed``, then the elastic repair when the strict problem fails.
 
@@ -60,7 +61,9 @@ def solve_with_repair(
     the end of the arm's range: the singularity bound holds there from the first solve (at and
     between the waypoints), so the elbow cannot pass through its stretched singularity while the
     solver pulls the wrist in. ``multipliers`` (a previous solve's of the same rows, see
-    :class:`RoundLoop`) warm-start the first strict solve.
+    :class:`RoundLoop`) warm-start the first strict solve. ``first_options`` (solver options) hold
+    for the first strict solve only, less the keys the problem's caller gave; the later rounds and
+    the elastic problem are built with the problem's own options.
     """
     kin = problem_kinematics(problem)
     loop = RoundLoop(problem, timings, max_rounds=max_rounds, deadline=deadline, multipliers=multipliers)
@@ -71,6 +74,9 @@ def solve_with_repair(
     seed_rows = tuple(r for src in sources for r in src.rows(problem, q_seed))
     seed_steps = new_joint_steps(problem, q_seed)
     add_time(timings, "seed", start)
+    first = {k: v for k, v in (first_options or {}).items() if k not in problem.given_options}
+    if first and not skip_strict:
+        loop.base_options = {**problem.solver_options, **first}
     if initial.singular_waypoints or initial.singular_segments or seed_rows or seed_steps:
         loop.rebuild(
             active=problem.active.union(
@@ -78,6 +84,9 @@ def solve_with_repair(
             ),
             joint_steps=with_joint_steps(problem, seed_steps),
         )
+    elif loop.base_options is not None:
+        loop.rebuild()
+    loop.base_options = dict(problem.solver_options)  # every later build: the problem's own options
     if skip_strict:
         q = q_seed
         slack = np.zeros(problem.n_waypoints)

@@ -199,17 +199,20 @@ def solve_refinement(
         )
 
     coarse_iterations = 0
+    first_options: dict = {}
     if q0 is None and rotations is None and not skip_strict:
         seeding = StageTimes.clock()
         smooth, coarse_iterations = coarse_seed(problem, q_seed)
         q_seed = q_seed if smooth is None else smooth
+        if smooth is not None and problem.tool_in_world is not None and problem.solver_name == "ipopt":
+            first_options = {"ipopt.mu_init": COARSE_SEEDED_MU_INIT}
         add_time(timings, "seed", seeding)
 
     deadline = t0 + time_limit_s if time_limit_s is not None else math.inf
 
     repairing = repair_max_slack_deg is not None and repair_max_slack_deg > 0
 
-    def attempt_from(seed: Array, skip: str = skip_strict) -> Refinement:
+    def attempt_from(seed: Array, skip: str = skip_strict, options: dict | None = None) -> Refinement:
         return solve_with_repair(
             problem,
             seed,
@@ -221,10 +224,11 @@ def solve_refinement(
             skip,
             stretched,
             multipliers,
+            options,
         )
 
     try:
-        attempt = attempt_from(q_seed)
+        attempt = attempt_from(q_seed, options=first_options)
     except TimeLimitReached:
         return timed_out(problem, q_seed, time_limit_s, timings)
     if attempt.status == "infeasible" and q0 is None and max_branches > 1 and time.perf_counter() < deadline:
@@ -354,6 +358,13 @@ coarse waypoints leave the full solve 6 to 155 iterations, and on the bends of t
 waypoints, mid-range cost) 12 leave it 11 where 16-40 leave 5 (CPU 0.095 s against 0.077-0.080
 s). On the wave without mid-range cost, chained / 40 / 16 coarse waypoints: 100 waypoints 0.257 /
 - / 0.124 s, 120: - / 0.175 / 0.121 s, 400: - / 0.198 / 0.163 s."""
+
+
+COARSE_SEEDED_MU_INIT = 1e-4
+"""IPOPT's initial barrier parameter [-] for the first full solve of a held part (a stationary tool)
+from the coarse seed (:func:`coarse_seed`), which starts next to the answer: IPOPT's default 0.1
+pushes the seed off the cone it already sits on, and the monotone barrier of a held part
+(:data:`refine.optimise.problem.HELD_PART_IPOPT`) then spends most of its iterations coming back."""
 
 
 COARSE_SEED_STRIDE = 40
