@@ -6,7 +6,8 @@ slack although no single limit is broken at the demonstrated orientation: severa
 together hold the answer back (a clearance pair at its margin, a joint at its limit, a joint step at
 its bound, the manipulability at its margin), and the orientation gives way. Those are read off the
 answer itself (:func:`binding_at`): each constraint of the refinement within a small distance of
-its bound, at the segment's waypoints, with the bound and the figure.
+its bound, at the segment's waypoints, with the bound, the figure and the runs of waypoints where
+it is at its bound.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from refine.optimise.verify import singularity_measures
+from refine.optimise.verify import runs, singularity_measures
 from refine.robot.kinematics import TcpKinematics
 from refine.settings import Tolerances
 from refine.types import Array
@@ -59,17 +60,25 @@ def binding_at(
     Returns:
         One entry per binding constraint (pair, joint, or the singularity), the closest to its bound
         in the segment: the fields of a :class:`refine.optimise.diagnosis.Cause` (``cause``,
-        ``figure``, ``limit``, ``unit``, ``objects``, ``joint``, ``suggestion``).
+        ``figure``, ``limit``, ``unit``, ``objects``, ``joint``, ``suggestion``, ``waypoints``: the
+        runs (first, last inclusive) of the path's waypoints where it is at its bound; a joint step
+        is at its bound over the two waypoints of the step).
     """
     seg = q[a : b + 1]
     out: list[dict[str, Any]] = []
+
+    def waypoints(mask: Array, first: int = a) -> tuple[tuple[int, int], ...]:
+        return tuple((first + i, first + j) for i, j in runs(mask))
+
     if model is not None:
         reach = max(model.margin_m, model.self_margin_m) + BIND_CLEARANCE_M
         pairs: dict[tuple[str, str], Any] = {}
-        for qk in seg:
+        where: dict[tuple[str, str], Array] = {}
+        for i, qk in enumerate(seg):
             for c in model.contacts(qk, reach):
                 if c.distance_m < c.margin_m + BIND_CLEARANCE_M:
                     key = (c.body, c.other)
+                    where.setdefault(key, np.zeros(len(seg), dtype=bool))[i] = True
                     if key not in pairs or c.distance_m < pairs[key].distance_m:
                         pairs[key] = c
         for (body, other), c in sorted(pairs.items(), key=lambda item: item[1].distance_m):
@@ -87,6 +96,7 @@ def binding_at(
                         f"{'self' if own_self else 'cell'} margin {c.margin_m * 1e3:g} mm in the answer"
                         + ("" if own_self else f"; more room round {other} frees the orientation")
                     ),
+                    "waypoints": waypoints(where[(body, other)]),
                 }
             )
     for j in range(q.shape[1]):
@@ -94,6 +104,7 @@ def binding_at(
         high = float(upper[j] - seg[:, j].max())
         if min(low, high) <= BIND_JOINT_RAD:
             bound = lower[j] if low <= high else upper[j]
+            at = np.abs(seg[:, j] - bound) <= BIND_JOINT_RAD
             value = float(seg[:, j].min() if low <= high else seg[:, j].max())
             out.append(
                 {
@@ -107,12 +118,16 @@ def binding_at(
                         f"joint {j + 1} held at {math.degrees(bound):.1f} deg (its limit less the "
                         f"{tolerances.joint_margin_deg:g} deg margin) in the answer"
                     ),
+                    "waypoints": waypoints(at),
                 }
             )
     step = math.radians(tolerances.joint_step_deg)
     lo, hi = max(a - 1, 0), min(b + 1, len(q) - 1)  # the steps into and out of the segment too
     steps = np.abs(np.diff(q[lo : hi + 1], axis=0))
     for j in np.flatnonzero(steps.max(axis=0, initial=0.0) >= step - BIND_JOINT_RAD) if len(steps) else []:
+        at = np.zeros(hi - lo + 1, dtype=bool)
+        for i in np.flatnonzero(steps[:, j] >= step - BIND_JOINT_RAD):
+            at[i : i + 2] = True  # a step binds the two waypoints it joins
         out.append(
             {
                 "cause": "joint step",
@@ -125,12 +140,14 @@ def binding_at(
                     f"joint {int(j) + 1} moves the whole joint-step bound of {tolerances.joint_step_deg:g} "
                     "deg between two waypoints in the answer; a denser path or a larger bound frees it"
                 ),
+                "waypoints": waypoints(at, lo),
             }
         )
     margin = tolerances.singularity_margin
     if margin > 0:
         w, _ = singularity_measures(kin, seg)
-        if float(w.min()) <= margin * (1.0 + BIND_SINGULARITY):
+        at = w <= margin * (1.0 + BIND_SINGULARITY)
+        if at.any():
             out.append(
                 {
                     "cause": "singularity",
@@ -140,6 +157,38 @@ def binding_at(
                     "objects": (),
                     "joint": None,
                     "suggestion": f"the scaled manipulability held at its margin {margin:g} in the answer",
+                    "waypoints": waypoints(at),
                 }
             )
     return out
+
+
+def waypoint_runs(spans: tuple[tuple[int, int], ...]) -> str:
+    """``" over waypoints 120-164, 170"`` for runs (first, last inclusive); empty for none."""
+    if not spans:
+        return ""
+    text = ", ".join(f"{i}" if i == j else f"{i}-{j}" for i, j in spans)
+    single = len(spans) == 1 and spans[0][0] == spans[0][1]
+    return f" over waypoint{'' if single else 's'} {text}"
+
+
+def bound_text(cause: Any) -> str:
+    """A constraint at its bound in the answer (a :class:`refine.optimise.diagnosis.Cause`), in words.
+
+    Its object, its bound, its figure and its waypoints, e.g. ``"clearance part<->grinder at its 5 mm
+    margin (5.4 mm) over waypoints 120-164"``, ``"joint 2 at its limit -118.0 deg (less the margin)
+    over waypoint 7"``.
+    """
+    c = cause
+    if c.cause in ("collision", "self-collision"):
+        kind = "self-clearance" if c.cause == "self-collision" else "clearance"
+        what = f"{kind} {'<->'.join(c.objects)} at its {c.limit * 1e3:g} mm margin ({c.figure * 1e3:.1f} mm)"
+    elif c.cause == "joint limit":
+        what = f"joint {c.joint} at its limit {c.limit:.1f} deg (less the margin)"
+    elif c.cause == "joint step":
+        what = f"joint {c.joint} step at its {c.limit:g} deg bound ({c.figure:.2f} deg)"
+    elif c.cause == "singularity":
+        what = f"scaled manipulability at its margin {c.limit:g} ({c.figure:.4f})"
+    else:
+        what = c.label + (f" ({', '.join(c.objects)})" if c.objects else "")
+    return what + waypoint_runs(c.waypoints)

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from refine.optimise.binding import binding_at
+from refine.optimise.binding import binding_at, bound_text, waypoint_runs
 from refine.optimise.reach import reach_model, rotations_about
 from refine.optimise.verify import runs, singularity_measures
 from refine.paths import FusedPath
@@ -78,6 +78,8 @@ class Cause:
         suggestion: what would fix it, in words with figures.
         in_answer: measured at the answer rather than at the demonstrated orientation: a constraint
             at its bound there (:mod:`refine.optimise.binding`); ``explains_deg`` is then 0.
+        waypoints: for a cause in the answer, the runs of waypoints (first, last inclusive) where
+            it is at its bound; else empty.
     """
 
     cause: str
@@ -89,11 +91,16 @@ class Cause:
     explains_deg: float = 0.0
     suggestion: str = ""
     in_answer: bool = False
+    waypoints: tuple[tuple[int, int], ...] = ()
 
     @property
     def label(self) -> str:
         """The cause as the repair reasons write it: ``"joint limit (joint 5)"``, ``"collision"``."""
         return f"{self.cause} (joint {self.joint})" if self.joint is not None else self.cause
+
+    def at_bound(self) -> str:
+        """A constraint at its bound in the answer, in words (:func:`refine.optimise.binding.bound_text`)."""
+        return bound_text(self)
 
     def as_json(self) -> dict[str, Any]:
         """Plain values for ``result.json``."""
@@ -106,7 +113,10 @@ class Cause:
             "joint": self.joint,
             "explains_deg": _finite(self.explains_deg),
             "suggestion": self.suggestion,
+            "in_answer": self.in_answer,
+            "waypoints": [list(w) for w in self.waypoints],
         }
+
 
 
 @dataclass(frozen=True)
@@ -144,11 +154,10 @@ class Finding:
         c = self.cause
         objs = f" ({', '.join(c.objects)})" if c.objects else ""
         text = head + c.label + objs + (f": {c.suggestion}" if c.suggestion else "")
+        text += waypoint_runs(c.waypoints) if c.in_answer else ""
         held = [x for x in self.causes[1:] if x.in_answer]
         if held:
-            text += "; also at its bound in the answer: " + ", ".join(
-                x.label + (f" ({', '.join(x.objects)})" if x.objects else "") for x in held
-            )
+            text += "; at its bound in the answer: " + "; ".join(x.at_bound() for x in held)
         return text
 
     def as_json(self) -> dict[str, Any]:
@@ -461,11 +470,9 @@ class Diagnoser:
         if reach_rows:
             causes.append(self._reach_cause(reach_rows))
         causes.sort(key=lambda c: -c.explains_deg)
-        if status == "repaired":  # and what holds the answer there, not named yet
-            named = {(c.cause, c.joint, c.objects) for c in causes}
+        if status == "repaired":  # and every constraint that holds the answer there
             for entry in binding_at(self.kin, q, a, b, self.tolerances, self.lower, self.upper, self.model, self.cell):
-                if (entry["cause"], entry["joint"], entry["objects"]) not in named:
-                    causes.append(Cause(**entry, in_answer=True))
+                causes.append(Cause(**entry, in_answer=True))
         if not causes:
             causes = [
                 Cause(

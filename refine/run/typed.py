@@ -77,6 +77,10 @@ class DiagnosisCause:
         explains_deg: the orientation change this cause alone asks for [deg]; None when no
             orientation change is enough.
         suggestion: what would fix it, in words with figures.
+        in_answer: measured at the repaired answer (a constraint at its bound there), not at the
+            demonstrated orientation.
+        waypoints: for a cause in the answer, the runs (first, last inclusive) of waypoints where
+            it is at its bound; else empty.
     """
 
     cause: str
@@ -87,12 +91,15 @@ class DiagnosisCause:
     joint: int | None = None
     explains_deg: float | None = None
     suggestion: str = ""
+    in_answer: bool = False
+    waypoints: tuple[tuple[int, int], ...] = ()
 
     @classmethod
     def from_dict(cls, doc: dict[str, Any]) -> DiagnosisCause:
         """A cause from its ``result.json`` entry."""
         cause = settings_from(doc, cls, "diagnosis.causes[]")
-        return dataclasses.replace(cause, objects=tuple(cause.objects))
+        spans = tuple((int(a), int(b)) for a, b in cause.waypoints)
+        return dataclasses.replace(cause, objects=tuple(cause.objects), waypoints=spans)
 
 
 @dataclass(frozen=True)

@@ -26,15 +26,22 @@ def test_a_joint_at_its_limit_and_a_step_at_its_bound_are_named_and_nothing_else
     assert [(f["cause"], f["joint"]) for f in found] == [("joint limit", 2), ("joint step", 4)]
     assert math.isclose(found[0]["limit"], math.degrees(lower[1]))
     assert math.isclose(found[1]["figure"], 10.0, abs_tol=1e-9)
+    # joint 2 is on its bound at waypoint 3 only (0.1 deg off elsewhere); the 10 deg step joins 3 and 4
+    assert found[0]["waypoints"] == ((3, 3),) and found[1]["waypoints"] == ((3, 4),)
     # outside the segment (waypoints 0-1, whose steps in and out are 0.5 deg) nothing binds
     assert binding_at(kin, q, 0, 1, tol, lower, upper) == []
 
 
 def test_the_repair_text_names_what_binds_in_the_answer_after_the_first_cause():
     first = Cause("reach", 0.84, 0.82, "m", explains_deg=5.6, suggestion="tilt the tool")
-    held = Cause("collision", 0.0105, 0.01, "m", objects=("link_6", "post"), in_answer=True)
-    step = Cause("joint step", 20.0, 20.0, "deg", joint=4, in_answer=True)
+    held = Cause(
+        "collision", 0.0105, 0.01, "m", objects=("link_6", "post"), in_answer=True, waypoints=((3, 5), (8, 8))
+    )
+    step = Cause("joint step", 20.0, 20.0, "deg", joint=4, in_answer=True, waypoints=((6, 7),))
     text = Finding("repaired", 3, 9, 0.1, 0.2, (first, held, step), 2.5).describe()
     assert text.endswith(
-        "reach: tilt the tool; also at its bound in the answer: collision (link_6, post), joint step (joint 4)"
+        "reach: tilt the tool; at its bound in the answer: clearance link_6<->post at its 10 mm margin "
+        "(10.5 mm) over waypoints 3-5, 8; joint 4 step at its 20 deg bound (20.00 deg) over waypoints 6-7"
     )
+    assert held.as_json()["waypoints"] == [[3, 5], [8, 8]] and held.as_json()["in_answer"] is True
+    assert first.as_json()["waypoints"] == [] and first.as_json()["in_answer"] is False
