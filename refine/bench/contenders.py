@@ -102,11 +102,12 @@ def solve_as_refine(
     return result, nlp, build, build_cpu
 
 
-def refine_options(nlp: Any) -> dict[str, Any]:
+def refine_options(nlp: Any, first: dict[str, Any] | None = None) -> dict[str, Any]:
     """What refine's solve of ``nlp`` used: its solver's options, which were given, and what rounds change.
 
     ``options``: the first round's options of the problem's solver (refine's defaults and the given
-    ones); ``given``: the keys the caller gave, which no round overrides; ``later_rounds`` and
+    ones): ``first``, the options of the first solve when known
+    (:attr:`refine.optimise.outcome.Refinement.first_options`), else ``nlp``'s; ``given``: the keys the caller gave, which no round overrides; ``later_rounds`` and
     ``repair``: the options refine sets itself for a round that starts from the last answer
     (:data:`refine.optimise.rounds.WARM_START_OPTIONS`) and for the elastic repair
     (:data:`refine.optimise.rounds.ELASTIC_OPTIONS`), less the given ones.
@@ -120,7 +121,7 @@ def refine_options(nlp: Any) -> dict[str, Any]:
     def own(options: dict[str, Any]) -> dict[str, Any]:
         return {k: v for k, v in options.items() if k.startswith(prefix) and k not in given}
 
-    options = {k: v for k, v in nlp.solver_options.items() if k.startswith(prefix)}
+    options = {k: v for k, v in (first or nlp.solver_options).items() if k.startswith(prefix)}
     if nlp.solver_name == "fatrop":  # fatrop's defaults are merged in its stage-wise solver
         options = {f"{FATROP_PREFIX}{k}": v for k, v in getattr(nlp.solver, "options", {}).items()}
     return {
@@ -147,7 +148,7 @@ def _refine(problem: BenchProblem, mode: str, solver: str = "ipopt") -> Answer:
     cpu = build_cpu + sum(t.cpu.get(k, 0.0) for k in ("build", "seed", "solve"))
     slack = result.slack_deg if result.status == "repaired" else None
     solved = result.problem if result.problem is not None else nlp
-    options = refine_options(solved)
+    options = refine_options(solved, result.first_options)
     options["kernels"] = kernel_settings(mode)
     return Answer(
         result.status,

@@ -87,6 +87,7 @@ def solve_with_repair(
     elif loop.base_options is not None:
         loop.rebuild()
     loop.base_options = dict(problem.solver_options)  # every later build: the problem's own options
+    used = {} if skip_strict else dict(loop.problem.solver_options)
     if skip_strict:
         q = q_seed
         slack = np.zeros(problem.n_waypoints)
@@ -102,6 +103,7 @@ def solve_with_repair(
 
     if status == "infeasible" and repair_max_slack_deg is not None and repair_max_slack_deg > 0:
         loop.rebuild(active=loop.problem.active, elastic_deg=repair_max_slack_deg)
+        used = used or dict(loop.problem.solver_options)
         # start from the seed (on the path, orientation off only where the limits clamped it), with
         # each slack at what that start needs, so IPOPT begins feasible wherever it can
         q_start = q_seed
@@ -182,4 +184,5 @@ def solve_with_repair(
         diagnosis=findings,
         problem=loop.problem,
         multipliers=loop.multipliers,
+        first_options=used,
     )

@@ -108,3 +108,41 @@ def test_no_coarse_seed_for_a_six_axis_arm_or_a_short_path(family, n):
     problem = generated_problem("test", family, load_suites()["generated"][family], n)
     nlp = problem.refinement()
     assert coarse_seed(nlp, initial_guess(nlp, problem.home)) == (None, 0)
+
+
+@functools.cache
+def _puzzle_start():
+    """The first 120 waypoints of the puzzle piece: the LBR iiwa holds the part against a standing grinder."""
+    from pathlib import Path
+
+    from refine.bench.suites import bundled_problem
+    from refine.paths import FusedPath
+
+    problem = bundled_problem("test", Path(__file__).resolve().parents[2] / "problems" / "puzzle_piece")
+    f, i = problem.fused, slice(0, 120)
+    return replace(problem, fused=FusedPath(f.s[i], f.positions[i], f.rotations[i], f.speed[i], f.t_demo[i], f.residual[i]))
+
+
+def test_a_held_part_starts_its_first_full_solve_from_the_coarse_seed_at_a_small_barrier(monkeypatch):
+    from refine.bench.contenders import solve_as_refine
+
+    problem = _puzzle_start()
+    small, _, _, _ = solve_as_refine(problem, "assembled")
+    assert small.status == "ok"
+    assert small.first_options["ipopt.mu_init"] == pytest.approx(1e-4)
+    # IPOPT's own default initial barrier, 0.1 (IPOPT's options reference), for comparison
+    monkeypatch.setattr(solve_module, "COARSE_SEEDED_MU_INIT", 0.1)
+    default, _, _, _ = solve_as_refine(problem, "assembled")
+    assert default.status == "ok" and default.first_options["ipopt.mu_init"] == pytest.approx(0.1)
+    assert small.iterations < default.iterations
+    assert np.degrees(np.abs(small.q - default.q).max()) < 1e-3  # the same answer
+    # a given option is the caller's: it holds in the first solve too
+    given, _, _, _ = solve_as_refine(replace(problem, solver_options={"ipopt.mu_init": 0.01}), "assembled")
+    assert given.first_options["ipopt.mu_init"] == pytest.approx(0.01)
+
+
+def test_a_tool_on_the_flange_keeps_ipopts_initial_barrier():
+    problem, nlp = _iiwa(60, REDUNDANT_MID_RANGE_WEIGHT)
+    result = solve_refinement(nlp, home=problem.home)
+    assert result.status == "ok" and result.first_options
+    assert "ipopt.mu_init" not in result.first_options
