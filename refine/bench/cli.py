@@ -167,9 +167,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"not run here (rows with status unavailable, the reason in note): {', '.join(absent)}")
     for r in unavailable:
         if r["note"].startswith(NOT_POSED):
-            print(
-                f"{r['contender']} did not pose {r['suite']}/{r['problem']} (status unavailable): {r['note']}"
-            )
+            reason = r["note"][len(NOT_POSED) :].strip()
+            print(f"{r['contender']} did not pose {r['suite']}/{r['problem']} (status unavailable): {reason}")
     return 0
 
 

@@ -366,12 +366,16 @@ def _drake_plant(problem: BenchProblem):
 
 
 def _drake_setup(problem: BenchProblem) -> None:
-    """The Drake contender's set-up: its plant (:func:`_drake_plant`); :class:`Unavailable` without pydrake."""
+    """The Drake contender's set-up: its plant (:func:`_drake_plant`); :class:`Unavailable` without pydrake.
+
+    None on a stationary tool, which the contender does not pose (:class:`NotPosed` from its call).
+    """
     try:
         import pydrake  # noqa: F401
     except ImportError as e:
         raise Unavailable(f"pydrake is not installed ({e}); pip install '.[bench]'") from e
-    _drake_plant(problem)
+    if problem.tool_in_world is None:
+        _drake_plant(problem)
 
 
 drake_chained_ik.setup = _drake_setup  # made once per problem, before the runs (refine.bench.watchdog)

@@ -194,16 +194,30 @@ def _profiles_table(groups: dict[tuple[str, str], list[Row]]) -> list[str]:
     return lines
 
 
+def _best_on(groups: dict[tuple[str, str], list[Row]], suite: str, problems: set[str]) -> float:
+    """The least shifted geometric mean of penalised CPU times on ``problems`` [s].
+
+    Of the contenders of ``suite`` that posed every one of ``problems``: a contender's ratio is
+    taken on its own problems only.
+    """
+    means = []
+    for (s, _), rs in groups.items():
+        mine = [r for r in rs if r["problem"] in problems]
+        if s == suite and {r["problem"] for r in mine} == problems:
+            means.append(shifted_geometric_mean([_f(r, "penalised_cpu_s") for r in mine]))
+    return min(means)
+
+
 def _times_table(groups: dict[tuple[str, str], list[Row]]) -> list[str]:
     lines = [
-        "| suite | contender | problems | shifted geometric mean CPU s (penalised) | ratio to the suite's best | "
+        "| suite | contender | problems | shifted geometric mean CPU s (penalised) | ratio to the best on its problems | "
         "shifted geometric mean wall s (penalised) | median wall s (penalised) | least CPU s of a solved row | "
         "median spread of repeats |",
         "|---|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
     sgm = {k: shifted_geometric_mean([_f(r, "penalised_cpu_s") for r in rs]) for k, rs in groups.items()}
     for (suite, contender), rs in sorted(groups.items()):
-        best = min(v for (s, _), v in sgm.items() if s == suite)
+        best = _best_on(groups, suite, {r["problem"] for r in rs})
         spreads = [
             (_f(r, "max_total_s") - _f(r, "min_total_s")) / _f(r, "total_s")
             for r in rs
