@@ -74,9 +74,8 @@ def _row(problem: str, contender: str, cpu: float, status: str = "ok", note: str
     return row
 
 
-def test_a_ratio_compares_a_contender_with_the_others_on_the_problems_it_posed(tmp_path):
+def test_a_ratio_compares_a_contender_with_the_others_on_the_problems_it_posed(tmp_path, write_rows):
     from refine.bench.figures import performance_ratios
-    from refine.bench.table import COLUMNS
 
     rows = [
         _row("p1", "refine", 1.0),
@@ -84,11 +83,7 @@ def test_a_ratio_compares_a_contender_with_the_others_on_the_problems_it_posed(t
         _row("p1", "peer", 0.0, "unavailable", "not posed: the peer does not pose p1"),
         _row("p2", "peer", 8.0),
     ]
-    path = tmp_path / "bench.csv"
-    with path.open("w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=COLUMNS)
-        writer.writeheader()
-        writer.writerows(rows)
+    path = write_rows(tmp_path / "bench.csv", rows)
     text = write_report(path, tmp_path / "report").read_text()
     assert "- not posed: peer on s/p1, the peer does not pose p1" in text
     # shifted geometric means (shift 0.1 s) by hand: refine's of 1 s and 4 s is

@@ -190,7 +190,7 @@ def _row(run_id, suite, problem, contender, n, total, cpu, success=True, penalis
     return row
 
 
-def test_the_report_uses_the_rows_of_one_run_and_pairs_rows_within_a_suite(tmp_path):
+def test_the_report_uses_the_rows_of_one_run_and_pairs_rows_within_a_suite(tmp_path, write_rows):
     a, b = "20260101T000000Z-aaaaaa", "20260102T000000Z-bbbbbb"
     rows = [
         # run a: refine 2 s, greedy 1 s on the glass cell: ratio 2.00; growth t = n / 100: exponent 1.00
@@ -208,11 +208,7 @@ def test_the_report_uses_the_rows_of_one_run_and_pairs_rows_within_a_suite(tmp_p
         # a failed row of b counts as its 300 s limit: median of 1, 16, 300 is 16
         _row(b, "growth", "irb4600-1600", "refine", 1600, 0.0, 0.0, success=False, penalised=300.0),
     ]
-    path = tmp_path / "bench.csv"
-    with path.open("w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=COLUMNS)
-        writer.writeheader()
-        writer.writerows(rows)
+    path = write_rows(tmp_path / "bench.csv", rows)
 
     latest = write_report(path, tmp_path / "latest").read_text()
     assert f"Run `{b}`" in latest and a not in latest
