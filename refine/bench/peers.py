@@ -10,7 +10,11 @@ in the world.
   inside a tolerance box that lies inside the cone (each rotation-vector component within
   cone/sqrt(3), or within cone/sqrt(2) about x and y and free about the tool axis for an
   axisymmetric tool); collision as a constraint with the problem's cell margin; the joints inside
-  their limits less the problem's joint margin; smooth velocities as TrajOpt's default cost.
+  their limits less the problem's joint margin; smooth velocities as TrajOpt's default cost. On
+  the puzzle piece as Tesseract poses it, as Tesseract's example poses it: every waypoint seeded
+  by the example's start state, the pose held by the Cartesian constraint with the turn about the
+  tool axis free by a zero coefficient (:data:`EXAMPLE_COEFF`); a problem file's stationary tool
+  is not posed (:class:`~refine.bench.contenders.NotPosed`).
 - Descartes (:func:`descartes`): the same waypoints, sampled about the tool axis (the whole turn
   for an axisymmetric tool in :data:`DESCARTES_SAMPLE_DEG` steps, else three turns within half the
   cone), joint solutions a whole turn apart where a joint's range allows them, the
@@ -19,7 +23,7 @@ in the world.
   wheel's Python profile samples about one axis only: a grid of tilts within the cone cannot be
   given to it, so a non-axisymmetric tool keeps its tilt as demonstrated. On a stationary TCP
   (the puzzle piece as Tesseract poses it) the wheel's Descartes aborts the process (an uncaught
-  std::out_of_range), so it answers `failed` there without being called.
+  std::out_of_range), so it is not called there (:class:`~refine.bench.contenders.NotPosed`).
 
 Rules neither keeps (the shared verification still checks them, so an answer that breaks one is
 not verified): refine's joint-step bound between waypoints, its singularity margin, the
