@@ -145,6 +145,7 @@ def run(args: argparse.Namespace) -> int:
     if args.bench_command == "export":
         return _export(args)
     from refine.bench.runner import run_suites
+    from refine.bench.table import NOT_POSED
 
     rows = run_suites(
         args.suite or ["quick"],
@@ -160,9 +161,14 @@ def run(args: argparse.Namespace) -> int:
     )
     run_id = rows[0]["run_id"] if rows else "-"
     print(f"{len(rows)} row(s) of run {run_id} appended to {args.csv}")
-    absent = sorted({r["contender"] for r in rows if r["status"] == "unavailable"})
+    unavailable = [r for r in rows if r["status"] == "unavailable"]
+    absent = sorted({r["contender"] for r in unavailable if not r["note"].startswith(NOT_POSED)})
     if absent:
         print(f"not run here (rows with status unavailable, the reason in note): {', '.join(absent)}")
+    for r in unavailable:
+        if r["note"].startswith(NOT_POSED):
+            reason = r["note"][len(NOT_POSED) :].strip()
+            print(f"{r['contender']} did not pose {r['suite']}/{r['problem']} (status unavailable): {reason}")
     return 0
 
 

@@ -30,6 +30,14 @@ class Unavailable(Exception):
     """A contender that cannot run here (a missing optional package); the message says why."""
 
 
+class NotPosed(Exception):
+    """A contender that cannot pose this one problem (it runs on the others); the message says why.
+
+    Its row on the problem has status ``unavailable`` and the reason in ``note``, and enters no
+    table, average or ratio of the report.
+    """
+
+
 @dataclass
 class Answer:
     """What a contender returns.
@@ -136,10 +144,8 @@ def _refine(problem: BenchProblem, mode: str, solver: str = "ipopt") -> Answer:
     from refine.optimise.stagewise import MAX_FATROP_WAYPOINTS
 
     if solver == "fatrop" and problem.n_waypoints > MAX_FATROP_WAYPOINTS:
-        return Answer(
-            "failed",
-            None,
-            note=f"not run: fatrop takes at most {MAX_FATROP_WAYPOINTS} waypoints, the path has {problem.n_waypoints}",
+        raise NotPosed(
+            f"fatrop takes at most {MAX_FATROP_WAYPOINTS} waypoints, the path has {problem.n_waypoints}"
         )
     result, nlp, build, build_cpu = solve_as_refine(problem, mode, solver)
     t = result.timings_s
@@ -198,8 +204,8 @@ def refine_fatrop(problem: BenchProblem) -> Answer:
     """The refinement solved by fatrop on its stage-wise form (:mod:`refine.optimise.stagewise`).
 
     Timed as :func:`refine_assembled`; the build includes CasADi's set-up of fatrop's stage blocks.
-    Paths over :data:`refine.optimise.stagewise.MAX_FATROP_WAYPOINTS` waypoints are not run (status
-    ``failed``, saying why).
+    Paths over :data:`refine.optimise.stagewise.MAX_FATROP_WAYPOINTS` waypoints are not posed
+    (:class:`NotPosed`, saying why).
     """
     return _refine(problem, "assembled", "fatrop")
 
@@ -253,7 +259,8 @@ def drake_chained_ik(problem: BenchProblem) -> Answer:
     solving it (``solve``). Not timed, as refine's robot loading is not: the plant, parsed from the
     robot's URDF once per problem and kept (:func:`_drake_plant`), and the start configuration, the
     first configuration of the greedy chain along the whole path (:func:`greedy_ik`), so both
-    start on the same IK branch. Raises :class:`Unavailable` without pydrake or SNOPT.
+    start on the same IK branch. Raises :class:`Unavailable` without pydrake or SNOPT, and
+    :class:`NotPosed` on a stationary tool.
     """
     try:
         from pydrake.math import RotationMatrix
@@ -262,7 +269,7 @@ def drake_chained_ik(problem: BenchProblem) -> Answer:
     except ImportError as e:
         raise Unavailable(f"pydrake is not installed ({e}); pip install '.[bench]'") from e
     if problem.tool_in_world is not None:
-        return Answer("failed", None, note="not run: the Drake contender does not pose a stationary tool")
+        raise NotPosed("the Drake contender does not pose a stationary tool (the robot holding the part)")
     snopt = SnoptSolver()
     if not snopt.available():
         raise Unavailable("pydrake has no SNOPT here")
@@ -360,12 +367,16 @@ def _drake_plant(problem: BenchProblem):
 
 
 def _drake_setup(problem: BenchProblem) -> None:
-    """The Drake contender's set-up: its plant (:func:`_drake_plant`); :class:`Unavailable` without pydrake."""
+    """The Drake contender's set-up: its plant (:func:`_drake_plant`); :class:`Unavailable` without pydrake.
+
+    None on a stationary tool, which the contender does not pose (:class:`NotPosed` from its call).
+    """
     try:
         import pydrake  # noqa: F401
     except ImportError as e:
         raise Unavailable(f"pydrake is not installed ({e}); pip install '.[bench]'") from e
-    _drake_plant(problem)
+    if problem.tool_in_world is None:
+        _drake_plant(problem)
 
 
 drake_chained_ik.setup = _drake_setup  # made once per problem, before the runs (refine.bench.watchdog)
@@ -511,12 +522,13 @@ def timed_call(problem: BenchProblem, name: str, function: Contender) -> tuple[A
 
     The clock runs around the whole call, whatever the contender times itself. A crash is an
     ``error`` answer with the exception in its note; :class:`Unavailable` passes through (the
-    runner then skips the contender); an answer of another type is an ``error`` too.
+    runner then skips the contender), and so does :class:`NotPosed` (the runner then skips it on
+    this problem); an answer of another type is an ``error`` too.
     """
     t0 = time.perf_counter()
     try:
         answer = function(problem)
-    except Unavailable:
+    except (Unavailable, NotPosed):
         raise
     except Exception as e:  # a contender crashing is a result, not the end of the benchmark
         log.warning("%s on %s failed: %s", name, problem.name, e)

@@ -74,8 +74,9 @@ def performance_ratios(
 
     Only a row that ``passes`` (default :func:`solved`; a tolerance profile's test, see
     :data:`PROFILE_TESTS`) has a time; any other, or a problem no contender passed, gives ``inf``.
-    One ratio per problem of ``rows`` for every contender in them (a contender without a row on a
-    problem also gets ``inf``).
+    One ratio per problem a contender has a row on: a problem it has no row on (one it did not
+    pose, whose ``unavailable`` row the report leaves out) is left out of its ratios, so its curve
+    is the share of the problems it posed.
     """
     passes = solved if passes is None else passes
     problems = sorted({r["problem"] for r in rows})
@@ -85,7 +86,9 @@ def performance_ratios(
     for p in problems:
         best = min((times.get((p, c), math.inf) for c in contenders), default=math.inf)
         for c in contenders:
-            t = times.get((p, c), math.inf)
+            if (p, c) not in times:
+                continue
+            t = times[(p, c)]
             ratios[c].append(
                 t / best if math.isfinite(t) and best > 0 else (1.0 if t == best == 0 else math.inf)
             )

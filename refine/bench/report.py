@@ -28,7 +28,7 @@ from refine.bench.figures import (
 from refine.bench.figures import number as _f
 from refine.bench.figures import yes as _yes
 from refine.bench.rules import RULES, UNSTATED
-from refine.bench.table import Row, read_runs
+from refine.bench.table import NOT_POSED, Row, read_runs
 
 
 def _fmt(x: float, digits: int = 3) -> str:
@@ -194,16 +194,30 @@ def _profiles_table(groups: dict[tuple[str, str], list[Row]]) -> list[str]:
     return lines
 
 
+def _best_on(groups: dict[tuple[str, str], list[Row]], suite: str, problems: set[str]) -> float:
+    """The least shifted geometric mean of penalised CPU times on ``problems`` [s].
+
+    Of the contenders of ``suite`` that posed every one of ``problems``: a contender's ratio is
+    taken on its own problems only.
+    """
+    means = []
+    for (s, _), rs in groups.items():
+        mine = [r for r in rs if r["problem"] in problems]
+        if s == suite and {r["problem"] for r in mine} == problems:
+            means.append(shifted_geometric_mean([_f(r, "penalised_cpu_s") for r in mine]))
+    return min(means)
+
+
 def _times_table(groups: dict[tuple[str, str], list[Row]]) -> list[str]:
     lines = [
-        "| suite | contender | problems | shifted geometric mean CPU s (penalised) | ratio to the suite's best | "
+        "| suite | contender | problems | shifted geometric mean CPU s (penalised) | ratio to the best on its problems | "
         "shifted geometric mean wall s (penalised) | median wall s (penalised) | least CPU s of a solved row | "
         "median spread of repeats |",
         "|---|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
     sgm = {k: shifted_geometric_mean([_f(r, "penalised_cpu_s") for r in rs]) for k, rs in groups.items()}
     for (suite, contender), rs in sorted(groups.items()):
-        best = min(v for (s, _), v in sgm.items() if s == suite)
+        best = _best_on(groups, suite, {r["problem"] for r in rs})
         spreads = [
             (_f(r, "max_total_s") - _f(r, "min_total_s")) / _f(r, "total_s")
             for r in rs
@@ -248,11 +262,25 @@ def _growth_table(rows: list[Row]) -> list[str]:
     return lines if count else []
 
 
+def _absent_lines(absent: list[Row]) -> list[str]:
+    """One provenance line per contender that could not run here, and per problem a contender did not pose."""
+    lines = []
+    posed = [r for r in absent if not r["note"].startswith(NOT_POSED)]
+    for c in sorted({r["contender"] for r in posed}):
+        mine = [r for r in posed if r["contender"] == c]
+        lines.append(f"- not run here: {c} on {len(mine)} problem(s), {mine[0]['note']}")
+    for r in sorted((r for r in absent if r["note"].startswith(NOT_POSED)), key=lambda r: r["contender"]):
+        lines.append(
+            f"- not posed: {r['contender']} on {r['suite']}/{r['problem']}, {r['note'][len(NOT_POSED) :].strip()}"
+        )
+    return lines
+
+
 def run_section(run_id: str, rows: list[Row], out_dir: Path, prefix: str = "") -> list[str]:
     """The Markdown of one run's rows (plots written into ``out_dir``, names starting ``prefix``).
 
-    Rows of a contender that could not run here (status ``unavailable``) are listed in the
-    provenance block and enter no table or figure.
+    Rows of a contender that could not run here, or did not pose the problem (status
+    ``unavailable``), are listed in the provenance block and enter no table, figure, average or ratio.
     """
     rows = _latest(rows)
     absent = [r for r in rows if r["status"] == "unavailable"]
@@ -276,11 +304,7 @@ def run_section(run_id: str, rows: list[Row], out_dir: Path, prefix: str = "") -
         "### Provenance",
         "",
         *provenance(run_id, rows),
-        *(
-            f"- not run here: {c} on {sum(r['contender'] == c for r in absent)} problem(s), "
-            f"{next(r['note'] for r in absent if r['contender'] == c)}"
-            for c in sorted({r["contender"] for r in absent})
-        ),
+        *_absent_lines(absent),
         "",
         "### Targets",
         "",

@@ -30,14 +30,14 @@ from typing import Any
 import numpy as np
 
 from refine.bench import peers  # noqa: F401  (adds trajopt and descartes to CONTENDERS)
-from refine.bench.contenders import CONTENDERS, Answer, Unavailable, verify
+from refine.bench.contenders import CONTENDERS, Answer, NotPosed, Unavailable, verify
 from refine.bench.outcomes import DEFAULT_TIME_LIMIT_S, penalised, score
 from refine.bench.provenance import DEFAULT_BLAS_THREADS, fixed_threads, git_commit, solver_versions
 from refine.bench.provenance import blas_threads as current_blas_threads
 from refine.bench.quality import evaluate
 from refine.bench.rules import columns as rules_columns
 from refine.bench.suites import BenchProblem, load_suites, problems
-from refine.bench.table import COLUMNS, SCHEMA_VERSION, check_header, new_run_id
+from refine.bench.table import COLUMNS, NOT_POSED, SCHEMA_VERSION, check_header, new_run_id
 from refine.bench.watchdog import Workers, prepare
 from refine.errors import InputError
 
@@ -115,8 +115,11 @@ def run_turns(
 
     Each contender first makes its declared set-up (:func:`refine.bench.watchdog.prepare`, in this
     process, untimed; its wall and CPU time go to ``setup_s`` and ``setup_cpu_s``) and runs
-    ``warmup`` times untimed, then the ``repeat`` timed runs go round the contenders in turn. A contender that raises :class:`Unavailable` is left out with a message
-    (and its reason put in ``unavailable``, by name, when given).
+    ``warmup`` times untimed, then the ``repeat`` timed runs go round the contenders in turn. A
+    contender that raises :class:`Unavailable` is left out with a message (and its reason put in
+    ``unavailable``, by name, when given); one that raises :class:`NotPosed` is left out of this
+    problem only, and its row here is status ``unavailable`` with ``not posed:`` and the reason in
+    ``note``.
     Every run (warm-up ones included) is held to ``time_limit_s``
     (:class:`refine.bench.watchdog.Workers`): refine's contenders stop there themselves, any
     other runs in its worker, a child forked once for the problem that makes all its runs, warm-up
@@ -134,10 +137,16 @@ def run_turns(
     setups: dict[str, tuple[float, float]] = {}  # name -> the declared set-up's wall and CPU time [s]
     answers: dict[str, list[tuple[Answer, float]]] = {}
 
-    def drop(name: str, e: Unavailable) -> None:
-        echo(f"skipping {name}: {e}")
+    not_posed: dict[str, str] = {}  # name -> why it does not pose this problem
+
+    def drop(name: str, e: Exception) -> None:
         del functions[name]
         answers.pop(name, None)
+        if isinstance(e, NotPosed):
+            echo(f"{name} does not pose {problem.name}: {e}")
+            not_posed[name] = str(e)
+            return
+        echo(f"skipping {name}: {e}")
         if unavailable is not None:
             unavailable[name] = str(e)
 
@@ -149,7 +158,7 @@ def run_turns(
                     workers.run(
                         problem, name, functions[name], time_limit_s, isolate, log(name, "-warmup", k)
                     )
-            except Unavailable as e:
+            except (Unavailable, NotPosed) as e:
                 drop(name, e)
         answers = {name: [] for name in functions}
         load0 = _load()
@@ -160,14 +169,17 @@ def run_turns(
                     answers[name].append(
                         workers.run(problem, name, functions[name], time_limit_s, isolate, log(name, "", k))
                     )
-                except Unavailable as e:
+                except (Unavailable, NotPosed) as e:
                     drop(name, e)
     load = f"{load0:.2f}-{_load():.2f}"
-    return {
+    rows = {
         name: _row(problem, name, runs, warmup, load, peak0, time_limit_s, setups.get(name, (0.0, 0.0)))
         for name, runs in answers.items()
         if runs
     }
+    for name, reason in not_posed.items():
+        rows[name] = _unavailable_row(problem, name, f"{NOT_POSED} {reason}", warmup, time_limit_s)
+    return rows
 
 
 def _load() -> float:

@@ -95,3 +95,8 @@ def read_runs(csv_path: Path, run_ids: list[str] | None = None) -> list[tuple[st
 def read_run(csv_path: Path, run_id: str | None = None) -> tuple[str, list[Row]]:
     """The rows of one run (:func:`read_runs`): ``run_id``'s, or the last run's; returns the id and rows."""
     return read_runs(csv_path, [run_id] if run_id else None)[0]
+
+
+NOT_POSED = "not posed:"
+"""How the ``note`` of a row begins whose contender did not pose its problem (status ``unavailable``;
+:class:`refine.bench.contenders.NotPosed`)."""

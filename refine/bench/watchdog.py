@@ -46,7 +46,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-from refine.bench.contenders import Answer, Contender, Unavailable, timed_call
+from refine.bench.contenders import Answer, Contender, NotPosed, Unavailable, timed_call
 from refine.bench.suites import BenchProblem
 
 log = logging.getLogger(__name__)
@@ -74,7 +74,8 @@ def setup_of(function: Contender) -> Callable[[BenchProblem], Any] | None:
 def prepare(problem: BenchProblem, function: Contender) -> tuple[float, float]:
     """Make ``function``'s declared set-up for ``problem`` in this process; its wall and CPU time [s].
 
-    Nothing for a contender without one (0, 0). :class:`Unavailable` reaches the caller; any other
+    Nothing for a contender without one (0, 0). :class:`Unavailable` and :class:`NotPosed` reach the
+    caller; any other
     exception is logged and left to the contender's own calls, which then make the set-up themselves
     (and fail as they fail).
     """
@@ -84,7 +85,7 @@ def prepare(problem: BenchProblem, function: Contender) -> tuple[float, float]:
     w0, c0 = time.perf_counter(), time.process_time()
     try:
         setup(problem)
-    except Unavailable:
+    except (Unavailable, NotPosed):
         raise
     except Exception as e:  # the contender's call meets it again, as an error answer
         log.warning("the set-up of a contender on %s failed: %s", problem.name, e)
@@ -144,7 +145,8 @@ class Workers:
 
         In the contender's worker (made on its first run, or after a kill), or in this process for
         a contender that keeps the limit itself, with ``isolate`` False or without ``fork``.
-        :class:`Unavailable` raised by the contender reaches the caller in either way of running.
+        :class:`Unavailable` and :class:`NotPosed` raised by the contender reach the caller in either
+        way of running.
         ``log``: a file that receives everything the run prints to the process's standard output
         and error, the solvers' own iteration logs included (:func:`captured`).
         """
@@ -180,6 +182,8 @@ class Workers:
             return answer, own_wall
         if kind == "unavailable":
             raise Unavailable(payload)
+        if kind == "not_posed":
+            raise NotPosed(payload)
         # no answer: the stage time is the runner's wall time until then, the worker's CPU time unknown
         if kind == "timeout":
             note = f"stopped by the watchdog at the time limit of {time_limit_s:g} s"
@@ -266,6 +270,8 @@ def _serve(requests: Any, answers: Any, problem: BenchProblem, name: str, functi
                 message = ("answer", timed_call(problem, name, function))
         except Unavailable as e:
             message = ("unavailable", str(e))
+        except NotPosed as e:
+            message = ("not_posed", str(e))
         try:
             answers.send(message)
         except Exception as e:  # an answer that cannot be pickled is an error of the contender

@@ -62,3 +62,20 @@ def registry():
     yield CONTENDERS
     CONTENDERS.clear()
     CONTENDERS.update(saved)
+
+
+@pytest.fixture
+def write_rows():
+    """``write_rows(path, rows)``: a benchmark CSV of ``rows`` (dicts of the columns) under the header."""
+    import csv
+
+    from refine.bench.table import COLUMNS
+
+    def write(path, rows):
+        with path.open("w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=COLUMNS)
+            writer.writeheader()
+            writer.writerows(rows)
+        return path
+
+    return write

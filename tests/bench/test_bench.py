@@ -224,10 +224,10 @@ def test_the_fatrop_contender_is_verified_as_the_others_and_refuses_long_paths(s
     reference = contenders_module.refine_assembled(problem)
     np.testing.assert_allclose(answer.q, reference.q, atol=1e-6)
     long = generated_problem("tiny", "wave", data["generated"]["wave"], MAX_FATROP_WAYPOINTS + 1)
-    refused = contenders_module.refine_fatrop(long)
-    assert refused.status == "failed" and refused.q is None
-    assert (
-        f"at most {MAX_FATROP_WAYPOINTS} waypoints, the path has {MAX_FATROP_WAYPOINTS + 1}" in refused.note
+    with pytest.raises(contenders_module.NotPosed) as refused:
+        contenders_module.refine_fatrop(long)
+    assert f"at most {MAX_FATROP_WAYPOINTS} waypoints, the path has {MAX_FATROP_WAYPOINTS + 1}" in str(
+        refused.value
     )
 
 

@@ -9,6 +9,7 @@ import time
 import pytest
 
 from refine.bench import contenders as contenders_module
+from refine.bench import watchdog
 from refine.bench.contenders import Answer
 from refine.bench.outcomes import score
 from refine.bench.report import write_report
@@ -134,6 +135,9 @@ def test_a_run_over_the_time_limit_is_a_timeout_whatever_its_answer(tmp_path, mo
         return answer
 
     monkeypatch.setitem(contenders_module.CONTENDERS, "greedy-ik", slow)
+    # the answer must come back before the watchdog's kill, however loaded the machine: it waits
+    # past the limit for as long as the grace allows
+    monkeypatch.setattr(watchdog, "GRACE_S", 60.0)
     out = tmp_path / "bench.csv"
     (row,) = run_suites(
         ["tiny"], ["greedy-ik"], out, suites_file=suites, time_limit_s=0.1, echo=lambda _: None
@@ -186,7 +190,7 @@ def _row(run_id, suite, problem, contender, n, total, cpu, success=True, penalis
     return row
 
 
-def test_the_report_uses_the_rows_of_one_run_and_pairs_rows_within_a_suite(tmp_path):
+def test_the_report_uses_the_rows_of_one_run_and_pairs_rows_within_a_suite(tmp_path, write_rows):
     a, b = "20260101T000000Z-aaaaaa", "20260102T000000Z-bbbbbb"
     rows = [
         # run a: refine 2 s, greedy 1 s on the glass cell: ratio 2.00; growth t = n / 100: exponent 1.00
@@ -204,11 +208,7 @@ def test_the_report_uses_the_rows_of_one_run_and_pairs_rows_within_a_suite(tmp_p
         # a failed row of b counts as its 300 s limit: median of 1, 16, 300 is 16
         _row(b, "growth", "irb4600-1600", "refine", 1600, 0.0, 0.0, success=False, penalised=300.0),
     ]
-    path = tmp_path / "bench.csv"
-    with path.open("w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=COLUMNS)
-        writer.writeheader()
-        writer.writerows(rows)
+    path = write_rows(tmp_path / "bench.csv", rows)
 
     latest = write_report(path, tmp_path / "latest").read_text()
     assert f"Run `{b}`" in latest and a not in latest

@@ -121,3 +121,43 @@ def test_the_puzzle_piece_as_tesseract_poses_it(require):
     assert problem.tcp_in_flange == pytest.approx(expected, abs=1e-9)
     assert problem.fused.positions[0] == pytest.approx([0.0789071, 0.0, 0.0237139])
     assert verify(problem, None).reason == "no answer"
+
+
+def test_the_peers_do_not_pose_a_problem_files_stationary_tool():
+    from refine.bench.contenders import NotPosed
+    from refine.bench.peers import descartes, trajopt
+
+    problem = generated_problem("t", "wave", WAVE, 5)
+    problem.tool_in_world = np.eye(4)  # the robot holds the part, the TCP stands in the world
+    with pytest.raises(NotPosed, match="stationary"):
+        trajopt(problem)
+    with pytest.raises(NotPosed, match="stationary TCP"):
+        descartes(problem)
+
+
+@pytest.mark.slow
+def test_trajopt_poses_the_puzzle_piece_as_tesseracts_example_and_holds_the_part_to_a_micrometre(require):
+    pytest.importorskip("tesseract_robotics")
+    from refine.bench.peers import EXAMPLE_START_RAD, trajopt
+    from refine.bench.suites import tesseract_puzzle
+
+    support = require.path(
+        require.shared / "peers" / "tesseract_support", "the puzzle piece's files (../shared/peers)"
+    )
+    problem = tesseract_puzzle("t", support)
+    answer = trajopt(problem)
+    assert answer.status == "ok" and answer.solver_status == "successful"
+    assert answer.solver_options["cartesian_coeff"] == [100.0, 100.0, 100.0, 10.0, 10.0, 0.0]
+    assert answer.times_s["seed"] == 0.0  # seeded by the example's start state, no IK
+    # graded by Pinocchio (refine's verifier), not by Tesseract: the grinder's point on the path
+    # within the verifier's 1 µm and the grinder's axis on the path's axis
+    verdict = verify(problem, answer.q)
+    assert verdict.verified, verdict.reason
+    assert verdict.max_position_error_m < 1e-6 and verdict.max_orientation_deviation_deg < 1e-2
+    # the turn about the tool axis was left free: the answer's spin differs from the demonstrated
+    # frames' (a held spin, TrajOpt's default coefficient 5, would keep it at 0)
+    kin = TcpKinematics(problem.robot, problem.base_in_world, problem.tcp_in_flange, problem.tool_in_world)
+    turn = np.einsum("kji,kjl->kil", problem.fused.rotations, kin.poses(answer.q)[:, :3, :3])
+    spin = np.degrees(np.arctan2(turn[:, 1, 0], turn[:, 0, 0]))
+    assert np.abs(spin).max() > 1.0
+    assert len(EXAMPLE_START_RAD) == problem.robot.nq

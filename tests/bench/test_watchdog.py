@@ -3,6 +3,7 @@ and refine's contenders get the limit and stop there themselves."""
 
 from __future__ import annotations
 
+import ctypes
 import math
 import os
 import time
@@ -28,6 +29,13 @@ def sleeps_forever(problem):
     time.sleep(60.0)
 
 
+def pauses_in_libc(problem):
+    """Block in C until a signal comes (libc ``pause``), as a solver's loop that never returns to Python."""
+    (problem.extra["pid_file"]).write_text(str(os.getpid()))
+    ctypes.CDLL(None).pause()
+    return contenders_module.Answer("ok", None)
+
+
 def dies(problem):
     os.abort()  # as a C++ solver's uncaught exception does
 
@@ -47,6 +55,23 @@ def test_a_contender_past_the_limit_is_killed_and_fails_at_the_limit(tmp_path, m
     # the time it ran until stopped, not 0 s; its CPU time is not known
     assert 0.5 <= row["total_s"] < 20.0 and math.isnan(row["cpu_s"])
     assert row["penalised_total_s"] == 0.5 and row["penalised_cpu_s"] == 0.5
+
+
+def test_a_contender_blocked_in_libc_is_killed_at_the_limit_and_its_run_is_a_timeout(problem, tmp_path):
+    problem.extra["pid_file"] = tmp_path / "pid"
+    t0 = time.perf_counter()
+    answer, wall = run_limited(problem, "pauses", pauses_in_libc, 1.0)
+    elapsed = time.perf_counter() - t0
+    problem.extra.pop("pid_file")
+    assert answer.status == "timeout" and answer.q is None
+    assert answer.note == "stopped by the watchdog at the time limit of 1 s"
+    # the limit (1 s) and the grace (0.5 s) passed before the kill; the call came back soon after
+    assert 1.5 <= wall <= elapsed < 30.0 and answer.times_s["solve"] == wall and math.isnan(answer.cpu_s)
+    # the worker that blocked is gone (killed and reaped), not left behind
+    pid = int((tmp_path / "pid").read_text())
+    assert pid != os.getpid()
+    with pytest.raises(ProcessLookupError):
+        os.kill(pid, 0)
 
 
 def test_a_contender_that_kills_its_process_is_an_error_and_the_runner_goes_on(problem):
