@@ -1,0 +1,351 @@
+"""A re-solve as a Newton correction of the previous answer's KKT system, verified or refused.
+
+After a small change (the part moved a few millimetres, another cone) the answer of the kept
+problem (:mod:`refine.optimise.warm`) is near the previous one and, as a rule, its active set is the
+same: the cone rows, clearance rows, singularity bounds, joint-step rows and joint limits that
+bound the previous answer bound the new one, and no other. The KKT conditions of the problem with
+that active set held as equalities and the other inequalities dropped,
+
+    ∇f(x) + J_A(x)ᵀ λ_A = 0,    g_A(x) = b_A,
+
+are then a square nonlinear system, which Newton's method solves from the moved previous answer in
+a few steps to machine precision (:func:`newton_correction`): no barrier, no line search, no
+CasADi/IPOPT/MUMPS set-up. The problem is banded (each waypoint's joints couple only to the next
+two through the joint-step and smoothness terms, every row touches one waypoint or two neighbours),
+so the KKT matrix, variables and rows interleaved waypoint by waypoint, is a band matrix whose LU
+factorisation (LAPACK ``gbsv``) costs linear time in the waypoints.
+
+The answer is accepted only when it is the IPOPT problem's answer too (:func:`accept`): every
+constraint (the dropped rows, the variable bounds) holds within IPOPT's constraint tolerance, every
+active inequality's multiplier has the sign of a bound that pushes back, and the KKT residual is
+under IPOPT's tolerance. Anything else (a row that became active, one that let go, no
+convergence, a singular matrix) refuses the correction with the reason, and the caller solves with
+IPOPT as before (:class:`refine.optimise.rounds.RoundLoop`). An accepted answer still runs through
+the verification of any other answer.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+import scipy.sparse as sp
+
+from refine.optimise.problem import RefinementNLP
+from refine.types import Array
+
+log = logging.getLogger(__name__)
+
+
+ACTIVE_MULTIPLIER = 1e-6
+"""A previous inequality row (or variable bound) is taken as active when its multiplier is larger
+than this, at the side its sign names. An interior-point answer has λ·s = μ (about 1e-11 at IPOPT's
+tolerance): a row that binds has a multiplier of 1e-5 or more (the cost is in squared degrees), one
+clear of its bound by 1e-4 a multiplier of 1e-7 or less. The rows in between are within about
+√μ of their bound, weakly active, and may take either side (:data:`MAX_SWAPS`)."""
+
+
+MAX_SWAPS = 8
+"""Rows or bounds at most that the correction moves into or out of the active set: a row of the
+guessed set whose multiplier came out of the wrong sign is dropped, a dropped row the answer breaks
+is held, and Newton's method runs again. A larger change is a change of the active set, refused."""
+
+
+MAX_NEWTON_STEPS = 8
+"""Newton steps at most; with the exact Hessian two or three reach machine precision."""
+
+
+STEP_TOL_RAD = 1e-12
+"""The correction has converged when its last step moved no joint by more than this [rad] and the
+KKT residual is under the tolerance."""
+
+
+MAX_BANDWIDTH = 400
+"""A KKT matrix wider than this (a row coupling distant waypoints) is not banded: refused."""
+
+
+@dataclass(frozen=True)
+class Correction:
+    """A verified Newton correction.
+
+    Attributes:
+        x: the answer, the problem's variables (N·n) [rad].
+        lam_g: the multipliers of every constraint row (CasADi's sign: > 0 at an upper bound,
+            < 0 at a lower bound, zero for an inactive row).
+        lam_x: the multipliers of the variable bounds (the same sign convention).
+        iterations: Newton steps taken.
+        stationarity: the largest entry of ∇f + Jᵀλ_g + λ_x at ``x`` [cost units per rad].
+        violation: the largest constraint or bound violation at ``x`` (row units: m, cosine, rad).
+    """
+
+    x: Array
+    lam_g: Array
+    lam_x: Array
+    iterations: int
+    stationarity: float
+    violation: float
+
+
+@dataclass(frozen=True)
+class ActiveRows:
+    """The active set the correction holds: rows and bounds as equalities, at which side.
+
+    Attributes:
+        rows: indices of the constraint rows held (equalities and active inequalities).
+        side: per held row, -1 at its lower bound, +1 at its upper bound, 0 an equality row.
+        bounds: indices of the variables held at a bound.
+        bound_side: per held variable, -1 at its lower bound, +1 at its upper bound.
+    """
+
+    rows: Array
+    side: Array
+    bounds: Array
+    bound_side: Array
+
+
+def _tolerances(problem: RefinementNLP) -> tuple[float, float]:
+    """IPOPT's KKT tolerance and constraint tolerance for ``problem``."""
+    options = problem.solver_options
+    return float(options.get("ipopt.tol", 1e-8)), float(options.get("ipopt.constr_viol_tol", 1e-4))
+
+
+def active_rows(
+    lbg: Array, ubg: Array, lam_g: Array, lbx: Array, ubx: Array, lam_x: Array, no_upper: Array | None = None
+) -> ActiveRows:
+    """The active set that the multipliers ``lam_g`` of rows and ``lam_x`` of the variables name.
+
+    Equality rows are always held; an inequality row or a bound is held at the side its
+    multiplier's sign names when the multiplier is larger than :data:`ACTIVE_MULTIPLIER`.
+    ``no_upper`` (rows,) marks the rows whose upper bound is never held: the cone rows, whose
+    upper bound 1 + 1e-9 is the largest cosine there is. A waypoint on the demonstrated orientation
+    sits on it with a multiplier of IPOPT's making, but the row's gradient vanishes there (the
+    cosine is at its maximum), so holding it would leave the KKT matrix singular.
+    """
+    side_g = np.where(lam_g > ACTIVE_MULTIPLIER, 1, 0) - np.where(lam_g < -ACTIVE_MULTIPLIER, 1, 0)
+    if no_upper is not None:
+        side_g[no_upper & (side_g > 0)] = 0
+    side_g = np.where(np.isfinite(np.where(side_g > 0, ubg, lbg)), side_g, 0)
+    equal = lbg == ubg
+    side_g[equal] = 0
+    rows = np.flatnonzero(equal | (side_g != 0))
+    side_x = np.where(lam_x > ACTIVE_MULTIPLIER, 1, 0) - np.where(lam_x < -ACTIVE_MULTIPLIER, 1, 0)
+    side_x = np.where(np.isfinite(np.where(side_x > 0, ubx, lbx)), side_x, 0)
+    bounds = np.flatnonzero(side_x != 0)
+    return ActiveRows(rows, side_g[rows], bounds, side_x[bounds])
+
+
+def _csc(matrix) -> sp.csc_matrix:  # noqa: ANN001 - a casadi.DM
+    """A CasADi sparse matrix as SciPy's."""
+    sparsity = matrix.sparsity()
+    colind, row = sparsity.get_ccs()
+    return sp.csc_matrix((np.asarray(matrix.nonzeros()), row, colind), shape=matrix.shape)
+
+
+def _evaluate(problem: RefinementNLP, x: Array, lam_g: Array) -> tuple[Array, Array, sp.csr_matrix, sp.csc_matrix]:
+    """Gradient of the cost, rows, their Jacobian and the Hessian of the Lagrangian at ``x``, ``lam_g``."""
+    d = problem.derivatives
+    _, grad = d["grad_f"](x, problem.params)
+    g, jac = d["jac_g"](x, problem.params)
+    upper = _csc(d["hess_lag"](x, problem.params, 1.0, lam_g))
+    hess = upper + sp.triu(upper, 1).T
+    return np.asarray(grad).ravel(), np.asarray(g).ravel(), _csc(jac).tocsr(), hess.tocsc()
+
+
+def _band_order(nx: int, n: int, rows: sp.csr_matrix) -> Array:
+    """The order of variables and rows that keeps the KKT matrix banded.
+
+    Each waypoint's n variables, then the rows whose last variable is among them (a row of
+    waypoint k, or of the segment that ends there).
+    """
+    last = np.maximum.reduceat(rows.indices, rows.indptr[:-1]) if rows.nnz else np.zeros(0, dtype=np.int64)
+    empty = np.diff(rows.indptr) == 0
+    last = np.where(empty, 0, last) if len(last) else last
+    stage = np.concatenate([np.arange(nx) // n, last // n])
+    kind = np.concatenate([np.zeros(nx, dtype=np.int64), np.ones(rows.shape[0], dtype=np.int64)])
+    return np.lexsort((np.arange(len(stage)), kind, stage))
+
+
+def solve_banded_kkt(hess: sp.csc_matrix, rows: sp.csr_matrix, rhs: Array, n: int) -> Array:
+    """The solution of ``[[H, Aᵀ], [A, 0]] z = rhs``, ``A`` = ``rows``, in band form.
+
+    Raises:
+        numpy.linalg.LinAlgError: the matrix is singular or not banded (a row coupling distant
+            waypoints, bandwidth over :data:`MAX_BANDWIDTH`).
+    """
+    nx, m = hess.shape[0], rows.shape[0]
+    kkt = sp.bmat([[hess, rows.T], [rows, None]], format="coo")
+    order = _band_order(nx, n, rows)
+    position = np.empty_like(order)
+    position[order] = np.arange(len(order))
+    i, j = position[kkt.row], position[kkt.col]
+    lower, upper = int(max(0, (i - j).max())), int(max(0, (j - i).max()))
+    if max(lower, upper) > MAX_BANDWIDTH:
+        raise np.linalg.LinAlgError(f"KKT matrix not banded (bandwidth {max(lower, upper)})")
+    band = np.zeros((lower + upper + 1, nx + m))
+    np.add.at(band, (upper + i - j, j), kkt.data)
+    z = scipy.linalg.solve_banded((lower, upper), band, rhs[order], check_finite=False)
+    out = np.empty_like(z)
+    out[order] = z
+    return out
+
+
+def correct(
+    problem: RefinementNLP, x0: Array, lam_g0: Array, lam_x0: Array
+) -> tuple[Correction | None, str]:
+    """The answer of ``problem`` near ``x0`` by Newton's method on its KKT system, or None and why not.
+
+    ``lam_g0``, ``lam_x0``: the previous answer's multipliers of every row and variable bound
+    (CasADi's sign convention), which name the active set (:func:`active_rows`). A weakly active
+    row may change sides (at most :data:`MAX_SWAPS` in all); the answer is returned only when
+    :func:`accept` finds it an answer of the whole problem.
+    """
+    if problem.elastic_deg is not None or not problem.derivatives:
+        return None, "the problem has no assembled derivatives or is elastic"
+    lam_g0, lam_x0 = np.asarray(lam_g0, dtype=float), np.asarray(lam_x0, dtype=float)
+    if lam_g0.shape != problem.lbg.shape or lam_x0.shape != problem.lbx.shape:
+        return None, "the multipliers do not fit the problem's rows and variables"
+    cone = np.zeros(len(problem.lbg), dtype=bool)
+    cone[3 : 4 * problem.n_waypoints : 4] = True
+    active = active_rows(problem.lbg, problem.ubg, lam_g0, problem.lbx, problem.ubx, lam_x0, cone)
+    x, lam_g, lam_x = np.asarray(x0, dtype=float), lam_g0, lam_x0
+    swaps = 0
+    total = 0
+    while True:
+        found, reason, state = newton_correction(problem, x, active, lam_g, lam_x)
+        total += state[3]
+        if found is not None:
+            return Correction(found.x, found.lam_g, found.lam_x, total, found.stationarity, found.violation), ""
+        changed, count = state[4], state[5]
+        if changed is None or swaps + count > MAX_SWAPS:
+            return None, reason if changed is None else f"{reason} ({swaps + count} rows changed sides)"
+        log.debug("Newton correction: %s; %d rows change sides, solved again", reason, count)
+        swaps += count
+        active, (x, lam_g, lam_x) = changed, state[:3]
+
+
+def newton_correction(
+    problem: RefinementNLP, x0: Array, active: ActiveRows, lam_g0: Array, lam_x0: Array
+) -> tuple[Correction | None, str, tuple]:
+    """Newton's method on the KKT system of ``problem`` with ``active`` held, from ``x0``.
+
+    ``lam_g0``, ``lam_x0``: the start multipliers (of every row and bound; only the held ones
+    count). Returns the verified correction (:func:`accept`) and an empty reason, or None and why
+    it was refused; then the last iterate ``(x, lam_g, lam_x)``, the Newton steps, and the active
+    set :func:`accept` proposes instead (or None) with the number of rows it moves.
+    """
+    n = problem.dof
+    nx = len(problem.lbx)
+    x = np.asarray(x0, dtype=float).copy()
+    rows, bounds = active.rows, active.bounds
+    target = np.where(active.side > 0, problem.ubg[rows], problem.lbg[rows])
+    x[bounds] = np.where(active.bound_side > 0, problem.ubx[bounds], problem.lbx[bounds])
+    lam_g = np.zeros(len(problem.lbg))
+    lam_g[rows] = lam_g0[rows]
+    lam_x = np.zeros(nx)
+    lam_x[bounds] = lam_x0[bounds]
+    tol, _ = _tolerances(problem)
+    fix = sp.csr_matrix((np.ones(len(bounds)), (np.arange(len(bounds)), bounds)), shape=(len(bounds), nx))
+    step = np.inf
+    for iteration in range(MAX_NEWTON_STEPS + 1):
+        grad, g, jac, hess = _evaluate(problem, x, lam_g)
+        stationarity = grad + jac.T @ lam_g + lam_x
+        if step <= STEP_TOL_RAD and np.abs(stationarity).max() <= tol:
+            found, reason, changed, count = accept(problem, x, g, lam_g, lam_x, active, stationarity, iteration)
+            return found, reason, (x, lam_g, lam_x, iteration, changed, count)
+        if iteration == MAX_NEWTON_STEPS:
+            break
+        held = sp.vstack([jac[rows], fix], format="csr")
+        rhs = np.concatenate([-grad, target - g[rows], np.zeros(len(bounds))])
+        try:
+            z = solve_banded_kkt(hess, held, rhs, n)
+        except (np.linalg.LinAlgError, ValueError) as e:
+            return None, f"Newton step {iteration + 1}: {e}", (x, lam_g, lam_x, iteration, None, 0)
+        if not np.all(np.isfinite(z)):
+            reason = f"Newton step {iteration + 1}: the KKT matrix is singular"
+            return None, reason, (x, lam_g, lam_x, iteration, None, 0)
+        dx = z[:nx]
+        step = float(np.abs(dx).max())
+        x = x + dx
+        lam_g[rows] = z[nx : nx + len(rows)]
+        lam_x[bounds] = z[nx + len(rows) :]
+    reason = (
+        f"no convergence in {MAX_NEWTON_STEPS} Newton steps (last step {step:.1e} rad, "
+        f"stationarity {np.abs(stationarity).max():.1e})"
+    )
+    return None, reason, (x, lam_g, lam_x, MAX_NEWTON_STEPS, None, 0)
+
+
+def accept(
+    problem: RefinementNLP,
+    x: Array,
+    g: Array,
+    lam_g: Array,
+    lam_x: Array,
+    active: ActiveRows,
+    stationarity: Array,
+    iterations: int,
+) -> tuple[Correction | None, str, ActiveRows | None, int]:
+    """The correction at ``x`` (rows ``g``) if it is an answer of the whole problem, else None and why.
+
+    Every row and variable bound within IPOPT's constraint tolerance (``ipopt.constr_viol_tol``),
+    the multiplier of each active inequality row and bound of the sign of its side (or zero), and
+    the KKT residual ``stationarity`` under IPOPT's tolerance (``ipopt.tol``). When refused for a
+    row or bound, also the active set with the broken rows held and the wrong-signed ones dropped,
+    and how many rows that moves (else None, 0).
+    """
+    tol, ctol = _tolerances(problem)
+    keys = row_names(problem)
+    stat = float(np.abs(stationarity).max())
+    if stat > tol:
+        return None, f"KKT residual {stat:.1e} over the tolerance {tol:.0e}", None, 0
+    below, above = problem.lbg - g, g - problem.ubg
+    under, over = problem.lbx - x, x - problem.ubx
+    pushing = np.where(active.side > 0, lam_g[active.rows], -lam_g[active.rows])
+    wrong = (active.side != 0) & (pushing < -tol)
+    pushing_x = np.where(active.bound_side > 0, lam_x[active.bounds], -lam_x[active.bounds])
+    wrong_x = pushing_x < -tol
+    broken = np.flatnonzero(np.maximum(below, above) > ctol)
+    broken_x = np.flatnonzero(np.maximum(under, over) > ctol)
+    reasons = []
+    if broken.size:
+        r = int(broken[np.argmax(np.maximum(below, above)[broken])])
+        side = "below its lower" if below[r] >= above[r] else "above its upper"
+        reasons.append(f"row {keys[r]} {side} bound by {max(below[r], above[r]):.1e}")
+    if broken_x.size:
+        j = int(broken_x[0])
+        reasons.append(f"joint variable {j} beyond its limit by {max(under[j], over[j]):.1e} rad")
+    if wrong.any():
+        r = int(active.rows[np.flatnonzero(wrong)[0]])
+        reasons.append(f"row {keys[r]}: multiplier {lam_g[r]:.1e} of the wrong sign for its bound")
+    if wrong_x.any():
+        j = int(active.bounds[np.flatnonzero(wrong_x)[0]])
+        reasons.append(f"joint variable {j}: bound multiplier {lam_x[j]:.1e} of the wrong sign")
+    if reasons:
+        keep = ~wrong
+        rows = np.concatenate([active.rows[keep], broken])
+        side = np.concatenate([active.side[keep], np.where(below[broken] >= above[broken], -1, 1)])
+        keep_x = ~wrong_x
+        bounds = np.concatenate([active.bounds[keep_x], broken_x])
+        bound_side = np.concatenate(
+            [active.bound_side[keep_x], np.where(under[broken_x] >= over[broken_x], -1, 1)]
+        )
+        order, order_x = np.argsort(rows, kind="stable"), np.argsort(bounds, kind="stable")
+        changed = ActiveRows(rows[order], side[order], bounds[order_x], bound_side[order_x])
+        count = int(broken.size + broken_x.size + wrong.sum() + wrong_x.sum())
+        return None, "; ".join(reasons) + ": the active set changed", changed, count
+    violation = float(max(0.0, np.max(np.maximum(below, above)), np.max(np.maximum(under, over))))
+    return Correction(x, lam_g, lam_x, iterations, stat, violation), "", None, 0
+
+
+def row_names(problem: RefinementNLP) -> list[tuple]:
+    """A name for every constraint row of ``problem`` (as the rounds' multipliers are keyed)."""
+    N, a = problem.n_waypoints, problem.active
+    return (
+        [("path", i) for i in range(4 * N)]
+        + [("step", i) for i in problem.step_rows().tolist()]
+        + [("singular", k, 0.0) for k in a.singular_waypoints]
+        + [("singular", k, f) for k, f in a.singular_segments]
+        + [("row", r.k, r.f, r.label) for r in a.linear_rows]
+    )
