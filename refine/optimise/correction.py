@@ -43,14 +43,8 @@ ACTIVE_MULTIPLIER = 1e-6
 """A previous inequality row (or variable bound) is taken as active when its multiplier is larger
 than this, at the side its sign names. An interior-point answer has λ·s = μ (about 1e-11 at IPOPT's
 tolerance): a row that binds has a multiplier of 1e-5 or more (the cost is in squared degrees), one
-clear of its bound by 1e-4 a multiplier of 1e-7 or less. The rows in between are within about
-√μ of their bound, weakly active, and may take either side (:data:`MAX_SWAPS`)."""
-
-
-MAX_SWAPS = 8
-"""Rows or bounds at most that the correction moves into or out of the active set: a row of the
-guessed set whose multiplier came out of the wrong sign is dropped, a dropped row the answer breaks
-is held, and Newton's method runs again. A larger change is a change of the active set, refused."""
+clear of its bound by 1e-4 a multiplier of 1e-7 or less. A row in between (within about √μ of
+its bound) guessed on the wrong side is caught by :func:`accept`, and the correction refused."""
 
 
 MAX_NEWTON_STEPS = 8
@@ -135,9 +129,8 @@ def correct(
     """The answer of ``problem`` near ``x0`` by Newton's method on its KKT system, or None and why not.
 
     ``lam_g0``, ``lam_x0``: the previous answer's multipliers of every row and variable bound
-    (CasADi's sign convention), which name the active set (:func:`active_rows`). A weakly active
-    row may change sides (at most :data:`MAX_SWAPS` in all); the answer is returned only when
-    :func:`accept` finds it an answer of the whole problem.
+    (CasADi's sign convention), which name the active set (:func:`active_rows`). The answer is
+    returned only when :func:`accept` finds it an answer of the whole problem with that active set.
     """
     if problem.elastic_deg is not None or not problem.derivatives:
         return None, "the problem has no assembled derivatives or is elastic"
@@ -147,31 +140,17 @@ def correct(
     cone = np.zeros(len(problem.lbg), dtype=bool)
     cone[3 : 4 * problem.n_waypoints : 4] = True
     active = active_rows(problem.lbg, problem.ubg, lam_g0, problem.lbx, problem.ubx, lam_x0, cone)
-    x, lam_g, lam_x = np.asarray(x0, dtype=float), lam_g0, lam_x0
-    swaps = 0
-    total = 0
-    while True:
-        found, reason, state = newton_correction(problem, x, active, lam_g, lam_x)
-        total += state[3]
-        if found is not None:
-            return Correction(found.x, found.lam_g, found.lam_x, total, found.stationarity, found.violation), ""
-        changed, count = state[4], state[5]
-        if changed is None or swaps + count > MAX_SWAPS:
-            return None, reason if changed is None else f"{reason} ({swaps + count} rows changed sides)"
-        log.debug("Newton correction: %s; %d rows change sides, solved again", reason, count)
-        swaps += count
-        active, (x, lam_g, lam_x) = changed, state[:3]
+    return newton_correction(problem, np.asarray(x0, dtype=float), active, lam_g0, lam_x0)
 
 
 def newton_correction(
     problem: RefinementNLP, x0: Array, active: ActiveRows, lam_g0: Array, lam_x0: Array
-) -> tuple[Correction | None, str, tuple]:
+) -> tuple[Correction | None, str]:
     """Newton's method on the KKT system of ``problem`` with ``active`` held, from ``x0``.
 
     ``lam_g0``, ``lam_x0``: the start multipliers (of every row and bound; only the held ones
     count). Returns the verified correction (:func:`accept`) and an empty reason, or None and why
-    it was refused; then the last iterate ``(x, lam_g, lam_x)``, the Newton steps, and the active
-    set :func:`accept` proposes instead (or None) with the number of rows it moves.
+    it was refused.
     """
     N, n = problem.n_waypoints, problem.dof
     nx = len(problem.lbx)
@@ -194,12 +173,10 @@ def newton_correction(
     step = np.inf
     for iteration in range(MAX_NEWTON_STEPS + 1):
         grad, g, jac_values = ev.first_order(x)
-        jac = ev.jacobian(jac_values)
-        stationarity = grad + jac.T @ lam_g + lam_x
+        stationarity = grad + ev.jacobian_t_times(jac_values, lam_g) + lam_x
         residual = target - g[rows]
         if iteration and np.abs(stationarity).max() <= tol and np.abs(residual).max(initial=0.0) <= ctol:
-            found, reason, changed, count = accept(problem, x, g, lam_g, lam_x, active, stationarity, iteration)
-            return found, reason, (x, lam_g, lam_x, iteration, changed, count)
+            return accept(problem, x, g, lam_g, lam_x, active, stationarity, iteration)
         if iteration == MAX_NEWTON_STEPS:
             break
         hess_values = ev.hessian(lam_g)
@@ -207,24 +184,22 @@ def newton_correction(
             if nullspace is not None:
                 dx, lam = nullspace.step(grad, jac_values, hess_values, residual)
             else:
-                held = sp.vstack([jac[rows], fix], format="csr")
+                held = sp.vstack([ev.jacobian(jac_values)[rows], fix], format="csr")
                 rhs = np.concatenate([-grad, residual, np.zeros(len(bounds))])
                 z = solve_banded_kkt(ev.hessian_matrix(hess_values), held, rhs, n)
                 dx, lam = z[:nx], z[nx:]
         except (np.linalg.LinAlgError, ValueError) as e:
-            return None, f"Newton step {iteration + 1}: {e}", (x, lam_g, lam_x, iteration, None, 0)
+            return None, f"Newton step {iteration + 1}: {e}"
         if not (np.all(np.isfinite(dx)) and np.all(np.isfinite(lam))):
-            reason = f"Newton step {iteration + 1}: the KKT matrix is singular"
-            return None, reason, (x, lam_g, lam_x, iteration, None, 0)
+            return None, f"Newton step {iteration + 1}: the KKT matrix is singular"
         step = float(np.abs(dx).max())
         x = x + dx
         lam_g[rows] = lam[: len(rows)]
         lam_x[bounds] = lam[len(rows) :]
-    reason = (
+    return None, (
         f"no convergence in {MAX_NEWTON_STEPS} Newton steps (last step {step:.1e} rad, "
         f"stationarity {np.abs(stationarity).max():.1e})"
     )
-    return None, reason, (x, lam_g, lam_x, MAX_NEWTON_STEPS, None, 0)
 
 
 def accept(
@@ -236,57 +211,43 @@ def accept(
     active: ActiveRows,
     stationarity: Array,
     iterations: int,
-) -> tuple[Correction | None, str, ActiveRows | None, int]:
+) -> tuple[Correction | None, str]:
     """The correction at ``x`` (rows ``g``) if it is an answer of the whole problem, else None and why.
 
     Every row and variable bound within IPOPT's constraint tolerance (``ipopt.constr_viol_tol``),
     the multiplier of each active inequality row and bound of the sign of its side (or zero), and
-    the KKT residual ``stationarity`` under IPOPT's tolerance (``ipopt.tol``). When refused for a
-    row or bound, also the active set with the broken rows held and the wrong-signed ones dropped,
-    and how many rows that moves (else None, 0).
+    the KKT residual ``stationarity`` under IPOPT's tolerance (``ipopt.tol``). A row the answer
+    breaks should have been held, a held one with a multiplier of the wrong sign let go: either
+    way the active set changed.
     """
     tol, ctol = _tolerances(problem)
-    keys = row_names(problem)
     stat = float(np.abs(stationarity).max())
     if stat > tol:
-        return None, f"KKT residual {stat:.1e} over the tolerance {tol:.0e}", None, 0
-    below, above = problem.lbg - g, g - problem.ubg
-    under, over = problem.lbx - x, x - problem.ubx
+        return None, f"KKT residual {stat:.1e} over the tolerance {tol:.0e}"
+    broken = np.maximum(problem.lbg - g, g - problem.ubg)
+    r = int(np.argmax(broken)) if len(broken) else 0
+    if len(broken) and broken[r] > ctol:
+        side = "below its lower" if problem.lbg[r] - g[r] >= g[r] - problem.ubg[r] else "above its upper"
+        return None, f"row {row_names(problem)[r]} {side} bound by {broken[r]:.1e}: the active set changed"
+    beyond = np.maximum(problem.lbx - x, x - problem.ubx)
+    j = int(np.argmax(beyond))
+    if beyond[j] > ctol:
+        return None, f"joint variable {j} beyond its limit by {beyond[j]:.1e} rad: the active set changed"
     pushing = np.where(active.side > 0, lam_g[active.rows], -lam_g[active.rows])
-    wrong = (active.side != 0) & (pushing < -tol)
-    pushing_x = np.where(active.bound_side > 0, lam_x[active.bounds], -lam_x[active.bounds])
-    wrong_x = pushing_x < -tol
-    broken = np.flatnonzero(np.maximum(below, above) > ctol)
-    broken_x = np.flatnonzero(np.maximum(under, over) > ctol)
-    reasons = []
-    if broken.size:
-        r = int(broken[np.argmax(np.maximum(below, above)[broken])])
-        side = "below its lower" if below[r] >= above[r] else "above its upper"
-        reasons.append(f"row {keys[r]} {side} bound by {max(below[r], above[r]):.1e}")
-    if broken_x.size:
-        j = int(broken_x[0])
-        reasons.append(f"joint variable {j} beyond its limit by {max(under[j], over[j]):.1e} rad")
-    if wrong.any():
-        r = int(active.rows[np.flatnonzero(wrong)[0]])
-        reasons.append(f"row {keys[r]}: multiplier {lam_g[r]:.1e} of the wrong sign for its bound")
-    if wrong_x.any():
-        j = int(active.bounds[np.flatnonzero(wrong_x)[0]])
-        reasons.append(f"joint variable {j}: bound multiplier {lam_x[j]:.1e} of the wrong sign")
-    if reasons:
-        keep = ~wrong
-        rows = np.concatenate([active.rows[keep], broken])
-        side = np.concatenate([active.side[keep], np.where(below[broken] >= above[broken], -1, 1)])
-        keep_x = ~wrong_x
-        bounds = np.concatenate([active.bounds[keep_x], broken_x])
-        bound_side = np.concatenate(
-            [active.bound_side[keep_x], np.where(under[broken_x] >= over[broken_x], -1, 1)]
+    wrong = np.flatnonzero((active.side != 0) & (pushing < -tol))
+    if wrong.size:
+        r = int(active.rows[wrong[0]])
+        return None, (
+            f"row {row_names(problem)[r]}: multiplier {lam_g[r]:.1e} of the wrong sign for its "
+            f"{'upper' if active.side[wrong[0]] > 0 else 'lower'} bound ({wrong.size} rows): the active set changed"
         )
-        order, order_x = np.argsort(rows, kind="stable"), np.argsort(bounds, kind="stable")
-        changed = ActiveRows(rows[order], side[order], bounds[order_x], bound_side[order_x])
-        count = int(broken.size + broken_x.size + wrong.sum() + wrong_x.sum())
-        return None, "; ".join(reasons) + ": the active set changed", changed, count
-    violation = float(max(0.0, np.max(np.maximum(below, above)), np.max(np.maximum(under, over))))
-    return Correction(x, lam_g, lam_x, iterations, stat, violation), "", None, 0
+    pushing_x = np.where(active.bound_side > 0, lam_x[active.bounds], -lam_x[active.bounds])
+    wrong = np.flatnonzero(pushing_x < -tol)
+    if wrong.size:
+        j = int(active.bounds[wrong[0]])
+        return None, f"joint variable {j}: bound multiplier {lam_x[j]:.1e} of the wrong sign: the active set changed"
+    violation = float(max(0.0, broken.max(initial=0.0), beyond.max()))
+    return Correction(x, lam_g, lam_x, iterations, stat, violation), ""
 
 
 def row_names(problem: RefinementNLP) -> list[tuple]:

@@ -46,11 +46,23 @@ def _bind(function, args: list[Array]) -> tuple[object, object, list[Array]]:  #
     return buf, trigger, outs
 
 
+_PATTERNS: dict[tuple[int, int], tuple[object, tuple[Array, Array]]] = {}
+"""The nonzero patterns of the last functions read, by their id (the function is kept with them)."""
+
+
 def _pattern(function, i: int) -> tuple[Array, Array]:  # noqa: ANN001 - casadi.Function
     """Row and column of every nonzero of output ``i`` of ``function``."""
+    key = (id(function), i)
+    kept = _PATTERNS.get(key)
+    if kept is not None and kept[0] is function:
+        return kept[1]
     colind, row = function.sparsity_out(i).get_ccs()
     colind = np.asarray(colind, dtype=np.int64)
-    return np.asarray(row, dtype=np.int64), np.repeat(np.arange(len(colind) - 1), np.diff(colind))
+    pattern = np.asarray(row, dtype=np.int64), np.repeat(np.arange(len(colind) - 1), np.diff(colind))
+    if len(_PATTERNS) >= 16:
+        _PATTERNS.clear()
+    _PATTERNS[key] = (function, pattern)
+    return pattern
 
 
 class Evaluator:
@@ -91,6 +103,10 @@ class Evaluator:
         self.lam[:] = lam_g
         self._hess[1]()
         return self._hess[2][0]
+
+    def jacobian_t_times(self, values: Array, lam: Array) -> Array:
+        """``Jᵀ lam`` (nx,) for the Jacobian of nonzeros ``values``."""
+        return np.bincount(self.jac_col, weights=values * lam[self.jac_row], minlength=self.nx)
 
     def jacobian(self, values: Array) -> sp.csr_matrix:
         """The Jacobian (ng, nx) from its nonzeros ``values``."""
@@ -133,7 +149,7 @@ class NullSpaceStep:
         slot[order] = np.arange(len(k)) - start[k[order]]
         self.k, self.slot, self.count = k, slot, count
         self.m_max, self.m_min = int(count.max()), int(count.min())
-        if self.m_max >= n:
+        if self.m_max > n:
             raise NotLocal(f"{self.m_max} rows held at one waypoint of {n} joints")
         self.nz = n - self.m_min
         R = len(rows)
@@ -207,7 +223,7 @@ class NullSpaceStep:
         pad_k, pad_s = np.nonzero(~self.ymask)
         R[pad_k, pad_s, pad_s] = 1.0
         r = np.zeros((N, m))
-        r[self.k, self.slot] = residual
+        r[self.k, self.slot] = np.concatenate([residual, np.zeros(len(self.k) - len(residual))])  # bounds: met
         p_y = np.linalg.solve(np.transpose(R, (0, 2, 1)), r[..., None])[..., 0] * self.ymask
         Y, Z = Q[:, :, :m], Q[:, :, self.m_min :] * self.zmask[:, None, :]
         Zt = np.transpose(Z, (0, 2, 1))
