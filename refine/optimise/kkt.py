@@ -206,6 +206,10 @@ class NullSpaceStep:
     def step(self, grad: Array, jac_values: Array, hess_values: Array, residual: Array) -> tuple[Array, Array]:
         """The step dx (nx,) and the multipliers of the held rows, then bounds, for ``residual`` = r.
 
+        ``grad``: the cost gradient; ``jac_values``, ``hess_values``: the nonzeros of the Jacobian
+        and of the Hessian of the Lagrangian's upper triangle (:class:`Evaluator`), factorised here
+        and kept for :meth:`solve`.
+
         Raises:
             numpy.linalg.LinAlgError: the held rows at a waypoint are dependent, or the reduced
                 Hessian is not positive definite.
@@ -222,23 +226,30 @@ class NullSpaceStep:
             raise np.linalg.LinAlgError("the held rows at a waypoint are dependent")
         pad_k, pad_s = np.nonzero(~self.ymask)
         R[pad_k, pad_s, pad_s] = 1.0
-        r = np.zeros((N, m))
-        r[self.k, self.slot] = np.concatenate([residual, np.zeros(len(self.k) - len(residual))])  # bounds: met
-        p_y = np.linalg.solve(np.transpose(R, (0, 2, 1)), r[..., None])[..., 0] * self.ymask
         Y, Z = Q[:, :, :m], Q[:, :, self.m_min :] * self.zmask[:, None, :]
         Zt = np.transpose(Z, (0, 2, 1))
-        dx_y = (Y @ p_y[..., None])[..., 0]
         H = self._hess_blocks(hess_values)
-        g = grad.reshape(N, n)
-        w = g + self._hess_times(H, dx_y)
         band = np.zeros((self.width + 1, N * nz))
         flat = band.reshape(-1)
         for d in range(HESSIAN_REACH + 1):
             Bd = Zt[: N - d] @ H[d] @ Z[d:]
             flat[self.band_dst[d]] = Bd.reshape(-1)[self.band_src[d]]
         band[0] += (~self.zmask).reshape(-1)  # the padded null-space columns: unit diagonal
-        rhs = -(Zt @ w[..., None]).reshape(-1)
         factor = scipy.linalg.cholesky_banded(band, lower=True, check_finite=False)
+        self._factors = (R, Y, Z, Zt, H, factor)
+        return self.solve(grad, residual)
+
+    def solve(self, grad: Array, residual: Array) -> tuple[Array, Array]:
+        """:meth:`step` with the matrices it factorised last: for ``grad`` (nx,) and ``residual``."""
+        N, n, m, nz = self.N, self.n, self.m_max, self.nz
+        R, Y, Z, Zt, H, factor = self._factors
+        r = np.zeros((N, m))
+        r[self.k, self.slot] = np.concatenate([residual, np.zeros(len(self.k) - len(residual))])  # bounds: met
+        p_y = np.linalg.solve(np.transpose(R, (0, 2, 1)), r[..., None])[..., 0] * self.ymask
+        dx_y = (Y @ p_y[..., None])[..., 0]
+        g = grad.reshape(N, n)
+        w = g + self._hess_times(H, dx_y)
+        rhs = -(Zt @ w[..., None]).reshape(-1)
         p_z = scipy.linalg.cho_solve_banded((factor, True), rhs, check_finite=False).reshape(N, nz)
         dx = dx_y + (Z @ p_z[..., None])[..., 0]
         w = g + self._hess_times(H, dx)
