@@ -86,6 +86,18 @@ def test_a_moved_part_is_corrected_to_the_answer_ipopt_finds_at_a_tight_toleranc
     assert np.abs(warm.joints - cold.joints).max() <= 1e-6
 
 
+def test_a_rebuilt_problem_for_another_tool_is_corrected_from_the_previous_rows_and_multipliers(glass):
+    """The TCP 1 mm further along the flange z axis: a new problem, the previous active set and multipliers."""
+    tool = {**glass.common, "tcp_in_flange": glass.common["tcp_in_flange"] @ make_transform(p=[0.0, 0.0, 0.001])}
+    warm = refine.refine_path(ROBOT, glass.f.positions, glass.f.rotations, previous=glass.first, **tool)
+    assert warm.run.first.refinement.problem is not glass.first.run.first.refinement.problem
+    assert warm.run.first.refinement.solver_status == CORRECTED
+    cold = refine.refine_path(ROBOT, glass.f.positions, glass.f.rotations, **tool)
+    assert warm.status == cold.status == "ok"
+    assert np.abs(warm.joints - cold.joints).max() <= 1e-6
+    assert np.abs(warm.joints - glass.first.joints).max() > 1e-5  # the tool did move the answer
+
+
 def test_a_narrower_cone_changes_the_active_set_and_is_solved_by_ipopt_with_the_reason_logged(glass, caplog):
     """At a 0.2 deg cone some waypoints' cone rows bind that did not: the correction breaks them, refused."""
     narrow = {**glass.common, "tolerances": {"orientation_deg": 0.2}}
