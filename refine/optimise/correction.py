@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from refine.optimise.kkt import Evaluator, NotLocal, NullSpaceStep, solve_banded_kkt
+from refine.optimise.kkt import Evaluator, NotLocal, null_space_step, solve_banded_kkt
 from refine.optimise.problem import RefinementNLP
 from refine.types import Array
 
@@ -174,11 +174,10 @@ def newton_correction(
     tol, ctol = _tolerances(problem)
     ev = Evaluator(problem)
     try:
-        nullspace = NullSpaceStep(ev, rows, bounds, N, n)
+        nullspace = null_space_step(ev, rows, bounds, N, n)
     except NotLocal as e:
         log.debug("Newton correction: %s; the whole KKT matrix is factorised", e)
         nullspace = None
-    fix = sp.csr_matrix((np.ones(len(bounds)), (np.arange(len(bounds)), bounds)), shape=(len(bounds), nx))
     step, factored = np.inf, None
     for iteration in range(MAX_NEWTON_STEPS + 1):
         grad, g, jac_values = ev.first_order(x)
@@ -197,6 +196,7 @@ def newton_correction(
                 dx, lam = nullspace.step(grad, jac_values, ev.hessian(lam_g), residual)
             else:
                 hess_values = ev.hessian(lam_g)
+                fix = sp.csr_matrix((np.ones(len(bounds)), (np.arange(len(bounds)), bounds)), shape=(len(bounds), nx))
                 held = sp.vstack([ev.jacobian(jac_values)[rows], fix], format="csr")
                 rhs = np.concatenate([-grad, residual, np.zeros(len(bounds))])
                 z = solve_banded_kkt(ev.hessian_matrix(hess_values), held, rhs, n)

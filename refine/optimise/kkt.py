@@ -118,6 +118,27 @@ class Evaluator:
         return (upper + sp.triu(upper, 1).T).tocsc()
 
 
+_STEPS: list[tuple[tuple, NullSpaceStep]] = []
+"""The last null-space step built, with what it was built for (a re-solve of the same problem
+holds the same rows again: its index maps are kept)."""
+
+
+def null_space_step(ev: Evaluator, rows: Array, bounds: Array, N: int, n: int) -> NullSpaceStep:
+    """:class:`NullSpaceStep` for these rows, the last one built where its patterns and rows are these."""
+    key = (ev.jac_row, ev.jac_col, ev.hess_row, ev.hess_col, N, n)
+    for kept, step in _STEPS:
+        if (
+            all(a is b for a, b in zip(kept[:4], key[:4], strict=True))
+            and kept[4:6] == key[4:]
+            and np.array_equal(kept[6], rows)
+            and np.array_equal(kept[7], bounds)
+        ):
+            return step
+    step = NullSpaceStep(ev, rows, bounds, N, n)
+    _STEPS[:] = [((*key, rows.copy(), bounds.copy()), step)]
+    return step
+
+
 class NullSpaceStep:
     """The Newton step by per-waypoint null spaces and a banded reduced Hessian (module docstring).
 
