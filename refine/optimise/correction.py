@@ -11,15 +11,16 @@ that active set held as equalities and the other inequalities dropped,
 are then a square nonlinear system, which Newton's method solves from the moved previous answer in
 a few steps to machine precision (:func:`newton_correction`): no barrier, no line search, no
 CasADi/IPOPT/MUMPS set-up. The problem is banded (each waypoint's joints couple only to the next
-two through the joint-step and smoothness terms, every row touches one waypoint or two neighbours),
-so the KKT matrix, variables and rows interleaved waypoint by waypoint, is a band matrix whose LU
-factorisation (LAPACK ``gbsv``) costs linear time in the waypoints.
+two through the joint-step and smoothness terms, every row touches one waypoint or two neighbours):
+a step is a QR factorisation of each waypoint's held rows and a banded Cholesky factorisation of
+the reduced Hessian, or a banded LU factorisation of the whole KKT matrix where a held row spans
+two waypoints (:mod:`refine.optimise.kkt`), in time linear in the waypoints.
 
 The answer is accepted only when it is the IPOPT problem's answer too (:func:`accept`): every
 constraint (the dropped rows, the variable bounds) holds within IPOPT's constraint tolerance, every
 active inequality's multiplier has the sign of a bound that pushes back, and the KKT residual is
 under IPOPT's tolerance. Anything else (a row that became active, one that let go, no
-convergence, a singular matrix) refuses the correction with the reason, and the caller solves with
+convergence, a singular matrix, a reduced Hessian that is not positive definite) refuses the correction with the reason, and the caller solves with
 IPOPT as before (:class:`refine.optimise.rounds.RoundLoop`). An accepted answer still runs through
 the verification of any other answer.
 """

@@ -2,7 +2,9 @@
 
 The outer rounds of a solve: solve, verify with Pinocchio, add the constraints that bind only in
 places (singularity bounds, clearance rows from the constraint sources, joint-step rows) and solve
-again, warm-started, until the verified path needs nothing more (:func:`run_rounds`).
+again, warm-started, until the verified path needs nothing more (:func:`run_rounds`). The first
+solve of a re-solve from a previous answer's multipliers is first tried as a Newton correction
+(:mod:`refine.optimise.correction`), IPOPT solving where it is refused.
 """
 
 from __future__ import annotations
@@ -130,8 +132,6 @@ class RoundLoop:
     deadline: float = math.inf
     multipliers: tuple[dict[tuple, float], Array] | None = None
     base_options: dict | None = None
-    correction: str | None = None
-    """None when no Newton correction was tried, "" when it gave the first answer, else why it was refused."""
 
     def solve(self, x0: Array, warm: bool = False) -> tuple[Array, dict]:
         """Solve from ``x0``; ``warm``: with the last solve's multipliers, row by row."""
@@ -184,9 +184,7 @@ class RoundLoop:
         found, reason = correct(self.problem, x0, lam_g0, lam_x0)
         if found is None:
             log.debug("Newton correction refused, solved with IPOPT: %s", reason)
-            self.correction = reason
             return None
-        self.correction = ""
         self.multipliers = (dict(zip(keys, found.lam_g.tolist(), strict=True)), found.lam_x)
         self.iterations += found.iterations
         add_time(self.timings, "solve", start)
