@@ -194,3 +194,25 @@ def test_the_null_space_step_and_the_banded_kkt_solve_solve_the_kkt_system(glass
     z2 = sla.spsolve(sp.bmat([[H, A2.T], [A2, None]], format="csc"), rhs)
     banded = solve_banded_kkt(H, A2, rhs, n)
     assert np.abs(banded - z2).max() <= 1e-6 * max(1.0, np.abs(z2).max())
+
+
+def test_held_joint_step_rows_are_corrected_through_the_whole_banded_kkt_matrix(glass, caplog):
+    """Joint 1's steps after waypoints 200-202 held at half their size: rows of two waypoints each."""
+    refinement = glass.first.run.first.refinement
+    q = glass.first.joints
+    N, n = q.shape
+    waypoints = (200, 201, 202)
+    problem = refinement.problem.rebuilt(joint_steps=tuple(k * n for k in waypoints))
+    rows = 4 * N + np.arange(3)  # the three joint-step rows, after the path rows
+    steps = np.array([q[k + 1, 0] - q[k, 0] for k in waypoints])
+    lbg, ubg = problem.lbg.copy(), problem.ubg.copy()
+    lbg[rows] = np.where(steps < 0, 0.5 * steps, lbg[rows])
+    ubg[rows] = np.where(steps > 0, 0.5 * steps, ubg[rows])
+    x, lam_g, lam_x = ipopt_answer(problem, q.ravel(), lbg=lbg, ubg=ubg)
+    assert np.all(np.abs(lam_g[rows]) > 1e-3)  # held
+    halved = dataclasses.replace(problem, lbg=lbg, ubg=ubg)
+    with caplog.at_level(logging.DEBUG, logger="refine.optimise.correction"):
+        found, reason = correct(halved, x + 1e-6, lam_g, lam_x)
+    assert any("the whole KKT matrix is factorised" in r.getMessage() for r in caplog.records)
+    assert reason == "" and np.abs(found.x - x).max() <= 1e-6
+    assert np.abs(np.diff(found.x.reshape(N, n)[:, 0])[list(waypoints)] - 0.5 * steps).max() <= 1e-10
