@@ -179,7 +179,7 @@ def newton_correction(
     except NotLocal as e:
         log.debug("Newton correction: %s; the whole KKT matrix is factorised", e)
         nullspace = None
-    step, factored = np.inf, None
+    step, factored, factors = np.inf, None, ()
     for iteration in range(MAX_NEWTON_STEPS + 1):
         grad, g, jac_values = ev.first_order(x)
         stationarity = grad + ev.jacobian_t_times(jac_values, lam_g) + lam_x
@@ -191,10 +191,10 @@ def newton_correction(
         try:
             if nullspace is not None and step <= CHORD_STEP_RAD:
                 # the last factorisation, the gradient corrected for the Jacobian's change
-                dx, lam = nullspace.solve(grad + ev.jacobian_t_times(jac_values - factored, lam_g), residual)
+                dx, lam = nullspace.solve(factors, grad + ev.jacobian_t_times(jac_values - factored, lam_g), residual)
             elif nullspace is not None:
                 factored = jac_values.copy()
-                dx, lam = nullspace.step(grad, jac_values, ev.hessian(lam_g), residual)
+                dx, lam, factors = nullspace.step(grad, jac_values, ev.hessian(lam_g), residual)
             else:
                 hess_values = ev.hessian(lam_g)
                 fix = sp.csr_matrix((np.ones(len(bounds)), (np.arange(len(bounds)), bounds)), shape=(len(bounds), nx))

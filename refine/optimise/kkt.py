@@ -118,15 +118,18 @@ class Evaluator:
         return (upper + sp.triu(upper, 1).T).tocsc()
 
 
-_STEPS: list[tuple[tuple, NullSpaceStep]] = []
-"""The last null-space step built, with what it was built for (a re-solve of the same problem
-holds the same rows again: its index maps are kept)."""
+_LAST_STEP: list = [None]
+"""The last null-space step built, with what it was built for, ``(key, step)``: a re-solve of the
+same problem holds the same rows again, and its index maps are kept. The step holds nothing of a
+solve (its factors are the caller's), and the entry is replaced whole, so threads may share it."""
 
 
 def null_space_step(ev: Evaluator, rows: Array, bounds: Array, N: int, n: int) -> NullSpaceStep:
     """:class:`NullSpaceStep` for these rows, the last one built where its patterns and rows are these."""
     key = (ev.jac_row, ev.jac_col, ev.hess_row, ev.hess_col, N, n)
-    for kept, step in _STEPS:
+    last = _LAST_STEP[0]
+    if last is not None:
+        kept, step = last
         if (
             all(a is b for a, b in zip(kept[:4], key[:4], strict=True))
             and kept[4:6] == key[4:]
@@ -135,7 +138,7 @@ def null_space_step(ev: Evaluator, rows: Array, bounds: Array, N: int, n: int) -
         ):
             return step
     step = NullSpaceStep(ev, rows, bounds, N, n)
-    _STEPS[:] = [((*key, rows.copy(), bounds.copy()), step)]
+    _LAST_STEP[0] = ((*key, rows.copy(), bounds.copy()), step)
     return step
 
 
@@ -224,12 +227,14 @@ class NullSpaceStep:
             out[d:] += (v[:-d, None, :] @ H[d])[:, 0]
         return out
 
-    def step(self, grad: Array, jac_values: Array, hess_values: Array, residual: Array) -> tuple[Array, Array]:
-        """The step dx (nx,) and the multipliers of the held rows, then bounds, for ``residual`` = r.
+    def step(
+        self, grad: Array, jac_values: Array, hess_values: Array, residual: Array
+    ) -> tuple[Array, Array, tuple]:
+        """The step dx (nx,), the multipliers of the held rows, then bounds, for ``residual`` = r, and the factors.
 
         ``grad``: the cost gradient; ``jac_values``, ``hess_values``: the nonzeros of the Jacobian
-        and of the Hessian of the Lagrangian's upper triangle (:class:`Evaluator`), factorised here
-        and kept for :meth:`solve`.
+        and of the Hessian of the Lagrangian's upper triangle (:class:`Evaluator`), factorised here;
+        the factors for :meth:`solve` (kept by the caller: a step built once serves any thread).
 
         Raises:
             numpy.linalg.LinAlgError: the held rows at a waypoint are dependent, or the reduced
@@ -257,13 +262,13 @@ class NullSpaceStep:
             flat[self.band_dst[d]] = Bd.reshape(-1)[self.band_src[d]]
         band[0] += (~self.zmask).reshape(-1)  # the padded null-space columns: unit diagonal
         factor = scipy.linalg.cholesky_banded(band, lower=True, check_finite=False)
-        self._factors = (R, Y, Z, Zt, H, factor)
-        return self.solve(grad, residual)
+        factors = (R, Y, Z, Zt, H, factor)
+        return (*self.solve(factors, grad, residual), factors)
 
-    def solve(self, grad: Array, residual: Array) -> tuple[Array, Array]:
-        """:meth:`step` with the matrices it factorised last: for ``grad`` (nx,) and ``residual``."""
+    def solve(self, factors: tuple, grad: Array, residual: Array) -> tuple[Array, Array]:
+        """:meth:`step` with the ``factors`` a step returned: for ``grad`` (nx,) and ``residual``."""
         N, n, m, nz = self.N, self.n, self.m_max, self.nz
-        R, Y, Z, Zt, H, factor = self._factors
+        R, Y, Z, Zt, H, factor = factors
         r = np.zeros((N, m))
         r[self.k, self.slot] = np.concatenate([residual, np.zeros(len(self.k) - len(residual))])  # bounds: met
         p_y = np.linalg.solve(np.transpose(R, (0, 2, 1)), r[..., None])[..., 0] * self.ymask

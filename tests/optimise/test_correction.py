@@ -181,7 +181,8 @@ def test_the_null_space_step_and_the_banded_kkt_solve_solve_the_kkt_system(glass
     z = sla.spsolve(sp.bmat([[H, A.T], [A, None]], format="csc"), np.concatenate([-grad, r, np.zeros(3)]))
     step = NullSpaceStep(ev, rows, bounds, N, n)
     assert (step.m_min, step.m_max) == (3, 5)
-    dx, lam = step.step(grad, jac_values, hess_values, r)
+    dx, lam, factors = step.step(grad, jac_values, hess_values, r)
+    assert np.array_equal(step.solve(factors, grad, r)[0], dx)
     assert np.abs(dx - z[:nx]).max() <= 1e-9 * max(1.0, np.abs(z[:nx]).max())
     assert np.abs(lam - z[nx:]).max() <= 1e-6 * max(1.0, np.abs(z[nx:]).max())
     # a row coupling two neighbouring waypoints: the banded LU of the whole matrix
