@@ -2,7 +2,9 @@
 
 The outer rounds of a solve: solve, verify with Pinocchio, add the constraints that bind only in
 places (singularity bounds, clearance rows from the constraint sources, joint-step rows) and solve
-again, warm-started, until the verified path needs nothing more (:func:`run_rounds`).
+again, warm-started, until the verified path needs nothing more (:func:`run_rounds`). The first
+solve of a re-solve from a previous answer's multipliers is first tried as a Newton correction
+(:mod:`refine.optimise.correction`), IPOPT solving where it is refused.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import numpy as np
 
 from refine.control import after_solve, check_cancelled, enter_round, out_of_time, stage_done
 from refine.errors import SolverError
+from refine.optimise.correction import correct, row_names
 from refine.optimise.outcome import TimeLimitReached, problem_kinematics
 from refine.optimise.problem import ActiveSet, ConstraintSource, LinearRow, RefinementNLP
 from refine.optimise.verify import (
@@ -39,6 +42,10 @@ multipliers (its default, 0.1, pushes a warm start off the constraints it had fo
 FATROP_REPAIR_MU_INIT = 1e-6
 """fatrop's initial barrier parameter in a round after the first and in the repair (see
 :data:`refine.optimise.stagewise.FATROP_DEFAULTS`)."""
+
+
+CORRECTED = "Solve_Succeeded (Newton correction of the previous answer)"
+"""The solver status of a round answered by :func:`refine.optimise.correction.correct`."""
 
 
 SOLVER_LABELS = {"ipopt": "IPOPT", "fatrop": "fatrop"}
@@ -113,18 +120,6 @@ the adaptive barrier strategy drops the barrier to 1e-6 within ten iterations th
 monotone decrease converges in about 40 (the same answer where both converge)."""
 
 
-def _row_keys(problem: RefinementNLP) -> list[tuple]:
-    """A name for every constraint row of ``problem``, stable when the active set grows."""
-    N, a = problem.n_waypoints, problem.active
-    return (
-        [("path", i) for i in range(4 * N)]
-        + [("step", i) for i in problem.step_rows().tolist()]
-        + [("singular", k, 0.0) for k in a.singular_waypoints]
-        + [("singular", k, f) for k, f in a.singular_segments]
-        + [("row", r.k, r.f, r.label) for r in a.linear_rows]
-    )
-
-
 @dataclass
 class RoundLoop:
     """The state of one solve's outer rounds: the problem as grown so far, its multipliers, times and counts."""
@@ -145,7 +140,7 @@ class RoundLoop:
             raise TimeLimitReached
         check_cancelled("solve")
         p = self.problem
-        keys = _row_keys(p)  # the same rows name the start multipliers and the answer's
+        keys = row_names(p)  # the same rows name the start multipliers and the answer's
         extra = {}
         if warm and self.multipliers is not None:
             lam_g, lam_x = self.multipliers
@@ -153,6 +148,10 @@ class RoundLoop:
             if len(lam_x) == len(p.lbx):
                 extra["lam_x0"] = lam_x
         name = SOLVER_LABELS[p.solver_name]
+        if warm and self.outer <= 1 and "lam_x0" in extra and p.solver_name == "ipopt":
+            corrected = self._corrected(x0, extra["lam_g0"], extra["lam_x0"], keys, start)
+            if corrected is not None:
+                return corrected
         if p.watch is not None:
             p.watch.iteration, p.watch.interrupted = 0, False
         try:
@@ -174,6 +173,28 @@ class RoundLoop:
         self.iterations += int(stats.get("iter_count", 0))
         add_time(self.timings, "solve", start)
         return np.asarray(sol["x"]).ravel(), stats
+
+    def _corrected(
+        self, x0: Array, lam_g0: Array, lam_x0: Array, keys: list[tuple], start: tuple[float, float]
+    ) -> tuple[Array, dict] | None:
+        """The answer by Newton correction from ``x0`` and the previous multipliers, or None (logged why).
+
+        See :mod:`refine.optimise.correction`: accepted only as an answer of the whole problem.
+        """
+        found, reason = correct(self.problem, x0, lam_g0, lam_x0)
+        if found is None:
+            log.debug("Newton correction refused, solved with IPOPT: %s", reason)
+            return None
+        self.multipliers = (dict(zip(keys, found.lam_g.tolist(), strict=True)), found.lam_x)
+        self.iterations += found.iterations
+        add_time(self.timings, "solve", start)
+        stats = {
+            "return_status": CORRECTED,
+            "success": True,
+            "iter_count": found.iterations,
+            "solver": "Newton correction",
+        }
+        return found.x, stats
 
     def rebuild(self, warm: bool = False, **changes) -> None:
         """Rebuild with ``changes``; ``warm``: for a solve that starts at the last answer."""

@@ -43,7 +43,7 @@ from refine.optimise.seed import (
 from refine.optimise.verify import (
     check_path,
 )
-from refine.optimise.warm import WarmStart, reuse_final, warm_seed
+from refine.optimise.warm import WarmStart, rebuilt_like, reuse_final, warm_seed
 from refine.robot.kinematics import CONVERGED, TcpKinematics, solve_ik_batch
 from refine.stopwatch import StageTimes, add_time
 from refine.types import Array
@@ -146,7 +146,11 @@ def solve_refinement(
             if carry is not None and warm.clearance is not None:
                 carry(warm.clearance)
         q0 = warm_seed(problem, warm)
-        final = None if warm.problem is None else reuse_final(warm.problem, problem, problem.fused, problem.tolerances)
+        final = None
+        if warm.problem is not None and warm.reusable:
+            final = reuse_final(warm.problem, problem, problem.fused, problem.tolerances)
+        elif warm.problem is not None and warm.multipliers is not None:
+            final = rebuilt_like(warm.problem, problem)
         if final is not None and final.active.linear_rows:
             final = _refreshed_rows(final, sources, q0)
         if final is not None:

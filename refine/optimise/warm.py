@@ -9,9 +9,12 @@ offset) starts from what the previous solve ended with (:class:`WarmStart`):
   and no reach search (the projection reaches every pose the previous answer nearly reached);
 * the problem is the previous solve's last one, with its active set (singularity bounds, clearance
   rows) and joint-step rows, given the new path and tolerances as parameters and bounds
-  (:func:`reuse_final`): no CasADi build;
+  (:func:`reuse_final`): no CasADi build. For another tool or base the new problem takes over
+  that active set and those rows (:func:`rebuilt_like`);
 * the solve starts from the previous multipliers (row by row, see
-  :class:`refine.optimise.rounds.RoundLoop`);
+  :class:`refine.optimise.rounds.RoundLoop`): first as a Newton correction of the previous
+  answer's KKT system with its active set (:mod:`refine.optimise.correction`), accepted only when
+  it is an answer of the whole problem, else by IPOPT;
 * the dense clearance checks start from the previous check's distance bounds less the motion since
   (:mod:`refine.collision.carry`), so only the pairs the motion brought near are measured again.
 
@@ -46,6 +49,9 @@ class WarmStart:
             :class:`refine.optimise.rounds.RoundLoop` (by row, and of the variable bounds), or None.
         clearance: the previous answer's dense clearance check (a ``PathClearance``), whose bounds
             the new checks start from (:mod:`refine.collision.carry`), or None.
+        reusable: whether ``problem``'s solver is the new problem's too (the same robot, base, tool
+            and weights: :func:`reuse_final`); otherwise only its active set and joint-step rows
+            are taken over, into the new problem (:func:`rebuilt_like`).
     """
 
     q: Array
@@ -53,6 +59,7 @@ class WarmStart:
     problem: RefinementNLP | None = None
     multipliers: tuple[dict[tuple, float], Array] | None = None
     clearance: object = None
+    reusable: bool = True
 
 
 def warm_seed(problem: RefinementNLP, warm: WarmStart) -> Array:
@@ -127,6 +134,26 @@ def reuse_final(
         tolerances=tolerances,
         build_time_s=0.0,
     )
+
+
+def rebuilt_like(final: RefinementNLP, built: RefinementNLP) -> RefinementNLP | None:
+    """``built`` (the problem of another tool or base) with the rows of the previous last problem ``final``.
+
+    The previous active set (singularity bounds, linear rows) and joint-step rows, so that the
+    previous multipliers name the same rows (:class:`refine.optimise.rounds.RoundLoop`): ``built``
+    itself where its rows are already those, else ``built`` rebuilt with them (the linear rows'
+    bounds are then refreshed like a kept problem's). None when either is elastic, or the robot or
+    the number of waypoints differ.
+    """
+    from refine.optimise.correction import row_names
+
+    if final.elastic_deg is not None or built.elastic_deg is not None:
+        return None
+    if final.robot is not built.robot or final.n_waypoints != built.n_waypoints:
+        return None
+    if row_names(final) == row_names(built):
+        return built
+    return built.rebuilt(active=final.active, joint_steps=final.joint_steps)
 
 
 def built_for(built: RefinementNLP | None, base_in_world: Array, tool: object, weights: object) -> bool:

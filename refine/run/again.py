@@ -31,7 +31,8 @@ def solve_again(
 
     Its first pass's problem is reused when the robot, base, tool and weights are the same
     (:func:`refine.optimise.problem.reuse_for`), and its joints, moved onto the new poses, are the
-    start unless ``initial_joints`` (N, n) [rad] is given.
+    start unless ``initial_joints`` (N, n) [rad] is given; its last problem's active set and its
+    multipliers start the solve (also of a problem rebuilt for another tool or base).
     """
     from refine.optimise.problem import reuse_for
     from refine.optimise.warm import WarmStart, built_for
@@ -50,13 +51,15 @@ def solve_again(
         )
         nlp = reuse_for(old, fused, problem.tolerances) if same else None
         if q0 is None and previous.robot is robot and first.refinement.q.shape == (len(fused), n):
-            # the previous joints moved onto the new poses, and its last problem and multipliers
-            # where the robot, tool and weights are the same (refine.optimise.warm)
+            # the previous joints moved onto the new poses, and its last problem and multipliers:
+            # kept where the robot, tool and weights are the same, else their rows taken over by
+            # the new problem (refine.optimise.warm)
             warm = WarmStart(
                 first.refinement.q,
                 first.fused.rotations if len(first.fused) == len(fused) else None,
-                first.refinement.problem if nlp is not None else None,
-                first.refinement.multipliers if nlp is not None else None,
+                first.refinement.problem,
+                first.refinement.multipliers,
                 first.clearance,
+                reusable=nlp is not None,
             )
     return solve_problem(problem, robot=robot, fused=fused, nlp=nlp, q0=q0, warm=warm)

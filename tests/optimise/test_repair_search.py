@@ -3,9 +3,9 @@
 import numpy as np
 
 from refine.frames import rotation_angle_deg
+from refine.optimise.correction import row_names
 from refine.optimise.problem import ActiveSet, LinearRow, build_refinement
 from refine.optimise.repair import ELASTIC_ONLY, solve_with_repair
-from refine.optimise.rounds import _row_keys
 from refine.optimise.seed import initial_guess
 from refine.optimise.solve import _rank_chains
 from refine.problem import Tolerances
@@ -37,7 +37,7 @@ def test_row_names_follow_each_row_when_the_active_set_grows(irb4600, straight_t
         build_refinement(irb4600, wave_path(N), np.eye(4), straight_tool, Tolerances(), active=a)
         for a in (small, grown)
     ]
-    keys = [_row_keys(b) for b in built]
+    keys = [row_names(b) for b in built]
     for b, k in zip(built, keys, strict=True):
         assert len(k) == len(b.lbg) == len(set(k))
     base = 4 * N + n * (N - 1)

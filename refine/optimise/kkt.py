@@ -1,0 +1,321 @@
+"""The Newton step of the refinement's KKT system with an active set held: evaluation and linear algebra.
+
+:class:`Evaluator` evaluates the problem's own derivative functions (the ``grad_f``, ``jac_g``
+and ``hess_lag`` it gives IPOPT) into NumPy buffers, without CasADi matrices. The step
+``[[H, Aᵀ], [A, 0]] (dx, λ) = (-∇f, r)`` of the held rows ``A`` is solved in one of two ways:
+
+* :class:`NullSpaceStep`, when every held row touches one waypoint (the position and cone rows,
+  singularity bounds and clearance rows at a waypoint, joint limits): per waypoint a QR
+  factorisation of its held rows' Jacobian ``A_kᵀ = [Y_k Z_k] R_k`` (batched), the particular step
+  ``Y_k R_k⁻ᵀ r_k``, and the reduced Hessian ``ZᵀHZ``, banded because the Hessian couples a
+  waypoint to the next two only, solved by a banded Cholesky factorisation. A reduced Hessian that
+  is not positive definite (no strict minimum with this active set) is refused;
+* :func:`solve_banded_kkt` otherwise (a held row of a segment: a joint step, a point inside a
+  segment): the whole KKT matrix, variables and rows interleaved waypoint by waypoint, by banded LU.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg
+import scipy.sparse as sp
+
+from refine.optimise.problem import RefinementNLP
+from refine.types import Array
+
+MAX_BANDWIDTH = 400
+"""A KKT matrix wider than this (a row coupling distant waypoints) is not banded: refused."""
+
+
+HESSIAN_REACH = 2
+"""The Hessian couples waypoint k to k ± 2 at most (the second differences of the smoothness)."""
+
+
+class NotLocal(ValueError):
+    """A held row or a Hessian entry couples waypoints further apart than the null-space step allows."""
+
+
+def _bind(function, args: list[Array]) -> tuple[object, object, list[Array]]:  # noqa: ANN001 - casadi.Function
+    """``function`` evaluated from ``args`` into new arrays of its outputs' nonzeros, by its buffer."""
+    buf, trigger = function.buffer()
+    for i, a in enumerate(args):
+        buf.set_arg(i, memoryview(a))
+    outs = [np.zeros(function.nnz_out(i)) for i in range(function.n_out())]
+    for i, o in enumerate(outs):
+        buf.set_res(i, memoryview(o))
+    return buf, trigger, outs
+
+
+_PATTERNS: dict[tuple[int, int], tuple[object, tuple[Array, Array]]] = {}
+"""The nonzero patterns of the last functions read, by their id (the function is kept with them)."""
+
+
+def _pattern(function, i: int) -> tuple[Array, Array]:  # noqa: ANN001 - casadi.Function
+    """Row and column of every nonzero of output ``i`` of ``function``."""
+    key = (id(function), i)
+    kept = _PATTERNS.get(key)
+    if kept is not None and kept[0] is function:
+        return kept[1]
+    colind, row = function.sparsity_out(i).get_ccs()
+    colind = np.asarray(colind, dtype=np.int64)
+    pattern = np.asarray(row, dtype=np.int64), np.repeat(np.arange(len(colind) - 1), np.diff(colind))
+    if len(_PATTERNS) >= 16:
+        _PATTERNS.clear()
+    _PATTERNS[key] = (function, pattern)
+    return pattern
+
+
+class Evaluator:
+    """The derivatives of ``problem`` at a point, in NumPy arrays (see the module docstring).
+
+    Attributes:
+        jac_row, jac_col: the constraint Jacobian's nonzero pattern (row, column per nonzero).
+        hess_row, hess_col: the upper triangle of the Hessian of the Lagrangian, likewise.
+    """
+
+    def __init__(self, problem: RefinementNLP) -> None:
+        d = problem.derivatives
+        self.nx, self.ng = len(problem.lbx), len(problem.lbg)
+        self.x = np.zeros(self.nx)
+        self.p = np.array(problem.params, dtype=float)
+        self.lam = np.zeros(self.ng)
+        self.one = np.ones(1)
+        self._grad = _bind(d["grad_f"], [self.x, self.p])
+        self._jac = _bind(d["jac_g"], [self.x, self.p])
+        self._hess = _bind(d["hess_lag"], [self.x, self.p, self.one, self.lam])
+        self.grad_rows = _pattern(d["grad_f"], 1)[0]
+        self.g_rows = _pattern(d["jac_g"], 0)[0]
+        self.jac_row, self.jac_col = _pattern(d["jac_g"], 1)
+        self.hess_row, self.hess_col = _pattern(d["hess_lag"], 0)
+
+    def first_order(self, x: Array) -> tuple[Array, Array, Array]:
+        """At ``x``: the cost gradient (nx,), the rows (ng,), the Jacobian's nonzeros (a view)."""
+        self.x[:] = x
+        self._grad[1]()
+        self._jac[1]()
+        grad, g = np.zeros(self.nx), np.zeros(self.ng)
+        grad[self.grad_rows] = self._grad[2][1]
+        g[self.g_rows] = self._jac[2][0]
+        return grad, g, self._jac[2][1]
+
+    def hessian(self, lam_g: Array) -> Array:
+        """The nonzeros of the Hessian of the Lagrangian's upper triangle at the last ``x`` (a view)."""
+        self.lam[:] = lam_g
+        self._hess[1]()
+        return self._hess[2][0]
+
+    def jacobian_t_times(self, values: Array, lam: Array) -> Array:
+        """``Jᵀ lam`` (nx,) for the Jacobian of nonzeros ``values``."""
+        return np.bincount(self.jac_col, weights=values * lam[self.jac_row], minlength=self.nx)
+
+    def jacobian(self, values: Array) -> sp.csr_matrix:
+        """The Jacobian (ng, nx) from its nonzeros ``values``."""
+        return sp.csr_matrix((values, (self.jac_row, self.jac_col)), shape=(self.ng, self.nx))
+
+    def hessian_matrix(self, values: Array) -> sp.csc_matrix:
+        """The whole symmetric Hessian (nx, nx) from its upper triangle's nonzeros ``values``."""
+        upper = sp.csc_matrix((values, (self.hess_row, self.hess_col)), shape=(self.nx, self.nx))
+        return (upper + sp.triu(upper, 1).T).tocsc()
+
+
+_LAST_STEP: list = [None]
+"""The last null-space step built, with what it was built for, ``(key, step)``: a re-solve of the
+same problem holds the same rows again, and its index maps are kept. The step holds nothing of a
+solve (its factors are the caller's), and the entry is replaced whole, so threads may share it."""
+
+
+def null_space_step(ev: Evaluator, rows: Array, bounds: Array, N: int, n: int) -> NullSpaceStep:
+    """:class:`NullSpaceStep` for these rows, the last one built where its patterns and rows are these."""
+    key = (ev.jac_row, ev.jac_col, ev.hess_row, ev.hess_col, N, n)
+    last = _LAST_STEP[0]
+    if last is not None:
+        kept, step = last
+        if (
+            all(a is b for a, b in zip(kept[:4], key[:4], strict=True))
+            and kept[4:6] == key[4:]
+            and np.array_equal(kept[6], rows)
+            and np.array_equal(kept[7], bounds)
+        ):
+            return step
+    step = NullSpaceStep(ev, rows, bounds, N, n)
+    _LAST_STEP[0] = ((*key, rows.copy(), bounds.copy()), step)
+    return step
+
+
+class NullSpaceStep:
+    """The Newton step by per-waypoint null spaces and a banded reduced Hessian (module docstring).
+
+    Built once for an active set: ``rows`` (held constraint rows) and ``bounds`` (variables held at
+    a bound), with the problem's sizes ``N`` waypoints of ``n`` joints and the evaluator's patterns.
+
+    Raises:
+        NotLocal: a held row touches two waypoints, or the Hessian reaches beyond
+            :data:`HESSIAN_REACH` waypoints.
+    """
+
+    def __init__(self, ev: Evaluator, rows: Array, bounds: Array, N: int, n: int) -> None:
+        self.N, self.n = N, n
+        held = np.full(ev.ng, -1, dtype=np.int64)
+        held[rows] = np.arange(len(rows))
+        inside = held[ev.jac_row] >= 0
+        k_of = ev.jac_col // n
+        first = np.full(len(rows), N, dtype=np.int64)
+        last = np.full(len(rows), -1, dtype=np.int64)
+        np.minimum.at(first, held[ev.jac_row[inside]], k_of[inside])
+        np.maximum.at(last, held[ev.jac_row[inside]], k_of[inside])
+        if np.any(first != last):
+            raise NotLocal("a held row touches two waypoints or none")
+        k = np.concatenate([first, bounds // n])  # the waypoint of every held row, then bound
+        order = np.argsort(k, kind="stable")
+        count = np.bincount(k, minlength=N)
+        start = np.concatenate([[0], np.cumsum(count)[:-1]])
+        slot = np.empty(len(k), dtype=np.int64)
+        slot[order] = np.arange(len(k)) - start[k[order]]
+        self.k, self.slot, self.count = k, slot, count
+        self.m_max, self.m_min = int(count.max()), int(count.min())
+        if self.m_max > n:
+            raise NotLocal(f"{self.m_max} rows held at one waypoint of {n} joints")
+        self.nz = n - self.m_min
+        R = len(rows)
+        # where each held row's Jacobian nonzeros go in the padded blocks A (N, m_max, n)
+        self.src = np.flatnonzero(inside)
+        h = held[ev.jac_row[self.src]]
+        self.dst = np.ravel_multi_index((k[h], slot[h], ev.jac_col[self.src] - n * k[h]), (N, self.m_max, n))
+        b = np.arange(R, R + len(bounds))
+        self.bound_dst = np.ravel_multi_index((k[b], slot[b], bounds - n * k[b]), (N, self.m_max, n))
+        # where each Hessian nonzero goes in the blocks H_{k,k+d} (d = 0..HESSIAN_REACH)
+        ki, kj = ev.hess_row // n, ev.hess_col // n
+        d = kj - ki
+        if np.any((d < 0) | (d > HESSIAN_REACH)):
+            raise NotLocal("the Hessian couples waypoints more than two apart")
+        a, c = ev.hess_row - n * ki, ev.hess_col - n * kj
+        shape = (HESSIAN_REACH + 1, N, n, n)
+        self.h_dst = np.ravel_multi_index((d, ki, a, c), shape)
+        diagonal = d == 0
+        self.h_mirror_src = np.flatnonzero(diagonal)
+        self.h_mirror_dst = np.ravel_multi_index((d[diagonal], ki[diagonal], c[diagonal], a[diagonal]), shape)
+        self.ymask = np.arange(self.m_max)[None, :] < count[:, None]  # (N, m_max)
+        self.zmask = (self.m_min + np.arange(self.nz))[None, :] >= count[:, None]  # (N, nz)
+        self._band_index()
+
+    def _band_index(self) -> None:
+        """Where block (d, k)[a, b] of the reduced Hessian goes in its lower band storage."""
+        N, nz = self.N, self.nz
+        self.width = (HESSIAN_REACH + 1) * nz - 1
+        dst, src = [], []
+        for d in range(HESSIAN_REACH + 1):
+            k, a, b = np.meshgrid(np.arange(N - d), np.arange(nz), np.arange(nz), indexing="ij")
+            keep = (b >= a) if d == 0 else np.ones_like(a, dtype=bool)
+            k, a, b = k[keep], a[keep], b[keep]
+            i, j = (k + d) * nz + b, k * nz + a  # lower triangle: row i >= column j
+            dst.append(np.ravel_multi_index((i - j, j), (self.width + 1, N * nz)))
+            src.append(np.ravel_multi_index((k, a, b), (N - d, nz, nz)))
+        self.band_dst, self.band_src = dst, src
+
+    def _hess_blocks(self, values: Array) -> list[Array]:
+        blocks = np.zeros((HESSIAN_REACH + 1) * self.N * self.n * self.n)
+        blocks[self.h_dst] = values
+        blocks[self.h_mirror_dst] = values[self.h_mirror_src]
+        blocks = blocks.reshape(HESSIAN_REACH + 1, self.N, self.n, self.n)
+        return [blocks[d, : self.N - d] for d in range(HESSIAN_REACH + 1)]
+
+    def _hess_times(self, H: list[Array], v: Array) -> Array:
+        """``H v`` for ``v`` (N, n), from the blocks of :meth:`_hess_blocks`."""
+        out = (H[0] @ v[..., None])[..., 0]
+        for d in range(1, HESSIAN_REACH + 1):
+            out[:-d] += (H[d] @ v[d:, :, None])[..., 0]
+            out[d:] += (v[:-d, None, :] @ H[d])[:, 0]
+        return out
+
+    def step(
+        self, grad: Array, jac_values: Array, hess_values: Array, residual: Array
+    ) -> tuple[Array, Array, tuple]:
+        """The step dx (nx,), the multipliers of the held rows, then bounds, for ``residual`` = r, and the factors.
+
+        ``grad``: the cost gradient; ``jac_values``, ``hess_values``: the nonzeros of the Jacobian
+        and of the Hessian of the Lagrangian's upper triangle (:class:`Evaluator`), factorised here;
+        the factors for :meth:`solve` (kept by the caller: a step built once serves any thread).
+
+        Raises:
+            numpy.linalg.LinAlgError: the held rows at a waypoint are dependent, or the reduced
+                Hessian is not positive definite.
+        """
+        N, n, m, nz = self.N, self.n, self.m_max, self.nz
+        A = np.zeros(N * m * n)
+        A[self.dst] = jac_values[self.src]
+        A[self.bound_dst] = 1.0
+        A = A.reshape(N, m, n)
+        Q, Rm = np.linalg.qr(np.transpose(A, (0, 2, 1)), mode="complete")  # (N, n, n), (N, n, m)
+        R = Rm[:, :m, :m].copy()
+        diag = np.abs(R[:, np.arange(m), np.arange(m)])
+        if np.any(diag[self.ymask] <= 1e-12 * max(1.0, float(np.abs(A).max()))):
+            raise np.linalg.LinAlgError("the held rows at a waypoint are dependent")
+        pad_k, pad_s = np.nonzero(~self.ymask)
+        R[pad_k, pad_s, pad_s] = 1.0
+        Y, Z = Q[:, :, :m], Q[:, :, self.m_min :] * self.zmask[:, None, :]
+        Zt = np.transpose(Z, (0, 2, 1))
+        H = self._hess_blocks(hess_values)
+        band = np.zeros((self.width + 1, N * nz))
+        flat = band.reshape(-1)
+        for d in range(HESSIAN_REACH + 1):
+            Bd = Zt[: N - d] @ H[d] @ Z[d:]
+            flat[self.band_dst[d]] = Bd.reshape(-1)[self.band_src[d]]
+        band[0] += (~self.zmask).reshape(-1)  # the padded null-space columns: unit diagonal
+        factor = scipy.linalg.cholesky_banded(band, lower=True, check_finite=False)
+        factors = (R, Y, Z, Zt, H, factor)
+        return (*self.solve(factors, grad, residual), factors)
+
+    def solve(self, factors: tuple, grad: Array, residual: Array) -> tuple[Array, Array]:
+        """:meth:`step` with the ``factors`` a step returned: for ``grad`` (nx,) and ``residual``."""
+        N, n, m, nz = self.N, self.n, self.m_max, self.nz
+        R, Y, Z, Zt, H, factor = factors
+        r = np.zeros((N, m))
+        r[self.k, self.slot] = np.concatenate([residual, np.zeros(len(self.k) - len(residual))])  # bounds: met
+        p_y = np.linalg.solve(np.transpose(R, (0, 2, 1)), r[..., None])[..., 0] * self.ymask
+        dx_y = (Y @ p_y[..., None])[..., 0]
+        g = grad.reshape(N, n)
+        w = g + self._hess_times(H, dx_y)
+        rhs = -(Zt @ w[..., None]).reshape(-1)
+        p_z = scipy.linalg.cho_solve_banded((factor, True), rhs, check_finite=False).reshape(N, nz)
+        dx = dx_y + (Z @ p_z[..., None])[..., 0]
+        w = g + self._hess_times(H, dx)
+        lam = -np.linalg.solve(R, (np.transpose(Y, (0, 2, 1)) @ w[..., None])[..., 0][..., None])[..., 0]
+        return dx.reshape(-1), lam[self.k, self.slot]
+
+
+def _band_order(nx: int, n: int, rows: sp.csr_matrix) -> Array:
+    """The order of variables and rows that keeps the KKT matrix banded.
+
+    Each waypoint's n variables, then the rows whose last variable is among them (a row of
+    waypoint k, or of the segment that ends there).
+    """
+    coo = rows.tocoo()
+    last = np.zeros(rows.shape[0], dtype=np.int64)
+    np.maximum.at(last, coo.row, coo.col)
+    stage = np.concatenate([np.arange(nx) // n, last // n])
+    kind = np.concatenate([np.zeros(nx, dtype=np.int64), np.ones(rows.shape[0], dtype=np.int64)])
+    return np.lexsort((np.arange(len(stage)), kind, stage))
+
+
+def solve_banded_kkt(hess: sp.csc_matrix, rows: sp.csr_matrix, rhs: Array, n: int) -> Array:
+    """The solution of ``[[H, Aᵀ], [A, 0]] z = rhs``, ``A`` = ``rows``, in band form.
+
+    Raises:
+        numpy.linalg.LinAlgError: the matrix is singular or not banded (a row coupling distant
+            waypoints, bandwidth over :data:`MAX_BANDWIDTH`).
+    """
+    nx, m = hess.shape[0], rows.shape[0]
+    kkt = sp.bmat([[hess, rows.T], [rows, None]], format="coo")
+    order = _band_order(nx, n, rows)
+    position = np.empty_like(order)
+    position[order] = np.arange(len(order))
+    i, j = position[kkt.row], position[kkt.col]
+    lower, upper = int(max(0, (i - j).max())), int(max(0, (j - i).max()))
+    if max(lower, upper) > MAX_BANDWIDTH:
+        raise np.linalg.LinAlgError(f"KKT matrix not banded (bandwidth {max(lower, upper)})")
+    band = np.zeros((lower + upper + 1, nx + m))
+    np.add.at(band, (upper + i - j, j), kkt.data)
+    z = scipy.linalg.solve_banded((lower, upper), band, rhs[order], check_finite=False)
+    out = np.empty_like(z)
+    out[order] = z
+    return out
