@@ -141,9 +141,12 @@ class PathClearance:
         tolerance_m: a clearance counts as broken below ``-tolerance_m`` [m].
         certified_segments: segments proved clear along their whole motion by the per-pair
             motion bound (``method="bound"``; see the module notes); the rest were sampled densely.
-        waypoint_measured: None when every waypoint is measured; from known bounds (``prior``), the
-            waypoints measured (N,): those that can hold the least distance or clearance or whose
-            margins the bounds leave unproved; the others' figures are lower bounds.
+        waypoint_measured: None when every waypoint is measured; from known bounds (``prior``, or
+            ``every_waypoint=False``), the waypoints measured (N,): those that can hold the least
+            distance or clearance, whose margins the bounds leave unproved, or that end a segment
+            sampled inside; the others' figures are lower bounds, and so are the figures of a
+            segment with one sub-step (``segment_samples`` 1) that ends at one of them. The least
+            distance and clearance over the path are exact either way.
         bounds: the lower bounds on every pair's distance at the waypoints the check ended with,
             for the check of a nearby path (:mod:`refine.collision.carry`); None for ``"sample"``.
     """
@@ -326,8 +329,6 @@ def check_path_clearance(
             at.get(k, _Sample(d, c, model.pairs[p], dp, _NONE))
             for k, (p, (d, c, dp)) in enumerate(zip(least, figures))  # noqa: B905
         ]
-    wp_dist = np.array([p.distance for p in points])
-    wp_clear = np.array([p.clearance for p in points])
     sweep = np.abs(np.diff(q_path, axis=0)) @ joint_reach(model)  # any body point's motion per segment [m]
     found_by_segment: list[list[_Sample] | None] = [None] * len(sweep)
     inner: list[list[_Sample]] = [[] for _ in sweep]
@@ -345,6 +346,14 @@ def check_path_clearance(
         for k, m in zip(dense, least, strict=True):
             steps[k] = _sub_steps(kin, q_path[k], q_path[k + 1], int(m), step_m)
             found_by_segment[k] = [sample(q) for q in _interpolate(q_path[k], q_path[k + 1], int(steps[k]))]
+    if measured is not None:  # a segment sampled inside takes its ends' exact figures, not bounds
+        for k in np.flatnonzero([bool(found or inner[k]) for k, found in enumerate(found_by_segment)]):
+            for end in (k, k + 1):
+                if not measured[end]:
+                    measure(end)
+                    points[end], measured[end] = at[end], True
+    wp_dist = np.array([p.distance for p in points])
+    wp_clear = np.array([p.clearance for p in points])
     worst: list[_Sample] = []
     seg_dist = np.empty(len(sweep))
     sampled = set(dense)
