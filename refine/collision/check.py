@@ -141,12 +141,10 @@ class PathClearance:
         tolerance_m: a clearance counts as broken below ``-tolerance_m`` [m].
         certified_segments: segments proved clear along their whole motion by the per-pair
             motion bound (``method="bound"``; see the module notes); the rest were sampled densely.
-        waypoint_measured: None when every waypoint is measured; from known bounds (``prior``, or
-            ``every_waypoint=False``), the waypoints measured (N,): those that can hold the least
-            distance or clearance, whose margins the bounds leave unproved, or that end a segment
-            sampled inside; the others' figures are lower bounds, and so are the figures of a
-            segment with one sub-step (``segment_samples`` 1) that ends at one of them. The least
-            distance and clearance over the path are exact either way.
+        waypoint_measured: None when every waypoint is measured; else (``prior``, ``every_waypoint=False``)
+            those measured (N,): that can hold the least distance or clearance, whose margins the bounds
+            leave unproved, or that end a segment sampled inside. The others' figures, and those of a
+            segment with one sub-step ending at one, are lower bounds; the least figures are exact.
         bounds: the lower bounds on every pair's distance at the waypoints the check ended with,
             for the check of a nearby path (:mod:`refine.collision.carry`); None for ``"sample"``.
     """
@@ -205,11 +203,6 @@ class _Sample(NamedTuple):
     pair: tuple[str, str]  # the pair with the least clearance
     pair_distance: float  # its distance [m]
     below: frozenset[str]  # every body and object below its margin
-
-
-def _interpolate(q0: Array, q1: Array, m: int) -> Array:
-    t = np.arange(1, m)[:, None] / m
-    return q0 + t * (q1 - q0)
 
 
 def _sub_steps(kin: TcpKinematics, q0: Array, q1: Array, m: int, step_m: float) -> int:
@@ -345,13 +338,12 @@ def check_path_clearance(
         )
         for k, m in zip(dense, least, strict=True):
             steps[k] = _sub_steps(kin, q_path[k], q_path[k + 1], int(m), step_m)
-            found_by_segment[k] = [sample(q) for q in _interpolate(q_path[k], q_path[k + 1], int(steps[k]))]
-    if measured is not None:  # a segment sampled inside takes its ends' exact figures, not bounds
-        for k in np.flatnonzero([bool(found or inner[k]) for k, found in enumerate(found_by_segment)]):
-            for end in (k, k + 1):
-                if not measured[end]:
-                    measure(end)
-                    points[end], measured[end] = at[end], True
+            t = np.arange(1, steps[k])[:, None] / steps[k]  # the inner sub-steps
+            found_by_segment[k] = [sample(q) for q in q_path[k] + t * (q_path[k + 1] - q_path[k])]
+    inside = [k + e for k, found in enumerate(found_by_segment) for e in (0, 1) if found or inner[k]]
+    for end in [] if measured is None else sorted(set(inside) - set(np.flatnonzero(measured).tolist())):
+        measure(end)  # a segment sampled inside takes its ends' exact figures, not bounds
+        points[end], measured[end] = at[end], True
     wp_dist = np.array([p.distance for p in points])
     wp_clear = np.array([p.clearance for p in points])
     worst: list[_Sample] = []
