@@ -68,11 +68,18 @@ def kind_minima(model: Any, q: Array, clearance: Any) -> KindMinima:
             out.append(None)
             continue
         best = _between_waypoints(clearance, kinds, kind, float(margins[columns[0]]))
-        sub = bounds[:, columns]
-        for flat in np.argsort(sub, axis=None, kind="stable"):
-            i, j = divmod(int(flat), len(columns))
-            if sub[i, j] >= best:
+        sub = bounds[:, columns].ravel()
+        first = int(np.argmin(sub))  # the least bound: measured first
+        if sub[first] < best:
+            best = min(best, model.pair_distance(q[first // len(columns)], int(columns[first % len(columns)])))
+            queries += 1
+        left = np.flatnonzero(sub < best)  # in the order of their bounds, until none can come closer
+        for flat in left[np.argsort(sub[left], kind="stable")]:
+            if flat == first:
+                continue
+            if sub[flat] >= best:
                 break  # no pair left can come closer
+            i, j = divmod(int(flat), len(columns))
             best = min(best, model.pair_distance(q[i], int(columns[j])))
             queries += 1
         out.append(float(best))
