@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import logging
 import os
@@ -25,7 +26,32 @@ def _seconds_since_process_start() -> float | None:
         return None
 
 
-def _parser() -> argparse.ArgumentParser:
+LAZY_COMMANDS = {
+    "calibrate": ("refine.calibrate.cli", "measure a frame of a problem from measurement files"),
+    "bench": ("refine.bench.cli", "benchmark refine against other methods on named suites"),
+}
+"""Subcommands whose modules take long to import (NumPy, SciPy), by name: the module whose
+``add_parser`` adds them and their one-line help. Only the command being run imports its module;
+for any other the parser holds a stand-in with the same help (``refine --help`` lists it)."""
+
+
+def _command(argv: list[str] | None) -> str | None:
+    """The subcommand named in ``argv`` (the first word not an option), or None."""
+    words = sys.argv[1:] if argv is None else argv
+    return next((w for w in words if not w.startswith("-")), None)
+
+
+def _add_lazy(sub: argparse._SubParsersAction, name: str, chosen: str | None) -> None:
+    module, help_text = LAZY_COMMANDS[name]
+    if chosen == name:
+        importlib.import_module(module).add_parser(sub)
+    else:
+        sub.add_parser(name, help=help_text, add_help=False).add_argument("rest", nargs=argparse.REMAINDER)
+
+
+def _parser(argv: list[str] | None = None, *, every: bool = False) -> argparse.ArgumentParser:
+    """The command line's parser; only the command in ``argv`` imports its module (all with ``every``)."""
+    chosen = _command(argv)
     p = argparse.ArgumentParser(
         prog="refine", description="Refine a demonstrated robot path onto a CAD path."
     )
@@ -59,15 +85,11 @@ def _parser() -> argparse.ArgumentParser:
         add_safety_options(parser)
     robots = sub.add_parser("robots", help="list the robots of the registry, or import one")
     _add_import(robots.add_subparsers(dest="robots_command"))
-    from refine.calibrate.cli import add_parser as add_calibrate
-
-    add_calibrate(sub)
+    _add_lazy(sub, "calibrate", "calibrate" if every else chosen)
     from refine.run.batch import add_parser as add_batch
 
     add_batch(sub)
-    from refine.bench.cli import add_parser as add_bench
-
-    add_bench(sub)
+    _add_lazy(sub, "bench", "bench" if every else chosen)
     from refine.serve.cli import add_parser as add_serve
 
     add_serve(sub)
@@ -197,7 +219,7 @@ def _import_robot(args: argparse.Namespace) -> int:
 
 
 def _main(argv: list[str] | None) -> int:
-    args = _parser().parse_args(argv)
+    args = _parser(argv).parse_args(argv)
     level = [logging.WARNING, logging.INFO, logging.DEBUG][min(args.verbose, 2)]
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
 

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from refine.errors import InputError, SolverError
+from refine.timing_passes import lean_passes
 from refine.types import Array
 
 logger = logging.getLogger(__name__)
@@ -170,7 +171,10 @@ def _check_inputs(s, q, speed_cap, velocity_limits, acceleration_limits, toleran
 
 @functools.cache
 def _toppra():
-    """The toppra package and this module's two subclasses of it, imported on first use.
+    """The toppra package and this module's subclasses of it, imported on first use.
+
+    Returned: toppra, the path speed constraint, the free-end TOPPRA and the TOPPRA, both with
+    the lean passes of :mod:`refine.timing_passes`.
 
     toppra imports matplotlib's pyplot when it is imported, for plotting helpers a run never
     calls and at more CPU time than the rest of the timing stage: pyplot is deferred until toppra
@@ -196,7 +200,9 @@ def _toppra():
             xbound = np.column_stack([np.zeros_like(cap), cap**2])
             return None, None, None, None, None, None, xbound
 
-    class _FreeEndTOPPRA(toppra.algorithm.TOPPRA):
+    lean = lean_passes(toppra.algorithm.TOPPRA)  # toppra's passes to the bit, less of its Python
+
+    class _FreeEndTOPPRA(lean):  # type: ignore[misc, valid-type]
         """TOPPRA whose end speed may be anything from 0 up to the ``sd_end`` it is given.
 
         ``compute_parameterization`` pins the end speed to ``sd_end``; widening the end of the
@@ -206,7 +212,7 @@ def _toppra():
         def compute_controllable_sets(self, sdmin, sdmax):  # noqa: D102
             return super().compute_controllable_sets(0.0, sdmax)
 
-    return toppra, _PathSpeedConstraint, _FreeEndTOPPRA
+    return toppra, _PathSpeedConstraint, _FreeEndTOPPRA, lean
 
 
 @functools.lru_cache(maxsize=32)
@@ -242,14 +248,14 @@ def build_toppra(s, q, speed_cap, velocity_limits, acceleration_limits, *, free_
     Returns:
         A ``toppra.algorithm.TOPPRA`` on the spline through (s, q), gridpoints ``s``.
     """
-    toppra, _PathSpeedConstraint, _FreeEndTOPPRA = _toppra()
+    toppra, _PathSpeedConstraint, _FreeEndTOPPRA, lean = _toppra()
     path = toppra.SplineInterpolator(s, q)
     velocity, acceleration = _joint_constraints(
         tuple(np.asarray(velocity_limits, dtype=float).tolist()),
         tuple(np.asarray(acceleration_limits, dtype=float).tolist()),
     )
     constraints = [velocity, acceleration, _PathSpeedConstraint(s, speed_cap)]
-    algorithm = _FreeEndTOPPRA if free_end else toppra.algorithm.TOPPRA
+    algorithm = _FreeEndTOPPRA if free_end else lean
     return algorithm(constraints, path, gridpoints=s, solver_wrapper="seidel")
 
 

@@ -1,4 +1,5 @@
 import json
+import os
 import shutil
 import time
 from pathlib import Path
@@ -89,7 +90,7 @@ def test_run_writes_every_output_and_a_result_with_the_documented_keys(tmp_path,
 def test_ctrl_c_while_the_command_line_is_read_exits_130_without_a_traceback(monkeypatch, capsys):
     import refine.cli
 
-    def interrupted():
+    def interrupted(*_args, **_kwargs):
         raise KeyboardInterrupt
 
     monkeypatch.setattr(refine.cli, "_parser", interrupted)
@@ -149,3 +150,40 @@ def test_check_of_a_urdf_robot_still_reports_what_is_wrong(tmp_path, capsys):
     assert main(["check", str(urdf)]) == 2
     err = capsys.readouterr().err
     assert "'rapid'" in err and "ur controller" in err and "urscript only" in err
+
+
+def test_help_lists_every_command_as_the_full_parser_does_without_importing_the_heavy_ones():
+    """``refine --help`` (in a fresh interpreter) prints what the parser with every command's module
+    imported prints, and leaves the benchmark's and the calibration's modules unimported; a lazy
+    command still gets its own full parser."""
+    import subprocess
+    import sys
+
+    from refine import cli
+
+    code = (
+        "import sys, contextlib, io\n"
+        "from refine import cli\n"
+        "out = io.StringIO()\n"
+        "with contextlib.redirect_stdout(out), contextlib.suppress(SystemExit):\n"
+        "    cli._parser(['--help']).parse_args(['--help'])\n"
+        "print(out.getvalue(), end='')\n"
+        "print([m for m in ('refine.bench.cli', 'refine.calibrate.cli', 'scipy') if m in sys.modules])\n"
+    )
+    env = {**os.environ, "COLUMNS": "100"}
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True)
+    *lines, loaded = done.stdout.splitlines()
+    assert loaded == "[]"
+    full = subprocess.run(
+        [sys.executable, "-c", code.replace("cli._parser(['--help'])", "cli._parser(every=True)")],
+        capture_output=True,
+        text=True,
+        env=env,
+        check=True,
+    ).stdout.splitlines()[:-1]
+    assert lines == full and any(line.strip().startswith("bench") for line in lines)
+    args = cli._parser(["bench", "list"]).parse_args(["bench", "list"])
+    assert args.command == "bench" and args.bench_command == "list"
+    commands = next(a for a in cli._parser(["-v", "calibrate"])._actions if a.dest == "command").choices
+    kinds = next(a for a in commands["calibrate"]._actions if a.dest == "kind").choices
+    assert {"pivot", "receiver"} <= set(kinds)

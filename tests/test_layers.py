@@ -41,7 +41,7 @@ FLOORS: tuple[tuple[str, tuple[str, ...]], ...] = (
         ),
     ),
     ("robot", ("refine.robot",)),
-    ("inputs", ("refine.problem", "refine.problem_toml", "refine.cad", "refine.demo", "refine.collision", "refine.timing")),
+    ("inputs", ("refine.problem", "refine.problem_toml", "refine.cad", "refine.demo", "refine.collision", "refine.timing", "refine.timing_passes")),
     ("fusion", ("refine.fuse",)),
     ("optimise", ("refine.optimise",)),
     ("plan", ("refine.plan",)),

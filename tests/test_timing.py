@@ -402,3 +402,56 @@ def test_joint_constraints_kept_between_calls_time_as_toppra_built_afresh():
     sd_other = other.compute_parameterization(0.0, 0.0)[1]
     np.testing.assert_array_equal(sd_kept, sd_fresh)
     assert not np.allclose(sd_other, sd_fresh)  # the limits bind: other limits, another timing
+
+
+def _toppras(s, q, cap, vlim, alim):
+    """The lean TOPPRA of a call and toppra's own, on constraints and splines of their own each."""
+
+    def parts():
+        return [
+            toppra.constraint.JointVelocityConstraint(vlim),
+            toppra.constraint.JointAccelerationConstraint(alim, toppra.constraint.DiscretizationType.Interpolation),
+            timing._toppra()[1](s, cap),
+        ], toppra.SplineInterpolator(s, q)
+
+    lean = timing.build_toppra(s, q, cap, vlim, alim)
+    assert type(lean) is not toppra.algorithm.TOPPRA and isinstance(lean, toppra.algorithm.TOPPRA)
+    constraints, path = parts()
+    own = toppra.algorithm.TOPPRA(constraints, path, gridpoints=s, solver_wrapper="seidel")
+    return lean, own
+
+
+@pytest.mark.parametrize("seed", [0, 3, 7])
+def test_the_lean_passes_give_toppras_own_sets_and_timing_to_the_bit(seed):
+    """From rest to rest and from a start speed to a free end (the glass cell's kinds of call),
+    the lean passes' controllable sets, path speeds, accelerations and auxiliary variables are
+    toppra's own, bit for bit, with the same return code."""
+    s, q = smooth_path(n_pts=301, seed=seed)
+    cap = np.full(len(s), 0.4) * (1.0 + 0.3 * np.sin(np.linspace(0.0, 6.0, len(s))))
+    vlim, alim = np.full(N_JOINTS, 0.9), np.full(N_JOINTS, 3.0)
+    speeds = []
+    for start, end in ((0.0, 0.0), (0.05, 0.3)):
+        lean, own = _toppras(s, q, cap, vlim, alim)
+        got = lean.compute_parameterization(start, end, return_data=True)
+        want = own.compute_parameterization(start, end, return_data=True)
+        for a, b in zip(got, want, strict=True):
+            np.testing.assert_array_equal(a, b)
+        assert lean.problem_data.return_code == own.problem_data.return_code
+        speeds.append(got[1])
+    assert np.all(np.isfinite(speeds[0])) and np.all(speeds[0][1:-1] > 0.0)  # rest to rest: a timing
+
+
+def test_the_lean_passes_stop_where_toppra_does_on_an_end_speed_it_cannot_reach():
+    """An end speed far above what the joints allow: the controllable sets break off at the same
+    step with the same entries, and both say the path is not controllable."""
+    s, q = smooth_path(n_pts=201, seed=5)
+    cap = np.full(len(s), 50.0)
+    vlim, alim = np.full(N_JOINTS, 0.5), np.full(N_JOINTS, 0.5)
+    lean, own = _toppras(s, q, cap, vlim, alim)
+    K_lean = lean.compute_controllable_sets(40.0, 40.0)
+    K_own = own.compute_controllable_sets(40.0, 40.0)
+    assert np.isnan(K_own).any()
+    np.testing.assert_array_equal(K_lean, K_own)
+    assert lean.compute_parameterization(0.0, 40.0)[0] is None
+    assert own.compute_parameterization(0.0, 40.0)[0] is None
+    assert lean.problem_data.return_code == own.problem_data.return_code

@@ -30,8 +30,10 @@ marked for the resampling (:func:`refine.cad.resample.resample_track`).
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import math
+import threading
 from collections import defaultdict
 from pathlib import Path
 from typing import Any
@@ -447,11 +449,28 @@ def dxf_circles(path: str | Path, units: str = "mm", layer: str | None = None) -
     return circles
 
 
+_LAST = threading.local()
+"""Per thread, the last drawing read (``drawing``) and its key (``key``): the resolved path and the
+SHA-256 of the file's bytes."""
+
+
 def _open(path: Path, units: str) -> tuple[Any, str, float]:
-    """The drawing read by ezdxf, its name for messages and the metres per drawing unit."""
+    """The drawing read by ezdxf, its name for messages and the metres per drawing unit.
+
+    Each thread keeps the last drawing it read, keyed by the file's resolved path and the SHA-256
+    of its bytes: the path and the arcs of one run, or a problem solved again, read the file's
+    bytes once more but parse them once. A file whose bytes changed is parsed again. The drawing
+    is only read, never changed, by this module.
+    """
     source = f"DXF file {str(path)!r}"
     scale = metres_per_unit(units, str(path))
     try:
-        return ezdxf.readfile(path), source, scale
+        key = (str(path.resolve()), hashlib.sha256(path.read_bytes()).digest())
+        if getattr(_LAST, "key", None) == key:
+            return _LAST.drawing, source, scale
+        drawing = ezdxf.readfile(path)
+        if hashlib.sha256(path.read_bytes()).digest() == key[1]:  # not written to while it was parsed
+            _LAST.key, _LAST.drawing = key, drawing
+        return drawing, source, scale
     except (OSError, ezdxf.DXFError) as e:
         raise InputError(f"{source} cannot be read: {e}") from e

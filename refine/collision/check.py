@@ -141,9 +141,10 @@ class PathClearance:
         tolerance_m: a clearance counts as broken below ``-tolerance_m`` [m].
         certified_segments: segments proved clear along their whole motion by the per-pair
             motion bound (``method="bound"``; see the module notes); the rest were sampled densely.
-        waypoint_measured: None when every waypoint is measured; from known bounds (``prior``), the
-            waypoints measured (N,): those that can hold the least distance or clearance or whose
-            margins the bounds leave unproved; the others' figures are lower bounds.
+        waypoint_measured: None when every waypoint is measured; else (``prior``, ``every_waypoint=False``)
+            those measured (N,): that can hold the least distance or clearance, whose margins the bounds
+            leave unproved, or that end a segment sampled inside. The others' figures, and those of a
+            segment with one sub-step ending at one, are lower bounds; the least figures are exact.
         bounds: the lower bounds on every pair's distance at the waypoints the check ended with,
             for the check of a nearby path (:mod:`refine.collision.carry`); None for ``"sample"``.
     """
@@ -202,11 +203,6 @@ class _Sample(NamedTuple):
     pair: tuple[str, str]  # the pair with the least clearance
     pair_distance: float  # its distance [m]
     below: frozenset[str]  # every body and object below its margin
-
-
-def _interpolate(q0: Array, q1: Array, m: int) -> Array:
-    t = np.arange(1, m)[:, None] / m
-    return q0 + t * (q1 - q0)
 
 
 def _sub_steps(kin: TcpKinematics, q0: Array, q1: Array, m: int, step_m: float) -> int:
@@ -326,8 +322,6 @@ def check_path_clearance(
             at.get(k, _Sample(d, c, model.pairs[p], dp, _NONE))
             for k, (p, (d, c, dp)) in enumerate(zip(least, figures))  # noqa: B905
         ]
-    wp_dist = np.array([p.distance for p in points])
-    wp_clear = np.array([p.clearance for p in points])
     sweep = np.abs(np.diff(q_path, axis=0)) @ joint_reach(model)  # any body point's motion per segment [m]
     found_by_segment: list[list[_Sample] | None] = [None] * len(sweep)
     inner: list[list[_Sample]] = [[] for _ in sweep]
@@ -344,7 +338,14 @@ def check_path_clearance(
         )
         for k, m in zip(dense, least, strict=True):
             steps[k] = _sub_steps(kin, q_path[k], q_path[k + 1], int(m), step_m)
-            found_by_segment[k] = [sample(q) for q in _interpolate(q_path[k], q_path[k + 1], int(steps[k]))]
+            t = np.arange(1, steps[k])[:, None] / steps[k]  # the inner sub-steps
+            found_by_segment[k] = [sample(q) for q in q_path[k] + t * (q_path[k + 1] - q_path[k])]
+    inside = [k + e for k, found in enumerate(found_by_segment) for e in (0, 1) if found or inner[k]]
+    for end in [] if measured is None else sorted(set(inside) - set(np.flatnonzero(measured).tolist())):
+        measure(end)  # a segment sampled inside takes its ends' exact figures, not bounds
+        points[end], measured[end] = at[end], True
+    wp_dist = np.array([p.distance for p in points])
+    wp_clear = np.array([p.clearance for p in points])
     worst: list[_Sample] = []
     seg_dist = np.empty(len(sweep))
     sampled = set(dense)

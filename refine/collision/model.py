@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import logging
 import math
+import threading
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -74,7 +75,7 @@ class CollisionModel:
         self.tcp_in_flange = check_transform(tcp_in_flange, "collision model: tcp_in_flange").copy()
         self.margin_m, self.self_margin_m = float(margin_m), float(self_margin_m)
         self._model = robot.model
-        self._data = robot.model.createData()
+        self._local = threading.local()  # per thread: its own Pinocchio data (see _data)
         self.bodies: list[Body] = self._robot_bodies() + self._tool_bodies(tool_shapes)
         self._n_moving = len(self.bodies)
         self.bodies += self._cell_bodies(cell)
@@ -95,6 +96,7 @@ class CollisionModel:
         self._exact: dict[int, Contact] = {}  # pairs measured at the current configuration
         self._motion: Array | None = None
         self._recent_poses: dict[bytes, Array] = {}  # moving_poses of the last few joint paths
+        self._recent_lock = threading.Lock()  # held while _recent_poses is read or changed
 
     # ---- building ----------------------------------------------------------------------------
 
@@ -213,19 +215,32 @@ class CollisionModel:
         """World poses (N, M, 4, 4) of the M moving bodies' shape frames for joint rows qs (N, n).
 
         The answer for a path of several rows is kept for the next few calls with the same joints
-        (the proof, the check and the figures of one path each ask for them), read-only.
+        (the proof, the check and the figures of one path each ask for them), read-only. Threads
+        may call it at once: the kept answers are locked, and each thread has its own Pinocchio data.
         """
         qs = np.asarray(qs, dtype=float)
         key = qs.shape[0].to_bytes(8, "little") + qs.tobytes() if qs.ndim == 2 and len(qs) > 1 else None
-        if key is not None and key in self._recent_poses:
-            return self._recent_poses[key]
+        if key is not None:
+            with self._recent_lock:
+                known = self._recent_poses.get(key)
+            if known is not None:
+                return known
         poses = self._moving_poses(qs)
         if key is not None:
             poses.flags.writeable = False
-            self._recent_poses[key] = poses
-            while len(self._recent_poses) > 4:
-                del self._recent_poses[next(iter(self._recent_poses))]
+            with self._recent_lock:
+                self._recent_poses[key] = poses
+                while len(self._recent_poses) > 4:
+                    del self._recent_poses[next(iter(self._recent_poses))]
         return poses
+
+    @property
+    def _data(self) -> pin.Data:
+        """This thread's Pinocchio data of the robot's model (made on its first use in the thread)."""
+        data = getattr(self._local, "data", None)
+        if data is None:
+            data = self._local.data = self._model.createData()
+        return data
 
     def _moving_poses(self, qs: Array) -> Array:
         chain = getattr(self.robot, "chain", None)

@@ -25,6 +25,7 @@ value over a shape is reached at a corner of any convex set holding the shape.
 
 from __future__ import annotations
 
+import threading
 import weakref
 from typing import Any
 
@@ -110,22 +111,47 @@ def pair_reach(model: pin.Model, pairs: list[tuple[Body, Body]]) -> Array:
         model: the robot's Pinocchio model (joint frames as in the collision model's bodies).
         pairs: the checked pairs as (body, other); a cell object has joint -1 and does not move.
     """
-    chain = _Chain(model)
+    chain, known = _chain_of(model)
     out = np.zeros((len(pairs), model.nv))
-    cache: dict[tuple[int, int], dict[int, float]] = {}
+    points: dict[int, Array] = {}  # per body: its corners in its joint's frame
     for p, (a, b) in enumerate(pairs):
         for body, other in ((a, b), (b, a)):
             if body.joint <= 0:
                 continue
-            key = (id(body), max(other.joint, 0))
-            if key not in cache:
-                T = (
-                    model.frames[body.frame_id].placement.homogeneous @ body.link_T_shape
-                )  # in the joint frame
-                cache[key] = chain.side(body, corners(body) @ T[:3, :3].T + T[:3, 3], max(other.joint, 0))
-            for v, r in cache[key].items():
+            if id(body) not in points:
+                T = model.frames[body.frame_id].placement.homogeneous @ body.link_T_shape  # in the joint frame
+                points[id(body)] = corners(body) @ T[:3, :3].T + T[:3, 3]
+            key = (body.joint, max(other.joint, 0), points[id(body)].tobytes())
+            sides = known.get(key)
+            if sides is None:
+                sides = chain.side(body, points[id(body)], max(other.joint, 0))
+                with _CHAINS_LOCK:
+                    known[key] = sides
+            for v, r in sides.items():
                 out[p, v] += r
     return out
+
+
+_CHAINS: dict[int, tuple[pin.Model, _Chain, dict[tuple[int, int, bytes], dict[int, float]]]] = {}
+"""Per Pinocchio model (by id, the model kept with it): its :class:`_Chain` and the bounds of each
+side worked out so far, by the body's joint, the other body's joint and the body's corners: the
+same robot and tool in a new collision model (a problem solved again) take them as they are."""
+_CHAINS_LOCK = threading.Lock()
+CHAINS_KEPT = 16
+"""Pinocchio models whose chains :data:`_CHAINS` keeps."""
+
+
+def _chain_of(model: pin.Model) -> tuple[_Chain, dict[tuple[int, int, bytes], dict[int, float]]]:
+    with _CHAINS_LOCK:
+        entry = _CHAINS.get(id(model))
+        if entry is not None and entry[0] is model:
+            return entry[1], entry[2]
+    chain = _Chain(model)
+    with _CHAINS_LOCK:
+        _CHAINS[id(model)] = (model, chain, {})
+        while len(_CHAINS) > CHAINS_KEPT:
+            del _CHAINS[next(iter(_CHAINS))]
+        return chain, _CHAINS[id(model)][2]
 
 
 def joint_reach(model: Any) -> Array:  # a CollisionModel (which imports this module)

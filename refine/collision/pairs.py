@@ -119,7 +119,7 @@ def joint_axes(model: pin.Model, T_world_base: Array) -> Axes:
             axes[j] = None  # prismatic or multi-DoF: no fixed axis
             continue
         w = w / np.linalg.norm(w)
-        axes[j] = (R @ w, R @ np.cross(w, v) + t)  # v = p x w for p on the axis, so w x v is one
+        axes[j] = (R @ w, R @ cross3(w, v) + t)  # v = p x w for p on the axis, so w x v is one
     return axes
 
 
@@ -128,6 +128,13 @@ def joints_between(model: pin.Model, ja: int, jb: int) -> list[int]:
     sa, sb = list(model.supports[ja]), list(model.supports[jb])
     common = set(sa) & set(sb)
     return [j for j in reversed(sa) if j not in common] + [j for j in sb if j not in common]
+
+
+def cross3(a: Array, b: Array) -> Array:
+    """``np.cross`` of two 3-vectors, the same products and differences without its array set-up."""
+    a0, a1, a2 = float(a[0]), float(a[1]), float(a[2])
+    b0, b1, b2 = float(b[0]), float(b[1]), float(b[2])
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
 
 
 def _off_line(x: Array, line: tuple[Array, Array]) -> float:
@@ -153,7 +160,7 @@ def _symmetric_about(body: Body, T: Array, line: tuple[Array, Array]) -> bool:
     if tag == "sphere":
         return _off_line(centre, line) <= _TOL
     if tag == "cylinder":
-        parallel = float(np.linalg.norm(np.cross(line[0], T[:3, 2]))) <= _TOL
+        parallel = float(np.linalg.norm(cross3(line[0], T[:3, 2]))) <= _TOL
         return parallel and _off_line(centre, line) <= _TOL
     return False
 

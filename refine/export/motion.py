@@ -21,8 +21,11 @@ the report state the same figures, so what is reported is what is written:
 
 from __future__ import annotations
 
+import inspect
 import math
+import threading
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -208,7 +211,39 @@ def zone_points(trajectory: Trajectory, retract_m: float) -> Array:
     )
 
 
-def program_motion(
+_RECENT: list[tuple[str, Trajectory, Problem, tuple, ProgramMotion]] = []
+"""The last few answers of :func:`program_motion`, with the objects they were computed for."""
+_RECENT_LOCK = threading.Lock()
+RECENT_MOTIONS = 8
+"""Answers :func:`program_motion` keeps: the writers and ``result.json`` (twice: the file and the
+report) ask for the same pass's motion, which is computed once."""
+
+
+def program_motion(kind: str, trajectory: Trajectory, problem: Problem, **options: Any) -> ProgramMotion:
+    """The zones and speeds program ``kind`` writes for ``trajectory`` (:func:`compute_program_motion`).
+
+    The answer for the same trajectory and problem objects and options is the one computed
+    before (the last :data:`RECENT_MOTIONS` kept), its arrays read-only.
+    """
+    bound = inspect.signature(compute_program_motion).bind(kind, trajectory, problem, **options)
+    bound.apply_defaults()  # an option given as its default is the same answer
+    key = tuple(sorted((k, v) for k, v in bound.arguments.items() if k not in ("kind", "trajectory", "problem")))
+    with _RECENT_LOCK:
+        for k, tr, pr, opts, motion in _RECENT:
+            if k == kind and tr is trajectory and pr is problem and opts == key:
+                return motion
+    motion = compute_program_motion(kind, trajectory, problem, **options)
+    zones = motion.zones
+    for array in (zones.radius_m, zones.deviation_m, motion.planned_m_s, motion.programmed_m_s, motion.lengths_m):
+        array.flags.writeable = False
+    motion.levels.flags.writeable = False
+    with _RECENT_LOCK:
+        _RECENT.append((kind, trajectory, problem, key, motion))
+        del _RECENT[:-RECENT_MOTIONS]
+    return motion
+
+
+def compute_program_motion(
     kind: str,
     trajectory: Trajectory,
     problem: Problem,

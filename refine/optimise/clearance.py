@@ -99,6 +99,7 @@ class ClearanceSource:
                 self.check_step_m,
                 prior=self._carried(q),
                 directions=self._directions(q),
+                every_waypoint=False,
             )
             self.stats["check_s"] += time.perf_counter() - t0
         self._recent[key] = found  # most recent last

@@ -48,9 +48,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from refine.optimise.problem import LinearRow
+from refine.optimise.slerp import exp_rotvecs, log_rotations, rotation_angles
 from refine.optimise.verify import Violation, runs, singularity_measures
 from refine.robot.kinematics import TcpKinematics, rotation_vectors, solve_ik_batch
 from refine.settings import Tolerances
@@ -182,10 +182,9 @@ def line_poses(poses: Array, q: Array, segment: Array, t: Array, kin: TcpKinemat
     out = np.zeros((len(t), 4, 4))
     out[:, 3, 3] = 1.0
     out[:, :3, 3] = a[:, :3, 3] + t[:, None] * (b[:, :3, 3] - a[:, :3, 3])
-    R_start = Rotation.from_matrix(poses[:-1, :3, :3])  # per segment, then per sample: the same rows
-    steps = (R_start.inv() * Rotation.from_matrix(poses[1:, :3, :3])).as_rotvec()
-    R_a = R_start[segment]
-    out[:, :3, :3] = (R_a * Rotation.from_rotvec(t[:, None] * steps[segment])).as_matrix()
+    R = poses[:, :3, :3]
+    steps = log_rotations(np.swapaxes(R[:-1], 1, 2) @ R[1:])  # per segment, then per sample
+    out[:, :3, :3] = R[segment] @ exp_rotvecs(t[:, None] * steps[segment])
     on_wrist = wrist[segment]
     if on_wrist.any():
         q_lin = q[segment] + t[:, None] * (q[segment + 1] - q[segment])
@@ -281,7 +280,7 @@ def _solve_line(
     )
     off_line = np.linalg.norm(lin_poses[:, :3, 3] - (a + along[:, None] * chord), axis=1)
     rel = np.einsum("kji,kjl->kil", lin_poses[:, :3, :3], targets[:, :3, :3])
-    angle = np.degrees(Rotation.from_matrix(rel).magnitude())
+    angle = np.degrees(rotation_angles(rel))
     return (
         q_line,
         err,

@@ -68,11 +68,18 @@ def kind_minima(model: Any, q: Array, clearance: Any) -> KindMinima:
             out.append(None)
             continue
         best = _between_waypoints(clearance, kinds, kind, float(margins[columns[0]]))
-        sub = bounds[:, columns]
-        for flat in np.argsort(sub, axis=None, kind="stable"):
-            i, j = divmod(int(flat), len(columns))
-            if sub[i, j] >= best:
+        sub = bounds[:, columns].ravel()
+        first = int(np.argmin(sub))  # the least bound: measured first
+        if sub[first] < best:
+            best = min(best, model.pair_distance(q[first // len(columns)], int(columns[first % len(columns)])))
+            queries += 1
+        left = np.flatnonzero(sub < best)  # in the order of their bounds, until none can come closer
+        for flat in left[np.argsort(sub[left], kind="stable")]:
+            if flat == first:
+                continue
+            if sub[flat] >= best:
                 break  # no pair left can come closer
+            i, j = divmod(int(flat), len(columns))
             best = min(best, model.pair_distance(q[i], int(columns[j])))
             queries += 1
         out.append(float(best))
@@ -82,7 +89,10 @@ def kind_minima(model: Any, q: Array, clearance: Any) -> KindMinima:
 def _between_waypoints(clearance: Any, kinds: dict[str, str], cell: bool, margin_m: float) -> float:
     """The least distance of a kind's pair where it held a segment's least clearance [m] (inf if none)."""
     best = np.inf
+    samples = getattr(clearance, "segment_samples", None)
     for k, (body, other) in enumerate(clearance.segment_pair):
+        if samples is not None and samples[k] == 1:
+            continue  # nothing inside: its figures are its ends', which the waypoints give exactly
         if (kinds.get(other) == "cell" or kinds.get(body) == "cell") == cell and body:
             best = min(best, float(clearance.segment_clearance_m[k]) + margin_m)
     return best

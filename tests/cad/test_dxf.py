@@ -149,3 +149,38 @@ def test_read_cad_path_reads_a_closed_dxf_loop_on_a_layer(tmp_path):
     assert path.closed and path.length == pytest.approx(0.3)
     assert np.array_equal(path.positions[0], path.positions[-1])
     assert np.all(np.diff(path.s) <= 0.007)
+
+
+def test_a_drawing_read_again_is_parsed_once_and_a_changed_file_is_parsed_again(tmp_path, monkeypatch):
+    """The path and the arcs of one file parse it once; new bytes under the same name (same size,
+    so only the content tells) are parsed again and give the new points; another thread parses its own."""
+    import threading
+
+    import refine.cad.dxf as dxf
+
+    parsed = []
+    readfile = ezdxf.readfile
+    monkeypatch.setattr(dxf.ezdxf, "readfile", lambda p: parsed.append(p) or readfile(p))
+    f = _save(tmp_path, lambda msp: msp.add_lwpolyline([(0, 0, 0), (10, 0, 1), (10, 10, 0)], format="xyb"))
+    first = points_from_dxf(f, "mm")
+    circles = dxf.dxf_circles(f, "mm")
+    assert len(parsed) == 1 and len(circles) == 1
+    np.testing.assert_allclose(circles[0][0], [0.010, 0.005, 0.0], atol=1e-12)  # the bulge's centre [m]
+    np.testing.assert_allclose(points_from_dxf(f, "mm"), first)
+    assert len(parsed) == 1
+    size = f.stat().st_size
+    text = f.read_text().replace("\n10.0\n", "\n20.0\n")  # the polyline's x = 10 vertices now at x = 20
+    assert len(text) == size and text != f.read_text()
+    f.write_text(text)
+    moved = points_from_dxf(f, "mm")
+    assert len(parsed) == 2 and not np.array_equal(moved, first)
+    copy = tmp_path / "copy.dxf"  # the new bytes under another name: parsed afresh
+    copy.write_text(text)
+    np.testing.assert_array_equal(points_from_dxf(copy, "mm"), moved)
+    assert len(parsed) == 3
+    other = []
+    thread = threading.Thread(target=lambda: other.append(points_from_dxf(copy, "mm")))
+    thread.start()
+    thread.join()
+    assert len(parsed) == 4  # another thread parses its own, though this thread's last is that file
+    np.testing.assert_array_equal(other[0], moved)

@@ -292,3 +292,46 @@ def test_a_check_measuring_only_the_waypoints_that_can_hold_the_least_reports_th
     assert [r.describe() for r in least_only.runs] == [r.describe() for r in full.runs]
     assert bool(full.runs) == (margin_m > 0.03)
     assert least_only.queries < full.queries
+    inside = np.flatnonzero(least_only.segment_samples > 1)  # a segment sampled inside: exact ends
+    assert least_only.waypoint_measured[inside].all() and least_only.waypoint_measured[inside + 1].all()
+    assert np.array_equal(least_only.waypoint_distance_m[inside], full.waypoint_distance_m[inside])
+
+
+def test_the_cold_glass_check_measures_few_waypoints_and_reports_what_fcl_gives_over_every_pair():
+    """A cold glass run's dense check measures only the waypoints that can hold the least figures
+    (or end a segment sampled inside): the least distance and clearance are FCL's over every pair at
+    every waypoint, a measured waypoint's figures are FCL's, every other one's are at most FCL's,
+    and the cell and self pairs' least distances are FCL's least over the pairs of each kind."""
+    p = refine.load_problem(ROOT / "problems" / "glass_adhesive")
+    f = fused_path(p)
+    r = refine.refine_path(
+        "abb_irb4600_60_205",
+        f.positions,
+        f.rotations,
+        speeds=f.speed,
+        arc_length=f.s,
+        tcp_in_flange=p.tool.tcp_in_flange,
+        base_in_world=p.robot.base_in_world,
+        cell=p.cell,
+        tool_shapes=p.tool.collision,
+        collision=p.collision,
+    )
+    assert r.status == "ok"
+    check = r.run.first.clearance
+    measured = check.waypoint_measured
+    assert measured is not None and measured.sum() < len(r.joints) // 4
+    model = ClearanceSource.for_problem(r.run.problem, r.run.robot).model
+    truth = every_pair(model, r.joints)
+    d, _, c, _ = least(model, truth)
+    assert check.waypoint_distance_m.min() == pytest.approx(d, abs=1e-12)
+    assert check.waypoint_clearance_m.min() == pytest.approx(c, abs=1e-12)
+    per_waypoint = truth.min(axis=1)
+    assert np.allclose(check.waypoint_distance_m[measured], per_waypoint[measured], atol=1e-12, rtol=0.0)
+    assert np.all(check.waypoint_distance_m <= per_waypoint + 1e-12)
+    inside = np.flatnonzero(check.segment_samples > 1)
+    assert measured[inside].all() and measured[inside + 1].all()
+    kinds = {b.label: b.kind for b in model.bodies}
+    is_cell = np.array([kinds[a] == "cell" or kinds[b] == "cell" for a, b in model.pairs])
+    found = r.run.first.clearance_kinds
+    assert found.cell_m == pytest.approx(truth[:, is_cell].min(), abs=1e-12)
+    assert found.self_m == pytest.approx(truth[:, ~is_cell].min(), abs=1e-12)

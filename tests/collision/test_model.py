@@ -267,3 +267,53 @@ def test_the_gap_along_a_witness_normal_bounds_the_distance_and_meets_it_where_i
             model.pair_distance(q, k)  # back to the first configuration for the next pair
             moved += 1
     assert tight >= 20 and moved >= 20
+
+
+def test_threads_placing_one_model_get_each_their_own_joints_poses(cell_model, base_in_world):
+    """Eight threads call ``moving_poses`` on one model at once, with single rows (Pinocchio's loop)
+    and paths long enough to be kept: every answer is the bodies' poses from a Pinocchio data of
+    the test's own (``oMf`` of the body's frame), the threads switching every microsecond."""
+    import sys
+    import threading
+
+    import pinocchio as pin
+
+    model = cell_model
+    moving = [b for b in model.bodies if b.kind != "cell"]
+    pm = model.robot.model
+    rng = np.random.default_rng(11)
+    paths = [[_random_q(model.robot, rng, 0.5)[None] for _ in range(6)] for _ in range(8)]
+    paths = [rows + [np.vstack([_random_q(model.robot, rng, 0.5) for _ in range(120)]) for _ in range(3)] for rows in paths]
+
+    def expected(qs):
+        data = pm.createData()
+        out = np.empty((len(qs), len(moving), 4, 4))
+        for k, q in enumerate(qs):
+            pin.framesForwardKinematics(pm, data, q)
+            out[k] = [base_in_world @ data.oMf[b.frame_id].homogeneous @ b.link_T_shape for b in moving]
+        return out
+
+    truth = [[expected(qs) for qs in rows] for rows in paths]
+    got: dict[int, list] = {}
+    errors: list[BaseException] = []
+
+    def work(i):
+        try:
+            got[i] = [np.array(model.moving_poses(qs)) for _ in range(20) for qs in paths[i]]
+        except BaseException as e:  # noqa: BLE001 - handed to the main thread
+            errors.append(e)
+
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)
+    try:
+        threads = [threading.Thread(target=work, args=(i,)) for i in range(8)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+    finally:
+        sys.setswitchinterval(interval)
+    assert not errors, errors
+    for i, rows in enumerate(truth):
+        for k, poses in enumerate(got[i]):
+            np.testing.assert_allclose(poses, rows[k % len(rows)], atol=1e-12, rtol=0.0)

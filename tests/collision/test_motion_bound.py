@@ -62,7 +62,23 @@ def test_no_point_of_a_pair_travels_further_relative_to_the_other_than_its_bound
     """Along random joint segments, the path length of every corner of a pair's first (distal) body
     as seen from the other body (from the world for a cell object) stays within the pair's bound."""
     robot, model = arm
-    rng = np.random.default_rng(11)
+    _within_bound(robot, model, np.random.default_rng(11))
+
+
+def test_a_longer_torch_on_the_same_robot_gets_bounds_of_its_own(arm):
+    """A second model on the same robot, its torch 0.6 m long where the first's is 0.2 m: its
+    bounds are its own (the robot's links' as the first model's) and hold as the first's do."""
+    robot, first = arm
+    long_torch = Shape("torch", "cylinder", pose=make_transform(p=[0.0, 0.0, 0.3]), radius_m=0.02, length_m=0.6)
+    model = CollisionModel(robot, np.eye(4), TCP, (long_torch,), (FAR,), margin_m=MARGIN, self_margin_m=0.005)
+    assert first.pairs == model.pairs
+    tool = np.array(["tool:" in a for a, _ in model.pairs])
+    assert np.array_equal(model.pair_motion[~tool], first.pair_motion[~tool])
+    assert np.all(model.pair_motion[tool].sum(axis=1) > first.pair_motion[tool].sum(axis=1))
+    _within_bound(robot, model, np.random.default_rng(12))
+
+
+def _within_bound(robot, model, rng):
     lo, hi = robot.model.lowerPositionLimit, robot.model.upperPositionLimit
     bodies = {b.label: b for b in model.bodies}
     pairs = [(bodies[a], bodies[b]) for a, b in model.pairs]

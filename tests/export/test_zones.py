@@ -154,3 +154,18 @@ def test_the_problem_file_sets_the_path_tolerance_and_the_speed_share(tmp_path):
     toml.write_text(toml.read_text(encoding="utf-8").replace("speed_share = 0.05", "speed_share = 0.9"))
     with pytest.raises(InputError, match=r"output.speed_share must be a finite number in \[0.0001, 0.5\]"):
         load_problem(folder)
+
+
+def test_a_pass_motion_asked_for_again_is_the_one_computed_and_another_problem_is_its_own():
+    """The same trajectory and problem objects (options spelled out as their defaults or not) give
+    the motion computed first, read-only; a problem with another tolerance gets its own zones (the
+    hand figures of the z1/z0 test above), and so does an equal trajectory that is another object."""
+    tr, problem = _l_path(), _problem("glue")
+    first = program_motion("rapid", tr, problem)
+    assert program_motion("rapid", tr, problem, zone="z1", retract_m=0.1) is first
+    assert not first.zones.deviation_m.flags.writeable and not first.programmed_m_s.flags.writeable
+    tight = program_motion("rapid", tr, _problem("glue", 0.0002))
+    assert tight.zones.largest_deviation_m == 0.0 and first.zones.largest_deviation_m == pytest.approx(0.0003 * SIN45)
+    again = program_motion("rapid", dataclasses.replace(tr), problem)
+    assert again is not first and again.zones.label == first.zones.label
+    assert program_motion("krl", tr, problem) is not program_motion("urscript", tr, problem)
