@@ -118,4 +118,9 @@ def test_verified_counts_the_claims_kept_of_every_run(tmp_path, registry, tiny_w
     first = write_report(out, tmp_path / "first", run_ids=[r["run_id"] for r in rows[:1]]).read_text()
     for name, cell in cells.items():
         assert f"| {name} {cell}" in first, name
+    # the strict check's broken cone reads as the slack used, for the verified repair only
+    within = next(line for line in first.splitlines() if "| within-slack | repaired |" in line)
+    beyond = next(line for line in first.splitlines() if "| beyond-slack | repaired |" in line)
+    assert "| within its slack; strict: orientation" in within
+    assert "within its slack" not in beyond and "| orientation" in beyond
     assert verified_cell({"claimed_runs": "", "verified_runs": "0", "repeats": "3"}) == "–"
