@@ -10,7 +10,9 @@ changes reach them alike; printed per contender: the median and least CPU time, 
 time, the answer's status and whether refine's verifier accepts it, and the ratio of each median
 CPU time to refine's, and the median of the CPU time the contender reports for its own stages
 (``Answer.cpu_s``, the ``cpu_s`` of a ``refine bench`` row: the same as the outside figure for the
-peers, refine's without its verification); then the 1-minute load average over the runs.
+peers, refine's without its verification); then the 1-minute load average over the runs. A
+contender that cannot run here (``Unavailable``) or does not pose a problem (``NotPosed``, e.g.
+Drake on a stationary tool) gets one line saying so and is left out there.
 
     python3 benchmarks/peers_glass.py [--repeat 7] [--suite glass] [--contenders refine,trajopt,descartes]
 """
@@ -23,7 +25,7 @@ import statistics
 import time
 
 import refine.bench.peers  # noqa: F401  (the peers join the contenders)
-from refine.bench.contenders import CONTENDERS, Unavailable, verify
+from refine.bench.contenders import CONTENDERS, NotPosed, Unavailable, verify
 from refine.bench.suites import load_suites, problems
 
 
@@ -33,8 +35,9 @@ def main() -> int:
     parser.add_argument("--suite", default="glass")
     parser.add_argument("--contenders", default="refine,trajopt,descartes")
     args = parser.parse_args()
-    names = args.contenders.split(",")
+    available = args.contenders.split(",")
     for problem in problems(load_suites(), args.suite):
+        names = list(available)  # less those that do not pose this problem
         times: dict[str, list[tuple[float, float]]] = {name: [] for name in names}
         verdicts: dict[str, str] = {}
         loads = []
@@ -44,6 +47,12 @@ def main() -> int:
             except Unavailable as e:
                 print(f"  {name}: unavailable ({e})")
                 names.remove(name)
+                available.remove(name)
+            except NotPosed as e:
+                print(f"  {name}: not posed on {problem.name} ({e})")
+                names.remove(name)
+        if not names:
+            continue
         for _ in range(args.repeat):
             for name in names:
                 w0, c0 = time.perf_counter(), time.process_time()

@@ -55,6 +55,8 @@ class Answer:
             :data:`refine.bench.outcomes.NOT_CONVERGED` makes the row no success, however it verifies.
         solver_options: the solver options the contender used, as it reports them (empty when it
             reports none); refine's: :func:`refine_options`.
+        verify_s, verify_cpu_s: wall and CPU time [s] of its own check, outside ``times_s``
+            (refine's :data:`OWN_CHECK_STAGES`); NaN for a contender without one.
     """
 
     status: str
@@ -66,6 +68,12 @@ class Answer:
     slack_deg: Array | None = None
     solver_status: str = ""
     solver_options: dict[str, Any] = field(default_factory=dict)
+    verify_s: float = float("nan")
+    verify_cpu_s: float = float("nan")
+
+
+OWN_CHECK_STAGES = ("verify", "diagnose")
+"""refine's own check: its verification of every round's answer and its diagnosis of a repair."""
 
 
 def solve_as_refine(
@@ -150,7 +158,7 @@ def _refine(problem: BenchProblem, mode: str, solver: str = "ipopt") -> Answer:
     result, nlp, build, build_cpu = solve_as_refine(problem, mode, solver)
     t = result.timings_s
     times = {"build": build + t.get("build", 0.0), "seed": t.get("seed", 0.0), "solve": t.get("solve", 0.0)}
-    # refine verifies inside its loop (and diagnoses a repair); those stages are not counted
+    # refine verifies inside its loop (and diagnoses a repair): outside the timed window, in verify_s
     cpu = build_cpu + sum(t.cpu.get(k, 0.0) for k in ("build", "seed", "solve"))
     slack = result.slack_deg if result.status == "repaired" else None
     solved = result.problem if result.problem is not None else nlp
@@ -166,6 +174,8 @@ def _refine(problem: BenchProblem, mode: str, solver: str = "ipopt") -> Answer:
         slack,
         solver_status=result.solver_status.split(";")[0].strip(),
         solver_options=options,
+        verify_s=sum(t.get(k, 0.0) for k in OWN_CHECK_STAGES),
+        verify_cpu_s=sum(t.cpu.get(k, 0.0) for k in OWN_CHECK_STAGES),
     )
 
 
@@ -187,10 +197,9 @@ def refine_assembled(problem: BenchProblem) -> Answer:
 
     Timed: building the problem (``build``, with any rebuild of the outer loop), seeding it (reach
     tilts, chained IK, the constraints the seed shows to be needed: ``seed``) and solving it (every
-    IPOPT round and what each round adds: ``solve``). Not timed: the robot's loading (done once per
-    problem, as Drake's plant) and refine's own verification of each round's answer and diagnosis
-    of a repair (``verify`` and ``diagnose`` of :class:`refine.stopwatch.StageTimes`); the
-    per-waypoint kernels are compiled and cached on disk before the timed runs (the warm-up run).
+    IPOPT round and what each round adds: ``solve``). Not timed: the robot's loading (once per
+    problem, as Drake's plant), refine's own check (:data:`OWN_CHECK_STAGES`, in ``verify_s``);
+    the kernels are compiled and cached on disk before the timed runs (the warm-up run).
     """
     return _refine(problem, "assembled")
 

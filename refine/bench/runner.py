@@ -210,11 +210,12 @@ def _row(
     cpus = [a.cpu_s for a in runs]
     repeat = len(runs)
     timed_out = any(wall > time_limit_s or a.status == "timeout" for a, wall in timed)
-    verdicts, scores = [], []
+    verdicts, scores, kept = [], [], []
     for a in runs:
         verdict = verify(problem, a.q)
         repaired = a.status == "repaired" and verify(problem, a.q, a.slack_deg).verified
         verdicts.append(verdict)
+        kept.append(claim_kept(a.status, verdict.verified, repaired))
         scores.append(
             score(
                 problem.expected,
@@ -241,8 +242,7 @@ def _row(
         **_problem_columns(problem, contender),
         "status": "timeout" if timed_out else answer.status,
         "solver_status": answer.solver_status,
-        "verified": all(v.verified for v in verdicts),
-        "verified_runs": sum(v.verified for v in verdicts),
+        **_claims_columns(kept, verdicts),
         "success": success,
         "detected_infeasible": detected,
         "timed_out": timed_out,
@@ -268,6 +268,8 @@ def _row(
         "min_cpu_s": min(cpus),
         "max_cpu_s": max(cpus),
         "penalised_cpu_s": penalised(statistics.median(cpus), failed, time_limit_s),
+        "verify_s": statistics.median(a.verify_s for a in runs),
+        "verify_cpu_s": statistics.median(a.verify_cpu_s for a in runs),
         "iterations": answer.iterations,
         "repeats": repeat,
         "warmup": warmup,
@@ -277,6 +279,36 @@ def _row(
         "reason": verdict.reason[:160],
         "note": answer.note,
         "solver_options": json.dumps(answer.solver_options, sort_keys=True, default=str),
+    }
+
+
+def claim_kept(status: str, verified: bool, verified_with_slack: bool) -> bool | None:
+    """Whether an answer keeps every rule it claims; None when it claims no path.
+
+    ``ok`` claims the problem's tolerances (``verified``: the shared verification passed); ``repaired``
+    claims them widened by the slack it reports and no more (``verified_with_slack``); any other
+    status (``infeasible``, ``failed``, ``error``, ``timeout``) claims no path, so there is none to
+    verify (a stated infeasibility's detection is scored apart: :func:`refine.bench.outcomes.score`).
+    """
+    if status == "ok":
+        return verified
+    if status == "repaired":
+        return verified_with_slack
+    return None
+
+
+def _claims_columns(kept: list[bool | None], verdicts: list[Any]) -> dict[str, Any]:
+    """``verified``, ``verified_runs``, ``claimed_runs`` and ``strict_runs`` of a row's timed runs.
+
+    ``kept``: :func:`claim_kept` per run; ``verdicts``: the shared verification per run. ``verified``
+    is empty when no run claims a path.
+    """
+    claimed = [k for k in kept if k is not None]
+    return {
+        "verified": all(claimed) if claimed else "",
+        "verified_runs": sum(claimed),
+        "claimed_runs": len(claimed),
+        "strict_runs": sum(v.verified for v in verdicts),
     }
 
 
@@ -371,7 +403,7 @@ def run_suites(
                     rows.append(row)
                     echo(
                         f"{suite:11s} {problem.name:28s} {name:16s} {row['status']:10s} "
-                        f"verified {'yes' if row['verified'] else 'no ':3s} success {'yes' if row['success'] else 'no '} "
+                        f"verified {_said(row['verified']):3s} success {'yes' if row['success'] else 'no '} "
                         f"detected {'yes' if row['detected_infeasible'] else 'no '} "
                         f"total {row['total_s']:7.3f} s cpu {row['cpu_s']:7.3f} s set-up {row.get('setup_s', 0.0):6.3f} s load {row.get('load_1min', '')} "
                         f"({time.perf_counter() - t0:.1f} s for the problem's runs)"
@@ -399,8 +431,10 @@ def _unavailable_row(
     return {
         **_problem_columns(problem, contender),
         "status": "unavailable",
-        "verified": False,
+        "verified": "",
         "verified_runs": 0,
+        "claimed_runs": 0,
+        "strict_runs": 0,
         "success": False,
         "detected_infeasible": False,
         "timed_out": False,
@@ -420,6 +454,11 @@ LOG_PRINT_LEVEL = 5
 
 EXACT = ("objective", "primal_residual", "dual_residual")
 """Columns written with 15 significant digits (the others with 6): an objective is compared closely."""
+
+
+def _said(verified: Any) -> str:
+    """``yes``, ``no``, or ``–`` when no run claimed a path."""
+    return "–" if verified == "" else "yes" if verified else "no"
 
 
 def _cell(value: Any, exact: bool = False) -> Any:

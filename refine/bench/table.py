@@ -13,19 +13,19 @@ from pathlib import Path
 
 from refine.errors import InputError
 
-SCHEMA_VERSION = "5"
+SCHEMA_VERSION = "6"
 """Version of :data:`COLUMNS`, written in every row (``schema``); raised whenever the columns change."""
 
 COLUMNS = [
     "schema", "run_id", "suite", "problem", "robot", "n_waypoints", "obstacles", "expected", "contender",
-    "status", "solver_status", "verified", "verified_runs", "success", "detected_infeasible", "timed_out",
-    "time_limit_s", "objective", "primal_residual", "dual_residual", "max_position_error_m",
-    "max_orientation_deviation_deg", "min_clearance_m", "max_joint_step_deg", "rules_kept", "rules_not_kept",
-    "setup_s", "setup_cpu_s", "build_s", "seed_s", "solve_s", "total_s",
+    "status", "solver_status", "verified", "verified_runs", "claimed_runs", "strict_runs", "success",
+    "detected_infeasible", "timed_out", "time_limit_s", "objective", "primal_residual", "dual_residual",
+    "max_position_error_m", "max_orientation_deviation_deg", "min_clearance_m", "max_joint_step_deg",
+    "rules_kept", "rules_not_kept", "setup_s", "setup_cpu_s", "build_s", "seed_s", "solve_s", "total_s",
     "min_total_s", "max_total_s", "penalised_total_s", "cpu_s", "min_cpu_s", "max_cpu_s", "penalised_cpu_s",
-    "iterations", "repeats", "warmup", "load_1min", "peak_rss_mb", "rss_growth_mb", "reason", "note",
-    "solver_options", "blas_threads", "date", "machine", "cpu", "cores", "python", "refine", "git_commit",
-    "casadi", "solver_versions", "pinocchio", "drake",
+    "verify_s", "verify_cpu_s", "iterations", "repeats", "warmup", "load_1min", "peak_rss_mb",
+    "rss_growth_mb", "reason", "note", "solver_options", "blas_threads", "date", "machine", "cpu", "cores",
+    "python", "refine", "git_commit", "casadi", "solver_versions", "pinocchio", "drake",
 ]  # fmt: skip
 """The CSV columns, in order (docs/bench.md)."""
 
