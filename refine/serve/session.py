@@ -22,7 +22,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -39,6 +39,7 @@ from refine.paths import FusedPath
 from refine.problem import Problem, load_problem
 from refine.robot.model import Robot
 from refine.robot.registry import robot_for
+from refine.run.placement import PlacementRepair
 from refine.run.result import RunResult
 from refine.run.solve import solve_problem
 from refine.run.stages import fused_path, weights_for
@@ -228,19 +229,39 @@ def resolve(problem: Problem, fused: FusedPath, previous: RunResult | None) -> R
     weights are the same, the previous last problem, its multipliers and its clearance bounds.
     Only an ``ok`` answer is a start, and only for a path :func:`near` the one it answered: a
     repaired or failed one holds joints bent by the slack or left where the solver gave up, and a
-    path moved far (a jump of the part) is solved as ``refine run`` solves it. When the warm solve
-    is not ``ok`` the problem is solved again from the IK seed and that answer is kept, so a
+    path moved far (a jump of the part) is solved as ``refine run`` solves it. The warm solve is
+    :func:`strict` (no repair); when it is not ``ok`` the problem is solved again from the IK seed,
+    repairs included, and that answer is kept, so a
     verdict never depends on the changes before it (the cold answer is the one ``refine run`` gives).
     """
     robot = robot_for(problem.robot)
-    nlp, warm = None, None
     if previous is not None and previous.robot is robot and previous.status == "ok" and near(previous, fused):
         nlp, warm = warm_start(previous, problem, robot, fused)
-    result = solve_problem(problem, robot=robot, fused=fused, nlp=nlp, warm=warm)
-    if result.status != "ok" and warm is not None:
-        log.info("serve: the warm solve is %s; solving again from the IK seed", result.status)
-        result = solve_problem(problem, robot=robot, fused=fused)
-    return result
+        if warm is not None:
+            result = solve_problem(strict(problem), robot=robot, fused=fused, nlp=nlp, warm=warm)
+            if result.status == "ok":
+                return as_asked(result, problem)
+            log.info("serve: the strict warm solve is %s; solving from the IK seed", result.status)
+    return solve_problem(problem, robot=robot, fused=fused)
+
+
+def strict(problem: Problem) -> Problem:
+    """``problem`` without its repairs (the slack repair and the placement search): a warm attempt.
+
+    A warm start is kept only when its answer is ``ok``, which needs no repair; a warm attempt that
+    repaired would be thrown away and repaired once more from the IK seed.
+    """
+    return replace(problem, repair=replace(problem.repair, enabled=False, placement=None))
+
+
+def as_asked(result: RunResult, problem: Problem) -> RunResult:
+    """The ``ok`` answer of :func:`strict` ``problem`` as the answer of ``problem``.
+
+    An ``ok`` run needs no repair, so the run of ``problem`` itself gives the same passes; only its
+    settings and, with ``[repair] placement``, the placement outcome (``not needed``) are its own.
+    """
+    bounds = problem.repair.placement
+    return replace(result, problem=problem, placement=None if bounds is None else PlacementRepair("not needed", bounds))
 
 
 @dataclass
