@@ -42,13 +42,17 @@ def rss_mb() -> float:
     return float("nan")
 
 
-async def changes(url: str, kinds: list[dict], first: bool) -> tuple[list[float], list[float]]:
+async def first_scene(url: str) -> None:
+    """Wait for the scene of the problem as loaded (its first solve)."""
+    async with websockets.connect(url, max_size=None) as ws:
+        while json.loads(await ws.recv()).get("type") != "scene":
+            pass
+
+
+async def changes(url: str, kinds: list[dict]) -> tuple[list[float], list[float]]:
     """Send each change after the verdict of the one before; the latencies and CPU times [s]."""
     out, cpu = [], []
     async with websockets.connect(url, max_size=None) as ws:
-        if first:  # the verdict of the problem as loaded
-            while json.loads(await ws.recv()).get("type") != "scene":
-                pass
         for change in kinds:
             t0, c0 = time.perf_counter(), time.process_time()
             await ws.send(json.dumps({"type": "change", "changes": change}))
@@ -97,10 +101,11 @@ def main() -> int:
     cone = [{"tolerances.orientation_deg": 2.9 if k % 2 == 0 else 3.0} for k in range(n)]
     steps = [min(k, n - k) for k in range(1, n + 1)]
     move = [{"move": {"xyz": [s * 1e-3, 0.0, 0.0], "rpy_deg": [0.0, 0.0, 0.0]}} for s in steps]
-    t_cone, c_cone = asyncio.run(changes(url, cone, first=True))
+    asyncio.run(first_scene(url))
     after_first = rss_mb()
+    t_cone, c_cone = asyncio.run(changes(url, cone))
     load_cone = os.getloadavg()[0]
-    t_move, c_move = asyncio.run(changes(url, move, first=False))
+    t_move, c_move = asyncio.run(changes(url, move))
     load_move = os.getloadavg()[0]
     for label, t, c, load in (
         ("cone 2.9/3.0 deg", t_cone, c_cone, load_cone),
@@ -112,18 +117,18 @@ def main() -> int:
             f"max {a.max():.3f} s; CPU of the process median {np.median(b):.3f} s, p95 "
             f"{np.percentile(b, 95):.3f} s (load average {load:.2f})"
         )
-    before = session.solver.solved
+    before, stopped = session.solver.solved, session.solver.cancelled
     steps20 = [{"move": {"xyz": [k * 1e-3, 0.0, 0.0], "rpy_deg": [0.0, 0.0, 0.0]}} for k in range(1, 21)]
     t_drag = asyncio.run(drag(url, steps20))
     print(
         f"a drag of 20 changes sent at once: the last one's verdict after {t_drag:.3f} s, "
-        f"{session.solver.solved - before} solved, {session.solver.cancelled} solves stopped when superseded"
+        f"{session.solver.solved - before} solved, {session.solver.cancelled - stopped} solves stopped when superseded"
     )
     done = 2 * n + len(steps20)
     extra = max(0, args.memory_changes - done)
     if extra:
         more = [{"tolerances.orientation_deg": 2.9 if k % 2 == 0 else 3.0} for k in range(extra)]
-        asyncio.run(changes(url, more, first=False))
+        asyncio.run(changes(url, more))
     import gc
 
     gc.collect()
