@@ -21,7 +21,7 @@ import difflib
 import logging
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -42,7 +42,7 @@ from refine.robot.registry import robot_for
 from refine.run.placement import PlacementRepair
 from refine.run.result import RunResult
 from refine.run.solve import solve_problem
-from refine.run.stages import fused_path, weights_for
+from refine.run.stages import fused_tracks, weights_for
 from refine.serve.edits import apply_changes, check_keys
 
 log = logging.getLogger(__name__)
@@ -157,30 +157,44 @@ def _relative(problem: Problem) -> np.ndarray:
 
 
 class FusedCache:
-    """The last fused path, reused (or moved rigidly with the workpiece) while its inputs hold."""
+    """The last fused tracks, reused (or moved rigidly with the workpiece) while their inputs hold.
+
+    A CAD file with several tracks gives one path per track, each solved as a pass as ``refine run``
+    solves them (:func:`refine.run.stages.fused_tracks`); the demonstration quality gate's figures
+    (``demo_quality``) are kept with them, since a rigid move of the workpiece with its receiver
+    leaves the demonstration relative to the CAD path as it was.
+    """
 
     def __init__(self) -> None:
         self._problem: Problem | None = None
-        self._fused: FusedPath | None = None
+        self._key: str | None = None
+        self._tracks: list[FusedPath] = []
+        self.quality: Any = None
         self.reused = 0
         self.fused = 0
 
-    def path_for(self, problem: Problem) -> FusedPath:
-        """The fused path of ``problem``: reused, moved by the workpiece move, or fused anew."""
-        old, fused = self._problem, self._fused
-        if old is not None and fused is not None and fusion_inputs(old) == fusion_inputs(problem):
+    def tracks_for(self, problem: Problem) -> tuple[list[FusedPath], Any]:
+        """The fused path of every track of ``problem`` and the quality gate's figures (or None)."""
+        old, key = self._problem, fusion_inputs(problem)
+        if old is not None and self._tracks and key == self._key:
             D = problem.frames.cad_in_world @ invert_transform(old.frames.cad_in_world)
             if np.allclose(D, np.eye(4), atol=RIGID_ATOL):
                 self.reused += 1
-                return fused
+                return self._tracks, self.quality
             pathml = problem.cad is not None and problem.cad.format == "pathml"
             if not pathml and np.allclose(_relative(old), _relative(problem), atol=RIGID_ATOL):
                 self.reused += 1
-                return moved_path(fused, D)
+                return [moved_path(f, D) for f in self._tracks], self.quality
         self.fused += 1
-        new = fused_path(problem)
-        self._problem, self._fused = problem, new
-        return new
+        qualities: list[Any] = []
+        tracks = fused_tracks(problem, qualities=qualities)
+        self._problem, self._key, self._tracks = problem, key, tracks
+        self.quality = qualities[0] if qualities else None
+        return tracks, self.quality
+
+    def path_for(self, problem: Problem) -> FusedPath:
+        """The fused path of ``problem``'s first track (:meth:`tracks_for`)."""
+        return self.tracks_for(problem)[0][0]
 
 
 WARM_MOVE_M = 0.1
@@ -221,8 +235,16 @@ def warm_start(
     )
 
 
-def resolve(problem: Problem, fused: FusedPath, previous: RunResult | None) -> RunResult:
+def resolve(
+    problem: Problem,
+    fused: FusedPath | Sequence[FusedPath],
+    previous: RunResult | None,
+    quality: Any = None,
+) -> RunResult:
     """Solve ``problem`` on ``fused``, from ``previous``'s answer where it applies (module docstring).
+
+    ``fused`` is the first pass's path or the paths of every track of the CAD file (each a pass,
+    the first warm-started); ``quality`` the demonstration quality gate's figures kept in the result.
 
     The start is :class:`refine.optimise.warm.WarmStart`, as ``refine.solve(..., previous=...)``
     re-solves: the previous joints moved onto the new poses and, when robot, base, tool and
@@ -235,14 +257,16 @@ def resolve(problem: Problem, fused: FusedPath, previous: RunResult | None) -> R
     verdict never depends on the changes before it (the cold answer is the one ``refine run`` gives).
     """
     robot = robot_for(problem.robot)
+    tracks = [fused] if isinstance(fused, FusedPath) else list(fused)
+    fused, given = tracks[0], {"tracks": tracks, "demo_quality": quality}
     if previous is not None and previous.robot is robot and previous.status == "ok" and near(previous, fused):
         nlp, warm = warm_start(previous, problem, robot, fused)
         if warm is not None:
-            result = solve_problem(strict(problem), robot=robot, fused=fused, nlp=nlp, warm=warm)
+            result = solve_problem(strict(problem), robot=robot, nlp=nlp, warm=warm, **given)
             if result.status == "ok":
                 return as_asked(result, problem)
             log.info("serve: the strict warm solve is %s; solving from the IK seed", result.status)
-    return solve_problem(problem, robot=robot, fused=fused)
+    return solve_problem(problem, robot=robot, **given)
 
 
 def strict(problem: Problem) -> Problem:
@@ -347,7 +371,8 @@ class Session:
         t0 = time.perf_counter()
         with self._engine, controlled(cancel=self.solver.superseded):
             try:
-                return resolve(job.problem, self._cache.path_for(job.problem), previous)
+                tracks, quality = self._cache.tracks_for(job.problem)
+                return resolve(job.problem, tracks, previous, quality)
             finally:
                 job.solve_s = time.perf_counter() - t0
 

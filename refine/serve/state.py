@@ -7,6 +7,7 @@ so the app and the report never disagree.
 
 from __future__ import annotations
 
+import html
 import json
 from collections.abc import Iterable, Mapping
 from typing import TYPE_CHECKING, Any
@@ -71,7 +72,42 @@ def verdict_message(session: Session, answer: Answer) -> dict[str, Any]:
         doc["outputs"] = {}
         out["status"] = result.status
         out["verdict_html"] = verdict_html(result, doc)
+        out["demo_quality_html"] = demo_quality_html(doc.get("demo_quality"))
     return out
+
+
+def demo_quality_html(quality: Mapping[str, Any] | None) -> str:
+    """The demonstration quality gate's figures (``result.json``'s ``demo_quality``) in plain words.
+
+    The samples and their rate, the dropouts bridged or trimmed, the tracker frame's estimated
+    error (rotation with its uncertainty, offset, distortion, what is left) and the gate's warnings;
+    empty when the run had no demonstration (a PathML path).
+    """
+    if not quality:
+        return ""
+    step = float(quality.get("sample_step_s") or 0.0)
+    rate = f" at {1.0 / step:.0f} Hz" if step > 0 else ""
+    lines = [f"{quality['n_samples']} tracker samples{rate}"]
+    bridged, trimmed = int(quality.get("n_bridged", 0)), int(quality.get("n_trimmed", 0))
+    if bridged or trimmed:
+        longest = float(quality.get("longest_bridged_s", 0.0)) * 1e3
+        lines.append(f"dropouts: {bridged} bridged (the longest {longest:.0f} ms), {trimmed} trimmed")
+    else:
+        lines.append("no dropouts")
+    frame = quality.get("frame")
+    if frame:
+        lines.append(
+            f"tracker frame against the CAD path: rotation {frame['observable_rotation_deg']:.2f} deg "
+            f"(± {frame['observable_sigma_deg']:.2f} deg, told from noise above {frame['detectable_deg']:.2f} deg), "
+            f"offset {frame['offset_m'] * 1e3:.1f} mm, distortion up to {frame['max_distortion_m'] * 1e3:.1f} mm, "
+            f"{frame['rms_after_m'] * 1e3:.2f} mm RMS left over {frame['n_points']} waypoints"
+        )
+    flagged = int((quality.get("device_errors") or {}).get("n_flagged", 0))
+    if flagged:
+        lines.append(f"{flagged} samples flagged by the tracker")
+    items = "".join(f"<li>{html.escape(line)}</li>" for line in lines)
+    warnings = "".join(f"<li class='warning'>{html.escape(str(w))}</li>" for w in quality.get("warnings", []))
+    return f"<h2>Demonstration quality</h2><ul class='demo-quality'>{items}{warnings}</ul>"
 
 
 SCENE_SECTIONS = ("cell", "parts", "robot", "paths", "motions", "demo")

@@ -64,3 +64,75 @@ def test_an_ok_warm_attempt_is_the_answer_with_the_settings_asked(calls):
     assert answer.status == "ok"
     assert answer.problem is shifted and answer.problem.repair.enabled  # the settings asked, not the strict copy
     assert answer.placement is None
+
+
+# Two feed tracks of a G-code program on the generated line problem's demonstration (as in
+# tests/test_cad_tracks_run.py): y -100..-10 mm, a retract, a rapid and a plunge, then y 10..100 mm.
+PROGRAM = """G21 G90
+G0 X600 Y-100 Z310
+G1 Z300 F3000
+G1 Y-10
+G1 Z310
+G0 Y10
+G1 Z300
+G1 Y100
+G1 Z310
+"""
+
+
+@pytest.mark.slow
+def test_every_cad_track_is_a_pass_and_the_demonstration_quality_is_kept(tmp_path):
+    from refine.problem import load_problem
+    from refine.synthetic import write_line_problem
+
+    path = write_line_problem(tmp_path / "line")
+    (path.parent / "path.nc").write_text(PROGRAM)
+    path.write_text(path.read_text().replace('file = "path.csv"', 'file = "path.nc"\nformat = "gcode"'))
+    problem = load_problem(path)
+    cache = FusedCache()
+    tracks, quality = cache.tracks_for(problem)
+    assert len(tracks) == 2 and quality is not None
+    first = resolve(problem, tracks, None, quality)
+    assert [p.name for p in first.passes] == ["track 1", "track 2"]
+    # each pass on its own track: y -100..-10 mm and 10..100 mm (the program's numbers)
+    for p, (lo, hi) in zip(first.passes, ((-0.1, -0.01), (0.01, 0.1)), strict=True):
+        y = p.fused.positions[:, 1]
+        assert y[0] == pytest.approx(lo, abs=1e-9) and y[-1] == pytest.approx(hi, abs=1e-9)
+    assert first.demo_quality is quality
+    tracks2, quality2 = cache.tracks_for(problem)  # unchanged: reused, not fused again
+    assert cache.fused == 1 and tracks2 is tracks and quality2 is quality
+    warm = resolve(problem, tracks2, first, quality2)
+    assert [p.name for p in warm.passes] == ["track 1", "track 2"] and warm.demo_quality is quality
+
+
+def test_the_demonstration_quality_in_plain_words():
+    from refine.serve.state import demo_quality_html
+
+    assert demo_quality_html(None) == ""
+    quality = {
+        "n_samples": 1200,
+        "sample_step_s": 0.004,  # 250 Hz
+        "n_bridged": 2,
+        "n_trimmed": 1,
+        "longest_bridged_s": 0.031,
+        "frame": {
+            "observable_rotation_deg": 0.571,
+            "observable_sigma_deg": 0.326,
+            "detectable_deg": 0.652,
+            "offset_m": 0.00284,
+            "max_distortion_m": 0.051,
+            "rms_after_m": 0.000526,
+            "n_points": 618,
+        },
+        "warnings": ["the <receiver> may have moved"],
+        "device_errors": {"n_flagged": 3},
+    }
+    text = demo_quality_html(quality)
+    assert "<li>1200 tracker samples at 250 Hz</li>" in text
+    assert "<li>dropouts: 2 bridged (the longest 31 ms), 1 trimmed</li>" in text
+    assert (
+        "rotation 0.57 deg (± 0.33 deg, told from noise above 0.65 deg), offset 2.8 mm, "
+        "distortion up to 51.0 mm, 0.53 mm RMS left over 618 waypoints" in text
+    )
+    assert "<li>3 samples flagged by the tracker</li>" in text
+    assert "the &lt;receiver&gt; may have moved" in text  # escaped
