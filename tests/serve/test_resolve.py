@@ -34,6 +34,7 @@ def calls(monkeypatch):
     return seen
 
 
+@pytest.mark.slow
 def test_a_warm_attempt_that_fails_is_strict_and_the_verdict_is_the_cold_one(calls):
     from refine.robot.registry import robot_for
     from refine.run.solve import solve_problem
@@ -62,7 +63,8 @@ def test_an_ok_warm_attempt_is_the_answer_with_the_settings_asked(calls):
     answer = resolve(shifted, cache.path_for(shifted), previous)
     assert calls == [(False, True)]  # one strict warm solve, ok: no cold solve after it
     assert answer.status == "ok"
-    assert answer.problem is shifted and answer.problem.repair.enabled  # the settings asked, not the strict copy
+    # the settings asked, not the strict copy
+    assert answer.problem is shifted and answer.problem.repair.enabled
     assert answer.placement is None
 
 
