@@ -85,6 +85,9 @@ def _the_first_screen_shows_the_cell_and_the_verdict(pages):
     ):  # the cell's objects, the robot, the path
         assert name in drawn
     page.screenshot(path=str(ARTIFACTS / "first-screen.png"))
+    quality = page.inner_text("#demo-quality")  # the glass cell's Liberty log: 8127 samples at 240 Hz
+    assert "Demonstration quality" in quality and "8127 tracker samples at 240 Hz" in quality
+    assert "no dropouts" in quality and "tracker frame against the CAD path: rotation" in quality
     assert pages["errors"] == []
     assert page.is_hidden("#js-errors")
     # what the first screen cost: every file the page loaded and the first scene over the websocket
@@ -533,8 +536,32 @@ def _hovering_a_waypoint_labels_its_index_deviation_clearance_and_speed(server, 
         assert word in text
     dev = server["session"].answer.result.first.refinement.check.orientation_deviation_deg[index]
     assert f"deviation {dev:.2f} deg" in text
+    assert index == k  # the dot drawn nearest the pointer, in pixels
     page.screenshot(path=str(ARTIFACTS / "hover.png"))
-    page.mouse.move(5, 5)
+    page.mouse.move(5, 5)  # off the canvas: the label goes
+    assert page.is_hidden("#hover")
+    # zoomed out three times as far, the pointer 5 px off the path's waypoint (across the path): still
+    # that waypoint's label, since the pick is in pixels (5 px is some 30 mm there, on a path 5 mm apart)
+    view = "document.getElementById('scene').view"
+    eye = page.evaluate(
+        f"() => {{ const v = {view}, e = v.camera.position.toArray();"
+        " v.camera.position.sub(v.orbit.target).multiplyScalar(3).add(v.orbit.target);"
+        " v.camera.updateMatrixWorld(); v.render(); return e; }"
+    )
+    try:
+        (ax, ay), (x, y), (bx, by) = (
+            page.evaluate(f"(j) => {view}.screenOfWaypoint(0, j)", j) for j in (k - 1, k, k + 1)
+        )
+        norm = ((bx - ax) ** 2 + (by - ay) ** 2) ** 0.5
+        page.mouse.move(x - 5 * (by - ay) / norm, y + 5 * (bx - ax) / norm)
+        page.wait_for_selector("#hover:not([hidden])")
+        assert int(page.get_attribute("#hover", "data-index")) == k
+        page.mouse.move(5, 5)
+    finally:
+        page.evaluate(
+            f"(e) => {{ const v = {view}; v.camera.position.fromArray(e); v.camera.updateMatrixWorld(); v.render(); }}",
+            eye,
+        )
 
 
 def _every_planned_motion_of_result_json_is_drawn_and_selectable(server, pages):
