@@ -339,8 +339,12 @@ class Session:
     def change(self, changes: Mapping[str, Any]) -> int:
         """Merge ``changes`` into the session's changes, check them and ask for a solve.
 
+        The edited values are compared as the page sent them (plain numbers and lists): a change
+        that leaves every one as it was (a drag's last pose sent again on release, a field left
+        as it was) is neither checked nor solved again, and its revision is the current one.
+
         Returns:
-            The new revision.
+            The new revision (the current one when nothing changed).
 
         Raises:
             InputError: a key the page may not change or a value the problem file would refuse;
@@ -349,6 +353,8 @@ class Session:
         check_keys(changes)
         with self._lock:
             merged = {**self.changes, **changes}
+            if merged == self.changes:
+                return self.revision
             doc, problem = apply_changes(self.base, merged, self.path)
             self.revision += 1
             self.changes, self.doc, self.problem = merged, doc, problem

@@ -185,3 +185,27 @@ def test_a_previous_answer_is_a_start_only_for_a_path_moved_a_little():
     turned = line @ np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # 90 deg about z
     assert not near(previous, path(turned))  # the far end moved by sqrt(2) m
     assert not near(previous, path(line[:10]))  # another number of waypoints
+
+
+def test_a_change_that_leaves_every_value_as_it_was_is_not_solved_again(tmp_path, monkeypatch):
+    import shutil
+
+    from refine.serve.session import Session
+
+    folder = tmp_path / "glass_adhesive"
+    shutil.copytree(ROOT / "problems" / "glass_adhesive", folder)
+    session = Session(folder)
+    asked = []
+    monkeypatch.setattr(session.solver, "submit", lambda job: asked.append((job.revision, job.changes)))
+    try:
+        pose = {"xyz": [0.002, 0.0, 0.0], "rpy_deg": [0.0, 0.0, 0.0]}
+        assert session.change({"tolerances.orientation_deg": 2.9}) == 1
+        assert session.change({"move": pose}) == 2
+        assert session.change({"move": dict(pose)}) == 2  # the drag's last pose again, on release
+        assert session.change({"tolerances.orientation_deg": 2.9}) == 2  # 2.9 deg as it was
+        assert session.change({"tolerances.orientation_deg": 3}) == 3  # 3 deg is a change
+        assert [r for r, _ in asked] == [1, 2, 3]
+        assert asked[-1][1] == {"tolerances.orientation_deg": 3, "move": pose}
+        assert session.problem.tolerances.orientation_deg == 3.0
+    finally:
+        session.close()
