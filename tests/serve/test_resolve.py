@@ -138,3 +138,23 @@ def test_the_demonstration_quality_in_plain_words():
     )
     assert "<li>3 samples flagged by the tracker</li>" in text
     assert "the &lt;receiver&gt; may have moved" in text  # escaped
+
+
+def test_an_ok_warm_attempt_with_placement_bounds_says_the_placement_was_not_needed(calls):
+    from refine.robot.registry import robot_for
+    from refine.run.solve import solve_problem
+
+    base = tomlkit.parse(GLASS.read_text(encoding="utf-8"))
+    bounds = {"repair.placement.translate_m": 0.05, "repair.placement.rotate_deg": 5.0}
+    placed = apply_changes(base, bounds, GLASS)[1]
+    shifted = apply_changes(base, {**bounds, "move": {"xyz": [0.002, 0.0, 0.0]}}, GLASS)[1]
+    assert shifted.repair.placement is not None
+    cache = FusedCache()
+    previous = resolve(placed, cache.path_for(placed), None)
+    calls.clear()
+    answer = resolve(shifted, cache.path_for(shifted), previous)
+    assert calls == [(False, True)]
+    cold = solve_problem(shifted, robot=robot_for(shifted.robot), fused=cache.path_for(shifted))
+    assert answer.status == cold.status == "ok"
+    assert answer.placement.status == cold.placement.status == "not needed"
+    assert answer.placement.bounds == cold.placement.bounds == shifted.repair.placement
