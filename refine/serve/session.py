@@ -253,8 +253,8 @@ def resolve(
     repaired or failed one holds joints bent by the slack or left where the solver gave up, and a
     path moved far (a jump of the part) is solved as ``refine run`` solves it. The warm solve is
     :func:`strict` (no repair); when it is not ``ok`` the problem is solved again from the IK seed,
-    repairs included, and that answer is kept, so a
-    verdict never depends on the changes before it (the cold answer is the one ``refine run`` gives).
+    repairs included, and that answer is kept, so a verdict never depends on the changes before it
+    (the cold answer is the one ``refine run`` gives) and a change out of reach is repaired once.
     """
     robot = robot_for(problem.robot)
     tracks = [fused] if isinstance(fused, FusedPath) else list(fused)
