@@ -117,9 +117,18 @@ def _robot_parts(result: RunResult) -> list[tuple[str, str, trimesh.Trimesh, Any
     return parts
 
 
-def robot_frames(result: RunResult) -> dict[str, Any]:
-    """The robot's shapes (local meshes) and their poses in {F} at waypoints along every pass."""
-    parts = _robot_parts(result)
+def robot_parts(result: RunResult) -> list[tuple[str, str, trimesh.Trimesh, Any]]:
+    """(name, frame, mesh, frame_T_shape) of every robot link shape and tool shape."""
+    return _robot_parts(result)
+
+
+def robot_frames(result: RunResult, parts: list[Any] | None = None, meshes: bool = True) -> dict[str, Any]:
+    """The robot's shapes (local meshes) and their poses in {F} at waypoints along every pass.
+
+    ``parts`` are :func:`robot_parts` of ``result`` when the caller holds them (a re-solve that
+    kept robot and tool); ``meshes=False`` leaves their meshes out (``parts`` in the answer).
+    """
+    parts = _robot_parts(result) if parts is None else parts
     base = np.asarray(result.problem.robot.base_in_world, dtype=float)
     samples = [(i, k) for i, p in enumerate(result.passes) for k in range(len(p.refinement.q))]
     pick = np.unique(np.linspace(0, len(samples) - 1, min(ROBOT_FRAMES, len(samples))).round().astype(int))
@@ -132,11 +141,18 @@ def robot_frames(result: RunResult) -> dict[str, Any]:
         frames.append([rounded(T[:3, :].ravel(), 5) for T in poses])
         labels.append(f"{p.name}, waypoint {k}" if len(result.passes) > 1 else f"waypoint {k}")
         where.append([i, int(k)])
-    meshes = [
+    out: dict[str, Any] = {"frames": frames, "labels": labels, "where": where}
+    if meshes:
+        out["parts"] = parts_json(parts)
+    return out
+
+
+def parts_json(parts: list[Any]) -> list[dict[str, Any]]:
+    """The meshes of :func:`robot_parts`, each in its own frame."""
+    return [
         _mesh_json(name, mesh, np.eye(4), "robot" if not name.startswith("tool/") else "tool")
         for name, _, mesh, _ in parts
     ]
-    return {"parts": meshes, "frames": frames, "labels": labels, "where": where}
 
 
 def path_data(result: RunResult) -> list[dict[str, Any]]:

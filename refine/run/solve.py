@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -51,6 +52,8 @@ def solve_problem(
     nlp: RefinementNLP | None = None,
     q0: np.ndarray | None = None,
     warm: WarmStart | None = None,
+    tracks: Sequence[FusedPath] | None = None,
+    demo_quality: Any = None,
 ) -> RunResult:
     """Run every stage up to the timed trajectories, without writing files.
 
@@ -63,13 +66,24 @@ def solve_problem(
         nlp: the first pass's problem, already built (re-solving); None to build it.
         q0: initial joints (N, n) [rad] of the first pass (warm start); None for the IK seed.
         warm: a previous answer of the first pass to re-solve from (:mod:`refine.optimise.warm`).
+        tracks: the path of every track of the CAD file (:func:`refine.run.stages.fused_tracks`),
+            when the caller holds them: each is a pass, as when the files are read; its first is
+            ``fused`` (which may then be None).
+        demo_quality: the demonstration quality gate's figures of ``tracks`` or ``fused``, kept in
+            the result as when the files are read.
     """
     watch = Stopwatch()
     if robot is None:
         robot = robot_for(problem.robot)
     watch.lap("load")
-    qualities: list[Any] = []
-    tracks = [fused] if fused is not None else []
+    qualities: list[Any] = [] if demo_quality is None else [demo_quality]
+    if tracks is not None:
+        tracks = list(tracks)
+        if fused is not None and fused is not tracks[0]:
+            raise ValueError("solve_problem: fused must be the first of tracks")
+        fused = tracks[0]
+    else:
+        tracks = [fused] if fused is not None else []
     if fused is None:
         tracks = fused_tracks(problem, watch, accept_frame_error=accept_frame_error, qualities=qualities)
         fused = tracks[0]

@@ -104,12 +104,16 @@ def motion_lines(result: Any) -> list[dict[str, Any]]:
 
 
 class DemoCache:
-    """The tracker log and the robot's visual meshes, each read once per file (a file changed is read again)."""
+    """The tracker log and the robot's visual meshes, each read once per file (a file changed is read again).
+
+    The recorded demonstration's line is drawn again only when the log or the frames placing it change.
+    """
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self._key: str | None = None
         self._log: Any = None
+        self._recorded: tuple[Any, Any, dict[str, Any]] | None = None  # the recorded line last drawn, by its inputs
 
     def log(self, settings: Any) -> Any:
         """The tracker log of ``settings`` (``problem.demonstration``) as read, before cleaning."""
@@ -141,11 +145,19 @@ def demonstration_lines(result: Any, cache: DemoCache) -> dict[str, Any]:
     from refine.fuse.align import demo_tcp_poses
 
     raw = cache.log(problem.demonstration)
-    recorded = demo_tcp_poses(raw, problem.frames.source_in_world, problem.tool.sensor_in_tcp)[:, :3, 3]
+    source, sensor = np.asarray(problem.frames.source_in_world), np.asarray(problem.tool.sensor_in_tcp)
+    key = (id(raw), source.tobytes(), sensor.tobytes())  # the log as read, the frames it is placed by
+    with cache._lock:
+        held = cache._recorded if cache._recorded is not None and cache._recorded[0] == key else None
+    if held is None:
+        recorded = demo_tcp_poses(raw, source, sensor)[:, :3, 3]
+        held = (key, raw, _xyz(recorded[_thin(len(recorded), DEMO_POINTS)]))  # the log kept: its id stays its own
+        with cache._lock:
+            cache._recorded = held
     out = {
         "recorded": {
             "title": f"as recorded ({problem.demonstration.file.name}, before the tracker correction)",
-            **_xyz(recorded[_thin(len(recorded), DEMO_POINTS)]),
+            **held[2],
         }
     }
     aligned = [p.fused.demo_positions for p in result.passes if p.fused.demo_positions is not None]

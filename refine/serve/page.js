@@ -198,6 +198,7 @@ import { View, poseMatrix, matrixPose, rowMatrix } from "./scene3d.js";
       view.setParts(scene.parts);
       var visual = scene.parts.some(function (p) { return p.kind === "visual"; });
       $("show-collision").disabled = !visual;
+      $("collision-toggle").hidden = !visual;   // no visual meshes: the collision shapes are all there is
       if (!visual) { $("show-collision").checked = true; }
     }
     if (sections.indexOf("robot") >= 0) { $("visual-note").textContent = scene.robot.visual_note || ""; }
@@ -286,6 +287,7 @@ import { View, poseMatrix, matrixPose, rowMatrix } from "./scene3d.js";
     if (msg.type === "verdict") {
       if (msg.error) { showError(msg.error); }
       if (msg.verdict_html) { $("verdict-box").innerHTML = msg.verdict_html; highlightSegments(); }
+      if (msg.verdict_html) { $("demo-quality").innerHTML = msg.demo_quality_html || ""; $("demo-quality").hidden = !msg.demo_quality_html; }
       fillValues(msg.values);
       var busy = msg.latest !== msg.revision;
       $("state").textContent = "verdict of revision " + msg.revision + " in " + msg.latency_s.toFixed(2) + " s" +

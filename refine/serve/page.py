@@ -159,7 +159,7 @@ def page_html(title: str, errors_js: str) -> str:
         '"three/addons/": "./three/"}}</script></head><body>'
         "<div id='side'><ul id='js-errors' hidden></ul>"
         "<div id='state'>connecting...</div><div id='error' hidden></div>"
-        "<div id='verdict-box'></div>"
+        "<div id='verdict-box'></div><div id='demo-quality' hidden></div>"
         "<h2>Move the workpiece (the CAD path, the receiver and the workpiece objects together)</h2>"
         f"{_move_rows()}"
         f"<h2>Tolerances, margins, speed</h2>{_scalar_rows()}"
@@ -207,7 +207,8 @@ def page_html(title: str, errors_js: str) -> str:
         "the tracker's positions, before the correction of its distortion)</label>"
         "<label><input type='checkbox' id='show-aligned'> the demonstration as the fusion uses it (brown: "
         "at each waypoint's matched time, the tracker's distortion corrected)</label>"
-        "<label><input type='checkbox' id='show-collision' disabled> the robot's collision shapes instead of "
+        "<label id='collision-toggle' hidden><input type='checkbox' id='show-collision' disabled> the robot's "
+        "collision shapes instead of "
         "its visual meshes</label>"
         "<span id='visual-note' class='note'></span></div>"
         "<div id='scene'><pre id='hover' hidden></pre></div>"

@@ -42,6 +42,8 @@ export function linePoints(o) {   // the points a line (fat or not) is drawn thr
   return p;
 }
 
+const HOVER_PX = 8;   // how near the pointer a waypoint must be drawn for its label [px]
+
 const VIRIDIS = [[68, 1, 84], [72, 40, 120], [62, 74, 137], [49, 104, 142], [38, 130, 142],
   [31, 158, 137], [53, 183, 121], [109, 205, 89], [180, 222, 44], [253, 231, 37]];
 
@@ -126,9 +128,8 @@ export class View {
     this.target = null;
     this.fitted = false;
     this.hover = null;              // (text, x, y) for the label of the waypoint under the pointer, or null
-    this.ray = new THREE.Raycaster();
-    this.ray.params.Points.threshold = 0.006;
     this.renderer.domElement.addEventListener("pointermove", (ev) => this.pointed(ev));
+    this.renderer.domElement.addEventListener("pointerleave", () => { if (this.onHover) { this.onHover(null, 0, 0); } });
     this.robotMeshes = [];
     new ResizeObserver(() => this.resize()).observe(div);
     this.resize();
@@ -298,14 +299,21 @@ export class View {
     if (o) { o.visible = on; this.render(); }
   }
 
-  waypointAt(clientX, clientY) {   // the (path, waypoint) nearest the pointer within a few pixels, or null
+  waypointAt(clientX, clientY) {   // the (path, waypoint) nearest the pointer on the screen within HOVER_PX, or null
     const r = this.renderer.domElement.getBoundingClientRect();
-    this.ray.setFromCamera(new THREE.Vector2((clientX - r.left) / r.width * 2 - 1, -(clientY - r.top) / r.height * 2 + 1), this.camera);
+    const x = clientX - r.left, y = clientY - r.top, v = new THREE.Vector3();
     const dots = this.groups.paths.children.filter((o) => o.name === "waypoints");
-    const hits = this.ray.intersectObjects(dots, false);
-    if (!hits.length) { return null; }
-    hits.sort((a, b) => a.distanceToRay - b.distanceToRay);
-    return { path: dots.indexOf(hits[0].object), index: hits[0].index };
+    let best = null, bestD = HOVER_PX * HOVER_PX;
+    dots.forEach((o, path) => {   // in pixels, so at any zoom; the nearest to the camera wins a tie
+      const a = o.geometry.getAttribute("position");
+      for (let k = 0; k < a.count; k++) {
+        v.set(a.getX(k), a.getY(k), a.getZ(k)).project(this.camera);
+        if (v.z < -1 || v.z > 1) { continue; }   // behind the camera or beyond its far plane
+        const dx = (v.x + 1) / 2 * r.width - x, dy = (1 - v.y) / 2 * r.height - y, d = dx * dx + dy * dy;
+        if (d < bestD || (d === bestD && best && v.z < best.z)) { bestD = d; best = { path, index: k, z: v.z }; }
+      }
+    });
+    return best && { path: best.path, index: best.index };
   }
 
   screenOfWaypoint(path, index) {   // where waypoint ``index`` of path ``path`` is on the page [px], for tests

@@ -21,8 +21,8 @@ import difflib
 import logging
 import threading
 import time
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -39,9 +39,10 @@ from refine.paths import FusedPath
 from refine.problem import Problem, load_problem
 from refine.robot.model import Robot
 from refine.robot.registry import robot_for
+from refine.run.placement import PlacementRepair
 from refine.run.result import RunResult
 from refine.run.solve import solve_problem
-from refine.run.stages import fused_path, weights_for
+from refine.run.stages import fused_tracks, weights_for
 from refine.serve.edits import apply_changes, check_keys
 
 log = logging.getLogger(__name__)
@@ -156,30 +157,44 @@ def _relative(problem: Problem) -> np.ndarray:
 
 
 class FusedCache:
-    """The last fused path, reused (or moved rigidly with the workpiece) while its inputs hold."""
+    """The last fused tracks, reused (or moved rigidly with the workpiece) while their inputs hold.
+
+    A CAD file with several tracks gives one path per track, each solved as a pass as ``refine run``
+    solves them (:func:`refine.run.stages.fused_tracks`); the demonstration quality gate's figures
+    (``demo_quality``) are kept with them, since a rigid move of the workpiece with its receiver
+    leaves the demonstration relative to the CAD path as it was.
+    """
 
     def __init__(self) -> None:
         self._problem: Problem | None = None
-        self._fused: FusedPath | None = None
+        self._key: str | None = None
+        self._tracks: list[FusedPath] = []
+        self.quality: Any = None
         self.reused = 0
         self.fused = 0
 
-    def path_for(self, problem: Problem) -> FusedPath:
-        """The fused path of ``problem``: reused, moved by the workpiece move, or fused anew."""
-        old, fused = self._problem, self._fused
-        if old is not None and fused is not None and fusion_inputs(old) == fusion_inputs(problem):
+    def tracks_for(self, problem: Problem) -> tuple[list[FusedPath], Any]:
+        """The fused path of every track of ``problem`` and the quality gate's figures (or None)."""
+        old, key = self._problem, fusion_inputs(problem)
+        if old is not None and self._tracks and key == self._key:
             D = problem.frames.cad_in_world @ invert_transform(old.frames.cad_in_world)
             if np.allclose(D, np.eye(4), atol=RIGID_ATOL):
                 self.reused += 1
-                return fused
+                return self._tracks, self.quality
             pathml = problem.cad is not None and problem.cad.format == "pathml"
             if not pathml and np.allclose(_relative(old), _relative(problem), atol=RIGID_ATOL):
                 self.reused += 1
-                return moved_path(fused, D)
+                return [moved_path(f, D) for f in self._tracks], self.quality
         self.fused += 1
-        new = fused_path(problem)
-        self._problem, self._fused = problem, new
-        return new
+        qualities: list[Any] = []
+        tracks = fused_tracks(problem, qualities=qualities)
+        self._problem, self._key, self._tracks = problem, key, tracks
+        self.quality = qualities[0] if qualities else None
+        return tracks, self.quality
+
+    def path_for(self, problem: Problem) -> FusedPath:
+        """The fused path of ``problem``'s first track (:meth:`tracks_for`)."""
+        return self.tracks_for(problem)[0][0]
 
 
 WARM_MOVE_M = 0.1
@@ -220,27 +235,57 @@ def warm_start(
     )
 
 
-def resolve(problem: Problem, fused: FusedPath, previous: RunResult | None) -> RunResult:
+def resolve(
+    problem: Problem,
+    fused: FusedPath | Sequence[FusedPath],
+    previous: RunResult | None,
+    quality: Any = None,
+) -> RunResult:
     """Solve ``problem`` on ``fused``, from ``previous``'s answer where it applies (module docstring).
+
+    ``fused`` is the first pass's path or the paths of every track of the CAD file (each a pass,
+    the first warm-started); ``quality`` the demonstration quality gate's figures kept in the result.
 
     The start is :class:`refine.optimise.warm.WarmStart`, as ``refine.solve(..., previous=...)``
     re-solves: the previous joints moved onto the new poses and, when robot, base, tool and
     weights are the same, the previous last problem, its multipliers and its clearance bounds.
     Only an ``ok`` answer is a start, and only for a path :func:`near` the one it answered: a
     repaired or failed one holds joints bent by the slack or left where the solver gave up, and a
-    path moved far (a jump of the part) is solved as ``refine run`` solves it. When the warm solve
-    is not ``ok`` the problem is solved again from the IK seed and that answer is kept, so a
-    verdict never depends on the changes before it (the cold answer is the one ``refine run`` gives).
+    path moved far (a jump of the part) is solved as ``refine run`` solves it. The warm solve is
+    :func:`strict` (no repair); when it is not ``ok`` the problem is solved again from the IK seed,
+    repairs included, and that answer is kept, so a verdict never depends on the changes before it
+    (the cold answer is the one ``refine run`` gives) and a change out of reach is repaired once.
     """
     robot = robot_for(problem.robot)
-    nlp, warm = None, None
+    tracks = [fused] if isinstance(fused, FusedPath) else list(fused)
+    fused, given = tracks[0], {"tracks": tracks, "demo_quality": quality}
     if previous is not None and previous.robot is robot and previous.status == "ok" and near(previous, fused):
         nlp, warm = warm_start(previous, problem, robot, fused)
-    result = solve_problem(problem, robot=robot, fused=fused, nlp=nlp, warm=warm)
-    if result.status != "ok" and warm is not None:
-        log.info("serve: the warm solve is %s; solving again from the IK seed", result.status)
-        result = solve_problem(problem, robot=robot, fused=fused)
-    return result
+        if warm is not None:
+            result = solve_problem(strict(problem), robot=robot, nlp=nlp, warm=warm, **given)
+            if result.status == "ok":
+                return as_asked(result, problem)
+            log.info("serve: the strict warm solve is %s; solving from the IK seed", result.status)
+    return solve_problem(problem, robot=robot, **given)
+
+
+def strict(problem: Problem) -> Problem:
+    """``problem`` without its repairs (the slack repair and the placement search): a warm attempt.
+
+    A warm start is kept only when its answer is ``ok``, which needs no repair; a warm attempt that
+    repaired would be thrown away and repaired once more from the IK seed.
+    """
+    return replace(problem, repair=replace(problem.repair, enabled=False, placement=None))
+
+
+def as_asked(result: RunResult, problem: Problem) -> RunResult:
+    """The ``ok`` answer of :func:`strict` ``problem`` as the answer of ``problem``.
+
+    An ``ok`` run needs no repair, so the run of ``problem`` itself gives the same passes; only its
+    settings and, with ``[repair] placement``, the placement outcome (``not needed``) are its own.
+    """
+    bounds = problem.repair.placement
+    return replace(result, problem=problem, placement=None if bounds is None else PlacementRepair("not needed", bounds))
 
 
 @dataclass
@@ -294,8 +339,12 @@ class Session:
     def change(self, changes: Mapping[str, Any]) -> int:
         """Merge ``changes`` into the session's changes, check them and ask for a solve.
 
+        The edited values are compared as the page sent them (plain numbers and lists): a change
+        that leaves every one as it was (a drag's last pose sent again on release, a field left
+        as it was) is neither checked nor solved again, and its revision is the current one.
+
         Returns:
-            The new revision.
+            The new revision (the current one when nothing changed).
 
         Raises:
             InputError: a key the page may not change or a value the problem file would refuse;
@@ -304,6 +353,8 @@ class Session:
         check_keys(changes)
         with self._lock:
             merged = {**self.changes, **changes}
+            if merged == self.changes:
+                return self.revision
             doc, problem = apply_changes(self.base, merged, self.path)
             self.revision += 1
             self.changes, self.doc, self.problem = merged, doc, problem
@@ -326,7 +377,8 @@ class Session:
         t0 = time.perf_counter()
         with self._engine, controlled(cancel=self.solver.superseded):
             try:
-                return resolve(job.problem, self._cache.path_for(job.problem), previous)
+                tracks, quality = self._cache.tracks_for(job.problem)
+                return resolve(job.problem, tracks, previous, quality)
             finally:
                 job.solve_s = time.perf_counter() - t0
 

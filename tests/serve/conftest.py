@@ -29,3 +29,75 @@ def pytest_terminal_summary(terminalreporter) -> None:  # noqa: ANN001 - pytest'
 def summary() -> list[str]:
     """The lines printed at the end of the run (append to it)."""
     return SUMMARY
+
+
+CHROMIUM = Path("/usr/bin/chromium")
+"""Debian's chromium, which the browser tests drive (no browser download)."""
+
+
+class Served:
+    """The servers of a run: ``refine serve``'s app on a problem folder, uvicorn on a free port in a thread."""
+
+    def __init__(self) -> None:
+        self.running: dict[str, dict] = {}
+
+    def __call__(self, key: str, folder: Path) -> dict:
+        """The server of ``key`` (started on ``folder`` the first time): ``url``, ``folder``, ``session``."""
+        if key not in self.running:
+            self.running[key] = self._start(folder)
+        return self.running[key]
+
+    @staticmethod
+    def _start(folder: Path) -> dict:
+        import threading
+
+        import uvicorn
+
+        from refine.serve.app import create_app
+        from refine.serve.session import Session
+
+        session = Session(folder)
+        app = create_app(session, folder / "out")
+        server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=0, log_level="warning"))
+        thread = threading.Thread(target=server.run, daemon=True)
+        thread.start()
+        deadline = time.time() + 60
+        while not server.started and time.time() < deadline:
+            time.sleep(0.05)
+        assert server.started, "the server did not start within 60 s"
+        port = server.servers[0].sockets[0].getsockname()[1]
+        return {
+            "url": f"http://127.0.0.1:{port}/",
+            "folder": folder,
+            "session": session,
+            "server": server,
+            "thread": thread,
+        }
+
+    def stop(self, key: str) -> None:
+        """Stop the server of ``key`` (waits up to 30 s for it)."""
+        info = self.running.pop(key, None)
+        if info is not None:
+            info["server"].should_exit = True
+            info["thread"].join(30)
+
+
+@pytest.fixture(scope="session")
+def served():
+    """Start a server once per key for the whole run (:class:`Served`); all stopped at its end."""
+    servers = Served()
+    yield servers
+    for key in list(servers.running):
+        servers.stop(key)
+
+
+@pytest.fixture(scope="session")
+def chromium():
+    """One chromium for every browser test of the run (Playwright, Debian's executable)."""
+    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is in the test extra")
+    if not CHROMIUM.exists():
+        pytest.skip("chromium is not installed (.ci/run installs it)")
+    with sync_api.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=["--no-sandbox"])
+        yield browser
+        browser.close()

@@ -13,7 +13,6 @@ import json
 import os
 import re
 import shutil
-import threading
 import time
 from pathlib import Path
 
@@ -32,47 +31,29 @@ pytestmark = [
 
 
 @pytest.fixture(scope="module")
-def server(tmp_path_factory):
-    import uvicorn
-
-    from refine.serve.app import create_app
-    from refine.serve.session import Session
-
+def server(tmp_path_factory, served):
     folder = tmp_path_factory.mktemp("serve") / "glass_adhesive"
     shutil.copytree(ROOT / "problems" / "glass_adhesive", folder)
     shutil.copytree(ROOT / "problems" / "glass_calibrated" / "measurements", folder / "measurements")
-    session = Session(folder)
-    app = create_app(session, folder / "out")
-    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=0, log_level="warning"))
-    thread = threading.Thread(target=server.run, daemon=True)
-    thread.start()
-    deadline = time.time() + 60
-    while not server.started and time.time() < deadline:
-        time.sleep(0.05)
-    assert server.started, "the server did not start"
-    port = server.servers[0].sockets[0].getsockname()[1]
-    yield {"url": f"http://127.0.0.1:{port}/", "folder": folder, "session": session}
-    server.should_exit = True
-    thread.join(30)
+    return served("glass with measurements", folder)
 
 
 @pytest.fixture(scope="module")
-def pages(server, summary):
+def pages(server, summary, chromium):
     ARTIFACTS.mkdir(parents=True, exist_ok=True)
     summary.append(f"refine serve in the browser: screenshots in {ARTIFACTS}")
-    with playwright.sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=["--no-sandbox"])
-        errors: list[str] = []
-        tabs = []
-        for _ in range(2):  # a second tab sees the same state
-            page = browser.new_page(viewport={"width": 1500, "height": 900})
-            page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
-            page.on("pageerror", lambda e: errors.append(str(e)))
-            page.set_default_timeout(SOLVE_S * 1000)  # a loaded machine: the server shares two cores
-            page.goto(server["url"], wait_until="domcontentloaded")
-            tabs.append(page)
-        yield {"tabs": tabs, "errors": errors, "summary": summary}
-        browser.close()
+    errors: list[str] = []
+    tabs = []
+    for _ in range(2):  # a second tab sees the same state
+        page = chromium.new_page(viewport={"width": 1500, "height": 900})
+        page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.set_default_timeout(SOLVE_S * 1000)  # a loaded machine: the server shares two cores
+        page.goto(server["url"], wait_until="domcontentloaded")
+        tabs.append(page)
+    yield {"tabs": tabs, "errors": errors, "summary": summary}
+    for page in tabs:
+        page.close()
 
 
 def settled(page, timeout_s: float = SOLVE_S) -> str:
@@ -104,6 +85,9 @@ def _the_first_screen_shows_the_cell_and_the_verdict(pages):
     ):  # the cell's objects, the robot, the path
         assert name in drawn
     page.screenshot(path=str(ARTIFACTS / "first-screen.png"))
+    quality = page.inner_text("#demo-quality")  # the glass cell's Liberty log: 8127 samples at 240 Hz
+    assert "Demonstration quality" in quality and "8127 tracker samples at 240 Hz" in quality
+    assert "no dropouts" in quality and "tracker frame against the CAD path: rotation" in quality
     assert pages["errors"] == []
     assert page.is_hidden("#js-errors")
     # what the first screen cost: every file the page loaded and the first scene over the websocket
@@ -244,6 +228,42 @@ def _the_part_dragged_by_the_gizmo_moves_the_cad_frame_and_the_receiver_by_as_mu
     assert settled(page) == "ok"
     assert max(abs(a - b) for a, b in zip(_pose(page, "frames.cad_in_world"), cad0, strict=True)) < 2e-6
     assert pages["errors"] == []
+
+
+def _a_burst_of_slider_steps_solves_only_the_last_to_the_end(server, pages):
+    page = pages["tabs"][0]
+    session = server["session"]
+    assert settled(page) == "ok"
+    solver, answered = session.solver, []
+    real = session._on_answer
+    session.on_answer(lambda answer: (answered.append(answer.revision), real(answer)))
+    before, x0 = revision(page), _pose(page, "frames.cad_in_world")[0]
+    assert page.input_value("#move-x") == "0"
+    counts = solver.solved, solver.dropped, solver.cancelled
+    try:  # 15 steps of the x slider in one go, 1 to 15 mm, as a fast drag sends them
+        page.eval_on_selector(
+            "#move-x",
+            "(e) => { for (let v = 1; v <= 15; v++) { e.value = String(v); e.dispatchEvent(new Event('input')); } }",
+        )
+        last = before + 15
+        page.wait_for_function(f"Number(document.body.dataset.latest) >= {last}")
+        assert settled(page) == "ok"
+    finally:
+        session.on_answer(real)
+    assert revision(page) == last and answered[-1] == last
+    now = solver.solved, solver.dropped, solver.cancelled
+    solved, dropped, cancelled = (a - b for a, b in zip(now, counts, strict=True))
+    # only the last is solved to the end: the others waited and were replaced, or were stopped under way
+    assert solved == len(answered) and len(answered) <= 2, answered
+    assert solved + dropped == 15 and cancelled <= dropped
+    assert abs(_pose(page, "frames.cad_in_world")[0] - x0 - 0.015) < 2e-6  # [m]: the last step, 15 mm
+    pages["summary"].append(
+        f"refine serve: 15 slider steps at once: {solved} solved to the end (revisions {answered}), "
+        f"{dropped - cancelled} replaced while waiting, {cancelled} stopped under way"
+    )
+    page.eval_on_selector("#move-x", "(e) => { e.value = '0'; e.dispatchEvent(new Event('input')); }")
+    page.wait_for_function(f"Number(document.body.dataset.latest) > {last}")
+    assert settled(page) == "ok"
 
 
 def _the_part_turned_by_the_gizmo_turns_the_receiver_about_the_cad_origin(pages):
@@ -442,7 +462,7 @@ def _the_demonstration_is_drawn_as_recorded_and_as_the_fusion_uses_it_beside_the
     page.check("#show-recorded")
     page.uncheck("#show-aligned")
     # the registry's ABB has no visual meshes of its own (its <visual> elements name its collision pieces)
-    assert page.is_disabled("#show-collision")
+    assert page.is_disabled("#show-collision") and page.is_hidden("#collision-toggle")
     assert "visual meshes are its collision shapes" in page.inner_text("#visual-note")
 
 
@@ -516,8 +536,32 @@ def _hovering_a_waypoint_labels_its_index_deviation_clearance_and_speed(server, 
         assert word in text
     dev = server["session"].answer.result.first.refinement.check.orientation_deviation_deg[index]
     assert f"deviation {dev:.2f} deg" in text
+    assert index == k  # the dot drawn nearest the pointer, in pixels
     page.screenshot(path=str(ARTIFACTS / "hover.png"))
-    page.mouse.move(5, 5)
+    page.mouse.move(5, 5)  # off the canvas: the label goes
+    assert page.is_hidden("#hover")
+    # zoomed out three times as far, the pointer 5 px off the path's waypoint (across the path): still
+    # that waypoint's label, since the pick is in pixels (5 px is some 30 mm there, on a path 5 mm apart)
+    view = "document.getElementById('scene').view"
+    eye = page.evaluate(
+        f"() => {{ const v = {view}, e = v.camera.position.toArray();"
+        " v.camera.position.sub(v.orbit.target).multiplyScalar(3).add(v.orbit.target);"
+        " v.camera.updateMatrixWorld(); v.render(); return e; }"
+    )
+    try:
+        (ax, ay), (x, y), (bx, by) = (
+            page.evaluate(f"(j) => {view}.screenOfWaypoint(0, j)", j) for j in (k - 1, k, k + 1)
+        )
+        norm = ((bx - ax) ** 2 + (by - ay) ** 2) ** 0.5
+        page.mouse.move(x - 5 * (by - ay) / norm, y + 5 * (bx - ax) / norm)
+        page.wait_for_selector("#hover:not([hidden])")
+        assert int(page.get_attribute("#hover", "data-index")) == k
+        page.mouse.move(5, 5)
+    finally:
+        page.evaluate(
+            f"(e) => {{ const v = {view}; v.camera.position.fromArray(e); v.camera.updateMatrixWorld(); v.render(); }}",
+            eye,
+        )
 
 
 def _every_planned_motion_of_result_json_is_drawn_and_selectable(server, pages):
@@ -577,6 +621,7 @@ STEPS = (
     _the_part_moved_away_out_of_reach_fails_with_its_cause_and_moved_back_is_ok,
     _the_part_dragged_by_the_gizmo_moves_the_cad_frame_and_the_receiver_by_as_much,
     _the_part_turned_by_the_gizmo_turns_the_receiver_about_the_cad_origin,
+    _a_burst_of_slider_steps_solves_only_the_last_to_the_end,
     _a_receiver_calibration_is_fitted_shows_its_rejected_point_and_is_accepted,
     _write_saves_the_problem_and_writes_what_refine_run_writes,
     _every_planned_motion_of_result_json_is_drawn_and_selectable,
@@ -596,4 +641,10 @@ def test_a_user_reviews_changes_calibrates_and_writes_the_glass_cell(server, pag
         times.append(f"{step.__name__.strip('_')}: {wall:.1f} s ({cpu:.1f} s CPU in this process)")
     summary.append("refine serve in the browser, each step's wall time: " + "; ".join(times))
     summary.append(f"load average at the end: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
-    (ARTIFACTS / "steps.txt").write_text("\n".join(times) + "\n", encoding="utf-8")
+    found = [  # the figures the steps measured, for a run whose workers' summary lines do not reach the terminal
+        line
+        for line in summary
+        if line.startswith(("refine serve", "load average"))
+        and not line.startswith("refine serve in the browser")
+    ]
+    (ARTIFACTS / "steps.txt").write_text("\n".join(times + found) + "\n", encoding="utf-8")

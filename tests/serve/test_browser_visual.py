@@ -13,8 +13,6 @@ import base64
 import io
 import os
 import shutil
-import threading
-import time
 from pathlib import Path
 
 import numpy as np
@@ -59,32 +57,16 @@ def _registry_with_visual_meshes(folder: Path) -> Path:
 
 
 @pytest.fixture(scope="module")
-def server(tmp_path_factory):
-    import uvicorn
-
-    from refine.serve.app import create_app
-    from refine.serve.session import Session
-
+def server(tmp_path_factory, served):
     base = tmp_path_factory.mktemp("serve_visual")
     before = os.environ.get("REFINE_ROBOTS_DIR")
     os.environ["REFINE_ROBOTS_DIR"] = str(_registry_with_visual_meshes(base / "robots"))
     folder = base / "glass_adhesive"
     shutil.copytree(ROOT / "problems" / "glass_adhesive", folder)
     try:
-        session = Session(folder)
-        app = create_app(session, folder / "out")
-        server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=0, log_level="warning"))
-        thread = threading.Thread(target=server.run, daemon=True)
-        thread.start()
-        deadline = time.time() + 60
-        while not server.started and time.time() < deadline:
-            time.sleep(0.05)
-        assert server.started, "the server did not start"
-        port = server.servers[0].sockets[0].getsockname()[1]
-        yield {"url": f"http://127.0.0.1:{port}/", "session": session}
-        server.should_exit = True
-        thread.join(30)
-    finally:
+        yield served("glass with visual meshes", folder)
+    finally:  # stopped with the module: its robot registry is this module's
+        served.stop("glass with visual meshes")
         if before is None:
             os.environ.pop("REFINE_ROBOTS_DIR", None)
         else:
@@ -128,58 +110,56 @@ def _reference_bounds(q: np.ndarray) -> dict[str, np.ndarray]:
 
 
 def test_the_robot_is_drawn_by_its_visual_meshes_where_its_links_are_and_by_its_collision_shapes_on_demand(
-    server, summary
+    server, summary, chromium
 ):
     ARTIFACTS.mkdir(parents=True, exist_ok=True)
-    with playwright.sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=["--no-sandbox"])
-        errors: list[str] = []
-        page = browser.new_page(viewport={"width": 1500, "height": 900})
-        page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
-        page.on("pageerror", lambda e: errors.append(str(e)))
-        page.set_default_timeout(SOLVE_S * 1000)
-        page.goto(server["url"], wait_until="domcontentloaded")
-        page.wait_for_function(
-            "document.body.dataset.revision !== undefined && document.body.dataset.scene === document.body.dataset.revision"
-        )
-        note = page.inner_text("#visual-note")
-        assert note.startswith("visual meshes: 7 ("), note
-        assert page.is_enabled("#show-collision") and not page.is_checked("#show-collision")
-        view = "document.getElementById('scene').view"
-        shown = page.evaluate(f"() => {view}.robotMeshes.map((m) => [m.name, m.userData.shown, m.visible])")
-        visual = [name for name, kind, visible in shown if kind == "visual" and visible]
-        assert sorted(visual) == sorted(f"{link}/{link}_mesh (visual)" for link in LINKS)
-        assert not any(visible for _, kind, visible in shown if kind == "collision")
-        # each visual mesh drawn where Pinocchio puts the link on the reference URDF (an independent
-        # description of the same robot) at the joints of the robot frame shown, the base at the origin
-        from refine.report.scene import robot_frames
+    errors: list[str] = []
+    page = chromium.new_page(viewport={"width": 1500, "height": 900})
+    page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.set_default_timeout(SOLVE_S * 1000)
+    page.goto(server["url"], wait_until="domcontentloaded")
+    page.wait_for_function(
+        "document.body.dataset.revision !== undefined && document.body.dataset.scene === document.body.dataset.revision"
+    )
+    note = page.inner_text("#visual-note")
+    assert note.startswith("visual meshes: 7 ("), note
+    assert page.is_enabled("#show-collision") and not page.is_checked("#show-collision")
+    view = "document.getElementById('scene').view"
+    shown = page.evaluate(f"() => {view}.robotMeshes.map((m) => [m.name, m.userData.shown, m.visible])")
+    visual = [name for name, kind, visible in shown if kind == "visual" and visible]
+    assert sorted(visual) == sorted(f"{link}/{link}_mesh (visual)" for link in LINKS)
+    assert not any(visible for _, kind, visible in shown if kind == "collision")
+    # each visual mesh drawn where Pinocchio puts the link on the reference URDF (an independent
+    # description of the same robot) at the joints of the robot frame shown, the base at the origin
+    from refine.report.scene import robot_frames
 
-        result = server["session"].answer.result
-        i, k = robot_frames(result)["where"][0]  # the frame the scrubber starts at
-        q = result.passes[i].refinement.q[k]
-        expected = _reference_bounds(np.asarray(q, dtype=float))
-        drawn = page.evaluate(
-            "async () => { const THREE = await import('three'); const v = document.getElementById('scene').view;"
-            " v.robotMeshes.forEach((m) => m.updateMatrixWorld(true)); const out = {};"
-            " v.robotMeshes.filter((m) => m.userData.shown === 'visual').forEach((m) => {"
-            " const b = new THREE.Box3().setFromObject(m, true); out[m.name.split('/')[0]] = [b.min.toArray(), b.max.toArray()]; });"
-            " return out; }"
-        )
-        for link in LINKS:
-            assert np.abs(np.array(drawn[link]) - expected[link]).max() < 2e-3, link  # [m]
-        page.screenshot(path=str(ARTIFACTS / "visual-meshes.png"))
-        orange = _share_of(_scene_pixels(page), 0xF39C12)  # the visual meshes' colour
-        assert orange > 0.005
-        page.check("#show-collision")  # the collision shapes instead
-        shown = page.evaluate(f"() => {view}.robotMeshes.map((m) => [m.userData.shown, m.visible])")
-        assert all(visible == (kind != "visual") for kind, visible in shown)
-        image = _scene_pixels(page)
-        assert _share_of(image, 0xF39C12) < 0.1 * orange
-        page.screenshot(path=str(ARTIFACTS / "collision-shapes.png"))
-        page.uncheck("#show-collision")
-        assert _share_of(_scene_pixels(page), 0xF39C12) > 0.5 * orange
-        assert errors == [], errors
-        browser.close()
+    result = server["session"].answer.result
+    i, k = robot_frames(result)["where"][0]  # the frame the scrubber starts at
+    q = result.passes[i].refinement.q[k]
+    expected = _reference_bounds(np.asarray(q, dtype=float))
+    drawn = page.evaluate(
+        "async () => { const THREE = await import('three'); const v = document.getElementById('scene').view;"
+        " v.robotMeshes.forEach((m) => m.updateMatrixWorld(true)); const out = {};"
+        " v.robotMeshes.filter((m) => m.userData.shown === 'visual').forEach((m) => {"
+        " const b = new THREE.Box3().setFromObject(m, true); out[m.name.split('/')[0]] = [b.min.toArray(), b.max.toArray()]; });"
+        " return out; }"
+    )
+    for link in LINKS:
+        assert np.abs(np.array(drawn[link]) - expected[link]).max() < 2e-3, link  # [m]
+    page.screenshot(path=str(ARTIFACTS / "visual-meshes.png"))
+    orange = _share_of(_scene_pixels(page), 0xF39C12)  # the visual meshes' colour
+    assert orange > 0.005
+    page.check("#show-collision")  # the collision shapes instead
+    shown = page.evaluate(f"() => {view}.robotMeshes.map((m) => [m.userData.shown, m.visible])")
+    assert all(visible == (kind != "visual") for kind, visible in shown)
+    image = _scene_pixels(page)
+    assert _share_of(image, 0xF39C12) < 0.1 * orange
+    page.screenshot(path=str(ARTIFACTS / "collision-shapes.png"))
+    page.uncheck("#show-collision")
+    assert _share_of(_scene_pixels(page), 0xF39C12) > 0.5 * orange
+    assert errors == [], errors
+    page.close()
     summary.append(
         f"refine serve with visual meshes ({note}): screenshots visual-meshes.png, collision-shapes.png"
     )

@@ -106,38 +106,45 @@ def test_a_solve_under_way_stops_when_a_newer_change_comes_and_only_the_newest_i
     assert 1 not in answered  # a stopped solve is never answered
 
 
-def test_the_scene_resends_only_the_sections_that_changed():
+@pytest.mark.slow
+def test_the_scene_resends_only_the_sections_that_changed_and_each_is_the_reports(moved):
     import json
     from types import SimpleNamespace
 
-    from refine.serve import state
+    from refine.report.scene import scene_data
+    from refine.serve.overlays import DemoCache, demonstration_lines
+    from refine.serve.session import resolve
+    from refine.serve.state import SceneDiff
 
-    scenes = iter(
-        [
-            {"cell": [1], "robot": {"parts": ["p"], "frames": [0], "where": []}, "paths": [7]},
-            {"cell": [1], "robot": {"parts": ["p"], "frames": [1], "where": []}, "paths": [8]},
-        ]
+    placed, shifted = moved
+    _, cone = apply_changes(
+        tomlkit.parse(GLASS.read_text(encoding="utf-8")), {"tolerances.orientation_deg": 2.9}, GLASS
     )
-    real = state.scene_data, state.flange_poses, state.motion_lines, state.demonstration_lines
-    state.scene_data = lambda result: next(scenes)
-    state.flange_poses = lambda result, where: []
-    state.motion_lines = lambda result: [{"name": "home"}]
-    state.demonstration_lines = lambda result, cache: {}
-    try:
-        diff = state.SceneDiff()
-        diff.demos.visual = lambda robot: ([], "none")
-        answer = SimpleNamespace(revision=1, result=SimpleNamespace(robot=None))
-        first, whole = diff.messages(answer)
-        answer.revision = 2
-        second, whole2 = diff.messages(answer)
-    finally:
-        state.scene_data, state.flange_poses, state.motion_lines, state.demonstration_lines = real
-    assert sorted(json.loads(first)["scene"]) == ["cell", "demo", "motions", "parts", "paths", "robot"]
-    robot = {"frames": [1], "where": [], "flange": [], "visual_note": "none"}
-    assert json.loads(second) == {"type": "scene", "revision": 2, "scene": {"robot": robot, "paths": [8]}}
-    assert json.loads(whole2)["scene"] == {
-        "cell": [1], "parts": ["p"], "robot": robot, "paths": [8], "motions": [{"name": "home"}], "demo": {}
-    }
+    cache = FusedCache()
+    first = resolve(placed, cache.path_for(placed), None)
+    diff = SceneDiff()
+    sent = []
+    for revision, problem in enumerate((placed, cone, shifted), start=1):
+        result = first if revision == 1 else resolve(problem, cache.path_for(problem), first)
+        changed, whole = diff.messages(SimpleNamespace(revision=revision, result=result))
+        sent.append(sorted(json.loads(changed)["scene"]))
+        scene = json.loads(whole)["scene"]
+        report = json.loads(json.dumps(scene_data(result)))  # the report's scene, built from nothing
+        assert scene["cell"] == report["cell"]
+        assert scene["parts"] == report["robot"]["parts"]
+        assert scene["paths"] == report["paths"]
+        assert scene["robot"]["frames"] == report["robot"]["frames"]
+        assert scene["robot"]["where"] == report["robot"]["where"]
+        fresh = json.loads(json.dumps(demonstration_lines(result, DemoCache())))  # the log read anew
+        assert scene["demo"] == fresh
+    assert sent[0] == ["cell", "demo", "motions", "parts", "paths", "robot"]
+    assert (
+        "cell" not in sent[1] and "parts" not in sent[1] and "demo" not in sent[1]
+    )  # the cone: the path and robot
+    assert (
+        "cell" in sent[2] and "demo" in sent[2] and "parts" not in sent[2]
+    )  # the part moved, the robot as it was
+    assert diff.cache.built == {"cell": 2, "parts": 1}
 
 
 @pytest.fixture(scope="module")
@@ -163,7 +170,6 @@ def test_the_fused_path_moves_with_the_workpiece_as_fusing_the_moved_files_gives
     assert np.degrees(angle).max() < 1e-3
 
 
-
 def test_a_previous_answer_is_a_start_only_for_a_path_moved_a_little():
     from types import SimpleNamespace
 
@@ -179,3 +185,27 @@ def test_a_previous_answer_is_a_start_only_for_a_path_moved_a_little():
     turned = line @ np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # 90 deg about z
     assert not near(previous, path(turned))  # the far end moved by sqrt(2) m
     assert not near(previous, path(line[:10]))  # another number of waypoints
+
+
+def test_a_change_that_leaves_every_value_as_it_was_is_not_solved_again(tmp_path, monkeypatch):
+    import shutil
+
+    from refine.serve.session import Session
+
+    folder = tmp_path / "glass_adhesive"
+    shutil.copytree(ROOT / "problems" / "glass_adhesive", folder)
+    session = Session(folder)
+    asked = []
+    monkeypatch.setattr(session.solver, "submit", lambda job: asked.append((job.revision, job.changes)))
+    try:
+        pose = {"xyz": [0.002, 0.0, 0.0], "rpy_deg": [0.0, 0.0, 0.0]}
+        assert session.change({"tolerances.orientation_deg": 2.9}) == 1
+        assert session.change({"move": pose}) == 2
+        assert session.change({"move": dict(pose)}) == 2  # the drag's last pose again, on release
+        assert session.change({"tolerances.orientation_deg": 2.9}) == 2  # 2.9 deg as it was
+        assert session.change({"tolerances.orientation_deg": 3}) == 3  # 3 deg is a change
+        assert [r for r, _ in asked] == [1, 2, 3]
+        assert asked[-1][1] == {"tolerances.orientation_deg": 3, "move": pose}
+        assert session.problem.tolerances.orientation_deg == 3.0
+    finally:
+        session.close()
