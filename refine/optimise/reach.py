@@ -142,7 +142,9 @@ def reach_model(robot: Robot, joint_margin_rad: float, samples: int = 3000) -> R
     lo, hi = np.clip(lower, -math.pi, math.pi), np.clip(upper, -math.pi, math.pi)
     qs = np.tile(q_ref, (samples, 1))
     qs[:, arm] = lo[arm] + rng.random((samples, len(range(n)[arm]))) * (hi - lo)[arm]
-    d = np.array([distance_from_shoulder(q) for q in qs])
+    at_ref = qs.copy()
+    at_ref[:, 0] = q_ref[0]  # distance_from_shoulder of every sample, their poses in one batch
+    d = np.linalg.norm((robot.fk_many(at_ref) @ np.append(point_in_flange, 1.0))[:, :3] - shoulder, axis=1)
     r = []
     for sign, k in ((1.0, int(np.argmin(d))), (-1.0, int(np.argmax(d)))):
         res = scipy.optimize.minimize(

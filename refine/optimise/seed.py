@@ -101,7 +101,7 @@ def _chain_each(
         guess = q
         if k >= 2:  # predict from the last step where it is small (not near a singularity)
             last = q - qs[k - 2]
-            if float(np.max(np.abs(last))) <= PREDICT_STEP_MAX:
+            if float(np.abs(last).max()) <= PREDICT_STEP_MAX:
                 guess = q + last
         q, errors[k] = solve_ik(kin, T, guess, lower, upper, axis_only=axis_only)
         qs[k] = q

@@ -126,10 +126,10 @@ class TcpKinematics:
         Jv, Jw = R_wb @ J[:3], R_wb @ J[3:]
         if self.tool_in_world is not None:
             return self._stationary(T_wf, Jv, Jw)
-        rx, ry, rz = T_wf[:3, :3] @ self.tcp_in_flange[:3, 3]  # flange origin -> TCP, world axes
+        rx, ry, rz = (T_wf[:3, :3] @ self.tcp_in_flange[:3, 3]).tolist()  # flange origin -> TCP, world axes
         # v_TCP = v_flange + ω × r = v_flange - [r]ₓ ω
         skew = np.array([[0.0, -rz, ry], [rz, 0.0, -rx], [-ry, rx, 0.0]])
-        return T_wf @ self.tcp_in_flange, np.vstack([Jv - skew @ Jw, Jw])
+        return T_wf @ self.tcp_in_flange, np.concatenate((Jv - skew @ Jw, Jw))
 
     def jacobian(self, q: Array) -> Array:
         """Geometric Jacobian (6, n) of the TCP, world-aligned axes, linear rows first."""
@@ -199,23 +199,25 @@ def solve_ik(
         joints [rad] (n,) and the remaining pose error norm (position [m] and angle [rad] stacked).
     """
     rows = slice(0, 3) if position_only else slice(0, 6)
-    q = np.clip(np.asarray(q0, dtype=float), lower, upper)
+    # np.minimum(np.maximum(...)) is np.clip's answer (the bounds are never crossed), at a third of its cost
+    q = np.minimum(np.maximum(np.asarray(q0, dtype=float), lower), upper)
     T, J = kin.pose_jacobian(q)
     err = (axis_error(T[None], T_target[None], J[None])[0] if axis_only else pose_error(T, T_target))[rows]
+    damped = damping**2 * np.eye(len(err))
     for _ in range(max_iterations):
         if float(err @ err) < tol * tol:
             break
         J = J[rows]
-        JJt_inv = np.linalg.inv(J @ J.T + damping**2 * np.eye(len(err)))
+        JJt_inv = np.linalg.inv(J @ J.T + damped)
         dq = J.T @ JJt_inv @ err
         if J.shape[1] > J.shape[0]:  # redundant: drift toward mid-range in the null space of the task
             mid, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
             pull = np.where(np.isfinite(half), (mid - q) / np.where(np.isfinite(half), half, 1.0) ** 2, 0.0)
             dq += NULLSPACE_GAIN * (pull - J.T @ (JJt_inv @ (J @ pull)))
-        step = float(np.max(np.abs(dq)))
+        step = float(np.abs(dq).max())
         if step > 0.3:  # keep steps small so the chain does not jump branches
             dq *= 0.3 / step
-        q = np.clip(q + dq, lower, upper)
+        q = np.minimum(np.maximum(q + dq, lower), upper)
         T, J = kin.pose_jacobian(q)
         err = (axis_error(T[None], T_target[None], J[None])[0] if axis_only else pose_error(T, T_target))[
             rows

@@ -146,3 +146,22 @@ def test_a_tool_on_the_flange_keeps_ipopts_initial_barrier():
     result = solve_refinement(nlp, home=problem.home)
     assert result.status == "ok" and result.first_options
     assert "ipopt.mu_init" not in result.first_options
+
+
+@pytest.mark.slow
+def test_a_redundant_arm_stopping_at_its_first_acceptable_iterate_keeps_the_answer_of_ipopts_default():
+    """At 6,400 waypoints the iiwa's full solve cannot reach IPOPT's 1e-9 and ends at its acceptable
+    level; the answer is the one IPOPT's own default (15 acceptable iterations in a row) gives, and
+    every pose is held as the robot's forward kinematics, placed by hand, measures it."""
+    problem = generated_problem("test", "iiwa", load_suites()["generated"]["iiwa"], 6400)
+    ours = solve_refinement(problem.refinement(), home=problem.home)
+    default = solve_refinement(
+        problem.refinement(solver_options={"ipopt.acceptable_iter": 15}), home=problem.home
+    )
+    assert ours.status == default.status == "ok"
+    assert ours.solver_status == "Solved_To_Acceptable_Level"
+    assert ours.iterations < default.iterations
+    np.testing.assert_allclose(ours.q, default.q, atol=1e-7)  # rad
+    for k in range(0, len(ours.q), 97):
+        T = problem.base_in_world @ problem.robot.fk(ours.q[k]) @ problem.tcp_in_flange
+        np.testing.assert_allclose(T[:3, 3], problem.fused.positions[k], atol=1e-9)  # m
