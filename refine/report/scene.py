@@ -163,8 +163,9 @@ def path_data(result: RunResult) -> list[dict[str, Any]]:
                 "missing": "no timing: the pass is infeasible",
             }
         if p.clearance is not None:
+            bounds = p.clearance.waypoint_measured is not None and not bool(np.all(p.clearance.waypoint_measured))
             quantities["clearance"] = {
-                "title": "clearance [mm]",
+                "title": "clearance [mm], a lower bound where not measured" if bounds else "clearance [mm]",
                 "values": rounded(p.clearance.waypoint_distance_m * 1e3, 2),
             }
         else:
