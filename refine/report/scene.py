@@ -18,10 +18,12 @@ from typing import TYPE_CHECKING, Any
 import fcl
 import numpy as np
 
-from refine.lazy import lean_imports
+from refine.lazy import on_first_use
 
-with lean_imports():
+if TYPE_CHECKING:
     import trimesh
+else:
+    trimesh = on_first_use("trimesh")  # the first mesh call imports it
 
 if TYPE_CHECKING:
     from refine.run.result import RunResult
