@@ -13,7 +13,8 @@ While :func:`deferred_modules` is active, an ``import`` of the named modules bin
 stand-in imports the real module the first time one of its attributes is read, so a library that
 does plot or walk a graph still works. The stand-ins leave ``sys.modules`` (and the attributes of
 already imported parents) when the block ends, so every later ``import`` gets the real module.
-:func:`lean_imports` is the block ``refine`` wraps around its imports of these libraries.
+:func:`lean_imports` is the block ``refine`` wraps around its imports of these libraries, and
+:func:`on_first_use` defers the import of a library itself until a call needs it.
 """
 
 from __future__ import annotations
@@ -96,6 +97,30 @@ def lean_imports() -> Iterator[None]:
 
     with deferred_modules(*UNUSED_AT_IMPORT):
         yield
+
+
+class _OnFirstUse(types.ModuleType):
+    """Stand-in for a module nobody has needed yet: imports it (lean) when an attribute is first read."""
+
+    def __getattr__(self, attribute: str) -> object:
+        real = self.__dict__.get("_real")
+        if real is None:
+            with lean_imports():
+                real = importlib.import_module(self.__name__)
+            self.__dict__["_real"] = real
+        return getattr(real, attribute)
+
+
+def on_first_use(name: str) -> types.ModuleType:
+    """Module ``name`` as a stand-in that imports it under :func:`lean_imports` when first used.
+
+    For a library only some calls need (trimesh: a mesh read, a convex cover, the report's shapes)::
+
+        trimesh = on_first_use("trimesh")
+
+    Once ``name`` is imported, the real module is returned instead.
+    """
+    return sys.modules.get(name) or _OnFirstUse(name)
 
 
 def _has_submodule(parent: str, child: str) -> bool:

@@ -156,3 +156,24 @@ def test_lazy_names_import_a_name_on_first_read_and_keep_it():
     assert namespace["dedent"] is textwrap.dedent  # stored: the next read does not come here
     with pytest.raises(AttributeError, match="module 'pkg' has no attribute 'missing'"):
         getattr_("missing")
+
+
+def test_trimesh_is_imported_by_the_first_mesh_call_not_by_the_modules_that_use_it():
+    """The robot, collision, CAD mesh and report modules import without trimesh; their first mesh
+    call imports it (with what it imports for nothing deferred) and every module then shares it."""
+    code = textwrap.dedent(
+        """
+        import sys
+        import refine.robot.registry, refine.collision, refine.report.scene, refine.cad.mesh
+        import refine.robot.convex as convex
+        print("trimesh" in sys.modules)
+        piece = convex.ConvexPiece.hull_of([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [0.1, 0.1, 0.1]])
+        print("trimesh" in sys.modules, "networkx" in sys.modules, len(piece.vertices), round(piece.mesh.volume, 6))
+        import trimesh
+        box = refine.report.scene.mesh_of_geometry(__import__("fcl").Box(1.0, 2.0, 3.0))
+        print(isinstance(box, trimesh.Trimesh), round(box.volume, 6))
+        """
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    # the unit corner tetrahedron: 4 corners (the inner point dropped), volume 1/6; the box 1 x 2 x 3
+    assert out.split() == ["False", "True", "False", "4", "0.166667", "True", "6.0"]

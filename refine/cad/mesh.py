@@ -26,6 +26,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -33,11 +34,13 @@ from numpy.typing import ArrayLike, NDArray
 from refine.cad.csv_ import metres_per_unit
 from refine.cad.resample import nearest_on_polyline, start_at_nearest
 from refine.errors import InputError
-from refine.lazy import lean_imports
+from refine.lazy import on_first_use
 from refine.plausible import CAD_COORDINATE_LIMIT_M, check_coordinates
 
-with lean_imports():
+if TYPE_CHECKING:
     import trimesh
+else:
+    trimesh = on_first_use("trimesh")  # the first mesh call imports it
 
 logger = logging.getLogger(__name__)
 

@@ -117,17 +117,20 @@ def carried_directions(model: CollisionModel, prior: CheckedBounds, q: Array) ->
         return None
     old = {pair: p for p, pair in enumerate(prior.pairs)}
     out = np.full((len(prior.q), len(model.pairs), 3), np.nan)
-    rows = np.arange(len(prior.q))
-    for p, pair in enumerate(model.pairs):
-        k = old.get(pair)
-        known = np.array([], dtype=int) if k is None else np.flatnonzero(~np.isnan(prior.normals[:, k, 0]))
-        if known.size:
-            after = np.minimum(np.searchsorted(known, rows), len(known) - 1)
-            before = np.maximum(after - 1, 0)
-            near = np.where(
-                np.abs(known[before] - rows) <= np.abs(known[after] - rows), known[before], known[after]
-            )
-            out[:, p] = prior.normals[near, k]
+    given = ~np.isnan(prior.normals[:, :, 0])  # (N, P of prior)
+    with_any = given.any(axis=0)
+    cols = [(p, old[pair]) for p, pair in enumerate(model.pairs) if pair in old and with_any[old[pair]]]
+    if not cols:
+        return out
+    mine, theirs = (np.array(c) for c in zip(*cols, strict=True))
+    known = given[:, theirs]  # (N, C): each column has a normal somewhere
+    n = len(prior.q)
+    rows = np.arange(n)[:, None]
+    before = np.maximum.accumulate(np.where(known, rows, -1), axis=0)  # the last known at or before
+    after = np.minimum.accumulate(np.where(known, rows, n)[::-1], axis=0)[::-1]  # the first at or after
+    # the nearest known waypoint, the earlier of two as near
+    near = np.where((before >= 0) & ((after >= n) | (rows - before <= after - rows)), before, after)
+    out[:, mine] = prior.normals[near, theirs]
     return out
 
 

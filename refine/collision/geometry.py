@@ -15,20 +15,23 @@ import logging
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import fcl
 import numpy as np
 from numpy.typing import NDArray
 
 from refine.errors import InputError
-from refine.lazy import lean_imports
+from refine.lazy import on_first_use
 from refine.robot.convex import ConvexPiece
 from refine.robot.geometry import CollisionShape, fcl_convex, read_mesh
 from refine.settings import Shape
 from refine.types import Array
 
-with lean_imports():
+if TYPE_CHECKING:
     import trimesh
+else:
+    trimesh = on_first_use("trimesh")  # the first mesh call imports it
 
 log = logging.getLogger(__name__)
 

@@ -214,7 +214,9 @@ def _newton_start(
     saves it one pass over every sample). A row whose step exceeds :data:`NEWTON_STEP_MAX` (near a
     singularity) starts from ``q_lin`` as it is, so every start stays on the refined joints' branch.
     """
-    J = J_wp[segment] + t[:, None, None] * (J_wp[segment + 1] - J_wp[segment])
+    J = np.diff(J_wp, axis=0)[segment]  # J_wp[segment + 1] - J_wp[segment], per segment once
+    J *= t[:, None, None]
+    J += J_wp[segment]
     R = targets[:, :3, :3] @ np.transpose(lin_poses[:, :3, :3], (0, 2, 1))
     e = np.concatenate([targets[:, :3, 3] - lin_poses[:, :3, 3], rotation_vectors(R)], axis=1)
     A = J @ np.transpose(J, (0, 2, 1)) + NEWTON_DAMPING**2 * np.eye(6)

@@ -130,21 +130,55 @@ def pass_panels(result: RunResult, p: PassResult) -> dict[str, Any]:
         )
         panels["clearance"] = {"empty": f"No clearance: {why}."}
     else:
-        mid = 0.5 * (s[1:] + s[:-1])
-        panels["clearance"] = {
-            "lines": [
-                _line("at waypoints", s, p.clearance.waypoint_distance_m * 1e3, colour="#1f77b4"),
-                _line(
-                    "least between waypoints",
-                    mid,
-                    p.clearance.segment_distance_m * 1e3,
-                    colour="#ff7f0e",
-                    mode="markers",
-                ),
-                _flat("margin", s, problem.collision.margin_m * 1e3, "#d62728"),
-            ]
-        }
+        panels["clearance"] = {"lines": clearance_lines(s, p.clearance, problem.collision.margin_m)}
     return panels
+
+
+def clearance_lines(s: Any, clearance: Any, margin_m: float) -> list[dict[str, Any]]:
+    """The clearance panel's lines: per waypoint, per segment and the margin [mm].
+
+    Where the dense check left a waypoint unmeasured (``PathClearance.waypoint_measured`` false),
+    its figure is a lower bound on the distance, and so is that of a segment with one sub-step
+    that ends at one: those points are drawn apart (open markers, "lower bound" in the legend and
+    in the hover text), the measured ones as before.
+    """
+    wp_mm = np.asarray(clearance.waypoint_distance_m, dtype=float) * 1e3
+    seg_mm = np.asarray(clearance.segment_distance_m, dtype=float) * 1e3
+    measured = clearance.waypoint_measured
+    mid = 0.5 * (s[1:] + s[:-1])
+    if measured is None or bool(np.all(measured)):
+        return [
+            _line("at waypoints", s, wp_mm, colour="#1f77b4"),
+            _line("least between waypoints", mid, seg_mm, colour="#ff7f0e", mode="markers"),
+            _flat("margin", s, margin_m * 1e3, "#d62728"),
+        ]
+    measured = np.asarray(measured, dtype=bool)
+    seg_bound = (np.asarray(clearance.segment_samples) == 1) & ~(measured[:-1] & measured[1:])
+    wp_text = np.where(measured, "measured", "lower bound (waypoint not measured)")
+    seg_text = np.where(seg_bound, "lower bound (an end not measured)", "measured")
+    lines = [
+        _line("at waypoints (lower bound where not measured)", s, wp_mm, colour="#1f77b4", group="wp")
+        | {"text": wp_text.tolist()},
+        _line(
+            "at waypoints: lower bound (not measured)",
+            s[~measured],
+            wp_mm[~measured],
+            colour="#1f77b4",
+            mode="markers",
+            symbol="circle-open",
+            group="wp",
+        ),
+    ]
+    for name, keep, symbol in (
+        ("least between waypoints", ~seg_bound, "circle"),
+        ("least between waypoints: lower bound", seg_bound, "circle-open"),
+    ):
+        if keep.any():
+            lines.append(
+                _line(name, mid[keep], seg_mm[keep], colour="#ff7f0e", mode="markers", symbol=symbol)
+                | {"text": seg_text[keep].tolist()}
+            )
+    return lines + [_flat("margin", s, margin_m * 1e3, "#d62728")]
 
 
 def panel_data(result: RunResult) -> dict[str, Any]:

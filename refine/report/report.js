@@ -144,12 +144,17 @@
 
   function panelTraces(entry) {
     return entry.lines.map(function (l) {
-      return {
+      var trace = {
         type: "scatter", mode: l.mode || "lines", name: l.name, x: l.x, y: l.y,
         line: { color: l.colour, dash: l.dash || "solid", width: l.dash ? 1.5 : 2 },
-        marker: { color: l.colour, size: 4 }, showlegend: l.legend !== false,
+        marker: { color: l.colour, size: 4, symbol: l.symbol || "circle" }, showlegend: l.legend !== false,
         legendgroup: l.group || l.name
       };
+      if (l.text) {  // per point: whether the figure is measured or a lower bound
+        trace.text = l.text;
+        trace.hovertemplate = "%{y}<br>%{text}<extra>%{fullData.name}</extra>";
+      }
+      return trace;
     });
   }
 

@@ -18,10 +18,12 @@ from typing import TYPE_CHECKING, Any
 import fcl
 import numpy as np
 
-from refine.lazy import lean_imports
+from refine.lazy import on_first_use
 
-with lean_imports():
+if TYPE_CHECKING:
     import trimesh
+else:
+    trimesh = on_first_use("trimesh")  # the first mesh call imports it
 
 if TYPE_CHECKING:
     from refine.run.result import RunResult
@@ -179,8 +181,9 @@ def path_data(result: RunResult) -> list[dict[str, Any]]:
                 "missing": "no timing: the pass is infeasible",
             }
         if p.clearance is not None:
+            bounds = p.clearance.waypoint_measured is not None and not bool(np.all(p.clearance.waypoint_measured))
             quantities["clearance"] = {
-                "title": "clearance [mm]",
+                "title": "clearance [mm], a lower bound where not measured" if bounds else "clearance [mm]",
                 "values": rounded(p.clearance.waypoint_distance_m * 1e3, 2),
             }
         else:

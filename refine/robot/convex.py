@@ -23,17 +23,20 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import ConvexHull, HalfspaceIntersection, cKDTree
 
 from refine.errors import InputError
-from refine.lazy import lean_imports
+from refine.lazy import on_first_use
 from refine.types import Array
 
-with lean_imports():
+if TYPE_CHECKING:
     import trimesh
+else:
+    trimesh = on_first_use("trimesh")  # the first mesh call imports it
 
 log = logging.getLogger(__name__)
 

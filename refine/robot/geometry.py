@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import fcl
 import numpy as np
@@ -21,11 +22,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from refine.errors import InputError
 from refine.frames import make_transform, matrix_from_fixed_xyz
-from refine.lazy import lean_imports
+from refine.lazy import on_first_use
 from refine.robot.convex import ConvexPiece
 
-with lean_imports():
+if TYPE_CHECKING:
     import trimesh
+else:
+    trimesh = on_first_use("trimesh")  # the first mesh call imports it
 
 SUPPORTED_GEOMETRY = ("box", "cylinder", "sphere", "mesh")
 

@@ -15,13 +15,14 @@ import shutil
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from lxml import etree
 
 from refine.errors import InputError
 from refine.frames import make_transform, matrix_from_fixed_xyz
-from refine.lazy import lean_imports
+from refine.lazy import lean_imports, on_first_use
 from refine.robot.coupling import JOINT_COUPLINGS
 from refine.robot.description import package_name, resolve_description
 from refine.robot.geometry import read_mesh
@@ -39,7 +40,10 @@ from refine.robot.spec import CONTROLLERS, DEFAULT_PROGRAM, PROGRAMS, SELF_COLLI
 
 with lean_imports():
     import pinocchio as pin
+if TYPE_CHECKING:
     import trimesh
+else:
+    trimesh = on_first_use("trimesh")  # the first mesh call imports it
 
 MAKERS = {
     "abb": "ABB",

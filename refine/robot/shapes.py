@@ -15,17 +15,19 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from lxml import etree
 from scipy.spatial import ConvexHull
 
-from refine.lazy import lean_imports
+from refine.lazy import on_first_use
 from refine.robot.convex import ConvexPiece, convex_cover
 
-with lean_imports():
+if TYPE_CHECKING:
     import trimesh
+else:
+    trimesh = on_first_use("trimesh")  # the first mesh call imports it
 
 SETTINGS: dict[str, Any] = {"max_overshoot_m": 0.015, "max_pieces": 4, "tolerance_m": 0.006, "max_planes": 48}
 """Slab hulls at most 15 mm beyond the mesh, each simplified to <= 48 planes within 6 mm of its hull."""

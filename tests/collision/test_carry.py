@@ -188,6 +188,42 @@ def test_carried_directions_take_the_nearest_waypoints_normal_and_follow_the_pai
     assert carried_directions(model, checked, q[:5]) is None
 
 
+def test_carried_directions_on_random_masks_are_the_brute_force_nearest_with_ties_to_the_earlier():
+    """Normals known at random waypoints of each pair (some pairs none, some one, one all but a
+    tie-making gap): every waypoint takes the normal at the nearest known waypoint, the earlier of
+    two as near, found by a plain search over every known waypoint."""
+    from types import SimpleNamespace
+
+    from refine.collision.carry import CheckedBounds
+
+    rng = np.random.default_rng(3)
+    n, pairs = 30, [(f"a{i}", f"b{i}") for i in range(7)]
+    normals = rng.normal(size=(n, len(pairs), 3))
+    mask = rng.random((n, len(pairs))) < 0.15
+    mask[:, 0] = False  # no normal at all
+    mask[:, 1] = False
+    mask[17, 1] = True  # a single one
+    mask[:, 2] = True
+    mask[10, 2] = False  # 9 and 11 equally near 10: the earlier
+    mask[[3, 5], 3] = True
+    mask[4, 3] = False
+    normals[~mask] = np.nan
+    prior = CheckedBounds(np.zeros((n, 6)), tuple(pairs), np.zeros((n, len(pairs))), {}, np.eye(4), normals)
+    model = SimpleNamespace(pairs=[pairs[i] for i in (4, 2, 0, 6, 1, 3, 5)] + [("new", "pair")])
+    got = carried_directions(model, prior, np.zeros((n, 6)))
+    for p, pair in enumerate(model.pairs):
+        k = pairs.index(pair) if pair in pairs else None
+        known = [] if k is None else [j for j in range(n) if mask[j, k]]
+        for row in range(n):
+            if not known:
+                assert np.isnan(got[row, p]).all()
+                continue
+            near = min(known, key=lambda j: (abs(j - row), j))
+            assert np.array_equal(got[row, p], normals[near, k]), (pair, row)
+    assert np.array_equal(got[10, model.pairs.index(pairs[2])], normals[9, 2])
+    assert np.array_equal(got[4, model.pairs.index(pairs[3])], normals[3, 3])
+
+
 def test_measure_least_with_tightened_and_raised_bounds_stays_exact():
     """Random distances and bounds up to 1 cm under them; each measurement raises its neighbours'
     bounds to within 0.1 mm of the truth, and a tightening raises the rest to within 1 mm once: the

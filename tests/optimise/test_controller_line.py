@@ -184,3 +184,36 @@ def test_the_final_check_takes_the_line_source_s_ik_only_for_the_same_joints_kin
     assert source.checked(q, other_tcp, no_wrist) is None
     assert source.checked(q, ur10e_kin, np.array([True, False])) is None
     assert source.checked(q + 1e-9, ur10e_kin, no_wrist) is None
+
+
+def test_the_newton_start_is_one_damped_step_with_the_jacobian_interpolated_per_sample():
+    """Random waypoint Jacobians, samples and pose errors: each row's start is the joint-linear
+    joints plus J^T (J J^T + damping^2 I)^-1 e with J = J_a + t (J_b - J_a) of its segment, worked
+    out row by row; a row whose step exceeds NEWTON_STEP_MAX keeps the joint-linear joints."""
+    from scipy.spatial.transform import Rotation
+
+    from refine.optimise import controller_line as cl
+
+    rng = np.random.default_rng(7)
+    n_wp, m = 9, 40
+    J_wp = rng.normal(size=(n_wp, 6, 6))
+    segment = np.sort(rng.integers(0, n_wp - 1, m))
+    t = rng.uniform(0.05, 0.95, m)
+    q_lin = rng.normal(size=(m, 6))
+    lin = np.tile(np.eye(4), (m, 1, 1))
+    lin[:, :3, :3] = Rotation.random(m, random_state=1).as_matrix()
+    lin[:, :3, 3] = rng.normal(size=(m, 3))
+    err = rng.normal(size=(m, 6)) * np.where(np.arange(m) % 5 == 0, 1e-1, 1e-5)[:, None]  # some steps too long
+    targets = lin.copy()
+    targets[:, :3, 3] += err[:, :3]
+    targets[:, :3, :3] = Rotation.from_rotvec(err[:, 3:]).as_matrix() @ lin[:, :3, :3]
+    got = cl._newton_start(J_wp, segment, t, q_lin, lin, targets)
+    taken = 0
+    for k in range(m):
+        a, b = J_wp[segment[k]], J_wp[segment[k] + 1]
+        J = a + t[k] * (b - a)
+        dq = J.T @ np.linalg.solve(J @ J.T + cl.NEWTON_DAMPING**2 * np.eye(6), err[k])
+        want = q_lin[k] + dq if np.abs(dq).max() <= cl.NEWTON_STEP_MAX else q_lin[k]
+        taken += np.abs(dq).max() <= cl.NEWTON_STEP_MAX
+        np.testing.assert_allclose(got[k], want, rtol=1e-9, atol=1e-15)
+    assert 0 < taken < m
