@@ -54,14 +54,9 @@ def _coarse(targets: Array, axis_only: bool = False) -> Array:
 
 
 def _chain(
-    kin: TcpKinematics,
-    targets: Array,
-    q_first: Array,
-    lower: Array,
-    upper: Array,
-    axis_only: bool = False,
-    at: Array | None = None,
-) -> tuple[Array, Array]:
+    kin: TcpKinematics, targets: Array, q_first: Array, lower: Array, upper: Array,
+    axis_only: bool = False, at: Array | None = None,
+) -> tuple[Array, Array]:  # fmt: skip
     """IK chained along ``targets`` from ``q_first``.
 
     Waypoints a coarse step apart (:data:`COARSE_STEP_M`, :data:`COARSE_STEP_RAD`) are chained one
