@@ -169,9 +169,20 @@ def ik_chain(
             chain solves only its chained waypoints and these (:func:`_chain`), and judges the
             branches by them.
 
+    With ``prefer_first`` the first start's branch is chained before the other starts are solved
+    (:func:`first_solutions` costs about as much as a chain of 6,400 waypoints when some start does
+    not converge); their branches follow only if that chain does not converge everywhere.
+
     Returns:
         joints (N, n) [rad] and the pose error norm per waypoint (N,), or at ``at`` only.
     """
+    best: tuple[float, Array, Array] | None = None
+    if prefer_first:  # the home's branch first: the other starts are solved only if its chain fails
+        home = first_solutions(kin, targets[0], lower, upper, starts[:1], prefer_first=True, axis_only=axis_only)
+        for qs, errors in _chains(kin, targets, lower, upper, home, axis_only, at):
+            best = (float(errors.max()), qs, errors)
+            if best[0] <= CONVERGED:
+                return qs, errors
     firsts = first_solutions(
         kin, targets[0], lower, upper, starts, prefer_first=prefer_first, axis_only=axis_only
     )
@@ -179,7 +190,8 @@ def ik_chain(
         firsts = [
             solve_ik(kin, targets[0], starts[0], lower, upper, max_iterations=300, axis_only=axis_only)[0]
         ]
-    best: tuple[float, Array, Array] | None = None
+    elif best is not None:  # the home's branch is chained already (first_solutions puts it first)
+        firsts = firsts[1:max_chains]
     for qs, errors in _chains(kin, targets, lower, upper, firsts[:max_chains], axis_only, at):
         score = float(errors.max())
         if best is None or score < best[0]:
