@@ -54,8 +54,9 @@ def _coarse(targets: Array, axis_only: bool = False) -> Array:
 
 
 def _chain(
-    kin: TcpKinematics, targets: Array, q_first: Array, lower: Array, upper: Array, axis_only: bool = False
-) -> tuple[Array, Array]:
+    kin: TcpKinematics, targets: Array, q_first: Array, lower: Array, upper: Array,
+    axis_only: bool = False, at: Array | None = None,
+) -> tuple[Array, Array]:  # fmt: skip
     """IK chained along ``targets`` from ``q_first``.
 
     Waypoints a coarse step apart (:data:`COARSE_STEP_M`, :data:`COARSE_STEP_RAD`) are chained one
@@ -64,22 +65,28 @@ def _chain(
     close to the interpolation, or a coarse chain that does not converge everywhere, is chained
     one waypoint at a time instead, so the answer stays on the branch a full chain would follow.
     ``axis_only``: the spin about the tool axis is free (:func:`refine.robot.kinematics.solve_ik`).
+    ``at``: the waypoints (sorted indices) whose joints are wanted, None for all: the others
+    between the chained ones are not solved, and those asked for are as the whole chain has them
+    unless a span re-chained for a waypoint not asked for.
     """
     coarse = _coarse(targets, axis_only)
     if len(coarse) >= 0.5 * len(targets):
-        return _chain_each(kin, targets, q_first, lower, upper, axis_only)
+        qs, errors = _chain_each(kin, targets, q_first, lower, upper, axis_only)
+        return (qs, errors) if at is None else (qs[at], errors[at])
     qs_c, err_c = _chain_each(kin, targets[coarse], q_first, lower, upper, axis_only)
     if float(err_c.max()) > CONVERGED:
-        return _chain_each(kin, targets, q_first, lower, upper, axis_only)
+        qs, errors = _chain_each(kin, targets, q_first, lower, upper, axis_only)
+        return (qs, errors) if at is None else (qs[at], errors[at])
     N = len(targets)
     qs, errors = np.empty((N, len(q_first))), np.zeros(N)
     qs[coarse], errors[coarse] = qs_c, err_c
-    inner = np.setdiff1d(np.arange(N), coarse)
+    inner = np.setdiff1d(np.arange(N) if at is None else at, coarse)
     seg = np.searchsorted(coarse, inner) - 1  # inner waypoint -> its coarse span
     a, b = coarse[seg], coarse[seg + 1]
     t = ((inner - a) / (b - a))[:, None]
     guess = qs[a] + t * (qs[b] - qs[a])
-    qs[inner], errors[inner] = solve_ik_batch(kin, targets[inner], guess, lower, upper, axis_only=axis_only)
+    if inner.size:
+        qs[inner], errors[inner] = solve_ik_batch(kin, targets[inner], guess, lower, upper, axis_only=axis_only)
     span = np.abs(qs_c[1:] - qs_c[:-1]).max(axis=1)  # per coarse span
     off = np.abs(qs[inner] - guess).max(axis=1)
     bad = (errors[inner] > CONVERGED) | (off > np.maximum(span[seg], 0.05))
@@ -88,7 +95,7 @@ def _chain(
         qs[lo : hi + 1], errors[lo : hi + 1] = _chain_each(
             kin, targets[lo : hi + 1], qs[lo], lower, upper, axis_only
         )
-    return qs, errors
+    return (qs, errors) if at is None else (qs[at], errors[at])
 
 
 def _chain_each(
@@ -139,6 +146,7 @@ def ik_chain(
     max_chains: int = 4,
     prefer_first: bool = False,
     axis_only: bool = False,
+    at: Array | None = None,
 ) -> tuple[Array, Array]:
     """IK chained along ``targets`` (N, 4, 4), trying the distinct first-waypoint solutions of ``starts``.
 
@@ -157,10 +165,24 @@ def ik_chain(
         prefer_first: chain the first start's branch first (the problem's home), whatever its
             joint margin; otherwise branches are tried by decreasing joint margin.
         axis_only: reach the targets' positions and tool axes, the spin about the axis free.
+        at: sorted waypoint indices, the first 0, whose joints alone are wanted (None: all); the
+            chain solves only its chained waypoints and these (:func:`_chain`), and judges the
+            branches by them.
+
+    With ``prefer_first`` the first start's branch is chained before the other starts are solved
+    (:func:`first_solutions` costs about as much as a chain of 6,400 waypoints when some start does
+    not converge); their branches follow only if that chain does not converge everywhere.
 
     Returns:
-        joints (N, n) [rad] and the pose error norm per waypoint (N,).
+        joints (N, n) [rad] and the pose error norm per waypoint (N,), or at ``at`` only.
     """
+    best: tuple[float, Array, Array] | None = None
+    if prefer_first:  # the home's branch first: the other starts are solved only if its chain fails
+        home = first_solutions(kin, targets[0], lower, upper, starts[:1], prefer_first=True, axis_only=axis_only)
+        for qs, errors in _chains(kin, targets, lower, upper, home, axis_only, at):
+            best = (float(errors.max()), qs, errors)
+            if best[0] <= CONVERGED:
+                return qs, errors
     firsts = first_solutions(
         kin, targets[0], lower, upper, starts, prefer_first=prefer_first, axis_only=axis_only
     )
@@ -168,8 +190,9 @@ def ik_chain(
         firsts = [
             solve_ik(kin, targets[0], starts[0], lower, upper, max_iterations=300, axis_only=axis_only)[0]
         ]
-    best: tuple[float, Array, Array] | None = None
-    for qs, errors in _chains(kin, targets, lower, upper, firsts[:max_chains], axis_only):
+    elif best is not None:  # the home's branch is chained already (first_solutions puts it first)
+        firsts = firsts[1:max_chains]
+    for qs, errors in _chains(kin, targets, lower, upper, firsts[:max_chains], axis_only, at):
         score = float(errors.max())
         if best is None or score < best[0]:
             best = (score, qs, errors)
@@ -225,16 +248,20 @@ def _chains(
     upper: Array,
     firsts: list[Array],
     axis_only: bool = False,
+    at: Array | None = None,
 ):
-    """Chain IK from each first-waypoint solution in turn (a generator: chains cost time)."""
+    """Chain IK from each first-waypoint solution in turn (a generator: chains cost time).
+
+    ``at``: the waypoints whose joints are wanted (:func:`ik_chain`); None for all.
+    """
     wraps = upper - lower > 2 * np.pi
     free_lower, free_upper = np.where(wraps, -np.inf, lower), np.where(wraps, np.inf, upper)
     for q_first in firsts:
-        qs, errors = _chain(kin, targets, q_first, free_lower, free_upper, axis_only)
+        qs, errors = _chain(kin, targets, q_first, free_lower, free_upper, axis_only, at)
         qs = shift_turns(qs, lower, upper)
         outside = np.any(qs < lower - 1e-9, axis=0) | np.any(qs > upper + 1e-9, axis=0)
         if np.any(outside & ~wraps):
-            qs, errors = _chain(kin, targets, np.clip(qs[0], lower, upper), lower, upper, axis_only)
+            qs, errors = _chain(kin, targets, np.clip(qs[0], lower, upper), lower, upper, axis_only, at)
         elif np.any(outside):
             # a multi-turn joint whose excursion exceeds its range: no whole-turn shift fits it, so
             # centre it exactly (turning the tool by the shift) and clip both ends; the strict
@@ -242,14 +269,14 @@ def _chains(
             for j in np.flatnonzero(outside):
                 qs[:, j] += 0.5 * (lower[j] + upper[j]) - 0.5 * (qs[:, j].max() + qs[:, j].min())
             qs = np.clip(qs, lower, upper)
-            reached = kin.poses(qs)
+            reached, wanted = kin.poses(qs), targets if at is None else targets[at]
             if axis_only:  # the poses' errors only (the Jacobians passed are placeholders)
                 errors = np.linalg.norm(
-                    axis_error(reached, targets, np.zeros((len(qs), 6, qs.shape[1]))), axis=1
+                    axis_error(reached, wanted, np.zeros((len(qs), 6, qs.shape[1]))), axis=1
                 )
             else:
                 errors = np.array(
-                    [np.linalg.norm(pose_error(P, T)) for P, T in zip(reached, targets, strict=True)]
+                    [np.linalg.norm(pose_error(P, T)) for P, T in zip(reached, wanted, strict=True)]
                 )
         yield qs, errors
 
@@ -320,6 +347,17 @@ def initial_guess(problem: RefinementNLP, home: Array | None = None, rotations: 
     ``rotations`` (N, 3, 3) replaces the demonstrated tool orientations as IK targets (e.g. tilted
     into reach, :func:`refine.optimise.diagnosis.reach_tilts`).
     """
+    return chained_seed(problem, home, rotations)[0]
+
+
+def chained_seed(
+    problem: RefinementNLP, home: Array | None = None, rotations: Array | None = None, at: Array | None = None
+) -> tuple[Array, Array]:
+    """:func:`initial_guess`'s joints [rad] and pose error per waypoint, or at the waypoints ``at`` only.
+
+    ``at``: sorted waypoint indices, the first 0 (:func:`ik_chain`): the chain then solves only
+    its chained waypoints and these, which costs a fraction of the whole chain on a long path.
+    """
     lower, upper = problem_bounds(problem)
     starts = start_candidates(lower, upper, home)
     targets = problem_targets(problem)
@@ -334,7 +372,7 @@ def initial_guess(problem: RefinementNLP, home: Array | None = None, rotations: 
         if reach.spherical:
             spins = path_spins(reach, targets, problem.base_in_world, problem.tcp_in_flange, problem.tool_in_world)
             targets, axis_only = spun(targets, spins), False
-    qs, _ = ik_chain(
+    return ik_chain(
         problem_kinematics(problem),
         targets,
         lower,
@@ -342,8 +380,8 @@ def initial_guess(problem: RefinementNLP, home: Array | None = None, rotations: 
         starts,
         prefer_first=home is not None,
         axis_only=axis_only,
+        at=at,
     )
-    return qs
 
 
 def seed_axis_only(problem: RefinementNLP) -> bool:

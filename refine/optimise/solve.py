@@ -35,6 +35,7 @@ from refine.optimise.rounds import MAX_OUTER_ITERATIONS
 from refine.optimise.seed import (
     REACH_TOLERANCE_M,
     alternative_seeds,
+    chained_seed,
     initial_guess,
     out_of_reach,
     seed_axis_only,
@@ -155,12 +156,29 @@ def solve_refinement(
             final = _refreshed_rows(final, sources, q0)
         if final is not None:
             problem, multipliers = final, warm.multipliers
-    q_seed = initial_guess(problem, home, rotations) if q0 is None else np.asarray(q0, dtype=float)
-    unreachable = out_of_reach(problem, q_seed, home)
-    add_time(timings, "seed", start)
     cone = problem.tolerances.orientation_deg
     slack_max = repair_max_slack_deg if repair_max_slack_deg is not None else 0.0
     beyond = certain & (tilts > cone + slack_max + TILT_TOLERANCE_DEG)
+    skip_strict = (
+        "not run (the demonstrated orientation is out of reach beyond the cone)"
+        if (certain & (tilts > cone + TILT_TOLERANCE_DEG)).any()
+        else ""
+    )
+    # a redundant arm's seed comes from a coarse refinement (coarse_seed), which needs the chained
+    # IK at its waypoints alone; the whole chain is the fallback where that seed fails
+    coarse_at = coarse_waypoints(problem) if q0 is None and rotations is None else None
+    coarse_iterations, smooth = 0, None
+    if coarse_at is not None and not skip_strict and not beyond.any():
+        chain_at, chain_errors = chained_seed(problem, home, at=coarse_at)
+        if float(chain_errors.max()) <= CONVERGED:  # else as before: the whole chain, then coarse_seed
+            smooth, coarse_iterations = _coarse_seed_at(problem, coarse_at, chain_at)
+            coarse_at = None  # tried: not again from the whole chain
+    if smooth is not None:
+        q_seed = smooth
+    else:
+        q_seed = initial_guess(problem, home, rotations) if q0 is None else np.asarray(q0, dtype=float)
+    unreachable = out_of_reach(problem, q_seed, home)
+    add_time(timings, "seed", start)
     if not unreachable and beyond.any():
         t1, c1 = StageTimes.clock()
         findings = findings_of(problem, sources, "infeasible", q_seed, beyond)
@@ -174,11 +192,6 @@ def solve_refinement(
         return unsolved(
             problem, q_seed, reason, "not run (orientation out of reach beyond the slack)", timings, findings
         )
-    skip_strict = (
-        "not run (the demonstrated orientation is out of reach beyond the cone)"
-        if (certain & (tilts > cone + TILT_TOLERANCE_DEG)).any()
-        else ""
-    )
     if unreachable:
         check = check_path(kin, q_seed, problem.fused, problem.tolerances, problem.axisymmetric)
         t0, c0 = StageTimes.clock()
@@ -202,15 +215,14 @@ def solve_refinement(
             diagnosis=findings,
         )
 
-    coarse_iterations = 0
     first_options: dict = {}
-    if q0 is None and rotations is None and not skip_strict:
+    if coarse_at is not None and not skip_strict:  # a chained seed the coarse refinement did not see
         seeding = StageTimes.clock()
         smooth, coarse_iterations = coarse_seed(problem, q_seed)
         q_seed = q_seed if smooth is None else smooth
-        if smooth is not None and problem.tool_in_world is not None and problem.solver_name == "ipopt":
-            first_options = {"ipopt.mu_init": COARSE_SEEDED_MU_INIT}
         add_time(timings, "seed", seeding)
+    if smooth is not None and problem.tool_in_world is not None and problem.solver_name == "ipopt":
+        first_options = {"ipopt.mu_init": COARSE_SEEDED_MU_INIT}
 
     deadline = t0 + time_limit_s if time_limit_s is not None else math.inf
 
@@ -386,20 +398,38 @@ def coarse_seed(problem: RefinementNLP, q_seed: Array) -> tuple[Array | None, in
     waypoint, while the refined path puts it where the whole path's joint motion is least: IPOPT
     then needs 150-300 iterations to move it there (LBR iiwa without a mid-range cost). The same
     refinement over evenly spaced waypoints (every :data:`COARSE_SEED_STRIDE`-th, at least
-    :data:`COARSE_SEED_WAYPOINTS`; seeded with the chained joints there; the joint-step bound
+    :data:`COARSE_SEED_WAYPOINTS`, :func:`coarse_waypoints`; seeded with the chained joints
+    there, which the refinement chains at those waypoints alone; the joint-step bound
     scaled by the spacing, at most 360 deg; no clearance rows) finds that elbow cheaply. Its
     joints, interpolated along the arc length and projected onto every waypoint's exact pose by
     least-squares IK without null-space drift, start the full solve next to its answer. None for
     a non-redundant arm, a path shorter than :data:`COARSE_SEED_MIN_PATH`, a coarse refinement
     that is not ``ok`` or a projection that misses a pose.
     """
-    from refine.paths import FusedPath
+    idx = coarse_waypoints(problem)
+    if idx is None:
+        return None, 0
+    return _coarse_seed_at(problem, idx, np.asarray(q_seed, dtype=float)[idx])
 
+
+def coarse_waypoints(problem: RefinementNLP) -> Array | None:
+    """The waypoints of :func:`coarse_seed`'s coarse copy (sorted indices, the first 0), or None.
+
+    Every :data:`COARSE_SEED_STRIDE`-th waypoint, at least :data:`COARSE_SEED_WAYPOINTS`, evenly
+    spaced and rounded; None for a non-redundant arm or a path shorter than
+    :data:`COARSE_SEED_MIN_PATH`.
+    """
     N = problem.n_waypoints
     if problem.dof <= 6 or N < COARSE_SEED_MIN_PATH:
-        return None, 0
+        return None
     count = max(COARSE_SEED_WAYPOINTS, N // COARSE_SEED_STRIDE)
-    idx = np.unique(np.linspace(0, N - 1, count).round().astype(int))
+    return np.unique(np.linspace(0, N - 1, count).round().astype(int))
+
+
+def _coarse_seed_at(problem: RefinementNLP, idx: Array, q_coarse: Array) -> tuple[Array | None, int]:
+    """:func:`coarse_seed` from the joints ``q_coarse`` [rad] at the coarse waypoints ``idx``."""
+    from refine.paths import FusedPath
+
     f = problem.fused
     coarse_path = FusedPath(
         f.s[idx], f.positions[idx], f.rotations[idx], f.speed[idx], f.t_demo[idx], f.residual[idx]
@@ -408,7 +438,7 @@ def coarse_seed(problem: RefinementNLP, q_seed: Array) -> tuple[Array | None, in
     step = min(problem.tolerances.joint_step_deg * spread, 360.0)  # 360 deg: no bound at all
     tolerances = replace(problem.tolerances, joint_step_deg=step)
     coarse = problem.rebuilt(fused=coarse_path, tolerances=tolerances, active=ActiveSet(), joint_steps=())
-    answer = solve_refinement(coarse, q_seed[idx])
+    answer = solve_refinement(coarse, q_coarse)
     if answer.status != "ok":
         log.info(
             "coarse seed: the %d-waypoint refinement is %s; the chained IK seed stays",
