@@ -51,6 +51,7 @@ def solve_with_repair(
     stretched: Array | None = None,
     multipliers: tuple[dict[tuple, float], Array] | None = None,
     first_options: dict | None = None,
+    seed_jacobians: Array | None = None,
 ) -> Refinement:
     """Strict solve from ``q_seed``, then the elastic repair when the strict problem fails.
 
@@ -63,12 +64,15 @@ def solve_with_repair(
     solver pulls the wrist in. ``multipliers`` (a previous solve's of the same rows, see
     :class:`RoundLoop`) warm-start the first strict solve. ``first_options`` (solver options) hold
     for the first strict solve only, less the keys the problem's caller gave; the later rounds and
-    the elastic problem are built with the problem's own options.
+    the elastic problem are built with the problem's own options. ``seed_jacobians``: the TCP
+    Jacobians (N, 6, n) at ``q_seed`` when the caller has them (a warm seed's projection), or None.
     """
     kin = problem_kinematics(problem)
     loop = RoundLoop(problem, timings, max_rounds=max_rounds, deadline=deadline, multipliers=multipliers)
     start = StageTimes.clock()  # the constraints the seed shows to be needed count as seeding
-    initial = new_singular_points(kin, q_seed, problem.tolerances.singularity_margin, problem.active)
+    initial = new_singular_points(
+        kin, q_seed, problem.tolerances.singularity_margin, problem.active, jacobians=seed_jacobians
+    )
     if stretched is not None and stretched.any() and problem.tolerances.singularity_margin > 0:
         initial = initial.union(singular_around(stretched))
     seed_rows = tuple(r for src in sources for r in src.rows(problem, q_seed))
