@@ -104,8 +104,10 @@ def solve_with_repair(
         strict_reason = describe_check(check, stats)
     status = "ok" if check.ok and not skip_strict else "infeasible"
     repairs: tuple[Repair, ...] = ()
+    strict_problem = None
 
     if status == "infeasible" and repair_max_slack_deg is not None and repair_max_slack_deg > 0:
+        strict_problem = loop.problem  # its rows are the elastic problem's: a re-solve's start
         loop.rebuild(active=loop.problem.active, elastic_deg=repair_max_slack_deg)
         used = used or dict(loop.problem.solver_options)
         # start from the seed (on the path, orientation off only where the limits clamped it), with
@@ -189,4 +191,5 @@ def solve_with_repair(
         problem=loop.problem,
         multipliers=loop.multipliers,
         first_options=used,
+        strict_problem=strict_problem if loop.problem.elastic_deg is not None else None,
     )

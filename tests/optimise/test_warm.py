@@ -248,3 +248,25 @@ def test_a_warm_seed_hands_back_the_tool_jacobians_at_the_joints_it_returns():
             numeric[:3, j] = (Tu[:3, 3] - Td[:3, 3]) / (2 * h)
             numeric[3:, j] = rotation_vectors((Tu[:3, :3] @ Td[:3, :3].T)[None])[0] / (2 * h)
         assert np.abs(J[k] - numeric).max() <= 1e-6, k
+
+
+def test_a_re_solve_after_a_repair_starts_from_the_strict_problem_the_repair_grew_from(monkeypatch):
+    """A repaired answer keeps its strict problem; the re-solve takes it (not the elastic one) as its start."""
+    from pathlib import Path
+
+    import refine.optimise.solve as solve_module
+
+    problem = refine.load_problem(Path(__file__).resolve().parents[2] / "problems" / "unreachable" / "joint_limit")
+    first = refine.solve(problem)
+    refinement = first.run.first.refinement
+    assert first.status == "repaired" and refinement.problem.elastic_deg is not None
+    strict = refinement.strict_problem
+    assert strict is not None and strict.elastic_deg is None
+    assert set(strict.active.singular_waypoints) <= set(refinement.problem.active.singular_waypoints)
+    started = []
+    reuse = solve_module.reuse_final
+    monkeypatch.setattr(solve_module, "reuse_final", lambda final, *a: started.append(final) or reuse(final, *a))
+    again = refine.solve(problem, previous=first)
+    assert len(started) == 1 and started[0] is strict  # kept, and no multipliers of the elastic solve (other rows) with it
+    assert again.status == "repaired"
+    assert np.abs(again.joints - first.joints).max() <= 1e-6
