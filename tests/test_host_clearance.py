@@ -131,3 +131,19 @@ def test_the_raised_glass_cell_with_a_narrow_cone_keeps_every_tolerance_it_is_re
         assert m["min_cell_clearance_m"] >= tol["clearance_m"] - 1e-6
         assert m["min_self_clearance_m"] >= tol["self_clearance_m"] - 1e-6
         assert not [row for row in figure_rows(doc) if row[3] is False]
+
+
+def test_the_bounds_are_visited_in_a_stable_sort_s_order_however_many_and_with_ties():
+    from itertools import islice
+
+    from refine.run.clearance_kinds import SORTED_FIRST, ascending
+
+    rng = np.random.default_rng(3)
+    for size in (0, 1, SORTED_FIRST, SORTED_FIRST + 1, 5000):
+        values = rng.integers(0, 7, size).astype(float)  # many ties
+        values[rng.random(size) < 0.1] = -np.inf  # boxes overlapping
+        values[rng.random(size) < 0.05] = np.inf
+        values[rng.random(size) < 0.05] = np.nan
+        expected = np.argsort(values, kind="stable").tolist()  # numpy's own stable sort
+        assert list(ascending(values.reshape(-1, 5) if size % 5 == 0 else values)) == expected
+        assert list(islice(ascending(values), 3)) == expected[:3]

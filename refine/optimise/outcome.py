@@ -83,6 +83,9 @@ class Refinement:
         problem: the last problem solved (with the active set and joint-step rows the rounds
             found), for a re-solve to start from (:mod:`refine.optimise.warm`); None when none was solved.
         multipliers: that solve's multipliers by row and of the variable bounds, or None.
+        strict_problem: when ``problem`` is the elastic (repair) problem, the strict problem it was
+            built from (the active set and joint-step rows the strict rounds found), for a re-solve
+            to start from instead; None otherwise.
         first_options: the solver options of the first solve of the full problem that gave this
             result (the later rounds' and the repair's differ, :mod:`refine.optimise.rounds`); empty
             when none was solved.
@@ -105,10 +108,11 @@ class Refinement:
     problem: RefinementNLP | None = None
     multipliers: tuple[dict[tuple, float], Array] | None = None
     first_options: dict[str, Any] = field(default_factory=dict)
+    strict_problem: RefinementNLP | None = None
 
     def __getstate__(self) -> dict[str, Any]:
         # the built problem's CasADi expressions and solver stay in the process that built them
-        return {**self.__dict__, "problem": None}
+        return {**self.__dict__, "problem": None, "strict_problem": None}
 
 
 def problem_targets(problem: RefinementNLP) -> Array:

@@ -51,6 +51,7 @@ def solve_with_repair(
     stretched: Array | None = None,
     multipliers: tuple[dict[tuple, float], Array] | None = None,
     first_options: dict | None = None,
+    seed_jacobians: Array | None = None,
 ) -> Refinement:
     """Strict solve from ``q_seed``, then the elastic repair when the strict problem fails.
 
@@ -63,12 +64,15 @@ def solve_with_repair(
     solver pulls the wrist in. ``multipliers`` (a previous solve's of the same rows, see
     :class:`RoundLoop`) warm-start the first strict solve. ``first_options`` (solver options) hold
     for the first strict solve only, less the keys the problem's caller gave; the later rounds and
-    the elastic problem are built with the problem's own options.
+    the elastic problem are built with the problem's own options. ``seed_jacobians``: the TCP
+    Jacobians (N, 6, n) at ``q_seed`` when the caller has them (a warm seed's projection), or None.
     """
     kin = problem_kinematics(problem)
     loop = RoundLoop(problem, timings, max_rounds=max_rounds, deadline=deadline, multipliers=multipliers)
     start = StageTimes.clock()  # the constraints the seed shows to be needed count as seeding
-    initial = new_singular_points(kin, q_seed, problem.tolerances.singularity_margin, problem.active)
+    initial = new_singular_points(
+        kin, q_seed, problem.tolerances.singularity_margin, problem.active, jacobians=seed_jacobians
+    )
     if stretched is not None and stretched.any() and problem.tolerances.singularity_margin > 0:
         initial = initial.union(singular_around(stretched))
     seed_rows = tuple(r for src in sources for r in src.rows(problem, q_seed))
@@ -100,8 +104,10 @@ def solve_with_repair(
         strict_reason = describe_check(check, stats)
     status = "ok" if check.ok and not skip_strict else "infeasible"
     repairs: tuple[Repair, ...] = ()
+    strict_problem = None
 
     if status == "infeasible" and repair_max_slack_deg is not None and repair_max_slack_deg > 0:
+        strict_problem = loop.problem  # its rows are the elastic problem's: a re-solve's start
         loop.rebuild(active=loop.problem.active, elastic_deg=repair_max_slack_deg)
         used = used or dict(loop.problem.solver_options)
         # start from the seed (on the path, orientation off only where the limits clamped it), with
@@ -185,4 +191,5 @@ def solve_with_repair(
         problem=loop.problem,
         multipliers=loop.multipliers,
         first_options=used,
+        strict_problem=strict_problem if loop.problem.elastic_deg is not None else None,
     )

@@ -63,20 +63,26 @@ complete problem's."""
 
 
 def new_singular_points(
-    kin: TcpKinematics, q: Array, margin: float, active: ActiveSet, check: PathCheck | None = None
+    kin: TcpKinematics,
+    q: Array,
+    margin: float,
+    active: ActiveSet,
+    check: PathCheck | None = None,
+    jacobians: Array | None = None,
 ) -> ActiveSet:
     """Waypoints and segment points near the singularity not yet bounded in ``active``.
 
     ``check``: the check of ``q`` (:func:`refine.optimise.verify.check_path`), whose measures at the
     waypoints and inside the segments are these (the same functions of the same joints), or None
-    to compute them.
+    to compute them. ``jacobians``: the TCP Jacobians (N, 6, n) at ``q`` when the caller has them
+    (a warm seed's projection, :func:`refine.optimise.warm.warm_seed`), or None.
     """
     if margin <= 0:
         return ActiveSet()
     if check is not None and check.singularity_between_at is not None:
         w, w_between, frac = check.singularity, check.singularity_between, check.singularity_between_at
     else:
-        w = singularity_measures(kin, q, smallest=False)[0]
+        w = singularity_measures(kin, q, smallest=False, jacobians=jacobians)[0]
         w_between, frac = segment_singularity(kin, q)
     near = np.flatnonzero(w < 1.5 * margin)
     widened = np.unique(np.clip(near[:, None] + np.arange(-2, 3), 0, len(q) - 1)) if near.size else near

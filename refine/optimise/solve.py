@@ -141,12 +141,15 @@ def solve_refinement(
         )
         stretched = inset > 0.0
     multipliers = None
+    seed_jacobians = None  # the TCP Jacobians at a warm seed, from its projection
     if warm is not None:
         for src in sources:
             carry = getattr(src, "carry_from", None)
             if carry is not None and warm.clearance is not None:
                 carry(warm.clearance)
-        q0 = warm_seed(problem, warm)
+        if problem.tolerances.singularity_margin > 0:  # the seed's measures start from these
+            seed_jacobians = np.empty((problem.n_waypoints, 6, problem.dof))
+        q0 = warm_seed(problem, warm, seed_jacobians)
         final = None
         if warm.problem is not None and warm.reusable:
             final = reuse_final(warm.problem, problem, problem.fused, problem.tolerances)
@@ -229,6 +232,7 @@ def solve_refinement(
     repairing = repair_max_slack_deg is not None and repair_max_slack_deg > 0
 
     def attempt_from(seed: Array, skip: str = skip_strict, options: dict | None = None) -> Refinement:
+        jacobians = seed_jacobians if seed is q_seed else None
         return solve_with_repair(
             problem,
             seed,
@@ -241,6 +245,7 @@ def solve_refinement(
             stretched,
             multipliers,
             options,
+            jacobians,
         )
 
     try:

@@ -62,7 +62,7 @@ class WarmStart:
     reusable: bool = True
 
 
-def warm_seed(problem: RefinementNLP, warm: WarmStart) -> Array:
+def warm_seed(problem: RefinementNLP, warm: WarmStart, jacobians_out: Array | None = None) -> Array:
     """The previous joints moved onto ``problem``'s poses (N, n) [rad].
 
     Each waypoint's target is the new CAD position with the previous reached orientation turned by
@@ -71,6 +71,8 @@ def warm_seed(problem: RefinementNLP, warm: WarmStart) -> Array:
     where they were. Least-squares IK (:func:`refine.robot.kinematics.solve_ik_batch`, no
     null-space drift) from the previous joints moves each waypoint the least. A waypoint whose
     projection does not converge keeps what the IK reached (the NLP takes it from there).
+    ``jacobians_out``: an array (N, 6, n) to receive the TCP Jacobian at each returned row (the
+    projection's own last evaluation where it moved the joints), or None.
     """
     q0 = np.asarray(warm.q, dtype=float)
     kin = problem_kinematics(problem)
@@ -85,11 +87,16 @@ def warm_seed(problem: RefinementNLP, warm: WarmStart) -> Array:
     position = np.linalg.norm(reached[:, :3, 3] - targets[:, :3, 3], axis=1)
     cos = (np.einsum("kij,kij->k", reached[:, :3, :3], R) - 1.0) / 2.0
     turn = np.arccos(np.clip(cos, -1.0, 1.0))
-    off = np.flatnonzero(position + turn > CONVERGED)
-    if not off.size:
+    off = position + turn > CONVERGED
+    if jacobians_out is not None and not off.all():
+        jacobians_out[~off] = kin.jacobians(q0[~off])
+    if not off.any():
         return q0
     q = q0.copy()
-    q[off], _ = solve_ik_batch(kin, targets[off], q0[off], lower, upper, nullspace_gain=0.0)
+    moved = None if jacobians_out is None else np.empty((int(off.sum()),) + jacobians_out.shape[1:])
+    q[off], _ = solve_ik_batch(kin, targets[off], q0[off], lower, upper, nullspace_gain=0.0, jacobians_out=moved)
+    if moved is not None:
+        jacobians_out[off] = moved
     return q
 
 

@@ -54,11 +54,16 @@ def solve_again(
             # the previous joints moved onto the new poses, and its last problem and multipliers:
             # kept where the robot, tool and weights are the same, else their rows taken over by
             # the new problem (refine.optimise.warm)
+            last, multipliers = first.refinement.problem, first.refinement.multipliers
+            if first.refinement.strict_problem is not None:
+                # a repaired answer: the strict problem it grew from, whose rows the strict
+                # re-solve needs again; the elastic solve's multipliers are not its
+                last, multipliers = first.refinement.strict_problem, None
             warm = WarmStart(
                 first.refinement.q,
                 first.fused.rotations if len(first.fused) == len(fused) else None,
-                first.refinement.problem,
-                first.refinement.multipliers,
+                last,
+                multipliers,
                 first.clearance,
                 reusable=nlp is not None,
             )

@@ -16,6 +16,7 @@ way round. :func:`kind_minima` gives each kind's own least distance:
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -68,22 +69,32 @@ def kind_minima(model: Any, q: Array, clearance: Any) -> KindMinima:
             out.append(None)
             continue
         best = _between_waypoints(clearance, kinds, kind, float(margins[columns[0]]))
-        sub = bounds[:, columns].ravel()
-        first = int(np.argmin(sub))  # the least bound: measured first
-        if sub[first] < best:
-            best = min(best, model.pair_distance(q[first // len(columns)], int(columns[first % len(columns)])))
-            queries += 1
-        left = np.flatnonzero(sub < best)  # in the order of their bounds, until none can come closer
-        for flat in left[np.argsort(sub[left], kind="stable")]:
-            if flat == first:
-                continue
-            if sub[flat] >= best:
-                break  # no pair left can come closer
+        sub = bounds[:, columns]
+        for flat in ascending(sub):
             i, j = divmod(int(flat), len(columns))
+            if sub[i, j] >= best:
+                break  # no pair left can come closer
             best = min(best, model.pair_distance(q[i], int(columns[j])))
             queries += 1
         out.append(float(best))
     return KindMinima(out[0], out[1], queries)
+
+
+SORTED_FIRST = 64
+"""How many of the smallest bounds :func:`ascending` sorts before the rest are asked for."""
+
+
+def ascending(values: Array) -> Iterator[int]:
+    """The flat indices of ``values`` in ascending order, ties by index (NaN last), as a stable sort gives them.
+
+    Lazily: the :data:`SORTED_FIRST` smallest entries are sorted first, the rest only when the
+    caller asks past them (the search for the least distance usually stops within a few bounds).
+    """
+    flat = np.asarray(values, dtype=float).ravel()
+    cut = np.partition(flat, SORTED_FIRST)[SORTED_FIRST] if flat.size > SORTED_FIRST else np.inf
+    below = flat < cut  # every entry under the cut comes before every other in the sorted order
+    for part in (np.flatnonzero(below), np.flatnonzero(~below)):
+        yield from part[np.argsort(flat[part], kind="stable")].tolist()
 
 
 def _between_waypoints(clearance: Any, kinds: dict[str, str], cell: bool, margin_m: float) -> float:

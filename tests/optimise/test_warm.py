@@ -216,3 +216,57 @@ def test_a_kept_clearance_row_asks_for_the_margin_from_where_the_object_moved():
     assert before[0].lower == pytest.approx(0.01 + BACK_OFF_M - 0.25, abs=1e-6)
     assert after[0].lower - before[0].lower == pytest.approx(0.005, abs=1e-7)
     assert after[1] is rows[1]  # a pair the source does not check is kept
+
+
+def test_a_warm_seed_hands_back_the_tool_jacobians_at_the_joints_it_returns():
+    """The Jacobians the projection leaves (moved rows) and takes (kept rows) are those of the seed itself.
+
+    Checked against central differences of forward kinematics (position, and the rotation vector of
+    ``R(q + h) R(q)ᵀ``), at waypoints the projection moved and at waypoints it left alone.
+    """
+    from refine.optimise.outcome import problem_kinematics
+    from refine.optimise.warm import WarmStart, warm_seed
+    from refine.robot.kinematics import rotation_vectors
+
+    positions, R, cell, tool = cell_line()
+    first = refine.refine_path("ur10e", positions, R, cell=cell, speeds=0.1, tcp_in_flange=TCP, tool_shapes=tool)
+    problem = first.run.first.refinement.problem
+    q_prev = first.joints.copy()
+    q_prev[::3] += 0.01  # every third waypoint off its pose: projected; the others kept
+    J = np.full((N, 6, q_prev.shape[1]), np.nan)
+    q = warm_seed(problem, WarmStart(q_prev, R), jacobians_out=J)
+    assert np.abs(q[::3] - q_prev[::3]).max() > 1e-3 and np.array_equal(q[1::3], q_prev[1::3])
+    kin = problem_kinematics(problem)
+    h = 1e-6
+    for k in (0, 1, 9, 10, N - 1):
+        numeric = np.zeros((6, q.shape[1]))
+        for j in range(q.shape[1]):
+            up, down = q[k].copy(), q[k].copy()
+            up[j] += h
+            down[j] -= h
+            Tu, Td = kin.poses(np.array([up, down]))
+            numeric[:3, j] = (Tu[:3, 3] - Td[:3, 3]) / (2 * h)
+            numeric[3:, j] = rotation_vectors((Tu[:3, :3] @ Td[:3, :3].T)[None])[0] / (2 * h)
+        assert np.abs(J[k] - numeric).max() <= 1e-6, k
+
+
+def test_a_re_solve_after_a_repair_starts_from_the_strict_problem_the_repair_grew_from(monkeypatch):
+    """A repaired answer keeps its strict problem; the re-solve takes it (not the elastic one) as its start."""
+    from pathlib import Path
+
+    import refine.optimise.solve as solve_module
+
+    problem = refine.load_problem(Path(__file__).resolve().parents[2] / "problems" / "unreachable" / "joint_limit")
+    first = refine.solve(problem)
+    refinement = first.run.first.refinement
+    assert first.status == "repaired" and refinement.problem.elastic_deg is not None
+    strict = refinement.strict_problem
+    assert strict is not None and strict.elastic_deg is None
+    assert set(strict.active.singular_waypoints) <= set(refinement.problem.active.singular_waypoints)
+    started = []
+    reuse = solve_module.reuse_final
+    monkeypatch.setattr(solve_module, "reuse_final", lambda final, *a: started.append(final) or reuse(final, *a))
+    again = refine.solve(problem, previous=first)
+    assert len(started) == 1 and started[0] is strict  # kept, and no multipliers of the elastic solve (other rows) with it
+    assert again.status == "repaired"
+    assert np.abs(again.joints - first.joints).max() <= 1e-6
