@@ -8,9 +8,9 @@ only the newest problem asked for, so a drag that sends many changes never queue
 
 A re-solve starts from the previous answer: the fused path is reused when the change leaves the
 CAD path and the demonstration alone, moved rigidly when the workpiece moved with its receiver,
-and the solve starts as ``refine.solve(..., previous=...)`` does (:mod:`refine.optimise.warm`:
+and the solve starts as ``refine.solve(..., previous=...)`` does (:func:`refine.run.again.warm_from`:
 the previous joints moved onto the new poses, the previous last problem and multipliers kept where
-robot, base, tool and weights are the same). A solve still running when a newer change comes is
+robot, base, tool and weights are the same, else their rows taken over by the new problem). A solve still running when a newer change comes is
 stopped (:func:`refine.control.controlled`). Writing saves the problem
 file and runs it as ``refine run`` does (:func:`refine.run.write.run`), from the saved file.
 """
@@ -33,16 +33,14 @@ from refine.control import controlled
 from refine.errors import Cancelled, InputError
 from refine.frames import invert_transform
 from refine.optimise.moves import moved_path
-from refine.optimise.problem import RefinementNLP, reuse_for
-from refine.optimise.warm import WarmStart, built_for
 from refine.paths import FusedPath
 from refine.problem import Problem, load_problem
-from refine.robot.model import Robot
 from refine.robot.registry import robot_for
+from refine.run.again import warm_from
 from refine.run.placement import PlacementRepair
 from refine.run.result import RunResult
 from refine.run.solve import solve_problem
-from refine.run.stages import fused_tracks, weights_for
+from refine.run.stages import fused_tracks
 from refine.serve.edits import apply_changes, check_keys
 
 log = logging.getLogger(__name__)
@@ -211,30 +209,6 @@ def near(previous: RunResult, fused: FusedPath) -> bool:
     return bool(np.linalg.norm(old - fused.positions, axis=1).max() <= WARM_MOVE_M)
 
 
-def warm_start(
-    previous: RunResult, problem: Problem, robot: Robot, fused: FusedPath
-) -> tuple[RefinementNLP | None, WarmStart | None]:
-    """The built problem to reuse and the start :func:`resolve` takes from ``previous`` (its docstring).
-
-    The previous last problem and multipliers are kept only with its built problem, which needs the
-    same base, tool and weights (:func:`refine.optimise.problem.reuse_for` checks the rest).
-    """
-    first = previous.first
-    built = first.nlp
-    setup = built_for(built, problem.robot.base_in_world, problem.tool, weights_for(problem, robot))
-    nlp = reuse_for(built, fused, problem.tolerances) if setup else None
-    if first.refinement.q.shape != (len(fused), robot.nq):
-        return nlp, None
-    kept = nlp is not None
-    return nlp, WarmStart(
-        q=first.refinement.q,
-        rotations=first.fused.rotations if len(first.fused) == len(fused) else None,
-        problem=first.refinement.problem if kept else None,
-        multipliers=first.refinement.multipliers if kept else None,
-        clearance=first.clearance,
-    )
-
-
 def resolve(
     problem: Problem,
     fused: FusedPath | Sequence[FusedPath],
@@ -246,9 +220,10 @@ def resolve(
     ``fused`` is the first pass's path or the paths of every track of the CAD file (each a pass,
     the first warm-started); ``quality`` the demonstration quality gate's figures kept in the result.
 
-    The start is :class:`refine.optimise.warm.WarmStart`, as ``refine.solve(..., previous=...)``
-    re-solves: the previous joints moved onto the new poses and, when robot, base, tool and
-    weights are the same, the previous last problem, its multipliers and its clearance bounds.
+    The start is :func:`refine.run.again.warm_from`'s, as ``refine.solve(..., previous=...)``
+    re-solves: the previous joints moved onto the new poses, the previous last problem's rows and
+    its multipliers (its solver too when robot, base, tool and weights are the same) and its
+    clearance bounds.
     Only an ``ok`` answer is a start, and only for a path :func:`near` the one it answered: a
     repaired or failed one holds joints bent by the slack or left where the solver gave up, and a
     path moved far (a jump of the part) is solved as ``refine run`` solves it. The warm solve is
@@ -260,7 +235,7 @@ def resolve(
     tracks = [fused] if isinstance(fused, FusedPath) else list(fused)
     fused, given = tracks[0], {"tracks": tracks, "demo_quality": quality}
     if previous is not None and previous.robot is robot and previous.status == "ok" and near(previous, fused):
-        nlp, warm = warm_start(previous, problem, robot, fused)
+        nlp, warm = warm_from(previous, problem, robot, fused)
         if warm is not None:
             result = solve_problem(strict(problem), robot=robot, nlp=nlp, warm=warm, **given)
             if result.status == "ok":
