@@ -1,6 +1,6 @@
 """The problem being edited in the browser, its warm re-solves (the latest change wins), and writing it.
 
-A :class:`Session` holds the problem file's TOML document as read (or as last saved), the changes
+A :class:`Session` holds the problem file's TOML document as read (or as last saved) and its plain data, the changes
 made since, the problem they describe and its last answer. :meth:`Session.change` checks a change
 at once (as the problem file would be checked) and hands the new problem to a
 :class:`LatestSolver`: one thread that solves one problem at a time and, when it is free, takes
@@ -41,7 +41,7 @@ from refine.run.placement import PlacementRepair
 from refine.run.result import RunResult
 from refine.run.solve import solve_problem
 from refine.run.stages import fused_tracks
-from refine.serve.edits import apply_changes, check_keys
+from refine.serve.edits import check_keys, edit_data, edit_document
 
 log = logging.getLogger(__name__)
 
@@ -300,7 +300,8 @@ class Session:
         self.problem = load_problem(self.path)  # checks the file as `refine run` does
         self.text = self.path.read_text(encoding="utf-8")
         self.base = tomlkit.parse(self.text)
-        self.doc = self.base
+        self.data = self.base.unwrap()
+        self.doc: Any = self.base
         self.changes: dict[str, Any] = {}
 
     def on_answer(self, callback: Callable[[Answer], None]) -> None:
@@ -330,9 +331,9 @@ class Session:
             merged = {**self.changes, **changes}
             if merged == self.changes:
                 return self.revision
-            doc, problem = apply_changes(self.base, merged, self.path)
+            _, problem = edit_data(self.data, merged, self.path)
             self.revision += 1
-            self.changes, self.doc, self.problem = merged, doc, problem
+            self.changes, self.doc, self.problem = merged, None, problem  # the document when shown
             job = Job(self.revision, problem, dict(merged))
         self.solver.submit(job)
         return job.revision
@@ -380,6 +381,8 @@ class Session:
     def current_text(self) -> str:
         """The problem file as it would be saved."""
         with self._lock:
+            if self.doc is None:  # the changes written into the document as they were into the problem
+                self.doc = edit_document(self.base, self.changes, self.path)
             return tomlkit.dumps(self.doc)
 
     def diff(self) -> str:
@@ -406,6 +409,7 @@ class Session:
         with self._lock:
             self.text = text
             self.base = tomlkit.parse(text)
+            self.data = self.base.unwrap()
             self.doc = self.base
             self.changes = {}
         return self.path
@@ -423,14 +427,14 @@ class Session:
         with self._engine:
             on_disk = self.path.read_text(encoding="utf-8")
             with self._lock:
-                kept = (self.text, self.base, self.doc, dict(self.changes))
+                kept = (self.text, self.base, self.data, self.doc, dict(self.changes))
             self.save()
             try:
                 return run(load_problem(self.path), out_dir)
             except BaseException:
                 self._replace_file(on_disk)
                 with self._lock:
-                    self.text, self.base, self.doc, self.changes = kept
+                    self.text, self.base, self.data, self.doc, self.changes = kept
                 raise
 
     def close(self) -> None:
