@@ -122,11 +122,14 @@ def robot_parts(result: RunResult) -> list[tuple[str, str, trimesh.Trimesh, Any]
     return _robot_parts(result)
 
 
-def robot_frames(result: RunResult, parts: list[Any] | None = None, meshes: bool = True) -> dict[str, Any]:
+def robot_frames(
+    result: RunResult, parts: list[Any] | None = None, meshes: bool = True, links: list[Any] | None = None
+) -> dict[str, Any]:
     """The robot's shapes (local meshes) and their poses in {F} at waypoints along every pass.
 
     ``parts`` are :func:`robot_parts` of ``result`` when the caller holds them (a re-solve that
     kept robot and tool); ``meshes=False`` leaves their meshes out (``parts`` in the answer).
+    ``links``, when given, is appended each frame's link poses in the robot's base frame (by link name).
     """
     parts = _robot_parts(result) if parts is None else parts
     base = np.asarray(result.problem.robot.base_in_world, dtype=float)
@@ -136,8 +139,10 @@ def robot_frames(result: RunResult, parts: list[Any] | None = None, meshes: bool
     for idx in pick:
         i, k = samples[idx]
         p = result.passes[i]
-        links = result.robot.link_poses(p.refinement.q[k])
-        poses = [base @ links[frame] @ np.asarray(T) for _, frame, _, T in parts]
+        at = result.robot.link_poses(p.refinement.q[k])
+        if links is not None:
+            links.append(at)
+        poses = [base @ at[frame] @ np.asarray(T) for _, frame, _, T in parts]
         frames.append([rounded(T[:3, :].ravel(), 5) for T in poses])
         labels.append(f"{p.name}, waypoint {k}" if len(result.passes) > 1 else f"waypoint {k}")
         where.append([i, int(k)])
