@@ -42,6 +42,16 @@ def rounded(a: Any, decimals: int = 5) -> list[float | None]:
     return [float(v) if np.isfinite(v) else None for v in arr]
 
 
+def rounded_rows(a: Any, decimals: int = 5) -> list[list[float | None]]:
+    """Each row of a 2-D array as :func:`rounded` gives it (one rounding for all rows)."""
+    if not len(a):
+        return []
+    arr = np.round(np.asarray(a, dtype=float).reshape(len(a), -1), decimals)
+    if np.all(np.isfinite(arr)):
+        return arr.tolist()
+    return [rounded(row, decimals) for row in arr]
+
+
 def mesh_of_geometry(geometry: Any) -> trimesh.Trimesh | None:
     """A triangle mesh of an FCL box, cylinder, sphere or capsule (centred, axis z), else None."""
     if isinstance(geometry, fcl.Box):
@@ -142,8 +152,8 @@ def robot_frames(
         at = result.robot.link_poses(p.refinement.q[k])
         if links is not None:
             links.append(at)
-        poses = [base @ at[frame] @ np.asarray(T) for _, frame, _, T in parts]
-        frames.append([rounded(T[:3, :].ravel(), 5) for T in poses])
+        poses = np.array([(base @ at[frame] @ np.asarray(T))[:3, :].ravel() for _, frame, _, T in parts])
+        frames.append(rounded_rows(poses, 5))
         labels.append(f"{p.name}, waypoint {k}" if len(result.passes) > 1 else f"waypoint {k}")
         where.append([i, int(k)])
     out: dict[str, Any] = {"frames": frames, "labels": labels, "where": where}
