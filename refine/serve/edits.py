@@ -55,6 +55,9 @@ POSES: tuple[str, ...] = (
 MOVE = "move"
 """The key of the workpiece move."""
 
+MOVED_FRAMES = ("frames.cad_in_world", "frames.source_in_world")
+"""The frames a workpiece move rewrites (with the poses of the cell objects marked ``workpiece``)."""
+
 MAX_MOVE_M = 5.0
 """The largest workpiece shift the page may ask for [m]."""
 MAX_MOVE_DEG = 180.0
@@ -171,7 +174,8 @@ def _edited(tree: Any, changes: Mapping[str, Any], path: Path, plain: bool) -> A
     """A copy of ``tree`` (the TOML document, or its plain data when ``plain``) with ``changes`` applied.
 
     The frames and scalars are set first and the workpiece move is applied on top of them, about
-    the CAD frame as set (a frame the loader refuses is reported by it, before the move).
+    the CAD frame as set: a frame the move rewrites, when changed, is first read by the loader (a
+    value it refuses is not rewritten into one it takes); the file's own frames it read already.
     """
     check_keys(changes)
     doc = copy.deepcopy(tree)
@@ -183,15 +187,12 @@ def _edited(tree: Any, changes: Mapping[str, Any], path: Path, plain: bool) -> A
             _set(doc, key, value, plain)
     if MOVE not in changes:
         return doc
-    try:
-        cad_in_world = _frame(doc, "frames.cad_in_world")
-    except (TypeError, ValueError, KeyError, AttributeError, IndexError):
-        problem_from_data(doc if plain else doc.unwrap(), path)  # the loader's message
-        raise
-    D = move_transform(changes[MOVE], cad_in_world)
+    if any(key in changes for key in MOVED_FRAMES):  # checked as set, before the move rewrites them
+        problem_from_data(doc if plain else doc.unwrap(), path)
+    D = move_transform(changes[MOVE], _frame(doc, "frames.cad_in_world"))
     if np.array_equal(D, np.eye(4)):  # no move: the file keeps its own text
         return doc
-    for key in ("frames.cad_in_world", "frames.source_in_world"):
+    for key in MOVED_FRAMES:
         _set(doc, key, pose_table(D @ _frame(doc, key)), plain)
     for obj in doc.get("cell", {}).get("objects", []):
         if obj.get("workpiece", False):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -108,3 +109,19 @@ def test_the_loader_gives_the_same_message_as_for_the_file(base, tmp_path):
         apply_changes(base, {"tolerances.orientation_deg": 200}, GLASS)
     tail = "tolerances.orientation_deg must be a finite number in [0.01, 89] deg, got 200"
     assert str(from_file.value).endswith(tail) and str(from_app.value).endswith(tail)
+
+
+@pytest.mark.parametrize("key", ["frames.cad_in_world", "frames.source_in_world"])
+@pytest.mark.parametrize(
+    "bad, says",
+    [
+        ({"rpy_deg": [0.0, 0.0, 1000.0]}, "within ±720 deg"),
+        ({"xyz": [True, 0.0, 0.0]}, "must be a number"),
+        ({"xyz": [1.3, 0.0, 0.6], "scale": 2}, "unknown key(s) 'scale'"),
+    ],
+)
+def test_a_frame_the_loader_refuses_is_refused_with_a_move_too(base, key, bad, says):
+    # the move rewrites the frame as a pose table: the value as set is read by the loader first
+    with pytest.raises(InputError, match=re.escape(f"{key}")) as caught:
+        edit_data(base.unwrap(), {key: bad, "move": {"xyz": [0.01, 0.0, 0.0]}}, GLASS)
+    assert says in str(caught.value)
