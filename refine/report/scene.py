@@ -44,6 +44,16 @@ def rounded(a: Any, decimals: int = 5) -> list[float | None]:
     return [float(v) if np.isfinite(v) else None for v in arr]
 
 
+def rounded_rows(a: Any, decimals: int = 5) -> list[list[float | None]]:
+    """Each row of a 2-D array as :func:`rounded` gives it (one rounding for all rows)."""
+    if not len(a):
+        return []
+    arr = np.round(np.asarray(a, dtype=float).reshape(len(a), -1), decimals)
+    if np.all(np.isfinite(arr)):
+        return arr.tolist()
+    return [rounded(row, decimals) for row in arr]
+
+
 def mesh_of_geometry(geometry: Any) -> trimesh.Trimesh | None:
     """A triangle mesh of an FCL box, cylinder, sphere or capsule (centred, axis z), else None."""
     if isinstance(geometry, fcl.Box):
@@ -124,11 +134,14 @@ def robot_parts(result: RunResult) -> list[tuple[str, str, trimesh.Trimesh, Any]
     return _robot_parts(result)
 
 
-def robot_frames(result: RunResult, parts: list[Any] | None = None, meshes: bool = True) -> dict[str, Any]:
+def robot_frames(
+    result: RunResult, parts: list[Any] | None = None, meshes: bool = True, links: list[Any] | None = None
+) -> dict[str, Any]:
     """The robot's shapes (local meshes) and their poses in {F} at waypoints along every pass.
 
     ``parts`` are :func:`robot_parts` of ``result`` when the caller holds them (a re-solve that
     kept robot and tool); ``meshes=False`` leaves their meshes out (``parts`` in the answer).
+    ``links``, when given, is appended each frame's link poses in the robot's base frame (by link name).
     """
     parts = _robot_parts(result) if parts is None else parts
     base = np.asarray(result.problem.robot.base_in_world, dtype=float)
@@ -138,9 +151,11 @@ def robot_frames(result: RunResult, parts: list[Any] | None = None, meshes: bool
     for idx in pick:
         i, k = samples[idx]
         p = result.passes[i]
-        links = result.robot.link_poses(p.refinement.q[k])
-        poses = [base @ links[frame] @ np.asarray(T) for _, frame, _, T in parts]
-        frames.append([rounded(T[:3, :].ravel(), 5) for T in poses])
+        at = result.robot.link_poses(p.refinement.q[k])
+        if links is not None:
+            links.append(at)
+        poses = np.array([(base @ at[frame] @ np.asarray(T))[:3, :].ravel() for _, frame, _, T in parts])
+        frames.append(rounded_rows(poses, 5))
         labels.append(f"{p.name}, waypoint {k}" if len(result.passes) > 1 else f"waypoint {k}")
         where.append([i, int(k)])
     out: dict[str, Any] = {"frames": frames, "labels": labels, "where": where}

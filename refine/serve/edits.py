@@ -8,9 +8,11 @@ frame, the tracker receiver and the cell objects marked ``workpiece`` together, 
 repair does (:func:`refine.optimise.moves.moved_problem`). Nothing else can be changed: a key not
 listed in :data:`SCALARS` or :data:`POSES` is refused, and so is every file path.
 
-The values are written into a copy of the TOML document (:mod:`tomlkit` keeps its comments and
-order) and the copy is read by :func:`refine.problem.problem_from_data`, so a bad value gets the
-message the problem file would get.
+The values are written into a copy of the document's plain data, which
+:func:`refine.problem.problem_from_data` reads (:func:`edit_data`: a bad value gets the message the
+problem file would get), and, only when the file is shown or saved, into a copy of the TOML
+document itself (:func:`edit_document`: :mod:`tomlkit` keeps its comments and order). Both take
+the same steps, so the file saved is the problem solved.
 """
 
 from __future__ import annotations
@@ -52,6 +54,9 @@ POSES: tuple[str, ...] = (
 
 MOVE = "move"
 """The key of the workpiece move."""
+
+MOVED_FRAMES = ("frames.cad_in_world", "frames.source_in_world")
+"""The frames a workpiece move rewrites (with the poses of the cell objects marked ``workpiece``)."""
 
 MAX_MOVE_M = 5.0
 """The largest workpiece shift the page may ask for [m]."""
@@ -126,13 +131,16 @@ def _toml_value(value: Any, key: str) -> Any:
         raise InputError(f"{key}: {value!r} is not a value a problem file can hold") from e
 
 
-def _set(doc: Any, dotted: str, value: Any) -> None:
-    """Set ``doc[a][b][c] = value`` for ``a.b.c``, creating the tables on the way."""
+def _set(doc: Any, dotted: str, value: Any, plain: bool = False) -> None:
+    """Set ``doc[a][b][c] = value`` for ``a.b.c``, creating the tables on the way.
+
+    ``plain``: ``doc`` is plain data (dicts and lists), given the value as the document would hold it.
+    """
     *tables, last = dotted.split(".")
     node = doc
     for name in tables:
         if name not in node:
-            node[name] = tomlkit.table()
+            node[name] = {} if plain else tomlkit.table()
         node = node[name]
         if not isinstance(node, Table | dict) and not hasattr(node, "keys"):
             raise InputError(f"{dotted}: {name} is not a table in the problem file")
@@ -140,9 +148,10 @@ def _set(doc: Any, dotted: str, value: Any) -> None:
         inline = tomlkit.inline_table()
         for k, v in value.items():
             inline[k] = _toml_value(v, f"{dotted}.{k}")
-        node[last] = inline
+        node[last] = inline.unwrap() if plain else inline
     else:
-        node[last] = _toml_value(value, dotted)
+        item = _toml_value(value, dotted)
+        node[last] = item.unwrap() if plain else item
 
 
 def _pose_of(node: Any) -> np.ndarray:
@@ -161,6 +170,60 @@ def _frame(doc: Any, dotted: str) -> np.ndarray:
     return _pose_of(node)
 
 
+def _edited(tree: Any, changes: Mapping[str, Any], path: Path, plain: bool) -> Any:
+    """A copy of ``tree`` (the TOML document, or its plain data when ``plain``) with ``changes`` applied.
+
+    The frames and scalars are set first and the workpiece move is applied on top of them, about
+    the CAD frame as set: a frame the move rewrites, when changed, is first read by the loader (a
+    value it refuses is not rewritten into one it takes); the file's own frames it read already.
+    """
+    check_keys(changes)
+    doc = copy.deepcopy(tree)
+    for key, value in changes.items():
+        if key in SCALARS and (not isinstance(value, int | float) or isinstance(value, bool)):
+            unit = SCALARS[key]
+            raise InputError(f"{path}: {key} must be a number [{unit}], got {value!r}")
+        if key != MOVE:
+            _set(doc, key, value, plain)
+    if MOVE not in changes:
+        return doc
+    if any(key in changes for key in MOVED_FRAMES):  # checked as set, before the move rewrites them
+        problem_from_data(doc if plain else doc.unwrap(), path)
+    D = move_transform(changes[MOVE], _frame(doc, "frames.cad_in_world"))
+    if np.array_equal(D, np.eye(4)):  # no move: the file keeps its own text
+        return doc
+    for key in MOVED_FRAMES:
+        _set(doc, key, pose_table(D @ _frame(doc, key)), plain)
+    for obj in doc.get("cell", {}).get("objects", []):
+        if obj.get("workpiece", False):
+            pose = pose_table(D @ _pose_of(obj.get("pose")))
+            if plain:
+                obj["pose"] = pose
+            else:
+                inline = tomlkit.inline_table()
+                inline.update(pose)
+                obj["pose"] = inline
+    return doc
+
+
+def edit_data(data: Mapping[str, Any], changes: Mapping[str, Any], path: Path) -> tuple[dict[str, Any], Problem]:
+    """The problem file's plain data ``data`` with ``changes`` applied, and the problem it describes.
+
+    ``data`` (the TOML document's ``unwrap()``) is left as it was.
+
+    Raises:
+        InputError: a key the page may not change, or a value the problem file would refuse
+            (the loader's message, which names the key and its unit).
+    """
+    edited = _edited(data, changes, path, plain=True)
+    return edited, problem_from_data(edited, path)
+
+
+def edit_document(base: Any, changes: Mapping[str, Any], path: Path) -> Any:
+    """The TOML document ``base`` with ``changes`` applied as :func:`edit_data` applies them (``base`` kept)."""
+    return _edited(base, changes, path, plain=False)
+
+
 def apply_changes(base: Any, changes: Mapping[str, Any], path: Path) -> tuple[Any, Problem]:
     """The TOML document ``base`` with ``changes`` applied, and the problem it describes.
 
@@ -171,25 +234,5 @@ def apply_changes(base: Any, changes: Mapping[str, Any], path: Path) -> tuple[An
         InputError: a key the page may not change, or a value the problem file would refuse
             (the loader's message, which names the key and its unit).
     """
-    check_keys(changes)
-    doc = copy.deepcopy(base)
-    for key, value in changes.items():
-        if key in SCALARS and (not isinstance(value, int | float) or isinstance(value, bool)):
-            unit = SCALARS[key]
-            raise InputError(f"{path}: {key} must be a number [{unit}], got {value!r}")
-        if key != MOVE:
-            _set(doc, key, value)
-    problem = problem_from_data(doc.unwrap(), path)  # the frames checked before a move uses them
-    if MOVE in changes:
-        D = move_transform(changes[MOVE], problem.frames.cad_in_world)
-        if np.array_equal(D, np.eye(4)):  # no move: the file keeps its own text
-            return doc, problem
-        for key in ("frames.cad_in_world", "frames.source_in_world"):
-            _set(doc, key, pose_table(D @ _frame(doc, key)))
-        for obj in doc.get("cell", {}).get("objects", []):
-            if obj.get("workpiece", False):
-                inline = tomlkit.inline_table()
-                inline.update(pose_table(D @ _pose_of(obj.get("pose"))))
-                obj["pose"] = inline
-        problem = problem_from_data(doc.unwrap(), path)
-    return doc, problem
+    problem = edit_data(base.unwrap(), changes, path)[1]
+    return edit_document(base, changes, path), problem

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 import threading
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -150,8 +151,12 @@ def demonstration_lines(result: Any, cache: DemoCache) -> dict[str, Any]:
     with cache._lock:
         held = cache._recorded if cache._recorded is not None and cache._recorded[0] == key else None
     if held is None:
-        recorded = demo_tcp_poses(raw, source, sensor)[:, :3, 3]
-        held = (key, raw, _xyz(recorded[_thin(len(recorded), DEMO_POINTS)]))  # the log kept: its id stays its own
+        keep = _thin(len(raw.t), DEMO_POINTS)  # only the samples drawn are placed
+        shown = replace(
+            raw, t=raw.t[keep], positions=raw.positions[keep], rotations=raw.rotations[keep], device_error=None
+        )
+        recorded = demo_tcp_poses(shown, source, sensor)[:, :3, 3]
+        held = (key, raw, _xyz(recorded))  # the log kept: its id stays its own
         with cache._lock:
             cache._recorded = held
     out = {

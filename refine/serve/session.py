@@ -1,6 +1,6 @@
 """The problem being edited in the browser, its warm re-solves (the latest change wins), and writing it.
 
-A :class:`Session` holds the problem file's TOML document as read (or as last saved), the changes
+A :class:`Session` holds the problem file's TOML document as read (or as last saved) and its plain data, the changes
 made since, the problem they describe and its last answer. :meth:`Session.change` checks a change
 at once (as the problem file would be checked) and hands the new problem to a
 :class:`LatestSolver`: one thread that solves one problem at a time and, when it is free, takes
@@ -8,9 +8,9 @@ only the newest problem asked for, so a drag that sends many changes never queue
 
 A re-solve starts from the previous answer: the fused path is reused when the change leaves the
 CAD path and the demonstration alone, moved rigidly when the workpiece moved with its receiver,
-and the solve starts as ``refine.solve(..., previous=...)`` does (:mod:`refine.optimise.warm`:
+and the solve starts as ``refine.solve(..., previous=...)`` does (:func:`refine.run.again.warm_from`:
 the previous joints moved onto the new poses, the previous last problem and multipliers kept where
-robot, base, tool and weights are the same). A solve still running when a newer change comes is
+robot, base, tool and weights are the same, else their rows taken over by the new problem). A solve still running when a newer change comes is
 stopped (:func:`refine.control.controlled`). Writing saves the problem
 file and runs it as ``refine run`` does (:func:`refine.run.write.run`), from the saved file.
 """
@@ -33,17 +33,15 @@ from refine.control import controlled
 from refine.errors import Cancelled, InputError
 from refine.frames import invert_transform
 from refine.optimise.moves import moved_path
-from refine.optimise.problem import RefinementNLP, reuse_for
-from refine.optimise.warm import WarmStart, built_for
 from refine.paths import FusedPath
 from refine.problem import Problem, load_problem
-from refine.robot.model import Robot
 from refine.robot.registry import robot_for
+from refine.run.again import warm_from
 from refine.run.placement import PlacementRepair
 from refine.run.result import RunResult
 from refine.run.solve import solve_problem
-from refine.run.stages import fused_tracks, weights_for
-from refine.serve.edits import apply_changes, check_keys
+from refine.run.stages import fused_tracks
+from refine.serve.edits import check_keys, edit_data, edit_document
 
 log = logging.getLogger(__name__)
 
@@ -211,30 +209,6 @@ def near(previous: RunResult, fused: FusedPath) -> bool:
     return bool(np.linalg.norm(old - fused.positions, axis=1).max() <= WARM_MOVE_M)
 
 
-def warm_start(
-    previous: RunResult, problem: Problem, robot: Robot, fused: FusedPath
-) -> tuple[RefinementNLP | None, WarmStart | None]:
-    """The built problem to reuse and the start :func:`resolve` takes from ``previous`` (its docstring).
-
-    The previous last problem and multipliers are kept only with its built problem, which needs the
-    same base, tool and weights (:func:`refine.optimise.problem.reuse_for` checks the rest).
-    """
-    first = previous.first
-    built = first.nlp
-    setup = built_for(built, problem.robot.base_in_world, problem.tool, weights_for(problem, robot))
-    nlp = reuse_for(built, fused, problem.tolerances) if setup else None
-    if first.refinement.q.shape != (len(fused), robot.nq):
-        return nlp, None
-    kept = nlp is not None
-    return nlp, WarmStart(
-        q=first.refinement.q,
-        rotations=first.fused.rotations if len(first.fused) == len(fused) else None,
-        problem=first.refinement.problem if kept else None,
-        multipliers=first.refinement.multipliers if kept else None,
-        clearance=first.clearance,
-    )
-
-
 def resolve(
     problem: Problem,
     fused: FusedPath | Sequence[FusedPath],
@@ -246,9 +220,10 @@ def resolve(
     ``fused`` is the first pass's path or the paths of every track of the CAD file (each a pass,
     the first warm-started); ``quality`` the demonstration quality gate's figures kept in the result.
 
-    The start is :class:`refine.optimise.warm.WarmStart`, as ``refine.solve(..., previous=...)``
-    re-solves: the previous joints moved onto the new poses and, when robot, base, tool and
-    weights are the same, the previous last problem, its multipliers and its clearance bounds.
+    The start is :func:`refine.run.again.warm_from`'s, as ``refine.solve(..., previous=...)``
+    re-solves: the previous joints moved onto the new poses, the previous last problem's rows and
+    its multipliers (its solver too when robot, base, tool and weights are the same) and its
+    clearance bounds.
     Only an ``ok`` answer is a start, and only for a path :func:`near` the one it answered: a
     repaired or failed one holds joints bent by the slack or left where the solver gave up, and a
     path moved far (a jump of the part) is solved as ``refine run`` solves it. The warm solve is
@@ -260,7 +235,7 @@ def resolve(
     tracks = [fused] if isinstance(fused, FusedPath) else list(fused)
     fused, given = tracks[0], {"tracks": tracks, "demo_quality": quality}
     if previous is not None and previous.robot is robot and previous.status == "ok" and near(previous, fused):
-        nlp, warm = warm_start(previous, problem, robot, fused)
+        nlp, warm = warm_from(previous, problem, robot, fused)
         if warm is not None:
             result = solve_problem(strict(problem), robot=robot, nlp=nlp, warm=warm, **given)
             if result.status == "ok":
@@ -325,7 +300,8 @@ class Session:
         self.problem = load_problem(self.path)  # checks the file as `refine run` does
         self.text = self.path.read_text(encoding="utf-8")
         self.base = tomlkit.parse(self.text)
-        self.doc = self.base
+        self.data = self.base.unwrap()
+        self.doc: Any = self.base
         self.changes: dict[str, Any] = {}
 
     def on_answer(self, callback: Callable[[Answer], None]) -> None:
@@ -355,9 +331,9 @@ class Session:
             merged = {**self.changes, **changes}
             if merged == self.changes:
                 return self.revision
-            doc, problem = apply_changes(self.base, merged, self.path)
+            _, problem = edit_data(self.data, merged, self.path)
             self.revision += 1
-            self.changes, self.doc, self.problem = merged, doc, problem
+            self.changes, self.doc, self.problem = merged, None, problem  # the document when shown
             job = Job(self.revision, problem, dict(merged))
         self.solver.submit(job)
         return job.revision
@@ -405,6 +381,8 @@ class Session:
     def current_text(self) -> str:
         """The problem file as it would be saved."""
         with self._lock:
+            if self.doc is None:  # the changes written into the document as they were into the problem
+                self.doc = edit_document(self.base, self.changes, self.path)
             return tomlkit.dumps(self.doc)
 
     def diff(self) -> str:
@@ -431,6 +409,7 @@ class Session:
         with self._lock:
             self.text = text
             self.base = tomlkit.parse(text)
+            self.data = self.base.unwrap()
             self.doc = self.base
             self.changes = {}
         return self.path
@@ -448,14 +427,14 @@ class Session:
         with self._engine:
             on_disk = self.path.read_text(encoding="utf-8")
             with self._lock:
-                kept = (self.text, self.base, self.doc, dict(self.changes))
+                kept = (self.text, self.base, self.data, self.doc, dict(self.changes))
             self.save()
             try:
                 return run(load_problem(self.path), out_dir)
             except BaseException:
                 self._replace_file(on_disk)
                 with self._lock:
-                    self.text, self.base, self.doc, self.changes = kept
+                    self.text, self.base, self.data, self.doc, self.changes = kept
                 raise
 
     def close(self) -> None:

@@ -176,11 +176,12 @@ def scene_sections(
     result = answer.result
     demos, cache = demos or DemoCache(), cache or SceneCache()
     parts, parts_text, visual, note = cache.robot(result, demos)
-    robot = robot_frames(result, parts, meshes=False)
-    robot["flange"] = flange_poses(result, robot["where"])
+    links: list[Any] = []  # each frame's link poses, for the flange and the visual meshes too
+    robot = robot_frames(result, parts, meshes=False, links=links)
+    robot["flange"] = flange_poses(result, robot["where"], links)
     robot["visual_note"] = note
     if visual:  # the visual meshes' poses after the collision shapes' in every frame
-        extra = visual_poses(result, robot["where"], visual)
+        extra = visual_poses(result, robot["where"], visual, links)
         robot["frames"] = [f + e for f, e in zip(robot["frames"], extra, strict=True)]
     return {
         "cell": cache.cell(result),
@@ -192,28 +193,34 @@ def scene_sections(
     }
 
 
-def flange_poses(result: Any, where: list[list[int]]) -> list[list[float | None]]:
+def flange_poses(result: Any, where: list[list[int]], links: list[Any] | None = None) -> list[list[float | None]]:
     """The flange's pose in {F} at each robot frame of the scene (``where``: pass, waypoint), as 12 numbers.
 
     The page puts the TCP gizmo at the flange times ``tcp_in_flange`` and turns a drag back into
-    ``tcp_in_flange``.
+    ``tcp_in_flange``. ``links``: the link poses at those frames (:func:`frame_links`) when held.
     """
     robot = result.robot
     base = np.asarray(result.problem.robot.base_in_world, dtype=float)
     out = []
-    for i, k in where:
-        T = base @ robot.link_poses(result.passes[i].refinement.q[k])[robot.spec.flange_frame]
+    for at in links if links is not None else frame_links(result, where):
+        T = base @ at[robot.spec.flange_frame]
         out.append(rounded(T[:3, :].ravel(), 6))
     return out
 
 
-def visual_poses(result: Any, where: list[list[int]], visual: list[Any]) -> list[list[list[float | None]]]:
-    """Each visual mesh's pose in {F} at each robot frame of the scene, as 12 numbers."""
+def frame_links(result: Any, where: list[list[int]]) -> list[Any]:
+    """The robot's link poses (by name, in its base frame) at each robot frame of the scene."""
+    return [result.robot.link_poses(result.passes[i].refinement.q[k]) for i, k in where]
+
+
+def visual_poses(
+    result: Any, where: list[list[int]], visual: list[Any], links: list[Any] | None = None
+) -> list[list[list[float | None]]]:
+    """Each visual mesh's pose in {F} at each robot frame of the scene, as 12 numbers (``links``: :func:`flange_poses`)."""
     base = np.asarray(result.problem.robot.base_in_world, dtype=float)
     out = []
-    for i, k in where:
-        links = result.robot.link_poses(result.passes[i].refinement.q[k])
-        out.append([rounded((base @ links[link] @ T)[:3, :].ravel(), 5) for _, link, _, T in visual])
+    for at in links if links is not None else frame_links(result, where):
+        out.append([rounded((base @ at[link] @ T)[:3, :].ravel(), 5) for _, link, _, T in visual])
     return out
 
 

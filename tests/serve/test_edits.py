@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +11,7 @@ import pytest
 import tomlkit
 
 from refine.errors import InputError
-from refine.serve.edits import apply_changes
+from refine.serve.edits import apply_changes, edit_data, edit_document
 
 ROOT = Path(__file__).resolve().parents[2]
 GLASS = ROOT / "problems" / "glass_adhesive" / "problem.toml"
@@ -38,6 +39,26 @@ def test_a_workpiece_move_turns_the_cad_frame_receiver_and_glass_about_the_cad_o
     text = tomlkit.dumps(doc)
     assert "# the window's CAD frame: origin at the lowest point of the glass" in text  # comments kept
     assert "cad_in_world = { xyz = [1.30, 0.0, 0.60]" in tomlkit.dumps(base)  # the base is left as it was
+
+
+def test_a_move_with_a_new_cad_frame_moves_about_the_frame_as_set_and_the_file_saved_is_the_problem(base):
+    # by hand: the CAD frame set to (1.20, 0.10, 0.60), then shifted by 0.05 m along x and turned
+    # 90 deg about z about that origin: the CAD origin goes to (1.25, 0.10, 0.60); the receiver
+    # (1.30, -0.82, 0.72) is (0.10, -0.92, 0.12) from the set origin, turned (0.92, 0.10, 0.12)
+    changes = {
+        "frames.cad_in_world": {"xyz": [1.2, 0.1, 0.6], "rpy_deg": [0.0, 0.0, 0.0]},
+        "tolerances.orientation_deg": 2.5,
+        "move": {"xyz": [0.05, 0.0, 0.0], "rpy_deg": [0.0, 0.0, 90.0]},
+    }
+    data, problem = edit_data(base.unwrap(), changes, GLASS)
+    f = problem.frames
+    np.testing.assert_allclose(f.cad_in_world[:3, 3], [1.25, 0.1, 0.6], atol=1e-9)
+    np.testing.assert_allclose(f.source_in_world[:3, 3], [1.25 + 0.92, 0.2, 0.72], atol=1e-9)
+    assert problem.tolerances.orientation_deg == 2.5
+    doc = edit_document(base, changes, GLASS)
+    assert doc.unwrap() == data  # the file written holds the problem solved
+    assert "# the window's CAD frame: origin at the lowest point of the glass" in tomlkit.dumps(doc)
+    assert base.unwrap()["frames"]["cad_in_world"]["xyz"] == [1.30, 0.0, 0.60]  # the base as it was
 
 
 def test_a_zero_move_leaves_the_file_as_written(base):
@@ -88,3 +109,19 @@ def test_the_loader_gives_the_same_message_as_for_the_file(base, tmp_path):
         apply_changes(base, {"tolerances.orientation_deg": 200}, GLASS)
     tail = "tolerances.orientation_deg must be a finite number in [0.01, 89] deg, got 200"
     assert str(from_file.value).endswith(tail) and str(from_app.value).endswith(tail)
+
+
+@pytest.mark.parametrize("key", ["frames.cad_in_world", "frames.source_in_world"])
+@pytest.mark.parametrize(
+    "bad, says",
+    [
+        ({"rpy_deg": [0.0, 0.0, 1000.0]}, "within ±720 deg"),
+        ({"xyz": [True, 0.0, 0.0]}, "must be a number"),
+        ({"xyz": [1.3, 0.0, 0.6], "scale": 2}, "unknown key(s) 'scale'"),
+    ],
+)
+def test_a_frame_the_loader_refuses_is_refused_with_a_move_too(base, key, bad, says):
+    # the move rewrites the frame as a pose table: the value as set is read by the loader first
+    with pytest.raises(InputError, match=re.escape(f"{key}")) as caught:
+        edit_data(base.unwrap(), {key: bad, "move": {"xyz": [0.01, 0.0, 0.0]}}, GLASS)
+    assert says in str(caught.value)

@@ -62,3 +62,29 @@ def test_a_visual_mesh_named_by_url_leaves_the_collision_shapes_drawn(urdf_with_
     path.write_text(path.read_text().replace("link_1_visual.stl", "package://x/link_1.stl"), encoding="utf-8")
     meshes, note = visual_meshes(path)
     assert meshes == [] and "is a URL" in note
+
+
+def test_the_recorded_demonstration_is_every_kth_sample_placed_by_the_receiver_and_the_sensor():
+    """Each drawn point is T_F_S T_S_E(t) inv(T_TCP_E)'s origin, of every k-th sample (the first and
+    the last kept) of the log as read, so that at most DEMO_POINTS remain."""
+    import math
+    from types import SimpleNamespace
+
+    from refine.demo import read_tracker_log
+    from refine.problem import load_problem
+    from refine.serve.overlays import DEMO_POINTS, DemoCache, demonstration_lines
+
+    problem = load_problem(ROOT / "problems" / "glass_adhesive" / "problem.toml")
+    log = read_tracker_log(problem.demonstration)
+    n = len(log.t)
+    assert n > DEMO_POINTS  # the thinning is exercised
+    step = math.ceil(n / DEMO_POINTS)
+    rows = sorted(set(range(0, n, step)) | {n - 1})
+    S, E = np.asarray(problem.frames.source_in_world), np.asarray(problem.tool.sensor_in_tcp)
+    # the sensor origin's TCP: p_F = R_FS (R_SE(t) (-R_TCP_Eᵀ p_TCP_E) + p_SE(t)) + p_FS
+    tcp_in_sensor = -E[:3, :3].T @ E[:3, 3]
+    expected = (S[:3, :3] @ (log.rotations[rows] @ tcp_in_sensor + log.positions[rows]).T).T + S[:3, 3]
+    lines = demonstration_lines(SimpleNamespace(problem=problem, passes=[]), DemoCache())
+    drawn = np.column_stack([lines["recorded"][k] for k in "xyz"])
+    assert drawn.shape == (len(rows), 3)
+    np.testing.assert_allclose(drawn, expected, atol=1e-5)

@@ -158,3 +158,38 @@ def test_an_ok_warm_attempt_with_placement_bounds_says_the_placement_was_not_nee
     assert answer.status == cold.status == "ok"
     assert answer.placement.status == cold.placement.status == "not needed"
     assert answer.placement.bounds == cold.placement.bounds == shifted.repair.placement
+
+
+def test_a_new_tcp_starts_from_the_previous_rows_and_multipliers_and_gives_the_cold_answer(monkeypatch):
+    """Another tool needs another built problem: the warm start still carries the previous last
+    problem (its rows taken over) and its multipliers; the answer is the cold solve's."""
+    import numpy as np
+
+    from refine.robot.registry import robot_for
+    from refine.run.solve import solve_problem
+
+    starts = []
+    real = session_module.solve_problem
+
+    def spy(problem, **kw):
+        starts.append((kw.get("nlp"), kw.get("warm")))
+        return real(problem, **kw)
+
+    monkeypatch.setattr(session_module, "solve_problem", spy)
+    base = tomlkit.parse(GLASS.read_text(encoding="utf-8"))
+    placed = apply_changes(base, {}, GLASS)[1]
+    cache = FusedCache()
+    previous = resolve(placed, cache.path_for(placed), None)
+    assert previous.status == "ok"
+    # 2 mm longer tool, 0.5 deg about x: another tool than the built problem's
+    tcp = {"tool.tcp_in_flange": {"xyz": [0.0, 0.0, 0.352], "rpy_deg": [0.5, 0.0, 0.0]}}
+    longer = apply_changes(base, tcp, GLASS)[1]
+    starts.clear()
+    answer = resolve(longer, cache.path_for(longer), previous)
+    nlp, warm = starts[0]
+    assert nlp is None and warm is not None and not warm.reusable
+    assert warm.problem is previous.first.refinement.problem
+    assert warm.multipliers is previous.first.refinement.multipliers is not None
+    cold = solve_problem(longer, robot=robot_for(longer.robot), fused=cache.path_for(longer))
+    assert answer.status == cold.status == "ok"
+    assert np.abs(answer.first.refinement.q - cold.first.refinement.q).max() < 1e-4

@@ -135,6 +135,11 @@ def test_the_scene_resends_only_the_sections_that_changed_and_each_is_the_report
         assert scene["paths"] == report["paths"]
         assert scene["robot"]["frames"] == report["robot"]["frames"]
         assert scene["robot"]["where"] == report["robot"]["where"]
+        # the flange drawn at each frame, times tcp_in_flange, is the TCP on the CAD path
+        tcp = np.asarray(result.problem.tool.tcp_in_flange)
+        for (i, k), row in zip(scene["robot"]["where"], scene["robot"]["flange"], strict=True):
+            T = np.vstack([np.reshape(row, (3, 4)), [0, 0, 0, 1]]) @ tcp
+            assert np.linalg.norm(T[:3, 3] - result.passes[i].fused.positions[k]) < 2e-6  # [m]
         fresh = json.loads(json.dumps(demonstration_lines(result, DemoCache())))  # the log read anew
         assert scene["demo"] == fresh
     assert sent[0] == ["cell", "demo", "motions", "parts", "paths", "robot"]
