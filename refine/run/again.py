@@ -61,5 +61,6 @@ def solve_again(
                 first.refinement.multipliers,
                 first.clearance,
                 reusable=nlp is not None,
+                line=first.line,
             )
     return solve_problem(problem, robot=robot, fused=fused, nlp=nlp, q0=q0, warm=warm)

@@ -232,6 +232,7 @@ def warm_start(
         problem=first.refinement.problem if kept else None,
         multipliers=first.refinement.multipliers if kept else None,
         clearance=first.clearance,
+        line=first.line,
     )
 
 
