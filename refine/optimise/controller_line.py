@@ -20,7 +20,9 @@ and k+1 with poses (p_k, R_k) and (p_{k+1}, R_{k+1}):
 **The check** (:func:`check_controller_lines`): every segment is sampled at ``t = i/m``
 (``m`` even and >= :data:`MIN_SAMPLES`, more where a joint moves more than
 :data:`MAX_SAMPLE_STEP_DEG` between samples); the joints at each sample are solved by damped least squares from the joint-linear
-interpolation (moved by one Newton step, :func:`refine.optimise.line_start.newton_start`), without a pull to mid-range, so they stay on the refined joints' branch (as the
+interpolation (moved by one Newton step, :func:`refine.optimise.line_start.newton_start`; on a
+re-solve, where the waypoints barely moved, plus the previous answer's bow at the same sample,
+:func:`refine.optimise.line_start.previous_bows`), without a pull to mid-range, so they stay on the refined joints' branch (as the
 controller's IK from its current joints). At every sample: the IK's residual, the joint-limit
 margins (kept to the full ``joint_margin_deg``, less the waypoint check's 1e-7 rad of rounding),
 the singularity measure (to the full ``singularity_margin``, less 1e-9). The clearance is proved along the joint path through the
@@ -227,8 +229,9 @@ def _solve_line(
 ) -> tuple[Array, Array, Array, Array, Array]:
     """The line's IK at the samples and what depends on it and on ``q`` alone.
 
-    ``bows``: per sample a previous line's bow (:func:`refine.optimise.line_start.previous_bows`), the IK's start ``q_lin +
-    bow`` where it is not NaN (the rest start from :func:`refine.optimise.line_start.newton_start`); None for none.
+    ``bows``: per sample a previous line's bow (:func:`refine.optimise.line_start.previous_bows`),
+    the IK's start ``q_lin + bow`` where it is not NaN (the rest start from
+    :func:`refine.optimise.line_start.newton_start`); None for none.
 
     Returns:
         the line's joints (M, n) [rad], the IK residual per sample (M,), and per segment the least
@@ -240,12 +243,13 @@ def _solve_line(
     poses, J_wp = kin.poses_jacobians(q)
     targets = line_poses(poses, q, segment, t, kin, wrist)
     lin_poses = kin.poses(q_lin)
-    cold = np.ones(len(t), dtype=bool) if bows is None else np.isnan(bows[:, 0])
-    start = q_lin.copy()
-    if not cold.all():
-        start[~cold] += bows[~cold]
-    if cold.any():
-        start[cold] = newton_start(J_wp, segment[cold], t[cold], q_lin[cold], lin_poses[cold], targets[cold])
+    cold = None if bows is None else np.isnan(bows[:, 0])
+    if cold is None or cold.all():
+        start = newton_start(J_wp, segment, t, q_lin, lin_poses, targets)
+    else:
+        start = q_lin + np.where(cold[:, None], 0.0, bows)
+        if cold.any():
+            start[cold] = newton_start(J_wp, segment[cold], t[cold], q_lin[cold], lin_poses[cold], targets[cold])
     J_line = np.empty((len(t), 6, q.shape[1]))
     q_line, err = solve_ik_batch(
         kin,
@@ -314,8 +318,9 @@ def check_controller_lines(
             motion, and only the limits, the violations (at ``s``) and the clearance are done;
             None to solve the line's IK.
         previous: a previous answer's joints (N, n) [rad] and its line check (a re-solve's): its
-            bows ``q_line - q_lin`` start the IK at the samples it has (:func:`refine.optimise.line_start.previous_bows`),
-            which then converges to the same tolerance (:data:`IK_TOLERANCE`); None for none.
+            bows ``q_line - q_lin`` start the IK at the samples it has
+            (:func:`refine.optimise.line_start.previous_bows`), which then converges to the same
+            tolerance (:data:`IK_TOLERANCE`); None for none.
 
     Returns:
         The per-segment figures and the violations.
