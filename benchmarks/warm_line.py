@@ -14,21 +14,14 @@ measures, violations).
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import statistics
 import time
-from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+from warm_resolve import ROBOT, glass_setup  # the same cell, first answer and changes
 
 import refine
-from refine.frames import make_transform
 from refine.optimise import controller_line as cl
-from refine.run.stages import fused_path
-
-ROOT = Path(__file__).resolve().parents[1]
-ROBOT = "abb_irb4600_60_205"
 
 
 def main() -> int:
@@ -43,30 +36,13 @@ def main() -> int:
         return check(self, q)
 
     cl.ControllerLineSource._check = spy
-    p = refine.load_problem(ROOT / "problems" / "glass_adhesive")
-    f = fused_path(p)
-    common = {
-        "speeds": f.speed,
-        "arc_length": f.s,
-        "tcp_in_flange": p.tool.tcp_in_flange,
-        "base_in_world": p.robot.base_in_world,
-        "cell": p.cell,
-        "tool_shapes": p.tool.collision,
-        "collision": p.collision,
-    }
+    f, common, changes = glass_setup()
     first = refine.refine_path(ROBOT, f.positions, f.rotations, **common)
-    centre = np.array([1.30, 0.0, 0.60])  # the pane's centre [m], as warm_resolve.py
-    R = Rotation.from_rotvec(np.radians(0.3) * np.array([0.0, 0.0, 1.0])).as_matrix()
-    move = make_transform(p=centre - R @ centre + np.array([0.002, 0.0, 0.0]))
-    move[:3, :3] = R
-    cell = tuple(dataclasses.replace(o, pose=move @ o.pose) if o.workpiece else o for o in p.cell)
-    changes = {
-        "part": (f.positions @ R.T + move[:3, 3], np.einsum("ij,njk->nik", R, f.rotations), {"cell": cell}),
-        "cone": (f.positions, f.rotations, {"tolerances": {"orientation_deg": 2.5}}),
-    }
-    for name, (positions, orientations, extra) in changes.items():
+    for name in ("part", "cone"):
+        change = {"positions": f.positions, "orientations": f.rotations, **common, **changes[name]}
+        positions, orientations = change.pop("positions"), change.pop("orientations")
         seen.clear()
-        refine.refine_path(ROBOT, positions, orientations, **{**common, **extra}, previous=first)
+        refine.refine_path(ROBOT, positions, orientations, **change, previous=first)
         source, q = seen[-1]
         s = np.arange(len(q), dtype=float)
         wrist = np.asarray(source.wrist(q), dtype=bool) if source.wrist else np.zeros(len(q) - 1, dtype=bool)
