@@ -71,14 +71,8 @@ def time_stages() -> None:
     refine.run.solve.constraint_sources = _timed("collision model", stages.constraint_sources)
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeat", type=int, default=7)
-    parser.add_argument("--changes", default="part,cone,tool,base")
-    parser.add_argument("--stages", action="store_true", help="time the top-level stages in CPU too")
-    args = parser.parse_args()
-    if args.stages:
-        time_stages()
+def glass_setup() -> tuple[object, dict, dict[str, dict]]:
+    """The glass cell's fused path, the arguments every call shares, and each change's own (module notes)."""
     p = refine.load_problem(ROOT / "problems" / "glass_adhesive")
     f = fused_path(p)
     common = {
@@ -90,8 +84,6 @@ def main() -> int:
         "tool_shapes": p.tool.collision,
         "collision": p.collision,
     }
-    first = refine.refine_path(ROBOT, f.positions, f.rotations, **common)
-    print(f"glass cell, {len(f)} waypoints, collision on; first answer {first.status}")
     centre = np.array([1.30, 0.0, 0.60])  # the pane's centre [m]
     R = Rotation.from_rotvec(np.radians(0.3) * np.array([0.0, 0.0, 1.0])).as_matrix()
     move = make_transform(p=centre - R @ centre + np.array([0.002, 0.0, 0.0]))
@@ -109,6 +101,20 @@ def main() -> int:
         "tool": {"tcp_in_flange": tcp},
         "base": {"base_in_world": base},
     }
+    return f, common, changes
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeat", type=int, default=7)
+    parser.add_argument("--changes", default="part,cone,tool,base")
+    parser.add_argument("--stages", action="store_true", help="time the top-level stages in CPU too")
+    args = parser.parse_args()
+    if args.stages:
+        time_stages()
+    f, common, changes = glass_setup()
+    first = refine.refine_path(ROBOT, f.positions, f.rotations, **common)
+    print(f"glass cell, {len(f)} waypoints, collision on; first answer {first.status}")
     for name in args.changes.split(","):
         change = {"positions": f.positions, "orientations": f.rotations, **common, **changes[name]}
         positions, orientations = change.pop("positions"), change.pop("orientations")

@@ -20,7 +20,9 @@ and k+1 with poses (p_k, R_k) and (p_{k+1}, R_{k+1}):
 **The check** (:func:`check_controller_lines`): every segment is sampled at ``t = i/m``
 (``m`` even and >= :data:`MIN_SAMPLES`, more where a joint moves more than
 :data:`MAX_SAMPLE_STEP_DEG` between samples); the joints at each sample are solved by damped least squares from the joint-linear
-interpolation (moved by one Newton step, :func:`_newton_start`), without a pull to mid-range, so they stay on the refined joints' branch (as the
+interpolation (moved by one Newton step, :func:`refine.optimise.line_start.newton_start`; on a
+re-solve, where the waypoints barely moved, plus the previous answer's bow at the same sample,
+:func:`refine.optimise.line_start.previous_bows`), without a pull to mid-range, so they stay on the refined joints' branch (as the
 controller's IK from its current joints). At every sample: the IK's residual, the joint-limit
 margins (kept to the full ``joint_margin_deg``, less the waypoint check's 1e-7 rad of rounding),
 the singularity measure (to the full ``singularity_margin``, less 1e-9). The clearance is proved along the joint path through the
@@ -49,10 +51,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from refine.optimise.line_start import newton_start, previous_bows
 from refine.optimise.problem import LinearRow
 from refine.optimise.slerp import exp_rotvecs, log_rotations, rotation_angles
 from refine.optimise.verify import Violation, runs, singularity_measures
-from refine.robot.kinematics import TcpKinematics, rotation_vectors, solve_ik_batch
+from refine.robot.kinematics import TcpKinematics, solve_ik_batch
 from refine.settings import Tolerances
 from refine.types import Array
 
@@ -203,34 +206,6 @@ def sample_parameters(q: Array) -> tuple[Array, Array, Array]:
     return m, segment, t
 
 
-def _newton_start(
-    J_wp: Array, segment: Array, t: Array, q_lin: Array, lin_poses: Array, targets: Array
-) -> Array:
-    """The IK's start on the line: the joint-linear joints ``q_lin`` moved by one damped Newton step.
-
-    The step takes the Jacobian interpolated between the two waypoints' (``J_wp`` (N, 6, n), the
-    TCP Jacobians at the waypoints; the line lies within the
-    square of the step of the joint-linear motion, so that step leaves about the IK's tolerance and
-    saves it one pass over every sample). A row whose step exceeds :data:`NEWTON_STEP_MAX` (near a
-    singularity) starts from ``q_lin`` as it is, so every start stays on the refined joints' branch.
-    """
-    J = np.diff(J_wp, axis=0)[segment]  # J_wp[segment + 1] - J_wp[segment], per segment once
-    J *= t[:, None, None]
-    J += J_wp[segment]
-    R = targets[:, :3, :3] @ np.transpose(lin_poses[:, :3, :3], (0, 2, 1))
-    e = np.concatenate([targets[:, :3, 3] - lin_poses[:, :3, 3], rotation_vectors(R)], axis=1)
-    A = J @ np.transpose(J, (0, 2, 1)) + NEWTON_DAMPING**2 * np.eye(6)
-    dq = np.einsum("kji,kj->ki", J, np.linalg.solve(A, e[:, :, None])[:, :, 0])
-    small = np.abs(dq).max(axis=1) <= NEWTON_STEP_MAX
-    return np.where(small[:, None], q_lin + dq, q_lin)
-
-
-NEWTON_DAMPING = 1e-3
-"""Damping of :func:`_newton_start`'s step, as the IK's own."""
-NEWTON_STEP_MAX = 1e-3
-"""A larger start step [rad] on any joint is not taken: the row starts from the joint-linear joints."""
-
-
 def _segment_max(values: Array, segment: Array, count: int, initial: float) -> Array:
     out = np.full(count, initial)
     np.maximum.at(out, segment, values)
@@ -244,9 +219,19 @@ def _segment_min(values: Array, segment: Array, count: int) -> Array:
 
 
 def _solve_line(
-    kin: TcpKinematics, q: Array, segment: Array, t: Array, q_lin: Array, wrist: Array
+    kin: TcpKinematics,
+    q: Array,
+    segment: Array,
+    t: Array,
+    q_lin: Array,
+    wrist: Array,
+    bows: Array | None = None,
 ) -> tuple[Array, Array, Array, Array, Array]:
     """The line's IK at the samples and what depends on it and on ``q`` alone.
+
+    ``bows``: per sample a previous line's bow (:func:`refine.optimise.line_start.previous_bows`),
+    the IK's start ``q_lin + bow`` where it is not NaN (the rest start from
+    :func:`refine.optimise.line_start.newton_start`); None for none.
 
     Returns:
         the line's joints (M, n) [rad], the IK residual per sample (M,), and per segment the least
@@ -258,7 +243,13 @@ def _solve_line(
     poses, J_wp = kin.poses_jacobians(q)
     targets = line_poses(poses, q, segment, t, kin, wrist)
     lin_poses = kin.poses(q_lin)
-    start = _newton_start(J_wp, segment, t, q_lin, lin_poses, targets)
+    cold = None if bows is None else np.isnan(bows[:, 0])
+    if cold is None or cold.all():
+        start = newton_start(J_wp, segment, t, q_lin, lin_poses, targets)
+    else:
+        start = q_lin + np.where(cold[:, None], 0.0, bows)
+        if cold.any():
+            start[cold] = newton_start(J_wp, segment[cold], t[cold], q_lin[cold], lin_poses[cold], targets[cold])
     J_line = np.empty((len(t), 6, q.shape[1]))
     q_line, err = solve_ik_batch(
         kin,
@@ -302,6 +293,7 @@ def check_controller_lines(
     clearance: Callable[[Array], tuple[Array | None, float]] | None = None,
     reach: Array | None = None,
     known: LineCheck | None = None,
+    previous: tuple[Array, LineCheck] | None = None,
 ) -> LineCheck:
     """Check the controller's straight-line motion between the waypoints of joint path ``q``.
 
@@ -325,6 +317,10 @@ def check_controller_lines(
             they are taken as they are, with its per-segment differences to the joint-linear
             motion, and only the limits, the violations (at ``s``) and the clearance are done;
             None to solve the line's IK.
+        previous: a previous answer's joints (N, n) [rad] and its line check (a re-solve's): its
+            bows ``q_line - q_lin`` start the IK at the samples it has
+            (:func:`refine.optimise.line_start.previous_bows`), which then converges to the same
+            tolerance (:data:`IK_TOLERANCE`); None for none.
 
     Returns:
         The per-segment figures and the violations.
@@ -339,7 +335,8 @@ def check_controller_lines(
         q_line, err, sing_seg = known.q, known.ik_error, known.singularity
         off_seg, angle_seg = known.position_difference_m, known.orientation_difference_deg
     else:
-        q_line, err, sing_seg, off_seg, angle_seg = _solve_line(kin, q, segment, t, q_lin, wrist)
+        bows = None if previous is None else previous_bows(q, m, segment, t, previous, IK_TOLERANCE)
+        q_line, err, sing_seg, off_seg, angle_seg = _solve_line(kin, q, segment, t, q_lin, wrist, bows)
     joint_diff = np.degrees(np.abs(q_line - q_lin).max(axis=1))
     margins = np.minimum(q_line - spec.lower, spec.upper - q_line)
 
@@ -493,12 +490,15 @@ class ControllerLineSource:
         wrist: joints (N, n) -> per segment, True where the program hands the wrist to the
             controller (see :func:`check_controller_lines`); None for nowhere.
         checks: lines checked, for the figures (how many rounds looked at the line).
+        previous: a previous answer's joints (N, n) [rad] and line check, whose bows start the line's
+            IK (``check_controller_lines(..., previous=)``); None for none.
     """
 
     kin: TcpKinematics
     tolerances: Tolerances
     wrist: Callable[[Array], Array] | None = None
     checks: int = 0
+    previous: tuple[Array, LineCheck] | None = None
     _last: tuple[Array, LineCheck] | None = None
     _last_wrist: Array | None = None
 
@@ -510,7 +510,7 @@ class ControllerLineSource:
         wrist = (
             np.zeros(len(q) - 1, dtype=bool) if self.wrist is None else np.asarray(self.wrist(q), dtype=bool)
         )
-        line = check_controller_lines(self.kin, q, s, self.tolerances, wrist=wrist)
+        line = check_controller_lines(self.kin, q, s, self.tolerances, wrist=wrist, previous=self.previous)
         self.checks += 1
         self._last, self._last_wrist = (q.copy(), line), wrist
         return line

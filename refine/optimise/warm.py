@@ -52,6 +52,8 @@ class WarmStart:
         reusable: whether ``problem``'s solver is the new problem's too (the same robot, base, tool
             and weights: :func:`reuse_final`); otherwise only its active set and joint-step rows
             are taken over, into the new problem (:func:`rebuilt_like`).
+        line: the previous answer's controller line check (a ``LineCheck`` of ``q``), whose bows
+            start the new line's IK (:func:`refine.optimise.line_start.previous_bows`), or None.
     """
 
     q: Array
@@ -60,6 +62,7 @@ class WarmStart:
     multipliers: tuple[dict[tuple, float], Array] | None = None
     clearance: object = None
     reusable: bool = True
+    line: object = None
 
 
 def warm_seed(problem: RefinementNLP, warm: WarmStart, jacobians_out: Array | None = None) -> Array:

@@ -83,4 +83,5 @@ def warm_from(
         multipliers,
         first.clearance,
         reusable=nlp is not None,
+        line=first.line,
     )

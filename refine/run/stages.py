@@ -225,6 +225,8 @@ def refine_pass(
         else np.radians(robot.spec.from_controller(problem.robot.home_deg))
     )
     lines = line_source(problem, robot)
+    if warm is not None and warm.line is not None:
+        lines.previous = (warm.q, warm.line)  # the previous line's bows start this line's IK
     refinement = solve_refinement(
         nlp,
         q0,

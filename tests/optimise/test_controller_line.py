@@ -192,7 +192,7 @@ def test_the_newton_start_is_one_damped_step_with_the_jacobian_interpolated_per_
     out row by row; a row whose step exceeds NEWTON_STEP_MAX keeps the joint-linear joints."""
     from scipy.spatial.transform import Rotation
 
-    from refine.optimise import controller_line as cl
+    from refine.optimise import line_start as cl
 
     rng = np.random.default_rng(7)
     n_wp, m = 9, 40
@@ -207,7 +207,7 @@ def test_the_newton_start_is_one_damped_step_with_the_jacobian_interpolated_per_
     targets = lin.copy()
     targets[:, :3, 3] += err[:, :3]
     targets[:, :3, :3] = Rotation.from_rotvec(err[:, 3:]).as_matrix() @ lin[:, :3, :3]
-    got = cl._newton_start(J_wp, segment, t, q_lin, lin, targets)
+    got = cl.newton_start(J_wp, segment, t, q_lin, lin, targets)
     taken = 0
     for k in range(m):
         a, b = J_wp[segment[k]], J_wp[segment[k] + 1]
@@ -217,3 +217,56 @@ def test_the_newton_start_is_one_damped_step_with_the_jacobian_interpolated_per_
         taken += np.abs(dq).max() <= cl.NEWTON_STEP_MAX
         np.testing.assert_allclose(got[k], want, rtol=1e-9, atol=1e-15)
     assert 0 < taken < m
+
+
+def test_a_previous_line_s_bows_start_the_ik_where_its_samples_match_and_the_figures_are_the_cold_check_s(ur10e_kin):
+    """A path, its line checked; then the waypoints moved 1e-9 rad, one waypoint 0.02 rad (far), and
+    one segment's largest step taken from just under 4 deg to just over (8 sub-steps to 10, so the
+    samples after it shift): the bows start exactly the samples of the other segments, each start
+    within 1e-9 of the new line's pose (targets by hand: chord and scipy slerp), and the check equals
+    the cold one within the IK's tolerance (joints 1e-8 rad, residual 1e-9 m+rad stacked)."""
+    from scipy.spatial.transform import Rotation, Slerp
+
+    from refine.optimise.controller_line import IK_TOLERANCE, sample_parameters
+    from refine.optimise.line_start import PREVIOUS_MOVE_MAX_RAD, previous_bows
+
+    rng = np.random.default_rng(11)
+    steps = np.radians(rng.uniform(-3.0, 3.0, size=(12, 6)))
+    steps[5] = np.radians([4.0 - 1e-6, 1.0, -1.0, 0.5, 0.5, -0.5])  # segment 5: 8 sub-steps
+    q_old = Q0 + np.vstack([np.zeros(6), np.cumsum(steps, axis=0)])
+    tol = Tolerances(joint_step_deg=360.0)
+    s = np.arange(len(q_old), dtype=float)
+    old = check_controller_lines(ur10e_kin, q_old, s, tol)
+    q = q_old + rng.uniform(-1e-9, 1e-9, size=q_old.shape)
+    q[6:, 0] += np.radians(2e-6)  # segment 5's step over 4 deg: 10 sub-steps
+    q[9] += 0.02  # far: segments 8 and 9 start without a bow
+    m, segment, t = sample_parameters(q)
+    kept = np.delete(np.arange(len(m)), [5, 8, 9])
+    assert old.samples[5] == 8 and m[5] == 10 and (m[kept] == old.samples[kept]).all()
+    assert 0.02 > PREVIOUS_MOVE_MAX_RAD > 2e-6
+
+    bows = previous_bows(q, m, segment, t, (q_old, old), IK_TOLERANCE)
+    expected = ~np.isin(segment, [5, 8, 9])
+    np.testing.assert_array_equal(np.isfinite(bows).all(axis=1), expected)
+    q_lin = q[segment] + t[:, None] * (q[segment + 1] - q[segment])
+    start = (q_lin + bows)[expected]
+    poses = ur10e_kin.poses(q)
+    reached = ur10e_kin.poses(start)
+    for k, T in zip(np.flatnonzero(expected), reached, strict=True):
+        a, b, tk = poses[segment[k]], poses[segment[k] + 1], t[k]
+        p = a[:3, 3] + tk * (b[:3, 3] - a[:3, 3])
+        R = Slerp([0.0, 1.0], Rotation.from_matrix([a[:3, :3], b[:3, :3]]))([tk]).as_matrix()[0]
+        err = np.concatenate([p - T[:3, 3], Rotation.from_matrix(R @ T[:3, :3].T).as_rotvec()])
+        assert np.linalg.norm(err) <= 1e-9
+
+    cold = check_controller_lines(ur10e_kin, q, s, tol)
+    warm = check_controller_lines(ur10e_kin, q, s, tol, previous=(q_old, old))
+    np.testing.assert_allclose(warm.q, cold.q, rtol=0.0, atol=1e-8)
+    assert warm.ik_error.max() <= IK_TOLERANCE and cold.ik_error.max() <= IK_TOLERANCE
+    np.testing.assert_allclose(warm.singularity, cold.singularity, rtol=0.0, atol=1e-8)
+    np.testing.assert_allclose(warm.joint_margin_rad, cold.joint_margin_rad, rtol=0.0, atol=1e-8)
+    for field in ("samples", "t", "segment", "position_difference_m", "orientation_difference_deg"):
+        np.testing.assert_array_equal(getattr(warm, field), getattr(cold, field))
+    assert [(v.index_start, v.index_end, v.reason) for v in warm.violations] == [
+        (v.index_start, v.index_end, v.reason) for v in cold.violations
+    ]
