@@ -40,13 +40,13 @@ waypoints are left that can hold the least distance (:func:`direction_bounds`;
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from refine.collision.geometry import Body
 from refine.collision.model import CollisionModel
 from refine.collision.motion import corners
 from refine.types import Array
@@ -78,14 +78,35 @@ class CheckedBounds:
     normals: Array | None = None
 
 
-def _shape(model: CollisionModel, body: Body) -> tuple[int, Array]:
-    """A body's hull corners where they do not move with the joints, and its joint (-1: the cell)."""
-    c = corners(body)
-    if body.kind == "cell":
-        T = body.link_T_shape
-        return -1, c @ T[:3, :3].T + T[:3, 3]
-    T = model.robot.model.frames[body.frame_id].placement.homogeneous @ body.link_T_shape
-    return int(body.joint), c @ T[:3, :3].T + T[:3, 3]
+_HULLS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+""":func:`hull_corners` per collision model."""
+
+
+def hull_corners(model: CollisionModel) -> dict[str, tuple[int, Array]]:
+    """Per body label, its joint (-1: a cell object) and corners (K, 3) [m] of a convex set holding it.
+
+    In the joint's frame for a moving body, in the world for a cell object: what does not move with
+    the joints. A moving body's corners are the same read-only array in every model of the same
+    robot, base, moving bodies and self margin (:attr:`CollisionModel.kept_hulls`), so a re-solve
+    compares them by identity.
+    """
+    known = _HULLS.get(model)
+    if known is None:
+        known = {}
+        for body in model.bodies:
+            found = model.kept_hulls.get(body.label) if body.kind != "cell" else None
+            if found is None:
+                T = body.link_T_shape
+                if body.kind != "cell":
+                    T = model.robot.model.frames[body.frame_id].placement.homogeneous @ T
+                c = corners(body) @ T[:3, :3].T + T[:3, 3]
+                c.flags.writeable = False
+                found = (int(body.joint), c)
+                if body.kind != "cell":
+                    model.kept_hulls[body.label] = found
+            known[body.label] = found
+        _HULLS[model] = known
+    return known
 
 
 def checked_bounds(
@@ -99,7 +120,7 @@ def checked_bounds(
         np.array(q, dtype=float),
         tuple(model.pairs),
         np.array(bounds, dtype=float),
-        {b.label: _shape(model, b) for b in model.bodies},
+        dict(hull_corners(model)),
         model.base_in_world.copy(),
         None if normals is None else np.array(normals, dtype=float),
     )
@@ -174,15 +195,16 @@ def carried_bounds(model: CollisionModel, prior: CheckedBounds, q: Array) -> Arr
         return None
     old = {pair: p for p, pair in enumerate(prior.pairs)}
     shift: dict[str, float] = {}  # per body: how far its points moved, inf for a changed shape
-    for b in model.bodies:
-        joint, now = _shape(model, b)
-        before = prior.shapes.get(b.label)
+    for label, (joint, now) in hull_corners(model).items():
+        before = prior.shapes.get(label)
         if before is None or before[0] != joint or before[1].shape != now.shape:
-            shift[b.label] = np.inf
+            shift[label] = np.inf
+        elif before[1] is now:  # the same read-only corners: a body of a model like the prior's
+            shift[label] = 0.0
         elif joint >= 0:
-            shift[b.label] = 0.0 if np.array_equal(before[1], now) else np.inf
+            shift[label] = 0.0 if np.array_equal(before[1], now) else np.inf
         else:
-            shift[b.label] = float(np.max(np.linalg.norm(now - before[1], axis=1)))
+            shift[label] = float(np.max(np.linalg.norm(now - before[1], axis=1)))
     motion = np.abs(q - prior.q) @ model.pair_motion.T  # (N, P) [m]
     out = np.full((len(q), len(model.pairs)), -np.inf)
     for p, (a, b) in enumerate(model.pairs):
@@ -218,10 +240,9 @@ def bounds_between(model: CollisionModel, checked: CheckedBounds, q: Array, plac
         or not np.all((place >= 0.0) & (place <= N - 1))
     ):
         return None
-    for b in model.bodies:
-        joint, now = _shape(model, b)
-        before = checked.shapes.get(b.label)
-        if before is None or before[0] != joint or not np.array_equal(before[1], now):
+    for label, (joint, now) in hull_corners(model).items():
+        before = checked.shapes.get(label)
+        if before is None or before[0] != joint or not (before[1] is now or np.array_equal(before[1], now)):
             return None
     a = np.floor(place).astype(int)
     at_waypoint = place == a

@@ -13,9 +13,11 @@ the signed distance changes as ``n^T (J_body - J_other) dq`` (:func:`linearised_
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import math
 import threading
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -38,6 +40,47 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
+KEPT_MODELS = 8
+"""Models whose pairs, motion bounds and moving hulls :data:`_KEPT` keeps for the next model like them."""
+
+
+@dataclass(eq=False)
+class _Kept:
+    """What a model of the same robot, base, moving bodies, self margin and cell names takes as it is.
+
+    None of it reads the cell objects' shapes or places (the pair rules for a cell object read only its
+    name and whether it is the workpiece; the motion bounds only the moving bodies), so a re-solve whose
+    part moved, or whose cone or margin changed, takes it from the previous call's model.
+    """
+
+    robot: Robot
+    pin_model: pin.Model
+    kept: list[tuple[int, int]]
+    excluded: tuple[tuple[str, str, str], ...]
+    notes: list[tuple[int, str, tuple]]  # the log lines of the selection, said again on each reuse
+    motion: Array | None = None  # pair_reach of the pairs, read-only
+    hulls: dict[str, tuple[int, Array]] = field(default_factory=dict)  # moving bodies' hull corners
+
+
+_KEPT: dict[bytes, _Kept] = {}
+_KEPT_LOCK = threading.Lock()
+
+
+def _structure_key(robot: Robot, base: Array, self_margin_m: float, bodies: list[Body]) -> bytes:
+    """A digest of everything :class:`_Kept` depends on: the moving bodies' geometry as built, not as named."""
+    h = hashlib.blake2b(digest_size=24)
+    h.update(repr((id(robot), id(robot.model), float(self_margin_m))).encode())
+    h.update(base.tobytes())
+    for b in bodies:
+        h.update(repr((b.label, b.kind, b.joint, b.frame_id, b.workpiece, b.kind_params[0])).encode())
+        if b.kind == "cell":
+            continue
+        for a in (b.link_T_shape, b.centre, b.half_extent, b.vertices, *b.kind_params[1:]):
+            if a is not None:
+                a = np.ascontiguousarray(a, dtype=float)
+                h.update(repr(a.shape).encode() + a.tobytes())
+    return h.digest()
+
 
 class CollisionModel:
     """Robot, tool and cell as FCL objects, with the pairs to check.
@@ -54,6 +97,8 @@ class CollisionModel:
         excluded: the shape pairs not checked, as (body, other, reason) labels
             (the reasons are those of :mod:`refine.collision.pairs`).
         queries: narrow-phase (FCL) pair queries made so far.
+        kept_hulls: the moving bodies' hull corners by label, shared by every model of the same robot,
+            base, moving bodies and self margin (:func:`refine.collision.carry.hull_corners`).
     """
 
     def __init__(
@@ -147,11 +192,41 @@ class CollisionModel:
             seen.add(b.name)
 
     def _select_pairs(self) -> None:
+        key = _structure_key(self.robot, self.base_in_world, self.self_margin_m, self.bodies)
+        with _KEPT_LOCK:
+            known = _KEPT.get(key)
+        if known is not None and known.robot is self.robot and known.pin_model is self._model:
+            for level, msg, args in known.notes:
+                log.log(level, msg, *args)
+        else:
+            known = self._selection()
+            with _KEPT_LOCK:
+                _KEPT[key] = known
+                while len(_KEPT) > KEPT_MODELS:
+                    del _KEPT[next(iter(_KEPT))]
+        self._kept = known
+        self.kept_hulls = known.hulls
+        kept = known.kept
+        self._pa = np.array([p[0] for p in kept], dtype=int)
+        self._pb = np.array([p[1] for p in kept], dtype=int)
+        self._self = np.array([self.bodies[b].kind != "cell" for b in self._pb], dtype=bool)
+        self._margin = np.where(self._self, self.self_margin_m, self.margin_m)
+        self._hulled = np.array(
+            [self.bodies[b].hull is not None and self.bodies[b].kind == "cell" for b in self._pb]
+        )
+        self._normals = np.full((len(kept), 3), np.nan)  # last witness normal per pair, world
+        self._bounded = np.array([not (self.bodies[a].is_mesh or self.bodies[b].is_mesh) for a, b in kept])
+        self.pairs = tuple((self.bodies[a].label, self.bodies[b].label) for a, b in kept)
+        self.excluded = known.excluded
+
+    def _selection(self) -> _Kept:
+        """The pairs to check by the rules of :mod:`refine.collision.pairs`, and the others with their reasons."""
         self._place_all(pin.neutral(self._model))
         axes = joint_axes(self._model, self.base_in_world)
         matrix = self.robot.self_collision()
         kept: list[tuple[int, int]] = []
         excluded: list[tuple[str, str, str]] = []
+        notes: list[tuple[int, str, tuple]] = []
         for i in range(self._n_moving):
             for j in range(i + 1, len(self.bodies)):
                 a, b = self._order(i, j)
@@ -163,23 +238,15 @@ class CollisionModel:
                     kept.append((a, b))
                     continue
                 excluded.append((A.label, B.label, why))
-                log.debug("not checking %s vs %s: %s", A.label, B.label, why)
+                notes.append((logging.DEBUG, "not checking %s vs %s: %s", (A.label, B.label, why)))
                 if why == "constant distance":
                     d = signed_distance(A, self._poses[a], B, self._poses[b])[0]
                     level = logging.WARNING if d < self.self_margin_m else logging.INFO
                     msg = "%s and %s are %.1f mm apart at every configuration (self margin %.1f mm): not checked"
-                    log.log(level, msg, A.label, B.label, d * 1e3, self.self_margin_m * 1e3)
-        self._pa = np.array([p[0] for p in kept], dtype=int)
-        self._pb = np.array([p[1] for p in kept], dtype=int)
-        self._self = np.array([self.bodies[b].kind != "cell" for b in self._pb], dtype=bool)
-        self._margin = np.where(self._self, self.self_margin_m, self.margin_m)
-        self._hulled = np.array(
-            [self.bodies[b].hull is not None and self.bodies[b].kind == "cell" for b in self._pb]
-        )
-        self._normals = np.full((len(kept), 3), np.nan)  # last witness normal per pair, world
-        self._bounded = np.array([not (self.bodies[a].is_mesh or self.bodies[b].is_mesh) for a, b in kept])
-        self.pairs = tuple((self.bodies[a].label, self.bodies[b].label) for a, b in kept)
-        self.excluded = tuple(excluded)
+                    notes.append((level, msg, (A.label, B.label, d * 1e3, self.self_margin_m * 1e3)))
+        for level, msg, args in notes:
+            log.log(level, msg, *args)
+        return _Kept(self.robot, self._model, kept, tuple(excluded), notes)
 
     def _order(self, i: int, j: int) -> tuple[int, int]:
         """Body first: the tool before links, the distal link before the proximal one."""
@@ -332,10 +399,14 @@ class CollisionModel:
         the other body than ``|dq| @ pair_motion[p]``.
         """
         if self._motion is None:
-            from refine.collision.motion import pair_reach
+            if self._kept.motion is None:  # the first model of its robot, moving bodies and pairs
+                from refine.collision.motion import pair_reach
 
-            pairs = [(self.bodies[a], self.bodies[b]) for a, b in zip(self._pa, self._pb, strict=True)]
-            self._motion = pair_reach(self._model, pairs)
+                pairs = [(self.bodies[a], self.bodies[b]) for a, b in zip(self._pa, self._pb, strict=True)]
+                motion = pair_reach(self._model, pairs)
+                motion.flags.writeable = False
+                self._kept.motion = motion
+            self._motion = self._kept.motion
         return self._motion
 
     def pair_bound(
