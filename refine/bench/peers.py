@@ -69,8 +69,8 @@ EXAMPLE_POSED = frozenset({"puzzle_piece_turned"})
 """Problem files TrajOpt poses as Tesseract's puzzle-piece example poses a puzzle path: the
 Cartesian constraint with :data:`EXAMPLE_COEFF`, no tolerance box, every waypoint seeded by the
 example's start state (:data:`EXAMPLE_START_RAD`), TrajOpt's seed from the current state. The
-chained IK's seed turns the arm over near the path's end (joint 4 through about 200 deg in one
-step), which the SQP's trust region does not undo: its convex solver fails."""
+chained IK's seed turns the arm over near the path's end, which the SQP's trust region keeps:
+posed with it, TrajOpt answered with a 188 deg joint step, 1.9 µm off the path, in 3.7x the CPU."""
 
 EXAMPLE_START_RAD = (-0.785398, 0.4, 0.0, -1.9, 0.0, 1.0, 0.0)
 """The iiwa's start state in Tesseract's puzzle-piece example [rad]: the seed of every waypoint."""
