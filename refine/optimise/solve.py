@@ -183,14 +183,8 @@ def solve_refinement(
             coarse_at = None  # tried: not again from the whole chain
     if smooth is not None:
         q_seed = smooth
-    elif q0 is None:
-        q_seed = initial_guess(problem, home, rotations)
-        if max_branches > 1:  # a chain that turns the arm over in one step: another branch's first
-            q_seed = _steady_branch(
-                problem, kin, q_seed, home, rotations, BRANCH_CANDIDATES * (max_branches - 1)
-            )
     else:
-        q_seed = np.asarray(q0, dtype=float)
+        q_seed = initial_guess(problem, home, rotations) if q0 is None else np.asarray(q0, dtype=float)
     unreachable = out_of_reach(problem, q_seed, home)
     add_time(timings, "seed", start)
     if not unreachable and beyond.any():
@@ -229,6 +223,11 @@ def solve_refinement(
             diagnosis=findings,
         )
 
+    if q0 is None and smooth is None and max_branches > 1:
+        # a chain that turns the arm over in one step (the points all in reach): not solved as it is
+        seeding = StageTimes.clock()
+        q_seed = _steady_branch(problem, kin, q_seed, home, rotations, BRANCH_CANDIDATES * (max_branches - 1))
+        add_time(timings, "seed", seeding)
     first_options: dict = {}
     if coarse_at is not None and not skip_strict:  # a chained seed the coarse refinement did not see
         seeding = StageTimes.clock()
