@@ -76,6 +76,10 @@ FATROP_HINT = (
 STEP_TOLERANCE = 1e-6
 """A seed's joint step counts as beyond the step bound by more than this fraction of it."""
 
+TURN_OVER_STEPS = 1.5
+"""A chained seed whose largest joint step exceeds this many step bounds turned the arm over, and is
+chained again (:func:`_steady_branch`); a step just over the bound is the solve's to take in."""
+
 
 BRANCH_CANDIDATES = 2
 """Other IK branches chained per branch tried when the first gives no answer; the best are tried
@@ -383,15 +387,15 @@ def _steady_branch(
     """``q_seed``, or another IK branch's chain when ``q_seed`` steps further than the step bound.
 
     A chain that turns the arm over between two waypoints (a joint moving more than
-    ``tolerances.joint_step_deg`` in one step) starts every round far from an answer: the solve
-    has to undo the turn against the step rows. Up to ``count`` chains from the first waypoint's
+    :data:`TURN_OVER_STEPS` times ``tolerances.joint_step_deg`` in one step) starts every round far
+    from an answer: the solve has to undo the turn against the step rows. Up to ``count`` chains from the first waypoint's
     other IK branches are ranked as the branches tried after an infeasible answer
     (:func:`_rank_chains`); the first that reaches every target and keeps every step within the
     bound replaces the seed. None does: the seed stays, and the rounds decide.
     """
     bound = math.radians(problem.tolerances.joint_step_deg)
     step, k, j = largest_step(q_seed)
-    if step <= bound * (1.0 + STEP_TOLERANCE):
+    if step <= bound * TURN_OVER_STEPS:
         return q_seed
     lower, upper = problem_bounds(problem)
     targets = problem_targets(problem)

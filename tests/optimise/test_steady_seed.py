@@ -75,4 +75,6 @@ def test_a_seed_within_the_bound_stays_as_it_is(turned):
     robot, nlp, home = turned
     steady = np.tile(0.5 * (robot.spec.lower + robot.spec.upper), (nlp.n_waypoints, 1))
     steady[:, 0] += np.linspace(0.0, 0.3, nlp.n_waypoints)  # a small step everywhere
+    steady[200:, 5] += math.radians(25.0)  # and one just over the bound: the solve's to take in
+    assert math.radians(20.0) < _largest_step(steady) < math.radians(26.0)
     assert _steady_branch(nlp, problem_kinematics(nlp), steady, home, None, 4) is steady
