@@ -45,29 +45,39 @@ def solver_blas_threads() -> int:
 
 
 def limit_solver_threads() -> int | None:
-    """Set the thread count of CasADi's OpenBLAS once per process and count; the count set, or None.
+    """Set the thread count of CasADi's OpenBLAS where it is not that count already; the count, or None.
 
+    The count is read back from OpenBLAS on every call (a cheap call into the library), so a count
+    that other code changed in between (a benchmark restoring its own, say) is set again.
     None when the count is 0 (left alone) or the library or its ``openblas_set_num_threads`` is
     not there.
     """
-    return _limit(solver_blas_threads())
+    count = solver_blas_threads()
+    if count == 0:
+        return None
+    lib = _library()
+    if lib is None:
+        return None
+    if int(lib.openblas_get_num_threads()) != count:
+        lib.openblas_set_num_threads(ctypes.c_int(count))
+        log.debug("CasADi's OpenBLAS: %d thread(s)", count)
+    return count
 
 
 @functools.cache
-def _limit(count: int) -> int | None:
-    if count == 0:
-        return None
+def _library() -> ctypes.CDLL | None:
+    """CasADi's own OpenBLAS, with both thread calls; None where this CasADi build has none."""
     import casadi
 
     folder = Path(casadi.__file__).parent
     for path in sorted(folder.glob("libcasadi-tp-openblas.so*")) + sorted(folder.glob("libopenblas*.so*")):
         try:
             lib = ctypes.CDLL(str(path))
-            lib.openblas_set_num_threads(ctypes.c_int(count))
+            lib.openblas_set_num_threads  # noqa: B018 - both calls must be there
+            lib.openblas_get_num_threads  # noqa: B018
         except (OSError, AttributeError) as e:
-            log.debug("could not set the threads of %s: %s", path, e)
+            log.debug("could not use the thread calls of %s: %s", path, e)
             continue
-        log.debug("%s: %d thread(s)", path.name, count)
-        return count
+        return lib
     log.debug("no OpenBLAS beside CasADi in %s; its threads are left as they are", folder)
     return None

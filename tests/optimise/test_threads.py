@@ -32,7 +32,23 @@ def test_the_solver_blas_runs_on_the_count_set(monkeypatch):
         assert lib.openblas_get_num_threads() == 2
     finally:
         lib.openblas_set_num_threads(before)
-        threads._limit.cache_clear()
+
+
+def test_a_count_changed_by_other_code_is_set_again(monkeypatch):
+    """Another caller resets OpenBLAS (as a benchmark restoring its own count does): the next limit sets it again."""
+    lib = _openblas()
+    if lib is None:
+        pytest.skip("this CasADi build has no OpenBLAS of its own")
+    before = lib.openblas_get_num_threads()
+    try:
+        monkeypatch.delenv(threads.THREADS_ENV, raising=False)
+        assert threads.limit_solver_threads() == 1
+        lib.openblas_set_num_threads(3)
+        assert lib.openblas_get_num_threads() == 3
+        assert threads.limit_solver_threads() == 1
+        assert lib.openblas_get_num_threads() == 1
+    finally:
+        lib.openblas_set_num_threads(before)
 
 
 def test_zero_leaves_the_count_alone(monkeypatch):
