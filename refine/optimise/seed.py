@@ -10,8 +10,10 @@ from there.
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
+from contextvars import ContextVar
 
 import numpy as np
 
@@ -98,7 +100,46 @@ def _chain(
     return (qs, errors) if at is None else (qs[at], errors[at])
 
 
+_CHAINS: ContextVar[dict | None] = ContextVar("chains", default=None)
+"""The chains already solved inside :func:`remembering_chains`, by their inputs; None outside it."""
+
+
+def remembering_chains(solve):
+    """Decorate ``solve`` so that a chain asked for again inside it is solved once.
+
+    A refinement's seed can chain the same branch more than once (at the coarse waypoints, then
+    along the whole path, then as a branch tried after an infeasible answer); a chain is a pure
+    function of its kinematics, targets, first joints and bounds, so the repeat is the first's
+    answer, to the bit.
+    """
+
+    @functools.wraps(solve)
+    def remembering(*args, **kwargs):
+        token = _CHAINS.set({} if _CHAINS.get() is None else _CHAINS.get())
+        try:
+            return solve(*args, **kwargs)
+        finally:
+            _CHAINS.reset(token)
+
+    return remembering
+
+
 def _chain_each(
+    kin: TcpKinematics, targets: Array, q_first: Array, lower: Array, upper: Array, axis_only: bool = False
+) -> tuple[Array, Array]:
+    """IK chained one waypoint at a time along ``targets`` from ``q_first`` (remembered, see above)."""
+    memo = _CHAINS.get()
+    if memo is None:
+        return _solve_chain(kin, targets, q_first, lower, upper, axis_only)
+    arrays = (kin.base_in_world, kin.tcp_in_flange, kin.tool_in_world, targets, q_first, lower, upper)
+    key = (id(kin.robot), axis_only) + tuple(None if a is None else np.asarray(a, float).tobytes() for a in arrays)
+    found = memo.get(key)
+    if found is None or found[0] is not kin.robot:  # the robot kept with it: its id is not reused
+        found = memo[key] = (kin.robot, *_solve_chain(kin, targets, q_first, lower, upper, axis_only))
+    return found[1].copy(), found[2].copy()
+
+
+def _solve_chain(
     kin: TcpKinematics, targets: Array, q_first: Array, lower: Array, upper: Array, axis_only: bool = False
 ) -> tuple[Array, Array]:
     qs = np.empty((len(targets), len(q_first)))

@@ -39,6 +39,7 @@ from refine.optimise.seed import (
     ik_chain,
     initial_guess,
     out_of_reach,
+    remembering_chains,
     seed_axis_only,
     start_candidates,
 )
@@ -95,6 +96,7 @@ BRANCH_CANDIDATES = 2
 # ---- the outer loop ------------------------------------------------------------------------------
 
 
+@remembering_chains
 def solve_refinement(
     problem: RefinementNLP,
     q0: Array | None = None,
