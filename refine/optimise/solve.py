@@ -35,6 +35,7 @@ from refine.optimise.rounds import MAX_OUTER_ITERATIONS
 from refine.optimise.seed import (
     alternative_seeds,
     chained_seed,
+    initial_guess,
     out_of_reach,
     remembering_chains,
     seed_axis_only,
@@ -182,7 +183,9 @@ def solve_refinement(
         q_seed = smooth
     elif q0 is not None:
         q_seed = np.asarray(q0, dtype=float)
-    else:
+    elif give_up is None:
+        q_seed = initial_guess(problem, home, rotations)
+    else:  # a chain that turns the arm over is abandoned there
         q_seed = whole_chain(problem, kin, home, rotations, give_up)
     unreachable = out_of_reach(problem, q_seed, home)
     add_time(timings, "seed", start)
