@@ -10,8 +10,10 @@ from there.
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
+from contextvars import ContextVar
 
 import numpy as np
 
@@ -55,7 +57,7 @@ def _coarse(targets: Array, axis_only: bool = False) -> Array:
 
 def _chain(
     kin: TcpKinematics, targets: Array, q_first: Array, lower: Array, upper: Array,
-    axis_only: bool = False, at: Array | None = None,
+    axis_only: bool = False, at: Array | None = None, give_up: float | None = None,
 ) -> tuple[Array, Array]:  # fmt: skip
     """IK chained along ``targets`` from ``q_first``.
 
@@ -68,14 +70,16 @@ def _chain(
     ``at``: the waypoints (sorted indices) whose joints are wanted, None for all: the others
     between the chained ones are not solved, and those asked for are as the whole chain has them
     unless a span re-chained for a waypoint not asked for.
+    ``give_up``: a joint step [rad] between two waypoints chained one by one beyond which the chain
+    is abandoned (:func:`_chain_each`); the coarse chain's steps span several waypoints, and keep it.
     """
     coarse = _coarse(targets, axis_only)
     if len(coarse) >= 0.5 * len(targets):
-        qs, errors = _chain_each(kin, targets, q_first, lower, upper, axis_only)
+        qs, errors = _chain_each(kin, targets, q_first, lower, upper, axis_only, give_up)
         return (qs, errors) if at is None else (qs[at], errors[at])
     qs_c, err_c = _chain_each(kin, targets[coarse], q_first, lower, upper, axis_only)
     if float(err_c.max()) > CONVERGED:
-        qs, errors = _chain_each(kin, targets, q_first, lower, upper, axis_only)
+        qs, errors = _chain_each(kin, targets, q_first, lower, upper, axis_only, give_up)
         return (qs, errors) if at is None else (qs[at], errors[at])
     N = len(targets)
     qs, errors = np.empty((N, len(q_first))), np.zeros(N)
@@ -93,14 +97,68 @@ def _chain(
     for j in np.unique(seg[bad]):
         lo, hi = coarse[j], coarse[j + 1]
         qs[lo : hi + 1], errors[lo : hi + 1] = _chain_each(
-            kin, targets[lo : hi + 1], qs[lo], lower, upper, axis_only
+            kin, targets[lo : hi + 1], qs[lo], lower, upper, axis_only, give_up
         )
     return (qs, errors) if at is None else (qs[at], errors[at])
 
 
+_CHAINS: ContextVar[dict | None] = ContextVar("chains", default=None)
+"""The chains already solved inside :func:`remembering_chains`, by their inputs; None outside it."""
+
+
+def remembering_chains(solve):
+    """Decorate ``solve`` so that a chain asked for again inside it is solved once.
+
+    A refinement's seed can chain the same branch more than once (at the coarse waypoints, then
+    along the whole path, then as a branch tried after an infeasible answer); a chain is a pure
+    function of its kinematics, targets, first joints and bounds, so the repeat is the first's
+    answer, to the bit.
+    """
+
+    @functools.wraps(solve)
+    def remembering(*args, **kwargs):
+        token = _CHAINS.set({} if _CHAINS.get() is None else _CHAINS.get())
+        try:
+            return solve(*args, **kwargs)
+        finally:
+            _CHAINS.reset(token)
+
+    return remembering
+
+
 def _chain_each(
-    kin: TcpKinematics, targets: Array, q_first: Array, lower: Array, upper: Array, axis_only: bool = False
-) -> tuple[Array, Array]:
+    kin: TcpKinematics, targets: Array, q_first: Array, lower: Array, upper: Array, axis_only: bool = False,
+    give_up: float | None = None,
+) -> tuple[Array, Array]:  # fmt: skip
+    """IK chained one waypoint at a time along ``targets`` from ``q_first`` (remembered, see above).
+
+    ``give_up``: when a joint moves further than this [rad] from one waypoint to the next, the
+    chain stops there; the waypoints after it keep the last joints and an infinite error. Until
+    then it is the chain without ``give_up``, which one that is not abandoned is.
+    """
+    memo = _CHAINS.get()
+    if memo is None:
+        return _solve_chain(kin, targets, q_first, lower, upper, axis_only, give_up)
+    arrays = (kin.base_in_world, kin.tcp_in_flange, kin.tool_in_world, targets, q_first, lower, upper)
+    key = (id(kin.robot), axis_only) + tuple(None if a is None else np.asarray(a, float).tobytes() for a in arrays)
+    found = memo.get(key)  # the whole chain answers any step to give up at
+    if found is None or found[0] is not kin.robot:  # the robot kept with it: its id is not reused
+        found = memo.get(key + (give_up,))
+    if found is None or found[0] is not kin.robot:
+        found = (kin.robot, *_solve_chain(kin, targets, q_first, lower, upper, axis_only, give_up))
+        memo[key if np.isfinite(found[2]).all() else key + (give_up,)] = found
+    qs, errors = found[1].copy(), found[2].copy()
+    if give_up is not None and np.isfinite(errors).all():
+        far = np.flatnonzero(np.abs(np.diff(qs, axis=0)).max(axis=1) > give_up) if len(qs) > 1 else []
+        if len(far):
+            qs[far[0] + 2 :], errors[far[0] + 1 :] = qs[far[0] + 1], np.inf
+    return qs, errors
+
+
+def _solve_chain(
+    kin: TcpKinematics, targets: Array, q_first: Array, lower: Array, upper: Array, axis_only: bool = False,
+    give_up: float | None = None,
+) -> tuple[Array, Array]:  # fmt: skip
     qs = np.empty((len(targets), len(q_first)))
     errors = np.empty(len(targets))
     q = q_first
@@ -112,6 +170,9 @@ def _chain_each(
                 guess = q + last
         q, errors[k] = solve_ik(kin, T, guess, lower, upper, axis_only=axis_only)
         qs[k] = q
+        if give_up is not None and k and float(np.abs(q - qs[k - 1]).max()) > give_up:
+            qs[k + 1 :], errors[k:] = q, np.inf
+            break
     return qs, errors
 
 
@@ -147,6 +208,7 @@ def ik_chain(
     prefer_first: bool = False,
     axis_only: bool = False,
     at: Array | None = None,
+    give_up: float | None = None,
 ) -> tuple[Array, Array]:
     """IK chained along ``targets`` (N, 4, 4), trying the distinct first-waypoint solutions of ``starts``.
 
@@ -168,6 +230,9 @@ def ik_chain(
         at: sorted waypoint indices, the first 0, whose joints alone are wanted (None: all); the
             chain solves only its chained waypoints and these (:func:`_chain`), and judges the
             branches by them.
+        give_up: a joint step [rad] from one waypoint to the next at which a chain is abandoned
+            (:func:`_chain_each`): its errors from there on are infinite, so a branch that keeps
+            its steps wins; when every branch is abandoned, the first is returned so.
 
     With ``prefer_first`` the first start's branch is chained before the other starts are solved
     (:func:`first_solutions` costs about as much as a chain of 6,400 waypoints when some start does
@@ -179,7 +244,7 @@ def ik_chain(
     best: tuple[float, Array, Array] | None = None
     if prefer_first:  # the home's branch first: the other starts are solved only if its chain fails
         home = first_solutions(kin, targets[0], lower, upper, starts[:1], prefer_first=True, axis_only=axis_only)
-        for qs, errors in _chains(kin, targets, lower, upper, home, axis_only, at):
+        for qs, errors in _chains(kin, targets, lower, upper, home, axis_only, at, give_up):
             best = (float(errors.max()), qs, errors)
             if best[0] <= CONVERGED:
                 return qs, errors
@@ -192,7 +257,7 @@ def ik_chain(
         ]
     elif best is not None:  # the home's branch is chained already (first_solutions puts it first)
         firsts = firsts[1:max_chains]
-    for qs, errors in _chains(kin, targets, lower, upper, firsts[:max_chains], axis_only, at):
+    for qs, errors in _chains(kin, targets, lower, upper, firsts[:max_chains], axis_only, at, give_up):
         score = float(errors.max())
         if best is None or score < best[0]:
             best = (score, qs, errors)
@@ -249,19 +314,24 @@ def _chains(
     firsts: list[Array],
     axis_only: bool = False,
     at: Array | None = None,
+    give_up: float | None = None,
 ):
     """Chain IK from each first-waypoint solution in turn (a generator: chains cost time).
 
-    ``at``: the waypoints whose joints are wanted (:func:`ik_chain`); None for all.
+    ``at``: the waypoints whose joints are wanted (:func:`ik_chain`); None for all. ``give_up``: the
+    joint step [rad] that abandons a chain (:func:`_chain_each`); an abandoned chain is yielded as it is.
     """
     wraps = upper - lower > 2 * np.pi
     free_lower, free_upper = np.where(wraps, -np.inf, lower), np.where(wraps, np.inf, upper)
     for q_first in firsts:
-        qs, errors = _chain(kin, targets, q_first, free_lower, free_upper, axis_only, at)
+        qs, errors = _chain(kin, targets, q_first, free_lower, free_upper, axis_only, at, give_up)
         qs = shift_turns(qs, lower, upper)
+        if np.isinf(errors).any():  # abandoned
+            yield qs, errors
+            continue
         outside = np.any(qs < lower - 1e-9, axis=0) | np.any(qs > upper + 1e-9, axis=0)
         if np.any(outside & ~wraps):
-            qs, errors = _chain(kin, targets, np.clip(qs[0], lower, upper), lower, upper, axis_only, at)
+            qs, errors = _chain(kin, targets, np.clip(qs[0], lower, upper), lower, upper, axis_only, at, give_up)
         elif np.any(outside):
             # a multi-turn joint whose excursion exceeds its range: no whole-turn shift fits it, so
             # centre it exactly (turning the tool by the shift) and clip both ends; the strict
@@ -351,12 +421,17 @@ def initial_guess(problem: RefinementNLP, home: Array | None = None, rotations: 
 
 
 def chained_seed(
-    problem: RefinementNLP, home: Array | None = None, rotations: Array | None = None, at: Array | None = None
+    problem: RefinementNLP,
+    home: Array | None = None,
+    rotations: Array | None = None,
+    at: Array | None = None,
+    give_up: float | None = None,
 ) -> tuple[Array, Array]:
     """:func:`initial_guess`'s joints [rad] and pose error per waypoint, or at the waypoints ``at`` only.
 
     ``at``: sorted waypoint indices, the first 0 (:func:`ik_chain`): the chain then solves only
     its chained waypoints and these, which costs a fraction of the whole chain on a long path.
+    ``give_up``: the joint step [rad] at which a branch's chain is abandoned (:func:`ik_chain`).
     """
     lower, upper = problem_bounds(problem)
     starts = start_candidates(lower, upper, home)
@@ -381,6 +456,7 @@ def chained_seed(
         prefer_first=home is not None,
         axis_only=axis_only,
         at=at,
+        give_up=give_up,
     )
 
 

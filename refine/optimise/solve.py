@@ -33,20 +33,20 @@ from refine.optimise.problem import ActiveSet, ConstraintSource, RefinementNLP
 from refine.optimise.repair import ELASTIC_ONLY, solve_with_repair
 from refine.optimise.rounds import MAX_OUTER_ITERATIONS
 from refine.optimise.seed import (
-    REACH_TOLERANCE_M,
     alternative_seeds,
     chained_seed,
-    ik_chain,
     initial_guess,
     out_of_reach,
+    remembering_chains,
     seed_axis_only,
     start_candidates,
 )
+from refine.optimise.steady import rank_chains, steady_branch, turn_over_step, whole_chain
 from refine.optimise.verify import (
     check_path,
 )
 from refine.optimise.warm import WarmStart, rebuilt_like, reuse_final, warm_seed
-from refine.robot.kinematics import CONVERGED, TcpKinematics, solve_ik_batch
+from refine.robot.kinematics import CONVERGED, solve_ik_batch
 from refine.stopwatch import StageTimes, add_time
 from refine.types import Array
 
@@ -73,17 +73,9 @@ FATROP_HINT = (
 """Appended to the reason of an infeasible refinement in which fatrop failed to converge."""
 
 
-STEP_TOLERANCE = 1e-6
-"""A seed's joint step counts as beyond the step bound by more than this fraction of it."""
-
-TURN_OVER_STEPS = 1.5
-"""A chained seed whose largest joint step exceeds this many step bounds turned the arm over, and is
-chained again (:func:`_steady_branch`); a step just over the bound is the solve's to take in."""
-
-
 BRANCH_CANDIDATES = 2
 """Other IK branches chained per branch tried when the first gives no answer; the best are tried
-(:func:`_rank_chains`)."""
+(:func:`rank_chains`)."""
 
 
 """Rounds of solve -> verify -> add constraints before giving up on adding more."""
@@ -95,6 +87,7 @@ BRANCH_CANDIDATES = 2
 # ---- the outer loop ------------------------------------------------------------------------------
 
 
+@remembering_chains
 def solve_refinement(
     problem: RefinementNLP,
     q0: Array | None = None,
@@ -180,15 +173,20 @@ def solve_refinement(
     # IK at its waypoints alone; the whole chain is the fallback where that seed fails
     coarse_at = coarse_waypoints(problem) if q0 is None and rotations is None else None
     coarse_iterations, smooth = 0, None
+    give_up = turn_over_step(problem) if q0 is None and max_branches > 1 else None
     if coarse_at is not None and not skip_strict and not beyond.any():
-        chain_at, chain_errors = chained_seed(problem, home, at=coarse_at)
+        chain_at, chain_errors = chained_seed(problem, home, at=coarse_at, give_up=give_up)
         if float(chain_errors.max()) <= CONVERGED:  # else as before: the whole chain, then coarse_seed
             smooth, coarse_iterations = _coarse_seed_at(problem, coarse_at, chain_at)
             coarse_at = None  # tried: not again from the whole chain
     if smooth is not None:
         q_seed = smooth
-    else:
-        q_seed = initial_guess(problem, home, rotations) if q0 is None else np.asarray(q0, dtype=float)
+    elif q0 is not None:
+        q_seed = np.asarray(q0, dtype=float)
+    elif give_up is None:
+        q_seed = initial_guess(problem, home, rotations)
+    else:  # a chain that turns the arm over is abandoned there
+        q_seed = whole_chain(problem, kin, home, rotations, give_up)
     unreachable = out_of_reach(problem, q_seed, home)
     add_time(timings, "seed", start)
     if not unreachable and beyond.any():
@@ -230,7 +228,7 @@ def solve_refinement(
     if q0 is None and smooth is None and max_branches > 1:
         # a chain that turns the arm over in one step (the points all in reach): not solved as it is
         seeding = StageTimes.clock()
-        q_seed = _steady_branch(problem, kin, q_seed, home, rotations, BRANCH_CANDIDATES * (max_branches - 1))
+        q_seed = steady_branch(problem, kin, q_seed, home, rotations, BRANCH_CANDIDATES * (max_branches - 1))
         add_time(timings, "seed", seeding)
     first_options: dict = {}
     if coarse_at is not None and not skip_strict:  # a chained seed the coarse refinement did not see
@@ -284,7 +282,7 @@ def solve_refinement(
             skip=q_seed,
             count=BRANCH_CANDIDATES * (max_branches - 1),
         )
-        others = _rank_chains(kin, targets, lower, upper, chains)[: max_branches - 1]
+        others = rank_chains(kin, targets, lower, upper, chains)[: max_branches - 1]
         add_time(timings, "seed", start)
         for k, q_other in enumerate(others, start=2):
             try:
@@ -337,103 +335,6 @@ def _refreshed_rows(
     head = len(problem.lbg) - len(rows)
     lbg = np.concatenate([problem.lbg[:head], [r.lower for r in rows]])
     return replace(problem, lbg=lbg, active=replace(problem.active, linear_rows=rows))
-
-
-def _rank_chains(
-    kin: TcpKinematics, targets: Array, lower: Array, upper: Array, chains: list[Array]
-) -> list[Array]:
-    """IK chains (N, n) best first: those on the targets (N, 4, 4) everywhere, then by joint margin.
-
-    A chain reaches every target within :data:`REACH_TOLERANCE_M` (position [m] plus rotation
-    [rad]) or it does not; among either kind, the larger the smallest distance to a joint limit
-    along the whole path, the better. A branch judged by its first pose alone can run into a joint
-    limit further on, and its repair then needs the orientation it cannot reach there.
-    """
-    return sorted(chains, key=lambda qs: _chain_key(kin, targets, lower, upper, qs))
-
-
-def _chain_key(
-    kin: TcpKinematics, targets: Array, lower: Array, upper: Array, qs: Array
-) -> tuple[bool, float]:
-    """Whether chain ``qs`` (N, n) misses a target (N, 4, 4), and its smallest joint margin [rad] negated."""
-    poses = kin.poses(qs)
-    position = np.linalg.norm(poses[:, :3, 3] - targets[:, :3, 3], axis=1)
-    cos = (np.einsum("kij,kij->k", poses[:, :3, :3], targets[:, :3, :3]) - 1.0) / 2.0
-    error = position + np.arccos(np.clip(cos, -1.0, 1.0))
-    margin = float(np.min(np.minimum(qs - lower, upper - qs)))
-    return bool(error.max() > REACH_TOLERANCE_M), -margin
-
-
-def largest_step(qs: Array) -> tuple[float, int, int]:
-    """The largest joint change between consecutive waypoints of ``qs`` (N, n) [rad], with k and j.
-
-    The change is joint j's from waypoint k to k + 1; (0, 0, 0) for a single waypoint.
-    """
-    if len(qs) < 2:
-        return 0.0, 0, 0
-    steps = np.abs(np.diff(qs, axis=0))
-    k, j = np.unravel_index(int(np.argmax(steps)), steps.shape)
-    return float(steps[k, j]), int(k), int(j)
-
-
-def _steady_branch(
-    problem: RefinementNLP,
-    kin: TcpKinematics,
-    q_seed: Array,
-    home: Array | None,
-    rotations: Array | None,
-    count: int,
-) -> Array:
-    """``q_seed``, or another IK branch's chain when ``q_seed`` steps further than the step bound.
-
-    A chain that turns the arm over between two waypoints (a joint moving more than
-    :data:`TURN_OVER_STEPS` times ``tolerances.joint_step_deg`` in one step) starts every round far
-    from an answer: the solve has to undo the turn against the step rows. Up to ``count`` chains from the first waypoint's
-    other IK branches are ranked as the branches tried after an infeasible answer
-    (:func:`_rank_chains`); the first that reaches every target and keeps every step within the
-    bound replaces the seed. None does: the seed stays, and the rounds decide.
-    """
-    bound = math.radians(problem.tolerances.joint_step_deg)
-    step, k, j = largest_step(q_seed)
-    if step <= bound * TURN_OVER_STEPS:
-        return q_seed
-    lower, upper = problem_bounds(problem)
-    targets = problem_targets(problem)
-    if rotations is not None:
-        targets[:, :3, :3] = rotations
-    starts = start_candidates(lower, upper, home)
-    why = (
-        f"IK seed: joint {j + 1} moves {math.degrees(step):.1f} deg from waypoint {k} to {k + 1} "
-        f"(the joint step bound is {problem.tolerances.joint_step_deg:g} deg)"
-    )
-    if problem.axisymmetric and not seed_axis_only(problem):
-        # the demonstrated spin about the tool axis (a CAM toolpath's is arbitrary) can drive the
-        # last joint into its limit and the chain over to another branch: chain it free
-        qs, errors = ik_chain(
-            kin, targets, lower, upper, starts, prefer_first=home is not None, axis_only=True
-        )
-        other = largest_step(qs)[0]
-        if float(errors.max()) <= CONVERGED and other <= bound * (1.0 + STEP_TOLERANCE):
-            log.info(
-                "%s: chained again with the spin about the tool axis free, whose largest step is %.1f deg, "
-                "it is the seed",
-                why,
-                math.degrees(other),
-            )
-            return qs
-    chains = alternative_seeds(kin, targets, lower, upper, starts, skip=q_seed, count=count)
-    for m, qs in enumerate(_rank_chains(kin, targets, lower, upper, chains), start=2):
-        other = largest_step(qs)[0]
-        if not _chain_key(kin, targets, lower, upper, qs)[0] and other <= bound * (1.0 + STEP_TOLERANCE):
-            log.info(
-                "%s: the chain of IK branch %d, whose largest step is %.1f deg, is the seed",
-                why,
-                m,
-                math.degrees(other),
-            )
-            return qs
-    log.info("%s: none of %d other IK branches' chains keeps the steps; the seed stays", why, len(chains))
-    return q_seed
 
 
 def _tilt_is_a_bound(problem: RefinementNLP) -> bool:

@@ -7,7 +7,7 @@ from refine.optimise.correction import row_names
 from refine.optimise.problem import ActiveSet, LinearRow, build_refinement
 from refine.optimise.repair import ELASTIC_ONLY, solve_with_repair
 from refine.optimise.seed import initial_guess
-from refine.optimise.solve import _rank_chains
+from refine.optimise.steady import rank_chains
 from refine.problem import Tolerances
 from refine.synthetic import wave_path
 
@@ -24,7 +24,7 @@ def test_chains_on_the_targets_everywhere_come_first_then_the_larger_margin_over
     assert np.all(good_narrow <= upper)
     off = good_wide.copy()
     off[7, 0] += 0.01  # 0.01 rad off at one waypoint: misses its target by about 2 cm
-    ranked = _rank_chains(kin, targets, lower, upper, [off, good_narrow, good_wide])
+    ranked = rank_chains(kin, targets, lower, upper, [off, good_narrow, good_wide])
     assert [id(c) for c in ranked] == [id(good_wide), id(good_narrow), id(off)]
 
 
