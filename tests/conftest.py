@@ -57,3 +57,76 @@ class Require:
 def require() -> Require:
     """``require.module(name)``, ``require.path(path, what)``, ``require.shared`` (``../shared``)."""
     return Require()
+
+
+TWO_TRACK_PROGRAM = """G21 G90
+G0 X600 Y-100 Z310
+G1 Z300 F3000
+G1 Y-10
+G1 Z310
+G0 Y10
+G1 Z300
+G1 Y100
+G1 Z310
+"""
+"""Two feed tracks on the line the generated demonstration follows (x = 600 mm, z = 300 mm, y from
+-100 to 100 mm): y -100..-10 mm, then a retract, a rapid and a plunge, then y 10..100 mm."""
+
+
+@pytest.fixture
+def two_track_line_problem(tmp_path: Path) -> Path:
+    """The generated line problem (``refine.synthetic.write_line_problem``) with its CAD path given
+    as :data:`TWO_TRACK_PROGRAM`, a G-code file; the path of its problem.toml."""
+    from refine.synthetic import write_line_problem
+
+    problem = write_line_problem(tmp_path / "line")
+    (problem.parent / "path.nc").write_text(TWO_TRACK_PROGRAM)
+    toml = problem.read_text()
+    assert 'file = "path.csv"' in toml
+    problem.write_text(toml.replace('file = "path.csv"', 'file = "path.nc"\nformat = "gcode"'))
+    return problem
+
+
+@pytest.fixture(scope="session")
+def glass_shift():
+    """The glass cell's first answer (618 waypoints, collision on) and its part moved 2 mm along x and
+    turned 0.3 deg about the pane's centre: ``problem``, ``fused``, ``common`` (the ``refine_path``
+    arguments of the first answer, its cell included), ``first``, ``positions`` and ``orientations``
+    (the moved path) and ``part`` (``common`` with the moved cell)."""
+    import dataclasses
+    from types import SimpleNamespace
+
+    import numpy as np
+    from scipy.spatial.transform import Rotation
+
+    import refine
+    from refine.frames import make_transform
+    from refine.run.stages import fused_path
+
+    p = refine.load_problem(Path(__file__).resolve().parents[1] / "problems" / "glass_adhesive")
+    f = fused_path(p)
+    common = {
+        "speeds": f.speed,
+        "arc_length": f.s,
+        "tcp_in_flange": p.tool.tcp_in_flange,
+        "base_in_world": p.robot.base_in_world,
+        "cell": p.cell,
+        "tool_shapes": p.tool.collision,
+        "collision": p.collision,
+    }
+    first = refine.refine_path("abb_irb4600_60_205", f.positions, f.rotations, **common)
+    assert first.status == "ok"
+    centre = np.array([1.30, 0.0, 0.60])  # the pane's centre [m]
+    R = Rotation.from_rotvec(np.radians(0.3) * np.array([0.0, 0.0, 1.0])).as_matrix()
+    move = make_transform(p=centre - R @ centre + np.array([0.002, 0.0, 0.0]))
+    move[:3, :3] = R
+    moved = tuple(dataclasses.replace(o, pose=move @ o.pose) if o.workpiece else o for o in p.cell)
+    return SimpleNamespace(
+        problem=p,
+        fused=f,
+        common=common,
+        first=first,
+        positions=f.positions @ R.T + move[:3, 3],
+        orientations=np.einsum("ij,njk->nik", R, f.rotations),
+        part={**common, "cell": moved},
+    )

@@ -8,29 +8,11 @@ import numpy as np
 import pytest
 
 from refine.cli import main
-from refine.synthetic import write_line_problem
-
-# Two feed tracks on the line the generated demonstration follows (x = 600 mm, z = 300 mm, y from
-# -100 to 100 mm): y -100..-10 mm, then a retract, a rapid and a plunge, then y 10..100 mm.
-PROGRAM = """G21 G90
-G0 X600 Y-100 Z310
-G1 Z300 F3000
-G1 Y-10
-G1 Z310
-G0 Y10
-G1 Z300
-G1 Y100
-G1 Z310
-"""
 
 
 @pytest.mark.slow
-def test_two_gcode_tracks_are_two_passes(tmp_path):
-    problem = write_line_problem(tmp_path / "line")
-    (problem.parent / "path.nc").write_text(PROGRAM)
-    toml = problem.read_text()
-    assert 'file = "path.csv"' in toml
-    problem.write_text(toml.replace('file = "path.csv"', 'file = "path.nc"\nformat = "gcode"'))
+def test_two_gcode_tracks_are_two_passes(tmp_path, two_track_line_problem):
+    problem = two_track_line_problem  # the tracks: y -100..-10 mm and 10..100 mm (conftest)
     out = tmp_path / "out"
     assert main(["run", str(problem.parent), "--out", str(out), "--no-report"]) == 0
     doc = json.loads((out / "result.json").read_text())

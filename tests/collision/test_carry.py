@@ -1,11 +1,9 @@
 """The dense check from known bounds and witness directions against every waypoint measured."""
 
-import dataclasses
 from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
 
 import refine
 from refine.collision import check_path_clearance
@@ -261,30 +259,14 @@ def test_measure_least_with_tightened_and_raised_bounds_stays_exact():
     assert measured.sum() < again.sum()
 
 
-def test_the_warm_glass_check_reports_the_least_distance_and_pair_of_every_waypoint_measured():
+def test_the_warm_glass_check_reports_the_least_distance_and_pair_of_every_waypoint_measured(glass_shift):
     """The glass cell's part moved 2 mm and turned 0.3 deg, re-solved from the first answer: the warm
     dense check (from the first check's bounds and witness normals, a few waypoints measured)
     reports the least distance, the least clearance and its pair that FCL gives over every pair at
     every waypoint of the answer's joints."""
-    p = refine.load_problem(ROOT / "problems" / "glass_adhesive")
-    f = fused_path(p)
-    common = {
-        "speeds": f.speed,
-        "arc_length": f.s,
-        "tcp_in_flange": p.tool.tcp_in_flange,
-        "base_in_world": p.robot.base_in_world,
-        "tool_shapes": p.tool.collision,
-        "collision": p.collision,
-    }
-    first = refine.refine_path("abb_irb4600_60_205", f.positions, f.rotations, cell=p.cell, **common)
-    centre = np.array([1.30, 0.0, 0.60])
-    R = Rotation.from_rotvec(np.radians(0.3) * np.array([0.0, 0.0, 1.0])).as_matrix()
-    move = make_transform(p=centre - R @ centre + np.array([0.002, 0.0, 0.0]))
-    move[:3, :3] = R
-    moved = tuple(dataclasses.replace(o, pose=move @ o.pose) if o.workpiece else o for o in p.cell)
-    positions, rotations = f.positions @ R.T + move[:3, 3], np.einsum("ij,njk->nik", R, f.rotations)
+    s = glass_shift
     warm = refine.refine_path(
-        "abb_irb4600_60_205", positions, rotations, cell=moved, previous=first, **common
+        "abb_irb4600_60_205", s.positions, s.orientations, previous=s.first, **s.part
     )
     assert warm.status == "ok"
     check = warm.run.first.clearance

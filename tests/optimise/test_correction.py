@@ -2,14 +2,11 @@
 
 import dataclasses
 import logging
-from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
-from scipy.spatial.transform import Rotation
 
 import refine
 from refine.frames import make_transform
@@ -17,44 +14,14 @@ from refine.optimise.correction import active_rows, correct, row_names
 from refine.optimise.kkt import Evaluator, NullSpaceStep, solve_banded_kkt
 from refine.optimise.problem import ActiveSet, LinearRow
 from refine.optimise.rounds import CORRECTED
-from refine.run.stages import fused_path
 
-ROOT = Path(__file__).resolve().parents[2]
 ROBOT = "abb_irb4600_60_205"
 
 
 @pytest.fixture(scope="module")
-def glass():
-    """The glass cell's first answer (618 waypoints, collision on) and the part moved 2 mm, 0.3 deg."""
-    p = refine.load_problem(ROOT / "problems" / "glass_adhesive")
-    f = fused_path(p)
-    common = {
-        "speeds": f.speed,
-        "arc_length": f.s,
-        "tcp_in_flange": p.tool.tcp_in_flange,
-        "base_in_world": p.robot.base_in_world,
-        "cell": p.cell,
-        "tool_shapes": p.tool.collision,
-        "collision": p.collision,
-    }
-    first = refine.refine_path(ROBOT, f.positions, f.rotations, **common)
-    assert first.status == "ok"
-    centre = np.array([1.30, 0.0, 0.60])
-    R = Rotation.from_rotvec(np.radians(0.3) * np.array([0.0, 0.0, 1.0])).as_matrix()
-    move = make_transform(p=centre - R @ centre + np.array([0.002, 0.0, 0.0]))
-    move[:3, :3] = R
-    part = {
-        **common,
-        "cell": tuple(dataclasses.replace(o, pose=move @ o.pose) if o.workpiece else o for o in p.cell),
-    }
-    return SimpleNamespace(
-        f=f,
-        common=common,
-        first=first,
-        positions=f.positions @ R.T + move[:3, 3],
-        orientations=np.einsum("ij,njk->nik", R, f.rotations),
-        part=part,
-    )
+def glass(glass_shift):
+    """The glass cell's first answer and the part moved 2 mm, 0.3 deg (``glass_shift`` of conftest)."""
+    return glass_shift
 
 
 def kept_multipliers(problem, multipliers):
@@ -89,10 +56,10 @@ def test_a_moved_part_is_corrected_to_the_answer_ipopt_finds_at_a_tight_toleranc
 def test_a_rebuilt_problem_for_another_tool_is_corrected_from_the_previous_rows_and_multipliers(glass):
     """The TCP 1 mm further along the flange z axis: a new problem, the previous active set and multipliers."""
     tool = {**glass.common, "tcp_in_flange": glass.common["tcp_in_flange"] @ make_transform(p=[0.0, 0.0, 0.001])}
-    warm = refine.refine_path(ROBOT, glass.f.positions, glass.f.rotations, previous=glass.first, **tool)
+    warm = refine.refine_path(ROBOT, glass.fused.positions, glass.fused.rotations, previous=glass.first, **tool)
     assert warm.run.first.refinement.problem is not glass.first.run.first.refinement.problem
     assert warm.run.first.refinement.solver_status == CORRECTED
-    cold = refine.refine_path(ROBOT, glass.f.positions, glass.f.rotations, **tool)
+    cold = refine.refine_path(ROBOT, glass.fused.positions, glass.fused.rotations, **tool)
     assert warm.status == cold.status == "ok"
     assert np.abs(warm.joints - cold.joints).max() <= 1e-6
     assert np.abs(warm.joints - glass.first.joints).max() > 1e-5  # the tool did move the answer
@@ -102,12 +69,12 @@ def test_a_narrower_cone_changes_the_active_set_and_is_solved_by_ipopt_with_the_
     """At a 0.2 deg cone some waypoints' cone rows bind that did not: the correction breaks them, refused."""
     narrow = {**glass.common, "tolerances": {"orientation_deg": 0.2}}
     with caplog.at_level(logging.DEBUG, logger="refine.optimise.rounds"):
-        warm = refine.refine_path(ROBOT, glass.f.positions, glass.f.rotations, previous=glass.first, **narrow)
+        warm = refine.refine_path(ROBOT, glass.fused.positions, glass.fused.rotations, previous=glass.first, **narrow)
     refused = [r.getMessage() for r in caplog.records if "Newton correction refused" in r.getMessage()]
     assert len(refused) == 1
     assert "below its lower bound" in refused[0] and "the active set changed" in refused[0]
     assert CORRECTED not in warm.run.first.refinement.solver_status
-    cold = refine.refine_path(ROBOT, glass.f.positions, glass.f.rotations, **narrow)
+    cold = refine.refine_path(ROBOT, glass.fused.positions, glass.fused.rotations, **narrow)
     assert warm.status == cold.status
     assert np.abs(warm.joints - cold.joints).max() <= 1e-6
 

@@ -17,38 +17,34 @@ def _openblas() -> ctypes.CDLL | None:
     return ctypes.CDLL(str(found[0])) if found else None
 
 
-def test_the_solver_blas_runs_on_the_count_set(monkeypatch):
+@pytest.fixture
+def openblas(monkeypatch):
+    """CasADi's OpenBLAS, its count restored after the test; no ``$REFINE_SOLVER_BLAS_THREADS``."""
+    lib = _openblas()
+    if lib is None:
+        pytest.skip("this CasADi build has no OpenBLAS of its own")
+    monkeypatch.delenv(threads.THREADS_ENV, raising=False)
+    before = lib.openblas_get_num_threads()
+    yield lib
+    lib.openblas_set_num_threads(before)
+
+
+def test_the_solver_blas_runs_on_the_count_set(openblas, monkeypatch):
     """After the limit, OpenBLAS itself reports the count asked for (1 by default, 2 when asked)."""
-    lib = _openblas()
-    if lib is None:
-        pytest.skip("this CasADi build has no OpenBLAS of its own")
-    before = lib.openblas_get_num_threads()
-    try:
-        monkeypatch.delenv(threads.THREADS_ENV, raising=False)
-        assert threads.limit_solver_threads() == 1
-        assert lib.openblas_get_num_threads() == 1
-        monkeypatch.setenv(threads.THREADS_ENV, "2")
-        assert threads.limit_solver_threads() == 2
-        assert lib.openblas_get_num_threads() == 2
-    finally:
-        lib.openblas_set_num_threads(before)
+    assert threads.limit_solver_threads() == 1
+    assert openblas.openblas_get_num_threads() == 1
+    monkeypatch.setenv(threads.THREADS_ENV, "2")
+    assert threads.limit_solver_threads() == 2
+    assert openblas.openblas_get_num_threads() == 2
 
 
-def test_a_count_changed_by_other_code_is_set_again(monkeypatch):
+def test_a_count_changed_by_other_code_is_set_again(openblas):
     """Another caller resets OpenBLAS (as a benchmark restoring its own count does): the next limit sets it again."""
-    lib = _openblas()
-    if lib is None:
-        pytest.skip("this CasADi build has no OpenBLAS of its own")
-    before = lib.openblas_get_num_threads()
-    try:
-        monkeypatch.delenv(threads.THREADS_ENV, raising=False)
-        assert threads.limit_solver_threads() == 1
-        lib.openblas_set_num_threads(3)
-        assert lib.openblas_get_num_threads() == 3
-        assert threads.limit_solver_threads() == 1
-        assert lib.openblas_get_num_threads() == 1
-    finally:
-        lib.openblas_set_num_threads(before)
+    assert threads.limit_solver_threads() == 1
+    openblas.openblas_set_num_threads(3)
+    assert openblas.openblas_get_num_threads() == 3
+    assert threads.limit_solver_threads() == 1
+    assert openblas.openblas_get_num_threads() == 1
 
 
 def test_zero_leaves_the_count_alone(monkeypatch):

@@ -68,29 +68,12 @@ def test_an_ok_warm_attempt_is_the_answer_with_the_settings_asked(calls):
     assert answer.placement is None
 
 
-# Two feed tracks of a G-code program on the generated line problem's demonstration (as in
-# tests/test_cad_tracks_run.py): y -100..-10 mm, a retract, a rapid and a plunge, then y 10..100 mm.
-PROGRAM = """G21 G90
-G0 X600 Y-100 Z310
-G1 Z300 F3000
-G1 Y-10
-G1 Z310
-G0 Y10
-G1 Z300
-G1 Y100
-G1 Z310
-"""
-
-
 @pytest.mark.slow
-def test_every_cad_track_is_a_pass_and_the_demonstration_quality_is_kept(tmp_path):
+def test_every_cad_track_is_a_pass_and_the_demonstration_quality_is_kept(two_track_line_problem):
+    """The G-code program of conftest's ``two_track_line_problem``: two feed tracks on the line."""
     from refine.problem import load_problem
-    from refine.synthetic import write_line_problem
 
-    path = write_line_problem(tmp_path / "line")
-    (path.parent / "path.nc").write_text(PROGRAM)
-    path.write_text(path.read_text().replace('file = "path.csv"', 'file = "path.nc"\nformat = "gcode"'))
-    problem = load_problem(path)
+    problem = load_problem(two_track_line_problem)
     cache = FusedCache()
     tracks, quality = cache.tracks_for(problem)
     assert len(tracks) == 2 and quality is not None
