@@ -4,15 +4,18 @@ toppra's ``TOPPRA.compute_parameterization`` runs a backward pass (the controlla
 calls of the solver wrapper's ``solve_stagewise_optim`` per gridpoint, through ``_one_step``) and a
 forward pass (one call per gridpoint, through ``_forward_step``). Each step allocates the cost
 vector again, checks its inputs through NumPy and formats nothing but still asks the logger, which
-on the glass cell's 618 gridpoints is about half of the call's time.
+on the glass cell's 618 gridpoints is about half of the call's time. Making the instance asks
+importlib which of toppra's solver wrappers are installed, at each call.
 
 :func:`lean_passes` makes a subclass of a toppra algorithm class whose two passes make the same
 calls of ``solve_stagewise_optim`` with the same arguments in the same order: the cost vectors
 ``(1e-9, -1, 0, ...)`` and its negation (backward), ``(-2 delta_i, -1, 0, ...)`` (forward, one row
 of an array made once per instance), the same bounds, the same clamping of a negative lower end to
-0 and the same early stop at a NaN set. The timing is toppra's to the bit
-(``tests/test_timing.py``). The rest of ``compute_parameterization`` (the start speed's check,
-the forward loop with its retries) is toppra's own.
+0 and the same early stop at a NaN set. The forward pass is toppra's loop in plain floats: the same
+shaving of each next ``x`` (``max(x - TINY, 0.9999 x)``), the same clamping into the next
+controllable set, the same retries (at most ``MAX_TRIES`` times ``x`` lowered by 0.1 %) where a
+step has no solution. With the seidel wrapper the instance makes that wrapper directly, as toppra
+does once it has chosen it. The timing is toppra's to the bit (``tests/test_timing.py``).
 """
 
 from __future__ import annotations
@@ -31,9 +34,92 @@ _TOPPRA_LOG = logging.getLogger("toppra.algorithm.reachabilitybased.reachability
 
 def lean_passes(base: type) -> type:
     """A subclass of toppra algorithm class ``base`` (``toppra.algorithm.TOPPRA``) with lean passes."""
+    import toppra.constants
+    import toppra.exceptions
+    from toppra.algorithm.algorithm import ParameterizationAlgorithm, ParameterizationReturnCode
+    from toppra.constraint import ConstraintType
+    from toppra.solverwrapper.cy_seidel_solverwrapper import seidelWrapper
+
+    tiny, small, max_tries = toppra.constants.TINY, toppra.constants.SMALL, toppra.constants.MAX_TRIES
+    linear = ConstraintType.CanonicalLinear
 
     class LeanPasses(base):  # type: ignore[misc, valid-type]
         __doc__ = f"{base.__name__} whose backward and forward passes skip toppra's per-step Python."
+
+        def __init__(self, constraint_list, path, gridpoints=None, solver_wrapper=None, **kwargs):
+            if solver_wrapper != "seidel" or any(c.get_constraint_type() != linear for c in constraint_list):
+                super().__init__(constraint_list, path, gridpoints, solver_wrapper, **kwargs)
+                return
+            # toppra's own choice of wrapper made directly: linear constraints, seidel asked for
+            ParameterizationAlgorithm.__init__(self, constraint_list, path, gridpoints=gridpoints, **kwargs)
+            self.solver_wrapper = seidelWrapper(self.constraints, self.path, self.gridpoints, solve_lp1d=True)
+
+        def compute_parameterization(self, sd_start: float, sd_end: float, return_data: bool = False):  # noqa: D102
+            if sd_end < 0 or sd_start < 0:
+                raise toppra.exceptions.BadInputVelocities(
+                    f"Negative path velocities: path velocities must be positive: ({sd_start}, {sd_end})"
+                )
+            data = self._problem_data
+            failed = (None, None, None)
+            K = self.compute_controllable_sets(sd_end, sd_end)
+            if np.isnan(K).any():
+                _TOPPRA_LOG.warning(
+                    "An error occurred when computing controllable velocities. "
+                    "The path is not controllable, or is badly conditioned."
+                )
+                data.return_code = ParameterizationReturnCode.FailUncontrollable
+                return (*failed, K) if return_data else failed
+            data.K = K
+            x_start = sd_start**2
+            if x_start + small < K[0, 0] or K[0, 1] + small < x_start:
+                _TOPPRA_LOG.warning(
+                    "The initial velocity is not controllable. %f not in (%f, %f)", x_start, K[0, 0], K[0, 1]
+                )
+                data.return_code = ParameterizationReturnCode.FailUncontrollable
+                return (*failed, K) if return_data else failed
+            xs, us, v_vec = self._forward_pass(x_start, K)
+            sd_vec = np.sqrt(xs)
+            sdd_vec = np.copy(us)
+            data.sd_vec, data.sdd_vec = sd_vec, sdd_vec
+            ok = not np.isnan(sd_vec).any()
+            data.return_code = ParameterizationReturnCode.Ok if ok else ParameterizationReturnCode.ErrUnknown
+            return (sdd_vec, sd_vec, v_vec, K) if return_data else (sdd_vec, sd_vec, v_vec)
+
+        def _forward_pass(self, x_start: float, K: Array) -> tuple[Array, Array, Array]:
+            """toppra's forward loop in floats: ``x`` [m^2/s^2] at each gridpoint, ``u``, the auxiliaries."""
+            wrapper = self.solver_wrapper
+            N = wrapper.get_no_stages()
+            two_deltas = (2 * np.asarray(wrapper.get_deltas())).tolist()
+            xs, us = [0.0] * (N + 1), [0.0] * N
+            v_vec = np.zeros((N, wrapper.get_no_vars() - 2))
+            K_lo, K_hi = K[:, 0].tolist(), K[:, 1].tolist()
+            nan = np.nan
+            wrapper.setup_solver()
+            x, i, tries = float(x_start), 0, 0
+            xs[0] = x
+            while i < self._N:
+                optim_res = self._forward_step(i, x, (K_lo[i + 1], K_hi[i + 1]))
+                if isnan(optim_res[0]):  # as toppra: lower x by 0.1 % and try again, a few times
+                    if tries < max_tries:
+                        x = max(x - tiny, 0.999 * x)
+                        xs[i] = x
+                        tries += 1
+                        _TOPPRA_LOG.warning("forward pass failed at step %d: x lowered to %.6f", i, x)
+                    else:
+                        _TOPPRA_LOG.warning("the forward pass failed %d times at step %d", max_tries, i)
+                        xs[i + 1 :] = [nan] * (N - i)
+                        break
+                else:
+                    tries = 0
+                    u = us[i] = optim_res[0]
+                    x_next = x + two_deltas[i] * u
+                    x_next = max(x_next - tiny, 0.9999 * x_next)
+                    x = xs[i + 1] = min(K_hi[i + 1], max(K_lo[i + 1], x_next))
+                    if len(optim_res) > 2:
+                        v_vec[i] = optim_res[2:]
+                    i += 1
+            wrapper.close_solver()
+            return np.array(xs), np.array(us), v_vec
 
         def compute_controllable_sets(self, sdmin: float, sdmax: float) -> Array:  # noqa: D102
             assert sdmin <= sdmax and 0 <= sdmin  # as toppra's
