@@ -86,7 +86,7 @@ def lean_passes(base: type) -> type:
             return (sdd_vec, sd_vec, v_vec, K) if return_data else (sdd_vec, sd_vec, v_vec)
 
         def _forward_pass(self, x_start: float, K: Array) -> tuple[Array, Array, Array]:
-            """toppra's forward loop in floats: ``x`` [m^2/s^2] at each gridpoint, ``u``, the auxiliaries."""
+            """The forward loop of toppra in floats: ``x`` [m^2/s^2] at each gridpoint, ``u``, the auxiliaries."""
             wrapper = self.solver_wrapper
             N = wrapper.get_no_stages()
             two_deltas = (2 * np.asarray(wrapper.get_deltas())).tolist()

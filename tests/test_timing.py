@@ -410,7 +410,9 @@ def _toppras(s, q, cap, vlim, alim):
     def parts():
         return [
             toppra.constraint.JointVelocityConstraint(vlim),
-            toppra.constraint.JointAccelerationConstraint(alim, toppra.constraint.DiscretizationType.Interpolation),
+            toppra.constraint.JointAccelerationConstraint(
+                alim, toppra.constraint.DiscretizationType.Interpolation
+            ),
             timing._toppra()[1](s, cap),
         ], toppra.SplineInterpolator(s, q)
 
