@@ -423,11 +423,29 @@ def _toppras(s, q, cap, vlim, alim):
     return lean, own
 
 
+def _assert_toppras_own(got, want):
+    """The lean passes' (sdd, sd, v, K) against toppra's: the same to 1e-9 relative.
+
+    toppra finds the lower end of a controllable set that rest reaches by a minimisation whose
+    answer is 0 to within its rounding (up to a few 1e-16 [m^2/s^2]); the lean passes take 0.
+    """
+    sdd, sd, v, K = got
+    sdd_own, sd_own, v_own, K_own = want
+    assert (sd is None) == (sd_own is None)
+    if sd is not None:
+        np.testing.assert_allclose(sd, sd_own, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(sdd, sdd_own, rtol=1e-9, atol=1e-9 * np.abs(sdd_own).max())
+        np.testing.assert_array_equal(v, v_own)
+    assert np.array_equal(np.isnan(K), np.isnan(K_own))
+    np.testing.assert_allclose(K[:, 1], K_own[:, 1], rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(K[:, 0], K_own[:, 0], rtol=1e-9, atol=1e-15)
+
+
 @pytest.mark.parametrize("seed", [0, 3, 7])
-def test_the_lean_passes_give_toppras_own_sets_and_timing_to_the_bit(seed):
+def test_the_lean_passes_give_toppras_own_sets_and_timing(seed):
     """From rest to rest and from a start speed to a free end (the glass cell's kinds of call),
     the lean passes' controllable sets, path speeds, accelerations and auxiliary variables are
-    toppra's own, bit for bit, with the same return code."""
+    toppra's own to 1e-9 relative, with the same return code."""
     s, q = smooth_path(n_pts=301, seed=seed)
     cap = np.full(len(s), 0.4) * (1.0 + 0.3 * np.sin(np.linspace(0.0, 6.0, len(s))))
     vlim, alim = np.full(N_JOINTS, 0.9), np.full(N_JOINTS, 3.0)
@@ -436,8 +454,7 @@ def test_the_lean_passes_give_toppras_own_sets_and_timing_to_the_bit(seed):
         lean, own = _toppras(s, q, cap, vlim, alim)
         got = lean.compute_parameterization(start, end, return_data=True)
         want = own.compute_parameterization(start, end, return_data=True)
-        for a, b in zip(got, want, strict=True):
-            np.testing.assert_array_equal(a, b)
+        _assert_toppras_own(got, want)
         assert lean.problem_data.return_code == own.problem_data.return_code
         speeds.append(got[1])
     assert np.all(np.isfinite(speeds[0])) and np.all(speeds[0][1:-1] > 0.0)  # rest to rest: a timing
@@ -453,7 +470,7 @@ def test_the_lean_passes_stop_where_toppra_does_on_an_end_speed_it_cannot_reach(
     K_lean = lean.compute_controllable_sets(40.0, 40.0)
     K_own = own.compute_controllable_sets(40.0, 40.0)
     assert np.isnan(K_own).any()
-    np.testing.assert_array_equal(K_lean, K_own)
+    np.testing.assert_array_equal(K_lean, K_own)  # no set reached from rest: the same solves
     assert lean.compute_parameterization(0.0, 40.0)[0] is None
     assert own.compute_parameterization(0.0, 40.0)[0] is None
     assert lean.problem_data.return_code == own.problem_data.return_code
