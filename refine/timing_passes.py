@@ -130,8 +130,11 @@ def lean_passes(base: type) -> type:
             wrapper.setup_solver()
             x, i, tries = float(x_start), 0, 0
             xs[0] = x
-            while i < self._N:
-                optim_res = self._forward_step(i, x, (K_lo[i + 1], K_hi[i + 1]))
+            solve, costs = wrapper.solve_stagewise_optim, list(self._stage_costs())
+            while i < self._N:  # _forward_step's solve, inline
+                optim_res = (
+                    (nan, nan) if isnan(x) else solve(i, None, costs[i], x, x, K_lo[i + 1], K_hi[i + 1])
+                )
                 if isnan(optim_res[0]):  # as toppra: lower x by 0.1 % and try again, a few times
                     if tries < max_tries:
                         x = max(x - tiny, 0.999 * x)
@@ -188,16 +191,21 @@ def lean_passes(base: type) -> type:
             wrapper.close_solver()
             return K
 
-        def _forward_step(self, i: int, x: Any, K_next: Array) -> Array:
-            if i < 0 or i > self._N or x is None or isnan(x):
-                return np.array([np.nan, np.nan])
+        def _stage_costs(self) -> Array:
+            """Per stage the forward step's cost ``(-2 delta_i, -1, 0, ...)``, as toppra makes it each step."""
             costs = self.__dict__.get("_forward_costs")
-            if costs is None:  # per stage: (-2 delta_i, -1, 0, ...), as toppra makes it each step
+            if costs is None:
                 wrapper = self.solver_wrapper
                 costs = np.zeros((wrapper.get_no_stages(), wrapper.get_no_vars()))
                 costs[:, 1] = -1
                 costs[:, 0] = -2 * np.asarray(wrapper.get_deltas())
                 self._forward_costs = costs
+            return costs
+
+        def _forward_step(self, i: int, x: Any, K_next: Array) -> Array:
+            if i < 0 or i > self._N or x is None or isnan(x):
+                return np.array([np.nan, np.nan])
+            costs = self._stage_costs()
             return self.solver_wrapper.solve_stagewise_optim(i, None, costs[i], x, x, K_next[0], K_next[1])
 
     LeanPasses.__name__ = LeanPasses.__qualname__ = f"Lean{base.__name__}"
