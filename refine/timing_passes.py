@@ -38,8 +38,15 @@ _TOPPRA_LOG = logging.getLogger("toppra.algorithm.reachabilitybased.reachability
 """toppra's own logger of the passes (its warning on a set that cannot be computed)."""
 
 
-def origin_feasible(params: list, n_points: int) -> Array:
-    """Per gridpoint, whether rest, ``(u, x) = (0, 0)``, meets every constraint there (exactly).
+_VAR_BOUND = 1e8
+"""toppra's seidel wrapper bounds ``u`` and ``x`` to +-1e8 where no constraint bounds them."""
+_TOP_MARGIN_REL = 1e-9
+"""Relative width the interval of ``u`` at the top of a stage must keep for that top to count as
+reached: the interval's ends are rounded to 1e-16 relative, far inside this margin."""
+
+
+def stage_rows(params: list, n_points: int) -> tuple[Array, Array, Array, Array]:
+    """The stage LPs' rows ``A u + B x + C <= 0`` and the bounds on ``x``, from the constraint parameters.
 
     Args:
         params: the solver wrapper's constraint parameters, ``(a, b, c, F, h, ubound, xbound)`` per
@@ -48,21 +55,65 @@ def origin_feasible(params: list, n_points: int) -> Array:
         n_points: number of gridpoints.
 
     Returns:
-        Shape (n_points,), bool. Where True and the next gridpoint's controllable set is
-        ``[0, hi]`` with ``hi >= 0``, the stage's feasible set holds ``x = 0`` (with ``u = 0``, the
-        next ``x`` is 0 too) and every feasible ``x`` is >= 0 or clamped to 0: the lower end of
-        the controllable set is exactly 0, as the minimisation that toppra runs for it finds.
+        ``A, B, C`` shape (n_points, m) (the two bounds on ``u`` among the rows), ``x_bounds``
+        shape (n_points, 2) [m^2/s^2], as the seidel wrapper makes them.
     """
-    ok = np.ones(n_points, dtype=bool)
-    for a, _b, c, F, h, ubound, xbound in params:
+    A, B, C = [], [], []
+    u_bounds = np.tile([-_VAR_BOUND, _VAR_BOUND], (n_points, 1))
+    x_bounds = u_bounds.copy()
+    for a, b, c, F, h, ubound, xbound in params:
         if a is not None:
             F, h = np.asarray(F), np.asarray(h)
-            rows = np.einsum("ij,ikj->ik", c, F) if F.ndim == 3 else c @ F.T
-            ok &= np.all(rows - h <= 0.0, axis=1)
-        for bound in (ubound, xbound):
+            if F.ndim == 3:
+                A.append(np.einsum("ikj,ij->ik", F, a))
+                B.append(np.einsum("ikj,ij->ik", F, b))
+                C.append(np.einsum("ikj,ij->ik", F, c) - h)
+            else:
+                A.append(a @ F.T)
+                B.append(b @ F.T)
+                C.append(c @ F.T - h)
+        for bound, into in ((ubound, u_bounds), (xbound, x_bounds)):
             if bound is not None:
-                ok &= (np.asarray(bound)[:, 0] <= 0.0) & (np.asarray(bound)[:, 1] >= 0.0)
-    return ok
+                into[:, 0] = np.maximum(into[:, 0], np.asarray(bound)[:, 0])
+                into[:, 1] = np.minimum(into[:, 1], np.asarray(bound)[:, 1])
+    ones, zeros = np.ones((n_points, 1)), np.zeros((n_points, 1))
+    A.append(np.hstack([-ones, ones]))  # u >= lower bound, u <= upper bound
+    B.append(np.hstack([zeros, zeros]))
+    C.append(np.column_stack([u_bounds[:, 0], -u_bounds[:, 1]]))
+    return np.hstack(A), np.hstack(B), np.hstack(C), x_bounds
+
+
+def stage_shortcuts(params: list, n_points: int) -> tuple[Array, Array, Array, Array]:
+    """Per gridpoint, what lets the backward pass skip a stage's solves.
+
+    * ``x_top`` [m^2/s^2], the largest ``x`` the stage's bounds allow, and ``[u_lo, u_hi]``
+      [m/s^2], the interval of ``u`` the rows leave at ``x_top`` (``u_lo = inf`` where a row
+      without ``u`` or the lower bound on ``x`` excludes ``x_top``). ``x <= x_top`` holds on the
+      whole stage, so where some ``u`` in that interval also takes ``x_top + 2 delta u`` into the
+      next stage's set, the controllable set ends at ``x_top`` exactly.
+    * ``at_rest``: whether rest, ``(u, x) = (0, 0)``, meets every row and bound (exactly). Where
+      it does and the next stage's set is ``[0, hi]`` with ``hi >= 0``, ``x = 0`` is feasible
+      (with ``u = 0`` the next ``x`` is 0 too) and every feasible ``x`` is >= 0 or clamped to 0: the
+      controllable set's lower end is 0, which toppra's minimisation finds to within its rounding.
+
+    Args:
+        params: the solver wrapper's constraint parameters (:func:`stage_rows`).
+        n_points: number of gridpoints.
+
+    Returns:
+        ``x_top, u_lo, u_hi, at_rest``, each shape (n_points,).
+    """
+    A, B, C, x_bounds = stage_rows(params, n_points)
+    x_top = x_bounds[:, 1]
+    rest = -(B * x_top[:, None] + C)  # A u <= rest
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = rest / A
+    u_lo = np.max(np.where(A < 0.0, ratio, -np.inf), axis=1)
+    u_hi = np.min(np.where(A > 0.0, ratio, np.inf), axis=1)
+    excluded = np.any((A == 0.0) & (rest < 0.0), axis=1) | (x_bounds[:, 0] > x_top)
+    u_lo[excluded | ~np.isfinite(u_lo) | ~np.isfinite(u_hi)] = np.inf
+    at_rest = np.all(C <= 0.0, axis=1) & (x_bounds[:, 0] <= 0.0) & (x_bounds[:, 1] >= 0.0)
+    return x_top, u_lo, u_hi, at_rest
 
 
 def lean_passes(base: type) -> type:
@@ -160,8 +211,8 @@ def lean_passes(base: type) -> type:
         def compute_controllable_sets(self, sdmin: float, sdmax: float) -> Array:  # noqa: D102
             assert sdmin <= sdmax and 0 <= sdmin  # as toppra's
             N = self._N
-            K = np.zeros((N + 1, 2))
-            K[N] = [sdmin**2, sdmax**2]
+            K_lo, K_hi = [0.0] * (N + 1), [0.0] * (N + 1)
+            K_lo[N], K_hi[N] = sdmin**2, sdmax**2
             wrapper = self.solver_wrapper
             wrapper.setup_solver()
             upper = np.zeros(wrapper.get_no_vars())
@@ -169,27 +220,33 @@ def lean_passes(base: type) -> type:
             lower = -upper
             solve = wrapper.solve_stagewise_optim
             nan = np.nan
-            at_rest = origin_feasible(wrapper.params, N + 1).tolist()
+            x_top, u_lo, u_hi, at_rest = (v.tolist() for v in stage_shortcuts(wrapper.params, N + 1))
+            two_deltas = (2 * np.asarray(wrapper.get_deltas())).tolist()
             for i in range(N - 1, -1, -1):
-                lo, hi = K[i + 1, 0], K[i + 1, 1]
+                lo, hi = K_lo[i + 1], K_hi[i + 1]
                 if isnan(lo) or isnan(hi):
-                    K[i] = nan
+                    K_lo[i] = K_hi[i] = nan
                 elif at_rest[i] and lo == 0.0 and hi >= 0.0:  # rest reaches rest: the lower end is 0
-                    K[i, 0], K[i, 1] = 0.0, solve(i, None, upper, nan, nan, lo, hi)[1]
+                    top = x_top[i]
+                    u_from = max(u_lo[i], (lo - top) / two_deltas[i])
+                    u_to = min(u_hi[i], (hi - top) / two_deltas[i])
+                    if u_to - u_from > _TOP_MARGIN_REL * (abs(u_from) + abs(u_to) + 1.0):
+                        K_hi[i] = top  # the stage's top reaches the next set: nothing is higher
+                    else:
+                        K_hi[i] = solve(i, None, upper, nan, nan, lo, hi)[1]
                 else:
                     x_upper = solve(i, None, upper, nan, nan, lo, hi)[1]
-                    K[i, 0], K[i, 1] = solve(i, None, lower, nan, nan, lo, hi)[1], x_upper
-                    if K[i, 0] < 0:
-                        K[i, 0] = 0
-                if isnan(K[i, 0]) or isnan(K[i, 1]):
+                    x_lower = solve(i, None, lower, nan, nan, lo, hi)[1]
+                    K_lo[i], K_hi[i] = (0 if x_lower < 0 else x_lower), x_upper
+                if isnan(K_lo[i]) or isnan(K_hi[i]):
                     _TOPPRA_LOG.warning(
                         "A numerical error occurs: The controllable set at step [%d / %d] can't be computed.",
                         i,
                         N + 1,
                     )
-                    return K
+                    return np.column_stack([K_lo, K_hi])
             wrapper.close_solver()
-            return K
+            return np.column_stack([K_lo, K_hi])
 
         def _stage_costs(self) -> Array:
             """Per stage the forward step's cost ``(-2 delta_i, -1, 0, ...)``, as toppra makes it each step."""
