@@ -83,7 +83,7 @@ def stage_rows(params: list, n_points: int) -> tuple[Array, Array, Array, Array]
     return np.hstack(A), np.hstack(B), np.hstack(C), x_bounds
 
 
-def stage_shortcuts(params: list, n_points: int) -> tuple[Array, Array, Array, Array]:
+def stage_shortcuts(rows: tuple[Array, Array, Array, Array]) -> tuple[Array, Array, Array, Array]:
     """Per gridpoint, what lets the backward pass skip a stage's solves.
 
     * ``x_top`` [m^2/s^2], the largest ``x`` the stage's bounds allow, and ``[u_lo, u_hi]``
@@ -97,13 +97,12 @@ def stage_shortcuts(params: list, n_points: int) -> tuple[Array, Array, Array, A
       controllable set's lower end is 0, which toppra's minimisation finds to within its rounding.
 
     Args:
-        params: the solver wrapper's constraint parameters (:func:`stage_rows`).
-        n_points: number of gridpoints.
+        rows: ``A, B, C, x_bounds`` of :func:`stage_rows`.
 
     Returns:
-        ``x_top, u_lo, u_hi, at_rest``, each shape (n_points,).
+        ``x_top, u_lo, u_hi, at_rest``, each shape (N + 1,).
     """
-    A, B, C, x_bounds = stage_rows(params, n_points)
+    A, B, C, x_bounds = rows
     x_top = x_bounds[:, 1]
     rest = -(B * x_top[:, None] + C)  # A u <= rest
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -114,6 +113,39 @@ def stage_shortcuts(params: list, n_points: int) -> tuple[Array, Array, Array, A
     u_lo[excluded | ~np.isfinite(u_lo) | ~np.isfinite(u_hi)] = np.inf
     at_rest = np.all(C <= 0.0, axis=1) & (x_bounds[:, 0] <= 0.0) & (x_bounds[:, 1] >= 0.0)
     return x_top, u_lo, u_hi, at_rest
+
+
+def forward_certificates(rows: tuple[Array, Array, Array, Array], x_guess: Array) -> tuple[Array, ...]:
+    """Per stage, what proves that the forward step's best ``u`` is the one onto the next set's top.
+
+    With ``x`` fixed, the forward step maximises ``u`` over the rows ``A u <= -(B x + C)``, the
+    bounds on ``x`` and ``lo <= x + 2 delta u <= hi``. Where ``u_cap = (hi - x) / (2 delta)`` lies
+    inside the rows' interval ``[u_lo(x), u_hi(x)]`` and ``x`` inside its bounds, ``u_cap`` is the
+    maximum (``u_cap >= (lo - x) / (2 delta)`` as ``hi >= lo``). The interval's ends are evaluated
+    at a guess ``x_guess`` of each stage's ``x``; each row's end moves by ``|B / A| |x - x_guess|``
+    at another ``x``, so ``u_hi(x) >= u_hi_g - L_hi |x - x_guess|``, and likewise ``u_lo(x)``; a
+    row without ``u`` keeps ``-(B x + C) >= slack_0 - L_0 |x - x_guess|``.
+
+    Args:
+        rows: ``A, B, C, x_bounds`` of :func:`stage_rows`, shape (N + 1, m) and (N + 1, 2).
+        x_guess: the guess of ``x`` at each gridpoint [m^2/s^2], shape (N + 1,).
+
+    Returns:
+        ``u_hi_g, L_hi, u_lo_g, L_lo, slack_0, L_0``, each shape (N + 1,); ends are +-inf where
+        no row bounds ``u`` that way (the seidel wrapper's +-1e8 bounds are rows).
+    """
+    A, B, C, _ = rows
+    rest = -(B * x_guess[:, None] + C)  # A u <= rest
+    up, down, flat = A > 0.0, A < 0.0, A == 0.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio, slope = rest / A, np.abs(B / A)
+    u_hi = np.min(np.where(up, ratio, np.inf), axis=1)
+    L_hi = np.max(np.where(up, slope, 0.0), axis=1)
+    u_lo = np.max(np.where(down, ratio, -np.inf), axis=1)
+    L_lo = np.max(np.where(down, slope, 0.0), axis=1)
+    slack_0 = np.min(np.where(flat, rest, np.inf), axis=1)
+    L_0 = np.max(np.where(flat, np.abs(B), 0.0), axis=1)
+    return u_hi, L_hi, u_lo, L_lo, slack_0, L_0
 
 
 def lean_passes(base: type) -> type:
@@ -182,10 +214,30 @@ def lean_passes(base: type) -> type:
             x, i, tries = float(x_start), 0, 0
             xs[0] = x
             solve, costs = wrapper.solve_stagewise_optim, list(self._stage_costs())
-            while i < self._N:  # _forward_step's solve, inline
-                optim_res = (
-                    (nan, nan) if isnan(x) else solve(i, None, costs[i], x, x, K_lo[i + 1], K_hi[i + 1])
-                )
+            # where x runs at the next set's top, shaved as below: the guess the certificates are made at
+            rows = self._stage_rows()
+            top = K[:, 1]
+            guess = np.minimum(top, np.maximum(K[:, 0], np.maximum(top - tiny, 0.9999 * top)))
+            guess[0] = x
+            u_hi, L_hi, u_lo, L_lo, slack_0, L_0 = (v.tolist() for v in forward_certificates(rows, guess))
+            x_lo, x_hi = rows[3][:, 0].tolist(), rows[3][:, 1].tolist()
+            guess = guess.tolist()
+            margin = _TOP_MARGIN_REL
+            while i < self._N:  # _forward_step's solve, inline, or its answer where it is proved
+                hi = K_hi[i + 1]
+                u_cap = (hi - x) / two_deltas[i]
+                d = abs(x - guess[i])
+                if (
+                    x_lo[i] <= x <= x_hi[i]
+                    and u_cap <= u_hi[i] - L_hi[i] * d - margin * (abs(u_hi[i]) + 1.0)
+                    and u_cap >= u_lo[i] + L_lo[i] * d + margin * (abs(u_lo[i]) + 1.0)
+                    and slack_0[i] >= L_0[i] * d
+                ):
+                    optim_res = (u_cap, x)
+                elif isnan(x):
+                    optim_res = (nan, nan)
+                else:
+                    optim_res = solve(i, None, costs[i], x, x, K_lo[i + 1], hi)
                 if isnan(optim_res[0]):  # as toppra: lower x by 0.1 % and try again, a few times
                     if tries < max_tries:
                         x = max(x - tiny, 0.999 * x)
@@ -220,7 +272,7 @@ def lean_passes(base: type) -> type:
             lower = -upper
             solve = wrapper.solve_stagewise_optim
             nan = np.nan
-            x_top, u_lo, u_hi, at_rest = (v.tolist() for v in stage_shortcuts(wrapper.params, N + 1))
+            x_top, u_lo, u_hi, at_rest = (v.tolist() for v in stage_shortcuts(self._stage_rows()))
             two_deltas = (2 * np.asarray(wrapper.get_deltas())).tolist()
             for i in range(N - 1, -1, -1):
                 lo, hi = K_lo[i + 1], K_hi[i + 1]
@@ -247,6 +299,13 @@ def lean_passes(base: type) -> type:
                     return np.column_stack([K_lo, K_hi])
             wrapper.close_solver()
             return np.column_stack([K_lo, K_hi])
+
+        def _stage_rows(self) -> tuple[Array, Array, Array, Array]:
+            """The wrapper's rows and bounds on ``x`` (:func:`stage_rows`), made once per instance."""
+            rows = self.__dict__.get("_rows")
+            if rows is None:
+                rows = self._rows = stage_rows(self.solver_wrapper.params, self._N + 1)
+            return rows
 
         def _stage_costs(self) -> Array:
             """Per stage the forward step's cost ``(-2 delta_i, -1, 0, ...)``, as toppra makes it each step."""
