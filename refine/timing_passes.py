@@ -148,6 +148,53 @@ def forward_certificates(rows: tuple[Array, Array, Array, Array], x_guess: Array
     return u_hi, L_hi, u_lo, L_lo, slack_0, L_0
 
 
+def _step_onto_top(x: Array, K: Array, two_deltas: Array, tiny: float) -> tuple[Array, Array]:
+    """The forward step from ``x[i]`` with ``u = (K[i + 1, 1] - x[i]) / (2 delta_i)``: ``u`` and the next ``x``.
+
+    The same operations as the forward loop's, element by element, so the same bits.
+    """
+    u = (K[1:, 1] - x[:-1]) / two_deltas
+    x_next = x[:-1] + two_deltas * u
+    x_next = np.maximum(x_next - tiny, 0.9999 * x_next)
+    return u, np.minimum(K[1:, 1], np.maximum(K[1:, 0], x_next))
+
+
+def forward_guess(x_start: float, K: Array, two_deltas: Array, tiny: float) -> tuple[Array, Array, Array]:
+    """Where the forward pass runs along the top of the controllable sets: the guess of its ``x``.
+
+    Starting from the next set's top, shaved as the forward loop shaves, the step onto the top
+    (:func:`_step_onto_top`) is applied to the whole guess a few times, until it reproduces it.
+
+    Args:
+        x_start: ``x`` at the first gridpoint [m^2/s^2].
+        K: the controllable sets, shape (N + 1, 2) [m^2/s^2].
+        two_deltas: ``2 delta_i`` [m], shape (N,).
+        tiny: toppra's shaving constant [m^2/s^2].
+
+    Returns:
+        ``g`` shape (N + 1,), ``u_g`` shape (N,) (the step's ``u`` from ``g[i]``) and ``follows``
+        shape (N,): whether the step from ``g[i]`` gives ``g[i + 1]`` to the bit.
+    """
+    top = K[:, 1]
+    g = np.minimum(top, np.maximum(K[:, 0], np.maximum(top - tiny, 0.9999 * top)))
+    g[0] = x_start
+    for _ in range(4):
+        u_g, g_next = _step_onto_top(g, K, two_deltas, tiny)
+        follows = g_next == g[1:]
+        if follows.all():
+            break
+        g[1:] = g_next
+    u_g, g_next = _step_onto_top(g, K, two_deltas, tiny)
+    return g, u_g, g_next == g[1:]
+
+
+def _next_false(flags: Array) -> Array:
+    """Per index ``i``, the first index ``k >= i`` where ``flags`` is False (``len(flags)`` if none)."""
+    n = len(flags)
+    where = np.where(flags, n, np.arange(n))
+    return np.minimum.accumulate(where[::-1])[::-1]
+
+
 def lean_passes(base: type) -> type:
     """A subclass of toppra algorithm class ``base`` (``toppra.algorithm.TOPPRA``) with lean passes."""
     import toppra.constants
@@ -202,11 +249,17 @@ def lean_passes(base: type) -> type:
             return (sdd_vec, sd_vec, v_vec, K) if return_data else (sdd_vec, sd_vec, v_vec)
 
         def _forward_pass(self, x_start: float, K: Array) -> tuple[Array, Array, Array]:
-            """The forward loop of toppra in floats: ``x`` [m^2/s^2] at each gridpoint, ``u``, the auxiliaries."""
+            """The forward loop of toppra: ``x`` [m^2/s^2] at each gridpoint, ``u`` [m/s^2], the auxiliaries.
+
+            Each step is toppra's solve, or its answer ``u_cap`` where :func:`forward_certificates`
+            proves it; runs of such steps are taken at once where ``x`` follows the guess ``g``
+            exactly (the step from ``g[i]`` gives ``g[i + 1]`` to the bit).
+            """
             wrapper = self.solver_wrapper
             N = wrapper.get_no_stages()
-            two_deltas = (2 * np.asarray(wrapper.get_deltas())).tolist()
-            xs, us = [0.0] * (N + 1), [0.0] * N
+            two_deltas_arr = 2 * np.asarray(wrapper.get_deltas())
+            two_deltas = two_deltas_arr.tolist()
+            xs, us = np.zeros(N + 1), np.zeros(N)
             v_vec = np.zeros((N, wrapper.get_no_vars() - 2))
             K_lo, K_hi = K[:, 0].tolist(), K[:, 1].tolist()
             nan = np.nan
@@ -214,19 +267,34 @@ def lean_passes(base: type) -> type:
             x, i, tries = float(x_start), 0, 0
             xs[0] = x
             solve, costs = wrapper.solve_stagewise_optim, list(self._stage_costs())
-            # where x runs at the next set's top, shaved as below: the guess the certificates are made at
             rows = self._stage_rows()
-            top = K[:, 1]
-            guess = np.minimum(top, np.maximum(K[:, 0], np.maximum(top - tiny, 0.9999 * top)))
-            guess[0] = x
-            u_hi, L_hi, u_lo, L_lo, slack_0, L_0 = (v.tolist() for v in forward_certificates(rows, guess))
-            x_lo, x_hi = rows[3][:, 0].tolist(), rows[3][:, 1].tolist()
-            guess = guess.tolist()
+            g, u_g, good = forward_guess(x, K, two_deltas_arr, tiny)
+            u_hi, L_hi, u_lo, L_lo, slack_0, L_0 = forward_certificates(rows, g)
+            x_bounds = rows[3]
             margin = _TOP_MARGIN_REL
-            while i < self._N:  # _forward_step's solve, inline, or its answer where it is proved
+            good &= (
+                (x_bounds[:-1, 0] <= g[:-1])
+                & (g[:-1] <= x_bounds[:-1, 1])
+                & (u_g <= u_hi[:-1] - margin * (np.abs(u_hi[:-1]) + 1.0))
+                & (u_g >= u_lo[:-1] + margin * (np.abs(u_lo[:-1]) + 1.0))
+                & (slack_0[:-1] >= 0.0)
+            )
+            run_end = _next_false(good).tolist()
+            good_list, g_list = good.tolist(), g.tolist()
+            u_hi, L_hi, u_lo, L_lo, slack_0, L_0 = (
+                v.tolist() for v in (u_hi, L_hi, u_lo, L_lo, slack_0, L_0)
+            )
+            x_lo, x_hi = x_bounds[:, 0].tolist(), x_bounds[:, 1].tolist()
+            while i < N:  # _forward_step's solve, inline, or its answer where it is proved
+                if good_list[i] and x == g_list[i]:  # a run of proved steps along the guess
+                    k = run_end[i]
+                    xs[i + 1 : k + 1] = g[i + 1 : k + 1]
+                    us[i:k] = u_g[i:k]
+                    x, i, tries = g_list[k], k, 0
+                    continue
                 hi = K_hi[i + 1]
                 u_cap = (hi - x) / two_deltas[i]
-                d = abs(x - guess[i])
+                d = abs(x - g_list[i])
                 if (
                     x_lo[i] <= x <= x_hi[i]
                     and u_cap <= u_hi[i] - L_hi[i] * d - margin * (abs(u_hi[i]) + 1.0)
@@ -246,19 +314,20 @@ def lean_passes(base: type) -> type:
                         _TOPPRA_LOG.warning("forward pass failed at step %d: x lowered to %.6f", i, x)
                     else:
                         _TOPPRA_LOG.warning("the forward pass failed %d times at step %d", max_tries, i)
-                        xs[i + 1 :] = [nan] * (N - i)
+                        xs[i + 1 :] = nan
                         break
                 else:
                     tries = 0
                     u = us[i] = optim_res[0]
                     x_next = x + two_deltas[i] * u
                     x_next = max(x_next - tiny, 0.9999 * x_next)
-                    x = xs[i + 1] = min(K_hi[i + 1], max(K_lo[i + 1], x_next))
+                    x = min(K_hi[i + 1], max(K_lo[i + 1], x_next))
+                    xs[i + 1] = x
                     if len(optim_res) > 2:
                         v_vec[i] = optim_res[2:]
                     i += 1
             wrapper.close_solver()
-            return np.array(xs), np.array(us), v_vec
+            return xs, us, v_vec
 
         def compute_controllable_sets(self, sdmin: float, sdmax: float) -> Array:  # noqa: D102
             assert sdmin <= sdmax and 0 <= sdmin  # as toppra's
