@@ -188,6 +188,25 @@ def forward_guess(x_start: float, K: Array, two_deltas: Array, tiny: float) -> t
     return g, u_g, g_next == g[1:]
 
 
+def _top_reached(x_top, u_lo, u_hi, at_rest, lo: Array, hi: Array, two_deltas: Array) -> Array:
+    """Per stage, whether the backward pass takes the stage's top given the next set ``[lo, hi]``.
+
+    The backward loop's test element by element (the same operations, so the same answers):
+    rest reaches rest, and ``u`` at the top keeps an interval wider than the margin.
+    """
+    x_top, u_lo, u_hi, at_rest = x_top[:-1], u_lo[:-1], u_hi[:-1], at_rest[:-1]
+    u_from = np.maximum(u_lo, (lo - x_top) / two_deltas)
+    u_to = np.minimum(u_hi, (hi - x_top) / two_deltas)
+    wide = u_to - u_from > _TOP_MARGIN_REL * (np.abs(u_from) + np.abs(u_to) + 1.0)
+    return at_rest & (lo == 0.0) & (hi >= 0.0) & wide
+
+
+def _last_false(flags: Array) -> Array:
+    """Per index ``i``, the last index ``k <= i`` where ``flags`` is False (-1 if none)."""
+    where = np.where(flags, -1, np.arange(len(flags)))
+    return np.maximum.accumulate(where)
+
+
 def _next_false(flags: Array) -> Array:
     """Per index ``i``, the first index ``k >= i`` where ``flags`` is False (``len(flags)`` if none)."""
     n = len(flags)
@@ -341,10 +360,24 @@ def lean_passes(base: type) -> type:
             lower = -upper
             solve = wrapper.solve_stagewise_optim
             nan = np.nan
-            x_top, u_lo, u_hi, at_rest = (v.tolist() for v in stage_shortcuts(self._stage_rows()))
-            two_deltas = (2 * np.asarray(wrapper.get_deltas())).tolist()
-            for i in range(N - 1, -1, -1):
+            shortcuts = stage_shortcuts(self._stage_rows())
+            two_deltas_arr = 2 * np.asarray(wrapper.get_deltas())
+            # runs of stages that take their top, each from the next one's top (from K[N] at the end)
+            lo_run, hi_run = np.zeros(N), shortcuts[0][1:].copy()
+            lo_run[-1], hi_run[-1] = K_lo[N], K_hi[N]
+            on_top = _top_reached(*shortcuts, lo_run, hi_run, two_deltas_arr)
+            run_start = _last_false(on_top).tolist()
+            lo_run, hi_run, on_top = lo_run.tolist(), hi_run.tolist(), on_top.tolist()
+            x_top, u_lo, u_hi, at_rest = (v.tolist() for v in shortcuts)
+            two_deltas = two_deltas_arr.tolist()
+            i = N - 1
+            while i >= 0:
                 lo, hi = K_lo[i + 1], K_hi[i + 1]
+                if on_top[i] and lo == lo_run[i] and hi == hi_run[i]:
+                    k = run_start[i]
+                    K_hi[k + 1 : i + 1] = x_top[k + 1 : i + 1]  # K_lo there stays 0
+                    i = k
+                    continue
                 if isnan(lo) or isnan(hi):
                     K_lo[i] = K_hi[i] = nan
                 elif at_rest[i] and lo == 0.0 and hi >= 0.0:  # rest reaches rest: the lower end is 0
@@ -366,6 +399,7 @@ def lean_passes(base: type) -> type:
                         N + 1,
                     )
                     return np.column_stack([K_lo, K_hi])
+                i -= 1
             wrapper.close_solver()
             return np.column_stack([K_lo, K_hi])
 
