@@ -293,7 +293,7 @@ def _segment_times(s: Array, speed: Array) -> tuple[Array, Array, Array]:
     return x, sdd, t
 
 
-def _between_waypoint_speed_ratio(path, s: Array, q: Array, x: Array, sdd: Array, t: Array, vlim: Array):
+def _between_waypoint_speed_ratio(path, s: Array, q: Array, x: Array, t: Array, vlim: Array, dq: Array, ddq: Array):
     """Per segment and joint, a bound on the joint speed between the waypoints over its limit [-].
 
     The larger of the mean speed over the segment, ``|q[k+1] - q[k]| / (t[k+1] - t[k])`` (what a
@@ -301,19 +301,24 @@ def _between_waypoint_speed_ratio(path, s: Array, q: Array, x: Array, sdd: Array
     inside it: ``q'`` is quadratic on a cubic segment, so its largest magnitude is at an end or where
     ``q''`` (linear) crosses zero; ``sdot^2`` is linear in ``s``, so ``sdot`` is largest at an end.
 
+    Args:
+        path: the spline (``toppra.SplineInterpolator``) through ``(s, q)``.
+        s, q, x, t: arc length [m], joints [rad], ``sdot^2`` [m^2/s^2] and time [s] at the waypoints.
+        vlim: joint speed limits [rad/s], shape (n,).
+        dq, ddq: ``q'`` [rad/m] and ``q''`` [rad/m^2] at the waypoints, shape (N, n).
+
     Returns:
         Shape (N - 1, n).
     """
-    del sdd  # sdot is monotone on a segment: its ends bound it
     mean = np.abs(np.diff(q, axis=0)) / np.diff(t)[:, None]
-    n_seg, n = len(s) - 1, q.shape[1]
-    dq, ddq = np.asarray(path(s, 1)), np.asarray(path(s, 2))
     a, b = ddq[:-1], ddq[1:]
     turns = a * b < 0.0  # q'' changes sign inside: q' has an extremum there
     with np.errstate(divide="ignore", invalid="ignore"):
         frac = np.where(turns, a / (a - b), 0.0)
-    s_turn = s[:-1, None] + np.diff(s)[:, None] * np.clip(frac, 0.0, 1.0)  # (N - 1, n)
-    dq_turn = np.asarray(path(s_turn.ravel(), 1)).reshape(n_seg, n, n)[:, np.arange(n), np.arange(n)]
+    # q' of each joint at its own turning point: its segment's quadratic (Horner, as scipy's PPoly)
+    c = path.cspld.c  # (3, N - 1, n): q' = (c0 h + c1) h + c2, h from the segment's start
+    h = np.diff(s)[:, None] * np.clip(frac, 0.0, 1.0)
+    dq_turn = (c[0] * h + c[1]) * h + c[2]
     dq_max = np.maximum(np.maximum(np.abs(dq[:-1]), np.abs(dq[1:])), np.where(turns, np.abs(dq_turn), 0.0))
     sd_max = np.sqrt(np.maximum(x[:-1], x[1:]))
     return np.maximum(mean, dq_max * sd_max[:, None]) / vlim
@@ -438,7 +443,7 @@ def time_parameterise(
             sd_start, sd_end = np.minimum(np.minimum(cap, between_cap)[[0, -1]], sd_bound)
         speed = _solve_path_speed(instance, float(sd_start), float(sd_end))
         x, sdd, t = _segment_times(s, speed)
-        between = _between_waypoint_speed_ratio(instance.path, s, q, x, sdd, t, vlim)
+        between = _between_waypoint_speed_ratio(instance.path, s, q, x, t, vlim, dq, ddq)
         excess = between.max(axis=1)
         over = np.flatnonzero(excess > 1.0 + _VELOCITY_SLACK_REL)
         if over.size == 0:
