@@ -293,7 +293,9 @@ def _segment_times(s: Array, speed: Array) -> tuple[Array, Array, Array]:
     return x, sdd, t
 
 
-def _between_waypoint_speed_ratio(path, s: Array, q: Array, x: Array, t: Array, vlim: Array, dq: Array, ddq: Array):
+def _between_waypoint_speed_ratio(
+    path, s: Array, q: Array, x: Array, t: Array, vlim: Array, dq: Array, ddq: Array
+):
     """Per segment and joint, a bound on the joint speed between the waypoints over its limit [-].
 
     The larger of the mean speed over the segment, ``|q[k+1] - q[k]| / (t[k+1] - t[k])`` (what a
@@ -303,9 +305,13 @@ def _between_waypoint_speed_ratio(path, s: Array, q: Array, x: Array, t: Array, 
 
     Args:
         path: the spline (``toppra.SplineInterpolator``) through ``(s, q)``.
-        s, q, x, t: arc length [m], joints [rad], ``sdot^2`` [m^2/s^2] and time [s] at the waypoints.
+        s: arc length at the waypoints [m], shape (N,).
+        q: joints at the waypoints [rad], shape (N, n).
+        x: ``sdot^2`` at the waypoints [m^2/s^2], shape (N,).
+        t: time at the waypoints [s], shape (N,).
         vlim: joint speed limits [rad/s], shape (n,).
-        dq, ddq: ``q'`` [rad/m] and ``q''`` [rad/m^2] at the waypoints, shape (N, n).
+        dq: ``q'`` at the waypoints [rad/m], shape (N, n).
+        ddq: ``q''`` at the waypoints [rad/m^2], shape (N, n).
 
     Returns:
         Shape (N - 1, n).
