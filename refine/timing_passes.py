@@ -1,27 +1,35 @@
-"""TOPP-RA's two passes without toppra's per-step Python: the same solver calls, fewer allocations.
+"""TOPP-RA's two passes with toppra's solver only where no bound proves its answer.
 
 toppra's ``TOPPRA.compute_parameterization`` runs a backward pass (the controllable sets, two
 calls of the solver wrapper's ``solve_stagewise_optim`` per gridpoint, through ``_one_step``) and a
-forward pass (one call per gridpoint, through ``_forward_step``). Each step allocates the cost
-vector again, checks its inputs through NumPy and formats nothing but still asks the logger, which
-on the glass cell's 618 gridpoints is about half of the call's time. Making the instance asks
-importlib which of toppra's solver wrappers are installed, at each call.
+forward pass (one call per gridpoint, through ``_forward_step``), each call a small LP in the
+stage's path acceleration ``u`` and squared speed ``x`` with its rows ``A u + B x + C <= 0``.
+Making the instance asks importlib which of toppra's solver wrappers are installed, at each call.
 
-:func:`lean_passes` makes a subclass of a toppra algorithm class whose two passes make the same
-calls of ``solve_stagewise_optim`` with the same arguments in the same order: the cost vectors
-``(1e-9, -1, 0, ...)`` and its negation (backward), ``(-2 delta_i, -1, 0, ...)`` (forward, one row
-of an array made once per instance), the same bounds, the same clamping of a negative lower end to
-0 and the same early stop at a NaN set. The forward pass is toppra's loop in plain floats: the same
-shaving of each next ``x`` (``max(x - TINY, 0.9999 x)``), the same clamping into the next
-controllable set, the same retries (at most ``MAX_TRIES`` times ``x`` lowered by 0.1 %) where a
-step has no solution. With the seidel wrapper the instance makes that wrapper directly, as toppra
-does once it has chosen it.
+:func:`lean_passes` makes a subclass of a toppra algorithm class whose passes make toppra's calls
+with the same arguments (the cost vectors ``(1e-9, -1, 0, ...)`` and its negation backward,
+``(-2 delta_i, -1, 0, ...)`` forward), the same clamping of a negative lower end to 0, the same
+early stop at a NaN set, the same shaving of each next ``x`` (``max(x - TINY, 0.9999 x)``), the
+same clamping into the next controllable set and the same retries (at most ``MAX_TRIES`` times
+``x`` lowered by 0.1 %) where a step has no solution, except where the answer of a call is proved
+without it:
 
-One solve is left out: where rest meets every constraint of a stage and the next stage's set is
-``[0, hi]``, the lower end of the stage's set is 0 (:func:`origin_feasible`), which toppra finds
-by a minimisation that starts from ``u = 1e8`` (about half the backward pass's time) and returns
-0 to within its rounding (a few 1e-16 [m^2/s^2]). The timing is toppra's to 1e-9 relative, the
-path speeds on the glass cell to 2e-16 (``tests/test_timing.py``).
+* the lower end of a stage's set is 0 where rest meets every row and bound of the stage and the
+  next set is ``[0, hi]`` (toppra's minimisation returns 0 to within its rounding, a few 1e-16
+  [m^2/s^2]);
+* the upper end is the stage's largest bounded ``x`` where, there, the rows leave an interval of
+  ``u`` that also reaches the next set, wider than a margin of 1e-9 relative
+  (:func:`stage_shortcuts`);
+* the forward step's ``u`` is the one onto the next set's top where that ``u`` lies inside the
+  rows' interval at ``x``, bounded from a guess of ``x`` by each row's slope
+  (:func:`forward_certificates`).
+
+Runs of such stages are taken at once (:func:`forward_guess`: along the top, the step from
+``g[i]`` gives ``g[i + 1]`` to the bit), so the result is the one a stage-by-stage loop of the same
+rules gives. On the glass cell's 618 gridpoints toppra's solver runs once instead of 1851 times;
+the path speeds are toppra's own to 2e-16, the cycle time to the bit
+(``tests/test_timing_passes.py``, ``tests/test_timing.py``). With the seidel wrapper the instance
+makes that wrapper directly, as toppra does once it has chosen it.
 """
 
 from __future__ import annotations
@@ -41,8 +49,29 @@ _TOPPRA_LOG = logging.getLogger("toppra.algorithm.reachabilitybased.reachability
 _VAR_BOUND = 1e8
 """toppra's seidel wrapper bounds ``u`` and ``x`` to +-1e8 where no constraint bounds them."""
 _TOP_MARGIN_REL = 1e-9
-"""Relative width the interval of ``u`` at the top of a stage must keep for that top to count as
-reached: the interval's ends are rounded to 1e-16 relative, far inside this margin."""
+"""Relative margin [-] by which a proved answer must clear the rows: far above the rounding of the
+interval's ends, which :func:`_row_ends` takes off them besides."""
+_EPS = float(np.finfo(float).eps)
+
+
+def _row_ends(A: Array, B: Array, C: Array, x: Array) -> tuple[Array, Array, Array]:
+    """Each row's end ``u = -(B x + C) / A`` at ``x`` per stage, pulled in by its rounding.
+
+    ``-(B x + C)`` is within ``2 eps (|B x| + |C|)`` of its value and the division adds
+    ``eps |ratio|``: four times both, taken off the upper ends (``A > 0``) and added to the lower
+    ends (``A < 0``), leave ends that the exact ones cannot be inside of.
+
+    Returns:
+        ``rest = -(B x + C)`` shape (N + 1, m), the upper and the lower end per row (+-inf on
+        rows that do not bound ``u`` that way).
+    """
+    rest = -(B * x[:, None] + C)  # A u <= rest
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        ratio = rest / A
+        slack = 8.0 * _EPS * ((np.abs(B * x[:, None]) + np.abs(C)) / np.abs(A) + np.abs(ratio))
+        upper = np.where(A > 0.0, ratio - slack, np.inf)
+        lower = np.where(A < 0.0, ratio + slack, -np.inf)
+    return rest, upper, lower
 
 
 def stage_rows(params: list, n_points: int) -> tuple[Array, Array, Array, Array]:
@@ -104,11 +133,8 @@ def stage_shortcuts(rows: tuple[Array, Array, Array, Array]) -> tuple[Array, Arr
     """
     A, B, C, x_bounds = rows
     x_top = x_bounds[:, 1]
-    rest = -(B * x_top[:, None] + C)  # A u <= rest
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = rest / A
-    u_lo = np.max(np.where(A < 0.0, ratio, -np.inf), axis=1)
-    u_hi = np.min(np.where(A > 0.0, ratio, np.inf), axis=1)
+    rest, upper, lower = _row_ends(A, B, C, x_top)
+    u_lo, u_hi = np.max(lower, axis=1), np.min(upper, axis=1)
     excluded = np.any((A == 0.0) & (rest < 0.0), axis=1) | (x_bounds[:, 0] > x_top)
     u_lo[excluded | ~np.isfinite(u_lo) | ~np.isfinite(u_hi)] = np.inf
     at_rest = np.all(C <= 0.0, axis=1) & (x_bounds[:, 0] <= 0.0) & (x_bounds[:, 1] >= 0.0)
@@ -135,13 +161,13 @@ def forward_certificates(rows: tuple[Array, Array, Array, Array], x_guess: Array
         no row bounds ``u`` that way (the seidel wrapper's +-1e8 bounds are rows).
     """
     A, B, C, _ = rows
-    rest = -(B * x_guess[:, None] + C)  # A u <= rest
+    rest, upper, lower = _row_ends(A, B, C, x_guess)
     up, down, flat = A > 0.0, A < 0.0, A == 0.0
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio, slope = rest / A, np.abs(B / A)
-    u_hi = np.min(np.where(up, ratio, np.inf), axis=1)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        slope = np.abs(B / A)
+    u_hi = np.min(upper, axis=1)
     L_hi = np.max(np.where(up, slope, 0.0), axis=1)
-    u_lo = np.max(np.where(down, ratio, -np.inf), axis=1)
+    u_lo = np.max(lower, axis=1)
     L_lo = np.max(np.where(down, slope, 0.0), axis=1)
     slack_0 = np.min(np.where(flat, rest, np.inf), axis=1)
     L_0 = np.max(np.where(flat, np.abs(B), 0.0), axis=1)

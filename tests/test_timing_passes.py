@@ -35,33 +35,34 @@ def _case(name):
     elif name == "still joint and a step down":  # rows without u; braking before the cap's step
         q[:, 0] = 0.2
         cap = np.where(s < 0.5, 0.3, 0.05)
+    elif name == "creeping joints":  # rows with u's coefficient near 0: ends far out, rounded
+        q[:, 0] = 0.2 + 1e-9 * np.sin(3.0 * s)
+        q[:, 1] = 1e-12 * s**2
+        alim[:2] = 1e-3
     return s, q, cap, vlim, alim
 
 
-CASES = ["cruise", "slow ramps", "velocity dip", "still joint and a step down"]
+CASES = ["cruise", "slow ramps", "velocity dip", "still joint and a step down", "creeping joints"]
 
 
-def _plain_toppra(monkeypatch):
-    """Make the timing run on toppra's own TOPPRA class, constraints made afresh for each build."""
-    _, speed_constraint, _, _ = timing._toppra()
+class _FreeEnd(toppra.algorithm.TOPPRA):
+    """toppra's own TOPPRA with the end speed free up to the one asked for (as the timing's)."""
 
-    class FreeEnd(toppra.algorithm.TOPPRA):
-        def compute_controllable_sets(self, sdmin, sdmax):
-            return super().compute_controllable_sets(0.0, sdmax)
+    def compute_controllable_sets(self, sdmin, sdmax):
+        return super().compute_controllable_sets(0.0, sdmax)
 
-    def build(s, q, speed_cap, velocity_limits, acceleration_limits, *, free_end=False):
-        constraints = [
-            toppra.constraint.JointVelocityConstraint(np.asarray(velocity_limits, dtype=float)),
-            toppra.constraint.JointAccelerationConstraint(
-                np.asarray(acceleration_limits, dtype=float),
-                toppra.constraint.DiscretizationType.Interpolation,
-            ),
-            speed_constraint(s, speed_cap),
-        ]
-        algorithm = FreeEnd if free_end else toppra.algorithm.TOPPRA
-        return algorithm(constraints, toppra.SplineInterpolator(s, q), gridpoints=s, solver_wrapper="seidel")
 
-    monkeypatch.setattr(timing, "build_toppra", build)
+def _own_toppra(s, q, speed_cap, velocity_limits, acceleration_limits, *, free_end=False):
+    """``timing.build_toppra`` on toppra's own TOPPRA class, constraints made afresh."""
+    constraints = [
+        toppra.constraint.JointVelocityConstraint(np.asarray(velocity_limits, dtype=float)),
+        toppra.constraint.JointAccelerationConstraint(
+            np.asarray(acceleration_limits, dtype=float), toppra.constraint.DiscretizationType.Interpolation
+        ),
+        timing._toppra()[1](s, speed_cap),
+    ]
+    algorithm = _FreeEnd if free_end else toppra.algorithm.TOPPRA
+    return algorithm(constraints, toppra.SplineInterpolator(s, q), gridpoints=s, solver_wrapper="seidel")
 
 
 @pytest.mark.parametrize("start_stop", [True, False])
@@ -72,7 +73,7 @@ def test_the_timing_is_the_one_on_toppras_own_passes(monkeypatch, name, start_st
     args = _case(name)
     got = time_parameterise(*args, start_stop=start_stop)
     with monkeypatch.context() as m:
-        _plain_toppra(m)
+        m.setattr(timing, "build_toppra", _own_toppra)
         want = time_parameterise(*args, start_stop=start_stop)
     np.testing.assert_allclose(got.speed, want.speed, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(got.t, want.t, rtol=1e-9, atol=1e-12)
@@ -88,18 +89,7 @@ def test_the_lean_passes_give_toppras_sets_and_speeds(name):
     on the path that runs at its cap, nearly every step is proved rather than solved."""
     s, q, cap, vlim, alim = _case(name)
     lean = timing.build_toppra(s, q, cap, vlim, alim)
-    own = toppra.algorithm.TOPPRA(
-        [
-            toppra.constraint.JointVelocityConstraint(vlim),
-            toppra.constraint.JointAccelerationConstraint(
-                alim, toppra.constraint.DiscretizationType.Interpolation
-            ),
-            timing._toppra()[1](s, cap),
-        ],
-        toppra.SplineInterpolator(s, q),
-        gridpoints=s,
-        solver_wrapper="seidel",
-    )
+    own = _own_toppra(s, q, cap, vlim, alim)
     solves = []
     wrapper = lean.solver_wrapper
 
