@@ -227,6 +227,35 @@ def _top_reached(x_top, u_lo, u_hi, at_rest, lo: Array, hi: Array, two_deltas: A
     return at_rest & (lo == 0.0) & (hi >= 0.0) & wide
 
 
+def top_to_rest(rows: tuple[Array, Array, Array, Array], i: int, two_delta: float) -> float | None:
+    """The largest ``x`` at stage ``i`` from which one step stops (``x + 2 delta u = 0``), or None.
+
+    With ``u = -x / (2 delta)`` the rows read ``p x <= r``, ``p = B - A / (2 delta)``, ``r = -C``;
+    where rest meets the stage's rows (``r >= 0``) the largest ``x`` is the least ``r / p`` over
+    ``p > 0`` and the stage's top. ``p`` is a difference: where it loses more than 4 digits on a
+    row that could bind, None (toppra's solver decides).
+
+    Args:
+        rows: ``A, B, C, x_bounds`` of :func:`stage_rows`.
+        i: the stage.
+        two_delta: ``2 delta_i`` [m].
+
+    Returns:
+        ``x`` [m^2/s^2], or None.
+    """
+    A, B, C, x_bounds = (r[i] for r in rows)
+    p, r = B - A / two_delta, -C
+    if np.any(r < 0.0):
+        return None
+    up = p > 0.0
+    ends = r[up] / p[up]
+    x = min(float(x_bounds[1]), float(ends.min()) if ends.size else np.inf)
+    lost = (np.abs(B[up]) + np.abs(A[up] / two_delta)) / p[up]
+    if not np.isfinite(x) or x < x_bounds[0] or np.any((lost > 1e4) & (ends <= 2.0 * x)):
+        return None
+    return x
+
+
 def _last_false(flags: Array) -> Array:
     """Per index ``i``, the last index ``k <= i`` where ``flags`` is False (-1 if none)."""
     where = np.where(flags, -1, np.arange(len(flags)))
@@ -258,9 +287,38 @@ def lean_passes(base: type) -> type:
             if solver_wrapper != "seidel" or any(c.get_constraint_type() != linear for c in constraint_list):
                 super().__init__(constraint_list, path, gridpoints, solver_wrapper, **kwargs)
                 return
-            # toppra's own choice of wrapper made directly: linear constraints, seidel asked for
+            # toppra's own choice of wrapper, seidel, made when a step first needs it
             ParameterizationAlgorithm.__init__(self, constraint_list, path, gridpoints=gridpoints, **kwargs)
-            self.solver_wrapper = seidelWrapper(self.constraints, self.path, self.gridpoints, solve_lp1d=True)
+
+        @property
+        def solver_wrapper(self):  # noqa: D102
+            wrapper = self.__dict__.get("_wrapper")
+            if wrapper is None:
+                wrapper = self._wrapper = seidelWrapper(
+                    self.constraints, self.path, self.gridpoints, solve_lp1d=True
+                )
+            return wrapper
+
+        @solver_wrapper.setter
+        def solver_wrapper(self, wrapper) -> None:
+            self._wrapper = wrapper
+
+        def _solve(self, *args):
+            """The wrapper's ``solve_stagewise_optim``, the wrapper made first if it is not yet."""
+            return self.solver_wrapper.solve_stagewise_optim(*args)
+
+        def _made_wrapper(self):
+            """The solver wrapper if it is made (then its setup and close are called), else None."""
+            return self.__dict__.get("_wrapper")
+
+        def _two_deltas(self) -> Array:
+            """``2 delta_i`` [m] per stage, as the wrappers make ``delta_i``, shape (N,)."""
+            return 2 * (self.gridpoints[1:] - self.gridpoints[:-1])
+
+        def _n_vars(self) -> int:
+            """The stage LP's variables: ``u``, ``x`` (and no more with the seidel wrapper, made or not)."""
+            wrapper = self._made_wrapper()
+            return 2 if wrapper is None else wrapper.get_no_vars()
 
         def compute_parameterization(self, sd_start: float, sd_end: float, return_data: bool = False):  # noqa: D102
             if sd_end < 0 or sd_start < 0:
@@ -300,18 +358,19 @@ def lean_passes(base: type) -> type:
             proves it; runs of such steps are taken at once where ``x`` follows the guess ``g``
             exactly (the step from ``g[i]`` gives ``g[i + 1]`` to the bit).
             """
-            wrapper = self.solver_wrapper
-            N = wrapper.get_no_stages()
-            two_deltas_arr = 2 * np.asarray(wrapper.get_deltas())
+            wrapper = self._made_wrapper()
+            N = self._N
+            two_deltas_arr = self._two_deltas()
             two_deltas = two_deltas_arr.tolist()
             xs, us = np.zeros(N + 1), np.zeros(N)
-            v_vec = np.zeros((N, wrapper.get_no_vars() - 2))
+            v_vec = np.zeros((N, self._n_vars() - 2))
             K_lo, K_hi = K[:, 0].tolist(), K[:, 1].tolist()
             nan = np.nan
-            wrapper.setup_solver()
+            if wrapper is not None:
+                wrapper.setup_solver()
             x, i, tries = float(x_start), 0, 0
             xs[0] = x
-            solve, costs = wrapper.solve_stagewise_optim, list(self._stage_costs())
+            solve, costs = self._solve, list(self._stage_costs())
             rows = self._stage_rows()
             g, u_g, good = forward_guess(x, K, two_deltas_arr, tiny)
             u_hi, L_hi, u_lo, L_lo, slack_0, L_0 = forward_certificates(rows, g)
@@ -371,7 +430,8 @@ def lean_passes(base: type) -> type:
                     if len(optim_res) > 2:
                         v_vec[i] = optim_res[2:]
                     i += 1
-            wrapper.close_solver()
+            if self._made_wrapper() is not None:
+                self._made_wrapper().close_solver()
             return xs, us, v_vec
 
         def compute_controllable_sets(self, sdmin: float, sdmax: float) -> Array:  # noqa: D102
@@ -379,15 +439,17 @@ def lean_passes(base: type) -> type:
             N = self._N
             K_lo, K_hi = [0.0] * (N + 1), [0.0] * (N + 1)
             K_lo[N], K_hi[N] = sdmin**2, sdmax**2
-            wrapper = self.solver_wrapper
-            wrapper.setup_solver()
-            upper = np.zeros(wrapper.get_no_vars())
+            wrapper = self._made_wrapper()
+            if wrapper is not None:
+                wrapper.setup_solver()
+            upper = np.zeros(self._n_vars())
             upper[0], upper[1] = 1e-9, -1
             lower = -upper
-            solve = wrapper.solve_stagewise_optim
+            solve = self._solve
             nan = np.nan
-            shortcuts = stage_shortcuts(self._stage_rows())
-            two_deltas_arr = 2 * np.asarray(wrapper.get_deltas())
+            rows = self._stage_rows()
+            shortcuts = stage_shortcuts(rows)
+            two_deltas_arr = self._two_deltas()
             # runs of stages that take their top, each from the next one's top (from K[N] at the end)
             lo_run, hi_run = np.zeros(N), shortcuts[0][1:].copy()
             lo_run[-1], hi_run[-1] = K_lo[N], K_hi[N]
@@ -412,6 +474,8 @@ def lean_passes(base: type) -> type:
                     u_to = min(u_hi[i], (hi - top) / two_deltas[i])
                     if u_to - u_from > _TOP_MARGIN_REL * (abs(u_from) + abs(u_to) + 1.0):
                         K_hi[i] = top  # the stage's top reaches the next set: nothing is higher
+                    elif hi == 0.0 and (stop := top_to_rest(rows, i, two_deltas[i])) is not None:
+                        K_hi[i] = stop
                     else:
                         K_hi[i] = solve(i, None, upper, nan, nan, lo, hi)[1]
                 else:
@@ -426,24 +490,31 @@ def lean_passes(base: type) -> type:
                     )
                     return np.column_stack([K_lo, K_hi])
                 i -= 1
-            wrapper.close_solver()
+            if self._made_wrapper() is not None:
+                self._made_wrapper().close_solver()
             return np.column_stack([K_lo, K_hi])
 
         def _stage_rows(self) -> tuple[Array, Array, Array, Array]:
             """The wrapper's rows and bounds on ``x`` (:func:`stage_rows`), made once per instance."""
             rows = self.__dict__.get("_rows")
             if rows is None:
-                rows = self._rows = stage_rows(self.solver_wrapper.params, self._N + 1)
+                wrapper = self._made_wrapper()
+                if wrapper is not None:
+                    params = wrapper.params
+                else:  # what the seidel wrapper computes when it is made
+                    params = [
+                        c.compute_constraint_params(self.path, self.gridpoints) for c in self.constraints
+                    ]
+                rows = self._rows = stage_rows(params, self._N + 1)
             return rows
 
         def _stage_costs(self) -> Array:
             """Per stage the forward step's cost ``(-2 delta_i, -1, 0, ...)``, as toppra makes it each step."""
             costs = self.__dict__.get("_forward_costs")
             if costs is None:
-                wrapper = self.solver_wrapper
-                costs = np.zeros((wrapper.get_no_stages(), wrapper.get_no_vars()))
+                costs = np.zeros((self._N, self._n_vars()))
                 costs[:, 1] = -1
-                costs[:, 0] = -2 * np.asarray(wrapper.get_deltas())
+                costs[:, 0] = -self._two_deltas()
                 self._forward_costs = costs
             return costs
 
