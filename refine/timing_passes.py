@@ -24,12 +24,14 @@ without it:
   rows' interval at ``x``, bounded from a guess of ``x`` by each row's slope
   (:func:`forward_certificates`).
 
+Where the next set is the single point 0 (the stage before the end of a rest-to-rest timing),
+the upper end is the largest ``x`` from which the rows let one step stop (:func:`top_to_rest`).
 Runs of such stages are taken at once (:func:`forward_guess`: along the top, the step from
 ``g[i]`` gives ``g[i + 1]`` to the bit), so the result is the one a stage-by-stage loop of the same
-rules gives. On the glass cell's 618 gridpoints toppra's solver runs once instead of 1851 times;
-the path speeds are toppra's own to 2e-16, the cycle time to the bit
-(``tests/test_timing_passes.py``, ``tests/test_timing.py``). With the seidel wrapper the instance
-makes that wrapper directly, as toppra does once it has chosen it.
+rules gives. The seidel wrapper (toppra's own choice once asked for it) is made when a step first
+needs it: on the glass cell's 618 gridpoints no step needs it (toppra's passes solve 1851 LPs),
+the path speeds are toppra's own to 2e-16 and the cycle time to the bit
+(``tests/test_timing_passes.py``, ``tests/test_timing.py``).
 """
 
 from __future__ import annotations
