@@ -142,18 +142,28 @@ def singularity_measures(
     return w, smin
 
 
+ORTHONORMAL = 1e-12
+"""A rotation matrix whose ``RᵀR`` is within this of the identity (every entry) counts as
+orthonormal for :func:`rotation_angles_deg`'s closed form."""
+
+
 def rotation_angles_deg(R_a: Array, R_b: Array) -> Array:
     """Geodesic angle between rotations ``R_a`` and ``R_b`` (N, 3, 3) [deg], shape (N,).
 
     The angle θ of ``R_aᵀ R_b`` from ``|R_a - R_b|_F = 2√2 sin(θ/2)`` and
     ``1 + tr(R_aᵀ R_b) = 4 cos²(θ/2)``: ``θ = 2 atan2(sin, cos)``, exact to rounding (about
-    1e-14 deg) where θ < 90 deg, as :func:`refine.frames.rotation_angle_deg` is; the rows at
-    90 deg or more (where the cosine's square root loses digits) are given by that function.
+    1e-14 deg) where θ < 90 deg and both matrices are orthonormal (:data:`ORTHONORMAL`: the
+    formulas then differ from those of the nearest rotations by about 1e-12 rad), as
+    :func:`refine.frames.rotation_angle_deg` is. The other rows (at 90 deg or more, where the
+    cosine's square root loses digits, or off orthonormal, as rounded input may be) are given by
+    that function.
     """
     sin = np.sqrt(np.einsum("kij,kij->k", d := R_a - R_b, d)) / (2.0 * math.sqrt(2.0))
     cos = np.sqrt(np.clip(1.0 + np.einsum("kij,kij->k", R_a, R_b), 0.0, None)) / 2.0
     angle = np.degrees(2.0 * np.arctan2(sin, cos))
-    wide = sin >= cos
+    eye = np.eye(3)
+    off = [np.abs(np.einsum("kji,kjl->kil", R, R) - eye).max(axis=(1, 2)) > ORTHONORMAL for R in (R_a, R_b)]
+    wide = (sin >= cos) | off[0] | off[1]
     if wide.any():
         angle[wide] = rotation_angle_deg(R_a[wide], R_b[wide])
     return angle

@@ -437,3 +437,14 @@ def test_the_orientation_angle_is_the_geodesic_angle_from_round_off_to_a_half_tu
     np.testing.assert_allclose(got, np.degrees(angles), rtol=0.0, atol=1e-10)
     np.testing.assert_allclose(got, rotation_angle_deg(R_a, R_b), rtol=0.0, atol=1e-12)
     np.testing.assert_allclose(rotation_angles_deg(R_a, R_a), 0.0, atol=1e-12)
+
+
+def test_the_orientation_angle_of_rounded_matrices_is_the_one_of_their_nearest_rotations_as_before():
+    """Matrices off orthonormal by 1e-6 (rotations written with six decimals) get scipy's angle itself."""
+    R_a = Rotation.random(50, random_state=7).as_matrix()
+    R_b = R_a @ Rotation.from_rotvec(np.full((50, 3), 0.02)).as_matrix()
+    rounded = np.round(R_b, 6)
+    np.testing.assert_array_equal(rotation_angles_deg(R_a, rounded), rotation_angle_deg(R_a, rounded))
+    np.testing.assert_array_equal(
+        rotation_angles_deg(np.round(R_a, 6), R_b), rotation_angle_deg(np.round(R_a, 6), R_b)
+    )
