@@ -194,6 +194,14 @@ class NullSpaceStep:
         diagonal = d == 0
         self.h_mirror_src = np.flatnonzero(diagonal)
         self.h_mirror_dst = np.ravel_multi_index((d[diagonal], ki[diagonal], c[diagonal], a[diagonal]), shape)
+        # the whole symmetric Hessian in CSR form: which upper-triangle nonzero each entry is
+        off = np.flatnonzero(ev.hess_row != ev.hess_col)
+        src = np.concatenate([np.arange(len(ev.hess_row)), off])
+        rows_all = np.concatenate([ev.hess_row, ev.hess_col[off]])
+        cols_all = np.concatenate([ev.hess_col, ev.hess_row[off]])
+        marker = sp.csr_matrix((src + 1.0, (rows_all, cols_all)), shape=(N * n, N * n))
+        self.h_src = marker.data.astype(np.int64) - 1
+        self.h_indices, self.h_indptr = marker.indices, marker.indptr
         self.ymask = np.arange(self.m_max)[None, :] < count[:, None]  # (N, m_max)
         self.zmask = (self.m_min + np.arange(self.nz))[None, :] >= count[:, None]  # (N, nz)
         self._band_index()
@@ -219,13 +227,14 @@ class NullSpaceStep:
         blocks = blocks.reshape(HESSIAN_REACH + 1, self.N, self.n, self.n)
         return [blocks[d, : self.N - d] for d in range(HESSIAN_REACH + 1)]
 
-    def _hess_times(self, H: list[Array], v: Array) -> Array:
-        """``H v`` for ``v`` (N, n), from the blocks of :meth:`_hess_blocks`."""
-        out = (H[0] @ v[..., None])[..., 0]
-        for d in range(1, HESSIAN_REACH + 1):
-            out[:-d] += (H[d] @ v[d:, :, None])[..., 0]
-            out[d:] += (v[:-d, None, :] @ H[d])[:, 0]
-        return out
+    def _hess_matrix(self, values: Array) -> sp.csr_matrix:
+        """The whole symmetric Hessian (N·n, N·n) from its upper triangle's nonzeros ``values``."""
+        nx = self.N * self.n
+        return sp.csr_matrix((values[self.h_src], self.h_indices, self.h_indptr), shape=(nx, nx))
+
+    def _hess_times(self, H: sp.csr_matrix, v: Array) -> Array:
+        """``H v`` for ``v`` (N, n), with ``H`` from :meth:`_hess_matrix`."""
+        return (H @ v.reshape(-1)).reshape(self.N, self.n)
 
     def step(
         self, grad: Array, jac_values: Array, hess_values: Array, residual: Array
@@ -262,7 +271,7 @@ class NullSpaceStep:
             flat[self.band_dst[d]] = Bd.reshape(-1)[self.band_src[d]]
         band[0] += (~self.zmask).reshape(-1)  # the padded null-space columns: unit diagonal
         factor = scipy.linalg.cholesky_banded(band, lower=True, check_finite=False)
-        factors = (R, Y, Z, Zt, H, factor)
+        factors = (R, Y, Z, Zt, self._hess_matrix(hess_values), factor)
         return (*self.solve(factors, grad, residual), factors)
 
     def solve(self, factors: tuple, grad: Array, residual: Array) -> tuple[Array, Array]:
@@ -271,7 +280,7 @@ class NullSpaceStep:
         R, Y, Z, Zt, H, factor = factors
         r = np.zeros((N, m))
         r[self.k, self.slot] = np.concatenate([residual, np.zeros(len(self.k) - len(residual))])  # bounds: met
-        p_y = np.linalg.solve(np.transpose(R, (0, 2, 1)), r[..., None])[..., 0] * self.ymask
+        p_y = _solve_triangular(R, r, transposed=True) * self.ymask
         dx_y = (Y @ p_y[..., None])[..., 0]
         g = grad.reshape(N, n)
         w = g + self._hess_times(H, dx_y)
@@ -279,8 +288,24 @@ class NullSpaceStep:
         p_z = scipy.linalg.cho_solve_banded((factor, True), rhs, check_finite=False).reshape(N, nz)
         dx = dx_y + (Z @ p_z[..., None])[..., 0]
         w = g + self._hess_times(H, dx)
-        lam = -np.linalg.solve(R, (np.transpose(Y, (0, 2, 1)) @ w[..., None])[..., 0][..., None])[..., 0]
+        lam = -_solve_triangular(R, (np.transpose(Y, (0, 2, 1)) @ w[..., None])[..., 0])
         return dx.reshape(-1), lam[self.k, self.slot]
+
+
+def _solve_triangular(R: Array, b: Array, transposed: bool = False) -> Array:
+    """The solution x (N, m) of ``R x = b`` (or ``Rᵀ x = b``) for upper triangular ``R`` (N, m, m), ``b`` (N, m).
+
+    Substitution, one row of every waypoint at a time.
+    """
+    m = R.shape[1]
+    x = np.zeros_like(b)
+    for i in range(m) if transposed else range(m - 1, -1, -1):
+        if transposed:  # row i of Rᵀ: column i of R above the diagonal
+            done = np.einsum("kj,kj->k", R[:, :i, i], x[:, :i])
+        else:
+            done = np.einsum("kj,kj->k", R[:, i, i + 1 :], x[:, i + 1 :])
+        x[:, i] = (b[:, i] - done) / R[:, i, i]
+    return x
 
 
 def _band_order(nx: int, n: int, rows: sp.csr_matrix) -> Array:

@@ -469,10 +469,16 @@ def seed_axis_only(problem: RefinementNLP) -> bool:
     return problem.axisymmetric and problem.tool_in_world is not None
 
 
-def out_of_reach(problem: RefinementNLP, q_seed: Array, home: Array | None) -> list[Violation]:
-    """Runs of waypoints whose CAD point no configuration inside the limits reaches."""
+def out_of_reach(
+    problem: RefinementNLP, q_seed: Array, home: Array | None, poses: Array | None = None
+) -> list[Violation]:
+    """Runs of waypoints whose CAD point no configuration inside the limits reaches.
+
+    ``poses``: the TCP poses T_F_TCP (N, 4, 4) at ``q_seed`` when the caller has them, or None.
+    """
     kin = problem_kinematics(problem)
-    missed = np.linalg.norm(kin.poses(q_seed)[:, :3, 3] - problem.fused.positions, axis=1) > REACH_TOLERANCE_M
+    reached = kin.poses(q_seed) if poses is None else poses
+    missed = np.linalg.norm(reached[:, :3, 3] - problem.fused.positions, axis=1) > REACH_TOLERANCE_M
     if not missed.any():
         return []
     lower, upper = problem_bounds(problem)

@@ -144,6 +144,7 @@ def solve_refinement(
         stretched = inset > 0.0
     multipliers = None
     seed_jacobians = None  # the TCP Jacobians at a warm seed, from its projection
+    seed_poses = None  # and its TCP poses
     if warm is not None:
         for src in sources:
             carry = getattr(src, "carry_from", None)
@@ -151,7 +152,8 @@ def solve_refinement(
                 carry(warm.clearance)
         if problem.tolerances.singularity_margin > 0:  # the seed's measures start from these
             seed_jacobians = np.empty((problem.n_waypoints, 6, problem.dof))
-        q0 = warm_seed(problem, warm, seed_jacobians)
+        seed_poses = np.empty((problem.n_waypoints, 4, 4))
+        q0 = warm_seed(problem, warm, seed_jacobians, seed_poses)
         final = None
         if warm.problem is not None and warm.reusable:
             final = reuse_final(warm.problem, problem, problem.fused, problem.tolerances)
@@ -187,7 +189,7 @@ def solve_refinement(
         q_seed = initial_guess(problem, home, rotations)
     else:  # a chain that turns the arm over is abandoned there
         q_seed = whole_chain(problem, kin, home, rotations, give_up)
-    unreachable = out_of_reach(problem, q_seed, home)
+    unreachable = out_of_reach(problem, q_seed, home, seed_poses if q_seed is q0 else None)
     add_time(timings, "seed", start)
     if not unreachable and beyond.any():
         t1, c1 = StageTimes.clock()

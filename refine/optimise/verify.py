@@ -99,6 +99,11 @@ def runs(mask: Array) -> list[tuple[int, int]]:
     return list(zip(starts.tolist(), ends.tolist(), strict=True))
 
 
+SVD_BELOW = 1e-2
+"""A row whose smallest singular value is under this fraction of its largest (by the eigenvalues of
+``Js Jsᵀ``) takes its singular values from an SVD of ``Js`` instead (:func:`singularity_measures`)."""
+
+
 def singularity_measures(
     kin: TcpKinematics, q: Array, *, smallest: bool = True, jacobians: Array | None = None
 ) -> tuple[Array, Array]:
@@ -110,17 +115,58 @@ def singularity_measures(
     ``q`` when the caller has them already (:func:`refine.robot.kinematics.solve_ik_batch`'s
     ``jacobians_out``), else None to compute them.
 
+    For a square ``Js`` (6 joints) ``sqrt(det(Js Jsᵀ)) = |det Js|``, taken without the product.
+    The smallest singular value is the root of the smallest eigenvalue of the symmetric 6 × 6
+    ``Js Jsᵀ``, whose rounding error is a small multiple of ``eps·σ_max²``: relative to ``σ_min``
+    that is ``eps·(σ_max / σ_min)² / 2`` times that multiple, under 1e-11 above
+    :data:`SVD_BELOW`; below it the row's SVD gives it (to about ``eps·σ_max``).
+
     Returns:
         ``sqrt(det(Js Jsᵀ))`` (N,) and the smallest singular value of ``Js`` (N,) [-]
         (0 for a robot with fewer than 6 joints).
     """
     scale = np.array([1.0 / kin.robot.spec.reach_m] * 3 + [1.0] * 3)[:, None]
     Js = scale * (kin.jacobians(q) if jacobians is None else jacobians)
-    w = np.sqrt(np.clip(np.linalg.det(Js @ np.swapaxes(Js, 1, 2)), 0.0, None))
+    square = Js.shape[2] == 6
+    gram = None if square and not smallest else Js @ np.swapaxes(Js, 1, 2)
+    w = np.abs(np.linalg.det(Js)) if square else np.sqrt(np.clip(np.linalg.det(gram), 0.0, None))
     if not smallest:
         return w, np.full(len(Js), np.nan)
-    smin = np.linalg.svd(Js, compute_uv=False)[:, -1] if Js.shape[2] >= 6 else np.zeros(len(Js))
+    if Js.shape[2] < 6:
+        return w, np.zeros(len(Js))
+    eig = np.linalg.eigvalsh(gram)  # ascending: σ_min², ..., σ_max²
+    smin = np.sqrt(np.clip(eig[:, 0], 0.0, None))
+    close = eig[:, 0] < SVD_BELOW**2 * eig[:, -1]
+    if close.any():
+        smin[close] = np.linalg.svd(Js[close], compute_uv=False)[:, -1]
     return w, smin
+
+
+ORTHONORMAL = 1e-12
+"""A rotation matrix whose ``RᵀR`` is within this of the identity (every entry) counts as
+orthonormal for :func:`rotation_angles_deg`'s closed form."""
+
+
+def rotation_angles_deg(R_a: Array, R_b: Array) -> Array:
+    """Geodesic angle between rotations ``R_a`` and ``R_b`` (N, 3, 3) [deg], shape (N,).
+
+    The angle θ of ``R_aᵀ R_b`` from ``|R_a - R_b|_F = 2√2 sin(θ/2)`` and
+    ``1 + tr(R_aᵀ R_b) = 4 cos²(θ/2)``: ``θ = 2 atan2(sin, cos)``, exact to rounding (about
+    1e-14 deg) where θ < 90 deg and both matrices are orthonormal (:data:`ORTHONORMAL`: the
+    formulas then differ from those of the nearest rotations by about 1e-12 rad), as
+    :func:`refine.frames.rotation_angle_deg` is. The other rows (at 90 deg or more, where the
+    cosine's square root loses digits, or off orthonormal, as rounded input may be) are given by
+    that function.
+    """
+    sin = np.sqrt(np.einsum("kij,kij->k", d := R_a - R_b, d)) / (2.0 * math.sqrt(2.0))
+    cos = np.sqrt(np.clip(1.0 + np.einsum("kij,kij->k", R_a, R_b), 0.0, None)) / 2.0
+    angle = np.degrees(2.0 * np.arctan2(sin, cos))
+    eye = np.eye(3)
+    off = [np.abs(np.einsum("kji,kjl->kil", R, R) - eye).max(axis=(1, 2)) > ORTHONORMAL for R in (R_a, R_b)]
+    wide = (sin >= cos) | off[0] | off[1]
+    if wide.any():
+        angle[wide] = rotation_angle_deg(R_a[wide], R_b[wide])
+    return angle
 
 
 def segment_singularity(kin: TcpKinematics, q: Array, max_step_deg: float = 1.0) -> tuple[Array, Array]:
@@ -163,7 +209,7 @@ def check_path(
         cosines = np.einsum("ij,ij->i", poses[:, :3, 2], fused.rotations[:, :, 2])
         ori = np.degrees(np.arccos(np.clip(cosines, -1.0, 1.0)))
     else:
-        ori = rotation_angle_deg(fused.rotations, poses[:, :3, :3])
+        ori = rotation_angles_deg(np.asarray(fused.rotations, dtype=float), poses[:, :3, :3])
     spec = kin.robot.spec
     margins = np.minimum(q - spec.lower, spec.upper - q)
     A, lower, upper = interaction_rows(spec.joint_coupling, spec.joint_interaction, q.shape[1])

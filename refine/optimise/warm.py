@@ -65,7 +65,12 @@ class WarmStart:
     line: object = None
 
 
-def warm_seed(problem: RefinementNLP, warm: WarmStart, jacobians_out: Array | None = None) -> Array:
+def warm_seed(
+    problem: RefinementNLP,
+    warm: WarmStart,
+    jacobians_out: Array | None = None,
+    poses_out: Array | None = None,
+) -> Array:
     """The previous joints moved onto ``problem``'s poses (N, n) [rad].
 
     Each waypoint's target is the new CAD position with the previous reached orientation turned by
@@ -74,14 +79,16 @@ def warm_seed(problem: RefinementNLP, warm: WarmStart, jacobians_out: Array | No
     where they were. Least-squares IK (:func:`refine.robot.kinematics.solve_ik_batch`, no
     null-space drift) from the previous joints moves each waypoint the least. A waypoint whose
     projection does not converge keeps what the IK reached (the NLP takes it from there).
-    ``jacobians_out``: an array (N, 6, n) to receive the TCP Jacobian at each returned row (the
-    projection's own last evaluation where it moved the joints), or None.
+    ``jacobians_out``, ``poses_out``: arrays (N, 6, n) and (N, 4, 4) to receive the TCP Jacobian
+    and pose T_F_TCP at each returned row, or None. One evaluation at the previous joints serves
+    the test of which waypoints moved, the returned rows that did not, and the projection's first
+    iteration; the rows it moves get its own last evaluation.
     """
     q0 = np.asarray(warm.q, dtype=float)
     kin = problem_kinematics(problem)
     lower, upper = problem_bounds(problem)
     q0 = np.clip(q0, lower, upper)
-    reached = kin.poses(q0)
+    reached, J0 = kin.poses_jacobians(q0)
     targets = problem_targets(problem)
     R = reached[:, :3, :3]
     if warm.rotations is not None:
@@ -91,15 +98,31 @@ def warm_seed(problem: RefinementNLP, warm: WarmStart, jacobians_out: Array | No
     cos = (np.einsum("kij,kij->k", reached[:, :3, :3], R) - 1.0) / 2.0
     turn = np.arccos(np.clip(cos, -1.0, 1.0))
     off = position + turn > CONVERGED
-    if jacobians_out is not None and not off.all():
-        jacobians_out[~off] = kin.jacobians(q0[~off])
+    if jacobians_out is not None:
+        jacobians_out[~off] = J0[~off]
+    if poses_out is not None:
+        poses_out[~off] = reached[~off]
     if not off.any():
         return q0
     q = q0.copy()
-    moved = None if jacobians_out is None else np.empty((int(off.sum()),) + jacobians_out.shape[1:])
-    q[off], _ = solve_ik_batch(kin, targets[off], q0[off], lower, upper, nullspace_gain=0.0, jacobians_out=moved)
+    moved = None if jacobians_out is None else np.empty((int(off.sum()),) + J0.shape[1:])
+    moved_poses = None if poses_out is None else np.empty((int(off.sum()), 4, 4))
+    start = (reached[off, :3, 3], reached[off, :3, :3], J0[off])
+    q[off], _ = solve_ik_batch(
+        kin,
+        targets[off],
+        q0[off],
+        lower,
+        upper,
+        nullspace_gain=0.0,
+        jacobians_out=moved,
+        poses_out=moved_poses,
+        start=start,
+    )
     if moved is not None:
         jacobians_out[off] = moved
+    if moved_poses is not None:
+        poses_out[off] = moved_poses
     return q
 
 

@@ -261,6 +261,8 @@ def solve_ik_batch(
     nullspace_gain: float = NULLSPACE_GAIN,
     axis_only: bool = False,
     jacobians_out: Array | None = None,
+    poses_out: Array | None = None,
+    start: tuple[Array, Array, Array] | None = None,
 ) -> tuple[Array, Array]:
     """:func:`solve_ik` for many independent poses at once, vectorised over them.
 
@@ -271,7 +273,10 @@ def solve_ik_batch(
     poses that moves the joints the least). ``jacobians_out``: an array (M, 6, n) to receive the
     TCP Jacobian (:meth:`TcpKinematics.jacobian`) at each returned row, or None; every row's last
     evaluation is at the joints returned (a row is never moved after its last check), so a caller
-    needing the Jacobians of the answer gets them without another pass.
+    needing the Jacobians of the answer gets them without another pass. ``poses_out``: likewise an
+    array (M, 4, 4) to receive the TCP pose at each returned row, or None. ``start``: the TCP
+    positions (M, 3), rotations (M, 3, 3) and Jacobians (M, 6, n) at ``q0`` (inside the limits) when
+    the caller has them, used for the first iteration instead of evaluating them again; or None.
 
     Returns:
         joints [rad] (M, n) and the remaining pose error norm per pose (M,).
@@ -288,9 +293,12 @@ def solve_ik_batch(
     for it in range(max_iterations + 1):
         if not active.size:
             break
-        p, R, J = kin.batch(q[active])
+        p, R, J = kin.batch(q[active]) if it or start is None else start
         if jacobians_out is not None:
             jacobians_out[active] = J
+        if poses_out is not None:
+            poses_out[active, :3, :3], poses_out[active, :3, 3] = R, p
+            poses_out[active, 3] = (0.0, 0.0, 0.0, 1.0)
         T = targets[active]
         e = T[:, :3, 3] - p
         if axis_only:

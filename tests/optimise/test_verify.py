@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from refine.optimise.verify import check_path, runs, singularity_measures
+from refine.frames import rotation_angle_deg
+from refine.optimise.verify import SVD_BELOW, check_path, rotation_angles_deg, runs, singularity_measures
 from refine.paths import FusedPath
 from refine.problem import Tolerances
 
@@ -389,3 +390,61 @@ def test_the_rounds_take_the_singular_points_from_the_check_of_the_same_joints(k
     fresh = new_singular_points(kin, q, margin, ActiveSet())
     taken = new_singular_points(kin, q, margin, ActiveSet(), check)
     assert taken == fresh and any(k == 1 for k, _ in taken.singular_segments)
+
+
+def _jacobians_with(singular: np.ndarray, columns: int, seed: int) -> np.ndarray:
+    """Scaled Jacobians (M, 6, columns) with the singular values ``singular`` (M, 6), random bases."""
+    rng = np.random.default_rng(seed)
+    M = len(singular)
+    U = np.linalg.qr(rng.normal(size=(M, 6, 6)))[0]
+    V = np.linalg.qr(rng.normal(size=(M, columns, columns)))[0][:, :, :6]
+    return U @ (singular[:, :, None] * np.swapaxes(V, 1, 2))
+
+
+@pytest.mark.parametrize("columns", [6, 7])
+def test_the_smallest_singular_value_is_the_svd_s_from_clear_of_the_singularity_to_on_it(kin, columns):
+    """The measures of Jacobians of known singular values: σ_min and sqrt(det(Js Jsᵀ)) = Π σ.
+
+    Largest 1.7, smallest from 1.7 down through the switch to the SVD (:data:`SVD_BELOW`) to 1e-9
+    and exactly 0; the expectation is the singular values put in, and numpy's SVD of the same matrix.
+    """
+    smallest = np.array([0.45, 0.4, 3e-2, 1.01 * SVD_BELOW * 1.7, 0.99 * SVD_BELOW * 1.7, 1e-4, 1e-9, 0.0])
+    singular = np.column_stack([np.full(8, 1.7), [1.2] * 8, [0.9] * 8, [0.6] * 8, [0.5] * 8, smallest])
+    Js = _jacobians_with(singular, columns, seed=columns)
+    scale = np.array([1.0 / kin.robot.spec.reach_m] * 3 + [1.0] * 3)[:, None]
+    w, smin = singularity_measures(kin, np.zeros((8, columns)), jacobians=Js / scale)
+    np.testing.assert_allclose(smin, smallest, rtol=1e-9, atol=1e-14)
+    np.testing.assert_allclose(smin, np.linalg.svd(Js, compute_uv=False)[:, -1], rtol=1e-9, atol=1e-14)
+    # six joints: |det Js|; seven: sqrt(det(Js Jsᵀ)), whose determinant's round-off (about 1e-16) puts
+    # the root within 1e-8 of the product
+    atol = 1e-14 if columns == 6 else 1e-7
+    np.testing.assert_allclose(w, singular.prod(axis=1), rtol=1e-9, atol=atol)
+    w_only, _ = singularity_measures(kin, np.zeros((8, columns)), smallest=False, jacobians=Js / scale)
+    np.testing.assert_allclose(w_only, singular.prod(axis=1), rtol=1e-9, atol=atol)
+
+
+def test_the_orientation_angle_is_the_geodesic_angle_from_round_off_to_a_half_turn():
+    """Angles put in as rotation vectors (1e-9 rad to π) come out as scipy's angle of R_aᵀ R_b."""
+    rng = np.random.default_rng(5)
+    angles = np.concatenate(
+        [[1e-9, 1e-6, 1e-3, 0.05, 1.0, np.pi / 2 - 1e-9, np.pi / 2, 2.5, np.pi - 1e-6, np.pi]] * 20
+    )
+    axes = rng.normal(size=(len(angles), 3))
+    axes /= np.linalg.norm(axes, axis=1)[:, None]
+    R_a = Rotation.random(len(angles), random_state=6).as_matrix()
+    R_b = R_a @ Rotation.from_rotvec(axes * angles[:, None]).as_matrix()
+    got = rotation_angles_deg(R_a, R_b)
+    np.testing.assert_allclose(got, np.degrees(angles), rtol=0.0, atol=1e-10)
+    np.testing.assert_allclose(got, rotation_angle_deg(R_a, R_b), rtol=0.0, atol=1e-12)
+    np.testing.assert_allclose(rotation_angles_deg(R_a, R_a), 0.0, atol=1e-12)
+
+
+def test_the_orientation_angle_of_rounded_matrices_is_the_one_of_their_nearest_rotations_as_before():
+    """Matrices off orthonormal by 1e-6 (rotations written with six decimals) get scipy's angle itself."""
+    R_a = Rotation.random(50, random_state=7).as_matrix()
+    R_b = R_a @ Rotation.from_rotvec(np.full((50, 3), 0.02)).as_matrix()
+    rounded = np.round(R_b, 6)
+    np.testing.assert_array_equal(rotation_angles_deg(R_a, rounded), rotation_angle_deg(R_a, rounded))
+    np.testing.assert_array_equal(
+        rotation_angles_deg(np.round(R_a, 6), R_b), rotation_angle_deg(np.round(R_a, 6), R_b)
+    )

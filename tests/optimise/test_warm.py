@@ -229,14 +229,18 @@ def test_a_warm_seed_hands_back_the_tool_jacobians_at_the_joints_it_returns():
     from refine.robot.kinematics import rotation_vectors
 
     positions, R, cell, tool = cell_line()
-    first = refine.refine_path("ur10e", positions, R, cell=cell, speeds=0.1, tcp_in_flange=TCP, tool_shapes=tool)
+    first = refine.refine_path(
+        "ur10e", positions, R, cell=cell, speeds=0.1, tcp_in_flange=TCP, tool_shapes=tool
+    )
     problem = first.run.first.refinement.problem
     q_prev = first.joints.copy()
     q_prev[::3] += 0.01  # every third waypoint off its pose: projected; the others kept
     J = np.full((N, 6, q_prev.shape[1]), np.nan)
-    q = warm_seed(problem, WarmStart(q_prev, R), jacobians_out=J)
+    T = np.full((N, 4, 4), np.nan)
+    q = warm_seed(problem, WarmStart(q_prev, R), jacobians_out=J, poses_out=T)
     assert np.abs(q[::3] - q_prev[::3]).max() > 1e-3 and np.array_equal(q[1::3], q_prev[1::3])
     kin = problem_kinematics(problem)
+    np.testing.assert_allclose(T, kin.poses(q), rtol=0.0, atol=1e-12)  # the poses of the seed too
     h = 1e-6
     for k in (0, 1, 9, 10, N - 1):
         numeric = np.zeros((6, q.shape[1]))
@@ -256,7 +260,9 @@ def test_a_re_solve_after_a_repair_starts_from_the_strict_problem_the_repair_gre
 
     import refine.optimise.solve as solve_module
 
-    problem = refine.load_problem(Path(__file__).resolve().parents[2] / "problems" / "unreachable" / "joint_limit")
+    problem = refine.load_problem(
+        Path(__file__).resolve().parents[2] / "problems" / "unreachable" / "joint_limit"
+    )
     first = refine.solve(problem)
     refinement = first.run.first.refinement
     assert first.status == "repaired" and refinement.problem.elastic_deg is not None
@@ -265,8 +271,40 @@ def test_a_re_solve_after_a_repair_starts_from_the_strict_problem_the_repair_gre
     assert set(strict.active.singular_waypoints) <= set(refinement.problem.active.singular_waypoints)
     started = []
     reuse = solve_module.reuse_final
-    monkeypatch.setattr(solve_module, "reuse_final", lambda final, *a: started.append(final) or reuse(final, *a))
+    monkeypatch.setattr(
+        solve_module, "reuse_final", lambda final, *a: started.append(final) or reuse(final, *a)
+    )
     again = refine.solve(problem, previous=first)
-    assert len(started) == 1 and started[0] is strict  # kept, and no multipliers of the elastic solve (other rows) with it
+    assert (
+        len(started) == 1 and started[0] is strict
+    )  # kept, and no multipliers of the elastic solve (other rows) with it
     assert again.status == "repaired"
     assert np.abs(again.joints - first.joints).max() <= 1e-6
+
+
+def test_a_projection_started_from_the_given_first_evaluation_is_the_one_that_evaluates_it():
+    """``solve_ik_batch``'s ``start`` (the poses and Jacobians at the start joints) changes nothing.
+
+    The same targets and starts solved with the evaluation handed in and without it give the same
+    joints, errors and returned Jacobians and poses, bit for bit; the poses it returns are the
+    forward kinematics of its joints.
+    """
+    from refine.robot.kinematics import solve_ik_batch
+
+    robot = load_robot("ur10e")
+    kin = TcpKinematics(robot, np.eye(4), TCP)
+    rng = np.random.default_rng(3)
+    lower, upper = robot.spec.lower, robot.spec.upper
+    q_true = rng.uniform(-1.5, 1.5, (40, 6))
+    targets = kin.poses(q_true)
+    q0 = q_true + rng.normal(0.0, 0.05, q_true.shape)
+    T0, J0 = kin.poses_jacobians(q0)
+    outs = []
+    for start in (None, (T0[:, :3, 3], T0[:, :3, :3], J0)):
+        J, T = np.full((40, 6, 6), np.nan), np.full((40, 4, 4), np.nan)
+        q, err = solve_ik_batch(kin, targets, q0, lower, upper, jacobians_out=J, poses_out=T, start=start)
+        outs.append((q, err, J, T))
+    for a, b in zip(*outs, strict=True):
+        assert np.array_equal(a, b)
+    np.testing.assert_allclose(outs[0][3], kin.poses(outs[0][0]), rtol=0.0, atol=1e-12)
+    assert outs[0][1].max() < 1e-6
