@@ -30,7 +30,6 @@ from refine.collision.geometry import Body, link_body, shape_body, world_aabb
 from refine.collision.pairs import exclusion, joint_axes
 from refine.errors import InputError
 from refine.frames import check_transform
-from refine.robot.chain import MIN_ROWS
 from refine.robot.model import Robot
 from refine.settings import Shape
 from refine.types import Array
@@ -311,7 +310,7 @@ class CollisionModel:
 
     def _moving_poses(self, qs: Array) -> Array:
         chain = getattr(self.robot, "chain", None)
-        if chain is not None and len(qs) >= MIN_ROWS:
+        if chain is not None and len(qs) >= chain.min_rows:
             T_joint = chain.joint_placements(qs, self._joints)
             return self.base_in_world @ T_joint[:, self._joint_slot] @ self._joint_T_shape
         T_joint = np.empty((len(qs), len(self._joints), 4, 4))

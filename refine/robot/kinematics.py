@@ -15,7 +15,6 @@ import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
 from refine.errors import InputError
-from refine.robot.chain import MIN_ROWS
 from refine.robot.model import Robot
 from refine.types import Array
 
@@ -86,8 +85,8 @@ class TcpKinematics:
         """:meth:`poses` (M, 4, 4) and :meth:`jacobians` (M, 6, n) of joint rows ``qs`` (M, n) in one pass.
 
         The flange's placements and Jacobians come from the robot's batched chain
-        (:class:`refine.robot.chain.BatchChain`) for :data:`~refine.robot.chain.MIN_ROWS` rows or
-        more, else from one pass of Pinocchio per row; the change to the base placement and the TCP
+        (:class:`refine.robot.compiled_chain.CompiledChain`) for its ``min_rows`` rows or more,
+        else from one pass of Pinocchio per row; the change to the base placement and the TCP
         is done for all rows at once. The Jacobian as :meth:`jacobian`.
         """
         qs = np.atleast_2d(np.asarray(qs, dtype=float))
@@ -95,7 +94,7 @@ class TcpKinematics:
         model, data, fid = robot.model, robot.data, robot.flange_id
         if qs.ndim != 2 or qs.shape[1] != robot.nq:
             raise InputError(f"qs: expected shape (M, {robot.nq}) [rad], got {qs.shape}")
-        if robot.chain is not None and len(qs) >= MIN_ROWS:
+        if robot.chain is not None and len(qs) >= robot.chain.min_rows:
             T_bf, J = robot.chain.frame(qs, fid)
         else:
             J = np.empty((len(qs), 6, robot.nq))
