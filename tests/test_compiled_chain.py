@@ -63,6 +63,34 @@ def test_the_compiled_chain_agrees_with_pinocchio_on_every_registry_robot(name: 
     rng = np.random.default_rng(sum(map(ord, name)))
     qs = rng.uniform(robot.spec.lower, robot.spec.upper, (37, robot.nq))  # 37: no round number of rows
     _assert_pinocchio(robot.model, chain, robot.flange_id, qs)
+    _assert_tcp(robot.model, chain, robot.flange_id, qs)
+
+
+BASE = pin.SE3(pin.exp3(np.array([0.02, -0.03, 0.5])), np.array([0.2, -0.1, 0.05])).homogeneous
+TCP = pin.SE3(pin.exp3(np.array([0.0, 0.35, 0.1])), np.array([0.01, 0.02, 0.25])).homogeneous
+
+
+def _assert_tcp(model: pin.Model, chain: CompiledChain, fid: int, qs: np.ndarray) -> None:
+    """The TCP's world pose and Jacobian against Pinocchio's frame of a TCP added to the model, 1e-12.
+
+    The model with a frame at ``TCP`` on the flange and ``BASE`` applied by hand: ``oMf`` of the
+    new frame, its ``LOCAL_WORLD_ALIGNED`` Jacobian turned into world axes by ``R(BASE)``.
+    """
+    with_tcp = model.copy()
+    flange = model.frames[fid]
+    placement = flange.placement * pin.SE3(TCP)
+    tcp_id = with_tcp.addFrame(pin.Frame("tcp", flange.parentJoint, fid, placement, pin.FrameType.OP_FRAME))
+    data = with_tcp.createData()
+    T, J = chain.tcp_frames(qs, BASE, TCP)
+    T_alone, none = chain.tcp_frames(qs, BASE, TCP, jacobian=False)
+    assert none is None
+    R = BASE[:3, :3]
+    for k, q in enumerate(qs):
+        J_pin = pin.computeFrameJacobian(with_tcp, data, q, tcp_id, pin.LOCAL_WORLD_ALIGNED)
+        T_pin = BASE @ pin.updateFramePlacement(with_tcp, data, tcp_id).homogeneous
+        np.testing.assert_allclose(T[k], T_pin, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(T_alone[k], T_pin, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(J[k], np.vstack([R @ J_pin[:3], R @ J_pin[3:]]), rtol=0, atol=1e-12)
 
 
 def test_the_compiled_chain_agrees_with_pinocchio_on_a_tree_of_prismatic_and_unaligned_joints(cache) -> None:
@@ -71,6 +99,7 @@ def test_the_compiled_chain_agrees_with_pinocchio_on_a_tree_of_prismatic_and_una
     assert chain.compiled
     qs = np.random.default_rng(11).uniform(-3.5, 3.5, (23, model.nq))
     _assert_pinocchio(model, chain, model.getFrameId("tip"), qs)
+    _assert_tcp(model, chain, model.getFrameId("tip"), qs)
     # another frame than the flange, and a subset of the joints: the NumPy chain's answers
     side = model.getFrameId("side")
     T_side, J_side = chain.frame(qs, side)
@@ -86,6 +115,9 @@ def test_one_row_and_no_rows_are_evaluated_too(cache) -> None:
     chain = _fresh(robot.model, robot.flange_id)
     q = np.random.default_rng(2).uniform(robot.spec.lower, robot.spec.upper, (1, robot.nq))
     _assert_pinocchio(robot.model, chain, robot.flange_id, q)
+    _assert_tcp(robot.model, chain, robot.flange_id, q)
+    T, J = chain.tcp_frames(np.zeros((0, robot.nq)), BASE, TCP)
+    assert T.shape == (0, 4, 4) and J.shape == (0, 6, robot.nq)
     T, J = chain.frame(np.zeros((0, robot.nq)), robot.flange_id)
     assert T.shape == (0, 4, 4) and J.shape == (0, 6, robot.nq)
     assert chain.joint_placements(np.zeros((0, robot.nq))).shape == (0, robot.model.njoints, 4, 4)
@@ -104,6 +136,7 @@ def test_without_compilation_the_chain_is_numpys(cache, monkeypatch) -> None:
     T_np, J_np = numpy_chain.frame(qs, robot.flange_id)
     assert np.array_equal(T, T_np) and np.array_equal(J, J_np)
     assert np.array_equal(chain.joint_placements(qs), numpy_chain.joint_placements(qs))
+    assert chain.tcp_frames(qs, np.eye(4), np.eye(4)) is None  # the caller composes NumPy's flange
 
 
 def test_a_compiler_that_fails_leaves_numpys_chain_with_a_warning(tmp_path, monkeypatch, caplog) -> None:

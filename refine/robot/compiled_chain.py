@@ -9,8 +9,11 @@ model into a shared library (:mod:`refine.native`: the cache folder, the compile
 ``REFINE_COMPILE=0``). The library is called through :mod:`ctypes` on the NumPy arrays themselves:
 the joint rows are read and the answers written in place, nothing is copied or converted.
 
-Three functions: the flange's placement, the flange's placement with its Jacobian (Pinocchio's
-``LOCAL_WORLD_ALIGNED``), and every joint's ``data.oMi``. Any number of rows is one call; each
+Five functions: the flange's placement, the flange's placement with its Jacobian (Pinocchio's
+``LOCAL_WORLD_ALIGNED``), every joint's ``data.oMi``, and the TCP's pose in the world (the robot
+placed by ``T_world_base``, the tool by ``T_flange_TCP``, both arguments of the call) with and
+without its Jacobian, the composition :class:`~refine.robot.kinematics.TcpKinematics` does in NumPy
+otherwise. Any number of rows is one call; each
 call's work memory is on the C stack, so threads may call at once (:mod:`ctypes` lets go of the
 GIL for the call). Any other frame, and :meth:`CompiledChain.axis_frames`, are the NumPy chain's.
 
@@ -48,9 +51,9 @@ from refine.types import Array
 
 log = logging.getLogger(__name__)
 
-COMPILED_MIN_ROWS = 8
-"""Rows from which the compiled chain beats Pinocchio's row loop: about 10 µs a call plus 0.2 µs a
-row against Pinocchio's 6 µs a row with the Jacobian and 3 µs without it
+COMPILED_MIN_ROWS = 4
+"""Rows from which the compiled chain beats Pinocchio's row loop: about 7 µs a call plus 0.2-0.3 µs a
+row, against Pinocchio's 3.5 µs a row with the Jacobian and 2 µs without it
 (``benchmarks/batch_kinematics.py``)."""
 CHECK_ROWS = 5
 """Configurations at which a loaded library is compared with Pinocchio."""
@@ -62,18 +65,22 @@ LOADED_MAX = 16
 """Chain libraries kept loaded in one process (one per robot model)."""
 
 _PREFIX = "refine_chain"
+_FUNCTIONS = ("fk", "fkj", "joints", "tcp", "tcpj")
 _SOURCES = (Path(__file__), Path(__file__).with_name("chain.py"))
 _loaded = BoundedCache(LOADED_MAX)
+# a base and a tool placement of no special orientation, for the load check [m]
+_CHECK_BASE = pin.SE3(pin.exp3(np.array([0.3, -0.2, 0.9])), np.array([0.4, -0.3, 0.2])).homogeneous
+_CHECK_TCP = pin.SE3(pin.exp3(np.array([-0.5, 0.1, 0.25])), np.array([0.02, -0.01, 0.3])).homogeneous
 
 # a loop over the rows around each generated function: pointers moved along, work memory on the stack
 _LOOP = """
-int {name}_rows(const casadi_real* q, casadi_real* const* out, long long n) {{
+int {name}_rows(const casadi_real* q, const casadi_real* const* fixed, casadi_real* const* out, long long n) {{
   const casadi_real* arg[{sz_arg}];
   casadi_real* res[{sz_res}];
   casadi_int iw[{sz_iw}];
   casadi_real w[{sz_w}];
   long long k;
-  int i;
+{fixed}
   for (k = 0; k < n; ++k) {{
     arg[0] = q + k * {nq};
 {moves}
@@ -138,6 +145,35 @@ class CompiledChain:
             return T, None
         J = np.empty((len(qs), 6, self.nq))
         lib.call("fkj", qs, T, J)
+        return T, J
+
+    def tcp_frames(
+        self, qs: Array, base_in_world: Array, tcp_in_flange: Array, jacobian: bool = True
+    ) -> tuple[Array, Array | None] | None:
+        """The TCP's poses ``T_world_base · T_base_flange(q) · T_flange_TCP`` (N, 4, 4) [m] and Jacobians.
+
+        The Jacobian (N, 6, nv) as ``TcpKinematics.jacobian``: the TCP's linear velocity and the
+        angular velocity, world axes, linear rows first. None when the chain runs in NumPy (the
+        caller then composes :meth:`frame`'s flange).
+        """
+        lib = self._lib()
+        if lib is None:
+            return None
+        qs = self._rows(qs)
+        fixed = (
+            np.ascontiguousarray(base_in_world, dtype=float),
+            np.ascontiguousarray(tcp_in_flange, dtype=float),
+        )
+        if fixed[0].shape != (4, 4) or fixed[1].shape != (4, 4):
+            raise ValueError(
+                f"placements: expected (4, 4) and (4, 4), got {fixed[0].shape} and {fixed[1].shape}"
+            )
+        T = np.empty((len(qs), 4, 4))
+        if not jacobian:
+            lib.call("tcp", qs, T, fixed=fixed)
+            return T, None
+        J = np.empty((len(qs), 6, self.nq))
+        lib.call("tcpj", qs, T, J, fixed=fixed)
         return T, J
 
     def joint_placements(self, qs: Array, joints: Array | None = None) -> Array:
@@ -207,7 +243,7 @@ class CompiledChain:
             if library.exists() and library.with_suffix(".names").exists():
                 os.utime(library)  # recently used: the last to be evicted
             else:
-                build_library(cc, self._source(), library, ["fk", "fkj", "joints"], FLAGS)
+                build_library(cc, self._source(), library, list(_FUNCTIONS), FLAGS)
             lib = _Library(library, self.nq)
         except (OSError, RuntimeError, AttributeError) as e:
             log.warning("compiling the batch kinematics failed (%s); using NumPy's", e)
@@ -224,10 +260,11 @@ class CompiledChain:
         return lib
 
     def _source(self) -> str:
-        """The C of the three functions and their row loops."""
+        """The C of the five functions and their row loops."""
         import casadi as ca  # only when a library is written
 
         q = ca.SX.sym("q", self.nq)
+        base, tool = ca.SX.sym("base", 16), ca.SX.sym("tcp", 16)  # row-major 4 × 4
         qs = [q[i] for i in range(self.nq)]
         chain, fid = self.numpy, self.flange_id
 
@@ -236,17 +273,21 @@ class CompiledChain:
 
         T, J = chain.row_frame(qs, fid, ca.cos, ca.sin)
         oMi = chain.row_joint_placements(qs, ca.cos, ca.sin)
+        B = [[base[4 * r + c] for c in range(4)] for r in range(4)]
+        X = [[tool[4 * r + c] for c in range(4)] for r in range(4)]
+        T_tcp, J_tcp = placed(T, J, B, X)
         functions = [
             ca.Function(f"{_PREFIX}_fk", [q], flat(T)),
             ca.Function(f"{_PREFIX}_fkj", [q], flat(T, J)),
             ca.Function(f"{_PREFIX}_joints", [q], [ca.vertcat(*flat(*oMi))]),
+            ca.Function(f"{_PREFIX}_tcp", [q, base, tool], flat(T_tcp)),
+            ca.Function(f"{_PREFIX}_tcpj", [q, base, tool], flat(T_tcp, J_tcp)),
         ]
         gen = ca.CodeGenerator(f"{_PREFIX}.c", {"with_header": False})
         for f in functions:
             gen.add(f)
         loops = []
         for f in functions:
-            moves = "\n".join(f"    res[{i}] = out[{i}] + k * {f.nnz_out(i)};" for i in range(f.n_out()))
             loops.append(
                 _LOOP.format(
                     name=f.name(),
@@ -255,7 +296,10 @@ class CompiledChain:
                     sz_iw=max(f.sz_iw(), 1),
                     sz_w=max(f.sz_w(), 1),
                     nq=self.nq,
-                    moves=moves,
+                    fixed="\n".join(f"  arg[{i}] = fixed[{i - 1}];" for i in range(1, f.n_in())),
+                    moves="\n".join(
+                        f"    res[{i}] = out[{i}] + k * {f.nnz_out(i)};" for i in range(f.n_out())
+                    ),
                 )
             )
         return gen.dump() + "".join(loops)
@@ -276,13 +320,25 @@ class CompiledChain:
         lib.call("fkj", qs, T, J)
         lib.call("fk", qs, T_alone)
         lib.call("joints", qs, oMi)
+        B, X = _CHECK_BASE, _CHECK_TCP
+        T_tcp, J_tcp, T_tcp_alone = np.empty_like(T), np.empty_like(J), np.empty_like(T)
+        lib.call("tcpj", qs, T_tcp, J_tcp, fixed=(B, X))
+        lib.call("tcp", qs, T_tcp_alone, fixed=(B, X))
         error = 0.0
         for k, q in enumerate(qs):
             pin.forwardKinematics(model, data, q)  # every joint (the Jacobian's pass: only the flange's)
             oMi_pin = np.array([data.oMi[i].homogeneous for i in range(self._njoints)])
             J_pin = pin.computeFrameJacobian(model, data, q, self.flange_id, pin.LOCAL_WORLD_ALIGNED)
             T_pin = pin.updateFramePlacement(model, data, self.flange_id).homogeneous
-            for a, b in ((T[k], T_pin), (T_alone[k], T_pin), (J[k], J_pin), (oMi[k], oMi_pin)):
+            # the TCP: v = R_B (v_flange + ω × (p_TCP - p_flange)), ω = R_B ω_flange
+            T_tcp_pin = B @ T_pin @ X
+            arm = T_pin[:3, :3] @ X[:3, 3]
+            J_tcp_pin = np.vstack(
+                [B[:3, :3] @ (J_pin[:3] - np.cross(arm, J_pin[3:].T).T), B[:3, :3] @ J_pin[3:]]
+            )
+            pairs = [(T[k], T_pin), (T_alone[k], T_pin), (J[k], J_pin), (oMi[k], oMi_pin)]
+            pairs += [(T_tcp[k], T_tcp_pin), (T_tcp_alone[k], T_tcp_pin), (J_tcp[k], J_tcp_pin)]
+            for a, b in pairs:
                 error = max(error, float(np.abs(a - b).max()))
         return error if np.isfinite(error) else np.inf
 
@@ -294,16 +350,71 @@ class _Library:
         self._dll = ctypes.CDLL(str(path))
         self.nq = nq
         self._calls = {}
-        for name in ("fk", "fkj", "joints"):
+        for name in _FUNCTIONS:
             fn = getattr(self._dll, f"{_PREFIX}_{name}_rows")
-            fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong]
+            fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong]
             fn.restype = ctypes.c_int
             self._calls[name] = fn
 
-    def call(self, name: str, qs: Array, *out: Array) -> None:
-        """Evaluate ``name`` on the rows ``qs`` (N, nq) into the C-contiguous arrays ``out`` (N, ...)."""
-        for a in out:
-            assert a.flags.c_contiguous and a.dtype == np.float64 and len(a) == len(qs)
+    def call(self, name: str, qs: Array, *out: Array, fixed: tuple[Array, ...] = ()) -> None:
+        """Evaluate ``name`` on the rows ``qs`` (N, nq) into the C-contiguous arrays ``out`` (N, ...).
+
+        ``fixed``: the arguments the same for every row (C-contiguous float64, read only).
+        """
+        for a in (qs, *out, *fixed):
+            if not (a.flags.c_contiguous and a.dtype == np.float64):
+                raise ValueError("the compiled batch kinematics take C-contiguous float64 arrays")
+        if any(len(a) != len(qs) for a in out):
+            raise ValueError("the compiled batch kinematics write one row of each output per joint row")
         pointers = (ctypes.c_void_p * len(out))(*(a.ctypes.data for a in out))
-        if self._calls[name](qs.ctypes.data, pointers, len(qs)) != 0:
+        given = (ctypes.c_void_p * max(len(fixed), 1))(*(a.ctypes.data for a in fixed))
+        if self._calls[name](qs.ctypes.data, given, pointers, len(qs)) != 0:
             raise RuntimeError(f"the compiled batch kinematics' {name} failed")
+
+
+def placed(T: list, J: list, B: list, X: list) -> tuple[list, list]:
+    """The TCP's pose ``B · T · X`` (4 × 4) and Jacobian (6 × nv) from the flange's, nested lists of scalars.
+
+    ``T``, ``J``: the flange's placement in the base and its Jacobian (base axes, linear rows first);
+    ``B``: ``T_world_base``; ``X``: ``T_flange_TCP``. The TCP's linear velocity is the flange's plus
+    ``ω × r`` with ``r = R_world_flange · p(X)``, both halves turned into world axes by ``R(B)``.
+    """
+    T_wf = _product(B, T)
+    T_wt = _product(T_wf, X)
+    RB = [row[:3] for row in B[:3]]
+    Jv, Jw = _product(RB, J[:3]), _product(RB, J[3:])
+    r = [sum_terms([T_wf[i][k] * X[k][3] for k in range(3)]) for i in range(3)]
+    cross = [
+        [r[1] * Jw[2][j] - r[2] * Jw[1][j] for j in range(len(J[0]))],
+        [r[2] * Jw[0][j] - r[0] * Jw[2][j] for j in range(len(J[0]))],
+        [r[0] * Jw[1][j] - r[1] * Jw[0][j] for j in range(len(J[0]))],
+    ]
+    return T_wt, [[Jv[i][j] - cross[i][j] for j in range(len(J[0]))] for i in range(3)] + Jw
+
+
+def _product(A: list, B: list) -> list:
+    """The matrix product of nested lists of scalars; a float factor 0 adds no term, a float 1 no product."""
+    return [
+        [sum_terms([_times(A[i][k], B[k][j]) for k in range(len(B))]) for j in range(len(B[0]))]
+        for i in range(len(A))
+    ]
+
+
+def _times(a: Any, b: Any) -> Any:
+    for x, y in ((a, b), (b, a)):
+        if isinstance(x, float):
+            if x == 0.0:
+                return 0.0
+            if x == 1.0:
+                return y
+    return a * b
+
+
+def sum_terms(terms: list) -> Any:
+    """``Σ terms`` leaving out the float zeros (0.0 when nothing is left)."""
+    total: Any = 0.0
+    for t in terms:
+        if isinstance(t, float) and t == 0.0:
+            continue
+        total = t if isinstance(total, float) and total == 0.0 else total + t
+    return total
