@@ -10,7 +10,9 @@ calls) of
 * the compiled chain: ``CompiledChain.frame`` with and without the Jacobian
   (:mod:`refine.robot.compiled_chain`; compiled, or found in the cache folder, before the timings);
 
-and the largest difference of either chain from Pinocchio. Run with one BLAS thread:
+and the largest difference of either chain from Pinocchio; then ``TcpKinematics.poses_jacobians`` and
+``poses`` (a base placement and a TCP: the compiled chain composes them in C, the NumPy chain's
+flange is composed in NumPy). Run with one BLAS thread:
 
     OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python3 benchmarks/batch_kinematics.py [--robots abb_irb4600_60_205,kuka_iiwa14_r820]
 """
@@ -18,6 +20,7 @@ and the largest difference of either chain from Pinocchio. Run with one BLAS thr
 from __future__ import annotations
 
 import argparse
+import copy
 import os
 import statistics
 import time
@@ -27,6 +30,7 @@ import pinocchio as pin
 
 from refine.robot.chain import MIN_ROWS, BatchChain
 from refine.robot.compiled_chain import COMPILED_MIN_ROWS, CompiledChain
+from refine.robot.kinematics import TcpKinematics
 from refine.robot.registry import load_robot
 
 SIZES = (1, 2, 4, 8, 16, 32, 64, 128, 618, 4319)
@@ -95,6 +99,21 @@ def main() -> int:
                 _cpu_ms(rows, fast.frame, qs, fid, False),
             ]
             print(f"  {rows:5d}  " + " / ".join(f"{x:7.3f}" for x in figures) + f"  {diff:.1e}")
+        slow = copy.copy(robot)
+        slow.chain = CompiledChain.from_model(model, fid, compile=False)
+        base = np.eye(4)
+        base[:3, 3] = [0.1, -0.2, 0.3]
+        tcp = np.eye(4)
+        tcp[:3, :3] = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]
+        tcp[:3, 3] = [0.01, 0.02, 0.25]
+        kins = [TcpKinematics(r, base, tcp) for r in (slow, robot)]
+        print("  TcpKinematics: rows, CPU [ms] of poses_jacobians numpy / compiled, poses numpy / compiled")
+        for rows in (16, 128, 618, 4319):
+            qs = rng.uniform(robot.spec.lower, robot.spec.upper, (rows, robot.nq))
+            figures = [_cpu_ms(rows, k.poses_jacobians, qs) for k in kins] + [
+                _cpu_ms(rows, k.poses, qs) for k in kins
+            ]
+            print(f"  {rows:5d}  " + " / ".join(f"{x:7.3f}" for x in figures))
     return 0
 
 

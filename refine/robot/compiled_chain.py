@@ -99,7 +99,7 @@ class CompiledChain:
     beats Pinocchio's row loop.
     """
 
-    def __init__(self, model: pin.Model, flange_id: int, chain: BatchChain) -> None:
+    def __init__(self, model: pin.Model, flange_id: int, chain: BatchChain, compile: bool = True) -> None:
         self.model = model
         self.flange_id = int(flange_id)
         self.numpy = chain
@@ -107,17 +107,21 @@ class CompiledChain:
         self._njoints = int(model.njoints)
         self._lock = threading.Lock()
         self._library: _Library | None = None
-        self._resolved = False
+        self._compile = compile
+        self._resolved = not compile  # without compiling: NumPy's chain from the start
 
     @classmethod
-    def from_model(cls, model: pin.Model, flange_id: int) -> CompiledChain | None:
-        """The chain of ``model`` (the flange: frame ``flange_id``), or None where BatchChain refuses it."""
+    def from_model(cls, model: pin.Model, flange_id: int, compile: bool = True) -> CompiledChain | None:
+        """The chain of ``model`` (the flange: frame ``flange_id``), or None where BatchChain refuses it.
+
+        ``compile=False``: NumPy's evaluations whatever the compiler (for comparisons).
+        """
         chain = BatchChain.from_model(model)
-        return None if chain is None else cls(model, flange_id, chain)
+        return None if chain is None else cls(model, flange_id, chain, compile)
 
     def __getstate__(self) -> dict[str, Any]:
         # the loaded library and the lock belong to this process; the other side looks again
-        return {**self.__dict__, "_lock": None, "_library": None, "_resolved": False}
+        return {**self.__dict__, "_lock": None, "_library": None, "_resolved": not self._compile}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
