@@ -207,3 +207,26 @@ def test_a_pickled_robot_evaluates_its_chain_on_the_other_side(cache) -> None:
     copy = pickle.loads(pickle.dumps(robot))
     assert copy.chain.compiled
     assert np.array_equal(copy.fk_many(qs), before)
+
+
+def test_bodies_on_the_joints_are_placed_as_pinocchios_joints_say(cache) -> None:
+    robot = load_robot("kuka_iiwa14_r820")
+    model, data = robot.model, robot.model.createData()
+    chain = _fresh(model, robot.flange_id)
+    rng = np.random.default_rng(12)
+    joints = np.array([0, 3, model.njoints - 1, 3, 1])
+    local = np.array([pin.SE3.Random().homogeneous for _ in joints])
+    qs = rng.uniform(robot.spec.lower, robot.spec.upper, (29, robot.nq))
+    poses = chain.body_poses(qs, BASE, joints, local)
+    assert poses.shape == (29, len(joints), 4, 4)
+    for k, q in enumerate(qs):
+        pin.forwardKinematics(model, data, q)
+        for m, j in enumerate(joints):
+            np.testing.assert_allclose(
+                poses[k, m], BASE @ data.oMi[int(j)].homogeneous @ local[m], rtol=0, atol=1e-12
+            )
+    assert chain.body_poses(qs[:0], BASE, joints, local).shape == (0, len(joints), 4, 4)
+    with pytest.raises(ValueError, match="joint indices"):
+        chain.body_poses(qs, BASE, [model.njoints], local[:1])
+    numpy_only = CompiledChain.from_model(model, robot.flange_id, compile=False)
+    assert numpy_only.body_poses(qs, BASE, joints, local) is None

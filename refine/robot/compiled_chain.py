@@ -65,7 +65,7 @@ LOADED_MAX = 16
 """Chain libraries kept loaded in one process (one per robot model)."""
 
 _PREFIX = "refine_chain"
-_FUNCTIONS = ("fk", "fkj", "joints", "tcp", "tcpj")
+_FUNCTIONS = ("fk", "fkj", "joints", "tcp", "tcpj", "bodies")
 _SOURCES = (Path(__file__), Path(__file__).with_name("chain.py"))
 _loaded = BoundedCache(LOADED_MAX)
 # a base and a tool placement of no special orientation, for the load check [m]
@@ -85,6 +85,45 @@ int {name}_rows(const casadi_real* q, const casadi_real* const* fixed, casadi_re
     arg[0] = q + k * {nq};
 {moves}
     if ({name}(arg, res, iw, w, 0)) return 1;
+  }}
+  return 0;
+}}
+"""
+
+
+# bodies on the joints: every row's joints, then T_world_base · oMi[joint] · T_joint_body per body
+_BODIES = """
+static void {prefix}_product(const casadi_real* a, const casadi_real* b, casadi_real* c) {{
+  int r, j, i;
+  for (r = 0; r < 4; ++r) {{
+    for (j = 0; j < 4; ++j) {{
+      casadi_real s = 0;
+      for (i = 0; i < 4; ++i) s += a[4 * r + i] * b[4 * i + j];
+      c[4 * r + j] = s;
+    }}
+  }}
+}}
+
+int {prefix}_bodies_rows(const casadi_real* q, const casadi_real* base, const long long* joint,
+                         const casadi_real* local, long long m, casadi_real* out, long long n) {{
+  const casadi_real* arg[{sz_arg}];
+  casadi_real* res[{sz_res}];
+  casadi_int iw[{sz_iw}];
+  casadi_real w[{sz_w}];
+  casadi_real oMi[{size}];
+  casadi_real placed[16];
+  long long k, b;
+  for (b = 0; b < m; ++b) {{
+    if (joint[b] < 0 || joint[b] >= {njoints}) return 2;
+  }}
+  for (k = 0; k < n; ++k) {{
+    arg[0] = q + k * {nq};
+    res[0] = oMi;
+    if ({prefix}_joints(arg, res, iw, w, 0)) return 1;
+    for (b = 0; b < m; ++b) {{
+      {prefix}_product(base, oMi + 16 * joint[b], placed);
+      {prefix}_product(placed, local + 16 * b, out + 16 * (k * m + b));
+    }}
   }}
   return 0;
 }}
@@ -179,6 +218,29 @@ class CompiledChain:
         J = np.empty((len(qs), 6, self.nq))
         lib.call("tcpj", qs, T, J, fixed=fixed)
         return T, J
+
+    def body_poses(self, qs: Array, base_in_world: Array, joints: Array, joint_T_body: Array) -> Array | None:
+        """World poses (N, M, 4, 4) [m] of M bodies fixed on joints: ``T_world_base · oMi[joints[m]] · joint_T_body[m]``.
+
+        ``joints``: each body's joint index (M,); ``joint_T_body``: its placement on the joint
+        (M, 4, 4). None when the chain runs in NumPy (the caller composes :meth:`joint_placements`).
+        """
+        lib = self._lib()
+        if lib is None:
+            return None
+        qs = self._rows(qs)
+        joints = np.ascontiguousarray(joints, dtype=np.int64)
+        local = np.ascontiguousarray(joint_T_body, dtype=float)
+        base = np.ascontiguousarray(base_in_world, dtype=float)
+        if joints.ndim != 1 or local.shape != (len(joints), 4, 4) or base.shape != (4, 4):
+            raise ValueError(
+                f"bodies: expected (M,), (M, 4, 4), (4, 4), got {joints.shape}, {local.shape}, {base.shape}"
+            )
+        if len(joints) and not (0 <= joints.min() and joints.max() < self._njoints):
+            raise ValueError(f"bodies: joint indices 0..{self._njoints - 1}, got {joints.tolist()}")
+        out = np.empty((len(qs), len(joints), 4, 4))
+        lib.bodies(qs, base, joints, local, out)
+        return out
 
     def joint_placements(self, qs: Array, joints: Array | None = None) -> Array:
         """:meth:`BatchChain.joint_placements`: ``data.oMi`` (N, K, 4, 4) of ``joints`` (default all)."""
@@ -306,7 +368,18 @@ class CompiledChain:
                     ),
                 )
             )
-        return gen.dump() + "".join(loops)
+        joints = functions[2]
+        bodies = _BODIES.format(
+            prefix=_PREFIX,
+            sz_arg=max(joints.sz_arg(), 1),
+            sz_res=max(joints.sz_res(), 1),
+            sz_iw=max(joints.sz_iw(), 1),
+            sz_w=max(joints.sz_w(), 1),
+            size=joints.nnz_out(0),
+            njoints=self._njoints,
+            nq=self.nq,
+        )
+        return gen.dump() + "".join(loops) + bodies
 
     def _check(self, lib: _Library) -> float:
         """The largest difference of ``lib``'s answers from Pinocchio's at :data:`CHECK_ROWS` rows."""
@@ -328,6 +401,10 @@ class CompiledChain:
         T_tcp, J_tcp, T_tcp_alone = np.empty_like(T), np.empty_like(J), np.empty_like(T)
         lib.call("tcpj", qs, T_tcp, J_tcp, fixed=(B, X))
         lib.call("tcp", qs, T_tcp_alone, fixed=(B, X))
+        body_joints = np.array([self._njoints - 1, 0, 1, self._njoints - 1], dtype=np.int64)
+        local = np.ascontiguousarray(np.stack([X, B, X @ B, np.eye(4)]))
+        bodies = np.empty((CHECK_ROWS, len(body_joints), 4, 4))
+        lib.bodies(qs, B, body_joints, local, bodies)
         error = 0.0
         for k, q in enumerate(qs):
             pin.forwardKinematics(model, data, q)  # every joint (the Jacobian's pass: only the flange's)
@@ -342,6 +419,7 @@ class CompiledChain:
             )
             pairs = [(T[k], T_pin), (T_alone[k], T_pin), (J[k], J_pin), (oMi[k], oMi_pin)]
             pairs += [(T_tcp[k], T_tcp_pin), (T_tcp_alone[k], T_tcp_pin), (J_tcp[k], J_tcp_pin)]
+            pairs += [(bodies[k, m], B @ oMi_pin[j] @ local[m]) for m, j in enumerate(body_joints)]
             for a, b in pairs:
                 error = max(error, float(np.abs(a - b).max()))
         return error if np.isfinite(error) else np.inf
@@ -354,7 +432,11 @@ class _Library:
         self._dll = ctypes.CDLL(str(path))
         self.nq = nq
         self._calls = {}
-        for name in _FUNCTIONS:
+        self._bodies = self._dll[f"{_PREFIX}_bodies_rows"]
+        pointer, count = ctypes.c_void_p, ctypes.c_longlong
+        self._bodies.argtypes = [pointer, pointer, pointer, pointer, count, pointer, count]
+        self._bodies.restype = ctypes.c_int
+        for name in _FUNCTIONS[:-1]:
             fn = getattr(self._dll, f"{_PREFIX}_{name}_rows")
             fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong]
             fn.restype = ctypes.c_int
@@ -374,6 +456,26 @@ class _Library:
         given = (ctypes.c_void_p * max(len(fixed), 1))(*(a.ctypes.data for a in fixed))
         if self._calls[name](qs.ctypes.data, given, pointers, len(qs)) != 0:
             raise RuntimeError(f"the compiled batch kinematics' {name} failed")
+
+    def bodies(self, qs: Array, base: Array, joints: Array, local: Array, out: Array) -> None:
+        """Bodies' world poses into ``out`` (N, M, 4, 4) (:meth:`CompiledChain.body_poses`, arguments checked there)."""
+        for a in (qs, base, local, out):
+            if not (a.flags.c_contiguous and a.dtype == np.float64):
+                raise ValueError("the compiled batch kinematics take C-contiguous float64 arrays")
+        shape = (len(qs), len(joints))
+        if not (joints.flags.c_contiguous and joints.dtype == np.int64) or out.shape[:2] != shape:
+            raise ValueError("the compiled batch kinematics' bodies: int64 joints and (N, M, 4, 4) poses")
+        code = self._bodies(
+            qs.ctypes.data,
+            base.ctypes.data,
+            joints.ctypes.data,
+            local.ctypes.data,
+            len(joints),
+            out.ctypes.data,
+            len(qs),
+        )
+        if code != 0:
+            raise RuntimeError(f"the compiled batch kinematics' bodies failed ({code})")
 
 
 def placed(T: list, J: list, B: list, X: list) -> tuple[list, list]:
