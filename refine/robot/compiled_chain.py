@@ -1,4 +1,4 @@
-"""The robot's batch kinematics compiled to C: the flange's placements and Jacobians, every joint's placement.
+"""The robot's batch kinematics compiled to C: flange and TCP poses and Jacobians, every joint's placement.
 
 :class:`~refine.robot.chain.BatchChain` costs NumPy about 0.3 ms a batch and 1 µs a row. The same
 recursion written for one row on CasADi ``SX`` scalars (:meth:`BatchChain.row_frame`,
@@ -9,13 +9,15 @@ model into a shared library (:mod:`refine.native`: the cache folder, the compile
 ``REFINE_COMPILE=0``). The library is called through :mod:`ctypes` on the NumPy arrays themselves:
 the joint rows are read and the answers written in place, nothing is copied or converted.
 
-Five functions: the flange's placement, the flange's placement with its Jacobian (Pinocchio's
-``LOCAL_WORLD_ALIGNED``), every joint's ``data.oMi``, and the TCP's pose in the world (the robot
-placed by ``T_world_base``, the tool by ``T_flange_TCP``, both arguments of the call) with and
-without its Jacobian, the composition :class:`~refine.robot.kinematics.TcpKinematics` does in NumPy
-otherwise. Any number of rows is one call; each
-call's work memory is on the C stack, so threads may call at once (:mod:`ctypes` lets go of the
-GIL for the call). Any other frame, and :meth:`CompiledChain.axis_frames`, are the NumPy chain's.
+The functions (:mod:`refine.robot.chain_source` writes them): the flange's placement, the
+flange's placement with its Jacobian (Pinocchio's ``LOCAL_WORLD_ALIGNED``), every joint's
+``data.oMi``, the TCP's pose in the world (the robot placed by ``T_world_base``, the tool by
+``T_flange_TCP``, both arguments of the call) with and without its Jacobian (what
+:class:`~refine.robot.kinematics.TcpKinematics` composes in NumPy otherwise), and bodies fixed on
+the joints placed in the world (the collision model's moving shapes). Any number of rows is one
+call; each call's work memory is on the C stack, so threads may call at once (:mod:`ctypes` lets
+go of the GIL for the call). Any other frame, and :meth:`CompiledChain.axis_frames`, are the NumPy
+chain's.
 
 When a library is loaded it is checked once against Pinocchio (``forwardKinematics`` and
 ``computeFrameJacobian``) at :data:`CHECK_ROWS` configurations; a difference above
@@ -46,6 +48,7 @@ from refine.native import (
     compiler_version,
 )
 from refine.robot.chain import MIN_ROWS, BatchChain
+from refine.robot.chain_source import PREFIX, chain_source
 from refine.types import Array
 
 log = logging.getLogger(__name__)
@@ -65,70 +68,12 @@ reassociates a sum (no -ffast-math)."""
 LOADED_MAX = 16
 """Chain libraries kept loaded in one process (one per robot model)."""
 
-_PREFIX = "refine_chain"
 _FUNCTIONS = ("fk", "fkj", "joints", "tcp", "tcpj", "bodies")
-_SOURCES = (Path(__file__), Path(__file__).with_name("chain.py"))
+_SOURCES = tuple(Path(__file__).with_name(n) for n in ("compiled_chain.py", "chain_source.py", "chain.py"))
 _loaded = BoundedCache(LOADED_MAX)
 # a base and a tool placement of no special orientation, for the load check [m]
 _CHECK_BASE = pin.SE3(pin.exp3(np.array([0.3, -0.2, 0.9])), np.array([0.4, -0.3, 0.2])).homogeneous
 _CHECK_TCP = pin.SE3(pin.exp3(np.array([-0.5, 0.1, 0.25])), np.array([0.02, -0.01, 0.3])).homogeneous
-
-# a loop over the rows around each generated function: pointers moved along, work memory on the stack
-_LOOP = """
-int {name}_rows(const casadi_real* q, const casadi_real* const* fixed, casadi_real* const* out, long long n) {{
-  const casadi_real* arg[{sz_arg}];
-  casadi_real* res[{sz_res}];
-  casadi_int iw[{sz_iw}];
-  casadi_real w[{sz_w}];
-  long long k;
-{fixed}
-  for (k = 0; k < n; ++k) {{
-    arg[0] = q + k * {nq};
-{moves}
-    if ({name}(arg, res, iw, w, 0)) return 1;
-  }}
-  return 0;
-}}
-"""
-
-
-# bodies on the joints: every row's joints, then T_world_base · oMi[joint] · T_joint_body per body
-_BODIES = """
-static void {prefix}_product(const casadi_real* a, const casadi_real* b, casadi_real* c) {{
-  int r, j, i;
-  for (r = 0; r < 4; ++r) {{
-    for (j = 0; j < 4; ++j) {{
-      casadi_real s = 0;
-      for (i = 0; i < 4; ++i) s += a[4 * r + i] * b[4 * i + j];
-      c[4 * r + j] = s;
-    }}
-  }}
-}}
-
-int {prefix}_bodies_rows(const casadi_real* q, const casadi_real* base, const long long* joint,
-                         const casadi_real* local, long long m, casadi_real* out, long long n) {{
-  const casadi_real* arg[{sz_arg}];
-  casadi_real* res[{sz_res}];
-  casadi_int iw[{sz_iw}];
-  casadi_real w[{sz_w}];
-  casadi_real oMi[{size}];
-  casadi_real placed[16];
-  long long k, b;
-  for (b = 0; b < m; ++b) {{
-    if (joint[b] < 0 || joint[b] >= {njoints}) return 2;
-  }}
-  for (k = 0; k < n; ++k) {{
-    arg[0] = q + k * {nq};
-    res[0] = oMi;
-    if ({prefix}_joints(arg, res, iw, w, 0)) return 1;
-    for (b = 0; b < m; ++b) {{
-      {prefix}_product(base, oMi + 16 * joint[b], placed);
-      {prefix}_product(placed, local + 16 * b, out + 16 * (k * m + b));
-    }}
-  }}
-  return 0;
-}}
-"""
 
 
 class CompiledChain:
@@ -277,7 +222,11 @@ class CompiledChain:
         cc = compiler()
         if cc is None:
             return None
-        digest = self._digest(cc)
+        try:
+            digest = self._digest(cc)
+        except (OSError, ImportError) as e:  # a source file or CasADi's version not to be read
+            log.warning("the batch kinematics cannot be keyed (%s); using NumPy's", e)
+            return None
         with _loaded.lock:  # one thread at a time looks up, compiles and loads
             hit = _loaded.get(digest)
             if hit is None:
@@ -305,14 +254,16 @@ class CompiledChain:
 
     def _load(self, cc: str, digest: str) -> _Library | bool:
         """Load (compiling first when missing) and check the library; False when it cannot be used."""
-        library = cache_dir() / f"{_PREFIX}-{digest}.so"
+        library = cache_dir() / f"{PREFIX}-{digest}.so"
         try:
             if library.exists() and library.with_suffix(".names").exists():
                 os.utime(library)  # recently used: the last to be evicted
             else:
-                build_library(cc, self._source(), library, list(_FUNCTIONS), FLAGS)
+                build_library(
+                    cc, chain_source(self.numpy, self.flange_id, PREFIX), library, list(_FUNCTIONS), FLAGS
+                )
             lib = _Library(library, self.nq)
-        except (OSError, RuntimeError, AttributeError) as e:
+        except (OSError, RuntimeError, AttributeError, ImportError) as e:
             log.warning("compiling the batch kinematics failed (%s); using NumPy's", e)
             return False
         error = self._check(lib)
@@ -325,62 +276,6 @@ class CompiledChain:
             )
             return False
         return lib
-
-    def _source(self) -> str:
-        """The C of the five functions and their row loops."""
-        import casadi as ca  # only when a library is written
-
-        q = ca.SX.sym("q", self.nq)
-        base, tool = ca.SX.sym("base", 16), ca.SX.sym("tcp", 16)  # row-major 4 × 4
-        qs = [q[i] for i in range(self.nq)]
-        chain, fid = self.numpy, self.flange_id
-
-        def flat(*matrices: list) -> list[ca.SX]:
-            return [ca.densify(ca.vertcat(*[x for row in m for x in row])) for m in matrices]
-
-        T, J = chain.row_frame(qs, fid, ca.cos, ca.sin)
-        oMi = chain.row_joint_placements(qs, ca.cos, ca.sin)
-        B = [[base[4 * r + c] for c in range(4)] for r in range(4)]
-        X = [[tool[4 * r + c] for c in range(4)] for r in range(4)]
-        T_tcp, J_tcp = placed(T, J, B, X)
-        functions = [
-            ca.Function(f"{_PREFIX}_fk", [q], flat(T)),
-            ca.Function(f"{_PREFIX}_fkj", [q], flat(T, J)),
-            ca.Function(f"{_PREFIX}_joints", [q], [ca.vertcat(*flat(*oMi))]),
-            ca.Function(f"{_PREFIX}_tcp", [q, base, tool], flat(T_tcp)),
-            ca.Function(f"{_PREFIX}_tcpj", [q, base, tool], flat(T_tcp, J_tcp)),
-        ]
-        gen = ca.CodeGenerator(f"{_PREFIX}.c", {"with_header": False})
-        for f in functions:
-            gen.add(f)
-        loops = []
-        for f in functions:
-            loops.append(
-                _LOOP.format(
-                    name=f.name(),
-                    sz_arg=max(f.sz_arg(), 1),
-                    sz_res=max(f.sz_res(), 1),
-                    sz_iw=max(f.sz_iw(), 1),
-                    sz_w=max(f.sz_w(), 1),
-                    nq=self.nq,
-                    fixed="\n".join(f"  arg[{i}] = fixed[{i - 1}];" for i in range(1, f.n_in())),
-                    moves="\n".join(
-                        f"    res[{i}] = out[{i}] + k * {f.nnz_out(i)};" for i in range(f.n_out())
-                    ),
-                )
-            )
-        joints = functions[2]
-        bodies = _BODIES.format(
-            prefix=_PREFIX,
-            sz_arg=max(joints.sz_arg(), 1),
-            sz_res=max(joints.sz_res(), 1),
-            sz_iw=max(joints.sz_iw(), 1),
-            sz_w=max(joints.sz_w(), 1),
-            size=joints.nnz_out(0),
-            njoints=self._njoints,
-            nq=self.nq,
-        )
-        return gen.dump() + "".join(loops) + bodies
 
     def _check(self, lib: _Library) -> float:
         """The largest difference of ``lib``'s answers from Pinocchio's at :data:`CHECK_ROWS` rows."""
@@ -433,12 +328,12 @@ class _Library:
         self._dll = ctypes.CDLL(str(path))
         self.nq = nq
         self._calls = {}
-        self._bodies = self._dll[f"{_PREFIX}_bodies_rows"]
+        self._bodies = self._dll[f"{PREFIX}_bodies_rows"]
         pointer, count = ctypes.c_void_p, ctypes.c_longlong
         self._bodies.argtypes = [pointer, pointer, pointer, pointer, count, pointer, count]
         self._bodies.restype = ctypes.c_int
         for name in _FUNCTIONS[:-1]:
-            fn = getattr(self._dll, f"{_PREFIX}_{name}_rows")
+            fn = getattr(self._dll, f"{PREFIX}_{name}_rows")
             fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong]
             fn.restype = ctypes.c_int
             self._calls[name] = fn
@@ -477,51 +372,3 @@ class _Library:
         )
         if code != 0:
             raise RuntimeError(f"the compiled batch kinematics' bodies failed ({code})")
-
-
-def placed(T: list, J: list, B: list, X: list) -> tuple[list, list]:
-    """The TCP's pose ``B · T · X`` (4 × 4) and Jacobian (6 × nv) from the flange's, nested lists of scalars.
-
-    ``T``, ``J``: the flange's placement in the base and its Jacobian (base axes, linear rows first);
-    ``B``: ``T_world_base``; ``X``: ``T_flange_TCP``. The TCP's linear velocity is the flange's plus
-    ``ω × r`` with ``r = R_world_flange · p(X)``, both halves turned into world axes by ``R(B)``.
-    """
-    T_wf = _product(B, T)
-    T_wt = _product(T_wf, X)
-    RB = [row[:3] for row in B[:3]]
-    Jv, Jw = _product(RB, J[:3]), _product(RB, J[3:])
-    r = [sum_terms([T_wf[i][k] * X[k][3] for k in range(3)]) for i in range(3)]
-    cross = [
-        [r[1] * Jw[2][j] - r[2] * Jw[1][j] for j in range(len(J[0]))],
-        [r[2] * Jw[0][j] - r[0] * Jw[2][j] for j in range(len(J[0]))],
-        [r[0] * Jw[1][j] - r[1] * Jw[0][j] for j in range(len(J[0]))],
-    ]
-    return T_wt, [[Jv[i][j] - cross[i][j] for j in range(len(J[0]))] for i in range(3)] + Jw
-
-
-def _product(A: list, B: list) -> list:
-    """The matrix product of nested lists of scalars; a float factor 0 adds no term, a float 1 no product."""
-    return [
-        [sum_terms([_times(A[i][k], B[k][j]) for k in range(len(B))]) for j in range(len(B[0]))]
-        for i in range(len(A))
-    ]
-
-
-def _times(a: Any, b: Any) -> Any:
-    for x, y in ((a, b), (b, a)):
-        if isinstance(x, float):
-            if x == 0.0:
-                return 0.0
-            if x == 1.0:
-                return y
-    return a * b
-
-
-def sum_terms(terms: list) -> Any:
-    """``Σ terms`` leaving out the float zeros (0.0 when nothing is left)."""
-    total: Any = 0.0
-    for t in terms:
-        if isinstance(t, float) and t == 0.0:
-            continue
-        total = t if isinstance(total, float) and total == 0.0 else total + t
-    return total
