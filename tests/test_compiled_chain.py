@@ -184,7 +184,8 @@ def test_two_threads_at_once_get_their_own_answers(cache) -> None:
             for _ in range(20):
                 T, J = chain.frame(batches[k], robot.flange_id)
                 oMi = chain.joint_placements(batches[k])
-            got[k] = (T, J, oMi)
+                T_tcp, J_tcp = chain.tcp_frames(batches[k], BASE, TCP)
+            got[k] = (T, J, oMi, T_tcp, J_tcp)
         except Exception as e:  # noqa: BLE001 - reported below
             errors.append(e)
 
@@ -195,9 +196,11 @@ def test_two_threads_at_once_get_their_own_answers(cache) -> None:
         t.join()
     assert errors == []
     for k in range(2):
-        T, J, oMi = got[k]
+        T, J, oMi, T_tcp, J_tcp = got[k]
         assert np.array_equal(T, alone[k][0]) and np.array_equal(J, alone[k][1])
         assert np.array_equal(oMi, chain.joint_placements(batches[k]))
+        T_one, J_one = chain.tcp_frames(batches[k], BASE, TCP)
+        assert np.array_equal(T_tcp, T_one) and np.array_equal(J_tcp, J_one)
 
 
 def test_a_pickled_robot_evaluates_its_chain_on_the_other_side(cache) -> None:
