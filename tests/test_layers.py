@@ -38,6 +38,7 @@ FLOORS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "refine.stopwatch",
             "refine.settings",
             "refine.pathml_format",
+            "refine.native",
         ),
     ),
     ("robot", ("refine.robot",)),

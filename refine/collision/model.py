@@ -30,7 +30,6 @@ from refine.collision.geometry import Body, link_body, shape_body, world_aabb
 from refine.collision.pairs import exclusion, joint_axes
 from refine.errors import InputError
 from refine.frames import check_transform
-from refine.robot.chain import MIN_ROWS
 from refine.robot.model import Robot
 from refine.settings import Shape
 from refine.types import Array
@@ -128,6 +127,7 @@ class CollisionModel:
         moving = self.bodies[: self._n_moving]
         self._joints = sorted({b.joint for b in moving})
         self._joint_slot = np.array([self._joints.index(b.joint) for b in moving], dtype=int)
+        self._body_joints = np.array([b.joint for b in moving], dtype=np.int64)  # Pinocchio's joint index
         self._joint_T_shape = np.array(  # shape pose in its joint's frame: frame placement, then shape
             [self._model.frames[b.frame_id].placement.homogeneous @ b.link_T_shape for b in moving]
         )
@@ -311,7 +311,10 @@ class CollisionModel:
 
     def _moving_poses(self, qs: Array) -> Array:
         chain = getattr(self.robot, "chain", None)
-        if chain is not None and len(qs) >= MIN_ROWS:
+        if chain is not None and len(qs) >= chain.min_rows:
+            placed = chain.body_poses(qs, self.base_in_world, self._body_joints, self._joint_T_shape)
+            if placed is not None:  # compiled: the placement on the joints done with the joints
+                return placed
             T_joint = chain.joint_placements(qs, self._joints)
             return self.base_in_world @ T_joint[:, self._joint_slot] @ self._joint_T_shape
         T_joint = np.empty((len(qs), len(self._joints), 4, 4))

@@ -25,11 +25,17 @@ are taken: Pinocchio's ``RX``, ``RY``, ``RZ``, ``RevoluteUnaligned``, ``PX``, ``
 free flyer) gives no chain (:meth:`BatchChain.from_model` returns None), and the callers keep
 Pinocchio's row-by-row evaluation. :data:`MIN_ROWS` is the batch size from which the chain is faster
 than the row loop.
+
+The same recursion for one row on any scalars (floats, CasADi's ``SX``) is
+:meth:`BatchChain.row_frame` and :meth:`BatchChain.row_joint_placements`: what
+:mod:`refine.robot.compiled_chain` writes out as C.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -205,3 +211,86 @@ class BatchChain:
             J[:, 2, jt.q] = z[:, 0] * r[:, 1] - z[:, 1] * r[:, 0]
             J[:, 3:, jt.q] = z
         return T, J
+
+    # ---- one row on generic scalars (the compiled chain's source)
+
+    def row_axis_frames(self, q: Sequence[Any], cos: Callable, sin: Callable) -> tuple[list, list]:
+        """Every joint's axis frame for one joint row ``q`` (nq scalars), as nested lists of scalars.
+
+        The recursion of :meth:`axis_frames` on any scalar type with ``+``, ``*``, ``cos`` and
+        ``sin`` (floats, CasADi's ``SX``); products with a constant 0 are left out, so the aligned
+        joints' signed permutations cost nothing. Returns the rotations (3 × 3 lists) and origins
+        (3 lists), item 0 the universe.
+        """
+        R: list = [[[1.0 if r == c else 0.0 for c in range(3)] for r in range(3)]]
+        p: list = [[0.0, 0.0, 0.0]]
+        for jt in self._joints:
+            Rp, pp = R[jt.parent], p[jt.parent]
+            Ri = [[_dot(Rp[r], jt.C[:, c]) for c in range(3)] for r in range(3)]
+            pi = [pp[r] + _dot(Rp[r], jt.t) for r in range(3)]
+            qj = q[jt.q]
+            if jt.revolute:
+                c, s = cos(qj), sin(qj)
+                for r in range(3):
+                    x, y = Ri[r][0], Ri[r][1]
+                    Ri[r][0], Ri[r][1] = c * x + s * y, c * y - s * x
+            else:
+                pi = [pi[r] + qj * Ri[r][2] for r in range(3)]
+            R.append(Ri)
+            p.append(pi)
+        return R, p
+
+    def row_joint_placements(self, q: Sequence[Any], cos: Callable, sin: Callable) -> list:
+        """Every joint's ``data.oMi`` for one row as 4 × 4 nested lists of scalars (see :meth:`row_axis_frames`)."""
+        R, p = self.row_axis_frames(q, cos, sin)
+        out = []
+        for i in range(len(self._joints) + 1):
+            A = np.eye(3) if i == 0 else self._joints[i - 1].A
+            rows = [[_dot(R[i][r], A[c]) for c in range(3)] + [p[i][r]] for r in range(3)]
+            out.append([*rows, [0.0, 0.0, 0.0, 1.0]])
+        return out
+
+    def row_frame(
+        self, q: Sequence[Any], frame_id: int, cos: Callable, sin: Callable, jacobian: bool = True
+    ) -> tuple[list, list | None]:
+        """Frame ``frame_id``'s placement (4 × 4) and Jacobian (6 × nv) for one row, nested lists of scalars.
+
+        :meth:`frame` for one row on any scalars (see :meth:`row_axis_frames`); entries the
+        Jacobian does not depend on are the float 0.0.
+        """
+        R, p = self.row_axis_frames(q, cos, sin)
+        parent, F = self._frames[frame_id]
+        A = np.eye(3) if parent == 0 else self._joints[parent - 1].A
+        M, m = A.T @ F[:3, :3], A.T @ F[:3, 3]
+        Rf = [[_dot(R[parent][r], M[:, c]) for c in range(3)] for r in range(3)]
+        origin = [p[parent][r] + _dot(R[parent][r], m) for r in range(3)]
+        T = [[*Rf[r], origin[r]] for r in range(3)] + [[0.0, 0.0, 0.0, 1.0]]
+        if not jacobian:
+            return T, None
+        J: list = [[0.0] * self.nq for _ in range(6)]
+        for k in self._support[parent]:
+            jt = self._joints[k - 1]
+            z = [R[k][r][2] for r in range(3)]
+            if not jt.revolute:
+                for r in range(3):
+                    J[r][jt.q] = z[r]
+                continue
+            d = [origin[r] - p[k][r] for r in range(3)]
+            J[0][jt.q] = z[1] * d[2] - z[2] * d[1]
+            J[1][jt.q] = z[2] * d[0] - z[0] * d[2]
+            J[2][jt.q] = z[0] * d[1] - z[1] * d[0]
+            for r in range(3):
+                J[3 + r][jt.q] = z[r]
+        return T, J
+
+
+def _dot(row: Sequence[Any], constants: Array) -> Any:
+    """``Σ row[i] · constants[i]`` with the terms of a constant 0 left out and those of a constant 1 not multiplied."""
+    total: Any = 0.0
+    for x, c in zip(row, constants, strict=True):
+        c = float(c)
+        if c == 0.0:
+            continue
+        term = x if c == 1.0 else (-x if c == -1.0 else x * c)
+        total = term if isinstance(total, float) and total == 0.0 else total + term
+    return total

@@ -15,7 +15,6 @@ import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
 from refine.errors import InputError
-from refine.robot.chain import MIN_ROWS
 from refine.robot.model import Robot
 from refine.types import Array
 
@@ -56,6 +55,12 @@ class TcpKinematics:
 
     def poses(self, qs: Array) -> Array:
         """T_F_TCP for joint rows ``qs`` (N, n), shape (N, 4, 4) (with a stationary tool: T_part_TCP)."""
+        chain, rows = self.robot.chain, np.shape(qs)
+        if self.tool_in_world is None and chain is not None and len(rows) == 2 and rows[1] == self.robot.nq:
+            if rows[0] >= chain.min_rows:  # the compiled chain places the robot and the tool too
+                tcp = chain.tcp_frames(qs, self.base_in_world, self.tcp_in_flange, jacobian=False)
+                if tcp is not None:
+                    return tcp[0]
         T = self.base_in_world @ self.robot.fk_many(qs) @ self.tcp_in_flange
         return T if self.tool_in_world is None else _rigid_inverse(T) @ self.tool_in_world
 
@@ -86,8 +91,9 @@ class TcpKinematics:
         """:meth:`poses` (M, 4, 4) and :meth:`jacobians` (M, 6, n) of joint rows ``qs`` (M, n) in one pass.
 
         The flange's placements and Jacobians come from the robot's batched chain
-        (:class:`refine.robot.chain.BatchChain`) for :data:`~refine.robot.chain.MIN_ROWS` rows or
-        more, else from one pass of Pinocchio per row; the change to the base placement and the TCP
+        (:class:`refine.robot.compiled_chain.CompiledChain`) for its ``min_rows`` rows or more,
+        else from one pass of Pinocchio per row; compiled, the chain also places the robot and the
+        tool on a flange (``tcp_frames``), else the change to the base placement and the TCP
         is done for all rows at once. The Jacobian as :meth:`jacobian`.
         """
         qs = np.atleast_2d(np.asarray(qs, dtype=float))
@@ -95,7 +101,11 @@ class TcpKinematics:
         model, data, fid = robot.model, robot.data, robot.flange_id
         if qs.ndim != 2 or qs.shape[1] != robot.nq:
             raise InputError(f"qs: expected shape (M, {robot.nq}) [rad], got {qs.shape}")
-        if robot.chain is not None and len(qs) >= MIN_ROWS:
+        if robot.chain is not None and len(qs) >= robot.chain.min_rows:
+            if self.tool_in_world is None:  # the compiled chain places the robot and the tool too
+                tcp = robot.chain.tcp_frames(qs, self.base_in_world, self.tcp_in_flange)
+                if tcp is not None:
+                    return tcp
             T_bf, J = robot.chain.frame(qs, fid)
         else:
             J = np.empty((len(qs), 6, robot.nq))

@@ -20,7 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from refine.arguments import typed
 from refine.errors import InputError, checked_call
-from refine.robot.chain import MIN_ROWS, BatchChain
+from refine.robot.compiled_chain import CompiledChain
 from refine.robot.geometry import CollisionShape, collision_shapes_from_urdf
 from refine.robot.self_collision import read_matrix
 from refine.robot.spec import SELF_COLLISION_FILE, RobotSpec, build_model
@@ -48,8 +48,9 @@ class Robot:
         self.flange_id = self.frame_id(spec.flange_frame)
         self._shapes: tuple[CollisionShape, ...] | None = None
         self._matrix: dict[frozenset[str], str] | None = None
-        self.chain = BatchChain.from_model(self.model)
-        """The model's batched kinematics (:class:`~refine.robot.chain.BatchChain`), or None for joints it does not take."""
+        self.chain = CompiledChain.from_model(self.model, self.flange_id)
+        """The model's batched kinematics (:class:`~refine.robot.compiled_chain.CompiledChain`, compiled
+        where it can be, else :class:`~refine.robot.chain.BatchChain`'s NumPy), or None for joints it does not take."""
 
     def __repr__(self) -> str:
         return f"Robot({self.spec.name!r}, nq={self.nq})"
@@ -111,7 +112,7 @@ class Robot:
         qs = np.asarray(qs, dtype=float)
         if qs.ndim != 2 or qs.shape[1] != self.nq:
             raise InputError(f"qs: expected shape (N, {self.nq}) [rad], got {qs.shape}")
-        if self.chain is not None and len(qs) >= MIN_ROWS:
+        if self.chain is not None and len(qs) >= self.chain.min_rows:
             return self.chain.frame(qs, self.flange_id, jacobian=False)[0]
         out = np.empty((len(qs), 4, 4))
         model, data = self.model, self.data
@@ -154,7 +155,7 @@ class Robot:
         self.__dict__.update(state)
         self._local = threading.local()
         if "chain" not in state:
-            self.chain = BatchChain.from_model(self.model)
+            self.chain = CompiledChain.from_model(self.model, self.flange_id)
 
     def collision_shapes(self) -> list[CollisionShape]:
         """Collision primitives of every link, parsed once from the URDF's ``<collision>``."""

@@ -1,0 +1,188 @@
+"""The C source of the compiled batch kinematics (:mod:`refine.robot.compiled_chain`).
+
+:class:`~refine.robot.chain.BatchChain`'s recursion for one row (:meth:`BatchChain.row_frame`,
+:meth:`BatchChain.row_joint_placements`) on CasADi ``SX`` scalars gives five functions of a joint
+row ``q``: ``<prefix>_fk`` (the flange's placement, 16 numbers row-major), ``_fkj`` (that and its
+Jacobian, 6 × nv row-major), ``_joints`` (every joint's ``oMi``, universe first), ``_tcp`` and
+``_tcpj`` (the TCP's world pose ``B · T · X`` and its Jacobian, with ``B = T_world_base`` and
+``X = T_flange_TCP`` two more arguments: :func:`placed`). CasADi's code generator writes them; each
+gets a loop over the rows in C, ``<name>_rows(q, fixed, out, n)``, which moves the row and output
+pointers along with its work memory on the stack (so threads may call at once). A sixth,
+hand-written, ``<prefix>_bodies_rows(q, base, joint, local, m, out, n)``, evaluates ``_joints``
+per row and places ``m`` bodies ``base · oMi[joint[b]] · local[b]``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from refine.robot.chain import BatchChain
+
+PREFIX = "refine_chain"
+"""The names' start in the library."""
+
+# a loop over the rows around each generated function: pointers moved along, work memory on the stack
+_LOOP = """
+int {name}_rows(const casadi_real* q, const casadi_real* const* fixed, casadi_real* const* out, long long n) {{
+  const casadi_real* arg[{sz_arg}];
+  casadi_real* res[{sz_res}];
+  casadi_int iw[{sz_iw}];
+  casadi_real w[{sz_w}];
+  long long k;
+{fixed}
+  for (k = 0; k < n; ++k) {{
+    arg[0] = q + k * {nq};
+{moves}
+    if ({name}(arg, res, iw, w, 0)) return 1;
+  }}
+  return 0;
+}}
+"""
+
+
+# bodies on the joints: every row's joints, then T_world_base · oMi[joint] · T_joint_body per body
+_BODIES = """
+static void {prefix}_product(const casadi_real* a, const casadi_real* b, casadi_real* c) {{
+  int r, j, i;
+  for (r = 0; r < 4; ++r) {{
+    for (j = 0; j < 4; ++j) {{
+      casadi_real s = 0;
+      for (i = 0; i < 4; ++i) s += a[4 * r + i] * b[4 * i + j];
+      c[4 * r + j] = s;
+    }}
+  }}
+}}
+
+int {prefix}_bodies_rows(const casadi_real* q, const casadi_real* base, const long long* joint,
+                         const casadi_real* local, long long m, casadi_real* out, long long n) {{
+  const casadi_real* arg[{sz_arg}];
+  casadi_real* res[{sz_res}];
+  casadi_int iw[{sz_iw}];
+  casadi_real w[{sz_w}];
+  casadi_real oMi[{size}];
+  casadi_real placed[16];
+  long long k, b;
+  for (b = 0; b < m; ++b) {{
+    if (joint[b] < 0 || joint[b] >= {njoints}) return 2;
+  }}
+  for (k = 0; k < n; ++k) {{
+    arg[0] = q + k * {nq};
+    res[0] = oMi;
+    if ({prefix}_joints(arg, res, iw, w, 0)) return 1;
+    for (b = 0; b < m; ++b) {{
+      {prefix}_product(base, oMi + 16 * joint[b], placed);
+      {prefix}_product(placed, local + 16 * b, out + 16 * (k * m + b));
+    }}
+  }}
+  return 0;
+}}
+"""
+
+
+def chain_source(chain: BatchChain, flange_id: int, prefix: str = PREFIX) -> str:
+    """The C of the chain's row functions and their row loops (module notes), names starting ``prefix``.
+
+    Args:
+        chain: the NumPy chain whose one-row recursion is written out.
+        flange_id: the frame of the flange (Pinocchio's frame index).
+        prefix: a C identifier the functions' names start with, e.g. ``"refine_chain"``.
+    """
+    import casadi as ca  # only when a library is written
+
+    q = ca.SX.sym("q", chain.nq)
+    base, tool = ca.SX.sym("base", 16), ca.SX.sym("tcp", 16)  # row-major 4 × 4
+    qs = [q[i] for i in range(chain.nq)]
+    fid = flange_id
+
+    def flat(*matrices: list) -> list[ca.SX]:
+        return [ca.densify(ca.vertcat(*[x for row in m for x in row])) for m in matrices]
+
+    T, J = chain.row_frame(qs, fid, ca.cos, ca.sin)
+    oMi = chain.row_joint_placements(qs, ca.cos, ca.sin)
+    B = [[base[4 * r + c] for c in range(4)] for r in range(4)]
+    X = [[tool[4 * r + c] for c in range(4)] for r in range(4)]
+    T_tcp, J_tcp = placed(T, J, B, X)
+    functions = [
+        ca.Function(f"{prefix}_fk", [q], flat(T)),
+        ca.Function(f"{prefix}_fkj", [q], flat(T, J)),
+        ca.Function(f"{prefix}_joints", [q], [ca.vertcat(*flat(*oMi))]),
+        ca.Function(f"{prefix}_tcp", [q, base, tool], flat(T_tcp)),
+        ca.Function(f"{prefix}_tcpj", [q, base, tool], flat(T_tcp, J_tcp)),
+    ]
+    gen = ca.CodeGenerator(f"{prefix}.c", {"with_header": False})
+    for f in functions:
+        gen.add(f)
+    loops = []
+    for f in functions:
+        loops.append(
+            _LOOP.format(
+                name=f.name(),
+                sz_arg=max(f.sz_arg(), 1),
+                sz_res=max(f.sz_res(), 1),
+                sz_iw=max(f.sz_iw(), 1),
+                sz_w=max(f.sz_w(), 1),
+                nq=chain.nq,
+                fixed="\n".join(f"  arg[{i}] = fixed[{i - 1}];" for i in range(1, f.n_in())),
+                moves="\n".join(f"    res[{i}] = out[{i}] + k * {f.nnz_out(i)};" for i in range(f.n_out())),
+            )
+        )
+    joints = functions[2]
+    bodies = _BODIES.format(
+        prefix=prefix,
+        sz_arg=max(joints.sz_arg(), 1),
+        sz_res=max(joints.sz_res(), 1),
+        sz_iw=max(joints.sz_iw(), 1),
+        sz_w=max(joints.sz_w(), 1),
+        size=joints.nnz_out(0),
+        njoints=len(oMi),
+        nq=chain.nq,
+    )
+    return gen.dump() + "".join(loops) + bodies
+
+
+def placed(T: list, J: list, B: list, X: list) -> tuple[list, list]:
+    """The TCP's pose ``B · T · X`` (4 × 4) and Jacobian (6 × nv) from the flange's, nested lists of scalars.
+
+    ``T``, ``J``: the flange's placement in the base and its Jacobian (base axes, linear rows first);
+    ``B``: ``T_world_base``; ``X``: ``T_flange_TCP``. The TCP's linear velocity is the flange's plus
+    ``ω × r`` with ``r = R_world_flange · p(X)``, both halves turned into world axes by ``R(B)``.
+    """
+    T_wf = _product(B, T)
+    T_wt = _product(T_wf, X)
+    RB = [row[:3] for row in B[:3]]
+    Jv, Jw = _product(RB, J[:3]), _product(RB, J[3:])
+    r = [sum_terms([T_wf[i][k] * X[k][3] for k in range(3)]) for i in range(3)]
+    cross = [
+        [r[1] * Jw[2][j] - r[2] * Jw[1][j] for j in range(len(J[0]))],
+        [r[2] * Jw[0][j] - r[0] * Jw[2][j] for j in range(len(J[0]))],
+        [r[0] * Jw[1][j] - r[1] * Jw[0][j] for j in range(len(J[0]))],
+    ]
+    return T_wt, [[Jv[i][j] - cross[i][j] for j in range(len(J[0]))] for i in range(3)] + Jw
+
+
+def _product(A: list, B: list) -> list:
+    """The matrix product of nested lists of scalars; a float factor 0 adds no term, a float 1 no product."""
+    return [
+        [sum_terms([_times(A[i][k], B[k][j]) for k in range(len(B))]) for j in range(len(B[0]))]
+        for i in range(len(A))
+    ]
+
+
+def _times(a: Any, b: Any) -> Any:
+    for x, y in ((a, b), (b, a)):
+        if isinstance(x, float):
+            if x == 0.0:
+                return 0.0
+            if x == 1.0:
+                return y
+    return a * b
+
+
+def sum_terms(terms: list) -> Any:
+    """``Σ terms`` leaving out the float zeros (0.0 when nothing is left)."""
+    total: Any = 0.0
+    for t in terms:
+        if isinstance(t, float) and t == 0.0:
+            continue
+        total = t if isinstance(total, float) and total == 0.0 else total + t
+    return total

@@ -1,0 +1,374 @@
+"""The robot's batch kinematics compiled to C: flange and TCP poses and Jacobians, every joint's placement.
+
+:class:`~refine.robot.chain.BatchChain` costs NumPy about 0.3 ms a batch and 1 µs a row. The same
+recursion written for one row on CasADi ``SX`` scalars (:meth:`BatchChain.row_frame`,
+:meth:`BatchChain.row_joint_placements`: the chain's own joint placements and axes, not the
+optimiser's symbolic kinematics, so the verifier stays independent of the NLP) is written out as C
+by CasADi's code generator, with a loop over the rows in C around it, and compiled once per robot
+model into a shared library (:mod:`refine.native`: the cache folder, the compiler,
+``REFINE_COMPILE=0``). The library is called through :mod:`ctypes` on the NumPy arrays themselves:
+the joint rows are read and the answers written in place, nothing is copied or converted.
+
+The functions (:mod:`refine.robot.chain_source` writes them): the flange's placement, the
+flange's placement with its Jacobian (Pinocchio's ``LOCAL_WORLD_ALIGNED``), every joint's
+``data.oMi``, the TCP's pose in the world (the robot placed by ``T_world_base``, the tool by
+``T_flange_TCP``, both arguments of the call) with and without its Jacobian (what
+:class:`~refine.robot.kinematics.TcpKinematics` composes in NumPy otherwise), and bodies fixed on
+the joints placed in the world (the collision model's moving shapes). Any number of rows is one
+call; each call's work memory is on the C stack, so threads may call at once (:mod:`ctypes` lets
+go of the GIL for the call). Any other frame, and :meth:`CompiledChain.axis_frames`, are the NumPy
+chain's.
+
+When a library is loaded it is checked once against Pinocchio (``forwardKinematics`` and
+``computeFrameJacobian``) at :data:`CHECK_ROWS` configurations; a difference above
+:data:`CHECK_TOLERANCE` is logged as a warning and the chain stays NumPy's, as it does without a
+compiler, with ``REFINE_COMPILE=0`` or when compiling fails. The library is looked for on the
+first evaluation (not when the robot is made), once per :class:`CompiledChain`.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import importlib.metadata
+import logging
+import os
+import threading
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from refine.native import (
+    BoundedCache,
+    build_library,
+    cache_dir,
+    compiler,
+    compiler_version,
+)
+from refine.robot.chain import MIN_ROWS, BatchChain
+from refine.robot.chain_source import PREFIX, chain_source
+from refine.types import Array
+
+log = logging.getLogger(__name__)
+
+COMPILED_MIN_ROWS = 4
+"""Rows from which the compiled chain beats Pinocchio's row loop: about 7 µs a call plus 0.2-0.3 µs a
+row, against Pinocchio's 3.5 µs a row with the Jacobian and 2 µs without it
+(``benchmarks/batch_kinematics.py``)."""
+CHECK_ROWS = 5
+"""Configurations at which a loaded library is compared with Pinocchio."""
+CHECK_TOLERANCE = 1e-12
+"""The largest difference [m, rad, 1] from Pinocchio a loaded library may show in its check."""
+FLAGS = ("-O3", "-fPIC", "-shared", "-ffp-contract=off")
+"""-O3: the bodies' 4 × 4 products vectorised (3x faster than -O1, compiling about as long: 0.3-1 s);
+no fused multiply-adds: the pose alone and the pose beside its Jacobian round alike. Nothing
+reassociates a sum (no -ffast-math)."""
+LOADED_MAX = 16
+"""Chain libraries kept loaded in one process (one per robot model)."""
+
+_FUNCTIONS = ("fk", "fkj", "joints", "tcp", "tcpj", "bodies")
+_SOURCES = tuple(Path(__file__).with_name(n) for n in ("compiled_chain.py", "chain_source.py", "chain.py"))
+_loaded = BoundedCache(LOADED_MAX)
+# a base and a tool placement of no special orientation, for the load check [m]
+_CHECK_BASE = pin.SE3(pin.exp3(np.array([0.3, -0.2, 0.9])), np.array([0.4, -0.3, 0.2])).homogeneous
+_CHECK_TCP = pin.SE3(pin.exp3(np.array([-0.5, 0.1, 0.25])), np.array([0.02, -0.01, 0.3])).homogeneous
+
+
+class CompiledChain:
+    """:class:`~refine.robot.chain.BatchChain`'s evaluations of a model, compiled where it can be.
+
+    Answers as the NumPy chain (``frame``, ``joint_placements``, ``axis_frames``), to rounding
+    (``tests/test_compiled_chain.py``); :attr:`min_rows` is the batch size from which either
+    beats Pinocchio's row loop.
+    """
+
+    def __init__(self, model: pin.Model, flange_id: int, chain: BatchChain, compile: bool = True) -> None:
+        self.model = model
+        self.flange_id = int(flange_id)
+        self.numpy = chain
+        self.nq = chain.nq
+        self._njoints = int(model.njoints)
+        self._lock = threading.Lock()
+        self._library: _Library | None = None
+        self._compile = compile
+        self._resolved = not compile  # without compiling: NumPy's chain from the start
+
+    @classmethod
+    def from_model(cls, model: pin.Model, flange_id: int, compile: bool = True) -> CompiledChain | None:
+        """The chain of ``model`` (the flange: frame ``flange_id``), or None where BatchChain refuses it.
+
+        ``compile=False``: NumPy's evaluations whatever the compiler (for comparisons).
+        """
+        chain = BatchChain.from_model(model)
+        return None if chain is None else cls(model, flange_id, chain, compile)
+
+    def __getstate__(self) -> dict[str, Any]:
+        # the loaded library and the lock belong to this process; the other side looks again
+        return {**self.__dict__, "_lock": None, "_library": None, "_resolved": not self._compile}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._lock = threading.Lock()
+
+    @property
+    def compiled(self) -> bool:
+        """Whether the evaluations run compiled (found or built on first use), else in NumPy."""
+        return self._lib() is not None
+
+    @property
+    def min_rows(self) -> int:
+        """Rows from which this chain beats Pinocchio's row loop (:data:`COMPILED_MIN_ROWS` or ``MIN_ROWS``)."""
+        return COMPILED_MIN_ROWS if self._lib() is not None else MIN_ROWS
+
+    def frame(self, qs: Array, frame_id: int, jacobian: bool = True) -> tuple[Array, Array | None]:
+        """:meth:`BatchChain.frame`: placements (N, 4, 4) [m] and, with ``jacobian``, Jacobians (N, 6, nv)."""
+        lib = self._lib()
+        if lib is None or frame_id != self.flange_id:
+            return self.numpy.frame(qs, frame_id, jacobian)
+        qs = self._rows(qs)
+        T = np.empty((len(qs), 4, 4))
+        if not jacobian:
+            lib.call("fk", qs, T)
+            return T, None
+        J = np.empty((len(qs), 6, self.nq))
+        lib.call("fkj", qs, T, J)
+        return T, J
+
+    def tcp_frames(
+        self, qs: Array, base_in_world: Array, tcp_in_flange: Array, jacobian: bool = True
+    ) -> tuple[Array, Array | None] | None:
+        """The TCP's poses ``T_world_base · T_base_flange(q) · T_flange_TCP`` (N, 4, 4) [m] and Jacobians.
+
+        The Jacobian (N, 6, nv) as ``TcpKinematics.jacobian``: the TCP's linear velocity and the
+        angular velocity, world axes, linear rows first. None when the chain runs in NumPy (the
+        caller then composes :meth:`frame`'s flange).
+        """
+        lib = self._lib()
+        if lib is None:
+            return None
+        qs = self._rows(qs)
+        fixed = (
+            np.ascontiguousarray(base_in_world, dtype=float),
+            np.ascontiguousarray(tcp_in_flange, dtype=float),
+        )
+        if fixed[0].shape != (4, 4) or fixed[1].shape != (4, 4):
+            raise ValueError(
+                f"placements: expected (4, 4) and (4, 4), got {fixed[0].shape} and {fixed[1].shape}"
+            )
+        T = np.empty((len(qs), 4, 4))
+        if not jacobian:
+            lib.call("tcp", qs, T, fixed=fixed)
+            return T, None
+        J = np.empty((len(qs), 6, self.nq))
+        lib.call("tcpj", qs, T, J, fixed=fixed)
+        return T, J
+
+    def body_poses(self, qs: Array, base_in_world: Array, joints: Array, joint_T_body: Array) -> Array | None:
+        """World poses (N, M, 4, 4) [m] of M bodies fixed on joints: ``T_world_base · oMi[joints[m]] · joint_T_body[m]``.
+
+        ``joints``: each body's joint index (M,); ``joint_T_body``: its placement on the joint
+        (M, 4, 4). None when the chain runs in NumPy (the caller composes :meth:`joint_placements`).
+        """
+        lib = self._lib()
+        if lib is None:
+            return None
+        qs = self._rows(qs)
+        joints = np.ascontiguousarray(joints, dtype=np.int64)
+        local = np.ascontiguousarray(joint_T_body, dtype=float)
+        base = np.ascontiguousarray(base_in_world, dtype=float)
+        if joints.ndim != 1 or local.shape != (len(joints), 4, 4) or base.shape != (4, 4):
+            raise ValueError(
+                f"bodies: expected (M,), (M, 4, 4), (4, 4), got {joints.shape}, {local.shape}, {base.shape}"
+            )
+        if len(joints) and not (0 <= joints.min() and joints.max() < self._njoints):
+            raise ValueError(f"bodies: joint indices 0..{self._njoints - 1}, got {joints.tolist()}")
+        out = np.empty((len(qs), len(joints), 4, 4))
+        lib.bodies(qs, base, joints, local, out)
+        return out
+
+    def joint_placements(self, qs: Array, joints: Array | None = None) -> Array:
+        """:meth:`BatchChain.joint_placements`: ``data.oMi`` (N, K, 4, 4) of ``joints`` (default all)."""
+        lib = self._lib()
+        if lib is None:
+            return self.numpy.joint_placements(qs, joints)
+        qs = self._rows(qs)
+        out = np.empty((len(qs), self._njoints, 4, 4))
+        lib.call("joints", qs, out)
+        return out if joints is None else out[:, np.asarray(joints, dtype=int)]
+
+    def axis_frames(self, qs: Array) -> tuple[list[Array], list[Array]]:
+        """:meth:`BatchChain.axis_frames` (NumPy's)."""
+        return self.numpy.axis_frames(qs)
+
+    def _rows(self, qs: Array) -> Array:
+        qs = np.ascontiguousarray(qs, dtype=float)
+        if qs.ndim != 2 or qs.shape[1] != self.nq:
+            raise ValueError(f"qs: expected shape (N, {self.nq}) [rad], got {qs.shape}")
+        return qs
+
+    def _lib(self) -> _Library | None:
+        if self._resolved:
+            return self._library
+        with self._lock:
+            if not self._resolved:
+                self._library = self._find()
+                self._resolved = True
+        return self._library
+
+    def _find(self) -> _Library | None:
+        """The library of this model (loaded, from the cache folder or compiled), checked; None: NumPy."""
+        cc = compiler()
+        if cc is None:
+            return None
+        try:
+            digest = self._digest(cc)
+        except (OSError, ImportError) as e:  # a source file or CasADi's version not to be read
+            log.warning("the batch kinematics cannot be keyed (%s); using NumPy's", e)
+            return None
+        with _loaded.lock:  # one thread at a time looks up, compiles and loads
+            hit = _loaded.get(digest)
+            if hit is None:
+                hit = self._load(cc, digest)
+                _loaded.put(digest, hit)
+        return hit or None
+
+    def _digest(self, cc: str) -> str:
+        """The library's key: the code that writes it, CasADi, the compiler and the model's constants."""
+        h = hashlib.sha256()
+        for part in (importlib.metadata.version("casadi"), cc, compiler_version(cc), *FLAGS):
+            h.update(part.encode() + b"\0")
+        for source in _SOURCES:
+            h.update(source.read_bytes())
+        h.update(repr((self.nq, self._njoints, self.flange_id)).encode())
+        for i in range(1, self._njoints):
+            jm = self.model.joints[i]
+            h.update(f"{jm.shortname()} {int(self.model.parents[i])} {jm.idx_q}".encode())
+            h.update(self.model.jointPlacements[i].homogeneous.tobytes())
+            if "Unaligned" in jm.shortname():
+                h.update(np.asarray(jm.extract().axis, dtype=float).tobytes())
+        frame = self.model.frames[self.flange_id]
+        h.update(f"{int(frame.parentJoint)}".encode() + frame.placement.homogeneous.tobytes())
+        return h.hexdigest()[:24]
+
+    def _load(self, cc: str, digest: str) -> _Library | bool:
+        """Load (compiling first when missing) and check the library; False when it cannot be used."""
+        library = cache_dir() / f"{PREFIX}-{digest}.so"
+        try:
+            if library.exists() and library.with_suffix(".names").exists():
+                os.utime(library)  # recently used: the last to be evicted
+            else:
+                build_library(
+                    cc, chain_source(self.numpy, self.flange_id, PREFIX), library, list(_FUNCTIONS), FLAGS
+                )
+            lib = _Library(library, self.nq)
+        except (OSError, RuntimeError, AttributeError, ImportError) as e:
+            log.warning("compiling the batch kinematics failed (%s); using NumPy's", e)
+            return False
+        error = self._check(lib)
+        if not error <= CHECK_TOLERANCE:
+            log.warning(
+                "the compiled batch kinematics %s differ from Pinocchio by %.3g (> %g); using NumPy's",
+                library,
+                error,
+                CHECK_TOLERANCE,
+            )
+            return False
+        return lib
+
+    def _check(self, lib: _Library) -> float:
+        """The largest difference of ``lib``'s answers from Pinocchio's at :data:`CHECK_ROWS` rows."""
+        model, data = self.model, self.model.createData()
+        lower = np.maximum(model.lowerPositionLimit, -np.pi)
+        upper = np.minimum(model.upperPositionLimit, np.pi)
+        qs = np.random.default_rng(0).uniform(lower, upper, (CHECK_ROWS, self.nq))
+        qs[0] = 0.0
+        T, J, T_alone = (
+            np.empty((CHECK_ROWS, 4, 4)),
+            np.empty((CHECK_ROWS, 6, self.nq)),
+            np.empty((CHECK_ROWS, 4, 4)),
+        )
+        oMi = np.empty((CHECK_ROWS, self._njoints, 4, 4))
+        lib.call("fkj", qs, T, J)
+        lib.call("fk", qs, T_alone)
+        lib.call("joints", qs, oMi)
+        B, X = _CHECK_BASE, _CHECK_TCP
+        T_tcp, J_tcp, T_tcp_alone = np.empty_like(T), np.empty_like(J), np.empty_like(T)
+        lib.call("tcpj", qs, T_tcp, J_tcp, fixed=(B, X))
+        lib.call("tcp", qs, T_tcp_alone, fixed=(B, X))
+        body_joints = np.array([self._njoints - 1, 0, 1, self._njoints - 1], dtype=np.int64)
+        local = np.ascontiguousarray(np.stack([X, B, X @ B, np.eye(4)]))
+        bodies = np.empty((CHECK_ROWS, len(body_joints), 4, 4))
+        lib.bodies(qs, B, body_joints, local, bodies)
+        error = 0.0
+        for k, q in enumerate(qs):
+            pin.forwardKinematics(model, data, q)  # every joint (the Jacobian's pass: only the flange's)
+            oMi_pin = np.array([data.oMi[i].homogeneous for i in range(self._njoints)])
+            J_pin = pin.computeFrameJacobian(model, data, q, self.flange_id, pin.LOCAL_WORLD_ALIGNED)
+            T_pin = pin.updateFramePlacement(model, data, self.flange_id).homogeneous
+            # the TCP: v = R_B (v_flange + ω × (p_TCP - p_flange)), ω = R_B ω_flange
+            T_tcp_pin = B @ T_pin @ X
+            arm = T_pin[:3, :3] @ X[:3, 3]
+            J_tcp_pin = np.vstack(
+                [B[:3, :3] @ (J_pin[:3] - np.cross(arm, J_pin[3:].T).T), B[:3, :3] @ J_pin[3:]]
+            )
+            pairs = [(T[k], T_pin), (T_alone[k], T_pin), (J[k], J_pin), (oMi[k], oMi_pin)]
+            pairs += [(T_tcp[k], T_tcp_pin), (T_tcp_alone[k], T_tcp_pin), (J_tcp[k], J_tcp_pin)]
+            pairs += [(bodies[k, m], B @ oMi_pin[j] @ local[m]) for m, j in enumerate(body_joints)]
+            for a, b in pairs:
+                error = max(error, float(np.abs(a - b).max()))
+        return error if np.isfinite(error) else np.inf
+
+
+class _Library:
+    """The loaded library: each function's row loop, called on C-contiguous float64 arrays."""
+
+    def __init__(self, path: Path, nq: int) -> None:
+        self._dll = ctypes.CDLL(str(path))
+        self.nq = nq
+        self._calls = {}
+        self._bodies = self._dll[f"{PREFIX}_bodies_rows"]
+        pointer, count = ctypes.c_void_p, ctypes.c_longlong
+        self._bodies.argtypes = [pointer, pointer, pointer, pointer, count, pointer, count]
+        self._bodies.restype = ctypes.c_int
+        for name in _FUNCTIONS[:-1]:
+            fn = getattr(self._dll, f"{PREFIX}_{name}_rows")
+            fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong]
+            fn.restype = ctypes.c_int
+            self._calls[name] = fn
+
+    def call(self, name: str, qs: Array, *out: Array, fixed: tuple[Array, ...] = ()) -> None:
+        """Evaluate ``name`` on the rows ``qs`` (N, nq) into the C-contiguous arrays ``out`` (N, ...).
+
+        ``fixed``: the arguments the same for every row (C-contiguous float64, read only).
+        """
+        for a in (qs, *out, *fixed):
+            if not (a.flags.c_contiguous and a.dtype == np.float64):
+                raise ValueError("the compiled batch kinematics take C-contiguous float64 arrays")
+        if any(len(a) != len(qs) for a in out):
+            raise ValueError("the compiled batch kinematics write one row of each output per joint row")
+        pointers = (ctypes.c_void_p * len(out))(*(a.ctypes.data for a in out))
+        given = (ctypes.c_void_p * max(len(fixed), 1))(*(a.ctypes.data for a in fixed))
+        if self._calls[name](qs.ctypes.data, given, pointers, len(qs)) != 0:
+            raise RuntimeError(f"the compiled batch kinematics' {name} failed")
+
+    def bodies(self, qs: Array, base: Array, joints: Array, local: Array, out: Array) -> None:
+        """Bodies' world poses into ``out`` (N, M, 4, 4) (:meth:`CompiledChain.body_poses`, arguments checked there)."""
+        for a in (qs, base, local, out):
+            if not (a.flags.c_contiguous and a.dtype == np.float64):
+                raise ValueError("the compiled batch kinematics take C-contiguous float64 arrays")
+        shape = (len(qs), len(joints))
+        if not (joints.flags.c_contiguous and joints.dtype == np.int64) or out.shape[:2] != shape:
+            raise ValueError("the compiled batch kinematics' bodies: int64 joints and (N, M, 4, 4) poses")
+        code = self._bodies(
+            qs.ctypes.data,
+            base.ctypes.data,
+            joints.ctypes.data,
+            local.ctypes.data,
+            len(joints),
+            out.ctypes.data,
+            len(qs),
+        )
+        if code != 0:
+            raise RuntimeError(f"the compiled batch kinematics' bodies failed ({code})")
