@@ -44,13 +44,19 @@ IK_TOLERANCE = 1e-8
 """Pose error [m and rad stacked] under which an IK sample counts as on the line."""
 
 
-def _line_deviation(checker: MotionChecker, q: Array, start: Array, end: Array) -> float:
-    """Largest distance [m] of the joint-interpolated TCP (at the midpoints) from the segment start-end."""
-    mid = checker.kin.poses(0.5 * (q[:-1] + q[1:]))[:, :3, 3]
+def _line_deviation(checker: MotionChecker, q: Array, start: Array, end: Array) -> tuple[float, Array]:
+    """Largest distance [m] of the joint-interpolated TCP (at the midpoints) from the segment start-end.
+
+    Also the TCP Jacobians at those midpoints ``q[k] + (q[k+1] - q[k]) / 2`` (K-1, 6, n), for the
+    singularity measure between the samples.
+    """
+    poses, jacobians = checker.kin.poses_jacobians(q[:-1] + 0.5 * np.diff(q, axis=0))
+    mid = poses[:, :3, 3]
     axis = end - start
     length = float(np.linalg.norm(axis))
     u = np.clip((mid - start) @ axis / max(length * length, 1e-300), 0.0, 1.0)
-    return float(np.max(np.linalg.norm(mid - (start + u[:, None] * axis), axis=1))) if len(mid) else 0.0
+    found = float(np.max(np.linalg.norm(mid - (start + u[:, None] * axis), axis=1))) if len(mid) else 0.0
+    return found, jacobians
 
 
 def line_joints(
@@ -60,13 +66,15 @@ def line_joints(
     offset_m: float,
     count: int,
     start: Array | None = None,
+    jacobians_out: Array | None = None,
 ) -> tuple[Array, float]:
     """IK along the tool z line from ``T_anchor`` to ``offset_m`` along its z axis, ``count`` steps.
 
     On a seven-axis arm axis 3 (the LBR's redundancy angle E1) is held at the anchor's value, as the
     controller holds it on a linear move. ``start``: the joints (K, n) [rad] of an earlier line
     from the anchor (the anchor's first), whose rows at the same share of the line start the IK;
-    None to start every sample from the anchor's joints.
+    None to start every sample from the anchor's joints. ``jacobians_out``: an array (count + 1,
+    6, n) to receive the TCP Jacobians at the returned joints, the anchor's first; or None.
 
     Returns:
         joints (count + 1, n) [rad], the anchor's first; and the largest IK residual.
@@ -91,7 +99,10 @@ def line_joints(
         tol=IK_TOLERANCE,
         nullspace_gain=0.0,
         max_iterations=200,
+        jacobians_out=None if jacobians_out is None else jacobians_out[1:],
     )
+    if jacobians_out is not None:
+        jacobians_out[0] = kin.pose_jacobian(anchor)[1]
     return np.vstack([anchor, q]), float(residual.max())
 
 
@@ -147,16 +158,17 @@ def plan_line(
     end = T_anchor[:3, 3] - retract_m * T_anchor[:3, 2]
     start = _previous_start(previous, kind, q_anchor)
     for _ in range(4):
-        q, residual = line_joints(checker, q_anchor, T_anchor, -retract_m, count, start)
-        deviation = _line_deviation(checker, q, T_anchor[:3, 3], end)
+        jacobians = np.empty((count + 1, 6, len(q_anchor)))
+        q, residual = line_joints(checker, q_anchor, T_anchor, -retract_m, count, start, jacobians)
+        deviation, between = _line_deviation(checker, q, T_anchor[:3, 3], end)
         if deviation <= MAX_LINE_DEVIATION_M or residual > IK_TOLERANCE * 10:
             break
         count *= 2
     issues: list[MotionIssue] = []
     wanted = T_anchor[:3, 3] + np.outer(np.linspace(0.0, 1.0, len(q)), end - T_anchor[:3, 3])
     if kind == "approach":  # from the approach point onto the waypoint: every figure in that order
-        q, wanted = q[::-1].copy(), wanted[::-1]
-    poses, jacobians = checker.kin.poses_jacobians(q)
+        q, wanted, jacobians, between = q[::-1].copy(), wanted[::-1], jacobians[::-1], between[::-1]
+    poses = checker.kin.poses(q)
     if residual > IK_TOLERANCE * 10:
         k = int(np.argmax(np.linalg.norm(poses[:, :3, 3] - wanted, axis=1)))
         issues.append(
@@ -181,7 +193,9 @@ def plan_line(
             )
         )
     issues += checker.limit_issues(q, 0.0)  # the controller's limits (the margin is the optimiser's)
-    _, least = checker.singularity_issues(q, jacobians)  # the figure; what a singularity breaks is the speed:
+    _, least = checker.singularity_issues(
+        q, jacobians, between
+    )  # the figure; what a singularity breaks is the speed:
     dt = (retract_m / (len(q) - 1)) / speed_m_s
     rate = np.abs(np.diff(q, axis=0)) / dt / checker.kin.robot.spec.velocity  # share of each joint's limit
     if rate.size and rate.max() > 1.0:

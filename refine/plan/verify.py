@@ -217,14 +217,22 @@ class MotionChecker:
             )
         return out
 
-    def singularity_issues(self, q: Array, jacobians: Array | None = None) -> tuple[list[MotionIssue], float]:
+    def singularity_issues(
+        self, q: Array, jacobians: Array | None = None, midpoint_jacobians: Array | None = None
+    ) -> tuple[list[MotionIssue], float]:
         """The scaled manipulability along the rows of ``q`` (K, n) below the margin, and its least value.
 
-        ``jacobians``: the TCP Jacobians (K, 6, n) at the rows when the caller has them, else None.
+        ``jacobians``: the TCP Jacobians (K, 6, n) at the rows when the caller has them, else None;
+        ``midpoint_jacobians`` (K-1, 6, n): those at the segments' midpoints
+        (:func:`refine.optimise.verify.segment_singularity`), or None.
         """
         q = np.atleast_2d(q)
         at, _ = singularity_measures(self.kin, q, smallest=False, jacobians=jacobians)
-        between = segment_singularity(self.kin, q)[0] if len(q) > 1 else np.zeros(0)
+        between = (
+            segment_singularity(self.kin, q, midpoint_jacobians=midpoint_jacobians)[0]
+            if len(q) > 1
+            else np.zeros(0)
+        )
         least = float(min(at.min(), between.min() if between.size else math.inf))
         limit = self.tolerances.singularity_margin
         if least >= limit - 1e-9:
