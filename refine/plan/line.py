@@ -193,9 +193,8 @@ def plan_line(
             )
         )
     issues += checker.limit_issues(q, 0.0)  # the controller's limits (the margin is the optimiser's)
-    _, least = checker.singularity_issues(
-        q, jacobians, between
-    )  # the figure; what a singularity breaks is the speed:
+    # the singularity measure is the figure; what a singularity breaks is the speed:
+    _, least = checker.singularity_issues(q, jacobians, between)
     dt = (retract_m / (len(q) - 1)) / speed_m_s
     rate = np.abs(np.diff(q, axis=0)) / dt / checker.kin.robot.spec.velocity  # share of each joint's limit
     if rate.size and rate.max() > 1.0:

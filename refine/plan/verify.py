@@ -6,6 +6,11 @@ margins) and the tolerances. Clearance is the path's dense check
 move linearly, and the motion bound certifies every pair's margin along that continuous motion,
 not only at samples. A broken margin becomes a :class:`refine.plan.motion.MotionIssue` naming the
 objects, the share of the motion and the TCP position where the worst pair is.
+
+A check may start from what an earlier check proved (:class:`Known`: a previous run's check of the
+same motion, its distance bounds less the motion since, :func:`refine.collision.carry.carried_bounds`):
+a pair those bounds prove is not measured again, and the least figures are measured as without
+them. An air move's kept via points are checked so (:func:`refine.plan.air.plan_air`).
 """
 
 from __future__ import annotations
