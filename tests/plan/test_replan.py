@@ -128,6 +128,11 @@ def moved_ends(problem, robot, q_a, q_b, z=0.7, dx=0.002):
     return a, joints_at(problem, robot, np.array([1.2 + dx, 0.3, z]), q_b)
 
 
+def air_limits(robot) -> dict:
+    """The robot's joint speed and acceleration limits as ``plan_air`` takes them."""
+    return {"velocity": robot.spec.velocity, "acceleration": robot.spec.acceleration}
+
+
 def least_skeleton_distance(problem, robot, rows, centre, size) -> float:
     """Least distance [m] of the arm's axis and tool line from a box along the joint path (own geometry)."""
     return min(inside_box(skeleton(problem, robot, q), centre, size).min() for q in joint_samples(rows))
@@ -137,17 +142,7 @@ def test_a_link_planned_again_keeps_its_via_points_when_its_ends_moved_a_little(
     problem, robot, checker, q_a, q_b, motion = link
     assert motion.planner == "RRT-Connect" and len(motion.via) >= 1
     a, b = moved_ends(problem, robot, q_a, q_b)
-    spec = robot.spec
-    again = plan_air(
-        checker,
-        "link",
-        motion.name,
-        a,
-        b,
-        velocity=spec.velocity,
-        acceleration=spec.acceleration,
-        previous=motion,
-    )
+    again = plan_air(checker, "link", motion.name, a, b, previous=motion, **air_limits(robot))
     assert again.ok, again.reason
     assert again.planner == "RRT-Connect"
     np.testing.assert_array_equal(again.via, motion.via)
@@ -164,7 +159,6 @@ def test_a_box_moved_into_a_kept_link_makes_it_plan_again(link):
     geometry), so they are not kept, and what is planned instead keeps the post's margin (or the
     move fails). The ends are far from the post, so only the whole path's check can refuse them."""
     problem, robot, _, q_a, q_b, motion = link
-    spec = robot.spec
     size = (0.06, 0.06, 0.06)
     onto = skeleton(problem, robot, motion.via[0])[-5]  # on the tool's line at the first via point
     aside = onto + np.array([0.12, 0.0, 0.0])  # beyond the tool, away from the arm
@@ -186,15 +180,7 @@ def test_a_box_moved_into_a_kept_link_makes_it_plan_again(link):
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(refine.plan.air, "_rrt_connect", counted)
         again = plan_air(
-            after,
-            "link",
-            motion.name,
-            a,
-            b,
-            velocity=spec.velocity,
-            acceleration=spec.acceleration,
-            previous=previous,
-            time_limit_s=1.0,
+            after, "link", motion.name, a, b, previous=previous, time_limit_s=1.0, **air_limits(robot)
         )
     assert calls  # planned again
     assert not (again.via.shape == motion.via.shape and np.array_equal(again.via, motion.via))
@@ -213,8 +199,7 @@ def test_a_direct_move_planned_again_is_the_direct_move_checked_afresh(glass):
     q_a = joints_at(problem, robot, np.array([1.2, -0.3, 0.9]))
     q_b = joints_at(problem, robot, np.array([1.2, 0.3, 0.9]), q_a)
     checker = checker_with(problem, robot, [box("part", WALL_CENTRE, WALL_SIZE)])
-    spec = robot.spec
-    limits = {"velocity": spec.velocity, "acceleration": spec.acceleration}
+    limits = air_limits(robot)
     first = plan_air(checker, "link", "l", q_a, q_b, **limits)
     a, b = moved_ends(problem, robot, q_a, q_b, z=0.9)
     again = plan_air(checker, "link", "l", a, b, previous=first, **limits)
