@@ -169,12 +169,16 @@ def rotation_angles_deg(R_a: Array, R_b: Array) -> Array:
     return angle
 
 
-def segment_singularity(kin: TcpKinematics, q: Array, max_step_deg: float = 1.0) -> tuple[Array, Array]:
+def segment_singularity(
+    kin: TcpKinematics, q: Array, max_step_deg: float = 1.0, midpoint_jacobians: Array | None = None
+) -> tuple[Array, Array]:
     """Smallest scaled manipulability inside each segment between consecutive waypoints [-].
 
     Joints are interpolated linearly inside each segment with steps of at most ``max_step_deg`` on
     every joint (at least the midpoint), which is how a wrist flip between two waypoints that are
-    each clear of the singularity shows up.
+    each clear of the singularity shows up. ``midpoint_jacobians``: the TCP Jacobians (N-1, 6, n)
+    at the segments' midpoints ``q[k] + (q[k+1] - q[k]) / 2`` when the caller has them (used when
+    the midpoint is every segment's only sample), else None.
 
     Returns:
         the smallest measure per segment (N-1,) and the fraction of the segment in (0, 1) where it
@@ -185,7 +189,8 @@ def segment_singularity(kin: TcpKinematics, q: Array, max_step_deg: float = 1.0)
     seg = np.repeat(np.arange(len(dq)), n_sub - 1)
     start = np.concatenate([[0], np.cumsum(n_sub - 1)[:-1]])  # each segment's first sample
     frac = (np.arange(len(seg)) - start[seg] + 1) / n_sub[seg]  # 1/m, ..., (m-1)/m per segment
-    w, _ = singularity_measures(kin, q[seg] + frac[:, None] * dq[seg], smallest=False)
+    given = midpoint_jacobians if midpoint_jacobians is not None and np.all(n_sub == 2) else None
+    w, _ = singularity_measures(kin, q[seg] + frac[:, None] * dq[seg], smallest=False, jacobians=given)
     order = np.lexsort((w, seg))  # by segment, then by measure: the first of each segment is its minimum
     first = order[np.searchsorted(seg[order], np.arange(len(dq)))]
     return w[first], frac[first]

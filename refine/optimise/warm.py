@@ -54,6 +54,8 @@ class WarmStart:
             are taken over, into the new problem (:func:`rebuilt_like`).
         line: the previous answer's controller line check (a ``LineCheck`` of ``q``), whose bows
             start the new line's IK (:func:`refine.optimise.line_start.previous_bows`), or None.
+        motions: the previous run's motions (``refine.plan.motion.Motion``), which the program's
+            motions are planned again from (:func:`refine.plan.program.plan_program`), or ().
     """
 
     q: Array
@@ -63,6 +65,7 @@ class WarmStart:
     clearance: object = None
     reusable: bool = True
     line: object = None
+    motions: tuple[object, ...] = ()
 
 
 def warm_seed(

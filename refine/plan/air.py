@@ -13,17 +13,30 @@ The path found is written as via points, and verified again as a whole with the 
 clearance check (:class:`refine.plan.verify.MotionChecker`): only a path whose every segment keeps
 every margin along its continuous motion is called ``ok``. A path that fails that check is planned
 again with twice the extra distance, up to :data:`ATTEMPTS` times.
+
+**An air move planned again** (``previous``, the same move of an earlier run, e.g. after the part
+moved a few millimetres) first checks the direct move as a move planned afresh. Where that still
+collides, the previous via points are tried before the planner: with the new start and goal in
+place of the old, when the previous check's distance bounds, less the motion of the start and the
+goal since (:class:`refine.plan.verify.Known`), still prove every margin at both (they moved less
+than the previous clearance allows), and only when the whole path then passes the check above
+(first the motion bound's proof alone, :func:`refine.collision.margins_proved`, then limits and
+the continuous clearance check; both start from the previous check's bounds less the motion since,
+which at the via points is the cell's alone). Otherwise, or when the previous move was not
+planned around the cell, the planner runs as for a move planned afresh. Nothing is kept unchecked.
 """
 
 from __future__ import annotations
 
+import logging
 import math
 import time
+from collections.abc import Sequence
 
 import numpy as np
 
 from refine.plan.motion import Motion, MotionIssue, joint_move_times
-from refine.plan.verify import MotionChecker
+from refine.plan.verify import Known, MotionChecker
 from refine.types import Array
 
 INFLATION_M = 0.01
@@ -41,6 +54,8 @@ SEED = 20260101
 TIME_LIMIT_S = 5.0
 """Wall time one RRT-Connect attempt may take [s]."""
 
+log = logging.getLogger(__name__)
+
 
 def plan_air(
     checker: MotionChecker,
@@ -53,6 +68,7 @@ def plan_air(
     acceleration: Array,
     time_limit_s: float = TIME_LIMIT_S,
     seed: int = SEED,
+    previous: Motion | None = None,
 ) -> Motion:
     """An air move from ``q_start`` to ``q_goal`` [rad]: the direct joint move, or via points around the cell.
 
@@ -66,6 +82,7 @@ def plan_air(
         acceleration: joint acceleration limits for the duration [rad/s^2], shape (n,).
         time_limit_s: wall time of one planner attempt [s].
         seed: the planner's random seed.
+        previous: the same move of an earlier run, to start from (module notes); None to plan afresh.
     """
     t0 = time.perf_counter()
     q_start, q_goal = np.asarray(q_start, dtype=float), np.asarray(q_goal, dtype=float)
@@ -73,15 +90,23 @@ def plan_air(
     issues, check = _verify(checker, direct)
     planner, rows, direct_issues = "joint move", direct, ()
     if issues and all(i.cause in ("collision", "self-collision") for i in issues):
-        ends = [_end_issue(checker, q, f) for q, f in ((q_start, 0.0), (q_goal, 1.0))]
-        ends = [e for e in ends if e is not None]
+        inside = [_end_issue(checker, q, f) for q, f in ((q_start, 0.0), (q_goal, 1.0))]
+        inside = [e for e in inside if e is not None]
         direct_issues = tuple(issues)
-        if ends:
-            issues = ends  # an end inside the margin: nothing can be planned from it
+        if inside:
+            issues = inside  # an end inside the margin: nothing can be planned from it
         else:
             planner = "RRT-Connect"
             found = None
-            for attempt in range(ATTEMPTS):
+            kept, known = _kept(checker, previous, q_start, q_goal)
+            # the motion bound's proof first: a kept path it cannot prove clear is planned again
+            # (without the dense sampling the check gives a broken segment)
+            if kept is not None and checker.proved(kept, known):
+                again, again_check = _verify(checker, kept, known)
+                if not again:
+                    rows, issues, check = kept, [], again_check
+                    log.info("%s: the previous via points kept, verified again", name)
+            for attempt in range(ATTEMPTS if issues else 0):
                 found = _rrt_connect(
                     checker, q_start, q_goal, INFLATION_M * 2**attempt, seed + attempt, time_limit_s
                 )
@@ -123,6 +148,7 @@ def plan_air(
         min_joint_margin_rad=float(checker.joint_margin(rows).min()),
         issues=tuple(issues),
         direct_issues=direct_issues if planner == "RRT-Connect" else (),
+        check=check,
     )
 
 
@@ -132,11 +158,35 @@ def _worst_pair(check) -> tuple[str, str]:  # noqa: ANN001 - PathClearance
     return tuple(check.segment_pair[int(np.argmin(check.segment_clearance_m))])  # type: ignore[return-value]
 
 
-def _verify(checker: MotionChecker, rows: Array) -> tuple[list[MotionIssue], object]:
+def _verify(
+    checker: MotionChecker, rows: Array, known: Sequence[Known | None] = ()
+) -> tuple[list[MotionIssue], object]:
     """Joint limits (hard: an air move may start at a home near a limit) and continuous clearance."""
     issues = checker.limit_issues(rows, 0.0)
-    check = checker.clearance(rows)
+    check = checker.clearance(rows, known)
     return issues + checker.clearance_issues(rows, check), check
+
+
+def _kept(
+    checker: MotionChecker, previous: Motion | None, q_start: Array, q_goal: Array
+) -> tuple[Array | None, list[Known | None]]:
+    """``previous``'s via points between ``q_start`` and ``q_goal`` [rad] (K, n), when they may serve.
+
+    When ``previous`` is an ``ok`` move planned around the cell and its check's bounds, carried to
+    the new start and goal, prove every margin there; else None. Also the bounds its check
+    proved, for the new path's rows.
+    """
+    if previous is None or not previous.ok or previous.planner != "RRT-Connect" or checker.model is None:
+        return None, []
+    rows = np.array(previous.q, dtype=float)
+    if rows.ndim != 2 or rows.shape[1] != len(q_start) or len(rows) < 3:
+        return None, []
+    rows[0], rows[-1] = q_start, q_goal
+    ends = [0, len(rows) - 1]
+    bounds, _ = checker.carried(rows[ends], [Known.of(previous.check, ends, (0, 1))])
+    if bounds is None or np.min(bounds - checker.model.pair_margins) < 0.0:
+        return None, []
+    return rows, [Known.of(previous.check, range(len(rows)), range(len(rows)))]
 
 
 def _end_issue(checker: MotionChecker, q: Array, fraction: float) -> MotionIssue | None:

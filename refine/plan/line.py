@@ -12,6 +12,14 @@ turn ever faster: the line fails when a joint would exceed its speed limit at th
 joint-interpolated TCP
 leaves the straight line by at most :attr:`Motion.line_deviation_m` (measured at the midpoints and
 kept below :data:`MAX_LINE_DEVIATION_M` by refining the samples).
+
+**A line planned again** (``previous``, the same line of an earlier run, e.g. after the part moved
+a few millimetres): the IK of each sample starts from the previous line's joints at the same share
+of the line, moved by the change of the anchor's joints, instead of from the anchor's. Every
+check above runs as for a line planned afresh, so a line planned again is verified as fully, and
+the same IK answer (within its tolerance) gives the same figures. (Its clearance check is made
+afresh too: a line's check measures few pairs, and starting it from the previous check's bounds,
+:class:`refine.plan.verify.Known`, costs more than the queries it saves.)
 """
 
 from __future__ import annotations
@@ -36,22 +44,37 @@ IK_TOLERANCE = 1e-8
 """Pose error [m and rad stacked] under which an IK sample counts as on the line."""
 
 
-def _line_deviation(checker: MotionChecker, q: Array, start: Array, end: Array) -> float:
-    """Largest distance [m] of the joint-interpolated TCP (at the midpoints) from the segment start-end."""
-    mid = checker.kin.poses(0.5 * (q[:-1] + q[1:]))[:, :3, 3]
+def _line_deviation(checker: MotionChecker, q: Array, start: Array, end: Array) -> tuple[float, Array]:
+    """Largest distance [m] of the joint-interpolated TCP (at the midpoints) from the segment start-end.
+
+    Also the TCP Jacobians at those midpoints ``q[k] + (q[k+1] - q[k]) / 2`` (K-1, 6, n), for the
+    singularity measure between the samples.
+    """
+    poses, jacobians = checker.kin.poses_jacobians(q[:-1] + 0.5 * np.diff(q, axis=0))
+    mid = poses[:, :3, 3]
     axis = end - start
     length = float(np.linalg.norm(axis))
     u = np.clip((mid - start) @ axis / max(length * length, 1e-300), 0.0, 1.0)
-    return float(np.max(np.linalg.norm(mid - (start + u[:, None] * axis), axis=1))) if len(mid) else 0.0
+    found = float(np.max(np.linalg.norm(mid - (start + u[:, None] * axis), axis=1))) if len(mid) else 0.0
+    return found, jacobians
 
 
 def line_joints(
-    checker: MotionChecker, q_anchor: Array, T_anchor: Array, offset_m: float, count: int
+    checker: MotionChecker,
+    q_anchor: Array,
+    T_anchor: Array,
+    offset_m: float,
+    count: int,
+    start: Array | None = None,
+    jacobians_out: Array | None = None,
 ) -> tuple[Array, float]:
     """IK along the tool z line from ``T_anchor`` to ``offset_m`` along its z axis, ``count`` steps.
 
     On a seven-axis arm axis 3 (the LBR's redundancy angle E1) is held at the anchor's value, as the
-    controller holds it on a linear move.
+    controller holds it on a linear move. ``start``: the joints (K, n) [rad] of an earlier line
+    from the anchor (the anchor's first), whose rows at the same share of the line start the IK;
+    None to start every sample from the anchor's joints. ``jacobians_out``: an array (count + 1,
+    6, n) to receive the TCP Jacobians at the returned joints, the anchor's first; or None.
 
     Returns:
         joints (count + 1, n) [rad], the anchor's first; and the largest IK residual.
@@ -69,15 +92,39 @@ def line_joints(
     q, residual = solve_ik_batch(
         kin,
         targets,
-        np.tile(anchor, (count, 1)),
+        np.tile(anchor, (count, 1)) if start is None else _at_shares(start, u),
         lower,
         upper,
         damping=1e-6,
         tol=IK_TOLERANCE,
         nullspace_gain=0.0,
         max_iterations=200,
+        jacobians_out=None if jacobians_out is None else jacobians_out[1:],
     )
+    if jacobians_out is not None:
+        jacobians_out[0] = kin.pose_jacobian(anchor)[1]
     return np.vstack([anchor, q]), float(residual.max())
+
+
+def _at_shares(rows: Array, u: Array) -> Array:
+    """The joints of ``rows`` (K, n), linearly interpolated at the shares ``u`` (M,) of their span, (M, n)."""
+    s = np.linspace(0.0, 1.0, len(rows))
+    return np.stack([np.interp(u, s, rows[:, j]) for j in range(rows.shape[1])], axis=1)
+
+
+def _previous_start(previous: Motion | None, kind: str, q_anchor: Array) -> Array | None:
+    """An earlier line's joints from its anchor, moved by the change of the anchor's joints; None if none.
+
+    Only an ``ok`` line of the same kind and robot serves (a failed one may have left the branch).
+    """
+    if previous is None or previous.kind != kind or not previous.ok or previous.planner != "line":
+        return None
+    rows = np.asarray(previous.q, dtype=float)
+    if rows.ndim != 2 or rows.shape[1] != len(q_anchor) or len(rows) < 2:
+        return None
+    if kind == "approach":  # written from the approach point onto the anchor
+        rows = rows[::-1]
+    return rows + (q_anchor - rows[0])
 
 
 def plan_line(
@@ -89,6 +136,7 @@ def plan_line(
     *,
     retract_m: float,
     speed_m_s: float = AIR_SPEED_M_S,
+    previous: Motion | None = None,
 ) -> Motion:
     """The approach onto (``kind="approach"``) or the retract from (``"retract"``) a pass's end waypoint.
 
@@ -101,20 +149,25 @@ def plan_line(
         T_anchor: the TCP pose at the waypoint, world frame (4, 4).
         retract_m: the line's length along -z of the tool [m].
         speed_m_s: the TCP speed of the line [m/s] (its duration is ``retract_m / speed_m_s``).
+        previous: the same line of an earlier run, to start the IK from (module notes); None to
+            plan it afresh.
     """
     t0 = time.perf_counter()
+    q_anchor = np.asarray(q_anchor, dtype=float)
     count = max(1, math.ceil(retract_m / LINE_STEP_M))
     end = T_anchor[:3, 3] - retract_m * T_anchor[:3, 2]
+    start = _previous_start(previous, kind, q_anchor)
     for _ in range(4):
-        q, residual = line_joints(checker, q_anchor, T_anchor, -retract_m, count)
-        deviation = _line_deviation(checker, q, T_anchor[:3, 3], end)
+        jacobians = np.empty((count + 1, 6, len(q_anchor)))
+        q, residual = line_joints(checker, q_anchor, T_anchor, -retract_m, count, start, jacobians)
+        deviation, between = _line_deviation(checker, q, T_anchor[:3, 3], end)
         if deviation <= MAX_LINE_DEVIATION_M or residual > IK_TOLERANCE * 10:
             break
         count *= 2
     issues: list[MotionIssue] = []
     wanted = T_anchor[:3, 3] + np.outer(np.linspace(0.0, 1.0, len(q)), end - T_anchor[:3, 3])
     if kind == "approach":  # from the approach point onto the waypoint: every figure in that order
-        q, wanted = q[::-1].copy(), wanted[::-1]
+        q, wanted, jacobians, between = q[::-1].copy(), wanted[::-1], jacobians[::-1], between[::-1]
     poses = checker.kin.poses(q)
     if residual > IK_TOLERANCE * 10:
         k = int(np.argmax(np.linalg.norm(poses[:, :3, 3] - wanted, axis=1)))
@@ -140,7 +193,8 @@ def plan_line(
             )
         )
     issues += checker.limit_issues(q, 0.0)  # the controller's limits (the margin is the optimiser's)
-    _, least = checker.singularity_issues(q)  # the figure; what a singularity breaks is the speed:
+    # the singularity measure is the figure; what a singularity breaks is the speed:
+    _, least = checker.singularity_issues(q, jacobians, between)
     dt = (retract_m / (len(q) - 1)) / speed_m_s
     rate = np.abs(np.diff(q, axis=0)) / dt / checker.kin.robot.spec.velocity  # share of each joint's limit
     if rate.size and rate.max() > 1.0:
@@ -174,6 +228,7 @@ def plan_line(
         min_singularity=least,
         line_deviation_m=deviation,
         issues=tuple(issues),
+        check=check,
     )
 
 

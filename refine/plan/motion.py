@@ -103,6 +103,9 @@ class Motion:
         direct_issues: for an air move planned around the cell, what the direct joint move hit.
         move_s: an air move's time per joint move between its rows [s], (K-1,) (what the programs
             command for each: RAPID's time argument ``T``, URScript's ``t``); () for other kinds.
+        check: the motion's continuous clearance check (``PathClearance`` of ``q``), whose
+            distance bounds a later plan of the same motion starts from
+            (:class:`refine.plan.verify.Known`); None without a collision model.
     """
 
     kind: str
@@ -123,6 +126,7 @@ class Motion:
     issues: tuple[MotionIssue, ...] = ()
     direct_issues: tuple[MotionIssue, ...] = ()
     move_s: tuple[float, ...] = ()
+    check: Any = field(default=None, compare=False, repr=False)
 
     @property
     def ok(self) -> bool:
@@ -219,7 +223,9 @@ def air_limits(problem: Any, robot: Any) -> tuple[Array, Array]:
     accel = spec.acceleration
     if problem.robot.joint_acceleration_deg_s2 is not None:
         accel = np.radians(problem.robot.joint_acceleration_deg_s2)
-    return np.asarray(spec.velocity, dtype=float) * problem.output.air_speed_share, np.asarray(accel, dtype=float)
+    return np.asarray(spec.velocity, dtype=float) * problem.output.air_speed_share, np.asarray(
+        accel, dtype=float
+    )
 
 
 TABLE_COLUMNS = (

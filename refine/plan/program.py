@@ -9,10 +9,17 @@ and ``retract`` straight TCP lines of :data:`refine.plan.motion.RETRACT_M` along
 (:func:`refine.plan.line.plan_line`), each pass the refined path as it was verified. The program
 writers write these motions (their via points and approach joints), so what was verified is what
 is written.
+
+A program planned again (``previous``: the motions of an earlier run, after a small change such
+as the part moved a few millimetres) plans each motion from the earlier one of the same kind and
+name (a line's IK from its joints, :func:`refine.plan.line.plan_line`; an air move planned around
+the cell tries its via points again, :func:`refine.plan.air.plan_air`), and verifies each as fully
+as a motion planned afresh.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -32,9 +39,9 @@ class PlannedPass:
     Attributes:
         name: the pass's name.
         q: its joints per waypoint [rad], shape (N, n).
-        poses: its TCP poses per waypoint, world frame, shape (N, 4, 4).
+        poses: its TCP poses per waypoint, world frame, shape (N, 4, 4) (the first and last are used).
         duration_s: its timed duration [s].
-        clearance: its dense clearance check (``PathClearance``), or None.
+        clearance: its dense clearance check (``PathClearance`` of ``q``), or None.
         min_joint_margin_rad: least joint margin along it [rad].
         min_singularity: least scaled manipulability along it [-].
     """
@@ -57,6 +64,7 @@ def plan_program(
     acceleration: Array,
     retract_m: float = RETRACT_M,
     time_limit_s: float = TIME_LIMIT_S,
+    previous: Sequence[Motion] = (),
 ) -> tuple[Motion, ...]:
     """Every motion of the program, each verified (see the module notes).
 
@@ -68,25 +76,47 @@ def plan_program(
         acceleration: joint acceleration limits of the air moves [rad/s^2], shape (n,).
         retract_m: approach and retract distance along the tool z axis [m].
         time_limit_s: wall time of one planner attempt per air move [s].
+        previous: the motions of an earlier run of the same robot to plan from (module notes),
+            matched by kind and name; () to plan afresh.
     """
     q_home = np.asarray(passes[0].q[0] if home is None else home, dtype=float)
     air = {"velocity": velocity, "acceleration": acceleration, "time_limit_s": time_limit_s}
+    earlier = {(m.kind, m.name): m for m in previous}
     motions: list[Motion] = []
     here, where = q_home, "home"
     for k, p in enumerate(passes):
+        name = f"approach {p.name}"
         approach = plan_line(
-            checker, "approach", f"approach {p.name}", p.q[0], p.poses[0], retract_m=retract_m
+            checker,
+            "approach",
+            name,
+            p.q[0],
+            p.poses[0],
+            retract_m=retract_m,
+            previous=earlier.get(("approach", name)),
         )
-        kind = "home" if k == 0 else "link"
-        motions.append(plan_air(checker, kind, f"{where} -> {p.name}", here, approach.q[0], **air))
+        kind, name = ("home" if k == 0 else "link"), f"{where} -> {p.name}"
+        motions.append(
+            plan_air(checker, kind, name, here, approach.q[0], previous=earlier.get((kind, name)), **air)
+        )
         motions.append(approach)
         motions.append(_path_motion(p))
+        name = f"retract {p.name}"
         retract = plan_line(
-            checker, "retract", f"retract {p.name}", p.q[-1], p.poses[-1], retract_m=retract_m
+            checker,
+            "retract",
+            name,
+            p.q[-1],
+            p.poses[-1],
+            retract_m=retract_m,
+            previous=earlier.get(("retract", name)),
         )
         motions.append(retract)
         here, where = retract.q[-1], p.name
-    motions.append(plan_air(checker, "return", f"{where} -> home", here, q_home, **air))
+    name = f"{where} -> home"
+    motions.append(
+        plan_air(checker, "return", name, here, q_home, previous=earlier.get(("return", name)), **air)
+    )
     return tuple(motions)
 
 

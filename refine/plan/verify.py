@@ -6,16 +6,23 @@ margins) and the tolerances. Clearance is the path's dense check
 move linearly, and the motion bound certifies every pair's margin along that continuous motion,
 not only at samples. A broken margin becomes a :class:`refine.plan.motion.MotionIssue` naming the
 objects, the share of the motion and the TCP position where the worst pair is.
+
+A check may start from what an earlier check proved (:class:`Known`: a previous run's check of the
+same motion, its distance bounds less the motion since, :func:`refine.collision.carry.carried_bounds`):
+a pair those bounds prove is not measured again, and the least figures are measured as without
+them. An air move's kept via points are checked so (:func:`refine.plan.air.plan_air`).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from refine.collision import CollisionModel, PathClearance, check_path_clearance
+from refine.collision import CollisionModel, PathClearance, check_path_clearance, margins_proved
+from refine.collision.carry import CheckedBounds, carried_bounds, carried_directions
 from refine.optimise.verify import segment_singularity, singularity_measures
 from refine.plan.motion import MotionIssue
 from refine.robot.kinematics import TcpKinematics
@@ -24,6 +31,34 @@ from refine.types import Array
 
 LOCATE_SAMPLES = 21
 """Samples along the worst segment of a broken margin that locate its worst point for the diagnosis."""
+
+
+@dataclass(frozen=True)
+class Known:
+    """Distance bounds an earlier check proved, for rows of a motion about to be checked.
+
+    Attributes:
+        bounds: the earlier check's bounds (``PathClearance.bounds``).
+        rows: the rows of the earlier check to take, (R,).
+        at: the rows of the new motion they bound, (R,): each bound is carried from the earlier
+            check's joints and cell to the new row's (:func:`refine.collision.carry.carried_bounds`:
+            unchanged at the same joints in the same cell, less the motion since elsewhere).
+    """
+
+    bounds: CheckedBounds
+    rows: tuple[int, ...]
+    at: tuple[int, ...]
+
+    @staticmethod
+    def of(check: PathClearance | None, rows: Sequence[int], at: Sequence[int]) -> Known | None:
+        """``check``'s bounds at its ``rows`` for the new motion's rows ``at``; None without them."""
+        bounds = getattr(check, "bounds", None)
+        if bounds is None:
+            return None
+        n = len(bounds.q)
+        if not all(-n <= r < n for r in rows):
+            return None
+        return Known(bounds, tuple(int(r) % n for r in rows), tuple(int(a) for a in at))
 
 
 @dataclass
@@ -66,17 +101,70 @@ class MotionChecker:
             return math.inf, math.inf, ("", "")
         return worst.clearance_m, worst.distance_m, (worst.body, worst.other)
 
-    def clearance(self, q: Array) -> PathClearance | None:
+    def clearance(self, q: Array, known: Sequence[Known | None] = ()) -> PathClearance | None:
         """The continuous clearance check of the joint-interpolated rows ``q`` (K, n); None without a model.
 
         Its least distance and clearance are exact; a row's own figures are exact only where they
-        can be those (elsewhere lower bounds: a motion reports its least only).
+        can be those (elsewhere lower bounds: a motion reports its least only). ``known``: bounds
+        earlier checks proved at rows of ``q`` (:class:`Known`); the larger bound of a pair holds.
         """
         if self.model is None:
             return None
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        prior, directions = self.carried(q, known)
         return check_path_clearance(
-            self.model, np.atleast_2d(q), self.kin, self.check_step_m, every_waypoint=False
+            self.model,
+            q,
+            self.kin,
+            self.check_step_m,
+            every_waypoint=False,
+            prior=prior,
+            directions=directions,
         )
+
+    def proved(self, q: Array, known: Sequence[Known | None] = ()) -> bool:
+        """True when the motion bound proves every margin along the rows ``q`` (K, n) (without a model too).
+
+        :func:`refine.collision.margins_proved` from the bounds ``known``; False decides nothing.
+        """
+        if self.model is None:
+            return True
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        prior, directions = self.carried(q, known)
+        return margins_proved(self.model, q, prior=prior, directions=directions)
+
+    def carried(self, q: Array, known: Sequence[Known | None]) -> tuple[Array | None, Array | None]:
+        """Lower bounds (K, P) [m] and witness directions (K, P, 3) at the rows ``q`` (K, n) from ``known``.
+
+        None for either when no bound applies: another robot or base, or no earlier check. A row
+        without a bound has ``-inf`` (directions NaN).
+        """
+        assert self.model is not None
+        bounds: Array | None = None
+        directions: Array | None = None
+        for k in known:
+            if k is None or not k.at:
+                continue
+            at, rows = list(k.at), list(k.rows)
+            part = replace(
+                k.bounds,
+                q=k.bounds.q[rows],
+                bounds=k.bounds.bounds[rows],
+                normals=None if k.bounds.normals is None else k.bounds.normals[rows],
+            )
+            found = carried_bounds(self.model, part, q[at])
+            if found is None:
+                continue
+            if bounds is None:
+                bounds = np.full((len(q), len(self.model.pairs)), -np.inf)
+            bounds[at] = np.maximum(bounds[at], found)
+            towards = carried_directions(self.model, part, q[at])
+            if towards is not None:
+                if directions is None:
+                    directions = np.full((len(q), len(self.model.pairs), 3), np.nan)
+                free = np.isnan(directions[at, :, :1])
+                directions[at] = np.where(free, towards, directions[at])
+        return bounds, directions
 
     def limit_issues(self, q: Array, margin_rad: float) -> list[MotionIssue]:
         """A joint outside [lower + margin, upper - margin] anywhere in the rows of ``q`` (K, n).
@@ -134,11 +222,22 @@ class MotionChecker:
             )
         return out
 
-    def singularity_issues(self, q: Array) -> tuple[list[MotionIssue], float]:
-        """The scaled manipulability along the rows of ``q`` (K, n) below the margin, and its least value."""
+    def singularity_issues(
+        self, q: Array, jacobians: Array | None = None, midpoint_jacobians: Array | None = None
+    ) -> tuple[list[MotionIssue], float]:
+        """The scaled manipulability along the rows of ``q`` (K, n) below the margin, and its least value.
+
+        ``jacobians``: the TCP Jacobians (K, 6, n) at the rows when the caller has them, else None;
+        ``midpoint_jacobians`` (K-1, 6, n): those at the segments' midpoints
+        (:func:`refine.optimise.verify.segment_singularity`), or None.
+        """
         q = np.atleast_2d(q)
-        at, _ = singularity_measures(self.kin, q, smallest=False)
-        between = segment_singularity(self.kin, q)[0] if len(q) > 1 else np.zeros(0)
+        at, _ = singularity_measures(self.kin, q, smallest=False, jacobians=jacobians)
+        between = (
+            segment_singularity(self.kin, q, midpoint_jacobians=midpoint_jacobians)[0]
+            if len(q) > 1
+            else np.zeros(0)
+        )
         least = float(min(at.min(), between.min() if between.size else math.inf))
         limit = self.tolerances.singularity_margin
         if least >= limit - 1e-9:

@@ -58,7 +58,8 @@ def warm_from(
     same (:func:`refine.optimise.problem.reuse_for` checks the rest), else None. The start
     (:class:`refine.optimise.warm.WarmStart`, None for another robot or number of waypoints) holds
     the previous joints, to be moved onto the new poses, and its last problem and multipliers:
-    kept where the built problem is, else their rows taken over by the new problem.
+    kept where the built problem is, else their rows taken over by the new problem; and its
+    motions, which the new program's are planned from (each verified again).
     """
     from refine.optimise.problem import reuse_for
     from refine.optimise.warm import WarmStart, built_for
@@ -84,4 +85,5 @@ def warm_from(
         first.clearance,
         reusable=nlp is not None,
         line=first.line,
+        motions=tuple(previous.motions),
     )

@@ -65,7 +65,8 @@ def solve_problem(
             problem's files.
         nlp: the first pass's problem, already built (re-solving); None to build it.
         q0: initial joints (N, n) [rad] of the first pass (warm start); None for the IK seed.
-        warm: a previous answer of the first pass to re-solve from (:mod:`refine.optimise.warm`).
+        warm: a previous answer of the first pass to re-solve from (:mod:`refine.optimise.warm`),
+            and the previous motions to plan the program's from.
         tracks: the path of every track of the CAD file (:func:`refine.run.stages.fused_tracks`),
             when the caller holds them: each is a pass, as when the files are read; its first is
             ``fused`` (which may then be None).
@@ -105,7 +106,7 @@ def solve_problem(
             passes.append(refine_pass(problem, robot, p.path, watch, name, p.layer, p.index, sources))
     from refine.run.stages import plan_motions
 
-    motions = plan_motions(problem, robot, passes, sources)
+    motions = plan_motions(problem, robot, passes, sources, () if warm is None else warm.motions)
     watch.lap("motions")
     truth = None
     first = passes[0]

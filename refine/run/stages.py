@@ -365,12 +365,17 @@ def circular_moves(
 
 
 def plan_motions(
-    problem: Problem, robot: Robot, passes: list[PassResult], sources: tuple[ConstraintSource, ...]
+    problem: Problem,
+    robot: Robot,
+    passes: list[PassResult],
+    sources: tuple[ConstraintSource, ...],
+    previous: tuple[Any, ...] = (),
 ) -> tuple[Any, ...]:
     """Every motion of the program (``refine.plan.program``), verified; () when a pass is not executable.
 
     The collision model is the run's own (the clearance source's, with its margins) when the run
-    checks collision, else the motions are checked for limits and singularity only.
+    checks collision, else the motions are checked for limits and singularity only. ``previous``:
+    the motions of an earlier run of the same robot, planned again from (each still verified).
     """
     if not passes or any(p.trajectory is None for p in passes):
         return ()
@@ -389,7 +394,7 @@ def plan_motions(
             PlannedPass(
                 p.name,
                 p.trajectory.q,
-                kin.poses(p.trajectory.q),
+                p.trajectory.poses,  # the refinement's verified poses of these joints
                 p.timing.cycle_time_s,
                 p.clearance,
                 float(check.joint_margin_rad.min()),
@@ -401,7 +406,7 @@ def plan_motions(
     velocity, accel = air_limits(problem, robot)
     spec = robot.spec
     home = None if problem.robot.home_deg is None else np.radians(spec.from_controller(problem.robot.home_deg))
-    return plan_program(checker, planned, home, velocity=velocity, acceleration=accel)
+    return plan_program(checker, planned, home, velocity=velocity, acceleration=accel, previous=previous)
 
 
 def program_formats(problem: Problem, robot: Robot) -> tuple[str, ...]:

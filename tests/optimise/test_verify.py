@@ -372,6 +372,24 @@ def test_segment_samples_are_at_whole_fractions_of_each_segment(kin):
     np.testing.assert_allclose(w, expected, rtol=1e-12)
 
 
+def test_midpoint_jacobians_given_serve_only_where_the_midpoint_is_each_segment_s_only_sample(kin):
+    """Jacobians given for the midpoints are those of the midpoints when every segment moves at most
+    2 deg (its only sample); with a segment of 2.5 deg (sampled at thirds) they are not used."""
+    from refine.optimise.verify import segment_singularity
+
+    q = np.zeros((3, 6))
+    q[:, 4] = np.radians([30.0, 28.5, 27.9])  # steps of 1.5 and 0.6 deg: one sample per segment
+    mid = q[:-1] + 0.5 * np.diff(q, axis=0)
+    w, frac = segment_singularity(kin, q, midpoint_jacobians=kin.jacobians(mid))
+    np.testing.assert_allclose(frac, [0.5, 0.5])
+    np.testing.assert_allclose(w, singularity_measures(kin, mid)[0], rtol=1e-12)
+    wrong = np.zeros((2, 6, 6))  # not the midpoints' Jacobians: where used, every measure would be 0
+    q[1, 4] = np.radians(27.5)  # the first segment moves 2.5 deg: sampled at 1/3 and 2/3
+    w, frac = segment_singularity(kin, q, midpoint_jacobians=wrong)
+    np.testing.assert_allclose(frac, [2 / 3, 0.5])
+    assert np.all(w > 0.0)
+
+
 def test_the_rounds_take_the_singular_points_from_the_check_of_the_same_joints(kin):
     """The wrist flip of the test above: the check keeps where in segment 1 the least measure is
     (a third or two thirds of the way, +-0.4167 deg), and the rounds' new singular points taken
