@@ -54,7 +54,7 @@ import numpy as np
 from refine.optimise.line_start import newton_start, previous_bows
 from refine.optimise.problem import LinearRow
 from refine.optimise.slerp import exp_rotvecs, log_rotations, rotation_angles
-from refine.optimise.verify import Violation, runs, singularity_measures
+from refine.optimise.verify import Violation, runs
 from refine.robot.kinematics import TcpKinematics, solve_ik_batch
 from refine.settings import Tolerances
 from refine.types import Array
@@ -218,6 +218,29 @@ def _segment_min(values: Array, segment: Array, count: int) -> Array:
     return out
 
 
+def _sample_starts(segment: Array) -> Array:
+    """Each segment's first sample, (N-1,).
+
+    :func:`sample_parameters` puts every segment's samples (at least :data:`MIN_SAMPLES` - 1) one
+    after the other.
+    """
+    return np.flatnonzero(np.concatenate([[True], segment[1:] != segment[:-1]]))
+
+
+def line_manipulability(kin: TcpKinematics, jacobians: Array) -> Array:
+    """The scaled manipulability ``sqrt(det(Js Jsᵀ))`` [-] of TCP Jacobians (M, 6, n), (M,).
+
+    The measure :func:`refine.optimise.verify.singularity_measures` defines: ``Js`` is ``J`` with its linear rows divided by the robot's reach. For a six-axis arm ``Js`` is
+    square and the measure is ``|det Js| = |det J| / reach³``, without forming ``Js Jsᵀ`` (whose
+    determinant loses twice the digits near a singularity).
+    """
+    reach = kin.robot.spec.reach_m
+    if jacobians.shape[2] == 6:
+        return np.abs(np.linalg.det(jacobians)) / reach**3
+    Js = np.concatenate([jacobians[:, :3] / reach, jacobians[:, 3:]], axis=1)
+    return np.sqrt(np.clip(np.linalg.det(Js @ np.swapaxes(Js, 1, 2)), 0.0, None))
+
+
 def _solve_line(
     kin: TcpKinematics,
     q: Array,
@@ -238,7 +261,6 @@ def _solve_line(
         scaled manipulability [-], the largest distance of the joint-linear TCP from the chord [m]
         and the largest angle between its orientation and the line's [deg], each (N-1,).
     """
-    n_seg = len(q) - 1
     spec = kin.robot.spec
     poses, J_wp = kin.poses_jacobians(q)
     targets = line_poses(poses, q, segment, t, kin, wrist)
@@ -249,7 +271,9 @@ def _solve_line(
     else:
         start = q_lin + np.where(cold[:, None], 0.0, bows)
         if cold.any():
-            start[cold] = newton_start(J_wp, segment[cold], t[cold], q_lin[cold], lin_poses[cold], targets[cold])
+            start[cold] = newton_start(
+                J_wp, segment[cold], t[cold], q_lin[cold], lin_poses[cold], targets[cold]
+            )
     J_line = np.empty((len(t), 6, q.shape[1]))
     q_line, err = solve_ik_batch(
         kin,
@@ -262,7 +286,7 @@ def _solve_line(
         nullspace_gain=0.0,
         jacobians_out=J_line,
     )
-    sing = singularity_measures(kin, q_line, smallest=False, jacobians=J_line)[0]
+    sing = line_manipulability(kin, J_line)
     a, b = poses[segment, :3, 3], poses[segment + 1, :3, 3]
     chord = b - a
     along = np.clip(
@@ -274,12 +298,13 @@ def _solve_line(
     off_line = np.linalg.norm(lin_poses[:, :3, 3] - (a + along[:, None] * chord), axis=1)
     rel = np.einsum("kji,kjl->kil", lin_poses[:, :3, :3], targets[:, :3, :3])
     angle = np.degrees(rotation_angles(rel))
+    first = _sample_starts(segment)
     return (
         q_line,
         err,
-        _segment_min(sing, segment, n_seg),
-        _segment_max(off_line, segment, n_seg, 0.0),
-        _segment_max(angle, segment, n_seg, 0.0),
+        np.minimum.reduceat(sing, first),
+        np.maximum.reduceat(off_line, first),
+        np.maximum.reduceat(angle, first),
     )
 
 
@@ -349,15 +374,16 @@ def check_controller_lines(
             worst = float(part.max() if worst_is_max else part.min()) if part.size else math.nan
             violations.append(Violation(i, j, float(s[i]), float(s[j]), reason, worst, unit, limit))
 
-    ik_worst = _segment_max(err, segment, n_seg, 0.0)
+    first = _sample_starts(segment)
+    ik_worst = np.maximum.reduceat(err, first)
     add(ik_worst > IK_FAILED, "no IK on the controller's line", ik_worst, "m+rad", IK_FAILED, True)
     margin = math.radians(tolerances.joint_margin_deg) - JOINT_TOLERANCE_RAD
+    joint_margins = np.minimum.reduceat(margins, first, axis=0)  # per segment and joint
     for j in range(q.shape[1]):
-        per_seg = _segment_min(margins[:, j], segment, n_seg)
         add(
-            per_seg < margin,
+            joint_margins[:, j] < margin,
             f"joint limit on the controller's line (joint {j + 1})",
-            per_seg,
+            joint_margins[:, j],
             "rad",
             margin,
             False,
@@ -374,7 +400,7 @@ def check_controller_lines(
 
     clear = change = proved = None
     if reach is not None:
-        change = _segment_max(np.abs(q_line - q_lin) @ np.asarray(reach, dtype=float), segment, n_seg, 0.0)
+        change = np.maximum.reduceat(np.abs(q_line - q_lin) @ np.asarray(reach, dtype=float), first)
     if clearance is not None:
         # the joint path through every waypoint and every sample, in order
         order = np.argsort(np.concatenate([np.arange(len(q)) * 1.0, segment + t]), kind="stable")
@@ -394,8 +420,8 @@ def check_controller_lines(
         ik_error=err,
         position_difference_m=off_seg,
         orientation_difference_deg=angle_seg,
-        joint_difference_deg=_segment_max(joint_diff, segment, n_seg, 0.0),
-        joint_margin_rad=_segment_min(margins.min(axis=1), segment, n_seg),
+        joint_difference_deg=np.maximum.reduceat(joint_diff, first),
+        joint_margin_rad=joint_margins.min(axis=1),
         singularity=sing_seg,
         clearance_m=clear,
         clearance_proved=proved,
@@ -461,12 +487,12 @@ def line_rows(kin: TcpKinematics, q: Array, line: LineCheck, tolerances: Toleran
         # hold a sample under the margin
         near = np.flatnonzero(line.singularity[seg] < sing_limit)
         w = np.full(len(t), np.inf)
-        w[near], _ = singularity_measures(kin, line.q[near], smallest=False)
+        w[near] = line_manipulability(kin, kin.jacobians(line.q[near]))
         low = np.flatnonzero(w < sing_limit)
         if low.size:
             at = line.q[low]
             stepped = (at[:, None, :] + GRADIENT_STEP_RAD * np.eye(n)[None]).reshape(-1, n)
-            w_step, _ = singularity_measures(kin, stepped, smallest=False)
+            w_step = line_manipulability(kin, kin.jacobians(stepped))
             grad = (w_step.reshape(len(low), n) - w[low, None]) / GRADIENT_STEP_RAD
             for g, i in zip(grad, low, strict=True):
                 lower = tolerances.singularity_margin + SINGULARITY_HEADROOM - w[i] + float(g @ q_lin[i])

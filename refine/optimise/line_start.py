@@ -35,21 +35,27 @@ def newton_start(
 ) -> Array:
     """The IK's start on the line: the joint-linear joints ``q_lin`` moved by one damped Newton step.
 
-    The step takes the Jacobian interpolated between the two waypoints' (``J_wp`` (N, 6, n), the
-    TCP Jacobians at the waypoints; the line lies within the
-    square of the step of the joint-linear motion, so that step leaves about the IK's tolerance and
-    saves it one pass over every sample). A row whose step exceeds :data:`NEWTON_STEP_MAX` (near a
-    singularity) starts from ``q_lin`` as it is, so every start stays on the refined joints' branch.
+    The step ``P e`` takes the damped inverse ``P = Jᵀ (J Jᵀ + λ² I)⁻¹`` (:data:`NEWTON_DAMPING`)
+    of the TCP Jacobians at the two waypoints (``J_wp`` (N, 6, n)), interpolated linearly at the
+    sample's ``t``, and the pose error ``e`` of the joint-linear pose to the line's. The line lies
+    within the square of the step of the joint-linear motion, and the interpolated inverse is off
+    the one at ``q_lin`` by the square of the step too, so that step leaves about the IK's
+    tolerance and saves it one pass over every sample; it costs one small solve per waypoint, none
+    per sample. A row whose step exceeds :data:`NEWTON_STEP_MAX` (near a singularity) starts from
+    ``q_lin`` as it is, so every start stays on the refined joints' branch.
     """
-    J = np.diff(J_wp, axis=0)[segment]  # J_wp[segment + 1] - J_wp[segment], per segment once
-    J *= t[:, None, None]
-    J += J_wp[segment]
-    R = targets[:, :3, :3] @ np.transpose(lin_poses[:, :3, :3], (0, 2, 1))
-    e = np.concatenate([targets[:, :3, 3] - lin_poses[:, :3, 3], rotation_vectors(R)], axis=1)
-    A = J @ np.transpose(J, (0, 2, 1)) + NEWTON_DAMPING**2 * np.eye(6)
-    dq = np.einsum("kji,kj->ki", J, np.linalg.solve(A, e[:, :, None])[:, :, 0])
-    small = np.abs(dq).max(axis=1) <= NEWTON_STEP_MAX
-    return np.where(small[:, None], q_lin + dq, q_lin)
+    A = J_wp @ np.swapaxes(J_wp, 1, 2) + NEWTON_DAMPING**2 * np.eye(J_wp.shape[1])
+    P_wp = np.swapaxes(np.linalg.solve(A, J_wp), 1, 2)  # (A⁻¹ J)ᵀ = Jᵀ A⁻¹, A symmetric: (N, n, 6)
+    P = np.diff(P_wp, axis=0)[segment]
+    P *= t[:, None, None]
+    P += P_wp[segment]
+    e = np.empty((len(t), 6, 1))
+    e[:, :3, 0] = targets[:, :3, 3] - lin_poses[:, :3, 3]
+    e[:, 3:, 0] = rotation_vectors(targets[:, :3, :3] @ np.transpose(lin_poses[:, :3, :3], (0, 2, 1)))
+    dq = (P @ e)[:, :, 0]
+    dq[np.abs(dq).max(axis=1) > NEWTON_STEP_MAX] = 0.0
+    dq += q_lin
+    return dq
 
 
 def previous_bows(
