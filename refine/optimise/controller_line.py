@@ -51,11 +51,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from refine.optimise.line_start import newton_start, previous_bows
+from refine.optimise.line_ik import line_manipulability, segment_starts, solve_line
 from refine.optimise.problem import LinearRow
-from refine.optimise.slerp import exp_rotvecs, log_rotations, rotation_angles
 from refine.optimise.verify import Violation, runs
-from refine.robot.kinematics import TcpKinematics, solve_ik_batch
+from refine.robot.kinematics import TcpKinematics
 from refine.settings import Tolerances
 from refine.types import Array
 
@@ -109,6 +108,9 @@ class LineCheck:
             joint-linear motion and the line's at equal t (the joint difference times the joints'
             reach) [m], (N-1,); None without a collision check.
         violations: what the line breaks (empty when it passes).
+        start_correction: per sample, what the IK changed its Newton start by [rad], (M, n), a row
+            NaN where it started from a previous line's bow, for a re-solve's start
+            (:func:`refine.optimise.line_start.previous_corrections`); None when not recorded.
     """
 
     samples: Array
@@ -125,6 +127,7 @@ class LineCheck:
     clearance_proved: bool | None
     clearance_change_m: Array | None
     violations: tuple[Violation, ...]
+    start_correction: Array | None = None
 
     @property
     def ok(self) -> bool:
@@ -170,31 +173,6 @@ class LineCheck:
         )
 
 
-def line_poses(poses: Array, q: Array, segment: Array, t: Array, kin: TcpKinematics, wrist: Array) -> Array:
-    """Poses (M, 4, 4) of the controller's line at ``t`` inside ``segment`` (see the module notes).
-
-    Args:
-        poses: T_F_TCP of the targets, (N, 4, 4).
-        q: joints at the targets [rad], (N, n) (for the wrist model).
-        segment: segment of each sample, (M,).
-        t: parameter in [0, 1] of each sample, (M,).
-        kin: TCP kinematics (for the wrist model).
-        wrist: per segment, True where the orientation follows the joint-linear wrist, (N-1,).
-    """
-    a, b = poses[segment], poses[segment + 1]
-    out = np.zeros((len(t), 4, 4))
-    out[:, 3, 3] = 1.0
-    out[:, :3, 3] = a[:, :3, 3] + t[:, None] * (b[:, :3, 3] - a[:, :3, 3])
-    R = poses[:, :3, :3]
-    steps = log_rotations(np.swapaxes(R[:-1], 1, 2) @ R[1:])  # per segment, then per sample
-    out[:, :3, :3] = R[segment] @ exp_rotvecs(t[:, None] * steps[segment])
-    on_wrist = wrist[segment]
-    if on_wrist.any():
-        q_lin = q[segment] + t[:, None] * (q[segment + 1] - q[segment])
-        out[on_wrist, :3, :3] = kin.poses(q_lin[on_wrist])[:, :3, :3]
-    return out
-
-
 def sample_parameters(q: Array) -> tuple[Array, Array, Array]:
     """Sub-steps per segment (N-1,), and each inner sample's segment (M,) and parameter t (M,)."""
     dq = np.degrees(np.abs(np.diff(q, axis=0))).max(axis=1)
@@ -216,96 +194,6 @@ def _segment_min(values: Array, segment: Array, count: int) -> Array:
     out = np.full(count, np.inf)
     np.minimum.at(out, segment, values)
     return out
-
-
-def _sample_starts(segment: Array) -> Array:
-    """Each segment's first sample, (N-1,).
-
-    :func:`sample_parameters` puts every segment's samples (at least :data:`MIN_SAMPLES` - 1) one
-    after the other.
-    """
-    return np.flatnonzero(np.concatenate([[True], segment[1:] != segment[:-1]]))
-
-
-def line_manipulability(kin: TcpKinematics, jacobians: Array) -> Array:
-    """The scaled manipulability ``sqrt(det(Js Jsᵀ))`` [-] of TCP Jacobians (M, 6, n), (M,).
-
-    The measure :func:`refine.optimise.verify.singularity_measures` defines: ``Js`` is ``J`` with its linear rows divided by the robot's reach. For a six-axis arm ``Js`` is
-    square and the measure is ``|det Js| = |det J| / reach³``, without forming ``Js Jsᵀ`` (whose
-    determinant loses twice the digits near a singularity).
-    """
-    reach = kin.robot.spec.reach_m
-    if jacobians.shape[2] == 6:
-        return np.abs(np.linalg.det(jacobians)) / reach**3
-    Js = np.concatenate([jacobians[:, :3] / reach, jacobians[:, 3:]], axis=1)
-    return np.sqrt(np.clip(np.linalg.det(Js @ np.swapaxes(Js, 1, 2)), 0.0, None))
-
-
-def _solve_line(
-    kin: TcpKinematics,
-    q: Array,
-    segment: Array,
-    t: Array,
-    q_lin: Array,
-    wrist: Array,
-    bows: Array | None = None,
-) -> tuple[Array, Array, Array, Array, Array]:
-    """The line's IK at the samples and what depends on it and on ``q`` alone.
-
-    ``bows``: per sample a previous line's bow (:func:`refine.optimise.line_start.previous_bows`),
-    the IK's start ``q_lin + bow`` where it is not NaN (the rest start from
-    :func:`refine.optimise.line_start.newton_start`); None for none.
-
-    Returns:
-        the line's joints (M, n) [rad], the IK residual per sample (M,), and per segment the least
-        scaled manipulability [-], the largest distance of the joint-linear TCP from the chord [m]
-        and the largest angle between its orientation and the line's [deg], each (N-1,).
-    """
-    spec = kin.robot.spec
-    poses, J_wp = kin.poses_jacobians(q)
-    targets = line_poses(poses, q, segment, t, kin, wrist)
-    lin_poses = kin.poses(q_lin)
-    cold = None if bows is None else np.isnan(bows[:, 0])
-    if cold is None or cold.all():
-        start = newton_start(J_wp, segment, t, q_lin, lin_poses, targets)
-    else:
-        start = q_lin + np.where(cold[:, None], 0.0, bows)
-        if cold.any():
-            start[cold] = newton_start(
-                J_wp, segment[cold], t[cold], q_lin[cold], lin_poses[cold], targets[cold]
-            )
-    J_line = np.empty((len(t), 6, q.shape[1]))
-    q_line, err = solve_ik_batch(
-        kin,
-        targets,
-        start,
-        spec.lower,
-        spec.upper,
-        tol=IK_TOLERANCE,
-        max_iterations=60,
-        nullspace_gain=0.0,
-        jacobians_out=J_line,
-    )
-    sing = line_manipulability(kin, J_line)
-    a, b = poses[segment, :3, 3], poses[segment + 1, :3, 3]
-    chord = b - a
-    along = np.clip(
-        np.einsum("ij,ij->i", lin_poses[:, :3, 3] - a, chord)
-        / np.maximum(np.einsum("ij,ij->i", chord, chord), 1e-300),
-        0.0,
-        1.0,
-    )
-    off_line = np.linalg.norm(lin_poses[:, :3, 3] - (a + along[:, None] * chord), axis=1)
-    rel = np.einsum("kji,kjl->kil", lin_poses[:, :3, :3], targets[:, :3, :3])
-    angle = np.degrees(rotation_angles(rel))
-    first = _sample_starts(segment)
-    return (
-        q_line,
-        err,
-        np.minimum.reduceat(sing, first),
-        np.maximum.reduceat(off_line, first),
-        np.maximum.reduceat(angle, first),
-    )
 
 
 def check_controller_lines(
@@ -359,9 +247,11 @@ def check_controller_lines(
     if known is not None and known.q.shape == q_lin.shape:
         q_line, err, sing_seg = known.q, known.ik_error, known.singularity
         off_seg, angle_seg = known.position_difference_m, known.orientation_difference_deg
+        correction = known.start_correction
     else:
-        bows = None if previous is None else previous_bows(q, m, segment, t, previous, IK_TOLERANCE)
-        q_line, err, sing_seg, off_seg, angle_seg = _solve_line(kin, q, segment, t, q_lin, wrist, bows)
+        q_line, err, correction, sing_seg, off_seg, angle_seg = solve_line(
+            kin, q, m, segment, t, wrist, IK_TOLERANCE, previous
+        )
     joint_diff = np.degrees(np.abs(q_line - q_lin).max(axis=1))
     margins = np.minimum(q_line - spec.lower, spec.upper - q_line)
 
@@ -374,7 +264,7 @@ def check_controller_lines(
             worst = float(part.max() if worst_is_max else part.min()) if part.size else math.nan
             violations.append(Violation(i, j, float(s[i]), float(s[j]), reason, worst, unit, limit))
 
-    first = _sample_starts(segment)
+    first = segment_starts(segment)
     ik_worst = np.maximum.reduceat(err, first)
     add(ik_worst > IK_FAILED, "no IK on the controller's line", ik_worst, "m+rad", IK_FAILED, True)
     margin = math.radians(tolerances.joint_margin_deg) - JOINT_TOLERANCE_RAD
@@ -427,6 +317,7 @@ def check_controller_lines(
         clearance_proved=proved,
         clearance_change_m=change,
         violations=tuple(violations),
+        start_correction=correction,
     )
 
 

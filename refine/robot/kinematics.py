@@ -325,10 +325,11 @@ def solve_ik_batch(
     for it in range(max_iterations + 1):
         if not active.size:
             break
-        p, R, J = kin.batch(q[active])
+        rows_now = slice(None) if active.size == m else active  # all rows: views, not copies
+        p, R, J = kin.batch(q[rows_now])
         if jacobians_out is not None:
-            jacobians_out[active] = J
-        T = targets[active]
+            jacobians_out[rows_now] = J
+        T = targets[rows_now]
         e = T[:, :3, 3] - p
         if axis_only:
             reached = np.zeros_like(T)
