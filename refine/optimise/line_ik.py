@@ -19,8 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from refine.optimise.line_start import newton_start, previous_bows, previous_corrections
-from refine.optimise.slerp import exp_rotvecs, log_rotations, rotation_angles
+from refine.optimise.line_start import newton_start, pose_errors, previous_bows, previous_corrections
+from refine.optimise.slerp import exp_rotvecs, log_rotations
 from refine.robot.kinematics import TcpKinematics, solve_ik_batch
 from refine.types import Array
 
@@ -111,15 +111,16 @@ def solve_line(
     poses, J_wp = kin.poses_jacobians(q)
     targets = line_poses(poses, q, segment, t, kin, wrist)
     lin_poses = kin.poses(q_lin)
+    errors = pose_errors(lin_poses, targets)
     bows = None if previous is None else previous_bows(q, m, segment, t, previous, tolerance)
     cold = np.ones(len(t), dtype=bool) if bows is None else np.isnan(bows[:, 0])
     if cold.all():
-        start = newton_start(J_wp, segment, t, q_lin, lin_poses, targets)
+        start = newton_start(J_wp, segment, t, q_lin, lin_poses, targets, errors)
     else:
         start = q_lin + np.where(cold[:, None], 0.0, bows)
         if cold.any():
             start[cold] = newton_start(
-                J_wp, segment[cold], t[cold], q_lin[cold], lin_poses[cold], targets[cold]
+                J_wp, segment[cold], t[cold], q_lin[cold], lin_poses[cold], targets[cold], errors[cold]
             )
     newton = start.copy()
     if previous is not None:
@@ -148,8 +149,7 @@ def solve_line(
         1.0,
     )
     off_line = np.linalg.norm(lin_poses[:, :3, 3] - (a + along[:, None] * chord), axis=1)
-    rel = np.swapaxes(lin_poses[:, :3, :3], 1, 2) @ targets[:, :3, :3]
-    angle = np.degrees(rotation_angles(rel))
+    angle = np.degrees(np.linalg.norm(errors[:, 3:], axis=1))  # the angle of R_target R_linᵀ
     first = segment_starts(segment)
     return (
         q_line,

@@ -37,7 +37,13 @@ are about 1e-8 rad; a larger one is a start far from the line (a Newton step not
 
 
 def newton_start(
-    J_wp: Array, segment: Array, t: Array, q_lin: Array, lin_poses: Array, targets: Array
+    J_wp: Array,
+    segment: Array,
+    t: Array,
+    q_lin: Array,
+    lin_poses: Array,
+    targets: Array,
+    errors: Array | None = None,
 ) -> Array:
     """The IK's start on the line: the joint-linear joints ``q_lin`` moved by one damped Newton step.
 
@@ -48,20 +54,32 @@ def newton_start(
     the one at ``q_lin`` by the square of the step too, so that step leaves about the IK's
     tolerance and saves it one pass over every sample; it costs one small solve per waypoint, none
     per sample. A row whose step exceeds :data:`NEWTON_STEP_MAX` (near a singularity) starts from
-    ``q_lin`` as it is, so every start stays on the refined joints' branch.
+    ``q_lin`` as it is, so every start stays on the refined joints' branch. ``errors``: those pose
+    errors (M, 6) when the caller has them (:func:`pose_errors` of ``lin_poses`` to ``targets``),
+    else None.
     """
     A = J_wp @ np.swapaxes(J_wp, 1, 2) + NEWTON_DAMPING**2 * np.eye(J_wp.shape[1])
     P_wp = np.swapaxes(np.linalg.solve(A, J_wp), 1, 2)  # (A⁻¹ J)ᵀ = Jᵀ A⁻¹, A symmetric: (N, n, 6)
     P = np.diff(P_wp, axis=0)[segment]
     P *= t[:, None, None]
     P += P_wp[segment]
-    e = np.empty((len(t), 6, 1))
-    e[:, :3, 0] = targets[:, :3, 3] - lin_poses[:, :3, 3]
-    e[:, 3:, 0] = rotation_vectors(targets[:, :3, :3] @ np.transpose(lin_poses[:, :3, :3], (0, 2, 1)))
-    dq = (P @ e)[:, :, 0]
+    e = pose_errors(lin_poses, targets) if errors is None else errors
+    dq = (P @ e[:, :, None])[:, :, 0]
     dq[np.abs(dq).max(axis=1) > NEWTON_STEP_MAX] = 0.0
     dq += q_lin
     return dq
+
+
+def pose_errors(poses: Array, targets: Array) -> Array:
+    """Pose errors (M, 6) of ``poses`` to ``targets`` (M, 4, 4), as the IK's.
+
+    The position difference [m] and the rotation vector of ``R_target Rᵀ`` [rad], both in the
+    frame the poses are given in.
+    """
+    e = np.empty((len(poses), 6))
+    e[:, :3] = targets[:, :3, 3] - poses[:, :3, 3]
+    e[:, 3:] = rotation_vectors(targets[:, :3, :3] @ np.transpose(poses[:, :3, :3], (0, 2, 1)))
+    return e
 
 
 def previous_bows(
