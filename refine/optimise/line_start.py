@@ -65,7 +65,7 @@ def newton_start(
     P += P_wp[segment]
     e = pose_errors(lin_poses, targets) if errors is None else errors
     dq = (P @ e[:, :, None])[:, :, 0]
-    dq[np.abs(dq).max(axis=1) > NEWTON_STEP_MAX] = 0.0
+    dq[~(np.abs(dq).max(axis=1) <= NEWTON_STEP_MAX)] = 0.0  # and a NaN step: from q_lin
     dq += q_lin
     return dq
 
