@@ -407,8 +407,10 @@ class ControllerLineSource:
         wrist: joints (N, n) -> per segment, True where the program hands the wrist to the
             controller (see :func:`check_controller_lines`); None for nowhere.
         checks: lines checked, for the figures (how many rounds looked at the line).
-        previous: a previous answer's joints (N, n) [rad] and line check, whose bows start the line's
-            IK (``check_controller_lines(..., previous=)``); None for none.
+        previous: a previous answer's joints (N, n) [rad] and line check, whose bows and start
+            corrections start the line's IK (``check_controller_lines(..., previous=)``) until the
+            source has checked an answer of as many waypoints itself (the rounds' previous answer,
+            whose line then starts the next); None for none.
     """
 
     kin: TcpKinematics
@@ -427,7 +429,9 @@ class ControllerLineSource:
         wrist = (
             np.zeros(len(q) - 1, dtype=bool) if self.wrist is None else np.asarray(self.wrist(q), dtype=bool)
         )
-        line = check_controller_lines(self.kin, q, s, self.tolerances, wrist=wrist, previous=self.previous)
+        # the rounds' previous answer is nearer than a previous call's: its line starts this one's IK
+        near = self._last if self._last is not None and self._last[0].shape == q.shape else self.previous
+        line = check_controller_lines(self.kin, q, s, self.tolerances, wrist=wrist, previous=near)
         self.checks += 1
         self._last, self._last_wrist = (q.copy(), line), wrist
         return line

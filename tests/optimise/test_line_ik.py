@@ -199,3 +199,27 @@ def test_the_line_manipulability_is_the_root_of_det_js_js_t(name):
         Js = np.vstack([(J[:3] + np.cross(J[3:].T, r).T) / robot.spec.reach_m, J[3:]])
         want.append(np.sqrt(np.linalg.det(Js @ Js.T)))
     np.testing.assert_allclose(line_manipulability(kin, kin.jacobians(qs)), want, rtol=1e-9)
+
+
+def test_a_line_source_starts_the_next_rounds_line_from_its_last_one():
+    """The rounds' source checks an answer, then a moved one: the second check is the one started
+    from the first's line (the same joints, bit for bit), within 1e-8 rad of a cold check."""
+    from types import SimpleNamespace
+
+    from refine.optimise.controller_line import ControllerLineSource
+
+    kin = TcpKinematics(load_robot(ROBOT), BASES["shifted"], TCP)
+    q1 = _path(2.0, n=12, seed=8)
+    q2 = q1 + np.cumsum(np.random.default_rng(4).uniform(-2e-4, 2e-4, q1.shape), axis=0)
+    s = np.arange(len(q1), dtype=float)
+    problem = SimpleNamespace(fused=SimpleNamespace(s=s))
+    source = ControllerLineSource(kin, Tolerances())
+    source.violations(problem, q1)
+    first = source.checked(q1, kin, np.zeros(len(q1) - 1, dtype=bool))
+    source.violations(problem, q2)
+    second = source.checked(q2, kin, np.zeros(len(q1) - 1, dtype=bool))
+    from_first = check_controller_lines(kin, q2, s, Tolerances(), previous=(q1, first))
+    np.testing.assert_array_equal(second.q, from_first.q)
+    cold = check_controller_lines(kin, q2, s, Tolerances())
+    np.testing.assert_allclose(second.q, cold.q, rtol=0, atol=1e-8)
+    assert source.checks == 2 and second.ik_error.max() <= IK_TOLERANCE
