@@ -51,11 +51,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from refine.optimise.line_start import newton_start, previous_bows
+from refine.optimise.line_ik import line_manipulability, segment_starts, solve_line
 from refine.optimise.problem import LinearRow
-from refine.optimise.slerp import exp_rotvecs, log_rotations, rotation_angles
-from refine.optimise.verify import Violation, runs, singularity_measures
-from refine.robot.kinematics import TcpKinematics, solve_ik_batch
+from refine.optimise.verify import Violation, runs
+from refine.robot.kinematics import TcpKinematics
 from refine.settings import Tolerances
 from refine.types import Array
 
@@ -109,6 +108,9 @@ class LineCheck:
             joint-linear motion and the line's at equal t (the joint difference times the joints'
             reach) [m], (N-1,); None without a collision check.
         violations: what the line breaks (empty when it passes).
+        start_correction: per sample, what the IK changed its Newton start by [rad], (M, n), a row
+            NaN where it started from a previous line's bow, for a re-solve's start
+            (:func:`refine.optimise.line_start.previous_corrections`); None when not recorded.
     """
 
     samples: Array
@@ -125,6 +127,7 @@ class LineCheck:
     clearance_proved: bool | None
     clearance_change_m: Array | None
     violations: tuple[Violation, ...]
+    start_correction: Array | None = None
 
     @property
     def ok(self) -> bool:
@@ -170,31 +173,6 @@ class LineCheck:
         )
 
 
-def line_poses(poses: Array, q: Array, segment: Array, t: Array, kin: TcpKinematics, wrist: Array) -> Array:
-    """Poses (M, 4, 4) of the controller's line at ``t`` inside ``segment`` (see the module notes).
-
-    Args:
-        poses: T_F_TCP of the targets, (N, 4, 4).
-        q: joints at the targets [rad], (N, n) (for the wrist model).
-        segment: segment of each sample, (M,).
-        t: parameter in [0, 1] of each sample, (M,).
-        kin: TCP kinematics (for the wrist model).
-        wrist: per segment, True where the orientation follows the joint-linear wrist, (N-1,).
-    """
-    a, b = poses[segment], poses[segment + 1]
-    out = np.zeros((len(t), 4, 4))
-    out[:, 3, 3] = 1.0
-    out[:, :3, 3] = a[:, :3, 3] + t[:, None] * (b[:, :3, 3] - a[:, :3, 3])
-    R = poses[:, :3, :3]
-    steps = log_rotations(np.swapaxes(R[:-1], 1, 2) @ R[1:])  # per segment, then per sample
-    out[:, :3, :3] = R[segment] @ exp_rotvecs(t[:, None] * steps[segment])
-    on_wrist = wrist[segment]
-    if on_wrist.any():
-        q_lin = q[segment] + t[:, None] * (q[segment + 1] - q[segment])
-        out[on_wrist, :3, :3] = kin.poses(q_lin[on_wrist])[:, :3, :3]
-    return out
-
-
 def sample_parameters(q: Array) -> tuple[Array, Array, Array]:
     """Sub-steps per segment (N-1,), and each inner sample's segment (M,) and parameter t (M,)."""
     dq = np.degrees(np.abs(np.diff(q, axis=0))).max(axis=1)
@@ -216,71 +194,6 @@ def _segment_min(values: Array, segment: Array, count: int) -> Array:
     out = np.full(count, np.inf)
     np.minimum.at(out, segment, values)
     return out
-
-
-def _solve_line(
-    kin: TcpKinematics,
-    q: Array,
-    segment: Array,
-    t: Array,
-    q_lin: Array,
-    wrist: Array,
-    bows: Array | None = None,
-) -> tuple[Array, Array, Array, Array, Array]:
-    """The line's IK at the samples and what depends on it and on ``q`` alone.
-
-    ``bows``: per sample a previous line's bow (:func:`refine.optimise.line_start.previous_bows`),
-    the IK's start ``q_lin + bow`` where it is not NaN (the rest start from
-    :func:`refine.optimise.line_start.newton_start`); None for none.
-
-    Returns:
-        the line's joints (M, n) [rad], the IK residual per sample (M,), and per segment the least
-        scaled manipulability [-], the largest distance of the joint-linear TCP from the chord [m]
-        and the largest angle between its orientation and the line's [deg], each (N-1,).
-    """
-    n_seg = len(q) - 1
-    spec = kin.robot.spec
-    poses, J_wp = kin.poses_jacobians(q)
-    targets = line_poses(poses, q, segment, t, kin, wrist)
-    lin_poses = kin.poses(q_lin)
-    cold = None if bows is None else np.isnan(bows[:, 0])
-    if cold is None or cold.all():
-        start = newton_start(J_wp, segment, t, q_lin, lin_poses, targets)
-    else:
-        start = q_lin + np.where(cold[:, None], 0.0, bows)
-        if cold.any():
-            start[cold] = newton_start(J_wp, segment[cold], t[cold], q_lin[cold], lin_poses[cold], targets[cold])
-    J_line = np.empty((len(t), 6, q.shape[1]))
-    q_line, err = solve_ik_batch(
-        kin,
-        targets,
-        start,
-        spec.lower,
-        spec.upper,
-        tol=IK_TOLERANCE,
-        max_iterations=60,
-        nullspace_gain=0.0,
-        jacobians_out=J_line,
-    )
-    sing = singularity_measures(kin, q_line, smallest=False, jacobians=J_line)[0]
-    a, b = poses[segment, :3, 3], poses[segment + 1, :3, 3]
-    chord = b - a
-    along = np.clip(
-        np.einsum("ij,ij->i", lin_poses[:, :3, 3] - a, chord)
-        / np.maximum(np.einsum("ij,ij->i", chord, chord), 1e-300),
-        0.0,
-        1.0,
-    )
-    off_line = np.linalg.norm(lin_poses[:, :3, 3] - (a + along[:, None] * chord), axis=1)
-    rel = np.einsum("kji,kjl->kil", lin_poses[:, :3, :3], targets[:, :3, :3])
-    angle = np.degrees(rotation_angles(rel))
-    return (
-        q_line,
-        err,
-        _segment_min(sing, segment, n_seg),
-        _segment_max(off_line, segment, n_seg, 0.0),
-        _segment_max(angle, segment, n_seg, 0.0),
-    )
 
 
 def check_controller_lines(
@@ -334,9 +247,11 @@ def check_controller_lines(
     if known is not None and known.q.shape == q_lin.shape:
         q_line, err, sing_seg = known.q, known.ik_error, known.singularity
         off_seg, angle_seg = known.position_difference_m, known.orientation_difference_deg
+        correction = known.start_correction
     else:
-        bows = None if previous is None else previous_bows(q, m, segment, t, previous, IK_TOLERANCE)
-        q_line, err, sing_seg, off_seg, angle_seg = _solve_line(kin, q, segment, t, q_lin, wrist, bows)
+        q_line, err, correction, sing_seg, off_seg, angle_seg = solve_line(
+            kin, q, m, segment, t, wrist, IK_TOLERANCE, previous
+        )
     joint_diff = np.degrees(np.abs(q_line - q_lin).max(axis=1))
     margins = np.minimum(q_line - spec.lower, spec.upper - q_line)
 
@@ -349,15 +264,16 @@ def check_controller_lines(
             worst = float(part.max() if worst_is_max else part.min()) if part.size else math.nan
             violations.append(Violation(i, j, float(s[i]), float(s[j]), reason, worst, unit, limit))
 
-    ik_worst = _segment_max(err, segment, n_seg, 0.0)
+    first = segment_starts(segment)
+    ik_worst = np.maximum.reduceat(err, first)
     add(ik_worst > IK_FAILED, "no IK on the controller's line", ik_worst, "m+rad", IK_FAILED, True)
     margin = math.radians(tolerances.joint_margin_deg) - JOINT_TOLERANCE_RAD
+    joint_margins = np.minimum.reduceat(margins, first, axis=0)  # per segment and joint
     for j in range(q.shape[1]):
-        per_seg = _segment_min(margins[:, j], segment, n_seg)
         add(
-            per_seg < margin,
+            joint_margins[:, j] < margin,
             f"joint limit on the controller's line (joint {j + 1})",
-            per_seg,
+            joint_margins[:, j],
             "rad",
             margin,
             False,
@@ -374,7 +290,7 @@ def check_controller_lines(
 
     clear = change = proved = None
     if reach is not None:
-        change = _segment_max(np.abs(q_line - q_lin) @ np.asarray(reach, dtype=float), segment, n_seg, 0.0)
+        change = np.maximum.reduceat(np.abs(q_line - q_lin) @ np.asarray(reach, dtype=float), first)
     if clearance is not None:
         # the joint path through every waypoint and every sample, in order
         order = np.argsort(np.concatenate([np.arange(len(q)) * 1.0, segment + t]), kind="stable")
@@ -394,13 +310,14 @@ def check_controller_lines(
         ik_error=err,
         position_difference_m=off_seg,
         orientation_difference_deg=angle_seg,
-        joint_difference_deg=_segment_max(joint_diff, segment, n_seg, 0.0),
-        joint_margin_rad=_segment_min(margins.min(axis=1), segment, n_seg),
+        joint_difference_deg=np.maximum.reduceat(joint_diff, first),
+        joint_margin_rad=joint_margins.min(axis=1),
         singularity=sing_seg,
         clearance_m=clear,
         clearance_proved=proved,
         clearance_change_m=change,
         violations=tuple(violations),
+        start_correction=correction,
     )
 
 
@@ -461,12 +378,12 @@ def line_rows(kin: TcpKinematics, q: Array, line: LineCheck, tolerances: Toleran
         # hold a sample under the margin
         near = np.flatnonzero(line.singularity[seg] < sing_limit)
         w = np.full(len(t), np.inf)
-        w[near], _ = singularity_measures(kin, line.q[near], smallest=False)
+        w[near] = line_manipulability(kin, kin.jacobians(line.q[near]))
         low = np.flatnonzero(w < sing_limit)
         if low.size:
             at = line.q[low]
             stepped = (at[:, None, :] + GRADIENT_STEP_RAD * np.eye(n)[None]).reshape(-1, n)
-            w_step, _ = singularity_measures(kin, stepped, smallest=False)
+            w_step = line_manipulability(kin, kin.jacobians(stepped))
             grad = (w_step.reshape(len(low), n) - w[low, None]) / GRADIENT_STEP_RAD
             for g, i in zip(grad, low, strict=True):
                 lower = tolerances.singularity_margin + SINGULARITY_HEADROOM - w[i] + float(g @ q_lin[i])
@@ -490,8 +407,10 @@ class ControllerLineSource:
         wrist: joints (N, n) -> per segment, True where the program hands the wrist to the
             controller (see :func:`check_controller_lines`); None for nowhere.
         checks: lines checked, for the figures (how many rounds looked at the line).
-        previous: a previous answer's joints (N, n) [rad] and line check, whose bows start the line's
-            IK (``check_controller_lines(..., previous=)``); None for none.
+        previous: a previous answer's joints (N, n) [rad] and line check, whose bows and start
+            corrections start the line's IK (``check_controller_lines(..., previous=)``) until the
+            source has checked an answer of as many waypoints itself (the rounds' previous answer,
+            whose line then starts the next); None for none.
     """
 
     kin: TcpKinematics
@@ -510,7 +429,9 @@ class ControllerLineSource:
         wrist = (
             np.zeros(len(q) - 1, dtype=bool) if self.wrist is None else np.asarray(self.wrist(q), dtype=bool)
         )
-        line = check_controller_lines(self.kin, q, s, self.tolerances, wrist=wrist, previous=self.previous)
+        # the rounds' previous answer is nearer than a previous call's: its line starts this one's IK
+        near = self._last if self._last is not None and self._last[0].shape == q.shape else self.previous
+        line = check_controller_lines(self.kin, q, s, self.tolerances, wrist=wrist, previous=near)
         self.checks += 1
         self._last, self._last_wrist = (q.copy(), line), wrist
         return line

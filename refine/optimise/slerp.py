@@ -62,15 +62,28 @@ def log_rotations(R: Array) -> Array:
 
 
 def exp_rotvecs(w: Array) -> Array:
-    """Rotation matrices (M, 3, 3) of the rotation vectors ``w`` (M, 3) [rad] (Rodrigues)."""
+    """Rotation matrices (M, 3, 3) of the rotation vectors ``w`` (M, 3) [rad] (Rodrigues).
+
+    With ``K² = w wᵀ - θ² I`` the formula reads ``(1 - b θ²) I + a K + b w wᵀ``, written entry
+    by entry for all rows at once.
+    """
     theta = np.linalg.norm(w, axis=1)
     small = theta < SMALL_RAD
     t2 = theta**2
     safe = np.where(small, 1.0, theta)
     a = np.where(small, 1.0 - t2 / 6.0 + t2**2 / 120.0, np.sin(safe) / safe)
     b = np.where(small, 0.5 - t2 / 24.0 + t2**2 / 720.0, 2.0 * (np.sin(safe / 2.0) / safe) ** 2)
-    x, y, z = w[:, 0], w[:, 1], w[:, 2]
-    zero = np.zeros_like(x)
-    K = np.stack([zero, -z, y, z, zero, -x, -y, x, zero], axis=1).reshape(-1, 3, 3)
-    return np.eye(3) + a[:, None, None] * K + b[:, None, None] * (K @ K)
-
+    bw = b[:, None] * w
+    out = bw[:, :, None] * w[:, None, :]
+    diagonal = 1.0 - b * t2
+    out[:, 0, 0] += diagonal
+    out[:, 1, 1] += diagonal
+    out[:, 2, 2] += diagonal
+    aw = a[:, None] * w
+    out[:, 0, 1] -= aw[:, 2]
+    out[:, 1, 0] += aw[:, 2]
+    out[:, 0, 2] += aw[:, 1]
+    out[:, 2, 0] -= aw[:, 1]
+    out[:, 1, 2] -= aw[:, 0]
+    out[:, 2, 1] += aw[:, 0]
+    return out

@@ -61,8 +61,10 @@ class TcpKinematics:
                 tcp = chain.tcp_frames(qs, self.base_in_world, self.tcp_in_flange, jacobian=False)
                 if tcp is not None:
                     return tcp[0]
-        T = self.base_in_world @ self.robot.fk_many(qs) @ self.tcp_in_flange
-        return T if self.tool_in_world is None else _rigid_inverse(T) @ self.tool_in_world
+        T_bf = self.robot.fk_many(qs)
+        if self.tool_in_world is not None:  # as :meth:`poses_jacobians` (the same products, the same bits)
+            return _rigid_inverse(self.base_in_world @ T_bf @ self.tcp_in_flange) @ self.tool_in_world
+        return _on_base(self.base_in_world, (T_bf.reshape(-1, 4) @ self.tcp_in_flange).reshape(T_bf.shape))
 
     def _stationary(self, T_wf: Array, Jv: Array, Jw: Array) -> tuple[Array, Array]:
         """T_part_TCP (..., 4, 4) and its Jacobian (..., 6, n) from the flange's pose and world Jacobian.
@@ -113,13 +115,36 @@ class TcpKinematics:
             for k, q in enumerate(qs):
                 J[k] = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
                 T_bf[k] = data.oMf[fid].homogeneous
-        T_wf = self.base_in_world @ T_bf
-        R_wb = self.base_in_world[:3, :3]
-        Jv, Jw = R_wb @ J[:, :3], R_wb @ J[:, 3:]
         if self.tool_in_world is not None:
-            return self._stationary(T_wf, Jv, Jw)
-        r = T_wf[:, :3, :3] @ self.tcp_in_flange[:3, 3]  # flange origin -> TCP, world axes (M, 3)
-        return T_wf @ self.tcp_in_flange, np.concatenate([Jv - _cross_columns(r, Jw), Jw], axis=1)
+            R_wb = self.base_in_world[:3, :3]
+            return self._stationary(self.base_in_world @ T_bf, R_wb @ J[:, :3], R_wb @ J[:, 3:])
+        return self._flange_tcp(T_bf, J)
+
+    def _flange_tcp(self, T_bf: Array, J: Array) -> tuple[Array, Array]:
+        """TCP poses (M, 4, 4) and Jacobians (M, 6, n) in the world from the flange's in the base frame.
+
+        Done in the base frame first, where the TCP's placement on the flange is one matrix product
+        for all rows (``T_bf · T_flange_TCP`` as a (4M, 4) by (4, 4) product) and the linear rows
+        move to the TCP as ``v_TCP = v_flange - r × ω`` with ``r`` the flange origin -> TCP; then
+        turned and shifted into the world (nothing to turn for a base without rotation).
+        """
+        M = len(T_bf)
+        rows = T_bf.reshape(-1, 4)
+        T = (rows @ self.tcp_in_flange).reshape(M, 4, 4)
+        offset = np.append(self.tcp_in_flange[:3, 3], 0.0)
+        r = (rows @ offset).reshape(M, 4)  # flange origin -> TCP, base axes (M, 3) and a 0
+        x, y, z = r[:, 0, None], r[:, 1, None], r[:, 2, None]
+        a, b, c = J[:, 3], J[:, 4], J[:, 5]
+        out = np.empty_like(J)
+        out[:, 0] = J[:, 0] - (y * c - z * b)
+        out[:, 1] = J[:, 1] - (z * a - x * c)
+        out[:, 2] = J[:, 2] - (x * b - y * a)
+        out[:, 3:] = J[:, 3:]
+        R_wb = self.base_in_world[:3, :3]
+        if not np.array_equal(R_wb, np.eye(3)):
+            out[:, :3] = R_wb @ out[:, :3]
+            out[:, 3:] = R_wb @ out[:, 3:]
+        return _on_base(self.base_in_world, T), out
 
     def jacobians(self, qs: Array) -> Array:
         """:meth:`jacobian` for joint rows ``qs`` (N, n), shape (N, 6, n) (see :meth:`batch`)."""
@@ -158,6 +183,18 @@ def _cross_columns(r: Array, M: Array) -> Array:
     x, y, z = r[..., 0, None], r[..., 1, None], r[..., 2, None]
     a, b, c = M[..., 0, :], M[..., 1, :], M[..., 2, :]
     return np.stack([y * c - z * b, z * a - x * c, x * b - y * a], axis=-2)
+
+
+def _on_base(T_wb: Array, T: Array) -> Array:
+    """``T_wb · T[k]`` for every rigid transform of ``T`` (M, 4, 4); ``T`` itself, shifted, when ``T_wb`` does not turn.
+
+    A rotation that is exactly the identity changes no digit of a product, so it is skipped.
+    """
+    if not np.array_equal(T_wb[:3, :3], np.eye(3)):
+        return T_wb @ T
+    if T_wb[:3, 3].any():
+        T[:, :3, 3] += T_wb[:3, 3]
+    return T
 
 
 def _rigid_inverse(T: Array) -> Array:
@@ -303,13 +340,14 @@ def solve_ik_batch(
     for it in range(max_iterations + 1):
         if not active.size:
             break
-        p, R, J = kin.batch(q[active]) if it or start is None else start
+        rows_now = slice(None) if active.size == m else active  # all rows: views, not copies
+        p, R, J = kin.batch(q[rows_now]) if it or start is None else start
         if jacobians_out is not None:
-            jacobians_out[active] = J
+            jacobians_out[rows_now] = J
         if poses_out is not None:
-            poses_out[active, :3, :3], poses_out[active, :3, 3] = R, p
-            poses_out[active, 3] = (0.0, 0.0, 0.0, 1.0)
-        T = targets[active]
+            poses_out[rows_now, :3, :3], poses_out[rows_now, :3, 3] = R, p
+            poses_out[rows_now, 3] = (0.0, 0.0, 0.0, 1.0)
+        T = targets[rows_now]
         e = T[:, :3, 3] - p
         if axis_only:
             reached = np.zeros_like(T)

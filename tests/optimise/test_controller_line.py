@@ -138,7 +138,11 @@ def test_the_line_source_makes_rows_only_for_an_answer_it_verified(ur10e_kin):
     problem = SimpleNamespace(fused=SimpleNamespace(s=np.array([0.002, 0.007])))
     assert source.rows(problem, q) == ()  # never verified: the seed
     (v,) = source.violations(problem, q)
-    assert (v.reason, v.index_start, v.s_start_m) == ("joint limit on the controller's line (joint 6)", 0, 0.002)
+    assert (v.reason, v.index_start, v.s_start_m) == (
+        "joint limit on the controller's line (joint 6)",
+        0,
+        0.002,
+    )
     assert source.rows(problem, q) and source.checks == 1
     assert source.rows(problem, q + 1e-3) == ()
 
@@ -176,7 +180,13 @@ def test_the_final_check_takes_the_line_source_s_ik_only_for_the_same_joints_kin
     taken = check_controller_lines(ur10e_kin, q, s, tol, known=known)
     assert not alone.ok and taken.violations == alone.violations
     np.testing.assert_array_equal(taken.q, alone.q)
-    for field in ("singularity", "ik_error", "position_difference_m", "orientation_difference_deg", "joint_margin_rad"):
+    for field in (
+        "singularity",
+        "ik_error",
+        "position_difference_m",
+        "orientation_difference_deg",
+        "joint_margin_rad",
+    ):
         np.testing.assert_array_equal(getattr(taken, field), getattr(alone, field))
     tcp = np.eye(4)
     tcp[2, 3] = 0.001
@@ -186,10 +196,11 @@ def test_the_final_check_takes_the_line_source_s_ik_only_for_the_same_joints_kin
     assert source.checked(q + 1e-9, ur10e_kin, no_wrist) is None
 
 
-def test_the_newton_start_is_one_damped_step_with_the_jacobian_interpolated_per_sample():
+def test_the_newton_start_is_one_damped_step_with_the_damped_inverse_interpolated_per_sample():
     """Random waypoint Jacobians, samples and pose errors: each row's start is the joint-linear
-    joints plus J^T (J J^T + damping^2 I)^-1 e with J = J_a + t (J_b - J_a) of its segment, worked
-    out row by row; a row whose step exceeds NEWTON_STEP_MAX keeps the joint-linear joints."""
+    joints plus P e with P = P_a + t (P_b - P_a) of its segment and each waypoint's damped inverse
+    P = J^T (J J^T + damping^2 I)^-1 worked out by its singular values (V diag(s / (s^2 + d^2)) U^T),
+    row by row; a row whose step exceeds NEWTON_STEP_MAX keeps the joint-linear joints."""
     from scipy.spatial.transform import Rotation
 
     from refine.optimise import line_start as cl
@@ -203,23 +214,31 @@ def test_the_newton_start_is_one_damped_step_with_the_jacobian_interpolated_per_
     lin = np.tile(np.eye(4), (m, 1, 1))
     lin[:, :3, :3] = Rotation.random(m, random_state=1).as_matrix()
     lin[:, :3, 3] = rng.normal(size=(m, 3))
-    err = rng.normal(size=(m, 6)) * np.where(np.arange(m) % 5 == 0, 1e-1, 1e-5)[:, None]  # some steps too long
+    err = (
+        rng.normal(size=(m, 6)) * np.where(np.arange(m) % 5 == 0, 1e-1, 1e-5)[:, None]
+    )  # some steps too long
     targets = lin.copy()
     targets[:, :3, 3] += err[:, :3]
     targets[:, :3, :3] = Rotation.from_rotvec(err[:, 3:]).as_matrix() @ lin[:, :3, :3]
     got = cl.newton_start(J_wp, segment, t, q_lin, lin, targets)
+
+    def damped_inverse(J):
+        U, sv, Vt = np.linalg.svd(J)
+        return Vt.T @ np.diag(sv / (sv**2 + cl.NEWTON_DAMPING**2)) @ U.T
+
     taken = 0
     for k in range(m):
-        a, b = J_wp[segment[k]], J_wp[segment[k] + 1]
-        J = a + t[k] * (b - a)
-        dq = J.T @ np.linalg.solve(J @ J.T + cl.NEWTON_DAMPING**2 * np.eye(6), err[k])
+        a, b = damped_inverse(J_wp[segment[k]]), damped_inverse(J_wp[segment[k] + 1])
+        dq = (a + t[k] * (b - a)) @ err[k]
         want = q_lin[k] + dq if np.abs(dq).max() <= cl.NEWTON_STEP_MAX else q_lin[k]
         taken += np.abs(dq).max() <= cl.NEWTON_STEP_MAX
         np.testing.assert_allclose(got[k], want, rtol=1e-9, atol=1e-15)
     assert 0 < taken < m
 
 
-def test_a_previous_line_s_bows_start_the_ik_where_its_samples_match_and_the_figures_are_the_cold_check_s(ur10e_kin):
+def test_a_previous_line_s_bows_start_the_ik_where_its_samples_match_and_the_figures_are_the_cold_check_s(
+    ur10e_kin,
+):
     """A path, its line checked; then the waypoints moved 1e-9 rad, one waypoint 0.02 rad (far), and
     one segment's largest step taken from just under 4 deg to just over (8 sub-steps to 10, so the
     samples after it shift): the bows start exactly the samples of the other segments, each start

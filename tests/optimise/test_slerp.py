@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from refine.optimise.controller_line import line_poses
+from refine.optimise.line_ik import line_poses
 from refine.optimise.slerp import exp_rotvecs, log_rotations, rotation_angles
 
 

@@ -1,0 +1,161 @@
+"""The controller line's IK at its samples (:mod:`refine.optimise.controller_line`).
+
+* :func:`line_poses`: the line's poses at the samples (chord and slerp, or the joint-linear wrist);
+* :func:`solve_line`: the IK at every sample, from the starts of :mod:`refine.optimise.line_start`,
+  and what the check needs of it: the residuals, the manipulability (:func:`line_manipulability`)
+  and the joint-linear motion's distance from the line, per segment.
+
+The passes over the samples: the waypoints' poses and Jacobians (for the targets and the start's
+interpolated damped inverses), the joint-linear poses (the start's pose errors and the figures), and
+the IK's passes, whose first is at the start and the last at the answer (its Jacobians give the
+manipulability). A start within the IK's tolerance leaves the IK that one pass; on a re-solve the
+previous line's corrections of its starts (:func:`refine.optimise.line_start.previous_corrections`)
+bring most samples there.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from refine.optimise.line_start import newton_start, pose_errors, previous_bows, previous_corrections
+from refine.optimise.slerp import exp_rotvecs, log_rotations
+from refine.robot.kinematics import TcpKinematics, solve_ik_batch
+from refine.types import Array
+
+
+def line_poses(poses: Array, q: Array, segment: Array, t: Array, kin: TcpKinematics, wrist: Array) -> Array:
+    """Poses (M, 4, 4) of the controller's line at ``t`` inside ``segment`` (see the module notes).
+
+    Args:
+        poses: T_F_TCP of the targets, (N, 4, 4).
+        q: joints at the targets [rad], (N, n) (for the wrist model).
+        segment: segment of each sample, (M,).
+        t: parameter in [0, 1] of each sample, (M,).
+        kin: TCP kinematics (for the wrist model).
+        wrist: per segment, True where the orientation follows the joint-linear wrist, (N-1,).
+    """
+    p = poses[:, :3, 3]
+    a, b = p[segment], p[segment + 1]
+    out = np.zeros((len(t), 4, 4))
+    out[:, 3, 3] = 1.0
+    out[:, :3, 3] = a + t[:, None] * (b - a)
+    R = poses[:, :3, :3]
+    steps = log_rotations(np.swapaxes(R[:-1], 1, 2) @ R[1:])  # per segment, then per sample
+    out[:, :3, :3] = R[segment] @ exp_rotvecs(t[:, None] * steps[segment])
+    on_wrist = wrist[segment]
+    if on_wrist.any():
+        q_lin = q[segment] + t[:, None] * (q[segment + 1] - q[segment])
+        out[on_wrist, :3, :3] = kin.poses(q_lin[on_wrist])[:, :3, :3]
+    return out
+
+
+def segment_starts(segment: Array) -> Array:
+    """Each segment's first sample, (N-1,).
+
+    For samples that lie segment after segment, none empty, as
+    :func:`refine.optimise.controller_line.sample_parameters` puts them.
+    """
+    return np.flatnonzero(np.concatenate([[True], segment[1:] != segment[:-1]]))
+
+
+def line_manipulability(kin: TcpKinematics, jacobians: Array) -> Array:
+    """The scaled manipulability ``sqrt(det(Js Jsᵀ))`` [-] of TCP Jacobians (M, 6, n), (M,).
+
+    The measure :func:`refine.optimise.verify.singularity_measures` defines: ``Js`` is ``J`` with its linear rows divided by the robot's reach. For a six-axis arm ``Js`` is
+    square and the measure is ``|det Js| = |det J| / reach³``, without forming ``Js Jsᵀ`` (whose
+    determinant loses twice the digits near a singularity).
+    """
+    reach = kin.robot.spec.reach_m
+    if jacobians.shape[2] == 6:
+        return np.abs(np.linalg.det(jacobians)) / reach**3
+    Js = np.concatenate([jacobians[:, :3] / reach, jacobians[:, 3:]], axis=1)
+    return np.sqrt(np.clip(np.linalg.det(Js @ np.swapaxes(Js, 1, 2)), 0.0, None))
+
+
+def solve_line(
+    kin: TcpKinematics,
+    q: Array,
+    m: Array,
+    segment: Array,
+    t: Array,
+    wrist: Array,
+    tolerance: float,
+    previous: tuple[Array, Any] | None = None,
+) -> tuple[Array, Array, Array, Array, Array, Array]:
+    """The line's IK at the samples and what depends on it and on ``q`` alone.
+
+    Args:
+        kin: TCP kinematics.
+        q: joints per waypoint [rad], (N, n).
+        m: sub-steps per segment, (N-1,).
+        segment: each sample's segment, (M,).
+        t: each sample's parameter in its segment, (M,).
+        wrist: per segment, True where the orientation follows the joint-linear wrist, (N-1,).
+        tolerance: the pose error [m and rad stacked] the IK must reach.
+        previous: a previous answer's joints (N, n) [rad] and its line check (a ``LineCheck``):
+            where its waypoints barely moved, its bows start the IK
+            (:func:`refine.optimise.line_start.previous_bows`); elsewhere the start is
+            :func:`refine.optimise.line_start.newton_start` plus its corrections
+            (:func:`refine.optimise.line_start.previous_corrections`). None for the Newton start.
+
+    Returns:
+        the line's joints (M, n) [rad], the IK residual per sample (M,), the IK's change of the
+        Newton start per sample (M, n) [rad] (NaN where the IK started from a bow), and per segment
+        the least scaled manipulability [-], the largest distance of the joint-linear TCP from the
+        chord [m] and the largest angle between its orientation and the line's [deg], each (N-1,).
+    """
+    spec = kin.robot.spec
+    q_lin = q[segment] + t[:, None] * (q[segment + 1] - q[segment])
+    poses, J_wp = kin.poses_jacobians(q)
+    targets = line_poses(poses, q, segment, t, kin, wrist)
+    lin_poses = kin.poses(q_lin)
+    errors = pose_errors(lin_poses, targets)
+    bows = None if previous is None else previous_bows(q, m, segment, t, previous, tolerance)
+    cold = np.ones(len(t), dtype=bool) if bows is None else np.isnan(bows[:, 0])
+    if cold.all():
+        start = newton_start(J_wp, segment, t, q_lin, lin_poses, targets, errors)
+    else:
+        start = q_lin + np.where(cold[:, None], 0.0, bows)
+        if cold.any():
+            start[cold] = newton_start(
+                J_wp, segment[cold], t[cold], q_lin[cold], lin_poses[cold], targets[cold], errors[cold]
+            )
+    newton = start.copy()
+    if previous is not None:
+        start[cold] += previous_corrections(q, m, segment, t, previous, tolerance)[cold]
+    J_line = np.empty((len(t), 6, q.shape[1]))
+    q_line, err = solve_ik_batch(
+        kin,
+        targets,
+        start,
+        spec.lower,
+        spec.upper,
+        tol=tolerance,
+        max_iterations=60,
+        nullspace_gain=0.0,
+        jacobians_out=J_line,
+    )
+    correction = q_line - newton
+    correction[~cold] = np.nan
+    sing = line_manipulability(kin, J_line)
+    a, b = poses[segment, :3, 3], poses[segment + 1, :3, 3]
+    chord = b - a
+    along = np.clip(
+        np.einsum("ij,ij->i", lin_poses[:, :3, 3] - a, chord)
+        / np.maximum(np.einsum("ij,ij->i", chord, chord), 1e-300),
+        0.0,
+        1.0,
+    )
+    off_line = np.linalg.norm(lin_poses[:, :3, 3] - (a + along[:, None] * chord), axis=1)
+    angle = np.degrees(np.linalg.norm(errors[:, 3:], axis=1))  # the angle of R_target R_linᵀ
+    first = segment_starts(segment)
+    return (
+        q_line,
+        err,
+        correction,
+        np.minimum.reduceat(sing, first),
+        np.maximum.reduceat(off_line, first),
+        np.maximum.reduceat(angle, first),
+    )
