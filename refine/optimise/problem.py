@@ -31,6 +31,7 @@ import numpy as np
 
 from refine.errors import InputError
 from refine.optimise.derivatives import (
+    NLPSOL_FUNCTIONS,
     derivative_functions,
     orientation_factor,
     smoothness_matrix,
@@ -452,7 +453,8 @@ def build_refinement(
         options = {**IPOPT_DEFAULTS, **(REDUNDANT_IPOPT if n > 6 else {}), **held, **(solver_options or {})}
         ipopt = {k: v for k, v in options.items() if not k.startswith(FATROP_PREFIX)}
         watch = iteration_watch(x.numel(), g.numel(), p.numel())
-        built = ca.nlpsol("refine", "ipopt", nlp, {**derivatives, **ipopt, "iteration_callback": watch})
+        given = {k: v for k, v in derivatives.items() if k in NLPSOL_FUNCTIONS}
+        built = ca.nlpsol("refine", "ipopt", nlp, {**given, **ipopt, "iteration_callback": watch})
     return RefinementNLP(
         nlp=nlp,
         solver=built,
