@@ -1,7 +1,9 @@
 """The Newton step of the refinement's KKT system with an active set held: evaluation and linear algebra.
 
-:class:`Evaluator` evaluates the problem's own derivative functions (the ``grad_f``, ``jac_g``
-and ``hess_lag`` it gives IPOPT) into NumPy buffers, without CasADi matrices. The step
+:class:`Evaluator` evaluates the problem's own derivatives (those of the ``grad_f``, ``jac_g`` and
+``hess_lag`` it gives IPOPT, from one call per point:
+:class:`refine.optimise.derivatives.NewtonFunctions`) into NumPy buffers, without CasADi
+matrices. The step
 ``[[H, Aᵀ], [A, 0]] (dx, λ) = (-∇f, r)`` of the held rows ``A`` is solved in one of two ways:
 
 * :class:`NullSpaceStep`, when every held row touches one waypoint (the position and cone rows,
