@@ -266,6 +266,9 @@ def derivative_functions(
 ) -> dict[str, ca.Function]:
     """``grad_f``, ``jac_g`` and ``hess_lag`` of the refinement NLP, in CasADi's nlpsol signatures.
 
+    Without slack variables also ``newton``, the same derivatives a point at a time for the Newton
+    correction (:class:`NewtonFunctions`, not an nlpsol option).
+
     Args:
         kernels: from :func:`waypoint_kernels`.
         N: waypoints.
@@ -378,10 +381,6 @@ def derivative_functions(
             [x, p, lam_g], grad, rows_g, jac, ca.substitute(hess, lam_f, ca.MX(1.0))
         )
     return functions
-
-
-NLPSOL_FUNCTIONS = ("grad_f", "jac_g", "hess_lag")
-"""The entries of :func:`derivative_functions`'s dictionary that are CasADi nlpsol options."""
 
 
 class NewtonFunctions:

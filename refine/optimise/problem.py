@@ -31,7 +31,6 @@ import numpy as np
 
 from refine.errors import InputError
 from refine.optimise.derivatives import (
-    NLPSOL_FUNCTIONS,
     derivative_functions,
     orientation_factor,
     smoothness_matrix,
@@ -453,7 +452,7 @@ def build_refinement(
         options = {**IPOPT_DEFAULTS, **(REDUNDANT_IPOPT if n > 6 else {}), **held, **(solver_options or {})}
         ipopt = {k: v for k, v in options.items() if not k.startswith(FATROP_PREFIX)}
         watch = iteration_watch(x.numel(), g.numel(), p.numel())
-        given = {k: v for k, v in derivatives.items() if k in NLPSOL_FUNCTIONS}
+        given = {k: v for k, v in derivatives.items() if isinstance(v, ca.Function)}  # nlpsol's options
         built = ca.nlpsol("refine", "ipopt", nlp, {**given, **ipopt, "iteration_callback": watch})
     return RefinementNLP(
         nlp=nlp,
