@@ -99,7 +99,7 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 
 def checked_call(fn: F) -> F:
-    """``fn`` with its arguments bound first: an unknown keyword or a missing argument is an ArgumentError.
+    """``fn`` whose unknown keyword or missing argument is an ArgumentError (not Python's TypeError).
 
     The error names the keyword (``key``), its value and the keywords ``fn`` takes (``expected``),
     with the nearest one when the name looks misspelt.
@@ -112,18 +112,26 @@ def checked_call(fn: F) -> F:
 
     @functools.wraps(fn)
     def call(*args: Any, **kwargs: Any) -> Any:
+        # Python binds the arguments by the same rules before ``fn`` runs a line, so the signature
+        # is bound (for the message) only when the call raised a TypeError; one from inside ``fn``
+        # (the arguments bind) is raised as it was
         try:
-            signature.bind(*args, **kwargs)
-        except TypeError as e:
-            unknown = next((k for k in kwargs if k not in signature.parameters), None) if closed else None
-            near = difflib.get_close_matches(unknown, names, n=1) if unknown else []
-            hint = f"; did you mean {near[0]!r}?" if near else ""
-            raise ArgumentError(
-                f"{fn.__qualname__.removesuffix('.__init__')}: {e}{hint} (it takes {', '.join(names)})",
-                key=unknown,
-                value=kwargs.get(unknown) if unknown else None,
-                expected=f"one of the arguments {', '.join(names)}",
-            ) from None
-        return fn(*args, **kwargs)
+            return fn(*args, **kwargs)
+        except TypeError:
+            try:
+                signature.bind(*args, **kwargs)
+            except TypeError as e:
+                error = e
+            else:
+                raise
+        unknown = next((k for k in kwargs if k not in signature.parameters), None) if closed else None
+        near = difflib.get_close_matches(unknown, names, n=1) if unknown else []
+        hint = f"; did you mean {near[0]!r}?" if near else ""
+        raise ArgumentError(
+            f"{fn.__qualname__.removesuffix('.__init__')}: {error}{hint} (it takes {', '.join(names)})",
+            key=unknown,
+            value=kwargs.get(unknown) if unknown else None,
+            expected=f"one of the arguments {', '.join(names)}",
+        ) from None
 
     return call  # type: ignore[return-value]

@@ -745,3 +745,51 @@ def test_continuous_quaternions_agree_with_walking_the_sequence(signs, kinds):
             q[k] = [np.nan, 0.0, 0.0, 0.0]
         q[k] *= sign
     np.testing.assert_array_equal(continuous_quaternions(q), _continuous_by_walking(q))
+
+
+def _refuses(check, value) -> bool:
+    try:
+        check(value)
+    except InputError:
+        return True
+    return False
+
+
+def _reference_rotation_refuses(R, atol=1e-6) -> bool:
+    """check_rotation's rule written plainly: orthonormal within atol, no negative determinant (LAPACK)."""
+    R = np.asarray(R, dtype=float)
+    if R.size == 0:
+        return False
+    RtR = np.einsum("...ji,...jk->...ik", R, R)
+    return bool(np.max(np.abs(RtR - np.eye(3))) > atol or np.min(np.linalg.det(R)) < 0.0)
+
+
+def _reference_transform_refuses(T) -> bool:
+    T = np.asarray(T, dtype=float)
+    return _reference_rotation_refuses(T[..., :3, :3]) or not np.allclose(T[..., 3, :], [0.0, 0.0, 0.0, 1.0])
+
+
+def test_rotation_and_transform_checks_refuse_exactly_what_the_plain_rule_refuses():
+    """Rotations, reflections, matrices off orthonormal near the tolerance, stacks with one bad
+    matrix, NaN, and last rows on either side of NumPy's allclose tolerance (rtol 1e-5, atol 1e-8)."""
+    rng = np.random.default_rng(5)
+    flip = np.diag([1.0, 1.0, -1.0])
+    cases = []
+    for R in Rotation.random(40, random_state=3).as_matrix():
+        cases += [R, R @ flip, R * (1 + 4.9e-7), R * (1 + 5.1e-7), R + rng.normal(scale=3e-7, size=(3, 3))]
+        cases += [R * 0.7, R @ flip * 0.4, np.zeros((3, 3)), np.full((3, 3), np.nan)]
+    stacks = [np.stack(cases[i : i + 5]) for i in range(0, len(cases), 5)]
+    stacks += [Rotation.random(9, random_state=4).as_matrix(), np.zeros((0, 3, 3))]
+    refused = 0
+    for R in cases + stacks:
+        assert _refuses(check_rotation, R) == _reference_rotation_refuses(R)
+        refused += _refuses(check_rotation, R)
+    assert 0 < refused < len(cases + stacks)  # both outcomes were met
+    for R in Rotation.random(10, random_state=6).as_matrix():
+        for last in ([0, 0, 0, 1], [0, 0, 0, 1 + 1.01e-5], [0, 0, 0, 1 + 0.99e-5], [0.99e-8, 0, 0, 1], [1.01e-8, 0, 0, 1],
+                     [0, 0, 0, np.inf], [0, 0, np.nan, 1], [0, -2e-8, 0, 1 - 1.2e-5]):  # fmt: skip
+            T = make_transform(R, rng.normal(size=3))
+            T[3] = last
+            assert _refuses(check_transform, T) == _reference_transform_refuses(T), last
+            stack = np.stack([make_transform(R), T])
+            assert _refuses(check_transform, stack) == _reference_transform_refuses(stack), last

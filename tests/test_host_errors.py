@@ -128,3 +128,21 @@ def test_write_and_program_speak_of_the_api_not_the_command_line(result, tmp_pat
     assert e.value.key == "programs[0]"
     with pytest.raises(refine.ArgumentError):
         result.to_dict(content=True)
+
+
+def test_a_type_error_from_inside_a_checked_call_is_raised_as_it_was():
+    """Arguments that bind run the call; a TypeError it raises itself is not an argument error."""
+
+    @refine.errors.checked_call
+    def takes(a, *, b=1):
+        return [] + a  # a TypeError inside, for a that is not a list
+
+    assert takes([1], b=2) == [1]
+    with pytest.raises(TypeError) as e:
+        takes(3)
+    assert not isinstance(e.value, refine.ArgumentError)
+    with pytest.raises(refine.ArgumentError, match="did you mean 'b'") as e:
+        takes([1], bb=2)
+    assert e.value.key == "bb"
+    with pytest.raises(refine.ArgumentError, match="missing a required argument: 'a'"):
+        takes(b=2)

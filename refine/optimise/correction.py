@@ -181,7 +181,8 @@ def newton_correction(
         nullspace = None
     step, factored, factors = np.inf, None, ()
     for iteration in range(MAX_NEWTON_STEPS + 1):
-        grad, g, jac_values = ev.first_order(x)
+        # the first step always needs the Hessian: evaluated with the rows, at once
+        grad, g, jac_values = ev.first_order(x, lam_g if iteration == 0 else None)
         stationarity = grad + ev.jacobian_t_times(jac_values, lam_g) + lam_x
         residual = target - g[rows]
         if iteration and np.abs(stationarity).max() <= tol and np.abs(residual).max(initial=0.0) <= ctol:

@@ -266,6 +266,9 @@ def derivative_functions(
 ) -> dict[str, ca.Function]:
     """``grad_f``, ``jac_g`` and ``hess_lag`` of the refinement NLP, in CasADi's nlpsol signatures.
 
+    Without slack variables also ``newton``, the same derivatives a point at a time for the Newton
+    correction (:class:`NewtonFunctions`, not an nlpsol option).
+
     Args:
         kernels: from :func:`waypoint_kernels`.
         N: waypoints.
@@ -304,7 +307,7 @@ def derivative_functions(
         Qs = Q[:, ks.tolist()] + (Q[:, kb.tolist()] - Q[:, ks.tolist()]) * ca.repmat(ca.DM(fs).T, n, 1)
 
     # ---- gradient of the cost
-    _, _, Jg, grad_cost = kernels["waypoint_d"].map(N)(Q, P_ref, R_demo)
+    G, _, Jg, grad_cost = kernels["waypoint_d"].map(N)(Q, P_ref, R_demo)
     grad = orientation_coef * ca.vec(grad_cost) + ca.mtimes(K, x[:nq]) + ca.DM(b)
     if ns:
         grad = ca.vertcat(grad, ca.DM.ones(ns) * elastic_weight)
@@ -369,7 +372,51 @@ def derivative_functions(
     hess_lag = ca.Function(
         "hess_lag", [x, p, lam_f, lam_g], [hess], ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"]
     )
-    return {"grad_f": grad_f, "jac_g": jac_g, "hess_lag": hess_lag}
+    functions: dict = {"grad_f": grad_f, "jac_g": jac_g, "hess_lag": hess_lag}
+    if not ns:
+        # the path rows from the same kernel call as their Jacobian; the other rows are g's own
+        # (a slice of the concatenation, which CasADi evaluates without the path rows)
+        rows_g = ca.vertcat(ca.vec(G), g[4 * N :])
+        functions["newton"] = NewtonFunctions(
+            [x, p, lam_g], grad, rows_g, jac, ca.substitute(hess, lam_f, ca.MX(1.0))
+        )
+    return functions
+
+
+class NewtonFunctions:
+    """The derivatives a Newton step of the KKT system needs, each set from one evaluation.
+
+    ``first(x, p) -> (∇f, g, J)`` and ``start(x, p, lam_g) -> (∇f, g, J, H)``, H the upper triangle
+    of the Hessian of the Lagrangian with ``lam_f = 1``: the values of ``grad_f``, ``jac_g`` and
+    ``hess_lag`` at the same point (the path rows ``g[:4N]`` from the kernel that also gives their
+    Jacobian: the same expression as the problem's own path rows, to rounding), with the
+    per-waypoint kernel mapped once where ``grad_f`` and ``jac_g`` each map it and evaluate the
+    objective or the rows once more. Built on first use (a cold solve never asks for them).
+    """
+
+    def __init__(self, inputs: list[ca.MX], grad: ca.MX, g: ca.MX, jac: ca.MX, hess: ca.MX) -> None:
+        self._made: dict[str, ca.Function] = {}
+        self._parts = inputs, grad, g, jac, hess
+        self._lock = threading.Lock()
+
+    def _function(self, name: str) -> ca.Function:
+        with self._lock:
+            if name not in self._made:
+                (x, p, lam_g), grad, g, jac, hess = self._parts
+                outs = [grad, g, jac] + ([hess] if name == "start" else [])
+                ins = [x, p] + ([lam_g] if name == "start" else [])
+                self._made[name] = ca.Function(f"newton_{name}", ins, outs)
+            return self._made[name]
+
+    @property
+    def first(self) -> ca.Function:
+        """``(x, p) -> (grad_f_x, g, jac_g_x)``."""
+        return self._function("first")
+
+    @property
+    def start(self) -> ca.Function:
+        """``(x, p, lam_g) -> (grad_f_x, g, jac_g_x, hess_gamma_x_x)`` with ``lam_f = 1``."""
+        return self._function("start")
 
 
 def orientation_factor(weight: float, N: int) -> float:

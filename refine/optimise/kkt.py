@@ -1,7 +1,9 @@
 """The Newton step of the refinement's KKT system with an active set held: evaluation and linear algebra.
 
-:class:`Evaluator` evaluates the problem's own derivative functions (the ``grad_f``, ``jac_g``
-and ``hess_lag`` it gives IPOPT) into NumPy buffers, without CasADi matrices. The step
+:class:`Evaluator` evaluates the problem's own derivatives (those of the ``grad_f``, ``jac_g`` and
+``hess_lag`` it gives IPOPT, from one call per point:
+:class:`refine.optimise.derivatives.NewtonFunctions`) into NumPy buffers, without CasADi
+matrices. The step
 ``[[H, Aᵀ], [A, 0]] (dx, λ) = (-∇f, r)`` of the held rows ``A`` is solved in one of two ways:
 
 * :class:`NullSpaceStep`, when every held row touches one waypoint (the position and cone rows,
@@ -80,26 +82,51 @@ class Evaluator:
         self.p = np.array(problem.params, dtype=float)
         self.lam = np.zeros(self.ng)
         self.one = np.ones(1)
-        self._grad = _bind(d["grad_f"], [self.x, self.p])
-        self._jac = _bind(d["jac_g"], [self.x, self.p])
         self._hess = _bind(d["hess_lag"], [self.x, self.p, self.one, self.lam])
+        newton = d.get("newton")
+        if newton is not None:  # one evaluation for the gradient, the rows and the Jacobian
+            self._first = _bind(newton.first, [self.x, self.p])
+            self._start = _bind(newton.start, [self.x, self.p, self.lam])
+        else:
+            self._grad = _bind(d["grad_f"], [self.x, self.p])
+            self._jac = _bind(d["jac_g"], [self.x, self.p])
+            self._first = self._start = None
         self.grad_rows = _pattern(d["grad_f"], 1)[0]
         self.g_rows = _pattern(d["jac_g"], 0)[0]
         self.jac_row, self.jac_col = _pattern(d["jac_g"], 1)
+        if newton is not None:  # its gradient and Jacobian are grad_f's and jac_g's expressions
+            self.g_rows = _pattern(newton.first, 1)[0]
         self.hess_row, self.hess_col = _pattern(d["hess_lag"], 0)
+        self._hess_values: Array | None = None
 
-    def first_order(self, x: Array) -> tuple[Array, Array, Array]:
-        """At ``x``: the cost gradient (nx,), the rows (ng,), the Jacobian's nonzeros (a view)."""
+    def first_order(self, x: Array, lam_g: Array | None = None) -> tuple[Array, Array, Array]:
+        """At ``x``: the cost gradient (nx,), the rows (ng,), the Jacobian's nonzeros (a view).
+
+        With ``lam_g``, the Hessian of the Lagrangian at ``x`` with these multipliers is evaluated in
+        the same call, for the next :meth:`hessian` of the same multipliers.
+        """
         self.x[:] = x
-        self._grad[1]()
-        self._jac[1]()
+        self._hess_values = None
+        if self._first is None:
+            self._grad[1]()
+            self._jac[1]()
+            grad_nz, g_nz, jac_nz = self._grad[2][1], self._jac[2][0], self._jac[2][1]
+        elif lam_g is None:
+            self._first[1]()
+            grad_nz, g_nz, jac_nz = self._first[2]
+        else:
+            self.lam[:] = lam_g
+            self._start[1]()
+            grad_nz, g_nz, jac_nz, self._hess_values = self._start[2]
         grad, g = np.zeros(self.nx), np.zeros(self.ng)
-        grad[self.grad_rows] = self._grad[2][1]
-        g[self.g_rows] = self._jac[2][0]
-        return grad, g, self._jac[2][1]
+        grad[self.grad_rows] = grad_nz
+        g[self.g_rows] = g_nz
+        return grad, g, jac_nz
 
     def hessian(self, lam_g: Array) -> Array:
         """The nonzeros of the Hessian of the Lagrangian's upper triangle at the last ``x`` (a view)."""
+        if self._hess_values is not None and np.array_equal(lam_g, self.lam):
+            return self._hess_values
         self.lam[:] = lam_g
         self._hess[1]()
         return self._hess[2][0]

@@ -452,7 +452,8 @@ def build_refinement(
         options = {**IPOPT_DEFAULTS, **(REDUNDANT_IPOPT if n > 6 else {}), **held, **(solver_options or {})}
         ipopt = {k: v for k, v in options.items() if not k.startswith(FATROP_PREFIX)}
         watch = iteration_watch(x.numel(), g.numel(), p.numel())
-        built = ca.nlpsol("refine", "ipopt", nlp, {**derivatives, **ipopt, "iteration_callback": watch})
+        given = {k: v for k, v in derivatives.items() if isinstance(v, ca.Function)}  # nlpsol's options
+        built = ca.nlpsol("refine", "ipopt", nlp, {**given, **ipopt, "iteration_callback": watch})
     return RefinementNLP(
         nlp=nlp,
         solver=built,

@@ -43,8 +43,17 @@ def robots_dir() -> Path:
     override = os.environ.get("REFINE_ROBOTS_DIR")
     if override:
         return Path(override)
-    source = Path(__file__).resolve().parents[2] / "robots"
-    return source if source.is_dir() or not PACKAGED_ROBOTS.is_dir() else PACKAGED_ROBOTS
+    return _SOURCE_ROBOTS if _SOURCE_ROBOTS.is_dir() or not PACKAGED_ROBOTS.is_dir() else PACKAGED_ROBOTS
+
+
+_SOURCE_ROBOTS = Path(__file__).resolve().parents[2] / "robots"
+"""``robots/`` beside the package (a source checkout or an editable install)."""
+
+
+@functools.cache
+def _resolved_default(folder: Path) -> str:
+    """A default registry folder resolved, once per process (the package's place does not move)."""
+    return str(folder.resolve())
 
 
 def available_robots() -> list[str]:
@@ -62,7 +71,10 @@ def load_robot(name: str) -> Robot:
         InputError: if the name is unknown (the message lists the available robots) or the
             robot's files are inconsistent.
     """
-    return _load_robot(name, str(robots_dir().resolve()))
+    root = robots_dir()
+    return _load_robot(
+        name, _resolved_default(root) if root in (_SOURCE_ROBOTS, PACKAGED_ROBOTS) else str(root.resolve())
+    )
 
 
 def robot_argument(robot: object) -> Robot:

@@ -1,6 +1,7 @@
 """The hand-assembled derivatives of the refinement NLP against CasADi's own differentiation, and the
 on-disk cache of compiled kernels."""
 
+import dataclasses
 import os
 
 import casadi as ca
@@ -11,6 +12,7 @@ from refine.errors import InputError
 from refine.optimise import compiled as compiled_module
 from refine.optimise.compiled import compiled, compiler
 from refine.optimise.derivatives import waypoint_kernels
+from refine.optimise.kkt import Evaluator
 from refine.optimise.problem import ActiveSet, LinearRow, Weights, build_refinement
 from refine.problem import Tolerances
 from refine.synthetic import wave_path
@@ -185,3 +187,72 @@ def test_the_cache_folder_keeps_its_bound_dropping_the_least_recently_used(tmp_p
     monkeypatch.setenv("REFINE_CACHE_MAX_MB", "lots")
     with pytest.raises(InputError, match="REFINE_CACHE_MAX_MB must be a number of megabytes"):
         compiled("t", "key-9", make(9.0))
+
+
+@pytest.mark.parametrize(("singularity_hessian", "joint_steps"), [(True, (0, 7, 20, 65)), (False, "all")])
+def test_the_newton_evaluation_gives_the_nlp_derivatives_at_once(
+    irb4600, straight_tool, monkeypatch, singularity_hessian, joint_steps
+):
+    """The Newton correction's one-call evaluation gives CasADi's own gradient, rows, Jacobian and
+    Hessian of the problem, and the values of the separate grad_f, jac_g and hess_lag to rounding."""
+    monkeypatch.setenv("REFINE_COMPILE", "0")  # CasADi differentiates the problem twice itself
+    nlp = _problem(
+        irb4600,
+        straight_tool,
+        elastic=False,
+        singularity_hessian=singularity_hessian,
+        joint_steps=joint_steps,
+    )
+    assert "newton" in nlp.derivatives
+    x, p, f, g = (nlp.nlp[k] for k in ("x", "p", "f", "g"))
+    lam_g = ca.MX.sym("lam_g", g.shape[0])
+    hessian = ca.triu(ca.hessian(f + ca.dot(lam_g, g), x)[0])
+    reference = ca.Function("reference", [x, p, lam_g], [ca.gradient(f, x), g, ca.jacobian(g, x), hessian])
+    rng = np.random.default_rng(11)
+    xv = rng.uniform(nlp.lbx, nlp.ubx) * 0.5
+    lg = rng.normal(size=g.shape[0])
+    if not singularity_hessian:  # the four singularity rows follow the path and step rows
+        first = 4 * nlp.n_waypoints + (
+            6 * (nlp.n_waypoints - 1) if joint_steps == "all" else len(joint_steps)
+        )
+        lg[first : first + 4] = 0.0
+    grad_ref, g_ref, jac_ref, hess_ref = (np.array(ca.densify(v)) for v in reference(xv, nlp.params, lg))
+    _, grad_sep = nlp.derivatives["grad_f"](xv, nlp.params)
+    g_sep, jac_sep = nlp.derivatives["jac_g"](xv, nlp.params)
+    hess_sep = nlp.derivatives["hess_lag"](xv, nlp.params, 1.0, lg)
+
+    ev = Evaluator(nlp)
+    grad1, g1, jac1 = (np.array(v, copy=True) for v in ev.first_order(xv))
+    grad0, g0, jac0 = ev.first_order(xv, lg)
+    hess0 = ev.hessian(lg)
+    assert jac0 is not jac1  # each evaluation has its own buffers
+    for grad_ev, g_ev, jac_ev in ((grad1, g1, jac1), (grad0, g0, jac0)):
+        np.testing.assert_allclose(grad_ev, grad_ref.ravel(), rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(g_ev, g_ref.ravel(), atol=1e-12)
+        np.testing.assert_allclose(ev.jacobian(jac_ev).toarray(), jac_ref, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(grad_ev, np.array(grad_sep).ravel(), rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(g_ev, np.array(g_sep).ravel(), rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(
+            ev.jacobian(jac_ev).toarray(), np.array(ca.densify(jac_sep)), rtol=1e-12, atol=1e-12
+        )
+    upper = np.triu(ev.hessian_matrix(hess0).toarray())
+    np.testing.assert_allclose(upper, hess_ref, rtol=1e-8, atol=1e-8)
+    np.testing.assert_allclose(upper, np.array(ca.densify(hess_sep)), rtol=1e-12, atol=1e-12)
+    # another point's Hessian is evaluated there, not the one kept from the first
+    xv2 = xv + 1e-2
+    ev.first_order(xv2)
+    hess2 = np.triu(ev.hessian_matrix(ev.hessian(lg)).toarray())
+    np.testing.assert_allclose(
+        hess2,
+        np.array(ca.densify(nlp.derivatives["hess_lag"](xv2, nlp.params, 1.0, lg))),
+        rtol=1e-12,
+        atol=1e-12,
+    )
+    assert np.abs(hess_ref).max() > 1.0 and np.abs(g_ref).max() > 1e-2  # the comparison is not of zeros
+    # without them (an elastic problem has none) the separate functions give the same
+    separate = Evaluator(
+        dataclasses.replace(nlp, derivatives={k: v for k, v in nlp.derivatives.items() if k != "newton"})
+    )
+    for a, b in zip(separate.first_order(xv), (grad1, g1, jac1), strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(separate.hessian(lg), hess0, rtol=1e-12, atol=1e-12)
