@@ -53,7 +53,8 @@ def kind_minima(model: Any, q: Array, clearance: Any) -> KindMinima:
     is_cell = np.array([kinds.get(b) == "cell" or kinds.get(a) == "cell" for a, b in model.pairs], dtype=bool)
     if not len(is_cell):
         return KindMinima(None, None)
-    bounds = model.box_bounds(model.moving_poses(q))  # (N, P), -inf where the boxes overlap
+    poses = model.moving_poses(q)  # the check's, kept for these joints, as are their boxes
+    bounds = model.box_bounds(poses)  # (N, P), -inf where the boxes overlap
     carried = getattr(clearance, "bounds", None)
     if (
         carried is not None
@@ -74,7 +75,7 @@ def kind_minima(model: Any, q: Array, clearance: Any) -> KindMinima:
             i, j = divmod(int(flat), len(columns))
             if sub[i, j] >= best:
                 break  # no pair left can come closer
-            best = min(best, model.pair_distance(q[i], int(columns[j])))
+            best = min(best, model.pair_distance(q[i], int(columns[j]), poses[i]))
             queries += 1
         out.append(float(best))
     return KindMinima(out[0], out[1], queries)

@@ -255,6 +255,7 @@ def test_the_proofs_bounds_are_those_waypoint_by_waypoint_and_below_every_distan
     a fresh model bounding the same pairs waypoint by waypoint (the gap along the pair's last
     normal, kept when above the margin, else FCL; ``pair_bound`` for a pair without a normal), and
     FCL's distance of every pair."""
+    from refine.collision import advance
     from refine.collision import check as check_module
 
     sphere = Shape("ball", "sphere", pose=make_transform(p=[1.05, -0.3, 1.1]), radius_m=0.08)
@@ -268,8 +269,8 @@ def test_the_proofs_bounds_are_those_waypoint_by_waypoint_and_below_every_distan
     model = make_model(robot, cell, (nozzle,))
     poses, boxes, bounds, exact = check_module._waypoint_bounds(model, q, 1e-4, True, plane=True)
     reference = make_model(robot, cell, (nozzle,))
-    motion = check_module._pair_motion(reference, q)
-    short = check_module._short(boxes - reference.pair_margins + 1e-4, motion)
+    motion = advance.pair_motion(reference, q)
+    short = advance.short(boxes - reference.pair_margins + 1e-4, motion)
     need = np.zeros(boxes.shape, dtype=bool)
     need[:-1] |= short
     need[1:] |= short

@@ -69,7 +69,9 @@ def test_a_longer_torch_on_the_same_robot_gets_bounds_of_its_own(arm):
     """A second model on the same robot, its torch 0.6 m long where the first's is 0.2 m: its
     bounds are its own (the robot's links' as the first model's) and hold as the first's do."""
     robot, first = arm
-    long_torch = Shape("torch", "cylinder", pose=make_transform(p=[0.0, 0.0, 0.3]), radius_m=0.02, length_m=0.6)
+    long_torch = Shape(
+        "torch", "cylinder", pose=make_transform(p=[0.0, 0.0, 0.3]), radius_m=0.02, length_m=0.6
+    )
     model = CollisionModel(robot, np.eye(4), TCP, (long_torch,), (FAR,), margin_m=MARGIN, self_margin_m=0.005)
     assert first.pairs == model.pairs
     tool = np.array(["tool:" in a for a, _ in model.pairs])
@@ -234,7 +236,7 @@ def test_advancement_never_certifies_a_segment_where_some_motion_within_the_boun
     """The budget f(t) = slope |t - t*| - depth, slope <= S, changes no faster than S, as a pair's
     budget does, and dips below zero only around t*. Whatever t* and the depth, advancement must not certify
     [0, 1]; with the dip lifted above zero it must, within its sample limit."""
-    from refine.collision.check import MAX_ADVANCE, _advance
+    from refine.collision.advance import MAX_ADVANCE, advance
 
     rng = np.random.default_rng(5)
     for _ in range(2000):
@@ -251,10 +253,10 @@ def test_advancement_never_certifies_a_segment_where_some_motion_within_the_boun
         b0, b1 = dip(0.0), dip(1.0)
         if min(b0, b1) < 0.0:
             continue
-        assert not _advance(dip, b0, b1, S), (S, t_star, depth, calls)
+        assert not advance(dip, b0, b1, S), (S, t_star, depth, calls)
 
         def lifted(t, slope=slope, t_star=t_star, S=S):
             return slope * abs(t - t_star) + 0.3 * S
 
-        assert _advance(lifted, lifted(0.0), lifted(1.0), S)
+        assert advance(lifted, lifted(0.0), lifted(1.0), S)
         assert len(calls) <= 2 + 2 * MAX_ADVANCE
