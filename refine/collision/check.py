@@ -536,6 +536,8 @@ def _waypoint_bounds(
         left_now = short(bounds - model.pair_margins + tolerance_m, pair_motion(model, q_path))
         need[:-1] |= left_now
         need[1:] |= left_now
+    if left is not None and need[np.setdiff1d(np.arange(len(q_path)), rows)].any():
+        raise AssertionError("the proof from known bounds would read a waypoint it did not place")
     if plane and at_waypoint is None:
         bounds_along_normals(model, q_path, poses, need, bounds, exact, out)
         return poses, boxes, bounds, exact
