@@ -170,14 +170,14 @@ def direction_bounds(
     have = ~np.isnan(normals[:, :, 0])
     if columns is not None:
         have &= columns
-    cols = np.flatnonzero(have.any(axis=0))
-    if not len(cols):
-        return out
-    given = have[:, cols]
-    n = np.where(given[:, :, None], normals[:, cols], 0.0)
-    n[given] /= np.linalg.norm(n[given], axis=1, keepdims=True)  # unit, whatever rounding left
-    gaps = model.plane_gaps(cols, poses, n)  # NaN for a mesh: no bound
-    out[:, cols] = np.where(given & (gaps > 0.0), gaps, -np.inf)
+    for p in np.flatnonzero(have.any(axis=0)):
+        ks = np.flatnonzero(have[:, p])
+        every = len(ks) == len(poses)  # then all the rows as they are, not a copy of every body's poses
+        n = normals[:, p] if every else normals[ks, p]
+        n = n / np.linalg.norm(n, axis=1, keepdims=True)  # unit, whatever rounding left
+        gaps = model.plane_bounds(int(p), poses if every else poses[ks], n)
+        if gaps is not None:
+            out[ks, p] = np.where(gaps > 0.0, gaps, -np.inf)
     return out
 
 
@@ -309,15 +309,13 @@ def raise_near(
     (any unit direction does, see the module notes); near k the joints, hence the normal, have
     turned little, so the gap is close to the distance there. Waypoint k keeps its own figures.
     """
-    if not found:
-        return
-    near = np.arange(max(k - NEAR, 0), min(k + NEAR + 1, len(bounds)))
-    near = near[near != k]
-    cols = np.fromiter(found, dtype=int, count=len(found))
-    n = np.array([found[p][1] for p in cols.tolist()])  # (C, 3), the same at every waypoint near
-    gaps = model.plane_gaps(cols, poses[near], np.broadcast_to(n, (len(near), *n.shape)))  # NaN: a mesh
-    rows = near[:, None]
-    bounds[rows, cols] = np.maximum(bounds[rows, cols], np.where(gaps > 0.0, gaps, -np.inf))
+    lo, hi = max(k - NEAR, 0), min(k + NEAR + 1, len(bounds))
+    near = np.arange(lo, hi) != k  # of the rows lo..hi-1, a view of the poses (no copy)
+    for p, (_, n) in found.items():
+        gaps = model.plane_bounds(p, poses[lo:hi], n)
+        if gaps is not None:
+            rows = bounds[lo:hi, p]
+            rows[near] = np.maximum(rows[near], np.where(gaps[near] > 0.0, gaps[near], -np.inf))
 
 
 def tightener(

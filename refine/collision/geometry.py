@@ -160,27 +160,6 @@ class Body:
             return base + np.abs(local) @ dims[0]
         return base + dims[1] * np.abs(local[:, 2]) + dims[0] * np.hypot(local[:, 0], local[:, 1])
 
-    def reach_grid(self, T: Array, directions: Array) -> Array:
-        """:meth:`reach` for several directions per pose, (K, C) [m].
-
-        ``T``: the body's pose per row (K, 4, 4), or one pose (4, 4) for every row;
-        ``directions`` (K, C, 3): C directions per row.
-        """
-        d = np.asarray(directions, dtype=float)
-        t, R = T[..., :3, 3], T[..., :3, :3]
-        base = (d @ t[:, :, None])[..., 0] if T.ndim == 3 else d @ t
-        local = d @ R  # each direction in the shape frame, (K, C, 3)
-        if self.vertices is not None:
-            return base + (local @ self.vertices.T).max(axis=-1)
-        tag, *dims = self.kind_params
-        if tag == "convex":
-            return base + (local @ dims[0].T).max(axis=-1)
-        if tag == "sphere":
-            return base + dims[0] * np.linalg.norm(d, axis=-1)
-        if tag == "box":
-            return base + np.abs(local) @ dims[0]
-        return base + dims[1] * np.abs(local[..., 2]) + dims[0] * np.hypot(local[..., 0], local[..., 1])
-
     def support(self, T: Array, direction: Array) -> Array:
         """The point of the body placed at T (4, 4) furthest along ``direction`` (3,), world [m]."""
         R, c = T[:3, :3], T[:3, 3]

@@ -479,26 +479,6 @@ class CollisionModel:
         Tb = poses[:, b] if b < m else np.broadcast_to(self._poses[b], (len(poses), 4, 4))
         return -self.bodies[a].reach_many(Ta, -n) - self.bodies[b].reach_many(Tb, n)
 
-    def plane_gaps(self, columns: ArrayLike, poses: Array, normals: Array) -> Array:
-        """Lower bounds [m] on several pairs' distances at rows of moving-body poses, (K, C).
-
-        What :meth:`plane_bounds` gives along ``normals``, for the pairs ``columns`` (C,) (indices
-        into :attr:`pairs`) at once: ``poses`` (K, M, 4, 4), ``normals`` (K, C, 3) one unit vector
-        per row and pair (any unit vector gives a lower bound). NaN for a pair with a mesh.
-        """
-        columns = np.asarray(columns, dtype=int)
-        normals = np.asarray(normals, dtype=float)
-        gaps = np.zeros((len(poses), len(columns)))
-        for side, sign in ((self._pa[columns], -1.0), (self._pb[columns], 1.0)):
-            groups: dict[int, list[int]] = {}  # each body once, with all its pairs' directions
-            for i, b in enumerate(side.tolist()):
-                groups.setdefault(b, []).append(i)
-            for b, cols in groups.items():
-                T = poses[:, b] if b < self._n_moving else self._poses[b]
-                gaps[:, cols] -= self.bodies[b].reach_grid(T, sign * normals[:, cols])
-        gaps[:, ~self._bounded[columns]] = np.nan
-        return gaps
-
     def _hull_bound(self, k: int) -> float:
         a, b = int(self._pa[k]), int(self._pb[k])
         self._ensure_placed(a)

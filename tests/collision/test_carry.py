@@ -265,7 +265,9 @@ def test_the_warm_glass_check_reports_the_least_distance_and_pair_of_every_waypo
     reports the least distance, the least clearance and its pair that FCL gives over every pair at
     every waypoint of the answer's joints."""
     s = glass_shift
-    warm = refine.refine_path("abb_irb4600_60_205", s.positions, s.orientations, previous=s.first, **s.part)
+    warm = refine.refine_path(
+        "abb_irb4600_60_205", s.positions, s.orientations, previous=s.first, **s.part
+    )
     assert warm.status == "ok"
     check = warm.run.first.clearance
     assert check.waypoint_measured is not None and check.waypoint_measured.sum() < 60

@@ -58,9 +58,7 @@ def fcl_nozzle_to(robot, q, box):
     pin.forwardKinematics(robot.model, data, q)
     fid = robot.model.getFrameId(robot.spec.flange_frame)
     T = pin.updateFramePlacement(robot.model, data, fid).homogeneous @ NOZZLE.pose
-    nozzle = fcl.CollisionObject(
-        fcl.Cylinder(NOZZLE.radius_m, NOZZLE.length_m), fcl.Transform(T[:3, :3], T[:3, 3])
-    )
+    nozzle = fcl.CollisionObject(fcl.Cylinder(NOZZLE.radius_m, NOZZLE.length_m), fcl.Transform(T[:3, :3], T[:3, 3]))
     other = fcl.CollisionObject(fcl.Box(*box.size_m), fcl.Transform(box.pose[:3, :3], box.pose[:3, 3]))
     return fcl.distance(nozzle, other, fcl.DistanceRequest())
 

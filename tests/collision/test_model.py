@@ -285,10 +285,7 @@ def test_threads_placing_one_model_get_each_their_own_joints_poses(cell_model, b
     pm = model.robot.model
     rng = np.random.default_rng(11)
     paths = [[_random_q(model.robot, rng, 0.5)[None] for _ in range(6)] for _ in range(8)]
-    paths = [
-        rows + [np.vstack([_random_q(model.robot, rng, 0.5) for _ in range(120)]) for _ in range(3)]
-        for rows in paths
-    ]
+    paths = [rows + [np.vstack([_random_q(model.robot, rng, 0.5) for _ in range(120)]) for _ in range(3)] for rows in paths]
 
     def expected(qs):
         data = pm.createData()

@@ -69,9 +69,7 @@ def test_a_longer_torch_on_the_same_robot_gets_bounds_of_its_own(arm):
     """A second model on the same robot, its torch 0.6 m long where the first's is 0.2 m: its
     bounds are its own (the robot's links' as the first model's) and hold as the first's do."""
     robot, first = arm
-    long_torch = Shape(
-        "torch", "cylinder", pose=make_transform(p=[0.0, 0.0, 0.3]), radius_m=0.02, length_m=0.6
-    )
+    long_torch = Shape("torch", "cylinder", pose=make_transform(p=[0.0, 0.0, 0.3]), radius_m=0.02, length_m=0.6)
     model = CollisionModel(robot, np.eye(4), TCP, (long_torch,), (FAR,), margin_m=MARGIN, self_margin_m=0.005)
     assert first.pairs == model.pairs
     tool = np.array(["tool:" in a for a, _ in model.pairs])
