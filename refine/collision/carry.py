@@ -251,9 +251,11 @@ def bounds_between(model: CollisionModel, checked: CheckedBounds, q: Array, plac
         return None
     b = np.where(at_waypoint, a, np.minimum(a + 1, N - 1))  # a waypoint keeps its own bound
     R = model.pair_motion.T  # (n, P) [m/rad]
-    return np.maximum(
-        checked.bounds[a] - np.abs(q - checked.q[a]) @ R, checked.bounds[b] - np.abs(q - checked.q[b]) @ R
-    )
+    out = checked.bounds[a]  # (K, P), a copy: taken in place from here on
+    out -= np.abs(q - checked.q[a]) @ R
+    other = checked.bounds[b]
+    other -= np.abs(q - checked.q[b]) @ R
+    return np.maximum(out, other, out=out)
 
 
 def bounds_along_normals(

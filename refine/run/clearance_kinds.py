@@ -102,9 +102,11 @@ def _between_waypoints(clearance: Any, kinds: dict[str, str], cell: bool, margin
     """The least distance of a kind's pair where it held a segment's least clearance [m] (inf if none)."""
     best = np.inf
     samples = getattr(clearance, "segment_samples", None)
-    for k, (body, other) in enumerate(clearance.segment_pair):
-        if samples is not None and samples[k] == 1:
-            continue  # nothing inside: its figures are its ends', which the waypoints give exactly
+    pairs = clearance.segment_pair
+    # a segment with nothing inside has its ends' figures, which the waypoints give exactly
+    inside = range(len(pairs)) if samples is None else np.flatnonzero(np.asarray(samples) != 1).tolist()
+    for k in inside:
+        body, other = pairs[k]
         if (kinds.get(other) == "cell" or kinds.get(body) == "cell") == cell and body:
             best = min(best, float(clearance.segment_clearance_m[k]) + margin_m)
     return best
