@@ -16,7 +16,8 @@ samples, provided ``m_p >= tolerance_m`` (the distances the proof uses are then 
 and up to the accuracy of FCL's distances (checked against a separating plane, see
 :mod:`refine.collision.distance`). Segments not certified are sampled densely (below) and reported
 as such by ``certified_segments``: that happens only where a margin is broken (the path then fails
-the check anyway) or where one pair needs more than :data:`~refine.collision.advance.MAX_ADVANCE` samples inside one segment.
+the check anyway) or where one pair needs more than
+:data:`~refine.collision.advance.MAX_ADVANCE` samples inside one segment.
 
 **How.** Per pair, a motion bound (:mod:`refine.collision.motion`): along a segment neither body
 of pair p moves relative to the other further than ``S_p = Σ_j |Δq_j| R_pj``, summed only over the
@@ -28,10 +29,10 @@ from a parameter where the pair's budget ``b = d_p - m_p + tolerance_m`` is know
 two ends add up to ``S_p`` at least; lower bounds on ``d_p`` serve where they suffice (the gap
 between world-aligned boxes around the two bodies, or the distance to a cell mesh's convex hull),
 so far pairs cost no FCL query. A pair that falls short is measured exactly at the ends, and then
-advanced from the start by conservative advancement, one FCL query of that pair per step, until
-the span certified from the end is reached. At every waypoint the pair with the least clearance
-and the pair with the least distance are measured exactly (:meth:`CollisionModel.nearest_pairs`),
-for the figures and the runs.
+advanced from the start by conservative advancement (:mod:`refine.collision.advance`), one FCL
+query of that pair per step, until the span certified from the end is reached. At every waypoint
+the pair with the least clearance and the pair with the least distance are measured exactly
+(:meth:`CollisionModel.nearest_pairs`), for the figures and the runs.
 
 **Dense sampling (``method="sample"``, and the fallback).** Each segment is cut into enough
 sub-steps that

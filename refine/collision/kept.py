@@ -70,7 +70,7 @@ def recall(key: bytes) -> Kept | None:
 
 
 def remember(key: bytes, known: Kept) -> None:
-    """Keep ``known`` for the next model of structure ``key``, dropping the oldest past :data:`KEPT_MODELS`."""
+    """Keep ``known`` for the next model of structure ``key``, the oldest dropped past :data:`KEPT_MODELS`."""
     with _LOCK:
         KEPT[key] = known
         while len(KEPT) > KEPT_MODELS:

@@ -322,7 +322,8 @@ def test_threads_placing_one_model_get_each_their_own_joints_poses(cell_model, b
 
 
 def _world_boxes(model, robot, base, q):
-    """World-aligned boxes (centre, half sizes) of every body at joints q, from Pinocchio and each body's box corners."""
+    """World-aligned boxes (low and high corners) [m] of every body at joints q, from Pinocchio and
+    each body's box corners."""
     import pinocchio as pin
 
     data = robot.model.createData()
