@@ -7,7 +7,8 @@
 * Which pairs are checked: ``pairs.py``. One pair's signed distance and witness points, with
   python-fcl's mesh pitfalls worked around: ``distance.py``. Bodies and bounds: ``geometry.py``.
 * :func:`check_path_clearance` (``check.py``): the dense final check between waypoints;
-  :func:`margins_proved` its proof alone, without the figures.
+  :func:`margins_proved` its proof alone, without the figures; the conservative advancement both
+  build on: ``advance.py``. What a model takes from the model built before it: ``kept.py``.
 """
 
 from refine.collision.check import (

@@ -172,9 +172,10 @@ def direction_bounds(
         have &= columns
     for p in np.flatnonzero(have.any(axis=0)):
         ks = np.flatnonzero(have[:, p])
-        n = normals[ks, p]
+        every = len(ks) == len(poses)  # then all the rows as they are, not a copy of every body's poses
+        n = normals[:, p] if every else normals[ks, p]
         n = n / np.linalg.norm(n, axis=1, keepdims=True)  # unit, whatever rounding left
-        gaps = model.plane_bounds(int(p), poses[ks], n)
+        gaps = model.plane_bounds(int(p), poses if every else poses[ks], n)
         if gaps is not None:
             out[ks, p] = np.where(gaps > 0.0, gaps, -np.inf)
     return out
@@ -250,9 +251,11 @@ def bounds_between(model: CollisionModel, checked: CheckedBounds, q: Array, plac
         return None
     b = np.where(at_waypoint, a, np.minimum(a + 1, N - 1))  # a waypoint keeps its own bound
     R = model.pair_motion.T  # (n, P) [m/rad]
-    return np.maximum(
-        checked.bounds[a] - np.abs(q - checked.q[a]) @ R, checked.bounds[b] - np.abs(q - checked.q[b]) @ R
-    )
+    out = checked.bounds[a]  # (K, P), a copy: taken in place from here on
+    out -= np.abs(q - checked.q[a]) @ R
+    other = checked.bounds[b]
+    other -= np.abs(q - checked.q[b]) @ R
+    return np.maximum(out, other, out=out)
 
 
 def bounds_along_normals(
@@ -308,12 +311,13 @@ def raise_near(
     (any unit direction does, see the module notes); near k the joints, hence the normal, have
     turned little, so the gap is close to the distance there. Waypoint k keeps its own figures.
     """
-    near = np.arange(max(k - NEAR, 0), min(k + NEAR + 1, len(bounds)))
-    near = near[near != k]
+    lo, hi = max(k - NEAR, 0), min(k + NEAR + 1, len(bounds))
+    near = np.arange(lo, hi) != k  # of the rows lo..hi-1, a view of the poses (no copy)
     for p, (_, n) in found.items():
-        gaps = model.plane_bounds(p, poses[near], n)
+        gaps = model.plane_bounds(p, poses[lo:hi], n)
         if gaps is not None:
-            bounds[near, p] = np.maximum(bounds[near, p], np.where(gaps > 0.0, gaps, -np.inf))
+            rows = bounds[lo:hi, p]
+            rows[near] = np.maximum(rows[near], np.where(gaps[near] > 0.0, gaps[near], -np.inf))
 
 
 def tightener(

@@ -16,7 +16,8 @@ samples, provided ``m_p >= tolerance_m`` (the distances the proof uses are then 
 and up to the accuracy of FCL's distances (checked against a separating plane, see
 :mod:`refine.collision.distance`). Segments not certified are sampled densely (below) and reported
 as such by ``certified_segments``: that happens only where a margin is broken (the path then fails
-the check anyway) or where one pair needs more than :data:`MAX_ADVANCE` samples inside one segment.
+the check anyway) or where one pair needs more than
+:data:`~refine.collision.advance.MAX_ADVANCE` samples inside one segment.
 
 **How.** Per pair, a motion bound (:mod:`refine.collision.motion`): along a segment neither body
 of pair p moves relative to the other further than ``S_p = Σ_j |Δq_j| R_pj``, summed only over the
@@ -28,10 +29,10 @@ from a parameter where the pair's budget ``b = d_p - m_p + tolerance_m`` is know
 two ends add up to ``S_p`` at least; lower bounds on ``d_p`` serve where they suffice (the gap
 between world-aligned boxes around the two bodies, or the distance to a cell mesh's convex hull),
 so far pairs cost no FCL query. A pair that falls short is measured exactly at the ends, and then
-advanced from the start by conservative advancement, one FCL query of that pair per step, until
-the span certified from the end is reached. At every waypoint the pair with the least clearance
-and the pair with the least distance are measured exactly (:meth:`CollisionModel.nearest_pairs`),
-for the figures and the runs.
+advanced from the start by conservative advancement (:mod:`refine.collision.advance`), one FCL
+query of that pair per step, until the span certified from the end is reached. At every waypoint
+the pair with the least clearance and the pair with the least distance are measured exactly
+(:meth:`CollisionModel.nearest_pairs`), for the figures and the runs.
 
 **Dense sampling (``method="sample"``, and the fallback).** Each segment is cut into enough
 sub-steps that
@@ -60,12 +61,11 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from functools import partial
-from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from refine.collision.advance import NONE, Sample, advance_pairs, pair_motion, short
 from refine.collision.carry import (
     NEAR,
     CheckedBounds,
@@ -86,12 +86,6 @@ log = logging.getLogger(__name__)
 
 LINK_STEP_M = 0.005
 """Default largest motion of any link point between two checks [m]."""
-
-REACH_AHEAD = 0.75
-"""Conservative advancement places its next sample this many budgets beyond the certified edge."""
-
-MAX_ADVANCE = 200
-"""Samples one pair may take inside one segment before the segment is sampled densely instead."""
 
 
 @dataclass(frozen=True)
@@ -194,15 +188,54 @@ class PathClearance:
         )
 
 
-_NONE: frozenset[str] = frozenset()
+class _Figures:
+    """Per waypoint of a check, its figures.
 
+    The least distance and clearance [m], the pair of least clearance and its distance [m] (arrays
+    (N,) and a list), and the bodies below their margins where there are any.
+    """
 
-class _Sample(NamedTuple):
-    distance: float  # least distance over all pairs [m]
-    clearance: float  # least distance minus margin [m]
-    pair: tuple[str, str]  # the pair with the least clearance
-    pair_distance: float  # its distance [m]
-    below: frozenset[str]  # every body and object below its margin
+    def __init__(self, distance: Array, clearance: Array, pair_distance: Array, pair: list[tuple[str, str]]):
+        self.distance = np.array(distance, dtype=float)
+        self.clearance = np.array(clearance, dtype=float)
+        self.pair_distance = np.array(pair_distance, dtype=float)
+        self.pair = pair
+        self.below: dict[int, frozenset[str]] = {}
+
+    @classmethod
+    def of(cls, samples: list[Sample]) -> _Figures:
+        """The figures of one sample per waypoint."""
+        figures = cls(
+            [s.distance for s in samples],
+            [s.clearance for s in samples],
+            [s.pair_distance for s in samples],
+            [s.pair for s in samples],
+        )
+        figures.below = {k: s.below for k, s in enumerate(samples) if s.below}
+        return figures
+
+    def put(self, k: int, s: Sample) -> None:
+        """Waypoint k's figures are those of sample ``s``."""
+        self.distance[k], self.clearance[k], self.pair[k], self.pair_distance[k] = (
+            s.distance,
+            s.clearance,
+            s.pair,
+            s.pair_distance,
+        )
+        if s.below:
+            self.below[k] = s.below
+        else:
+            self.below.pop(k, None)
+
+    def sample(self, k: int) -> Sample:
+        """Waypoint k's figures as a sample."""
+        return Sample(
+            float(self.distance[k]),
+            float(self.clearance[k]),
+            self.pair[k],
+            float(self.pair_distance[k]),
+            self.below.get(k, NONE),
+        )
 
 
 def _sub_steps(kin: TcpKinematics, q0: Array, q1: Array, m: int, step_m: float) -> int:
@@ -277,21 +310,21 @@ def check_path_clearance(
     start, queries = time.perf_counter(), model.queries
     top_margin = max(model.margin_m, model.self_margin_m)
 
-    def sample(q: Array, poses: Array | None = None, bounds: Array | None = None) -> _Sample:
+    def sample(q: Array, poses: Array | None = None, bounds: Array | None = None) -> Sample:
         by_distance, by_clearance = model.nearest_pairs(q, poses, bounds)
         if by_distance is None or by_clearance is None:
-            return _Sample(math.inf, math.inf, ("", ""), math.inf, frozenset())
+            return Sample(math.inf, math.inf, ("", ""), math.inf, frozenset())
         names: set[str] = set()
         if by_clearance.clearance_m < -tolerance_m:
             for c in model.contacts(q, top_margin):
                 if c.clearance_m < -tolerance_m:
                     names.update((c.body, c.other))
         pair = (by_clearance.body, by_clearance.other)
-        return _Sample(
+        return Sample(
             by_distance.distance_m, by_clearance.clearance_m, pair, by_clearance.distance_m, frozenset(names)
         )
 
-    points: list[_Sample] = []
+    points: list[Sample] = []
     given = prior is not None or directions is not None  # then, or without every_waypoint, the least only
     carry = (given or not every_waypoint) and method == "bound" and len(model.pairs) > 0
     at_waypoint = None if carry else lambda q, poses, boxes: points.append(sample(q, poses, boxes))
@@ -302,7 +335,7 @@ def check_path_clearance(
     )
     measured = None  # every waypoint measured, unless the check starts from known bounds:
     if carry:  # then exact where they can be the least or a margin is not proved, bounds elsewhere
-        at: dict[int, _Sample] = {}  # the waypoints measured
+        at: dict[int, Sample] = {}  # the waypoints measured
 
         def measure(k: int) -> tuple[float, float]:
             at[k] = sample(q_path[k], poses[k], bounds[k].copy())
@@ -318,66 +351,80 @@ def check_path_clearance(
         clear = bounds - model.pair_margins
         least = np.argmin(clear, axis=1)  # per waypoint, the pair of least clearance bound
         rows = np.arange(len(q_path))
-        figures = zip(bounds.min(axis=1).tolist(), clear[rows, least].tolist(), bounds[rows, least].tolist())  # noqa: B905
-        points = [  # the same lengths: least and the figures are one per waypoint
-            at.get(k, _Sample(d, c, model.pairs[p], dp, _NONE))
-            for k, (p, (d, c, dp)) in enumerate(zip(least, figures))  # noqa: B905
-        ]
-    sweep = np.abs(np.diff(q_path, axis=0)) @ joint_reach(model)  # any body point's motion per segment [m]
-    found_by_segment: list[list[_Sample] | None] = [None] * len(sweep)
-    inner: list[list[_Sample]] = [[] for _ in sweep]
-    if method == "bound":
-        _advance_pairs(model, q_path, poses, bounds, exact, inner, found_by_segment, tolerance_m)
-    dense = [k for k, found in enumerate(found_by_segment) if found is None]
-    steps = np.ones(len(sweep), dtype=np.int64)
-    if dense:
-        idx = np.array(dense)
-        tcp = kin.poses(q_path)[:, :3, 3]
-        chord = np.linalg.norm(tcp[idx + 1] - tcp[idx], axis=1)
-        least = np.maximum(1, np.maximum(np.ceil(chord / step_m), np.ceil(sweep[idx] / link_step_m))).astype(
-            int
+        pairs = model.pairs
+        figures = _Figures(
+            bounds.min(axis=1), clear[rows, least], bounds[rows, least], [pairs[p] for p in least.tolist()]
         )
-        for k, m in zip(dense, least, strict=True):
+        for k, found in at.items():
+            figures.put(k, found)
+    else:
+        figures = _Figures.of(points)
+    sweep = np.abs(np.diff(q_path, axis=0)) @ joint_reach(model)  # any body point's motion per segment [m]
+    certified = np.zeros(len(sweep), dtype=bool)
+    inner: dict[int, list[Sample]] = {}  # per segment, the samples the advancement took inside
+    if method == "bound":
+        certified, inner = advance_pairs(model, q_path, poses, bounds, exact, tolerance_m)
+    dense = np.flatnonzero(~certified)
+    sampled: dict[int, list[Sample]] = {}  # per segment sampled densely, its inner sub-steps
+    steps = np.ones(len(sweep), dtype=np.int64)
+    if len(dense):
+        tcp = kin.poses(q_path)[:, :3, 3]
+        chord = np.linalg.norm(tcp[dense + 1] - tcp[dense], axis=1)
+        least = np.maximum(
+            1, np.maximum(np.ceil(chord / step_m), np.ceil(sweep[dense] / link_step_m))
+        ).astype(int)
+        for k, m in zip(dense.tolist(), least, strict=True):
             steps[k] = _sub_steps(kin, q_path[k], q_path[k + 1], int(m), step_m)
             t = np.arange(1, steps[k])[:, None] / steps[k]  # the inner sub-steps
-            found_by_segment[k] = [sample(q) for q in q_path[k] + t * (q_path[k + 1] - q_path[k])]
-    inside = [k + e for k, found in enumerate(found_by_segment) for e in (0, 1) if found or inner[k]]
-    for end in [] if measured is None else sorted(set(inside) - set(np.flatnonzero(measured).tolist())):
-        measure(end)  # a segment sampled inside takes its ends' exact figures, not bounds
-        points[end], measured[end] = at[end], True
-    wp_dist = np.array([p.distance for p in points])
-    wp_clear = np.array([p.clearance for p in points])
-    worst: list[_Sample] = []
-    seg_dist = np.empty(len(sweep))
-    sampled = set(dense)
-    for k, found_inside in enumerate(found_by_segment):
-        assert found_inside is not None
-        a, b = points[k], points[k + 1]
-        if not (found_inside or inner[k] or a.below or b.below):  # the two ends alone, nothing below
-            seg_dist[k] = min(a.distance, b.distance)
-            worst.append(a if a.clearance <= b.clearance else b)  # as min() picks: the first of a tie
-            continue
+            sampled[k] = [sample(q) for q in q_path[k] + t * (q_path[k + 1] - q_path[k])]
+    inside = {k for k, found in (*sampled.items(), *inner.items()) if found}  # segments with samples inside
+    if measured is not None:
+        for end in sorted({k + e for k in inside for e in (0, 1)} - set(np.flatnonzero(measured).tolist())):
+            measure(end)  # a segment sampled inside takes its ends' exact figures, not bounds
+            figures.put(end, at[end])
+            measured[end] = True
+    wp_dist, wp_clear = figures.distance, figures.clearance
+    # ---- per segment: its ends' figures, and where it was sampled inside or an end is below, its samples'
+    ends = np.arange(len(sweep)) + (wp_clear[1:] < wp_clear[:-1])  # the worse end: the first of a tie
+    seg_dist = np.minimum(wp_dist[:-1], wp_dist[1:])
+    seg_clear = wp_clear[ends]
+    seg_pair = [figures.pair[k] for k in ends.tolist()]
+    seg_pair_distance = figures.pair_distance[ends]
+    seg_below: dict[int, frozenset[str]] = {}
+    for k in sorted(inside | {k - e for k in figures.below for e in (0, 1) if 0 <= k - e < len(sweep)}):
+        found = [figures.sample(k), figures.sample(k + 1), *sampled.get(k, ()), *inner.get(k, ())]
         if k not in sampled:
-            steps[k] = len(inner[k]) + 1
-        found = [a, b, *found_inside, *inner[k]]
+            steps[k] = len(inner.get(k, ())) + 1
         seg_dist[k] = min(s.distance for s in found)
-        worst.append(
-            min(found, key=lambda s: s.clearance)._replace(below=frozenset().union(*(s.below for s in found)))
+        w = min(found, key=lambda s: s.clearance)  # the first of a tie
+        seg_clear[k], seg_pair[k], seg_pair_distance[k] = w.clearance, w.pair, w.pair_distance
+        below = frozenset().union(*(s.below for s in found))
+        if below:
+            seg_below[k] = below
+    if len(sweep):
+        runs = _runs(seg_clear, seg_pair, seg_pair_distance, seg_below, tolerance_m, single=False)
+    else:
+        one = figures.sample(0)
+        runs = _runs(
+            np.array([one.clearance]),
+            [one.pair],
+            np.array([one.pair_distance]),
+            {0: one.below} if one.below else {},
+            tolerance_m,
+            single=True,
         )
-    seg_clear = np.array([w.clearance for w in worst])
-    runs = _runs(worst if len(steps) else points[:1], tolerance_m, single=len(steps) == 0)
     result = PathClearance(
         waypoint_distance_m=wp_dist,
         waypoint_clearance_m=wp_clear,
         segment_distance_m=seg_dist,
         segment_clearance_m=seg_clear,
-        segment_pair=tuple(w.pair for w in worst),
+        segment_pair=tuple(seg_pair),
         segment_samples=steps,
         runs=runs,
         queries=model.queries - queries,
         time_s=time.perf_counter() - start,
         tolerance_m=tolerance_m,
-        certified_segments=len(sweep) - len(dense),
+        certified_segments=int(certified.sum()),
         waypoint_measured=measured,
         bounds=checked_bounds(model, q_path, bounds, normals) if method == "bound" else None,
     )
@@ -417,16 +464,15 @@ def margins_proved(
         )
     if len(q_path) < 2:
         return False
-    budget = None if prior is None else prior - model.pair_margins + tolerance_m
-    if budget is not None and not _short(budget, _pair_motion(model, q_path)).any():
-        return True  # the known bounds certify every segment: no pose or distance is needed
+    left = None  # the segments and pairs the known bounds leave short, (N-1, P)
+    if prior is not None:
+        left = short(prior - model.pair_margins + tolerance_m, pair_motion(model, q_path))
+        if not left.any():
+            return True  # the known bounds certify every segment: no pose or distance is needed
     poses, _, bounds, exact = _waypoint_bounds(
-        model, q_path, tolerance_m, True, plane=True, prior=prior, directions=directions
+        model, q_path, tolerance_m, True, plane=True, prior=prior, directions=directions, left=left
     )
-    found_by_segment: list[list[_Sample] | None] = [None] * (len(q_path) - 1)
-    inner: list[list[_Sample]] = [[] for _ in found_by_segment]
-    _advance_pairs(model, q_path, poses, bounds, exact, inner, found_by_segment, tolerance_m)
-    return all(found is not None for found in found_by_segment)
+    return bool(advance_pairs(model, q_path, poses, bounds, exact, tolerance_m)[0].all())
 
 
 def _waypoint_bounds(
@@ -440,7 +486,8 @@ def _waypoint_bounds(
     prior: Array | None = None,
     directions: Array | None = None,
     out: Array | None = None,
-) -> tuple[Array, Array, Array, NDArray[np.bool_]]:
+    left: NDArray[np.bool_] | None = None,
+) -> tuple[Array, Array | None, Array, NDArray[np.bool_]]:
     """The moving bodies' poses and each pair's distance bounds at every waypoint.
 
     With ``by_bound``, the pairs whose box bounds do not certify a segment next to a waypoint are
@@ -451,24 +498,48 @@ def _waypoint_bounds(
     ``directions`` (N, P, 3): unit vectors whose gaps bound the pairs too; ``out`` (N, P, 3): where
     the witness normals of the pairs measured are written.
 
+    ``left`` (N-1, P), for the proof alone (no ``at_waypoint``, no ``out``): the segment pairs that
+    ``prior`` leaves short. Bounds only rise, so every other segment pair stays certified whatever
+    else is found, and only the waypoints ending a segment left short are placed and bounded
+    further, for the pairs left short somewhere: ``prior`` stands for every other bound, and the
+    poses of the other waypoints are NaN (nothing reads them: every pair measured or advanced
+    belongs to a segment left short).
+
     Returns:
-        poses (N, M, 4, 4), box bounds (N, P) [m], the better bounds (N, P) [m], and which of
-        those are exact distances (N, P).
+        poses (N, M, 4, 4), box bounds (N, P) [m] (None with ``left``), the better bounds (N, P)
+        [m], and which of those are exact distances (N, P).
     """
-    poses = model.moving_poses(q_path)
-    boxes = model.box_bounds(poses)  # lower bounds on each pair's distance per waypoint (N, P) [m]
-    bounds = boxes.copy() if prior is None else np.maximum(boxes, prior)  # and the better ones found
+    if left is None:
+        poses = model.moving_poses(q_path)
+        boxes = model.box_bounds(poses)  # lower bounds on each pair's distance per waypoint (N, P) [m]
+        bounds = boxes.copy() if prior is None else np.maximum(boxes, prior)  # and the better ones found
+        rows: slice | NDArray[np.intp] = slice(None)
+    else:
+        assert prior is not None and at_waypoint is None and out is None
+        segments = np.flatnonzero(left.any(axis=1))
+        rows = np.union1d(segments, segments + 1)  # the waypoints bounded further
+        columns = np.flatnonzero(left.any(axis=0))
+        placed = model.moving_poses(q_path[rows])
+        poses = np.full((len(q_path), *placed.shape[1:]), np.nan)
+        poses[rows] = placed
+        boxes = None
+        bounds = prior.copy()
+        cut = np.ix_(rows, columns)
+        bounds[cut] = np.maximum(bounds[cut], model.box_bounds(poses[rows], columns))
     if directions is not None:  # the proof alone (no figures written) bounds only the pairs left short
-        short = _short(bounds - model.pair_margins + tolerance_m, _pair_motion(model, q_path)).any(0)
-        bounds = np.maximum(
-            bounds, direction_bounds(model, poses, directions, None if out is not None else short)
+        columns_left = short(bounds - model.pair_margins + tolerance_m, pair_motion(model, q_path)).any(0)
+        bounds[rows] = np.maximum(
+            bounds[rows],
+            direction_bounds(model, poses[rows], directions[rows], None if out is not None else columns_left),
         )
     exact = np.zeros(bounds.shape, dtype=bool)
     need = np.zeros(bounds.shape, dtype=bool)  # pairs to measure at each waypoint
     if by_bound and len(q_path) > 1:
-        short = _short(bounds - model.pair_margins + tolerance_m, _pair_motion(model, q_path))
-        need[:-1] |= short
-        need[1:] |= short
+        left_now = short(bounds - model.pair_margins + tolerance_m, pair_motion(model, q_path))
+        need[:-1] |= left_now
+        need[1:] |= left_now
+    if left is not None and need[np.setdiff1d(np.arange(len(q_path)), rows)].any():
+        raise AssertionError("the proof from known bounds would read a waypoint it did not place")
     if plane and at_waypoint is None:
         bounds_along_normals(model, q_path, poses, need, bounds, exact, out)
         return poses, boxes, bounds, exact
@@ -485,116 +556,26 @@ def _waypoint_bounds(
     return poses, boxes, bounds, exact
 
 
-def _advance_pairs(
-    model: CollisionModel,
-    q_path: Array,
-    poses: Array,
-    bounds: Array,
-    exact: NDArray[np.bool_],
-    inner: list[list[_Sample]],
-    found_by_segment: list[list[_Sample] | None],
+def _runs(
+    clearance: Array,
+    pair: list[tuple[str, str]],
+    pair_distance: Array,
+    below: dict[int, frozenset[str]],
     tolerance_m: float,
-) -> None:
-    """Certify every segment pair by pair by conservative advancement on the pair's motion bound.
+    *,
+    single: bool,
+) -> tuple[ClearanceRun, ...]:
+    """Group consecutive segments (or the single waypoint) whose worst sample breaks a margin.
 
-    ``bounds`` (N, P) holds lower bounds on each pair's distance at the waypoints (``exact`` where
-    FCL measured it), ``poses`` the moving bodies' poses there (N, M, 4, 4). A pair keeps its
-    margin over segment k when its budgets (distance minus margin plus tolerance) at the two ends
-    add up to at least the pair's motion bound ``S`` over the segment: each end certifies
-    ``budget / S`` of the segment. A pair that falls short is measured exactly at the ends, then
-    advanced from the start (:func:`_advance`) until the span certified from the end is reached.
-    Samples taken go to
-    ``inner[k]``; ``found_by_segment[k]`` becomes ``[]`` for a certified segment and stays None for
-    one to sample densely (a broken margin, or more than :data:`MAX_ADVANCE` samples for a pair).
+    Per segment (or the waypoint): the least clearance [m], its pair and that pair's distance [m];
+    ``below``: the bodies found below their margins, by segment, where there are any.
     """
-    names = model.pairs
-    margin = model.pair_margins
-    motion = _pair_motion(model, q_path)
-    budget = bounds - margin + tolerance_m
-    need = _short(budget, motion)
-    for k in np.flatnonzero(need.any(axis=1)):  # measure the pairs that fall short at the ends
-        for end in (k, k + 1):
-            for p in np.flatnonzero(need[k] & ~exact[end]):
-                bounds[end, p] = model.pair_distance(q_path[end], int(p), poses[end])
-                exact[end, p] = True
-    budget = bounds - margin + tolerance_m
-    need = _short(budget, motion)
-    broken = np.zeros(len(motion), dtype=bool)
-
-    def _measure(k: int, p: int, t: float) -> float:
-        d = model.pair_distance(q_path[k] + t * (q_path[k + 1] - q_path[k]), int(p))
-        inner[k].append(_Sample(d, d - margin[p], names[p], d, frozenset()))
-        return d - margin[p] + tolerance_m
-
-    for k, p in zip(*np.nonzero(need), strict=True):
-        if broken[k]:
-            continue
-        b0, b1, S = budget[k, p], budget[k + 1, p], motion[k, p]
-        if b0 < 0.0 or b1 < 0.0:
-            broken[k] = True
-            continue
-        if not _advance(partial(_measure, k, p), b0, b1, S):
-            broken[k] = True  # a margin broken inside, or the advance stalled: sample the segment densely
-    for k in np.flatnonzero(~broken):
-        found_by_segment[k] = []
-
-
-def _advance(budget_at, b0: float, b1: float, S: float) -> bool:
-    """Conservative advancement of one pair over one segment; True when [0, 1] is certified.
-
-    A sample at t with budget c (distance minus margin plus tolerance) certifies the window
-    ``[t - c/S, t + c/S]``. The start certifies ``[0, b0/S]``, the end ``[1 - b1/S, 1]``. The next
-    sample is placed :data:`REACH_AHEAD` budgets beyond the certified edge, where its window reaches
-    back to the edge unless the clearance there is smaller than that share of the edge's; when it
-    does not, a sample at the edge itself is taken, whose window always joins. False when a budget
-    is negative (a margin broken) or after :data:`MAX_ADVANCE` samples.
-
-    Args:
-        budget_at: the pair's budget [m] at segment parameter t (one FCL query).
-        b0: budget at t = 0 [m], >= 0.
-        b1: budget at t = 1 [m], >= 0.
-        S: the pair's motion bound over the segment [m], > 0.
-    """
-    edge, c_edge, end = b0 / S, b0, 1.0 - b1 / S
-    for _ in range(MAX_ADVANCE):
-        if edge >= end:
-            return True
-        t = min(edge + REACH_AHEAD * c_edge / S, end)
-        c = budget_at(t)
-        if c < 0.0:
-            return False
-        if t - c / S > edge:  # the window does not reach back: step from the edge itself
-            t = edge
-            c = budget_at(t)
-            if c < 0.0:
-                return False
-        edge, c_edge = t + c / S, c
-    return edge >= end
-
-
-def _pair_motion(model: CollisionModel, q_path: Array) -> Array:
-    """Per segment and pair, the most a point of one body moves relative to the other [m], (N-1, P)."""
-    return np.abs(np.diff(q_path, axis=0)) @ model.pair_motion.T
-
-
-def _short(budget: Array, motion: Array) -> NDArray[np.bool_]:
-    """Segment pairs (N-1, P) whose end budgets (N, P) [m] do not certify the whole segment."""
-    return (budget[:-1] < 0.0) | (budget[1:] < 0.0) | (budget[:-1] + budget[1:] < motion)
-
-
-def _runs(worst: list[_Sample], tolerance_m: float, *, single: bool) -> tuple[ClearanceRun, ...]:
-    """Group consecutive segments (or the single waypoint) whose worst sample breaks a margin."""
     runs = []
-    k = 0
-    while k < len(worst):
-        if worst[k].clearance >= -tolerance_m:
-            k += 1
-            continue
-        first = k
-        while k < len(worst) and worst[k].clearance < -tolerance_m:
-            k += 1
-        w = min(worst[first:k], key=lambda s: s.clearance)
-        names = tuple(sorted(frozenset().union(*(s.below for s in worst[first:k]))))
-        end = first if single else k
-        runs.append(ClearanceRun(first, end, w.clearance, w.pair_distance, w.pair, names))
+    bad = np.flatnonzero(clearance < -tolerance_m)
+    for run in np.split(bad, np.flatnonzero(np.diff(bad) > 1) + 1) if len(bad) else ():
+        first, last = int(run[0]), int(run[-1])
+        w = first + int(np.argmin(clearance[first : last + 1]))  # the first of a tie, as min() picks
+        names = tuple(sorted(frozenset().union(*(below.get(k, NONE) for k in range(first, last + 1)))))
+        end = first if single else last + 1
+        runs.append(ClearanceRun(first, end, float(clearance[w]), float(pair_distance[w]), pair[w], names))
     return tuple(runs)

@@ -13,11 +13,9 @@ the signed distance changes as ``n^T (J_body - J_other) dq`` (:func:`linearised_
 
 from __future__ import annotations
 
-import hashlib
 import logging
 import math
 import threading
-from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -27,6 +25,7 @@ from numpy.typing import ArrayLike
 from refine.collision.contact import Contact, linearised_distance
 from refine.collision.distance import hull_bound, place, signed_distance
 from refine.collision.geometry import Body, link_body, shape_body, world_aabb
+from refine.collision.kept import Kept, recall, remember, structure_key
 from refine.collision.pairs import exclusion, joint_axes
 from refine.errors import InputError
 from refine.frames import check_transform
@@ -39,46 +38,8 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-KEPT_MODELS = 8
-"""Models whose pairs, motion bounds and moving hulls :data:`_KEPT` keeps for the next model like them."""
-
-
-@dataclass(eq=False)
-class _Kept:
-    """What a model of the same robot, base, moving bodies, self margin and cell names takes as it is.
-
-    None of it reads the cell objects' shapes or places (the pair rules for a cell object read only its
-    name and whether it is the workpiece; the motion bounds only the moving bodies), so a re-solve whose
-    part moved, or whose cone or margin changed, takes it from the previous call's model.
-    """
-
-    robot: Robot
-    pin_model: pin.Model
-    kept: list[tuple[int, int]]
-    excluded: tuple[tuple[str, str, str], ...]
-    notes: list[tuple[int, str, tuple]]  # the log lines of the selection, said again on each reuse
-    motion: Array | None = None  # pair_reach of the pairs, read-only
-    hulls: dict[str, tuple[int, Array]] = field(default_factory=dict)  # moving bodies' hull corners
-
-
-_KEPT: dict[bytes, _Kept] = {}
-_KEPT_LOCK = threading.Lock()
-
-
-def _structure_key(robot: Robot, base: Array, self_margin_m: float, bodies: list[Body]) -> bytes:
-    """A digest of everything :class:`_Kept` depends on: the moving bodies' geometry as built, not as named."""
-    h = hashlib.blake2b(digest_size=24)
-    h.update(repr((id(robot), id(robot.model), float(self_margin_m))).encode())
-    h.update(base.tobytes())
-    for b in bodies:
-        h.update(repr((b.label, b.kind, b.joint, b.frame_id, b.workpiece, b.kind_params[0])).encode())
-        if b.kind == "cell":
-            continue
-        for a in (b.link_T_shape, b.centre, b.half_extent, b.vertices, *b.kind_params[1:]):
-            if a is not None:
-                a = np.ascontiguousarray(a, dtype=float)
-                h.update(repr(a.shape).encode() + a.tobytes())
-    return h.digest()
+RECENT_PATHS = 4
+"""Joint paths whose moving-body poses and box bounds a model keeps for the next calls with them."""
 
 
 class CollisionModel:
@@ -141,7 +102,8 @@ class CollisionModel:
         self._exact: dict[int, Contact] = {}  # pairs measured at the current configuration
         self._motion: Array | None = None
         self._recent_poses: dict[bytes, Array] = {}  # moving_poses of the last few joint paths
-        self._recent_lock = threading.Lock()  # held while _recent_poses is read or changed
+        self._recent_boxes: list[tuple[Array, Array]] = []  # box_bounds of those poses, by identity
+        self._recent_lock = threading.Lock()  # held while _recent_poses or _recent_boxes is read or changed
 
     # ---- building ----------------------------------------------------------------------------
 
@@ -192,18 +154,14 @@ class CollisionModel:
             seen.add(b.name)
 
     def _select_pairs(self) -> None:
-        key = _structure_key(self.robot, self.base_in_world, self.self_margin_m, self.bodies)
-        with _KEPT_LOCK:
-            known = _KEPT.get(key)
+        key = structure_key(self.robot, self.base_in_world, self.self_margin_m, self.bodies)
+        known = recall(key)
         if known is not None and known.robot is self.robot and known.pin_model is self._model:
             for level, msg, args in known.notes:
                 log.log(level, msg, *args)
         else:
             known = self._selection()
-            with _KEPT_LOCK:
-                _KEPT[key] = known
-                while len(_KEPT) > KEPT_MODELS:
-                    del _KEPT[next(iter(_KEPT))]
+            remember(key, known)
         self._kept = known
         self.kept_hulls = known.hulls
         kept = known.kept
@@ -219,7 +177,7 @@ class CollisionModel:
         self.pairs = tuple((self.bodies[a].label, self.bodies[b].label) for a, b in kept)
         self.excluded = known.excluded
 
-    def _selection(self) -> _Kept:
+    def _selection(self) -> Kept:
         """The pairs to check by the rules of :mod:`refine.collision.pairs`, and the others with their reasons."""
         self._place_all(pin.neutral(self._model))
         axes = joint_axes(self._model, self.base_in_world)
@@ -246,7 +204,7 @@ class CollisionModel:
                     notes.append((level, msg, (A.label, B.label, d * 1e3, self.self_margin_m * 1e3)))
         for level, msg, args in notes:
             log.log(level, msg, *args)
-        return _Kept(self.robot, self._model, kept, tuple(excluded), notes)
+        return Kept(self.robot, self._model, kept, tuple(excluded), notes)
 
     def _order(self, i: int, j: int) -> tuple[int, int]:
         """Body first: the tool before links, the distal link before the proximal one."""
@@ -297,7 +255,7 @@ class CollisionModel:
             poses.flags.writeable = False
             with self._recent_lock:
                 self._recent_poses[key] = poses
-                while len(self._recent_poses) > 4:
+                while len(self._recent_poses) > RECENT_PATHS:
                     del self._recent_poses[next(iter(self._recent_poses))]
         return poses
 
@@ -324,19 +282,41 @@ class CollisionModel:
             T_joint[k] = [oMi[j].homogeneous for j in self._joints]
         return self.base_in_world @ T_joint[:, self._joint_slot] @ self._joint_T_shape
 
-    def box_bounds(self, poses: Array) -> Array:
+    def box_bounds(self, poses: Array, columns: ArrayLike | None = None) -> Array:
         """Per row of moving-body poses (N, M, 4, 4), lower bounds [m] on every pair's distance, (N, P).
 
         The gap between the world-aligned boxes of the two bodies; ``-inf`` where they overlap
-        (the bodies may then penetrate).
+        (the bodies may then penetrate). ``columns``: the pairs to bound (indices into
+        :attr:`pairs`), (C,), for an answer (N, C); all if None. For poses kept by
+        :meth:`moving_poses` (read-only: the same array for the same joints) the answer for every
+        pair is kept beside them and returned again, read-only, so the check, the proof and the
+        figures of one path box it once.
         """
+        if columns is not None:
+            columns = np.asarray(columns, dtype=int)
+            return self._box_bounds(poses, self._pa[columns], self._pb[columns])
+        if poses.flags.writeable:
+            return self._box_bounds(poses, self._pa, self._pb)
+        with self._recent_lock:
+            known = next((boxes for kept, boxes in self._recent_boxes if kept is poses), None)
+        if known is not None:
+            return known
+        boxes = self._box_bounds(poses, self._pa, self._pb)
+        boxes.flags.writeable = False
+        with self._recent_lock:  # the poses are held, so their identity stays theirs
+            self._recent_boxes.append((poses, boxes))
+            del self._recent_boxes[:-RECENT_PATHS]
+        return boxes
+
+    def _box_bounds(self, poses: Array, pa: Array, pb: Array) -> Array:
+        """The box gaps (N, len(pa)) [m] of the body pairs (pa, pb) at poses (N, M, 4, 4), -inf for none."""
         c, h = world_aabb(poses, self._centre[: self._n_moving], self._half[: self._n_moving])
         cells = np.broadcast_to(
             self._aabb_c[self._n_moving :], (len(poses), *self._aabb_c[self._n_moving :].shape)
         )
         c = np.concatenate([c, cells], axis=1)
         h = np.concatenate([h, np.broadcast_to(self._aabb_h[self._n_moving :], cells.shape)], axis=1)
-        d = np.maximum(np.abs(c[:, self._pa] - c[:, self._pb]) - h[:, self._pa] - h[:, self._pb], 0.0)
+        d = np.maximum(np.abs(c[:, pa] - c[:, pb]) - h[:, pa] - h[:, pb], 0.0)
         gaps = np.sqrt(np.einsum("nij,nij->ni", d, d))
         return np.where(gaps > 0.0, gaps, -np.inf)
 

@@ -53,7 +53,8 @@ def kind_minima(model: Any, q: Array, clearance: Any) -> KindMinima:
     is_cell = np.array([kinds.get(b) == "cell" or kinds.get(a) == "cell" for a, b in model.pairs], dtype=bool)
     if not len(is_cell):
         return KindMinima(None, None)
-    bounds = model.box_bounds(model.moving_poses(q))  # (N, P), -inf where the boxes overlap
+    poses = model.moving_poses(q)  # the check's, kept for these joints, as are their boxes
+    bounds = model.box_bounds(poses)  # (N, P), -inf where the boxes overlap
     carried = getattr(clearance, "bounds", None)
     if (
         carried is not None
@@ -74,7 +75,7 @@ def kind_minima(model: Any, q: Array, clearance: Any) -> KindMinima:
             i, j = divmod(int(flat), len(columns))
             if sub[i, j] >= best:
                 break  # no pair left can come closer
-            best = min(best, model.pair_distance(q[i], int(columns[j])))
+            best = min(best, model.pair_distance(q[i], int(columns[j]), poses[i]))
             queries += 1
         out.append(float(best))
     return KindMinima(out[0], out[1], queries)
@@ -101,9 +102,11 @@ def _between_waypoints(clearance: Any, kinds: dict[str, str], cell: bool, margin
     """The least distance of a kind's pair where it held a segment's least clearance [m] (inf if none)."""
     best = np.inf
     samples = getattr(clearance, "segment_samples", None)
-    for k, (body, other) in enumerate(clearance.segment_pair):
-        if samples is not None and samples[k] == 1:
-            continue  # nothing inside: its figures are its ends', which the waypoints give exactly
+    pairs = clearance.segment_pair
+    # a segment with nothing inside has its ends' figures, which the waypoints give exactly
+    inside = range(len(pairs)) if samples is None else np.flatnonzero(np.asarray(samples) != 1).tolist()
+    for k in inside:
+        body, other = pairs[k]
         if (kinds.get(other) == "cell" or kinds.get(body) == "cell") == cell and body:
             best = min(best, float(clearance.segment_clearance_m[k]) + margin_m)
     return best

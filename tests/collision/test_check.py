@@ -255,6 +255,7 @@ def test_the_proofs_bounds_are_those_waypoint_by_waypoint_and_below_every_distan
     a fresh model bounding the same pairs waypoint by waypoint (the gap along the pair's last
     normal, kept when above the margin, else FCL; ``pair_bound`` for a pair without a normal), and
     FCL's distance of every pair."""
+    from refine.collision import advance
     from refine.collision import check as check_module
 
     sphere = Shape("ball", "sphere", pose=make_transform(p=[1.05, -0.3, 1.1]), radius_m=0.08)
@@ -268,8 +269,8 @@ def test_the_proofs_bounds_are_those_waypoint_by_waypoint_and_below_every_distan
     model = make_model(robot, cell, (nozzle,))
     poses, boxes, bounds, exact = check_module._waypoint_bounds(model, q, 1e-4, True, plane=True)
     reference = make_model(robot, cell, (nozzle,))
-    motion = check_module._pair_motion(reference, q)
-    short = check_module._short(boxes - reference.pair_margins + 1e-4, motion)
+    motion = advance.pair_motion(reference, q)
+    short = advance.short(boxes - reference.pair_margins + 1e-4, motion)
     need = np.zeros(boxes.shape, dtype=bool)
     need[:-1] |= short
     need[1:] |= short
@@ -317,3 +318,30 @@ def test_a_bodys_reach_at_many_poses_is_its_support_point_along_the_direction(
     else:
         expected = [direction @ body.support(T, direction) for T in Ts]
     np.testing.assert_allclose(got, expected, atol=1e-12)
+
+
+@pytest.mark.parametrize(("offset", "proved"), [(0.05, False), (0.11, True)])
+def test_the_proof_from_known_bounds_bounds_only_what_they_leave_short_and_follows_the_geometry(
+    offset, proved, irb4600, nozzle, make_model, kin
+):
+    """The near miss above on a path of 20 waypoints whose closest pass falls between waypoints 9
+    and 10 (both clear of the margin), from known bounds: FCL's distance of every pair at every
+    waypoint, none (-inf) for the cube's pairs at waypoint 9, so only the two segments about it are
+    left short. Reference: FCL's distance of the cube's pairs at 400 samples along the path (the
+    margin of 1 cm broken below 5.5 cm, kept above)."""
+    ends = np.radians([[-50.0, 10, 10, 0, 60, 0], [50.0, 10, 10, 0, 60, 0]])
+    q = ends[0] + np.linspace(0.0, 1.0, 20)[:, None] * (ends[1] - ends[0])
+    T = kin.pose(ends.mean(axis=0))
+    centre = T[:3, 3] - 0.2 * T[:3, 2]
+    radial = np.array([centre[0], centre[1], 0.0]) / np.linalg.norm(centre[:2])
+    cube = Shape("cube", "box", pose=make_transform(p=centre + offset * radial), size_m=(0.03, 0.03, 0.03))
+    model = make_model(irb4600, (cube,), (nozzle,))
+    cubes = [k for k, pair in enumerate(model.pairs) if "cube" in pair]
+    prior = np.array([[model.pair_distance(qk, p) for p in range(len(model.pairs))] for qk in q])
+    assert prior[[9, 10]][:, cubes].min() > 0.01  # the waypoints keep the margin
+    prior[9, cubes] = -np.inf
+    samples = ends[0] + np.linspace(0.0, 1.0, 401)[:, None] * (ends[1] - ends[0])
+    least = min(model.pair_distance(qt, k) for qt in samples for k in cubes)
+    assert (least >= 0.01 - 1e-4) is proved
+    assert margins_proved(model, q, prior=prior) is proved
+    assert margins_proved(model, q, prior=prior, directions=np.full((*prior.shape, 3), np.nan)) is proved

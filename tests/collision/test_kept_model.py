@@ -14,7 +14,7 @@ import pinocchio as pin
 import pytest
 
 from refine.collision import CollisionModel
-from refine.collision import model as collision_model
+from refine.collision import kept as collision_kept
 from refine.collision.carry import carried_bounds, checked_bounds
 from refine.frames import make_transform
 from refine.robot.registry import load_robot
@@ -33,13 +33,13 @@ def build(robot, tool=(NOZZLE,), cell=(PILLAR, BALL), margin_m=0.01, self_margin
 
 def fresh(robot, **kwargs):
     """The model as built with nothing kept from earlier models."""
-    saved = dict(collision_model._KEPT)
-    collision_model._KEPT.clear()
+    saved = dict(collision_kept.KEPT)
+    collision_kept.KEPT.clear()
     try:
         return build(robot, **kwargs)
     finally:
-        collision_model._KEPT.clear()
-        collision_model._KEPT.update(saved)
+        collision_kept.KEPT.clear()
+        collision_kept.KEPT.update(saved)
 
 
 def path(n=12, seed=3):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import fcl
 import numpy as np
 import pytest
@@ -317,3 +319,64 @@ def test_threads_placing_one_model_get_each_their_own_joints_poses(cell_model, b
     for i, rows in enumerate(truth):
         for k, poses in enumerate(got[i]):
             np.testing.assert_allclose(poses, rows[k % len(rows)], atol=1e-12, rtol=0.0)
+
+
+def _world_boxes(model, robot, base, q):
+    """World-aligned boxes (low and high corners) [m] of every body at joints q, from Pinocchio and
+    each body's box corners."""
+    import pinocchio as pin
+
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, q)
+    lo, hi = [], []
+    signs = np.array(list(np.ndindex(2, 2, 2))) * 2.0 - 1.0
+    for b in model.bodies:
+        T = b.link_T_shape if b.kind == "cell" else base @ data.oMf[b.frame_id].homogeneous @ b.link_T_shape
+        corners = (b.centre + signs * b.half_extent) @ T[:3, :3].T + T[:3, 3]
+        lo.append(corners.min(axis=0))
+        hi.append(corners.max(axis=0))
+    return np.array(lo), np.array(hi)
+
+
+def _box_gaps(model, robot, base, q):
+    """Every pair's box gap [m] at joints q (P,), -inf where the boxes overlap: the brute-force reference."""
+    lo, hi = _world_boxes(model, robot, base, q)
+    index = {b.label: i for i, b in enumerate(model.bodies)}
+    out = []
+    for a, b in model.pairs:
+        i, j = index[a], index[b]
+        gap = np.linalg.norm(np.maximum(0.0, np.maximum(lo[j] - hi[i], lo[i] - hi[j])))
+        out.append(gap if gap > 0.0 else -np.inf)
+    return np.array(out)
+
+
+def test_the_box_bounds_kept_with_a_paths_poses_are_its_own_and_not_another_paths_or_cells(
+    irb4600, table_cell, nozzle, base_in_world, make_model
+):
+    """The box bounds of the poses :meth:`moving_poses` keeps for a path are given again (read-only)
+    for the same joints; another path, a pair subset, or a model whose fixture moved gets its own.
+    Reference: boxes around each body's box corners placed by Pinocchio, gap by gap."""
+    rng = np.random.default_rng(3)
+    q1 = np.radians(NEAR_TABLE_DEG) + rng.normal(0.0, 0.05, (6, 6))
+    q2 = q1 + 0.1
+    model = make_model(irb4600, table_cell, (nozzle,), base=base_in_world)
+    boxes = model.box_bounds(model.moving_poses(q1))
+    assert not boxes.flags.writeable
+    assert model.box_bounds(model.moving_poses(q1.copy())) is boxes  # the same joints: the same answer
+    for q, found in ((q1, boxes), (q2, model.box_bounds(model.moving_poses(q2)))):
+        want = np.array([_box_gaps(model, irb4600, base_in_world, qk) for qk in q])
+        np.testing.assert_array_equal(np.isinf(found), np.isinf(want))
+        np.testing.assert_allclose(found[np.isfinite(want)], want[np.isfinite(want)], rtol=0.0, atol=1e-9)
+    columns = np.array([0, len(model.pairs) - 1, 3])
+    subset = model.box_bounds(model.moving_poses(q2), columns)
+    np.testing.assert_array_equal(subset, model.box_bounds(model.moving_poses(q2))[:, columns])
+    moved = tuple(
+        replace(s, pose=make_transform(p=[1.3, 0.35, 0.62])) if s.name == "fixture" else s for s in table_cell
+    )
+    other = make_model(irb4600, moved, (nozzle,), base=base_in_world)
+    found = other.box_bounds(other.moving_poses(q1))
+    want = np.array([_box_gaps(other, irb4600, base_in_world, qk) for qk in q1])
+    np.testing.assert_array_equal(np.isinf(found), np.isinf(want))
+    np.testing.assert_allclose(found[np.isfinite(want)], want[np.isfinite(want)], rtol=0.0, atol=1e-9)
+    fixture = [k for k, pair in enumerate(model.pairs) if "fixture" in pair]
+    assert not np.array_equal(found[:, fixture], boxes[:, fixture])

@@ -234,7 +234,7 @@ def test_advancement_never_certifies_a_segment_where_some_motion_within_the_boun
     """The budget f(t) = slope |t - t*| - depth, slope <= S, changes no faster than S, as a pair's
     budget does, and dips below zero only around t*. Whatever t* and the depth, advancement must not certify
     [0, 1]; with the dip lifted above zero it must, within its sample limit."""
-    from refine.collision.check import MAX_ADVANCE, _advance
+    from refine.collision.advance import MAX_ADVANCE, advance
 
     rng = np.random.default_rng(5)
     for _ in range(2000):
@@ -251,10 +251,10 @@ def test_advancement_never_certifies_a_segment_where_some_motion_within_the_boun
         b0, b1 = dip(0.0), dip(1.0)
         if min(b0, b1) < 0.0:
             continue
-        assert not _advance(dip, b0, b1, S), (S, t_star, depth, calls)
+        assert not advance(dip, b0, b1, S), (S, t_star, depth, calls)
 
         def lifted(t, slope=slope, t_star=t_star, S=S):
             return slope * abs(t - t_star) + 0.3 * S
 
-        assert _advance(lifted, lifted(0.0), lifted(1.0), S)
+        assert advance(lifted, lifted(0.0), lifted(1.0), S)
         assert len(calls) <= 2 + 2 * MAX_ADVANCE
