@@ -51,7 +51,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from refine.optimise.line_ik import line_manipulability, segment_starts, solve_line
+from refine.optimise.line_ik import joint_linear, line_manipulability, segment_starts, solve_line
 from refine.optimise.problem import LinearRow
 from refine.optimise.verify import Violation, runs
 from refine.robot.kinematics import TcpKinematics
@@ -242,7 +242,7 @@ def check_controller_lines(
     n_seg = len(q) - 1
     wrist = np.zeros(n_seg, dtype=bool) if wrist is None else np.asarray(wrist, dtype=bool)
     m, segment, t = sample_parameters(q)
-    q_lin = q[segment] + t[:, None] * (q[segment + 1] - q[segment])
+    q_lin = joint_linear(q, segment, t)
     spec = kin.robot.spec
     if known is not None and known.q.shape == q_lin.shape:
         q_line, err, sing_seg = known.q, known.ik_error, known.singularity

@@ -60,11 +60,11 @@ def newton_start(
     """
     A = J_wp @ np.swapaxes(J_wp, 1, 2) + NEWTON_DAMPING**2 * np.eye(J_wp.shape[1])
     P_wp = np.swapaxes(np.linalg.solve(A, J_wp), 1, 2)  # (A⁻¹ J)ᵀ = Jᵀ A⁻¹, A symmetric: (N, n, 6)
-    P = np.diff(P_wp, axis=0)[segment]
-    P *= t[:, None, None]
-    P += P_wp[segment]
+    # P e = P_k e + t (P_k+1 - P_k) e: one product of [P_k, P_k+1 - P_k] (n, 12) and [e, t e] (12,)
+    PP = np.concatenate([P_wp[:-1], np.diff(P_wp, axis=0)], axis=2)
     e = pose_errors(lin_poses, targets) if errors is None else errors
-    dq = (P @ e[:, :, None])[:, :, 0]
+    ee = np.concatenate([e, t[:, None] * e], axis=1)
+    dq = np.einsum("mij,mj->mi", np.take(PP, segment, axis=0), ee)
     dq[~(np.abs(dq).max(axis=1) <= NEWTON_STEP_MAX)] = 0.0  # and a NaN step: from q_lin
     dq += q_lin
     return dq
@@ -78,8 +78,31 @@ def pose_errors(poses: Array, targets: Array) -> Array:
     """
     e = np.empty((len(poses), 6))
     e[:, :3] = targets[:, :3, 3] - poses[:, :3, 3]
-    e[:, 3:] = rotation_vectors(targets[:, :3, :3] @ np.transpose(poses[:, :3, :3], (0, 2, 1)))
+    e[:, 3:] = relative_rotation_vectors(targets[:, :3, :3], poses[:, :3, :3])
     return e
+
+
+def relative_rotation_vectors(Ra: Array, Rb: Array) -> Array:
+    """Rotation vectors (M, 3) [rad] of ``Ra Rbᵀ`` for rotation matrices ``Ra``, ``Rb`` (M, 3, 3).
+
+    :func:`refine.robot.kinematics.rotation_vectors` of the products, to rounding, without
+    forming them: the trace of ``Ra Rbᵀ`` is the sum of the entries of ``Ra * Rb``, and its skew
+    part's entry ``(i, j)`` is ``Σ_k Ra_ik Rb_jk - Ra_jk Rb_ik``. Near 180 degrees, where that
+    function takes the axis from the whole matrix, the products are formed for those rows.
+    """
+    cos = np.clip((np.einsum("mij,mij->m", Ra, Rb) - 1.0) / 2.0, -1.0, 1.0)
+    theta = np.arccos(cos)
+    vee = np.empty((len(Ra), 3))
+    for out, i, j in ((0, 2, 1), (1, 0, 2), (2, 1, 0)):
+        vee[:, out] = np.einsum("mk,mk->m", Ra[:, i], Rb[:, j]) - np.einsum("mk,mk->m", Ra[:, j], Rb[:, i])
+    vee *= 0.5
+    small = theta < 1e-6
+    scale = np.where(small, 1.0 + theta**2 / 6.0, theta / np.where(small, 1.0, np.sin(theta)))
+    vee *= scale[:, None]
+    near_pi = np.flatnonzero(theta > np.pi - 1e-3)
+    if len(near_pi):
+        vee[near_pi] = rotation_vectors(Ra[near_pi] @ np.swapaxes(Rb[near_pi], 1, 2))
+    return vee
 
 
 def previous_bows(
@@ -148,10 +171,13 @@ def previous_corrections(
     if old.start_correction is None or q_old.shape != q.shape or old.samples.shape != m.shape:
         return out
     rows, at = _same_samples(m, segment, old, np.ones(len(m), dtype=bool))
-    c = old.start_correction[at]
+    c = np.take(old.start_correction, at, axis=0)
     with np.errstate(invalid="ignore"):
-        good = (old.ik_error[at] <= tolerance) & (np.abs(c).max(axis=1) <= CORRECTION_MAX_RAD)
-    out[rows[good]] = c[good]
+        good = (np.take(old.ik_error, at) <= tolerance) & (np.abs(c).max(axis=1) <= CORRECTION_MAX_RAD)
+    c[~good] = 0.0
+    if len(rows) == len(t):  # every sample has one (rows are in order, without repeats)
+        return c
+    out[rows] = c
     return out
 
 
