@@ -63,11 +63,37 @@ def newton_start(
     # P e = P_k e + t (P_k+1 - P_k) e: one product of [P_k, P_k+1 - P_k] (n, 12) and [e, t e] (12,)
     PP = np.concatenate([P_wp[:-1], np.diff(P_wp, axis=0)], axis=2)
     e = pose_errors(lin_poses, targets) if errors is None else errors
-    ee = np.concatenate([e, t[:, None] * e], axis=1)
-    dq = np.einsum("mij,mj->mi", np.take(PP, segment, axis=0), ee)
-    dq[~(np.abs(dq).max(axis=1) <= NEWTON_STEP_MAX)] = 0.0  # and a NaN step: from q_lin
+    dq = _per_segment_products(PP, segment, np.concatenate([e, t[:, None] * e], axis=1))
+    dq[~(_largest_per_row(np.abs(dq)) <= NEWTON_STEP_MAX)] = 0.0  # and a NaN step: from q_lin
     dq += q_lin
     return dq
+
+
+def _largest_per_row(a: Array) -> Array:
+    """The largest entry of each row of ``a`` (M, n), NaN where a row holds one: ``a.max(axis=1)``
+    column by column."""
+    out = a[:, 0].copy()
+    for j in range(1, a.shape[1]):
+        np.maximum(out, a[:, j], out=out)
+    return out
+
+
+def _per_segment_products(A: Array, segment: Array, x: Array) -> Array:
+    """The products ``A[segment[i]] @ x[i]`` (M, r) of matrices ``A`` (K, r, c) and vectors ``x`` (M, c).
+
+    Where the samples lie segment after segment (``segment`` non-decreasing) and no segment holds
+    more than twice the mean, the vectors are laid out per segment, padded with zeros, and each
+    segment's matrix multiplies its block at once; else each sample's matrix is gathered.
+    """
+    M, K = len(segment), len(A)
+    counts = np.bincount(segment, minlength=K)
+    width = int(counts.max()) if M else 0
+    if M == 0 or width * K > 2 * M or np.any(segment[1:] < segment[:-1]):
+        return np.einsum("mij,mj->mi", np.take(A, segment, axis=0), x)
+    slot = np.arange(M) - (np.cumsum(counts) - counts)[segment]  # each sample's place in its segment
+    blocks = np.zeros((K, width, x.shape[1]))
+    blocks[segment, slot] = x
+    return (blocks @ np.swapaxes(A, 1, 2))[segment, slot]
 
 
 def pose_errors(poses: Array, targets: Array) -> Array:
