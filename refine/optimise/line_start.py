@@ -70,8 +70,10 @@ def newton_start(
 
 
 def _largest_per_row(a: Array) -> Array:
-    """The largest entry of each row of ``a`` (M, n), NaN where a row holds one: ``a.max(axis=1)``
-    column by column."""
+    """The largest entry of each row of ``a`` (M, n), (M,): ``a.max(axis=1)`` column by column.
+
+    NaN where a row holds one, as ``max``.
+    """
     out = a[:, 0].copy()
     for j in range(1, a.shape[1]):
         np.maximum(out, a[:, j], out=out)
