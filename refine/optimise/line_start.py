@@ -92,10 +92,12 @@ def _per_segment_products(A: Array, segment: Array, x: Array) -> Array:
     width = int(counts.max()) if M else 0
     if M == 0 or width * K > 2 * M or np.any(segment[1:] < segment[:-1]):
         return np.einsum("mij,mj->mi", np.take(A, segment, axis=0), x)
-    slot = np.arange(M) - (np.cumsum(counts) - counts)[segment]  # each sample's place in its segment
-    blocks = np.zeros((K, width, x.shape[1]))
-    blocks[segment, slot] = x
-    return (blocks @ np.swapaxes(A, 1, 2))[segment, slot]
+    # each sample's row in the blocks (K, width) laid out flat: its segment's first plus its place in it
+    flat = np.arange(M) + (segment * width - (np.cumsum(counts) - counts)[segment])
+    blocks = np.zeros((K * width, x.shape[1]))
+    blocks[flat] = x
+    products = blocks.reshape(K, width, x.shape[1]) @ np.swapaxes(A, 1, 2)
+    return np.take(products.reshape(K * width, A.shape[1]), flat, axis=0)
 
 
 def pose_errors(poses: Array, targets: Array) -> Array:
