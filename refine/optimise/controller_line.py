@@ -51,7 +51,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from refine.optimise.line_ik import line_manipulability, segment_starts, solve_line
+from refine.optimise.line_ik import joint_linear, line_manipulability, segment_starts, solve_line
 from refine.optimise.problem import LinearRow
 from refine.optimise.verify import Violation, runs
 from refine.robot.kinematics import TcpKinematics
@@ -242,7 +242,7 @@ def check_controller_lines(
     n_seg = len(q) - 1
     wrist = np.zeros(n_seg, dtype=bool) if wrist is None else np.asarray(wrist, dtype=bool)
     m, segment, t = sample_parameters(q)
-    q_lin = q[segment] + t[:, None] * (q[segment + 1] - q[segment])
+    q_lin = joint_linear(q, segment, t)
     spec = kin.robot.spec
     if known is not None and known.q.shape == q_lin.shape:
         q_line, err, sing_seg = known.q, known.ik_error, known.singularity
@@ -252,7 +252,7 @@ def check_controller_lines(
         q_line, err, correction, sing_seg, off_seg, angle_seg = solve_line(
             kin, q, m, segment, t, wrist, IK_TOLERANCE, previous
         )
-    joint_diff = np.degrees(np.abs(q_line - q_lin).max(axis=1))
+    bow = np.abs(q_line - q_lin)
     margins = np.minimum(q_line - spec.lower, spec.upper - q_line)
 
     violations: list[Violation] = []
@@ -290,7 +290,7 @@ def check_controller_lines(
 
     clear = change = proved = None
     if reach is not None:
-        change = np.maximum.reduceat(np.abs(q_line - q_lin) @ np.asarray(reach, dtype=float), first)
+        change = np.maximum.reduceat(bow @ np.asarray(reach, dtype=float), first)
     if clearance is not None:
         # the joint path through every waypoint and every sample, in order
         order = np.argsort(np.concatenate([np.arange(len(q)) * 1.0, segment + t]), kind="stable")
@@ -310,7 +310,7 @@ def check_controller_lines(
         ik_error=err,
         position_difference_m=off_seg,
         orientation_difference_deg=angle_seg,
-        joint_difference_deg=np.maximum.reduceat(joint_diff, first),
+        joint_difference_deg=np.degrees(np.maximum.reduceat(bow, first, axis=0).max(axis=1)),
         joint_margin_rad=joint_margins.min(axis=1),
         singularity=sing_seg,
         clearance_m=clear,

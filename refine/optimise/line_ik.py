@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from refine.optimise.line_start import newton_start, pose_errors, previous_bows, previous_corrections
-from refine.optimise.slerp import exp_rotvecs, log_rotations
+from refine.optimise.slerp import log_rotations, slerp_rotations
 from refine.robot.kinematics import TcpKinematics, solve_ik_batch
 from refine.types import Array
 
@@ -37,17 +37,26 @@ def line_poses(poses: Array, q: Array, segment: Array, t: Array, kin: TcpKinemat
         wrist: per segment, True where the orientation follows the joint-linear wrist, (N-1,).
     """
     p = poses[:, :3, 3]
-    a, b = p[segment], p[segment + 1]
-    out = np.zeros((len(t), 4, 4))
+    out = np.empty((len(t), 4, 4))
+    out[:, 3, :3] = 0.0
     out[:, 3, 3] = 1.0
-    out[:, :3, 3] = a + t[:, None] * (b - a)
+    a = np.take(p, segment, axis=0)
+    out[:, :3, 3] = a + t[:, None] * (np.take(np.diff(p, axis=0), segment, axis=0))
     R = poses[:, :3, :3]
     steps = log_rotations(np.swapaxes(R[:-1], 1, 2) @ R[1:])  # per segment, then per sample
-    out[:, :3, :3] = R[segment] @ exp_rotvecs(t[:, None] * steps[segment])
+    out[:, :3, :3] = slerp_rotations(R[:-1], steps, segment, t)
     on_wrist = wrist[segment]
     if on_wrist.any():
-        q_lin = q[segment] + t[:, None] * (q[segment + 1] - q[segment])
+        q_lin = joint_linear(q, segment, t)
         out[on_wrist, :3, :3] = kin.poses(q_lin[on_wrist])[:, :3, :3]
+    return out
+
+
+def joint_linear(q: Array, segment: Array, t: Array) -> Array:
+    """The joint-linear joints ``q_k + t (q_k+1 - q_k)`` [rad] (M, n) at ``t`` (M,) inside ``segment`` (M,)."""
+    out = np.take(np.diff(q, axis=0), segment, axis=0)
+    out *= t[:, None]
+    out += np.take(q, segment, axis=0)
     return out
 
 
@@ -107,7 +116,7 @@ def solve_line(
         chord [m] and the largest angle between its orientation and the line's [deg], each (N-1,).
     """
     spec = kin.robot.spec
-    q_lin = q[segment] + t[:, None] * (q[segment + 1] - q[segment])
+    q_lin = joint_linear(q, segment, t)
     poses, J_wp = kin.poses_jacobians(q)
     targets = line_poses(poses, q, segment, t, kin, wrist)
     lin_poses = kin.poses(q_lin)
@@ -140,16 +149,15 @@ def solve_line(
     correction = q_line - newton
     correction[~cold] = np.nan
     sing = line_manipulability(kin, J_line)
-    a, b = poses[segment, :3, 3], poses[segment + 1, :3, 3]
-    chord = b - a
-    along = np.clip(
-        np.einsum("ij,ij->i", lin_poses[:, :3, 3] - a, chord)
-        / np.maximum(np.einsum("ij,ij->i", chord, chord), 1e-300),
-        0.0,
-        1.0,
-    )
-    off_line = np.linalg.norm(lin_poses[:, :3, 3] - (a + along[:, None] * chord), axis=1)
-    angle = np.degrees(np.linalg.norm(errors[:, 3:], axis=1))  # the angle of R_target R_linᵀ
+    p = poses[:, :3, 3]
+    chords = np.diff(p, axis=0)  # per segment
+    lengths2 = np.maximum(np.einsum("ij,ij->i", chords, chords), 1e-300)
+    chord = np.take(chords, segment, axis=0)
+    from_a = lin_poses[:, :3, 3] - np.take(p, segment, axis=0)
+    along = np.clip(np.einsum("ij,ij->i", from_a, chord) / np.take(lengths2, segment), 0.0, 1.0)
+    from_a -= along[:, None] * chord  # the joint-linear TCP less its nearest point of the chord
+    off_line = np.sqrt(np.einsum("ij,ij->i", from_a, from_a))
+    angle = np.degrees(np.sqrt(np.einsum("ij,ij->i", errors[:, 3:], errors[:, 3:])))  # of R_target R_linᵀ
     first = segment_starts(segment)
     return (
         q_line,

@@ -60,14 +60,44 @@ def newton_start(
     """
     A = J_wp @ np.swapaxes(J_wp, 1, 2) + NEWTON_DAMPING**2 * np.eye(J_wp.shape[1])
     P_wp = np.swapaxes(np.linalg.solve(A, J_wp), 1, 2)  # (A⁻¹ J)ᵀ = Jᵀ A⁻¹, A symmetric: (N, n, 6)
-    P = np.diff(P_wp, axis=0)[segment]
-    P *= t[:, None, None]
-    P += P_wp[segment]
+    # P e = P_k e + t (P_k+1 - P_k) e: one product of [P_k, P_k+1 - P_k] (n, 12) and [e, t e] (12,)
+    PP = np.concatenate([P_wp[:-1], np.diff(P_wp, axis=0)], axis=2)
     e = pose_errors(lin_poses, targets) if errors is None else errors
-    dq = (P @ e[:, :, None])[:, :, 0]
-    dq[~(np.abs(dq).max(axis=1) <= NEWTON_STEP_MAX)] = 0.0  # and a NaN step: from q_lin
+    dq = _per_segment_products(PP, segment, np.concatenate([e, t[:, None] * e], axis=1))
+    dq[~(_largest_per_row(np.abs(dq)) <= NEWTON_STEP_MAX)] = 0.0  # and a NaN step: from q_lin
     dq += q_lin
     return dq
+
+
+def _largest_per_row(a: Array) -> Array:
+    """The largest entry of each row of ``a`` (M, n), (M,): ``a.max(axis=1)`` column by column.
+
+    NaN where a row holds one, as ``max``.
+    """
+    out = a[:, 0].copy()
+    for j in range(1, a.shape[1]):
+        np.maximum(out, a[:, j], out=out)
+    return out
+
+
+def _per_segment_products(A: Array, segment: Array, x: Array) -> Array:
+    """The products ``A[segment[i]] @ x[i]`` (M, r) of matrices ``A`` (K, r, c) and vectors ``x`` (M, c).
+
+    Where the samples lie segment after segment (``segment`` non-decreasing) and no segment holds
+    more than twice the mean, the vectors are laid out per segment, padded with zeros, and each
+    segment's matrix multiplies its block at once; else each sample's matrix is gathered.
+    """
+    M, K = len(segment), len(A)
+    counts = np.bincount(segment, minlength=K)
+    width = int(counts.max()) if M else 0
+    if M == 0 or width * K > 2 * M or np.any(segment[1:] < segment[:-1]):
+        return np.einsum("mij,mj->mi", np.take(A, segment, axis=0), x)
+    # each sample's row in the blocks (K, width) laid out flat: its segment's first plus its place in it
+    flat = np.arange(M) + (segment * width - (np.cumsum(counts) - counts)[segment])
+    blocks = np.zeros((K * width, x.shape[1]))
+    blocks[flat] = x
+    products = blocks.reshape(K, width, x.shape[1]) @ np.swapaxes(A, 1, 2)
+    return np.take(products.reshape(K * width, A.shape[1]), flat, axis=0)
 
 
 def pose_errors(poses: Array, targets: Array) -> Array:
@@ -78,8 +108,31 @@ def pose_errors(poses: Array, targets: Array) -> Array:
     """
     e = np.empty((len(poses), 6))
     e[:, :3] = targets[:, :3, 3] - poses[:, :3, 3]
-    e[:, 3:] = rotation_vectors(targets[:, :3, :3] @ np.transpose(poses[:, :3, :3], (0, 2, 1)))
+    e[:, 3:] = relative_rotation_vectors(targets[:, :3, :3], poses[:, :3, :3])
     return e
+
+
+def relative_rotation_vectors(Ra: Array, Rb: Array) -> Array:
+    """Rotation vectors (M, 3) [rad] of ``Ra Rbᵀ`` for rotation matrices ``Ra``, ``Rb`` (M, 3, 3).
+
+    :func:`refine.robot.kinematics.rotation_vectors` of the products, to rounding, without
+    forming them: the trace of ``Ra Rbᵀ`` is the sum of the entries of ``Ra * Rb``, and its skew
+    part's entry ``(i, j)`` is ``Σ_k Ra_ik Rb_jk - Ra_jk Rb_ik``. Near 180 degrees, where that
+    function takes the axis from the whole matrix, the products are formed for those rows.
+    """
+    cos = np.clip((np.einsum("mij,mij->m", Ra, Rb) - 1.0) / 2.0, -1.0, 1.0)
+    theta = np.arccos(cos)
+    vee = np.empty((len(Ra), 3))
+    for out, i, j in ((0, 2, 1), (1, 0, 2), (2, 1, 0)):
+        vee[:, out] = np.einsum("mk,mk->m", Ra[:, i], Rb[:, j]) - np.einsum("mk,mk->m", Ra[:, j], Rb[:, i])
+    vee *= 0.5
+    small = theta < 1e-6
+    scale = np.where(small, 1.0 + theta**2 / 6.0, theta / np.where(small, 1.0, np.sin(theta)))
+    vee *= scale[:, None]
+    near_pi = np.flatnonzero(theta > np.pi - 1e-3)
+    if len(near_pi):
+        vee[near_pi] = rotation_vectors(Ra[near_pi] @ np.swapaxes(Rb[near_pi], 1, 2))
+    return vee
 
 
 def previous_bows(
@@ -148,10 +201,13 @@ def previous_corrections(
     if old.start_correction is None or q_old.shape != q.shape or old.samples.shape != m.shape:
         return out
     rows, at = _same_samples(m, segment, old, np.ones(len(m), dtype=bool))
-    c = old.start_correction[at]
+    c = np.take(old.start_correction, at, axis=0)
     with np.errstate(invalid="ignore"):
-        good = (old.ik_error[at] <= tolerance) & (np.abs(c).max(axis=1) <= CORRECTION_MAX_RAD)
-    out[rows[good]] = c[good]
+        good = (np.take(old.ik_error, at) <= tolerance) & (np.abs(c).max(axis=1) <= CORRECTION_MAX_RAD)
+    c[~good] = 0.0
+    if len(rows) == len(t):  # every sample has one (rows are in order, without repeats)
+        return c
+    out[rows] = c
     return out
 
 

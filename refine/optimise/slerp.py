@@ -11,7 +11,10 @@ matrices without a rotation object per sample:
   axis comes from ``R + Rᵀ``;
 * :func:`exp_rotvecs`: Rodrigues' formula ``I + (sin θ / θ) K + (2 sin²(θ/2) / θ²) K²`` with ``K``
   the skew matrix of the rotation vector, both coefficients by their series below
-  :data:`SMALL_RAD`.
+  :data:`SMALL_RAD`;
+* :func:`slerp_rotations`: ``R_k exp(t w_k)`` at many ``t`` per rotation ``R_k``, as Rodrigues'
+  formula multiplied out: ``R_k + t a(tθ) (R_k K) + t² b(tθ) (R_k K²)``, the two products once per
+  rotation and per sample only two coefficients.
 
 They agree with SciPy's ``Rotation`` (``from_matrix``, ``as_rotvec``, ``from_rotvec``,
 ``as_matrix``, ``magnitude``) to a few units of the last place on orthonormal matrices
@@ -68,11 +71,8 @@ def exp_rotvecs(w: Array) -> Array:
     by entry for all rows at once.
     """
     theta = np.linalg.norm(w, axis=1)
-    small = theta < SMALL_RAD
+    a, b = _rodrigues_coefficients(theta)
     t2 = theta**2
-    safe = np.where(small, 1.0, theta)
-    a = np.where(small, 1.0 - t2 / 6.0 + t2**2 / 120.0, np.sin(safe) / safe)
-    b = np.where(small, 0.5 - t2 / 24.0 + t2**2 / 720.0, 2.0 * (np.sin(safe / 2.0) / safe) ** 2)
     bw = b[:, None] * w
     out = bw[:, :, None] * w[:, None, :]
     diagonal = 1.0 - b * t2
@@ -86,4 +86,47 @@ def exp_rotvecs(w: Array) -> Array:
     out[:, 2, 0] -= aw[:, 1]
     out[:, 1, 2] -= aw[:, 0]
     out[:, 2, 1] += aw[:, 0]
+    return out
+
+
+def _rodrigues_coefficients(theta: Array) -> tuple[Array, Array]:
+    """``sin θ / θ`` and ``2 sin²(θ/2) / θ²`` of angles ``theta`` [rad], by their series below :data:`SMALL_RAD`."""
+    small = theta < SMALL_RAD
+    t2 = theta**2
+    safe = np.where(small, 1.0, theta)
+    a = np.where(small, 1.0 - t2 / 6.0 + t2**2 / 120.0, np.sin(safe) / safe)
+    b = np.where(small, 0.5 - t2 / 24.0 + t2**2 / 720.0, 2.0 * (np.sin(safe / 2.0) / safe) ** 2)
+    return a, b
+
+
+def _skews(w: Array) -> Array:
+    K = np.zeros((len(w), 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -w[:, 2], w[:, 1], -w[:, 0]
+    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = w[:, 2], -w[:, 1], w[:, 0]
+    return K
+
+
+def slerp_rotations(R: Array, w: Array, index: Array, t: Array) -> Array:
+    """Rotation matrices ``R[index] exp(t w[index])`` (M, 3, 3) at the parameters ``t`` (M,).
+
+    Args:
+        R: rotation matrices (K, 3, 3).
+        w: rotation vectors (K, 3) [rad], one per rotation of ``R``.
+        index: each sample's rotation, (M,), integers in [0, K).
+        t: each sample's fraction of its rotation vector, (M,).
+
+    With ``K`` the skew matrix of ``w`` and ``θ = |w|``, ``exp(t K) = I + t a(tθ) K + t² b(tθ) K²``
+    (``a``, ``b`` the coefficients of :func:`exp_rotvecs`), so the product is
+    ``R + t a (R K) + t² b (R K²)``: the same as ``R[index] @ exp_rotvecs(t[:, None] * w[index])``
+    to rounding.
+    """
+    K = _skews(w)
+    RK = R @ K
+    RK2 = RK @ K
+    a, b = _rodrigues_coefficients(t * np.take(np.linalg.norm(w, axis=1), index))
+    a *= t
+    b *= t * t
+    out = np.take(R, index, axis=0)
+    out += a[:, None, None] * np.take(RK, index, axis=0)
+    out += b[:, None, None] * np.take(RK2, index, axis=0)
     return out

@@ -196,11 +196,13 @@ def test_the_final_check_takes_the_line_source_s_ik_only_for_the_same_joints_kin
     assert source.checked(q + 1e-9, ur10e_kin, no_wrist) is None
 
 
-def test_the_newton_start_is_one_damped_step_with_the_damped_inverse_interpolated_per_sample():
+@pytest.mark.parametrize("layout", ["in order", "shuffled", "crowded"])
+def test_the_newton_start_is_one_damped_step_with_the_damped_inverse_interpolated_per_sample(layout):
     """Random waypoint Jacobians, samples and pose errors: each row's start is the joint-linear
     joints plus P e with P = P_a + t (P_b - P_a) of its segment and each waypoint's damped inverse
     P = J^T (J J^T + damping^2 I)^-1 worked out by its singular values (V diag(s / (s^2 + d^2)) U^T),
-    row by row; a row whose step exceeds NEWTON_STEP_MAX keeps the joint-linear joints."""
+    row by row; a row whose step exceeds NEWTON_STEP_MAX keeps the joint-linear joints. The samples
+    segment after segment (some segments empty), in no order, or most in one segment."""
     from scipy.spatial.transform import Rotation
 
     from refine.optimise import line_start as cl
@@ -209,6 +211,10 @@ def test_the_newton_start_is_one_damped_step_with_the_damped_inverse_interpolate
     n_wp, m = 9, 40
     J_wp = rng.normal(size=(n_wp, 6, 6))
     segment = np.sort(rng.integers(0, n_wp - 1, m))
+    if layout == "shuffled":
+        segment = rng.permutation(segment)
+    elif layout == "crowded":
+        segment = np.sort(np.where(np.arange(m) % 8 == 0, segment, 3))
     t = rng.uniform(0.05, 0.95, m)
     q_lin = rng.normal(size=(m, 6))
     lin = np.tile(np.eye(4), (m, 1, 1))

@@ -5,7 +5,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from refine.optimise.line_ik import line_poses
-from refine.optimise.slerp import exp_rotvecs, log_rotations, rotation_angles
+from refine.optimise.line_start import relative_rotation_vectors
+from refine.optimise.slerp import exp_rotvecs, log_rotations, rotation_angles, slerp_rotations
 
 
 def rotvecs(rng, n):
@@ -58,3 +59,29 @@ def test_the_line_poses_are_scipys_slerp_between_targets():
     assert np.abs(got[:, :3, :3] - ref).max() < 1e-14
     a, b = poses[segment, :3, 3], poses[segment + 1, :3, 3]
     assert np.abs(got[:, :3, 3] - (a + t[:, None] * (b - a))).max() == 0.0
+
+
+def test_slerp_rotations_are_scipys_composition_from_zero_to_pi():
+    """``R_k exp(t w_k)`` for steps 0 .. pi and t in [0, 1], against SciPy's composition of rotations."""
+    rng = np.random.default_rng(11)
+    w = rotvecs(rng, 200)
+    R = Rotation.random(len(w), random_state=12)
+    index = rng.integers(0, len(w), size=3000)
+    t = np.concatenate([[0.0, 1.0, 1e-9, 0.5], rng.uniform(0.0, 1.0, 2996)])
+    got = slerp_rotations(R.as_matrix(), w, index, t)
+    ref = (R[index] * Rotation.from_rotvec(t[:, None] * w[index])).as_matrix()
+    assert np.abs(got - ref).max() < 2e-15
+
+
+def test_relative_rotation_vectors_are_scipys_rotvec_of_the_product():
+    """The rotation vector of ``Ra Rbᵀ`` for relative angles 0 .. pi, against SciPy's."""
+    rng = np.random.default_rng(13)
+    w = rotvecs(rng, 400)
+    Rb = Rotation.random(len(w), random_state=14)
+    Ra = Rotation.from_rotvec(w) * Rb
+    got = relative_rotation_vectors(Ra.as_matrix(), Rb.as_matrix())
+    ref = (Ra * Rb.inv()).as_rotvec()
+    at_pi = np.isclose(np.linalg.norm(ref, axis=1), np.pi, atol=1e-8)  # at pi: w and -w are one rotation
+    # the arccos of the trace, as the IK's: loses digits near pi
+    assert np.abs(got[~at_pi] - ref[~at_pi]).max() < 1e-9
+    assert np.abs(np.linalg.norm(got, axis=1) - np.linalg.norm(w, axis=1)).max() < 1e-9
