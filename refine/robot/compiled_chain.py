@@ -22,7 +22,8 @@ go of the GIL for the call). Any other frame, and :meth:`CompiledChain.axis_fram
 chain's.
 
 When a library is loaded it is checked once against Pinocchio (``forwardKinematics`` and
-``computeFrameJacobian``) at :data:`CHECK_ROWS` configurations; a difference above
+``computeFrameJacobian``; the IK step's error against ``log3`` and its step against NumPy's solve,
+the determinants against NumPy's) at :data:`CHECK_ROWS` configurations; a difference above
 :data:`CHECK_TOLERANCE` is logged as a warning and the chain stays NumPy's, as it does without a
 compiler, with ``REFINE_COMPILE=0`` or when compiling fails. The library is looked for on the
 first evaluation (not when the robot is made), once per :class:`CompiledChain`.
@@ -354,6 +355,20 @@ class CompiledChain:
         local = np.ascontiguousarray(np.stack([X, B, X @ B, np.eye(4)]))
         bodies = np.empty((CHECK_ROWS, len(body_joints), 4, 4))
         lib.bodies(qs, B, body_joints, local, bodies)
+        # the IK step toward targets turned and shifted off the TCP, and the determinants of 6 × 6 rows
+        targets = np.array([pin.SE3(pin.exp3(0.1 * w), 0.01 * w).homogeneous for w in qs[:, :3]])
+        targets = np.ascontiguousarray(T_tcp @ targets)
+        T_ik, J_ik = np.empty_like(T), np.empty_like(J)
+        e, norm, dq, theta = (
+            np.empty((CHECK_ROWS, 6)),
+            np.empty(CHECK_ROWS),
+            np.empty((CHECK_ROWS, self.nq)),
+            np.empty(CHECK_ROWS),
+        )
+        lib.ik(qs, B, X, targets, 0.01, False, T_ik, J_ik, e, norm, dq, theta)
+        square = np.ascontiguousarray(J_tcp[:, :, :6]) if self.nq >= 6 else np.zeros((CHECK_ROWS, 6, 6))
+        dets = np.empty(CHECK_ROWS)
+        lib.det6(square, dets)
         error = 0.0
         for k, q in enumerate(qs):
             pin.forwardKinematics(model, data, q)  # every joint (the Jacobian's pass: only the flange's)
@@ -369,6 +384,20 @@ class CompiledChain:
             pairs = [(T[k], T_pin), (T_alone[k], T_pin), (J[k], J_pin), (oMi[k], oMi_pin)]
             pairs += [(T_tcp[k], T_tcp_pin), (T_tcp_alone[k], T_tcp_pin), (J_tcp[k], J_tcp_pin)]
             pairs += [(bodies[k, m], B @ oMi_pin[j] @ local[m]) for m, j in enumerate(body_joints)]
+            e_pin = np.concatenate(
+                [targets[k, :3, 3] - T_tcp_pin[:3, 3], pin.log3(targets[k, :3, :3] @ T_tcp_pin[:3, :3].T)]
+            )
+            A = J_tcp_pin @ J_tcp_pin.T + 1e-4 * np.eye(6)
+            dq_pin = J_tcp_pin.T @ np.linalg.solve(A, e_pin)
+            pairs += [
+                (T_ik[k], T_tcp_pin),
+                (J_ik[k], J_tcp_pin),
+                (e[k], e_pin),
+                (norm[k], np.linalg.norm(e_pin)),
+            ]
+            pairs += [(dq[k] / max(1.0, np.abs(dq_pin).max()), dq_pin / max(1.0, np.abs(dq_pin).max()))]
+            det = np.linalg.det(square[k])
+            pairs += [(dets[k] / max(1.0, abs(det)), det / max(1.0, abs(det)))]
             for a, b in pairs:
                 error = max(error, float(np.abs(a - b).max()))
         return error if np.isfinite(error) else np.inf
