@@ -82,6 +82,14 @@ def test_the_step_is_the_damped_least_squares_step_of_pinocchios_error(cache) ->
         stacked = np.vstack([J_pin, damping * np.eye(robot.nq)])
         ref = np.linalg.lstsq(stacked, np.concatenate([e_pin, np.zeros(robot.nq)]), rcond=None)[0]
         np.testing.assert_allclose(dq[k], ref, rtol=0, atol=1e-10 * max(1.0, np.abs(ref).max()))
+    # a tolerance: no step for the rows under it, the same step for the others
+    tol = float(np.median(norm))
+    _, _, dq_tol, _ = robot.chain.ik_steps(qs, BASE, TCP, targets, damping, T.copy(), J.copy(), tol=tol)
+    below = norm < tol
+    assert below.any() and (~below).any()
+    assert np.array_equal(dq_tol[below], np.zeros_like(dq[below])) and np.array_equal(
+        dq_tol[~below], dq[~below]
+    )
     # given: T and J read, not computed (a Jacobian scaled by 2 halves the undamped step's size)
     J2 = 2.0 * J
     T2 = T.copy()
@@ -125,7 +133,24 @@ def test_solve_ik_batch_compiled_is_the_numpy_paths_answer(cache) -> None:
             k, targets, q0, spec.lower, spec.upper, nullspace_gain=0.0, jacobians_out=J_out, poses_out=T_out
         )
         out[name] = q, err, J_out, T_out
+    # outputs the chain cannot write into directly (not contiguous): the same answers
+    J_wide, T_wide = np.zeros((40, 6, kin.robot.nq + 2)), np.zeros((40, 4, 5))
+    q_wide, _ = solve_ik_batch(
+        kin,
+        targets,
+        q0,
+        spec.lower,
+        spec.upper,
+        nullspace_gain=0.0,
+        jacobians_out=J_wide[:, :, 1:-1],
+        poses_out=T_wide[:, :, :4],
+    )
     q, err, J_out, T_out = out["c"]
+    assert (
+        np.array_equal(q_wide, q)
+        and np.array_equal(J_wide[:, :, 1:-1], J_out)
+        and np.array_equal(T_wide[:, :, :4], T_out)
+    )
     np.testing.assert_allclose(q, out["np"][0], rtol=0, atol=1e-9)
     np.testing.assert_allclose(err, out["np"][1], rtol=0, atol=1e-9)
     assert (err < 1e-6).sum() == (out["np"][1] < 1e-6).sum() >= 35

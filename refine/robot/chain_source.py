@@ -86,7 +86,7 @@ int {prefix}_bodies_rows(const casadi_real* q, const casadi_real* base, const lo
 # one damped least-squares step per row toward a TCP target (6 task rows, nv columns)
 _IK = """
 int {prefix}_ik_rows(const casadi_real* q, const casadi_real* base, const casadi_real* tool,
-                     const casadi_real* target, casadi_real damping, long long given, casadi_real* T,
+                     const casadi_real* target, casadi_real damping, casadi_real tol, long long given, casadi_real* T,
                      casadi_real* J, casadi_real* e, casadi_real* norm, casadi_real* dq,
                      casadi_real* theta, long long n) {{
   const casadi_real* arg[{sz_arg}];
@@ -128,6 +128,10 @@ int {prefix}_ik_rows(const casadi_real* q, const casadi_real* base, const casadi
     s = 0.0;
     for (i = 0; i < 6; ++i) s += ek[i] * ek[i];
     norm[k] = sqrt(s);
+    if (s < tol * tol * (1.0 - 1e-12)) {{  /* then norm * norm < tol * tol in the caller too */
+      for (c = 0; c < {nv}; ++c) dq[{nv} * k + c] = 0.0;
+      continue;
+    }}
     /* A = J J^T + damping^2 I, its Cholesky factor L (lower, in A), y = A^-1 e, dq = J^T y */
     for (i = 0; i < 6; ++i) {{
       for (j = 0; j <= i; ++j) {{

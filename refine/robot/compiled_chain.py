@@ -201,6 +201,7 @@ class CompiledChain:
         T: Array,
         J: Array,
         given: bool = False,
+        tol: float = 0.0,
     ) -> tuple[Array, Array, Array, Array] | None:
         """One damped least-squares IK step per row toward TCP targets, or None when the chain runs in NumPy.
 
@@ -210,7 +211,8 @@ class CompiledChain:
         :func:`refine.robot.kinematics.solve_ik_batch` forms it (the position difference and the
         rotation vector of ``R_target Rᵀ`` by :func:`refine.robot.kinematics.rotation_vectors`'
         formula, without its branch near π), its norm (N,), the step ``Jᵀ (J Jᵀ + λ² I)⁻¹ e``
-        (N, nv) [rad] with ``λ = damping`` (> 0) and the rotation angle of ``R_target Rᵀ`` (N,)
+        (N, nv) [rad] with ``λ = damping`` (> 0; 0 where the norm is under ``tol``, a row the
+        caller stops) and the rotation angle of ``R_target Rᵀ`` (N,)
         [rad] (where it exceeds ``π - 1e-3`` the caller takes the rotation vector otherwise).
 
         Returns:
@@ -227,7 +229,7 @@ class CompiledChain:
         if T.shape != (n, 4, 4) or J.shape != (n, 6, self.nq) or not damping > 0.0:
             raise ValueError(f"ik_steps: T ({n}, 4, 4), J ({n}, 6, {self.nq}) and damping > 0 expected")
         e, norm, dq, theta = np.empty((n, 6)), np.empty(n), np.empty((n, self.nq)), np.empty(n)
-        lib.ik(qs, *fixed, float(damping), bool(given), T, J, e, norm, dq, theta)
+        lib.ik(qs, *fixed, float(damping), float(tol), bool(given), T, J, e, norm, dq, theta)
         return e, norm, dq, theta
 
     def dets6(self, matrices: Array) -> Array | None:
@@ -365,7 +367,7 @@ class CompiledChain:
             np.empty((CHECK_ROWS, self.nq)),
             np.empty(CHECK_ROWS),
         )
-        lib.ik(qs, B, X, targets, 0.01, False, T_ik, J_ik, e, norm, dq, theta)
+        lib.ik(qs, B, X, targets, 0.01, 0.0, False, T_ik, J_ik, e, norm, dq, theta)
         square = np.ascontiguousarray(J_tcp[:, :, :6]) if self.nq >= 6 else np.zeros((CHECK_ROWS, 6, 6))
         dets = np.empty(CHECK_ROWS)
         lib.det6(square, dets)
@@ -415,7 +417,9 @@ class _Library:
         self._bodies.argtypes = [pointer, pointer, pointer, pointer, count, pointer, count]
         self._bodies.restype = ctypes.c_int
         self._ik = self._dll[f"{PREFIX}_ik_rows"]
-        self._ik.argtypes = [pointer] * 4 + [ctypes.c_double, count] + [pointer] * 6 + [count]
+        self._ik.argtypes = (
+            [pointer] * 4 + [ctypes.c_double, ctypes.c_double, count] + [pointer] * 6 + [count]
+        )
         self._ik.restype = ctypes.c_int
         self._det6 = self._dll[f"{PREFIX}_det6_rows"]
         self._det6.argtypes = [pointer, pointer, count]
@@ -464,14 +468,14 @@ class _Library:
     def ik(self, qs: Array, *arrays: Any) -> None:
         """:meth:`CompiledChain.ik_steps` into its arrays (checked there).
 
-        ``arrays``: base, tool, targets, damping, given, T, J, e, norms, steps, angles.
+        ``arrays``: base, tool, targets, damping, tol, given, T, J, e, norms, steps, angles.
         """
-        base, tool, targets, damping, given, *out = arrays
+        base, tool, targets, damping, tol, given, *out = arrays
         for a in (qs, base, tool, targets, *out):
             if not (a.flags.c_contiguous and a.dtype == np.float64):
                 raise ValueError("the compiled batch kinematics take C-contiguous float64 arrays")
         pointers = [a.ctypes.data for a in (qs, base, tool, targets)]
-        code = self._ik(*pointers, damping, int(given), *(a.ctypes.data for a in out), len(qs))
+        code = self._ik(*pointers, damping, tol, int(given), *(a.ctypes.data for a in out), len(qs))
         if code != 0:
             raise RuntimeError(f"the compiled IK step failed ({code})")
 

@@ -407,7 +407,10 @@ def _solve_compiled(
     active row's TCP pose, Jacobian, pose error, its norm and the damped least-squares step; the
     stall, the tolerance, the 0.3 rad step cap and the limits are :func:`solve_ik_batch`'s. A row
     whose rotation error is within 1e-3 rad of π has its error taken by :func:`rotation_vectors`
-    (the axis from ``R + Rᵀ``) and its step by NumPy. ``q``: the clipped start (M, n), changed in place.
+    (the axis from ``R + Rᵀ``) and its step by NumPy. The compiled step is 0 for a row whose
+    squared norm is under ``tol²`` by more than rounding (``1 - 1e-12``): a row this loop stops.
+    With every row active the poses and Jacobians are written into ``poses_out`` and
+    ``jacobians_out`` directly. ``q``: the clipped start (M, n), changed in place.
     """
     chain = kin.robot.chain
     m, n = q.shape
@@ -422,6 +425,10 @@ def _solve_compiled(
         every = active.size == m
         k = active.size
         T, J = T_all[:k], J_all[:k]
+        if every and given_out(jacobians_out, (m, 6, n)):  # all rows: into the caller's arrays at once
+            J = jacobians_out
+        if every and given_out(poses_out, (m, 4, 4)):
+            T = poses_out
         given = it == 0 and start is not None
         if given:
             p, R, J0 = start
@@ -436,6 +443,7 @@ def _solve_compiled(
             T,
             J,
             given,
+            tol,
         )
         near_pi = theta > np.pi - 1e-3
         if near_pi.any():  # rotation_vectors' branch: the axis from R + Rᵀ, NumPy's step
@@ -446,10 +454,10 @@ def _solve_compiled(
             norm[near_pi] = np.linalg.norm(e[near_pi], axis=1)
             A = Jn @ np.transpose(Jn, (0, 2, 1)) + damping**2 * np.eye(6)
             dq[near_pi] = np.einsum("kji,kj->ki", Jn, np.linalg.solve(A, e[near_pi][:, :, None])[:, :, 0])
-        if jacobians_out is not None:
-            jacobians_out[active] = J
-        if poses_out is not None:
-            poses_out[active] = T
+        if jacobians_out is not None and J is not jacobians_out:
+            jacobians_out[slice(None) if every else active] = J
+        if poses_out is not None and T is not poses_out:
+            poses_out[slice(None) if every else active] = T
         err[active] = norm
         improved = norm < (1.0 - STALL_FRACTION) * best[active]
         best[active] = np.where(improved, norm, best[active])
@@ -465,6 +473,11 @@ def _solve_compiled(
         dq *= np.where(step > 0.3, 0.3 / np.maximum(step, 1e-300), 1.0)[:, None]
         q[active] = np.clip(q[active] + dq, lower, upper)
     return q, err
+
+
+def given_out(a: Array | None, shape: tuple[int, ...]) -> bool:
+    """Whether ``a`` is a C-contiguous float64 array of ``shape`` the compiled chain may write into."""
+    return a is not None and a.shape == shape and a.dtype == np.float64 and a.flags.c_contiguous
 
 
 STALL_ITERATIONS = 30
