@@ -74,11 +74,14 @@ def line_manipulability(kin: TcpKinematics, jacobians: Array) -> Array:
 
     The measure :func:`refine.optimise.verify.singularity_measures` defines: ``Js`` is ``J`` with its linear rows divided by the robot's reach. For a six-axis arm ``Js`` is
     square and the measure is ``|det Js| = |det J| / reach³``, without forming ``Js Jsᵀ`` (whose
-    determinant loses twice the digits near a singularity).
+    determinant loses twice the digits near a singularity). The determinants are the compiled
+    chain's (:meth:`refine.robot.compiled_chain.CompiledChain.dets6`) where it is compiled.
     """
     reach = kin.robot.spec.reach_m
     if jacobians.shape[2] == 6:
-        return np.abs(np.linalg.det(jacobians)) / reach**3
+        chain = kin.robot.chain
+        dets = None if chain is None else chain.dets6(jacobians)  # compiled, else NumPy's
+        return np.abs(np.linalg.det(jacobians) if dets is None else dets) / reach**3
     Js = np.concatenate([jacobians[:, :3] / reach, jacobians[:, 3:]], axis=1)
     return np.sqrt(np.clip(np.linalg.det(Js @ np.swapaxes(Js, 1, 2)), 0.0, None))
 

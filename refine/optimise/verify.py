@@ -115,7 +115,9 @@ def singularity_measures(
     ``q`` when the caller has them already (:func:`refine.robot.kinematics.solve_ik_batch`'s
     ``jacobians_out``), else None to compute them.
 
-    For a square ``Js`` (6 joints) ``sqrt(det(Js Jsᵀ)) = |det Js|``, taken without the product.
+    For a square ``Js`` (6 joints) ``sqrt(det(Js Jsᵀ)) = |det Js|``, taken without the product
+    (the compiled chain's determinant, :meth:`refine.robot.compiled_chain.CompiledChain.dets6`,
+    where it is compiled).
     The smallest singular value is the root of the smallest eigenvalue of the symmetric 6 × 6
     ``Js Jsᵀ``, whose rounding error is a small multiple of ``eps·σ_max²``: relative to ``σ_min``
     that is ``eps·(σ_max / σ_min)² / 2`` times that multiple, under 1e-11 above
@@ -129,7 +131,12 @@ def singularity_measures(
     Js = scale * (kin.jacobians(q) if jacobians is None else jacobians)
     square = Js.shape[2] == 6
     gram = None if square and not smallest else Js @ np.swapaxes(Js, 1, 2)
-    w = np.abs(np.linalg.det(Js)) if square else np.sqrt(np.clip(np.linalg.det(gram), 0.0, None))
+    if square:
+        chain = kin.robot.chain
+        dets = None if chain is None else chain.dets6(Js)  # compiled, else NumPy's
+        w = np.abs(np.linalg.det(Js) if dets is None else dets)
+    else:
+        w = np.sqrt(np.clip(np.linalg.det(gram), 0.0, None))
     if not smallest:
         return w, np.full(len(Js), np.nan)
     if Js.shape[2] < 6:

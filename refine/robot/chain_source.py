@@ -9,7 +9,11 @@ Jacobian, 6 × nv row-major), ``_joints`` (every joint's ``oMi``, universe first
 gets a loop over the rows in C, ``<name>_rows(q, fixed, out, n)``, which moves the row and output
 pointers along with its work memory on the stack (so threads may call at once). A sixth,
 hand-written, ``<prefix>_bodies_rows(q, base, joint, local, m, out, n)``, evaluates ``_joints``
-per row and places ``m`` bodies ``base · oMi[joint[b]] · local[b]``.
+per row and places ``m`` bodies ``base · oMi[joint[b]] · local[b]``. Two more, hand-written:
+``<prefix>_ik_rows``, a damped least-squares IK step per row toward a TCP target (the pose error as
+:func:`refine.robot.kinematics.solve_ik_batch` forms it, its norm and the step ``Jᵀ (J Jᵀ + λ² I)⁻¹ e``
+by a 6 × 6 Cholesky factor), and ``<prefix>_det6_rows``, the determinants of 6 × 6 matrices (an LU
+factorisation with partial pivoting, as LAPACK's ``getrf``).
 """
 
 from __future__ import annotations
@@ -79,6 +83,127 @@ int {prefix}_bodies_rows(const casadi_real* q, const casadi_real* base, const lo
 """
 
 
+# one damped least-squares step per row toward a TCP target (6 task rows, nv columns)
+_IK = """
+int {prefix}_ik_rows(const casadi_real* q, const casadi_real* base, const casadi_real* tool,
+                     const casadi_real* target, casadi_real damping, casadi_real tol, long long given, casadi_real* T,
+                     casadi_real* J, casadi_real* e, casadi_real* norm, casadi_real* dq,
+                     casadi_real* theta, long long n) {{
+  const casadi_real* arg[{sz_arg}];
+  casadi_real* res[{sz_res}];
+  casadi_int iw[{sz_iw}];
+  casadi_real w[{sz_w}];
+  casadi_real A[36], y[6], M[9];
+  long long k;
+  int i, j, c;
+  for (k = 0; k < n; ++k) {{
+    casadi_real* Tk = T + 16 * k;
+    casadi_real* Jk = J + 6 * {nv} * k;
+    casadi_real* ek = e + 6 * k;
+    const casadi_real* G = target + 16 * k;
+    casadi_real cs, th, s, scale;
+    if (!given) {{
+      arg[0] = q + k * {nq};
+      arg[1] = base;
+      arg[2] = tool;
+      res[0] = Tk;
+      res[1] = Jk;
+      if ({prefix}_tcpj(arg, res, iw, w, 0)) return 1;
+    }}
+    for (i = 0; i < 3; ++i) ek[i] = G[4 * i + 3] - Tk[4 * i + 3];
+    /* M = R_target R(q)^T, its rotation vector (rotation_vectors' formula) */
+    for (i = 0; i < 3; ++i) {{
+      for (j = 0; j < 3; ++j) {{
+        M[3 * i + j] = G[4 * i] * Tk[4 * j] + G[4 * i + 1] * Tk[4 * j + 1] + G[4 * i + 2] * Tk[4 * j + 2];
+      }}
+    }}
+    cs = (M[0] + M[4] + M[8] - 1.0) / 2.0;
+    cs = cs < -1.0 ? -1.0 : (cs > 1.0 ? 1.0 : cs);
+    th = acos(cs);
+    scale = th < 1e-6 ? 1.0 + th * th / 6.0 : th / sin(th);
+    ek[3] = 0.5 * (M[7] - M[5]) * scale;
+    ek[4] = 0.5 * (M[2] - M[6]) * scale;
+    ek[5] = 0.5 * (M[3] - M[1]) * scale;
+    theta[k] = th;
+    s = 0.0;
+    for (i = 0; i < 6; ++i) s += ek[i] * ek[i];
+    norm[k] = sqrt(s);
+    if (s < tol * tol * (1.0 - 1e-12)) {{  /* then norm * norm < tol * tol in the caller too */
+      for (c = 0; c < {nv}; ++c) dq[{nv} * k + c] = 0.0;
+      continue;
+    }}
+    /* A = J J^T + damping^2 I, its Cholesky factor L (lower, in A), y = A^-1 e, dq = J^T y */
+    for (i = 0; i < 6; ++i) {{
+      for (j = 0; j <= i; ++j) {{
+        s = 0.0;
+        for (c = 0; c < {nv}; ++c) s += Jk[{nv} * i + c] * Jk[{nv} * j + c];
+        A[6 * i + j] = s + (i == j ? damping * damping : 0.0);
+      }}
+    }}
+    for (j = 0; j < 6; ++j) {{
+      s = A[6 * j + j];
+      for (c = 0; c < j; ++c) s -= A[6 * j + c] * A[6 * j + c];
+      if (!(s > 0.0)) return 2;
+      A[6 * j + j] = sqrt(s);
+      for (i = j + 1; i < 6; ++i) {{
+        s = A[6 * i + j];
+        for (c = 0; c < j; ++c) s -= A[6 * i + c] * A[6 * j + c];
+        A[6 * i + j] = s / A[6 * j + j];
+      }}
+    }}
+    for (i = 0; i < 6; ++i) {{
+      s = ek[i];
+      for (c = 0; c < i; ++c) s -= A[6 * i + c] * y[c];
+      y[i] = s / A[6 * i + i];
+    }}
+    for (i = 5; i >= 0; --i) {{
+      s = y[i];
+      for (c = i + 1; c < 6; ++c) s -= A[6 * c + i] * y[c];
+      y[i] = s / A[6 * i + i];
+    }}
+    for (c = 0; c < {nv}; ++c) {{
+      s = 0.0;
+      for (i = 0; i < 6; ++i) s += Jk[{nv} * i + c] * y[i];
+      dq[{nv} * k + c] = s;
+    }}
+  }}
+  return 0;
+}}
+
+int {prefix}_det6_rows(const casadi_real* a, casadi_real* det, long long n) {{
+  casadi_real L[36];
+  long long k;
+  int i, j, c, p;
+  for (k = 0; k < n; ++k) {{
+    casadi_real d = 1.0;
+    for (i = 0; i < 36; ++i) L[i] = a[36 * k + i];
+    for (j = 0; j < 6; ++j) {{
+      p = j;
+      for (i = j + 1; i < 6; ++i) {{
+        if (fabs(L[6 * i + j]) > fabs(L[6 * p + j])) p = i;
+      }}
+      if (p != j) {{
+        for (c = 0; c < 6; ++c) {{
+          casadi_real t = L[6 * j + c];
+          L[6 * j + c] = L[6 * p + c];
+          L[6 * p + c] = t;
+        }}
+        d = -d;
+      }}
+      d *= L[6 * j + j];
+      if (L[6 * j + j] == 0.0) continue;
+      for (i = j + 1; i < 6; ++i) {{
+        casadi_real f = L[6 * i + j] / L[6 * j + j];
+        for (c = j + 1; c < 6; ++c) L[6 * i + c] -= f * L[6 * j + c];
+      }}
+    }}
+    det[k] = d;
+  }}
+  return 0;
+}}
+"""
+
+
 def chain_source(chain: BatchChain, flange_id: int, prefix: str = PREFIX) -> str:
     """The C of the chain's row functions and their row loops (module notes), names starting ``prefix``.
 
@@ -137,7 +262,17 @@ def chain_source(chain: BatchChain, flange_id: int, prefix: str = PREFIX) -> str
         njoints=len(oMi),
         nq=chain.nq,
     )
-    return gen.dump() + "".join(loops) + bodies
+    tcpj = functions[4]
+    ik = _IK.format(
+        prefix=prefix,
+        sz_arg=max(tcpj.sz_arg(), 3),
+        sz_res=max(tcpj.sz_res(), 2),
+        sz_iw=max(tcpj.sz_iw(), 1),
+        sz_w=max(tcpj.sz_w(), 1),
+        nq=chain.nq,
+        nv=tcpj.nnz_out(1) // 6,
+    )
+    return gen.dump() + "".join(loops) + bodies + ik
 
 
 def placed(T: list, J: list, B: list, X: list) -> tuple[list, list]:

@@ -14,13 +14,16 @@ flange's placement with its Jacobian (Pinocchio's ``LOCAL_WORLD_ALIGNED``), ever
 ``data.oMi``, the TCP's pose in the world (the robot placed by ``T_world_base``, the tool by
 ``T_flange_TCP``, both arguments of the call) with and without its Jacobian (what
 :class:`~refine.robot.kinematics.TcpKinematics` composes in NumPy otherwise), and bodies fixed on
-the joints placed in the world (the collision model's moving shapes). Any number of rows is one
+the joints placed in the world (the collision model's moving shapes); a damped least-squares IK
+step toward TCP targets (:meth:`CompiledChain.ik_steps`) and determinants of 6 × 6 matrices
+(:meth:`CompiledChain.dets6`). Any number of rows is one
 call; each call's work memory is on the C stack, so threads may call at once (:mod:`ctypes` lets
 go of the GIL for the call). Any other frame, and :meth:`CompiledChain.axis_frames`, are the NumPy
 chain's.
 
 When a library is loaded it is checked once against Pinocchio (``forwardKinematics`` and
-``computeFrameJacobian``) at :data:`CHECK_ROWS` configurations; a difference above
+``computeFrameJacobian``; the IK step's error against ``log3`` and its step against NumPy's solve,
+the determinants against NumPy's) at :data:`CHECK_ROWS` configurations; a difference above
 :data:`CHECK_TOLERANCE` is logged as a warning and the chain stays NumPy's, as it does without a
 compiler, with ``REFINE_COMPILE=0`` or when compiling fails. The library is looked for on the
 first evaluation (not when the robot is made), once per :class:`CompiledChain`.
@@ -68,7 +71,7 @@ reassociates a sum (no -ffast-math)."""
 LOADED_MAX = 16
 """Chain libraries kept loaded in one process (one per robot model)."""
 
-_FUNCTIONS = ("fk", "fkj", "joints", "tcp", "tcpj", "bodies")
+_FUNCTIONS = ("fk", "fkj", "joints", "tcp", "tcpj", "bodies", "ik", "det6")
 _SOURCES = tuple(Path(__file__).with_name(n) for n in ("compiled_chain.py", "chain_source.py", "chain.py"))
 _loaded = BoundedCache(LOADED_MAX)
 # a base and a tool placement of no special orientation, for the load check [m]
@@ -188,6 +191,59 @@ class CompiledChain:
         lib.bodies(qs, base, joints, local, out)
         return out
 
+    def ik_steps(
+        self,
+        qs: Array,
+        base_in_world: Array,
+        tcp_in_flange: Array,
+        targets: Array,
+        damping: float,
+        T: Array,
+        J: Array,
+        given: bool = False,
+        tol: float = 0.0,
+    ) -> tuple[Array, Array, Array, Array] | None:
+        """One damped least-squares IK step per row toward TCP targets, or None when the chain runs in NumPy.
+
+        Per row of ``qs`` (N, nv) [rad]: the TCP pose ``T`` (N, 4, 4) and Jacobian ``J`` (N, 6, nv)
+        as :meth:`tcp_frames` (written into the given C-contiguous arrays; with ``given`` read from
+        them instead), the pose error ``e`` (N, 6) toward ``targets`` (N, 4, 4) [m, rad] as
+        :func:`refine.robot.kinematics.solve_ik_batch` forms it (the position difference and the
+        rotation vector of ``R_target Rᵀ`` by :func:`refine.robot.kinematics.rotation_vectors`'
+        formula, without its branch near π), its norm (N,), the step ``Jᵀ (J Jᵀ + λ² I)⁻¹ e``
+        (N, nv) [rad] with ``λ = damping`` (> 0; 0 where the norm is under ``tol``, a row the
+        caller stops) and the rotation angle of ``R_target Rᵀ`` (N,)
+        [rad] (where it exceeds ``π - 1e-3`` the caller takes the rotation vector otherwise).
+
+        Returns:
+            ``e``, the norms, the steps and the angles.
+        """
+        lib = self._lib()
+        if lib is None:
+            return None
+        qs = self._rows(qs)
+        fixed = [np.ascontiguousarray(a, dtype=float) for a in (base_in_world, tcp_in_flange, targets)]
+        n = len(qs)
+        if fixed[0].shape != (4, 4) or fixed[1].shape != (4, 4) or fixed[2].shape != (n, 4, 4):
+            raise ValueError(f"ik_steps: placements (4, 4), (4, 4) and targets ({n}, 4, 4) expected")
+        if T.shape != (n, 4, 4) or J.shape != (n, 6, self.nq) or not damping > 0.0:
+            raise ValueError(f"ik_steps: T ({n}, 4, 4), J ({n}, 6, {self.nq}) and damping > 0 expected")
+        e, norm, dq, theta = np.empty((n, 6)), np.empty(n), np.empty((n, self.nq)), np.empty(n)
+        lib.ik(qs, *fixed, float(damping), float(tol), bool(given), T, J, e, norm, dq, theta)
+        return e, norm, dq, theta
+
+    def dets6(self, matrices: Array) -> Array | None:
+        """Determinants (N,) of 6 × 6 matrices (N, 6, 6) (LU with partial pivoting), or None in NumPy."""
+        lib = self._lib()
+        if lib is None:
+            return None
+        a = np.ascontiguousarray(matrices, dtype=float)
+        if a.ndim != 3 or a.shape[1:] != (6, 6):
+            raise ValueError(f"dets6: expected (N, 6, 6), got {a.shape}")
+        out = np.empty(len(a))
+        lib.det6(a, out)
+        return out
+
     def joint_placements(self, qs: Array, joints: Array | None = None) -> Array:
         """:meth:`BatchChain.joint_placements`: ``data.oMi`` (N, K, 4, 4) of ``joints`` (default all)."""
         lib = self._lib()
@@ -301,6 +357,20 @@ class CompiledChain:
         local = np.ascontiguousarray(np.stack([X, B, X @ B, np.eye(4)]))
         bodies = np.empty((CHECK_ROWS, len(body_joints), 4, 4))
         lib.bodies(qs, B, body_joints, local, bodies)
+        # the IK step toward targets turned and shifted off the TCP, and the determinants of 6 × 6 rows
+        targets = np.array([pin.SE3(pin.exp3(0.1 * w), 0.01 * w).homogeneous for w in qs[:, :3]])
+        targets = np.ascontiguousarray(T_tcp @ targets)
+        T_ik, J_ik = np.empty_like(T), np.empty_like(J)
+        e, norm, dq, theta = (
+            np.empty((CHECK_ROWS, 6)),
+            np.empty(CHECK_ROWS),
+            np.empty((CHECK_ROWS, self.nq)),
+            np.empty(CHECK_ROWS),
+        )
+        lib.ik(qs, B, X, targets, 0.01, 0.0, False, T_ik, J_ik, e, norm, dq, theta)
+        square = np.ascontiguousarray(J_tcp[:, :, :6]) if self.nq >= 6 else np.zeros((CHECK_ROWS, 6, 6))
+        dets = np.empty(CHECK_ROWS)
+        lib.det6(square, dets)
         error = 0.0
         for k, q in enumerate(qs):
             pin.forwardKinematics(model, data, q)  # every joint (the Jacobian's pass: only the flange's)
@@ -316,6 +386,20 @@ class CompiledChain:
             pairs = [(T[k], T_pin), (T_alone[k], T_pin), (J[k], J_pin), (oMi[k], oMi_pin)]
             pairs += [(T_tcp[k], T_tcp_pin), (T_tcp_alone[k], T_tcp_pin), (J_tcp[k], J_tcp_pin)]
             pairs += [(bodies[k, m], B @ oMi_pin[j] @ local[m]) for m, j in enumerate(body_joints)]
+            e_pin = np.concatenate(
+                [targets[k, :3, 3] - T_tcp_pin[:3, 3], pin.log3(targets[k, :3, :3] @ T_tcp_pin[:3, :3].T)]
+            )
+            A = J_tcp_pin @ J_tcp_pin.T + 1e-4 * np.eye(6)
+            dq_pin = J_tcp_pin.T @ np.linalg.solve(A, e_pin)
+            pairs += [
+                (T_ik[k], T_tcp_pin),
+                (J_ik[k], J_tcp_pin),
+                (e[k], e_pin),
+                (norm[k], np.linalg.norm(e_pin)),
+            ]
+            pairs += [(dq[k] / max(1.0, np.abs(dq_pin).max()), dq_pin / max(1.0, np.abs(dq_pin).max()))]
+            det = np.linalg.det(square[k])
+            pairs += [(dets[k] / max(1.0, abs(det)), det / max(1.0, abs(det)))]
             for a, b in pairs:
                 error = max(error, float(np.abs(a - b).max()))
         return error if np.isfinite(error) else np.inf
@@ -332,7 +416,15 @@ class _Library:
         pointer, count = ctypes.c_void_p, ctypes.c_longlong
         self._bodies.argtypes = [pointer, pointer, pointer, pointer, count, pointer, count]
         self._bodies.restype = ctypes.c_int
-        for name in _FUNCTIONS[:-1]:
+        self._ik = self._dll[f"{PREFIX}_ik_rows"]
+        self._ik.argtypes = (
+            [pointer] * 4 + [ctypes.c_double, ctypes.c_double, count] + [pointer] * 6 + [count]
+        )
+        self._ik.restype = ctypes.c_int
+        self._det6 = self._dll[f"{PREFIX}_det6_rows"]
+        self._det6.argtypes = [pointer, pointer, count]
+        self._det6.restype = ctypes.c_int
+        for name in _FUNCTIONS[:-3]:
             fn = getattr(self._dll, f"{PREFIX}_{name}_rows")
             fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong]
             fn.restype = ctypes.c_int
@@ -372,3 +464,22 @@ class _Library:
         )
         if code != 0:
             raise RuntimeError(f"the compiled batch kinematics' bodies failed ({code})")
+
+    def ik(self, qs: Array, *arrays: Any) -> None:
+        """:meth:`CompiledChain.ik_steps` into its arrays (checked there).
+
+        ``arrays``: base, tool, targets, damping, tol, given, T, J, e, norms, steps, angles.
+        """
+        base, tool, targets, damping, tol, given, *out = arrays
+        for a in (qs, base, tool, targets, *out):
+            if not (a.flags.c_contiguous and a.dtype == np.float64):
+                raise ValueError("the compiled batch kinematics take C-contiguous float64 arrays")
+        pointers = [a.ctypes.data for a in (qs, base, tool, targets)]
+        code = self._ik(*pointers, damping, tol, int(given), *(a.ctypes.data for a in out), len(qs))
+        if code != 0:
+            raise RuntimeError(f"the compiled IK step failed ({code})")
+
+    def det6(self, a: Array, out: Array) -> None:
+        """Determinants of C-contiguous (N, 6, 6) float64 matrices into ``out`` (N,)."""
+        if self._det6(a.ctypes.data, out.ctypes.data, len(a)) != 0:
+            raise RuntimeError("the compiled determinants failed")

@@ -331,6 +331,12 @@ def solve_ik_batch(
     rows = 3 if position_only else 6
     q = np.clip(np.array(q0, dtype=float), lower, upper)
     m, n = q.shape
+    chain = kin.robot.chain
+    plain = not (position_only or axis_only or (n > rows and nullspace_gain > 0.0))
+    if plain and damping > 0.0 and kin.tool_in_world is None and chain is not None and chain.compiled:
+        return _solve_compiled(
+            kin, targets, q, lower, upper, max_iterations, damping, tol, jacobians_out, poses_out, start
+        )
     err = np.zeros(m)
     active = np.arange(m)
     with np.errstate(invalid="ignore"):  # unbounded (multi-turn) joints have no mid-range
@@ -380,6 +386,98 @@ def solve_ik_batch(
         dq *= np.where(step > 0.3, 0.3 / np.maximum(step, 1e-300), 1.0)[:, None]
         q[active] = np.clip(q[active] + dq, lower, upper)
     return q, err
+
+
+def _solve_compiled(
+    kin: TcpKinematics,
+    targets: Array,
+    q: Array,
+    lower: Array,
+    upper: Array,
+    max_iterations: int,
+    damping: float,
+    tol: float,
+    jacobians_out: Array | None,
+    poses_out: Array | None,
+    start: tuple[Array, Array, Array] | None,
+) -> tuple[Array, Array]:
+    """:func:`solve_ik_batch`'s iterations for 6 task rows without a null-space pull, the step compiled.
+
+    The compiled chain (:meth:`refine.robot.compiled_chain.CompiledChain.ik_steps`) gives each
+    active row's TCP pose, Jacobian, pose error, its norm and the damped least-squares step; the
+    stall, the tolerance, the 0.3 rad step cap and the limits are :func:`solve_ik_batch`'s. A row
+    whose rotation error is within 1e-3 rad of π has its error taken by :func:`rotation_vectors`
+    (the axis from ``R + Rᵀ``) and its step by NumPy. The compiled step is 0 for a row whose
+    squared norm is under ``tol²`` by more than rounding (``1 - 1e-12``): a row this loop stops.
+    With every row active the poses and Jacobians are written into ``poses_out`` and
+    ``jacobians_out`` directly. ``q``: the clipped start (M, n), changed in place.
+    """
+    chain = kin.robot.chain
+    m, n = q.shape
+    targets = np.ascontiguousarray(targets, dtype=float)
+    T_all, J_all = np.empty((m, 4, 4)), np.empty((m, 6, n))
+    err = np.zeros(m)
+    active = np.arange(m)
+    best, last_gain = np.full(m, np.inf), np.zeros(m, dtype=int)
+    for it in range(max_iterations + 1):
+        if not active.size:
+            break
+        every = active.size == m
+        k = active.size
+        T, J = T_all[:k], J_all[:k]
+        if every and given_out(jacobians_out, (m, 6, n)):  # all rows: into the caller's arrays at once
+            J = jacobians_out
+        if every and given_out(poses_out, (m, 4, 4)):
+            T = poses_out
+        given = it == 0 and start is not None
+        if given:
+            p, R, J0 = start
+            T[:, :3, :3], T[:, :3, 3], T[:, 3] = R, p, (0.0, 0.0, 0.0, 1.0)
+            J[:] = J0
+        e, norm, dq, theta = chain.ik_steps(
+            q if every else q[active],
+            kin.base_in_world,
+            kin.tcp_in_flange,
+            targets if every else targets[active],
+            damping,
+            T,
+            J,
+            given,
+            tol,
+        )
+        near_pi = theta > np.pi - 1e-3
+        if near_pi.any():  # rotation_vectors' branch: the axis from R + Rᵀ, NumPy's step
+            Tn, Jn = T[near_pi], J[near_pi]
+            e[near_pi, 3:] = rotation_vectors(
+                targets[active[near_pi], :3, :3] @ np.transpose(Tn[:, :3, :3], (0, 2, 1))
+            )
+            norm[near_pi] = np.linalg.norm(e[near_pi], axis=1)
+            A = Jn @ np.transpose(Jn, (0, 2, 1)) + damping**2 * np.eye(6)
+            dq[near_pi] = np.einsum("kji,kj->ki", Jn, np.linalg.solve(A, e[near_pi][:, :, None])[:, :, 0])
+        if jacobians_out is not None and J is not jacobians_out:
+            jacobians_out[slice(None) if every else active] = J
+        if poses_out is not None and T is not poses_out:
+            poses_out[slice(None) if every else active] = T
+        err[active] = norm
+        improved = norm < (1.0 - STALL_FRACTION) * best[active]
+        best[active] = np.where(improved, norm, best[active])
+        last_gain[active] = np.where(improved, it, last_gain[active])
+        stalled = it - last_gain[active] >= STALL_ITERATIONS
+        going = (norm * norm >= tol * tol) & ~stalled
+        if it == max_iterations:
+            break
+        active, dq = active[going], dq[going]
+        if not active.size:
+            break
+        step = np.max(np.abs(dq), axis=1)
+        dq *= np.where(step > 0.3, 0.3 / np.maximum(step, 1e-300), 1.0)[:, None]
+        q[active] = np.clip(q[active] + dq, lower, upper)
+    return q, err
+
+
+def given_out(a: Array | None, shape: tuple[int, ...]) -> bool:
+    """Whether ``a`` is a C-contiguous float64 array of ``shape`` the compiled chain may write into."""
+    return a is not None and a.shape == shape and a.dtype == np.float64 and a.flags.c_contiguous
 
 
 STALL_ITERATIONS = 30
