@@ -287,8 +287,10 @@ _SLACK_M = 1e-9  # [m], far above the rounding of sums of a few metres, far belo
 def _segment_ends(
     model: CollisionModel, checked: CheckedBounds, q: Array, place: Array
 ) -> tuple[Array, NDArray[np.intp], NDArray[np.intp]] | None:
-    """The rows ``q`` as floats and each row's segment ends in ``checked`` (K,), (K,); None as in
-    :func:`bounds_between` (another model, or a row at a waypoint without its joints)."""
+    """The rows ``q`` as floats and each row's segment ends in ``checked``, (K,) and (K,).
+
+    None as in :func:`bounds_between` (another model, or a row at a waypoint without its joints).
+    """
     q = np.asarray(q, dtype=float)
     place = np.asarray(place, dtype=float)
     N = len(checked.q)
