@@ -47,6 +47,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from refine.collision.advance import short
 from refine.collision.model import CollisionModel
 from refine.collision.motion import corners
 from refine.types import Array
@@ -229,6 +230,67 @@ def bounds_between(model: CollisionModel, checked: CheckedBounds, q: Array, plac
     larger of the two is kept. None when the model is not the checked one's (other pairs, another
     base, a body of another shape or place) or a row at a waypoint does not hold its joints.
     """
+    ends = _segment_ends(model, checked, q, place)
+    if ends is None:
+        return None
+    q, a, b = ends
+    R = model.pair_motion.T  # (n, P) [m/rad]
+    out = checked.bounds.take(a, axis=0)  # (K, P), a copy: taken in place from here on
+    out -= np.abs(q - checked.q.take(a, axis=0)) @ R
+    other = checked.bounds.take(b, axis=0)
+    other -= np.abs(q - checked.q.take(b, axis=0)) @ R
+    return np.maximum(out, other, out=out)
+
+
+def proved_between(
+    model: CollisionModel, checked: CheckedBounds, q: Array, place: Array, tolerance_m: float = 1e-4
+) -> bool:
+    """True when the bounds of :func:`bounds_between` prove every margin along the rows ``q`` (K, n).
+
+    True implies that :func:`refine.collision.check.margins_proved` of ``q`` with
+    ``prior=bounds_between(model, checked, q, place)`` is True (and so that the dense check finds
+    every margin kept); False decides nothing. Most pairs are far from their margins everywhere:
+    a pair p is proved on every segment of ``q`` at once when, with ``B_p`` its least checked bound
+    over the path, ``U`` (n,) the largest |q - q_k| per joint over the rows (k the row's segment
+    start, whose bound :func:`bounds_between` never goes below), and ``V`` (n,) the largest joint
+    step between consecutive rows, the budget ``b_p = B_p - U · R_p - m_p + tolerance_m`` keeps
+    ``b_p >= ε`` and ``2 b_p >= V · R_p + ε`` (each row's budget there is at least ``b_p``, each
+    segment's motion at most ``V · R_p``; ``ε = 1e-9`` m covers the rounding of both sums). Only
+    the other pairs' bounds are formed row by row, as :func:`bounds_between` forms them, and
+    tested as ``margins_proved`` tests its known bounds.
+    """
+    ends = _segment_ends(model, checked, q, place)
+    if ends is None or len(q) < 2 or not np.all(np.isfinite(ends[0])):
+        return False
+    q, a, b = ends
+    R = model.pair_motion.T  # (n, P) [m/rad]
+    margins = model.pair_margins
+    from_start = np.abs(q - checked.q.take(a, axis=0))  # (K, n) [rad]
+    moves = np.abs(q[1:] - q[:-1])  # (K-1, n) [rad]
+    # the largest per joint, reduced along rows laid out contiguously (a strided reduction costs 10x)
+    reach = np.ascontiguousarray(from_start.T).max(axis=1) @ R  # (P,) [m]: no row moved further
+    step = np.ascontiguousarray(moves.T).max(axis=1) @ R  # (P,) [m]: no segment moves further
+    budget = np.ascontiguousarray(checked.bounds.T).min(axis=1) - reach - margins + tolerance_m
+    rest = np.flatnonzero(~((budget >= _SLACK_M) & (2.0 * budget >= step + _SLACK_M)))
+    if len(rest) == 0:
+        return True
+    R = R[:, rest]
+    low = checked.bounds[:, rest].take(a, axis=0) - from_start @ R
+    low = np.maximum(low, checked.bounds[:, rest].take(b, axis=0) - np.abs(q - checked.q.take(b, axis=0)) @ R)
+    motion = moves @ R
+    return not short(low - margins[rest] + tolerance_m, motion).any()
+
+
+_SLACK_M = 1e-9  # [m], far above the rounding of sums of a few metres, far below any margin
+
+
+def _segment_ends(
+    model: CollisionModel, checked: CheckedBounds, q: Array, place: Array
+) -> tuple[Array, NDArray[np.intp], NDArray[np.intp]] | None:
+    """The rows ``q`` as floats and each row's segment ends in ``checked``, (K,) and (K,).
+
+    None as in :func:`bounds_between` (another model, or a row at a waypoint without its joints).
+    """
     q = np.asarray(q, dtype=float)
     place = np.asarray(place, dtype=float)
     N = len(checked.q)
@@ -250,12 +312,7 @@ def bounds_between(model: CollisionModel, checked: CheckedBounds, q: Array, plac
     if not np.array_equal(q[at_waypoint], checked.q[a[at_waypoint]]):
         return None
     b = np.where(at_waypoint, a, np.minimum(a + 1, N - 1))  # a waypoint keeps its own bound
-    R = model.pair_motion.T  # (n, P) [m/rad]
-    out = checked.bounds[a]  # (K, P), a copy: taken in place from here on
-    out -= np.abs(q - checked.q[a]) @ R
-    other = checked.bounds[b]
-    other -= np.abs(q - checked.q[b]) @ R
-    return np.maximum(out, other, out=out)
+    return q, a, b
 
 
 def bounds_along_normals(

@@ -148,7 +148,8 @@ class Body:
         d = np.asarray(direction, dtype=float)
         rows = d.ndim == 2
         base = np.einsum("ki,ki->k", Ts[:, :3, 3], d) if rows else Ts[:, :3, 3] @ d
-        local = np.einsum("kij,ki->kj" if rows else "kij,i->kj", Ts[:, :3, :3], d)  # in each shape frame
+        # the direction in each shape frame (matmul for one direction: a few microseconds less than einsum)
+        local = np.einsum("kij,ki->kj", Ts[:, :3, :3], d) if rows else d @ Ts[:, :3, :3]
         if self.vertices is not None:
             return base + (local @ self.vertices.T).max(axis=1)
         tag, *dims = self.kind_params

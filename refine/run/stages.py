@@ -463,7 +463,7 @@ def controller_line_check(
     Returns:
         a :class:`refine.optimise.controller_line.LineCheck`.
     """
-    from refine.collision.carry import bounds_between
+    from refine.collision.carry import bounds_between, proved_between
     from refine.collision.check import check_path_clearance, joint_reach, margins_proved
     from refine.optimise.controller_line import check_controller_lines
     from refine.robot.kinematics import TcpKinematics
@@ -476,6 +476,8 @@ def controller_line_check(
     def clearance(dense: np.ndarray, place: np.ndarray) -> tuple[np.ndarray | None, float]:
         # the waypoints' own dense check (kept by the source) bounds every pair along the line
         checked = getattr(source.clearance(q), "bounds", None)
+        if checked is not None and proved_between(model, checked, dense, place):
+            return None, 1e-4  # what margins_proved with bounds_between's prior would prove
         prior = None if checked is None else bounds_between(model, checked, dense, place)
         if margins_proved(model, dense, prior=prior):
             return None, 1e-4  # margins_proved's and check_path_clearance's default tolerance
