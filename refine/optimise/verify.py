@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -64,7 +65,8 @@ class PathCheck:
         joint_margin_rad: distance of each waypoint's closest joint to its limit (or to an interaction
             limit of the controller's joints) [rad], shape (N,).
         singularity: scaled manipulability sqrt(det(Js Jsᵀ)) [-], shape (N,).
-        sigma_min: smallest singular value of the scaled Jacobian [-], shape (N,).
+        scaled_jacobians: the TCP Jacobians with their linear rows divided by the robot's reach
+            (:func:`singularity_measures`) [-], shape (N, 6, n).
         singularity_between: smallest scaled manipulability inside each segment, joints
             interpolated linearly (:func:`segment_singularity`) [-], shape (N-1,).
         violations: the runs that break a tolerance (empty when the path passes).
@@ -77,7 +79,7 @@ class PathCheck:
     orientation_deviation_deg: Array
     joint_margin_rad: Array
     singularity: Array
-    sigma_min: Array
+    scaled_jacobians: Array
     singularity_between: Array
     violations: tuple[Violation, ...]
     singularity_between_at: Array | None = None
@@ -86,6 +88,15 @@ class PathCheck:
     def ok(self) -> bool:
         """True when no tolerance is broken."""
         return not self.violations
+
+    @cached_property
+    def sigma_min(self) -> Array:
+        """Smallest singular value of the scaled Jacobian [-], shape (N,).
+
+        Computed when first asked for (:func:`smallest_singular_values`; no tolerance depends on
+        it, and most checks of a solve's rounds are never reported).
+        """
+        return smallest_singular_values(self.scaled_jacobians)
 
 
 def runs(mask: Array) -> list[tuple[int, int]]:
@@ -125,21 +136,40 @@ def singularity_measures(
         ``sqrt(det(Js Jsᵀ))`` (N,) and the smallest singular value of ``Js`` (N,) [-]
         (0 for a robot with fewer than 6 joints).
     """
-    scale = np.array([1.0 / kin.robot.spec.reach_m] * 3 + [1.0] * 3)[:, None]
-    Js = scale * (kin.jacobians(q) if jacobians is None else jacobians)
-    square = Js.shape[2] == 6
-    gram = None if square and not smallest else Js @ np.swapaxes(Js, 1, 2)
-    w = np.abs(np.linalg.det(Js)) if square else np.sqrt(np.clip(np.linalg.det(gram), 0.0, None))
+    Js = scaled_jacobians(kin, q, jacobians)
+    w = scaled_manipulability(Js)
     if not smallest:
         return w, np.full(len(Js), np.nan)
+    return w, smallest_singular_values(Js)
+
+
+def scaled_jacobians(kin: TcpKinematics, q: Array, jacobians: Array | None = None) -> Array:
+    """The TCP Jacobians at ``q`` (N, n) (or ``jacobians``), linear rows divided by the reach, (N, 6, n) [-]."""
+    scale = np.array([1.0 / kin.robot.spec.reach_m] * 3 + [1.0] * 3)[:, None]
+    return scale * (kin.jacobians(q) if jacobians is None else jacobians)
+
+
+def scaled_manipulability(Js: Array) -> Array:
+    """``sqrt(det(Js Jsᵀ))`` of scaled Jacobians ``Js`` (N, 6, n), shape (N,) [-] (see :func:`singularity_measures`)."""
+    if Js.shape[2] == 6:
+        return np.abs(np.linalg.det(Js))
+    return np.sqrt(np.clip(np.linalg.det(Js @ np.swapaxes(Js, 1, 2)), 0.0, None))
+
+
+def smallest_singular_values(Js: Array) -> Array:
+    """The smallest singular value of each scaled Jacobian ``Js`` (N, 6, n), shape (N,) [-].
+
+    0 for fewer than 6 joints; else as :func:`singularity_measures` describes (eigenvalues of
+    ``Js Jsᵀ``, an SVD below :data:`SVD_BELOW`).
+    """
     if Js.shape[2] < 6:
-        return w, np.zeros(len(Js))
-    eig = np.linalg.eigvalsh(gram)  # ascending: σ_min², ..., σ_max²
+        return np.zeros(len(Js))
+    eig = np.linalg.eigvalsh(Js @ np.swapaxes(Js, 1, 2))  # ascending: σ_min², ..., σ_max²
     smin = np.sqrt(np.clip(eig[:, 0], 0.0, None))
     close = eig[:, 0] < SVD_BELOW**2 * eig[:, -1]
     if close.any():
         smin[close] = np.linalg.svd(Js[close], compute_uv=False)[:, -1]
-    return w, smin
+    return smin
 
 
 ORTHONORMAL = 1e-12
@@ -220,7 +250,8 @@ def check_path(
     A, lower, upper = interaction_rows(spec.joint_coupling, spec.joint_interaction, q.shape[1])
     inter = np.minimum(q @ A.T - lower, upper - q @ A.T)  # (N, m): the controller's interaction limits
     joint_margin = np.minimum(margins.min(axis=1), inter.min(axis=1, initial=np.inf))
-    sing, smin = singularity_measures(kin, q, jacobians=jacobians)
+    Js = scaled_jacobians(kin, q, jacobians)
+    sing = scaled_manipulability(Js)  # the smallest singular values when asked for (PathCheck.sigma_min)
 
     s = fused.s
     violations: list[Violation] = []
@@ -261,4 +292,4 @@ def check_path(
         tolerances.singularity_margin,
         False,
     )
-    return PathCheck(poses, pos_err, ori, joint_margin, sing, smin, between, tuple(violations), between_at)
+    return PathCheck(poses, pos_err, ori, joint_margin, sing, Js, between, tuple(violations), between_at)
