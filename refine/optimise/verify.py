@@ -266,15 +266,18 @@ def check_path(
     ori_limit = tolerances.orientation_deg + (0.0 if slack_deg is None else np.asarray(slack_deg))
     add(ori - ori_limit > 1e-6, "orientation", ori, "deg", float(np.max(ori_limit)), True)
     margin = math.radians(tolerances.joint_margin_deg) - 1e-7
-    for j in range(q.shape[1]):
-        add(margins[:, j] < margin, f"joint limit (joint {j + 1})", margins[:, j], "rad", margin, False)
+    # runs only of the joints with a waypoint (or a step) past the limit, in joint order
+    close = margins < margin
+    for j in np.flatnonzero(close.any(axis=0)).tolist():
+        add(close[:, j], f"joint limit (joint {j + 1})", margins[:, j], "rad", margin, False)
     for i, it in enumerate(spec.joint_interaction):
         add(inter[:, i] < margin, f"joint limit ({it.label})", inter[:, i], "rad", margin, False)
     steps = np.abs(np.diff(q, axis=0))
     step_limit = math.radians(tolerances.joint_step_deg) + 1e-9
-    for j in range(q.shape[1]):
+    over = steps > step_limit
+    for j in np.flatnonzero(over.any(axis=0)).tolist():
         add(
-            np.append(steps[:, j] > step_limit, False),
+            np.append(over[:, j], False),
             f"joint step (joint {j + 1})",
             np.degrees(np.append(steps[:, j], 0.0)),
             "deg",
