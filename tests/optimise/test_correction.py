@@ -195,18 +195,23 @@ def test_held_joint_step_rows_are_corrected_through_the_whole_banded_kkt_matrix(
     assert np.abs(np.diff(found.x.reshape(N, n)[:, 0])[list(waypoints)] - 0.5 * steps).max() <= 1e-10
 
 
-def test_multipliers_kept_in_row_order_read_by_row_name_and_move_to_a_grown_problems_rows(irb4600, straight_tool):
+def test_multipliers_kept_in_row_order_read_by_row_name_and_move_to_a_grown_problems_rows(
+    irb4600, straight_tool
+):
     """The rounds' multipliers (values in row order, named by the rows' layout) are the mapping of row names."""
     N, n = 8, 6
     small = ActiveSet((3,), ((5, 0.5),), (LinearRow(2, 0.0, np.ones(n), 0.0, "a / b"),))
     grown = ActiveSet((1, 3), ((2, 0.5), (5, 0.5)), small.linear_rows)
     built = [
-        build_refinement(irb4600, wave_path(N), np.eye(4), straight_tool, Tolerances(), active=a, joint_steps=steps)
+        build_refinement(
+            irb4600, wave_path(N), np.eye(4), straight_tool, Tolerances(), active=a, joint_steps=steps
+        )
         for a, steps in ((small, (4, 9)), (grown, (4, 7, 9)))
     ]
     base = [("path", i) for i in range(4 * N)]
     names = [  # by hand: path rows, joint-step rows, singular waypoints, segment points, linear rows
-        base + [("step", 4), ("step", 9), ("singular", 3, 0.0), ("singular", 5, 0.5), ("row", 2, 0.0, "a / b")],
+        base
+        + [("step", 4), ("step", 9), ("singular", 3, 0.0), ("singular", 5, 0.5), ("row", 2, 0.0, "a / b")],
         base
         + [("step", 4), ("step", 7), ("step", 9)]
         + [("singular", 1, 0.0), ("singular", 3, 0.0), ("singular", 2, 0.5), ("singular", 5, 0.5)]
