@@ -28,6 +28,7 @@ the verification of any other answer.
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -267,11 +268,75 @@ def accept(
 
 def row_names(problem: RefinementNLP) -> list[tuple]:
     """A name for every constraint row of ``problem`` (as the rounds' multipliers are keyed)."""
-    N, a = problem.n_waypoints, problem.active
+    return names_of(row_layout(problem))
+
+
+def row_layout(problem: RefinementNLP) -> tuple:
+    """What names the constraint rows of ``problem``: equal layouts, equal :func:`row_names`.
+
+    The number of waypoints, the joint-step rows (as bytes), the singularity bounds at waypoints
+    and inside segments, and the linear rows' places and labels; cheaper to build and to compare
+    than the names themselves (one tuple per row), which :func:`names_of` makes from it.
+    """
+    a = problem.active
+    steps = np.ascontiguousarray(problem.step_rows(), dtype=np.int64).tobytes()
+    linear = tuple((r.k, r.f, r.label) for r in a.linear_rows)
+    return (problem.n_waypoints, steps, a.singular_waypoints, a.singular_segments, linear)
+
+
+def names_of(layout: tuple) -> list[tuple]:
+    """The row names (:func:`row_names`) of the problem whose :func:`row_layout` is ``layout``."""
+    N, steps, waypoints, segments, linear = layout
     return (
         [("path", i) for i in range(4 * N)]
-        + [("step", i) for i in problem.step_rows().tolist()]
-        + [("singular", k, 0.0) for k in a.singular_waypoints]
-        + [("singular", k, f) for k, f in a.singular_segments]
-        + [("row", r.k, r.f, r.label) for r in a.linear_rows]
+        + [("step", i) for i in np.frombuffer(steps, dtype=np.int64).tolist()]
+        + [("singular", k, 0.0) for k in waypoints]
+        + [("singular", k, f) for k, f in segments]
+        + [("row", *key) for key in linear]
     )
+
+
+class RowMultipliers(Mapping):
+    """The multipliers of a problem's constraint rows, by row name (:func:`row_names`), read-only.
+
+    Kept as the values (ng,) in row order with the problem's :func:`row_layout`; the mapping from
+    names is made only when asked for. :meth:`in_rows_of` gives them in another problem's row
+    order: the values themselves when its layout is the same (its rows have the same names in the
+    same order, each name once), else looked up by name, 0 for a row without one.
+    """
+
+    def __init__(self, layout: tuple, values: Array) -> None:
+        N, steps, waypoints, segments, linear = layout
+        self.layout = layout
+        self.values = np.asarray(values, dtype=float).ravel()
+        if len(self.values) != 4 * N + len(steps) // 8 + len(waypoints) + len(segments) + len(linear):
+            raise ValueError(f"{len(self.values)} multipliers for the rows of another problem")
+        self._by_name: dict[tuple, float] | None = None
+
+    def _names(self) -> dict[tuple, float]:
+        if self._by_name is None:
+            self._by_name = dict(zip(names_of(self.layout), self.values.tolist(), strict=True))
+        return self._by_name
+
+    def __getitem__(self, key: tuple) -> float:
+        return self._names()[key]
+
+    def __iter__(self) -> Iterator[tuple]:
+        return iter(self._names())
+
+    def __len__(self) -> int:
+        return len(self._names())
+
+    def in_rows_of(self, layout: tuple) -> Array:
+        """The multipliers in the row order of the problem with ``layout`` (:func:`row_layout`), (ng,)."""
+        if layout == self.layout:
+            return self.values.copy()
+        by_name = self._names()
+        return np.array([by_name.get(key, 0.0) for key in names_of(layout)])
+
+
+def multipliers_in_rows(lam_g: Mapping, layout: tuple) -> Array:
+    """The multipliers ``lam_g`` (by row name) in the row order of the problem with ``layout``, 0 where unnamed."""
+    if isinstance(lam_g, RowMultipliers):
+        return lam_g.in_rows_of(layout)
+    return np.array([lam_g.get(key, 0.0) for key in names_of(layout)])

@@ -8,6 +8,7 @@ bounds and kinematics that every stage of the solve reads.
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -106,7 +107,7 @@ class Refinement:
     diagnosis: tuple[Finding, ...] = ()
     time_limit_reached: bool = False
     problem: RefinementNLP | None = None
-    multipliers: tuple[dict[tuple, float], Array] | None = None
+    multipliers: tuple[Mapping[tuple, float], Array] | None = None
     first_options: dict[str, Any] = field(default_factory=dict)
     strict_problem: RefinementNLP | None = None
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -49,7 +50,7 @@ def solve_with_repair(
     deadline: float = math.inf,
     skip_strict: str = "",
     stretched: Array | None = None,
-    multipliers: tuple[dict[tuple, float], Array] | None = None,
+    multipliers: tuple[Mapping[tuple, float], Array] | None = None,
     first_options: dict | None = None,
     seed_jacobians: Array | None = None,
 ) -> Refinement:

@@ -18,7 +18,7 @@ import numpy as np
 
 from refine.control import after_solve, check_cancelled, enter_round, out_of_time, stage_done
 from refine.errors import SolverError
-from refine.optimise.correction import correct, row_names
+from refine.optimise.correction import RowMultipliers, correct, multipliers_in_rows, row_layout
 from refine.optimise.outcome import TimeLimitReached, problem_kinematics
 from refine.optimise.problem import ActiveSet, ConstraintSource, LinearRow, RefinementNLP
 from refine.optimise.verify import (
@@ -146,16 +146,16 @@ class RoundLoop:
             raise TimeLimitReached
         check_cancelled("solve")
         p = self.problem
-        keys = row_names(p)  # the same rows name the start multipliers and the answer's
+        layout = row_layout(p)  # the same rows name the start multipliers and the answer's
         extra = {}
         if warm and self.multipliers is not None:
             lam_g, lam_x = self.multipliers
-            extra["lam_g0"] = np.array([lam_g.get(key, 0.0) for key in keys])
+            extra["lam_g0"] = multipliers_in_rows(lam_g, layout)
             if len(lam_x) == len(p.lbx):
                 extra["lam_x0"] = lam_x
         name = SOLVER_LABELS[p.solver_name]
         if warm and self.outer <= 1 and "lam_x0" in extra and p.solver_name == "ipopt":
-            corrected = self._corrected(x0, extra["lam_g0"], extra["lam_x0"], keys, start)
+            corrected = self._corrected(x0, extra["lam_g0"], extra["lam_x0"], layout, start)
             if corrected is not None:
                 return corrected
         if p.watch is not None:
@@ -167,7 +167,7 @@ class RoundLoop:
         stats = {**p.solver.stats(), "solver": name}
         after_solve(str(stats.get("return_status", "unknown")), p.watch is not None and p.watch.interrupted)
         self.multipliers = (
-            dict(zip(keys, np.asarray(sol["lam_g"]).ravel().tolist(), strict=True)),
+            RowMultipliers(layout, np.asarray(sol["lam_g"])),
             np.asarray(sol["lam_x"]).ravel(),
         )
         status = str(stats.get("return_status", "unknown"))
@@ -181,9 +181,11 @@ class RoundLoop:
         return np.asarray(sol["x"]).ravel(), stats
 
     def _corrected(
-        self, x0: Array, lam_g0: Array, lam_x0: Array, keys: list[tuple], start: tuple[float, float]
+        self, x0: Array, lam_g0: Array, lam_x0: Array, layout: tuple, start: tuple[float, float]
     ) -> tuple[Array, dict] | None:
         """The answer by Newton correction from ``x0`` and the previous multipliers, or None (logged why).
+
+        ``layout``: the problem's :func:`refine.optimise.correction.row_layout`, which keys the answer's multipliers.
 
         See :mod:`refine.optimise.correction`: accepted only as an answer of the whole problem.
         """
@@ -191,7 +193,7 @@ class RoundLoop:
         if found is None:
             log.debug("Newton correction refused, solved with IPOPT: %s", reason)
             return None
-        self.multipliers = (dict(zip(keys, found.lam_g.tolist(), strict=True)), found.lam_x)
+        self.multipliers = (RowMultipliers(layout, found.lam_g), found.lam_x)
         self.iterations += found.iterations
         add_time(self.timings, "solve", start)
         stats = {

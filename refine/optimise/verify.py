@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -64,7 +65,8 @@ class PathCheck:
         joint_margin_rad: distance of each waypoint's closest joint to its limit (or to an interaction
             limit of the controller's joints) [rad], shape (N,).
         singularity: scaled manipulability sqrt(det(Js Jsᵀ)) [-], shape (N,).
-        sigma_min: smallest singular value of the scaled Jacobian [-], shape (N,).
+        scaled_jacobians: the TCP Jacobians with their linear rows divided by the robot's reach
+            (:func:`singularity_measures`) [-], shape (N, 6, n).
         singularity_between: smallest scaled manipulability inside each segment, joints
             interpolated linearly (:func:`segment_singularity`) [-], shape (N-1,).
         violations: the runs that break a tolerance (empty when the path passes).
@@ -77,7 +79,7 @@ class PathCheck:
     orientation_deviation_deg: Array
     joint_margin_rad: Array
     singularity: Array
-    sigma_min: Array
+    scaled_jacobians: Array
     singularity_between: Array
     violations: tuple[Violation, ...]
     singularity_between_at: Array | None = None
@@ -86,6 +88,15 @@ class PathCheck:
     def ok(self) -> bool:
         """True when no tolerance is broken."""
         return not self.violations
+
+    @cached_property
+    def sigma_min(self) -> Array:
+        """Smallest singular value of the scaled Jacobian [-], shape (N,).
+
+        Computed when first asked for (:func:`smallest_singular_values`; no tolerance depends on
+        it, and most checks of a solve's rounds are never reported).
+        """
+        return smallest_singular_values(self.scaled_jacobians)
 
 
 def runs(mask: Array) -> list[tuple[int, int]]:
@@ -127,6 +138,7 @@ def singularity_measures(
         ``sqrt(det(Js Jsᵀ))`` (N,) and the smallest singular value of ``Js`` (N,) [-]
         (0 for a robot with fewer than 6 joints).
     """
+<<<<<<< HEAD
     scale = np.array([1.0 / kin.robot.spec.reach_m] * 3 + [1.0] * 3)[:, None]
     Js = scale * (kin.jacobians(q) if jacobians is None else jacobians)
     square = Js.shape[2] == 6
@@ -137,16 +149,42 @@ def singularity_measures(
         w = np.abs(np.linalg.det(Js) if dets is None else dets)
     else:
         w = np.sqrt(np.clip(np.linalg.det(gram), 0.0, None))
+=======
+    Js = scaled_jacobians(kin, q, jacobians)
+    w = scaled_manipulability(Js)
+>>>>>>> h6
     if not smallest:
         return w, np.full(len(Js), np.nan)
+    return w, smallest_singular_values(Js)
+
+
+def scaled_jacobians(kin: TcpKinematics, q: Array, jacobians: Array | None = None) -> Array:
+    """The TCP Jacobians at ``q`` (N, n) (or ``jacobians``), linear rows divided by the reach, (N, 6, n) [-]."""
+    scale = np.array([1.0 / kin.robot.spec.reach_m] * 3 + [1.0] * 3)[:, None]
+    return scale * (kin.jacobians(q) if jacobians is None else jacobians)
+
+
+def scaled_manipulability(Js: Array) -> Array:
+    """``sqrt(det(Js Jsᵀ))`` of scaled Jacobians ``Js`` (N, 6, n), shape (N,) [-] (see :func:`singularity_measures`)."""
+    if Js.shape[2] == 6:
+        return np.abs(np.linalg.det(Js))
+    return np.sqrt(np.clip(np.linalg.det(Js @ np.swapaxes(Js, 1, 2)), 0.0, None))
+
+
+def smallest_singular_values(Js: Array) -> Array:
+    """The smallest singular value of each scaled Jacobian ``Js`` (N, 6, n), shape (N,) [-].
+
+    0 for fewer than 6 joints; else as :func:`singularity_measures` describes (eigenvalues of
+    ``Js Jsᵀ``, an SVD below :data:`SVD_BELOW`).
+    """
     if Js.shape[2] < 6:
-        return w, np.zeros(len(Js))
-    eig = np.linalg.eigvalsh(gram)  # ascending: σ_min², ..., σ_max²
+        return np.zeros(len(Js))
+    eig = np.linalg.eigvalsh(Js @ np.swapaxes(Js, 1, 2))  # ascending: σ_min², ..., σ_max²
     smin = np.sqrt(np.clip(eig[:, 0], 0.0, None))
     close = eig[:, 0] < SVD_BELOW**2 * eig[:, -1]
     if close.any():
         smin[close] = np.linalg.svd(Js[close], compute_uv=False)[:, -1]
-    return w, smin
+    return smin
 
 
 ORTHONORMAL = 1e-12
@@ -227,7 +265,8 @@ def check_path(
     A, lower, upper = interaction_rows(spec.joint_coupling, spec.joint_interaction, q.shape[1])
     inter = np.minimum(q @ A.T - lower, upper - q @ A.T)  # (N, m): the controller's interaction limits
     joint_margin = np.minimum(margins.min(axis=1), inter.min(axis=1, initial=np.inf))
-    sing, smin = singularity_measures(kin, q, jacobians=jacobians)
+    Js = scaled_jacobians(kin, q, jacobians)
+    sing = scaled_manipulability(Js)  # the smallest singular values when asked for (PathCheck.sigma_min)
 
     s = fused.s
     violations: list[Violation] = []
@@ -242,15 +281,18 @@ def check_path(
     ori_limit = tolerances.orientation_deg + (0.0 if slack_deg is None else np.asarray(slack_deg))
     add(ori - ori_limit > 1e-6, "orientation", ori, "deg", float(np.max(ori_limit)), True)
     margin = math.radians(tolerances.joint_margin_deg) - 1e-7
-    for j in range(q.shape[1]):
-        add(margins[:, j] < margin, f"joint limit (joint {j + 1})", margins[:, j], "rad", margin, False)
+    # runs only of the joints with a waypoint (or a step) past the limit, in joint order
+    close = margins < margin
+    for j in np.flatnonzero(close.any(axis=0)).tolist():
+        add(close[:, j], f"joint limit (joint {j + 1})", margins[:, j], "rad", margin, False)
     for i, it in enumerate(spec.joint_interaction):
         add(inter[:, i] < margin, f"joint limit ({it.label})", inter[:, i], "rad", margin, False)
     steps = np.abs(np.diff(q, axis=0))
     step_limit = math.radians(tolerances.joint_step_deg) + 1e-9
-    for j in range(q.shape[1]):
+    over = steps > step_limit
+    for j in np.flatnonzero(over.any(axis=0)).tolist():
         add(
-            np.append(steps[:, j] > step_limit, False),
+            np.append(over[:, j], False),
             f"joint step (joint {j + 1})",
             np.degrees(np.append(steps[:, j], 0.0)),
             "deg",
@@ -268,4 +310,4 @@ def check_path(
         tolerances.singularity_margin,
         False,
     )
-    return PathCheck(poses, pos_err, ori, joint_margin, sing, smin, between, tuple(violations), between_at)
+    return PathCheck(poses, pos_err, ori, joint_margin, sing, Js, between, tuple(violations), between_at)

@@ -181,13 +181,13 @@ def rebuilt_like(final: RefinementNLP, built: RefinementNLP) -> RefinementNLP | 
     bounds are then refreshed like a kept problem's). None when either is elastic, or the robot or
     the number of waypoints differ.
     """
-    from refine.optimise.correction import row_names
+    from refine.optimise.correction import row_layout
 
     if final.elastic_deg is not None or built.elastic_deg is not None:
         return None
     if final.robot is not built.robot or final.n_waypoints != built.n_waypoints:
         return None
-    if row_names(final) == row_names(built):
+    if row_layout(final) == row_layout(built):
         return built
     return built.rebuilt(active=final.active, joint_steps=final.joint_steps)
 

@@ -10,10 +10,19 @@ import scipy.sparse.linalg as sla
 
 import refine
 from refine.frames import make_transform
-from refine.optimise.correction import active_rows, correct, row_names
+from refine.optimise.correction import (
+    RowMultipliers,
+    active_rows,
+    correct,
+    multipliers_in_rows,
+    row_layout,
+    row_names,
+)
 from refine.optimise.kkt import Evaluator, NullSpaceStep, solve_banded_kkt
-from refine.optimise.problem import ActiveSet, LinearRow
+from refine.optimise.problem import ActiveSet, LinearRow, build_refinement
 from refine.optimise.rounds import CORRECTED
+from refine.problem import Tolerances
+from refine.synthetic import wave_path
 
 ROBOT = "abb_irb4600_60_205"
 
@@ -184,3 +193,43 @@ def test_held_joint_step_rows_are_corrected_through_the_whole_banded_kkt_matrix(
     assert any("the whole KKT matrix is factorised" in r.getMessage() for r in caplog.records)
     assert reason == "" and np.abs(found.x - x).max() <= 1e-6
     assert np.abs(np.diff(found.x.reshape(N, n)[:, 0])[list(waypoints)] - 0.5 * steps).max() <= 1e-10
+
+
+def test_multipliers_kept_in_row_order_read_by_row_name_and_move_to_a_grown_problems_rows(
+    irb4600, straight_tool
+):
+    """The rounds' multipliers (values in row order, named by the rows' layout) are the mapping of row names."""
+    N, n = 8, 6
+    small = ActiveSet((3,), ((5, 0.5),), (LinearRow(2, 0.0, np.ones(n), 0.0, "a / b"),))
+    grown = ActiveSet((1, 3), ((2, 0.5), (5, 0.5)), small.linear_rows)
+    built = [
+        build_refinement(
+            irb4600, wave_path(N), np.eye(4), straight_tool, Tolerances(), active=a, joint_steps=steps
+        )
+        for a, steps in ((small, (4, 9)), (grown, (4, 7, 9)))
+    ]
+    base = [("path", i) for i in range(4 * N)]
+    names = [  # by hand: path rows, joint-step rows, singular waypoints, segment points, linear rows
+        base
+        + [("step", 4), ("step", 9), ("singular", 3, 0.0), ("singular", 5, 0.5), ("row", 2, 0.0, "a / b")],
+        base
+        + [("step", 4), ("step", 7), ("step", 9)]
+        + [("singular", 1, 0.0), ("singular", 3, 0.0), ("singular", 2, 0.5), ("singular", 5, 0.5)]
+        + [("row", 2, 0.0, "a / b")],
+    ]
+    assert [len(b.lbg) for b in built] == [len(k) for k in names]
+    values = np.random.default_rng(3).normal(size=len(names[0]))
+    kept = RowMultipliers(row_layout(built[0]), values)
+    by_name = dict(zip(names[0], values.tolist(), strict=True))
+    assert dict(kept) == by_name and kept.get(("step", 7), 0.0) == 0.0
+    # in the grown problem's rows: by name, 0 for a row the small problem did not have
+    expected = np.array([by_name.get(k, 0.0) for k in names[1]])
+    moved = kept.in_rows_of(row_layout(built[1]))
+    assert np.array_equal(moved, expected)
+    assert np.array_equal(multipliers_in_rows(by_name, row_layout(built[1])), expected)
+    # the same rows: the values themselves, a copy
+    same = kept.in_rows_of(row_layout(built[0].rebuilt()))
+    assert np.array_equal(same, values) and same is not kept.values
+    assert row_layout(built[0]) != row_layout(built[1])
+    with pytest.raises(ValueError, match="multipliers"):
+        RowMultipliers(row_layout(built[1]), values)

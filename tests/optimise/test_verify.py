@@ -8,6 +8,7 @@ check is put just beyond and just inside its threshold (by 0.1 %, or a few hundr
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -15,7 +16,14 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from refine.frames import rotation_angle_deg
-from refine.optimise.verify import SVD_BELOW, check_path, rotation_angles_deg, runs, singularity_measures
+from refine.optimise.verify import (
+    SVD_BELOW,
+    Violation,
+    check_path,
+    rotation_angles_deg,
+    runs,
+    singularity_measures,
+)
 from refine.paths import FusedPath
 from refine.problem import Tolerances
 
@@ -243,6 +251,19 @@ def test_the_singularity_figures_are_the_scaled_manipulability_and_smallest_sing
     np.testing.assert_allclose(check.singularity, [manipulability(qk) for qk in q], rtol=1e-9)
     smallest = [np.linalg.svd(scaled_jacobian(qk), compute_uv=False)[-1] for qk in q]
     np.testing.assert_allclose(check.sigma_min, smallest, rtol=1e-9)
+
+
+def test_the_smallest_singular_values_are_computed_when_asked_for_also_after_a_replace(kin):
+    """A check's smallest singular values come when read (no tolerance needs them), from its own Jacobians."""
+    q = path([Q0_DEG, [0.0, 100.0, -150.0, 0.0, 40.0, 0.0], [10.0, 20.0, -30.0, 40.0, 5.0, 60.0]])
+    check = check_path(kin, q, fused_on(q), Tolerances(**LOOSE), False)
+    assert "sigma_min" not in vars(check)
+    extra = Violation(0, 1, 0.0, 0.1, "clearance", 0.001, "m", 0.005)
+    grown = dataclasses.replace(check, violations=(*check.violations, extra))
+    smallest = [np.linalg.svd(scaled_jacobian(qk), compute_uv=False)[-1] for qk in q]
+    np.testing.assert_allclose(grown.sigma_min, smallest, rtol=1e-9)
+    np.testing.assert_allclose(check.sigma_min, smallest, rtol=1e-9)
+    assert grown.violations[-1] is extra and "sigma_min" in vars(check)
 
 
 def test_the_manipulability_alone_skips_the_singular_values(kin):
