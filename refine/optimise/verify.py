@@ -138,21 +138,8 @@ def singularity_measures(
         ``sqrt(det(Js Jsᵀ))`` (N,) and the smallest singular value of ``Js`` (N,) [-]
         (0 for a robot with fewer than 6 joints).
     """
-<<<<<<< HEAD
-    scale = np.array([1.0 / kin.robot.spec.reach_m] * 3 + [1.0] * 3)[:, None]
-    Js = scale * (kin.jacobians(q) if jacobians is None else jacobians)
-    square = Js.shape[2] == 6
-    gram = None if square and not smallest else Js @ np.swapaxes(Js, 1, 2)
-    if square:
-        chain = kin.robot.chain
-        dets = None if chain is None else chain.dets6(Js)  # compiled, else NumPy's
-        w = np.abs(np.linalg.det(Js) if dets is None else dets)
-    else:
-        w = np.sqrt(np.clip(np.linalg.det(gram), 0.0, None))
-=======
     Js = scaled_jacobians(kin, q, jacobians)
-    w = scaled_manipulability(Js)
->>>>>>> h6
+    w = scaled_manipulability(Js, kin.robot.chain)
     if not smallest:
         return w, np.full(len(Js), np.nan)
     return w, smallest_singular_values(Js)
@@ -164,10 +151,16 @@ def scaled_jacobians(kin: TcpKinematics, q: Array, jacobians: Array | None = Non
     return scale * (kin.jacobians(q) if jacobians is None else jacobians)
 
 
-def scaled_manipulability(Js: Array) -> Array:
-    """``sqrt(det(Js Jsᵀ))`` of scaled Jacobians ``Js`` (N, 6, n), shape (N,) [-] (see :func:`singularity_measures`)."""
+def scaled_manipulability(Js: Array, chain: object = None) -> Array:
+    """``sqrt(det(Js Jsᵀ))`` of scaled Jacobians ``Js`` (N, 6, n), shape (N,) [-] (see :func:`singularity_measures`).
+
+    ``chain``: the robot's batch chain, whose compiled determinant
+    (:meth:`refine.robot.compiled_chain.CompiledChain.dets6`) takes the square case where it is
+    compiled; None (or a chain without one) for NumPy's.
+    """
     if Js.shape[2] == 6:
-        return np.abs(np.linalg.det(Js))
+        dets = None if chain is None or not hasattr(chain, "dets6") else chain.dets6(Js)
+        return np.abs(np.linalg.det(Js) if dets is None else dets)
     return np.sqrt(np.clip(np.linalg.det(Js @ np.swapaxes(Js, 1, 2)), 0.0, None))
 
 
@@ -266,7 +259,7 @@ def check_path(
     inter = np.minimum(q @ A.T - lower, upper - q @ A.T)  # (N, m): the controller's interaction limits
     joint_margin = np.minimum(margins.min(axis=1), inter.min(axis=1, initial=np.inf))
     Js = scaled_jacobians(kin, q, jacobians)
-    sing = scaled_manipulability(Js)  # the smallest singular values when asked for (PathCheck.sigma_min)
+    sing = scaled_manipulability(Js, kin.robot.chain)  # the smallest singular values when asked for (PathCheck.sigma_min)
 
     s = fused.s
     violations: list[Violation] = []
