@@ -250,7 +250,7 @@ def check_controller_lines(
         correction = known.start_correction
     else:
         q_line, err, correction, sing_seg, off_seg, angle_seg = solve_line(
-            kin, q, m, segment, t, wrist, IK_TOLERANCE, previous
+            kin, q, m, segment, t, wrist, IK_TOLERANCE, previous, q_lin
         )
     bow = np.abs(q_line - q_lin)
     margins = np.minimum(q_line - spec.lower, spec.upper - q_line)

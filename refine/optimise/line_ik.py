@@ -95,6 +95,7 @@ def solve_line(
     wrist: Array,
     tolerance: float,
     previous: tuple[Array, Any] | None = None,
+    q_lin: Array | None = None,
 ) -> tuple[Array, Array, Array, Array, Array, Array]:
     """The line's IK at the samples and what depends on it and on ``q`` alone.
 
@@ -111,6 +112,8 @@ def solve_line(
             (:func:`refine.optimise.line_start.previous_bows`); elsewhere the start is
             :func:`refine.optimise.line_start.newton_start` plus its corrections
             (:func:`refine.optimise.line_start.previous_corrections`). None for the Newton start.
+        q_lin: the joint-linear joints at the samples [rad] (M, n) (:func:`joint_linear` of ``q``,
+            ``segment`` and ``t``) when the caller has them, else None.
 
     Returns:
         the line's joints (M, n) [rad], the IK residual per sample (M,), the IK's change of the
@@ -119,7 +122,7 @@ def solve_line(
         chord [m] and the largest angle between its orientation and the line's [deg], each (N-1,).
     """
     spec = kin.robot.spec
-    q_lin = joint_linear(q, segment, t)
+    q_lin = joint_linear(q, segment, t) if q_lin is None else q_lin
     poses, J_wp = kin.poses_jacobians(q)
     targets = line_poses(poses, q, segment, t, kin, wrist)
     lin_poses = kin.poses(q_lin)
@@ -136,7 +139,11 @@ def solve_line(
             )
     newton = start.copy()
     if previous is not None:
-        start[cold] += previous_corrections(q, m, segment, t, previous, tolerance)[cold]
+        corrections = previous_corrections(q, m, segment, t, previous, tolerance)
+        if cold.all():
+            start += corrections
+        else:
+            start[cold] += corrections[cold]
     J_line = np.empty((len(t), 6, q.shape[1]))
     q_line, err = solve_ik_batch(
         kin,

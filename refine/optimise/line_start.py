@@ -159,8 +159,11 @@ def previous_bows(
     out = np.full((len(t), q.shape[1]), np.nan)
     if q_old.shape != q.shape or old.samples.shape != m.shape:
         return out
-    moved = np.abs(q - q_old).max(axis=1) <= PREVIOUS_MOVE_MAX_RAD
-    rows, at = _same_samples(m, segment, old, moved[:-1] & moved[1:])
+    moved = _largest_per_row(np.abs(q - q_old)) <= PREVIOUS_MOVE_MAX_RAD
+    still = moved[:-1] & moved[1:]
+    if not still.any():  # no segment whose waypoints both stayed: no sample takes a bow
+        return out
+    rows, at = _same_samples(m, segment, old, still)
     s_old, t_old = old.segment[at], old.t[at]
     bow = old.q[at] - (q_old[s_old] + t_old[:, None] * (q_old[s_old + 1] - q_old[s_old]))
     good = (old.ik_error[at] <= tolerance) & (np.abs(bow).max(axis=1) <= NEWTON_STEP_MAX)
@@ -203,7 +206,7 @@ def previous_corrections(
     rows, at = _same_samples(m, segment, old, np.ones(len(m), dtype=bool))
     c = np.take(old.start_correction, at, axis=0)
     with np.errstate(invalid="ignore"):
-        good = (np.take(old.ik_error, at) <= tolerance) & (np.abs(c).max(axis=1) <= CORRECTION_MAX_RAD)
+        good = (np.take(old.ik_error, at) <= tolerance) & (_largest_per_row(np.abs(c)) <= CORRECTION_MAX_RAD)
     c[~good] = 0.0
     if len(rows) == len(t):  # every sample has one (rows are in order, without repeats)
         return c

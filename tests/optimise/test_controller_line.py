@@ -295,3 +295,32 @@ def test_a_previous_line_s_bows_start_the_ik_where_its_samples_match_and_the_fig
     assert [(v.index_start, v.index_end, v.reason) for v in warm.violations] == [
         (v.index_start, v.index_end, v.reason) for v in cold.violations
     ]
+
+
+def test_only_segments_whose_two_waypoints_both_stayed_take_a_previous_bow(ur10e_kin):
+    """A path's line checked; then every waypoint moved 1e-3 rad on joint 1 but waypoints 3 and 4
+    (far beyond the move that keeps a bow, under the one that changes a sample count): only
+    segment 3's samples take a bow, each the previous line's ``q_line - q_lin`` at its sample (by
+    hand from the previous check's arrays); with waypoint 4 moved too, no sample takes one."""
+    from refine.optimise.controller_line import IK_TOLERANCE, sample_parameters
+    from refine.optimise.line_start import PREVIOUS_MOVE_MAX_RAD, previous_bows
+
+    rng = np.random.default_rng(4)
+    steps = np.radians(rng.uniform(-2.0, 2.0, size=(8, 6)))
+    q_old = Q0 + np.vstack([np.zeros(6), np.cumsum(steps, axis=0)])
+    old = check_controller_lines(ur10e_kin, q_old, np.arange(len(q_old), dtype=float), Tolerances())
+    q = q_old.copy()
+    q[:, 0] += 1e-3
+    q[[3, 4], 0] = q_old[[3, 4], 0]
+    assert 1e-3 > 2 * PREVIOUS_MOVE_MAX_RAD
+    m, segment, t = sample_parameters(q)
+    assert (m == old.samples).all()
+    bows = previous_bows(q, m, segment, t, (q_old, old), IK_TOLERANCE)
+    ours = segment == 3
+    np.testing.assert_array_equal(np.isfinite(bows).all(axis=1), ours)
+    assert np.isnan(bows[~ours]).all()
+    s_old, t_old = old.segment[ours], old.t[ours]
+    by_hand = old.q[ours] - (q_old[s_old] + t_old[:, None] * (q_old[s_old + 1] - q_old[s_old]))
+    np.testing.assert_array_equal(bows[ours], by_hand)
+    q[4, 0] += 1e-3
+    assert np.isnan(previous_bows(q, m, segment, t, (q_old, old), IK_TOLERANCE)).all()
