@@ -89,29 +89,34 @@ def stage_rows(params: list, n_points: int) -> tuple[Array, Array, Array, Array]
         ``A, B, C`` shape (n_points, m) (the two bounds on ``u`` among the rows), ``x_bounds``
         shape (n_points, 2) [m^2/s^2], as the seidel wrapper makes them.
     """
-    A, B, C = [], [], []
     u_bounds = np.tile([-_VAR_BOUND, _VAR_BOUND], (n_points, 1))
     x_bounds = u_bounds.copy()
+    blocks = []  # (F, h, a, b, c) of the constraints with rows
     for a, b, c, F, h, ubound, xbound in params:
         if a is not None:
             F, h = np.asarray(F), np.asarray(h)
-            if F.ndim == 3:
-                A.append(np.einsum("ikj,ij->ik", F, a))
-                B.append(np.einsum("ikj,ij->ik", F, b))
-                C.append(np.einsum("ikj,ij->ik", F, c) - h)
-            else:
-                A.append(a @ F.T)
-                B.append(b @ F.T)
-                C.append(c @ F.T - h)
+            blocks.append((F, h, a, b, c))
         for bound, into in ((ubound, u_bounds), (xbound, x_bounds)):
             if bound is not None:
                 into[:, 0] = np.maximum(into[:, 0], np.asarray(bound)[:, 0])
                 into[:, 1] = np.minimum(into[:, 1], np.asarray(bound)[:, 1])
-    ones, zeros = np.ones((n_points, 1)), np.zeros((n_points, 1))
-    A.append(np.hstack([-ones, ones]))  # u >= lower bound, u <= upper bound
-    B.append(np.hstack([zeros, zeros]))
-    C.append(np.column_stack([u_bounds[:, 0], -u_bounds[:, 1]]))
-    return np.hstack(A), np.hstack(B), np.hstack(C), x_bounds
+    m = sum(F.shape[-2] for F, *_ in blocks) + 2
+    A, B, C = np.empty((n_points, m)), np.zeros((n_points, m)), np.empty((n_points, m))
+    k = 0
+    for F, h, a, b, c in blocks:  # each constraint's rows into its columns
+        cols = slice(k, k + F.shape[-2])
+        if F.ndim == 3:
+            A[:, cols] = np.einsum("ikj,ij->ik", F, a)
+            B[:, cols] = np.einsum("ikj,ij->ik", F, b)
+            C[:, cols] = np.einsum("ikj,ij->ik", F, c) - h
+        else:
+            A[:, cols] = a @ F.T
+            B[:, cols] = b @ F.T
+            C[:, cols] = c @ F.T - h
+        k = cols.stop
+    A[:, k], A[:, k + 1] = -1.0, 1.0  # u >= lower bound, u <= upper bound (B there is 0)
+    C[:, k], C[:, k + 1] = u_bounds[:, 0], -u_bounds[:, 1]
+    return A, B, C, x_bounds
 
 
 def stage_shortcuts(rows: tuple[Array, Array, Array, Array]) -> tuple[Array, Array, Array, Array]:
@@ -363,19 +368,18 @@ def lean_passes(base: type) -> type:
             wrapper = self._made_wrapper()
             N = self._N
             two_deltas_arr = self._two_deltas()
-            two_deltas = two_deltas_arr.tolist()
             xs, us = np.zeros(N + 1), np.zeros(N)
             v_vec = np.zeros((N, self._n_vars() - 2))
-            K_lo, K_hi = K[:, 0].tolist(), K[:, 1].tolist()
             nan = np.nan
             if wrapper is not None:
                 wrapper.setup_solver()
             x, i, tries = float(x_start), 0, 0
             xs[0] = x
-            solve, costs = self._solve, list(self._stage_costs())
+            solve, costs = self._solve, self._stage_costs()
             rows = self._stage_rows()
             g, u_g, good = forward_guess(x, K, two_deltas_arr, tiny)
-            u_hi, L_hi, u_lo, L_lo, slack_0, L_0 = forward_certificates(rows, g)
+            certificates = forward_certificates(rows, g)
+            u_hi, _, u_lo, _, slack_0, _ = certificates
             x_bounds = rows[3]
             margin = _TOP_MARGIN_REL
             good &= (
@@ -385,12 +389,18 @@ def lean_passes(base: type) -> type:
                 & (u_g >= u_lo[:-1] + margin * (np.abs(u_lo[:-1]) + 1.0))
                 & (slack_0[:-1] >= 0.0)
             )
-            run_end = _next_false(good).tolist()
-            good_list, g_list = good.tolist(), g.tolist()
-            u_hi, L_hi, u_lo, L_lo, slack_0, L_0 = (
-                v.tolist() for v in (u_hi, L_hi, u_lo, L_lo, slack_0, L_0)
-            )
-            x_lo, x_hi = x_bounds[:, 0].tolist(), x_bounds[:, 1].tolist()
+            run_end = _next_false(good)
+            if good[0] and x == g[0] and run_end[0] == N:  # one run of proved steps from start to end
+                xs[1:] = g[1:]
+                us[:] = u_g
+                i = N
+            else:
+                run_end = run_end.tolist()
+                good_list, g_list = good.tolist(), g.tolist()
+                u_hi, L_hi, u_lo, L_lo, slack_0, L_0 = (v.tolist() for v in certificates)
+                x_lo, x_hi = x_bounds[:, 0].tolist(), x_bounds[:, 1].tolist()
+                K_lo, K_hi = K[:, 0].tolist(), K[:, 1].tolist()
+                two_deltas = two_deltas_arr.tolist()
             while i < N:  # _forward_step's solve, inline, or its answer where it is proved
                 if good_list[i] and x == g_list[i]:  # a run of proved steps along the guess
                     k = run_end[i]
@@ -456,7 +466,15 @@ def lean_passes(base: type) -> type:
             lo_run, hi_run = np.zeros(N), shortcuts[0][1:].copy()
             lo_run[-1], hi_run[-1] = K_lo[N], K_hi[N]
             on_top = _top_reached(*shortcuts, lo_run, hi_run, two_deltas_arr)
-            run_start = _last_false(on_top).tolist()
+            run_start = _last_false(on_top)
+            if on_top[N - 1] and run_start[N - 1] == -1:  # one run: every stage takes its top
+                if self._made_wrapper() is not None:
+                    self._made_wrapper().close_solver()
+                K = np.zeros((N + 1, 2))
+                K[:N, 1] = shortcuts[0][:N]
+                K[N] = K_lo[N], K_hi[N]
+                return K
+            run_start = run_start.tolist()
             lo_run, hi_run, on_top = lo_run.tolist(), hi_run.tolist(), on_top.tolist()
             x_top, u_lo, u_hi, at_rest = (v.tolist() for v in shortcuts)
             two_deltas = two_deltas_arr.tolist()

@@ -35,6 +35,8 @@ def _case(name):
     elif name == "still joint and a step down":  # rows without u; braking before the cap's step
         q[:, 0] = 0.2
         cap = np.where(s < 0.5, 0.3, 0.05)
+    elif name == "ramped cap":  # the cap ramps to the ends: the forward pass is one run, rest to rest
+        cap = 0.3 * np.minimum(1.0, np.minimum(10.0 * s, 10.0 * (1.0 - s))) + 1e-3
     elif name == "creeping joints":  # rows with u's coefficient near 0: ends far out, rounded
         q[:, 0] = 0.2 + 1e-9 * np.sin(3.0 * s)
         q[:, 1] = 1e-12 * s**2
@@ -42,7 +44,14 @@ def _case(name):
     return s, q, cap, vlim, alim
 
 
-CASES = ["cruise", "slow ramps", "velocity dip", "still joint and a step down", "creeping joints"]
+CASES = [
+    "cruise",
+    "slow ramps",
+    "velocity dip",
+    "still joint and a step down",
+    "creeping joints",
+    "ramped cap",
+]
 
 
 class _FreeEnd(toppra.algorithm.TOPPRA):
@@ -109,3 +118,38 @@ def test_the_lean_passes_give_toppras_sets_and_speeds(name):
     np.testing.assert_allclose(K, K_own, rtol=1e-9, atol=1e-15)
     if name == "cruise":
         assert len(solves) < 0.1 * len(s)
+
+
+def test_the_stage_rows_are_each_gridpoints_constraints_stacked():
+    """``stage_rows`` against the rows built gridpoint by gridpoint from their definition
+    ``F (a u + b x + c) <= h`` (F per gridpoint or shared), then ``-u <= -u_lo`` and ``u <= u_hi``
+    with ``[u_lo, u_hi]`` the bounds on ``u`` intersected with +-1e8; ``x``'s bounds intersected."""
+    from refine.timing_passes import stage_rows
+
+    rng = np.random.default_rng(5)
+    n = 7
+    shared = (rng.normal(size=(n, 3)), rng.normal(size=(n, 3)), rng.normal(size=(n, 3)))
+    F2, h2 = rng.normal(size=(4, 3)), rng.normal(size=4)
+    per_point = (rng.normal(size=(n, 2)), rng.normal(size=(n, 2)), rng.normal(size=(n, 2)))
+    F3, h3 = rng.normal(size=(n, 5, 2)), rng.normal(size=(n, 5))
+    ub = np.column_stack([-rng.uniform(1, 2, n), rng.uniform(1, 2, n)])
+    xb = np.column_stack([rng.uniform(0, 1, n), rng.uniform(2, 3, n)])
+    xb2 = np.column_stack([rng.uniform(0, 1, n), rng.uniform(2, 3, n)])
+    params = [
+        (None, None, None, None, None, None, xb),
+        (*shared, F2, h2, None, None),
+        (*per_point, F3, h3, ub, xb2),
+    ]
+    A, B, C, x_bounds = stage_rows(params, n)
+    for i in range(n):
+        want_A, want_B, want_C = [], [], []
+        for (a, b, c), F, h in ((shared, F2, h2[None].repeat(n, 0)), (per_point, None, h3)):
+            Fi = F2 if F is not None else F3[i]
+            want_A += list(Fi @ a[i])
+            want_B += list(Fi @ b[i])
+            want_C += list(Fi @ c[i] - h[i])
+        u_lo, u_hi = max(-1e8, ub[i, 0]), min(1e8, ub[i, 1])
+        np.testing.assert_allclose(A[i], want_A + [-1.0, 1.0], rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(B[i], want_B + [0.0, 0.0], rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(C[i], want_C + [u_lo, -u_hi], rtol=1e-12, atol=1e-14)
+        assert x_bounds[i].tolist() == [max(xb[i, 0], xb2[i, 0]), min(xb[i, 1], xb2[i, 1])]
