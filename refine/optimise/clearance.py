@@ -61,7 +61,6 @@ class ClearanceSource:
     last: PathClearance | None = None
     prior: CheckedBounds | None = None
     _recent: dict[tuple, PathClearance] = field(default_factory=dict)
-    _carry: tuple | None = field(default=None, repr=False)
     stats: dict[str, float] = field(
         default_factory=lambda: {"rounds": 0, "rows": 0, "check_s": 0.0, "rows_s": 0.0}
     )
@@ -78,7 +77,6 @@ class ClearanceSource:
     def forget(self) -> None:
         """Drop the dense checks kept for reuse, so the next refinement starts as a fresh run's would."""
         self._recent.clear()
-        self._carry = None
         self.last = None
 
     # ---- the ConstraintSource protocol ------------------------------------------------------
@@ -94,14 +92,13 @@ class ClearanceSource:
         found = self._recent.pop(key, None)
         if found is None:
             t0 = time.perf_counter()
-            carried, directions = self._from_prior(q)
             found = check_path_clearance(
                 self.model,
                 q,
                 self.kin,
                 self.check_step_m,
-                prior=carried,
-                directions=directions,
+                prior=self._carried(q),
+                directions=self._directions(q),
                 every_waypoint=False,
             )
             self.stats["check_s"] += time.perf_counter() - t0
@@ -115,28 +112,11 @@ class ClearanceSource:
         """Start the checks from a previous answer's check (``PathClearance``) where it is near."""
         self.prior = getattr(clearance, "bounds", None)
 
-    def _from_prior(self, q: Array) -> tuple[Array | None, Array | None]:
-        """``prior``'s carried bounds (N, P) [m] and witness normals (N, P, 3) for joints ``q``.
+    def _carried(self, q: Array) -> Array | None:
+        return None if self.prior is None else carried_bounds(self.model, self.prior, q)
 
-        Both are functions of the model, ``prior`` and ``q`` alone (:func:`carried_bounds`,
-        :func:`carried_directions`), so the last pair is kept for the same three (the model and
-        ``prior`` by identity, held here so neither can be replaced by another at its address, ``q``
-        by its bytes): the motion bound's proof of a path and its dense check then share them. They
-        are kept read-only, so a caller writing into them fails instead of changing the next one's.
-        """
-        if self.prior is None:
-            return None, None
-        key = self._key(q)
-        memo = self._carry
-        if memo is not None and memo[0] is self.model and memo[1] is self.prior and memo[2] == key:
-            return memo[3], memo[4]
-        bounds = carried_bounds(self.model, self.prior, q)
-        directions = carried_directions(self.model, self.prior, q)
-        for a in (bounds, directions):
-            if a is not None:
-                a.flags.writeable = False
-        self._carry = (self.model, self.prior, key, bounds, directions)
-        return bounds, directions
+    def _directions(self, q: Array) -> Array | None:
+        return None if self.prior is None else carried_directions(self.model, self.prior, q)
 
     @staticmethod
     def _key(q: Array) -> tuple:
@@ -175,8 +155,7 @@ class ClearanceSource:
         q = np.asarray(q, dtype=float)
         if self._key(q) not in self._recent:
             t0 = time.perf_counter()
-            carried, directions = self._from_prior(q)
-            proved = margins_proved(self.model, q, prior=carried, directions=directions)
+            proved = margins_proved(self.model, q, prior=self._carried(q), directions=self._directions(q))
             self.stats["check_s"] += time.perf_counter() - t0
             if proved:
                 return ()
