@@ -147,3 +147,41 @@ def test_the_bounds_are_visited_in_a_stable_sort_s_order_however_many_and_with_t
         expected = np.argsort(values, kind="stable").tolist()  # numpy's own stable sort
         assert list(ascending(values.reshape(-1, 5) if size % 5 == 0 else values)) == expected
         assert list(islice(ascending(values), 3)) == expected[:3]
+
+
+def test_the_least_distance_between_the_waypoints_is_a_loop_over_the_segments_pairs():
+    """Random segments' least clearances (some NaN, some -inf), pairs of either kind or none, and
+    sub-step counts (1: nothing inside): each kind's least distance is the least clearance plus the
+    margin over the segments with something inside whose pair is of the kind, as a plain loop finds."""
+    from types import SimpleNamespace
+
+    kinds = {"table": "cell", "post": "cell", "link_3/0": "robot", "link_5/0": "robot", "tool:gun": "tool"}
+    names = list(kinds)
+    rng = np.random.default_rng(11)
+
+    def by_loop(check, cell, margin):
+        best = np.inf
+        samples = getattr(check, "segment_samples", None)
+        for k, (body, other) in enumerate(check.segment_pair):
+            if samples is not None and samples[k] == 1:
+                continue
+            if body and ((kinds[other] == "cell" or kinds[body] == "cell") == cell):
+                value = float(check.segment_clearance_m[k]) + margin
+                best = value if value < best else best
+        return best
+
+    for size in (0, 1, 2, 40, 617):
+        clear = rng.normal(0.02, 0.02, size)
+        clear[rng.random(size) < 0.1] = np.nan
+        clear[rng.random(size) < 0.05] = -np.inf
+        pairs = tuple(
+            ("", "") if rng.random() < 0.1 else (names[i], names[j])
+            for i, j in rng.integers(0, len(names), (size, 2))
+        )
+        samples = rng.integers(1, 4, size)
+        for check in (
+            SimpleNamespace(segment_clearance_m=clear, segment_pair=pairs, segment_samples=samples),
+            SimpleNamespace(segment_clearance_m=clear, segment_pair=pairs),
+        ):
+            for cell, margin in ((True, 0.01), (False, 0.002)):
+                assert _between_waypoints(check, kinds, cell, margin) == by_loop(check, cell, margin)

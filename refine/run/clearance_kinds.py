@@ -99,14 +99,23 @@ def ascending(values: Array) -> Iterator[int]:
 
 
 def _between_waypoints(clearance: Any, kinds: dict[str, str], cell: bool, margin_m: float) -> float:
-    """The least distance of a kind's pair where it held a segment's least clearance [m] (inf if none)."""
-    best = np.inf
+    """The least distance of a kind's pair where it held a segment's least clearance [m] (inf if none).
+
+    Each distinct pair's kind is looked up once; a NaN clearance counts for nothing. The least
+    clearance plus the margin is the least of the sums: rounding a sum keeps its order.
+    """
     samples = getattr(clearance, "segment_samples", None)
     pairs = clearance.segment_pair
+    if not len(pairs):
+        return np.inf
+    # a pair of the kind, and a pair at all (a segment without one names none)
+    own = {
+        p: (kinds.get(p[1]) == "cell" or kinds.get(p[0]) == "cell") == cell and bool(p[0]) for p in set(pairs)
+    }
+    take = np.fromiter((own[p] for p in pairs), dtype=bool, count=len(pairs))
     # a segment with nothing inside has its ends' figures, which the waypoints give exactly
-    inside = range(len(pairs)) if samples is None else np.flatnonzero(np.asarray(samples) != 1).tolist()
-    for k in inside:
-        body, other = pairs[k]
-        if (kinds.get(other) == "cell" or kinds.get(body) == "cell") == cell and body:
-            best = min(best, float(clearance.segment_clearance_m[k]) + margin_m)
-    return best
+    if samples is not None:
+        take &= np.asarray(samples) != 1
+    values = np.asarray(clearance.segment_clearance_m, dtype=float)[take]
+    values = values[~np.isnan(values)]
+    return float(values.min()) + margin_m if len(values) else np.inf
