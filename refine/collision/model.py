@@ -310,15 +310,17 @@ class CollisionModel:
 
     def _box_bounds(self, poses: Array, pa: Array, pb: Array) -> Array:
         """The box gaps (N, len(pa)) [m] of the body pairs (pa, pb) at poses (N, M, 4, 4), -inf for none."""
-        c, h = world_aabb(poses, self._centre[: self._n_moving], self._half[: self._n_moving])
-        cells = np.broadcast_to(
-            self._aabb_c[self._n_moving :], (len(poses), *self._aabb_c[self._n_moving :].shape)
-        )
-        c = np.concatenate([c, cells], axis=1)
-        h = np.concatenate([h, np.broadcast_to(self._aabb_h[self._n_moving :], cells.shape)], axis=1)
-        d = np.maximum(np.abs(c[:, pa] - c[:, pb]) - h[:, pa] - h[:, pb], 0.0)
-        gaps = np.sqrt(np.einsum("nij,nij->ni", d, d))
-        return np.where(gaps > 0.0, gaps, -np.inf)
+        n = self._n_moving
+        c, h = world_aabb(poses, self._centre[:n], self._half[:n])
+        # body-major (B, N, 3): each pair's rows are then gathered as whole blocks, not 3 at a time
+        cb, hb = np.empty((2, len(self._aabb_c), len(poses), 3))
+        cb[:n], cb[n:] = c.transpose(1, 0, 2), self._aabb_c[n:, None]
+        hb[:n], hb[n:] = h.transpose(1, 0, 2), self._aabb_h[n:, None]
+        d = np.abs(cb[pa] - cb[pb]) - hb[pa] - hb[pb]
+        np.maximum(d, 0.0, out=d)
+        gaps = np.ascontiguousarray(np.sqrt(np.einsum("pni,pni->pn", d, d)).T)
+        gaps[~(gaps > 0.0)] = -np.inf  # overlapping boxes (and NaN poses): no bound
+        return gaps
 
     def _place_all(self, q: Array) -> None:
         self._q = None
