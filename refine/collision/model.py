@@ -316,7 +316,11 @@ class CollisionModel:
         cb, hb = np.empty((2, len(self._aabb_c), len(poses), 3))
         cb[:n], cb[n:] = c.transpose(1, 0, 2), self._aabb_c[n:, None]
         hb[:n], hb[n:] = h.transpose(1, 0, 2), self._aabb_h[n:, None]
-        d = np.abs(cb[pa] - cb[pb]) - hb[pa] - hb[pb]
+        d = cb[pa]  # |c_a - c_b| - h_a - h_b, in place: the same sums without their temporaries
+        d -= cb[pb]
+        np.abs(d, out=d)
+        d -= hb[pa]
+        d -= hb[pb]
         np.maximum(d, 0.0, out=d)
         gaps = np.ascontiguousarray(np.sqrt(np.einsum("pni,pni->pn", d, d)).T)
         gaps[~(gaps > 0.0)] = -np.inf  # overlapping boxes (and NaN poses): no bound
