@@ -40,6 +40,7 @@ waypoints are left that can hold the least distance (:func:`direction_bounds`;
 
 from __future__ import annotations
 
+import math
 import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -209,13 +210,15 @@ def carried_bounds(model: CollisionModel, prior: CheckedBounds, q: Array) -> Arr
             shift[label] = float(np.max(np.linalg.norm(now - before[1], axis=1)))
     motion = np.abs(q - prior.q) @ model.pair_motion.T  # (N, P) [m]
     out = np.full((len(q), len(model.pairs)), -np.inf)
+    mine, theirs, delta = [], [], []  # the pairs carried: index here, index in the prior, shift [m]
     for p, (a, b) in enumerate(model.pairs):
         k = old.get((a, b))
-        if k is None:
-            continue
-        delta = shift[a] + shift[b]
-        if np.isfinite(delta):
-            out[:, p] = prior.bounds[:, k] - motion[:, p] - delta
+        if k is not None and math.isfinite(shift[a] + shift[b]):
+            mine.append(p)
+            theirs.append(k)
+            delta.append(shift[a] + shift[b])
+    if mine:  # all the carried columns at once, each as bound - motion - shift
+        out[:, mine] = prior.bounds[:, theirs] - motion[:, mine] - np.array(delta)
     return np.where(out > 0.0, out, -np.inf)
 
 

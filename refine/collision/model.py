@@ -310,15 +310,21 @@ class CollisionModel:
 
     def _box_bounds(self, poses: Array, pa: Array, pb: Array) -> Array:
         """The box gaps (N, len(pa)) [m] of the body pairs (pa, pb) at poses (N, M, 4, 4), -inf for none."""
-        c, h = world_aabb(poses, self._centre[: self._n_moving], self._half[: self._n_moving])
-        cells = np.broadcast_to(
-            self._aabb_c[self._n_moving :], (len(poses), *self._aabb_c[self._n_moving :].shape)
-        )
-        c = np.concatenate([c, cells], axis=1)
-        h = np.concatenate([h, np.broadcast_to(self._aabb_h[self._n_moving :], cells.shape)], axis=1)
-        d = np.maximum(np.abs(c[:, pa] - c[:, pb]) - h[:, pa] - h[:, pb], 0.0)
-        gaps = np.sqrt(np.einsum("nij,nij->ni", d, d))
-        return np.where(gaps > 0.0, gaps, -np.inf)
+        n = self._n_moving
+        c, h = world_aabb(poses, self._centre[:n], self._half[:n])
+        # body-major (B, N, 3): each pair's rows are then gathered as whole blocks, not 3 at a time
+        cb, hb = np.empty((2, len(self._aabb_c), len(poses), 3))
+        cb[:n], cb[n:] = c.transpose(1, 0, 2), self._aabb_c[n:, None]
+        hb[:n], hb[n:] = h.transpose(1, 0, 2), self._aabb_h[n:, None]
+        d = cb[pa]  # |c_a - c_b| - h_a - h_b, in place: the same sums without their temporaries
+        d -= cb[pb]
+        np.abs(d, out=d)
+        d -= hb[pa]
+        d -= hb[pb]
+        np.maximum(d, 0.0, out=d)
+        gaps = np.ascontiguousarray(np.sqrt(np.einsum("pni,pni->pn", d, d)).T)
+        gaps[~(gaps > 0.0)] = -np.inf  # overlapping boxes (and NaN poses): no bound
+        return gaps
 
     def _place_all(self, q: Array) -> None:
         self._q = None
@@ -519,18 +525,20 @@ class CollisionModel:
                 and lower - margin >= by_clearance.clearance_m
             )
 
-        for k in np.argsort(gaps):
-            if hopeless(bound[k], top_margin):
+        # as Python floats and bools: the loop reads them quicker than numpy scalars
+        lowers, margins, hulled = bound.tolist(), self._margin.tolist(), self._hulled.tolist()
+        for k in np.argsort(gaps).tolist():
+            if hopeless(lowers[k], top_margin):
                 break  # visited by bound: no pair left can beat either answer
             if k in self._exact:
                 continue
             if (
-                hopeless(bound[k], self._margin[k])
-                or (self._hulled[k] and hopeless(self._hull_bound(int(k)), self._margin[k]))
-                or hopeless(self._plane_bound(int(k)), self._margin[k])
+                hopeless(lowers[k], margins[k])
+                or (hulled[k] and hopeless(self._hull_bound(k), margins[k]))
+                or hopeless(self._plane_bound(k), margins[k])
             ):
                 continue
-            c = self._pair(int(k))
+            c = self._pair(k)
             if by_distance is None or c.distance_m < by_distance.distance_m:
                 by_distance = c
             if by_clearance is None or c.clearance_m < by_clearance.clearance_m:

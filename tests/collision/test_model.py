@@ -285,7 +285,10 @@ def test_threads_placing_one_model_get_each_their_own_joints_poses(cell_model, b
     pm = model.robot.model
     rng = np.random.default_rng(11)
     paths = [[_random_q(model.robot, rng, 0.5)[None] for _ in range(6)] for _ in range(8)]
-    paths = [rows + [np.vstack([_random_q(model.robot, rng, 0.5) for _ in range(120)]) for _ in range(3)] for rows in paths]
+    paths = [
+        rows + [np.vstack([_random_q(model.robot, rng, 0.5) for _ in range(120)]) for _ in range(3)]
+        for rows in paths
+    ]
 
     def expected(qs):
         data = pm.createData()
@@ -380,3 +383,26 @@ def test_the_box_bounds_kept_with_a_paths_poses_are_its_own_and_not_another_path
     np.testing.assert_allclose(found[np.isfinite(want)], want[np.isfinite(want)], rtol=0.0, atol=1e-9)
     fixture = [k for k, pair in enumerate(model.pairs) if "fixture" in pair]
     assert not np.array_equal(found[:, fixture], boxes[:, fixture])
+
+
+def test_the_nearest_pairs_are_those_of_a_check_of_every_pair_near_the_table(
+    irb4600, table_cell, nozzle, base_in_world, make_model
+):
+    """The pair of least distance and the pair of least clearance the search finds, on a model kept
+    from one pose to the next (witness normals of the last pose in play), are those of measuring
+    every pair: each pair's distance from a model of its own, the least taken by hand."""
+    rng = np.random.default_rng(8)
+    model = make_model(irb4600, table_cell, (nozzle,), base=base_in_world)
+    for _ in range(25):
+        q = np.radians(NEAR_TABLE_DEG) + rng.normal(0.0, 0.08, 6)
+        fresh = make_model(irb4600, table_cell, (nozzle,), base=base_in_world)
+        every = [fresh.pair_distance(q, p) for p in range(len(fresh.pairs))]
+        kinds = {b.label: b.kind for b in fresh.bodies}  # a pair with a cell body keeps the cell margin
+        margins = [
+            fresh.margin_m if "cell" in (kinds[a], kinds[b]) else fresh.self_margin_m for a, b in fresh.pairs
+        ]
+        by_distance, by_clearance = model.nearest_pairs(q)
+        assert by_distance.distance_m == pytest.approx(min(every), abs=1e-12)
+        assert by_clearance.clearance_m == pytest.approx(
+            min(d - m for d, m in zip(every, margins, strict=True)), abs=1e-12
+        )
