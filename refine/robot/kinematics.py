@@ -364,11 +364,7 @@ def solve_ik_batch(
         J = J[:, :rows]
         norm = np.linalg.norm(e, axis=1)
         err[active] = norm
-        improved = norm < (1.0 - STALL_FRACTION) * best[active]
-        best[active] = np.where(improved, norm, best[active])
-        last_gain[active] = np.where(improved, it, last_gain[active])
-        stalled = it - last_gain[active] >= STALL_ITERATIONS
-        going = (norm * norm >= tol * tol) & ~stalled
+        going = _still_going(norm, it, active, best, last_gain, tol)
         if it == max_iterations:
             break
         active, J, e = active[going], J[going], e[going]
@@ -459,11 +455,7 @@ def _solve_compiled(
         if poses_out is not None and T is not poses_out:
             poses_out[slice(None) if every else active] = T
         err[active] = norm
-        improved = norm < (1.0 - STALL_FRACTION) * best[active]
-        best[active] = np.where(improved, norm, best[active])
-        last_gain[active] = np.where(improved, it, last_gain[active])
-        stalled = it - last_gain[active] >= STALL_ITERATIONS
-        going = (norm * norm >= tol * tol) & ~stalled
+        going = _still_going(norm, it, active, best, last_gain, tol)
         if it == max_iterations:
             break
         active, dq = active[going], dq[going]
@@ -486,6 +478,20 @@ STALL_ITERATIONS = 30
 STALL_FRACTION = 0.01
 """A pose of :func:`solve_ik_batch` whose error has not fallen by 1 % in 30 iterations is given up
 (a start that leads nowhere, e.g. against a joint limit); its last joints and error are returned."""
+
+
+def _still_going(norm: Array, it: int, active: Array, best: Array, last_gain: Array, tol: float) -> Array:
+    """Which of the ``active`` rows of an IK iteration ``it`` go on, given their pose error ``norm``.
+
+    A row stops at the tolerance ``tol`` or when its error has not fallen by
+    :data:`STALL_FRACTION` in :data:`STALL_ITERATIONS` iterations; ``best`` and ``last_gain``
+    (per row of the whole batch) are updated in place.
+    """
+    improved = norm < (1.0 - STALL_FRACTION) * best[active]
+    best[active] = np.where(improved, norm, best[active])
+    last_gain[active] = np.where(improved, it, last_gain[active])
+    stalled = it - last_gain[active] >= STALL_ITERATIONS
+    return (norm * norm >= tol * tol) & ~stalled
 
 
 def rotation_vectors(R: Array) -> Array:
