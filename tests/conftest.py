@@ -130,3 +130,16 @@ def glass_shift():
         orientations=np.einsum("ij,njk->nik", R, f.rotations),
         part={**common, "cell": moved},
     )
+
+
+@pytest.fixture(scope="module")
+def chain_cache(tmp_path_factory):
+    """A compiled-library cache folder of the test module's own, so every compiled chain the module loads is
+    compiled from the code under test (``REFINE_CACHE_DIR`` and an empty in-process cache)."""
+    from refine.robot import compiled_chain as compiled_module
+
+    folder = tmp_path_factory.mktemp("chains")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("REFINE_CACHE_DIR", str(folder))
+        mp.setattr(compiled_module, "_loaded", compiled_module.BoundedCache(compiled_module.LOADED_MAX))
+        yield folder

@@ -19,16 +19,6 @@ from tests.test_batch_chain import TREE
 pytestmark = pytest.mark.skipif(compiled_module.compiler() is None, reason="no C compiler")
 
 
-@pytest.fixture(scope="module")
-def cache(tmp_path_factory):
-    """A cache folder of this module's own, so every library here is compiled from the code under test."""
-    folder = tmp_path_factory.mktemp("chains")
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setenv("REFINE_CACHE_DIR", str(folder))
-        mp.setattr(compiled_module, "_loaded", compiled_module.BoundedCache(compiled_module.LOADED_MAX))
-        yield folder
-
-
 def _fresh(model: pin.Model, flange_id: int) -> CompiledChain:
     chain = CompiledChain.from_model(model, flange_id)
     assert chain is not None
@@ -56,7 +46,7 @@ def _assert_pinocchio(model: pin.Model, chain: CompiledChain, fid: int, qs: np.n
 
 
 @pytest.mark.parametrize("name", available_robots())
-def test_the_compiled_chain_agrees_with_pinocchio_on_every_registry_robot(name: str, cache) -> None:
+def test_the_compiled_chain_agrees_with_pinocchio_on_every_registry_robot(name: str, chain_cache) -> None:
     robot = load_robot(name)
     chain = _fresh(robot.model, robot.flange_id)
     assert chain.compiled and chain.min_rows == COMPILED_MIN_ROWS
@@ -93,7 +83,7 @@ def _assert_tcp(model: pin.Model, chain: CompiledChain, fid: int, qs: np.ndarray
         np.testing.assert_allclose(J[k], np.vstack([R @ J_pin[:3], R @ J_pin[3:]]), rtol=0, atol=1e-12)
 
 
-def test_the_compiled_chain_agrees_with_pinocchio_on_a_tree_of_prismatic_and_unaligned_joints(cache) -> None:
+def test_the_compiled_chain_agrees_with_pinocchio_on_a_tree_of_prismatic_and_unaligned_joints(chain_cache) -> None:
     model = pin.buildModelFromXML(TREE)
     chain = _fresh(model, model.getFrameId("tip"))
     assert chain.compiled
@@ -110,7 +100,7 @@ def test_the_compiled_chain_agrees_with_pinocchio_on_a_tree_of_prismatic_and_una
     )
 
 
-def test_one_row_and_no_rows_are_evaluated_too(cache) -> None:
+def test_one_row_and_no_rows_are_evaluated_too(chain_cache) -> None:
     robot = load_robot("kuka_iiwa14_r820")
     chain = _fresh(robot.model, robot.flange_id)
     q = np.random.default_rng(2).uniform(robot.spec.lower, robot.spec.upper, (1, robot.nq))
@@ -125,7 +115,7 @@ def test_one_row_and_no_rows_are_evaluated_too(cache) -> None:
         chain.frame(np.zeros((3, robot.nq + 1)), robot.flange_id)
 
 
-def test_without_compilation_the_chain_is_numpys(cache, monkeypatch) -> None:
+def test_without_compilation_the_chain_is_numpys(chain_cache, monkeypatch) -> None:
     monkeypatch.setenv("REFINE_COMPILE", "0")
     robot = load_robot("abb_irb4600_60_205")
     chain = _fresh(robot.model, robot.flange_id)
@@ -170,7 +160,7 @@ def test_a_library_that_disagrees_with_pinocchio_is_not_used(tmp_path, monkeypat
     _assert_pinocchio(robot.model, chain, robot.flange_id, qs)
 
 
-def test_two_threads_at_once_get_their_own_answers(cache) -> None:
+def test_two_threads_at_once_get_their_own_answers(chain_cache) -> None:
     robot = load_robot("kuka_iiwa14_r820")
     chain = _fresh(robot.model, robot.flange_id)
     rng = np.random.default_rng(8)
@@ -203,7 +193,7 @@ def test_two_threads_at_once_get_their_own_answers(cache) -> None:
         assert np.array_equal(T_tcp, T_one) and np.array_equal(J_tcp, J_one)
 
 
-def test_a_pickled_robot_evaluates_its_chain_on_the_other_side(cache) -> None:
+def test_a_pickled_robot_evaluates_its_chain_on_the_other_side(chain_cache) -> None:
     robot = load_robot("abb_irb4600_60_205")
     qs = np.random.default_rng(9).uniform(robot.spec.lower, robot.spec.upper, (30, robot.nq))
     before = robot.fk_many(qs)
@@ -212,7 +202,7 @@ def test_a_pickled_robot_evaluates_its_chain_on_the_other_side(cache) -> None:
     assert np.array_equal(copy.fk_many(qs), before)
 
 
-def test_bodies_on_the_joints_are_placed_as_pinocchios_joints_say(cache) -> None:
+def test_bodies_on_the_joints_are_placed_as_pinocchios_joints_say(chain_cache) -> None:
     robot = load_robot("kuka_iiwa14_r820")
     model, data = robot.model, robot.model.createData()
     chain = _fresh(model, robot.flange_id)

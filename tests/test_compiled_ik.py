@@ -24,16 +24,6 @@ BASE = pin.SE3(pin.exp3(np.array([0.05, -0.1, 0.4])), np.array([0.3, -0.2, 0.1])
 TCP = pin.SE3(pin.exp3(np.array([0.2, 0.3, -0.1])), np.array([0.01, 0.02, 0.25])).homogeneous
 
 
-@pytest.fixture(scope="module")
-def cache(tmp_path_factory):
-    """A cache folder of this module's own, so the library is compiled from the code under test."""
-    folder = tmp_path_factory.mktemp("chains")
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setenv("REFINE_CACHE_DIR", str(folder))
-        mp.setattr(compiled_module, "_loaded", compiled_module.BoundedCache(compiled_module.LOADED_MAX))
-        yield folder
-
-
 def _kins(name: str = "abb_irb4600_60_205") -> tuple[TcpKinematics, TcpKinematics]:
     """The same robot's TCP kinematics compiled and in NumPy (a chain that never compiles)."""
     robot = load_robot(name)
@@ -54,7 +44,7 @@ def _pin_pose_jacobian(robot, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return BASE @ T_f @ TCP, np.vstack([BASE[:3, :3] @ Jv, BASE[:3, :3] @ J[3:]])
 
 
-def test_the_step_is_the_damped_least_squares_step_of_pinocchios_error(cache) -> None:
+def test_the_step_is_the_damped_least_squares_step_of_pinocchios_error(chain_cache) -> None:
     kin, _ = _kins()
     robot = kin.robot
     rng = np.random.default_rng(3)
@@ -100,7 +90,7 @@ def test_the_step_is_the_damped_least_squares_step_of_pinocchios_error(cache) ->
     np.testing.assert_allclose(dq2, 0.5 * undamped, rtol=1e-6, atol=1e-9)
 
 
-def test_dets6_are_numpys_determinants(cache) -> None:
+def test_dets6_are_numpys_determinants(chain_cache) -> None:
     kin, _ = _kins()
     rng = np.random.default_rng(5)
     a = rng.normal(size=(20, 6, 6))
@@ -119,7 +109,7 @@ def _targets(kin_ref: TcpKinematics, rng: np.random.Generator, m: int) -> tuple[
     return q_goal, targets
 
 
-def test_solve_ik_batch_compiled_is_the_numpy_paths_answer(cache) -> None:
+def test_solve_ik_batch_compiled_is_the_numpy_paths_answer(chain_cache) -> None:
     kin, kin_np = _kins()
     spec = kin.robot.spec
     rng = np.random.default_rng(11)
@@ -162,7 +152,7 @@ def test_solve_ik_batch_compiled_is_the_numpy_paths_answer(cache) -> None:
         assert np.linalg.norm(e) == pytest.approx(err[k], abs=1e-12)
 
 
-def test_solve_ik_batch_compiled_from_a_given_start_and_near_a_half_turn(cache) -> None:
+def test_solve_ik_batch_compiled_from_a_given_start_and_near_a_half_turn(chain_cache) -> None:
     kin, kin_np = _kins()
     spec = kin.robot.spec
     rng = np.random.default_rng(12)
@@ -182,7 +172,7 @@ def test_solve_ik_batch_compiled_from_a_given_start_and_near_a_half_turn(cache) 
     assert (results[0][1][4:] < 1e-6).all()
 
 
-def test_pulls_and_partial_tasks_keep_the_numpy_path(cache, monkeypatch) -> None:
+def test_pulls_and_partial_tasks_keep_the_numpy_path(chain_cache, monkeypatch) -> None:
     kin, kin_np = _kins()
     spec = kin.robot.spec
     rng = np.random.default_rng(13)
