@@ -87,7 +87,8 @@ def plan_air(
     t0 = time.perf_counter()
     q_start, q_goal = np.asarray(q_start, dtype=float), np.asarray(q_goal, dtype=float)
     direct = np.array([q_start, q_goal])
-    issues, check = _verify(checker, direct)
+    again = None if previous is None or len(previous.q) != 2 else previous.check  # the direct move's check
+    issues, check = _verify(checker, direct, again=again)
     planner, rows, direct_issues = "joint move", direct, ()
     if issues and all(i.cause in ("collision", "self-collision") for i in issues):
         inside = [_end_issue(checker, q, f) for q, f in ((q_start, 0.0), (q_goal, 1.0))]
@@ -159,11 +160,14 @@ def _worst_pair(check) -> tuple[str, str]:  # noqa: ANN001 - PathClearance
 
 
 def _verify(
-    checker: MotionChecker, rows: Array, known: Sequence[Known | None] = ()
+    checker: MotionChecker, rows: Array, known: Sequence[Known | None] = (), again: object = None
 ) -> tuple[list[MotionIssue], object]:
-    """Joint limits (hard: an air move may start at a home near a limit) and continuous clearance."""
+    """Joint limits (hard: an air move may start at a home near a limit) and continuous clearance.
+
+    ``again``: the earlier check of the same rows moved a little (:meth:`MotionChecker.clearance_again`), or None.
+    """
     issues = checker.limit_issues(rows, 0.0)
-    check = checker.clearance(rows, known)
+    check = checker.clearance(rows, known) if again is None else checker.clearance_again(rows, again)
     return issues + checker.clearance_issues(rows, check), check
 
 

@@ -209,7 +209,7 @@ def plan_line(
                 tcp_m=poses[k, :3, 3],
             )
         )
-    check = checker.clearance(q)
+    check = checker.clearance_again(q, None if start is None else previous.check)  # type: ignore[union-attr]
     issues += checker.clearance_issues(q, check)
     return Motion(
         kind=kind,

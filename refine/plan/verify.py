@@ -25,6 +25,7 @@ from refine.collision import CollisionModel, PathClearance, check_path_clearance
 from refine.collision.carry import CheckedBounds, carried_bounds, carried_directions
 from refine.optimise.verify import segment_singularity, singularity_measures
 from refine.plan.motion import MotionIssue
+from refine.plan.recheck import recheck
 from refine.robot.kinematics import TcpKinematics
 from refine.settings import Tolerances
 from refine.types import Array
@@ -121,6 +122,18 @@ class MotionChecker:
             prior=prior,
             directions=directions,
         )
+
+    def clearance_again(self, q: Array, previous: PathClearance | None) -> PathClearance | None:
+        """The continuous clearance check of the rows ``q`` (K, n) of a motion planned again; None without a model.
+
+        ``previous``: the earlier check of the same motion, row for row (or None). Its bounds,
+        carried to ``q``, prove the margins and bound the least figures where they can
+        (:func:`refine.plan.recheck.recheck`); where they cannot, the check of :meth:`clearance`.
+        """
+        if self.model is None:
+            return None
+        found = None if previous is None else recheck(self.model, q, previous)
+        return self.clearance(q) if found is None else found
 
     def proved(self, q: Array, known: Sequence[Known | None] = ()) -> bool:
         """True when the motion bound proves every margin along the rows ``q`` (K, n) (without a model too).
