@@ -1,0 +1,97 @@
+"""A motion planned again, its clearance proved from its earlier check's bounds.
+
+The glass cell's retract line is planned, then planned again from a waypoint 2 mm away, as a
+re-solve after the part moved plans it. The expectations come from measuring every pair at every
+row (and at dense samples between the rows) with the collision model's own distances, not from
+the re-proof; a clamp moved onto the line between the two plans must make the line fail as a
+line planned afresh fails.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from refine.collision.carry import carried_bounds
+from refine.frames import make_transform
+from refine.plan.line import plan_line
+from refine.plan.recheck import _carried, recheck
+
+from .test_motions import box, checker_with, joint_samples, joints_at, kinematics
+from .test_motions import glass as glass  # noqa: F401 - the module's fixture
+
+TOLERANCE = 1e-4  # the dense check's [m]
+
+
+def _line(problem, robot, checker, x, previous=None):
+    q = joints_at(problem, robot, np.array([x, 0.0, 0.66]))
+    T = kinematics(problem, robot).pose(q)
+    return plan_line(checker, "retract", "retract pass 1", q, T, retract_m=0.1, previous=previous)
+
+
+@pytest.fixture(scope="module")
+def lines(glass):
+    """The retract line planned in the glass cell, and its rows planned again 2 mm along x."""
+    problem, robot = glass
+    checker = checker_with(problem, robot, problem.cell)
+    first = _line(problem, robot, checker, 1.2)
+    again = _line(problem, robot, checker, 1.202, previous=first)
+    assert first.ok and again.ok and again.q.shape == first.q.shape
+    return problem, robot, checker, first, again
+
+
+def test_a_line_planned_again_has_the_least_figures_every_pair_measured_at_every_row_gives(lines):
+    _, _, checker, first, again = lines
+    model = checker.model
+    found = recheck(model, again.q, first.check)
+    assert found is not None and found.ok and found.certified_segments == len(again.q) - 1
+    d = np.array([[model.pair_distance(q, p) for p in range(len(model.pairs))] for q in again.q])
+    clear = d - model.pair_margins
+    assert found.waypoint_distance_m.min() == pytest.approx(d.min(), abs=1e-12)
+    assert found.waypoint_clearance_m.min() == pytest.approx(clear.min(), abs=1e-12)
+    k, p = np.unravel_index(np.argmin(clear), clear.shape)
+    named = tuple(label.split("/")[0] for label in model.pairs[p])  # the bodies' names, not their pieces'
+    assert found.segment_pair[int(np.argmin(found.segment_clearance_m))] == named
+    assert found.min_distance_m <= d.min() + 1e-12  # samples inside a segment count too
+    # the line's figures are these
+    assert again.min_distance_m == found.min_distance_m and again.min_clearance_m == found.min_clearance_m
+
+
+def test_a_line_planned_again_keeps_every_margin_between_its_rows(lines):
+    """Every pair at dense samples of the joint-interpolated rows keeps its margin (less the tolerance)."""
+    _, _, checker, first, again = lines
+    model = checker.model
+    assert recheck(model, again.q, first.check) is not None
+    top = float(model.pair_margins.max())
+    for q in joint_samples(again.q, step_rad=0.002):
+        assert all(c.clearance_m >= -TOLERANCE for c in model.contacts(q, top))
+
+
+def test_the_bounds_carried_are_those_of_carried_bounds_with_the_part_moved(lines):
+    problem, robot, checker, first, again = lines
+    move = make_transform(np.eye(3), [0.002, 0.0, 0.0])
+    cell = tuple(dataclasses.replace(o, pose=move @ o.pose) if o.workpiece else o for o in problem.cell)
+    moved = checker_with(problem, robot, cell).model
+    got, want = _carried(moved, first.check.bounds, again.q), carried_bounds(moved, first.check.bounds, again.q)
+    assert got is not None and want is not None
+    np.testing.assert_array_equal(np.isinf(got), np.isinf(want))
+    np.testing.assert_allclose(got[np.isfinite(got)], want[np.isfinite(want)], rtol=0.0, atol=1e-15)
+    assert np.isfinite(want).any() and (want < first.check.bounds.bounds).any()
+
+
+def test_a_clamp_moved_onto_the_line_fails_the_line_planned_again_as_one_planned_afresh(glass):
+    problem, robot = glass
+    q = joints_at(problem, robot, np.array([1.2, 0.0, 0.66]))
+    T = kinematics(problem, robot).pose(q)
+    on_line = T[:3, 3] - 0.07 * T[:3, 2]  # 70 mm back along the tool axis: on the 100 mm retract
+    aside = checker_with(problem, robot, [box("clamp", on_line + [0.0, 0.06, 0.0], (0.03, 0.03, 0.03))])
+    first = _line(problem, robot, aside, 1.2)
+    assert first.ok, first.reason
+    onto = checker_with(problem, robot, [box("clamp", on_line + [0.0, 0.03, 0.0], (0.03, 0.03, 0.03))])
+    again = _line(problem, robot, onto, 1.202, previous=first)
+    fresh = _line(problem, robot, onto, 1.202)
+    assert fresh.status == "failed" and again.status == "failed"
+    assert [i.objects for i in again.issues] == [i.objects for i in fresh.issues]
+    assert "clamp" in again.issues[0].objects
