@@ -74,7 +74,10 @@ def test_the_bounds_carried_are_those_of_carried_bounds_with_the_part_moved(line
     move = make_transform(np.eye(3), [0.002, 0.0, 0.0])
     cell = tuple(dataclasses.replace(o, pose=move @ o.pose) if o.workpiece else o for o in problem.cell)
     moved = checker_with(problem, robot, cell).model
-    got, want = _carried(moved, first.check.bounds, again.q), carried_bounds(moved, first.check.bounds, again.q)
+    got, want = (
+        _carried(moved, first.check.bounds, again.q),
+        carried_bounds(moved, first.check.bounds, again.q),
+    )
     assert got is not None and want is not None
     np.testing.assert_array_equal(np.isinf(got), np.isinf(want))
     np.testing.assert_allclose(got[np.isfinite(got)], want[np.isfinite(want)], rtol=0.0, atol=1e-15)
