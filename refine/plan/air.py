@@ -15,8 +15,9 @@ every margin along its continuous motion is called ``ok``. A path that fails tha
 again with twice the extra distance, up to :data:`ATTEMPTS` times.
 
 **An air move planned again** (``previous``, the same move of an earlier run, e.g. after the part
-moved a few millimetres) first checks the direct move as a move planned afresh. Where that still
-collides, the previous via points are tried before the planner: with the new start and goal in
+moved a few millimetres) first checks the direct move as a move planned afresh (a previous direct
+move's check proves it where its bounds, carried to the new ends, serve:
+:func:`refine.plan.recheck.recheck`; else the dense check). Where that still collides, the previous via points are tried before the planner: with the new start and goal in
 place of the old, when the previous check's distance bounds, less the motion of the start and the
 goal since (:class:`refine.plan.verify.Known`), still prove every margin at both (they moved less
 than the previous clearance allows), and only when the whole path then passes the check above

@@ -17,9 +17,10 @@ kept below :data:`MAX_LINE_DEVIATION_M` by refining the samples).
 a few millimetres): the IK of each sample starts from the previous line's joints at the same share
 of the line, moved by the change of the anchor's joints, instead of from the anchor's. Every
 check above runs as for a line planned afresh, so a line planned again is verified as fully, and
-the same IK answer (within its tolerance) gives the same figures. (Its clearance check is made
-afresh too: a line's check measures few pairs, and starting it from the previous check's bounds,
-:class:`refine.plan.verify.Known`, costs more than the queries it saves.)
+the same IK answer (within its tolerance) gives the same figures. Its clearance is proved from the
+previous line's check, its bounds carried to the new samples row for row, and its least figures
+measured as the dense check measures them (:func:`refine.plan.recheck.recheck`); where those
+bounds do not serve, the dense check runs as for a line planned afresh.
 """
 
 from __future__ import annotations

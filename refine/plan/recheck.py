@@ -22,8 +22,9 @@ advancement took inside a segment count with their segment's ends measured, as i
 
 What it skips is the dense check's own bounding of every pair at every row (boxes, gaps along the
 last normals) and the check's set-up; what it finds is what the dense check finds from the same
-exact distances: the same least figures wherever the least lies at a row or at an advancement's
-sample, the same pair. When the carried bounds cannot serve (no earlier check, other rows, another
+exact distances (to FCL's accuracy): the same pairs advanced (those the exact distances at a
+segment's ends leave short, whatever lower bounds came first), hence the same samples inside, and
+the same least figures and pair. When the carried bounds cannot serve (no earlier check, other rows, another
 robot, base or body, a pair without a bound at more than :data:`UNBOUND_ROWS` rows, a margin
 broken or a segment the advancement gives up on) it returns None and the caller runs the dense
 check, which finds and names what is broken.

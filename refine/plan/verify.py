@@ -10,7 +10,10 @@ objects, the share of the motion and the TCP position where the worst pair is.
 A check may start from what an earlier check proved (:class:`Known`: a previous run's check of the
 same motion, its distance bounds less the motion since, :func:`refine.collision.carry.carried_bounds`):
 a pair those bounds prove is not measured again, and the least figures are measured as without
-them. An air move's kept via points are checked so (:func:`refine.plan.air.plan_air`).
+them. An air move's kept via points are checked so (:func:`refine.plan.air.plan_air`). A line or a
+direct move planned again is checked by :meth:`MotionChecker.clearance_again`: its earlier check's
+bounds prove it where they can, with no bounding of every pair at every row
+(:func:`refine.plan.recheck.recheck`).
 """
 
 from __future__ import annotations
