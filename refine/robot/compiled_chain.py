@@ -71,12 +71,14 @@ reassociates a sum (no -ffast-math)."""
 LOADED_MAX = 16
 """Chain libraries kept loaded in one process (one per robot model)."""
 
-_FUNCTIONS = ("fk", "fkj", "joints", "tcp", "tcpj", "bodies", "ik", "det6")
+_GENERATED = ("fk", "fkj", "joints", "tcp", "tcpj", "stat", "statj")
+_FUNCTIONS = (*_GENERATED, "bodies", "ik", "det6", "solve")
 _SOURCES = tuple(Path(__file__).with_name(n) for n in ("compiled_chain.py", "chain_source.py", "chain.py"))
 _loaded = BoundedCache(LOADED_MAX)
 # a base and a tool placement of no special orientation, for the load check [m]
 _CHECK_BASE = pin.SE3(pin.exp3(np.array([0.3, -0.2, 0.9])), np.array([0.4, -0.3, 0.2])).homogeneous
 _CHECK_TCP = pin.SE3(pin.exp3(np.array([-0.5, 0.1, 0.25])), np.array([0.02, -0.01, 0.3])).homogeneous
+_CHECK_WORLD = pin.SE3(pin.exp3(np.array([1.2, -0.4, 0.3])), np.array([0.5, 0.6, 0.7])).homogeneous
 
 
 class CompiledChain:
@@ -140,33 +142,43 @@ class CompiledChain:
         return T, J
 
     def tcp_frames(
-        self, qs: Array, base_in_world: Array, tcp_in_flange: Array, jacobian: bool = True
+        self,
+        qs: Array,
+        base_in_world: Array,
+        tcp_in_flange: Array,
+        jacobian: bool = True,
+        tool_in_world: Array | None = None,
     ) -> tuple[Array, Array | None] | None:
         """The TCP's poses ``T_world_base · T_base_flange(q) · T_flange_TCP`` (N, 4, 4) [m] and Jacobians.
 
         The Jacobian (N, 6, nv) as ``TcpKinematics.jacobian``: the TCP's linear velocity and the
-        angular velocity, world axes, linear rows first. None when the chain runs in NumPy (the
-        caller then composes :meth:`frame`'s flange).
+        angular velocity, world axes, linear rows first. With ``tool_in_world`` (a stationary
+        tool's ``T_world_TCP``; ``tcp_in_flange`` then places the held part) the tool's TCP seen
+        from the part, ``(T_world_base · T_base_flange · T_flange_part)⁻¹ · T_world_TCP``, and its
+        Jacobian in the part's frame (:func:`refine.robot.chain_source.stationary`). None when
+        the chain runs in NumPy (the caller then composes :meth:`frame`'s flange).
         """
         lib = self._lib()
         if lib is None:
             return None
         qs = self._rows(qs)
-        fixed = (
-            np.ascontiguousarray(base_in_world, dtype=float),
-            np.ascontiguousarray(tcp_in_flange, dtype=float),
-        )
-        if fixed[0].shape != (4, 4) or fixed[1].shape != (4, 4):
-            raise ValueError(
-                f"placements: expected (4, 4) and (4, 4), got {fixed[0].shape} and {fixed[1].shape}"
-            )
+        fixed = self._placements(base_in_world, tcp_in_flange, tool_in_world)
+        name = "tcp" if tool_in_world is None else "stat"
         T = np.empty((len(qs), 4, 4))
         if not jacobian:
-            lib.call("tcp", qs, T, fixed=fixed)
+            lib.call(name, qs, T, fixed=fixed)
             return T, None
         J = np.empty((len(qs), 6, self.nq))
-        lib.call("tcpj", qs, T, J, fixed=fixed)
+        lib.call(name + "j", qs, T, J, fixed=fixed)
         return T, J
+
+    @staticmethod
+    def _placements(*placements: Array | None) -> tuple[Array, ...]:
+        """The given (4, 4) placements as C-contiguous float64 arrays (the Nones left out)."""
+        fixed = tuple(np.ascontiguousarray(a, dtype=float) for a in placements if a is not None)
+        if any(a.shape != (4, 4) for a in fixed):
+            raise ValueError(f"placements: expected (4, 4) each, got {[a.shape for a in fixed]}")
+        return fixed
 
     def body_poses(self, qs: Array, base_in_world: Array, joints: Array, joint_T_body: Array) -> Array | None:
         """World poses (N, M, 4, 4) [m] of M bodies fixed on joints: ``T_world_base · oMi[joints[m]] · joint_T_body[m]``.
@@ -231,6 +243,58 @@ class CompiledChain:
         e, norm, dq, theta = np.empty((n, 6)), np.empty(n), np.empty((n, self.nq)), np.empty(n)
         lib.ik(qs, *fixed, float(damping), float(tol), bool(given), T, J, e, norm, dq, theta)
         return e, norm, dq, theta
+
+    def ik_solve(
+        self,
+        qs: Array,
+        kinematics: tuple[Array, Array, Array | None],
+        targets: Array,
+        bounds: tuple[Array, Array],
+        damping: float,
+        tol: float,
+        gain: float,
+        max_iterations: int,
+        stall: tuple[int, float] | None,
+    ) -> tuple[Array, Array, Array, Array, Array] | None:
+        """Damped least-squares IK toward TCP targets, every row iterated in C; None in NumPy.
+
+        Per start row of ``qs`` (N, nv) [rad], clipped to ``bounds`` (lower, upper (nv,) [rad],
+        infinite for none): :func:`refine.robot.kinematics.solve_ik`'s iterations (``stall``
+        None) or :func:`refine.robot.kinematics.solve_ik_batch`'s (``stall = (iterations,
+        keep)``: a row stops once its error has not fallen under ``keep`` times its best for that
+        many iterations), the pose error as :meth:`ik_steps` forms it, the step ``Jᵀ (J Jᵀ + λ²
+        I)⁻¹ e`` (``λ = damping`` > 0) plus, with ``gain`` > 0, ``gain`` times the pull toward
+        mid-range ``(mid - q) / half²`` (0 for an unbounded joint) less its part in the task,
+        scaled to at most 0.3 rad, clipped. ``kinematics``: ``T_world_base``, ``T_flange_TCP``
+        and a stationary tool's ``T_world_TCP`` or None (:meth:`tcp_frames`).
+
+        Returns:
+            the joints (N, nv) [rad], the last pose error norms (N,), the TCP poses (N, 4, 4) and
+            Jacobians (N, 6, nv) at those joints, and a flag per row (N,), True where the rotation
+            error came within 1e-3 rad of π: that row's answer is not to be used.
+        """
+        lib = self._lib()
+        if lib is None:
+            return None
+        qs = self._rows(qs)
+        fixed = self._placements(*kinematics)
+        world = None if kinematics[2] is None else fixed[2]
+        n = len(qs)
+        targets = np.ascontiguousarray(targets, dtype=float)
+        lower, upper = (np.ascontiguousarray(np.broadcast_to(b, (self.nq,)), dtype=float) for b in bounds)
+        if targets.shape != (n, 4, 4) or not damping > 0.0 or max_iterations < 0:
+            raise ValueError(f"ik_solve: targets ({n}, 4, 4), damping > 0 and max_iterations >= 0 expected")
+        with np.errstate(invalid="ignore"):  # unbounded joints have no mid-range
+            mid, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
+        its, keep = (0, 0.0) if stall is None else stall
+        opts = np.array([damping, tol, gain, keep], dtype=float)
+        iopts = np.array([max_iterations, its], dtype=np.int64)
+        q, err, flag = np.empty((n, self.nq)), np.empty(n), np.empty(n, dtype=np.int64)
+        T, J = np.empty((n, 4, 4)), np.empty((n, 6, self.nq))
+        lib.solve(
+            qs, fixed[0], fixed[1], world, targets, lower, upper, mid, half, opts, iopts, q, err, T, J, flag
+        )
+        return q, err, T, J, flag.astype(bool)
 
     def dets6(self, matrices: Array) -> Array | None:
         """Determinants (N,) of 6 × 6 matrices (N, 6, 6) (LU with partial pivoting), or None in NumPy."""
@@ -371,6 +435,16 @@ class CompiledChain:
         square = np.ascontiguousarray(J_tcp[:, :, :6]) if self.nq >= 6 else np.zeros((CHECK_ROWS, 6, 6))
         dets = np.empty(CHECK_ROWS)
         lib.det6(square, dets)
+        # a stationary tool, and one iteration of the whole solve (with the pull of a redundant arm)
+        W = _CHECK_WORLD
+        T_st, J_st, T_st_alone = np.empty_like(T), np.empty_like(J), np.empty_like(T)
+        lib.call("statj", qs, T_st, J_st, fixed=(B, X, W))
+        lib.call("stat", qs, T_st_alone, fixed=(B, X, W))
+        gain = 0.05 if self.nq > 6 else 0.0
+        solved = self._one_iteration(lower, upper, gain)
+        q_one = np.empty_like(qs)
+        lib.solve(qs, B, X, None, targets, *solved, q_one, np.empty(CHECK_ROWS), T_ik.copy(), J_ik.copy(),
+                  np.empty(CHECK_ROWS, dtype=np.int64))  # fmt: skip
         error = 0.0
         for k, q in enumerate(qs):
             pin.forwardKinematics(model, data, q)  # every joint (the Jacobian's pass: only the flange's)
@@ -400,9 +474,26 @@ class CompiledChain:
             pairs += [(dq[k] / max(1.0, np.abs(dq_pin).max()), dq_pin / max(1.0, np.abs(dq_pin).max()))]
             det = np.linalg.det(square[k])
             pairs += [(dets[k] / max(1.0, abs(det)), det / max(1.0, abs(det)))]
+            T_wf, R_b = B @ T_pin, B[:3, :3]
+            T_wp = T_wf @ X
+            Jw = R_b @ J_pin[3:]
+            point = R_b @ J_pin[:3] - np.cross(W[:3, 3] - T_wf[:3, 3], Jw.T).T
+            J_st_pin = -np.vstack([T_wp[:3, :3].T @ point, T_wp[:3, :3].T @ Jw])
+            pairs += [(T_st[k], np.linalg.inv(T_wp) @ W), (T_st_alone[k], np.linalg.inv(T_wp) @ W)]
+            pairs += [(J_st[k], J_st_pin)]
+            pull = (0.5 * (lower + upper) - q) / (0.5 * (upper - lower)) ** 2
+            step = dq_pin + gain * (pull - J_tcp_pin.T @ np.linalg.solve(A, J_tcp_pin @ pull))
+            step *= min(1.0, 0.3 / np.abs(step).max())
+            pairs += [(q_one[k], np.clip(q + step, lower, upper))]
             for a, b in pairs:
                 error = max(error, float(np.abs(a - b).max()))
         return error if np.isfinite(error) else np.inf
+
+    def _one_iteration(self, lower: Array, upper: Array, gain: float) -> tuple[Array, ...]:
+        """The load check's arguments of the solve after the targets: bounds, mid-range, options."""
+        mid, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
+        opts = np.array([0.01, 0.0, gain, 0.0])
+        return lower, upper, mid, half, opts, np.array([1, 0], dtype=np.int64)
 
 
 class _Library:
@@ -424,7 +515,10 @@ class _Library:
         self._det6 = self._dll[f"{PREFIX}_det6_rows"]
         self._det6.argtypes = [pointer, pointer, count]
         self._det6.restype = ctypes.c_int
-        for name in _FUNCTIONS[:-3]:
+        self._solve = self._dll[f"{PREFIX}_solve_rows"]
+        self._solve.argtypes = [pointer] * 16 + [count]
+        self._solve.restype = ctypes.c_int
+        for name in _GENERATED:
             fn = getattr(self._dll, f"{PREFIX}_{name}_rows")
             fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong]
             fn.restype = ctypes.c_int
@@ -478,6 +572,17 @@ class _Library:
         code = self._ik(*pointers, damping, tol, int(given), *(a.ctypes.data for a in out), len(qs))
         if code != 0:
             raise RuntimeError(f"the compiled IK step failed ({code})")
+
+    def solve(self, *arrays: Array | None) -> None:
+        """:meth:`CompiledChain.ik_solve` into its arrays (checked there; the world tool may be None)."""
+        pointers = []
+        for a in arrays:
+            if a is not None and not (a.flags.c_contiguous and a.dtype in (np.float64, np.int64)):
+                raise ValueError("the compiled IK takes C-contiguous float64 and int64 arrays")
+            pointers.append(None if a is None else a.ctypes.data)
+        code = self._solve(*pointers, len(arrays[0]))
+        if code != 0:
+            raise RuntimeError(f"the compiled IK failed ({code})")
 
     def det6(self, a: Array, out: Array) -> None:
         """Determinants of C-contiguous (N, 6, 6) float64 matrices into ``out`` (N,)."""
