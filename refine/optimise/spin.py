@@ -54,7 +54,11 @@ def path_spins(
     v = np.linalg.inv(targets) @ (np.linalg.inv(tcp_in_flange) @ np.append(reach.point_in_flange, 1.0))
     c, s = np.cos(psi), np.sin(psi)  # Rz(ψ)⁻¹ applied to v, for every spin: (N, M, 3)
     turned = np.stack(
-        [c * v[:, 0, None] + s * v[:, 1, None], -s * v[:, 0, None] + c * v[:, 1, None], np.repeat(v[:, 2, None], len(psi), 1)],
+        [
+            c * v[:, 0, None] + s * v[:, 1, None],
+            -s * v[:, 0, None] + c * v[:, 1, None],
+            np.repeat(v[:, 2, None], len(psi), 1),
+        ],
         axis=-1,
     )
     T_base_tool = np.linalg.inv(base_in_world) @ tool_in_world

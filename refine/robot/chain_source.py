@@ -5,15 +5,20 @@
 row ``q``: ``<prefix>_fk`` (the flange's placement, 16 numbers row-major), ``_fkj`` (that and its
 Jacobian, 6 × nv row-major), ``_joints`` (every joint's ``oMi``, universe first), ``_tcp`` and
 ``_tcpj`` (the TCP's world pose ``B · T · X`` and its Jacobian, with ``B = T_world_base`` and
-``X = T_flange_TCP`` two more arguments: :func:`placed`). CasADi's code generator writes them; each
+``X = T_flange_TCP`` two more arguments: :func:`placed`), ``_stat`` and ``_statj`` (a stationary
+tool's TCP ``W`` seen from the held part ``X``, ``(B · T · X)⁻¹ · W``, and its Jacobian:
+:func:`stationary`). CasADi's code generator writes them; each
 gets a loop over the rows in C, ``<name>_rows(q, fixed, out, n)``, which moves the row and output
 pointers along with its work memory on the stack (so threads may call at once). A sixth,
 hand-written, ``<prefix>_bodies_rows(q, base, joint, local, m, out, n)``, evaluates ``_joints``
 per row and places ``m`` bodies ``base · oMi[joint[b]] · local[b]``. Two more, hand-written:
 ``<prefix>_ik_rows``, a damped least-squares IK step per row toward a TCP target (the pose error as
 :func:`refine.robot.kinematics.solve_ik_batch` forms it, its norm and the step ``Jᵀ (J Jᵀ + λ² I)⁻¹ e``
-by a 6 × 6 Cholesky factor), and ``<prefix>_det6_rows``, the determinants of 6 × 6 matrices (an LU
-factorisation with partial pivoting, as LAPACK's ``getrf``).
+by a 6 × 6 Cholesky factor), ``<prefix>_solve_rows``, that step iterated per row as
+:func:`refine.robot.kinematics.solve_ik` or ``solve_ik_batch`` iterate it (the 0.3 rad cap, the
+limits, a redundant arm's pull toward mid-range in the task's null space, the batch's stall rule;
+a TCP on the flange or a stationary tool), and ``<prefix>_det6_rows``, the determinants of 6 × 6
+matrices (an LU factorisation with partial pivoting, as LAPACK's ``getrf``).
 """
 
 from __future__ import annotations

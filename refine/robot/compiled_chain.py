@@ -14,16 +14,18 @@ flange's placement with its Jacobian (Pinocchio's ``LOCAL_WORLD_ALIGNED``), ever
 ``data.oMi``, the TCP's pose in the world (the robot placed by ``T_world_base``, the tool by
 ``T_flange_TCP``, both arguments of the call) with and without its Jacobian (what
 :class:`~refine.robot.kinematics.TcpKinematics` composes in NumPy otherwise), and bodies fixed on
-the joints placed in the world (the collision model's moving shapes); a damped least-squares IK
-step toward TCP targets (:meth:`CompiledChain.ik_steps`) and determinants of 6 × 6 matrices
-(:meth:`CompiledChain.dets6`). Any number of rows is one
+the joints placed in the world (the collision model's moving shapes); a stationary tool's TCP
+seen from the part the robot holds, with its Jacobian (``tcp_frames(..., tool_in_world)``); a
+damped least-squares IK step toward TCP targets (:meth:`CompiledChain.ik_steps`), the whole
+iterated IK of each row (:meth:`CompiledChain.ik_solve`: a redundant arm's null-space pull, a
+stationary tool) and determinants of 6 × 6 matrices (:meth:`CompiledChain.dets6`). Any number of rows is one
 call; each call's work memory is on the C stack, so threads may call at once (:mod:`ctypes` lets
 go of the GIL for the call). Any other frame, and :meth:`CompiledChain.axis_frames`, are the NumPy
 chain's.
 
 When a library is loaded it is checked once against Pinocchio (``forwardKinematics`` and
 ``computeFrameJacobian``; the IK step's error against ``log3`` and its step against NumPy's solve,
-the determinants against NumPy's) at :data:`CHECK_ROWS` configurations; a difference above
+one iteration of the whole IK with its pull against NumPy's, the determinants against NumPy's) at :data:`CHECK_ROWS` configurations; a difference above
 :data:`CHECK_TOLERANCE` is logged as a warning and the chain stays NumPy's, as it does without a
 compiler, with ``REFINE_COMPILE=0`` or when compiling fails. The library is looked for on the
 first evaluation (not when the robot is made), once per :class:`CompiledChain`.

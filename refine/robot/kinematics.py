@@ -339,6 +339,11 @@ def solve_ik_batch(
     positions (M, 3), rotations (M, 3, 3) and Jacobians (M, 6, n) at ``q0`` (inside the limits) when
     the caller has them, used for the first iteration instead of evaluating them again; or None.
 
+    With the robot's chain compiled, the full pose asked for and ``damping`` > 0 the iterations
+    run in C: the step alone (:func:`_solve_compiled`) for a TCP on the flange without a pull,
+    every row's whole IK (:func:`_solve_iterated`, ``start`` not needed) with a redundant arm's
+    pull or a stationary tool; the same answers to rounding.
+
     Returns:
         joints [rad] (M, n) and the remaining pose error norm per pose (M,).
     """
