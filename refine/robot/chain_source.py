@@ -199,7 +199,11 @@ int {prefix}_ik_rows(const casadi_real* q, const casadi_real* base, const casadi
    solve_ik_batch's (stall > 0: a row whose error has not fallen below keep * its best for stall
    iterations stops); the TCP on the flange (world == 0) or a stationary tool; a redundant arm's
    pull toward mid-range (gain > 0) in the task's null space. flag[k] = 1: the rotation error came
-   within 1e-3 rad of pi, the row is to be solved another way. */
+   within 1e-3 rad of pi, the row is to be solved another way. Chained (iopts[2]): rows first..n-1
+   in turn (iopts[3]: first; the rows before it solved already), each from the last answer plus
+   the last step where no joint moved more than opts[4] in it (row 0 from q0's first row); the
+   chain stops at a flagged row, or with flag[k] = 2 after a row whose joints moved more than
+   opts[5] from the row before. */
 int {prefix}_solve_rows(const casadi_real* q0, const casadi_real* base, const casadi_real* tool,
                         const casadi_real* world, const casadi_real* target, const casadi_real* lower,
                         const casadi_real* upper, const casadi_real* mid, const casadi_real* half,
@@ -211,19 +215,27 @@ int {prefix}_solve_rows(const casadi_real* q0, const casadi_real* base, const ca
   casadi_real w[{sz_w}];
   casadi_real A[36], e[6], Jp[6], dq[{nv}], pull[{nv}], back[{nv}];
   const casadi_real damping = opts[0], tol = opts[1], gain = opts[2], keep = opts[3];
-  const long long max_it = iopts[0], stall = iopts[1];
+  const long long max_it = iopts[0], stall = iopts[1], chained = iopts[2];
   long long k, it, last;
   int i, c;
-  for (k = 0; k < n; ++k) {{
+  for (k = chained ? iopts[3] : 0; k < n; ++k) {{
     casadi_real* qk = q + {nv} * k;
     casadi_real* Tk = T + 16 * k;
     casadi_real* Jk = J + 6 * {nv} * k;
     const casadi_real* G = target + 16 * k;
+    const casadi_real* start = q0 + (chained ? 0 : {nv} * k);
     casadi_real best = INFINITY, s, nrm, step, th;
     flag[k] = 0;
     last = 0;
+    if (chained && k > 0) {{  /* the last answer, plus its step where that is small */
+      const casadi_real* a = qk - {nv};
+      step = 0.0;
+      for (c = 0; c < {nv} && k >= 2; ++c) step = fabs(a[c] - a[c - {nv}]) > step ? fabs(a[c] - a[c - {nv}]) : step;
+      for (c = 0; c < {nv}; ++c) dq[c] = k >= 2 && step <= opts[4] ? a[c] + (a[c] - a[c - {nv}]) : a[c];
+      start = dq;
+    }}
     for (c = 0; c < {nv}; ++c) {{
-      s = q0[{nv} * k + c] > lower[c] ? q0[{nv} * k + c] : lower[c];
+      s = start[c] > lower[c] ? start[c] : lower[c];
       qk[c] = s < upper[c] ? s : upper[c];
     }}
     for (it = 0;; ++it) {{
@@ -275,6 +287,15 @@ int {prefix}_solve_rows(const casadi_real* q0, const casadi_real* base, const ca
         s = qk[c] + dq[c];
         s = s > lower[c] ? s : lower[c];
         qk[c] = s < upper[c] ? s : upper[c];
+      }}
+    }}
+    if (chained && flag[k]) break;
+    if (chained && k > 0) {{
+      step = 0.0;
+      for (c = 0; c < {nv}; ++c) step = fabs(qk[c] - qk[c - {nv}]) > step ? fabs(qk[c] - qk[c - {nv}]) : step;
+      if (step > opts[5]) {{
+        flag[k] = 2;
+        break;
       }}
     }}
   }}
