@@ -73,13 +73,14 @@ def path_spins(
     # ψ_j - ψ_i + twist: the grid's differences take a few hundred values, each wrapped once per step
     steps, where = np.unique(psi[None, :] - psi[:, None], return_inverse=True)
     turns = np.abs(np.angle(np.exp(1j * (steps[None, :] + twist[:, None]))))
-    where = where.reshape(len(psi), len(psi))
+    where = where.reshape(len(psi), len(psi)).T.copy()  # row j: the steps from every spin i to spin j
     cost = node[0].copy()
     back = np.empty((n, len(psi)), dtype=np.int64)
     for k in range(1, n):
-        total = cost[:, None] + turns[k - 1][where]
-        back[k] = np.argmin(total, axis=0)
-        cost = total.min(axis=0) + node[k]
+        total = turns[k - 1][where]  # total[j, i]: the turn from spin i to spin j plus the cost at i
+        total += cost
+        back[k] = total.argmin(axis=1)
+        cost = total.min(axis=1) + node[k]
     path = np.empty(n, dtype=np.int64)
     path[-1] = int(np.argmin(cost))
     for k in range(n - 1, 0, -1):
