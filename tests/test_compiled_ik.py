@@ -15,7 +15,7 @@ import pytest
 
 from refine.robot import compiled_chain as compiled_module
 from refine.robot.compiled_chain import CompiledChain
-from refine.robot.kinematics import TcpKinematics, solve_ik_batch
+from refine.robot.kinematics import TcpKinematics, solve_ik, solve_ik_batch
 from refine.robot.registry import load_robot
 
 pytestmark = pytest.mark.skipif(compiled_module.compiler() is None, reason="no C compiler")
@@ -191,3 +191,99 @@ def test_pulls_and_partial_tasks_keep_the_numpy_path(chain_cache, monkeypatch) -
         np.testing.assert_allclose(q, q_np, rtol=0, atol=1e-9)
     with pytest.raises(AssertionError, match="compiled step"):
         solve_ik_batch(kin, targets, q0, spec.lower, spec.upper, nullspace_gain=0.0)
+
+
+WORLD_TOOL = pin.SE3(pin.exp3(np.array([2.5, 0.4, -0.3])), np.array([0.9, 0.2, 0.6])).homogeneous
+
+
+def _kins_held(name: str) -> tuple[TcpKinematics, TcpKinematics]:
+    """A robot holding the part (``TCP`` places it on the flange) at a standing tool, compiled and in NumPy."""
+    kin, kin_np = _kins(name)
+    return (TcpKinematics(k.robot, BASE, TCP, WORLD_TOOL) for k in (kin, kin_np))
+
+
+def _pin_seen_from_part(robot, q: np.ndarray) -> np.ndarray:
+    """The standing tool's TCP in the held part's frame, from Pinocchio's flange alone."""
+    pin.framesForwardKinematics(robot.model, data := robot.model.createData(), q)
+    return np.linalg.inv(BASE @ data.oMf[robot.flange_id].homogeneous @ TCP) @ WORLD_TOOL
+
+
+@pytest.mark.parametrize("name", ["kuka_iiwa14_r820", "abb_irb4600_60_205"])
+def test_a_standing_tools_compiled_pose_and_jacobian_are_pinocchios_pose_and_its_derivative(
+    chain_cache, name
+) -> None:
+    kin, _ = _kins_held(name)
+    robot = kin.robot
+    qs = np.random.default_rng(21).uniform(0.8 * robot.spec.lower, 0.8 * robot.spec.upper, (7, robot.nq))
+    T, J = kin.poses_jacobians(qs)  # 7 rows: the compiled chain's
+    np.testing.assert_allclose(kin.poses(qs), T, rtol=0, atol=0)
+    h = 1e-6
+    for k, q in enumerate(qs):
+        np.testing.assert_allclose(T[k], _pin_seen_from_part(robot, q), rtol=0, atol=1e-12)
+        numeric = np.empty((6, robot.nq))
+        for j in range(robot.nq):  # central differences: the TCP's velocity and its turn, part axes
+            step = np.zeros(robot.nq)
+            step[j] = h
+            Tp, Tm = _pin_seen_from_part(robot, q + step), _pin_seen_from_part(robot, q - step)
+            numeric[:3, j] = (Tp[:3, 3] - Tm[:3, 3]) / (2 * h)
+            numeric[3:, j] = pin.log3(Tp[:3, :3] @ Tm[:3, :3].T) / (2 * h)
+        np.testing.assert_allclose(J[k], numeric, rtol=0, atol=1e-7)
+
+
+def _starts(kin_np: TcpKinematics, m: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    spec = kin_np.robot.spec
+    q_goal = rng.uniform(0.7 * spec.lower, 0.7 * spec.upper, (m, kin_np.robot.nq))
+    q0 = q_goal + rng.normal(size=q_goal.shape) * 0.2
+    q0[:4] = q_goal[:4] + rng.normal(size=(4, kin_np.robot.nq)) * 1.5  # far starts: capped steps, stalls
+    return kin_np.poses(q_goal), q0
+
+
+@pytest.mark.parametrize("held", [False, True])
+def test_the_redundant_arms_compiled_ik_with_its_pull_is_the_numpy_paths(chain_cache, held) -> None:
+    """The iiwa's batch and single-pose IK with the null-space pull, a TCP on the flange or a standing tool."""
+    kin, kin_np = _kins_held("kuka_iiwa14_r820") if held else _kins("kuka_iiwa14_r820")
+    spec, nq = kin.robot.spec, kin.robot.nq
+    targets, q0 = _starts(kin_np, 24, 31 + held)
+    out = {}
+    for name, k in (("c", kin), ("np", kin_np)):
+        J_out, T_out = np.empty((24, 6, nq)), np.empty((24, 4, 4))
+        q, err = solve_ik_batch(k, targets, q0, spec.lower, spec.upper, jacobians_out=J_out, poses_out=T_out)
+        single = [solve_ik(k, targets[i], q0[i], spec.lower, spec.upper) for i in range(24)]
+        out[name] = q, err, J_out, T_out, np.array([s[0] for s in single]), np.array([s[1] for s in single])
+    q, err, J_out, T_out, q1, err1 = out["c"]
+    np.testing.assert_allclose(q, out["np"][0], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(err, out["np"][1], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(q1, out["np"][4], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(err1, out["np"][5], rtol=0, atol=1e-9)
+    assert (err < 1e-6).sum() == (out["np"][1] < 1e-6).sum() >= 6
+    assert (err1 < 1e-6).sum() == (out["np"][5] < 1e-6).sum() >= 6
+    for i in range(24):  # poses and Jacobians out at the joints returned; the errors are Pinocchio's
+        T_pin = _pin_seen_from_part(kin.robot, q[i]) if held else _pin_pose_jacobian(kin.robot, q[i])[0]
+        np.testing.assert_allclose(T_out[i], T_pin, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(J_out[i], kin_np.jacobian(q[i]), rtol=0, atol=1e-12)
+        e = np.concatenate([targets[i, :3, 3] - T_pin[:3, 3], pin.log3(targets[i, :3, :3] @ T_pin[:3, :3].T)])
+        assert np.linalg.norm(e) == pytest.approx(err[i], abs=1e-12)
+
+
+def test_rows_turned_by_a_half_turn_are_solved_by_numpy_as_without_the_compiled_chain(
+    chain_cache, monkeypatch
+) -> None:
+    kin, kin_np = _kins_held("kuka_iiwa14_r820")
+    spec = kin.robot.spec
+    targets, q0 = _starts(kin_np, 8, 41)
+    q0 = np.clip(q0, spec.lower, spec.upper)
+    for k in range(3):  # about π from the start's pose: rotation_vectors' and log3's axis branch
+        T0 = kin_np.pose(q0[k])
+        axis = np.random.default_rng(k).normal(size=3)
+        targets[k, :3, :3] = T0[:3, :3] @ pin.exp3((np.pi - 2e-4 * k) * axis / np.linalg.norm(axis))
+    J_out = np.empty((8, 6, kin.robot.nq))
+    q, err = solve_ik_batch(kin, targets, q0, spec.lower, spec.upper, jacobians_out=J_out)
+    q_np, err_np = solve_ik_batch(kin_np, targets, q0, spec.lower, spec.upper)
+    np.testing.assert_allclose(q, q_np, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(err, err_np, rtol=0, atol=1e-9)
+    for k in range(8):
+        np.testing.assert_allclose(J_out[k], kin_np.jacobian(q[k]), rtol=0, atol=1e-12)
+    single = solve_ik(kin, targets[0], q0[0], spec.lower, spec.upper)
+    single_np = solve_ik(kin_np, targets[0], q0[0], spec.lower, spec.upper)
+    np.testing.assert_allclose(single[0], single_np[0], rtol=0, atol=1e-9)

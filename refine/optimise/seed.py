@@ -24,7 +24,15 @@ from refine.optimise.verify import (
     Violation,
     runs,
 )
-from refine.robot.kinematics import CONVERGED, TcpKinematics, axis_error, pose_error, solve_ik, solve_ik_batch
+from refine.robot.kinematics import (
+    CONVERGED,
+    NULLSPACE_GAIN,
+    TcpKinematics,
+    axis_error,
+    pose_error,
+    solve_ik,
+    solve_ik_batch,
+)
 from refine.types import Array
 
 log = logging.getLogger(__name__)
@@ -90,7 +98,9 @@ def _chain(
     t = ((inner - a) / (b - a))[:, None]
     guess = qs[a] + t * (qs[b] - qs[a])
     if inner.size:
-        qs[inner], errors[inner] = solve_ik_batch(kin, targets[inner], guess, lower, upper, axis_only=axis_only)
+        qs[inner], errors[inner] = solve_ik_batch(
+            kin, targets[inner], guess, lower, upper, axis_only=axis_only
+        )
     span = np.abs(qs_c[1:] - qs_c[:-1]).max(axis=1)  # per coarse span
     off = np.abs(qs[inner] - guess).max(axis=1)
     bad = (errors[inner] > CONVERGED) | (off > np.maximum(span[seg], 0.05))
@@ -140,7 +150,9 @@ def _chain_each(
     if memo is None:
         return _solve_chain(kin, targets, q_first, lower, upper, axis_only, give_up)
     arrays = (kin.base_in_world, kin.tcp_in_flange, kin.tool_in_world, targets, q_first, lower, upper)
-    key = (id(kin.robot), axis_only) + tuple(None if a is None else np.asarray(a, float).tobytes() for a in arrays)
+    key = (id(kin.robot), axis_only) + tuple(
+        None if a is None else np.asarray(a, float).tobytes() for a in arrays
+    )
     found = memo.get(key)  # the whole chain answers any step to give up at
     if found is None or found[0] is not kin.robot:  # the robot kept with it: its id is not reused
         found = memo.get(key + (give_up,))
@@ -159,6 +171,9 @@ def _solve_chain(
     kin: TcpKinematics, targets: Array, q_first: Array, lower: Array, upper: Array, axis_only: bool = False,
     give_up: float | None = None,
 ) -> tuple[Array, Array]:  # fmt: skip
+    chain = kin.robot.chain
+    if not axis_only and len(targets) and chain is not None and chain.compiled:
+        return _solve_chain_compiled(kin, targets, q_first, lower, upper, give_up)
     qs = np.empty((len(targets), len(q_first)))
     errors = np.empty(len(targets))
     q = q_first
@@ -173,6 +188,42 @@ def _solve_chain(
         if give_up is not None and k and float(np.abs(q - qs[k - 1]).max()) > give_up:
             qs[k + 1 :], errors[k:] = q, np.inf
             break
+    return qs, errors
+
+
+def _solve_chain_compiled(
+    kin: TcpKinematics, targets: Array, q_first: Array, lower: Array, upper: Array, give_up: float | None
+) -> tuple[Array, Array]:
+    """:func:`_solve_chain` with the chain's IK in C, the same answers to rounding.
+
+    :meth:`CompiledChain.ik_solve <refine.robot.compiled_chain.CompiledChain.ik_solve>`, chained:
+    :func:`solve_ik`'s iterations from the same starts. A waypoint whose rotation error comes
+    within 1e-3 rad of a half turn is solved by :func:`solve_ik` (NumPy's ``log3``) and the chain
+    goes on after it in C.
+    """
+    n, nq = len(targets), len(q_first)
+    qs, errors = np.empty((n, nq)), np.empty(n)
+    placements = (kin.base_in_world, kin.tcp_in_flange, kin.tool_in_world)
+    gain = NULLSPACE_GAIN if nq > 6 else 0.0
+    stop = np.inf if give_up is None else give_up
+    first = 0
+    while first < n:
+        flag = kin.robot.chain.ik_solve(
+            np.reshape(q_first, (1, nq)), placements, targets, (lower, upper), 1e-3, CONVERGED, gain, 100,
+            None, (PREDICT_STEP_MAX, stop, qs, errors, first),
+        )[4]  # fmt: skip
+        if not (flag == 1).any():
+            break
+        k = int(np.argmax(flag == 1))
+        guess = q_first if k == 0 else qs[k - 1]
+        if k >= 2 and float(np.abs(qs[k - 1] - qs[k - 2]).max()) <= PREDICT_STEP_MAX:
+            guess = qs[k - 1] + (qs[k - 1] - qs[k - 2])
+        qs[k], errors[k] = solve_ik(kin, targets[k], guess, lower, upper)
+        first = k + 1
+    if give_up is not None and n > 1:  # the first step beyond it: the chain stops there
+        far = np.flatnonzero(np.abs(np.diff(qs, axis=0)).max(axis=1) > give_up)
+        if far.size:
+            qs[far[0] + 2 :], errors[far[0] + 1 :] = qs[far[0] + 1], np.inf
     return qs, errors
 
 
@@ -243,7 +294,9 @@ def ik_chain(
     """
     best: tuple[float, Array, Array] | None = None
     if prefer_first:  # the home's branch first: the other starts are solved only if its chain fails
-        home = first_solutions(kin, targets[0], lower, upper, starts[:1], prefer_first=True, axis_only=axis_only)
+        home = first_solutions(
+            kin, targets[0], lower, upper, starts[:1], prefer_first=True, axis_only=axis_only
+        )
         for qs, errors in _chains(kin, targets, lower, upper, home, axis_only, at, give_up):
             best = (float(errors.max()), qs, errors)
             if best[0] <= CONVERGED:
@@ -331,7 +384,9 @@ def _chains(
             continue
         outside = np.any(qs < lower - 1e-9, axis=0) | np.any(qs > upper + 1e-9, axis=0)
         if np.any(outside & ~wraps):
-            qs, errors = _chain(kin, targets, np.clip(qs[0], lower, upper), lower, upper, axis_only, at, give_up)
+            qs, errors = _chain(
+                kin, targets, np.clip(qs[0], lower, upper), lower, upper, axis_only, at, give_up
+            )
         elif np.any(outside):
             # a multi-turn joint whose excursion exceeds its range: no whole-turn shift fits it, so
             # centre it exactly (turning the tool by the shift) and clip both ends; the strict
@@ -445,7 +500,9 @@ def chained_seed(
 
         reach = reach_model(problem.robot, math.radians(problem.tolerances.joint_margin_deg))
         if reach.spherical:
-            spins = path_spins(reach, targets, problem.base_in_world, problem.tcp_in_flange, problem.tool_in_world)
+            spins = path_spins(
+                reach, targets, problem.base_in_world, problem.tcp_in_flange, problem.tool_in_world
+            )
             targets, axis_only = spun(targets, spins), False
     return ik_chain(
         problem_kinematics(problem),

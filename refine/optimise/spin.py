@@ -54,7 +54,11 @@ def path_spins(
     v = np.linalg.inv(targets) @ (np.linalg.inv(tcp_in_flange) @ np.append(reach.point_in_flange, 1.0))
     c, s = np.cos(psi), np.sin(psi)  # Rz(ψ)⁻¹ applied to v, for every spin: (N, M, 3)
     turned = np.stack(
-        [c * v[:, 0, None] + s * v[:, 1, None], -s * v[:, 0, None] + c * v[:, 1, None], np.repeat(v[:, 2, None], len(psi), 1)],
+        [
+            c * v[:, 0, None] + s * v[:, 1, None],
+            -s * v[:, 0, None] + c * v[:, 1, None],
+            np.repeat(v[:, 2, None], len(psi), 1),
+        ],
         axis=-1,
     )
     T_base_tool = np.linalg.inv(base_in_world) @ tool_in_world
@@ -65,14 +69,18 @@ def path_spins(
     # the targets' own spin from one to the next (a CAM toolpath's is arbitrary): about z, from R_k to R_k+1
     rel = np.swapaxes(targets[:-1, :3, :3], 1, 2) @ targets[1:, :3, :3]
     twist = np.arctan2(rel[:, 1, 0] - rel[:, 0, 1], rel[:, 0, 0] + rel[:, 1, 1])
+    # the part's turn about the tool axis from spin i at k-1 to spin j at k [rad], (M, M) a step, of
+    # ψ_j - ψ_i + twist: the grid's differences take a few hundred values, each wrapped once per step
+    steps, where = np.unique(psi[None, :] - psi[:, None], return_inverse=True)
+    turns = np.abs(np.angle(np.exp(1j * (steps[None, :] + twist[:, None]))))
+    where = where.reshape(len(psi), len(psi)).T.copy()  # row j: the steps from every spin i to spin j
     cost = node[0].copy()
     back = np.empty((n, len(psi)), dtype=np.int64)
     for k in range(1, n):
-        # the part's turn about the tool axis from spin i at k-1 to spin j at k [rad], (M, M)
-        turn = np.abs(np.angle(np.exp(1j * (psi[None, :] - psi[:, None] + twist[k - 1]))))
-        total = cost[:, None] + turn
-        back[k] = np.argmin(total, axis=0)
-        cost = total[back[k], np.arange(len(psi))] + node[k]
+        total = turns[k - 1][where]  # total[j, i]: the turn from spin i to spin j plus the cost at i
+        total += cost
+        back[k] = total.argmin(axis=1)
+        cost = total.min(axis=1) + node[k]
     path = np.empty(n, dtype=np.int64)
     path[-1] = int(np.argmin(cost))
     for k in range(n - 1, 0, -1):

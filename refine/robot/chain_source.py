@@ -5,15 +5,20 @@
 row ``q``: ``<prefix>_fk`` (the flange's placement, 16 numbers row-major), ``_fkj`` (that and its
 Jacobian, 6 × nv row-major), ``_joints`` (every joint's ``oMi``, universe first), ``_tcp`` and
 ``_tcpj`` (the TCP's world pose ``B · T · X`` and its Jacobian, with ``B = T_world_base`` and
-``X = T_flange_TCP`` two more arguments: :func:`placed`). CasADi's code generator writes them; each
+``X = T_flange_TCP`` two more arguments: :func:`placed`), ``_stat`` and ``_statj`` (a stationary
+tool's TCP ``W`` seen from the held part ``X``, ``(B · T · X)⁻¹ · W``, and its Jacobian:
+:func:`stationary`). CasADi's code generator writes them; each
 gets a loop over the rows in C, ``<name>_rows(q, fixed, out, n)``, which moves the row and output
 pointers along with its work memory on the stack (so threads may call at once). A sixth,
 hand-written, ``<prefix>_bodies_rows(q, base, joint, local, m, out, n)``, evaluates ``_joints``
 per row and places ``m`` bodies ``base · oMi[joint[b]] · local[b]``. Two more, hand-written:
 ``<prefix>_ik_rows``, a damped least-squares IK step per row toward a TCP target (the pose error as
 :func:`refine.robot.kinematics.solve_ik_batch` forms it, its norm and the step ``Jᵀ (J Jᵀ + λ² I)⁻¹ e``
-by a 6 × 6 Cholesky factor), and ``<prefix>_det6_rows``, the determinants of 6 × 6 matrices (an LU
-factorisation with partial pivoting, as LAPACK's ``getrf``).
+by a 6 × 6 Cholesky factor), ``<prefix>_solve_rows``, that step iterated per row as
+:func:`refine.robot.kinematics.solve_ik` or ``solve_ik_batch`` iterate it (the 0.3 rad cap, the
+limits, a redundant arm's pull toward mid-range in the task's null space, the batch's stall rule;
+a TCP on the flange or a stationary tool), and ``<prefix>_det6_rows``, the determinants of 6 × 6
+matrices (an LU factorisation with partial pivoting, as LAPACK's ``getrf``).
 """
 
 from __future__ import annotations
@@ -83,8 +88,75 @@ int {prefix}_bodies_rows(const casadi_real* q, const casadi_real* base, const lo
 """
 
 
-# one damped least-squares step per row toward a TCP target (6 task rows, nv columns)
+# one damped least-squares step per row toward a TCP target (6 task rows, nv columns), and a whole solve
 _IK = """
+/* e (6): the position difference and the rotation vector of R_target R(q)^T (rotation_vectors'
+   formula, without its branch near pi); the rotation angle returned */
+static casadi_real {prefix}_error(const casadi_real* G, const casadi_real* Tk, casadi_real* ek) {{
+  casadi_real M[9], cs, th, scale;
+  int i, j;
+  for (i = 0; i < 3; ++i) ek[i] = G[4 * i + 3] - Tk[4 * i + 3];
+  for (i = 0; i < 3; ++i) {{
+    for (j = 0; j < 3; ++j) {{
+      M[3 * i + j] = G[4 * i] * Tk[4 * j] + G[4 * i + 1] * Tk[4 * j + 1] + G[4 * i + 2] * Tk[4 * j + 2];
+    }}
+  }}
+  cs = (M[0] + M[4] + M[8] - 1.0) / 2.0;
+  cs = cs < -1.0 ? -1.0 : (cs > 1.0 ? 1.0 : cs);
+  th = acos(cs);
+  scale = th < 1e-6 ? 1.0 + th * th / 6.0 : th / sin(th);
+  ek[3] = 0.5 * (M[7] - M[5]) * scale;
+  ek[4] = 0.5 * (M[2] - M[6]) * scale;
+  ek[5] = 0.5 * (M[3] - M[1]) * scale;
+  return th;
+}}
+
+/* the Cholesky factor L (lower, in A) of A = J J^T + damping^2 I; 2 when A is not positive */
+static int {prefix}_factor(const casadi_real* Jk, casadi_real damping, casadi_real* A) {{
+  casadi_real s;
+  int i, j, c;
+  for (i = 0; i < 6; ++i) {{
+    for (j = 0; j <= i; ++j) {{
+      s = 0.0;
+      for (c = 0; c < {nv}; ++c) s += Jk[{nv} * i + c] * Jk[{nv} * j + c];
+      A[6 * i + j] = s + (i == j ? damping * damping : 0.0);
+    }}
+  }}
+  for (j = 0; j < 6; ++j) {{
+    s = A[6 * j + j];
+    for (c = 0; c < j; ++c) s -= A[6 * j + c] * A[6 * j + c];
+    if (!(s > 0.0)) return 2;
+    A[6 * j + j] = sqrt(s);
+    for (i = j + 1; i < 6; ++i) {{
+      s = A[6 * i + j];
+      for (c = 0; c < j; ++c) s -= A[6 * i + c] * A[6 * j + c];
+      A[6 * i + j] = s / A[6 * j + j];
+    }}
+  }}
+  return 0;
+}}
+
+/* out (nv) = J^T A^-1 b with A's factor L */
+static void {prefix}_back(const casadi_real* A, const casadi_real* Jk, const casadi_real* b, casadi_real* out) {{
+  casadi_real y[6], s;
+  int i, c;
+  for (i = 0; i < 6; ++i) {{
+    s = b[i];
+    for (c = 0; c < i; ++c) s -= A[6 * i + c] * y[c];
+    y[i] = s / A[6 * i + i];
+  }}
+  for (i = 5; i >= 0; --i) {{
+    s = y[i];
+    for (c = i + 1; c < 6; ++c) s -= A[6 * c + i] * y[c];
+    y[i] = s / A[6 * i + i];
+  }}
+  for (c = 0; c < {nv}; ++c) {{
+    s = 0.0;
+    for (i = 0; i < 6; ++i) s += Jk[{nv} * i + c] * y[i];
+    out[c] = s;
+  }}
+}}
+
 int {prefix}_ik_rows(const casadi_real* q, const casadi_real* base, const casadi_real* tool,
                      const casadi_real* target, casadi_real damping, casadi_real tol, long long given, casadi_real* T,
                      casadi_real* J, casadi_real* e, casadi_real* norm, casadi_real* dq,
@@ -93,15 +165,14 @@ int {prefix}_ik_rows(const casadi_real* q, const casadi_real* base, const casadi
   casadi_real* res[{sz_res}];
   casadi_int iw[{sz_iw}];
   casadi_real w[{sz_w}];
-  casadi_real A[36], y[6], M[9];
+  casadi_real A[36];
   long long k;
-  int i, j, c;
+  int i, c;
   for (k = 0; k < n; ++k) {{
     casadi_real* Tk = T + 16 * k;
     casadi_real* Jk = J + 6 * {nv} * k;
     casadi_real* ek = e + 6 * k;
-    const casadi_real* G = target + 16 * k;
-    casadi_real cs, th, s, scale;
+    casadi_real s;
     if (!given) {{
       arg[0] = q + k * {nq};
       arg[1] = base;
@@ -110,21 +181,7 @@ int {prefix}_ik_rows(const casadi_real* q, const casadi_real* base, const casadi
       res[1] = Jk;
       if ({prefix}_tcpj(arg, res, iw, w, 0)) return 1;
     }}
-    for (i = 0; i < 3; ++i) ek[i] = G[4 * i + 3] - Tk[4 * i + 3];
-    /* M = R_target R(q)^T, its rotation vector (rotation_vectors' formula) */
-    for (i = 0; i < 3; ++i) {{
-      for (j = 0; j < 3; ++j) {{
-        M[3 * i + j] = G[4 * i] * Tk[4 * j] + G[4 * i + 1] * Tk[4 * j + 1] + G[4 * i + 2] * Tk[4 * j + 2];
-      }}
-    }}
-    cs = (M[0] + M[4] + M[8] - 1.0) / 2.0;
-    cs = cs < -1.0 ? -1.0 : (cs > 1.0 ? 1.0 : cs);
-    th = acos(cs);
-    scale = th < 1e-6 ? 1.0 + th * th / 6.0 : th / sin(th);
-    ek[3] = 0.5 * (M[7] - M[5]) * scale;
-    ek[4] = 0.5 * (M[2] - M[6]) * scale;
-    ek[5] = 0.5 * (M[3] - M[1]) * scale;
-    theta[k] = th;
+    theta[k] = {prefix}_error(target + 16 * k, Tk, ek);
     s = 0.0;
     for (i = 0; i < 6; ++i) s += ek[i] * ek[i];
     norm[k] = sqrt(s);
@@ -132,39 +189,114 @@ int {prefix}_ik_rows(const casadi_real* q, const casadi_real* base, const casadi
       for (c = 0; c < {nv}; ++c) dq[{nv} * k + c] = 0.0;
       continue;
     }}
-    /* A = J J^T + damping^2 I, its Cholesky factor L (lower, in A), y = A^-1 e, dq = J^T y */
-    for (i = 0; i < 6; ++i) {{
-      for (j = 0; j <= i; ++j) {{
-        s = 0.0;
-        for (c = 0; c < {nv}; ++c) s += Jk[{nv} * i + c] * Jk[{nv} * j + c];
-        A[6 * i + j] = s + (i == j ? damping * damping : 0.0);
-      }}
-    }}
-    for (j = 0; j < 6; ++j) {{
-      s = A[6 * j + j];
-      for (c = 0; c < j; ++c) s -= A[6 * j + c] * A[6 * j + c];
-      if (!(s > 0.0)) return 2;
-      A[6 * j + j] = sqrt(s);
-      for (i = j + 1; i < 6; ++i) {{
-        s = A[6 * i + j];
-        for (c = 0; c < j; ++c) s -= A[6 * i + c] * A[6 * j + c];
-        A[6 * i + j] = s / A[6 * j + j];
-      }}
-    }}
-    for (i = 0; i < 6; ++i) {{
-      s = ek[i];
-      for (c = 0; c < i; ++c) s -= A[6 * i + c] * y[c];
-      y[i] = s / A[6 * i + i];
-    }}
-    for (i = 5; i >= 0; --i) {{
-      s = y[i];
-      for (c = i + 1; c < 6; ++c) s -= A[6 * c + i] * y[c];
-      y[i] = s / A[6 * i + i];
+    if ({prefix}_factor(Jk, damping, A)) return 2;
+    {prefix}_back(A, Jk, ek, dq + {nv} * k);
+  }}
+  return 0;
+}}
+
+/* the damped least-squares IK per row, iterated: solve_ik's iterations (stall == 0) or
+   solve_ik_batch's (stall > 0: a row whose error has not fallen below keep * its best for stall
+   iterations stops); the TCP on the flange (world == 0) or a stationary tool; a redundant arm's
+   pull toward mid-range (gain > 0) in the task's null space. flag[k] = 1: the rotation error came
+   within 1e-3 rad of pi, the row is to be solved another way. Chained (iopts[2]): rows first..n-1
+   in turn (iopts[3]: first; the rows before it solved already), each from the last answer plus
+   the last step where no joint moved more than opts[4] in it (row 0 from q0's first row); the
+   chain stops at a flagged row, or with flag[k] = 2 after a row whose joints moved more than
+   opts[5] from the row before. */
+int {prefix}_solve_rows(const casadi_real* q0, const casadi_real* base, const casadi_real* tool,
+                        const casadi_real* world, const casadi_real* target, const casadi_real* lower,
+                        const casadi_real* upper, const casadi_real* mid, const casadi_real* half,
+                        const casadi_real* opts, const long long* iopts, casadi_real* q, casadi_real* err,
+                        casadi_real* T, casadi_real* J, long long* flag, long long n) {{
+  const casadi_real* arg[{sz_arg}];
+  casadi_real* res[{sz_res}];
+  casadi_int iw[{sz_iw}];
+  casadi_real w[{sz_w}];
+  casadi_real A[36], e[6], Jp[6], dq[{nv}], pull[{nv}], back[{nv}];
+  const casadi_real damping = opts[0], tol = opts[1], gain = opts[2], keep = opts[3];
+  const long long max_it = iopts[0], stall = iopts[1], chained = iopts[2];
+  long long k, it, last;
+  int i, c;
+  for (k = chained ? iopts[3] : 0; k < n; ++k) {{
+    casadi_real* qk = q + {nv} * k;
+    casadi_real* Tk = T + 16 * k;
+    casadi_real* Jk = J + 6 * {nv} * k;
+    const casadi_real* G = target + 16 * k;
+    const casadi_real* start = q0 + (chained ? 0 : {nv} * k);
+    casadi_real best = INFINITY, s, nrm, step, th;
+    flag[k] = 0;
+    last = 0;
+    if (chained && k > 0) {{  /* the last answer, plus its step where that is small */
+      const casadi_real* a = qk - {nv};
+      step = 0.0;
+      for (c = 0; c < {nv} && k >= 2; ++c) step = fabs(a[c] - a[c - {nv}]) > step ? fabs(a[c] - a[c - {nv}]) : step;
+      for (c = 0; c < {nv}; ++c) dq[c] = k >= 2 && step <= opts[4] ? a[c] + (a[c] - a[c - {nv}]) : a[c];
+      start = dq;
     }}
     for (c = 0; c < {nv}; ++c) {{
+      s = start[c] > lower[c] ? start[c] : lower[c];
+      qk[c] = s < upper[c] ? s : upper[c];
+    }}
+    for (it = 0;; ++it) {{
+      arg[0] = qk;
+      arg[1] = base;
+      arg[2] = tool;
+      arg[3] = world;
+      res[0] = Tk;
+      res[1] = Jk;
+      if (world ? {prefix}_statj(arg, res, iw, w, 0) : {prefix}_tcpj(arg, res, iw, w, 0)) return 1;
+      th = {prefix}_error(G, Tk, e);
       s = 0.0;
-      for (i = 0; i < 6; ++i) s += Jk[{nv} * i + c] * y[i];
-      dq[{nv} * k + c] = s;
+      for (i = 0; i < 6; ++i) s += e[i] * e[i];
+      nrm = sqrt(s);
+      err[k] = nrm;
+      if (th > M_PI - 1e-3) {{
+        flag[k] = 1;
+        break;
+      }}
+      if (stall > 0) {{
+        if (nrm < keep * best) {{
+          best = nrm;
+          last = it;
+        }}
+        if (!(nrm * nrm >= tol * tol) || it - last >= stall) break;
+      }} else if (s < tol * tol) {{
+        break;
+      }}
+      if (it >= max_it) break;
+      if ({prefix}_factor(Jk, damping, A)) return 2;
+      {prefix}_back(A, Jk, e, dq);
+      if (gain > 0.0) {{
+        for (c = 0; c < {nv}; ++c) pull[c] = isfinite(half[c]) ? (mid[c] - qk[c]) / (half[c] * half[c]) : 0.0;
+        for (i = 0; i < 6; ++i) {{
+          s = 0.0;
+          for (c = 0; c < {nv}; ++c) s += Jk[{nv} * i + c] * pull[c];
+          Jp[i] = s;
+        }}
+        {prefix}_back(A, Jk, Jp, back);
+        for (c = 0; c < {nv}; ++c) dq[c] += gain * (pull[c] - back[c]);
+      }}
+      step = 0.0;
+      for (c = 0; c < {nv}; ++c) step = fabs(dq[c]) > step ? fabs(dq[c]) : step;
+      if (step > 0.3) {{
+        s = 0.3 / step;
+        for (c = 0; c < {nv}; ++c) dq[c] *= s;
+      }}
+      for (c = 0; c < {nv}; ++c) {{
+        s = qk[c] + dq[c];
+        s = s > lower[c] ? s : lower[c];
+        qk[c] = s < upper[c] ? s : upper[c];
+      }}
+    }}
+    if (chained && flag[k]) break;
+    if (chained && k > 0) {{
+      step = 0.0;
+      for (c = 0; c < {nv}; ++c) step = fabs(qk[c] - qk[c - {nv}]) > step ? fabs(qk[c] - qk[c - {nv}]) : step;
+      if (step > opts[5]) {{
+        flag[k] = 2;
+        break;
+      }}
     }}
   }}
   return 0;
@@ -227,12 +359,17 @@ def chain_source(chain: BatchChain, flange_id: int, prefix: str = PREFIX) -> str
     B = [[base[4 * r + c] for c in range(4)] for r in range(4)]
     X = [[tool[4 * r + c] for c in range(4)] for r in range(4)]
     T_tcp, J_tcp = placed(T, J, B, X)
+    world = ca.SX.sym("world", 16)  # a stationary tool's T_world_TCP, row-major
+    W = [[world[4 * r + c] for c in range(4)] for r in range(4)]
+    T_part, J_part = stationary(T, J, B, X, W)
     functions = [
         ca.Function(f"{prefix}_fk", [q], flat(T)),
         ca.Function(f"{prefix}_fkj", [q], flat(T, J)),
         ca.Function(f"{prefix}_joints", [q], [ca.vertcat(*flat(*oMi))]),
         ca.Function(f"{prefix}_tcp", [q, base, tool], flat(T_tcp)),
         ca.Function(f"{prefix}_tcpj", [q, base, tool], flat(T_tcp, J_tcp)),
+        ca.Function(f"{prefix}_stat", [q, base, tool, world], flat(T_part)),
+        ca.Function(f"{prefix}_statj", [q, base, tool, world], flat(T_part, J_part)),
     ]
     gen = ca.CodeGenerator(f"{prefix}.c", {"with_header": False})
     for f in functions:
@@ -262,13 +399,13 @@ def chain_source(chain: BatchChain, flange_id: int, prefix: str = PREFIX) -> str
         njoints=len(oMi),
         nq=chain.nq,
     )
-    tcpj = functions[4]
+    tcpj, statj = functions[4], functions[6]
     ik = _IK.format(
         prefix=prefix,
-        sz_arg=max(tcpj.sz_arg(), 3),
-        sz_res=max(tcpj.sz_res(), 2),
-        sz_iw=max(tcpj.sz_iw(), 1),
-        sz_w=max(tcpj.sz_w(), 1),
+        sz_arg=max(tcpj.sz_arg(), statj.sz_arg(), 4),
+        sz_res=max(tcpj.sz_res(), statj.sz_res(), 2),
+        sz_iw=max(tcpj.sz_iw(), statj.sz_iw(), 1),
+        sz_w=max(tcpj.sz_w(), statj.sz_w(), 1),
         nq=chain.nq,
         nv=tcpj.nnz_out(1) // 6,
     )
@@ -293,6 +430,33 @@ def placed(T: list, J: list, B: list, X: list) -> tuple[list, list]:
         [r[0] * Jw[1][j] - r[1] * Jw[0][j] for j in range(len(J[0]))],
     ]
     return T_wt, [[Jv[i][j] - cross[i][j] for j in range(len(J[0]))] for i in range(3)] + Jw
+
+
+def stationary(T: list, J: list, B: list, X: list, W: list) -> tuple[list, list]:
+    """A stationary tool's TCP seen from the held part, ``(B · T · X)⁻¹ · W`` (4 × 4), and its Jacobian (6 × nv).
+
+    ``T``, ``J``: the flange's placement in the base and its Jacobian (base axes, linear rows
+    first); ``B``: ``T_world_base``; ``X``: ``T_flange_part``; ``W``: ``T_world_TCP``. As
+    :meth:`refine.robot.kinematics.TcpKinematics.poses_jacobians` composes it: the point of the
+    flange at the tool's TCP moves with ``v = v_flange - r × ω``, ``r = p(W) - p(B · T)`` (world
+    axes), and the TCP moves in the part's frame backwards, ``-R_world_partᵀ (v, ω)``.
+    """
+    T_wf = _product(B, T)
+    T_wp = _product(T_wf, X)
+    RB = [row[:3] for row in B[:3]]
+    Jv, Jw = _product(RB, J[:3]), _product(RB, J[3:])
+    r = [W[i][3] - T_wf[i][3] for i in range(3)]
+    n = len(J[0])
+    point = [
+        [Jv[0][j] - (r[1] * Jw[2][j] - r[2] * Jw[1][j]) for j in range(n)],
+        [Jv[1][j] - (r[2] * Jw[0][j] - r[0] * Jw[2][j]) for j in range(n)],
+        [Jv[2][j] - (r[0] * Jw[1][j] - r[1] * Jw[0][j]) for j in range(n)],
+    ]
+    Rt = [[T_wp[k][i] for k in range(3)] for i in range(3)]
+    shift = [-sum_terms([Rt[i][k] * T_wp[k][3] for k in range(3)]) for i in range(3)]
+    inverse = [Rt[i] + [shift[i]] for i in range(3)] + [[0.0, 0.0, 0.0, 1.0]]
+    J_out = [[-x for x in row] for row in _product(Rt, point) + _product(Rt, Jw)]
+    return _product(inverse, W), J_out
 
 
 def _product(A: list, B: list) -> list:

@@ -14,16 +14,18 @@ flange's placement with its Jacobian (Pinocchio's ``LOCAL_WORLD_ALIGNED``), ever
 ``data.oMi``, the TCP's pose in the world (the robot placed by ``T_world_base``, the tool by
 ``T_flange_TCP``, both arguments of the call) with and without its Jacobian (what
 :class:`~refine.robot.kinematics.TcpKinematics` composes in NumPy otherwise), and bodies fixed on
-the joints placed in the world (the collision model's moving shapes); a damped least-squares IK
-step toward TCP targets (:meth:`CompiledChain.ik_steps`) and determinants of 6 × 6 matrices
-(:meth:`CompiledChain.dets6`). Any number of rows is one
+the joints placed in the world (the collision model's moving shapes); a stationary tool's TCP
+seen from the part the robot holds, with its Jacobian (``tcp_frames(..., tool_in_world)``); a
+damped least-squares IK step toward TCP targets (:meth:`CompiledChain.ik_steps`), the whole
+iterated IK of each row (:meth:`CompiledChain.ik_solve`: a redundant arm's null-space pull, a
+stationary tool) and determinants of 6 × 6 matrices (:meth:`CompiledChain.dets6`). Any number of rows is one
 call; each call's work memory is on the C stack, so threads may call at once (:mod:`ctypes` lets
 go of the GIL for the call). Any other frame, and :meth:`CompiledChain.axis_frames`, are the NumPy
 chain's.
 
 When a library is loaded it is checked once against Pinocchio (``forwardKinematics`` and
 ``computeFrameJacobian``; the IK step's error against ``log3`` and its step against NumPy's solve,
-the determinants against NumPy's) at :data:`CHECK_ROWS` configurations; a difference above
+one iteration of the whole IK with its pull against NumPy's, the determinants against NumPy's) at :data:`CHECK_ROWS` configurations; a difference above
 :data:`CHECK_TOLERANCE` is logged as a warning and the chain stays NumPy's, as it does without a
 compiler, with ``REFINE_COMPILE=0`` or when compiling fails. The library is looked for on the
 first evaluation (not when the robot is made), once per :class:`CompiledChain`.
@@ -31,7 +33,6 @@ first evaluation (not when the robot is made), once per :class:`CompiledChain`.
 
 from __future__ import annotations
 
-import ctypes
 import hashlib
 import importlib.metadata
 import logging
@@ -51,6 +52,7 @@ from refine.native import (
     compiler_version,
 )
 from refine.robot.chain import MIN_ROWS, BatchChain
+from refine.robot.chain_library import FUNCTIONS, ChainLibrary
 from refine.robot.chain_source import PREFIX, chain_source
 from refine.types import Array
 
@@ -71,12 +73,15 @@ reassociates a sum (no -ffast-math)."""
 LOADED_MAX = 16
 """Chain libraries kept loaded in one process (one per robot model)."""
 
-_FUNCTIONS = ("fk", "fkj", "joints", "tcp", "tcpj", "bodies", "ik", "det6")
-_SOURCES = tuple(Path(__file__).with_name(n) for n in ("compiled_chain.py", "chain_source.py", "chain.py"))
+_SOURCES = tuple(
+    Path(__file__).with_name(n)
+    for n in ("compiled_chain.py", "chain_source.py", "chain_library.py", "chain.py")
+)
 _loaded = BoundedCache(LOADED_MAX)
 # a base and a tool placement of no special orientation, for the load check [m]
 _CHECK_BASE = pin.SE3(pin.exp3(np.array([0.3, -0.2, 0.9])), np.array([0.4, -0.3, 0.2])).homogeneous
 _CHECK_TCP = pin.SE3(pin.exp3(np.array([-0.5, 0.1, 0.25])), np.array([0.02, -0.01, 0.3])).homogeneous
+_CHECK_WORLD = pin.SE3(pin.exp3(np.array([1.2, -0.4, 0.3])), np.array([0.5, 0.6, 0.7])).homogeneous
 
 
 class CompiledChain:
@@ -94,7 +99,7 @@ class CompiledChain:
         self.nq = chain.nq
         self._njoints = int(model.njoints)
         self._lock = threading.Lock()
-        self._library: _Library | None = None
+        self._library: ChainLibrary | None = None
         self._compile = compile
         self._resolved = not compile  # without compiling: NumPy's chain from the start
 
@@ -140,33 +145,43 @@ class CompiledChain:
         return T, J
 
     def tcp_frames(
-        self, qs: Array, base_in_world: Array, tcp_in_flange: Array, jacobian: bool = True
+        self,
+        qs: Array,
+        base_in_world: Array,
+        tcp_in_flange: Array,
+        jacobian: bool = True,
+        tool_in_world: Array | None = None,
     ) -> tuple[Array, Array | None] | None:
         """The TCP's poses ``T_world_base · T_base_flange(q) · T_flange_TCP`` (N, 4, 4) [m] and Jacobians.
 
         The Jacobian (N, 6, nv) as ``TcpKinematics.jacobian``: the TCP's linear velocity and the
-        angular velocity, world axes, linear rows first. None when the chain runs in NumPy (the
-        caller then composes :meth:`frame`'s flange).
+        angular velocity, world axes, linear rows first. With ``tool_in_world`` (a stationary
+        tool's ``T_world_TCP``; ``tcp_in_flange`` then places the held part) the tool's TCP seen
+        from the part, ``(T_world_base · T_base_flange · T_flange_part)⁻¹ · T_world_TCP``, and its
+        Jacobian in the part's frame (:func:`refine.robot.chain_source.stationary`). None when
+        the chain runs in NumPy (the caller then composes :meth:`frame`'s flange).
         """
         lib = self._lib()
         if lib is None:
             return None
         qs = self._rows(qs)
-        fixed = (
-            np.ascontiguousarray(base_in_world, dtype=float),
-            np.ascontiguousarray(tcp_in_flange, dtype=float),
-        )
-        if fixed[0].shape != (4, 4) or fixed[1].shape != (4, 4):
-            raise ValueError(
-                f"placements: expected (4, 4) and (4, 4), got {fixed[0].shape} and {fixed[1].shape}"
-            )
+        fixed = self._placements(base_in_world, tcp_in_flange, tool_in_world)
+        name = "tcp" if tool_in_world is None else "stat"
         T = np.empty((len(qs), 4, 4))
         if not jacobian:
-            lib.call("tcp", qs, T, fixed=fixed)
+            lib.call(name, qs, T, fixed=fixed)
             return T, None
         J = np.empty((len(qs), 6, self.nq))
-        lib.call("tcpj", qs, T, J, fixed=fixed)
+        lib.call(name + "j", qs, T, J, fixed=fixed)
         return T, J
+
+    @staticmethod
+    def _placements(*placements: Array | None) -> tuple[Array, ...]:
+        """The given (4, 4) placements as C-contiguous float64 arrays (the Nones left out)."""
+        fixed = tuple(np.ascontiguousarray(a, dtype=float) for a in placements if a is not None)
+        if any(a.shape != (4, 4) for a in fixed):
+            raise ValueError(f"placements: expected (4, 4) each, got {[a.shape for a in fixed]}")
+        return fixed
 
     def body_poses(self, qs: Array, base_in_world: Array, joints: Array, joint_T_body: Array) -> Array | None:
         """World poses (N, M, 4, 4) [m] of M bodies fixed on joints: ``T_world_base · oMi[joints[m]] · joint_T_body[m]``.
@@ -232,6 +247,75 @@ class CompiledChain:
         lib.ik(qs, *fixed, float(damping), float(tol), bool(given), T, J, e, norm, dq, theta)
         return e, norm, dq, theta
 
+    def ik_solve(
+        self,
+        qs: Array,
+        kinematics: tuple[Array, Array, Array | None],
+        targets: Array,
+        bounds: tuple[Array, Array],
+        damping: float,
+        tol: float,
+        gain: float,
+        max_iterations: int,
+        stall: tuple[int, float] | None,
+        chained: tuple[float, float, Array, Array, int] | None = None,
+    ) -> tuple[Array, Array, Array, Array, Array] | None:
+        """Damped least-squares IK toward TCP targets, every row iterated in C; None in NumPy.
+
+        Per start row of ``qs`` (N, nv) [rad], clipped to ``bounds`` (lower, upper (nv,) [rad],
+        infinite for none): ``solve_ik``'s iterations (``stall`` None) or ``solve_ik_batch``'s
+        (``stall = (iterations, keep)``: a row stops once its error has not fallen under ``keep``
+        times its best for that many iterations) of :mod:`refine.robot.kinematics`, the error as
+        :meth:`ik_steps` forms it, the step ``Jᵀ (J Jᵀ + λ² I)⁻¹ e`` (``λ = damping`` > 0) plus
+        ``gain`` times the pull to mid-range ``(mid - q) / half²`` (0 unbounded) less its part in
+        the task, scaled to at most 0.3 rad, clipped. ``kinematics``: ``T_world_base``,
+        ``T_flange_TCP``, a stationary tool's ``T_world_TCP`` or None (:meth:`tcp_frames`).
+
+        ``chained``: ``(predict, give_up, q, err, first)`` to chain ``solve_ik`` along the targets
+        (N, 4, 4) instead, ``qs`` (1, nv) the first row's start: rows ``first`` to N - 1 in turn
+        into ``q`` (N, nv) and ``err`` (N,) (C-contiguous float64; the rows before ``first``
+        solved already), each from the last answer plus the last step where no joint moved more
+        than ``predict`` [rad] in it; the chain stops at a flagged row (1), or after a row whose
+        joints moved more than ``give_up`` [rad] from the row before (flag 2).
+
+        Returns:
+            the joints (N, nv) [rad], the last pose error norms (N,), the TCP poses (N, 4, 4) and
+            Jacobians (N, 6, nv) at those joints, and a flag per row (N,), 1 where the rotation
+            error came within 1e-3 rad of π: that row's answer is not to be used (chained, the
+            rows after a flagged one are not solved).
+        """
+        lib = self._lib()
+        if lib is None:
+            return None
+        qs = self._rows(qs)
+        fixed = self._placements(*kinematics)
+        world = None if kinematics[2] is None else fixed[2]
+        targets = np.ascontiguousarray(targets, dtype=float)
+        n = len(targets) if chained is not None else len(qs)
+        predict, give_up, q, err, first = (
+            (0.0, 0.0, np.empty((n, self.nq)), np.empty(n), 0) if chained is None else chained
+        )
+        if not (
+            len(qs) in (1, n) and 0 <= first <= n and _writable(q, (n, self.nq)) and _writable(err, (n,))
+        ):
+            raise ValueError(
+                f"ik_solve: one start, joints ({n}, {self.nq}), errors ({n},), a first row 0..{n}"
+            )
+        lower, upper = (np.ascontiguousarray(np.broadcast_to(b, (self.nq,)), dtype=float) for b in bounds)
+        if targets.shape != (n, 4, 4) or not damping > 0.0 or max_iterations < 0:
+            raise ValueError(f"ik_solve: targets ({n}, 4, 4), damping > 0 and max_iterations >= 0 expected")
+        with np.errstate(invalid="ignore"):  # unbounded joints have no mid-range
+            mid, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
+        its, keep = (0, 0.0) if stall is None else stall
+        opts = np.array([damping, tol, gain, keep, predict, give_up], dtype=float)
+        iopts = np.array([max_iterations, its, chained is not None, first], dtype=np.int64)
+        flag = np.zeros(n, dtype=np.int64)
+        T, J = np.empty((n, 4, 4)), np.empty((n, 6, self.nq))
+        lib.solve(
+            qs, fixed[0], fixed[1], world, targets, lower, upper, mid, half, opts, iopts, q, err, T, J, flag
+        )
+        return q, err, T, J, flag
+
     def dets6(self, matrices: Array) -> Array | None:
         """Determinants (N,) of 6 × 6 matrices (N, 6, 6) (LU with partial pivoting), or None in NumPy."""
         lib = self._lib()
@@ -264,7 +348,7 @@ class CompiledChain:
             raise ValueError(f"qs: expected shape (N, {self.nq}) [rad], got {qs.shape}")
         return qs
 
-    def _lib(self) -> _Library | None:
+    def _lib(self) -> ChainLibrary | None:
         if self._resolved:
             return self._library
         with self._lock:
@@ -273,7 +357,7 @@ class CompiledChain:
                 self._resolved = True
         return self._library
 
-    def _find(self) -> _Library | None:
+    def _find(self) -> ChainLibrary | None:
         """The library of this model (loaded, from the cache folder or compiled), checked; None: NumPy."""
         cc = compiler()
         if cc is None:
@@ -308,7 +392,7 @@ class CompiledChain:
         h.update(f"{int(frame.parentJoint)}".encode() + frame.placement.homogeneous.tobytes())
         return h.hexdigest()[:24]
 
-    def _load(self, cc: str, digest: str) -> _Library | bool:
+    def _load(self, cc: str, digest: str) -> ChainLibrary | bool:
         """Load (compiling first when missing) and check the library; False when it cannot be used."""
         library = cache_dir() / f"{PREFIX}-{digest}.so"
         try:
@@ -316,9 +400,9 @@ class CompiledChain:
                 os.utime(library)  # recently used: the last to be evicted
             else:
                 build_library(
-                    cc, chain_source(self.numpy, self.flange_id, PREFIX), library, list(_FUNCTIONS), FLAGS
+                    cc, chain_source(self.numpy, self.flange_id, PREFIX), library, list(FUNCTIONS), FLAGS
                 )
-            lib = _Library(library, self.nq)
+            lib = ChainLibrary(library, self.nq)
         except (OSError, RuntimeError, AttributeError, ImportError) as e:
             log.warning("compiling the batch kinematics failed (%s); using NumPy's", e)
             return False
@@ -333,7 +417,7 @@ class CompiledChain:
             return False
         return lib
 
-    def _check(self, lib: _Library) -> float:
+    def _check(self, lib: ChainLibrary) -> float:
         """The largest difference of ``lib``'s answers from Pinocchio's at :data:`CHECK_ROWS` rows."""
         model, data = self.model, self.model.createData()
         lower = np.maximum(model.lowerPositionLimit, -np.pi)
@@ -371,6 +455,21 @@ class CompiledChain:
         square = np.ascontiguousarray(J_tcp[:, :, :6]) if self.nq >= 6 else np.zeros((CHECK_ROWS, 6, 6))
         dets = np.empty(CHECK_ROWS)
         lib.det6(square, dets)
+        # a stationary tool, and one iteration of the whole solve (with the pull of a redundant arm)
+        W = _CHECK_WORLD
+        T_st, J_st, T_st_alone = np.empty_like(T), np.empty_like(J), np.empty_like(T)
+        lib.call("statj", qs, T_st, J_st, fixed=(B, X, W))
+        lib.call("stat", qs, T_st_alone, fixed=(B, X, W))
+        gain, q_one = (0.05 if self.nq > 6 else 0.0), np.empty_like(qs)
+        one = [
+            lower,
+            upper,
+            0.5 * (lower + upper),
+            0.5 * (upper - lower),
+            np.array([0.01, 0, gain, 0, 0, 0.0]),
+        ]
+        lib.solve(qs, B, X, None, targets, *one, np.array([1, 0, 0, 0]), q_one, np.empty(CHECK_ROWS),
+                  T_ik.copy(), J_ik.copy(), np.empty(CHECK_ROWS, dtype=np.int64))  # fmt: skip
         error = 0.0
         for k, q in enumerate(qs):
             pin.forwardKinematics(model, data, q)  # every joint (the Jacobian's pass: only the flange's)
@@ -400,86 +499,22 @@ class CompiledChain:
             pairs += [(dq[k] / max(1.0, np.abs(dq_pin).max()), dq_pin / max(1.0, np.abs(dq_pin).max()))]
             det = np.linalg.det(square[k])
             pairs += [(dets[k] / max(1.0, abs(det)), det / max(1.0, abs(det)))]
+            T_wf, R_b = B @ T_pin, B[:3, :3]
+            T_wp = T_wf @ X
+            Jw = R_b @ J_pin[3:]
+            point = R_b @ J_pin[:3] - np.cross(W[:3, 3] - T_wf[:3, 3], Jw.T).T
+            J_st_pin = -np.vstack([T_wp[:3, :3].T @ point, T_wp[:3, :3].T @ Jw])
+            pairs += [(T_st[k], np.linalg.inv(T_wp) @ W), (T_st_alone[k], np.linalg.inv(T_wp) @ W)]
+            pairs += [(J_st[k], J_st_pin)]
+            pull = (0.5 * (lower + upper) - q) / (0.5 * (upper - lower)) ** 2
+            step = dq_pin + gain * (pull - J_tcp_pin.T @ np.linalg.solve(A, J_tcp_pin @ pull))
+            step *= min(1.0, 0.3 / np.abs(step).max())
+            pairs += [(q_one[k], np.clip(q + step, lower, upper))]
             for a, b in pairs:
                 error = max(error, float(np.abs(a - b).max()))
         return error if np.isfinite(error) else np.inf
 
 
-class _Library:
-    """The loaded library: each function's row loop, called on C-contiguous float64 arrays."""
-
-    def __init__(self, path: Path, nq: int) -> None:
-        self._dll = ctypes.CDLL(str(path))
-        self.nq = nq
-        self._calls = {}
-        self._bodies = self._dll[f"{PREFIX}_bodies_rows"]
-        pointer, count = ctypes.c_void_p, ctypes.c_longlong
-        self._bodies.argtypes = [pointer, pointer, pointer, pointer, count, pointer, count]
-        self._bodies.restype = ctypes.c_int
-        self._ik = self._dll[f"{PREFIX}_ik_rows"]
-        self._ik.argtypes = (
-            [pointer] * 4 + [ctypes.c_double, ctypes.c_double, count] + [pointer] * 6 + [count]
-        )
-        self._ik.restype = ctypes.c_int
-        self._det6 = self._dll[f"{PREFIX}_det6_rows"]
-        self._det6.argtypes = [pointer, pointer, count]
-        self._det6.restype = ctypes.c_int
-        for name in _FUNCTIONS[:-3]:
-            fn = getattr(self._dll, f"{PREFIX}_{name}_rows")
-            fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong]
-            fn.restype = ctypes.c_int
-            self._calls[name] = fn
-
-    def call(self, name: str, qs: Array, *out: Array, fixed: tuple[Array, ...] = ()) -> None:
-        """Evaluate ``name`` on the rows ``qs`` (N, nq) into the C-contiguous arrays ``out`` (N, ...).
-
-        ``fixed``: the arguments the same for every row (C-contiguous float64, read only).
-        """
-        for a in (qs, *out, *fixed):
-            if not (a.flags.c_contiguous and a.dtype == np.float64):
-                raise ValueError("the compiled batch kinematics take C-contiguous float64 arrays")
-        if any(len(a) != len(qs) for a in out):
-            raise ValueError("the compiled batch kinematics write one row of each output per joint row")
-        pointers = (ctypes.c_void_p * len(out))(*(a.ctypes.data for a in out))
-        given = (ctypes.c_void_p * max(len(fixed), 1))(*(a.ctypes.data for a in fixed))
-        if self._calls[name](qs.ctypes.data, given, pointers, len(qs)) != 0:
-            raise RuntimeError(f"the compiled batch kinematics' {name} failed")
-
-    def bodies(self, qs: Array, base: Array, joints: Array, local: Array, out: Array) -> None:
-        """Bodies' world poses into ``out`` (N, M, 4, 4) (:meth:`CompiledChain.body_poses`, arguments checked there)."""
-        for a in (qs, base, local, out):
-            if not (a.flags.c_contiguous and a.dtype == np.float64):
-                raise ValueError("the compiled batch kinematics take C-contiguous float64 arrays")
-        shape = (len(qs), len(joints))
-        if not (joints.flags.c_contiguous and joints.dtype == np.int64) or out.shape[:2] != shape:
-            raise ValueError("the compiled batch kinematics' bodies: int64 joints and (N, M, 4, 4) poses")
-        code = self._bodies(
-            qs.ctypes.data,
-            base.ctypes.data,
-            joints.ctypes.data,
-            local.ctypes.data,
-            len(joints),
-            out.ctypes.data,
-            len(qs),
-        )
-        if code != 0:
-            raise RuntimeError(f"the compiled batch kinematics' bodies failed ({code})")
-
-    def ik(self, qs: Array, *arrays: Any) -> None:
-        """:meth:`CompiledChain.ik_steps` into its arrays (checked there).
-
-        ``arrays``: base, tool, targets, damping, tol, given, T, J, e, norms, steps, angles.
-        """
-        base, tool, targets, damping, tol, given, *out = arrays
-        for a in (qs, base, tool, targets, *out):
-            if not (a.flags.c_contiguous and a.dtype == np.float64):
-                raise ValueError("the compiled batch kinematics take C-contiguous float64 arrays")
-        pointers = [a.ctypes.data for a in (qs, base, tool, targets)]
-        code = self._ik(*pointers, damping, tol, int(given), *(a.ctypes.data for a in out), len(qs))
-        if code != 0:
-            raise RuntimeError(f"the compiled IK step failed ({code})")
-
-    def det6(self, a: Array, out: Array) -> None:
-        """Determinants of C-contiguous (N, 6, 6) float64 matrices into ``out`` (N,)."""
-        if self._det6(a.ctypes.data, out.ctypes.data, len(a)) != 0:
-            raise RuntimeError("the compiled determinants failed")
+def _writable(a: Array | None, shape: tuple[int, ...]) -> bool:
+    """Whether ``a`` is a C-contiguous float64 array of ``shape`` to be written into."""
+    return a is not None and a.shape == shape and a.dtype == np.float64 and a.flags.c_contiguous

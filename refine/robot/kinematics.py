@@ -56,11 +56,11 @@ class TcpKinematics:
     def poses(self, qs: Array) -> Array:
         """T_F_TCP for joint rows ``qs`` (N, n), shape (N, 4, 4) (with a stationary tool: T_part_TCP)."""
         chain, rows = self.robot.chain, np.shape(qs)
-        if self.tool_in_world is None and chain is not None and len(rows) == 2 and rows[1] == self.robot.nq:
-            if rows[0] >= chain.min_rows:  # the compiled chain places the robot and the tool too
-                tcp = chain.tcp_frames(qs, self.base_in_world, self.tcp_in_flange, jacobian=False)
-                if tcp is not None:
-                    return tcp[0]
+        if chain is not None and len(rows) == 2 and rows[1] == self.robot.nq and rows[0] >= chain.min_rows:
+            # the compiled chain places the robot and the tool (or the part and the standing tool) too
+            tcp = chain.tcp_frames(qs, self.base_in_world, self.tcp_in_flange, False, self.tool_in_world)
+            if tcp is not None:
+                return tcp[0]
         T_bf = self.robot.fk_many(qs)
         if self.tool_in_world is not None:  # as :meth:`poses_jacobians` (the same products, the same bits)
             return _rigid_inverse(self.base_in_world @ T_bf @ self.tcp_in_flange) @ self.tool_in_world
@@ -95,8 +95,8 @@ class TcpKinematics:
         The flange's placements and Jacobians come from the robot's batched chain
         (:class:`refine.robot.compiled_chain.CompiledChain`) for its ``min_rows`` rows or more,
         else from one pass of Pinocchio per row; compiled, the chain also places the robot and the
-        tool on a flange (``tcp_frames``), else the change to the base placement and the TCP
-        is done for all rows at once. The Jacobian as :meth:`jacobian`.
+        tool (``tcp_frames``; a stationary tool too), else the change to the base placement and
+        the TCP is done for all rows at once. The Jacobian as :meth:`jacobian`.
         """
         qs = np.atleast_2d(np.asarray(qs, dtype=float))
         robot = self.robot
@@ -104,10 +104,10 @@ class TcpKinematics:
         if qs.ndim != 2 or qs.shape[1] != robot.nq:
             raise InputError(f"qs: expected shape (M, {robot.nq}) [rad], got {qs.shape}")
         if robot.chain is not None and len(qs) >= robot.chain.min_rows:
-            if self.tool_in_world is None:  # the compiled chain places the robot and the tool too
-                tcp = robot.chain.tcp_frames(qs, self.base_in_world, self.tcp_in_flange)
-                if tcp is not None:
-                    return tcp
+            # the compiled chain places the robot and the tool (or the part and the standing tool) too
+            tcp = robot.chain.tcp_frames(qs, self.base_in_world, self.tcp_in_flange, True, self.tool_in_world)
+            if tcp is not None:
+                return tcp
             T_bf, J = robot.chain.frame(qs, fid)
         else:
             J = np.empty((len(qs), 6, robot.nq))
@@ -229,6 +229,11 @@ def solve_ik(
 ) -> tuple[Array, float]:
     """Damped least-squares IK for one TCP pose, clamped to [lower, upper].
 
+    With the robot's chain compiled the iterations run in C (:meth:`CompiledChain.ik_solve
+    <refine.robot.compiled_chain.CompiledChain.ik_solve>`: the same steps, rounded otherwise)
+    unless only the position or the axis is asked for, or the rotation error comes within 1e-3
+    rad of a half turn (then NumPy's, from ``q0`` again).
+
     Args:
         kin: TCP kinematics.
         T_target: wanted T_F_TCP (4, 4).
@@ -246,6 +251,15 @@ def solve_ik(
         joints [rad] (n,) and the remaining pose error norm (position [m] and angle [rad] stacked).
     """
     rows = slice(0, 3) if position_only else slice(0, 6)
+    chain = kin.robot.chain
+    if not (position_only or axis_only) and damping > 0.0 and chain is not None and chain.compiled:
+        gain = NULLSPACE_GAIN if kin.robot.nq > 6 else 0.0
+        found = chain.ik_solve(
+            np.reshape(q0, (1, -1)), _placements(kin), np.asarray(T_target)[None], (lower, upper),
+            damping, tol, gain, max_iterations, None,
+        )  # fmt: skip
+        if found is not None and not found[4][0]:  # else the rotation came near a half turn: NumPy's log3
+            return found[0][0], float(found[1][0])
     # np.minimum(np.maximum(...)) is np.clip's answer (the bounds are never crossed), at a third of its cost
     q = np.minimum(np.maximum(np.asarray(q0, dtype=float), lower), upper)
     T, J = kin.pose_jacobian(q)
@@ -325,6 +339,11 @@ def solve_ik_batch(
     positions (M, 3), rotations (M, 3, 3) and Jacobians (M, 6, n) at ``q0`` (inside the limits) when
     the caller has them, used for the first iteration instead of evaluating them again; or None.
 
+    With the robot's chain compiled, the full pose asked for and ``damping`` > 0 the iterations
+    run in C: the step alone (:func:`_solve_compiled`) for a TCP on the flange without a pull,
+    every row's whole IK (:func:`_solve_iterated`, ``start`` not needed) with a redundant arm's
+    pull or a stationary tool; the same answers to rounding.
+
     Returns:
         joints [rad] (M, n) and the remaining pose error norm per pose (M,).
     """
@@ -332,11 +351,29 @@ def solve_ik_batch(
     q = np.clip(np.array(q0, dtype=float), lower, upper)
     m, n = q.shape
     chain = kin.robot.chain
-    plain = not (position_only or axis_only or (n > rows and nullspace_gain > 0.0))
-    if plain and damping > 0.0 and kin.tool_in_world is None and chain is not None and chain.compiled:
+    if not (position_only or axis_only) and damping > 0.0 and chain is not None and chain.compiled:
+        if n > rows and nullspace_gain > 0.0 or kin.tool_in_world is not None:
+            return _solve_iterated(
+                kin, targets, q, lower, upper, max_iterations, damping, tol, nullspace_gain,
+                jacobians_out, poses_out,
+            )  # fmt: skip
         return _solve_compiled(
             kin, targets, q, lower, upper, max_iterations, damping, tol, jacobians_out, poses_out, start
         )
+    return _solve_numpy(
+        kin, targets, q, lower, upper, max_iterations, damping, tol, position_only, nullspace_gain,
+        axis_only, jacobians_out, poses_out, start,
+    )  # fmt: skip
+
+
+def _solve_numpy(
+    kin: TcpKinematics, targets: Array, q: Array, lower: Array, upper: Array, max_iterations: int,
+    damping: float, tol: float, position_only: bool, nullspace_gain: float, axis_only: bool,
+    jacobians_out: Array | None, poses_out: Array | None, start: tuple[Array, Array, Array] | None,
+) -> tuple[Array, Array]:  # fmt: skip
+    """:func:`solve_ik_batch`'s iterations in NumPy; ``q``: the clipped start (M, n), changed in place."""
+    rows = 3 if position_only else 6
+    m, n = q.shape
     err = np.zeros(m)
     active = np.arange(m)
     with np.errstate(invalid="ignore"):  # unbounded (multi-turn) joints have no mid-range
@@ -382,6 +419,41 @@ def solve_ik_batch(
         dq *= np.where(step > 0.3, 0.3 / np.maximum(step, 1e-300), 1.0)[:, None]
         q[active] = np.clip(q[active] + dq, lower, upper)
     return q, err
+
+
+def _solve_iterated(
+    kin: TcpKinematics, targets: Array, q: Array, lower: Array, upper: Array, max_iterations: int,
+    damping: float, tol: float, nullspace_gain: float, jacobians_out: Array | None, poses_out: Array | None,
+) -> tuple[Array, Array]:  # fmt: skip
+    """:func:`solve_ik_batch`'s iterations for 6 task rows, every row iterated in C.
+
+    :meth:`refine.robot.compiled_chain.CompiledChain.ik_solve` with the stall rule: a redundant
+    arm's null-space pull, a stationary tool. The rows whose rotation error came within 1e-3 rad
+    of a half turn are solved again by :func:`_solve_numpy` (their error by
+    :func:`rotation_vectors`' axis branch). ``q``: the clipped start (M, n).
+    """
+    gain = nullspace_gain if q.shape[1] > 6 else 0.0
+    q_out, err, T, J, flag = kin.robot.chain.ik_solve(
+        q, _placements(kin), targets, (lower, upper), damping, tol, gain, max_iterations,
+        (STALL_ITERATIONS, 1.0 - STALL_FRACTION),
+    )  # fmt: skip
+    again = np.flatnonzero(flag)
+    if again.size:
+        q_out[again], err[again] = _solve_numpy(
+            kin, np.asarray(targets)[again], q[again], lower, upper, max_iterations, damping, tol, False,
+            nullspace_gain, False, None, None, None,
+        )  # fmt: skip
+        T[again], J[again] = kin.poses_jacobians(q_out[again])
+    if jacobians_out is not None:
+        jacobians_out[:] = J
+    if poses_out is not None:
+        poses_out[:] = T
+    return q_out, err
+
+
+def _placements(kin: TcpKinematics) -> tuple[Array, Array, Array | None]:
+    """The robot's base, the TCP (or held part) on the flange and a stationary tool (or None)."""
+    return kin.base_in_world, kin.tcp_in_flange, kin.tool_in_world
 
 
 def _solve_compiled(

@@ -11,15 +11,15 @@ from refine.robot.kinematics import TcpKinematics
 
 @pytest.fixture()
 def counted(monkeypatch):
-    """The number of single-pose IK solves the chains make."""
+    """The number of waypoints the chains solve (one IK each, in NumPy or in C)."""
     calls = {"n": 0}
-    solve = seed.solve_ik
+    solve = seed._solve_chain
 
-    def counting(*args, **kwargs):
-        calls["n"] += 1
-        return solve(*args, **kwargs)
+    def counting(kin, targets, *args, **kwargs):
+        calls["n"] += len(targets)
+        return solve(kin, targets, *args, **kwargs)
 
-    monkeypatch.setattr(seed, "solve_ik", counting)
+    monkeypatch.setattr(seed, "_solve_chain", counting)
     return calls
 
 

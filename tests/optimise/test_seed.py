@@ -1,4 +1,5 @@
 import numpy as np
+import pytest
 
 from refine.optimise.seed import ik_chain, shift_turns, start_candidates
 from refine.robot.kinematics import solve_ik
@@ -182,3 +183,62 @@ def test_batched_ik_hands_back_the_jacobians_at_the_joints_it_returns(kin):
             J_fd[:3, j] = (Tp[:3, 3] - Tm[:3, 3]) / (2 * h)
             J_fd[3:, j] = Rotation.from_matrix(Tp[:3, :3] @ Tm[:3, :3].T).as_rotvec() / (2 * h)
         np.testing.assert_allclose(J_out[k], J_fd, atol=1e-6)
+
+
+def _compiled_and_numpy(name: str, tool_in_world=None):
+    """The same robot's TCP kinematics on a compiled chain and on one that never compiles."""
+    import copy
+
+    import pinocchio as pin
+
+    from refine.robot.compiled_chain import CompiledChain
+    from refine.robot.kinematics import TcpKinematics
+    from refine.robot.registry import load_robot
+
+    robot = load_robot(name)
+    robot.chain = CompiledChain.from_model(robot.model, robot.flange_id)
+    slow = copy.copy(robot)
+    slow.chain = CompiledChain.from_model(robot.model, robot.flange_id, compile=False)
+    assert robot.chain.compiled and not slow.chain.compiled
+    base = pin.SE3(pin.exp3(np.array([0.0, 0.1, 0.3])), np.array([0.2, -0.1, 0.05])).homogeneous
+    tcp = pin.SE3(pin.exp3(np.array([0.2, -0.3, 0.1])), np.array([0.01, 0.02, 0.2])).homogeneous
+    return [TcpKinematics(r, base, tcp, tool_in_world) for r in (robot, slow)]
+
+
+@pytest.mark.parametrize("held", [False, True])
+def test_the_chain_compiled_follows_the_numpy_chain_through_a_half_turn_and_gives_up_alike(chain_cache, held):
+    """The waypoint-by-waypoint chain in C (a redundant arm's pull, with and without a standing tool) against
+    NumPy's: a waypoint turned by a half turn from the last answer (solved by NumPy's log3 in both), a step bound."""
+    import pinocchio as pin
+
+    from refine.optimise.seed import _solve_chain
+
+    world = (
+        pin.SE3(pin.exp3(np.array([2.8, 0.2, 0.1])), np.array([0.6, 0.2, 0.5])).homogeneous if held else None
+    )
+    kin, kin_np = _compiled_and_numpy("kuka_iiwa14_r820", world)
+    spec = kin.robot.spec
+    t = np.linspace(0.0, 1.0, 30)[:, None]
+    q_path = np.array([0.1, 0.5, -0.2, -1.2, 0.3, 0.8, 0.1]) + t * np.array(
+        [0.4, -0.3, 0.2, 0.5, -0.6, 0.3, 0.9]
+    )
+    targets = kin_np.poses(q_path)
+    targets[12, :3, :3] = targets[12, :3, :3] @ pin.exp3(np.array([0.0, np.pi - 1e-5, 0.0]))  # about y
+    from refine.optimise import seed as seed_module
+
+    calls = []
+
+    def counted(*args, **kwargs):
+        calls.append(args[1])
+        return solve_ik(*args, **kwargs)
+
+    for give_up in (None, 0.5):
+        with pytest.MonkeyPatch.context() as mp:  # in C, the chain hands only the half turn to solve_ik
+            mp.setattr(seed_module, "solve_ik", counted)
+            got = _solve_chain(kin, targets, q_path[0] + 0.05, spec.lower, spec.upper, give_up=give_up)
+        assert len(calls) == 1 and np.array_equal(calls.pop(), targets[12])
+        want = _solve_chain(kin_np, targets, q_path[0] + 0.05, spec.lower, spec.upper, give_up=give_up)
+        np.testing.assert_allclose(got[0], want[0], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(got[1], want[1], rtol=0, atol=1e-9)
+        assert (want[1][:12] < 1e-6).all()
+        assert np.isinf(want[1]).any() == (give_up is not None)
