@@ -370,7 +370,17 @@ seed, down to where it misses the path's shape and the full solve's iterations g
 coarse waypoints leave the full solve 6 to 155 iterations, and on the bends of the TIG seam (237
 waypoints, mid-range cost) 12 leave it 11 where 16-40 leave 5 (CPU 0.095 s against 0.077-0.080
 s). On the wave without mid-range cost, chained / 40 / 16 coarse waypoints: 100 waypoints 0.257 /
-- / 0.124 s, 120: - / 0.175 / 0.121 s, 400: - / 0.198 / 0.163 s."""
+- / 0.124 s, 120: - / 0.175 / 0.121 s, 400: - / 0.198 / 0.163 s. A path whose fine shape sets the
+elbow is seeded far from its answer: on Tesseract's puzzle piece (443 waypoints, a held part) the
+16-waypoint answer's joints 1, 3, 5 and 7 lie up to 1.45 rad from the full answer's (the coarse copy's
+objective is 2.45 at its own answer, 3.76 at the full answer's joints), and the full solve takes 132
+iterations to move them; 32, 48 or 64 coarse waypoints lead it to other local optima (full objective
+7.64, 8.00, 7.64 against 7.59). Nor does a coarse-copy term for the fine path's joint motion about
+each chord help there: the least-norm joint steps of the demonstrated pose steps' deviations,
+``trace((J Jᵀ)⁻¹ S)`` per coarse waypoint, predict 4.14 and 3.60 [deg²] at the two optima where the
+full answers spend 2.77 and 2.84 (the cone absorbs most of the demonstrated axis's wiggles; the
+position wiggles are worth 2e-4), so it ranks them wrongly and leads the full solve to the 7.64
+optimum (92 iterations instead of 132)."""
 
 
 COARSE_SEEDED_MU_INIT = 1e-4
