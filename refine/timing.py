@@ -174,7 +174,7 @@ def _toppra():
     """The toppra package and this module's subclasses of it, imported on first use.
 
     Returned: toppra, the path speed constraint, the free-end TOPPRA and the TOPPRA, both with
-    the lean passes of :mod:`refine.timing_passes`.
+    the lean passes of :mod:`refine.timing_passes`, and the spline the TOPPRA runs on.
 
     toppra imports matplotlib's pyplot when it is imported, for plotting helpers a run never
     calls and at more CPU time than the rest of the timing stage: pyplot is deferred until toppra
@@ -200,6 +200,28 @@ def _toppra():
             xbound = np.column_stack([np.zeros_like(cap), cap**2])
             return None, None, None, None, None, None, xbound
 
+    class _GridSpline(toppra.SplineInterpolator):
+        """toppra's spline through the waypoints, its values at the waypoints evaluated once per order.
+
+        TOPPRA's joint velocity and acceleration constraints and the timing each ask for ``q'``
+        and ``q''`` at the gridpoints, the waypoints: at positions equal to the waypoints' to the
+        bit, each order is evaluated once and every caller gets a copy of the same values.
+        """
+
+        def __call__(self, path_positions, order=0):  # noqa: D102
+            grid = self.ss_waypoints
+            if (
+                isinstance(path_positions, np.ndarray)
+                and path_positions.dtype == grid.dtype == np.float64
+                and path_positions.shape == grid.shape
+                and np.array_equal(path_positions.view(np.uint64), grid.view(np.uint64))
+            ):
+                at_grid = self.__dict__.setdefault("_at_grid", {})
+                if order not in at_grid:
+                    at_grid[order] = super().__call__(grid, order)
+                return at_grid[order].copy()
+            return super().__call__(path_positions, order)
+
     lean = lean_passes(toppra.algorithm.TOPPRA)  # toppra's passes to the bit, less of its Python
 
     class _FreeEndTOPPRA(lean):  # type: ignore[misc, valid-type]
@@ -212,7 +234,7 @@ def _toppra():
         def compute_controllable_sets(self, sdmin, sdmax):  # noqa: D102
             return super().compute_controllable_sets(0.0, sdmax)
 
-    return toppra, _PathSpeedConstraint, _FreeEndTOPPRA, lean
+    return toppra, _PathSpeedConstraint, _FreeEndTOPPRA, lean, _GridSpline
 
 
 @functools.lru_cache(maxsize=32)
@@ -248,8 +270,8 @@ def build_toppra(s, q, speed_cap, velocity_limits, acceleration_limits, *, free_
     Returns:
         A ``toppra.algorithm.TOPPRA`` on the spline through (s, q), gridpoints ``s``.
     """
-    toppra, _PathSpeedConstraint, _FreeEndTOPPRA, lean = _toppra()
-    path = toppra.SplineInterpolator(s, q)
+    toppra, _PathSpeedConstraint, _FreeEndTOPPRA, lean, _GridSpline = _toppra()
+    path = _GridSpline(s, q)
     velocity, acceleration = _joint_constraints(
         tuple(np.asarray(velocity_limits, dtype=float).tolist()),
         tuple(np.asarray(acceleration_limits, dtype=float).tolist()),

@@ -167,18 +167,32 @@ def forward_certificates(rows: tuple[Array, Array, Array, Array], x_guess: Array
         ``u_hi_g, L_hi, u_lo_g, L_lo, slack_0, L_0``, each shape (N + 1,); ends are +-inf where
         no row bounds ``u`` that way (the seidel wrapper's +-1e8 bounds are rows).
     """
+    u_hi, u_lo, slack_0 = guess_ends(rows, x_guess)
+    L_hi, L_lo, L_0 = end_slopes(rows)
+    return u_hi, L_hi, u_lo, L_lo, slack_0, L_0
+
+
+def guess_ends(rows: tuple[Array, Array, Array, Array], x_guess: Array) -> tuple[Array, Array, Array]:
+    """``u_hi_g, u_lo_g, slack_0`` of :func:`forward_certificates`: the rows' ends at the guess, each (N + 1,)."""
     A, B, C, _ = rows
     rest, upper, lower = _row_ends(A, B, C, x_guess)
-    up, down, flat = A > 0.0, A < 0.0, A == 0.0
+    flat = A == 0.0
+    slack_0 = np.min(np.where(flat, rest, np.inf), axis=1) if flat.any() else np.full(len(A), np.inf)
+    return np.min(upper, axis=1), np.max(lower, axis=1), slack_0
+
+
+def end_slopes(rows: tuple[Array, Array, Array, Array]) -> tuple[Array, Array, Array]:
+    """``L_hi, L_lo, L_0`` of :func:`forward_certificates`: how fast the ends move with ``x``, each (N + 1,).
+
+    Only a step whose ``x`` is off the guess needs them.
+    """
+    A, B, _, _ = rows
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         slope = np.abs(B / A)
-    u_hi = np.min(upper, axis=1)
-    L_hi = np.max(np.where(up, slope, 0.0), axis=1)
-    u_lo = np.max(lower, axis=1)
-    L_lo = np.max(np.where(down, slope, 0.0), axis=1)
-    slack_0 = np.min(np.where(flat, rest, np.inf), axis=1)
-    L_0 = np.max(np.where(flat, np.abs(B), 0.0), axis=1)
-    return u_hi, L_hi, u_lo, L_lo, slack_0, L_0
+    L_hi = np.max(np.where(A > 0.0, slope, 0.0), axis=1)
+    L_lo = np.max(np.where(A < 0.0, slope, 0.0), axis=1)
+    L_0 = np.max(np.where(A == 0.0, np.abs(B), 0.0), axis=1)
+    return L_hi, L_lo, L_0
 
 
 def _step_onto_top(x: Array, K: Array, two_deltas: Array, tiny: float) -> tuple[Array, Array]:
@@ -378,8 +392,7 @@ def lean_passes(base: type) -> type:
             solve, costs = self._solve, self._stage_costs()
             rows = self._stage_rows()
             g, u_g, good = forward_guess(x, K, two_deltas_arr, tiny)
-            certificates = forward_certificates(rows, g)
-            u_hi, _, u_lo, _, slack_0, _ = certificates
+            u_hi, u_lo, slack_0 = guess_ends(rows, g)  # the slopes only where a step leaves the guess
             x_bounds = rows[3]
             margin = _TOP_MARGIN_REL
             good &= (
@@ -397,7 +410,10 @@ def lean_passes(base: type) -> type:
             else:
                 run_end = run_end.tolist()
                 good_list, g_list = good.tolist(), g.tolist()
-                u_hi, L_hi, u_lo, L_lo, slack_0, L_0 = (v.tolist() for v in certificates)
+                L_hi, L_lo, L_0 = end_slopes(rows)
+                u_hi, L_hi, u_lo, L_lo, slack_0, L_0 = (
+                    v.tolist() for v in (u_hi, L_hi, u_lo, L_lo, slack_0, L_0)
+                )
                 x_lo, x_hi = x_bounds[:, 0].tolist(), x_bounds[:, 1].tolist()
                 K_lo, K_hi = K[:, 0].tolist(), K[:, 1].tolist()
                 two_deltas = two_deltas_arr.tolist()

@@ -474,3 +474,28 @@ def test_the_lean_passes_stop_where_toppra_does_on_an_end_speed_it_cannot_reach(
     assert lean.compute_parameterization(0.0, 40.0)[0] is None
     assert own.compute_parameterization(0.0, 40.0)[0] is None
     assert lean.problem_data.return_code == own.problem_data.return_code
+
+
+def test_the_timings_spline_gives_toppras_values_and_a_copy_each_call():
+    """The spline TOPPRA runs on: at the waypoints (an equal array, not the same object) and
+    elsewhere, each order is toppra's own spline's to the bit (and SciPy's not-a-knot cubic
+    spline's to rounding), and a caller that writes into what it got changes nothing another
+    caller gets."""
+    from scipy.interpolate import CubicSpline
+
+    s, q = smooth_path(n_pts=101, seed=4)
+    path = timing.build_toppra(s, q, np.full(len(s), 0.3), np.ones(N_JOINTS), np.ones(N_JOINTS)).path
+    own = toppra.SplineInterpolator(s, q)
+    spline = CubicSpline(s, q, bc_type="not-a-knot")
+    elsewhere = np.linspace(s[0], s[-1], 37)
+    for order in (0, 1, 2):
+        want = own(s, order)
+        got = path(s.copy(), order)
+        np.testing.assert_array_equal(got, want)
+        np.testing.assert_allclose(got, spline(s, order), rtol=1e-13, atol=1e-13 * np.abs(want).max())
+        got[:] = np.nan  # the caller's own copy
+        np.testing.assert_array_equal(path(s.copy(), order), want)
+        np.testing.assert_array_equal(path(elsewhere, order), own(elsewhere, order))
+    shifted = s.copy()
+    shifted[3] = 0.5 * (s[3] + s[4])  # one position off the waypoints: evaluated there
+    np.testing.assert_array_equal(path(shifted, 1), own(shifted, 1))

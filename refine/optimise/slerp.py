@@ -92,6 +92,8 @@ def exp_rotvecs(w: Array) -> Array:
 def _rodrigues_coefficients(theta: Array) -> tuple[Array, Array]:
     """``sin θ / θ`` and ``2 sin²(θ/2) / θ²`` of angles ``theta`` [rad], by their series below :data:`SMALL_RAD`."""
     small = theta < SMALL_RAD
+    if not small.any():  # the closed forms everywhere: the same values without the series
+        return np.sin(theta) / theta, 2.0 * (np.sin(theta / 2.0) / theta) ** 2
     t2 = theta**2
     safe = np.where(small, 1.0, theta)
     a = np.where(small, 1.0 - t2 / 6.0 + t2**2 / 120.0, np.sin(safe) / safe)
