@@ -365,6 +365,18 @@ def _verify(s: Array, checks) -> None:
             )
 
 
+def _at_faster_ends(ratio: Array, speed: Array, between: Array) -> None:
+    """Raise ``ratio`` (N, n) at each segment's faster end to the segment's ``between`` (N - 1, n), in place.
+
+    A segment's end is waypoint k+1 where ``speed[k+1] > speed[k]`` [m/s], else waypoint k. A
+    waypoint ends at most two segments, and the largest of what it gets is the same in any order
+    (``np.maximum.at`` of the ends), so two shifted maxima give it.
+    """
+    to_end = (speed[1:] > speed[:-1])[:, None]
+    np.maximum(ratio[:-1], np.where(to_end, -np.inf, between), out=ratio[:-1])
+    np.maximum(ratio[1:], np.where(to_end, between, -np.inf), out=ratio[1:])
+
+
 def _binding_limit(run: Array, k: int, vel_ratio: Array, acc_ratio: Array) -> str:
     """Name the limit behind a slowdown: what binds at the slowest waypoint, else in the run."""
     candidates = (
@@ -499,8 +511,7 @@ def time_parameterise(
     # ---- where and why the plan is slower than the demonstration
     ratio = speed / cap
     vel_ratio = np.abs(qd) / vlim
-    faster_end = np.arange(len(s) - 1) + (speed[1:] > speed[:-1])  # a segment's bound counts there
-    np.maximum.at(vel_ratio, faster_end, between)
+    _at_faster_ends(vel_ratio, speed, between)
     acc_ratio = np.abs(qdd) / alim
     acc_ratio[1:] = np.maximum(acc_ratio[1:], np.abs(qdd_left) / alim)
     slow = ratio < 1.0 - tolerance_rel

@@ -86,8 +86,8 @@ def stage_rows(params: list, n_points: int) -> tuple[Array, Array, Array, Array]
         n_points: number of gridpoints.
 
     Returns:
-        ``A, B, C`` shape (n_points, m) (the two bounds on ``u`` among the rows), ``x_bounds``
-        shape (n_points, 2) [m^2/s^2], as the seidel wrapper makes them.
+        ``A, B, C`` shape (n_points, m) (the two bounds on ``u`` among the rows; column-major),
+        ``x_bounds`` shape (n_points, 2) [m^2/s^2], as the seidel wrapper makes them.
     """
     u_bounds = np.tile([-_VAR_BOUND, _VAR_BOUND], (n_points, 1))
     x_bounds = u_bounds.copy()
@@ -101,7 +101,10 @@ def stage_rows(params: list, n_points: int) -> tuple[Array, Array, Array, Array]
                 into[:, 0] = np.maximum(into[:, 0], np.asarray(bound)[:, 0])
                 into[:, 1] = np.minimum(into[:, 1], np.asarray(bound)[:, 1])
     m = sum(F.shape[-2] for F, *_ in blocks) + 2
-    A, B, C = np.empty((n_points, m)), np.zeros((n_points, m)), np.empty((n_points, m))
+    # column-major: each stage's row of A, B, C is strided, each row's column contiguous, so the
+    # passes' reductions over a stage's rows run column by column over every stage at once
+    A, B, C = (np.empty((n_points, m), order="F") for _ in range(3))
+    B[:] = 0.0
     k = 0
     for F, h, a, b, c in blocks:  # each constraint's rows into its columns
         cols = slice(k, k + F.shape[-2])
@@ -290,12 +293,32 @@ def _next_false(flags: Array) -> Array:
     return np.minimum.accumulate(where[::-1])[::-1]
 
 
+def _strictly_increasing_grid(path: Any, gridpoints: Any) -> bool:
+    """Whether toppra's ``ParameterizationAlgorithm`` accepts ``gridpoints`` of ``path`` without a word.
+
+    Given gridpoints that span the path's interval and strictly increase (its check, one
+    comparison per stage); otherwise (None, another span, a NaN) its own ``__init__`` decides.
+    """
+    if gridpoints is None:
+        return False
+    g = np.asarray(gridpoints)
+    if g.ndim != 1 or len(g) < 2 or g.dtype.kind != "f":
+        return False
+    start, end = path.path_interval[0], path.path_interval[1]
+    return bool(start == g[0] and end == g[-1] and np.all(g[1:] > g[:-1]))
+
+
 def lean_passes(base: type) -> type:
     """A subclass of toppra algorithm class ``base`` (``toppra.algorithm.TOPPRA``) with lean passes."""
     import toppra.constants
     import toppra.exceptions
-    from toppra.algorithm.algorithm import ParameterizationAlgorithm, ParameterizationReturnCode
+    from toppra.algorithm.algorithm import (
+        ParameterizationAlgorithm,
+        ParameterizationData,
+        ParameterizationReturnCode,
+    )
     from toppra.constraint import ConstraintType
+    from toppra.parametrizer import ParametrizeSpline
     from toppra.solverwrapper.cy_seidel_solverwrapper import seidelWrapper
 
     tiny, small, max_tries = toppra.constants.TINY, toppra.constants.SMALL, toppra.constants.MAX_TRIES
@@ -309,7 +332,18 @@ def lean_passes(base: type) -> type:
                 super().__init__(constraint_list, path, gridpoints, solver_wrapper, **kwargs)
                 return
             # toppra's own choice of wrapper, seidel, made when a step first needs it
-            ParameterizationAlgorithm.__init__(self, constraint_list, path, gridpoints=gridpoints, **kwargs)
+            if kwargs or not _strictly_increasing_grid(path, gridpoints):
+                ParameterizationAlgorithm.__init__(
+                    self, constraint_list, path, gridpoints=gridpoints, **kwargs
+                )
+                return
+            # ParameterizationAlgorithm.__init__'s state, its gridpoint check vectorised
+            self.constraints, self.path = constraint_list, path
+            self._problem_data = ParameterizationData()
+            self.gridpoints = np.array(gridpoints)
+            self._problem_data.gridpoints = np.array(gridpoints)
+            self._N = len(gridpoints) - 1
+            self.parametrizer = ParametrizeSpline
 
         @property
         def solver_wrapper(self):  # noqa: D102
