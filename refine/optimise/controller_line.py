@@ -20,8 +20,7 @@ and k+1 with poses (p_k, R_k) and (p_{k+1}, R_{k+1}):
 **The check** (:func:`check_controller_lines`): every segment is sampled at ``t = i/m``
 (``m`` even and >= :data:`MIN_SAMPLES`, more where a joint moves more than
 :data:`MAX_SAMPLE_STEP_DEG` between samples); the joints at each sample are solved by damped least squares from the joint-linear
-interpolation (moved by one Newton step, :func:`refine.optimise.line_start.newton_start` or its
-compiled :func:`refine.optimise.line_start.newton_steps`; on a
+interpolation (moved by one Newton step, :func:`refine.optimise.line_start.newton_start`; on a
 re-solve, where the waypoints barely moved, plus the previous answer's bow at the same sample,
 :func:`refine.optimise.line_start.previous_bows`), without a pull to mid-range, so they stay on the refined joints' branch (as the
 controller's IK from its current joints). At every sample: the IK's residual, the joint-limit

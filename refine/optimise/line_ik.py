@@ -5,15 +5,12 @@
   and what the check needs of it: the residuals, the manipulability (:func:`line_manipulability`)
   and the joint-linear motion's distance from the line, per segment.
 
-The passes over the samples: the waypoints' poses (for the targets), the joint-linear poses (the
-start's pose errors and the figures) and the IK's passes, whose first is at the start and the last
-at the answer (its Jacobians give the manipulability). Where the robot's chain is compiled, the
-joint-linear pass is the compiled IK step's, which gives the Newton start too
-(:func:`refine.optimise.line_start.newton_steps`); else NumPy's poses and the start from the
-waypoints' Jacobians' interpolated damped inverses (:func:`refine.optimise.line_start.newton_start`).
-A start within the IK's tolerance leaves the IK that one pass; on a re-solve the previous line's
-corrections of its starts (:func:`refine.optimise.line_start.previous_corrections`) bring most
-samples there.
+The passes over the samples: the waypoints' poses and Jacobians (for the targets and the start's
+interpolated damped inverses), the joint-linear poses (the start's pose errors and the figures), and
+the IK's passes, whose first is at the start and the last at the answer (its Jacobians give the
+manipulability). A start within the IK's tolerance leaves the IK that one pass; on a re-solve the
+previous line's corrections of its starts (:func:`refine.optimise.line_start.previous_corrections`)
+bring most samples there.
 """
 
 from __future__ import annotations
@@ -22,14 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from refine.optimise.line_start import (
-    compiled_newton,
-    newton_start,
-    newton_steps,
-    pose_errors,
-    previous_bows,
-    previous_corrections,
-)
+from refine.optimise.line_start import newton_start, pose_errors, previous_bows, previous_corrections
 from refine.optimise.slerp import log_rotations, slerp_rotations
 from refine.robot.kinematics import TcpKinematics, solve_ik_batch
 from refine.types import Array
@@ -133,26 +123,20 @@ def solve_line(
     """
     spec = kin.robot.spec
     q_lin = joint_linear(q, segment, t) if q_lin is None else q_lin
+    poses, J_wp = kin.poses_jacobians(q)
+    targets = line_poses(poses, q, segment, t, kin, wrist)
+    lin_poses = kin.poses(q_lin)
+    errors = pose_errors(lin_poses, targets)
     bows = None if previous is None else previous_bows(q, m, segment, t, previous, tolerance)
     cold = np.ones(len(t), dtype=bool) if bows is None else np.isnan(bows[:, 0])
-    compiled = compiled_newton(kin)
-    poses, J_wp = (kin.poses(q), None) if compiled else kin.poses_jacobians(q)
-    targets = line_poses(poses, q, segment, t, kin, wrist)
-    if compiled:  # the IK's own first step at q_lin where a row starts cold; its pose errors at all
-        lin_poses, errors, start = newton_steps(kin, q_lin, targets, cold)
-        if not cold.all():
-            start[~cold] = q_lin[~cold] + bows[~cold]
+    if cold.all():
+        start = newton_start(J_wp, segment, t, q_lin, lin_poses, targets, errors)
     else:
-        lin_poses = kin.poses(q_lin)
-        errors = pose_errors(lin_poses, targets)
-        if cold.all():
-            start = newton_start(J_wp, segment, t, q_lin, lin_poses, targets, errors)
-        else:
-            start = q_lin + np.where(cold[:, None], 0.0, bows)
-            if cold.any():
-                start[cold] = newton_start(
-                    J_wp, segment[cold], t[cold], q_lin[cold], lin_poses[cold], targets[cold], errors[cold]
-                )
+        start = q_lin + np.where(cold[:, None], 0.0, bows)
+        if cold.any():
+            start[cold] = newton_start(
+                J_wp, segment[cold], t[cold], q_lin[cold], lin_poses[cold], targets[cold], errors[cold]
+            )
     newton = start.copy()
     if previous is not None:
         corrections = previous_corrections(q, m, segment, t, previous, tolerance)

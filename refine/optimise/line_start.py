@@ -3,9 +3,7 @@
 Starts close to the line's joints so that the IK (to ``IK_TOLERANCE``) needs few passes and
 stays on the refined joints' branch:
 
-* :func:`newton_start`: the joint-linear joints moved by one damped Newton step, with the
-  waypoints' damped inverses interpolated; where the robot's chain is compiled,
-  :func:`newton_steps`: the compiled IK's own first step at the joint-linear joints;
+* :func:`newton_start`: the joint-linear joints moved by one damped Newton step;
 * :func:`previous_bows`: on a re-solve, the previous answer's line: its bow ``q_line - q_lin`` at
   the same sample, added to the new joint-linear joints. A small move of the waypoints leaves the
   bow the same to first order, so this start is within the IK's tolerance of the new line at most
@@ -20,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from refine.robot.kinematics import TcpKinematics, rotation_vectors
+from refine.robot.kinematics import rotation_vectors
 from refine.types import Array
 
 NEWTON_DAMPING = 1e-3
@@ -69,72 +67,6 @@ def newton_start(
     dq[~(largest_per_row(np.abs(dq)) <= NEWTON_STEP_MAX)] = 0.0  # and a NaN step: from q_lin
     dq += q_lin
     return dq
-
-
-def compiled_newton(kin: TcpKinematics) -> bool:
-    """Whether :func:`newton_steps` takes the line's Newton steps for ``kin``.
-
-    Where the robot's chain is compiled and the tool rides on the flange: the case the compiled
-    IK step serves (:func:`refine.robot.kinematics.solve_ik_batch`'s).
-    """
-    chain = kin.robot.chain
-    return kin.tool_in_world is None and chain is not None and chain.compiled
-
-
-def newton_steps(
-    kin: TcpKinematics, q_lin: Array, targets: Array, stepped: Array | None = None
-) -> tuple[Array, Array, Array]:
-    """The joint-linear poses, their pose errors and the IK's starts, by the compiled IK step.
-
-    The compiled damped least-squares step (:meth:`refine.robot.compiled_chain.CompiledChain.ik_steps`,
-    as :func:`refine.robot.kinematics.solve_ik_batch` takes it) at the joint-linear joints
-    ``q_lin`` (M, n) [rad] toward the line's poses ``targets`` (M, 4, 4) gives the TCP poses at
-    ``q_lin`` (M, 4, 4) and their pose errors to ``targets`` (M, 6) [m, rad] (:func:`pose_errors`'
-    formula; within 1e-3 rad of π, where the compiled error takes no branch, :func:`pose_errors`'
-    own), the same operations for every row. The start of a row ``stepped`` (M,) (default all) is
-    ``q_lin`` moved by ``Jᵀ (J Jᵀ + λ² I)⁻¹ e`` with the Jacobian at ``q_lin`` itself
-    (:data:`NEWTON_DAMPING`): :func:`newton_start`'s step without interpolating the inverse, so it
-    misses the line by the square of the step as that one does, and a previous line's corrections
-    (:func:`previous_corrections`) carry over alike. A row whose step exceeds
-    :data:`NEWTON_STEP_MAX` or is near π starts from ``q_lin`` as it is; the other rows' starts are
-    ``q_lin`` (their step is not solved: the compiled step skips a row under its tolerance, here
-    infinite). Only where :func:`compiled_newton` holds.
-    """
-    q_lin = np.ascontiguousarray(q_lin, dtype=float)
-    stepped = np.ones(len(q_lin), dtype=bool) if stepped is None else np.asarray(stepped, dtype=bool)
-    T, e = np.empty((len(q_lin), 4, 4)), np.empty((len(q_lin), 6))
-    dq, theta = np.zeros(q_lin.shape), np.empty(len(q_lin))
-    for rows, tol in ((stepped, 0.0), (~stepped, np.inf)):
-        if not rows.any():
-            continue
-        every = rows.all()
-        q_rows = q_lin if every else q_lin[rows]
-        T_rows, J_rows = np.empty((len(q_rows), 4, 4)), np.empty((len(q_rows), 6, q_lin.shape[1]))
-        e_rows, _, dq_rows, theta_rows = kin.robot.chain.ik_steps(
-            q_rows,
-            kin.base_in_world,
-            kin.tcp_in_flange,
-            targets if every else targets[rows],
-            NEWTON_DAMPING,
-            T_rows,
-            J_rows,
-            False,
-            tol,
-        )
-        if every:
-            T, e, theta = T_rows, e_rows, theta_rows
-            dq = dq_rows if tol == 0.0 else dq
-        else:
-            T[rows], e[rows], theta[rows] = T_rows, e_rows, theta_rows
-            if tol == 0.0:
-                dq[rows] = dq_rows
-    near_pi = np.flatnonzero(theta > np.pi - 1e-3)
-    if len(near_pi):
-        e[near_pi] = pose_errors(T[near_pi], targets[near_pi])
-        dq[near_pi] = np.nan
-    dq[~(largest_per_row(np.abs(dq)) <= NEWTON_STEP_MAX)] = 0.0  # and a NaN step: from q_lin
-    dq += q_lin
-    return T, e, dq
 
 
 def largest_per_row(a: Array) -> Array:
@@ -244,14 +176,13 @@ def previous_corrections(
 ) -> Array:
     """Per sample, what a previous answer's line IK changed its Newton start by at the same ``t``, (M, n).
 
-    The Newton start (:func:`newton_start`, :func:`newton_steps`) misses the line by the square of
-    its step (the pose's curvature along the step, the interpolated inverse's error) and the IK's
-    next pass takes that up: about 1e-8 rad where the bow is largest, above the IK's tolerance at
-    a sixth (an eighth from the compiled step) of the glass cell's samples. That correction is a
-    smooth function of the waypoints, so a re-solve's moved waypoints leave it the same to first
-    order in the move: added to the new Newton start, it brings the start within the tolerance
-    (the glass cell's 2 mm part shift, waypoints moved up to 8e-3 rad: at all but 2 of 4,319
-    samples, against 698 without it, 539 from the compiled step). The IK still converges from
+    The Newton start (:func:`newton_start`) misses the line by the square of its step (the pose's
+    curvature along the step, the interpolated inverse's error) and the IK's next pass takes that
+    up: about 1e-8 rad where the bow is largest, above the IK's tolerance at a sixth of the glass
+    cell's samples. That correction is a smooth function of the waypoints, so a re-solve's moved
+    waypoints leave it the same to first order in the move: added to the new Newton start, it
+    brings the start within the tolerance (the glass cell's 2 mm part shift, waypoints moved up to
+    8e-3 rad: at all but 2 of 4,319 samples, against 698 without it). The IK still converges from
     that start to the same tolerance; the correction only saves it a pass.
 
     Args:

@@ -10,15 +10,7 @@ from scipy.spatial.transform import Rotation, Slerp
 from refine.frames import make_transform
 from refine.optimise.controller_line import IK_TOLERANCE, check_controller_lines, sample_parameters
 from refine.optimise.line_ik import line_manipulability
-from refine.optimise.line_start import (
-    CORRECTION_MAX_RAD,
-    NEWTON_DAMPING,
-    NEWTON_STEP_MAX,
-    compiled_newton,
-    newton_start,
-    newton_steps,
-    previous_corrections,
-)
+from refine.optimise.line_start import CORRECTION_MAX_RAD, newton_start, previous_corrections
 from refine.robot.kinematics import TcpKinematics
 from refine.robot.registry import load_robot
 from refine.settings import Tolerances
@@ -173,11 +165,8 @@ def test_a_re_solve_starts_from_the_newton_step_plus_the_previous_lines_correcti
 
     targets = _targets(plain, q, segment, t)
     q_lin = q[segment] + t[:, None] * (q[segment + 1] - q[segment])
-    if compiled_newton(kin):  # the start the check takes: the compiled IK step at q_lin
-        newton = newton_steps(kin, q_lin, targets)[2]
-    else:
-        poses, J_wp = kin.poses_jacobians(q)
-        newton = newton_start(J_wp, segment, t, q_lin, kin.poses(q_lin), targets)
+    poses, J_wp = kin.poses_jacobians(q)
+    newton = newton_start(J_wp, segment, t, q_lin, kin.poses(q_lin), targets)
     alone = np.array([np.linalg.norm(plain.error(x, T)) for x, T in zip(newton, targets, strict=True)])
     carried = np.array(
         [np.linalg.norm(plain.error(x, T)) for x, T in zip(newton + corrections, targets, strict=True)]
@@ -234,37 +223,3 @@ def test_a_line_source_starts_the_next_rounds_line_from_its_last_one():
     cold = check_controller_lines(kin, q2, s, Tolerances())
     np.testing.assert_allclose(second.q, cold.q, rtol=0, atol=1e-8)
     assert source.checks == 2 and second.ik_error.max() <= IK_TOLERANCE
-
-
-def test_the_compiled_newton_step_is_one_damped_step_at_the_joint_linear_joints():
-    """Random joints and targets near their poses: the poses and pose errors are Pinocchio's and
-    SciPy's at every row, and a stepped row's start is ``q + Jᵀ (J Jᵀ + λ² I)⁻¹ e`` with the
-    damped inverse by the singular values of Pinocchio's Jacobian at ``q`` (the rows stepping
-    more than NEWTON_STEP_MAX, and the rows not stepped, keep ``q``)."""
-    plain = PlainIk(BASES["turned"])
-    kin = TcpKinematics(plain.robot, BASES["turned"], TCP)
-    if not compiled_newton(kin):
-        pytest.skip("the robot's chain is not compiled here")
-    rng = np.random.default_rng(4)
-    m = 120
-    q = Q0 + rng.uniform(-0.3, 0.3, (m, 6))
-    err = rng.normal(size=(m, 6)) * np.where(np.arange(m) % 7 == 0, 1e-1, 1e-5)[:, None]  # some too long
-    targets = np.empty((m, 4, 4))
-    for i in range(m):
-        T = plain.pose_jacobian(q[i])[0]
-        targets[i] = T
-        targets[i, :3, 3] += err[i, :3]
-        targets[i, :3, :3] = Rotation.from_rotvec(err[i, 3:]).as_matrix() @ T[:3, :3]
-    stepped = np.arange(m) % 3 != 1
-    poses, errors, start = newton_steps(kin, q, targets, stepped)
-    taken = 0
-    for i in range(m):
-        T, J = plain.pose_jacobian(q[i])
-        np.testing.assert_allclose(poses[i], T, rtol=0.0, atol=1e-12)
-        np.testing.assert_allclose(errors[i], plain.error(q[i], targets[i]), rtol=1e-9, atol=1e-13)
-        U, sv, Vt = np.linalg.svd(J)
-        dq = Vt.T @ np.diag(sv / (sv**2 + NEWTON_DAMPING**2)) @ U.T @ errors[i]
-        take = stepped[i] and np.abs(dq).max() <= NEWTON_STEP_MAX
-        taken += take
-        np.testing.assert_allclose(start[i], q[i] + dq if take else q[i], rtol=0.0, atol=1e-12)
-    assert 0 < taken < stepped.sum()
