@@ -174,7 +174,7 @@ def _toppra():
     """The toppra package and this module's subclasses of it, imported on first use.
 
     Returned: toppra, the path speed constraint, the free-end TOPPRA and the TOPPRA, both with
-    the lean passes of :mod:`refine.timing_passes`.
+    the lean passes of :mod:`refine.timing_passes`, and the spline the TOPPRA runs on.
 
     toppra imports matplotlib's pyplot when it is imported, for plotting helpers a run never
     calls and at more CPU time than the rest of the timing stage: pyplot is deferred until toppra
@@ -200,6 +200,28 @@ def _toppra():
             xbound = np.column_stack([np.zeros_like(cap), cap**2])
             return None, None, None, None, None, None, xbound
 
+    class _GridSpline(toppra.SplineInterpolator):
+        """toppra's spline through the waypoints, its values at the waypoints evaluated once per order.
+
+        TOPPRA's joint velocity and acceleration constraints and the timing each ask for ``q'``
+        and ``q''`` at the gridpoints, the waypoints: at positions equal to the waypoints' to the
+        bit, each order is evaluated once and every caller gets a copy of the same values.
+        """
+
+        def __call__(self, path_positions, order=0):  # noqa: D102
+            grid = self.ss_waypoints
+            if (
+                isinstance(path_positions, np.ndarray)
+                and path_positions.dtype == grid.dtype == np.float64
+                and path_positions.shape == grid.shape
+                and np.array_equal(path_positions.view(np.uint64), grid.view(np.uint64))
+            ):
+                at_grid = self.__dict__.setdefault("_at_grid", {})
+                if order not in at_grid:
+                    at_grid[order] = super().__call__(grid, order)
+                return at_grid[order].copy()
+            return super().__call__(path_positions, order)
+
     lean = lean_passes(toppra.algorithm.TOPPRA)  # toppra's passes to the bit, less of its Python
 
     class _FreeEndTOPPRA(lean):  # type: ignore[misc, valid-type]
@@ -212,7 +234,7 @@ def _toppra():
         def compute_controllable_sets(self, sdmin, sdmax):  # noqa: D102
             return super().compute_controllable_sets(0.0, sdmax)
 
-    return toppra, _PathSpeedConstraint, _FreeEndTOPPRA, lean
+    return toppra, _PathSpeedConstraint, _FreeEndTOPPRA, lean, _GridSpline
 
 
 @functools.lru_cache(maxsize=32)
@@ -248,8 +270,8 @@ def build_toppra(s, q, speed_cap, velocity_limits, acceleration_limits, *, free_
     Returns:
         A ``toppra.algorithm.TOPPRA`` on the spline through (s, q), gridpoints ``s``.
     """
-    toppra, _PathSpeedConstraint, _FreeEndTOPPRA, lean = _toppra()
-    path = toppra.SplineInterpolator(s, q)
+    toppra, _PathSpeedConstraint, _FreeEndTOPPRA, lean, _GridSpline = _toppra()
+    path = _GridSpline(s, q)
     velocity, acceleration = _joint_constraints(
         tuple(np.asarray(velocity_limits, dtype=float).tolist()),
         tuple(np.asarray(acceleration_limits, dtype=float).tolist()),
@@ -341,6 +363,18 @@ def _verify(s: Array, checks) -> None:
                 f"{what.format(j + 1)} {values[i, j]:.6g} {unit} exceeds its limit {limits[i, j]:.6g} "
                 f"{unit} at s = {s[i]:.4f} m"
             )
+
+
+def _at_faster_ends(ratio: Array, speed: Array, between: Array) -> None:
+    """Raise ``ratio`` (N, n) at each segment's faster end to the segment's ``between`` (N - 1, n), in place.
+
+    A segment's end is waypoint k+1 where ``speed[k+1] > speed[k]`` [m/s], else waypoint k. A
+    waypoint ends at most two segments, and the largest of what it gets is the same in any order
+    (``np.maximum.at`` of the ends), so two shifted maxima give it.
+    """
+    to_end = (speed[1:] > speed[:-1])[:, None]
+    np.maximum(ratio[:-1], np.where(to_end, -np.inf, between), out=ratio[:-1])
+    np.maximum(ratio[1:], np.where(to_end, between, -np.inf), out=ratio[1:])
 
 
 def _binding_limit(run: Array, k: int, vel_ratio: Array, acc_ratio: Array) -> str:
@@ -477,8 +511,7 @@ def time_parameterise(
     # ---- where and why the plan is slower than the demonstration
     ratio = speed / cap
     vel_ratio = np.abs(qd) / vlim
-    faster_end = np.arange(len(s) - 1) + (speed[1:] > speed[:-1])  # a segment's bound counts there
-    np.maximum.at(vel_ratio, faster_end, between)
+    _at_faster_ends(vel_ratio, speed, between)
     acc_ratio = np.abs(qdd) / alim
     acc_ratio[1:] = np.maximum(acc_ratio[1:], np.abs(qdd_left) / alim)
     slow = ratio < 1.0 - tolerance_rel

@@ -86,8 +86,8 @@ def stage_rows(params: list, n_points: int) -> tuple[Array, Array, Array, Array]
         n_points: number of gridpoints.
 
     Returns:
-        ``A, B, C`` shape (n_points, m) (the two bounds on ``u`` among the rows), ``x_bounds``
-        shape (n_points, 2) [m^2/s^2], as the seidel wrapper makes them.
+        ``A, B, C`` shape (n_points, m) (the two bounds on ``u`` among the rows; column-major),
+        ``x_bounds`` shape (n_points, 2) [m^2/s^2], as the seidel wrapper makes them.
     """
     u_bounds = np.tile([-_VAR_BOUND, _VAR_BOUND], (n_points, 1))
     x_bounds = u_bounds.copy()
@@ -101,7 +101,10 @@ def stage_rows(params: list, n_points: int) -> tuple[Array, Array, Array, Array]
                 into[:, 0] = np.maximum(into[:, 0], np.asarray(bound)[:, 0])
                 into[:, 1] = np.minimum(into[:, 1], np.asarray(bound)[:, 1])
     m = sum(F.shape[-2] for F, *_ in blocks) + 2
-    A, B, C = np.empty((n_points, m)), np.zeros((n_points, m)), np.empty((n_points, m))
+    # column-major: each stage's row of A, B, C is strided, each row's column contiguous, so the
+    # passes' reductions over a stage's rows run column by column over every stage at once
+    A, B, C = (np.empty((n_points, m), order="F") for _ in range(3))
+    B[:] = 0.0
     k = 0
     for F, h, a, b, c in blocks:  # each constraint's rows into its columns
         cols = slice(k, k + F.shape[-2])
@@ -167,18 +170,32 @@ def forward_certificates(rows: tuple[Array, Array, Array, Array], x_guess: Array
         ``u_hi_g, L_hi, u_lo_g, L_lo, slack_0, L_0``, each shape (N + 1,); ends are +-inf where
         no row bounds ``u`` that way (the seidel wrapper's +-1e8 bounds are rows).
     """
+    u_hi, u_lo, slack_0 = guess_ends(rows, x_guess)
+    L_hi, L_lo, L_0 = end_slopes(rows)
+    return u_hi, L_hi, u_lo, L_lo, slack_0, L_0
+
+
+def guess_ends(rows: tuple[Array, Array, Array, Array], x_guess: Array) -> tuple[Array, Array, Array]:
+    """``u_hi_g, u_lo_g, slack_0`` of :func:`forward_certificates`: the rows' ends at the guess, each (N + 1,)."""
     A, B, C, _ = rows
     rest, upper, lower = _row_ends(A, B, C, x_guess)
-    up, down, flat = A > 0.0, A < 0.0, A == 0.0
+    flat = A == 0.0
+    slack_0 = np.min(np.where(flat, rest, np.inf), axis=1) if flat.any() else np.full(len(A), np.inf)
+    return np.min(upper, axis=1), np.max(lower, axis=1), slack_0
+
+
+def end_slopes(rows: tuple[Array, Array, Array, Array]) -> tuple[Array, Array, Array]:
+    """``L_hi, L_lo, L_0`` of :func:`forward_certificates`: how fast the ends move with ``x``, each (N + 1,).
+
+    Only a step whose ``x`` is off the guess needs them.
+    """
+    A, B, _, _ = rows
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         slope = np.abs(B / A)
-    u_hi = np.min(upper, axis=1)
-    L_hi = np.max(np.where(up, slope, 0.0), axis=1)
-    u_lo = np.max(lower, axis=1)
-    L_lo = np.max(np.where(down, slope, 0.0), axis=1)
-    slack_0 = np.min(np.where(flat, rest, np.inf), axis=1)
-    L_0 = np.max(np.where(flat, np.abs(B), 0.0), axis=1)
-    return u_hi, L_hi, u_lo, L_lo, slack_0, L_0
+    L_hi = np.max(np.where(A > 0.0, slope, 0.0), axis=1)
+    L_lo = np.max(np.where(A < 0.0, slope, 0.0), axis=1)
+    L_0 = np.max(np.where(A == 0.0, np.abs(B), 0.0), axis=1)
+    return L_hi, L_lo, L_0
 
 
 def _step_onto_top(x: Array, K: Array, two_deltas: Array, tiny: float) -> tuple[Array, Array]:
@@ -276,12 +293,32 @@ def _next_false(flags: Array) -> Array:
     return np.minimum.accumulate(where[::-1])[::-1]
 
 
+def _strictly_increasing_grid(path: Any, gridpoints: Any) -> bool:
+    """Whether toppra's ``ParameterizationAlgorithm`` accepts ``gridpoints`` of ``path`` without a word.
+
+    Given gridpoints that span the path's interval and strictly increase (its check, one
+    comparison per stage); otherwise (None, another span, a NaN) its own ``__init__`` decides.
+    """
+    if gridpoints is None:
+        return False
+    g = np.asarray(gridpoints)
+    if g.ndim != 1 or len(g) < 2 or g.dtype.kind != "f":
+        return False
+    start, end = path.path_interval[0], path.path_interval[1]
+    return bool(start == g[0] and end == g[-1] and np.all(g[1:] > g[:-1]))
+
+
 def lean_passes(base: type) -> type:
     """A subclass of toppra algorithm class ``base`` (``toppra.algorithm.TOPPRA``) with lean passes."""
     import toppra.constants
     import toppra.exceptions
-    from toppra.algorithm.algorithm import ParameterizationAlgorithm, ParameterizationReturnCode
+    from toppra.algorithm.algorithm import (
+        ParameterizationAlgorithm,
+        ParameterizationData,
+        ParameterizationReturnCode,
+    )
     from toppra.constraint import ConstraintType
+    from toppra.parametrizer import ParametrizeSpline
     from toppra.solverwrapper.cy_seidel_solverwrapper import seidelWrapper
 
     tiny, small, max_tries = toppra.constants.TINY, toppra.constants.SMALL, toppra.constants.MAX_TRIES
@@ -295,7 +332,18 @@ def lean_passes(base: type) -> type:
                 super().__init__(constraint_list, path, gridpoints, solver_wrapper, **kwargs)
                 return
             # toppra's own choice of wrapper, seidel, made when a step first needs it
-            ParameterizationAlgorithm.__init__(self, constraint_list, path, gridpoints=gridpoints, **kwargs)
+            if kwargs or not _strictly_increasing_grid(path, gridpoints):
+                ParameterizationAlgorithm.__init__(
+                    self, constraint_list, path, gridpoints=gridpoints, **kwargs
+                )
+                return
+            # ParameterizationAlgorithm.__init__'s state, its gridpoint check vectorised
+            self.constraints, self.path = constraint_list, path
+            self._problem_data = ParameterizationData()
+            self.gridpoints = np.array(gridpoints)
+            self._problem_data.gridpoints = np.array(gridpoints)
+            self._N = len(gridpoints) - 1
+            self.parametrizer = ParametrizeSpline
 
         @property
         def solver_wrapper(self):  # noqa: D102
@@ -378,8 +426,7 @@ def lean_passes(base: type) -> type:
             solve, costs = self._solve, self._stage_costs()
             rows = self._stage_rows()
             g, u_g, good = forward_guess(x, K, two_deltas_arr, tiny)
-            certificates = forward_certificates(rows, g)
-            u_hi, _, u_lo, _, slack_0, _ = certificates
+            u_hi, u_lo, slack_0 = guess_ends(rows, g)  # the slopes only where a step leaves the guess
             x_bounds = rows[3]
             margin = _TOP_MARGIN_REL
             good &= (
@@ -397,7 +444,10 @@ def lean_passes(base: type) -> type:
             else:
                 run_end = run_end.tolist()
                 good_list, g_list = good.tolist(), g.tolist()
-                u_hi, L_hi, u_lo, L_lo, slack_0, L_0 = (v.tolist() for v in certificates)
+                L_hi, L_lo, L_0 = end_slopes(rows)
+                u_hi, L_hi, u_lo, L_lo, slack_0, L_0 = (
+                    v.tolist() for v in (u_hi, L_hi, u_lo, L_lo, slack_0, L_0)
+                )
                 x_lo, x_hi = x_bounds[:, 0].tolist(), x_bounds[:, 1].tolist()
                 K_lo, K_hi = K[:, 0].tolist(), K[:, 1].tolist()
                 two_deltas = two_deltas_arr.tolist()

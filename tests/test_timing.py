@@ -474,3 +474,66 @@ def test_the_lean_passes_stop_where_toppra_does_on_an_end_speed_it_cannot_reach(
     assert lean.compute_parameterization(0.0, 40.0)[0] is None
     assert own.compute_parameterization(0.0, 40.0)[0] is None
     assert lean.problem_data.return_code == own.problem_data.return_code
+
+
+def test_the_timings_spline_gives_toppras_values_and_a_copy_each_call():
+    """The spline TOPPRA runs on: at the waypoints (an equal array, not the same object) and
+    elsewhere, each order is toppra's own spline's to the bit (and SciPy's not-a-knot cubic
+    spline's to rounding), and a caller that writes into what it got changes nothing another
+    caller gets."""
+    from scipy.interpolate import CubicSpline
+
+    s, q = smooth_path(n_pts=101, seed=4)
+    path = timing.build_toppra(s, q, np.full(len(s), 0.3), np.ones(N_JOINTS), np.ones(N_JOINTS)).path
+    own = toppra.SplineInterpolator(s, q)
+    spline = CubicSpline(s, q, bc_type="not-a-knot")
+    elsewhere = np.linspace(s[0], s[-1], 37)
+    for order in (0, 1, 2):
+        want = own(s, order)
+        got = path(s.copy(), order)
+        np.testing.assert_array_equal(got, want)
+        np.testing.assert_allclose(got, spline(s, order), rtol=1e-13, atol=1e-13 * np.abs(want).max())
+        got[:] = np.nan  # the caller's own copy
+        np.testing.assert_array_equal(path(s.copy(), order), want)
+        np.testing.assert_array_equal(path(elsewhere, order), own(elsewhere, order))
+    shifted = s.copy()
+    shifted[3] = 0.5 * (s[3] + s[4])  # one position off the waypoints: evaluated there
+    np.testing.assert_array_equal(path(shifted, 1), own(shifted, 1))
+
+
+def test_a_segments_bound_between_waypoints_counts_at_its_faster_end():
+    """Against a loop over the segments: each raises the ratio at waypoint k+1 if the speed rises
+    there, else at k (ties, falls and NaN speeds at k), keeping the larger."""
+    rng = np.random.default_rng(8)
+    speed = rng.uniform(0.0, 1.0, 40)
+    speed[[5, 6]] = 0.3  # a tie
+    speed[20] = np.nan
+    ratio = rng.uniform(0.0, 1.0, (40, 3))
+    between = rng.uniform(0.0, 1.5, (39, 3))
+    want = ratio.copy()
+    for k in range(39):
+        at = k + 1 if speed[k + 1] > speed[k] else k
+        want[at] = np.maximum(want[at], between[k])
+    got = ratio.copy()
+    timing._at_faster_ends(got, speed, between)
+    np.testing.assert_array_equal(got, want)
+
+
+def test_the_lean_toppra_starts_in_toppras_own_state_and_refuses_what_it_refuses():
+    """The state toppra's ``__init__`` leaves (grid, stages, parametrizer, problem data) on
+    increasing gridpoints; gridpoints that do not increase or miss the path's ends raise its error."""
+    s, q = smooth_path(n_pts=51, seed=2)
+    cap, vlim, alim = np.full(len(s), 0.3), np.ones(N_JOINTS), np.ones(N_JOINTS)
+    lean, own = _toppras(s, q, cap, vlim, alim)
+    np.testing.assert_array_equal(lean.gridpoints, own.gridpoints)
+    np.testing.assert_array_equal(lean.problem_data.gridpoints, own.problem_data.gridpoints)
+    assert lean.gridpoints is not s and lean.problem_data.gridpoints is not lean.gridpoints
+    assert (lean._N, lean.parametrizer) == (own._N, own.parametrizer)
+    assert lean.problem_data.return_code == own.problem_data.return_code
+    assert lean.problem_data.K is None and lean.problem_data.sd_vec is None
+    lean_type = type(lean)
+    for grid in (np.concatenate([s[:10], s[9:]]), s[:-1]):
+        with pytest.raises(ValueError):
+            toppra.algorithm.TOPPRA(lean.constraints, lean.path, gridpoints=grid, solver_wrapper="seidel")
+        with pytest.raises(ValueError):
+            lean_type(lean.constraints, lean.path, gridpoints=grid, solver_wrapper="seidel")

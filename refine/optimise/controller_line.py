@@ -52,6 +52,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from refine.optimise.line_ik import joint_linear, line_manipulability, segment_starts, solve_line
+from refine.optimise.line_start import largest_per_row
 from refine.optimise.problem import LinearRow
 from refine.optimise.verify import Violation, runs
 from refine.robot.kinematics import TcpKinematics
@@ -184,6 +185,44 @@ def sample_parameters(q: Array) -> tuple[Array, Array, Array]:
     return m, segment, t
 
 
+def segment_margins(q_line: Array, first: Array, lower: Array, upper: Array) -> Array:
+    """Per segment and joint, the least joint-limit margin ``min(q - lower, upper - q)`` of the samples [rad], (N-1, n).
+
+    From each segment's least and largest joint (``first``: each segment's first sample, the
+    samples segment after segment): a rounded difference is monotonic in its operands, so the
+    least margin to a limit is the margin of the sample nearest it, to the bit.
+    """
+    q_t = q_line.T  # the reductions run along each joint's row
+    least = np.minimum.reduceat(q_t, first, axis=1).T
+    most = np.maximum.reduceat(q_t, first, axis=1).T
+    return np.minimum(least - lower, upper - most)
+
+
+def through_samples(q: Array, q_line: Array, m: Array, segment: Array, t: Array) -> tuple[Array, Array]:
+    """The joint path through every waypoint and every sample in order, and each row's place ``k + t``.
+
+    Args:
+        q: the waypoints' joints [rad], (N, n).
+        q_line: the samples' joints [rad], (M, n), segment after segment as
+            :func:`sample_parameters` puts them (``m - 1`` inside segment k).
+        m: sub-steps per segment, (N-1,).
+        segment: each sample's segment, (M,).
+        t: each sample's parameter in (0, 1), (M,).
+
+    Returns:
+        The joints (N + M, n) [rad] (waypoint k, then segment k's samples, then waypoint k+1) and
+        each row's place along ``q`` in segments (N + M,).
+    """
+    at_waypoint = np.concatenate([[0], np.cumsum(m)])  # waypoint k: k + its earlier segments' samples
+    at_sample = np.ones(len(segment) + len(q), dtype=bool)
+    at_sample[at_waypoint] = False
+    dense = np.empty((len(at_sample), q.shape[1]))
+    dense[at_waypoint], dense[at_sample] = q, q_line
+    place = np.empty(len(at_sample))
+    place[at_waypoint], place[at_sample] = np.arange(len(q), dtype=float), segment + t
+    return dense, place
+
+
 def _segment_max(values: Array, segment: Array, count: int, initial: float) -> Array:
     out = np.full(count, initial)
     np.maximum.at(out, segment, values)
@@ -253,7 +292,6 @@ def check_controller_lines(
             kin, q, m, segment, t, wrist, IK_TOLERANCE, previous, q_lin
         )
     bow = np.abs(q_line - q_lin)
-    margins = np.minimum(q_line - spec.lower, spec.upper - q_line)
 
     violations: list[Violation] = []
 
@@ -268,7 +306,7 @@ def check_controller_lines(
     ik_worst = np.maximum.reduceat(err, first)
     add(ik_worst > IK_FAILED, "no IK on the controller's line", ik_worst, "m+rad", IK_FAILED, True)
     margin = math.radians(tolerances.joint_margin_deg) - JOINT_TOLERANCE_RAD
-    joint_margins = np.minimum.reduceat(margins, first, axis=0)  # per segment and joint
+    joint_margins = segment_margins(q_line, first, spec.lower, spec.upper)  # per segment and joint
     for j in range(q.shape[1]):
         add(
             joint_margins[:, j] < margin,
@@ -292,10 +330,7 @@ def check_controller_lines(
     if reach is not None:
         change = np.maximum.reduceat(bow @ np.asarray(reach, dtype=float), first)
     if clearance is not None:
-        # the joint path through every waypoint and every sample, in order
-        order = np.argsort(np.concatenate([np.arange(len(q)) * 1.0, segment + t]), kind="stable")
-        dense = np.concatenate([q, q_line])[order]
-        dense_seg = np.concatenate([np.arange(len(q)) * 1.0, segment + t])[order]
+        dense, dense_seg = through_samples(q, q_line, m, segment, t)
         per_dense, tolerance_m = clearance(dense, dense_seg)
         proved = per_dense is None
     if clearance is not None and per_dense is not None:
@@ -310,7 +345,7 @@ def check_controller_lines(
         ik_error=err,
         position_difference_m=off_seg,
         orientation_difference_deg=angle_seg,
-        joint_difference_deg=np.degrees(np.maximum.reduceat(bow, first, axis=0).max(axis=1)),
+        joint_difference_deg=np.degrees(np.maximum.reduceat(largest_per_row(bow), first)),
         joint_margin_rad=joint_margins.min(axis=1),
         singularity=sing_seg,
         clearance_m=clear,

@@ -64,12 +64,12 @@ def newton_start(
     PP = np.concatenate([P_wp[:-1], np.diff(P_wp, axis=0)], axis=2)
     e = pose_errors(lin_poses, targets) if errors is None else errors
     dq = _per_segment_products(PP, segment, np.concatenate([e, t[:, None] * e], axis=1))
-    dq[~(_largest_per_row(np.abs(dq)) <= NEWTON_STEP_MAX)] = 0.0  # and a NaN step: from q_lin
+    dq[~(largest_per_row(np.abs(dq)) <= NEWTON_STEP_MAX)] = 0.0  # and a NaN step: from q_lin
     dq += q_lin
     return dq
 
 
-def _largest_per_row(a: Array) -> Array:
+def largest_per_row(a: Array) -> Array:
     """The largest entry of each row of ``a`` (M, n), (M,): ``a.max(axis=1)`` column by column.
 
     NaN where a row holds one, as ``max``.
@@ -159,7 +159,7 @@ def previous_bows(
     out = np.full((len(t), q.shape[1]), np.nan)
     if q_old.shape != q.shape or old.samples.shape != m.shape:
         return out
-    moved = _largest_per_row(np.abs(q - q_old)) <= PREVIOUS_MOVE_MAX_RAD
+    moved = largest_per_row(np.abs(q - q_old)) <= PREVIOUS_MOVE_MAX_RAD
     still = moved[:-1] & moved[1:]
     if not still.any():  # no segment whose waypoints both stayed: no sample takes a bow
         return out
@@ -206,7 +206,7 @@ def previous_corrections(
     rows, at = _same_samples(m, segment, old, np.ones(len(m), dtype=bool))
     c = np.take(old.start_correction, at, axis=0)
     with np.errstate(invalid="ignore"):
-        good = (np.take(old.ik_error, at) <= tolerance) & (_largest_per_row(np.abs(c)) <= CORRECTION_MAX_RAD)
+        good = (np.take(old.ik_error, at) <= tolerance) & (largest_per_row(np.abs(c)) <= CORRECTION_MAX_RAD)
     c[~good] = 0.0
     if len(rows) == len(t):  # every sample has one (rows are in order, without repeats)
         return c

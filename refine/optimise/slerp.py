@@ -91,11 +91,15 @@ def exp_rotvecs(w: Array) -> Array:
 
 def _rodrigues_coefficients(theta: Array) -> tuple[Array, Array]:
     """``sin θ / θ`` and ``2 sin²(θ/2) / θ²`` of angles ``theta`` [rad], by their series below :data:`SMALL_RAD`."""
-    small = theta < SMALL_RAD
-    t2 = theta**2
-    safe = np.where(small, 1.0, theta)
-    a = np.where(small, 1.0 - t2 / 6.0 + t2**2 / 120.0, np.sin(safe) / safe)
-    b = np.where(small, 0.5 - t2 / 24.0 + t2**2 / 720.0, 2.0 * (np.sin(safe / 2.0) / safe) ** 2)
+    small = np.flatnonzero(theta < SMALL_RAD)
+    safe = theta.copy()
+    safe[small] = 1.0
+    a = np.sin(safe) / safe
+    b = 2.0 * (np.sin(safe / 2.0) / safe) ** 2
+    if len(small):  # the series where the closed forms lose digits
+        t2 = theta[small] ** 2
+        a[small] = 1.0 - t2 / 6.0 + t2**2 / 120.0
+        b[small] = 0.5 - t2 / 24.0 + t2**2 / 720.0
     return a, b
 
 

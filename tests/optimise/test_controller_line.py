@@ -7,7 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from refine.optimise.controller_line import check_controller_lines
+from refine.optimise.controller_line import (
+    check_controller_lines,
+    sample_parameters,
+    segment_margins,
+    through_samples,
+)
+from refine.optimise.line_ik import segment_starts
 from refine.optimise.verify import segment_singularity
 from refine.robot.kinematics import TcpKinematics
 from refine.robot.registry import load_robot
@@ -324,3 +330,40 @@ def test_only_segments_whose_two_waypoints_both_stayed_take_a_previous_bow(ur10e
     np.testing.assert_array_equal(bows[ours], by_hand)
     q[4, 0] += 1e-3
     assert np.isnan(previous_bows(q, m, segment, t, (q_old, old), IK_TOLERANCE)).all()
+
+
+def test_the_per_segment_joint_margins_are_the_least_margin_of_any_sample_of_the_segment():
+    """Against a loop over every segment's samples and joints, to the bit (the margins are rounded
+    differences, so the sample nearest a limit has the least one)."""
+    rng = np.random.default_rng(11)
+    counts = np.array([1, 7, 3, 11, 5])  # samples per segment, segment after segment
+    segment = np.repeat(np.arange(len(counts)), counts)
+    q_line = rng.uniform(-3.0, 3.0, (len(segment), 6))
+    lower, upper = -np.linspace(2.9, 3.1, 6), np.linspace(2.8, 3.2, 6)
+    first = segment_starts(segment)
+    got = segment_margins(q_line, first, lower, upper)
+    for k in range(len(counts)):
+        rows = q_line[segment == k]
+        for j in range(6):
+            want = min(min(float(r[j]) - float(lower[j]), float(upper[j]) - float(r[j])) for r in rows)
+            assert got[k, j] == want
+
+
+def test_the_dense_path_runs_through_each_waypoint_then_the_samples_of_its_segment():
+    """Waypoint k, the samples of segment k in order of t, waypoint k+1, ...: each row's place is
+    ``k + t``, as a loop over the segments lays them out."""
+    rng = np.random.default_rng(5)
+    q = rng.normal(size=(4, 6))
+    m, segment, t = sample_parameters(np.array([[0.0] * 6, [0.01] * 6, [0.1] * 6, [0.11] * 6]))
+    q_line = rng.normal(size=(len(t), 6))
+    dense, place = through_samples(q, q_line, m, segment, t)
+    rows, places = [], []
+    for k in range(len(q)):
+        rows.append(q[k])
+        places.append(float(k))
+        for i in np.flatnonzero(segment == k):
+            rows.append(q_line[i])
+            places.append(k + float(t[i]))
+    np.testing.assert_array_equal(dense, np.array(rows))
+    np.testing.assert_array_equal(place, np.array(places))
+    assert np.all(np.diff(place) > 0.0)

@@ -85,3 +85,24 @@ def test_relative_rotation_vectors_are_scipys_rotvec_of_the_product():
     # the arccos of the trace, as the IK's: loses digits near pi
     assert np.abs(got[~at_pi] - ref[~at_pi]).max() < 1e-9
     assert np.abs(np.linalg.norm(got, axis=1) - np.linalg.norm(w, axis=1)).max() < 1e-9
+
+
+def test_the_rodrigues_coefficients_are_the_closed_forms_above_the_series_threshold():
+    """Angles all above ``SMALL_RAD`` and the same angles beside one below it give the same
+    coefficients to the bit, ``sin θ / θ`` and ``2 sin²(θ/2) / θ²`` (against ``math`` per angle);
+    the one below takes the series, within rounding of the closed forms."""
+    import math
+
+    from refine.optimise.slerp import SMALL_RAD, _rodrigues_coefficients
+
+    theta = np.concatenate([[SMALL_RAD, 1.5 * SMALL_RAD], np.random.default_rng(2).uniform(1e-3, np.pi, 50)])
+    a, b = _rodrigues_coefficients(theta)
+    a_mixed, b_mixed = _rodrigues_coefficients(np.append(theta, 0.5 * SMALL_RAD))
+    np.testing.assert_array_equal(a_mixed[:-1], a)
+    np.testing.assert_array_equal(b_mixed[:-1], b)
+    for x, ai, bi in zip(theta.tolist(), a, b, strict=True):
+        assert ai == pytest.approx(math.sin(x) / x, rel=1e-15, abs=0.0)
+        assert bi == pytest.approx(2.0 * (math.sin(x / 2.0) / x) ** 2, rel=1e-15, abs=0.0)
+    x = 0.5 * SMALL_RAD
+    assert a_mixed[-1] == pytest.approx(math.sin(x) / x, rel=1e-15)
+    assert b_mixed[-1] == pytest.approx(2.0 * (math.sin(x / 2.0) / x) ** 2, rel=1e-12)
