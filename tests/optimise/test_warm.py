@@ -254,6 +254,45 @@ def test_a_warm_seed_hands_back_the_tool_jacobians_at_the_joints_it_returns():
         assert np.abs(J[k] - numeric).max() <= 1e-6, k
 
 
+def test_a_warm_seed_of_a_wholly_moved_path_reaches_every_pose_and_hands_back_its_own_kinematics():
+    """Every waypoint off its pose: each is projected onto its CAD point at the orientation it had,
+    within the seed's tolerance, and the poses and Jacobians handed back are the seed's (forward
+    kinematics, central differences)."""
+    from refine.optimise.outcome import problem_kinematics
+    from refine.optimise.warm import WARM_SEED_TOLERANCE, WarmStart, warm_seed
+    from refine.robot.kinematics import rotation_vectors
+
+    positions, R, cell, tool = cell_line()
+    first = refine.refine_path(
+        "ur10e", positions, R, cell=cell, speeds=0.1, tcp_in_flange=TCP, tool_shapes=tool
+    )
+    problem = first.run.first.refinement.problem
+    kin = problem_kinematics(problem)
+    q_prev = first.joints + 0.002 * np.cos(np.arange(first.joints.size)).reshape(first.joints.shape)
+    # the orientations the projection keeps: the demonstration did not turn
+    kept = kin.poses(q_prev)[:, :3, :3]
+    J = np.full((N, 6, q_prev.shape[1]), np.nan)
+    T = np.full((N, 4, 4), np.nan)
+    q = warm_seed(problem, WarmStart(q_prev, R), jacobians_out=J, poses_out=T)
+    reached = kin.poses(q)
+    np.testing.assert_allclose(T, reached, rtol=0.0, atol=1e-12)
+    error = np.linalg.norm(reached[:, :3, 3] - problem.fused.positions, axis=1) + np.linalg.norm(
+        rotation_vectors(kept @ np.transpose(reached[:, :3, :3], (0, 2, 1))), axis=1
+    )
+    assert error.max() <= WARM_SEED_TOLERANCE and np.abs(q - q_prev).max() > 1e-3
+    h = 1e-6
+    for k in (0, 7, N - 1):
+        numeric = np.zeros((6, q.shape[1]))
+        for j in range(q.shape[1]):
+            up, down = q[k].copy(), q[k].copy()
+            up[j] += h
+            down[j] -= h
+            Tu, Td = kin.poses(np.array([up, down]))
+            numeric[:3, j] = (Tu[:3, 3] - Td[:3, 3]) / (2 * h)
+            numeric[3:, j] = rotation_vectors((Tu[:3, :3] @ Td[:3, :3].T)[None])[0] / (2 * h)
+        assert np.abs(J[k] - numeric).max() <= 1e-6, k
+
+
 def test_a_re_solve_after_a_repair_starts_from_the_strict_problem_the_repair_grew_from(monkeypatch):
     """A repaired answer keeps its strict problem; the re-solve takes it (not the elastic one) as its start."""
     from pathlib import Path
