@@ -18,6 +18,8 @@ matrices. The step
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
@@ -143,6 +145,29 @@ class Evaluator:
         """The whole symmetric Hessian (nx, nx) from its upper triangle's nonzeros ``values``."""
         upper = sp.csc_matrix((values, (self.hess_row, self.hess_col)), shape=(self.nx, self.nx))
         return (upper + sp.triu(upper, 1).T).tocsc()
+
+
+_EVALUATORS = threading.local()
+"""This thread's last :class:`Evaluator`, with the derivatives it evaluates (``last``)."""
+
+
+def evaluator_for(problem: RefinementNLP) -> Evaluator:
+    """An :class:`Evaluator` of ``problem``: this thread's last one where it evaluates the same derivatives.
+
+    A re-solve keeps its problem's functions (:func:`refine.optimise.warm.reuse_final`), so the
+    evaluator bound to their buffers serves again with the new parameters; evaluators hold no
+    result between calls (:meth:`Evaluator.first_order` starts afresh), and each thread has its own.
+    """
+    kept = getattr(_EVALUATORS, "last", None)
+    params = np.asarray(problem.params, dtype=float).ravel()
+    if kept is not None and kept[0] is problem.derivatives:
+        ev = kept[1]
+        if (ev.nx, ev.ng, ev.p.size) == (len(problem.lbx), len(problem.lbg), params.size):
+            ev.p.reshape(-1)[:] = params  # in place: the buffers read this memory
+            return ev
+    ev = Evaluator(problem)
+    _EVALUATORS.last = (problem.derivatives, ev)
+    return ev
 
 
 _LAST_STEP: list = [None]

@@ -254,3 +254,29 @@ def test_the_batched_householder_qr_is_a_complete_qr_of_every_block_padded_rows_
         R_ref = np.linalg.qr(A[k, :count].T, mode="r")
         assert np.allclose(np.abs(R[k, :count, :count]), np.abs(R_ref), atol=1e-12)
         assert np.all(R[k, count:, count:] == 0.0)
+
+
+def test_an_evaluator_kept_for_the_same_derivatives_evaluates_another_paths_parameters(glass):
+    """The thread's kept evaluator, handed a problem with the same functions and another path, gives
+    what a fresh evaluator of that problem gives; another thread gets its own."""
+    import threading
+
+    from refine.optimise.kkt import evaluator_for
+    from refine.optimise.problem import path_params
+
+    problem = glass.first.run.first.refinement.problem
+    moved = dataclasses.replace(problem, params=path_params(glass.fused) + 1e-3)
+    x = glass.first.joints.ravel()
+    ev = evaluator_for(problem)
+    ev.first_order(x)
+    again = evaluator_for(moved)
+    assert again is ev
+    got = [a.copy() for a in again.first_order(x)]
+    fresh = Evaluator(moved).first_order(x)
+    assert all(np.array_equal(a, b) for a, b in zip(got, fresh, strict=True))
+    assert not np.array_equal(got[1], Evaluator(problem).first_order(x)[1])
+    other = []
+    thread = threading.Thread(target=lambda: other.append(evaluator_for(moved)))
+    thread.start()
+    thread.join()
+    assert other[0] is not ev
