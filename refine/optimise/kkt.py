@@ -8,7 +8,8 @@ matrices. The step
 
 * :class:`NullSpaceStep`, when every held row touches one waypoint (the position and cone rows,
   singularity bounds and clearance rows at a waypoint, joint limits): per waypoint a QR
-  factorisation of its held rows' Jacobian ``A_kᵀ = [Y_k Z_k] R_k`` (batched), the particular step
+  factorisation of its held rows' Jacobian ``A_kᵀ = [Y_k Z_k] R_k`` (Householder reflections, each
+  applied to every waypoint at once: :func:`householder_qr`), the particular step
   ``Y_k R_k⁻ᵀ r_k``, and the reduced Hessian ``ZᵀHZ``, banded because the Hessian couples a
   waypoint to the next two only, solved by a banded Cholesky factorisation. A reduced Hessian that
   is not positive definite (no strict minimum with this active set) is refused;
