@@ -357,8 +357,8 @@ def householder_qr(A: Array) -> tuple[Array, Array]:
 
     Returns ``Qᵀ`` (N, n, n), orthogonal, and ``R`` (N, m, m), upper triangular (its diagonal of
     either sign). Householder reflections, each applied to all N blocks at once, the blocks on the
-    last axis (N long, contiguous): for the few rows and joints of a waypoint this is several times
-    faster than LAPACK called block by block. A column that is zero where its reflection would act
+    last axis (N long, contiguous): for the few rows and joints of a waypoint about twice as fast
+    as NumPy's batched LAPACK QR (618 blocks of 3 × 6: 0.35 against 0.72 ms). A column that is zero where its reflection would act
     (a padded row) is left as it is, with a zero on the diagonal of ``R``.
     """
     N, m, n = A.shape

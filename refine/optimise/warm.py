@@ -89,8 +89,8 @@ def warm_seed(
     rigidly moved part moves the previous answer's poses rigidly, a new cone or weight leaves them
     where they were. Least-squares IK (:func:`refine.robot.kinematics.solve_ik_batch`, no
     null-space drift, to :data:`WARM_SEED_TOLERANCE`) from the previous joints moves each waypoint
-    the least. A waypoint whose
-    projection does not converge keeps what the IK reached (the NLP takes it from there).
+    the least. A waypoint whose projection does not converge keeps what the IK reached (the NLP
+    takes it from there).
     ``jacobians_out``, ``poses_out``: arrays (N, 6, n) and (N, 4, 4) to receive the TCP Jacobian
     and pose T_F_TCP at each returned row, or None. One evaluation at the previous joints serves
     the test of which waypoints moved, the returned rows that did not, and the projection's first
