@@ -218,7 +218,16 @@ def test_a_kept_clearance_row_asks_for_the_margin_from_where_the_object_moved():
     assert after[1] is rows[1]  # a pair the source does not check is kept
 
 
-def test_a_warm_seed_hands_back_the_tool_jacobians_at_the_joints_it_returns():
+@pytest.fixture(scope="module")
+def cell_line_answer():
+    """The demonstrated rotations of :func:`cell_line` and the refined answer of that line."""
+    positions, R, cell, tool = cell_line()
+    return R, refine.refine_path(
+        "ur10e", positions, R, cell=cell, speeds=0.1, tcp_in_flange=TCP, tool_shapes=tool
+    )
+
+
+def test_a_warm_seed_hands_back_the_tool_jacobians_at_the_joints_it_returns(cell_line_answer):
     """The Jacobians the projection leaves (moved rows) and takes (kept rows) are those of the seed itself.
 
     Checked against central differences of forward kinematics (position, and the rotation vector of
@@ -228,10 +237,7 @@ def test_a_warm_seed_hands_back_the_tool_jacobians_at_the_joints_it_returns():
     from refine.optimise.warm import WarmStart, warm_seed
     from refine.robot.kinematics import rotation_vectors
 
-    positions, R, cell, tool = cell_line()
-    first = refine.refine_path(
-        "ur10e", positions, R, cell=cell, speeds=0.1, tcp_in_flange=TCP, tool_shapes=tool
-    )
+    R, first = cell_line_answer
     problem = first.run.first.refinement.problem
     q_prev = first.joints.copy()
     q_prev[::3] += 0.01  # every third waypoint off its pose: projected; the others kept
@@ -254,7 +260,9 @@ def test_a_warm_seed_hands_back_the_tool_jacobians_at_the_joints_it_returns():
         assert np.abs(J[k] - numeric).max() <= 1e-6, k
 
 
-def test_a_warm_seed_of_a_wholly_moved_path_reaches_every_pose_and_hands_back_its_own_kinematics():
+def test_a_warm_seed_of_a_wholly_moved_path_reaches_every_pose_and_hands_back_its_own_kinematics(
+    cell_line_answer,
+):
     """Every waypoint off its pose: each is projected onto its CAD point at the orientation it had,
     within the seed's tolerance, and the poses and Jacobians handed back are the seed's (forward
     kinematics, central differences)."""
@@ -262,10 +270,7 @@ def test_a_warm_seed_of_a_wholly_moved_path_reaches_every_pose_and_hands_back_it
     from refine.optimise.warm import WARM_SEED_TOLERANCE, WarmStart, warm_seed
     from refine.robot.kinematics import rotation_vectors
 
-    positions, R, cell, tool = cell_line()
-    first = refine.refine_path(
-        "ur10e", positions, R, cell=cell, speeds=0.1, tcp_in_flange=TCP, tool_shapes=tool
-    )
+    R, first = cell_line_answer
     problem = first.run.first.refinement.problem
     kin = problem_kinematics(problem)
     q_prev = first.joints + 0.002 * np.cos(np.arange(first.joints.size)).reshape(first.joints.shape)
