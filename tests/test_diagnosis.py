@@ -83,6 +83,34 @@ def test_the_reach_model_matches_the_data_sheet_arm_lengths():
     assert not reach_model(load_robot("ur10e"), math.radians(2.0)).spherical  # offset wrist
 
 
+def test_the_distance_from_the_shoulder_is_to_the_shoulder_turned_towards_or_away_from_the_point():
+    """IRB 4600 (shoulder 0.175 m off axis 1): the shoulder turned with axis 1 by the point's azimuth
+    less the wrist centre's (SciPy's rotation about the axis), or by half a turn more, whichever
+    distance is nearer the range; points around the arm, on axis 1 and next to it."""
+    from scipy.spatial.transform import Rotation
+
+    reach = reach_model(load_robot("abb_irb4600_60_205"), math.radians(2.0))
+    w, p = reach.axis1
+    e1 = np.cross(w, [1.0, 0.0, 0.0] if abs(w[0]) < 0.9 else [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(w, e1)
+    points = np.random.default_rng(5).normal(size=(300, 3)) * 1.2
+    points[:3] = p + np.outer([0.3, 1.0, -0.5], w)  # on axis 1
+    points[3] = p + 2.0 * w + 1e-9 * e1
+    expected = []
+    for x in points:
+        turn = math.atan2((x - p) @ e2, (x - p) @ e1) - math.atan2(
+            (reach.wrist_ref - p) @ e2, (reach.wrist_ref - p) @ e1
+        )
+        d = [
+            np.linalg.norm(x - (p + Rotation.from_rotvec(a * w).apply(reach.shoulder_ref - p)))
+            for a in (turn, turn + math.pi)
+        ]
+        off = [max(reach.r_min_m - v, 0.0, v - reach.r_max_m) for v in d]
+        expected.append(d[0] if off[0] <= off[1] else d[1])
+    assert np.abs(reach.distance(points) - np.array(expected)).max() <= 1e-12
+
+
 def test_the_tilt_that_brings_the_wrist_centre_into_reach_matches_the_geometry():
     """iiwa 14, 0.20 m tool pointing down and leaning 30 deg back: the wrist centre sits 0.326 m up
     the tool axis from the TCP (0.126 m flange + 0.20 m tool); the needed tilt is found here with

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from refine.optimise.kkt import Evaluator, NotLocal, null_space_step, solve_banded_kkt
+from refine.optimise.kkt import NotLocal, evaluator_for, null_space_step, solve_banded_kkt
 from refine.optimise.problem import RefinementNLP
 from refine.types import Array
 
@@ -174,7 +174,7 @@ def newton_correction(
     lam_x = np.zeros(nx)
     lam_x[bounds] = lam_x0[bounds]
     tol, ctol = _tolerances(problem)
-    ev = Evaluator(problem)
+    ev = evaluator_for(problem)
     try:
         nullspace = null_space_step(ev, rows, bounds, N, n)
     except NotLocal as e:

@@ -67,13 +67,33 @@ class ReachModel:
             out.append(p + np.einsum("nij,j->ni", R, self.shoulder_ref - p))
         return out[0], out[1]
 
+    @functools.cached_property
+    def _shoulder_cylinder(self) -> tuple[float, float, float]:
+        """The shoulder's height z_s and radius r_s about axis 1 [m], and cos φ (:meth:`distance`)."""
+        w, p = self.axis1
+        s = self.shoulder_ref - p
+        z_s = float(s @ w)
+        phi = float(self._azimuth(self.shoulder_ref)[0] - self._azimuth(self.wrist_ref)[0])
+        return z_s, math.sqrt(max(float(s @ s) - z_s * z_s, 0.0)), math.cos(phi)
+
     def distance(self, points: Array) -> Array:
         """Distance from the shoulder [m] for base-frame points (N, 3).
 
         The arm is turned towards the point, or away from it when that is closer to the range.
+        The shoulders of :meth:`shoulders` in cylinder coordinates about axis 1: a point at height
+        z and radius r from the axis and a shoulder at z_s, r_s whose azimuth differs from the
+        point's by the constant φ (the shoulder's from the wrist centre's, with axis 1 at 0) are
+        ``√((z - z_s)² + r² + r_s² ∓ 2 r r_s cos φ)`` apart, turned towards and away.
         """
-        front, back = self.shoulders(points)
-        d = [np.linalg.norm(points - s, axis=1) for s in (front, back)]
+        w, p = self.axis1
+        z_s, r_s, cos_phi = self._shoulder_cylinder
+        d = np.atleast_2d(points) - p
+        z = d @ w
+        rho = d - z[:, None] * w  # off axis 1
+        r2 = np.einsum("ki,ki->k", rho, rho)
+        base = (z - z_s) ** 2 + r2 + r_s * r_s
+        cross = (2.0 * r_s * cos_phi) * np.sqrt(r2)
+        d = [np.sqrt(np.maximum(base - cross, 0.0)), np.sqrt(np.maximum(base + cross, 0.0))]
         out = [np.maximum(self.r_min_m - x, 0.0) + np.maximum(x - self.r_max_m, 0.0) for x in d]
         return np.where(out[0] <= out[1], d[0], d[1])
 

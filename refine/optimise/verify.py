@@ -199,12 +199,26 @@ def rotation_angles_deg(R_a: Array, R_b: Array) -> Array:
     sin = np.sqrt(np.einsum("kij,kij->k", d := R_a - R_b, d)) / (2.0 * math.sqrt(2.0))
     cos = np.sqrt(np.clip(1.0 + np.einsum("kij,kij->k", R_a, R_b), 0.0, None)) / 2.0
     angle = np.degrees(2.0 * np.arctan2(sin, cos))
-    eye = np.eye(3)
-    off = [np.abs(np.einsum("kji,kjl->kil", R, R) - eye).max(axis=(1, 2)) > ORTHONORMAL for R in (R_a, R_b)]
+    off = [orthonormal_error(R) > ORTHONORMAL for R in (R_a, R_b)]
     wide = (sin >= cos) | off[0] | off[1]
     if wide.any():
         angle[wide] = rotation_angle_deg(R_a[wide], R_b[wide])
     return angle
+
+
+def orthonormal_error(R: Array) -> Array:
+    """The largest entry of ``|RᵀR - I|`` of each matrix ``R`` (N, 3, 3), shape (N,) [-].
+
+    From the six column products of the upper triangle: ``RᵀR`` is symmetric, each entry below the
+    diagonal the same sum of the same three products as its mirror.
+    """
+    columns = np.ascontiguousarray(np.swapaxes(R, 1, 2))  # columns[:, i]: column i of each matrix
+    error = np.zeros(len(R))
+    for i in range(3):
+        for j in range(i, 3):
+            product = np.einsum("kl,kl->k", columns[:, i], columns[:, j])
+            np.maximum(error, np.abs(product - 1.0 if i == j else product), out=error)
+    return error
 
 
 def segment_singularity(

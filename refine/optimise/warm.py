@@ -35,6 +35,14 @@ from refine.robot.kinematics import CONVERGED, solve_ik_batch
 from refine.settings import Tolerances
 from refine.types import Array
 
+WARM_SEED_TOLERANCE = 1e-4
+"""The warm seed's projection stops at this pose error [m and rad stacked]. The seed only starts the
+solve, which corrects it to the answer and from this close takes as many steps: on the glass cell
+with the part moved 2 mm, one Gauss-Newton step from the previous joints leaves 1.5e-5 (where the
+seed projected to 1e-6 is 2.6e-5 rad from the answer), and the Newton correction still converges in
+two steps to the same answer (to 4e-15 rad). The projection's second pass of the kinematics over
+the path is saved."""
+
 
 @dataclass(frozen=True)
 class WarmStart:
@@ -80,8 +88,9 @@ def warm_seed(
     the change of the demonstrated orientation there (``R_demo_new R_demo_oldᵀ R_reached``): a
     rigidly moved part moves the previous answer's poses rigidly, a new cone or weight leaves them
     where they were. Least-squares IK (:func:`refine.robot.kinematics.solve_ik_batch`, no
-    null-space drift) from the previous joints moves each waypoint the least. A waypoint whose
-    projection does not converge keeps what the IK reached (the NLP takes it from there).
+    null-space drift, to :data:`WARM_SEED_TOLERANCE`) from the previous joints moves each waypoint
+    the least. A waypoint whose projection does not converge keeps what the IK reached (the NLP
+    takes it from there).
     ``jacobians_out``, ``poses_out``: arrays (N, 6, n) and (N, 4, 4) to receive the TCP Jacobian
     and pose T_F_TCP at each returned row, or None. One evaluation at the previous joints serves
     the test of which waypoints moved, the returned rows that did not, and the projection's first
@@ -107,24 +116,28 @@ def warm_seed(
         poses_out[~off] = reached[~off]
     if not off.any():
         return q0
+    every = bool(off.all())  # a moved part, tool or base moves every waypoint: no copies in and out
+    rows = slice(None) if every else off
+    moved, moved_poses = jacobians_out, poses_out
+    if not every:
+        moved = None if jacobians_out is None else np.empty((int(off.sum()),) + J0.shape[1:])
+        moved_poses = None if poses_out is None else np.empty((int(off.sum()), 4, 4))
     q = q0.copy()
-    moved = None if jacobians_out is None else np.empty((int(off.sum()),) + J0.shape[1:])
-    moved_poses = None if poses_out is None else np.empty((int(off.sum()), 4, 4))
-    start = (reached[off, :3, 3], reached[off, :3, :3], J0[off])
-    q[off], _ = solve_ik_batch(
+    q[rows], _ = solve_ik_batch(
         kin,
-        targets[off],
-        q0[off],
+        targets[rows],
+        q0[rows],
         lower,
         upper,
+        tol=WARM_SEED_TOLERANCE,
         nullspace_gain=0.0,
         jacobians_out=moved,
         poses_out=moved_poses,
-        start=start,
+        start=(reached[rows, :3, 3], reached[rows, :3, :3], J0[rows]),
     )
-    if moved is not None:
+    if moved is not None and not every:
         jacobians_out[off] = moved
-    if moved_poses is not None:
+    if moved_poses is not None and not every:
         poses_out[off] = moved_poses
     return q
 

@@ -112,7 +112,7 @@ def _between_waypoints(clearance: Any, kinds: dict[str, str], cell: bool, margin
     own = {
         p: (kinds.get(p[1]) == "cell" or kinds.get(p[0]) == "cell") == cell and bool(p[0]) for p in set(pairs)
     }
-    take = np.fromiter((own[p] for p in pairs), dtype=bool, count=len(pairs))
+    take = np.fromiter(map(own.__getitem__, pairs), dtype=bool, count=len(pairs))
     # a segment with nothing inside has its ends' figures, which the waypoints give exactly
     if samples is not None:
         take &= np.asarray(samples) != 1

@@ -233,3 +233,50 @@ def test_multipliers_kept_in_row_order_read_by_row_name_and_move_to_a_grown_prob
     assert row_layout(built[0]) != row_layout(built[1])
     with pytest.raises(ValueError, match="multipliers"):
         RowMultipliers(row_layout(built[1]), values)
+
+
+def test_the_batched_householder_qr_is_a_complete_qr_of_every_block_padded_rows_left_alone():
+    """Qᵀ orthogonal, Q[:, :m] R = Aᵀ, A Q[:, m:] = 0 and |R| = LAPACK's, block by block; zero rows stay zero."""
+    from refine.optimise.kkt import householder_qr
+
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(40, 5, 7))
+    A[::3, 3:] = 0.0  # padded rows: two held rows fewer at every third block
+    A[1, 0] *= -1.0
+    Qt, R = householder_qr(A)
+    Q = np.transpose(Qt, (0, 2, 1))
+    assert np.abs(Qt @ Q - np.eye(7)).max() <= 1e-13
+    assert np.abs(Q[:, :, :5] @ R - np.transpose(A, (0, 2, 1))).max() <= 1e-13
+    assert np.all(np.tril(R, -1) == 0.0)
+    for k in range(40):
+        count = 3 if k % 3 == 0 else 5
+        assert np.abs(A[k, :count] @ Q[k, :, count:]).max() <= 1e-13  # the null space of the held rows
+        R_ref = np.linalg.qr(A[k, :count].T, mode="r")
+        assert np.allclose(np.abs(R[k, :count, :count]), np.abs(R_ref), atol=1e-12)
+        assert np.all(R[k, count:, count:] == 0.0)
+
+
+def test_an_evaluator_kept_for_the_same_derivatives_evaluates_another_paths_parameters(glass):
+    """The thread's kept evaluator, handed a problem with the same functions and another path, gives
+    what a fresh evaluator of that problem gives; another thread gets its own."""
+    import threading
+
+    from refine.optimise.kkt import evaluator_for
+    from refine.optimise.problem import path_params
+
+    problem = glass.first.run.first.refinement.problem
+    moved = dataclasses.replace(problem, params=path_params(glass.fused) + 1e-3)
+    x = glass.first.joints.ravel()
+    ev = evaluator_for(problem)
+    ev.first_order(x)
+    again = evaluator_for(moved)
+    assert again is ev
+    got = [a.copy() for a in again.first_order(x)]
+    fresh = Evaluator(moved).first_order(x)
+    assert all(np.array_equal(a, b) for a, b in zip(got, fresh, strict=True))
+    assert not np.array_equal(got[1], Evaluator(problem).first_order(x)[1])
+    other = []
+    thread = threading.Thread(target=lambda: other.append(evaluator_for(moved)))
+    thread.start()
+    thread.join()
+    assert other[0] is not ev

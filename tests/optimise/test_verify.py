@@ -487,3 +487,17 @@ def test_the_orientation_angle_of_rounded_matrices_is_the_one_of_their_nearest_r
     np.testing.assert_array_equal(
         rotation_angles_deg(np.round(R_a, 6), R_b), rotation_angle_deg(np.round(R_a, 6), R_b)
     )
+
+
+def test_the_orthonormality_error_is_the_largest_entry_of_rt_r_less_the_identity():
+    """Against each matrix's own ``|RᵀR - I|`` (a loop of 3 × 3 products): rotations, rotations off
+    by rounding and by 1e-11, a scaled one and a shear."""
+    from refine.optimise.verify import orthonormal_error
+
+    rng = np.random.default_rng(4)
+    R = Rotation.random(60, random_state=4).as_matrix()
+    R[::5] += 1e-11 * rng.normal(size=R[::5].shape)
+    R[1] *= 1.001
+    R[2, 0, 1] += 0.3
+    expected = np.array([np.abs(r.T @ r - np.eye(3)).max() for r in R])
+    assert np.abs(orthonormal_error(R) - expected).max() <= 1e-15

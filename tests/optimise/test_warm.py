@@ -218,7 +218,16 @@ def test_a_kept_clearance_row_asks_for_the_margin_from_where_the_object_moved():
     assert after[1] is rows[1]  # a pair the source does not check is kept
 
 
-def test_a_warm_seed_hands_back_the_tool_jacobians_at_the_joints_it_returns():
+@pytest.fixture(scope="module")
+def cell_line_answer():
+    """The demonstrated rotations of :func:`cell_line` and the refined answer of that line."""
+    positions, R, cell, tool = cell_line()
+    return R, refine.refine_path(
+        "ur10e", positions, R, cell=cell, speeds=0.1, tcp_in_flange=TCP, tool_shapes=tool
+    )
+
+
+def test_a_warm_seed_hands_back_the_tool_jacobians_at_the_joints_it_returns(cell_line_answer):
     """The Jacobians the projection leaves (moved rows) and takes (kept rows) are those of the seed itself.
 
     Checked against central differences of forward kinematics (position, and the rotation vector of
@@ -228,10 +237,7 @@ def test_a_warm_seed_hands_back_the_tool_jacobians_at_the_joints_it_returns():
     from refine.optimise.warm import WarmStart, warm_seed
     from refine.robot.kinematics import rotation_vectors
 
-    positions, R, cell, tool = cell_line()
-    first = refine.refine_path(
-        "ur10e", positions, R, cell=cell, speeds=0.1, tcp_in_flange=TCP, tool_shapes=tool
-    )
+    R, first = cell_line_answer
     problem = first.run.first.refinement.problem
     q_prev = first.joints.copy()
     q_prev[::3] += 0.01  # every third waypoint off its pose: projected; the others kept
@@ -243,6 +249,44 @@ def test_a_warm_seed_hands_back_the_tool_jacobians_at_the_joints_it_returns():
     np.testing.assert_allclose(T, kin.poses(q), rtol=0.0, atol=1e-12)  # the poses of the seed too
     h = 1e-6
     for k in (0, 1, 9, 10, N - 1):
+        numeric = np.zeros((6, q.shape[1]))
+        for j in range(q.shape[1]):
+            up, down = q[k].copy(), q[k].copy()
+            up[j] += h
+            down[j] -= h
+            Tu, Td = kin.poses(np.array([up, down]))
+            numeric[:3, j] = (Tu[:3, 3] - Td[:3, 3]) / (2 * h)
+            numeric[3:, j] = rotation_vectors((Tu[:3, :3] @ Td[:3, :3].T)[None])[0] / (2 * h)
+        assert np.abs(J[k] - numeric).max() <= 1e-6, k
+
+
+def test_a_warm_seed_of_a_wholly_moved_path_reaches_every_pose_and_hands_back_its_own_kinematics(
+    cell_line_answer,
+):
+    """Every waypoint off its pose: each is projected onto its CAD point at the orientation it had,
+    within the seed's tolerance, and the poses and Jacobians handed back are the seed's (forward
+    kinematics, central differences)."""
+    from refine.optimise.outcome import problem_kinematics
+    from refine.optimise.warm import WARM_SEED_TOLERANCE, WarmStart, warm_seed
+    from refine.robot.kinematics import rotation_vectors
+
+    R, first = cell_line_answer
+    problem = first.run.first.refinement.problem
+    kin = problem_kinematics(problem)
+    q_prev = first.joints + 0.002 * np.cos(np.arange(first.joints.size)).reshape(first.joints.shape)
+    # the orientations the projection keeps: the demonstration did not turn
+    kept = kin.poses(q_prev)[:, :3, :3]
+    J = np.full((N, 6, q_prev.shape[1]), np.nan)
+    T = np.full((N, 4, 4), np.nan)
+    q = warm_seed(problem, WarmStart(q_prev, R), jacobians_out=J, poses_out=T)
+    reached = kin.poses(q)
+    np.testing.assert_allclose(T, reached, rtol=0.0, atol=1e-12)
+    error = np.linalg.norm(reached[:, :3, 3] - problem.fused.positions, axis=1) + np.linalg.norm(
+        rotation_vectors(kept @ np.transpose(reached[:, :3, :3], (0, 2, 1))), axis=1
+    )
+    assert error.max() <= WARM_SEED_TOLERANCE and np.abs(q - q_prev).max() > 1e-3
+    h = 1e-6
+    for k in (0, 7, N - 1):
         numeric = np.zeros((6, q.shape[1]))
         for j in range(q.shape[1]):
             up, down = q[k].copy(), q[k].copy()
