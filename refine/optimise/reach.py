@@ -49,18 +49,27 @@ class ReachModel:
     r_min_m: float
     r_max_m: float
 
-    def _azimuth(self, x: Array) -> Array:
-        w, p = self.axis1
+    @functools.cached_property
+    def _plane(self) -> tuple[Array, Array]:
+        """Two unit vectors normal to axis 1 and to each other, the azimuth's 0 and 90 deg."""
+        w = self.axis1[0]
         e1 = np.cross(w, [1.0, 0.0, 0.0] if abs(w[0]) < 0.9 else [0.0, 1.0, 0.0])
         e1 /= np.linalg.norm(e1)
-        e2 = np.cross(w, e1)
-        d = np.atleast_2d(x) - p
+        return e1, np.cross(w, e1)
+
+    def _azimuth(self, x: Array) -> Array:
+        e1, e2 = self._plane
+        d = np.atleast_2d(x) - self.axis1[1]
         return np.arctan2(d @ e2, d @ e1)
+
+    @functools.cached_property
+    def _wrist_azimuth(self) -> Array:
+        return self._azimuth(self.wrist_ref)
 
     def shoulders(self, points: Array) -> tuple[Array, Array]:
         """The shoulder for each base-frame point (N, 3), arm turned towards it and away from it."""
         w, p = self.axis1
-        theta = self._azimuth(points) - self._azimuth(self.wrist_ref)
+        theta = self._azimuth(points) - self._wrist_azimuth
         out = []
         for t in (theta, theta + math.pi):
             R = rotations_about(w, t)
