@@ -49,18 +49,27 @@ class ReachModel:
     r_min_m: float
     r_max_m: float
 
-    def _azimuth(self, x: Array) -> Array:
-        w, p = self.axis1
+    @functools.cached_property
+    def _plane(self) -> tuple[Array, Array]:
+        """Two unit vectors normal to axis 1 and to each other, the azimuth's 0 and 90 deg."""
+        w = self.axis1[0]
         e1 = np.cross(w, [1.0, 0.0, 0.0] if abs(w[0]) < 0.9 else [0.0, 1.0, 0.0])
         e1 /= np.linalg.norm(e1)
-        e2 = np.cross(w, e1)
-        d = np.atleast_2d(x) - p
+        return e1, np.cross(w, e1)
+
+    def _azimuth(self, x: Array) -> Array:
+        e1, e2 = self._plane
+        d = np.atleast_2d(x) - self.axis1[1]
         return np.arctan2(d @ e2, d @ e1)
+
+    @functools.cached_property
+    def _wrist_azimuth(self) -> Array:
+        return self._azimuth(self.wrist_ref)
 
     def shoulders(self, points: Array) -> tuple[Array, Array]:
         """The shoulder for each base-frame point (N, 3), arm turned towards it and away from it."""
         w, p = self.axis1
-        theta = self._azimuth(points) - self._azimuth(self.wrist_ref)
+        theta = self._azimuth(points) - self._wrist_azimuth
         out = []
         for t in (theta, theta + math.pi):
             R = rotations_about(w, t)
@@ -177,3 +186,55 @@ def reach_model(robot: Robot, joint_margin_rad: float, samples: int = 3000) -> R
         )
         r.append(min(sign * d[k], float(res.fun)) * sign)
     return ReachModel(spherical, point_in_flange, (w1, p1), shoulder, point(q_ref), r[0], r[1])
+
+
+def reach_bound(
+    robot: Robot,
+    joint_margin_rad: float,
+    base_in_world: Array,
+    tcp_in_flange: Array,
+    positions: Array,
+    lower: Array,
+    upper: Array,
+) -> Array:
+    """A lower bound [m] on how far each TCP position (N, 3) in {F} is from every position the joints reach.
+
+    The bound holds at any tool orientation, for joints inside ``[lower, upper]`` [rad]. With a
+    spherical wrist the wrist centre's distance from the shoulder stays inside the reach model's
+    ``[r_min_m, r_max_m]`` (:func:`reach_model`, which samples the arm joints inside the limits less
+    ``joint_margin_rad``: the bound needs ``[lower, upper]`` inside those, each arm joint's either
+    within [-pi, pi] or spanning a full turn), the TCP stays a fixed distance L from the wrist
+    centre, and the shoulder turns about axis 1 on a circle; so a TCP position at distances from
+    that circle between d_min and d_max is reached only if ``d_min <= r_max_m + L`` and
+    ``d_max >= r_min_m - L``. The bound is how far either fails, axis 1 turned anywhere (its
+    limits ignored, which only lowers it). Zeros (nothing proven) for a robot without a spherical
+    wrist, or bounds the model did not sample. The range is as certain as the reach model's (its
+    sampled extremes polished by a local optimiser, which on a bundled arm, whose wrist-centre
+    distance turns with the elbow alone, are the extremes: the iiwa's stretched arm agrees to 1e-6 m).
+    """
+    reach = reach_model(robot, joint_margin_rad)
+    out = np.zeros(len(positions))
+    n = robot.nq
+    if not reach.spherical or n < 6:
+        return out
+    lo, hi = robot.spec.lower + joint_margin_rad, robot.spec.upper - joint_margin_rad
+    arm = slice(1, n - 3)
+    full = (lo[arm] <= -math.pi) & (hi[arm] >= math.pi)
+    inside = (lower[arm] >= np.clip(lo[arm], -math.pi, math.pi)) & (
+        upper[arm] <= np.clip(hi[arm], -math.pi, math.pi)
+    )
+    if not np.all(full | inside):
+        return out
+    T_inv = np.linalg.inv(base_in_world)
+    p = np.asarray(positions, dtype=float) @ T_inv[:3, :3].T + T_inv[:3, 3]
+    L = float(np.linalg.norm((np.linalg.inv(tcp_in_flange) @ np.append(reach.point_in_flange, 1.0))[:3]))
+    w, c = reach.axis1
+    s = reach.shoulder_ref - c
+    h = float(w @ s)
+    a = float(np.linalg.norm(s - h * w))  # the shoulder circle: height h along axis 1, radius a
+    v = p - c
+    z = v @ w
+    rho = np.linalg.norm(v - z[:, None] * w, axis=1)
+    d_min = np.hypot(z - h, rho - a)
+    d_max = np.hypot(z - h, rho + a)
+    return np.maximum(np.maximum(d_min - reach.r_max_m - L, reach.r_min_m - L - d_max), 0.0)

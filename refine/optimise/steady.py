@@ -15,6 +15,7 @@ import numpy as np
 
 from refine.optimise.outcome import problem_bounds, problem_targets
 from refine.optimise.problem import RefinementNLP
+from refine.optimise.reach import reach_bound
 from refine.optimise.seed import (
     REACH_TOLERANCE_M,
     alternative_seeds,
@@ -142,20 +143,36 @@ def turn_over_step(problem: RefinementNLP) -> float | None:
 
 
 def whole_chain(
-    problem: RefinementNLP, kin: TcpKinematics, home: Array | None, rotations: Array | None, give_up: float | None
+    problem: RefinementNLP,
+    kin: TcpKinematics,
+    home: Array | None,
+    rotations: Array | None,
+    give_up: float | None,
 ) -> Array:
     """The chained IK seed along the whole path (N, n) [rad], each branch's chain abandoned at ``give_up``.
 
     A chain that turns the arm over (a joint step beyond ``give_up`` [rad], :func:`turn_over_step`)
     would be chained again with the spin free after it is finished (:func:`steady_branch`): when
     every branch's chain turns it over, that chain is made at once. Else, or when it does not keep
-    the steps, the seed is the chain without ``give_up``.
+    the steps, the seed is the chain without ``give_up``. A target position out of reach at any
+    orientation by more than :data:`REACH_TOLERANCE_M` (:func:`position_gap`, a lower bound) leaves
+    the chain with the spin free an error above ``CONVERGED`` there, which :func:`spin_free_chain`
+    turns down: it is not chained.
     """
     if give_up is None:
         return initial_guess(problem, home, rotations)
     qs, errors = chained_seed(problem, home, rotations, give_up=give_up)
     if np.isfinite(errors).all():
         return qs
+    gap = position_gap(problem)
+    if gap.max() > REACH_TOLERANCE_M:  # the chain with the spin free cannot reach every target
+        log.info(
+            "IK seed: every IK branch's chain turns the arm over, and waypoint %d is %.1f mm out of reach "
+            "at any orientation: not chained with the spin about the tool axis free",
+            int(np.argmax(gap)),
+            1e3 * float(gap.max()),
+        )
+        return initial_guess(problem, home, rotations)
     free = spin_free_chain(problem, kin, home, rotations)
     if free is None:
         return initial_guess(problem, home, rotations)
@@ -174,6 +191,28 @@ def whole_chain(
         math.degrees(largest_step(free)[0]),
     )
     return free
+
+
+def position_gap(problem: RefinementNLP) -> Array:
+    """A lower bound [m] on how far each CAD point (N,) is from the TCP positions the joint bounds reach.
+
+    The reach model's bound at any tool orientation (:func:`refine.optimise.reach.reach_bound`), for
+    the joints inside the refinement's bounds; zeros where it proves nothing (a stationary tool, a
+    robot without a spherical wrist).
+    """
+    if problem.tool_in_world is not None:
+        return np.zeros(problem.n_waypoints)
+    lower, upper = problem_bounds(problem)
+    margin = math.radians(problem.tolerances.joint_margin_deg)
+    return reach_bound(
+        problem.robot,
+        margin,
+        problem.base_in_world,
+        problem.tcp_in_flange,
+        problem.fused.positions,
+        lower,
+        upper,
+    )
 
 
 def spin_free_chain(
