@@ -36,6 +36,15 @@ of the distance only by the second-order turn of the normal (for most pairs micr
 displacement bound above is millimetres off; more where the nearest features change), so few
 waypoints are left that can hold the least distance (:func:`direction_bounds`;
 ``tests/collision/test_carry.py`` compares with every pair measured at every waypoint).
+
+**Normals that turn with a body.** Where the nearest feature of a self pair (two of the robot's
+own bodies) is a face of its other body, a normal fixed in the world falls behind that face as
+the body turns, and the gap along it loses the turn at first order (a face 0.1 m across turned by
+a milliradian: 0.1 mm). Such a normal ``n``, found with the other body at rotation ``R_b``, is
+taken at another configuration as ``R_b' R_b^T n``: the same normal in that body's frame, a unit
+vector as well, so its gap is a lower bound by the same argument (:func:`attached_bounds`,
+:attr:`CheckedBounds.attached`). A cell object does not turn with the joints; its pairs keep the
+normal as it is.
 """
 
 from __future__ import annotations
@@ -70,6 +79,9 @@ class CheckedBounds:
         base_in_world: the robot base T_F_R (4, 4) of the check.
         normals: per waypoint and pair, a unit witness normal where one is known (N, P, 3), NaN
             elsewhere; None for none.
+        attached: per waypoint and self pair, the normal the check measured there in the shape
+            frame of the pair's other body (N, P, 3), NaN elsewhere (cell pairs too); None for none.
+            Read only where its rows are those of ``normals``.
     """
 
     q: Array
@@ -78,6 +90,7 @@ class CheckedBounds:
     shapes: dict[str, tuple[int, Array]]
     base_in_world: Array
     normals: Array | None = None
+    attached: Array | None = None
 
 
 _HULLS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -112,12 +125,28 @@ def hull_corners(model: CollisionModel) -> dict[str, tuple[int, Array]]:
 
 
 def checked_bounds(
-    model: CollisionModel, q: Array, bounds: Array, normals: Array | None = None
+    model: CollisionModel,
+    q: Array,
+    bounds: Array,
+    normals: Array | None = None,
+    poses: Array | None = None,
+    exact: NDArray[np.bool_] | None = None,
 ) -> CheckedBounds:
     """The bounds ``bounds`` (N, P) [m] of a check of joints ``q`` (N, n) in ``model``, to carry.
 
-    ``normals`` (N, P, 3): unit witness normals where the check measured a pair (NaN elsewhere).
+    ``normals`` (N, P, 3): unit witness normals where the check measured a pair (NaN elsewhere);
+    with the moving bodies' poses at ``q`` (N, M, 4, 4) and where the check measured a pair
+    ``exact`` (N, P), the self pairs' measured normals are kept in their other body's shape frame
+    too (:attr:`CheckedBounds.attached`).
     """
+    attached = None
+    if normals is not None and poses is not None and exact is not None:
+        attached = np.full(np.shape(normals), np.nan)
+        ks, ps = np.nonzero(exact & model.self_pairs & ~np.isnan(normals[:, :, 0]))
+        for p in np.unique(ps).tolist():
+            rows = ks[ps == p]
+            other = poses[rows, model.pair_bodies(p)[1], :3, :3]
+            attached[rows, p] = np.einsum("kij,ki->kj", other, normals[rows, p])  # R^T n per row
     return CheckedBounds(
         np.array(q, dtype=float),
         tuple(model.pairs),
@@ -125,16 +154,25 @@ def checked_bounds(
         dict(hull_corners(model)),
         model.base_in_world.copy(),
         None if normals is None else np.array(normals, dtype=float),
+        attached,
     )
 
 
-def carried_directions(model: CollisionModel, prior: CheckedBounds, q: Array) -> Array | None:
+def carried_directions(
+    model: CollisionModel, prior: CheckedBounds, q: Array, *, turned: bool = False
+) -> Array | None:
     """The witness normals of ``prior`` (N, P, 3) in the order of ``model``'s pairs, for joints ``q``.
 
     A waypoint where ``prior`` has no normal of a pair takes the pair's normal at the nearest
     waypoint that has one (the pair was bounded there without a query); NaN for a pair ``prior``
     has no normal of. None when it has none or the paths differ in length. Any unit vector serves
     :func:`direction_bounds`, so neither the robot nor the cell need be the same.
+
+    With ``turned``, a self pair's normal measured in ``prior`` (:attr:`CheckedBounds.attached`)
+    is taken instead turned with the pair's other body to where that body is at ``q`` (as
+    :func:`attached_bounds` does), from the nearest waypoint where it was measured:
+    near the distance where the nearest feature is a face of that body. That places the moving
+    bodies at ``q`` (:meth:`CollisionModel.moving_poses`, kept for the check of ``q``).
     """
     if prior.normals is None or np.shape(q)[0] != len(prior.q):
         return None
@@ -146,15 +184,66 @@ def carried_directions(model: CollisionModel, prior: CheckedBounds, q: Array) ->
     if not cols:
         return out
     mine, theirs = (np.array(c) for c in zip(*cols, strict=True))
-    known = given[:, theirs]  # (N, C): each column has a normal somewhere
-    n = len(prior.q)
+    out[:, mine] = prior.normals[_nearest(given[:, theirs]), theirs]
+    attached = prior.attached if turned else None
+    if attached is None or attached.shape != prior.normals.shape:
+        return out
+    own = model.self_pairs[mine]
+    mine, theirs = mine[own], theirs[own]
+    given = ~np.isnan(attached[:, theirs, 0])  # measured self pairs' normals in their other body's frame
+    some = given.any(axis=0)
+    if some.any():
+        mine, theirs = mine[some], theirs[some]
+        local = attached[_nearest(given[:, some]), theirs]  # (N, C, 3)
+        poses = model.moving_poses(np.asarray(q, dtype=float))
+        for c, p in enumerate(mine.tolist()):
+            out[:, p] = attached_normals(model, p, poses, local[:, c])
+    return out
+
+
+def _nearest(known: NDArray[np.bool_]) -> NDArray[np.intp]:
+    """Per row and column of ``known`` (N, C), the nearest row known in its column, the earlier of two as near.
+
+    Every column must have a row known.
+    """
+    n = len(known)
     rows = np.arange(n)[:, None]
     before = np.maximum.accumulate(np.where(known, rows, -1), axis=0)  # the last known at or before
     after = np.minimum.accumulate(np.where(known, rows, n)[::-1], axis=0)[::-1]  # the first at or after
-    # the nearest known waypoint, the earlier of two as near
-    near = np.where((before >= 0) & ((after >= n) | (rows - before <= after - rows)), before, after)
-    out[:, mine] = prior.normals[near, theirs]
-    return out
+    return np.where((before >= 0) & ((after >= n) | (rows - before <= after - rows)), before, after)
+
+
+def attached_normals(model: CollisionModel, p: int, poses: Array, local: Array) -> Array:
+    """Unit vectors ``local`` (K, 3) in self pair p's other body's shape frame, in the world at poses (K, M, 4, 4).
+
+    ``poses``: the moving bodies' poses (:meth:`CollisionModel.moving_poses`); (K, 3).
+    """
+    return np.einsum("kij,kj->ki", poses[:, model.pair_bodies(p)[1], :3, :3], local)
+
+
+def attached_bounds(
+    model: CollisionModel, p: int, poses: Array, normal: Array | None = None, at: Array | None = None
+) -> Array | None:
+    """:meth:`CollisionModel.plane_bounds` of pair p along a witness normal turned with the pair's other body.
+
+    A cell object does not move with the joints: its pairs take the normal as it is. For a self pair,
+    the normal ``n`` found with the other body at rotation ``R_b`` is taken at each row as
+    ``R_b(row) R_b^T n`` (see the module notes). ``normal`` (3,): a unit witness normal found with
+    the moving bodies at ``at`` (M, 4, 4); None for the pair's last one. ``poses`` (K, M, 4, 4).
+    None for a pair with a mesh or, without ``normal``, one never measured.
+    """
+    if normal is None:
+        normal, local = model.last_normal(p)
+    elif model.self_pairs[p]:
+        assert at is not None
+        local = normal @ at[model.pair_bodies(p)[1], :3, :3]
+    else:
+        local = None
+    if local is None or np.isnan(local).any() or not len(poses):
+        return model.plane_bounds(p, poses, normal)
+    return model.plane_bounds(
+        p, poses, attached_normals(model, p, poses, np.broadcast_to(local, (len(poses), 3)))
+    )
 
 
 def direction_bounds(
@@ -367,14 +456,15 @@ def raise_near(
 
     ``found``: the pairs measured at k, by pair index, with their unit witness normals
     (:meth:`CollisionModel.witnesses`); ``poses`` (N, M, 4, 4): the moving bodies at every waypoint.
-    Each pair's gap along its normal at k bounds its distance at the other waypoints from below
-    (any unit direction does, see the module notes); near k the joints, hence the normal, have
-    turned little, so the gap is close to the distance there. Waypoint k keeps its own figures.
+    Each pair's gap along its normal at k (a self pair's turned with its other body,
+    :func:`attached_bounds`) bounds its distance at the other waypoints from below (any unit
+    direction does, see the module notes); near k the joints, hence the normal, have turned
+    little, so the gap is close to the distance there. Waypoint k keeps its own figures.
     """
     lo, hi = max(k - NEAR, 0), min(k + NEAR + 1, len(bounds))
     near = np.arange(lo, hi) != k  # of the rows lo..hi-1, a view of the poses (no copy)
     for p, (_, n) in found.items():
-        gaps = model.plane_bounds(p, poses[lo:hi], n)
+        gaps = attached_bounds(model, p, poses[lo:hi], n, poses[k])
         if gaps is not None:
             rows = bounds[lo:hi, p]
             rows[near] = np.maximum(rows[near], np.where(gaps[near] > 0.0, gaps[near], -np.inf))
@@ -387,7 +477,7 @@ def tightener(
 
     The pairs holding waypoint k's least distance bound and least clearance bound, if not measured
     there, are bounded at every waypoint by their gap along the pair's last witness normal
-    (:meth:`CollisionModel.plane_bounds`, a lower bound whatever the normal, see the module notes),
+    (:func:`attached_bounds`, a lower bound whatever the normal, see the module notes),
     each pair once per check; ``bounds`` (N, P) [m] is raised in place where that gap is larger,
     ``exact`` (N, P) entries are kept. ``tighten(k)`` is True when it tried a pair (finitely often).
     """
@@ -399,7 +489,7 @@ def tightener(
         pairs = {p for p in pairs if not (tried[p] or exact[k, p])}
         for p in pairs:
             tried[p] = True
-            gaps = model.plane_bounds(p, poses)
+            gaps = attached_bounds(model, p, poses)
             if gaps is not None:
                 raised = np.maximum(bounds[:, p], np.where(gaps > 0.0, gaps, -np.inf))
                 bounds[:, p] = np.where(exact[:, p], bounds[:, p], raised)

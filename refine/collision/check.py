@@ -426,7 +426,7 @@ def check_path_clearance(
         tolerance_m=tolerance_m,
         certified_segments=int(certified.sum()),
         waypoint_measured=measured,
-        bounds=checked_bounds(model, q_path, bounds, normals) if method == "bound" else None,
+        bounds=checked_bounds(model, q_path, bounds, normals, poses, exact) if method == "bound" else None,
     )
     log.info("%s", result.summary())
     return result

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from refine.collision.contact import Contact, linearised_distance
 from refine.collision.distance import hull_bound, place, signed_distance
@@ -173,6 +173,7 @@ class CollisionModel:
             [self.bodies[b].hull is not None and self.bodies[b].kind == "cell" for b in self._pb]
         )
         self._normals = np.full((len(kept), 3), np.nan)  # last witness normal per pair, world
+        self._attached = np.full((len(kept), 3), np.nan)  # and in a self pair's other shape frame
         self._bounded = np.array([not (self.bodies[a].is_mesh or self.bodies[b].is_mesh) for a, b in kept])
         self.pairs = tuple((self.bodies[a].label, self.bodies[b].label) for a, b in kept)
         self.excluded = known.excluded
@@ -357,6 +358,8 @@ class CollisionModel:
         d, p_a, p_b, n = signed_distance(A, self._poses[a], B, self._poses[b])
         self.queries += 1
         self._normals[k] = n
+        if self._self[k]:
+            self._attached[k] = n @ self._poses[b, :3, :3]
         self._exact[k] = Contact(
             body=A.name,
             other=B.name,
@@ -487,6 +490,19 @@ class CollisionModel:
         Ta = poses[:, a] if a < m else np.broadcast_to(self._poses[a], (len(poses), 4, 4))
         Tb = poses[:, b] if b < m else np.broadcast_to(self._poses[b], (len(poses), 4, 4))
         return -self.bodies[a].reach_many(Ta, -n) - self.bodies[b].reach_many(Tb, n)
+
+    @property
+    def self_pairs(self) -> NDArray[np.bool_]:
+        """Which checked pairs are of two of the robot's own bodies (links, tool shapes), (P,)."""
+        return self._self.copy()
+
+    def pair_bodies(self, k: int) -> tuple[int, int]:
+        """Pair k's two bodies as indices into :attr:`bodies` (the moving ones first, as in the poses)."""
+        return int(self._pa[k]), int(self._pb[k])
+
+    def last_normal(self, k: int) -> tuple[Array, Array]:
+        """Pair k's last witness normal (3,), world, and in its other body's shape frame then (NaN for a cell object)."""
+        return self._normals[k], self._attached[k]
 
     def _hull_bound(self, k: int) -> float:
         a, b = int(self._pa[k]), int(self._pb[k])
