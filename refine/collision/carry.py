@@ -37,14 +37,12 @@ displacement bound above is millimetres off; more where the nearest features cha
 waypoints are left that can hold the least distance (:func:`direction_bounds`;
 ``tests/collision/test_carry.py`` compares with every pair measured at every waypoint).
 
-**Normals that turn with a body.** Where the nearest feature of a self pair (two of the robot's
-own bodies) is a face of its other body, a normal fixed in the world falls behind that face as
-the body turns, and the gap along it loses the turn at first order (a face 0.1 m across turned by
-a milliradian: 0.1 mm). Such a normal ``n``, found with the other body at rotation ``R_b``, is
-taken at another configuration as ``R_b' R_b^T n``: the same normal in that body's frame, a unit
-vector as well, so its gap is a lower bound by the same argument (:func:`attached_bounds`,
-:attr:`CheckedBounds.attached`). A cell object does not turn with the joints; its pairs keep the
-normal as it is.
+**Normals that turn with a body.** Where a self pair's nearest feature is a face of its other
+body, a normal fixed in the world falls behind the face as the body turns, and its gap loses the
+turn at first order (a face 0.1 m across turned 1 mrad: 0.1 mm). Such a normal ``n``, found with
+the other body at rotation ``R_b``, is taken elsewhere as ``R_b' R_b^T n``, a unit vector too, so
+its gap is a lower bound as well (:func:`attached_bounds`, :attr:`CheckedBounds.attached`). A cell
+object does not turn with the joints: its pairs keep the normal as it is.
 """
 
 from __future__ import annotations
@@ -57,7 +55,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from refine.collision.advance import short
+from refine.collision.advance import pair_motion, short
 from refine.collision.model import CollisionModel
 from refine.collision.motion import corners
 from refine.types import Array
@@ -202,10 +200,7 @@ def carried_directions(
 
 
 def _nearest(known: NDArray[np.bool_]) -> NDArray[np.intp]:
-    """Per row and column of ``known`` (N, C), the nearest row known in its column, the earlier of two as near.
-
-    Every column must have a row known.
-    """
+    """Per row and column of ``known`` (N, C), the nearest row known in its column (every column has one), the earlier of two as near."""
     n = len(known)
     rows = np.arange(n)[:, None]
     before = np.maximum.accumulate(np.where(known, rows, -1), axis=0)  # the last known at or before
@@ -214,10 +209,7 @@ def _nearest(known: NDArray[np.bool_]) -> NDArray[np.intp]:
 
 
 def attached_normals(model: CollisionModel, p: int, poses: Array, local: Array) -> Array:
-    """Unit vectors ``local`` (K, 3) in self pair p's other body's shape frame, in the world at poses (K, M, 4, 4).
-
-    ``poses``: the moving bodies' poses (:meth:`CollisionModel.moving_poses`); (K, 3).
-    """
+    """Unit vectors ``local`` (K, 3) in self pair p's other body's shape frame, in the world at poses (K, M, 4, 4)."""
     return np.einsum("kij,kj->ki", poses[:, model.pair_bodies(p)[1], :3, :3], local)
 
 
@@ -285,6 +277,30 @@ def carried_bounds(model: CollisionModel, prior: CheckedBounds, q: Array) -> Arr
         or not np.array_equal(model.base_in_world, prior.base_in_world)
     ):
         return None
+    mine, theirs, delta = _carried_columns(model, prior)
+    motion = np.abs(q - prior.q) @ model.pair_motion.T  # (N, P) [m]
+    out = np.full((len(q), len(model.pairs)), -np.inf)
+    if len(mine):  # all the carried columns at once, each as bound - motion - shift
+        out[:, mine] = prior.bounds[:, theirs] - motion[:, mine] - delta
+    return np.where(out > 0.0, out, -np.inf)
+
+
+_COLUMNS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+""":func:`_carried_columns` per checked bounds, per model."""
+
+
+def _carried_columns(
+    model: CollisionModel, prior: CheckedBounds
+) -> tuple[NDArray[np.intp], NDArray[np.intp], Array]:
+    """The pairs ``prior`` carries into ``model``: index here (C,), index in ``prior`` (C,), shift [m] (C,).
+
+    The shift: the largest displacement of its cell object's points (see the module notes); a pair
+    with a changed body is left out. Models and checked bounds do not change: kept for each pair.
+    """
+    per_model = _COLUMNS.setdefault(prior, weakref.WeakKeyDictionary())
+    known = per_model.get(model)
+    if known is not None:
+        return known
     old = {pair: p for p, pair in enumerate(prior.pairs)}
     shift: dict[str, float] = {}  # per body: how far its points moved, inf for a changed shape
     for label, (joint, now) in hull_corners(model).items():
@@ -297,18 +313,18 @@ def carried_bounds(model: CollisionModel, prior: CheckedBounds, q: Array) -> Arr
             shift[label] = 0.0 if np.array_equal(before[1], now) else np.inf
         else:
             shift[label] = float(np.max(np.linalg.norm(now - before[1], axis=1)))
-    motion = np.abs(q - prior.q) @ model.pair_motion.T  # (N, P) [m]
-    out = np.full((len(q), len(model.pairs)), -np.inf)
-    mine, theirs, delta = [], [], []  # the pairs carried: index here, index in the prior, shift [m]
+    mine, theirs, delta = [], [], []
     for p, (a, b) in enumerate(model.pairs):
         k = old.get((a, b))
         if k is not None and math.isfinite(shift[a] + shift[b]):
             mine.append(p)
             theirs.append(k)
             delta.append(shift[a] + shift[b])
-    if mine:  # all the carried columns at once, each as bound - motion - shift
-        out[:, mine] = prior.bounds[:, theirs] - motion[:, mine] - np.array(delta)
-    return np.where(out > 0.0, out, -np.inf)
+    known = (np.array(mine, dtype=np.intp), np.array(theirs, dtype=np.intp), np.array(delta, dtype=float))
+    for a in known:
+        a.flags.writeable = False
+    per_model[model] = known
+    return known
 
 
 def bounds_between(model: CollisionModel, checked: CheckedBounds, q: Array, place: Array) -> Array | None:
@@ -551,3 +567,31 @@ def measure_least(
                 continue
             visit(k)
     return measured
+
+
+SETTLED_M = 0.05
+"""A pair whose known bounds stay this far above the path's least known bound [m] is not bounded further."""
+
+
+def settled_pairs(
+    model: CollisionModel, q_path: Array, prior: Array, tolerance_m: float
+) -> NDArray[np.bool_]:
+    """The pairs (P,) whose known lower bounds ``prior`` (N, P) [m] leave nothing to find along ``q_path``.
+
+    Settled: its known bounds certify every segment of ``q_path`` (N, n) by the motion bound
+    (:func:`refine.collision.advance.short`) and stay :data:`SETTLED_M` above the least known bound
+    of any pair, in distance and in clearance. Bounds only rise, so it stays certified whatever else
+    is found; where it holds a waypoint's least bound, that waypoint is measured if it can matter
+    (:func:`measure_least` needs lower bounds, not close ones). Its box and direction bounds are not
+    computed: the check finds the same, only the lower-bound figures of waypoints it does not
+    measure (and the bounds it carries on) keep such a pair's known bound where a box gives more.
+    """
+    finite = np.isfinite(prior).all(axis=0)
+    if not finite.any():
+        return finite
+    clear = prior - model.pair_margins
+    certified = ~short(clear + tolerance_m, pair_motion(model, q_path)).any(axis=0)
+    far = (prior.min(axis=0) >= prior[:, finite].min() + SETTLED_M) & (
+        clear.min(axis=0) >= clear[:, finite].min() + SETTLED_M
+    )
+    return finite & certified & far

@@ -74,6 +74,7 @@ from refine.collision.carry import (
     direction_bounds,
     measure_least,
     raise_near,
+    settled_pairs,
     tightener,
 )
 from refine.collision.model import CollisionModel
@@ -509,10 +510,17 @@ def _waypoint_bounds(
         poses (N, M, 4, 4), box bounds (N, P) [m] (None with ``left``), the better bounds (N, P)
         [m], and which of those are exact distances (N, P).
     """
+    settled = None  # the pairs the known bounds leave far from the least and certified: bounded no further
     if left is None:
         poses = model.moving_poses(q_path)
-        boxes = model.box_bounds(poses)  # lower bounds on each pair's distance per waypoint (N, P) [m]
-        bounds = boxes.copy() if prior is None else np.maximum(boxes, prior)  # and the better ones found
+        if prior is not None and at_waypoint is None:
+            settled = settled_pairs(model, q_path, prior, tolerance_m)
+        if settled is None or not settled.any():
+            boxes = model.box_bounds(poses)  # lower bounds on each pair's distance per waypoint (N, P) [m]
+            bounds = boxes.copy() if prior is None else np.maximum(boxes, prior)  # and the better ones found
+        else:
+            boxes, bounds, columns = None, prior.copy(), np.flatnonzero(~settled)
+            bounds[:, columns] = np.maximum(bounds[:, columns], model.box_bounds(poses, columns))
         rows: slice | NDArray[np.intp] = slice(None)
     else:
         assert prior is not None and at_waypoint is None and out is None
@@ -530,7 +538,12 @@ def _waypoint_bounds(
         columns_left = short(bounds - model.pair_margins + tolerance_m, pair_motion(model, q_path)).any(0)
         bounds[rows] = np.maximum(
             bounds[rows],
-            direction_bounds(model, poses[rows], directions[rows], None if out is not None else columns_left),
+            direction_bounds(
+                model,
+                poses[rows],
+                directions[rows],
+                (None if settled is None else ~settled) if out is not None else columns_left,
+            ),
         )
     exact = np.zeros(bounds.shape, dtype=bool)
     need = np.zeros(bounds.shape, dtype=bool)  # pairs to measure at each waypoint

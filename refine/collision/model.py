@@ -312,11 +312,16 @@ class CollisionModel:
     def _box_bounds(self, poses: Array, pa: Array, pb: Array) -> Array:
         """The box gaps (N, len(pa)) [m] of the body pairs (pa, pb) at poses (N, M, 4, 4), -inf for none."""
         n = self._n_moving
-        c, h = world_aabb(poses, self._centre[:n], self._half[:n])
         # body-major (B, N, 3): each pair's rows are then gathered as whole blocks, not 3 at a time
         cb, hb = np.empty((2, len(self._aabb_c), len(poses), 3))
-        cb[:n], cb[n:] = c.transpose(1, 0, 2), self._aabb_c[n:, None]
-        hb[:n], hb[n:] = h.transpose(1, 0, 2), self._aabb_h[n:, None]
+        cb[n:], hb[n:] = self._aabb_c[n:, None], self._aabb_h[n:, None]
+        used = np.union1d(pa[pa < n], pb[pb < n])  # only the moving bodies of these pairs are boxed
+        if len(used) == n:
+            c, h = world_aabb(poses, self._centre[:n], self._half[:n])
+            cb[:n], hb[:n] = c.transpose(1, 0, 2), h.transpose(1, 0, 2)
+        elif len(used):
+            c, h = world_aabb(poses[:, used], self._centre[used], self._half[used])
+            cb[used], hb[used] = c.transpose(1, 0, 2), h.transpose(1, 0, 2)
         d = cb[pa]  # |c_a - c_b| - h_a - h_b, in place: the same sums without their temporaries
         d -= cb[pb]
         np.abs(d, out=d)
