@@ -497,7 +497,8 @@ def _waypoint_bounds(
     with the model placed there (given ``prior``, the best bounds known there); the pairs it
     measures improve the bounds. ``prior`` (N, P): lower bounds known beforehand [m];
     ``directions`` (N, P, 3): unit vectors whose gaps bound the pairs too; ``out`` (N, P, 3): where
-    the witness normals of the pairs measured are written.
+    the witness normals of the pairs measured are written. Given ``prior`` without ``at_waypoint``,
+    the pairs it settles (:func:`refine.collision.carry.settled_pairs`) keep it, unboxed.
 
     ``left`` (N-1, P), for the proof alone (no ``at_waypoint``, no ``out``): the segment pairs that
     ``prior`` leaves short. Bounds only rise, so every other segment pair stays certified whatever
