@@ -78,7 +78,6 @@ from refine.collision.carry import (
     tightener,
 )
 from refine.collision.model import CollisionModel
-from refine.collision.motion import joint_reach
 from refine.errors import InputError
 from refine.robot.kinematics import TcpKinematics
 from refine.types import Array
@@ -360,7 +359,7 @@ def check_path_clearance(
             figures.put(k, found)
     else:
         figures = _Figures.of(points)
-    sweep = np.abs(np.diff(q_path, axis=0)) @ joint_reach(model)  # any body point's motion per segment [m]
+    sweep = np.abs(np.diff(q_path, axis=0)) @ model.joint_reach  # any body point's motion per segment [m]
     certified = np.zeros(len(sweep), dtype=bool)
     inner: dict[int, list[Sample]] = {}  # per segment, the samples the advancement took inside
     if method == "bound":
@@ -433,6 +432,11 @@ def check_path_clearance(
     return result
 
 
+def joint_reach(model: CollisionModel) -> Array:
+    """Per joint, the largest distance [m] of any body downstream from its axis (n,), once per moving bodies."""
+    return model.joint_reach.copy()
+
+
 def margins_proved(
     model: CollisionModel,
     q_path: ArrayLike,
@@ -497,8 +501,8 @@ def _waypoint_bounds(
     with the model placed there (given ``prior``, the best bounds known there); the pairs it
     measures improve the bounds. ``prior`` (N, P): lower bounds known beforehand [m];
     ``directions`` (N, P, 3): unit vectors whose gaps bound the pairs too; ``out`` (N, P, 3): where
-    the witness normals of the pairs measured are written. Given ``prior`` without ``at_waypoint``,
-    the pairs it settles (:func:`refine.collision.carry.settled_pairs`) keep it, unboxed.
+    the witness normals of the pairs measured are written; without ``at_waypoint``, the pairs that
+    ``prior`` settles keep it, unboxed (:func:`refine.collision.carry.settled_pairs`).
 
     ``left`` (N-1, P), for the proof alone (no ``at_waypoint``, no ``out``): the segment pairs that
     ``prior`` leaves short. Bounds only rise, so every other segment pair stays certified whatever
