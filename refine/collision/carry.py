@@ -139,12 +139,12 @@ def checked_bounds(
     """
     attached = None
     if normals is not None and poses is not None and exact is not None:
-        attached = np.full(np.shape(normals), np.nan)
         ks, ps = np.nonzero(exact & model.self_pairs & ~np.isnan(normals[:, :, 0]))
-        for p in np.unique(ps).tolist():
-            rows = ks[ps == p]
-            other = poses[rows, model.pair_bodies(p)[1], :3, :3]
-            attached[rows, p] = np.einsum("kij,ki->kj", other, normals[rows, p])  # R^T n per row
+        if len(ks):
+            attached = np.full(np.shape(normals), np.nan)
+            other = {p: model.pair_bodies(p)[1] for p in set(ps.tolist())}
+            R = poses[ks, [other[p] for p in ps.tolist()], :3, :3]  # the other bodies' rotations (E, 3, 3)
+            attached[ks, ps] = np.einsum("kij,ki->kj", R, normals[ks, ps])  # R^T n per entry
     return CheckedBounds(
         np.array(q, dtype=float),
         tuple(model.pairs),
