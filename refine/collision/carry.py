@@ -209,8 +209,9 @@ def _nearest(known: NDArray[np.bool_]) -> NDArray[np.intp]:
 
 
 def attached_normals(model: CollisionModel, p: int, poses: Array, local: Array) -> Array:
-    """Unit vectors ``local`` (K, 3) in self pair p's other body's shape frame, in the world at poses (K, M, 4, 4)."""
-    return np.einsum("kij,kj->ki", poses[:, model.pair_bodies(p)[1], :3, :3], local)
+    """Unit vectors ``local`` (K, 3) or (3,) in self pair p's other body's frame, in the world at poses (K, M, 4, 4)."""
+    R = poses[:, model.pair_bodies(p)[1], :3, :3]
+    return R @ local if local.ndim == 1 else np.einsum("kij,kj->ki", R, local)
 
 
 def attached_bounds(
@@ -233,9 +234,7 @@ def attached_bounds(
         local = None
     if local is None or np.isnan(local).any() or not len(poses):
         return model.plane_bounds(p, poses, normal)
-    return model.plane_bounds(
-        p, poses, attached_normals(model, p, poses, np.broadcast_to(local, (len(poses), 3)))
-    )
+    return model.plane_bounds(p, poses, attached_normals(model, p, poses, local))
 
 
 def direction_bounds(
