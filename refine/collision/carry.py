@@ -41,7 +41,7 @@ waypoints are left that can hold the least distance (:func:`direction_bounds`;
 body, a normal fixed in the world falls behind the face as the body turns, and its gap loses the
 turn at first order (a face 0.1 m across turned 1 mrad: 0.1 mm). Such a normal ``n``, found with
 the other body at rotation ``R_b``, is taken elsewhere as ``R_b' R_b^T n``, a unit vector too, so
-its gap is a lower bound as well (:func:`attached_bounds`, :attr:`CheckedBounds.attached`). A cell
+its gap is a lower bound as well (:func:`carried_directions`, :attr:`CheckedBounds.attached`). A cell
 object does not turn with the joints: its pairs keep the normal as it is.
 """
 
@@ -168,7 +168,7 @@ def carried_directions(
 
     With ``turned``, a self pair's normal measured in ``prior`` (:attr:`CheckedBounds.attached`)
     is taken instead turned with the pair's other body to where that body is at ``q`` (as
-    :func:`attached_bounds` does), from the nearest waypoint where it was measured:
+    ``R_b' R_b^T n``, see the module notes), from the nearest waypoint where it was measured:
     near the distance where the nearest feature is a face of that body. That places the moving
     bodies at ``q`` (:meth:`CollisionModel.moving_poses`, kept for the check of ``q``).
     """
@@ -212,29 +212,6 @@ def attached_normals(model: CollisionModel, p: int, poses: Array, local: Array) 
     """Unit vectors ``local`` (K, 3) or (3,) in self pair p's other body's frame, in the world at poses (K, M, 4, 4)."""
     R = poses[:, model.pair_bodies(p)[1], :3, :3]
     return R @ local if local.ndim == 1 else np.einsum("kij,kj->ki", R, local)
-
-
-def attached_bounds(
-    model: CollisionModel, p: int, poses: Array, normal: Array | None = None, at: Array | None = None
-) -> Array | None:
-    """:meth:`CollisionModel.plane_bounds` of pair p along a witness normal turned with the pair's other body.
-
-    A cell object does not move with the joints: its pairs take the normal as it is. For a self pair,
-    the normal ``n`` found with the other body at rotation ``R_b`` is taken at each row as
-    ``R_b(row) R_b^T n`` (see the module notes). ``normal`` (3,): a unit witness normal found with
-    the moving bodies at ``at`` (M, 4, 4); None for the pair's last one. ``poses`` (K, M, 4, 4).
-    None for a pair with a mesh or, without ``normal``, one never measured.
-    """
-    if normal is None:
-        normal, local = model.last_normal(p)
-    elif model.self_pairs[p]:
-        assert at is not None
-        local = normal @ at[model.pair_bodies(p)[1], :3, :3]
-    else:
-        local = None
-    if local is None or np.isnan(local).any() or not len(poses):
-        return model.plane_bounds(p, poses, normal)
-    return model.plane_bounds(p, poses, attached_normals(model, p, poses, local))
 
 
 def direction_bounds(
@@ -471,15 +448,14 @@ def raise_near(
 
     ``found``: the pairs measured at k, by pair index, with their unit witness normals
     (:meth:`CollisionModel.witnesses`); ``poses`` (N, M, 4, 4): the moving bodies at every waypoint.
-    Each pair's gap along its normal at k (a self pair's turned with its other body,
-    :func:`attached_bounds`) bounds its distance at the other waypoints from below (any unit
-    direction does, see the module notes); near k the joints, hence the normal, have turned
-    little, so the gap is close to the distance there. Waypoint k keeps its own figures.
+    Each pair's gap along its normal at k bounds its distance at the other waypoints from below
+    (any unit direction does, see the module notes); near k the joints, hence the normal, have
+    turned little, so the gap is close to the distance there. Waypoint k keeps its own figures.
     """
     lo, hi = max(k - NEAR, 0), min(k + NEAR + 1, len(bounds))
     near = np.arange(lo, hi) != k  # of the rows lo..hi-1, a view of the poses (no copy)
     for p, (_, n) in found.items():
-        gaps = attached_bounds(model, p, poses[lo:hi], n, poses[k])
+        gaps = model.plane_bounds(p, poses[lo:hi], n)
         if gaps is not None:
             rows = bounds[lo:hi, p]
             rows[near] = np.maximum(rows[near], np.where(gaps[near] > 0.0, gaps[near], -np.inf))
@@ -492,7 +468,7 @@ def tightener(
 
     The pairs holding waypoint k's least distance bound and least clearance bound, if not measured
     there, are bounded at every waypoint by their gap along the pair's last witness normal
-    (:func:`attached_bounds`, a lower bound whatever the normal, see the module notes),
+    (:meth:`CollisionModel.plane_bounds`, a lower bound whatever the normal, see the module notes),
     each pair once per check; ``bounds`` (N, P) [m] is raised in place where that gap is larger,
     ``exact`` (N, P) entries are kept. ``tighten(k)`` is True when it tried a pair (finitely often).
     """
@@ -504,7 +480,7 @@ def tightener(
         pairs = {p for p in pairs if not (tried[p] or exact[k, p])}
         for p in pairs:
             tried[p] = True
-            gaps = attached_bounds(model, p, poses)
+            gaps = model.plane_bounds(p, poses)
             if gaps is not None:
                 raised = np.maximum(bounds[:, p], np.where(gaps > 0.0, gaps, -np.inf))
                 bounds[:, p] = np.where(exact[:, p], bounds[:, p], raised)

@@ -174,7 +174,6 @@ class CollisionModel:
             [self.bodies[b].hull is not None and self.bodies[b].kind == "cell" for b in self._pb]
         )
         self._normals = np.full((len(kept), 3), np.nan)  # last witness normal per pair, world
-        self._attached = np.full((len(kept), 3), np.nan)  # and in a self pair's other shape frame
         self._bounded = np.array([not (self.bodies[a].is_mesh or self.bodies[b].is_mesh) for a, b in kept])
         self.pairs = tuple((self.bodies[a].label, self.bodies[b].label) for a, b in kept)
         self.excluded = known.excluded
@@ -361,8 +360,6 @@ class CollisionModel:
         d, p_a, p_b, n = signed_distance(A, self._poses[a], B, self._poses[b])
         self.queries += 1
         self._normals[k] = n
-        if self._self[k]:
-            self._attached[k] = n @ self._poses[b, :3, :3]
         self._exact[k] = Contact(
             body=A.name,
             other=B.name,
@@ -504,10 +501,6 @@ class CollisionModel:
     def pair_bodies(self, k: int) -> tuple[int, int]:
         """Pair k's two bodies as indices into :attr:`bodies` (the moving ones first, as in the poses)."""
         return int(self._pa[k]), int(self._pb[k])
-
-    def last_normal(self, k: int) -> tuple[Array, Array]:
-        """Pair k's last witness normal (3,), world, and in its other body's shape frame then (NaN for a cell object)."""
-        return self._normals[k], self._attached[k]
 
     def _hull_bound(self, k: int) -> float:
         a, b = int(self._pa[k]), int(self._pb[k])
