@@ -67,6 +67,17 @@ def random_path(n=60, seed=4):
     return start + np.cumsum(rng.normal(0.0, np.radians(0.6), (n, 6)), axis=0)
 
 
+def witness_normals(model, q):
+    """FCL's witness normal of every pair at every waypoint of ``q`` (N, P, 3)."""
+    normals = np.full((len(q), len(model.pairs), 3), np.nan)
+    for k, qk in enumerate(q):
+        for p in range(len(model.pairs)):
+            model.pair_distance(qk, p)
+        for p, (_, n) in model.witnesses(qk).items():
+            normals[k, p] = n
+    return normals
+
+
 def random_configurations():
     """A model of the robot by the pillar and ball, a random path of 30 waypoints and FCL's distances."""
     shapes, tool = cell()
@@ -170,12 +181,7 @@ def test_the_gap_along_any_direction_bounds_every_distance_and_along_the_witness
     assert np.isfinite(bounds).sum() > 100  # many directions separate the pair
     assert np.all(bounds <= truth + 1e-9)
     near = q + rng.uniform(-1.0, 1.0, q.shape) * np.radians(0.2)
-    normals = np.full((len(q), len(model.pairs), 3), np.nan)
-    for k, qk in enumerate(near):
-        for p in range(len(model.pairs)):
-            model.pair_distance(qk, p)
-        for p, (_, n) in model.witnesses(qk).items():
-            normals[k, p] = n
+    normals = witness_normals(model, near)
     tight = direction_bounds(model, poses, normals)
     assert np.all(tight <= truth + 1e-9)
     apart = truth > 0.02
@@ -383,12 +389,7 @@ def test_a_self_pairs_carried_normal_turned_with_its_other_body_bounds_the_dista
     normal is carried as it was."""
     model, q, truth = random_configurations()
     found_at = q + np.random.default_rng(1).uniform(-1.0, 1.0, q.shape) * np.radians(0.5)
-    normals = np.full((len(q), len(model.pairs), 3), np.nan)
-    for k, qk in enumerate(found_at):
-        for p in range(len(model.pairs)):
-            model.pair_distance(qk, p)
-        for p, (_, n) in model.witnesses(qk).items():
-            normals[k, p] = n
+    normals = witness_normals(model, found_at)
     exact = np.ones(truth.shape, dtype=bool)
     measured = checked_bounds(
         model, found_at, every_pair(model, found_at), normals, model.moving_poses(found_at), exact
