@@ -36,6 +36,13 @@ of the distance only by the second-order turn of the normal (for most pairs micr
 displacement bound above is millimetres off; more where the nearest features change), so few
 waypoints are left that can hold the least distance (:func:`direction_bounds`;
 ``tests/collision/test_carry.py`` compares with every pair measured at every waypoint).
+
+**Normals that turn with a body.** Where a self pair's nearest feature is a face of its other
+body, a normal fixed in the world falls behind the face as the body turns, and its gap loses the
+turn at first order (a face 0.1 m across turned 1 mrad: 0.1 mm). Such a normal ``n``, found with
+the other body at rotation ``R_b``, is taken elsewhere as ``R_b' R_b^T n``, a unit vector too, so
+its gap is a lower bound as well (:func:`carried_directions`, :attr:`CheckedBounds.attached`). A cell
+object does not turn with the joints: its pairs keep the normal as it is.
 """
 
 from __future__ import annotations
@@ -48,7 +55,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from refine.collision.advance import short
+from refine.collision.advance import pair_motion, short
 from refine.collision.model import CollisionModel
 from refine.collision.motion import corners
 from refine.types import Array
@@ -70,6 +77,9 @@ class CheckedBounds:
         base_in_world: the robot base T_F_R (4, 4) of the check.
         normals: per waypoint and pair, a unit witness normal where one is known (N, P, 3), NaN
             elsewhere; None for none.
+        attached: per waypoint and self pair, the normal the check measured there in the shape
+            frame of the pair's other body (N, P, 3), NaN elsewhere (cell pairs too); None for none.
+            Read only where its rows are those of ``normals``.
     """
 
     q: Array
@@ -78,6 +88,7 @@ class CheckedBounds:
     shapes: dict[str, tuple[int, Array]]
     base_in_world: Array
     normals: Array | None = None
+    attached: Array | None = None
 
 
 _HULLS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -112,12 +123,28 @@ def hull_corners(model: CollisionModel) -> dict[str, tuple[int, Array]]:
 
 
 def checked_bounds(
-    model: CollisionModel, q: Array, bounds: Array, normals: Array | None = None
+    model: CollisionModel,
+    q: Array,
+    bounds: Array,
+    normals: Array | None = None,
+    poses: Array | None = None,
+    exact: NDArray[np.bool_] | None = None,
 ) -> CheckedBounds:
     """The bounds ``bounds`` (N, P) [m] of a check of joints ``q`` (N, n) in ``model``, to carry.
 
-    ``normals`` (N, P, 3): unit witness normals where the check measured a pair (NaN elsewhere).
+    ``normals`` (N, P, 3): unit witness normals where the check measured a pair (NaN elsewhere);
+    with the moving bodies' poses at ``q`` (N, M, 4, 4) and where the check measured a pair
+    ``exact`` (N, P), the self pairs' measured normals are kept in their other body's shape frame
+    too (:attr:`CheckedBounds.attached`).
     """
+    attached = None
+    if normals is not None and poses is not None and exact is not None:
+        ks, ps = np.nonzero(exact & model.self_pairs & ~np.isnan(normals[:, :, 0]))
+        if len(ks):
+            attached = np.full(np.shape(normals), np.nan)
+            other = {p: model.pair_bodies(p)[1] for p in set(ps.tolist())}
+            R = poses[ks, [other[p] for p in ps.tolist()], :3, :3]  # the other bodies' rotations (E, 3, 3)
+            attached[ks, ps] = np.einsum("kij,ki->kj", R, normals[ks, ps])  # R^T n per entry
     return CheckedBounds(
         np.array(q, dtype=float),
         tuple(model.pairs),
@@ -125,16 +152,25 @@ def checked_bounds(
         dict(hull_corners(model)),
         model.base_in_world.copy(),
         None if normals is None else np.array(normals, dtype=float),
+        attached,
     )
 
 
-def carried_directions(model: CollisionModel, prior: CheckedBounds, q: Array) -> Array | None:
+def carried_directions(
+    model: CollisionModel, prior: CheckedBounds, q: Array, *, turned: bool = False
+) -> Array | None:
     """The witness normals of ``prior`` (N, P, 3) in the order of ``model``'s pairs, for joints ``q``.
 
     A waypoint where ``prior`` has no normal of a pair takes the pair's normal at the nearest
     waypoint that has one (the pair was bounded there without a query); NaN for a pair ``prior``
     has no normal of. None when it has none or the paths differ in length. Any unit vector serves
     :func:`direction_bounds`, so neither the robot nor the cell need be the same.
+
+    With ``turned``, a self pair's normal measured in ``prior`` (:attr:`CheckedBounds.attached`)
+    is taken instead turned with the pair's other body to where that body is at ``q`` (as
+    ``R_b' R_b^T n``, see the module notes), from the nearest waypoint where it was measured:
+    near the distance where the nearest feature is a face of that body. That places the moving
+    bodies at ``q`` (:meth:`CollisionModel.moving_poses`, kept for the check of ``q``).
     """
     if prior.normals is None or np.shape(q)[0] != len(prior.q):
         return None
@@ -146,15 +182,36 @@ def carried_directions(model: CollisionModel, prior: CheckedBounds, q: Array) ->
     if not cols:
         return out
     mine, theirs = (np.array(c) for c in zip(*cols, strict=True))
-    known = given[:, theirs]  # (N, C): each column has a normal somewhere
-    n = len(prior.q)
+    out[:, mine] = prior.normals[_nearest(given[:, theirs]), theirs]
+    attached = prior.attached if turned else None
+    if attached is None or attached.shape != prior.normals.shape:
+        return out
+    own = model.self_pairs[mine]
+    mine, theirs = mine[own], theirs[own]
+    given = ~np.isnan(attached[:, theirs, 0])  # measured self pairs' normals in their other body's frame
+    some = given.any(axis=0)
+    if some.any():
+        mine, theirs = mine[some], theirs[some]
+        local = attached[_nearest(given[:, some]), theirs]  # (N, C, 3)
+        poses = model.moving_poses(np.asarray(q, dtype=float))
+        for c, p in enumerate(mine.tolist()):
+            out[:, p] = attached_normals(model, p, poses, local[:, c])
+    return out
+
+
+def _nearest(known: NDArray[np.bool_]) -> NDArray[np.intp]:
+    """Per row and column of ``known`` (N, C), the nearest row known in its column (every column has one), the earlier of two as near."""
+    n = len(known)
     rows = np.arange(n)[:, None]
     before = np.maximum.accumulate(np.where(known, rows, -1), axis=0)  # the last known at or before
     after = np.minimum.accumulate(np.where(known, rows, n)[::-1], axis=0)[::-1]  # the first at or after
-    # the nearest known waypoint, the earlier of two as near
-    near = np.where((before >= 0) & ((after >= n) | (rows - before <= after - rows)), before, after)
-    out[:, mine] = prior.normals[near, theirs]
-    return out
+    return np.where((before >= 0) & ((after >= n) | (rows - before <= after - rows)), before, after)
+
+
+def attached_normals(model: CollisionModel, p: int, poses: Array, local: Array) -> Array:
+    """Unit vectors ``local`` (K, 3) or (3,) in self pair p's other body's frame, in the world at poses (K, M, 4, 4)."""
+    R = poses[:, model.pair_bodies(p)[1], :3, :3]
+    return R @ local if local.ndim == 1 else np.einsum("kij,kj->ki", R, local)
 
 
 def direction_bounds(
@@ -196,6 +253,30 @@ def carried_bounds(model: CollisionModel, prior: CheckedBounds, q: Array) -> Arr
         or not np.array_equal(model.base_in_world, prior.base_in_world)
     ):
         return None
+    mine, theirs, delta = _carried_columns(model, prior)
+    motion = np.abs(q - prior.q) @ model.pair_motion.T  # (N, P) [m]
+    out = np.full((len(q), len(model.pairs)), -np.inf)
+    if len(mine):  # all the carried columns at once, each as bound - motion - shift
+        out[:, mine] = prior.bounds[:, theirs] - motion[:, mine] - delta
+    return np.where(out > 0.0, out, -np.inf)
+
+
+_COLUMNS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+""":func:`_carried_columns` per checked bounds, per model."""
+
+
+def _carried_columns(
+    model: CollisionModel, prior: CheckedBounds
+) -> tuple[NDArray[np.intp], NDArray[np.intp], Array]:
+    """The pairs ``prior`` carries into ``model``: index here (C,), index in ``prior`` (C,), shift [m] (C,).
+
+    The shift: the largest displacement of its cell object's points (see the module notes); a pair
+    with a changed body is left out. Models and checked bounds do not change: kept for each pair.
+    """
+    per_model = _COLUMNS.setdefault(prior, weakref.WeakKeyDictionary())
+    known = per_model.get(model)
+    if known is not None:
+        return known
     old = {pair: p for p, pair in enumerate(prior.pairs)}
     shift: dict[str, float] = {}  # per body: how far its points moved, inf for a changed shape
     for label, (joint, now) in hull_corners(model).items():
@@ -208,18 +289,18 @@ def carried_bounds(model: CollisionModel, prior: CheckedBounds, q: Array) -> Arr
             shift[label] = 0.0 if np.array_equal(before[1], now) else np.inf
         else:
             shift[label] = float(np.max(np.linalg.norm(now - before[1], axis=1)))
-    motion = np.abs(q - prior.q) @ model.pair_motion.T  # (N, P) [m]
-    out = np.full((len(q), len(model.pairs)), -np.inf)
-    mine, theirs, delta = [], [], []  # the pairs carried: index here, index in the prior, shift [m]
+    mine, theirs, delta = [], [], []
     for p, (a, b) in enumerate(model.pairs):
         k = old.get((a, b))
         if k is not None and math.isfinite(shift[a] + shift[b]):
             mine.append(p)
             theirs.append(k)
             delta.append(shift[a] + shift[b])
-    if mine:  # all the carried columns at once, each as bound - motion - shift
-        out[:, mine] = prior.bounds[:, theirs] - motion[:, mine] - np.array(delta)
-    return np.where(out > 0.0, out, -np.inf)
+    known = (np.array(mine, dtype=np.intp), np.array(theirs, dtype=np.intp), np.array(delta, dtype=float))
+    for a in known:
+        a.flags.writeable = False
+    per_model[model] = known
+    return known
 
 
 def bounds_between(model: CollisionModel, checked: CheckedBounds, q: Array, place: Array) -> Array | None:
@@ -461,3 +542,31 @@ def measure_least(
                 continue
             visit(k)
     return measured
+
+
+SETTLED_M = 0.05
+"""A pair whose known bounds stay this far above the path's least known bound [m] is not bounded further."""
+
+
+def settled_pairs(
+    model: CollisionModel, q_path: Array, prior: Array, tolerance_m: float
+) -> NDArray[np.bool_]:
+    """The pairs (P,) whose known lower bounds ``prior`` (N, P) [m] leave nothing to find along ``q_path``.
+
+    Settled: its known bounds certify every segment of ``q_path`` (N, n) by the motion bound
+    (:func:`refine.collision.advance.short`) and stay :data:`SETTLED_M` above the least known bound
+    of any pair, in distance and in clearance. Bounds only rise, so it stays certified whatever else
+    is found; where it holds a waypoint's least bound, that waypoint is measured if it can matter
+    (:func:`measure_least` needs lower bounds, not close ones). Its box and direction bounds are not
+    computed: the check finds the same, only the lower-bound figures of waypoints it does not
+    measure (and the bounds it carries on) keep such a pair's known bound where a box gives more.
+    """
+    finite = np.isfinite(prior).all(axis=0)
+    if not finite.any():
+        return finite
+    clear = prior - model.pair_margins
+    certified = ~short(clear + tolerance_m, pair_motion(model, q_path)).any(axis=0)
+    far = (prior.min(axis=0) >= prior[:, finite].min() + SETTLED_M) & (
+        clear.min(axis=0) >= clear[:, finite].min() + SETTLED_M
+    )
+    return finite & certified & far

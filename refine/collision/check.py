@@ -74,10 +74,10 @@ from refine.collision.carry import (
     direction_bounds,
     measure_least,
     raise_near,
+    settled_pairs,
     tightener,
 )
 from refine.collision.model import CollisionModel
-from refine.collision.motion import joint_reach
 from refine.errors import InputError
 from refine.robot.kinematics import TcpKinematics
 from refine.types import Array
@@ -359,7 +359,7 @@ def check_path_clearance(
             figures.put(k, found)
     else:
         figures = _Figures.of(points)
-    sweep = np.abs(np.diff(q_path, axis=0)) @ joint_reach(model)  # any body point's motion per segment [m]
+    sweep = np.abs(np.diff(q_path, axis=0)) @ model.joint_reach  # any body point's motion per segment [m]
     certified = np.zeros(len(sweep), dtype=bool)
     inner: dict[int, list[Sample]] = {}  # per segment, the samples the advancement took inside
     if method == "bound":
@@ -426,10 +426,15 @@ def check_path_clearance(
         tolerance_m=tolerance_m,
         certified_segments=int(certified.sum()),
         waypoint_measured=measured,
-        bounds=checked_bounds(model, q_path, bounds, normals) if method == "bound" else None,
+        bounds=checked_bounds(model, q_path, bounds, normals, poses, exact) if method == "bound" else None,
     )
     log.info("%s", result.summary())
     return result
+
+
+def joint_reach(model: CollisionModel) -> Array:
+    """Per joint, the largest distance [m] of any body downstream from its axis (n,), once per moving bodies."""
+    return model.joint_reach.copy()
 
 
 def margins_proved(
@@ -496,7 +501,8 @@ def _waypoint_bounds(
     with the model placed there (given ``prior``, the best bounds known there); the pairs it
     measures improve the bounds. ``prior`` (N, P): lower bounds known beforehand [m];
     ``directions`` (N, P, 3): unit vectors whose gaps bound the pairs too; ``out`` (N, P, 3): where
-    the witness normals of the pairs measured are written.
+    the witness normals of the pairs measured are written; without ``at_waypoint``, the pairs that
+    ``prior`` settles keep it, unboxed (:func:`refine.collision.carry.settled_pairs`).
 
     ``left`` (N-1, P), for the proof alone (no ``at_waypoint``, no ``out``): the segment pairs that
     ``prior`` leaves short. Bounds only rise, so every other segment pair stays certified whatever
@@ -509,10 +515,17 @@ def _waypoint_bounds(
         poses (N, M, 4, 4), box bounds (N, P) [m] (None with ``left``), the better bounds (N, P)
         [m], and which of those are exact distances (N, P).
     """
+    settled = None  # the pairs the known bounds leave far from the least and certified: bounded no further
     if left is None:
         poses = model.moving_poses(q_path)
-        boxes = model.box_bounds(poses)  # lower bounds on each pair's distance per waypoint (N, P) [m]
-        bounds = boxes.copy() if prior is None else np.maximum(boxes, prior)  # and the better ones found
+        if prior is not None and at_waypoint is None:
+            settled = settled_pairs(model, q_path, prior, tolerance_m)
+        if settled is None or not settled.any():
+            boxes = model.box_bounds(poses)  # lower bounds on each pair's distance per waypoint (N, P) [m]
+            bounds = boxes.copy() if prior is None else np.maximum(boxes, prior)  # and the better ones found
+        else:
+            boxes, bounds, columns = None, prior.copy(), np.flatnonzero(~settled)
+            bounds[:, columns] = np.maximum(bounds[:, columns], model.box_bounds(poses, columns))
         rows: slice | NDArray[np.intp] = slice(None)
     else:
         assert prior is not None and at_waypoint is None and out is None
@@ -530,7 +543,12 @@ def _waypoint_bounds(
         columns_left = short(bounds - model.pair_margins + tolerance_m, pair_motion(model, q_path)).any(0)
         bounds[rows] = np.maximum(
             bounds[rows],
-            direction_bounds(model, poses[rows], directions[rows], None if out is not None else columns_left),
+            direction_bounds(
+                model,
+                poses[rows],
+                directions[rows],
+                (None if settled is None else ~settled) if out is not None else columns_left,
+            ),
         )
     exact = np.zeros(bounds.shape, dtype=bool)
     need = np.zeros(bounds.shape, dtype=bool)  # pairs to measure at each waypoint

@@ -39,6 +39,7 @@ class Kept:
     excluded: tuple[tuple[str, str, str], ...]
     notes: list[tuple[int, str, tuple]]  # the log lines of the selection, said again on each reuse
     motion: Array | None = None  # pair_reach of the pairs, read-only
+    reach: Array | None = None  # joint_reach of the moving bodies, read-only
     hulls: dict[str, tuple[int, Array]] = field(default_factory=dict)  # moving bodies' hull corners
 
 

@@ -20,12 +20,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from refine.collision.contact import Contact, linearised_distance
 from refine.collision.distance import hull_bound, place, signed_distance
 from refine.collision.geometry import Body, link_body, shape_body, world_aabb
 from refine.collision.kept import Kept, recall, remember, structure_key
+from refine.collision.motion import joint_reach, pair_reach
 from refine.collision.pairs import exclusion, joint_axes
 from refine.errors import InputError
 from refine.frames import check_transform
@@ -311,11 +312,13 @@ class CollisionModel:
     def _box_bounds(self, poses: Array, pa: Array, pb: Array) -> Array:
         """The box gaps (N, len(pa)) [m] of the body pairs (pa, pb) at poses (N, M, 4, 4), -inf for none."""
         n = self._n_moving
-        c, h = world_aabb(poses, self._centre[:n], self._half[:n])
         # body-major (B, N, 3): each pair's rows are then gathered as whole blocks, not 3 at a time
         cb, hb = np.empty((2, len(self._aabb_c), len(poses), 3))
-        cb[:n], cb[n:] = c.transpose(1, 0, 2), self._aabb_c[n:, None]
-        hb[:n], hb[n:] = h.transpose(1, 0, 2), self._aabb_h[n:, None]
+        cb[n:], hb[n:] = self._aabb_c[n:, None], self._aabb_h[n:, None]
+        used = np.union1d(pa[pa < n], pb[pb < n])  # only the moving bodies of these pairs are boxed
+        at = slice(None, n) if len(used) == n else used  # all of them: the poses as they are
+        c, h = world_aabb(poses[:, at], self._centre[at], self._half[at])
+        cb[at], hb[at] = c.transpose(1, 0, 2), h.transpose(1, 0, 2)
         d = cb[pa]  # |c_a - c_b| - h_a - h_b, in place: the same sums without their temporaries
         d -= cb[pb]
         np.abs(d, out=d)
@@ -389,14 +392,19 @@ class CollisionModel:
         """
         if self._motion is None:
             if self._kept.motion is None:  # the first model of its robot, moving bodies and pairs
-                from refine.collision.motion import pair_reach
-
                 pairs = [(self.bodies[a], self.bodies[b]) for a, b in zip(self._pa, self._pb, strict=True)]
-                motion = pair_reach(self._model, pairs)
-                motion.flags.writeable = False
-                self._kept.motion = motion
+                self._kept.motion = pair_reach(self._model, pairs)
+                self._kept.motion.flags.writeable = False
             self._motion = self._kept.motion
         return self._motion
+
+    @property
+    def joint_reach(self) -> Array:
+        """:func:`refine.collision.motion.joint_reach` [m] (n,), read-only: once per robot and moving bodies."""
+        if self._kept.reach is None:  # the first model of its robot and moving bodies (see ``kept.py``)
+            self._kept.reach = joint_reach(self)
+            self._kept.reach.flags.writeable = False
+        return self._kept.reach
 
     def pair_bound(
         self, q: ArrayLike, k: int, poses: Array | None = None, *, plane: bool = False
@@ -431,12 +439,9 @@ class CollisionModel:
         return {k: (c.distance_m, c.normal) for k, c in self._exact.items()}
 
     def pair_distance(self, q: ArrayLike, k: int, poses: Array | None = None) -> float:
-        """The signed distance [m] of checked pair k (index into :attr:`pairs`) at joints q.
+        """The signed distance [m] of checked pair k (index into :attr:`pairs`) at joints q [rad] (n,).
 
-        Args:
-            q: joints [rad], (n,).
-            k: the pair.
-            poses: the moving bodies' poses at q from :meth:`moving_poses`, (M, 4, 4), or None.
+        ``poses``: the moving bodies' poses at q from :meth:`moving_poses`, (M, 4, 4), or None.
         """
         self._update(q, poses)
         return self._pair(k).distance_m
@@ -487,6 +492,15 @@ class CollisionModel:
         Ta = poses[:, a] if a < m else np.broadcast_to(self._poses[a], (len(poses), 4, 4))
         Tb = poses[:, b] if b < m else np.broadcast_to(self._poses[b], (len(poses), 4, 4))
         return -self.bodies[a].reach_many(Ta, -n) - self.bodies[b].reach_many(Tb, n)
+
+    @property
+    def self_pairs(self) -> NDArray[np.bool_]:
+        """Which checked pairs are of two of the robot's own bodies (links, tool shapes), (P,)."""
+        return self._self.copy()
+
+    def pair_bodies(self, k: int) -> tuple[int, int]:
+        """Pair k's two bodies as indices into :attr:`bodies` (the moving ones first, as in the poses)."""
+        return int(self._pa[k]), int(self._pb[k])
 
     def _hull_bound(self, k: int) -> float:
         a, b = int(self._pa[k]), int(self._pb[k])

@@ -98,7 +98,7 @@ class ClearanceSource:
                 self.kin,
                 self.check_step_m,
                 prior=self._carried(q),
-                directions=self._directions(q),
+                directions=self._directions(q, turned=True),
                 every_waypoint=False,
             )
             self.stats["check_s"] += time.perf_counter() - t0
@@ -115,8 +115,8 @@ class ClearanceSource:
     def _carried(self, q: Array) -> Array | None:
         return None if self.prior is None else carried_bounds(self.model, self.prior, q)
 
-    def _directions(self, q: Array) -> Array | None:
-        return None if self.prior is None else carried_directions(self.model, self.prior, q)
+    def _directions(self, q: Array, *, turned: bool = False) -> Array | None:
+        return None if self.prior is None else carried_directions(self.model, self.prior, q, turned=turned)
 
     @staticmethod
     def _key(q: Array) -> tuple:

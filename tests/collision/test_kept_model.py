@@ -58,7 +58,9 @@ def fcl_nozzle_to(robot, q, box):
     pin.forwardKinematics(robot.model, data, q)
     fid = robot.model.getFrameId(robot.spec.flange_frame)
     T = pin.updateFramePlacement(robot.model, data, fid).homogeneous @ NOZZLE.pose
-    nozzle = fcl.CollisionObject(fcl.Cylinder(NOZZLE.radius_m, NOZZLE.length_m), fcl.Transform(T[:3, :3], T[:3, 3]))
+    nozzle = fcl.CollisionObject(
+        fcl.Cylinder(NOZZLE.radius_m, NOZZLE.length_m), fcl.Transform(T[:3, :3], T[:3, 3])
+    )
     other = fcl.CollisionObject(fcl.Box(*box.size_m), fcl.Transform(box.pose[:3, :3], box.pose[:3, 3]))
     return fcl.distance(nozzle, other, fcl.DistanceRequest())
 
@@ -81,6 +83,7 @@ def test_a_moved_cell_object_or_margin_keeps_pairs_and_motion_bounds_with_a_fres
         assert again._kept is first._kept and new._kept is not first._kept
         assert again.pair_motion is first_motion
         assert np.array_equal(again.pair_motion, new.pair_motion)
+        assert again.joint_reach is first.joint_reach and np.array_equal(again.joint_reach, new.joint_reach)
         assert again.pairs == new.pairs and again.excluded == new.excluded
         assert np.array_equal(again.pair_margins, new.pair_margins)
         qs = path()
@@ -143,6 +146,10 @@ def test_the_tools_radius_changes_its_motion_bound(robot):
     wide = build(robot, tool=(dataclasses.replace(NOZZLE, radius_m=0.05),))
     k = first.pairs.index(("tool:nozzle", "pillar"))
     assert (wide.pair_motion[k] >= first.pair_motion[k]).all()
+    # joint 6's reach, kept apart: the nozzle's centre 15 cm out along the flange axis plus its box's half diagonal
+    assert wide.joint_reach is not first.joint_reach
+    for model, radius in ((first, 0.03), (wide, 0.05)):
+        assert model.joint_reach[5] == pytest.approx(0.15 + np.linalg.norm([radius, radius, 0.15]), abs=1e-9)
     assert wide.pair_motion[k, 5] == pytest.approx(first.pair_motion[k, 5] + 0.02 * np.sqrt(2.0), abs=1e-9)
 
 
