@@ -14,7 +14,7 @@ from refine.cli import exit_status, main
 from refine.collision import CollisionModel
 from refine.frames import make_transform
 from refine.optimise.clearance import ClearanceSource
-from refine.optimise.diagnosis import Diagnoser, closest_pair_text, reach_tilts
+from refine.optimise.diagnosis import Diagnoser, closest_pair_text, reach_gap, reach_tilts
 from refine.optimise.reach import reach_model
 from refine.robot.kinematics import TcpKinematics
 from refine.robot.registry import load_robot
@@ -109,6 +109,43 @@ def test_the_distance_from_the_shoulder_is_to_the_shoulder_turned_towards_or_awa
         off = [max(reach.r_min_m - v, 0.0, v - reach.r_max_m) for v in d]
         expected.append(d[0] if off[0] <= off[1] else d[1])
     assert np.abs(reach.distance(points) - np.array(expected)).max() <= 1e-12
+
+
+def test_the_reach_gap_claims_no_more_than_the_shoulder_turned_anywhere_on_its_circle_allows():
+    """IRB 4600 (shoulder 0.175 m off axis 1), the TCP on the flange: a TCP is out of reach by at least the
+    gap only if, with the shoulder turned to any of 7,200 angles about axis 1 (SciPy's rotation),
+    the sphere of wrist centres around it stays beyond r_max or inside r_min of that shoulder; the
+    gap is that least excess. Points around the arm, close to the shoulder, and reached by forward
+    kinematics (gap 0)."""
+    from scipy.spatial.transform import Rotation
+
+    robot = load_robot("abb_irb4600_60_205")
+    tool = np.eye(4)
+    kin = TcpKinematics(robot, np.eye(4), tool)
+    reach = reach_model(robot, math.radians(2.0))
+    L = float(np.linalg.norm((np.linalg.inv(tool) @ np.append(reach.point_in_flange, 1.0))[:3]))
+    w, c = reach.axis1
+    rng = np.random.default_rng(11)
+    shoulder = reach.shoulder_ref
+    # around axis 1 at the shoulder's height: inside r_min of the shoulder turned towards them
+    rho, phi, dz = (
+        rng.uniform(0.0, 0.3, 200),
+        rng.uniform(-math.pi, math.pi, 200),
+        rng.uniform(-0.2, 0.2, 200),
+    )
+    near = np.column_stack([rho * np.cos(phi), rho * np.sin(phi), shoulder[2] + dz])
+    q = rng.uniform(robot.spec.lower + 0.05, robot.spec.upper - 0.05, (200, robot.nq))
+    reached = kin.poses(q)[:, :3, 3]
+    points = np.vstack([rng.normal(size=(300, 3)) * 1.5, near, reached])
+    turns = Rotation.from_rotvec(np.outer(np.linspace(0.0, 2 * math.pi, 7200, endpoint=False), w))
+    shoulders = c + turns.apply(shoulder - c)  # (7200, 3)
+    d = np.linalg.norm(points[:, None, :] - shoulders[None], axis=2)  # (P, 7200)
+    excess = np.maximum(np.maximum(d - L - reach.r_max_m, reach.r_min_m - d - L), 0.0).min(axis=1)
+    gap = reach_gap(kin, points, 2.0)
+    assert np.all(gap <= excess + 1e-9)
+    assert np.abs(gap - excess).max() <= 1e-4  # the sampled circle's spacing (0.05 deg at <= 2 m)
+    assert np.count_nonzero(excess[300:500] > 0.01) > 0  # some points near the shoulder are out of reach
+    assert np.all(gap[500:] <= 1e-9)
 
 
 def test_the_tilt_that_brings_the_wrist_centre_into_reach_matches_the_geometry():

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from refine.optimise.binding import binding_at, bound_text, waypoint_runs
-from refine.optimise.reach import reach_model, rotations_about
+from refine.optimise.reach import reach_model, rotations_about, shoulder_circle_distances
 from refine.optimise.verify import runs, singularity_measures
 from refine.paths import FusedPath
 from refine.robot.kinematics import TcpKinematics, solve_ik
@@ -529,9 +529,11 @@ class Diagnoser:
 def reach_gap(kin: TcpKinematics, positions: Array, joint_margin_deg: float) -> Array:
     """How far each TCP position (N, 3) in {F} is out of reach at any tool orientation [m].
 
-    The wrist centre lies on a sphere of fixed radius around the TCP; the gap is how far the closest
-    (or farthest) point of that sphere stays outside the wrist centre's range from the shoulder.
-    Zeros for a robot without a spherical wrist (nothing certain to say).
+    The wrist centre lies on a sphere of fixed radius L around the TCP; the gap is how far that
+    sphere stays outside the wrist centre's range of distances from the shoulder, wherever axis 1
+    turns the shoulder on its circle: beyond ``r_max_m`` from its nearest point, or inside
+    ``r_min_m`` of its farthest (:func:`refine.optimise.reach.shoulder_circle_distances`). Zeros for
+    a robot without a spherical wrist (nothing certain to say).
     """
     reach = reach_model(kin.robot, math.radians(joint_margin_deg))
     out = np.zeros(len(positions))
@@ -540,9 +542,8 @@ def reach_gap(kin: TcpKinematics, positions: Array, joint_margin_deg: float) -> 
     T_inv = np.linalg.inv(kin.base_in_world)
     p = positions @ T_inv[:3, :3].T + T_inv[:3, 3]
     L = float(np.linalg.norm((np.linalg.inv(kin.tcp_in_flange) @ np.append(reach.point_in_flange, 1.0))[:3]))
-    front, back = reach.shoulders(p)
-    d = np.minimum(np.linalg.norm(p - front, axis=1), np.linalg.norm(p - back, axis=1))
-    return np.maximum(np.maximum(d - L - reach.r_max_m, reach.r_min_m - d - L), 0.0)
+    d_min, d_max = shoulder_circle_distances(reach, p)
+    return np.maximum(np.maximum(d_min - L - reach.r_max_m, reach.r_min_m - d_max - L), 0.0)
 
 
 def reach_tilts(

@@ -228,13 +228,22 @@ def reach_bound(
     T_inv = np.linalg.inv(base_in_world)
     p = np.asarray(positions, dtype=float) @ T_inv[:3, :3].T + T_inv[:3, 3]
     L = float(np.linalg.norm((np.linalg.inv(tcp_in_flange) @ np.append(reach.point_in_flange, 1.0))[:3]))
+    d_min, d_max = shoulder_circle_distances(reach, p)
+    return np.maximum(np.maximum(d_min - reach.r_max_m - L, reach.r_min_m - L - d_max), 0.0)
+
+
+def shoulder_circle_distances(reach: ReachModel, points: Array) -> tuple[Array, Array]:
+    """The least and largest distance [m] of each base-frame point (N, 3) from the shoulder's circle.
+
+    The shoulder turns with axis 1 on a circle (height h along the axis, radius a from it); a point
+    at height z and radius rho about the axis is between ``hypot(z - h, rho - a)`` and
+    ``hypot(z - h, rho + a)`` from it, whichever way axis 1 is turned.
+    """
     w, c = reach.axis1
     s = reach.shoulder_ref - c
     h = float(w @ s)
-    a = float(np.linalg.norm(s - h * w))  # the shoulder circle: height h along axis 1, radius a
-    v = p - c
+    a = float(np.linalg.norm(s - h * w))
+    v = np.asarray(points, dtype=float) - c
     z = v @ w
     rho = np.linalg.norm(v - z[:, None] * w, axis=1)
-    d_min = np.hypot(z - h, rho - a)
-    d_max = np.hypot(z - h, rho + a)
-    return np.maximum(np.maximum(d_min - reach.r_max_m - L, reach.r_min_m - L - d_max), 0.0)
+    return np.hypot(z - h, rho - a), np.hypot(z - h, rho + a)
