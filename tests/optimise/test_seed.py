@@ -205,6 +205,22 @@ def _compiled_and_numpy(name: str, tool_in_world=None):
     return [TcpKinematics(r, base, tcp, tool_in_world) for r in (robot, slow)]
 
 
+def _iiwa_path(held: bool):
+    """The iiwa compiled and in NumPy (the TCP on the flange or at a standing tool), a straight joint path
+    of 30 rows and its TCP poses."""
+    import pinocchio as pin
+
+    world = (
+        pin.SE3(pin.exp3(np.array([2.8, 0.2, 0.1])), np.array([0.6, 0.2, 0.5])).homogeneous if held else None
+    )
+    kin, kin_np = _compiled_and_numpy("kuka_iiwa14_r820", world)
+    t = np.linspace(0.0, 1.0, 30)[:, None]
+    q_path = np.array([0.1, 0.5, -0.2, -1.2, 0.3, 0.8, 0.1]) + t * np.array(
+        [0.4, -0.3, 0.2, 0.5, -0.6, 0.3, 0.9]
+    )
+    return kin, kin_np, q_path, kin_np.poses(q_path)
+
+
 @pytest.mark.parametrize("held", [False, True])
 def test_the_chain_compiled_follows_the_numpy_chain_through_a_half_turn_and_gives_up_alike(chain_cache, held):
     """The waypoint-by-waypoint chain in C (a redundant arm's pull, with and without a standing tool) against
@@ -213,16 +229,8 @@ def test_the_chain_compiled_follows_the_numpy_chain_through_a_half_turn_and_give
 
     from refine.optimise.seed import _solve_chain
 
-    world = (
-        pin.SE3(pin.exp3(np.array([2.8, 0.2, 0.1])), np.array([0.6, 0.2, 0.5])).homogeneous if held else None
-    )
-    kin, kin_np = _compiled_and_numpy("kuka_iiwa14_r820", world)
+    kin, kin_np, q_path, targets = _iiwa_path(held)
     spec = kin.robot.spec
-    t = np.linspace(0.0, 1.0, 30)[:, None]
-    q_path = np.array([0.1, 0.5, -0.2, -1.2, 0.3, 0.8, 0.1]) + t * np.array(
-        [0.4, -0.3, 0.2, 0.5, -0.6, 0.3, 0.9]
-    )
-    targets = kin_np.poses(q_path)
     targets[12, :3, :3] = targets[12, :3, :3] @ pin.exp3(np.array([0.0, np.pi - 1e-5, 0.0]))  # about y
     from refine.optimise import seed as seed_module
 
@@ -253,16 +261,8 @@ def test_the_axis_chain_compiled_follows_the_numpy_chain_through_a_turned_over_a
     from refine.optimise import seed as seed_module
     from refine.optimise.seed import _solve_chain
 
-    world = (
-        pin.SE3(pin.exp3(np.array([2.8, 0.2, 0.1])), np.array([0.6, 0.2, 0.5])).homogeneous if held else None
-    )
-    kin, kin_np = _compiled_and_numpy("kuka_iiwa14_r820", world)
-    spec = kin.robot.spec
-    t = np.linspace(0.0, 1.0, 30)[:, None]
-    q_path = np.array([0.1, 0.5, -0.2, -1.2, 0.3, 0.8, 0.1]) + t * np.array(
-        [0.4, -0.3, 0.2, 0.5, -0.6, 0.3, 0.9]
-    )
-    targets = kin_np.poses(q_path)
+    kin, kin_np, q_path, targets = _iiwa_path(held)
+    spec, t = kin.robot.spec, np.linspace(0.0, 1.0, 30)[:, None]
     for k in range(30):
         targets[k, :3, :3] = targets[k, :3, :3] @ pin.exp3(np.array([0.0, 0.0, 2.0 * t[k, 0]]))
     targets[12, :3, :3] = targets[12, :3, :3] @ pin.exp3(np.array([np.pi - 1e-5, 0.0, 0.0]))  # z over
