@@ -229,11 +229,11 @@ int {prefix}_ik_rows(const casadi_real* q, const casadi_real* base, const casadi
    iterations stops); the TCP on the flange (world == 0) or a stationary tool; a redundant arm's
    pull toward mid-range (gain > 0) in the task's null space; the whole pose or (iopts[4]) the
    position and the tool axis alone, the spin about it free. flag[k] = 1: the rotation error (the
-   angle between the axes) came within 1e-3 rad of pi, the row is to be solved another way. Chained (iopts[2]): rows first..n-1
-   in turn (iopts[3]: first; the rows before it solved already), each from the last answer plus
-   the last step where no joint moved more than opts[4] in it (row 0 from q0's first row); the
-   chain stops at a flagged row, or with flag[k] = 2 after a row whose joints moved more than
-   opts[5] from the row before. */
+   angle between the axes) came within 1e-3 rad of pi, the row is to be solved another way.
+   Chained (iopts[2]): rows first..n-1 in turn (iopts[3]: first; the rows before it solved
+   already), each from the last answer plus the last step where no joint moved more than opts[4]
+   in it (row 0 from q0's first row); the chain stops at a flagged row, or with flag[k] = 2 after
+   a row whose joints moved more than opts[5] from the row before. */
 int {prefix}_solve_rows(const casadi_real* q0, const casadi_real* base, const casadi_real* tool,
                         const casadi_real* world, const casadi_real* target, const casadi_real* lower,
                         const casadi_real* upper, const casadi_real* mid, const casadi_real* half,
