@@ -183,7 +183,7 @@ def test_pulls_and_partial_tasks_keep_the_numpy_path(chain_cache, monkeypatch) -
         raise AssertionError("the compiled step was used")
 
     monkeypatch.setattr(kin.robot.chain, "ik_steps", refuse)
-    for kwargs in ({"position_only": True}, {"axis_only": True}, {"damping": 0.0}):
+    for kwargs in ({"position_only": True}, {"damping": 0.0}):
         q, err = solve_ik_batch(kin, targets, q0, spec.lower, spec.upper, nullspace_gain=0.0, **kwargs)
         q_np, err_np = solve_ik_batch(
             kin_np, targets, q0, spec.lower, spec.upper, nullspace_gain=0.0, **kwargs

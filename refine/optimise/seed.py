@@ -172,8 +172,8 @@ def _solve_chain(
     give_up: float | None = None,
 ) -> tuple[Array, Array]:  # fmt: skip
     chain = kin.robot.chain
-    if not axis_only and len(targets) and chain is not None and chain.compiled:
-        return _solve_chain_compiled(kin, targets, q_first, lower, upper, give_up)
+    if len(targets) and chain is not None and chain.compiled:
+        return _solve_chain_compiled(kin, targets, q_first, lower, upper, give_up, axis_only)
     qs = np.empty((len(targets), len(q_first)))
     errors = np.empty(len(targets))
     q = q_first
@@ -192,14 +192,16 @@ def _solve_chain(
 
 
 def _solve_chain_compiled(
-    kin: TcpKinematics, targets: Array, q_first: Array, lower: Array, upper: Array, give_up: float | None
-) -> tuple[Array, Array]:
+    kin: TcpKinematics, targets: Array, q_first: Array, lower: Array, upper: Array, give_up: float | None,
+    axis_only: bool = False,
+) -> tuple[Array, Array]:  # fmt: skip
     """:func:`_solve_chain` with the chain's IK in C, the same answers to rounding.
 
     :meth:`CompiledChain.ik_solve <refine.robot.compiled_chain.CompiledChain.ik_solve>`, chained:
-    :func:`solve_ik`'s iterations from the same starts. A waypoint whose rotation error comes
-    within 1e-3 rad of a half turn is solved by :func:`solve_ik` (NumPy's ``log3``) and the chain
-    goes on after it in C.
+    :func:`solve_ik`'s iterations from the same starts, the whole pose or the tool axis alone. A
+    waypoint whose rotation error (the angle between the axes) comes within 1e-3 rad of a half
+    turn is solved by :func:`solve_ik` (NumPy's ``log3`` or :func:`axis_error`'s turn over) and
+    the chain goes on after it in C.
     """
     n, nq = len(targets), len(q_first)
     qs, errors = np.empty((n, nq)), np.empty(n)
@@ -210,7 +212,7 @@ def _solve_chain_compiled(
     while first < n:
         flag = kin.robot.chain.ik_solve(
             np.reshape(q_first, (1, nq)), placements, targets, (lower, upper), 1e-3, CONVERGED, gain, 100,
-            None, (PREDICT_STEP_MAX, stop, qs, errors, first),
+            None, (PREDICT_STEP_MAX, stop, qs, errors, first), axis_only,
         )[4]  # fmt: skip
         if not (flag == 1).any():
             break
@@ -218,7 +220,7 @@ def _solve_chain_compiled(
         guess = q_first if k == 0 else qs[k - 1]
         if k >= 2 and float(np.abs(qs[k - 1] - qs[k - 2]).max()) <= PREDICT_STEP_MAX:
             guess = qs[k - 1] + (qs[k - 1] - qs[k - 2])
-        qs[k], errors[k] = solve_ik(kin, targets[k], guess, lower, upper)
+        qs[k], errors[k] = solve_ik(kin, targets[k], guess, lower, upper, axis_only=axis_only)
         first = k + 1
     if give_up is not None and n > 1:  # the first step beyond it: the chain stops there
         far = np.flatnonzero(np.abs(np.diff(qs, axis=0)).max(axis=1) > give_up)

@@ -17,8 +17,9 @@ per row and places ``m`` bodies ``base · oMi[joint[b]] · local[b]``. Two more,
 by a 6 × 6 Cholesky factor), ``<prefix>_solve_rows``, that step iterated per row as
 :func:`refine.robot.kinematics.solve_ik` or ``solve_ik_batch`` iterate it (the 0.3 rad cap, the
 limits, a redundant arm's pull toward mid-range in the task's null space, the batch's stall rule;
-a TCP on the flange or a stationary tool), and ``<prefix>_det6_rows``, the determinants of 6 × 6
-matrices (an LU factorisation with partial pivoting, as LAPACK's ``getrf``).
+a TCP on the flange or a stationary tool; the whole pose or, as ``axis_only``, the tool axis
+alone), and ``<prefix>_det6_rows``, the determinants of 6 × 6 matrices (an LU factorisation with
+partial pivoting, as LAPACK's ``getrf``).
 """
 
 from __future__ import annotations
@@ -111,6 +112,34 @@ static casadi_real {prefix}_error(const casadi_real* G, const casadi_real* Tk, c
   return th;
 }}
 
+/* e (6): the position difference and the rotation vector turning the TCP's z axis onto the target's
+   the shortest way (axis_error's: z x z_target scaled to the angle between them, 0 when parallel);
+   Ja: J with its angular rows' component about the current z axis taken out, so a step leaves the
+   spin about the axis free; the angle between the axes returned */
+static casadi_real {prefix}_axis_error(const casadi_real* G, const casadi_real* Tk, const casadi_real* Jk,
+                                       casadi_real* Ja, casadi_real* ek) {{
+  casadi_real z[3], t[3], sn, th, s;
+  int i, c;
+  for (i = 0; i < 3; ++i) {{
+    ek[i] = G[4 * i + 3] - Tk[4 * i + 3];
+    z[i] = Tk[4 * i + 2];
+    t[i] = G[4 * i + 2];
+  }}
+  ek[3] = z[1] * t[2] - z[2] * t[1];
+  ek[4] = z[2] * t[0] - z[0] * t[2];
+  ek[5] = z[0] * t[1] - z[1] * t[0];
+  sn = sqrt(ek[3] * ek[3] + ek[4] * ek[4] + ek[5] * ek[5]);
+  th = atan2(sn, z[0] * t[0] + z[1] * t[1] + z[2] * t[2]);
+  s = sn > 1e-12 ? th / sn : 0.0;
+  for (i = 3; i < 6; ++i) ek[i] *= s;
+  for (c = 0; c < 3 * {nv}; ++c) Ja[c] = Jk[c];
+  for (c = 0; c < {nv}; ++c) {{
+    s = z[0] * Jk[3 * {nv} + c] + z[1] * Jk[4 * {nv} + c] + z[2] * Jk[5 * {nv} + c];
+    for (i = 0; i < 3; ++i) Ja[(3 + i) * {nv} + c] = Jk[(3 + i) * {nv} + c] - z[i] * s;
+  }}
+  return th;
+}}
+
 /* the Cholesky factor L (lower, in A) of A = J J^T + damping^2 I; 2 when A is not positive */
 static int {prefix}_factor(const casadi_real* Jk, casadi_real damping, casadi_real* A) {{
   casadi_real s;
@@ -198,12 +227,13 @@ int {prefix}_ik_rows(const casadi_real* q, const casadi_real* base, const casadi
 /* the damped least-squares IK per row, iterated: solve_ik's iterations (stall == 0) or
    solve_ik_batch's (stall > 0: a row whose error has not fallen below keep * its best for stall
    iterations stops); the TCP on the flange (world == 0) or a stationary tool; a redundant arm's
-   pull toward mid-range (gain > 0) in the task's null space. flag[k] = 1: the rotation error came
-   within 1e-3 rad of pi, the row is to be solved another way. Chained (iopts[2]): rows first..n-1
-   in turn (iopts[3]: first; the rows before it solved already), each from the last answer plus
-   the last step where no joint moved more than opts[4] in it (row 0 from q0's first row); the
-   chain stops at a flagged row, or with flag[k] = 2 after a row whose joints moved more than
-   opts[5] from the row before. */
+   pull toward mid-range (gain > 0) in the task's null space; the whole pose or (iopts[4]) the
+   position and the tool axis alone, the spin about it free. flag[k] = 1: the rotation error (the
+   angle between the axes) came within 1e-3 rad of pi, the row is to be solved another way.
+   Chained (iopts[2]): rows first..n-1 in turn (iopts[3]: first; the rows before it solved
+   already), each from the last answer plus the last step where no joint moved more than opts[4]
+   in it (row 0 from q0's first row); the chain stops at a flagged row, or with flag[k] = 2 after
+   a row whose joints moved more than opts[5] from the row before. */
 int {prefix}_solve_rows(const casadi_real* q0, const casadi_real* base, const casadi_real* tool,
                         const casadi_real* world, const casadi_real* target, const casadi_real* lower,
                         const casadi_real* upper, const casadi_real* mid, const casadi_real* half,
@@ -213,9 +243,10 @@ int {prefix}_solve_rows(const casadi_real* q0, const casadi_real* base, const ca
   casadi_real* res[{sz_res}];
   casadi_int iw[{sz_iw}];
   casadi_real w[{sz_w}];
-  casadi_real A[36], e[6], Jp[6], dq[{nv}], pull[{nv}], back[{nv}];
+  casadi_real A[36], e[6], Jp[6], dq[{nv}], pull[{nv}], back[{nv}], Ja[6 * {nv}];
   const casadi_real damping = opts[0], tol = opts[1], gain = opts[2], keep = opts[3];
-  const long long max_it = iopts[0], stall = iopts[1], chained = iopts[2];
+  const long long max_it = iopts[0], stall = iopts[1], chained = iopts[2], axis = iopts[4];
+  const casadi_real* Jt;  /* the task's Jacobian: for the axis, without the spin's part */
   long long k, it, last;
   int i, c;
   for (k = chained ? iopts[3] : 0; k < n; ++k) {{
@@ -246,7 +277,8 @@ int {prefix}_solve_rows(const casadi_real* q0, const casadi_real* base, const ca
       res[0] = Tk;
       res[1] = Jk;
       if (world ? {prefix}_statj(arg, res, iw, w, 0) : {prefix}_tcpj(arg, res, iw, w, 0)) return 1;
-      th = {prefix}_error(G, Tk, e);
+      th = axis ? {prefix}_axis_error(G, Tk, Jk, Ja, e) : {prefix}_error(G, Tk, e);
+      Jt = axis ? Ja : Jk;
       s = 0.0;
       for (i = 0; i < 6; ++i) s += e[i] * e[i];
       nrm = sqrt(s);
@@ -265,16 +297,16 @@ int {prefix}_solve_rows(const casadi_real* q0, const casadi_real* base, const ca
         break;
       }}
       if (it >= max_it) break;
-      if ({prefix}_factor(Jk, damping, A)) return 2;
-      {prefix}_back(A, Jk, e, dq);
+      if ({prefix}_factor(Jt, damping, A)) return 2;
+      {prefix}_back(A, Jt, e, dq);
       if (gain > 0.0) {{
         for (c = 0; c < {nv}; ++c) pull[c] = isfinite(half[c]) ? (mid[c] - qk[c]) / (half[c] * half[c]) : 0.0;
         for (i = 0; i < 6; ++i) {{
           s = 0.0;
-          for (c = 0; c < {nv}; ++c) s += Jk[{nv} * i + c] * pull[c];
+          for (c = 0; c < {nv}; ++c) s += Jt[{nv} * i + c] * pull[c];
           Jp[i] = s;
         }}
-        {prefix}_back(A, Jk, Jp, back);
+        {prefix}_back(A, Jt, Jp, back);
         for (c = 0; c < {nv}; ++c) dq[c] += gain * (pull[c] - back[c]);
       }}
       step = 0.0;

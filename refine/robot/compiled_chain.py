@@ -259,6 +259,7 @@ class CompiledChain:
         max_iterations: int,
         stall: tuple[int, float] | None,
         chained: tuple[float, float, Array, Array, int] | None = None,
+        axis_only: bool = False,
     ) -> tuple[Array, Array, Array, Array, Array] | None:
         """Damped least-squares IK toward TCP targets, every row iterated in C; None in NumPy.
 
@@ -270,6 +271,9 @@ class CompiledChain:
         ``gain`` times the pull to mid-range ``(mid - q) / half²`` (0 unbounded) less its part in
         the task, scaled to at most 0.3 rad, clipped. ``kinematics``: ``T_world_base``,
         ``T_flange_TCP``, a stationary tool's ``T_world_TCP`` or None (:meth:`tcp_frames`).
+        ``axis_only``: the position and the tool's z axis alone are asked for, the error and the
+        Jacobian's angular rows as :func:`refine.robot.kinematics.axis_error` forms them (the spin
+        about the current axis free); the angle flagged near π is the one between the axes.
 
         ``chained``: ``(predict, give_up, q, err, first)`` to chain ``solve_ik`` along the targets
         (N, 4, 4) instead, ``qs`` (1, nv) the first row's start: rows ``first`` to N - 1 in turn
@@ -280,7 +284,7 @@ class CompiledChain:
 
         Returns:
             the joints (N, nv) [rad], the last pose error norms (N,), the TCP poses (N, 4, 4) and
-            Jacobians (N, 6, nv) at those joints, and a flag per row (N,), 1 where the rotation
+            Jacobians (N, 6, nv, the whole, also with ``axis_only``) at those joints, and a flag per row (N,), 1 where the rotation
             error came within 1e-3 rad of π: that row's answer is not to be used (chained, the
             rows after a flagged one are not solved).
         """
@@ -308,7 +312,7 @@ class CompiledChain:
             mid, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
         its, keep = (0, 0.0) if stall is None else stall
         opts = np.array([damping, tol, gain, keep, predict, give_up], dtype=float)
-        iopts = np.array([max_iterations, its, chained is not None, first], dtype=np.int64)
+        iopts = np.array([max_iterations, its, chained is not None, first, axis_only], dtype=np.int64)
         flag = np.zeros(n, dtype=np.int64)
         T, J = np.empty((n, 4, 4)), np.empty((n, 6, self.nq))
         lib.solve(
@@ -455,7 +459,8 @@ class CompiledChain:
         square = np.ascontiguousarray(J_tcp[:, :, :6]) if self.nq >= 6 else np.zeros((CHECK_ROWS, 6, 6))
         dets = np.empty(CHECK_ROWS)
         lib.det6(square, dets)
-        # a stationary tool, and one iteration of the whole solve (with the pull of a redundant arm)
+        # a stationary tool, and one iteration of the whole solve (with the pull of a redundant arm), the
+        # whole pose's and the tool axis'
         W = _CHECK_WORLD
         T_st, J_st, T_st_alone = np.empty_like(T), np.empty_like(J), np.empty_like(T)
         lib.call("statj", qs, T_st, J_st, fixed=(B, X, W))
@@ -468,8 +473,10 @@ class CompiledChain:
             0.5 * (upper - lower),
             np.array([0.01, 0, gain, 0, 0, 0.0]),
         ]
-        lib.solve(qs, B, X, None, targets, *one, np.array([1, 0, 0, 0]), q_one, np.empty(CHECK_ROWS),
-                  T_ik.copy(), J_ik.copy(), np.empty(CHECK_ROWS, dtype=np.int64))  # fmt: skip
+        q_axis = np.empty_like(qs)
+        for counts, out in ((np.array([1, 0, 0, 0, 0]), q_one), (np.array([1, 0, 0, 0, 1]), q_axis)):
+            lib.solve(qs, B, X, None, targets, *one, counts, out, np.empty(CHECK_ROWS), T_ik.copy(),
+                      J_ik.copy(), np.empty(CHECK_ROWS, dtype=np.int64))  # fmt: skip
         error = 0.0
         for k, q in enumerate(qs):
             pin.forwardKinematics(model, data, q)  # every joint (the Jacobian's pass: only the flange's)
@@ -510,6 +517,18 @@ class CompiledChain:
             step = dq_pin + gain * (pull - J_tcp_pin.T @ np.linalg.solve(A, J_tcp_pin @ pull))
             step *= min(1.0, 0.3 / np.abs(step).max())
             pairs += [(q_one[k], np.clip(q + step, lower, upper))]
+            # the tool axis alone: z turned onto the target's, the Jacobian's spin about z taken out
+            z, zt = T_tcp_pin[:3, 2], targets[k, :3, 2]
+            turn = np.cross(z, zt)
+            sin = float(np.linalg.norm(turn))
+            turn *= np.arctan2(sin, z @ zt) / sin if sin > 1e-12 else 0.0  # row 0: at its target
+            e_axis = np.concatenate([e_pin[:3], turn])
+            J_axis = np.vstack([J_tcp_pin[:3], J_tcp_pin[3:] - np.outer(z, z @ J_tcp_pin[3:])])
+            A = J_axis @ J_axis.T + 1e-4 * np.eye(6)
+            step = J_axis.T @ np.linalg.solve(A, e_axis)
+            step += gain * (pull - J_axis.T @ np.linalg.solve(A, J_axis @ pull))
+            step *= min(1.0, 0.3 / max(float(np.abs(step).max()), 1e-300))  # row 0's may be 0
+            pairs += [(q_axis[k], np.clip(q + step, lower, upper))]
             for a, b in pairs:
                 error = max(error, float(np.abs(a - b).max()))
         return error if np.isfinite(error) else np.inf

@@ -231,8 +231,8 @@ def solve_ik(
 
     With the robot's chain compiled the iterations run in C (:meth:`CompiledChain.ik_solve
     <refine.robot.compiled_chain.CompiledChain.ik_solve>`: the same steps, rounded otherwise)
-    unless only the position or the axis is asked for, or the rotation error comes within 1e-3
-    rad of a half turn (then NumPy's, from ``q0`` again).
+    unless only the position is asked for, or the rotation error (with ``axis_only`` the angle
+    between the axes) comes within 1e-3 rad of a half turn (then NumPy's, from ``q0`` again).
 
     Args:
         kin: TCP kinematics.
@@ -252,11 +252,11 @@ def solve_ik(
     """
     rows = slice(0, 3) if position_only else slice(0, 6)
     chain = kin.robot.chain
-    if not (position_only or axis_only) and damping > 0.0 and chain is not None and chain.compiled:
+    if not position_only and damping > 0.0 and chain is not None and chain.compiled:
         gain = NULLSPACE_GAIN if kin.robot.nq > 6 else 0.0
         found = chain.ik_solve(
             np.reshape(q0, (1, -1)), _placements(kin), np.asarray(T_target)[None], (lower, upper),
-            damping, tol, gain, max_iterations, None,
+            damping, tol, gain, max_iterations, None, axis_only=axis_only,
         )  # fmt: skip
         if found is not None and not found[4][0]:  # else the rotation came near a half turn: NumPy's log3
             return found[0][0], float(found[1][0])
@@ -339,10 +339,11 @@ def solve_ik_batch(
     positions (M, 3), rotations (M, 3, 3) and Jacobians (M, 6, n) at ``q0`` (inside the limits) when
     the caller has them, used for the first iteration instead of evaluating them again; or None.
 
-    With the robot's chain compiled, the full pose asked for and ``damping`` > 0 the iterations
-    run in C: the step alone (:func:`_solve_compiled`) for a TCP on the flange without a pull,
-    every row's whole IK (:func:`_solve_iterated`, ``start`` not needed) with a redundant arm's
-    pull or a stationary tool; the same answers to rounding.
+    With the robot's chain compiled, the full pose or the axis asked for and ``damping`` > 0 the
+    iterations run in C: the step alone (:func:`_solve_compiled`) for the full pose of a TCP on
+    the flange without a pull, every row's whole IK (:func:`_solve_iterated`, ``start`` not
+    needed) with a redundant arm's pull, a stationary tool or ``axis_only``; the same answers to
+    rounding.
 
     Returns:
         joints [rad] (M, n) and the remaining pose error norm per pose (M,).
@@ -351,11 +352,11 @@ def solve_ik_batch(
     q = np.clip(np.array(q0, dtype=float), lower, upper)
     m, n = q.shape
     chain = kin.robot.chain
-    if not (position_only or axis_only) and damping > 0.0 and chain is not None and chain.compiled:
-        if n > rows and nullspace_gain > 0.0 or kin.tool_in_world is not None:
+    if not position_only and damping > 0.0 and chain is not None and chain.compiled:
+        if n > rows and nullspace_gain > 0.0 or kin.tool_in_world is not None or axis_only:
             return _solve_iterated(
                 kin, targets, q, lower, upper, max_iterations, damping, tol, nullspace_gain,
-                jacobians_out, poses_out,
+                jacobians_out, poses_out, axis_only,
             )  # fmt: skip
         return _solve_compiled(
             kin, targets, q, lower, upper, max_iterations, damping, tol, jacobians_out, poses_out, start
@@ -424,24 +425,26 @@ def _solve_numpy(
 def _solve_iterated(
     kin: TcpKinematics, targets: Array, q: Array, lower: Array, upper: Array, max_iterations: int,
     damping: float, tol: float, nullspace_gain: float, jacobians_out: Array | None, poses_out: Array | None,
+    axis_only: bool = False,
 ) -> tuple[Array, Array]:  # fmt: skip
     """:func:`solve_ik_batch`'s iterations for 6 task rows, every row iterated in C.
 
     :meth:`refine.robot.compiled_chain.CompiledChain.ik_solve` with the stall rule: a redundant
-    arm's null-space pull, a stationary tool. The rows whose rotation error came within 1e-3 rad
-    of a half turn are solved again by :func:`_solve_numpy` (their error by
-    :func:`rotation_vectors`' axis branch). ``q``: the clipped start (M, n).
+    arm's null-space pull, a stationary tool, the tool axis alone. The rows whose rotation error
+    (the angle between the axes with ``axis_only``) came within 1e-3 rad of a half turn are
+    solved again by :func:`_solve_numpy` (the whole pose's error by :func:`rotation_vectors`' axis
+    branch, the axis' by :func:`axis_error`'s turn over). ``q``: the clipped start (M, n).
     """
     gain = nullspace_gain if q.shape[1] > 6 else 0.0
     q_out, err, T, J, flag = kin.robot.chain.ik_solve(
         q, _placements(kin), targets, (lower, upper), damping, tol, gain, max_iterations,
-        (STALL_ITERATIONS, 1.0 - STALL_FRACTION),
+        (STALL_ITERATIONS, 1.0 - STALL_FRACTION), axis_only=axis_only,
     )  # fmt: skip
     again = np.flatnonzero(flag)
     if again.size:
         q_out[again], err[again] = _solve_numpy(
             kin, np.asarray(targets)[again], q[again], lower, upper, max_iterations, damping, tol, False,
-            nullspace_gain, False, None, None, None,
+            nullspace_gain, axis_only, None, None, None,
         )  # fmt: skip
         T[again], J[again] = kin.poses_jacobians(q_out[again])
     if jacobians_out is not None:

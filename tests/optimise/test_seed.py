@@ -205,6 +205,22 @@ def _compiled_and_numpy(name: str, tool_in_world=None):
     return [TcpKinematics(r, base, tcp, tool_in_world) for r in (robot, slow)]
 
 
+def _iiwa_path(held: bool):
+    """The iiwa compiled and in NumPy (the TCP on the flange or at a standing tool), a straight joint path
+    of 30 rows and its TCP poses."""
+    import pinocchio as pin
+
+    world = (
+        pin.SE3(pin.exp3(np.array([2.8, 0.2, 0.1])), np.array([0.6, 0.2, 0.5])).homogeneous if held else None
+    )
+    kin, kin_np = _compiled_and_numpy("kuka_iiwa14_r820", world)
+    t = np.linspace(0.0, 1.0, 30)[:, None]
+    q_path = np.array([0.1, 0.5, -0.2, -1.2, 0.3, 0.8, 0.1]) + t * np.array(
+        [0.4, -0.3, 0.2, 0.5, -0.6, 0.3, 0.9]
+    )
+    return kin, kin_np, q_path, kin_np.poses(q_path)
+
+
 @pytest.mark.parametrize("held", [False, True])
 def test_the_chain_compiled_follows_the_numpy_chain_through_a_half_turn_and_gives_up_alike(chain_cache, held):
     """The waypoint-by-waypoint chain in C (a redundant arm's pull, with and without a standing tool) against
@@ -213,16 +229,8 @@ def test_the_chain_compiled_follows_the_numpy_chain_through_a_half_turn_and_give
 
     from refine.optimise.seed import _solve_chain
 
-    world = (
-        pin.SE3(pin.exp3(np.array([2.8, 0.2, 0.1])), np.array([0.6, 0.2, 0.5])).homogeneous if held else None
-    )
-    kin, kin_np = _compiled_and_numpy("kuka_iiwa14_r820", world)
+    kin, kin_np, q_path, targets = _iiwa_path(held)
     spec = kin.robot.spec
-    t = np.linspace(0.0, 1.0, 30)[:, None]
-    q_path = np.array([0.1, 0.5, -0.2, -1.2, 0.3, 0.8, 0.1]) + t * np.array(
-        [0.4, -0.3, 0.2, 0.5, -0.6, 0.3, 0.9]
-    )
-    targets = kin_np.poses(q_path)
     targets[12, :3, :3] = targets[12, :3, :3] @ pin.exp3(np.array([0.0, np.pi - 1e-5, 0.0]))  # about y
     from refine.optimise import seed as seed_module
 
@@ -242,3 +250,52 @@ def test_the_chain_compiled_follows_the_numpy_chain_through_a_half_turn_and_give
         np.testing.assert_allclose(got[1], want[1], rtol=0, atol=1e-9)
         assert (want[1][:12] < 1e-6).all()
         assert np.isinf(want[1]).any() == (give_up is not None)
+
+
+@pytest.mark.parametrize("held", [False, True])
+def test_the_axis_chain_compiled_follows_the_numpy_chain_through_a_turned_over_axis(chain_cache, held):
+    """The spin-free chain (``axis_only``) in C against NumPy's, the iiwa with its pull: targets spun about
+    their axes (which the answer need not follow), one axis turned over (NumPy's in both), a step bound."""
+    import pinocchio as pin
+
+    from refine.optimise import seed as seed_module
+    from refine.optimise.seed import _solve_chain
+
+    kin, kin_np, q_path, targets = _iiwa_path(held)
+    spec, t = kin.robot.spec, np.linspace(0.0, 1.0, 30)[:, None]
+    for k in range(30):
+        targets[k, :3, :3] = targets[k, :3, :3] @ pin.exp3(np.array([0.0, 0.0, 2.0 * t[k, 0]]))
+    targets[12, :3, :3] = targets[12, :3, :3] @ pin.exp3(np.array([np.pi - 1e-5, 0.0, 0.0]))  # z over
+    calls = []
+
+    def counted(*args, **kwargs):
+        calls.append((args[1], kwargs.get("axis_only")))
+        return solve_ik(*args, **kwargs)
+
+    for give_up in (None, 0.5):
+        with pytest.MonkeyPatch.context() as mp:  # in C, the chain hands only the turned axis to solve_ik
+            mp.setattr(seed_module, "solve_ik", counted)
+            got = _solve_chain(kin, targets, q_path[0] + 0.05, spec.lower, spec.upper, True, give_up)
+        ((target, axis_only),) = calls
+        calls.clear()
+        assert np.array_equal(target, targets[12]) and axis_only
+        want = _solve_chain(kin_np, targets, q_path[0] + 0.05, spec.lower, spec.upper, True, give_up)
+        np.testing.assert_allclose(got[0][:12], want[0][:12], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(got[1][:12], want[1][:12], rtol=0, atol=1e-9)
+        assert (want[1][:12] < 1e-5).all()
+        # the turned-over axis is NumPy's from the start the compiled chain handed over; turning over
+        # from z x z_t of length 1e-5 its answer is sensitive (on the flange, out of reach with an error
+        # ~0.3, NumPy's own moves by ~3e-7 rad for a start moved by 1e-12; held, the two chains'
+        # answers there differ by ~1e-8 for starts differing by rounding), so the rows from it on are
+        # checked to that sensitivity
+        guess = 2.0 * got[0][11] - got[0][10]
+        q12, e12 = solve_ik(kin_np, targets[12], guess, spec.lower, spec.upper, axis_only=True)
+        assert np.array_equal(got[0][12], q12) and got[1][12] in (e12, np.inf) and (e12 > 0.1) != held
+        np.testing.assert_allclose(got[0], want[0], rtol=0, atol=1e-5)
+        np.testing.assert_allclose(got[1], want[1], rtol=0, atol=1e-6)
+        assert np.isinf(want[1]).any() == (give_up is not None)
+        for k in np.flatnonzero(np.isfinite(want[1])):  # the axis and position errors, from Pinocchio
+            T = kin_np.pose(got[0][k])
+            angle = np.arccos(np.clip(T[:3, 2] @ targets[k, :3, 2], -1.0, 1.0))
+            miss = np.linalg.norm(targets[k, :3, 3] - T[:3, 3])
+            assert got[1][k] == pytest.approx(np.hypot(miss, angle), abs=1e-7)
