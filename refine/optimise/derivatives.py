@@ -263,6 +263,7 @@ def derivative_functions(
     linear_rows: list[tuple[int, float, Array]],
     singularity_hessian: bool = False,
     step_rows: Index | None = None,
+    path_values: tuple[ca.MX, ca.MX] | None = None,
 ) -> dict[str, ca.Function]:
     """``grad_f``, ``jac_g`` and ``hess_lag`` of the refinement NLP, in CasADi's nlpsol signatures.
 
@@ -290,6 +291,11 @@ def derivative_functions(
             answer meets the same KKT conditions) costs about 1.4 times the iterations.
         step_rows: the joint-step rows the problem holds, as indices ``k·n + j`` in row order;
             None for all ``n·(N-1)``.
+        path_values: the outputs ``(G (4, N), cost (1, N))`` of the mapped ``waypoint`` kernel that
+            ``f`` and ``g`` are built from. Given, ``grad_f`` and ``jac_g`` return ``f`` and ``g``
+            computed from the same outputs of ``waypoint_d``, which they evaluate anyway for the
+            derivatives, instead of evaluating the waypoint kernel a second time (the two compiled
+            kernels compute these outputs by the same operations: the same values, bit for bit).
     """
     nq = N * n
     ns = N if elastic_weight is not None else 0
@@ -307,11 +313,12 @@ def derivative_functions(
         Qs = Q[:, ks.tolist()] + (Q[:, kb.tolist()] - Q[:, ks.tolist()]) * ca.repmat(ca.DM(fs).T, n, 1)
 
     # ---- gradient of the cost
-    G, _, Jg, grad_cost = kernels["waypoint_d"].map(N)(Q, P_ref, R_demo)
+    G, cost, Jg, grad_cost = kernels["waypoint_d"].map(N)(Q, P_ref, R_demo)
+    f_d, g_d = (f, g) if path_values is None else ca.graph_substitute([f, g], list(path_values), [G, cost])
     grad = orientation_coef * ca.vec(grad_cost) + ca.mtimes(K, x[:nq]) + ca.DM(b)
     if ns:
         grad = ca.vertcat(grad, ca.DM.ones(ns) * elastic_weight)
-    grad_f = ca.Function("grad_f", [x, p], [f, grad], ["x", "p"], ["f", "grad_f_x"])
+    grad_f = ca.Function("grad_f", [x, p], [f_d, grad], ["x", "p"], ["f", "grad_f_x"])
 
     # ---- Jacobian of the constraints: rows are 4 per waypoint, n per segment, singularity, linear.
     # The per-waypoint blocks side by side, in CasADi's column-major order, are the nonzeros of the
@@ -340,7 +347,7 @@ def derivative_functions(
     if ns:  # cos θ_k + σ_k: a one in row 4k+3 of slack column k
         slack = ca.kron(ca.DM.eye(N), ca.DM([0.0, 0.0, 0.0, 1.0]))
         jac = ca.horzcat(jac, ca.vertcat(slack, ca.DM(ng - 4 * N, N)))
-    jac_g = ca.Function("jac_g", [x, p], [g, jac], ["x", "p"], ["g", "jac_g_x"])
+    jac_g = ca.Function("jac_g", [x, p], [g_d, jac], ["x", "p"], ["g", "jac_g_x"])
 
     # ---- Hessian of the Lagrangian, upper triangle
     lam4 = ca.reshape(lam_g[: 4 * N], 4, N)

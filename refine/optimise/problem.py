@@ -359,7 +359,7 @@ def build_refinement(
         if derivative_mode == "assembled"
         else {"waypoint": waypoint_function(*chain, axisymmetric, tool_in_world), "singularity": singularity_function(*chain)}
     )
-    G, cost = kernels["waypoint"].map(N)(Q, P_ref, R_demo)
+    path_values = G, cost = kernels["waypoint"].map(N)(Q, P_ref, R_demo)  # f's and g's, for grad_f and jac_g
     if elastic:
         G = ca.vertcat(G[:3, :], G[3, :] + sigma.T)  # cos θ_k + σ_k >= cos α
     rows, lbg_extra, ubg_extra = [ca.vec(G)], [], []
@@ -423,7 +423,7 @@ def build_refinement(
             singular_points=points,
             linear_rows=[(r.k, r.f, np.asarray(r.gradient, dtype=float)) for r in active.linear_rows],
             singularity_hessian=singularity_hessian,
-            step_rows=steps,
+            step_rows=steps, path_values=path_values,  # fmt: skip
         )
     )
     limit_solver_threads()

@@ -116,6 +116,37 @@ def test_compiled_kernels_give_the_virtual_machine_values(irb4600, straight_tool
         np.testing.assert_allclose(np.array(a), np.array(b), rtol=1e-12, atol=1e-12)
 
 
+@pytest.mark.skipif(compiler() is None, reason="no C compiler: the kernels run in the virtual machine")
+@pytest.mark.parametrize("elastic", [False, True])
+def test_grad_f_and_jac_g_return_the_problems_own_objective_and_rows_bit_for_bit(
+    irb4600, straight_tool, elastic
+):
+    """With compiled kernels, the objective and rows that grad_f and jac_g return (from the derivative
+    kernel's outputs) are the very numbers of the problem's f and g (from the waypoint kernel), and the
+    two functions call the waypoint kernel no more."""
+    nlp = _problem(irb4600, straight_tool, elastic=elastic)
+    x, p, f, g = (nlp.nlp[k] for k in ("x", "p", "f", "g"))
+    own = ca.Function("own", [x, p], [f, g])
+    rng = np.random.default_rng(5)
+    for _ in range(3):
+        xv = rng.uniform(nlp.lbx, nlp.ubx) * 0.7
+        f_own, g_own = (np.array(v) for v in own(xv, nlp.params))
+        f_val, _ = nlp.derivatives["grad_f"](xv, nlp.params)
+        g_val, _ = nlp.derivatives["jac_g"](xv, nlp.params)
+        assert float(f_val) == f_own.item()
+        np.testing.assert_array_equal(np.array(g_val), g_own)
+        assert np.abs(g_own).max() > 0.1  # the comparison is not of zeros
+    for name in ("grad_f", "jac_g"):
+        called = {
+            nlp.derivatives[name].instruction_MX(k).which_function().name()
+            for k in range(nlp.derivatives[name].n_instructions())
+            if nlp.derivatives[name].instruction_MX(k).is_call()
+        }
+        assert not any(c.startswith("map") and "waypoint_d" not in c and "waypoint" in c for c in called), (
+            called
+        )
+
+
 @pytest.mark.skipif(compiler() is None, reason="no C compiler")
 def test_compiled_library_is_cached_on_disk_by_key(tmp_path, monkeypatch):
     monkeypatch.setenv("REFINE_CACHE_DIR", str(tmp_path))
