@@ -23,7 +23,8 @@ as quoted in robot-forum.com thread 7173 ("x value of wrist root point") and fro
 has a negative x in the A1 coordinate system (the frame turning with axis 1): overhead area; bit 1 = 1
 when the wrist root point lies in front of the line through axes 2 and 3 (it flips at the stretched
 elbow; elbow-up poses have it set, hence KUKA's usual ``S 2`` / ``S 6``); bit 2 = 1 when A5 < 0.
-T bit i = 1 when axis i+1 < 0.
+T bit i = 1 when axis i+1 < 0; an axis within :data:`TURN_ZERO_RAD` of zero counts as at zero (bit
+0), so the bits do not follow the solver's rounding of a joint held at zero.
 
 LBR iiwa (7 axes) on a KRC: the Sunrise handbook's redundancy information as quoted in
 ``IFL-CAMP/iiwa_stack`` ``iiwa_msgs/msg/RedundancyInformation.msg``: S bit 0 = 1 when working overhead
@@ -109,6 +110,13 @@ def krl_output_number(output: str) -> int | None:
     return number
 
 
+TURN_ZERO_RAD = 1e-9
+"""An axis closer to zero than this [rad] has Turn bit 0 (the rule's A >= 0): a joint the optimiser
+holds at zero (a redundant arm's seventh, drawn to the middle of its range) ends at +-1e-22 rad
+or so, whose sign is rounding, and a program must not change with it. 1e-9 rad is far below what
+any program prints (1e-4 deg)."""
+
+
 def kuka_status_turn(robot: Any, q: Array) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
     """KUKA Status and Turn of joint vectors (rules and sources in the module docstring).
 
@@ -135,7 +143,7 @@ def kuka_status_turn(robot: Any, q: Array) -> tuple[NDArray[np.int64], NDArray[n
             status[k] = int(overhead) + 2 * int(front) + 4 * int(qk[4] < 0.0)
         else:
             status[k] = int(overhead) + 2 * int(qk[3] < 0.0) + 4 * int(qk[5] <= 0.0)
-    turn = ((qs < 0.0) * (1 << np.arange(n))).sum(axis=1).astype(np.int64)
+    turn = ((qs < -TURN_ZERO_RAD) * (1 << np.arange(n))).sum(axis=1).astype(np.int64)
     return (status[0], turn[0]) if q.ndim == 1 else (status, turn)
 
 

@@ -241,6 +241,17 @@ def test_lbr_status_of_known_arm_shapes(iiwa, q_deg, status):
     assert s == status and t == _turn(np.radians(q_deg))
 
 
+@pytest.mark.parametrize("tiny", [-1e-22, 1e-22, -1e-12, 0.0])
+def test_a_joint_held_at_zero_has_turn_bit_0_whatever_the_sign_of_its_rounding(iiwa, tiny):
+    """KUKA: T bit i = 0 when A(i+1) >= 0. A seventh axis at +-1e-22 rad is at zero: bit 6 clear;
+    at -1e-6 rad (5.7e-5 deg, still printed as 0.0001 deg) it is negative: bit 6 set."""
+    q = np.radians([10.0, 30.0, -5.0, -60.0, 20.0, 45.0, 0.0])  # A3, A4 < 0: bits 2 and 3
+    q[6] = tiny
+    assert kuka_status_turn(iiwa, q)[1] == 4 + 8
+    q[6] = -1e-6
+    assert kuka_status_turn(iiwa, q)[1] == 4 + 8 + 64
+
+
 def test_lbr_status_and_turn_on_random_configurations(iiwa):
     rng = np.random.default_rng(3)
     q = rng.uniform(iiwa.spec.lower, iiwa.spec.upper, size=(600, 7))
