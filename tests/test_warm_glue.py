@@ -17,11 +17,13 @@ from refine.collision.model import CollisionModel
 from refine.optimise.problem import ActiveSet, LinearRow, reuse_for
 from refine.optimise.warm import _reusable
 from refine.run.clearance_kinds import kind_minima
-from tests.test_host_clearance import with_table  # noqa: F401 (a UR10e line over a table, with a gun)
+from tests.test_host_clearance import with_table
+
+over_table = with_table  # a UR10e line 0.2 m above a table, with a gun, solved once per module
 
 
-def test_the_reuse_test_agrees_with_reuse_for_on_every_kind_of_problem(with_table):
-    built = with_table.run.first.nlp
+def test_the_reuse_test_agrees_with_reuse_for_on_every_kind_of_problem(over_table):
+    built = over_table.run.first.nlp
     fused, tol = built.fused, built.tolerances
     assert built.elastic_deg is None and built.active == ActiveSet()
     row = LinearRow(3, 0.0, np.ones(built.dof), 0.0, "a row")
@@ -40,9 +42,9 @@ def test_the_reuse_test_agrees_with_reuse_for_on_every_kind_of_problem(with_tabl
         assert _reusable(problem, path, tol) is reusable
 
 
-def test_bounds_carried_for_other_joints_are_not_taken_for_these(with_table):
+def test_bounds_carried_for_other_joints_are_not_taken_for_these(over_table):
     """A check's bounds of other joints say nothing here: the least distances are those of every pair."""
-    run = with_table.run
+    run = over_table.run
     model = CollisionModel.for_problem(run.problem, run.robot)
     q, clearance = run.first.refinement.q, run.first.clearance
     q_other = q + np.radians(0.5)
