@@ -155,7 +155,7 @@ def reuse_final(
     as first built (``reuse_for`` checks that the robot, tool and spacing allow a reuse); None when
     it refuses, when ``final`` is an elastic problem, or when its size differs.
     """
-    if reuse_for(built, fused, tolerances) is None:
+    if not _reusable(built, fused, tolerances):
         return None
     N = final.n_waypoints
     if final.elastic_deg is not None or len(fused) != N or final.robot is not built.robot:
@@ -183,6 +183,27 @@ def reuse_final(
         tolerances=tolerances,
         build_time_s=0.0,
     )
+
+
+def _reusable(built: RefinementNLP, fused: FusedPath, tolerances: Tolerances) -> bool:
+    """Whether ``reuse_for(built, fused, tolerances)`` gives a problem, without making it.
+
+    That function refuses the elastic problem, an active set, another number of waypoints and a
+    mean spacing off the built one's; the tolerances only set the bounds it makes. A problem
+    already holding this very path (as ``reuse_for`` made it) has its own spacing (ratio exactly
+    1 where its mean spacing is positive), so the first three tests decide. Any other problem is
+    asked through ``reuse_for`` itself.
+    """
+    a = built.active
+    if (
+        built.fused is fused
+        and built.elastic_deg is None
+        and not (a.singular_waypoints or a.singular_segments or a.linear_rows)
+        and len(fused) == built.n_waypoints > 1
+        and float(np.mean(np.diff(fused.s))) > 0.0
+    ):
+        return True
+    return reuse_for(built, fused, tolerances) is not None
 
 
 def rebuilt_like(final: RefinementNLP, built: RefinementNLP) -> RefinementNLP | None:

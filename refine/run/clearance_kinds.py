@@ -7,7 +7,8 @@ cell margin misreads a self pair's 4.7 mm under a 10 mm cell margin as a collisi
 way round. :func:`kind_minima` gives each kind's own least distance:
 
 * at the waypoints, exactly: every pair of the kind is bounded from below at every waypoint (the
-  check's carried bounds where it kept them, else the gap between the bodies' boxes) and measured
+  check's carried bounds of these joints where it kept them, else the gap between the bodies'
+  boxes) and measured
   with FCL in the order of its bound until no bound left is below the least distance found, so far
   pairs cost nothing;
 * between the waypoints, from the check's own figures: a segment whose least clearance belongs to a
@@ -53,15 +54,20 @@ def kind_minima(model: Any, q: Array, clearance: Any) -> KindMinima:
     is_cell = np.array([kinds.get(b) == "cell" or kinds.get(a) == "cell" for a, b in model.pairs], dtype=bool)
     if not len(is_cell):
         return KindMinima(None, None)
-    poses = model.moving_poses(q)  # the check's, kept for these joints, as are their boxes
-    bounds = model.box_bounds(poses)  # (N, P), -inf where the boxes overlap
+    poses = model.moving_poses(q)  # the check's, kept for these joints
     carried = getattr(clearance, "bounds", None)
     if (
         carried is not None
-        and carried.bounds.shape == bounds.shape
+        and carried.bounds.shape == (len(q), len(model.pairs))
         and tuple(carried.pairs) == tuple(model.pairs)
+        and np.array_equal(carried.q, q)
     ):
-        bounds = np.maximum(bounds, carried.bounds)
+        # the check's own lower bounds at these joints: at least the box gaps wherever it boxed a
+        # pair, and a proved bound elsewhere (a pair it left far and certified), so boxing the
+        # pairs again would only tighten bounds that do not change the least distance found
+        bounds = carried.bounds
+    else:
+        bounds = model.box_bounds(poses)  # (N, P), -inf where the boxes overlap
     margins = model.pair_margins
     out, queries = [], 0
     for kind in (True, False):
