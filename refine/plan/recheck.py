@@ -35,11 +35,13 @@ from __future__ import annotations
 import math
 import time
 import weakref
+from collections.abc import Callable
 
 import numpy as np
+from numpy.typing import NDArray
 
 from refine.collision import CollisionModel, PathClearance
-from refine.collision.advance import NONE, Sample, advance_pairs
+from refine.collision.advance import NONE, Sample, advance_pairs, pair_motion, short
 from refine.collision.carry import (
     NEAR,
     CheckedBounds,
@@ -77,9 +79,10 @@ def recheck(
     if checked is None or q.ndim != 2 or len(q) < 2 or checked.q.shape != q.shape:
         return None
     start, queries = time.perf_counter(), model.queries
-    bounds = _carried(model, checked, q)  # (K, P) lower bounds [m], -inf where none is carried
-    if bounds is None:
+    carried = _carried(model, checked, q)  # (K, P) lower bounds [m], -inf where none is carried
+    if carried is None:
         return None
+    bounds, delta = carried
     poses = model.moving_poses(q)
     unbound = ~np.isfinite(bounds)
     if unbound.any():  # the boxes bound those pairs where they are apart
@@ -107,7 +110,9 @@ def recheck(
         return at[k].distance, at[k].clearance
 
     measured = measure_least(bounds, margins, measure, NEAR, tightener(model, poses, bounds, exact))
-    certified, inner = advance_pairs(model, q, poses, bounds, exact, tolerance_m)
+    proved, kept = _samples_carried(model, previous, checked, q, bounds, delta, tolerance_m, at, measure)
+    measured[list(at)] = True
+    certified, inner = advance_pairs(model, q, poses, bounds, exact, tolerance_m, proved)
     if not certified.all():
         return None  # a margin broken or a segment given up: the dense check samples and names it
     for k in sorted({k + e for k, found in inner.items() if found for e in (0, 1)} - set(at)):
@@ -149,6 +154,7 @@ def recheck(
         certified_segments=len(q) - 1,
         waypoint_measured=measured,
         bounds=checked_bounds(model, q, bounds, normals),
+        inner_samples={k: [*kept.get(k, ()), *inner.get(k, ())] for k in {*kept, *inner}},
     )
 
 
@@ -156,8 +162,10 @@ _SHIFTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 """Per collision model: its bodies' labels, each pair's two label indices, and the shifts found so far."""
 
 
-def _carried(model: CollisionModel, checked: CheckedBounds, q: Array) -> Array | None:
+def _carried(model: CollisionModel, checked: CheckedBounds, q: Array) -> tuple[Array, Array | None] | None:
     """:func:`refine.collision.carry.carried_bounds` of ``checked`` at joints ``q`` (K, n), (K, P) [m] or None.
+
+    With the bounds, each pair's shift ``δ_p`` [m] (P,), or None where ``carried_bounds`` formed them.
 
     For a check of the same pairs in the same order (a motion of the run before) the bounds are
     formed as there, ``bound - |q - q_checked| · R_p - δ_p`` kept where positive, with each body's
@@ -166,7 +174,8 @@ def _carried(model: CollisionModel, checked: CheckedBounds, q: Array) -> Array |
     ``carried_bounds`` itself.
     """
     if checked.pairs != model.pairs:
-        return carried_bounds(model, checked, q)
+        out = carried_bounds(model, checked, q)
+        return None if out is None else (out, None)
     if (
         q.shape != checked.q.shape
         or q.shape[1] != model.robot.nq
@@ -190,7 +199,77 @@ def _carried(model: CollisionModel, checked: CheckedBounds, q: Array) -> Array |
         shift[i] = memo[1]
     delta = shift[a] + shift[b]  # (P,) [m], inf for a pair with a changed body
     out = checked.bounds - np.abs(q - checked.q) @ model.pair_motion.T - delta
-    return np.where(out > 0.0, out, -np.inf)
+    return np.where(out > 0.0, out, -np.inf), delta
+
+
+def _samples_carried(
+    model: CollisionModel,
+    previous: object,
+    checked: CheckedBounds,
+    q: Array,
+    bounds: Array,
+    delta: Array | None,
+    tolerance_m: float,
+    at: dict[int, Sample],
+    measure: Callable[[int], tuple[float, float]],
+) -> tuple[NDArray[np.bool_], dict[int, list[Sample]]]:
+    """The segment pairs (K-1, P) the earlier check's samples inside prove, and those samples carried.
+
+    A sample of pair p at share t of segment k, distance ``d`` at the earlier rows' ``q_old(t)``,
+    bounds the pair at the new rows' ``q(t)`` from below by ``b = d - |q(t) - q_old(t)| · R_p - δ_p``
+    (``q(t) - q_old(t)`` is the rows' change interpolated at t). Along the segment, with these and the
+    ends' bounds at shares ``0 = t_0 < … < t_m = 1`` and the pair's motion ``S`` over the segment,
+    the pair's distance anywhere between ``t_i`` and ``t_i+1`` is at least
+    ``L = (b_i + b_i+1 - S (t_i+1 - t_i)) / 2``. When the least ``L`` keeps the margin
+    (``L >= m_p - tolerance_m``) and lies above the segment's ends' exact least distance and its
+    clearance above theirs (``L - m_p``), the pair keeps its margin over the segment, and any sample
+    the advancement would take of it counts in neither least figure nor names its pair: the segment's
+    figures are its ends', measured here as for a segment sampled inside. Otherwise the pair is
+    advanced as before.
+    """
+    proved = np.zeros((len(q) - 1, len(model.pairs)), dtype=bool)
+    kept: dict[int, list[Sample]] = {}
+    samples = getattr(previous, "inner_samples", None)
+    if not samples or delta is None:
+        return proved, kept
+    margin = model.pair_margins
+    motion = pair_motion(model, q)
+    need = short(bounds - margin + tolerance_m, motion)
+    for k, found in samples.items():
+        by_pair: dict[int, list[Sample]] = {}
+        for s in found:
+            by_pair.setdefault(s.index, []).append(s)
+        for p, mine in by_pair.items():
+            if p < 0 or not need[k, p] or not math.isfinite(delta[p]):
+                continue
+            mine.sort(key=lambda s: s.t)
+            t = np.array([s.t for s in mine])
+            moved = (1.0 - t)[:, None] * (q[k] - checked.q[k]) + t[:, None] * (q[k + 1] - checked.q[k + 1])
+            b = np.array([s.distance for s in mine]) - np.abs(moved) @ model.pair_motion[p] - delta[p]
+            b = np.where(b > 0.0, b, -np.inf)
+
+            def least(b: Array = b, t: Array = t, k: int = k, p: int = p) -> float:
+                chain = np.concatenate(([bounds[k, p]], b, [bounds[k + 1, p]]))
+                share = np.diff(np.concatenate(([0.0], t, [1.0])))
+                return float(np.min((chain[:-1] + chain[1:] - motion[k, p] * share) / 2.0))
+
+            if least() < margin[p] - tolerance_m:
+                continue
+            for end in (k, k + 1):
+                if end not in at:
+                    measure(end)
+            low = least()  # the ends' bounds raised where they were measured
+            if (
+                low >= margin[p] - tolerance_m
+                and low > min(at[k].distance, at[k + 1].distance)
+                and low - margin[p] > min(at[k].clearance, at[k + 1].clearance)
+            ):
+                proved[k, p] = True
+                kept.setdefault(k, []).extend(
+                    s._replace(distance=v, clearance=v - margin[p], pair_distance=v)
+                    for s, v in zip(mine, b.tolist(), strict=True)
+                )
+    return proved, kept
 
 
 def _shift(before: tuple[int, Array] | None, joint: int, now: Array) -> float:
