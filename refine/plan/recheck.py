@@ -15,7 +15,8 @@ motion from them as the dense check proves it from its own bounds: a pair whose 
 minus margin plus tolerance) at a segment's two ends add up to the pair's motion over the segment
 keeps its margin over the whole segment (:mod:`refine.collision.advance`); a pair that falls short
 is measured exactly at the ends and advanced by FCL queries (:func:`refine.collision.advance.advance_pairs`),
-as in the dense check. The least distance and clearance are then measured exactly: at every row
+as in the dense check, unless the earlier check's samples of it inside the segment, carried the same
+way, prove its margin and lie above the segment's least figures (:func:`_samples_carried`). The least distance and clearance are then measured exactly: at every row
 whose bounds could hold them (:func:`refine.collision.carry.measure_least`, with the gaps along
 the witness normals found, :func:`refine.collision.carry.raise_near`), and the samples the
 advancement took inside a segment count with their segment's ends measured, as in the dense check.
@@ -236,29 +237,33 @@ def _samples_carried(
     motion = pair_motion(model, q)
     need = short(bounds - margin + tolerance_m, motion)
     for k, found in samples.items():
-        by_pair: dict[int, list[Sample]] = {}
-        for s in found:
-            by_pair.setdefault(s.index, []).append(s)
-        for p, mine in by_pair.items():
-            if p < 0 or not need[k, p] or not math.isfinite(delta[p]):
+        index = np.array([s.index for s in found])
+        t = np.array([s.t for s in found])
+        moved = (1.0 - t)[:, None] * (q[k] - checked.q[k]) + t[:, None] * (q[k + 1] - checked.q[k + 1])
+        carried = (
+            np.array([s.distance for s in found])
+            - np.einsum("ij,ij->i", np.abs(moved), model.pair_motion[index])
+            - delta[index]
+        )
+        carried = np.where(carried > 0.0, carried, -np.inf)
+        for p in np.unique(index).tolist():
+            if not need[k, p] or not math.isfinite(delta[p]):
                 continue
-            mine.sort(key=lambda s: s.t)
-            t = np.array([s.t for s in mine])
-            moved = (1.0 - t)[:, None] * (q[k] - checked.q[k]) + t[:, None] * (q[k + 1] - checked.q[k + 1])
-            b = np.array([s.distance for s in mine]) - np.abs(moved) @ model.pair_motion[p] - delta[p]
-            b = np.where(b > 0.0, b, -np.inf)
-
-            def least(b: Array = b, t: Array = t, k: int = k, p: int = p) -> float:
-                chain = np.concatenate(([bounds[k, p]], b, [bounds[k + 1, p]]))
-                share = np.diff(np.concatenate(([0.0], t, [1.0])))
-                return float(np.min((chain[:-1] + chain[1:] - motion[k, p] * share) / 2.0))
-
-            if least() < margin[p] - tolerance_m:
+            mine = np.flatnonzero(index == p)
+            mine = mine[np.argsort(t[mine], kind="stable")]
+            share = np.diff(np.concatenate(([0.0], t[mine], [1.0]))) * motion[k, p]
+            low = _least(bounds[k, p], carried[mine], bounds[k + 1, p], share)
+            if low < margin[p] - tolerance_m:
                 continue
+            if k in at and k + 1 in at:  # the ends' figures known: the samples must lie above them
+                if low <= min(at[k].distance, at[k + 1].distance) or low - margin[p] <= min(
+                    at[k].clearance, at[k + 1].clearance
+                ):
+                    continue
             for end in (k, k + 1):
                 if end not in at:
                     measure(end)
-            low = least()  # the ends' bounds raised where they were measured
+            low = _least(bounds[k, p], carried[mine], bounds[k + 1, p], share)  # the ends measured
             if (
                 low >= margin[p] - tolerance_m
                 and low > min(at[k].distance, at[k + 1].distance)
@@ -266,10 +271,20 @@ def _samples_carried(
             ):
                 proved[k, p] = True
                 kept.setdefault(k, []).extend(
-                    s._replace(distance=v, clearance=v - margin[p], pair_distance=v)
-                    for s, v in zip(mine, b.tolist(), strict=True)
+                    found[i]._replace(distance=v, clearance=v - margin[p], pair_distance=v)
+                    for i, v in zip(mine.tolist(), carried[mine].tolist(), strict=True)
                 )
     return proved, kept
+
+
+def _least(start: float, inside: Array, end: float, motion: Array) -> float:
+    """The least distance [m] the bounds ``start``, ``inside`` (m,), ``end`` [m] allow along a segment.
+
+    ``motion`` (m+1,) [m] is the pair's motion bound over each stretch between them; over a stretch
+    with bounds ``a``, ``b`` the distance is at least ``(a + b - motion) / 2``.
+    """
+    chain = np.concatenate(([start], inside, [end]))
+    return float(np.min(chain[:-1] + chain[1:] - motion)) / 2.0
 
 
 def _shift(before: tuple[int, Array] | None, joint: int, now: Array) -> float:
