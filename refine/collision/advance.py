@@ -13,6 +13,7 @@ is reached (:func:`advance_pairs`). :func:`refine.collision.check.check_path_cle
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import NamedTuple
 
@@ -40,6 +41,8 @@ class Sample(NamedTuple):
     pair: tuple[str, str]  # the pair with the least clearance
     pair_distance: float  # its distance [m]
     below: frozenset[str]  # every body and object below its margin
+    t: float = math.nan  # an advancement's sample: its share of the segment
+    index: int = -1  # an advancement's sample: the pair's index in the model's pairs
 
 
 def advance_pairs(
@@ -49,6 +52,7 @@ def advance_pairs(
     bounds: Array,
     exact: NDArray[np.bool_],
     tolerance_m: float,
+    proved: NDArray[np.bool_] | None = None,
 ) -> tuple[NDArray[np.bool_], dict[int, list[Sample]]]:
     """Certify every segment pair by pair by conservative advancement on the pair's motion bound.
 
@@ -58,7 +62,8 @@ def advance_pairs(
     budgets (distance minus margin plus tolerance) at the two ends add up to at least the pair's
     motion bound ``S`` over the segment: each end certifies ``budget / S`` of the segment. A pair
     that falls short is measured exactly at the ends, then advanced from the start
-    (:func:`advance`) until the span certified from the end is reached.
+    (:func:`advance`) until the span certified from the end is reached. Segment pairs marked in
+    ``proved`` (N-1, P) were proved by the caller and are neither measured nor advanced.
 
     Returns:
         Which segments are certified (N-1,) (the others, with a broken margin or more than
@@ -70,6 +75,8 @@ def advance_pairs(
     motion = pair_motion(model, q_path)
     budget = bounds - margin + tolerance_m
     need = short(budget, motion)
+    if proved is not None:
+        need &= ~proved
     for k in np.flatnonzero(need.any(axis=1)):  # measure the pairs that fall short at the ends
         for end in (k, k + 1):
             for p in np.flatnonzero(need[k] & ~exact[end]):
@@ -77,6 +84,8 @@ def advance_pairs(
                 exact[end, p] = True
     budget = bounds - margin + tolerance_m
     need = short(budget, motion)
+    if proved is not None:
+        need &= ~proved
     broken = np.zeros(len(motion), dtype=bool)
     inner: dict[int, list[Sample]] = {}
 
@@ -85,7 +94,7 @@ def advance_pairs(
 
         def budget_at(t: float) -> float:
             d = model.pair_distance(q_path[k] + t * (q_path[k + 1] - q_path[k]), p)
-            found.append(Sample(d, d - margin[p], names[p], d, NONE))
+            found.append(Sample(d, d - margin[p], names[p], d, NONE, t, p))
             return d - margin[p] + tolerance_m
 
         return budget_at

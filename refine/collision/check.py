@@ -127,8 +127,7 @@ class PathClearance:
         segment_distance_m: least distance per segment, waypoints and sub-steps [m], (N-1,).
         segment_clearance_m: least clearance per segment [m], (N-1,).
         segment_pair: per segment, (body, other) of the pair with the least clearance.
-        segment_samples: sub-steps per segment: one more than the configurations sampled inside
-            it (by the advancement of any pair, or densely), (N-1,).
+        segment_samples: sub-steps per segment, one more than the configurations sampled inside it, (N-1,).
         runs: runs of segments below the margin, with the objects involved.
         queries: FCL pair queries made by the check.
         time_s: wall time of the check [s].
@@ -139,8 +138,8 @@ class PathClearance:
             those measured (N,): that can hold the least distance or clearance, whose margins the bounds
             leave unproved, or that end a segment sampled inside. The others' figures, and those of a
             segment with one sub-step ending at one, are lower bounds; the least figures are exact.
-        bounds: the lower bounds on every pair's distance at the waypoints the check ended with,
-            for the check of a nearby path (:mod:`refine.collision.carry`); None for ``"sample"``.
+        bounds, inner_samples: every pair's distance bounds at the waypoints (None for ``"sample"``), and
+            per segment the advancement's samples (``Sample.t``, ``.index``), to re-check a nearby path.
     """
 
     waypoint_distance_m: Array
@@ -156,6 +155,7 @@ class PathClearance:
     certified_segments: int = 0
     waypoint_measured: NDArray[np.bool_] | None = None
     bounds: CheckedBounds | None = None
+    inner_samples: dict[int, list[Sample]] | None = None
 
     @property
     def ok(self) -> bool:
@@ -427,6 +427,7 @@ def check_path_clearance(
         certified_segments=int(certified.sum()),
         waypoint_measured=measured,
         bounds=checked_bounds(model, q_path, bounds, normals, poses, exact) if method == "bound" else None,
+        inner_samples=inner,
     )
     log.info("%s", result.summary())
     return result

@@ -119,7 +119,9 @@ def pair_reach(model: pin.Model, pairs: list[tuple[Body, Body]]) -> Array:
             if body.joint <= 0:
                 continue
             if id(body) not in points:
-                T = model.frames[body.frame_id].placement.homogeneous @ body.link_T_shape  # in the joint frame
+                T = (
+                    model.frames[body.frame_id].placement.homogeneous @ body.link_T_shape
+                )  # in the joint frame
                 points[id(body)] = corners(body) @ T[:3, :3].T + T[:3, 3]
             key = (body.joint, max(other.joint, 0), points[id(body)].tobytes())
             sides = known.get(key)

@@ -15,7 +15,8 @@ motion from them as the dense check proves it from its own bounds: a pair whose 
 minus margin plus tolerance) at a segment's two ends add up to the pair's motion over the segment
 keeps its margin over the whole segment (:mod:`refine.collision.advance`); a pair that falls short
 is measured exactly at the ends and advanced by FCL queries (:func:`refine.collision.advance.advance_pairs`),
-as in the dense check. The least distance and clearance are then measured exactly: at every row
+as in the dense check, unless the earlier check's samples of it inside the segment, carried the same
+way, prove its margin and lie above the segment's least figures (:func:`_samples_carried`). The least distance and clearance are then measured exactly: at every row
 whose bounds could hold them (:func:`refine.collision.carry.measure_least`, with the gaps along
 the witness normals found, :func:`refine.collision.carry.raise_near`), and the samples the
 advancement took inside a segment count with their segment's ends measured, as in the dense check.
@@ -35,11 +36,13 @@ from __future__ import annotations
 import math
 import time
 import weakref
+from collections.abc import Callable
 
 import numpy as np
+from numpy.typing import NDArray
 
 from refine.collision import CollisionModel, PathClearance
-from refine.collision.advance import NONE, Sample, advance_pairs
+from refine.collision.advance import NONE, Sample, advance_pairs, pair_motion, short
 from refine.collision.carry import (
     NEAR,
     CheckedBounds,
@@ -77,9 +80,10 @@ def recheck(
     if checked is None or q.ndim != 2 or len(q) < 2 or checked.q.shape != q.shape:
         return None
     start, queries = time.perf_counter(), model.queries
-    bounds = _carried(model, checked, q)  # (K, P) lower bounds [m], -inf where none is carried
-    if bounds is None:
+    carried = _carried(model, checked, q)  # (K, P) lower bounds [m], -inf where none is carried
+    if carried is None:
         return None
+    bounds, delta = carried
     poses = model.moving_poses(q)
     unbound = ~np.isfinite(bounds)
     if unbound.any():  # the boxes bound those pairs where they are apart
@@ -107,7 +111,9 @@ def recheck(
         return at[k].distance, at[k].clearance
 
     measured = measure_least(bounds, margins, measure, NEAR, tightener(model, poses, bounds, exact))
-    certified, inner = advance_pairs(model, q, poses, bounds, exact, tolerance_m)
+    proved, kept = _samples_carried(model, previous, checked, q, bounds, delta, tolerance_m, at, measure)
+    measured[list(at)] = True
+    certified, inner = advance_pairs(model, q, poses, bounds, exact, tolerance_m, proved)
     if not certified.all():
         return None  # a margin broken or a segment given up: the dense check samples and names it
     for k in sorted({k + e for k, found in inner.items() if found for e in (0, 1)} - set(at)):
@@ -149,6 +155,7 @@ def recheck(
         certified_segments=len(q) - 1,
         waypoint_measured=measured,
         bounds=checked_bounds(model, q, bounds, normals),
+        inner_samples={k: [*kept.get(k, ()), *inner.get(k, ())] for k in {*kept, *inner}},
     )
 
 
@@ -156,8 +163,10 @@ _SHIFTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 """Per collision model: its bodies' labels, each pair's two label indices, and the shifts found so far."""
 
 
-def _carried(model: CollisionModel, checked: CheckedBounds, q: Array) -> Array | None:
+def _carried(model: CollisionModel, checked: CheckedBounds, q: Array) -> tuple[Array, Array | None] | None:
     """:func:`refine.collision.carry.carried_bounds` of ``checked`` at joints ``q`` (K, n), (K, P) [m] or None.
+
+    With the bounds, each pair's shift ``δ_p`` [m] (P,), or None where ``carried_bounds`` formed them.
 
     For a check of the same pairs in the same order (a motion of the run before) the bounds are
     formed as there, ``bound - |q - q_checked| · R_p - δ_p`` kept where positive, with each body's
@@ -166,7 +175,8 @@ def _carried(model: CollisionModel, checked: CheckedBounds, q: Array) -> Array |
     ``carried_bounds`` itself.
     """
     if checked.pairs != model.pairs:
-        return carried_bounds(model, checked, q)
+        out = carried_bounds(model, checked, q)
+        return None if out is None else (out, None)
     if (
         q.shape != checked.q.shape
         or q.shape[1] != model.robot.nq
@@ -190,7 +200,91 @@ def _carried(model: CollisionModel, checked: CheckedBounds, q: Array) -> Array |
         shift[i] = memo[1]
     delta = shift[a] + shift[b]  # (P,) [m], inf for a pair with a changed body
     out = checked.bounds - np.abs(q - checked.q) @ model.pair_motion.T - delta
-    return np.where(out > 0.0, out, -np.inf)
+    return np.where(out > 0.0, out, -np.inf), delta
+
+
+def _samples_carried(
+    model: CollisionModel,
+    previous: object,
+    checked: CheckedBounds,
+    q: Array,
+    bounds: Array,
+    delta: Array | None,
+    tolerance_m: float,
+    at: dict[int, Sample],
+    measure: Callable[[int], tuple[float, float]],
+) -> tuple[NDArray[np.bool_], dict[int, list[Sample]]]:
+    """The segment pairs (K-1, P) the earlier check's samples inside prove, and those samples carried.
+
+    A sample of pair p at share t of segment k, distance ``d`` at the earlier rows' ``q_old(t)``,
+    bounds the pair at the new rows' ``q(t)`` from below by ``b = d - |q(t) - q_old(t)| · R_p - δ_p``
+    (``q(t) - q_old(t)`` is the rows' change interpolated at t). Along the segment, with these and the
+    ends' bounds at shares ``0 = t_0 < … < t_m = 1`` and the pair's motion ``S`` over the segment,
+    the pair's distance anywhere between ``t_i`` and ``t_i+1`` is at least
+    ``L = (b_i + b_i+1 - S (t_i+1 - t_i)) / 2``. When the least ``L`` keeps the margin
+    (``L >= m_p - tolerance_m``) and lies above the segment's ends' exact least distance and its
+    clearance above theirs (``L - m_p``), the pair keeps its margin over the segment, and any sample
+    the advancement would take of it counts in neither least figure nor names its pair: the segment's
+    figures are its ends', measured here as for a segment sampled inside. Otherwise the pair is
+    advanced as before.
+    """
+    proved = np.zeros((len(q) - 1, len(model.pairs)), dtype=bool)
+    kept: dict[int, list[Sample]] = {}
+    samples = getattr(previous, "inner_samples", None)
+    if not samples or delta is None:
+        return proved, kept
+    margin = model.pair_margins
+    motion = pair_motion(model, q)
+    need = short(bounds - margin + tolerance_m, motion)
+    for k, found in samples.items():
+        index = np.array([s.index for s in found])
+        t = np.array([s.t for s in found])
+        moved = (1.0 - t)[:, None] * (q[k] - checked.q[k]) + t[:, None] * (q[k + 1] - checked.q[k + 1])
+        carried = (
+            np.array([s.distance for s in found])
+            - np.einsum("ij,ij->i", np.abs(moved), model.pair_motion[index])
+            - delta[index]
+        )
+        carried = np.where(carried > 0.0, carried, -np.inf)
+        for p in np.unique(index).tolist():
+            if not need[k, p] or not math.isfinite(delta[p]):
+                continue
+            mine = np.flatnonzero(index == p)
+            mine = mine[np.argsort(t[mine], kind="stable")]
+            share = np.diff(np.concatenate(([0.0], t[mine], [1.0]))) * motion[k, p]
+            low = _least(bounds[k, p], carried[mine], bounds[k + 1, p], share)
+            if low < margin[p] - tolerance_m:
+                continue
+            if k in at and k + 1 in at:  # the ends' figures known: the samples must lie above them
+                if low <= min(at[k].distance, at[k + 1].distance) or low - margin[p] <= min(
+                    at[k].clearance, at[k + 1].clearance
+                ):
+                    continue
+            for end in (k, k + 1):
+                if end not in at:
+                    measure(end)
+            low = _least(bounds[k, p], carried[mine], bounds[k + 1, p], share)  # the ends measured
+            if (
+                low >= margin[p] - tolerance_m
+                and low > min(at[k].distance, at[k + 1].distance)
+                and low - margin[p] > min(at[k].clearance, at[k + 1].clearance)
+            ):
+                proved[k, p] = True
+                kept.setdefault(k, []).extend(
+                    found[i]._replace(distance=v, clearance=v - margin[p], pair_distance=v)
+                    for i, v in zip(mine.tolist(), carried[mine].tolist(), strict=True)
+                )
+    return proved, kept
+
+
+def _least(start: float, inside: Array, end: float, motion: Array) -> float:
+    """The least distance [m] the bounds ``start``, ``inside`` (m,), ``end`` [m] allow along a segment.
+
+    ``motion`` (m+1,) [m] is the pair's motion bound over each stretch between them; over a stretch
+    with bounds ``a``, ``b`` the distance is at least ``(a + b - motion) / 2``.
+    """
+    chain = np.concatenate(([start], inside, [end]))
+    return float(np.min(chain[:-1] + chain[1:] - motion)) / 2.0
 
 
 def _shift(before: tuple[int, Array] | None, joint: int, now: Array) -> float:

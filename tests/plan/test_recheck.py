@@ -74,11 +74,12 @@ def test_the_bounds_carried_are_those_of_carried_bounds_with_the_part_moved(line
     move = make_transform(np.eye(3), [0.002, 0.0, 0.0])
     cell = tuple(dataclasses.replace(o, pose=move @ o.pose) if o.workpiece else o for o in problem.cell)
     moved = checker_with(problem, robot, cell).model
-    got, want = (
+    carried, want = (
         _carried(moved, first.check.bounds, again.q),
         carried_bounds(moved, first.check.bounds, again.q),
     )
-    assert got is not None and want is not None
+    assert carried is not None and want is not None
+    got = carried[0]
     np.testing.assert_array_equal(np.isinf(got), np.isinf(want))
     np.testing.assert_allclose(got[np.isfinite(got)], want[np.isfinite(want)], rtol=0.0, atol=1e-15)
     assert np.isfinite(want).any() and (want < first.check.bounds.bounds).any()
@@ -125,3 +126,62 @@ def test_random_joint_moves_re_proved_agree_with_the_dense_check(glass):
         assert worst[0] == worst[1]
         agreed += 1
     assert agreed >= 2
+
+
+def test_joint_moves_re_proved_from_the_earlier_samples_inside_agree_with_the_dense_check(glass):
+    """Seeded wrist unwinds near a box, checked, moved by about a milliradian: where the earlier
+    check's samples inside prove a pair (fewer queries than re-proving without them), the least
+    figures and pair are still the dense check's of the moved rows, and every pair keeps its margin
+    at dense samples between the rows."""
+    problem, robot = glass
+    rng = np.random.default_rng(20260312)
+    lo, hi = 0.5 * robot.spec.lower, 0.5 * robot.spec.upper
+    spared = 0
+    for _ in range(4):
+        centre = rng.uniform([0.9, -0.5, 0.5], [1.5, 0.5, 1.0])
+        checker = checker_with(problem, robot, [*problem.cell, box("clamp", centre, (0.1, 0.1, 0.1))])
+        a = rng.uniform(lo, hi)
+        step = rng.normal(0.0, 0.3, 6)
+        step[5] = rng.choice([-1.0, 1.0]) * rng.uniform(2.0, 5.0)  # the wrist unwinds
+        rows = np.stack([a, a + step])
+        first = checker.clearance(rows)
+        if not first.ok or not first.inner_samples:
+            continue
+        moved = rows + rng.normal(0.0, 1e-3, rows.shape)
+        fresh, found = checker.clearance(moved), recheck(checker.model, moved, first)
+        bare = recheck(checker.model, moved, dataclasses.replace(first, inner_samples=None))
+        if found is None or bare is None:
+            assert (found is None) == (bare is None)
+            continue
+        assert found.ok and fresh.ok
+        assert found.min_distance_m == pytest.approx(fresh.min_distance_m, abs=1e-9)
+        assert found.min_clearance_m == pytest.approx(fresh.min_clearance_m, abs=1e-9)
+        worst = [c.segment_pair[int(np.argmin(c.segment_clearance_m))] for c in (found, fresh)]
+        assert worst[0] == worst[1]
+        if found.queries < bare.queries:
+            spared += 1
+            top = float(checker.model.pair_margins.max())
+            for q in joint_samples(moved, step_rad=0.05):
+                assert all(c.clearance_m >= -TOLERANCE for c in checker.model.contacts(q, top))
+    assert spared >= 2, spared
+
+
+def test_a_move_passing_a_box_re_proved_from_its_samples_has_the_dense_checks_least_inside(glass):
+    """The TCP sweeps 30 mm over a box between two rows 50 mm clear of it: the least distance lies
+    inside the segment, where the dense check of the rows moved 10 µrad samples it; re-proved from the
+    earlier samples, the move has the same least figures and pair."""
+    problem, robot = glass
+    kin = kinematics(problem, robot)
+    a = joints_at(problem, robot, np.array([1.2, -0.25, 0.8]))
+    b = joints_at(problem, robot, np.array([1.2, 0.25, 0.8]), a)
+    below = kin.pose((a + b) / 2)[:3, 3] - [0.0, 0.0, 0.055]  # 30 mm gap to the top of a 50 mm box
+    checker = checker_with(problem, robot, [*problem.cell, box("clamp", below, (0.05, 0.05, 0.05))])
+    rows = np.stack([a, b])
+    first = checker.clearance(rows)
+    moved = rows + np.random.default_rng(3).normal(0.0, 1e-5, rows.shape)
+    fresh, found = checker.clearance(moved), recheck(checker.model, moved, first)
+    assert first.ok and first.inner_samples and found is not None and found.ok
+    assert fresh.min_distance_m < fresh.waypoint_distance_m.min() - 0.01  # the least is inside
+    assert found.min_distance_m == pytest.approx(fresh.min_distance_m, abs=1e-9)
+    assert found.min_clearance_m == pytest.approx(fresh.min_clearance_m, abs=1e-9)
+    assert found.segment_pair == fresh.segment_pair
