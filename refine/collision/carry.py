@@ -234,7 +234,7 @@ def direction_bounds(
         every = len(ks) == len(poses)  # then all the rows as they are, not a copy of every body's poses
         n = normals[:, p] if every else normals[ks, p]
         n = n / np.linalg.norm(n, axis=1, keepdims=True)  # unit, whatever rounding left
-        gaps = model.plane_bounds(int(p), poses if every else poses[ks], n)
+        gaps = model.plane_bounds(int(p), poses, n, None if every else ks)
         if gaps is not None:
             out[ks, p] = np.where(gaps > 0.0, gaps, -np.inf)
     return out
@@ -423,7 +423,7 @@ def bounds_along_normals(
         ks = np.flatnonzero(need[:, p])
         i = 0
         while i < len(ks):
-            gaps = model.plane_bounds(p, poses[ks[i:]])
+            gaps = model.plane_bounds(p, poses, rows=ks[i:])
             if gaps is not None:
                 short = np.flatnonzero(gaps <= margins[p])
                 stop = int(short[0]) if short.size else len(gaps)

@@ -540,8 +540,9 @@ def _waypoint_bounds(
         bounds = prior.copy()
         cut = np.ix_(rows, columns)
         bounds[cut] = np.maximum(bounds[cut], model.box_bounds(poses[rows], columns))
+    motion = pair_motion(model, q_path)  # per segment and pair [m], (N-1, P), once
     if directions is not None:  # the proof alone (no figures written) bounds only the pairs left short
-        columns_left = short(bounds - model.pair_margins + tolerance_m, pair_motion(model, q_path)).any(0)
+        columns_left = short(bounds - model.pair_margins + tolerance_m, motion).any(0)
         bounds[rows] = np.maximum(
             bounds[rows],
             direction_bounds(
@@ -554,7 +555,7 @@ def _waypoint_bounds(
     exact = np.zeros(bounds.shape, dtype=bool)
     need = np.zeros(bounds.shape, dtype=bool)  # pairs to measure at each waypoint
     if by_bound and len(q_path) > 1:
-        left_now = short(bounds - model.pair_margins + tolerance_m, pair_motion(model, q_path))
+        left_now = short(bounds - model.pair_margins + tolerance_m, motion)
         need[:-1] |= left_now
         need[1:] |= left_now
     if left is not None and need[np.setdiff1d(np.arange(len(q_path)), rows)].any():

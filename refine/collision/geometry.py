@@ -146,10 +146,9 @@ class Body:
         ``direction``: one (3,) for every pose, or one per pose (K, 3).
         """
         d = np.asarray(direction, dtype=float)
-        rows = d.ndim == 2
-        base = np.einsum("ki,ki->k", Ts[:, :3, 3], d) if rows else Ts[:, :3, 3] @ d
-        # the direction in each shape frame (matmul for one direction: a few microseconds less than einsum)
-        local = np.einsum("kij,ki->kj", Ts[:, :3, :3], d) if rows else d @ Ts[:, :3, :3]
+        # d . [R | t] at once: the direction in each shape frame (K, 3) and d . t (K,), one pass over the poses
+        lifted = np.einsum("ki,kij->kj", d, Ts[:, :3, :]) if d.ndim == 2 else d @ Ts[:, :3, :]
+        local, base = lifted[:, :3], lifted[:, 3]
         if self.vertices is not None:
             return base + (local @ self.vertices.T).max(axis=1)
         tag, *dims = self.kind_params

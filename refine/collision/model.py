@@ -477,20 +477,25 @@ class CollisionModel:
         a, b = int(self._pa[k]), int(self._pb[k])
         return -self.bodies[a].reach(self._poses[a], -n) - self.bodies[b].reach(self._poses[b], n)
 
-    def plane_bounds(self, k: int, poses: Array, normals: Array | None = None) -> Array | None:
+    def plane_bounds(
+        self, k: int, poses: Array, normals: Array | None = None, rows: NDArray[np.intp] | None = None
+    ) -> Array | None:
         """Lower bounds [m] on pair k's distance at rows of moving-body poses (K, M, 4, 4), (K,).
 
         The gap along the pair's last witness normal (:meth:`_plane_bound`) at every row at once,
         or along ``normals``: one unit vector (3,) or one per row (K, 3) (any unit vector gives a
         lower bound); None for a pair with a mesh or, without ``normals``, one never measured.
+        ``rows``: the rows of ``poses`` to bound (all if None), one per normal; only the pair's
+        two bodies' poses are read there, not every body's.
         """
         n = self._normals[k] if normals is None else np.asarray(normals, dtype=float)
         if not self._bounded[k] or np.isnan(n).any():
             return None
         a, b = int(self._pa[k]), int(self._pb[k])
-        m = self._n_moving
-        Ta = poses[:, a] if a < m else np.broadcast_to(self._poses[a], (len(poses), 4, 4))
-        Tb = poses[:, b] if b < m else np.broadcast_to(self._poses[b], (len(poses), 4, 4))
+        m, at = self._n_moving, slice(None) if rows is None else rows
+        count = len(poses) if rows is None else len(rows)
+        Ta = poses[at, a] if a < m else np.broadcast_to(self._poses[a], (count, 4, 4))
+        Tb = poses[at, b] if b < m else np.broadcast_to(self._poses[b], (count, 4, 4))
         return -self.bodies[a].reach_many(Ta, -n) - self.bodies[b].reach_many(Tb, n)
 
     @property
