@@ -34,8 +34,7 @@ query of that pair per step, until the span certified from the end is reached. A
 the pair with the least clearance and the pair with the least distance are measured exactly
 (:meth:`CollisionModel.nearest_pairs`), for the figures and the runs.
 
-**Dense sampling (``method="sample"``, and the fallback).** Each segment is cut into enough
-sub-steps that
+**Dense sampling (``method="sample"``, and the fallback).** Each segment is cut into enough sub-steps that
 
 * the TCP moves at most ``step_m`` between checks (the chord between consecutive checks; the
   segment's chord sets a first count, raised while the TCP curve makes a sub-step longer), and
