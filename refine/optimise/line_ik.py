@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from refine.optimise.line_start import newton_start, pose_errors, previous_bows, previous_corrections
+from refine.optimise.line_start import linear_starts, previous_bows, previous_corrections
 from refine.optimise.slerp import log_rotations, slerp_rotations
 from refine.robot.kinematics import TcpKinematics, solve_ik_batch
 from refine.types import Array
@@ -125,18 +125,11 @@ def solve_line(
     q_lin = joint_linear(q, segment, t) if q_lin is None else q_lin
     poses, J_wp = kin.poses_jacobians(q)
     targets = line_poses(poses, q, segment, t, kin, wrist)
-    lin_poses = kin.poses(q_lin)
-    errors = pose_errors(lin_poses, targets)
+    lin_poses, errors, start = linear_starts(kin, J_wp, segment, t, q_lin, targets)
     bows = None if previous is None else previous_bows(q, m, segment, t, previous, tolerance)
     cold = np.ones(len(t), dtype=bool) if bows is None else np.isnan(bows[:, 0])
-    if cold.all():
-        start = newton_start(J_wp, segment, t, q_lin, lin_poses, targets, errors)
-    else:
-        start = q_lin + np.where(cold[:, None], 0.0, bows)
-        if cold.any():
-            start[cold] = newton_start(
-                J_wp, segment[cold], t[cold], q_lin[cold], lin_poses[cold], targets[cold], errors[cold]
-            )
+    if not cold.all():
+        start[~cold] = q_lin[~cold] + bows[~cold]
     newton = start.copy()
     if previous is not None:
         corrections = previous_corrections(q, m, segment, t, previous, tolerance)

@@ -320,6 +320,53 @@ class CompiledChain:
         )
         return q, err, T, J, flag
 
+    def line_starts(
+        self,
+        qs: Array,
+        kinematics: tuple[Array, Array, Array | None],
+        targets: Array,
+        P: Array,
+        segment: Array,
+        t: Array,
+        step_max: float,
+    ) -> tuple[Array, Array, Array, Array] | None:
+        """The controller line's IK starts in one pass, or None when the chain runs in NumPy.
+
+        Per joint-linear row of ``qs`` (N, nv) [rad]: the TCP pose ``T`` (N, 4, 4) as
+        :meth:`tcp_frames` (``kinematics`` as :meth:`ik_solve`'s), the pose error ``e`` (N, 6)
+        toward ``targets`` (N, 4, 4) [m, rad] as :meth:`ik_steps` forms it, the rotation angle of
+        ``R_target Rᵀ`` (N,) [rad] (above ``π - 1e-3`` the error's rotation vector is to be taken
+        otherwise) and the start ``q + P[segment] [e, t e]`` (N, nv) [rad] with the per-segment
+        matrices ``P`` (K, nv, 12) (:func:`refine.optimise.line_start.start_matrices`), ``q`` alone
+        where a joint's step is not within ``step_max`` [rad] (or NaN).
+
+        Returns:
+            the poses, errors, angles and starts.
+        """
+        lib = self._lib()
+        if lib is None:
+            return None
+        qs = self._rows(qs)
+        fixed = self._placements(*kinematics)
+        world = None if kinematics[2] is None else fixed[2]
+        n = len(qs)
+        targets = np.ascontiguousarray(targets, dtype=float)
+        P = np.ascontiguousarray(P, dtype=float)
+        segment = np.ascontiguousarray(segment, dtype=np.int64)
+        t = np.ascontiguousarray(t, dtype=float)
+        if (
+            targets.shape != (n, 4, 4)
+            or segment.shape != (n,)
+            or t.shape != (n,)
+            or P.shape[1:] != (self.nq, 12)
+        ):
+            raise ValueError(f"line_starts: targets ({n}, 4, 4), segments and t ({n},), P (K, {self.nq}, 12)")
+        if n and not (0 <= segment.min() and segment.max() < len(P)):
+            raise ValueError(f"line_starts: segments 0..{len(P) - 1}")
+        T, e, theta, start = np.empty((n, 4, 4)), np.empty((n, 6)), np.empty(n), np.empty((n, self.nq))
+        lib.start(qs, fixed[0], fixed[1], world, targets, P, segment, t, float(step_max), T, e, theta, start)
+        return T, e, theta, start
+
     def dets6(self, matrices: Array) -> Array | None:
         """Determinants (N,) of 6 × 6 matrices (N, 6, 6) (LU with partial pivoting), or None in NumPy."""
         lib = self._lib()
