@@ -77,7 +77,7 @@ def test_the_compiled_starts_are_the_numpy_paths_with_far_and_half_turned_target
     J_wp = np.array([kin_np.jacobian(x) for x in q])
     out = linear_starts(kin, J_wp, segment, t, q_lin, targets)
     ref = linear_starts(kin_np, J_wp, segment, t, q_lin, targets)
-    for a, b in zip(out, ref):
+    for a, b in zip(out, ref, strict=True):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
     assert np.array_equal(out[2][3], q_lin[3]) and np.array_equal(out[2][7], q_lin[7])
     for k in (7, 8):  # the half-turned rows' errors are log3's
