@@ -11,6 +11,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from refine.optimise.line_ik import line_poses, segment_lines
 from refine.optimise.line_start import NEWTON_DAMPING, NEWTON_STEP_MAX, linear_starts
 from refine.robot import compiled_chain as compiled_module
 from tests.test_compiled_ik import _kins, _kins_held, _pin_pose_jacobian, _pin_seen_from_part
@@ -95,3 +96,33 @@ def test_line_starts_rejects_mismatched_rows(chain_cache) -> None:
         chain.line_starts(q, placements, np.zeros((n - 1, 4, 4)), P, np.zeros(n, int), np.zeros(n), 1e-3)
     with pytest.raises(ValueError):
         chain.line_starts(q, placements, np.zeros((n, 4, 4)), P, np.full(n, 2), np.zeros(n), 1e-3)
+
+
+@pytest.mark.parametrize("held", [False, True])
+def test_the_compiled_targets_are_the_chord_and_pinocchios_slerp_or_the_wrists_orientation(
+    chain_cache, held
+) -> None:
+    kin, kin_np = _kins_held("kuka_iiwa14_r820") if held else _kins("kuka_iiwa14_r820")
+    robot = kin.robot
+    q, segment, t, q_lin, _ = _line(kin_np, 17 + held)
+    poses = kin_np.poses(q)
+    poses[3, :3, :3] = poses[2, :3, :3] @ pin.exp3(np.array([3e-5, -2e-5, 1e-5]))  # the series' branch
+    wrist = np.array([False, True, False, True])
+    pose = (lambda x: _pin_seen_from_part(robot, x)) if held else (lambda x: _pin_pose_jacobian(robot, x)[0])
+    J_wp = np.array([kin_np.jacobian(x) for x in q])
+    targets = np.empty((len(t), 4, 4))
+    T, e, start = linear_starts(kin, J_wp, segment, t, q_lin, targets, segment_lines(poses, wrist))
+    for k in range(len(t)):
+        s = segment[k]
+        expected = np.eye(4)
+        expected[:3, 3] = poses[s, :3, 3] + t[k] * (poses[s + 1, :3, 3] - poses[s, :3, 3])
+        Ra, Rb = poses[s, :3, :3], poses[s + 1, :3, :3]
+        expected[:3, :3] = pose(q_lin[k])[:3, :3] if wrist[s] else Ra @ pin.exp3(t[k] * pin.log3(Ra.T @ Rb))
+        np.testing.assert_allclose(targets[k], expected, rtol=0, atol=1e-12)
+    # and the rest as the NumPy path's from those targets: line_poses' targets, NumPy's starts
+    ref_targets = line_poses(poses, q, segment, t, kin_np, wrist)
+    np.testing.assert_allclose(targets, ref_targets, rtol=0, atol=1e-13)
+    ref = linear_starts(kin_np, J_wp, segment, t, q_lin, ref_targets)
+    for a, b in zip((T, e, start), ref, strict=True):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+    assert linear_starts(kin_np, J_wp, segment, t, q_lin, targets, segment_lines(poses, wrist)) is None

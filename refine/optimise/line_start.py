@@ -78,8 +78,8 @@ def start_matrices(J_wp: Array) -> Array:
 
 
 def linear_starts(
-    kin: Any, J_wp: Array, segment: Array, t: Array, q_lin: Array, targets: Array
-) -> tuple[Array, Array, Array]:
+    kin: Any, J_wp: Array, segment: Array, t: Array, q_lin: Array, targets: Array, lines: Array | None = None
+) -> tuple[Array, Array, Array] | None:
     """The joint-linear TCP poses (M, 4, 4), their :func:`pose_errors` (M, 6) and :func:`newton_start` (M, n).
 
     ``kin``: the TCP kinematics (a ``TcpKinematics``); the rest as :func:`newton_start`'s. Where
@@ -87,12 +87,18 @@ def linear_starts(
     (:meth:`refine.robot.compiled_chain.CompiledChain.line_starts`); the rows whose rotation
     error comes within 1e-3 rad of π, where the compiled error leaves out
     :func:`relative_rotation_vectors`' branch, are taken again in NumPy. Else NumPy's passes.
+    ``lines``: the segments' lines (:func:`refine.optimise.line_ik.segment_lines`) from which the
+    compiled pass writes the targets into ``targets`` (M, 4, 4) first; then None where the chain
+    is not compiled (the caller forms the targets and calls again without).
     """
     chain = kin.robot.chain
     out = None
     if chain is not None and len(t) >= chain.min_rows:
         placements = (kin.base_in_world, kin.tcp_in_flange, kin.tool_in_world)
-        out = chain.line_starts(q_lin, placements, targets, start_matrices(J_wp), segment, t, NEWTON_STEP_MAX)
+        P = start_matrices(J_wp)
+        out = chain.line_starts(q_lin, placements, targets, P, segment, t, NEWTON_STEP_MAX, lines)
+    if out is None and lines is not None:
+        return None
     if out is None:
         lin_poses = kin.poses(q_lin)
         errors = pose_errors(lin_poses, targets)

@@ -45,7 +45,7 @@ class ChainLibrary:
         self._solve.argtypes = [pointer] * 16 + [count]
         self._solve.restype = ctypes.c_int
         self._start = self._dll[f"{PREFIX}_start_rows"]
-        self._start.argtypes = [pointer] * 8 + [ctypes.c_double] + [pointer] * 4 + [count]
+        self._start.argtypes = [pointer] * 9 + [ctypes.c_double] + [pointer] * 4 + [count]
         self._start.restype = ctypes.c_int
         for name in GENERATED:
             fn = getattr(self._dll, f"{PREFIX}_{name}_rows")
@@ -125,7 +125,8 @@ class ChainLibrary:
     def start(self, *arrays: Any) -> None:
         """:meth:`CompiledChain.line_starts` into its arrays (checked there; the world tool may be None).
 
-        ``arrays``: joints, base, tool, world, targets, per-segment matrices, segments, parameters,
+        ``arrays``: joints, base, tool, world, the segments' lines (or None), targets, per-segment
+        matrices, segments, parameters,
         the step bound, then the poses, errors, angles and starts written.
         """
         pointers = []

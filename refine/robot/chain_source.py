@@ -336,33 +336,62 @@ int {prefix}_solve_rows(const casadi_real* q0, const casadi_real* base, const ca
   return 0;
 }}
 
-/* the controller line's starts: per row the TCP pose T (the flange's, world == 0, or a stationary
-   tool's), its error e toward the target as _error forms it (the angle in theta), and the start
+/* the controller line's starts: per row the target (given, line == 0, or written from the row's
+   segment's line (36 numbers: the chord's start and step, R, R K, R K^2 row-major, the angle of K,
+   1 where the joint-linear wrist's orientation is taken)), the TCP pose T (the flange's, world == 0,
+   or a stationary tool's), its error e toward the target as _error forms it (the angle in theta), and the start
    q + dq with dq = P[segment] [e, t e] (P (K, nv, 12) per segment), dq = 0 where a joint's step is
    not within step_max (a NaN too) */
 int {prefix}_start_rows(const casadi_real* q, const casadi_real* base, const casadi_real* tool,
-                        const casadi_real* world, const casadi_real* target, const casadi_real* P,
+                        const casadi_real* world, const casadi_real* line, casadi_real* target, const casadi_real* P,
                         const long long* segment, const casadi_real* t, casadi_real step_max, casadi_real* T,
                         casadi_real* e, casadi_real* theta, casadi_real* start, long long n) {{
   const casadi_real* arg[{sz_arg}];
   casadi_real* res[{sz_res}];
   casadi_int iw[{sz_iw}];
   casadi_real w[{sz_w}];
-  casadi_real x[12], dq[{nv}], s;
+  casadi_real x[12], dq[{nv}], s, a, b, tk;
   long long k;
   int i, c, ok;
   for (k = 0; k < n; ++k) {{
     const casadi_real* qk = q + {nv} * k;
     const casadi_real* Pk = P + 12 * {nv} * segment[k];
+    const casadi_real* L = line ? line + 36 * segment[k] : 0;
+    casadi_real* G = target + 16 * k;
     casadi_real* Tk = T + 16 * k;
     casadi_real* ek = e + 6 * k;
+    if (L) {{  /* the chord's point and the slerp R + t a(t th) R K + t^2 b(t th) R K^2 */
+      tk = t[k];
+      s = tk * L[33];
+      if (s < 1e-4) {{
+        a = 1.0 - s * s / 6.0 + (s * s) * (s * s) / 120.0;
+        b = 0.5 - s * s / 24.0 + (s * s) * (s * s) / 720.0;
+      }} else {{
+        a = sin(s) / s;
+        b = sin(s / 2.0) / s;
+        b = 2.0 * (b * b);
+      }}
+      a *= tk;
+      b *= tk * tk;
+      for (i = 0; i < 3; ++i) {{
+        for (c = 0; c < 3; ++c) G[4 * i + c] = L[6 + 3 * i + c] + a * L[15 + 3 * i + c] + b * L[24 + 3 * i + c];
+        G[4 * i + 3] = L[i] + tk * L[3 + i];
+        G[12 + i] = 0.0;
+      }}
+      G[15] = 1.0;
+    }}
     arg[0] = qk;
     arg[1] = base;
     arg[2] = tool;
     arg[3] = world;
     res[0] = Tk;
     if (world ? {prefix}_stat(arg, res, iw, w, 0) : {prefix}_tcp(arg, res, iw, w, 0)) return 1;
-    theta[k] = {prefix}_error(target + 16 * k, Tk, ek);
+    if (L && L[34] != 0.0) {{  /* the joint-linear wrist's orientation */
+      for (i = 0; i < 3; ++i) {{
+        for (c = 0; c < 3; ++c) G[4 * i + c] = Tk[4 * i + c];
+      }}
+    }}
+    theta[k] = {prefix}_error(G, Tk, ek);
     for (i = 0; i < 6; ++i) {{
       x[i] = ek[i];
       x[6 + i] = t[k] * ek[i];

@@ -329,10 +329,17 @@ class CompiledChain:
         segment: Array,
         t: Array,
         step_max: float,
+        lines: Array | None = None,
     ) -> tuple[Array, Array, Array, Array] | None:
         """The controller line's IK starts in one pass, or None when the chain runs in NumPy.
 
-        Per joint-linear row of ``qs`` (N, nv) [rad]: the TCP pose ``T`` (N, 4, 4) as
+        With ``lines`` (K, 36) (:func:`refine.optimise.line_ik.segment_lines`: per segment the
+        chord's start and step [m], ``R``, ``R K``, ``R K²`` row-major, the angle of ``K`` [rad]
+        and 1 where the joint-linear wrist's orientation is the line's) the targets are written
+        into ``targets`` (N, 4, 4, C-contiguous float64) first, as
+        :func:`refine.optimise.line_ik.line_poses` forms them: the chord's point at ``t`` and
+        :func:`refine.optimise.slerp.slerp_rotations`' product (the row's TCP orientation on a
+        wrist segment). Then per joint-linear row of ``qs`` (N, nv) [rad]: the TCP pose ``T`` (N, 4, 4) as
         :meth:`tcp_frames` (``kinematics`` as :meth:`ik_solve`'s), the pose error ``e`` (N, 6)
         toward ``targets`` (N, 4, 4) [m, rad] as :meth:`ik_steps` forms it, the rotation angle of
         ``R_target Rᵀ`` (N,) [rad] (above ``π - 1e-3`` the error's rotation vector is to be taken
@@ -350,6 +357,10 @@ class CompiledChain:
         fixed = self._placements(*kinematics)
         world = None if kinematics[2] is None else fixed[2]
         n = len(qs)
+        if lines is not None:
+            lines = np.ascontiguousarray(lines, dtype=float)
+            if lines.shape != (len(P), 36) or not _writable(targets, (n, 4, 4)):
+                raise ValueError(f"line_starts: lines ({len(P)}, 36) and writable targets ({n}, 4, 4)")
         targets = np.ascontiguousarray(targets, dtype=float)
         P = np.ascontiguousarray(P, dtype=float)
         segment = np.ascontiguousarray(segment, dtype=np.int64)
@@ -364,7 +375,9 @@ class CompiledChain:
         if n and not (0 <= segment.min() and segment.max() < len(P)):
             raise ValueError(f"line_starts: segments 0..{len(P) - 1}")
         T, e, theta, start = np.empty((n, 4, 4)), np.empty((n, 6)), np.empty(n), np.empty((n, self.nq))
-        lib.start(qs, fixed[0], fixed[1], world, targets, P, segment, t, float(step_max), T, e, theta, start)
+        lib.start(
+            qs, fixed[0], fixed[1], world, lines, targets, P, segment, t, float(step_max), T, e, theta, start
+        )
         return T, e, theta, start
 
     def dets6(self, matrices: Array) -> Array | None:
