@@ -81,6 +81,11 @@ def test_the_compiled_starts_are_the_numpy_paths_with_far_and_half_turned_target
     for a, b in zip(out, ref, strict=True):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
     assert np.array_equal(out[2][3], q_lin[3]) and np.array_equal(out[2][7], q_lin[7])
+    plain = linear_starts(kin, J_wp, segment, t, q_lin, targets, newton=False)  # every row from its bow
+    np.testing.assert_allclose(plain[0], ref[0], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(plain[1], ref[1], rtol=0, atol=1e-12)
+    assert np.array_equal(plain[2], q_lin)
+    assert np.array_equal(linear_starts(kin_np, J_wp, segment, t, q_lin, targets, newton=False)[2], q_lin)
     for k in (7, 8):  # the half-turned rows' errors are log3's
         T_pin = _pin_pose_jacobian(kin.robot, q_lin[k])[0]
         np.testing.assert_allclose(out[1][k, 3:], pin.log3(targets[k, :3, :3] @ T_pin[:3, :3].T), atol=1e-9)

@@ -144,14 +144,15 @@ def solve_line(
     spec = kin.robot.spec
     q_lin = joint_linear(q, segment, t) if q_lin is None else q_lin
     poses, J_wp = kin.poses_jacobians(q)
-    targets = np.empty((len(t), 4, 4))
-    starts = linear_starts(kin, J_wp, segment, t, q_lin, targets, segment_lines(poses, wrist))
-    if starts is None:  # not compiled: NumPy's targets and starts
-        targets = line_poses(poses, q, segment, t, kin, wrist)
-        starts = linear_starts(kin, J_wp, segment, t, q_lin, targets)
-    lin_poses, errors, start = starts
     bows = None if previous is None else previous_bows(q, m, segment, t, previous, tolerance)
     cold = np.ones(len(t), dtype=bool) if bows is None else np.isnan(bows[:, 0])
+    any_cold = bool(cold.any())  # else every sample starts from its bow: no Newton start is formed
+    targets = np.empty((len(t), 4, 4))
+    starts = linear_starts(kin, J_wp, segment, t, q_lin, targets, segment_lines(poses, wrist), any_cold)
+    if starts is None:  # not compiled: NumPy's targets and starts
+        targets = line_poses(poses, q, segment, t, kin, wrist)
+        starts = linear_starts(kin, J_wp, segment, t, q_lin, targets, newton=any_cold)
+    lin_poses, errors, start = starts
     if not cold.all():
         start[~cold] = q_lin[~cold] + bows[~cold]
     newton = start.copy()

@@ -78,7 +78,14 @@ def start_matrices(J_wp: Array) -> Array:
 
 
 def linear_starts(
-    kin: Any, J_wp: Array, segment: Array, t: Array, q_lin: Array, targets: Array, lines: Array | None = None
+    kin: Any,
+    J_wp: Array,
+    segment: Array,
+    t: Array,
+    q_lin: Array,
+    targets: Array,
+    lines: Array | None = None,
+    newton: bool = True,
 ) -> tuple[Array, Array, Array] | None:
     """The joint-linear TCP poses (M, 4, 4), their :func:`pose_errors` (M, 6) and :func:`newton_start` (M, n).
 
@@ -89,24 +96,27 @@ def linear_starts(
     :func:`relative_rotation_vectors`' branch, are taken again in NumPy. Else NumPy's passes.
     ``lines``: the segments' lines (:func:`refine.optimise.line_ik.segment_lines`) from which the
     compiled pass writes the targets into ``targets`` (M, 4, 4) first; then None where the chain
-    is not compiled (the caller forms the targets and calls again without).
+    is not compiled (the caller forms the targets and calls again without). ``newton`` False:
+    no row takes the start (a re-solve's bows start them all), the starts returned are ``q_lin``.
     """
     chain = kin.robot.chain
     out = None
     if chain is not None and len(t) >= chain.min_rows:
         placements = (kin.base_in_world, kin.tcp_in_flange, kin.tool_in_world)
-        P = start_matrices(J_wp)
-        out = chain.line_starts(q_lin, placements, targets, P, segment, t, NEWTON_STEP_MAX, lines)
+        P = start_matrices(J_wp) if newton else np.broadcast_to(0.0, (len(J_wp) - 1, J_wp.shape[2], 12))
+        out = chain.line_starts(q_lin, placements, targets, P, segment, t, NEWTON_STEP_MAX, lines, newton)
     if out is None and lines is not None:
         return None
     if out is None:
         lin_poses = kin.poses(q_lin)
         errors = pose_errors(lin_poses, targets)
-        return lin_poses, errors, newton_start(J_wp, segment, t, q_lin, lin_poses, targets, errors)
+        start = newton_start(J_wp, segment, t, q_lin, lin_poses, targets, errors) if newton else q_lin.copy()
+        return lin_poses, errors, start
     lin_poses, errors, theta, start = out
     near_pi = np.flatnonzero(theta > np.pi - 1e-3)
     if len(near_pi):
         errors[near_pi] = pose_errors(lin_poses[near_pi], targets[near_pi])
+    if len(near_pi) and newton:
         start[near_pi] = newton_start(
             J_wp,
             segment[near_pi],

@@ -341,7 +341,7 @@ int {prefix}_solve_rows(const casadi_real* q0, const casadi_real* base, const ca
    1 where the joint-linear wrist's orientation is taken)), the TCP pose T (the flange's, world == 0,
    or a stationary tool's), its error e toward the target as _error forms it (the angle in theta), and the start
    q + dq with dq = P[segment] [e, t e] (P (K, nv, 12) per segment), dq = 0 where a joint's step is
-   not within step_max (a NaN too) */
+   not within step_max (a NaN too) or P == 0 */
 int {prefix}_start_rows(const casadi_real* q, const casadi_real* base, const casadi_real* tool,
                         const casadi_real* world, const casadi_real* line, casadi_real* target, const casadi_real* P,
                         const long long* segment, const casadi_real* t, casadi_real step_max, casadi_real* T,
@@ -355,7 +355,7 @@ int {prefix}_start_rows(const casadi_real* q, const casadi_real* base, const cas
   int i, c, ok;
   for (k = 0; k < n; ++k) {{
     const casadi_real* qk = q + {nv} * k;
-    const casadi_real* Pk = P + 12 * {nv} * segment[k];
+    const casadi_real* Pk = P ? P + 12 * {nv} * segment[k] : 0;
     const casadi_real* L = line ? line + 36 * segment[k] : 0;
     casadi_real* G = target + 16 * k;
     casadi_real* Tk = T + 16 * k;
@@ -392,6 +392,10 @@ int {prefix}_start_rows(const casadi_real* q, const casadi_real* base, const cas
       }}
     }}
     theta[k] = {prefix}_error(G, Tk, ek);
+    if (!Pk) {{  /* no Newton step asked for: the start is q */
+      for (c = 0; c < {nv}; ++c) start[{nv} * k + c] = qk[c];
+      continue;
+    }}
     for (i = 0; i < 6; ++i) {{
       x[i] = ek[i];
       x[6 + i] = t[k] * ek[i];

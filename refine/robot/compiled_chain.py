@@ -330,6 +330,7 @@ class CompiledChain:
         t: Array,
         step_max: float,
         lines: Array | None = None,
+        step: bool = True,
     ) -> tuple[Array, Array, Array, Array] | None:
         """The controller line's IK starts in one pass, or None when the chain runs in NumPy.
 
@@ -345,10 +346,9 @@ class CompiledChain:
         ``R_target Rᵀ`` (N,) [rad] (above ``π - 1e-3`` the error's rotation vector is to be taken
         otherwise) and the start ``q + P[segment] [e, t e]`` (N, nv) [rad] with the per-segment
         matrices ``P`` (K, nv, 12) (:func:`refine.optimise.line_start.start_matrices`), ``q`` alone
-        where a joint's step is not within ``step_max`` [rad] (or NaN).
+        where a joint's step is not within ``step_max`` [rad] (or NaN) and without ``step``.
 
-        Returns:
-            the poses, errors, angles and starts.
+        Returns the poses, errors, angles and starts (``P`` then only gives the segment count).
         """
         lib = self._lib()
         if lib is None:
@@ -362,7 +362,6 @@ class CompiledChain:
             if lines.shape != (len(P), 36) or not _writable(targets, (n, 4, 4)):
                 raise ValueError(f"line_starts: lines ({len(P)}, 36) and writable targets ({n}, 4, 4)")
         targets = np.ascontiguousarray(targets, dtype=float)
-        P = np.ascontiguousarray(P, dtype=float)
         segment = np.ascontiguousarray(segment, dtype=np.int64)
         t = np.ascontiguousarray(t, dtype=float)
         if (
@@ -374,6 +373,7 @@ class CompiledChain:
             raise ValueError(f"line_starts: targets ({n}, 4, 4), segments and t ({n},), P (K, {self.nq}, 12)")
         if n and not (0 <= segment.min() and segment.max() < len(P)):
             raise ValueError(f"line_starts: segments 0..{len(P) - 1}")
+        P = np.ascontiguousarray(P, dtype=float) if step else None
         T, e, theta, start = np.empty((n, 4, 4)), np.empty((n, 6)), np.empty(n), np.empty((n, self.nq))
         lib.start(
             qs, fixed[0], fixed[1], world, lines, targets, P, segment, t, float(step_max), T, e, theta, start
