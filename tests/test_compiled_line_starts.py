@@ -131,3 +131,16 @@ def test_the_compiled_targets_are_the_chord_and_pinocchios_slerp_or_the_wrists_o
     for a, b in zip((T, e, start), ref, strict=True):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
     assert linear_starts(kin_np, J_wp, segment, t, q_lin, targets, segment_lines(poses, wrist)) is None
+
+
+def test_the_damped_inverses_are_the_least_squares_answers_of_the_stacked_system(chain_cache) -> None:
+    kin, kin_np = _kins("kuka_iiwa14_r820")
+    robot = kin.robot
+    qs = np.random.default_rng(8).uniform(robot.spec.lower, robot.spec.upper, (7, robot.nq))
+    qs[0, 3] = 0.0  # near the iiwa's elbow singularity: the damping holds the inverse
+    J = np.array([kin_np.jacobian(q) for q in qs])
+    P = robot.chain.damped_inverses(J, NEWTON_DAMPING)
+    for k in range(len(qs)):
+        ref = _damped_inverse(J[k])
+        np.testing.assert_allclose(P[k], ref, rtol=0, atol=1e-9 * max(1.0, np.abs(ref).max()))
+    assert kin_np.robot.chain.damped_inverses(J, NEWTON_DAMPING) is None

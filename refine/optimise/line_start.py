@@ -66,14 +66,18 @@ def newton_start(
     return dq
 
 
-def start_matrices(J_wp: Array) -> Array:
+def start_matrices(J_wp: Array, chain: Any = None) -> Array:
     """Per segment, ``[P_k, P_k+1 - P_k]`` (N-1, n, 12) of the waypoints' damped inverses (:func:`newton_start`).
 
     ``P = Jᵀ (J Jᵀ + λ² I)⁻¹`` (:data:`NEWTON_DAMPING`) of the TCP Jacobians ``J_wp`` (N, 6, n), so
     that a sample's step ``P_k e + t (P_k+1 - P_k) e`` is one product with ``[e, t e]`` (12,).
+    ``chain``: the robot's chain, whose compiled library forms ``P`` (by a Cholesky factor of
+    ``J Jᵀ + λ² I``, :meth:`refine.robot.compiled_chain.CompiledChain.damped_inverses`), or None.
     """
-    A = J_wp @ np.swapaxes(J_wp, 1, 2) + NEWTON_DAMPING**2 * np.eye(J_wp.shape[1])
-    P_wp = np.swapaxes(np.linalg.solve(A, J_wp), 1, 2)  # (A⁻¹ J)ᵀ = Jᵀ A⁻¹, A symmetric: (N, n, 6)
+    P_wp = None if chain is None else chain.damped_inverses(J_wp, NEWTON_DAMPING)
+    if P_wp is None:
+        A = J_wp @ np.swapaxes(J_wp, 1, 2) + NEWTON_DAMPING**2 * np.eye(J_wp.shape[1])
+        P_wp = np.swapaxes(np.linalg.solve(A, J_wp), 1, 2)  # (A⁻¹ J)ᵀ = Jᵀ A⁻¹, A symmetric: (N, n, 6)
     return np.concatenate([P_wp[:-1], np.diff(P_wp, axis=0)], axis=2)
 
 
@@ -103,7 +107,11 @@ def linear_starts(
     out = None
     if chain is not None and len(t) >= chain.min_rows:
         placements = (kin.base_in_world, kin.tcp_in_flange, kin.tool_in_world)
-        P = start_matrices(J_wp) if newton else np.broadcast_to(0.0, (len(J_wp) - 1, J_wp.shape[2], 12))
+        P = (
+            start_matrices(J_wp, chain)
+            if newton
+            else np.broadcast_to(0.0, (len(J_wp) - 1, J_wp.shape[2], 12))
+        )
         out = chain.line_starts(q_lin, placements, targets, P, segment, t, NEWTON_STEP_MAX, lines, newton)
     if out is None and lines is not None:
         return None

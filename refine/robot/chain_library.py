@@ -18,7 +18,7 @@ from refine.types import Array
 
 GENERATED = ("fk", "fkj", "joints", "tcp", "tcpj", "stat", "statj")
 """The functions CasADi writes, each with a row loop ``(q, fixed, out, n)``."""
-FUNCTIONS = (*GENERATED, "bodies", "ik", "det6", "solve", "start")
+FUNCTIONS = (*GENERATED, "bodies", "ik", "det6", "solve", "start", "pinv")
 """Every function of a chain library (the hand-written ones after CasADi's)."""
 
 
@@ -47,6 +47,9 @@ class ChainLibrary:
         self._start = self._dll[f"{PREFIX}_start_rows"]
         self._start.argtypes = [pointer] * 9 + [ctypes.c_double] + [pointer] * 4 + [count]
         self._start.restype = ctypes.c_int
+        self._pinv = self._dll[f"{PREFIX}_pinv_rows"]
+        self._pinv.argtypes = [pointer, ctypes.c_double, pointer, count]
+        self._pinv.restype = ctypes.c_int
         for name in GENERATED:
             fn = getattr(self._dll, f"{PREFIX}_{name}_rows")
             fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong]
@@ -139,3 +142,8 @@ class ChainLibrary:
                 raise ValueError("the compiled line starts take C-contiguous float64 and int64 arrays")
         if self._start(*pointers, len(arrays[0])) != 0:
             raise RuntimeError("the compiled line starts failed")
+
+    def pinv(self, J: Array, damping: float, out: Array) -> None:
+        """Damped inverses ``Jᵀ (J Jᵀ + λ² I)⁻¹`` of C-contiguous (N, 6, nv) float64 Jacobians into ``out`` (N, nv, 6)."""
+        if self._pinv(J.ctypes.data, damping, out.ctypes.data, len(J)) != 0:
+            raise RuntimeError("the compiled damped inverses failed")

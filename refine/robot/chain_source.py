@@ -363,14 +363,8 @@ int {prefix}_start_rows(const casadi_real* q, const casadi_real* base, const cas
     if (L) {{  /* the chord's point and the slerp R + t a(t th) R K + t^2 b(t th) R K^2 */
       tk = t[k];
       s = tk * L[33];
-      if (s < 1e-4) {{
-        a = 1.0 - s * s / 6.0 + (s * s) * (s * s) / 120.0;
-        b = 0.5 - s * s / 24.0 + (s * s) * (s * s) / 720.0;
-      }} else {{
-        a = sin(s) / s;
-        b = sin(s / 2.0) / s;
-        b = 2.0 * (b * b);
-      }}
+      a = s < 1e-4 ? 1.0 - s * s / 6.0 + (s * s) * (s * s) / 120.0 : sin(s) / s;
+      b = s < 1e-4 ? 0.5 - s * s / 24.0 + (s * s) * (s * s) / 720.0 : 2.0 * ((sin(s / 2.0) / s) * (sin(s / 2.0) / s));
       a *= tk;
       b *= tk * tk;
       for (i = 0; i < 3; ++i) {{
@@ -386,20 +380,13 @@ int {prefix}_start_rows(const casadi_real* q, const casadi_real* base, const cas
     arg[3] = world;
     res[0] = Tk;
     if (world ? {prefix}_stat(arg, res, iw, w, 0) : {prefix}_tcp(arg, res, iw, w, 0)) return 1;
-    if (L && L[34] != 0.0) {{  /* the joint-linear wrist's orientation */
-      for (i = 0; i < 3; ++i) {{
-        for (c = 0; c < 3; ++c) G[4 * i + c] = Tk[4 * i + c];
-      }}
-    }}
+    for (i = 0; L && L[34] != 0.0 && i < 12; ++i) G[i] = i % 4 == 3 ? G[i] : Tk[i];  /* the wrist's orientation */
     theta[k] = {prefix}_error(G, Tk, ek);
     if (!Pk) {{  /* no Newton step asked for: the start is q */
       for (c = 0; c < {nv}; ++c) start[{nv} * k + c] = qk[c];
       continue;
     }}
-    for (i = 0; i < 6; ++i) {{
-      x[i] = ek[i];
-      x[6 + i] = t[k] * ek[i];
-    }}
+    for (i = 0; i < 12; ++i) x[i] = i < 6 ? ek[i] : t[k] * ek[i - 6];
     ok = 1;
     for (c = 0; c < {nv}; ++c) {{
       s = 0.0;
@@ -408,6 +395,22 @@ int {prefix}_start_rows(const casadi_real* q, const casadi_real* base, const cas
       ok = ok && fabs(s) <= step_max;  /* false at a NaN too */
     }}
     for (c = 0; c < {nv}; ++c) start[{nv} * k + c] = ok ? qk[c] + dq[c] : qk[c];
+  }}
+  return 0;
+}}
+
+/* P (nv x 6 per row) = J^T (J J^T + damping^2 I)^-1, column by column through the Cholesky factor */
+int {prefix}_pinv_rows(const casadi_real* J, casadi_real damping, casadi_real* P, long long n) {{
+  casadi_real A[36], b[6], col[{nv}];
+  long long k;
+  int i, c;
+  for (k = 0; k < n; ++k) {{
+    if ({prefix}_factor(J + 6 * {nv} * k, damping, A)) return 2;
+    for (i = 0; i < 6; ++i) {{
+      for (c = 0; c < 6; ++c) b[c] = c == i ? 1.0 : 0.0;
+      {prefix}_back(A, J + 6 * {nv} * k, b, col);
+      for (c = 0; c < {nv}; ++c) P[6 * {nv} * k + 6 * c + i] = col[c];
+    }}
   }}
   return 0;
 }}

@@ -334,21 +334,13 @@ class CompiledChain:
     ) -> tuple[Array, Array, Array, Array] | None:
         """The controller line's IK starts in one pass, or None when the chain runs in NumPy.
 
-        With ``lines`` (K, 36) (:func:`refine.optimise.line_ik.segment_lines`: per segment the
-        chord's start and step [m], ``R``, ``R K``, ``R K²`` row-major, the angle of ``K`` [rad]
-        and 1 where the joint-linear wrist's orientation is the line's) the targets are written
-        into ``targets`` (N, 4, 4, C-contiguous float64) first, as
-        :func:`refine.optimise.line_ik.line_poses` forms them: the chord's point at ``t`` and
-        :func:`refine.optimise.slerp.slerp_rotations`' product (the row's TCP orientation on a
-        wrist segment). Then per joint-linear row of ``qs`` (N, nv) [rad]: the TCP pose ``T`` (N, 4, 4) as
-        :meth:`tcp_frames` (``kinematics`` as :meth:`ik_solve`'s), the pose error ``e`` (N, 6)
-        toward ``targets`` (N, 4, 4) [m, rad] as :meth:`ik_steps` forms it, the rotation angle of
-        ``R_target Rᵀ`` (N,) [rad] (above ``π - 1e-3`` the error's rotation vector is to be taken
-        otherwise) and the start ``q + P[segment] [e, t e]`` (N, nv) [rad] with the per-segment
-        matrices ``P`` (K, nv, 12) (:func:`refine.optimise.line_start.start_matrices`), ``q`` alone
-        where a joint's step is not within ``step_max`` [rad] (or NaN) and without ``step``.
-
-        Returns the poses, errors, angles and starts (``P`` then only gives the segment count).
+        With ``lines`` (K, 36) (:func:`refine.optimise.line_ik.segment_lines`) the targets (N, 4, 4)
+        are written into ``targets`` first, as :func:`refine.optimise.line_ik.line_poses` forms them.
+        Per joint-linear row of ``qs`` (N, nv) [rad], returned: the TCP pose (N, 4, 4) (``kinematics``
+        as :meth:`ik_solve`'s), the pose error (N, 6) as :meth:`ik_steps` forms it, the angle of
+        ``R_target Rᵀ`` (N,) [rad] (above ``π - 1e-3`` take the rotation vector otherwise), the start
+        ``q + P[segment] [e, t e]`` (N, nv) [rad] (``P`` (K, nv, 12): :func:`refine.optimise.line_start.start_matrices`),
+        ``q`` where a joint's step exceeds ``step_max`` [rad] (or NaN) and without ``step``.
         """
         lib = self._lib()
         if lib is None:
@@ -379,6 +371,15 @@ class CompiledChain:
             qs, fixed[0], fixed[1], world, lines, targets, P, segment, t, float(step_max), T, e, theta, start
         )
         return T, e, theta, start
+
+    def damped_inverses(self, J: Array, damping: float) -> Array | None:
+        """``Jᵀ (J Jᵀ + λ² I)⁻¹`` (N, nv, 6) of Jacobians ``J`` (N, 6, nv), ``λ = damping`` > 0; None in NumPy."""
+        lib, J = self._lib(), np.ascontiguousarray(J, dtype=float)
+        if lib is not None and (J.ndim != 3 or J.shape[1:] != (6, self.nq) or not damping > 0.0):
+            raise ValueError(f"damped_inverses: (N, 6, {self.nq}) and damping > 0 expected, got {J.shape}")
+        if lib is not None:
+            lib.pinv(J, float(damping), out := np.empty((len(J), self.nq, 6)))
+        return None if lib is None else out
 
     def dets6(self, matrices: Array) -> Array | None:
         """Determinants (N,) of 6 × 6 matrices (N, 6, 6) (LU with partial pivoting), or None in NumPy."""
