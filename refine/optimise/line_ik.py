@@ -148,7 +148,10 @@ def solve_line(
     cold = np.ones(len(t), dtype=bool) if bows is None else np.isnan(bows[:, 0])
     any_cold = bool(cold.any())  # else every sample starts from its bow: no Newton start is formed
     targets = np.empty((len(t), 4, 4))
-    starts = linear_starts(kin, J_wp, segment, t, q_lin, targets, segment_lines(poses, wrist), any_cold)
+    chain = kin.robot.chain
+    starts = None  # the compiled pass, where the chain is compiled; else NumPy's targets and starts
+    if getattr(chain, "compiled", False):
+        starts = linear_starts(kin, J_wp, segment, t, q_lin, targets, segment_lines(poses, wrist), any_cold)
     if starts is None:  # not compiled: NumPy's targets and starts
         targets = line_poses(poses, q, segment, t, kin, wrist)
         starts = linear_starts(kin, J_wp, segment, t, q_lin, targets, newton=any_cold)
