@@ -19,8 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from refine.optimise.line_start import newton_start, pose_errors, previous_bows, previous_corrections
-from refine.optimise.slerp import log_rotations, slerp_rotations
+from refine.optimise.line_start import linear_starts, previous_bows, previous_corrections
+from refine.optimise.slerp import log_rotations, slerp_factors, slerp_rotations
 from refine.robot.kinematics import TcpKinematics, solve_ik_batch
 from refine.types import Array
 
@@ -49,6 +49,26 @@ def line_poses(poses: Array, q: Array, segment: Array, t: Array, kin: TcpKinemat
     if on_wrist.any():
         q_lin = joint_linear(q, segment, t)
         out[on_wrist, :3, :3] = kin.poses(q_lin[on_wrist])[:, :3, :3]
+    return out
+
+
+def segment_lines(poses: Array, wrist: Array) -> Array:
+    """Per segment what :func:`line_poses` needs of it, (N-1, 36), for the compiled chain.
+
+    The chord's start and step [m] (3 each), ``R``, ``R K`` and ``R K²`` row-major (9 each) with
+    ``K`` the skew matrix of the segment's rotation vector (:func:`refine.optimise.slerp.slerp_factors`),
+    its angle [rad], 1.0 where the orientation follows the joint-linear wrist, and a 0 pad.
+
+    Args:
+        poses: T_F_TCP of the targets, (N, 4, 4).
+        wrist: per segment, True where the orientation follows the joint-linear wrist, (N-1,).
+    """
+    p, R = poses[:, :3, 3], poses[:, :3, :3]
+    RK, RK2, theta = slerp_factors(R[:-1], log_rotations(np.swapaxes(R[:-1], 1, 2) @ R[1:]))
+    out = np.zeros((len(poses) - 1, 36))
+    out[:, :3], out[:, 3:6] = p[:-1], np.diff(p, axis=0)
+    out[:, 6:15], out[:, 15:24], out[:, 24:33] = R[:-1].reshape(-1, 9), RK.reshape(-1, 9), RK2.reshape(-1, 9)
+    out[:, 33], out[:, 34] = theta, wrist
     return out
 
 
@@ -124,19 +144,20 @@ def solve_line(
     spec = kin.robot.spec
     q_lin = joint_linear(q, segment, t) if q_lin is None else q_lin
     poses, J_wp = kin.poses_jacobians(q)
-    targets = line_poses(poses, q, segment, t, kin, wrist)
-    lin_poses = kin.poses(q_lin)
-    errors = pose_errors(lin_poses, targets)
     bows = None if previous is None else previous_bows(q, m, segment, t, previous, tolerance)
     cold = np.ones(len(t), dtype=bool) if bows is None else np.isnan(bows[:, 0])
-    if cold.all():
-        start = newton_start(J_wp, segment, t, q_lin, lin_poses, targets, errors)
-    else:
-        start = q_lin + np.where(cold[:, None], 0.0, bows)
-        if cold.any():
-            start[cold] = newton_start(
-                J_wp, segment[cold], t[cold], q_lin[cold], lin_poses[cold], targets[cold], errors[cold]
-            )
+    any_cold = bool(cold.any())  # else every sample starts from its bow: no Newton start is formed
+    targets = np.empty((len(t), 4, 4))
+    chain = kin.robot.chain
+    starts = None  # the compiled pass, where the chain is compiled; else NumPy's targets and starts
+    if getattr(chain, "compiled", False):
+        starts = linear_starts(kin, J_wp, segment, t, q_lin, targets, segment_lines(poses, wrist), any_cold)
+    if starts is None:  # not compiled: NumPy's targets and starts
+        targets = line_poses(poses, q, segment, t, kin, wrist)
+        starts = linear_starts(kin, J_wp, segment, t, q_lin, targets, newton=any_cold)
+    lin_poses, errors, start = starts
+    if not cold.all():
+        start[~cold] = q_lin[~cold] + bows[~cold]
     newton = start.copy()
     if previous is not None:
         corrections = previous_corrections(q, m, segment, t, previous, tolerance)

@@ -58,15 +58,83 @@ def newton_start(
     errors (M, 6) when the caller has them (:func:`pose_errors` of ``lin_poses`` to ``targets``),
     else None.
     """
-    A = J_wp @ np.swapaxes(J_wp, 1, 2) + NEWTON_DAMPING**2 * np.eye(J_wp.shape[1])
-    P_wp = np.swapaxes(np.linalg.solve(A, J_wp), 1, 2)  # (A⁻¹ J)ᵀ = Jᵀ A⁻¹, A symmetric: (N, n, 6)
-    # P e = P_k e + t (P_k+1 - P_k) e: one product of [P_k, P_k+1 - P_k] (n, 12) and [e, t e] (12,)
-    PP = np.concatenate([P_wp[:-1], np.diff(P_wp, axis=0)], axis=2)
+    PP = start_matrices(J_wp)
     e = pose_errors(lin_poses, targets) if errors is None else errors
     dq = _per_segment_products(PP, segment, np.concatenate([e, t[:, None] * e], axis=1))
     dq[~(largest_per_row(np.abs(dq)) <= NEWTON_STEP_MAX)] = 0.0  # and a NaN step: from q_lin
     dq += q_lin
     return dq
+
+
+def start_matrices(J_wp: Array, chain: Any = None) -> Array:
+    """Per segment, ``[P_k, P_k+1 - P_k]`` (N-1, n, 12) of the waypoints' damped inverses (:func:`newton_start`).
+
+    ``P = Jᵀ (J Jᵀ + λ² I)⁻¹`` (:data:`NEWTON_DAMPING`) of the TCP Jacobians ``J_wp`` (N, 6, n), so
+    that a sample's step ``P_k e + t (P_k+1 - P_k) e`` is one product with ``[e, t e]`` (12,).
+    ``chain``: the robot's chain, whose compiled library forms ``P`` (by a Cholesky factor of
+    ``J Jᵀ + λ² I``, :meth:`refine.robot.compiled_chain.CompiledChain.damped_inverses`), or None.
+    """
+    P_wp = None if chain is None else chain.damped_inverses(J_wp, NEWTON_DAMPING)
+    if P_wp is None:
+        A = J_wp @ np.swapaxes(J_wp, 1, 2) + NEWTON_DAMPING**2 * np.eye(J_wp.shape[1])
+        P_wp = np.swapaxes(np.linalg.solve(A, J_wp), 1, 2)  # (A⁻¹ J)ᵀ = Jᵀ A⁻¹, A symmetric: (N, n, 6)
+    return np.concatenate([P_wp[:-1], np.diff(P_wp, axis=0)], axis=2)
+
+
+def linear_starts(
+    kin: Any,
+    J_wp: Array,
+    segment: Array,
+    t: Array,
+    q_lin: Array,
+    targets: Array,
+    lines: Array | None = None,
+    newton: bool = True,
+) -> tuple[Array, Array, Array] | None:
+    """The joint-linear TCP poses (M, 4, 4), their :func:`pose_errors` (M, 6) and :func:`newton_start` (M, n).
+
+    ``kin``: the TCP kinematics (a ``TcpKinematics``); the rest as :func:`newton_start`'s. Where
+    the robot's chain is compiled, one pass of it gives all three per sample
+    (:meth:`refine.robot.compiled_chain.CompiledChain.line_starts`); the rows whose rotation
+    error comes within 1e-3 rad of π, where the compiled error leaves out
+    :func:`relative_rotation_vectors`' branch, are taken again in NumPy. Else NumPy's passes.
+    ``lines``: the segments' lines (:func:`refine.optimise.line_ik.segment_lines`) from which the
+    compiled pass writes the targets into ``targets`` (M, 4, 4) first; then None where the chain
+    is not compiled (the caller forms the targets and calls again without). ``newton`` False:
+    no row takes the start (a re-solve's bows start them all), the starts returned are ``q_lin``.
+    """
+    chain = kin.robot.chain
+    out = None
+    if chain is not None and len(t) >= chain.min_rows:
+        placements = (kin.base_in_world, kin.tcp_in_flange, kin.tool_in_world)
+        P = (
+            start_matrices(J_wp, chain)
+            if newton
+            else np.broadcast_to(0.0, (len(J_wp) - 1, J_wp.shape[2], 12))
+        )
+        out = chain.line_starts(q_lin, placements, targets, P, segment, t, NEWTON_STEP_MAX, lines, newton)
+    if out is None and lines is not None:
+        return None
+    if out is None:
+        lin_poses = kin.poses(q_lin)
+        errors = pose_errors(lin_poses, targets)
+        start = newton_start(J_wp, segment, t, q_lin, lin_poses, targets, errors) if newton else q_lin.copy()
+        return lin_poses, errors, start
+    lin_poses, errors, theta, start = out
+    near_pi = np.flatnonzero(theta > np.pi - 1e-3)
+    if len(near_pi):
+        errors[near_pi] = pose_errors(lin_poses[near_pi], targets[near_pi])
+    if len(near_pi) and newton:
+        start[near_pi] = newton_start(
+            J_wp,
+            segment[near_pi],
+            t[near_pi],
+            q_lin[near_pi],
+            lin_poses[near_pi],
+            targets[near_pi],
+            errors[near_pi],
+        )
+    return lin_poses, errors, start
 
 
 def largest_per_row(a: Array) -> Array:

@@ -110,6 +110,15 @@ def _skews(w: Array) -> Array:
     return K
 
 
+def slerp_factors(R: Array, w: Array) -> tuple[Array, Array, Array]:
+    """``R K`` and ``R K²`` (K, 3, 3) and ``θ = |w|`` (K,) [rad] of :func:`slerp_rotations`' product.
+
+    ``K`` the skew matrix of each rotation vector of ``w`` (K, 3) [rad]; ``R`` (K, 3, 3).
+    """
+    RK = R @ _skews(w)
+    return RK, RK @ _skews(w), np.linalg.norm(w, axis=1)
+
+
 def slerp_rotations(R: Array, w: Array, index: Array, t: Array) -> Array:
     """Rotation matrices ``R[index] exp(t w[index])`` (M, 3, 3) at the parameters ``t`` (M,).
 
@@ -124,10 +133,8 @@ def slerp_rotations(R: Array, w: Array, index: Array, t: Array) -> Array:
     ``R + t a (R K) + t² b (R K²)``: the same as ``R[index] @ exp_rotvecs(t[:, None] * w[index])``
     to rounding.
     """
-    K = _skews(w)
-    RK = R @ K
-    RK2 = RK @ K
-    a, b = _rodrigues_coefficients(t * np.take(np.linalg.norm(w, axis=1), index))
+    RK, RK2, theta = slerp_factors(R, w)
+    a, b = _rodrigues_coefficients(t * np.take(theta, index))
     a *= t
     b *= t * t
     out = np.take(R, index, axis=0)

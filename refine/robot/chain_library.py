@@ -18,7 +18,7 @@ from refine.types import Array
 
 GENERATED = ("fk", "fkj", "joints", "tcp", "tcpj", "stat", "statj")
 """The functions CasADi writes, each with a row loop ``(q, fixed, out, n)``."""
-FUNCTIONS = (*GENERATED, "bodies", "ik", "det6", "solve")
+FUNCTIONS = (*GENERATED, "bodies", "ik", "det6", "solve", "start", "pinv")
 """Every function of a chain library (the hand-written ones after CasADi's)."""
 
 
@@ -44,6 +44,12 @@ class ChainLibrary:
         self._solve = self._dll[f"{PREFIX}_solve_rows"]
         self._solve.argtypes = [pointer] * 16 + [count]
         self._solve.restype = ctypes.c_int
+        self._start = self._dll[f"{PREFIX}_start_rows"]
+        self._start.argtypes = [pointer] * 9 + [ctypes.c_double] + [pointer] * 4 + [count]
+        self._start.restype = ctypes.c_int
+        self._pinv = self._dll[f"{PREFIX}_pinv_rows"]
+        self._pinv.argtypes = [pointer, ctypes.c_double, pointer, count]
+        self._pinv.restype = ctypes.c_int
         for name in GENERATED:
             fn = getattr(self._dll, f"{PREFIX}_{name}_rows")
             fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong]
@@ -118,3 +124,26 @@ class ChainLibrary:
         """Determinants of C-contiguous (N, 6, 6) float64 matrices into ``out`` (N,)."""
         if self._det6(a.ctypes.data, out.ctypes.data, len(a)) != 0:
             raise RuntimeError("the compiled determinants failed")
+
+    def start(self, *arrays: Any) -> None:
+        """:meth:`CompiledChain.line_starts` into its arrays (checked there; the world tool may be None).
+
+        ``arrays``: joints, base, tool, world, the segments' lines (or None), targets, per-segment
+        matrices, segments, parameters,
+        the step bound, then the poses, errors, angles and starts written.
+        """
+        pointers = []
+        for a in arrays:
+            if isinstance(a, float):
+                pointers.append(a)
+            elif a is None or (a.flags.c_contiguous and a.dtype in (np.float64, np.int64)):
+                pointers.append(None if a is None else a.ctypes.data)
+            else:
+                raise ValueError("the compiled line starts take C-contiguous float64 and int64 arrays")
+        if self._start(*pointers, len(arrays[0])) != 0:
+            raise RuntimeError("the compiled line starts failed")
+
+    def pinv(self, J: Array, damping: float, out: Array) -> None:
+        """Damped inverses ``Jᵀ (J Jᵀ + λ² I)⁻¹`` of C-contiguous (N, 6, nv) float64 Jacobians into ``out`` (N, nv, 6)."""
+        if self._pinv(J.ctypes.data, damping, out.ctypes.data, len(J)) != 0:
+            raise RuntimeError("the compiled damped inverses failed")

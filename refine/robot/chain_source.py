@@ -18,7 +18,9 @@ by a 6 × 6 Cholesky factor), ``<prefix>_solve_rows``, that step iterated per ro
 :func:`refine.robot.kinematics.solve_ik` or ``solve_ik_batch`` iterate it (the 0.3 rad cap, the
 limits, a redundant arm's pull toward mid-range in the task's null space, the batch's stall rule;
 a TCP on the flange or a stationary tool; the whole pose or, as ``axis_only``, the tool axis
-alone), and ``<prefix>_det6_rows``, the determinants of 6 × 6 matrices (an LU factorisation with
+alone), ``<prefix>_start_rows``, the controller line's IK starts (the joint-linear samples' TCP
+poses, their errors toward the line's targets and the interpolated damped Newton step of
+:func:`refine.optimise.line_start.newton_start`), and ``<prefix>_det6_rows``, the determinants of 6 × 6 matrices (an LU factorisation with
 partial pivoting, as LAPACK's ``getrf``).
 """
 
@@ -334,6 +336,85 @@ int {prefix}_solve_rows(const casadi_real* q0, const casadi_real* base, const ca
   return 0;
 }}
 
+/* the controller line's starts: per row the target (given, line == 0, or written from the row's
+   segment's line (36 numbers: the chord's start and step, R, R K, R K^2 row-major, the angle of K,
+   1 where the joint-linear wrist's orientation is taken)), the TCP pose T (the flange's, world == 0,
+   or a stationary tool's), its error e toward the target as _error forms it (the angle in theta), and the start
+   q + dq with dq = P[segment] [e, t e] (P (K, nv, 12) per segment), dq = 0 where a joint's step is
+   not within step_max (a NaN too) or P == 0 */
+int {prefix}_start_rows(const casadi_real* q, const casadi_real* base, const casadi_real* tool,
+                        const casadi_real* world, const casadi_real* line, casadi_real* target, const casadi_real* P,
+                        const long long* segment, const casadi_real* t, casadi_real step_max, casadi_real* T,
+                        casadi_real* e, casadi_real* theta, casadi_real* start, long long n) {{
+  const casadi_real* arg[{sz_arg}];
+  casadi_real* res[{sz_res}];
+  casadi_int iw[{sz_iw}];
+  casadi_real w[{sz_w}];
+  casadi_real x[12], dq[{nv}], s, a, b, tk;
+  long long k;
+  int i, c, ok;
+  for (k = 0; k < n; ++k) {{
+    const casadi_real* qk = q + {nv} * k;
+    const casadi_real* Pk = P ? P + 12 * {nv} * segment[k] : 0;
+    const casadi_real* L = line ? line + 36 * segment[k] : 0;
+    casadi_real* G = target + 16 * k;
+    casadi_real* Tk = T + 16 * k;
+    casadi_real* ek = e + 6 * k;
+    if (L) {{  /* the chord's point and the slerp R + t a(t th) R K + t^2 b(t th) R K^2 */
+      tk = t[k];
+      s = tk * L[33];
+      a = s < 1e-4 ? 1.0 - s * s / 6.0 + (s * s) * (s * s) / 120.0 : sin(s) / s;
+      b = s < 1e-4 ? 0.5 - s * s / 24.0 + (s * s) * (s * s) / 720.0 : 2.0 * ((sin(s / 2.0) / s) * (sin(s / 2.0) / s));
+      a *= tk;
+      b *= tk * tk;
+      for (i = 0; i < 3; ++i) {{
+        for (c = 0; c < 3; ++c) G[4 * i + c] = L[6 + 3 * i + c] + a * L[15 + 3 * i + c] + b * L[24 + 3 * i + c];
+        G[4 * i + 3] = L[i] + tk * L[3 + i];
+        G[12 + i] = 0.0;
+      }}
+      G[15] = 1.0;
+    }}
+    arg[0] = qk;
+    arg[1] = base;
+    arg[2] = tool;
+    arg[3] = world;
+    res[0] = Tk;
+    if (world ? {prefix}_stat(arg, res, iw, w, 0) : {prefix}_tcp(arg, res, iw, w, 0)) return 1;
+    for (i = 0; L && L[34] != 0.0 && i < 12; ++i) G[i] = i % 4 == 3 ? G[i] : Tk[i];  /* the wrist's orientation */
+    theta[k] = {prefix}_error(G, Tk, ek);
+    if (!Pk) {{  /* no Newton step asked for: the start is q */
+      for (c = 0; c < {nv}; ++c) start[{nv} * k + c] = qk[c];
+      continue;
+    }}
+    for (i = 0; i < 12; ++i) x[i] = i < 6 ? ek[i] : t[k] * ek[i - 6];
+    ok = 1;
+    for (c = 0; c < {nv}; ++c) {{
+      s = 0.0;
+      for (i = 0; i < 12; ++i) s += Pk[12 * c + i] * x[i];
+      dq[c] = s;
+      ok = ok && fabs(s) <= step_max;  /* false at a NaN too */
+    }}
+    for (c = 0; c < {nv}; ++c) start[{nv} * k + c] = ok ? qk[c] + dq[c] : qk[c];
+  }}
+  return 0;
+}}
+
+/* P (nv x 6 per row) = J^T (J J^T + damping^2 I)^-1, column by column through the Cholesky factor */
+int {prefix}_pinv_rows(const casadi_real* J, casadi_real damping, casadi_real* P, long long n) {{
+  casadi_real A[36], b[6], col[{nv}];
+  long long k;
+  int i, c;
+  for (k = 0; k < n; ++k) {{
+    if ({prefix}_factor(J + 6 * {nv} * k, damping, A)) return 2;
+    for (i = 0; i < 6; ++i) {{
+      for (c = 0; c < 6; ++c) b[c] = c == i ? 1.0 : 0.0;
+      {prefix}_back(A, J + 6 * {nv} * k, b, col);
+      for (c = 0; c < {nv}; ++c) P[6 * {nv} * k + 6 * c + i] = col[c];
+    }}
+  }}
+  return 0;
+}}
+
 int {prefix}_det6_rows(const casadi_real* a, casadi_real* det, long long n) {{
   casadi_real L[36];
   long long k;
@@ -431,13 +512,13 @@ def chain_source(chain: BatchChain, flange_id: int, prefix: str = PREFIX) -> str
         njoints=len(oMi),
         nq=chain.nq,
     )
-    tcpj, statj = functions[4], functions[6]
+    tcpj = functions[4]
     ik = _IK.format(
         prefix=prefix,
-        sz_arg=max(tcpj.sz_arg(), statj.sz_arg(), 4),
-        sz_res=max(tcpj.sz_res(), statj.sz_res(), 2),
-        sz_iw=max(tcpj.sz_iw(), statj.sz_iw(), 1),
-        sz_w=max(tcpj.sz_w(), statj.sz_w(), 1),
+        sz_arg=max(*(f.sz_arg() for f in functions[3:]), 4),
+        sz_res=max(*(f.sz_res() for f in functions[3:]), 2),
+        sz_iw=max(*(f.sz_iw() for f in functions[3:]), 1),
+        sz_w=max(*(f.sz_w() for f in functions[3:]), 1),
         nq=chain.nq,
         nv=tcpj.nnz_out(1) // 6,
     )

@@ -320,6 +320,67 @@ class CompiledChain:
         )
         return q, err, T, J, flag
 
+    def line_starts(
+        self,
+        qs: Array,
+        kinematics: tuple[Array, Array, Array | None],
+        targets: Array,
+        P: Array,
+        segment: Array,
+        t: Array,
+        step_max: float,
+        lines: Array | None = None,
+        step: bool = True,
+    ) -> tuple[Array, Array, Array, Array] | None:
+        """The controller line's IK starts in one pass, or None when the chain runs in NumPy.
+
+        With ``lines`` (K, 36) (:func:`refine.optimise.line_ik.segment_lines`) the targets (N, 4, 4)
+        are written into ``targets`` first, as :func:`refine.optimise.line_ik.line_poses` forms them.
+        Per joint-linear row of ``qs`` (N, nv) [rad], returned: the TCP pose (N, 4, 4) (``kinematics``
+        as :meth:`ik_solve`'s), the pose error (N, 6) as :meth:`ik_steps` forms it, the angle of
+        ``R_target Rᵀ`` (N,) [rad] (above ``π - 1e-3`` take the rotation vector otherwise), the start
+        ``q + P[segment] [e, t e]`` (N, nv) [rad] (``P`` (K, nv, 12): :func:`refine.optimise.line_start.start_matrices`),
+        ``q`` where a joint's step exceeds ``step_max`` [rad] (or NaN) and without ``step``.
+        """
+        lib = self._lib()
+        if lib is None:
+            return None
+        qs = self._rows(qs)
+        fixed = self._placements(*kinematics)
+        world = None if kinematics[2] is None else fixed[2]
+        n = len(qs)
+        if lines is not None:
+            lines = np.ascontiguousarray(lines, dtype=float)
+            if lines.shape != (len(P), 36) or not _writable(targets, (n, 4, 4)):
+                raise ValueError(f"line_starts: lines ({len(P)}, 36) and writable targets ({n}, 4, 4)")
+        targets = np.ascontiguousarray(targets, dtype=float)
+        segment = np.ascontiguousarray(segment, dtype=np.int64)
+        t = np.ascontiguousarray(t, dtype=float)
+        if (
+            targets.shape != (n, 4, 4)
+            or segment.shape != (n,)
+            or t.shape != (n,)
+            or P.shape[1:] != (self.nq, 12)
+        ):
+            raise ValueError(f"line_starts: targets ({n}, 4, 4), segments and t ({n},), P (K, {self.nq}, 12)")
+        if n and not (0 <= segment.min() and segment.max() < len(P)):
+            raise ValueError(f"line_starts: segments 0..{len(P) - 1}")
+        P = np.ascontiguousarray(P, dtype=float) if step else None
+        T, e, theta, start = np.empty((n, 4, 4)), np.empty((n, 6)), np.empty(n), np.empty((n, self.nq))
+        lib.start(
+            qs, fixed[0], fixed[1], world, lines, targets, P, segment, t, float(step_max), T, e, theta, start
+        )
+        return T, e, theta, start
+
+    def damped_inverses(self, J: Array, damping: float) -> Array | None:
+        """``Jᵀ (J Jᵀ + λ² I)⁻¹`` (N, nv, 6) of Jacobians ``J`` (N, 6, nv), ``λ = damping`` > 0; None in NumPy."""
+        lib, J = self._lib(), np.ascontiguousarray(J, dtype=float)
+        if lib is not None and (J.ndim != 3 or J.shape[1:] != (6, self.nq) or not damping > 0.0):
+            raise ValueError(f"damped_inverses: (N, 6, {self.nq}) and damping > 0 expected, got {J.shape}")
+        if lib is not None:
+            lib.pinv(J, float(damping), out := np.empty((len(J), self.nq, 6)))
+        return None if lib is None else out
+
     def dets6(self, matrices: Array) -> Array | None:
         """Determinants (N,) of 6 × 6 matrices (N, 6, 6) (LU with partial pivoting), or None in NumPy."""
         lib = self._lib()
