@@ -235,7 +235,6 @@ def test_a_warm_seed_hands_back_the_tool_jacobians_at_the_joints_it_returns(cell
     """
     from refine.optimise.outcome import problem_kinematics
     from refine.optimise.warm import WarmStart, warm_seed
-    from refine.robot.kinematics import rotation_vectors
 
     R, first = cell_line_answer
     problem = first.run.first.refinement.problem
@@ -249,15 +248,7 @@ def test_a_warm_seed_hands_back_the_tool_jacobians_at_the_joints_it_returns(cell
     np.testing.assert_allclose(T, kin.poses(q), rtol=0.0, atol=1e-12)  # the poses of the seed too
     h = 1e-6
     for k in (0, 1, 9, 10, N - 1):
-        numeric = np.zeros((6, q.shape[1]))
-        for j in range(q.shape[1]):
-            up, down = q[k].copy(), q[k].copy()
-            up[j] += h
-            down[j] -= h
-            Tu, Td = kin.poses(np.array([up, down]))
-            numeric[:3, j] = (Tu[:3, 3] - Td[:3, 3]) / (2 * h)
-            numeric[3:, j] = rotation_vectors((Tu[:3, :3] @ Td[:3, :3].T)[None])[0] / (2 * h)
-        assert np.abs(J[k] - numeric).max() <= 1e-6, k
+        assert np.abs(J[k] - central_jacobian(kin, q[k], h)).max() <= 1e-6, k
 
 
 def test_a_warm_seed_of_a_wholly_moved_path_reaches_every_pose_and_hands_back_its_own_kinematics(
@@ -287,15 +278,7 @@ def test_a_warm_seed_of_a_wholly_moved_path_reaches_every_pose_and_hands_back_it
     assert error.max() <= WARM_SEED_TOLERANCE and np.abs(q - q_prev).max() > 1e-3
     h = 1e-6
     for k in (0, 7, N - 1):
-        numeric = np.zeros((6, q.shape[1]))
-        for j in range(q.shape[1]):
-            up, down = q[k].copy(), q[k].copy()
-            up[j] += h
-            down[j] -= h
-            Tu, Td = kin.poses(np.array([up, down]))
-            numeric[:3, j] = (Tu[:3, 3] - Td[:3, 3]) / (2 * h)
-            numeric[3:, j] = rotation_vectors((Tu[:3, :3] @ Td[:3, :3].T)[None])[0] / (2 * h)
-        assert np.abs(J[k] - numeric).max() <= 1e-6, k
+        assert np.abs(J[k] - central_jacobian(kin, q[k], h)).max() <= 1e-6, k
 
 
 def test_a_re_solve_after_a_repair_starts_from_the_strict_problem_the_repair_grew_from(monkeypatch):
@@ -352,3 +335,18 @@ def test_a_projection_started_from_the_given_first_evaluation_is_the_one_that_ev
         assert np.array_equal(a, b)
     np.testing.assert_allclose(outs[0][3], kin.poses(outs[0][0]), rtol=0.0, atol=1e-12)
     assert outs[0][1].max() < 1e-6
+
+
+def central_jacobian(kin, q, h):
+    """The TCP Jacobian (6, n) at ``q`` by central differences of the forward kinematics."""
+    from refine.robot.kinematics import rotation_vectors
+
+    numeric = np.zeros((6, len(q)))
+    for j in range(len(q)):
+        up, down = q.copy(), q.copy()
+        up[j] += h
+        down[j] -= h
+        Tu, Td = kin.poses(np.array([up, down]))
+        numeric[:3, j] = (Tu[:3, 3] - Td[:3, 3]) / (2 * h)
+        numeric[3:, j] = rotation_vectors((Tu[:3, :3] @ Td[:3, :3].T)[None])[0] / (2 * h)
+    return numeric
