@@ -101,6 +101,13 @@ class Evaluator:
             self.g_rows = _pattern(newton.first, 1)[0]
         self.hess_row, self.hess_col = _pattern(d["hess_lag"], 0)
         self._hess_values: Array | None = None
+        # Jᵀ in CSR form: the Jacobian's nonzeros are in column order (CasADi's compressed columns)
+        self._jac_t = None
+        if np.all(np.diff(self.jac_col) >= 0):
+            indptr = np.concatenate([[0], np.cumsum(np.bincount(self.jac_col, minlength=self.nx))])
+            self._jac_t = sp.csr_array(
+                (np.zeros(len(self.jac_row)), self.jac_row, indptr), shape=(self.nx, self.ng)
+            )
 
     def first_order(self, x: Array, lam_g: Array | None = None) -> tuple[Array, Array, Array]:
         """At ``x``: the cost gradient (nx,), the rows (ng,), the Jacobian's nonzeros (a view).
@@ -136,6 +143,9 @@ class Evaluator:
 
     def jacobian_t_times(self, values: Array, lam: Array) -> Array:
         """``Jᵀ lam`` (nx,) for the Jacobian of nonzeros ``values``."""
+        if self._jac_t is not None:
+            self._jac_t.data = values
+            return self._jac_t @ lam
         return np.bincount(self.jac_col, weights=values * lam[self.jac_row], minlength=self.nx)
 
     def jacobian(self, values: Array) -> sp.csr_matrix:
@@ -200,6 +210,11 @@ class NullSpaceStep:
 
     Built once for an active set: ``rows`` (held constraint rows) and ``bounds`` (variables held at
     a bound), with the problem's sizes ``N`` waypoints of ``n`` joints and the evaluator's patterns.
+    The per-waypoint blocks are kept with the waypoints on the last axis (``(…, N)``, contiguous),
+    so that each contraction is one :func:`numpy.einsum` over all waypoints at once. The Hessian is
+    kept as its blocks ``H_{k,k+d}`` for the reach ``d = 0..reach`` its pattern has (at most
+    :data:`HESSIAN_REACH`), a neighbour block (``d > 0``) whose pattern is its diagonal (the
+    smoothness terms, joint by joint) as that diagonal only.
 
     Raises:
         NotLocal: a held row touches two waypoints, or the Hessian reaches beyond
@@ -228,66 +243,80 @@ class NullSpaceStep:
         self.m_max, self.m_min = int(count.max()), int(count.min())
         if self.m_max > n:
             raise NotLocal(f"{self.m_max} rows held at one waypoint of {n} joints")
-        self.nz = n - self.m_min
+        m, self.nz = self.m_max, n - self.m_min
         R = len(rows)
-        # where each held row's Jacobian nonzeros go in the padded blocks A (N, m_max, n)
+        # where each held row's Jacobian nonzeros go in [Aᵀ | I] (n, m + n, N) (householder_qr's)
         self.src = np.flatnonzero(inside)
         h = held[ev.jac_row[self.src]]
-        self.dst = np.ravel_multi_index((k[h], slot[h], ev.jac_col[self.src] - n * k[h]), (N, self.m_max, n))
+        qr_shape = (n, m + n, N)
+        self.dst = np.ravel_multi_index((ev.jac_col[self.src] - n * k[h], slot[h], k[h]), qr_shape)
         b = np.arange(R, R + len(bounds))
-        self.bound_dst = np.ravel_multi_index((k[b], slot[b], bounds - n * k[b]), (N, self.m_max, n))
-        # where each Hessian nonzero goes in the blocks H_{k,k+d} (d = 0..HESSIAN_REACH)
+        self.bound_dst = np.ravel_multi_index((bounds - n * k[b], slot[b], k[b]), qr_shape)
+        self.ymask = np.arange(m)[:, None] < count[None, :]  # (m, N): a held row in this slot
+        self.pad = np.nonzero(~self.ymask)  # (slot, waypoint) of no row
+        self.zpad = (self.m_min + np.arange(self.nz))[:, None] < count[None, :]  # (nz, N): padded columns
+        # where each Hessian nonzero goes in the blocks H_{k,k+d}[a, c] (n, n, N) one after the other,
+        # a diagonal one's diagonal only (n, N)
         ki, kj = ev.hess_row // n, ev.hess_col // n
         d = kj - ki
         if np.any((d < 0) | (d > HESSIAN_REACH)):
             raise NotLocal("the Hessian couples waypoints more than two apart")
+        self.reach = int(d.max(initial=0))
         a, c = ev.hess_row - n * ki, ev.hess_col - n * kj
-        shape = (HESSIAN_REACH + 1, N, n, n)
-        self.h_dst = np.ravel_multi_index((d, ki, a, c), shape)
-        diagonal = d == 0
-        self.h_mirror_src = np.flatnonzero(diagonal)
-        self.h_mirror_dst = np.ravel_multi_index((d[diagonal], ki[diagonal], c[diagonal], a[diagonal]), shape)
-        # the whole symmetric Hessian in CSR form: which upper-triangle nonzero each entry is
-        off = np.flatnonzero(ev.hess_row != ev.hess_col)
-        src = np.concatenate([np.arange(len(ev.hess_row)), off])
-        rows_all = np.concatenate([ev.hess_row, ev.hess_col[off]])
-        cols_all = np.concatenate([ev.hess_col, ev.hess_row[off]])
-        marker = sp.csr_matrix((src + 1.0, (rows_all, cols_all)), shape=(N * n, N * n))
-        self.h_src = marker.data.astype(np.int64) - 1
-        self.h_indices, self.h_indptr = marker.indices, marker.indptr
-        self.ymask = np.arange(self.m_max)[None, :] < count[:, None]  # (N, m_max)
-        self.zmask = (self.m_min + np.arange(self.nz))[None, :] >= count[:, None]  # (N, nz)
-        self._band_index()
-
-    def _band_index(self) -> None:
-        """Where block (d, k)[a, b] of the reduced Hessian goes in its lower band storage."""
-        N, nz = self.N, self.nz
-        self.width = (HESSIAN_REACH + 1) * nz - 1
-        dst, src = [], []
-        for d in range(HESSIAN_REACH + 1):
-            k, a, b = np.meshgrid(np.arange(N - d), np.arange(nz), np.arange(nz), indexing="ij")
-            keep = (b >= a) if d == 0 else np.ones_like(a, dtype=bool)
-            k, a, b = k[keep], a[keep], b[keep]
-            i, j = (k + d) * nz + b, k * nz + a  # lower triangle: row i >= column j
-            dst.append(np.ravel_multi_index((i - j, j), (self.width + 1, N * nz)))
-            src.append(np.ravel_multi_index((k, a, b), (N - d, nz, nz)))
-        self.band_dst, self.band_src = dst, src
+        self.diagonal = [e > 0 and bool(np.all(a[d == e] == c[d == e])) for e in range(self.reach + 1)]
+        sizes = [n * N if diagonal else n * n * N for diagonal in self.diagonal]
+        offset = np.concatenate([[0], np.cumsum(sizes)])
+        self.h_offset = offset
+        full = ~np.asarray(self.diagonal)[d]
+        self.h_dst = offset[d] + np.where(full, (a * n + c) * N, a * N) + ki
+        lower = (d == 0) & (a != c)
+        self.h_mirror_src = np.flatnonzero(lower)
+        self.h_mirror_dst = (c[lower] * n + a[lower]) * N + ki[lower]
+        self.width = (self.reach + 1) * self.nz - 1  # the reduced Hessian's lower bandwidth
 
     def _hess_blocks(self, values: Array) -> list[Array]:
-        blocks = np.zeros((HESSIAN_REACH + 1) * self.N * self.n * self.n)
+        """The blocks ``H_{k,k+d}`` (n, n, N - d) of the Hessian, the diagonal (n, N - d) of a diagonal one."""
+        N, n = self.N, self.n
+        blocks = np.zeros(self.h_offset[-1])
         blocks[self.h_dst] = values
         blocks[self.h_mirror_dst] = values[self.h_mirror_src]
-        blocks = blocks.reshape(HESSIAN_REACH + 1, self.N, self.n, self.n)
-        return [blocks[d, : self.N - d] for d in range(HESSIAN_REACH + 1)]
+        shapes = [(n, N) if diagonal else (n, n, N) for diagonal in self.diagonal]
+        return [
+            blocks[self.h_offset[d] : self.h_offset[d + 1]].reshape(shape)[..., : N - d]
+            for d, shape in enumerate(shapes)
+        ]
 
-    def _hess_matrix(self, values: Array) -> sp.csr_matrix:
-        """The whole symmetric Hessian (N·n, N·n) from its upper triangle's nonzeros ``values``."""
-        nx = self.N * self.n
-        return sp.csr_matrix((values[self.h_src], self.h_indices, self.h_indptr), shape=(nx, nx))
+    def _hess_times(self, H: list[Array], v: Array) -> Array:
+        """``H v`` for ``v`` (n, N), the waypoints on the last axis, with ``H`` from :meth:`_hess_blocks`."""
+        N = self.N
+        out = np.einsum("ijk,jk->ik", H[0], v)
+        for d in range(1, self.reach + 1):
+            if self.diagonal[d]:
+                out[:, : N - d] += H[d] * v[:, d:]
+                out[:, d:] += H[d] * v[:, : N - d]
+            else:
+                out[:, : N - d] += np.einsum("ijk,jk->ik", H[d], v[:, d:])
+                out[:, d:] += np.einsum("jik,jk->ik", H[d], v[:, : N - d])
+        return out
 
-    def _hess_times(self, H: sp.csr_matrix, v: Array) -> Array:
-        """``H v`` for ``v`` (N, n), with ``H`` from :meth:`_hess_matrix`."""
-        return (H @ v.reshape(-1)).reshape(self.N, self.n)
+    def _reduced_band(self, Zt: Array, H: list[Array]) -> Array:
+        """The reduced Hessian ``ZᵀHZ`` in LAPACK's lower band storage (width + 1, N·nz), Fortran order.
+
+        Its blocks ``B_{k,k+d} = Z_kᵀ H_{k,k+d} Z_{k+d}`` (nz, nz, N - d); variable ``k·nz + a`` is
+        column ``a`` of ``Z_k``, and entry (i, j), i >= j, of the matrix is band entry (i - j, j).
+        """
+        N, nz = self.N, self.nz
+        band = np.zeros((N, nz, self.width + 1))  # [k, a, i - j]: the transpose of the Fortran array
+        for d in range(self.reach + 1):
+            if self.diagonal[d]:
+                B = np.einsum("aik,bik->abk", Zt[:, :, : N - d] * H[d], Zt[:, :, d:])
+            else:
+                B = np.einsum("aik,ibk->abk", Zt[:, :, : N - d], np.einsum("ijk,bjk->ibk", H[d], Zt[:, :, d:]))
+            for a in range(nz):  # entries (k + d, b), b from a on for d = 0: band rows d·nz + b - a
+                b = a if d == 0 else 0
+                band[: N - d, a, d * nz + b - a : (d + 1) * nz - a] = B[a, b:].T
+        band[:, :, 0] += self.zpad.T  # the padded null-space columns: unit diagonal
+        return band.reshape(N * nz, self.width + 1).T
 
     def step(
         self, grad: Array, jac_values: Array, hess_values: Array, residual: Array
@@ -302,69 +331,79 @@ class NullSpaceStep:
             numpy.linalg.LinAlgError: the held rows at a waypoint are dependent, or the reduced
                 Hessian is not positive definite.
         """
-        N, n, m, nz = self.N, self.n, self.m_max, self.nz
-        A = np.zeros(N * m * n)
-        A[self.dst] = jac_values[self.src]
-        A[self.bound_dst] = 1.0
-        A = A.reshape(N, m, n)
-        Qt, R = householder_qr(A)  # Qᵀ (N, n, n), R (N, m, m)
-        diag = np.abs(R[:, np.arange(m), np.arange(m)])
-        if np.any(diag[self.ymask] <= 1e-12 * max(1.0, float(np.abs(A).max()))):
+        N, n, m = self.N, self.n, self.m_max
+        values = jac_values[self.src]
+        M = np.zeros((n, m + n, N))
+        flat = M.reshape(-1)
+        flat[self.dst] = values
+        flat[self.bound_dst] = 1.0
+        scale = max(1.0, float(np.abs(values).max(initial=0.0)))
+        M[np.arange(n), m + np.arange(n)] = 1.0
+        _householder(M, m)  # [Aᵀ | I] -> [R; 0 | Qᵀ], block k in M[..., k]
+        R, Qt = M[:m, :m], M[:, m:]
+        if np.any(np.abs(R[np.arange(m), np.arange(m)])[self.ymask] <= 1e-12 * scale):
             raise np.linalg.LinAlgError("the held rows at a waypoint are dependent")
-        pad_k, pad_s = np.nonzero(~self.ymask)
-        R[pad_k, pad_s, pad_s] = 1.0
-        Zt = Qt[:, self.m_min :] * self.zmask[:, :, None]
-        Y, Z = np.transpose(Qt[:, :m], (0, 2, 1)), np.transpose(Zt, (0, 2, 1))
+        R[self.pad[0], self.pad[0], self.pad[1]] = 1.0
+        Zt = Qt[self.m_min :] if self.m_min == m else Qt[self.m_min :] * ~self.zpad[:, None, :]
+        Zt = np.ascontiguousarray(Zt)  # (nz, n, N): row b of Z_kᵀ in Zt[b, :, k]
         H = self._hess_blocks(hess_values)
-        band = np.zeros((self.width + 1, N * nz))
-        flat = band.reshape(-1)
-        for d in range(HESSIAN_REACH + 1):
-            Bd = Zt[: N - d] @ H[d] @ Z[d:]
-            flat[self.band_dst[d]] = Bd.reshape(-1)[self.band_src[d]]
-        band[0] += (~self.zmask).reshape(-1)  # the padded null-space columns: unit diagonal
-        factor = scipy.linalg.cholesky_banded(band, lower=True, check_finite=False)
-        # the least-norm step onto the held rows, Y R⁻ᵀ, and its transpose, the multipliers' map
-        pinv = Y @ np.transpose(_triangular_inverse(R), (0, 2, 1))
-        factors = (
-            pinv,
-            np.ascontiguousarray(np.transpose(pinv, (0, 2, 1))),
-            Z,
-            Zt,
-            self._hess_matrix(hess_values),
-            factor,
-        )
+        factor, info = scipy.linalg.lapack.dpbtrf(self._reduced_band(Zt, H), lower=1, overwrite_ab=1)
+        if info > 0:
+            raise np.linalg.LinAlgError(f"{info}-th leading minor of the reduced Hessian not positive definite")
+        if info < 0:
+            raise ValueError(f"illegal value in {-info}-th argument of dpbtrf")
+        # the least-norm step onto the held rows, Y R⁻ᵀ, as its transpose P = R⁻¹ Yᵀ (m, n, N):
+        # row a of R P = Yᵀ, from the rows below it
+        P = np.empty((m, n, N))
+        for a in range(m - 1, -1, -1):
+            P[a] = (Qt[a] - np.einsum("ck,cjk->jk", R[a, a + 1 :], P[a + 1 :])) / R[a, a]
+        factors = (P, Zt, H, factor)
         return (*self.solve(factors, grad, residual), factors)
 
     def solve(self, factors: tuple, grad: Array, residual: Array) -> tuple[Array, Array]:
         """:meth:`step` with the ``factors`` a step returned: for ``grad`` (nx,) and ``residual``."""
-        N, n, m, nz = self.N, self.n, self.m_max, self.nz
-        pinv, pinv_t, Z, Zt, H, factor = factors
-        r = np.zeros((N, m))
-        r[self.k[: len(residual)], self.slot[: len(residual)]] = residual  # the bounds': 0, met
-        dx_y = (pinv @ r[..., None])[..., 0]
-        g = grad.reshape(N, n)
+        N, n, m = self.N, self.n, self.m_max
+        P, Zt, H, factor = factors
+        r = np.zeros((m, N))
+        r[self.slot[: len(residual)], self.k[: len(residual)]] = residual  # the bounds': 0, met
+        dx_y = np.einsum("ajk,ak->jk", P, r)
+        g = grad.reshape(N, n).T
         w = g + self._hess_times(H, dx_y)
-        rhs = -(Zt @ w[..., None]).reshape(-1)
-        p_z = scipy.linalg.cho_solve_banded((factor, True), rhs, check_finite=False).reshape(N, nz)
-        dx = dx_y + (Z @ p_z[..., None])[..., 0]
+        rhs = -np.einsum("bik,ik->kb", Zt, w).reshape(-1, 1)  # variable k·nz + b
+        p_z, info = scipy.linalg.lapack.dpbtrs(factor, rhs, lower=1, overwrite_b=1)
+        if info != 0:
+            raise ValueError(f"illegal value in {-info}-th argument of dpbtrs")
+        dx = dx_y + np.einsum("bik,kb->ik", Zt, p_z.reshape(N, self.nz))
         w = g + self._hess_times(H, dx)
-        lam = -(pinv_t @ w[..., None])[..., 0]
-        return dx.reshape(-1), lam[self.k, self.slot]
+        lam = -np.einsum("ajk,jk->ak", P, w)
+        return dx.T.reshape(-1), lam[self.slot, self.k]
 
 
 def householder_qr(A: Array) -> tuple[Array, Array]:
     """The complete QR factorisation ``A_kᵀ = Q_k [R_k; 0]`` of every block of ``A`` (N, m, n), m <= n.
 
     Returns ``Qᵀ`` (N, n, n), orthogonal, and ``R`` (N, m, m), upper triangular (its diagonal of
-    either sign). Householder reflections, each applied to all N blocks at once, the blocks on the
-    last axis (N long, contiguous): for the few rows and joints of a waypoint about twice as fast
-    as NumPy's batched LAPACK QR (618 blocks of 3 × 6: 0.35 against 0.72 ms). A column that is zero where its reflection would act
-    (a padded row) is left as it is, with a zero on the diagonal of ``R``.
+    either sign): :func:`_householder` on the blocks.
     """
     N, m, n = A.shape
     M = np.zeros((n, m + n, N))  # [Aᵀ | I], block k in M[..., k]; the reflections turn it into [R; 0 | Qᵀ]
     M[:, :m] = np.transpose(A, (2, 1, 0))
     M[np.arange(n), m + np.arange(n)] = 1.0
+    _householder(M, m)
+    R = np.triu(np.transpose(M[:m, :m], (2, 0, 1)))
+    return np.ascontiguousarray(np.transpose(M[:, m:], (2, 0, 1))), R
+
+
+def _householder(M: Array, m: int) -> None:
+    """Householder reflections of the first ``m`` columns of every block of ``M`` (n, m + n, N), in place.
+
+    Block k is ``M[..., k]``, the blocks on the last axis (N long, contiguous); the reflections,
+    each applied to all N blocks at once, turn ``[Aᵀ | I]`` into ``[R; 0 | Qᵀ]`` (below the diagonal
+    of R: rounding errors, not zeros). For the few rows and joints of a waypoint about twice as
+    fast as NumPy's batched LAPACK QR (618 blocks of 3 × 6: 0.35 against 0.72 ms). A column that is
+    zero where its reflection would act (a padded row) is left as it is, with a zero on the diagonal
+    of ``R``.
+    """
     for j in range(m):
         x = M[j:, j]  # (n - j, N)
         norm = np.sqrt(np.einsum("iN,iN->N", x, x))
@@ -375,22 +414,6 @@ def householder_qr(A: Array) -> tuple[Array, Array]:
         scale = np.divide(2.0, vv, out=np.zeros_like(vv), where=vv > 0.0)
         rest = M[j:, j:]
         rest -= v[:, None] * (np.einsum("iN,icN->cN", v, rest) * scale)[None]
-    R = np.triu(np.transpose(M[:m, :m], (2, 0, 1)))
-    return np.ascontiguousarray(np.transpose(M[:, m:], (2, 0, 1))), R
-
-
-def _triangular_inverse(R: Array) -> Array:
-    """The inverses (N, m, m) of the upper triangular blocks ``R`` (N, m, m), by back substitution.
-
-    Row i of ``R⁻¹`` from the rows below it, for every block at once.
-    """
-    m = R.shape[1]
-    X = np.zeros_like(R)
-    for i in range(m - 1, -1, -1):
-        X[:, i] = -np.einsum("kj,kjc->kc", R[:, i, i + 1 :], X[:, i + 1 :])
-        X[:, i, i] += 1.0
-        X[:, i] /= R[:, i, i, None]
-    return X
 
 
 def _band_order(nx: int, n: int, rows: sp.csr_matrix) -> Array:
