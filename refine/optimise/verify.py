@@ -209,16 +209,12 @@ def rotation_angles_deg(R_a: Array, R_b: Array) -> Array:
 def orthonormal_error(R: Array) -> Array:
     """The largest entry of ``|RᵀR - I|`` of each matrix ``R`` (N, 3, 3), shape (N,) [-].
 
-    From the six column products of the upper triangle: ``RᵀR`` is symmetric, each entry below the
-    diagonal the same sum of the same three products as its mirror.
+    ``RᵀR`` of every matrix in one contraction, the matrices on the last axis (contiguous).
     """
-    columns = np.ascontiguousarray(np.swapaxes(R, 1, 2))  # columns[:, i]: column i of each matrix
-    error = np.zeros(len(R))
-    for i in range(3):
-        for j in range(i, 3):
-            product = np.einsum("kl,kl->k", columns[:, i], columns[:, j])
-            np.maximum(error, np.abs(product - 1.0 if i == j else product), out=error)
-    return error
+    columns = np.ascontiguousarray(np.moveaxis(R, 0, -1))  # (3, 3, N): entry [l, i] of matrix k in [l, i, k]
+    gram = np.einsum("lik,ljk->ijk", columns, columns)
+    gram[[0, 1, 2], [0, 1, 2]] -= 1.0
+    return np.abs(gram).max(axis=(0, 1))
 
 
 def segment_singularity(
@@ -237,15 +233,19 @@ def segment_singularity(
         occurs (N-1,); entry k covers the open segment between waypoints k and k+1.
     """
     dq = np.diff(q, axis=0)
+    if len(dq) == 0:
+        return np.zeros(0), np.zeros(0)
     n_sub = np.maximum(2, np.ceil(np.degrees(np.abs(dq).max(axis=1)) / max_step_deg)).astype(int)
     seg = np.repeat(np.arange(len(dq)), n_sub - 1)
     start = np.concatenate([[0], np.cumsum(n_sub - 1)[:-1]])  # each segment's first sample
     frac = (np.arange(len(seg)) - start[seg] + 1) / n_sub[seg]  # 1/m, ..., (m-1)/m per segment
     given = midpoint_jacobians if midpoint_jacobians is not None and np.all(n_sub == 2) else None
     w, _ = singularity_measures(kin, q[seg] + frac[:, None] * dq[seg], smallest=False, jacobians=given)
-    order = np.lexsort((w, seg))  # by segment, then by measure: the first of each segment is its minimum
-    first = order[np.searchsorted(seg[order], np.arange(len(dq)))]
-    return w[first], frac[first]
+    # per segment its least measure (NaN only where all are), then the first sample that has it
+    least = np.fmin.reduceat(w, start)
+    at = (w == least[seg]) | np.isnan(least)[seg]
+    first = np.minimum.reduceat(np.where(at, np.arange(len(w)), len(w)), start)
+    return least, frac[first]
 
 
 def check_path(

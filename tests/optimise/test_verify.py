@@ -501,3 +501,54 @@ def test_the_orthonormality_error_is_the_largest_entry_of_rt_r_less_the_identity
     R[2, 0, 1] += 0.3
     expected = np.array([np.abs(r.T @ r - np.eye(3)).max() for r in R])
     assert np.abs(orthonormal_error(R) - expected).max() <= 1e-15
+
+
+def plain_segment_minima(q: np.ndarray, measure, max_step_deg: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Segment by segment: the samples at j/m, m = max(2, ceil(largest joint move / step)), their least
+    ``measure`` and the first fraction where it is."""
+    least, where = [], []
+    for a, b in zip(q[:-1], q[1:], strict=True):
+        m = max(2, math.ceil(math.degrees(np.abs(b - a).max()) / max_step_deg))
+        fractions = [j / m for j in range(1, m)]
+        values = [measure(a + f * (b - a)) for f in fractions]
+        i = int(np.argmin(values))  # the first of equal least values
+        least.append(values[i])
+        where.append(fractions[i])
+    return np.array(least), np.array(where)
+
+
+def test_each_segment_s_least_measure_and_where_it_is_are_those_of_a_plain_loop_over_its_samples(kin):
+    """Segments of 0.4 to 9.3 deg (one to ten samples), the wrist through its stretched pose inside
+    some of them: the data-sheet model's measure at every sample, segment by segment."""
+    from refine.optimise.verify import segment_singularity
+
+    rows = np.tile(Q0_DEG, (7, 1))
+    rows[:, 4] = [6.0, 5.6, 3.1, -2.2, -4.0, 5.3, 4.9]  # 0.4, 2.5, 5.3, 1.8, 9.3, 0.4 deg
+    rows[:, 0] += [0.0, 0.3, 0.1, 0.9, 0.2, 0.0, 0.7]
+    q = path(rows)
+    w, frac = segment_singularity(kin, q)
+    expected_w, expected_frac = plain_segment_minima(q, manipulability)
+    np.testing.assert_allclose(w, expected_w, rtol=1e-9, atol=1e-12)
+    assert np.array_equal(frac, expected_frac)
+    assert len(set(np.round(1.0 / frac, 6))) > 2  # not all at the midpoint
+
+
+def test_equal_least_measures_in_a_segment_give_its_first_sample():
+    """A stand-in model whose measure is constant over stretches of joint 1: ties inside segments,
+    where the first sample with the least value is the one reported (as a plain loop's argmin)."""
+    from types import SimpleNamespace
+
+    from refine.optimise.verify import segment_singularity
+
+    def jacobians(q):  # |det| = (1 + floor(10 q1))⁶: equal on each 0.1 rad of joint 1
+        return (1.0 + np.floor(10.0 * np.abs(q[:, 0])))[:, None, None] * np.eye(6)
+
+    stand_in = SimpleNamespace(robot=SimpleNamespace(spec=SimpleNamespace(reach_m=1.0), chain=None), jacobians=jacobians)
+    q = np.zeros((5, 6))
+    q[:, 0] = [0.35, 0.02, 0.05, 0.31, 0.0]  # 19, 1.7, 15, 18 deg: the least values come in runs
+    w, frac = segment_singularity(stand_in, q)
+    expected_w, expected_frac = plain_segment_minima(q, lambda qk: float(np.abs(np.linalg.det(jacobians(qk[None])[0]))))
+    assert np.array_equal(w, expected_w)
+    assert np.array_equal(frac, expected_frac)
+    assert np.any(frac < 0.5) and np.any(frac > 0.5)
+
