@@ -117,9 +117,11 @@ def test_a_reduced_hessian_that_is_not_positive_definite_is_refused(answers):
         step.step(grad, jac_values, -ev.hessian(lam_g), np.zeros(len(rows)))
 
 
-def test_random_banded_kkt_systems_with_unsymmetric_neighbour_blocks_are_solved_as_numpy_solves_them():
+@pytest.mark.parametrize("reach", [0, 1, 2])
+def test_random_banded_kkt_systems_with_unsymmetric_neighbour_blocks_are_solved_as_numpy_solves_them(reach):
     """9 waypoints of 4 joints, 1 to 3 held rows or bounds each, a Hessian with full (unsymmetric)
-    blocks to the next waypoint and diagonal ones to the one after: the patterns only, no problem."""
+    blocks to the next waypoint and diagonal ones to the one after (up to ``reach``): the patterns
+    only, no problem."""
     from types import SimpleNamespace
 
     rng = np.random.default_rng(7)
@@ -137,15 +139,16 @@ def test_random_banded_kkt_systems_with_unsymmetric_neighbour_blocks_are_solved_
     for k in range(N9):
         block = rng.normal(size=(n, n))
         upper[k * n : (k + 1) * n, k * n : (k + 1) * n] = np.triu(block + block.T) + 8.0 * np.eye(n)
-        if k + 1 < N9:
+        if k + 1 < N9 and reach >= 1:
             upper[k * n : (k + 1) * n, (k + 1) * n : (k + 2) * n] = rng.normal(scale=0.5, size=(n, n))
-        if k + 2 < N9:
+        if k + 2 < N9 and reach >= 2:
             upper[k * n : (k + 1) * n, (k + 2) * n : (k + 3) * n] = np.diag(rng.normal(scale=0.5, size=n))
     hess_row, hess_col = np.nonzero(upper)
     ev = SimpleNamespace(ng=ng, jac_row=jac_row, jac_col=jac_col, hess_row=hess_row, hess_col=hess_col)
     rows = np.arange(len(row_k))
     step = NullSpaceStep(ev, rows, bounds, N9, n)
-    assert (step.m_min, step.m_max, step.diagonal) == (1, 3, [False, False, True])
+    assert (step.m_min, step.m_max, step.reach) == (1, 3, reach)
+    assert step.diagonal == [False, False, True][: reach + 1]
     jac_values = rng.normal(size=len(jac_row))
     J = dense(jac_row, jac_col, jac_values, (ng, nx))
     H = upper + np.triu(upper, 1).T
