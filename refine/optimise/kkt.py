@@ -11,8 +11,9 @@ matrices. The step
   factorisation of its held rows' Jacobian ``A_kᵀ = [Y_k Z_k] R_k`` (Householder reflections, each
   applied to every waypoint at once: :func:`householder_qr`), the particular step
   ``Y_k R_k⁻ᵀ r_k``, and the reduced Hessian ``ZᵀHZ``, banded because the Hessian couples a
-  waypoint to the next two only, solved by a banded Cholesky factorisation. A reduced Hessian that
-  is not positive definite (no strict minimum with this active set) is refused;
+  waypoint to the next two only, solved by a banded Cholesky factorisation (LAPACK's
+  ``dpbtrf``/``dpbtrs``). A reduced Hessian that is not positive definite (no strict minimum with
+  this active set) is refused;
 * :func:`solve_banded_kkt` otherwise (a held row of a segment: a joint step, a point inside a
   segment): the whole KKT matrix, variables and rows interleaved waypoint by waypoint, by banded LU.
 """
