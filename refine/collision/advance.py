@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from refine.collision.model import CollisionModel
+from refine.collision.native_bounds import short_of
 from refine.types import Array
 
 REACH_AHEAD = 0.75
@@ -73,10 +74,11 @@ def advance_pairs(
     names = model.pairs
     margin = model.pair_margins
     motion = pair_motion(model, q_path)
-    budget = bounds - margin + tolerance_m
-    need = short(budget, motion)
+    need = short_of(bounds, margin, tolerance_m, motion)
     if proved is not None:
         need &= ~proved
+    if not need.any():  # every segment pair certified by its end bounds: nothing to measure or advance
+        return np.ones(len(motion), dtype=bool), {}
     for k in np.flatnonzero(need.any(axis=1)):  # measure the pairs that fall short at the ends
         for end in (k, k + 1):
             for p in np.flatnonzero(need[k] & ~exact[end]):

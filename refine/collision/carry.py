@@ -58,6 +58,7 @@ from numpy.typing import NDArray
 from refine.collision.advance import pair_motion, short
 from refine.collision.model import CollisionModel
 from refine.collision.motion import corners
+from refine.collision.native_bounds import carried, direction_gaps, shapes_of, short_of
 from refine.types import Array
 
 NEAR = 24
@@ -225,10 +226,13 @@ def direction_bounds(
     their distance from below (see the module notes); ``-inf`` where there is no direction, where a
     body is a mesh, or where the gap is not positive; ``columns`` (P,): the pairs to bound (all if None).
     """
-    out = np.full(normals.shape[:2], -np.inf)
     have = ~np.isnan(normals[:, :, 0])
     if columns is not None:
         have &= columns
+    found = direction_gaps(shapes_of(model), poses, normals, have)
+    if found is not None:
+        return found
+    out = np.full(normals.shape[:2], -np.inf)
     for p in np.flatnonzero(have.any(axis=0)):
         ks = np.flatnonzero(have[:, p])
         every = len(ks) == len(poses)  # then all the rows as they are, not a copy of every body's poses
@@ -254,11 +258,8 @@ def carried_bounds(model: CollisionModel, prior: CheckedBounds, q: Array) -> Arr
     ):
         return None
     mine, theirs, delta = _carried_columns(model, prior)
-    motion = np.abs(q - prior.q) @ model.pair_motion.T  # (N, P) [m]
-    out = np.full((len(q), len(model.pairs)), -np.inf)
-    if len(mine):  # all the carried columns at once, each as bound - motion - shift
-        out[:, mine] = prior.bounds[:, theirs] - motion[:, mine] - delta
-    return np.where(out > 0.0, out, -np.inf)
+    # all the carried columns at once, each as bound - motion - shift
+    return carried(q, prior.q, model.pair_motion, prior.bounds, mine, theirs, delta)
 
 
 _COLUMNS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -565,7 +566,7 @@ def settled_pairs(
     if not finite.any():
         return finite
     clear = prior - model.pair_margins
-    certified = ~short(clear + tolerance_m, pair_motion(model, q_path)).any(axis=0)
+    certified = ~short_of(prior, model.pair_margins, tolerance_m, pair_motion(model, q_path)).any(axis=0)
     far = (prior.min(axis=0) >= prior[:, finite].min() + SETTLED_M) & (
         clear.min(axis=0) >= clear[:, finite].min() + SETTLED_M
     )
