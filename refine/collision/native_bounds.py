@@ -145,6 +145,7 @@ class _Library:
     """The loaded library's three functions, called on C-contiguous arrays."""
 
     def __init__(self, path: Path) -> None:
+        self.path = path
         dll = ctypes.CDLL(str(path))
         self.short = dll[f"{PREFIX}_short"]
         self.short.argtypes = [_pointer, _pointer, ctypes.c_double, _pointer, _count, _count, _pointer]
@@ -169,7 +170,8 @@ def library() -> _Library | None:
         return _state["lib"]  # type: ignore[return-value]
 
 
-def _find() -> _Library | None:
+def compiled() -> _Library | None:
+    """The library as compiled (from the cache folder, or compiled first), not checked; None without one."""
     cc = compiler()
     if cc is None:
         return None
@@ -182,15 +184,21 @@ def _find() -> _Library | None:
             os.utime(path)  # recently used: the last to be evicted
         else:
             build_library(cc, SOURCE, path, list(FUNCTIONS), FLAGS)
-        lib = _Library(path)
+        return _Library(path)
     except (OSError, RuntimeError, AttributeError) as e:
         log.warning("compiling the clearance bounds failed (%s); using NumPy's", e)
+        return None
+
+
+def _find() -> _Library | None:
+    lib = compiled()
+    if lib is None:
         return None
     error = self_check(lib)
     if not error <= CHECK_TOLERANCE:
         log.warning(
             "the compiled clearance bounds %s differ from NumPy's by %.3g (> %g); using NumPy's",
-            path,
+            lib.path,
             error,
             CHECK_TOLERANCE,
         )
