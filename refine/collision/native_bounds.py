@@ -29,13 +29,17 @@ import os
 import threading
 import weakref
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
-from refine.collision.model import CollisionModel
+from refine.collision.geometry import world_aabb
 from refine.native import build_library, cache_dir, compiler, compiler_version
 from refine.types import Array
+
+if TYPE_CHECKING:
+    from refine.collision.model import CollisionModel
 
 log = logging.getLogger(__name__)
 
@@ -45,7 +49,7 @@ CHECK_TOLERANCE = 1e-12
 FLAGS = ("-O3", "-fPIC", "-shared", "-ffp-contract=off")
 """-O3: the loops over pairs and corners vectorised; no fused multiply-adds and no reassociation (no
 -ffast-math): each sum rounds term by term, as NumPy's small products do."""
-FUNCTIONS = ("short", "carried", "gaps")
+FUNCTIONS = ("short", "carried", "gaps", "boxes")
 
 SOURCE = r"""
 #include <math.h>
@@ -83,6 +87,38 @@ int refine_bounds_carried(const double *q, const double *q0, const double *Rt, c
         for (idx c = 0; c < C; ++c) {
             double v = bk[theirs[c]] - s[c] - delta[c];
             o[mine[c]] = v > 0.0 ? v : -INFINITY;
+        }
+    }
+    return 0;
+}
+
+int refine_bounds_boxes(const double *poses, const double *centre, const double *half, const double *cfix,
+                        const double *hfix, const idx *pa, const idx *pb, idx N, idx M, idx P,
+                        double *work, double *out) {
+    /* work (M, 6): per moving body its world box's centre and half sizes at the row */
+    for (idx k = 0; k < N; ++k) {
+        for (idx m = 0; m < M; ++m) {
+            const double *T = poses + 16 * (k * M + m), *ce = centre + 3 * m, *hf = half + 3 * m;
+            double *c = work + 6 * m, *h = c + 3;
+            for (int i = 0; i < 3; ++i) {
+                const double *r = T + 4 * i;
+                c[i] = r[3] + (r[0] * ce[0] + r[1] * ce[1] + r[2] * ce[2]);
+                h[i] = fabs(r[0]) * hf[0] + fabs(r[1]) * hf[1] + fabs(r[2]) * hf[2];
+            }
+        }
+        double *o = out + k * P;
+        for (idx p = 0; p < P; ++p) {
+            idx a = pa[p], b = pb[p];
+            const double *ca = a < M ? work + 6 * a : cfix + 3 * a, *ha = a < M ? work + 6 * a + 3 : hfix + 3 * a;
+            const double *cb = b < M ? work + 6 * b : cfix + 3 * b, *hb = b < M ? work + 6 * b + 3 : hfix + 3 * b;
+            double s = 0.0;
+            for (int i = 0; i < 3; ++i) {
+                double d = fabs(ca[i] - cb[i]) - ha[i] - hb[i];
+                d = d < 0.0 ? 0.0 : d;  /* NaN stays NaN, as NumPy's maximum keeps it */
+                s += d * d;
+            }
+            double g = sqrt(s);
+            o[p] = g > 0.0 ? g : -INFINITY;
         }
     }
     return 0;
@@ -153,7 +189,9 @@ class _Library:
         self.carried.argtypes = [_pointer] * 7 + [_count] * 5 + [_pointer] * 2
         self.gaps = dll[f"{PREFIX}_gaps"]
         self.gaps.argtypes = [_pointer] * 11 + [_count] * 3 + [_pointer]
-        for fn in (self.short, self.carried, self.gaps):
+        self.boxes = dll[f"{PREFIX}_boxes"]
+        self.boxes.argtypes = [_pointer] * 7 + [_count] * 3 + [_pointer] * 2
+        for fn in (self.short, self.carried, self.gaps, self.boxes):
             fn.restype = ctypes.c_int
 
 
@@ -258,6 +296,54 @@ def carried(
     lib.carried(
         _ptr(q), _ptr(q0), _ptr(Rt), _ptr(bounds), _ptr(mine), _ptr(theirs), _ptr(delta),
         N, q.shape[1], P, bounds.shape[1], len(mine), _ptr(work), _ptr(out),
+    )  # fmt: skip
+    return out
+
+
+def box_gaps(
+    poses: Array,
+    centre: Array,
+    half: Array,
+    fixed_centre: Array,
+    fixed_half: Array,
+    pa: NDArray[np.intp],
+    pb: NDArray[np.intp],
+    lib: _Library | None | object = LOOKUP,
+) -> Array:
+    """The gaps (N, C) [m] between the world-aligned boxes of the body pairs (pa, pb) (C,), -inf for none.
+
+    ``poses`` (N, M, 4, 4): the M moving bodies; ``centre``, ``half`` (M, 3) [m]: each one's box in
+    its shape frame; ``fixed_centre``, ``fixed_half`` (B, 3) [m]: the world boxes of the bodies past
+    the moving ones (read there only). The gap ``|max(|c_a - c_b| - h_a - h_b, 0)|``; overlapping
+    boxes (and NaN poses) give ``-inf``.
+    """
+    lib = library() if lib is LOOKUP else lib
+    N, M = poses.shape[:2]
+    if lib is None:
+        cb, hb = np.empty((2, len(fixed_centre), N, 3))  # body-major: each pair's rows gathered as blocks
+        cb[M:], hb[M:] = fixed_centre[M:, None], fixed_half[M:, None]
+        used = np.union1d(pa[pa < M], pb[pb < M])  # only the moving bodies of these pairs are boxed
+        at = slice(None, M) if len(used) == M else used  # all of them: the poses as they are
+        c, h = world_aabb(poses[:, at], centre[at], half[at])
+        cb[at], hb[at] = c.transpose(1, 0, 2), h.transpose(1, 0, 2)
+        d = cb[pa]  # |c_a - c_b| - h_a - h_b, in place: the same sums without their temporaries
+        d -= cb[pb]
+        np.abs(d, out=d)
+        d -= hb[pa]
+        d -= hb[pb]
+        np.maximum(d, 0.0, out=d)
+        gaps = np.ascontiguousarray(np.sqrt(np.einsum("pni,pni->pn", d, d)).T)
+        gaps[~(gaps > 0.0)] = -np.inf
+        return gaps
+    poses = np.ascontiguousarray(poses, dtype=float)
+    centre, half, fixed_centre, fixed_half = (
+        np.ascontiguousarray(a, dtype=float) for a in (centre[:M], half[:M], fixed_centre, fixed_half)
+    )
+    pa, pb = (np.ascontiguousarray(a, dtype=np.int64) for a in (pa, pb))
+    out, work = np.empty((N, len(pa))), np.empty((max(M, 1), 6))
+    lib.boxes(
+        _ptr(poses), _ptr(centre), _ptr(half), _ptr(fixed_centre), _ptr(fixed_half), _ptr(pa), _ptr(pb),
+        N, M, len(pa), _ptr(work), _ptr(out),
     )  # fmt: skip
     return out
 
@@ -421,6 +507,11 @@ def self_check(lib: _Library, seed: int = 0) -> float:
     have = rng.random((N, P)) < 0.8
     error = max(error, _relative(direction_gaps(shapes, poses, normals, have, lib),
                                  numpy_gaps(shapes, poses, normals, have)))  # fmt: skip
+    # boxes: moving and fixed bodies, some overlapping
+    centre, half = rng.normal(scale=0.1, size=(M, 3)), rng.uniform(0.05, 0.5, (M, 3))
+    fixed_centre, fixed_half = rng.uniform(-2.0, 2.0, (B, 3)), rng.uniform(0.05, 0.5, (B, 3))
+    error = max(error, _relative(box_gaps(poses, centre, half, fixed_centre, fixed_half, pa, pb, lib),
+                                 box_gaps(poses, centre, half, fixed_centre, fixed_half, pa, pb, None)))  # fmt: skip
     return error
 
 

@@ -128,6 +128,38 @@ def test_the_compiled_gaps_are_the_sampled_gaps_between_the_shapes(seed):
     assert nb._relative(got, nb.numpy_gaps(shapes, poses, normals, have)) <= 1e-12
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_the_box_gaps_are_the_distances_between_the_boxes_of_the_corners(seed):
+    """Each moving box's world box from its 8 corners placed, the gap as the per-axis separation's norm."""
+    rng = np.random.default_rng(seed)
+    N, M, B = 7, 3, 6
+    centre, half = rng.normal(scale=0.1, size=(M, 3)), rng.uniform(0.05, 0.6, (M, 3))
+    fixed_centre, fixed_half = rng.uniform(-1.5, 1.5, (B, 3)), rng.uniform(0.05, 0.6, (B, 3))
+    poses = np.tile(np.eye(4), (N, M, 1, 1))
+    for k in range(N):
+        for m in range(M):
+            poses[k, m, :3, :3], poses[k, m, :3, 3] = rotation(rng), rng.uniform(-1.5, 1.5, 3)
+    pa, pb = np.array([0, 0, 1, 2, 1, 0]), np.array([1, 3, 4, 5, 2, 5])
+    signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+    expected = np.full((N, len(pa)), -np.inf)
+    for k in range(N):
+        lo, hi = fixed_centre - fixed_half, fixed_centre + fixed_half
+        lo, hi = lo.copy(), hi.copy()
+        for m in range(M):
+            x = (centre[m] + signs * half[m]) @ poses[k, m, :3, :3].T + poses[k, m, :3, 3]
+            lo[m], hi[m] = x.min(axis=0), x.max(axis=0)
+        for c, (a, b) in enumerate(zip(pa, pb, strict=True)):
+            apart = np.maximum(np.maximum(lo[b] - hi[a], lo[a] - hi[b]), 0.0)
+            if np.linalg.norm(apart) > 0.0:
+                expected[k, c] = np.linalg.norm(apart)
+    assert np.isfinite(expected).any() and np.isinf(expected).any()
+    for way in ([lib] if lib is not None else []) + [None]:
+        got = nb.box_gaps(poses, centre, half, fixed_centre, fixed_half, pa, pb, way)
+        assert np.array_equal(np.isfinite(got), np.isfinite(expected))
+        finite = np.isfinite(expected)
+        assert np.allclose(got[finite], expected[finite], rtol=1e-12, atol=1e-12)
+
+
 def glass_free_model():
     """The IRB 4600 by a pillar and a ball with a nozzle (boxes, a sphere, cylinders, convex links)."""
     pillar = Shape("pillar", "box", pose=make_transform(p=[1.5, -0.65, 1.0]), size_m=(0.2, 0.2, 2.0))
@@ -180,7 +212,7 @@ def test_the_load_check_catches_a_wrong_library():
     class Wrong:
         def __init__(self, real):
             self.real = real
-            self.short, self.carried = real.short, real.carried
+            self.short, self.carried, self.boxes = real.short, real.carried, real.boxes
 
         def gaps(self, *args):
             self.real.gaps(*args)
