@@ -58,7 +58,7 @@ from numpy.typing import NDArray
 from refine.collision.advance import pair_motion, short
 from refine.collision.model import CollisionModel
 from refine.collision.motion import corners
-from refine.collision.native_bounds import carried, direction_gaps, shapes_of, short_of
+from refine.collision.native_bounds import Shapes, carried, direction_gaps, short_of
 from refine.types import Array
 
 NEAR = 24
@@ -260,6 +260,26 @@ def carried_bounds(model: CollisionModel, prior: CheckedBounds, q: Array) -> Arr
     mine, theirs, delta = _carried_columns(model, prior)
     # all the carried columns at once, each as bound - motion - shift
     return carried(q, prior.q, model.pair_motion, prior.bounds, mine, theirs, delta)
+
+
+_SHAPES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+""":func:`shapes_of` per collision model."""
+
+
+def shapes_of(model: CollisionModel) -> Shapes:
+    """The model's bodies and pairs as :func:`refine.collision.native_bounds.direction_gaps` reads them (kept per model)."""
+    known = _SHAPES.get(model)
+    if known is None:
+        bodies = model.bodies
+        fixed = np.ascontiguousarray([b.link_T_shape for b in bodies], dtype=float)  # a cell object's: final
+        ends = np.array([model.pair_bodies(p) for p in range(len(model.pairs))], dtype=np.int64).reshape(
+            -1, 2
+        )
+        bounded = np.array(
+            [not (bodies[a].is_mesh or bodies[b].is_mesh) for a, b in ends.tolist()], dtype=bool
+        )
+        known = _SHAPES[model] = Shapes(bodies, fixed, ends[:, 0], ends[:, 1], bounded)
+    return known
 
 
 _COLUMNS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()

@@ -1,6 +1,6 @@
 """The dense check's bound arithmetic over whole paths, compiled to C where it can be.
 
-Three expressions of :mod:`refine.collision.carry`, :mod:`refine.collision.advance` and
+Four expressions of :mod:`refine.collision.carry`, :mod:`refine.collision.advance` and
 :mod:`refine.collision.check` run over every waypoint and pair of a path (618 × 63 on the glass
 cell) several times a check, each a chain of NumPy passes and temporaries:
 
@@ -11,7 +11,9 @@ cell) several times a check, each a chain of NumPy passes and temporaries:
   (:func:`refine.collision.carry.carried_bounds`);
 * :func:`direction_gaps`: every pair's gap along a unit direction per waypoint,
   ``-reach_A(-n) - reach_B(n)``, ``-inf`` where not positive
-  (:func:`refine.collision.carry.direction_bounds`; one pass over every pair instead of a loop).
+  (:func:`refine.collision.carry.direction_bounds`; one pass over every pair instead of a loop);
+* :func:`box_gaps`: the gaps between the pairs' world-aligned boxes
+  (:meth:`refine.collision.model.CollisionModel.box_bounds`).
 
 Each is one small C loop here (:data:`SOURCE`), compiled once into a shared library in the cache
 folder of :mod:`refine.native` and called through :mod:`ctypes` on C-contiguous float64 arrays.
@@ -27,9 +29,7 @@ import hashlib
 import logging
 import os
 import threading
-import weakref
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -37,9 +37,6 @@ from numpy.typing import NDArray
 from refine.collision.geometry import world_aabb
 from refine.native import build_library, cache_dir, compiler, compiler_version
 from refine.types import Array
-
-if TYPE_CHECKING:
-    from refine.collision.model import CollisionModel
 
 log = logging.getLogger(__name__)
 
@@ -390,26 +387,6 @@ class Shapes:
         self.fixed = fixed
         self.pa, self.pb = (np.ascontiguousarray(a, dtype=np.int64) for a in (pa, pb))
         self.bounded = np.asarray(bounded, dtype=bool)
-
-
-_SHAPES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-""":func:`shapes_of` per collision model."""
-
-
-def shapes_of(model: CollisionModel) -> Shapes:
-    """The model's bodies and pairs as :func:`direction_gaps` reads them (kept per model)."""
-    known = _SHAPES.get(model)
-    if known is None:
-        bodies = model.bodies
-        fixed = np.ascontiguousarray([b.link_T_shape for b in bodies], dtype=float)  # a cell object's: final
-        ends = np.array([model.pair_bodies(p) for p in range(len(model.pairs))], dtype=np.int64).reshape(
-            -1, 2
-        )
-        bounded = np.array(
-            [not (bodies[a].is_mesh or bodies[b].is_mesh) for a, b in ends.tolist()], dtype=bool
-        )
-        known = _SHAPES[model] = Shapes(bodies, fixed, ends[:, 0], ends[:, 1], bounded)
-    return known
 
 
 def direction_gaps(
