@@ -327,7 +327,8 @@ def margins_proved(
     poses, _, bounds, exact = _waypoint_bounds(
         model, q_path, tolerance_m, True, plane=True, prior=prior, directions=directions, left=left
     )
-    return bool(advance_pairs(model, q_path, poses, bounds, exact, tolerance_m)[0].all())
+    columns = None if left is None else np.flatnonzero(left.any(axis=0))  # the others: certified by prior
+    return bool(advance_pairs(model, q_path, poses, bounds, exact, tolerance_m, columns=columns)[0].all())
 
 
 def _waypoint_bounds(
