@@ -55,7 +55,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from refine.collision.advance import pair_motion, short
+from refine.collision.advance import pair_motion
 from refine.collision.model import CollisionModel
 from refine.collision.motion import corners
 from refine.collision.native_bounds import Shapes, carried, direction_gaps, short_of
@@ -380,10 +380,13 @@ def proved_between(
     if len(rest) == 0:
         return True
     R = R[:, rest]
-    low = checked.bounds[:, rest].take(a, axis=0) - from_start @ R
-    low = np.maximum(low, checked.bounds[:, rest].take(b, axis=0) - np.abs(q - checked.q.take(b, axis=0)) @ R)
-    motion = moves @ R
-    return not short(low - margins[rest] + tolerance_m, motion).any()
+    kept = checked.bounds[:, rest]
+    low = kept.take(a, axis=0)  # copies: taken in place from here on, as bounds_between forms them
+    low -= from_start @ R
+    other = kept.take(b, axis=0)
+    other -= np.abs(q - checked.q.take(b, axis=0)) @ R
+    np.maximum(low, other, out=low)
+    return not short_of(low, margins[rest], tolerance_m, moves @ R).any()
 
 
 _SLACK_M = 1e-9  # [m], far above the rounding of sums of a few metres, far below any margin
