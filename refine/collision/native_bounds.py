@@ -198,7 +198,7 @@ def _ptr(a: np.ndarray) -> int:
 
 def library() -> _Library | None:
     """The checked library (compiled and loaded on the first call), or None: the NumPy expressions."""
-    key = (os.environ.get("REFINE_COMPILE", "1"), os.environ.get("REFINE_CACHE_DIR", ""))
+    key = (os.environ.get("REFINE_COMPILE", "1"), os.environ.get("CC"))  # what decides the compiler
     with _lock:
         if _state.get("key") != key:
             _state["lib"], _state["key"] = _find(), key
