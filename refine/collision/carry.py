@@ -58,7 +58,7 @@ from numpy.typing import NDArray
 from refine.collision.advance import pair_motion
 from refine.collision.model import CollisionModel
 from refine.collision.motion import corners
-from refine.collision.native_bounds import Shapes, carried, direction_gaps, short_of
+from refine.collision.native_bounds import Shapes, carried, column_least, direction_gaps, row_least, short_of
 from refine.types import Array
 
 NEAR = 24
@@ -541,8 +541,7 @@ def measure_least(
     measured = np.zeros(N, dtype=bool)
 
     def read(rows: slice) -> None:
-        lower[0][rows] = np.where(measured[rows], np.inf, bounds[rows].min(axis=1))
-        lower[1][rows] = np.where(measured[rows], np.inf, (bounds[rows] - margins).min(axis=1))
+        row_least(bounds, margins, measured, rows, lower[0], lower[1])
 
     lower = [np.empty(N), np.empty(N)]  # per waypoint not measured: distance, clearance bounds
     read(slice(None))
@@ -585,12 +584,9 @@ def settled_pairs(
     computed: the check finds the same, only the lower-bound figures of waypoints it does not
     measure (and the bounds it carries on) keep such a pair's known bound where a box gives more.
     """
-    finite = np.isfinite(prior).all(axis=0)
+    least, clear, finite = column_least(prior, model.pair_margins)  # per pair (P,)
     if not finite.any():
         return finite
-    clear = prior - model.pair_margins
     certified = ~short_of(prior, model.pair_margins, tolerance_m, pair_motion(model, q_path)).any(axis=0)
-    far = (prior.min(axis=0) >= prior[:, finite].min() + SETTLED_M) & (
-        clear.min(axis=0) >= clear[:, finite].min() + SETTLED_M
-    )
+    far = (least >= least[finite].min() + SETTLED_M) & (clear >= clear[finite].min() + SETTLED_M)
     return finite & certified & far

@@ -15,8 +15,10 @@ cell) several times a check, each a chain of NumPy passes and temporaries:
 * :func:`box_gaps`: the gaps between the pairs' world-aligned boxes
   (:meth:`refine.collision.model.CollisionModel.box_bounds`).
 
-Each is one small C loop here (:data:`SOURCE`), compiled once into a shared library in the cache
-folder of :mod:`refine.native` and called through :mod:`ctypes` on C-contiguous float64 arrays.
+Each is one small C loop (:data:`refine.collision.bounds_source.SOURCE`), as are the least bound
+of each waypoint and of each pair (:func:`row_least`, :func:`column_least`: which waypoints the
+check measures, which pairs the known bounds settle), compiled once into a shared library in the
+cache folder of :mod:`refine.native` and called through :mod:`ctypes` on C-contiguous float64 arrays.
 When the library is loaded its answers are compared once with the NumPy expressions on random
 inputs (:data:`CHECK_TOLERANCE`); a difference, ``REFINE_COMPILE=0``, no C compiler or a failed
 compilation leave every function on its NumPy expression, which gives the same answers to rounding.
@@ -34,6 +36,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from refine.collision.bounds_source import SOURCE
 from refine.collision.geometry import world_aabb
 from refine.native import build_library, cache_dir, compiler, compiler_version
 from refine.types import Array
@@ -46,126 +49,8 @@ CHECK_TOLERANCE = 1e-12
 FLAGS = ("-O3", "-fPIC", "-shared", "-ffp-contract=off")
 """-O3: the loops over pairs and corners vectorised; no fused multiply-adds and no reassociation (no
 -ffast-math): each sum rounds term by term, as NumPy's small products do."""
-FUNCTIONS = ("short", "carried", "gaps", "boxes")
+FUNCTIONS = ("short", "carried", "gaps", "boxes", "rows", "columns")
 
-SOURCE = r"""
-#include <math.h>
-#include <stdint.h>
-
-typedef long long idx;
-
-int refine_bounds_short(const double *bounds, const double *margins, double tol, const double *motion,
-                        idx N, idx P, uint8_t *out) {
-    for (idx k = 0; k + 1 < N; ++k) {
-        const double *b0 = bounds + k * P, *b1 = b0 + P, *s = motion + k * P;
-        uint8_t *o = out + k * P;
-        for (idx p = 0; p < P; ++p) {
-            double u = b0[p] - margins[p] + tol, v = b1[p] - margins[p] + tol;
-            o[p] = (uint8_t)((u < 0.0) | (v < 0.0) | (u + v < s[p]));
-        }
-    }
-    return 0;
-}
-
-int refine_bounds_carried(const double *q, const double *q0, const double *Rt, const double *b0,
-                          const idx *mine, const idx *theirs, const double *delta,
-                          idx N, idx n, idx P, idx P0, idx C, double *s, double *out) {
-    /* Rt (n, C): the carried pairs' motion bounds by joint; s (C,): work memory */
-    for (idx k = 0; k < N; ++k) {
-        const double *qk = q + k * n, *q0k = q0 + k * n;
-        for (idx c = 0; c < C; ++c) s[c] = 0.0;
-        for (idx j = 0; j < n; ++j) {  /* each sum term by term over the joints, as a product's */
-            const double dq = fabs(qk[j] - q0k[j]), *r = Rt + j * C;
-            for (idx c = 0; c < C; ++c) s[c] += dq * r[c];
-        }
-        double *o = out + k * P;
-        const double *bk = b0 + k * P0;
-        for (idx p = 0; p < P; ++p) o[p] = -INFINITY;
-        for (idx c = 0; c < C; ++c) {
-            double v = bk[theirs[c]] - s[c] - delta[c];
-            o[mine[c]] = v > 0.0 ? v : -INFINITY;
-        }
-    }
-    return 0;
-}
-
-int refine_bounds_boxes(const double *poses, const double *centre, const double *half, const double *cfix,
-                        const double *hfix, const idx *pa, const idx *pb, idx N, idx M, idx P,
-                        double *work, double *out) {
-    /* work (M, 6): per moving body its world box's centre and half sizes at the row */
-    for (idx k = 0; k < N; ++k) {
-        for (idx m = 0; m < M; ++m) {
-            const double *T = poses + 16 * (k * M + m), *ce = centre + 3 * m, *hf = half + 3 * m;
-            double *c = work + 6 * m, *h = c + 3;
-            for (int i = 0; i < 3; ++i) {
-                const double *r = T + 4 * i;
-                c[i] = r[3] + (r[0] * ce[0] + r[1] * ce[1] + r[2] * ce[2]);
-                h[i] = fabs(r[0]) * hf[0] + fabs(r[1]) * hf[1] + fabs(r[2]) * hf[2];
-            }
-        }
-        double *o = out + k * P;
-        for (idx p = 0; p < P; ++p) {
-            idx a = pa[p], b = pb[p];
-            const double *ca = a < M ? work + 6 * a : cfix + 3 * a, *ha = a < M ? work + 6 * a + 3 : hfix + 3 * a;
-            const double *cb = b < M ? work + 6 * b : cfix + 3 * b, *hb = b < M ? work + 6 * b + 3 : hfix + 3 * b;
-            double s = 0.0;
-            for (int i = 0; i < 3; ++i) {
-                double d = fabs(ca[i] - cb[i]) - ha[i] - hb[i];
-                d = d < 0.0 ? 0.0 : d;  /* NaN stays NaN, as NumPy's maximum keeps it */
-                s += d * d;
-            }
-            double g = sqrt(s);
-            o[p] = g > 0.0 ? g : -INFINITY;
-        }
-    }
-    return 0;
-}
-
-/* the largest d . x over the body placed at T (row-major 4 x 4) */
-static double reach(const double *T, const double *d, idx kind, const double *par,
-                    const double *verts, idx nv) {
-    double l[4];
-    for (int j = 0; j < 4; ++j) l[j] = d[0] * T[j] + d[1] * T[4 + j] + d[2] * T[8 + j];
-    if (kind == 0) return l[3] + par[0] * sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-    if (kind == 1) return l[3] + (fabs(l[0]) * par[0] + fabs(l[1]) * par[1] + fabs(l[2]) * par[2]);
-    if (kind == 2) return l[3] + par[1] * fabs(l[2]) + par[0] * hypot(l[0], l[1]);
-    double best = -INFINITY;
-    for (idx v = 0; v < nv; ++v) {
-        double x = l[0] * verts[3 * v] + l[1] * verts[3 * v + 1] + l[2] * verts[3 * v + 2];
-        if (x > best) best = x;
-    }
-    return l[3] + best;
-}
-
-int refine_bounds_gaps(const double *poses, const double *fixed, const double *normals, const uint8_t *have,
-                       const idx *pa, const idx *pb, const idx *kind, const double *par, const idx *voff,
-                       const idx *vcount, const double *verts, idx N, idx M, idx P, double *out) {
-    for (idx i = 0; i < N * P; ++i) out[i] = -INFINITY;
-    for (idx p = 0; p < P; ++p) {
-        idx a = pa[p], b = pb[p];
-        int whole = 1;  /* a NaN direction anywhere leaves the pair without bounds, as NumPy's */
-        for (idx k = 0; k < N && whole; ++k) {
-            if (!have[k * P + p]) continue;
-            const double *n = normals + 3 * (k * P + p);
-            double s = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-            for (int i = 0; i < 3; ++i) if (isnan(n[i] / s)) whole = 0;
-        }
-        if (!whole) continue;
-        for (idx k = 0; k < N; ++k) {
-            if (!have[k * P + p]) continue;
-            const double *n = normals + 3 * (k * P + p);
-            double s = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-            double u[3] = {n[0] / s, n[1] / s, n[2] / s}, w[3] = {-u[0], -u[1], -u[2]};
-            const double *Ta = a < M ? poses + 16 * (k * M + a) : fixed + 16 * a;
-            const double *Tb = b < M ? poses + 16 * (k * M + b) : fixed + 16 * b;
-            double g = -reach(Ta, w, kind[a], par + 3 * a, verts + 3 * voff[a], vcount[a])
-                       - reach(Tb, u, kind[b], par + 3 * b, verts + 3 * voff[b], vcount[b]);
-            out[k * P + p] = g > 0.0 ? g : -INFINITY;
-        }
-    }
-    return 0;
-}
-"""
 
 _pointer, _count = ctypes.c_void_p, ctypes.c_longlong
 _lock = threading.Lock()
@@ -188,7 +73,11 @@ class _Library:
         self.gaps.argtypes = [_pointer] * 11 + [_count] * 3 + [_pointer]
         self.boxes = dll[f"{PREFIX}_boxes"]
         self.boxes.argtypes = [_pointer] * 7 + [_count] * 3 + [_pointer] * 2
-        for fn in (self.short, self.carried, self.gaps, self.boxes):
+        self.rows = dll[f"{PREFIX}_rows"]
+        self.rows.argtypes = [_pointer] * 3 + [_count] * 3 + [_pointer] * 2
+        self.columns = dll[f"{PREFIX}_columns"]
+        self.columns.argtypes = [_pointer] * 2 + [_count] * 2 + [_pointer] * 3
+        for fn in (self.short, self.carried, self.gaps, self.boxes, self.rows, self.columns):
             fn.restype = ctypes.c_int
 
 
@@ -261,6 +150,46 @@ def short_of(
     out = np.empty((N - 1, P), dtype=np.bool_)
     lib.short(_ptr(bounds), _ptr(margins), float(tolerance_m), _ptr(motion), N, P, _ptr(out))
     return out
+
+
+def row_least(
+    bounds: Array,
+    margins: Array,
+    measured: NDArray[np.bool_],
+    rows: slice,
+    distance: Array,
+    clearance: Array,
+    lib: _Library | None | object = LOOKUP,
+) -> None:
+    """Per waypoint of ``rows``, its least bound and least clearance bound into ``distance``, ``clearance`` (N,).
+
+    ``bounds`` (N, P) [m], ``margins`` (P,) [m]; ``inf`` for a waypoint ``measured`` (N,). Exact
+    (a least value does not round), so the same whether compiled or not.
+    """
+    lib = library() if lib is LOOKUP else lib
+    lo, hi, _ = rows.indices(len(bounds))
+    if lib is None or not bounds.flags.c_contiguous or bounds.shape[1] == 0 or hi <= lo:
+        distance[rows] = np.where(measured[rows], np.inf, bounds[rows].min(axis=1))
+        clearance[rows] = np.where(measured[rows], np.inf, (bounds[rows] - margins).min(axis=1))
+        return
+    margins = np.ascontiguousarray(margins, dtype=float)
+    lib.rows(
+        _ptr(bounds), _ptr(margins), _ptr(measured), lo, hi, bounds.shape[1], _ptr(distance), _ptr(clearance)
+    )
+
+
+def column_least(
+    bounds: Array, margins: Array, lib: _Library | None | object = LOOKUP
+) -> tuple[Array, Array, NDArray[np.bool_]]:
+    """Per pair of ``bounds`` (N, P) [m]: its least bound, its least ``bound - margin`` [m], all finite, (P,) each."""
+    lib = library() if lib is LOOKUP else lib
+    if lib is None or len(bounds) == 0:
+        return bounds.min(axis=0), (bounds - margins).min(axis=0), np.isfinite(bounds).all(axis=0)
+    bounds, margins = (np.ascontiguousarray(a, dtype=float) for a in (bounds, margins))
+    N, P = bounds.shape
+    d, c, finite = np.empty(P), np.empty(P), np.empty(P, dtype=np.bool_)
+    lib.columns(_ptr(bounds), _ptr(margins), N, P, _ptr(d), _ptr(c), _ptr(finite))
+    return d, c, finite
 
 
 def carried(
@@ -489,6 +418,19 @@ def self_check(lib: _Library, seed: int = 0) -> float:
     fixed_centre, fixed_half = rng.uniform(-2.0, 2.0, (B, 3)), rng.uniform(0.05, 0.5, (B, 3))
     error = max(error, _relative(box_gaps(poses, centre, half, fixed_centre, fixed_half, pa, pb, lib),
                                  box_gaps(poses, centre, half, fixed_centre, fixed_half, pa, pb, None)))  # fmt: skip
+    # least values per row and per column: exact, so equal
+    measured = rng.random(N) < 0.3
+    bounds[3, 2] = np.nan
+    rows = [np.empty(N) for _ in range(4)]
+    row_least(bounds, margins, measured, slice(2, N - 3), rows[0], rows[1], lib)
+    row_least(bounds, margins, measured, slice(2, N - 3), rows[2], rows[3], None)
+    cut = slice(2, N - 3)
+    for a, b in (
+        (rows[0][cut], rows[2][cut]),
+        (rows[1][cut], rows[3][cut]),
+        *zip(column_least(bounds, margins, lib), column_least(bounds, margins, None), strict=True),
+    ):
+        error = max(error, float(not np.array_equal(a, b, equal_nan=True)))
     return error
 
 
