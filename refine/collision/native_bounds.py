@@ -420,7 +420,8 @@ def self_check(lib: _Library, seed: int = 0) -> float:
                                  box_gaps(poses, centre, half, fixed_centre, fixed_half, pa, pb, None)))  # fmt: skip
     # least values per row and per column: exact, so equal
     measured = rng.random(N) < 0.3
-    bounds[3, 2] = np.nan
+    bounds = rng.uniform(-0.05, 0.3, (N, P))  # one -inf, one inf and one NaN: most columns finite
+    bounds[3, 2], bounds[5, 4], bounds[7, 6] = np.nan, -np.inf, np.inf
     rows = [np.empty(N) for _ in range(4)]
     row_least(bounds, margins, measured, slice(2, N - 3), rows[0], rows[1], lib)
     row_least(bounds, margins, measured, slice(2, N - 3), rows[2], rows[3], None)
