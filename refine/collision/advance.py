@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from refine.collision.model import CollisionModel
+from refine.collision.native_bounds import short_of
 from refine.types import Array
 
 REACH_AHEAD = 0.75
@@ -53,6 +54,7 @@ def advance_pairs(
     exact: NDArray[np.bool_],
     tolerance_m: float,
     proved: NDArray[np.bool_] | None = None,
+    columns: NDArray[np.intp] | None = None,
 ) -> tuple[NDArray[np.bool_], dict[int, list[Sample]]]:
     """Certify every segment pair by pair by conservative advancement on the pair's motion bound.
 
@@ -63,7 +65,8 @@ def advance_pairs(
     motion bound ``S`` over the segment: each end certifies ``budget / S`` of the segment. A pair
     that falls short is measured exactly at the ends, then advanced from the start
     (:func:`advance`) until the span certified from the end is reached. Segment pairs marked in
-    ``proved`` (N-1, P) were proved by the caller and are neither measured nor advanced.
+    ``proved`` (N-1, P) were proved by the caller and are neither measured nor advanced; with
+    ``columns`` (C,), ascending, only those pairs are looked at (the caller proved the others).
 
     Returns:
         Which segments are certified (N-1,) (the others, with a broken margin or more than
@@ -71,18 +74,26 @@ def advance_pairs(
         a pair was advanced the samples taken inside it.
     """
     names = model.pairs
-    margin = model.pair_margins
-    motion = pair_motion(model, q_path)
-    budget = bounds - margin + tolerance_m
-    need = short(budget, motion)
+    margins = model.pair_margins
+    cols = np.arange(len(names)) if columns is None else np.asarray(columns, dtype=np.intp)
+    if columns is None:
+        margin, motion, view = margins, pair_motion(model, q_path), bounds
+    else:  # the pairs' own columns: their bounds, margins and motion (C of P)
+        margin, view = margins[cols], bounds[:, cols]
+        motion = np.abs(np.diff(q_path, axis=0)) @ model.pair_motion[cols].T
+        proved = None if proved is None else proved[:, cols]
+    need = short_of(view, margin, tolerance_m, motion)
     if proved is not None:
         need &= ~proved
+    if not need.any():  # every segment pair certified by its end bounds: nothing to measure or advance
+        return np.ones(len(motion), dtype=bool), {}
     for k in np.flatnonzero(need.any(axis=1)):  # measure the pairs that fall short at the ends
         for end in (k, k + 1):
-            for p in np.flatnonzero(need[k] & ~exact[end]):
-                bounds[end, p] = model.pair_distance(q_path[end], int(p), poses[end])
+            for c in np.flatnonzero(need[k] & ~exact[end, cols]):
+                p = int(cols[c])
+                view[end, c] = bounds[end, p] = model.pair_distance(q_path[end], p, poses[end])
                 exact[end, p] = True
-    budget = bounds - margin + tolerance_m
+    budget = view - margin + tolerance_m
     need = short(budget, motion)
     if proved is not None:
         need &= ~proved
@@ -94,19 +105,19 @@ def advance_pairs(
 
         def budget_at(t: float) -> float:
             d = model.pair_distance(q_path[k] + t * (q_path[k + 1] - q_path[k]), p)
-            found.append(Sample(d, d - margin[p], names[p], d, NONE, t, p))
-            return d - margin[p] + tolerance_m
+            found.append(Sample(d, d - margins[p], names[p], d, NONE, t, p))
+            return d - margins[p] + tolerance_m
 
         return budget_at
 
-    for k, p in zip(*np.nonzero(need), strict=True):
+    for k, c in zip(*np.nonzero(need), strict=True):  # by segment, then by pair: the columns ascend
         if broken[k]:
             continue
-        b0, b1, S = budget[k, p], budget[k + 1, p], motion[k, p]
+        b0, b1, S = budget[k, c], budget[k + 1, c], motion[k, c]
         if b0 < 0.0 or b1 < 0.0:
             broken[k] = True
             continue
-        if not advance(measure(int(k), int(p)), b0, b1, S):
+        if not advance(measure(int(k), int(cols[c])), b0, b1, S):
             broken[k] = True  # a margin broken inside, or the advance stalled: sample the segment densely
     return ~broken, inner
 

@@ -55,9 +55,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from refine.collision.advance import pair_motion, short
+from refine.collision.advance import pair_motion
 from refine.collision.model import CollisionModel
 from refine.collision.motion import corners
+from refine.collision.native_bounds import Shapes, carried, column_least, direction_gaps, row_least, short_of
 from refine.types import Array
 
 NEAR = 24
@@ -225,10 +226,13 @@ def direction_bounds(
     their distance from below (see the module notes); ``-inf`` where there is no direction, where a
     body is a mesh, or where the gap is not positive; ``columns`` (P,): the pairs to bound (all if None).
     """
-    out = np.full(normals.shape[:2], -np.inf)
     have = ~np.isnan(normals[:, :, 0])
     if columns is not None:
         have &= columns
+    found = direction_gaps(shapes_of(model), poses, normals, have)
+    if found is not None:
+        return found
+    out = np.full(normals.shape[:2], -np.inf)
     for p in np.flatnonzero(have.any(axis=0)):
         ks = np.flatnonzero(have[:, p])
         every = len(ks) == len(poses)  # then all the rows as they are, not a copy of every body's poses
@@ -254,11 +258,28 @@ def carried_bounds(model: CollisionModel, prior: CheckedBounds, q: Array) -> Arr
     ):
         return None
     mine, theirs, delta = _carried_columns(model, prior)
-    motion = np.abs(q - prior.q) @ model.pair_motion.T  # (N, P) [m]
-    out = np.full((len(q), len(model.pairs)), -np.inf)
-    if len(mine):  # all the carried columns at once, each as bound - motion - shift
-        out[:, mine] = prior.bounds[:, theirs] - motion[:, mine] - delta
-    return np.where(out > 0.0, out, -np.inf)
+    # all the carried columns at once, each as bound - motion - shift
+    return carried(q, prior.q, model.pair_motion, prior.bounds, mine, theirs, delta)
+
+
+_SHAPES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+""":func:`shapes_of` per collision model."""
+
+
+def shapes_of(model: CollisionModel) -> Shapes:
+    """The model's bodies and pairs as :func:`refine.collision.native_bounds.direction_gaps` reads them (kept per model)."""
+    known = _SHAPES.get(model)
+    if known is None:
+        bodies = model.bodies
+        fixed = np.ascontiguousarray([b.link_T_shape for b in bodies], dtype=float)  # a cell object's: final
+        ends = np.array([model.pair_bodies(p) for p in range(len(model.pairs))], dtype=np.int64).reshape(
+            -1, 2
+        )
+        bounded = np.array(
+            [not (bodies[a].is_mesh or bodies[b].is_mesh) for a, b in ends.tolist()], dtype=bool
+        )
+        known = _SHAPES[model] = Shapes(bodies, fixed, ends[:, 0], ends[:, 1], bounded)
+    return known
 
 
 _COLUMNS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -359,10 +380,13 @@ def proved_between(
     if len(rest) == 0:
         return True
     R = R[:, rest]
-    low = checked.bounds[:, rest].take(a, axis=0) - from_start @ R
-    low = np.maximum(low, checked.bounds[:, rest].take(b, axis=0) - np.abs(q - checked.q.take(b, axis=0)) @ R)
-    motion = moves @ R
-    return not short(low - margins[rest] + tolerance_m, motion).any()
+    kept = checked.bounds[:, rest]
+    low = kept.take(a, axis=0)  # copies: taken in place from here on, as bounds_between forms them
+    low -= from_start @ R
+    other = kept.take(b, axis=0)
+    other -= np.abs(q - checked.q.take(b, axis=0)) @ R
+    np.maximum(low, other, out=low)
+    return not short_of(low, margins[rest], tolerance_m, moves @ R).any()
 
 
 _SLACK_M = 1e-9  # [m], far above the rounding of sums of a few metres, far below any margin
@@ -517,8 +541,7 @@ def measure_least(
     measured = np.zeros(N, dtype=bool)
 
     def read(rows: slice) -> None:
-        lower[0][rows] = np.where(measured[rows], np.inf, bounds[rows].min(axis=1))
-        lower[1][rows] = np.where(measured[rows], np.inf, (bounds[rows] - margins).min(axis=1))
+        row_least(bounds, margins, measured, rows, lower[0], lower[1])
 
     lower = [np.empty(N), np.empty(N)]  # per waypoint not measured: distance, clearance bounds
     read(slice(None))
@@ -561,12 +584,9 @@ def settled_pairs(
     computed: the check finds the same, only the lower-bound figures of waypoints it does not
     measure (and the bounds it carries on) keep such a pair's known bound where a box gives more.
     """
-    finite = np.isfinite(prior).all(axis=0)
+    least, clear, finite = column_least(prior, model.pair_margins)  # per pair (P,)
     if not finite.any():
         return finite
-    clear = prior - model.pair_margins
-    certified = ~short(clear + tolerance_m, pair_motion(model, q_path)).any(axis=0)
-    far = (prior.min(axis=0) >= prior[:, finite].min() + SETTLED_M) & (
-        clear.min(axis=0) >= clear[:, finite].min() + SETTLED_M
-    )
+    certified = ~short_of(prior, model.pair_margins, tolerance_m, pair_motion(model, q_path)).any(axis=0)
+    far = (least >= least[finite].min() + SETTLED_M) & (clear >= clear[finite].min() + SETTLED_M)
     return finite & certified & far

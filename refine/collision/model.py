@@ -27,6 +27,7 @@ from refine.collision.distance import hull_bound, place, signed_distance
 from refine.collision.geometry import Body, link_body, shape_body, world_aabb
 from refine.collision.kept import Kept, recall, remember, structure_key
 from refine.collision.motion import joint_reach, pair_reach
+from refine.collision.native_bounds import box_gaps
 from refine.collision.pairs import exclusion, joint_axes
 from refine.errors import InputError
 from refine.frames import check_transform
@@ -311,23 +312,7 @@ class CollisionModel:
 
     def _box_bounds(self, poses: Array, pa: Array, pb: Array) -> Array:
         """The box gaps (N, len(pa)) [m] of the body pairs (pa, pb) at poses (N, M, 4, 4), -inf for none."""
-        n = self._n_moving
-        # body-major (B, N, 3): each pair's rows are then gathered as whole blocks, not 3 at a time
-        cb, hb = np.empty((2, len(self._aabb_c), len(poses), 3))
-        cb[n:], hb[n:] = self._aabb_c[n:, None], self._aabb_h[n:, None]
-        used = np.union1d(pa[pa < n], pb[pb < n])  # only the moving bodies of these pairs are boxed
-        at = slice(None, n) if len(used) == n else used  # all of them: the poses as they are
-        c, h = world_aabb(poses[:, at], self._centre[at], self._half[at])
-        cb[at], hb[at] = c.transpose(1, 0, 2), h.transpose(1, 0, 2)
-        d = cb[pa]  # |c_a - c_b| - h_a - h_b, in place: the same sums without their temporaries
-        d -= cb[pb]
-        np.abs(d, out=d)
-        d -= hb[pa]
-        d -= hb[pb]
-        np.maximum(d, 0.0, out=d)
-        gaps = np.ascontiguousarray(np.sqrt(np.einsum("pni,pni->pn", d, d)).T)
-        gaps[~(gaps > 0.0)] = -np.inf  # overlapping boxes (and NaN poses): no bound
-        return gaps
+        return box_gaps(poses, self._centre, self._half, self._aabb_c, self._aabb_h, pa, pb)
 
     def _place_all(self, q: Array) -> None:
         self._q = None
