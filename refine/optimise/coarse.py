@@ -68,23 +68,45 @@ answer (LBR iiwa, 6,400 waypoints: 40 coarse waypoints, 164 apart, 175 iteration
 COARSE_LADDER_MIN_PATH = 320
 """A held part (a stationary tool) on a redundant arm, solved with IPOPT, on a path of more than this
 many waypoints climbs the coarse ladder (:data:`COARSE_LADDER_WAYPOINTS`): twice the ladder's finer
-copy, so that copy holds at most every other waypoint."""
+copy, so that copy holds at most every other waypoint (measured on the puzzle piece's 437 and 443
+waypoints only)."""
 
 
 COARSE_LADDER_WAYPOINTS = 160
 """The ladder's finer copy: this many evenly spaced waypoints (:func:`ladder_waypoints`), seeded from
 the :data:`COARSE_SEED_WAYPOINTS` copy's answer and solved with ``ipopt.mu_init``
-:data:`COARSE_SEEDED_MU_INIT`; its answer seeds the full solve. On Tesseract's puzzle piece (437
-waypoints, the iiwa holding the part against the grinder) the 16-waypoint answer leaves the full
-solve 132 iterations to move the elbow; a finer copy moves it at a fraction of the cost per
-iteration. Sizes tried there (bench ``puzzle_piece_tesseract``; IPOPT iterations of the finer copy
-and of the full solve, full objective [deg²], median CPU of 5 runs [s], 0.741 s without a ladder
-at 189 iterations, objective 7.5862100474):
+:data:`COARSE_SEEDED_MU_INIT`; its answer seeds the full solve. On Tesseract's puzzle piece (bench
+``puzzle_piece_tesseract``: 437 waypoints, the iiwa holding the part against the grinder) the
+16-waypoint answer leaves the full solve 132 iterations to move the elbow; the finer copy moves it
+at a fraction of the cost per iteration. Sizes tried there: IPOPT iterations of the finer copy and
+of the full solve (the 16-waypoint copy takes 57), the full objective [deg²], median CPU of 5 runs
+of the whole refinement [s]::
 
-TABLE
+    finer copy [waypoints]   its iterations   full solve's   objective   CPU [s]
+          none                   -              132          7.58621     0.836
+            40                  26            132 *          7.58621     0.872
+            80                  99            132 *          7.58621     0.933
+           120                  87            132 *          7.58621     0.980
+           130                  79            132 *          7.58621     0.988
+           140                  87               59          7.63939     0.561
+           150                  88               46          7.58621     0.496
+           155                  74               54          7.58621     0.531
+           160                  95               40          7.58621     0.481
+           165                  78            132 *          7.58621     0.975
+           170                  86            132 *          7.58621     1.013
+           175                  89               43          7.58621     0.511
+           180                  77               46          7.58621     0.509
+           190                  85            132 *          7.58621     1.070
+           200                 101            132 *          7.58621     1.086
+           240                 122            132 *          7.58621     1.197
 
-The neighbouring sizes land on other local optima; 160 keeps the answer of the solve without a
-ladder."""
+At the sizes marked * the finer answer's projection misses 2-4 poses (at 170: waypoints 316-318,
+between two of the copy's, where joint 4 is at its limit less the margin and the least-squares
+projection, held inside the bounds, ends 1.5-3e-4 from the pose), so the 16-waypoint answer seeds the full solve as without the ladder (132
+iterations) and the finer copy's solve is spent for nothing. 140 lands on another local optimum;
+150-180 less 165 and 170 keep the answer of the solve without a ladder (to 8.1e-10 rad at 160),
+160 the fastest. The size is tuned on this one path: on another the projection may miss where it
+does not here, which costs the finer copy's solve and leaves the answer as it was."""
 
 
 def coarse_waypoints(problem: RefinementNLP) -> Array | None:

@@ -409,12 +409,11 @@ def _coarse_seed_at(problem: RefinementNLP, idx: Array, q_coarse: Array) -> tupl
     if finer is not None:
         q_finer, iterations = _ladder_rung(problem, idx, answer.q, finer, iterations)
         if q_finer is not None:
-            idx, q_coarse = finer, q_finer
-        else:
-            q_coarse = answer.q
-    else:
-        q_coarse = answer.q
-    q, missed = projected(problem, idx, q_coarse)
+            q, missed = projected(problem, finer, q_finer)
+            if not missed:
+                return q, iterations
+            log.info("coarse ladder: the projection misses %d poses; the %d-waypoint answer seeds", missed, len(idx))
+    q, missed = projected(problem, idx, answer.q)
     if missed:
         log.info("coarse seed: the projection misses %d poses; the chained IK seed stays", missed)
         return None, iterations
