@@ -1,4 +1,4 @@
-"""A redundant arm's coarse copies of the path: which waypoints they hold, how they are posed, and the seed from their answer.
+"""A redundant arm's coarse copies of the path: their waypoints, their problems, the seed from their answers.
 
 A redundant arm's seed comes from the refinement of a coarse copy of the path
 (:func:`refine.optimise.solve.coarse_seed`): the same problem over evenly spaced waypoints
@@ -102,11 +102,12 @@ of the whole refinement [s]::
 
 At the sizes marked * the finer answer's projection misses 2-4 poses (at 170: waypoints 316-318,
 between two of the copy's, where joint 4 is at its limit less the margin and the least-squares
-projection, held inside the bounds, ends 1.5-3e-4 from the pose), so the 16-waypoint answer seeds the full solve as without the ladder (132
-iterations) and the finer copy's solve is spent for nothing. 140 lands on another local optimum;
-150-180 less 165 and 170 keep the answer of the solve without a ladder (to 8.1e-10 rad at 160),
-160 the fastest. The size is tuned on this one path: on another the projection may miss where it
-does not here, which costs the finer copy's solve and leaves the answer as it was."""
+projection, held inside the bounds, ends 1.5-3e-4 from the pose), so the 16-waypoint answer seeds
+the full solve as without the ladder (132 iterations) and the finer copy's solve is spent for
+nothing. 140 lands on another local optimum; 150-180 less 165 and 170 keep the answer of the solve
+without a ladder (to 8.1e-10 rad at 160), 160 the fastest. The size is tuned on this one path: on
+another the projection may miss where it does not here, which costs the finer copy's solve and
+leaves the answer as it was."""
 
 
 def coarse_waypoints(problem: RefinementNLP) -> Array | None:
@@ -146,7 +147,7 @@ def _evenly(N: int, count: int) -> Array:
 
 
 def coarse_copy(problem: RefinementNLP, idx: Array) -> RefinementNLP:
-    """``problem`` over the waypoints ``idx`` alone: no active rows or joint-step rows, the step bound widened.
+    """``problem`` over the waypoints ``idx`` alone: no active or joint-step rows, the step bound widened.
 
     The joint-step bound is scaled by the widest step between the copy's waypoints, at most 360 deg
     (no bound at all); no clearance rows are added (the copy is solved without sources).
@@ -164,7 +165,7 @@ def coarse_copy(problem: RefinementNLP, idx: Array) -> RefinementNLP:
 def projected(
     problem: RefinementNLP, idx: Array, q_coarse: Array, at: Array | None = None
 ) -> tuple[Array, int]:
-    """Joints (len(at), n) [rad] at the waypoints ``at`` (all when None) from the joints ``q_coarse`` at ``idx``.
+    """Joints (len(at), n) [rad] at the waypoints ``at`` (all when None) from ``q_coarse`` at ``idx``.
 
     ``q_coarse`` interpolated along the arc length and projected onto each waypoint's exact pose by
     least-squares IK without null-space drift (a stationary tool's spin stays where ``q_coarse``

@@ -370,22 +370,21 @@ def coarse_seed(problem: RefinementNLP, q_seed: Array) -> tuple[Array | None, in
     coarse copies (0 when none was solved), which count in the refinement's iterations.
 
     The chained IK leaves a redundant arm's elbow where the mid-range pull puts it, waypoint by
-    waypoint, while the refined path puts it where the whole path's joint motion is least: IPOPT
-    then needs 150-300 iterations to move it there (LBR iiwa without a mid-range cost). The same
-    refinement over evenly spaced waypoints (every :data:`~refine.optimise.coarse.COARSE_SEED_STRIDE`-th, at
-    least :data:`~refine.optimise.coarse.COARSE_SEED_WAYPOINTS`, :func:`~refine.optimise.coarse.coarse_waypoints`; seeded with the
-    chained joints there, which the refinement chains at those waypoints alone; posed by
-    :func:`refine.optimise.coarse.coarse_copy`: the joint-step bound scaled by the spacing, at most
-    360 deg, no clearance rows) finds that elbow cheaply. Its joints, interpolated along the arc
-    length and projected onto every waypoint's exact pose by least-squares IK without null-space
-    drift, start the full solve next to its answer. A held part on a long path
+    waypoint, while the refined path puts it where the whole path's joint motion is least: IPOPT then
+    needs 150-300 iterations to move it there (LBR iiwa without a mid-range cost). The same refinement
+    over evenly spaced waypoints (:func:`refine.optimise.coarse.coarse_waypoints`: every 40th, at least
+    16; seeded with the chained joints there, which the refinement chains at those waypoints alone;
+    posed by :func:`refine.optimise.coarse.coarse_copy`: the joint-step bound scaled by the spacing, at
+    most 360 deg, no clearance rows) finds that elbow cheaply. Its joints, interpolated along the arc
+    length and projected onto every waypoint's exact pose by least-squares IK without null-space drift,
+    start the full solve next to its answer. A held part on a long path
     (:func:`refine.optimise.coarse.ladder_waypoints`) climbs a ladder: that answer, projected onto a
     finer copy's waypoints, seeds the finer copy's solve (``ipopt.mu_init``
-    :data:`COARSE_SEEDED_MU_INIT`), and the finer answer seeds the full solve; where the finer copy
-    is not ``ok`` or its seed or answer misses a pose, the first copy's answer seeds it as without
-    the ladder. None for a non-redundant arm, a path shorter than
-    :data:`~refine.optimise.coarse.COARSE_SEED_MIN_PATH`, a
-    coarse refinement that is not ``ok`` or a projection that misses a pose.
+    :data:`COARSE_SEEDED_MU_INIT`), and the finer answer seeds the full solve; where the finer copy is
+    not ``ok`` or its seed or answer misses a pose, the first copy's answer seeds it as without the
+    ladder. None for a non-redundant arm, a path shorter than
+    :data:`~refine.optimise.coarse.COARSE_SEED_MIN_PATH`, a coarse refinement that is not ``ok`` or a
+    projection that misses a pose.
     """
     idx = coarse_waypoints(problem)
     if idx is None:
@@ -412,7 +411,11 @@ def _coarse_seed_at(problem: RefinementNLP, idx: Array, q_coarse: Array) -> tupl
             q, missed = projected(problem, finer, q_finer)
             if not missed:
                 return q, iterations
-            log.info("coarse ladder: the projection misses %d poses; the %d-waypoint answer seeds", missed, len(idx))
+            log.info(
+                "coarse ladder: the projection misses %d poses; the %d-waypoint answer seeds",
+                missed,
+                len(idx),
+            )
     q, missed = projected(problem, idx, answer.q)
     if missed:
         log.info("coarse seed: the projection misses %d poses; the chained IK seed stays", missed)
@@ -423,7 +426,7 @@ def _coarse_seed_at(problem: RefinementNLP, idx: Array, q_coarse: Array) -> tupl
 def _ladder_rung(
     problem: RefinementNLP, idx: Array, q_coarse: Array, finer: Array, iterations: int
 ) -> tuple[Array | None, int]:
-    """The answer (len(finer), n) [rad] of the copy at ``finer`` seeded from ``q_coarse`` at ``idx``, or None.
+    """The answer (len(finer), n) [rad] of the copy at ``finer``, seeded from ``q_coarse`` at ``idx``.
 
     Also returns ``iterations`` with the finer copy's added. None (the coarser answer seeds the full
     solve) when the seed misses a pose or the finer copy's answer is not ``ok``.

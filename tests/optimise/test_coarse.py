@@ -71,7 +71,7 @@ def _puzzle(n: int | None = None):
 
 
 def _spy(monkeypatch, fail: int | None = None):
-    """Record each coarse copy's solve (its size, seed and first options); the size ``fail`` answers infeasible."""
+    """Record each coarse copy's solve (size, seed, first options); the copy of size ``fail`` fails."""
     solves = []
     solve = solve_module.solve_refinement
 
