@@ -75,7 +75,7 @@ waypoints only)."""
 COARSE_LADDER_WAYPOINTS = 160
 """The ladder's finer copy: this many evenly spaced waypoints (:func:`ladder_waypoints`), seeded from
 the :data:`COARSE_SEED_WAYPOINTS` copy's answer and solved with ``ipopt.mu_init``
-:data:`COARSE_SEEDED_MU_INIT` (at IPOPT's default 0.1 the puzzle piece below takes 207
+:data:`COARSE_SEEDED_MU_INIT` (at IPOPT's default 0.1 the puzzle piece, below, takes 207
 iterations in all instead of 192); its answer seeds the full solve. On Tesseract's puzzle piece (bench
 ``puzzle_piece_tesseract``: 437 waypoints, the iiwa holding the part against the grinder) the
 16-waypoint answer leaves the full solve 132 iterations to move the elbow; the finer copy moves it
