@@ -18,6 +18,13 @@ from dataclasses import replace
 
 import numpy as np
 
+from refine.optimise.coarse import (
+    COARSE_SEEDED_MU_INIT,
+    coarse_copy,
+    coarse_waypoints,
+    ladder_waypoints,
+    projected,
+)
 from refine.optimise.diagnosis import reach_tilts
 from refine.optimise.outcome import (
     Refinement,
@@ -29,7 +36,7 @@ from refine.optimise.outcome import (
     timed_out,
     unsolved,
 )
-from refine.optimise.problem import ActiveSet, ConstraintSource, RefinementNLP
+from refine.optimise.problem import ConstraintSource, RefinementNLP
 from refine.optimise.repair import ELASTIC_ONLY, solve_with_repair
 from refine.optimise.rounds import MAX_OUTER_ITERATIONS
 from refine.optimise.seed import (
@@ -38,7 +45,6 @@ from refine.optimise.seed import (
     initial_guess,
     out_of_reach,
     remembering_chains,
-    seed_axis_only,
     start_candidates,
 )
 from refine.optimise.steady import rank_chains, steady_branch, turn_over_step, whole_chain
@@ -46,7 +52,7 @@ from refine.optimise.verify import (
     check_path,
 )
 from refine.optimise.warm import WarmStart, rebuilt_like, reuse_final, warm_seed
-from refine.robot.kinematics import CONVERGED, solve_ik_batch
+from refine.robot.kinematics import CONVERGED
 from refine.stopwatch import StageTimes, add_time
 from refine.types import Array
 
@@ -99,6 +105,7 @@ def solve_refinement(
     max_branches: int = 3,
     time_limit_s: float | None = None,
     warm: WarmStart | None = None,
+    first_options: dict | None = None,
 ) -> Refinement:
     """Solve ``problem`` with its solver from ``q0`` (or the IK seed), verify, and repair if asked.
 
@@ -121,6 +128,8 @@ def solve_refinement(
         warm: a previous answer to start from instead of ``q0`` (:mod:`refine.optimise.warm`): its
             joints moved onto the new poses are the seed, and its last problem (active set,
             joint-step rows) and multipliers are kept where they fit.
+        first_options: solver options of the first strict solve alone (less those the problem's
+            caller gave), such as a small initial barrier for a seed next to the answer.
 
     Raises:
         SolverError: the solver itself failed (not an infeasibility): the message names its status.
@@ -232,14 +241,14 @@ def solve_refinement(
         seeding = StageTimes.clock()
         q_seed = steady_branch(problem, kin, q_seed, home, rotations, BRANCH_CANDIDATES * (max_branches - 1))
         add_time(timings, "seed", seeding)
-    first_options: dict = {}
+    first_options = dict(first_options or {})
     if coarse_at is not None and not skip_strict:  # a chained seed the coarse refinement did not see
         seeding = StageTimes.clock()
         smooth, coarse_iterations = coarse_seed(problem, q_seed)
         q_seed = q_seed if smooth is None else smooth
         add_time(timings, "seed", seeding)
     if smooth is not None and problem.tool_in_world is not None and problem.solver_name == "ipopt":
-        first_options = {"ipopt.mu_init": COARSE_SEEDED_MU_INIT}
+        first_options["ipopt.mu_init"] = COARSE_SEEDED_MU_INIT
 
     deadline = t0 + time_limit_s if time_limit_s is not None else math.inf
 
@@ -354,64 +363,28 @@ def _tilt_is_a_bound(problem: RefinementNLP) -> bool:
     return bool(np.linalg.norm(np.cross(v, [0.0, 0.0, 1.0])) <= 1e-6 * max(np.linalg.norm(v), 1e-9))
 
 
-COARSE_SEED_MIN_PATH = 40
-"""A redundant arm's seed on a path of at least this many waypoints comes from a coarse refinement
-(:func:`coarse_seed`). Shorter paths keep the chained seed: there the coarse copy holds half the
-waypoints or more and saves little or nothing (generated iiwa wave without mid-range cost, CPU of
-the solve [s], chained / coarse seed: 30 waypoints 0.141 / 0.104, 36: 0.129 / 0.128, 40: 0.136 /
-0.105; with the pipeline's mid-range cost 30: 0.047 / 0.050)."""
-
-
-COARSE_SEED_WAYPOINTS = 16
-"""The coarse refinement holds every :data:`COARSE_SEED_STRIDE`-th waypoint, and at least this many.
-Without a mid-range cost its solve needs about as many iterations as the full one from the chained
-seed (120-220 on the LBR iiwa, whatever the length), so the fewer waypoints it has the cheaper the
-seed, down to where it misses the path's shape and the full solve's iterations grow again: 6-10
-coarse waypoints leave the full solve 6 to 155 iterations, and on the bends of the TIG seam (237
-waypoints, mid-range cost) 12 leave it 11 where 16-40 leave 5 (CPU 0.095 s against 0.077-0.080
-s). On the wave without mid-range cost, chained / 40 / 16 coarse waypoints: 100 waypoints 0.257 /
-- / 0.124 s, 120: - / 0.175 / 0.121 s, 400: - / 0.198 / 0.163 s. A path whose fine shape sets the
-elbow is seeded far from its answer: on Tesseract's puzzle piece (443 waypoints, a held part) the
-16-waypoint answer's joints 1, 3, 5 and 7 lie up to 1.45 rad from the full answer's (the coarse copy's
-objective is 2.45 at its own answer, 3.76 at the full answer's joints), and the full solve takes 132
-iterations to move them; 32, 48 or 64 coarse waypoints lead it to other local optima (full objective
-7.64, 8.00, 7.64 against 7.59). Nor does a coarse-copy term for the fine path's joint motion about
-each chord help there: the least-norm joint steps of the demonstrated pose steps' deviations,
-``trace((J Jᵀ)⁻¹ S)`` per coarse waypoint, predict 4.14 and 3.60 [deg²] at the two optima where the
-full answers spend 2.77 and 2.84 (the cone absorbs most of the demonstrated axis's wiggles; the
-position wiggles are worth 2e-4), so it ranks them wrongly and leads the full solve to the 7.64
-optimum (92 iterations instead of 132)."""
-
-
-COARSE_SEEDED_MU_INIT = 1e-4
-"""IPOPT's initial barrier parameter [-] for the first full solve of a held part (a stationary tool)
-from the coarse seed (:func:`coarse_seed`), which starts next to the answer: IPOPT's default 0.1
-pushes the seed off the cone it already sits on, and the monotone barrier of a held part
-(:data:`refine.optimise.problem.HELD_PART_IPOPT`) then spends most of its iterations coming back."""
-
-
-COARSE_SEED_STRIDE = 40
-"""Waypoints per coarse step on long paths: wider steps leave the interpolated seed too far from the
-answer (LBR iiwa, 6,400 waypoints: 40 coarse waypoints, 164 apart, 175 iterations; 160, 40 apart, 21)."""
-
-
 def coarse_seed(problem: RefinementNLP, q_seed: Array) -> tuple[Array | None, int]:
     """A redundant arm's seed from the refinement of a coarse copy of the path, and the iterations it took.
 
     Returns the seed (N, n) [rad], None where there is none, and the solver iterations spent on the
-    coarse copy (0 when none was solved), which count in the refinement's iterations.
+    coarse copies (0 when none was solved), which count in the refinement's iterations.
 
     The chained IK leaves a redundant arm's elbow where the mid-range pull puts it, waypoint by
-    waypoint, while the refined path puts it where the whole path's joint motion is least: IPOPT
-    then needs 150-300 iterations to move it there (LBR iiwa without a mid-range cost). The same
-    refinement over evenly spaced waypoints (every :data:`COARSE_SEED_STRIDE`-th, at least
-    :data:`COARSE_SEED_WAYPOINTS`, :func:`coarse_waypoints`; seeded with the chained joints
-    there, which the refinement chains at those waypoints alone; the joint-step bound
-    scaled by the spacing, at most 360 deg; no clearance rows) finds that elbow cheaply. Its
-    joints, interpolated along the arc length and projected onto every waypoint's exact pose by
-    least-squares IK without null-space drift, start the full solve next to its answer. None for
-    a non-redundant arm, a path shorter than :data:`COARSE_SEED_MIN_PATH`, a coarse refinement
-    that is not ``ok`` or a projection that misses a pose.
+    waypoint, while the refined path puts it where the whole path's joint motion is least: IPOPT then
+    needs 150-300 iterations to move it there (LBR iiwa without a mid-range cost). The same refinement
+    over evenly spaced waypoints (:func:`refine.optimise.coarse.coarse_waypoints`: every 40th, at least
+    16; seeded with the chained joints there, which the refinement chains at those waypoints alone;
+    posed by :func:`refine.optimise.coarse.coarse_copy`: the joint-step bound scaled by the spacing, at
+    most 360 deg, no clearance rows) finds that elbow cheaply. Its joints, interpolated along the arc
+    length and projected onto every waypoint's exact pose by least-squares IK without null-space drift,
+    start the full solve next to its answer. A held part on a long path
+    (:func:`refine.optimise.coarse.ladder_waypoints`) climbs a ladder: that answer, projected onto a
+    finer copy's waypoints, seeds the finer copy's solve (``ipopt.mu_init``
+    :data:`COARSE_SEEDED_MU_INIT`), and the finer answer seeds the full solve; where the finer copy is
+    not ``ok`` or its seed or answer misses a pose, the first copy's answer seeds it as without the
+    ladder. None for a non-redundant arm, a path shorter than
+    :data:`~refine.optimise.coarse.COARSE_SEED_MIN_PATH`, a coarse refinement that is not ``ok`` or a
+    projection that misses a pose.
     """
     idx = coarse_waypoints(problem)
     if idx is None:
@@ -419,33 +392,9 @@ def coarse_seed(problem: RefinementNLP, q_seed: Array) -> tuple[Array | None, in
     return _coarse_seed_at(problem, idx, np.asarray(q_seed, dtype=float)[idx])
 
 
-def coarse_waypoints(problem: RefinementNLP) -> Array | None:
-    """The waypoints of :func:`coarse_seed`'s coarse copy (sorted indices, the first 0), or None.
-
-    Every :data:`COARSE_SEED_STRIDE`-th waypoint, at least :data:`COARSE_SEED_WAYPOINTS`, evenly
-    spaced and rounded; None for a non-redundant arm or a path shorter than
-    :data:`COARSE_SEED_MIN_PATH`.
-    """
-    N = problem.n_waypoints
-    if problem.dof <= 6 or N < COARSE_SEED_MIN_PATH:
-        return None
-    count = max(COARSE_SEED_WAYPOINTS, N // COARSE_SEED_STRIDE)
-    return np.unique(np.linspace(0, N - 1, count).round().astype(int))
-
-
 def _coarse_seed_at(problem: RefinementNLP, idx: Array, q_coarse: Array) -> tuple[Array | None, int]:
     """:func:`coarse_seed` from the joints ``q_coarse`` [rad] at the coarse waypoints ``idx``."""
-    from refine.paths import FusedPath
-
-    f = problem.fused
-    coarse_path = FusedPath(
-        f.s[idx], f.positions[idx], f.rotations[idx], f.speed[idx], f.t_demo[idx], f.residual[idx]
-    )
-    spread = float(np.diff(idx).max())  # waypoint steps per coarse step
-    step = min(problem.tolerances.joint_step_deg * spread, 360.0)  # 360 deg: no bound at all
-    tolerances = replace(problem.tolerances, joint_step_deg=step)
-    coarse = problem.rebuilt(fused=coarse_path, tolerances=tolerances, active=ActiveSet(), joint_steps=())
-    answer = solve_refinement(coarse, q_coarse)
+    answer = solve_refinement(coarse_copy(problem, idx), q_coarse)
     if answer.status != "ok":
         log.info(
             "coarse seed: the %d-waypoint refinement is %s; the chained IK seed stays",
@@ -454,21 +403,44 @@ def _coarse_seed_at(problem: RefinementNLP, idx: Array, q_coarse: Array) -> tupl
         )
         return None, answer.iterations
     log.info("coarse seed: %d waypoints refined in %d solver iterations", len(idx), answer.iterations)
-    q = np.column_stack([np.interp(f.s, f.s[idx], answer.q[:, j]) for j in range(problem.dof)])
-    lower, upper = problem_bounds(problem)
-    q, err = solve_ik_batch(
-        problem_kinematics(problem),
-        problem_targets(problem),
-        q,
-        lower,
-        upper,
-        nullspace_gain=0.0,
-        axis_only=seed_axis_only(problem),  # a stationary tool's spin stays where the coarse answer has it
+    iterations = answer.iterations
+    finer = ladder_waypoints(problem)
+    if finer is not None:
+        q_finer, iterations = _ladder_rung(problem, idx, answer.q, finer, iterations)
+        if q_finer is not None:
+            q, missed = projected(problem, finer, q_finer)
+            if not missed:
+                return q, iterations
+            log.info(
+                "coarse ladder: the projection misses %d poses; the %d-waypoint answer seeds",
+                missed,
+                len(idx),
+            )
+    q, missed = projected(problem, idx, answer.q)
+    if missed:
+        log.info("coarse seed: the projection misses %d poses; the chained IK seed stays", missed)
+        return None, iterations
+    return q, iterations
+
+
+def _ladder_rung(
+    problem: RefinementNLP, idx: Array, q_coarse: Array, finer: Array, iterations: int
+) -> tuple[Array | None, int]:
+    """The answer (len(finer), n) [rad] of the copy at ``finer``, seeded from ``q_coarse`` at ``idx``.
+
+    Also returns ``iterations`` with the finer copy's added. None (the coarser answer seeds the full
+    solve) when the seed misses a pose or the finer copy's answer is not ``ok``.
+    """
+    seed, missed = projected(problem, idx, q_coarse, finer)
+    if missed:
+        log.info("coarse ladder: the %d-waypoint seed misses %d poses; not climbed", len(finer), missed)
+        return None, iterations
+    answer = solve_refinement(
+        coarse_copy(problem, finer), seed, first_options={"ipopt.mu_init": COARSE_SEEDED_MU_INIT}
     )
-    if not np.all(err < 10.0 * CONVERGED):
-        log.info(
-            "coarse seed: the projection misses %d poses; the chained IK seed stays",
-            int((err >= 10.0 * CONVERGED).sum()),
-        )
-        return None, answer.iterations
-    return q, answer.iterations
+    iterations += answer.iterations
+    if answer.status != "ok":
+        log.info("coarse ladder: the %d-waypoint refinement is %s; not climbed", len(finer), answer.status)
+        return None, iterations
+    log.info("coarse ladder: %d waypoints refined in %d solver iterations", len(finer), answer.iterations)
+    return answer.q, iterations

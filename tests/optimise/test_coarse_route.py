@@ -13,10 +13,12 @@ import functools
 import numpy as np
 import pytest
 
+import refine.optimise.coarse as coarse_module
 import refine.optimise.solve as solve_module
 from refine.bench.suites import generated_problem, load_suites
+from refine.optimise.coarse import coarse_waypoints
 from refine.optimise.seed import chained_seed, initial_guess
-from refine.optimise.solve import coarse_seed, coarse_waypoints, solve_refinement
+from refine.optimise.solve import coarse_seed, solve_refinement
 
 
 @functools.cache
@@ -86,7 +88,7 @@ def test_a_redundant_arm_is_seeded_without_chaining_the_whole_path(monkeypatch):
 @pytest.mark.parametrize("missed", [[0], [57, 58, 59], [399]])
 def test_a_projection_that_misses_a_pose_leaves_the_whole_chain_as_the_seed(monkeypatch, missed):
     problem, nlp = _iiwa(400)
-    project = solve_module.solve_ik_batch
+    project = coarse_module.solve_ik_batch
 
     def failing_projection(kin, targets, q, *args, **kwargs):  # a planted failure at ``missed``
         q, err = project(kin, targets, q, *args, **kwargs)
@@ -95,7 +97,7 @@ def test_a_projection_that_misses_a_pose_leaves_the_whole_chain_as_the_seed(monk
             err[missed] = 1e-3
         return q, err
 
-    monkeypatch.setattr(solve_module, "solve_ik_batch", failing_projection)
+    monkeypatch.setattr(coarse_module, "solve_ik_batch", failing_projection)
     seeds, chains = _seeds_solved(monkeypatch)
     result = solve_refinement(nlp, home=problem.home)
     assert result.status == "ok"
