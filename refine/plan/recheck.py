@@ -34,8 +34,10 @@ check, which finds and names what is broken.
 from __future__ import annotations
 
 import math
+import threading
 import time
 import weakref
+from collections import OrderedDict
 from collections.abc import Callable
 
 import numpy as np
@@ -57,6 +59,9 @@ from refine.types import Array
 
 UNBOUND_ROWS = 2
 """Rows with a pair the earlier bounds leave unbounded that :func:`recheck` measures; more: None."""
+
+MEASURED_ROWS = 16
+"""Rows measured exactly that :func:`recheck` keeps per collision model, for the next motions (the last used)."""
 
 
 def recheck(
@@ -96,15 +101,22 @@ def recheck(
     at: dict[int, Sample] = {}
 
     def measure(k: int) -> tuple[float, float]:
-        by_distance, by_clearance = model.nearest_pairs(q[k], poses[k], bounds[k].copy())
-        if by_distance is None or by_clearance is None:
-            at[k] = Sample(math.inf, math.inf, ("", ""), math.inf, NONE)
+        key = q[k].tobytes() + poses[k].tobytes()
+        known = _measured_row(model, key)
+        if known is None:
+            by_distance, by_clearance = model.nearest_pairs(q[k], poses[k], bounds[k].copy())
+            if by_distance is None or by_clearance is None:
+                at[k] = Sample(math.inf, math.inf, ("", ""), math.inf, NONE)
+            else:
+                pair = (by_clearance.body, by_clearance.other)
+                at[k] = Sample(
+                    by_distance.distance_m, by_clearance.clearance_m, pair, by_clearance.distance_m, NONE
+                )
+            found = model.witnesses(q[k])
+            _keep_row(model, key, (at[k], found))
         else:
-            pair = (by_clearance.body, by_clearance.other)
-            at[k] = Sample(
-                by_distance.distance_m, by_clearance.clearance_m, pair, by_clearance.distance_m, NONE
-            )
-        found = model.witnesses(q[k])
+            at[k], found = known
+            model.take_witnesses(found)  # the last normals the measurement would have left
         for p, (d, n) in found.items():
             bounds[k, p], exact[k, p], normals[k, p] = d, True, n
         raise_near(model, poses, bounds, k, found)
@@ -157,6 +169,41 @@ def recheck(
         bounds=checked_bounds(model, q, bounds, normals),
         inner_samples={k: [*kept.get(k, ()), *inner.get(k, ())] for k in {*kept, *inner}},
     )
+
+
+_MEASURED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+"""Per collision model: its rows measured exactly, joints and moving bodies' poses (bytes) -> what was found."""
+_MEASURED_LOCK = threading.Lock()  # held while _MEASURED or a model's rows are read or changed
+
+Measured = tuple[Sample, dict[int, tuple[float, Array]]]
+"""A row measured exactly: its least figures (a :class:`refine.collision.advance.Sample`) and the
+pairs measured there with their distances [m] and unit witness normals (:meth:`CollisionModel.witnesses`)."""
+
+
+def _measured_row(model: CollisionModel, key: bytes) -> Measured | None:
+    """What ``model`` found at the row ``key`` (its joints' and moving bodies' poses' bytes), or None.
+
+    The bodies of the cell, the tool, the base and the margins are a model's own, fixed for its life
+    (as :func:`refine.collision.carry.hull_corners` keeps them), so a model and the row's joints and
+    poses to the bit determine every distance measured there: the same row of the motions planned
+    one after the other (a line's first row, the direct move ending there) is measured once.
+    """
+    with _MEASURED_LOCK:
+        rows = _MEASURED.get(model)
+        if rows is None or key not in rows:
+            return None
+        rows.move_to_end(key)
+        return rows[key]
+
+
+def _keep_row(model: CollisionModel, key: bytes, found: Measured) -> None:
+    """Keep ``found`` at the row ``key`` of ``model``, the least recently used past :data:`MEASURED_ROWS` dropped."""
+    with _MEASURED_LOCK:
+        rows = _MEASURED.setdefault(model, OrderedDict())
+        rows[key] = found
+        rows.move_to_end(key)
+        while len(rows) > MEASURED_ROWS:
+            rows.popitem(last=False)
 
 
 _SHIFTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
