@@ -426,10 +426,10 @@ class CollisionModel:
         return {k: (c.distance_m, c.normal) for k, c in self._exact.items()}
 
     def take_witnesses(self, found: dict[int, tuple[float, Array]]) -> None:
-        """Take the unit normals of ``found`` (:meth:`witnesses` at joints measured before) as the pairs' last.
+        """Take the unit normals of ``found`` (:meth:`witnesses` at joints measured before) as the last.
 
-        What measuring those pairs there again would leave (the normals :meth:`plane_bounds` reads),
-        without the FCL calls.
+        The pairs' last witness normals (what :meth:`plane_bounds` reads) as measuring them there
+        again would leave them, without the FCL calls.
         """
         for k, (_, n) in found.items():
             self._normals[k] = n

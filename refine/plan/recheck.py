@@ -25,10 +25,14 @@ What it skips is the dense check's own bounding of every pair at every row (boxe
 last normals) and the check's set-up; what it finds is what the dense check finds from the same
 exact distances (to FCL's accuracy): the same pairs advanced (those the exact distances at a
 segment's ends leave short, whatever lower bounds came first), hence the same samples inside, and
-the same least figures and pair. When the carried bounds cannot serve (no earlier check, other rows, another
-robot, base or body, a pair without a bound at more than :data:`UNBOUND_ROWS` rows, a margin
-broken or a segment the advancement gives up on) it returns None and the caller runs the dense
-check, which finds and names what is broken.
+the same least figures and pair. A row measured exactly is kept with its collision model (the
+last :data:`MEASURED_ROWS`): motions planned one after the other share their ends (the home move
+ends on the approach's first row), and the later takes the row's figures and witnesses as they
+were, leaving the model the witness normals the measurement left
+(:meth:`CollisionModel.take_witnesses`). When the carried bounds cannot serve (no earlier check,
+other rows, another robot, base or body, a pair without a bound at more than :data:`UNBOUND_ROWS`
+rows, a margin broken or a segment the advancement gives up on) it returns None and the caller runs
+the dense check, which finds and names what is broken.
 """
 
 from __future__ import annotations
@@ -61,7 +65,7 @@ UNBOUND_ROWS = 2
 """Rows with a pair the earlier bounds leave unbounded that :func:`recheck` measures; more: None."""
 
 MEASURED_ROWS = 16
-"""Rows measured exactly that :func:`recheck` keeps per collision model, for the next motions (the last used)."""
+"""Rows measured exactly that :func:`recheck` keeps per collision model for the next motions."""
 
 
 def recheck(
@@ -172,21 +176,21 @@ def recheck(
 
 
 _MEASURED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-"""Per collision model: its rows measured exactly, joints and moving bodies' poses (bytes) -> what was found."""
+"""Per collision model: the rows it measured exactly (joints' and moving poses' bytes -> what was found)."""
 _MEASURED_LOCK = threading.Lock()  # held while _MEASURED or a model's rows are read or changed
 
 Measured = tuple[Sample, dict[int, tuple[float, Array]]]
-"""A row measured exactly: its least figures (a :class:`refine.collision.advance.Sample`) and the
-pairs measured there with their distances [m] and unit witness normals (:meth:`CollisionModel.witnesses`)."""
+"""A row measured exactly: its least figures and the pairs measured there, by pair index, with their
+distances [m] and unit witness normals (:meth:`CollisionModel.witnesses`)."""
 
 
 def _measured_row(model: CollisionModel, key: bytes) -> Measured | None:
-    """What ``model`` found at the row ``key`` (its joints' and moving bodies' poses' bytes), or None.
+    """What ``model`` found at the row ``key`` (the joints' and the moving bodies' poses' bytes), or None.
 
-    The bodies of the cell, the tool, the base and the margins are a model's own, fixed for its life
-    (as :func:`refine.collision.carry.hull_corners` keeps them), so a model and the row's joints and
-    poses to the bit determine every distance measured there: the same row of the motions planned
-    one after the other (a line's first row, the direct move ending there) is measured once.
+    A model's cell, tool, base and margins are fixed for its life (as
+    :func:`refine.collision.carry.hull_corners` keeps them), so the model and the row's joints and
+    poses to the bit fix every distance measured there: a row two motions planned one after the
+    other share (a line's first row, the direct move ending on it) is measured once.
     """
     with _MEASURED_LOCK:
         rows = _MEASURED.get(model)
@@ -197,7 +201,7 @@ def _measured_row(model: CollisionModel, key: bytes) -> Measured | None:
 
 
 def _keep_row(model: CollisionModel, key: bytes, found: Measured) -> None:
-    """Keep ``found`` at the row ``key`` of ``model``, the least recently used past :data:`MEASURED_ROWS` dropped."""
+    """Keep ``found`` at the row ``key`` of ``model`` (past :data:`MEASURED_ROWS`, the oldest used goes)."""
     with _MEASURED_LOCK:
         rows = _MEASURED.setdefault(model, OrderedDict())
         rows[key] = found
