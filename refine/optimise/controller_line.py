@@ -114,9 +114,9 @@ class LineCheck:
             (:func:`refine.optimise.line_start.previous_corrections`); None when not recorded.
         bow: per sample, the joint difference of the two motions ``|q - q_lin|`` [rad], (M, n),
             for a later check of the same joints (``check_controller_lines(..., known=)``); None
-            when not recorded.
+            for a check that took its IK from such a one.
         joint_margins_rad: per segment and joint, the least joint-limit margin on the line [rad],
-            (N-1, n), likewise; None when not recorded.
+            (N-1, n), likewise.
     """
 
     samples: Array
@@ -293,7 +293,9 @@ def check_controller_lines(
     first = segment_starts(segment)
     bow = joint_margins = q_lin = None
     reused: LineCheck | None = None  # a check whose bows and margins are this one's
+    taken = False  # the IK taken from ``known``, not solved
     if known is not None and known.q.shape == (len(t), q.shape[1]):
+        taken = True
         q_line, err, sing_seg = known.q, known.ik_error, known.singularity
         off_seg, angle_seg = known.position_difference_m, known.orientation_difference_deg
         correction = known.start_correction
@@ -371,8 +373,8 @@ def check_controller_lines(
         clearance_change_m=change,
         violations=tuple(violations),
         start_correction=correction,
-        bow=bow,
-        joint_margins_rad=joint_margins,
+        bow=None if taken else bow,  # only a check that solved its IK serves a later one as known
+        joint_margins_rad=None if taken else joint_margins,
     )
 
 
