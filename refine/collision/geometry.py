@@ -353,6 +353,21 @@ def shape_body(shape: Shape, *, name: str, kind: str, link: str | None, frame_id
     )
 
 
+def check_body_names(bodies: list[Body]) -> None:
+    """Reject a tool shape or cell object named as another body or a robot link (InputError)."""
+    links = {b.name for b in bodies if b.kind == "link"}
+    seen: set[str] = set()
+    for b in bodies:
+        if b.kind == "link":
+            continue
+        if b.name in seen or b.name in links:
+            raise InputError(
+                f"collision model: the name {b.name!r} is used twice (tool shapes, cell objects and "
+                f"robot links {sorted(links)} must all have distinct names)"
+            )
+        seen.add(b.name)
+
+
 def world_aabb(T: Array, centre: Array, half: Array) -> tuple[Array, Array]:
     """Axis-aligned box (centre, half sizes) [m] around a shape box placed at T (..., 4, 4)."""
     R = T[..., :3, :3]

@@ -24,7 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from refine.collision.contact import Contact, linearised_distance
 from refine.collision.distance import hull_bound, place, signed_distance
-from refine.collision.geometry import Body, link_body, shape_body, world_aabb
+from refine.collision.geometry import Body, check_body_names, link_body, shape_body, world_aabb
 from refine.collision.kept import Kept, recall, remember, structure_key
 from refine.collision.motion import joint_reach, pair_reach
 from refine.collision.native_bounds import box_gaps
@@ -86,7 +86,7 @@ class CollisionModel:
         self.bodies: list[Body] = self._robot_bodies() + self._tool_bodies(tool_shapes)
         self._n_moving = len(self.bodies)
         self.bodies += self._cell_bodies(cell)
-        self._check_names()
+        check_body_names(self.bodies)
         moving = self.bodies[: self._n_moving]
         self._joints = sorted({b.joint for b in moving})
         self._joint_slot = np.array([self._joints.index(b.joint) for b in moving], dtype=int)
@@ -141,19 +141,6 @@ class CollisionModel:
 
     def _cell_bodies(self, shapes: tuple[Shape, ...]) -> list[Body]:
         return [shape_body(s, name=s.name, kind="cell", link=None, frame_id=-1, joint=-1) for s in shapes]
-
-    def _check_names(self) -> None:
-        links = {b.name for b in self.bodies if b.kind == "link"}
-        seen: set[str] = set()
-        for b in self.bodies:
-            if b.kind == "link":
-                continue
-            if b.name in seen or b.name in links:
-                raise InputError(
-                    f"collision model: the name {b.name!r} is used twice (tool shapes, cell objects and "
-                    f"robot links {sorted(links)} must all have distinct names)"
-                )
-            seen.add(b.name)
 
     def _select_pairs(self) -> None:
         key = structure_key(self.robot, self.base_in_world, self.self_margin_m, self.bodies)
@@ -422,6 +409,15 @@ class CollisionModel:
         if self._q is None or not np.array_equal(self._q, q):
             return {}
         return {k: (c.distance_m, c.normal) for k, c in self._exact.items()}
+
+    def take_witnesses(self, found: dict[int, tuple[float, Array]]) -> None:
+        """Take the unit normals of ``found`` (:meth:`witnesses` at joints measured before) as the last.
+
+        The pairs' last witness normals (what :meth:`plane_bounds` reads) as measuring them there
+        again would leave them, without the FCL calls.
+        """
+        for k, (_, n) in found.items():
+            self._normals[k] = n
 
     def pair_distance(self, q: ArrayLike, k: int, poses: Array | None = None) -> float:
         """The signed distance [m] of checked pair k (index into :attr:`pairs`) at joints q [rad] (n,).

@@ -47,7 +47,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -112,6 +112,11 @@ class LineCheck:
         start_correction: per sample, what the IK changed its Newton start by [rad], (M, n), a row
             NaN where it started from a previous line's bow, for a re-solve's start
             (:func:`refine.optimise.line_start.previous_corrections`); None when not recorded.
+        bow: per sample, the joint difference of the two motions ``|q - q_lin|`` [rad], (M, n),
+            for a later check of the same joints (``check_controller_lines(..., known=)``); None
+            for a check that took its IK from such a one.
+        joint_margins_rad: per segment and joint, the least joint-limit margin on the line [rad],
+            (N-1, n), likewise.
     """
 
     samples: Array
@@ -129,6 +134,8 @@ class LineCheck:
     clearance_change_m: Array | None
     violations: tuple[Violation, ...]
     start_correction: Array | None = None
+    bow: Array | None = field(default=None, repr=False)
+    joint_margins_rad: Array | None = field(default=None, repr=False)
 
     @property
     def ok(self) -> bool:
@@ -267,8 +274,9 @@ def check_controller_lines(
             refinement's own of its answer, :meth:`ControllerLineSource.checked`): its line joints,
             IK residuals and singularity measures are the same function of the same arguments, so
             they are taken as they are, with its per-segment differences to the joint-linear
-            motion, and only the limits, the violations (at ``s``) and the clearance are done;
-            None to solve the line's IK.
+            motion, and only the limits, the violations (at ``s``) and the clearance are done
+            (with its bows and joint margins too where it recorded them for as many sub-steps per
+            segment); None to solve the line's IK.
         previous: a previous answer's joints (N, n) [rad] and its line check (a re-solve's): its
             bows ``q_line - q_lin`` start the IK at the samples it has
             (:func:`refine.optimise.line_start.previous_bows`), which then converges to the same
@@ -281,17 +289,27 @@ def check_controller_lines(
     n_seg = len(q) - 1
     wrist = np.zeros(n_seg, dtype=bool) if wrist is None else np.asarray(wrist, dtype=bool)
     m, segment, t = sample_parameters(q)
-    q_lin = joint_linear(q, segment, t)
     spec = kin.robot.spec
-    if known is not None and known.q.shape == q_lin.shape:
+    first = segment_starts(segment)
+    bow = joint_margins = q_lin = None
+    reused: LineCheck | None = None  # a check whose bows and margins are this one's
+    taken = False  # the IK taken from ``known``, not solved
+    if known is not None and known.q.shape == (len(t), q.shape[1]):
+        taken = True
         q_line, err, sing_seg = known.q, known.ik_error, known.singularity
         off_seg, angle_seg = known.position_difference_m, known.orientation_difference_deg
         correction = known.start_correction
+        if known.bow is not None and known.joint_margins_rad is not None and np.array_equal(known.samples, m):
+            # the same samples of the same joints: its bows and margins are these, to the bit
+            bow, joint_margins, reused = known.bow, known.joint_margins_rad, known
     else:
+        q_lin = joint_linear(q, segment, t)
         q_line, err, correction, sing_seg, off_seg, angle_seg = solve_line(
             kin, q, m, segment, t, wrist, IK_TOLERANCE, previous, q_lin
         )
-    bow = np.abs(q_line - q_lin)
+    if bow is None:
+        bow = np.abs(q_line - (joint_linear(q, segment, t) if q_lin is None else q_lin))
+        joint_margins = segment_margins(q_line, first, spec.lower, spec.upper)  # per segment and joint
 
     violations: list[Violation] = []
 
@@ -302,11 +320,9 @@ def check_controller_lines(
             worst = float(part.max() if worst_is_max else part.min()) if part.size else math.nan
             violations.append(Violation(i, j, float(s[i]), float(s[j]), reason, worst, unit, limit))
 
-    first = segment_starts(segment)
     ik_worst = np.maximum.reduceat(err, first)
     add(ik_worst > IK_FAILED, "no IK on the controller's line", ik_worst, "m+rad", IK_FAILED, True)
     margin = math.radians(tolerances.joint_margin_deg) - JOINT_TOLERANCE_RAD
-    joint_margins = segment_margins(q_line, first, spec.lower, spec.upper)  # per segment and joint
     for j in range(q.shape[1]):
         add(
             joint_margins[:, j] < margin,
@@ -345,14 +361,20 @@ def check_controller_lines(
         ik_error=err,
         position_difference_m=off_seg,
         orientation_difference_deg=angle_seg,
-        joint_difference_deg=np.degrees(np.maximum.reduceat(largest_per_row(bow), first)),
-        joint_margin_rad=joint_margins.min(axis=1),
+        joint_difference_deg=(
+            np.degrees(np.maximum.reduceat(largest_per_row(bow), first))
+            if reused is None
+            else reused.joint_difference_deg
+        ),
+        joint_margin_rad=joint_margins.min(axis=1) if reused is None else reused.joint_margin_rad,
         singularity=sing_seg,
         clearance_m=clear,
         clearance_proved=proved,
         clearance_change_m=change,
         violations=tuple(violations),
         start_correction=correction,
+        bow=None if taken else bow,  # only a check that solved its IK serves a later one as known
+        joint_margins_rad=None if taken else joint_margins,
     )
 
 

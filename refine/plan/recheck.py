@@ -25,17 +25,23 @@ What it skips is the dense check's own bounding of every pair at every row (boxe
 last normals) and the check's set-up; what it finds is what the dense check finds from the same
 exact distances (to FCL's accuracy): the same pairs advanced (those the exact distances at a
 segment's ends leave short, whatever lower bounds came first), hence the same samples inside, and
-the same least figures and pair. When the carried bounds cannot serve (no earlier check, other rows, another
-robot, base or body, a pair without a bound at more than :data:`UNBOUND_ROWS` rows, a margin
-broken or a segment the advancement gives up on) it returns None and the caller runs the dense
-check, which finds and names what is broken.
+the same least figures and pair. A row measured exactly is kept with its collision model (the
+last :data:`MEASURED_ROWS`): motions planned one after the other share their ends (the home move
+ends on the approach's first row), and the later takes the row's figures and witnesses as they
+were, leaving the model the witness normals the measurement left
+(:meth:`CollisionModel.take_witnesses`). When the carried bounds cannot serve (no earlier check,
+other rows, another robot, base or body, a pair without a bound at more than :data:`UNBOUND_ROWS`
+rows, a margin broken or a segment the advancement gives up on) it returns None and the caller runs
+the dense check, which finds and names what is broken.
 """
 
 from __future__ import annotations
 
 import math
+import threading
 import time
 import weakref
+from collections import OrderedDict
 from collections.abc import Callable
 
 import numpy as np
@@ -57,6 +63,9 @@ from refine.types import Array
 
 UNBOUND_ROWS = 2
 """Rows with a pair the earlier bounds leave unbounded that :func:`recheck` measures; more: None."""
+
+MEASURED_ROWS = 16
+"""Rows measured exactly that :func:`recheck` keeps per collision model for the next motions."""
 
 
 def recheck(
@@ -96,15 +105,22 @@ def recheck(
     at: dict[int, Sample] = {}
 
     def measure(k: int) -> tuple[float, float]:
-        by_distance, by_clearance = model.nearest_pairs(q[k], poses[k], bounds[k].copy())
-        if by_distance is None or by_clearance is None:
-            at[k] = Sample(math.inf, math.inf, ("", ""), math.inf, NONE)
+        key = q[k].tobytes() + poses[k].tobytes()
+        known = _measured_row(model, key)
+        if known is None:
+            by_distance, by_clearance = model.nearest_pairs(q[k], poses[k], bounds[k].copy())
+            if by_distance is None or by_clearance is None:
+                at[k] = Sample(math.inf, math.inf, ("", ""), math.inf, NONE)
+            else:
+                pair = (by_clearance.body, by_clearance.other)
+                at[k] = Sample(
+                    by_distance.distance_m, by_clearance.clearance_m, pair, by_clearance.distance_m, NONE
+                )
+            found = model.witnesses(q[k])
+            _keep_row(model, key, (at[k], found))
         else:
-            pair = (by_clearance.body, by_clearance.other)
-            at[k] = Sample(
-                by_distance.distance_m, by_clearance.clearance_m, pair, by_clearance.distance_m, NONE
-            )
-        found = model.witnesses(q[k])
+            at[k], found = known
+            model.take_witnesses(found)  # the last normals the measurement would have left
         for p, (d, n) in found.items():
             bounds[k, p], exact[k, p], normals[k, p] = d, True, n
         raise_near(model, poses, bounds, k, found)
@@ -157,6 +173,41 @@ def recheck(
         bounds=checked_bounds(model, q, bounds, normals),
         inner_samples={k: [*kept.get(k, ()), *inner.get(k, ())] for k in {*kept, *inner}},
     )
+
+
+_MEASURED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+"""Per collision model: the rows it measured exactly (joints' and moving poses' bytes -> what was found)."""
+_MEASURED_LOCK = threading.Lock()  # held while _MEASURED or a model's rows are read or changed
+
+Measured = tuple[Sample, dict[int, tuple[float, Array]]]
+"""A row measured exactly: its least figures and the pairs measured there, by pair index, with their
+distances [m] and unit witness normals (:meth:`CollisionModel.witnesses`)."""
+
+
+def _measured_row(model: CollisionModel, key: bytes) -> Measured | None:
+    """What ``model`` found at the row ``key`` (the joints' and the moving bodies' poses' bytes), or None.
+
+    A model's cell, tool, base and margins are fixed for its life (as
+    :func:`refine.collision.carry.hull_corners` keeps them), so the model and the row's joints and
+    poses to the bit fix every distance measured there: a row two motions planned one after the
+    other share (a line's first row, the direct move ending on it) is measured once.
+    """
+    with _MEASURED_LOCK:
+        rows = _MEASURED.get(model)
+        if rows is None or key not in rows:
+            return None
+        rows.move_to_end(key)
+        return rows[key]
+
+
+def _keep_row(model: CollisionModel, key: bytes, found: Measured) -> None:
+    """Keep ``found`` at the row ``key`` of ``model`` (past :data:`MEASURED_ROWS`, the oldest used goes)."""
+    with _MEASURED_LOCK:
+        rows = _MEASURED.setdefault(model, OrderedDict())
+        rows[key] = found
+        rows.move_to_end(key)
+        while len(rows) > MEASURED_ROWS:
+            rows.popitem(last=False)
 
 
 _SHIFTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()

@@ -406,3 +406,14 @@ def test_the_nearest_pairs_are_those_of_a_check_of_every_pair_near_the_table(
         assert by_clearance.clearance_m == pytest.approx(
             min(d - m for d, m in zip(every, margins, strict=True)), abs=1e-12
         )
+
+
+@pytest.mark.parametrize("clash", ["link_3", "table"])
+def test_a_cell_object_named_as_a_robot_link_or_another_object_is_an_input_error_naming_it(irb4600, clash):
+    def model(*cell):
+        return CollisionModel(irb4600, np.eye(4), np.eye(4), (), cell, margin_m=0.01, self_margin_m=0.005)
+
+    table = Shape("table", "box", make_transform(p=[1.5, 0.0, -0.3]), size_m=(1.0, 1.0, 0.1))
+    assert "link_3" in {b.name for b in model(table).bodies if b.kind == "link"}
+    with pytest.raises(InputError, match=f"the name '{clash}' is used twice"):
+        model(table, Shape(clash, "box", make_transform(p=[1.5, 1.5, -0.3]), size_m=(0.2, 0.2, 0.2)))

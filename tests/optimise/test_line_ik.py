@@ -223,3 +223,66 @@ def test_a_line_source_starts_the_next_rounds_line_from_its_last_one():
     cold = check_controller_lines(kin, q2, s, Tolerances())
     np.testing.assert_allclose(second.q, cold.q, rtol=0, atol=1e-8)
     assert source.checks == 2 and second.ik_error.max() <= IK_TOLERANCE
+
+
+def test_the_final_check_from_the_line_source_has_the_margins_bows_and_breaks_of_a_plain_pinocchio_ik():
+    """The rounds' source checks an answer; the final check of the same joints takes the source's
+    check (its IK, bows and joint margins) and reports, at the path's arc lengths, what a plain
+    Pinocchio IK at every sample gives: per segment the least joint-limit margin, the largest joint
+    difference to the joint-linear motion and that difference times the joints' reach, and the
+    joint-limit breaks of a margin half the segments miss (runs of segments, the least margin in
+    each), as the final check without the source finds them."""
+    from types import SimpleNamespace
+
+    from refine.optimise.controller_line import JOINT_TOLERANCE_RAD, ControllerLineSource
+
+    plain = PlainIk(BASES["turned"])
+    kin = TcpKinematics(plain.robot, BASES["turned"], TCP)
+    q = _path(3.0, n=14, seed=11) + np.radians([0.0, 0.0, 50.0, 0.0, 0.0, 0.0])  # joint 3 up to 7 deg from 75
+    s = np.cumsum(np.r_[0.0, np.full(len(q) - 1, 0.004)])
+    m, segment, t = sample_parameters(q)
+    targets = _targets(plain, q, segment, t)
+    q_lin = q[segment] + t[:, None] * (q[segment + 1] - q[segment])
+    exact = np.array([plain.solve(T, x) for T, x in zip(targets, q_lin, strict=True)])
+    lower, upper = plain.model.lowerPositionLimit, plain.model.upperPositionLimit
+    margins = np.minimum(exact - lower, upper - exact)  # per sample and joint [rad]
+    per_joint = np.array([margins[segment == k].min(axis=0) for k in range(len(m))])  # (N-1, n)
+    margin_deg = float(np.degrees(np.median(per_joint.min(axis=1))))  # about half the segments break it
+    tol = Tolerances(joint_margin_deg=margin_deg)
+    reach = np.array([2.4, 2.1, 1.3, 0.6, 0.45, 0.3])  # any per-joint reach [m]
+    bow = np.abs(exact - q_lin)
+    joint_diff = np.array([np.degrees(bow[segment == k].max()) for k in range(len(m))])
+    change = np.array([(bow[segment == k] @ reach).max() for k in range(len(m))])
+
+    source = ControllerLineSource(kin, tol)
+    source.violations(SimpleNamespace(fused=SimpleNamespace(s=np.arange(len(q), dtype=float))), q)
+    known = source.checked(q, kin, np.zeros(len(q) - 1, dtype=bool))
+    assert known is not None
+    taken = check_controller_lines(kin, q, s, tol, reach=reach, known=known)
+    assert known.bow is not None and taken.bow is None  # the source's bows taken, not kept again
+    alone = check_controller_lines(kin, q, s, tol, reach=reach)
+    limit = np.radians(margin_deg) - JOINT_TOLERANCE_RAD
+    for line in (taken, alone):
+        np.testing.assert_allclose(line.joint_margin_rad, per_joint.min(axis=1), rtol=0, atol=1e-8)
+        np.testing.assert_allclose(line.joint_difference_deg, joint_diff, rtol=0, atol=1e-6)
+        np.testing.assert_allclose(line.clearance_change_m, change, rtol=0, atol=1e-7)
+        found = sorted(
+            (v.reason, v.index_start, v.index_end, v.s_start_m, v.s_end_m, v.worst)
+            for v in line.violations
+            if v.reason.startswith("joint limit")
+        )
+        want = []
+        for j in range(q.shape[1]):
+            bad = per_joint[:, j] < limit
+            edges = np.flatnonzero(np.diff(np.r_[0, bad.astype(int), 0]))
+            for a, b in zip(edges[::2], edges[1::2] - 1, strict=True):
+                worst = per_joint[a : b + 1, j].min()
+                reason = f"joint limit on the controller's line (joint {j + 1})"
+                want.append((reason, a, b, s[a], s[b], worst))
+        want.sort()
+        assert want and sum(b - a + 1 for _, a, b, *_ in want) < len(m)
+        assert [w[:5] for w in found] == [w[:5] for w in want]
+        np.testing.assert_allclose([w[5] for w in found], [w[5] for w in want], rtol=0, atol=1e-8)
+    assert taken.violations == alone.violations
+    for name in ("joint_margin_rad", "joint_difference_deg", "clearance_change_m", "q", "singularity"):
+        np.testing.assert_array_equal(getattr(taken, name), getattr(alone, name))

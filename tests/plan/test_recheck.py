@@ -16,6 +16,7 @@ import pytest
 
 from refine.collision.carry import carried_bounds
 from refine.frames import make_transform
+from refine.plan import recheck as recheck_module
 from refine.plan.line import plan_line
 from refine.plan.recheck import _carried, recheck
 
@@ -185,3 +186,66 @@ def test_a_move_passing_a_box_re_proved_from_its_samples_has_the_dense_checks_le
     assert found.min_distance_m == pytest.approx(fresh.min_distance_m, abs=1e-9)
     assert found.min_clearance_m == pytest.approx(fresh.min_clearance_m, abs=1e-9)
     assert found.segment_pair == fresh.segment_pair
+
+
+def _every_pair(model, rows):
+    """Every pair's distance [m] at every row, (K, P), each measured by the model's own FCL query."""
+    return np.array([[model.pair_distance(q, p) for p in range(len(model.pairs))] for q in rows])
+
+
+def test_a_clamp_moved_closer_gets_its_own_distances_not_those_the_same_rows_had_before_it_moved(glass):
+    """The retract line is planned beside a clamp and again from 2 mm away (its rows measured on that
+    model); on the model of the clamp moved 10 mm closer, the same rows planned again have the least
+    figures every pair measured at every row on the moved model gives, 4 mm and more below the first's."""
+    problem, robot = glass
+    q = joints_at(problem, robot, np.array([1.2, 0.0, 0.66]))
+    T = kinematics(problem, robot).pose(q)
+    on_line = T[:3, 3] - 0.07 * T[:3, 2]  # 70 mm back along the tool axis: on the 100 mm retract
+    near = checker_with(problem, robot, [box("clamp", on_line + [0.0, 0.08, 0.0], (0.03, 0.03, 0.03))])
+    first = _line(problem, robot, near, 1.2)
+    again = _line(problem, robot, near, 1.202, previous=first)
+    assert again.ok and again.check.waypoint_measured.any()
+    closer = checker_with(problem, robot, [box("clamp", on_line + [0.0, 0.07, 0.0], (0.03, 0.03, 0.03))])
+    found = recheck(closer.model, again.q, first.check)
+    assert found is not None and found.ok
+    d = _every_pair(closer.model, again.q)
+    clear = d - closer.model.pair_margins
+    assert found.waypoint_distance_m.min() == pytest.approx(d.min(), abs=1e-12)
+    assert found.waypoint_clearance_m.min() == pytest.approx(clear.min(), abs=1e-12)
+    assert d.min() < again.min_distance_m - 0.004
+
+
+def test_a_motion_checked_again_on_its_model_takes_the_rows_measured_and_finds_what_measuring_finds(
+    glass, monkeypatch
+):
+    """The retract line planned again, re-proved twice on one model, then with its wrist turned 1 mrad
+    (the last joint alone): the second time its rows measured are taken as they were (fewer FCL
+    queries), and every figure and bound of the three is, bit for bit, what the same re-proofs give on
+    a model of the same cell that keeps no row."""
+    problem, robot = glass
+
+    def re_proofs():
+        checker = checker_with(problem, robot, problem.cell)
+        first = _line(problem, robot, checker, 1.2)
+        rows = _line(problem, robot, checker, 1.2, previous=first).q + 2e-5  # planned again, moved
+        turned = rows.copy()
+        turned[:, -1] += 1e-3
+        return [recheck(checker.model, x, first.check) for x in (rows, rows, turned)]
+
+    kept = re_proofs()
+    monkeypatch.setattr(recheck_module, "MEASURED_ROWS", 0)
+    bare = re_proofs()
+    assert all(c is not None and c.ok for c in (*kept, *bare))
+    assert kept[1].queries < bare[1].queries and kept[1].queries < kept[0].queries
+    for a, b in zip(kept, bare, strict=True):
+        for field in dataclasses.fields(a):
+            if field.name in ("queries", "time_s", "bounds", "inner_samples"):
+                continue
+            x, y = getattr(a, field.name), getattr(b, field.name)
+            if isinstance(x, np.ndarray):
+                np.testing.assert_array_equal(x, y, err_msg=field.name)
+            else:
+                assert x == y, field.name
+        np.testing.assert_array_equal(a.bounds.bounds, b.bounds.bounds)
+        np.testing.assert_array_equal(a.bounds.normals, b.bounds.normals)
+        assert a.inner_samples == b.inner_samples

@@ -21,6 +21,7 @@ import pytest
 import refine
 import refine.plan.air
 import refine.plan.line
+import refine.plan.recheck
 from refine.plan.air import plan_air
 
 from .test_motions import (
@@ -78,6 +79,42 @@ def test_a_re_solve_plans_the_cold_run_s_motions(shifted):
             assert b.min_singularity == pytest.approx(a.min_singularity, abs=1e-6), a.name
         if a.line_deviation_m is not None:
             assert b.line_deviation_m == pytest.approx(a.line_deviation_m, abs=1e-6), a.name
+
+
+def _same(x, y, where, skip=("planner_time_s", "queries", "time_s")):
+    """``x`` and ``y`` (dataclasses, mappings, sequences, arrays, values) equal to the bit, ``skip`` aside."""
+    if dataclasses.is_dataclass(x):
+        for f in dataclasses.fields(x):
+            if f.name not in skip:
+                _same(getattr(x, f.name), getattr(y, f.name), f"{where}.{f.name}")
+    elif isinstance(x, dict):
+        assert x.keys() == y.keys(), where
+        for k in x:
+            _same(x[k], y[k], f"{where}[{k!r}]")
+    elif isinstance(x, (tuple, list)):
+        assert type(x) is type(y) and len(x) == len(y), where
+        for k, (u, v) in enumerate(zip(x, y, strict=True)):
+            _same(u, v, f"{where}[{k}]")
+    elif isinstance(x, np.ndarray):
+        np.testing.assert_array_equal(x, y, err_msg=where)
+    else:
+        assert x == y or (x != x and y != y), where  # NaN equals NaN here
+
+
+def test_a_re_solve_s_motions_are_those_of_one_that_measures_every_row_again(shifted):
+    """The warm motions share rows (the home move ends on the approach's first row, the return
+    starts on the retract's last): measured once per collision model, they give every motion the
+    joints, figures and bounds, bit for bit, of a re-solve that keeps no row measured, with fewer
+    FCL queries."""
+    s, _, warm, _ = shifted
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(refine.plan.recheck, "MEASURED_ROWS", 0)
+        bare = refine.refine_path(ROBOT, s.positions, s.orientations, **s.part, previous=s.first)
+    assert [m.name for m in warm.run.motions] == [m.name for m in bare.run.motions]
+    for a, b in zip(warm.run.motions, bare.run.motions, strict=True):
+        _same(a, b, a.name)  # joints, figures, and the check's figures and bounds
+    queries = [sum(m.check.queries for m in r.run.motions if m.kind != "path") for r in (warm, bare)]
+    assert queries[0] < queries[1], queries
 
 
 def test_a_re_solve_starts_the_lines_ik_from_the_previous_lines(shifted):
