@@ -160,3 +160,29 @@ def test_another_robot_gets_its_own_selection(robot):
     again = build(other)
     assert again._kept is not first._kept and again._kept.robot is other
     assert again.pairs == fresh(other).pairs
+
+
+def test_a_kept_models_pair_indices_labels_and_flags_are_its_own_bodies(robot):
+    """Built again with the pillar moved (the selection kept), and with it renamed (a selection of its
+    own): each pair's indices name the bodies of its labels, its self flag says whether the other body
+    is a robot link or tool shape, and its mesh and hull flags are those of its two bodies, as a loop
+    over the model's own bodies reads them; the kept arrays cannot be written to."""
+    first = build(robot)
+    moved = dataclasses.replace(PILLAR, pose=make_transform(p=[1.503, -0.65, 1.0]))
+    renamed = dataclasses.replace(PILLAR, name="post")
+    for cell, shared in (((moved, BALL), True), ((renamed, BALL), False)):
+        again = build(robot, cell=cell)
+        assert (again._kept is first._kept) == shared
+        assert ("tool:nozzle", "post" if not shared else "pillar") in again.pairs
+        labels = [b.label for b in again.bodies]
+        assert len(again.pairs) == len(again._pa) == len(again._pb) == len(again._self)
+        for k, (body, other) in enumerate(again.pairs):
+            a, b = labels.index(body), labels.index(other)
+            assert (int(again._pa[k]), int(again._pb[k])) == (a, b)
+            A, B = again.bodies[a], again.bodies[b]
+            assert bool(again._self[k]) == (B.kind in ("link", "tool"))
+            assert bool(again._bounded[k]) == (A.vertices is None and B.vertices is None)
+            assert bool(again._hulled[k]) == (B.hull is not None and B.kind == "cell")
+        for a in (again._pa, again._pb, again._self):
+            with pytest.raises(ValueError):
+                a[0] = a[0]
