@@ -25,7 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 from refine.collision.contact import Contact, linearised_distance
 from refine.collision.distance import hull_bound, place, signed_distance
 from refine.collision.geometry import Body, check_body_names, link_body, shape_body, world_aabb
-from refine.collision.kept import Kept, recall, remember, structure_key
+from refine.collision.kept import Kept, indexed_pairs, recall, remember, structure_key
 from refine.collision.motion import joint_reach, pair_reach
 from refine.collision.native_bounds import box_gaps
 from refine.collision.pairs import exclusion, joint_axes
@@ -154,16 +154,13 @@ class CollisionModel:
         self._kept = known
         self.kept_hulls = known.hulls
         kept = known.kept
-        self._pa = np.array([p[0] for p in kept], dtype=int)
-        self._pb = np.array([p[1] for p in kept], dtype=int)
-        self._self = np.array([self.bodies[b].kind != "cell" for b in self._pb], dtype=bool)
+        self._pa, self._pb, self._self, self.pairs = indexed_pairs(known, self.bodies)
         self._margin = np.where(self._self, self.self_margin_m, self.margin_m)
-        self._hulled = np.array(
-            [self.bodies[b].hull is not None and self.bodies[b].kind == "cell" for b in self._pb]
-        )
+        hulled = np.array([b.hull is not None and b.kind == "cell" for b in self.bodies], dtype=bool)
+        mesh = np.array([b.is_mesh for b in self.bodies], dtype=bool)
+        self._hulled = hulled[self._pb]
         self._normals = np.full((len(kept), 3), np.nan)  # last witness normal per pair, world
-        self._bounded = np.array([not (self.bodies[a].is_mesh or self.bodies[b].is_mesh) for a, b in kept])
-        self.pairs = tuple((self.bodies[a].label, self.bodies[b].label) for a, b in kept)
+        self._bounded = ~(mesh[self._pa] | mesh[self._pb])
         self.excluded = known.excluded
 
     def _selection(self) -> Kept:

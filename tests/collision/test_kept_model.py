@@ -7,6 +7,7 @@ cylinder placed by Pinocchio's flange pose and a cell box (nothing from the mode
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import fcl
 import numpy as np
@@ -20,6 +21,7 @@ from refine.frames import make_transform
 from refine.robot.registry import load_robot
 from refine.settings import Shape
 
+BRACKET = Path(__file__).resolve().parents[1] / "data" / "bracket.stl"
 TCP = make_transform(p=[0.0, 0.0, 0.35])
 PILLAR = Shape("pillar", "box", pose=make_transform(p=[1.5, -0.65, 1.0]), size_m=(0.2, 0.2, 2.0))
 BALL = Shape("ball", "sphere", pose=make_transform(p=[1.45, -0.5, 0.5]), radius_m=0.08)
@@ -160,3 +162,33 @@ def test_another_robot_gets_its_own_selection(robot):
     again = build(other)
     assert again._kept is not first._kept and again._kept.robot is other
     assert again.pairs == fresh(other).pairs
+
+
+def test_a_kept_models_pair_indices_labels_and_flags_are_its_own_bodies(robot):
+    """Built again with the pillar moved (the selection kept), and with it renamed (a selection of its
+    own): each pair's indices name the bodies of its labels, its self flag says whether the other body
+    is a robot link or tool shape, and its mesh and hull flags are those of its two bodies, as a loop
+    over the model's own bodies reads them; the kept arrays cannot be written to."""
+    first = build(robot)
+    moved = dataclasses.replace(PILLAR, pose=make_transform(p=[1.503, -0.65, 1.0]))
+    renamed = dataclasses.replace(PILLAR, name="post")
+    bracket = Shape("bracket", "mesh", pose=make_transform(p=[1.3, 0.4, 0.6]), file=str(BRACKET), units="mm")
+    for cell, shared in (((moved, BALL), True), ((renamed, BALL), False), ((PILLAR, bracket), False)):
+        again = build(robot, cell=cell)
+        assert (again._kept is first._kept) == shared
+        assert ("tool:nozzle", cell[0].name) in again.pairs
+        labels = [b.label for b in again.bodies]
+        assert len(again.pairs) == len(again._pa) == len(again._pb) == len(again._self)
+        for k, (body, other) in enumerate(again.pairs):
+            a, b = labels.index(body), labels.index(other)
+            assert (int(again._pa[k]), int(again._pb[k])) == (a, b)
+            A, B = again.bodies[a], again.bodies[b]
+            assert bool(again._self[k]) == (B.kind in ("link", "tool"))
+            assert bool(again._bounded[k]) == (A.vertices is None and B.vertices is None)
+            assert bool(again._hulled[k]) == (B.hull is not None and B.kind == "cell")
+        if cell[1] is bracket:  # a mesh with its hull: its pairs are hulled and not bounded
+            near = [k for k, (_, other) in enumerate(again.pairs) if other == "bracket"]
+            assert near and again._hulled[near].all() and not again._bounded[near].any()
+        for a in (again._pa, again._pb, again._self):
+            with pytest.raises(ValueError):
+                a[0] = a[0]
