@@ -3,7 +3,12 @@ figures (shifted geometric mean, performance ratios, growth), each against a fig
 
 from __future__ import annotations
 
+import ast
 import math
+import os
+import subprocess
+import sys
+import textwrap
 
 import numpy as np
 import pytest
@@ -150,3 +155,35 @@ def test_growth_of_a_power_law_with_a_kink():
     assert exact["exponent"] == pytest.approx(1.0) and exact["high"] - exact["low"] == pytest.approx(
         0.0, abs=1e-9
     )
+
+
+def test_a_blas_first_loaded_inside_the_limit_runs_at_the_limit():
+    # a fresh interpreter that has not loaded SciPy's own OpenBLAS: after the block is entered, a run
+    # (here, the child of a fork, as the bench isolates runs) imports scipy.linalg for the first time;
+    # threadpoolctl itself reads every BLAS's thread count in the child
+    script = textwrap.dedent(
+        """
+        import os, sys
+        import numpy
+        from threadpoolctl import threadpool_info
+        from refine.bench.provenance import fixed_threads
+        assert "scipy.linalg" not in sys.modules
+        with fixed_threads(1):
+            pid = os.fork()
+            if pid == 0:
+                import scipy.linalg
+                counts = {lib["filepath"]: lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"}
+                print(sorted(counts.values()), flush=True)
+                os._exit(0)
+            os.waitpid(pid, 0)
+        """
+    )
+    if (os.cpu_count() or 1) < 2:
+        pytest.skip("one core: a BLAS starts at one thread anyway, so the limit shows nothing")
+    env = dict(os.environ)
+    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        env.pop(name, None)  # as a user starts it: one BLAS thread per core by default
+    done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    counts = ast.literal_eval(done.stdout.strip().splitlines()[-1])
+    assert len(counts) >= 2 and set(counts) == {1}  # NumPy's and SciPy's OpenBLAS both at one thread
