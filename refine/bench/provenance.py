@@ -135,8 +135,8 @@ def fixed_threads(count: int = DEFAULT_BLAS_THREADS) -> Iterator[str]:
     import, in this process or in a run's child process) reads its thread count from the environment
     when it loads, not from threadpoolctl's setting: SciPy's is loaded before the limit is set, and
     :data:`LOAD_TIME_THREAD_VARIABLES` hold ``count`` inside the block for any other (without them, a
-    run that first imports ``scipy.linalg`` ran SciPy's OpenBLAS at one thread per core, whose idle
-    workers spin: 0.49 -> 0.86 s of CPU for the same 0.49 s of wall time on two cores).
+    run that first imported ``scipy.linalg`` ran SciPy's OpenBLAS at one thread per core while the
+    row recorded ``count``).
 
     Raises:
         InputError: ``count`` below 1.
