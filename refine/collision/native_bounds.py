@@ -339,11 +339,12 @@ class Shapes:
         start, count: per body (B,), its corners' rows in ``corners``.
         corners: every corner body's corners (V, 3) [m], in its shape frame.
         fixed: every body's pose (B, 4, 4), read for the bodies past the moving ones.
-        pa, pb: the pairs' bodies (P,); bounded: the pairs without a mesh (P,).
+        pa, pb: the pairs' bodies (P,); bounded: the pairs without a mesh (P,) (nor a body with a
+            corner or size that is not finite: its gaps bound nothing).
     """
 
     def __init__(self, bodies: list, fixed: Array, pa: Array, pb: Array, bounded: Array) -> None:
-        kinds, sizes, starts, counts, corners = [], [], [], [], []
+        kinds, sizes, starts, counts, corners, corners_of = [], [], [], [], [], []
         at = 0
         for body in bodies:
             tag, *dims = body.kind_params
@@ -359,6 +360,7 @@ class Shapes:
             else:
                 kind, size[:2] = 2, dims[:2]
             n = len(corners[-1]) if kind == 3 else 0
+            corners_of.append(corners[-1] if kind == 3 else size)
             kinds.append(kind)
             sizes.append(size)
             starts.append(at)
@@ -371,7 +373,9 @@ class Shapes:
         self.corners = np.ascontiguousarray(np.concatenate(corners) if corners else np.zeros((1, 3)))
         self.fixed = fixed
         self.pa, self.pb = (np.ascontiguousarray(a, dtype=np.int64) for a in (pa, pb))
-        self.bounded = np.asarray(bounded, dtype=bool)
+        # a corner that is not finite: no reach to bound a gap by (NumPy's max is NaN, or infinite)
+        finite = np.array([np.isfinite(c).all() for c in corners_of], dtype=bool)
+        self.bounded = np.asarray(bounded, dtype=bool) & finite[self.pa] & finite[self.pb]
 
 
 def direction_gaps(
