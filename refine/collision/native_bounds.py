@@ -371,7 +371,7 @@ class Shapes:
         self.start = np.array(starts, dtype=np.int64)
         self.count = np.array(counts, dtype=np.int64)
         self.corners = np.ascontiguousarray(np.concatenate(corners) if corners else np.zeros((1, 3)))
-        self.fixed = fixed
+        self.fixed = np.ascontiguousarray(fixed, dtype=float)  # read by the C in place
         self.pa, self.pb = (np.ascontiguousarray(a, dtype=np.int64) for a in (pa, pb))
         # a corner that is not finite: no reach to bound a gap by (NumPy's max is NaN, or infinite)
         finite = np.array([np.isfinite(c).all() for c in corners_of], dtype=bool)

@@ -103,3 +103,22 @@ def test_a_box_pair_past_the_bodies_raises_as_numpy_does():
     fixed_centre, fixed_half = rng.uniform(-2.0, 2.0, (3, 3)), np.full((3, 3), 0.1)
     with pytest.raises(IndexError):
         nb.box_gaps(poses, centre, half, fixed_centre, fixed_half, np.array([0, 1]), np.array([2, 3]), lib)
+
+
+@compiled
+def test_fixed_poses_in_another_layout_are_read_as_poses():
+    """The bodies' fixed poses given transposed or strided in memory: the gaps NumPy reads from them."""
+    rng = np.random.default_rng(10)
+    bodies = [nb._Fake(("sphere", 0.1)), nb._Fake(("box", np.array([0.1, 0.2, 0.05])))]
+    poses = np.array([nb._pose(rng, 1.0) for _ in range(2)])
+    poses[1, :3, 3] += [2.0, 0.0, 0.0]
+    pa, pb = np.array([0]), np.array([1])
+    moving = poses[:1][None].repeat(4, axis=0)  # (4, 1, 4, 4): the sphere at every row
+    normals = rng.normal(size=(4, 1, 3))
+    have = np.ones((4, 1), dtype=bool)
+    want = nb.numpy_gaps(nb.Shapes(bodies, poses, pa, pb, np.ones(1, bool)), moving, normals, have)
+    wide = np.zeros((2, 4, 8))
+    wide[..., ::2] = poses
+    for fixed in (np.asfortranarray(poses), wide[..., ::2]):  # transposed in memory, strided
+        shapes = nb.Shapes(bodies, fixed, pa, pb, np.ones(1, bool))
+        assert np.array_equal(nb.direction_gaps(shapes, moving, normals, have, lib), want)
