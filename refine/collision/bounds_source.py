@@ -3,7 +3,8 @@
 Every function returns 0; ``idx`` is a 64-bit count. The sums are written term by term in the
 order NumPy's small products take them, and compiled without fused multiply-adds or reassociation
 (:data:`refine.collision.native_bounds.FLAGS`), so the answers agree with NumPy's to rounding; the
-least values (``least``) keep a NaN as NumPy's ``min`` does.
+least values (``least``) keep a NaN as NumPy's ``min`` does, and a corner body's largest product
+(``reach``) as NumPy's ``max`` does.
 """
 
 SOURCE = r"""
@@ -123,9 +124,16 @@ static double reach(const double *T, const double *d, idx kind, const double *pa
     if (kind == 1) return l[3] + (fabs(l[0]) * par[0] + fabs(l[1]) * par[1] + fabs(l[2]) * par[2]);
     if (kind == 2) return l[3] + par[1] * fabs(l[2]) + par[0] * hypot(l[0], l[1]);
     double best = -INFINITY;
-    for (idx v = 0; v < nv; ++v) {
-        double x = l[0] * verts[3 * v] + l[1] * verts[3 * v + 1] + l[2] * verts[3 * v + 2];
-        if (x > best) best = x;
+    if (isfinite(l[0]) && isfinite(l[1]) && isfinite(l[2])) {  /* finite corners (Shapes): finite products */
+        for (idx v = 0; v < nv; ++v) {
+            double x = l[0] * verts[3 * v] + l[1] * verts[3 * v + 1] + l[2] * verts[3 * v + 2];
+            if (x > best) best = x;
+        }
+    } else {  /* a pose not a number or infinite: a NaN product kept, as NumPy's max keeps it */
+        for (idx v = 0; v < nv; ++v) {
+            double x = l[0] * verts[3 * v] + l[1] * verts[3 * v + 1] + l[2] * verts[3 * v + 2];
+            if (x > best || isnan(x)) best = x;
+        }
     }
     return l[3] + best;
 }

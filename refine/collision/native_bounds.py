@@ -19,6 +19,9 @@ Each is one small C loop (:data:`refine.collision.bounds_source.SOURCE`), as are
 of each waypoint and of each pair (:func:`row_least`, :func:`column_least`: which waypoints the
 check measures, which pairs the known bounds settle), compiled once into a shared library in the
 cache folder of :mod:`refine.native` and called through :mod:`ctypes` on C-contiguous float64 arrays.
+Only arrays of the very shapes the loops read reach them (outputs also of their dtype, in place;
+indices within their axes); any other (a broadcast shape, a strided output, an index out of range)
+takes the NumPy expression, which broadcasts or raises as NumPy does.
 When the library is loaded its answers are compared once with the NumPy expressions on random
 inputs (:data:`CHECK_TOLERANCE`); a difference, ``REFINE_COMPILE=0``, no C compiler or a failed
 compilation leave every function on its NumPy expression, which gives the same answers to rounding.
@@ -85,6 +88,30 @@ def _ptr(a: np.ndarray) -> int:
     return a.ctypes.data
 
 
+def _shaped(*given: tuple[object, tuple[int, ...]]) -> bool:
+    """Every ``(array, shape)`` of ``given`` of that shape exactly (the C loops read no broadcast)."""
+    return all(np.shape(a) == shape for a, shape in given)
+
+
+def _within(index: object, size: int) -> bool:
+    """Every entry of ``index`` an index of an axis of ``size`` counted from 0 (no wrap, nothing past it)."""
+    index = np.asarray(index)
+    return index.dtype.kind in "iu" and (
+        index.size == 0 or (int(index.min()) >= 0 and int(index.max()) < size)
+    )
+
+
+def _in_place(a: object, shape: tuple[int, ...], dtype: type, written: bool = True) -> bool:
+    """``a`` as the C reads it (and, ``written``, writes it) in place: C-contiguous, of ``dtype`` and ``shape``."""
+    return (
+        isinstance(a, np.ndarray)
+        and a.dtype == dtype
+        and a.shape == shape
+        and a.flags.c_contiguous
+        and (a.flags.writeable or not written)
+    )
+
+
 def library() -> _Library | None:
     """The checked library (compiled and loaded on the first call), or None: the NumPy expressions."""
     key = (os.environ.get("REFINE_COMPILE", "1"), os.environ.get("CC"))  # what decides the compiler
@@ -142,7 +169,8 @@ def short_of(
     [m] each pair's motion bound per segment; as ``short(bounds - margins + tolerance_m, motion)``.
     """
     lib = library() if lib is LOOKUP else lib
-    if lib is None or len(bounds) < 2:
+    N, P = np.shape(bounds) if np.ndim(bounds) == 2 else (0, 0)
+    if lib is None or N < 2 or not _shaped((margins, (P,)), (motion, (N - 1, P))):
         budget = bounds - margins + tolerance_m
         return (budget[:-1] < 0.0) | (budget[1:] < 0.0) | (budget[:-1] + budget[1:] < motion)
     bounds, margins, motion = (np.ascontiguousarray(a, dtype=float) for a in (bounds, margins, motion))
@@ -167,8 +195,19 @@ def row_least(
     (a least value does not round), so the same whether compiled or not.
     """
     lib = library() if lib is LOOKUP else lib
-    lo, hi, _ = rows.indices(len(bounds))
-    if lib is None or not bounds.flags.c_contiguous or bounds.shape[1] == 0 or hi <= lo:
+    lo, hi, step = rows.indices(len(bounds))
+    N, P = np.shape(bounds) if np.ndim(bounds) == 2 else (0, 0)
+    if (
+        lib is None
+        or P == 0
+        or hi <= lo
+        or step != 1
+        or not _in_place(bounds, (N, P), np.float64, written=False)
+        or not _in_place(measured, (N,), np.bool_, written=False)
+        or not _in_place(distance, (N,), np.float64)
+        or not _in_place(clearance, (N,), np.float64)
+        or not _shaped((margins, (P,)))
+    ):
         distance[rows] = np.where(measured[rows], np.inf, bounds[rows].min(axis=1))
         clearance[rows] = np.where(measured[rows], np.inf, (bounds[rows] - margins).min(axis=1))
         return
@@ -183,7 +222,8 @@ def column_least(
 ) -> tuple[Array, Array, NDArray[np.bool_]]:
     """Per pair of ``bounds`` (N, P) [m]: its least bound, its least ``bound - margin`` [m], all finite, (P,) each."""
     lib = library() if lib is LOOKUP else lib
-    if lib is None or len(bounds) == 0:
+    N, P = np.shape(bounds) if np.ndim(bounds) == 2 else (0, 0)
+    if lib is None or N == 0 or not _shaped((margins, (P,))):
         return bounds.min(axis=0), (bounds - margins).min(axis=0), np.isfinite(bounds).all(axis=0)
     bounds, margins = (np.ascontiguousarray(a, dtype=float) for a in (bounds, margins))
     N, P = bounds.shape
@@ -210,7 +250,13 @@ def carried(
     """
     lib = library() if lib is LOOKUP else lib
     N, P = len(q), len(motion)
-    if lib is None:
+    C = len(mine)
+    fits = np.ndim(q) == 2 and np.ndim(motion) == 2 and np.ndim(bounds) == 2
+    if fits:
+        n, P0 = np.shape(q)[1], np.shape(bounds)[1]
+        fits = _shaped((q0, (N, n)), (motion, (P, n)), (bounds, (N, P0)), (theirs, (C,)), (delta, (C,)))
+        fits = fits and _shaped((mine, (C,))) and _within(mine, P) and _within(theirs, P0)
+    if lib is None or not fits:
         out = np.full((N, P), -np.inf)
         if len(mine):
             out[:, mine] = bounds[:, theirs] - (np.abs(q - q0) @ motion.T)[:, mine] - delta
@@ -245,7 +291,17 @@ def box_gaps(
     """
     lib = library() if lib is LOOKUP else lib
     N, M = poses.shape[:2]
-    if lib is None:
+    B, C = len(fixed_centre), len(pa)
+    fits = (
+        _shaped((poses, (N, M, 4, 4)), (fixed_centre, (B, 3)), (fixed_half, (B, 3)), (pb, (C,)))
+        and _shaped((pa, (C,)))
+        and np.shape(centre)[1:] == (3,)
+        and np.shape(half)[1:] == (3,)
+        and min(len(centre), len(half), B) >= M
+        and _within(pa, B)
+        and _within(pb, B)
+    )
+    if lib is None or not fits:
         cb, hb = np.empty((2, len(fixed_centre), N, 3))  # body-major: each pair's rows gathered as blocks
         cb[M:], hb[M:] = fixed_centre[M:, None], fixed_half[M:, None]
         used = np.union1d(pa[pa < M], pb[pb < M])  # only the moving bodies of these pairs are boxed
@@ -283,11 +339,12 @@ class Shapes:
         start, count: per body (B,), its corners' rows in ``corners``.
         corners: every corner body's corners (V, 3) [m], in its shape frame.
         fixed: every body's pose (B, 4, 4), read for the bodies past the moving ones.
-        pa, pb: the pairs' bodies (P,); bounded: the pairs without a mesh (P,).
+        pa, pb: the pairs' bodies (P,); bounded: the pairs without a mesh (P,) (nor a body with a
+            corner or size that is not finite: its gaps bound nothing).
     """
 
     def __init__(self, bodies: list, fixed: Array, pa: Array, pb: Array, bounded: Array) -> None:
-        kinds, sizes, starts, counts, corners = [], [], [], [], []
+        kinds, sizes, starts, counts, corners, corners_of = [], [], [], [], [], []
         at = 0
         for body in bodies:
             tag, *dims = body.kind_params
@@ -303,6 +360,7 @@ class Shapes:
             else:
                 kind, size[:2] = 2, dims[:2]
             n = len(corners[-1]) if kind == 3 else 0
+            corners_of.append(corners[-1] if kind == 3 else size)
             kinds.append(kind)
             sizes.append(size)
             starts.append(at)
@@ -313,9 +371,11 @@ class Shapes:
         self.start = np.array(starts, dtype=np.int64)
         self.count = np.array(counts, dtype=np.int64)
         self.corners = np.ascontiguousarray(np.concatenate(corners) if corners else np.zeros((1, 3)))
-        self.fixed = fixed
+        self.fixed = np.ascontiguousarray(fixed, dtype=float)  # read by the C in place
         self.pa, self.pb = (np.ascontiguousarray(a, dtype=np.int64) for a in (pa, pb))
-        self.bounded = np.asarray(bounded, dtype=bool)
+        # a corner that is not finite: no reach to bound a gap by (NumPy's max is NaN, or infinite)
+        finite = np.array([np.isfinite(c).all() for c in corners_of], dtype=bool)
+        self.bounded = np.asarray(bounded, dtype=bool) & finite[self.pa] & finite[self.pb]
 
 
 def direction_gaps(
@@ -332,7 +392,11 @@ def direction_gaps(
     that is not a number once made unit. None without the compiled library: the caller's NumPy then.
     """
     lib = library() if lib is LOOKUP else lib
-    if lib is None:
+    N, P = np.shape(have) if np.ndim(have) == 2 else (0, -1)
+    B, M = len(shapes.kind), np.shape(poses)[1] if np.ndim(poses) == 4 else -1
+    fits = _shaped((poses, (N, M, 4, 4)), (normals, (N, P, 3)), (shapes.pa, (P,)), (shapes.pb, (P,)))
+    fits = fits and _shaped((shapes.fixed, (B, 4, 4))) and _within(shapes.pa, B) and _within(shapes.pb, B)
+    if lib is None or not fits:
         return None
     poses, normals = np.ascontiguousarray(poses, dtype=float), np.ascontiguousarray(normals, dtype=float)
     have = np.ascontiguousarray(have & shapes.bounded)

@@ -348,11 +348,15 @@ class NullSpaceStep:
         Zt = Qt[self.m_min :] if self.m_min == m else Qt[self.m_min :] * ~self.zpad[:, None, :]
         Zt = np.ascontiguousarray(Zt)  # (nz, n, N): row b of Z_kᵀ in Zt[b, :, k]
         H = self._hess_blocks(hess_values)
-        factor, info = scipy.linalg.lapack.dpbtrf(self._reduced_band(Zt, H), lower=1, overwrite_ab=1)
-        if info > 0:
-            raise np.linalg.LinAlgError(f"{info}-th leading minor of the reduced Hessian not positive definite")
-        if info < 0:
-            raise ValueError(f"illegal value in {-info}-th argument of dpbtrf")
+        factor = None  # every joint held at every waypoint (nz 0): no reduced Hessian, the rows fix the step
+        if self.nz:
+            factor, info = scipy.linalg.lapack.dpbtrf(self._reduced_band(Zt, H), lower=1, overwrite_ab=1)
+            if info > 0:
+                raise np.linalg.LinAlgError(
+                    f"{info}-th leading minor of the reduced Hessian not positive definite"
+                )
+            if info < 0:
+                raise ValueError(f"illegal value in {-info}-th argument of dpbtrf")
         # the least-norm step onto the held rows, Y R⁻ᵀ, as its transpose P = R⁻¹ Yᵀ (m, n, N):
         # row a of R P = Yᵀ, from the rows below it
         P = np.empty((m, n, N))
@@ -369,12 +373,14 @@ class NullSpaceStep:
         r[self.slot[: len(residual)], self.k[: len(residual)]] = residual  # the bounds': 0, met
         dx_y = np.einsum("ajk,ak->jk", P, r)
         g = grad.reshape(N, n).T
-        w = g + self._hess_times(H, dx_y)
-        rhs = -np.einsum("bik,ik->kb", Zt, w).reshape(-1, 1)  # variable k·nz + b
-        p_z, info = scipy.linalg.lapack.dpbtrs(factor, rhs, lower=1, overwrite_b=1)
-        if info != 0:
-            raise ValueError(f"illegal value in {-info}-th argument of dpbtrs")
-        dx = dx_y + np.einsum("bik,kb->ik", Zt, p_z.reshape(N, self.nz))
+        dx = dx_y
+        if factor is not None:
+            w = g + self._hess_times(H, dx_y)
+            rhs = -np.einsum("bik,ik->kb", Zt, w).reshape(-1, 1)  # variable k·nz + b
+            p_z, info = scipy.linalg.lapack.dpbtrs(factor, rhs, lower=1, overwrite_b=1)
+            if info != 0:
+                raise ValueError(f"illegal value in {-info}-th argument of dpbtrs")
+            dx = dx_y + np.einsum("bik,kb->ik", Zt, p_z.reshape(N, self.nz))
         w = g + self._hess_times(H, dx)
         lam = -np.einsum("ajk,jk->ak", P, w)
         return dx.T.reshape(-1), lam[self.slot, self.k]

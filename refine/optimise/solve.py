@@ -18,6 +18,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from refine.errors import SolverError
 from refine.optimise.coarse import (
     COARSE_SEEDED_MU_INIT,
     coarse_copy,
@@ -429,15 +430,20 @@ def _ladder_rung(
     """The answer (len(finer), n) [rad] of the copy at ``finer``, seeded from ``q_coarse`` at ``idx``.
 
     Also returns ``iterations`` with the finer copy's added. None (the coarser answer seeds the full
-    solve) when the seed misses a pose or the finer copy's answer is not ``ok``.
+    solve) when the seed misses a pose, the finer copy's answer is not ``ok`` or its solver fails
+    to run (:class:`refine.errors.SolverError`: the full solve meets it again if it is the problem's).
     """
     seed, missed = projected(problem, idx, q_coarse, finer)
     if missed:
         log.info("coarse ladder: the %d-waypoint seed misses %d poses; not climbed", len(finer), missed)
         return None, iterations
-    answer = solve_refinement(
-        coarse_copy(problem, finer), seed, first_options={"ipopt.mu_init": COARSE_SEEDED_MU_INIT}
-    )
+    try:
+        answer = solve_refinement(
+            coarse_copy(problem, finer), seed, first_options={"ipopt.mu_init": COARSE_SEEDED_MU_INIT}
+        )
+    except SolverError as e:  # no answer of the finer copy: the ladder is a seed only, not climbed
+        log.info("coarse ladder: the %d-waypoint refinement failed (%s); not climbed", len(finer), e)
+        return None, iterations
     iterations += answer.iterations
     if answer.status != "ok":
         log.info("coarse ladder: the %d-waypoint refinement is %s; not climbed", len(finer), answer.status)

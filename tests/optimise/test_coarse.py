@@ -22,6 +22,7 @@ import pytest
 import refine.optimise.coarse as coarse_module
 import refine.optimise.solve as solve_module
 from refine.bench.suites import bundled_problem, generated_problem, load_suites
+from refine.errors import SolverError
 from refine.optimise.coarse import ladder_waypoints
 from refine.paths import FusedPath
 
@@ -70,13 +71,19 @@ def _puzzle(n: int | None = None):
     return problem, problem.refinement()
 
 
-def _spy(monkeypatch, fail: int | None = None):
-    """Record each coarse copy's solve (size, seed, first options); the copy of size ``fail`` fails."""
+def _spy(monkeypatch, fail: int | None = None, error: bool = False):
+    """Record each coarse copy's solve (size, seed, first options); the copy of size ``fail`` fails.
+
+    With ``error`` the solver fails to run on that copy (``SolverError``) instead of leaving it
+    infeasible.
+    """
     solves = []
     solve = solve_module.solve_refinement
 
     def recording(problem, q0=None, **kwargs):
         solves.append((problem.n_waypoints, np.array(q0), kwargs.get("first_options")))
+        if error and problem.n_waypoints == fail:
+            raise SolverError("IPOPT failed to run: planted")
         answer = solve(problem, q0, **kwargs)
         return replace(answer, status="infeasible") if problem.n_waypoints == fail else answer
 
@@ -155,7 +162,7 @@ def test_a_tool_on_the_flange_refines_the_16_waypoint_copy_alone(monkeypatch):
     assert [n for n, _, _ in solves] == [16]
 
 
-@pytest.mark.parametrize("failure", ["infeasible", "projection"])
+@pytest.mark.parametrize("failure", ["infeasible", "projection", "solver error"])
 def test_a_failing_rung_leaves_the_seed_of_the_16_waypoint_copy(monkeypatch, failure):
     problem, nlp = _puzzle(321)
     solve = solve_module.solve_refinement
@@ -167,6 +174,8 @@ def test_a_failing_rung_leaves_the_seed_of_the_16_waypoint_copy(monkeypatch, fai
     seeds.clear()
     if failure == "infeasible":  # the 160-waypoint copy has no answer
         _, solves = _spy(monkeypatch, fail=160)
+    elif failure == "solver error":  # the solver fails to run on the 160-waypoint copy
+        _, solves = _spy(monkeypatch, fail=160, error=True)
     else:  # its answer's projection onto the full path misses a pose
         _, solves = _spy(monkeypatch)
         project = solve_module.projected

@@ -158,3 +158,42 @@ def test_random_banded_kkt_systems_with_unsymmetric_neighbour_blocks_are_solved_
     expected = np.linalg.solve(kkt, np.concatenate([-grad, r, np.zeros(len(bounds))]))
     dx, lam, factors = step.step(grad, jac_values, upper[hess_row, hess_col], r)
     close(dx, lam, expected)
+
+
+def test_every_joint_held_at_every_waypoint_leaves_the_step_the_rows_fix():
+    """6 waypoints of 4 joints, 4 held rows or bounds at each: no null space (``nz`` 0), the step
+    ``A dx = r`` and the multipliers of ``H dx + g + Aᵀλ = 0`` alone, as NumPy's dense solve gives them."""
+    from types import SimpleNamespace
+
+    rng = np.random.default_rng(11)
+    n, N6 = 4, 6
+    nx = n * N6
+    bounds = np.array([0 * n + 2, 3 * n + 1])
+    row_k = np.repeat(np.arange(N6), n - np.bincount(bounds // n, minlength=N6))
+    jac_row = np.repeat(np.arange(len(row_k)), n)
+    jac_col = (row_k[:, None] * n + np.arange(n)).ravel()
+    upper = np.zeros((nx, nx))
+    for k in range(N6):
+        block = rng.normal(size=(n, n))
+        upper[k * n : (k + 1) * n, k * n : (k + 1) * n] = np.triu(block + block.T) + 8.0 * np.eye(n)
+        if k + 1 < N6:
+            upper[k * n : (k + 1) * n, (k + 1) * n : (k + 2) * n] = np.diag(rng.normal(scale=0.5, size=n))
+    hess_row, hess_col = np.nonzero(upper)
+    ev = SimpleNamespace(
+        ng=len(row_k), jac_row=jac_row, jac_col=jac_col, hess_row=hess_row, hess_col=hess_col
+    )
+    rows = np.arange(len(row_k))
+    step = NullSpaceStep(ev, rows, bounds, N6, n)
+    assert step.nz == 0
+    jac_values = rng.normal(size=len(jac_row))
+    J = dense(jac_row, jac_col, jac_values, (len(row_k), nx))
+    A = np.vstack([J, np.eye(nx)[bounds]])
+    H = upper + np.triu(upper, 1).T
+    kkt = np.block([[H, A.T], [A, np.zeros((len(A), len(A)))]])
+    grad, r = rng.normal(size=nx), rng.normal(size=len(rows))
+    expected = np.linalg.solve(kkt, np.concatenate([-grad, r, np.zeros(len(bounds))]))
+    dx, lam, factors = step.step(grad, jac_values, upper[hess_row, hess_col], r)
+    close(dx, lam, expected)
+    g2, r2 = rng.normal(size=nx), rng.normal(size=len(rows))
+    expected = np.linalg.solve(kkt, np.concatenate([-g2, r2, np.zeros(len(bounds))]))
+    close(*step.solve(factors, g2, r2), expected)
