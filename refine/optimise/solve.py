@@ -349,7 +349,8 @@ def solve_refinement(
                 # strict solve already failed on the first branch
                 other = attempt_from(q_other, skip_strict or (ELASTIC_ONLY if repairing else ""))
             except TimeLimitReached:
-                note = f"IK branches after the first {k - 1} not tried: time limit {time_limit_s:g} s reached"
+                limit = f"time limit {time_limit_s:g} s" if time_limit_s is not None else "IPOPT's wall-time limit"
+                note = f"IK branches after the first {k - 1} not tried: {limit} reached"
                 skips = f" ({_skips(skipped)})" if skipped else ""
                 attempt = replace(attempt, reason=f"{attempt.reason} ({note}){skips}")
                 break

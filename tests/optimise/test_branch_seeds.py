@@ -108,20 +108,35 @@ def test_the_time_limit_note_stays_after_a_skipped_branch(monkeypatch):
     )
 
 
-def test_without_repair_no_branch_is_skipped(monkeypatch):
-    """The verdict known is the elastic repair's: with repair off every branch ranked is solved."""
+@pytest.mark.parametrize("repair", [True, False], ids=["repair", "no-repair"])
+def test_a_branch_with_the_seed_of_a_later_failed_branch_is_skipped_with_repair_on_only(monkeypatch, repair):
+    """Branches 2 and 3 given the same seed (another than the first's): the verdict known is the
+    elastic repair's, so with repair off every branch is solved."""
     problem, nlp = _joint_wrap_infeasible()
     seeds = _spy(monkeypatch)
     rank = solve_module.rank_chains
-    ranked = []
 
-    def counting(kin, targets, lower, upper, chains):
-        ranked.extend(rank(kin, targets, lower, upper, chains)[:2])  # max_branches 3: two others
-        return rank(kin, targets, lower, upper, chains)
+    def twice(kin, targets, lower, upper, chains):
+        best = rank(kin, targets, lower, upper, chains)[0]
+        return [best, best.copy()]
 
-    monkeypatch.setattr(solve_module, "rank_chains", counting)
+    monkeypatch.setattr(solve_module, "rank_chains", twice)
+    result = _refine(problem if repair else replace(problem, repair_max_slack_deg=None), nlp)
+    assert result.status == "infeasible"
+    assert np.abs(seeds[1] - seeds[0]).max() > 1.0
+    if repair:
+        assert len(seeds) == 2
+        assert result.reason.endswith("(3 IK branch(es) tried, 1 skipped: branch 3 has the same seed as branch 2)")
+    else:
+        assert len(seeds) == 3
+        np.testing.assert_array_equal(seeds[2], seeds[1])
+        assert result.reason.endswith("(3 IK branch(es) tried)")
+
+
+def test_without_repair_the_first_branchs_seed_is_solved_again(monkeypatch):
+    problem, nlp = _joint_wrap_infeasible()
+    seeds = _spy(monkeypatch)
     result = _refine(replace(problem, repair_max_slack_deg=None), nlp)
-    assert result.status == "infeasible" and "skipped" not in result.reason
-    assert np.abs(ranked[1] - seeds[0]).max() <= 1e-6  # the first branch's seed again, solved again
-    assert len(seeds) == 1 + len(ranked) == 3
-    assert result.reason.endswith("(3 IK branch(es) tried)")
+    assert result.status == "infeasible" and result.reason.endswith("(3 IK branch(es) tried)")
+    assert len(seeds) == 3
+    assert np.abs(seeds[2] - seeds[0]).max() <= 1e-6  # the first branch's seed, solved strictly again
