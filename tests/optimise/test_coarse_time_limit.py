@@ -25,6 +25,7 @@ import refine.optimise.rounds as rounds_module
 import refine.optimise.solve as solve_module
 from refine.bench.suites import bundled_problem, generated_problem, load_suites
 from refine.optimise.outcome import TimeLimitReached
+from refine.optimise.problem import Weights
 from refine.paths import FusedPath
 
 PROBLEMS = Path(__file__).resolve().parents[2] / "problems"
@@ -166,3 +167,31 @@ def test_ipopts_wall_time_stop_in_the_ladders_finer_copy_ends_the_refinement_as_
     assert result.reason.startswith("IPOPT's wall-time limit of 30.0 s (ipopt.max_wall_time) reached")
     assert _seconds(result.reason, "the 16-waypoint coarse copy") > 0.0
     assert _seconds(result.reason, "the 160-waypoint coarse copy") >= 0.0
+
+
+def test_a_solve_started_with_little_time_left_stops_at_the_deadline_whatever_its_wall_time_limit(monkeypatch):
+    """The iiwa from its chained seed without a mid-range cost (no coarse copy): IPOPT needs over 50
+    iterations (:mod:`refine.optimise.coarse`: 120-220); each made to
+    take at least 20 ms, so at most 25 fit in a 0.5 s limit, and the iteration callback stops the
+    solve at the first past it although the problem's ``ipopt.max_wall_time`` is IPOPT's default."""
+    import refine.optimise.watch as watch_module
+    from refine.optimise.seed import initial_guess
+
+    problem = replace(_iiwa(60)[0], weights=Weights(mid_range=0.0))  # the generated family has 2.0
+    nlp = problem.refinement()
+    assert "ipopt.max_wall_time" not in nlp.solver_options  # IPOPT's default, 1e20 s
+    seed = initial_guess(nlp, problem.home)
+    free = solve_module.solve_refinement(nlp, seed, home=problem.home)
+    assert free.status == "ok" and free.iterations > 50
+    calls = []
+    report = watch_module.solver_iteration
+
+    def slow(iteration, **figures):
+        calls.append(iteration)
+        time.sleep(0.02)
+        return report(iteration, **figures)
+
+    monkeypatch.setattr(watch_module, "solver_iteration", slow)
+    result = solve_module.solve_refinement(nlp, seed, home=problem.home, time_limit_s=0.5)
+    assert result.status == "timeout" and result.time_limit_reached
+    assert 0 < len(calls) <= 26  # 0.5 s / 20 ms, and the one that stops it
