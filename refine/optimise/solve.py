@@ -144,9 +144,10 @@ def solve_refinement(
         max_rounds: solve -> verify -> add constraints rounds at most.
         max_branches: IK branches of the first waypoint to try (only when ``q0`` is None).
         time_limit_s: wall-time budget [s] of the solves; when it runs out before any verdict the
-            result is ``infeasible`` with ``time_limit_reached`` set and a reason saying so; when it
+            result is ``timeout`` with ``time_limit_reached`` set and a reason saying so; when it
             runs out while other IK branches are tried, the first branch's verdict stands. Build
-            the problem with ``ipopt.max_wall_time`` at most this so one solve cannot overrun it.
+            the problem with ``ipopt.max_wall_time`` at most this; each IPOPT solve also stops at
+            the deadline through its iteration callback (:mod:`refine.optimise.watch`).
             The coarse copies that seed a redundant arm (:func:`coarse_seed`) are solved within it,
             each with the time left as its ``ipopt.max_wall_time``; when it runs out there the
             result is ``timeout``, its reason saying how long the seed and each copy took, and the
