@@ -19,7 +19,6 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 import refine.optimise.rounds as rounds_module
 import refine.optimise.solve as solve_module
@@ -77,7 +76,7 @@ def test_the_limit_reached_in_the_coarse_copy_ends_the_refinement_as_timeout(mon
 
     def slow_copy(loop, x0, warm=False):  # the copy's solve spends all the time its refinement has
         if loop.problem.n_waypoints == 16:
-            deadlines.append(loop.deadline)
+            deadlines.append((loop.deadline, time.perf_counter()))
             if math.isfinite(loop.deadline):
                 time.sleep(max(loop.deadline - time.perf_counter(), 0.0) + 1e-3)
         return solve(loop, x0, warm)
@@ -86,8 +85,8 @@ def test_the_limit_reached_in_the_coarse_copy_ends_the_refinement_as_timeout(mon
     limit = 1.0
     begun = time.perf_counter()
     result = solve_module.solve_refinement(nlp, home=problem.home, time_limit_s=limit)
-    (deadline,) = deadlines  # the copy's refinement stops at the call's deadline
-    assert deadline == pytest.approx(begun + limit, abs=0.1)
+    ((deadline, copy_begun),) = deadlines  # the copy's refinement stops at the call's deadline:
+    assert begun + limit <= deadline <= copy_begun + limit  # the limit counted from the call's start
     assert result.status == "timeout" and result.time_limit_reached
     assert started == []  # the full solve never started
     assert result.iterations == 0
