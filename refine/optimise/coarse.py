@@ -11,6 +11,7 @@ solve. The solves themselves are :mod:`refine.optimise.solve`'s.
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -147,12 +148,23 @@ def _evenly(N: int, count: int) -> Array:
     return np.unique(np.linspace(0, N - 1, count).round().astype(int))
 
 
-def coarse_copy(problem: RefinementNLP, idx: Array) -> RefinementNLP:
+def coarse_copy(problem: RefinementNLP, idx: Array, wall_time_s: float | None = None) -> RefinementNLP:
     """``problem`` over the waypoints ``idx`` alone: no active or joint-step rows, the step bound widened.
 
     The joint-step bound is scaled by the widest step between the copy's waypoints, at most 360 deg
     (no bound at all); no clearance rows are added (the copy is solved without sources).
+    ``wall_time_s`` [s]: the time left of the refinement's limit, the copy's IPOPT
+    ``max_wall_time`` when less than the problem's (as a given option, so every round keeps it);
+    None for the problem's own.
     """
+    if wall_time_s is not None and problem.solver_name == "ipopt":
+        own = float(problem.solver_options.get("ipopt.max_wall_time", math.inf))
+        limit = {"ipopt.max_wall_time": max(1e-3, min(own, wall_time_s))}  # IPOPT wants > 0
+        problem = replace(
+            problem,
+            solver_options={**problem.solver_options, **limit},
+            given_options={**problem.given_options, **limit},
+        )
     f = problem.fused
     coarse_path = FusedPath(
         f.s[idx], f.positions[idx], f.rotations[idx], f.speed[idx], f.t_demo[idx], f.residual[idx]

@@ -141,14 +141,27 @@ class TimeLimitReached(Exception):
 
 
 def timed_out(
-    problem: RefinementNLP, q_seed: Array, time_limit_s: float | None, timings: dict[str, float]
+    problem: RefinementNLP,
+    q_seed: Array,
+    time_limit_s: float | None,
+    timings: dict[str, float],
+    where: str = "",
 ) -> Refinement:
-    """The answer when the time budget ran out before any verdict: status ``timeout``, saying so."""
+    """The answer when the time budget ran out before any verdict: status ``timeout``, saying so.
+
+    ``where``: where the time went, for the reason (after "before a verdict"); ``time_limit_s``
+    None when only the solver's own wall-time limit (``ipopt.max_wall_time``) stopped it.
+    """
     call_limit_s = note_timeout()  # a library call's own limit, for the message
     time_limit_s = call_limit_s if call_limit_s is not None else time_limit_s
+    limit = (
+        f"time limit of {time_limit_s:g} s ([repair] time_limit_s, or the call's time_limit_s)"
+        if time_limit_s is not None
+        else f"IPOPT's wall-time limit of {problem.solver_options.get('ipopt.max_wall_time')} s "
+        "(ipopt.max_wall_time)"
+    )
     reason = (
-        f"time limit of {time_limit_s:g} s ([repair] time_limit_s, or the call's time_limit_s) reached "
-        "before a verdict: neither an "
+        f"{limit} reached before a verdict{', ' + where if where else ''}: neither an "
         "answer nor a proof of infeasibility was found; raise the limit to let the solver finish"
     )
     log.warning("refinement stopped: %s", reason)

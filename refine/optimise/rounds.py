@@ -159,7 +159,7 @@ class RoundLoop:
             if corrected is not None:
                 return corrected
         if p.watch is not None:
-            p.watch.iteration, p.watch.interrupted = 0, False
+            p.watch.iteration, p.watch.interrupted, p.watch.deadline = 0, False, self.deadline
         try:
             sol = p.solver(x0=x0, p=p.params, lbx=p.lbx, ubx=p.ubx, lbg=p.lbg, ubg=p.ubg, **extra)
         except RuntimeError as e:

@@ -18,6 +18,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from refine.control import out_of_time
 from refine.errors import SolverError
 from refine.optimise.coarse import (
     COARSE_SEEDED_MU_INIT,
@@ -85,6 +86,26 @@ BRANCH_CANDIDATES = 2
 (:func:`rank_chains`)."""
 
 
+SAME_SEED_RAD = 1e-6
+"""An IK branch's seed within this [rad] of a seed whose elastic repair has already failed, at every
+waypoint and joint, is that seed: its verdict is known and it is not solved again. The chains are
+remembered within a refinement (:func:`refine.optimise.seed.remembering_chains`), so a branch that
+chains onto the same joints repeats them to the bit (``joint_wrap_infeasible``: the third branch's
+seed is the first's, 0 rad apart, where the second's is 3.14 rad from it)."""
+
+
+class CoarseTimeLimit(TimeLimitReached):
+    """The time limit ran out in a coarse copy's solve, or before it could start.
+
+    ``spent``: per copy reached, its waypoints and its solve's wall-clock start and end
+    (:func:`time.perf_counter` [s]; the end None for a copy not started).
+    """
+
+    def __init__(self, spent: list[tuple[int, float, float | None]]) -> None:
+        super().__init__(spent)
+        self.spent = spent
+
+
 """Rounds of solve -> verify -> add constraints before giving up on adding more."""
 
 
@@ -107,6 +128,7 @@ def solve_refinement(
     time_limit_s: float | None = None,
     warm: WarmStart | None = None,
     first_options: dict | None = None,
+    raise_on_timeout: bool = False,
 ) -> Refinement:
     """Solve ``problem`` with its solver from ``q0`` (or the IK seed), verify, and repair if asked.
 
@@ -123,14 +145,21 @@ def solve_refinement(
         max_rounds: solve -> verify -> add constraints rounds at most.
         max_branches: IK branches of the first waypoint to try (only when ``q0`` is None).
         time_limit_s: wall-time budget [s] of the solves; when it runs out before any verdict the
-            result is ``infeasible`` with ``time_limit_reached`` set and a reason saying so; when it
+            result is ``timeout`` with ``time_limit_reached`` set and a reason saying so; when it
             runs out while other IK branches are tried, the first branch's verdict stands. Build
-            the problem with ``ipopt.max_wall_time`` at most this so one solve cannot overrun it.
+            the problem with ``ipopt.max_wall_time`` at most this; each IPOPT solve also stops at
+            the deadline through its iteration callback (:mod:`refine.optimise.watch`).
+            The coarse copies that seed a redundant arm (:func:`coarse_seed`) are solved within it,
+            each with the time left as its ``ipopt.max_wall_time``; when it runs out there the
+            result is ``timeout``, its reason saying how long the seed and each copy took, and the
+            full solve is not started.
         warm: a previous answer to start from instead of ``q0`` (:mod:`refine.optimise.warm`): its
             joints moved onto the new poses are the seed, and its last problem (active set,
             joint-step rows) and multipliers are kept where they fit.
         first_options: solver options of the first strict solve alone (less those the problem's
             caller gave), such as a small initial barrier for a seed next to the answer.
+        raise_on_timeout: raise :class:`TimeLimitReached` instead of returning ``timeout`` (a
+            coarse copy's solve: the refinement it seeds reports the time limit).
 
     Raises:
         SolverError: the solver itself failed (not an infeasibility): the message names its status.
@@ -138,6 +167,8 @@ def solve_refinement(
     timings = StageTimes()
     start = StageTimes.clock()
     t0 = start[0]
+    deadline = t0 + time_limit_s if time_limit_s is not None else math.inf
+    spent: list[tuple[int, float, float | None]] = []  # the coarse copies' solves (CoarseTimeLimit)
     # the tilt each demonstrated pose needs for the wrist centre to be in reach: a seed tilted into
     # reach (off the stretched elbow) converges where the demonstrated one cannot, and a tilt beyond
     # the cone (or cone + slack) proves the strict (or repaired) problem infeasible without a solve
@@ -189,7 +220,13 @@ def solve_refinement(
     if coarse_at is not None and not skip_strict and not beyond.any():
         chain_at, chain_errors = chained_seed(problem, home, at=coarse_at, give_up=give_up)
         if float(chain_errors.max()) <= CONVERGED:  # else as before: the whole chain, then coarse_seed
-            smooth, coarse_iterations = _coarse_seed_at(problem, coarse_at, chain_at)
+            try:
+                smooth, coarse_iterations = _coarse_seed_at(problem, coarse_at, chain_at, deadline, spent)
+            except CoarseTimeLimit:  # the seed of the answer: the coarse chain along the arc length
+                s = problem.fused.s
+                q_chain = np.column_stack([np.interp(s, s[coarse_at], c) for c in chain_at.T])
+                add_time(timings, "seed", start)
+                return timed_out(problem, q_chain, time_limit_s, timings, _coarse_time(spent, t0))
             coarse_at = None  # tried: not again from the whole chain
     if smooth is not None:
         q_seed = smooth
@@ -245,13 +282,15 @@ def solve_refinement(
     first_options = dict(first_options or {})
     if coarse_at is not None and not skip_strict:  # a chained seed the coarse refinement did not see
         seeding = StageTimes.clock()
-        smooth, coarse_iterations = coarse_seed(problem, q_seed)
+        try:
+            smooth, coarse_iterations = coarse_seed(problem, q_seed, deadline, spent)
+        except CoarseTimeLimit:
+            add_time(timings, "seed", seeding)
+            return timed_out(problem, q_seed, time_limit_s, timings, _coarse_time(spent, t0))
         q_seed = q_seed if smooth is None else smooth
         add_time(timings, "seed", seeding)
     if smooth is not None and problem.tool_in_world is not None and problem.solver_name == "ipopt":
         first_options["ipopt.mu_init"] = COARSE_SEEDED_MU_INIT
-
-    deadline = t0 + time_limit_s if time_limit_s is not None else math.inf
 
     repairing = repair_max_slack_deg is not None and repair_max_slack_deg > 0
 
@@ -275,6 +314,8 @@ def solve_refinement(
     try:
         attempt = attempt_from(q_seed, options=first_options)
     except TimeLimitReached:
+        if raise_on_timeout:
+            raise
         return timed_out(problem, q_seed, time_limit_s, timings)
     if attempt.status == "infeasible" and q0 is None and max_branches > 1 and time.perf_counter() < deadline:
         # the first IK branch may be the wrong one: try the first waypoint's other branches
@@ -296,21 +337,33 @@ def solve_refinement(
         )
         others = rank_chains(kin, targets, lower, upper, chains)[: max_branches - 1]
         add_time(timings, "seed", start)
+        # the seeds whose elastic repair failed (branch, joints): the first's, with repair on
+        failed = [(1, q_seed)] if repairing else []
+        skipped: list[tuple[int, int]] = []  # (branch, the failed branch with its seed)
         for k, q_other in enumerate(others, start=2):
+            same = next((j for j, q in failed if np.abs(q_other - q).max() <= SAME_SEED_RAD), None)
+            if same is not None:
+                log.info("IK branch %d: the seed of branch %d, whose repair failed; not solved", k, same)
+                skipped.append((k, same))
+                continue
             try:
                 # the elastic problem alone: its answer without slack is the strict one, and the
                 # strict solve already failed on the first branch
                 other = attempt_from(q_other, skip_strict or (ELASTIC_ONLY if repairing else ""))
             except TimeLimitReached:
-                note = f"IK branches after the first {k - 1} not tried: time limit {time_limit_s:g} s reached"
-                attempt = replace(attempt, reason=f"{attempt.reason} ({note})")
+                limit = f"time limit {time_limit_s:g} s" if time_limit_s is not None else "IPOPT's wall-time limit"
+                note = f"IK branches after the first {k - 1} not tried: {limit} reached"
+                skips = f" ({_skips(skipped)})" if skipped else ""
+                attempt = replace(attempt, reason=f"{attempt.reason} ({note}){skips}")
                 break
             log.info("IK branch %d: %s", k, other.status)
             if other.status != "infeasible":
                 attempt = replace(other, iterations=attempt.iterations + other.iterations)
                 break
+            if repairing:
+                failed.append((k, q_other))
         else:
-            tried = f"{1 + len(others)} IK branch(es) tried"
+            tried = f"{1 + len(others)} IK branch(es) tried" + (f", {_skips(skipped)}" if skipped else "")
             attempt = replace(attempt, reason=f"{attempt.reason} ({tried})" if others else attempt.reason)
     attempt = replace(attempt, iterations=attempt.iterations + coarse_iterations)
     if (
@@ -326,6 +379,21 @@ def solve_refinement(
         attempt.outer_iterations,
     )
     return attempt
+
+
+def _skips(skipped: list[tuple[int, int]]) -> str:
+    """The IK branches not solved, their seed that of a branch whose repair failed, for the reason; or ""."""
+    which = "; ".join(f"branch {k} has the same seed as branch {j}" for k, j in skipped)
+    return f"{len(skipped)} skipped: {which}" if skipped else ""
+
+
+def _coarse_time(spent: list[tuple[int, float, float | None]], t0: float) -> str:
+    """Where the time went when it ran out in the coarse copies, for the reason (wall time [s])."""
+    parts = [f"{spent[0][1] - t0:.3g} s seeding" if spent else "seeding"]
+    for n, begun, ended in spent:
+        took = "not started" if ended is None else f"{ended - begun:.3g} s"
+        parts.append(f"the {n}-waypoint coarse copy {took}")
+    return f"in the coarse copies that seed the full solve, which was not started (wall time: {', '.join(parts)})"
 
 
 def _refreshed_rows(
@@ -364,7 +432,12 @@ def _tilt_is_a_bound(problem: RefinementNLP) -> bool:
     return bool(np.linalg.norm(np.cross(v, [0.0, 0.0, 1.0])) <= 1e-6 * max(np.linalg.norm(v), 1e-9))
 
 
-def coarse_seed(problem: RefinementNLP, q_seed: Array) -> tuple[Array | None, int]:
+def coarse_seed(
+    problem: RefinementNLP,
+    q_seed: Array,
+    deadline: float = math.inf,
+    spent: list[tuple[int, float, float | None]] | None = None,
+) -> tuple[Array | None, int]:
     """A redundant arm's seed from the refinement of a coarse copy of the path, and the iterations it took.
 
     Returns the seed (N, n) [rad], None where there is none, and the solver iterations spent on the
@@ -386,16 +459,64 @@ def coarse_seed(problem: RefinementNLP, q_seed: Array) -> tuple[Array | None, in
     ladder. None for a non-redundant arm, a path shorter than
     :data:`~refine.optimise.coarse.COARSE_SEED_MIN_PATH`, a coarse refinement that is not ``ok`` or a
     projection that misses a pose.
+
+    The copies are solved by :func:`_copy_answer` before ``deadline`` (:func:`time.perf_counter`
+    [s]), each noted in ``spent``; raises :class:`CoarseTimeLimit` when it passes there.
     """
     idx = coarse_waypoints(problem)
     if idx is None:
         return None, 0
-    return _coarse_seed_at(problem, idx, np.asarray(q_seed, dtype=float)[idx])
+    spent = [] if spent is None else spent
+    return _coarse_seed_at(problem, idx, np.asarray(q_seed, dtype=float)[idx], deadline, spent)
 
 
-def _coarse_seed_at(problem: RefinementNLP, idx: Array, q_coarse: Array) -> tuple[Array | None, int]:
+def _copy_answer(
+    problem: RefinementNLP,
+    idx: Array,
+    seed: Array,
+    deadline: float,
+    spent: list[tuple[int, float, float | None]],
+    first_options: dict | None = None,
+) -> Refinement:
+    """The refinement of ``problem``'s coarse copy at the waypoints ``idx`` from ``seed`` (len(idx), n) [rad].
+
+    Before ``deadline`` (:func:`time.perf_counter` [s]; inf for none): the copy's IPOPT gets the
+    time then left as ``max_wall_time`` and its refinement the time left after the build as
+    ``time_limit_s``; the copy is noted in ``spent`` with its start and end.
+
+    Raises:
+        CoarseTimeLimit: the deadline (or the call's) passed before the copy's solve or during it.
+    """
+    begun = time.perf_counter()
+    if begun >= deadline or out_of_time():
+        spent.append((len(idx), begun, None))
+        raise CoarseTimeLimit(spent)
+    limited = math.isfinite(deadline)
+    copy = coarse_copy(problem, idx, deadline - begun if limited else None)
+    try:
+        answer = solve_refinement(
+            copy,
+            seed,
+            time_limit_s=max(deadline - time.perf_counter(), 0.0) if limited else None,
+            first_options=first_options,
+            raise_on_timeout=True,
+        )
+    except TimeLimitReached as e:
+        spent.append((len(idx), begun, time.perf_counter()))
+        raise CoarseTimeLimit(spent) from e
+    spent.append((len(idx), begun, time.perf_counter()))
+    return answer
+
+
+def _coarse_seed_at(
+    problem: RefinementNLP,
+    idx: Array,
+    q_coarse: Array,
+    deadline: float,
+    spent: list[tuple[int, float, float | None]],
+) -> tuple[Array | None, int]:
     """:func:`coarse_seed` from the joints ``q_coarse`` [rad] at the coarse waypoints ``idx``."""
-    answer = solve_refinement(coarse_copy(problem, idx), q_coarse)
+    answer = _copy_answer(problem, idx, q_coarse, deadline, spent)
     if answer.status != "ok":
         log.info(
             "coarse seed: the %d-waypoint refinement is %s; the chained IK seed stays",
@@ -407,7 +528,7 @@ def _coarse_seed_at(problem: RefinementNLP, idx: Array, q_coarse: Array) -> tupl
     iterations = answer.iterations
     finer = ladder_waypoints(problem)
     if finer is not None:
-        q_finer, iterations = _ladder_rung(problem, idx, answer.q, finer, iterations)
+        q_finer, iterations = _ladder_rung(problem, idx, answer.q, finer, iterations, deadline, spent)
         if q_finer is not None:
             q, missed = projected(problem, finer, q_finer)
             if not missed:
@@ -425,21 +546,28 @@ def _coarse_seed_at(problem: RefinementNLP, idx: Array, q_coarse: Array) -> tupl
 
 
 def _ladder_rung(
-    problem: RefinementNLP, idx: Array, q_coarse: Array, finer: Array, iterations: int
+    problem: RefinementNLP,
+    idx: Array,
+    q_coarse: Array,
+    finer: Array,
+    iterations: int,
+    deadline: float,
+    spent: list[tuple[int, float, float | None]],
 ) -> tuple[Array | None, int]:
     """The answer (len(finer), n) [rad] of the copy at ``finer``, seeded from ``q_coarse`` at ``idx``.
 
     Also returns ``iterations`` with the finer copy's added. None (the coarser answer seeds the full
     solve) when the seed misses a pose, the finer copy's answer is not ``ok`` or its solver fails
     to run (:class:`refine.errors.SolverError`: the full solve meets it again if it is the problem's).
+    Solved by :func:`_copy_answer` before ``deadline``.
     """
     seed, missed = projected(problem, idx, q_coarse, finer)
     if missed:
         log.info("coarse ladder: the %d-waypoint seed misses %d poses; not climbed", len(finer), missed)
         return None, iterations
     try:
-        answer = solve_refinement(
-            coarse_copy(problem, finer), seed, first_options={"ipopt.mu_init": COARSE_SEEDED_MU_INIT}
+        answer = _copy_answer(
+            problem, finer, seed, deadline, spent, first_options={"ipopt.mu_init": COARSE_SEEDED_MU_INIT}
         )
     except SolverError as e:  # no answer of the finer copy: the ladder is a seed only, not climbed
         log.info("coarse ladder: the %d-waypoint refinement failed (%s); not climbed", len(finer), e)

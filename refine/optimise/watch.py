@@ -5,11 +5,18 @@
 to the current call's ``progress`` and returns 1 (stop) when the call's
 ``cancel`` says so; IPOPT then ends with ``User_Requested_Stop`` and
 :func:`refine.control.after_solve` raises :class:`refine.errors.Cancelled`. Outside a controlled
-call it does nothing but return 0. A ``KeyboardInterrupt`` that lands in its Python code (Ctrl-C
-while it runs) stops IPOPT the same way and is raised again once IPOPT has returned.
+call it reports nothing. It also stops IPOPT (returns 1) once the clock passes its ``deadline``
+(the refinement's own time limit, set before each solve by :class:`refine.optimise.rounds.RoundLoop`;
+inf for none), so a solve that starts with little of the limit left ends within an iteration of it
+whatever its ``max_wall_time``; the round loop then ends the refinement as ``timeout``. A
+``KeyboardInterrupt`` that lands in its Python code (Ctrl-C while it runs) stops IPOPT the same way
+and is raised again once IPOPT has returned.
 """
 
 from __future__ import annotations
+
+import math
+import time
 
 import casadi as ca
 
@@ -26,6 +33,7 @@ class IterationWatch(ca.Callback):
         self.sizes = {"x": nx, "f": 1, "g": ng, "lam_x": nx, "lam_g": ng, "lam_p": np_}
         self.iteration = 0
         self.interrupted = False
+        self.deadline = math.inf  # time.perf_counter() [s] past which the solve stops
         self.construct("refine_iteration_watch", {})
 
     def get_n_in(self) -> int:  # noqa: D102 - CasADi's Callback protocol
@@ -53,7 +61,7 @@ class IterationWatch(ca.Callback):
         except KeyboardInterrupt:  # Ctrl-C landed in this Python code: stop IPOPT, re-raised after it
             self.interrupted = True
             return [1]
-        return [1 if stop else 0]
+        return [1 if stop or time.perf_counter() >= self.deadline else 0]
 
 
 def iteration_watch(nx: int, ng: int, np_: int) -> IterationWatch:
