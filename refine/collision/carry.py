@@ -130,13 +130,16 @@ def checked_bounds(
     normals: Array | None = None,
     poses: Array | None = None,
     exact: NDArray[np.bool_] | None = None,
+    *,
+    copy: bool = True,
 ) -> CheckedBounds:
     """The bounds ``bounds`` (N, P) [m] of a check of joints ``q`` (N, n) in ``model``, to carry.
 
     ``normals`` (N, P, 3): unit witness normals where the check measured a pair (NaN elsewhere);
     with the moving bodies' poses at ``q`` (N, M, 4, 4) and where the check measured a pair
     ``exact`` (N, P), the self pairs' measured normals are kept in their other body's shape frame
-    too (:attr:`CheckedBounds.attached`).
+    too (:attr:`CheckedBounds.attached`). ``copy`` False: ``bounds`` and ``normals`` (float
+    arrays the caller changes no more) are kept as they are, not copied.
     """
     attached = None
     if normals is not None and poses is not None and exact is not None:
@@ -149,10 +152,14 @@ def checked_bounds(
     return CheckedBounds(
         np.array(q, dtype=float),
         tuple(model.pairs),
-        np.array(bounds, dtype=float),
+        np.array(bounds, dtype=float) if copy else np.asarray(bounds, dtype=float),
         dict(hull_corners(model)),
         model.base_in_world.copy(),
-        None if normals is None else np.array(normals, dtype=float),
+        None
+        if normals is None
+        else np.array(normals, dtype=float)
+        if copy
+        else np.asarray(normals, dtype=float),
         attached,
     )
 
@@ -183,7 +190,8 @@ def carried_directions(
     if not cols:
         return out
     mine, theirs = (np.array(c) for c in zip(*cols, strict=True))
-    out[:, mine] = prior.normals[_nearest(given[:, theirs]), theirs]
+    P0 = prior.normals.shape[1]  # gathered as whole rows of 3 from the flat (N * P0, 3) layout: one pass
+    out[:, mine] = prior.normals.reshape(-1, 3).take(_nearest(given[:, theirs]) * P0 + theirs, axis=0)
     attached = prior.attached if turned else None
     if attached is None or attached.shape != prior.normals.shape:
         return out
@@ -203,10 +211,13 @@ def carried_directions(
 def _nearest(known: NDArray[np.bool_]) -> NDArray[np.intp]:
     """Per row and column of ``known`` (N, C), the nearest row known in its column (every column has one), the earlier of two as near."""
     n = len(known)
-    rows = np.arange(n)[:, None]
-    before = np.maximum.accumulate(np.where(known, rows, -1), axis=0)  # the last known at or before
-    after = np.minimum.accumulate(np.where(known, rows, n)[::-1], axis=0)[::-1]  # the first at or after
-    return np.where((before >= 0) & ((after >= n) | (rows - before <= after - rows)), before, after)
+    rows = np.arange(n)
+    by_column = np.ascontiguousarray(known.T)  # (C, N): the accumulations run along contiguous rows
+    before = np.maximum.accumulate(np.where(by_column, rows, -1), axis=1)  # the last known at or before
+    after = np.where(by_column, rows, n)
+    after = np.minimum.accumulate(after[:, ::-1], axis=1)[:, ::-1]  # the first at or after
+    near = np.where((before >= 0) & ((after >= n) | (rows - before <= after - rows)), before, after)
+    return near.T
 
 
 def attached_normals(model: CollisionModel, p: int, poses: Array, local: Array) -> Array:
@@ -478,6 +489,19 @@ def raise_near(
     """
     lo, hi = max(k - NEAR, 0), min(k + NEAR + 1, len(bounds))
     near = np.arange(lo, hi) != k  # of the rows lo..hi-1, a view of the poses (no copy)
+    if not found:
+        return
+    pairs = list(found)
+    directions = np.full((hi - lo, bounds.shape[1], 3), np.nan)  # every pair's normal at once, one pass
+    directions[:, pairs] = np.array([n for _, n in found.values()])
+    have = np.zeros((hi - lo, bounds.shape[1]), dtype=bool)
+    have[:, pairs] = True
+    have[k - lo] = False  # waypoint k keeps its own figures
+    gaps = direction_gaps(shapes_of(model), poses[lo:hi], directions, have)
+    if gaps is not None:  # -inf where the gap is not positive, at waypoint k and in the other pairs
+        rows = bounds[lo:hi]
+        rows[:, pairs] = np.maximum(rows[:, pairs], gaps[:, pairs])
+        return
     for p, (_, n) in found.items():
         gaps = model.plane_bounds(p, poses[lo:hi], n)
         if gaps is not None:

@@ -275,7 +275,11 @@ def check_path_clearance(
         tolerance_m=tolerance_m,
         certified_segments=int(certified.sum()),
         waypoint_measured=measured,
-        bounds=checked_bounds(model, q_path, bounds, normals, poses, exact) if method == "bound" else None,
+        bounds=(  # bounds and normals are the check's own, changed no more: kept, not copied
+            checked_bounds(model, q_path, bounds, normals, poses, exact, copy=False)
+            if method == "bound"
+            else None
+        ),
         inner_samples=inner,
     )
     log.info("%s", result.summary())
