@@ -596,7 +596,7 @@ SETTLED_M = 0.05
 
 
 def settled_pairs(
-    model: CollisionModel, q_path: Array, prior: Array, tolerance_m: float
+    model: CollisionModel, q_path: Array, prior: Array, tolerance_m: float, motion: Array | None = None
 ) -> NDArray[np.bool_]:
     """The pairs (P,) whose known lower bounds ``prior`` (N, P) [m] leave nothing to find along ``q_path``.
 
@@ -607,10 +607,12 @@ def settled_pairs(
     (:func:`measure_least` needs lower bounds, not close ones). Its box and direction bounds are not
     computed: the check finds the same, only the lower-bound figures of waypoints it does not
     measure (and the bounds it carries on) keep such a pair's known bound where a box gives more.
+    ``motion``: :func:`refine.collision.advance.pair_motion` of ``q_path`` if the caller has it.
     """
     least, clear, finite = column_least(prior, model.pair_margins)  # per pair (P,)
     if not finite.any():
         return finite
-    certified = ~short_of(prior, model.pair_margins, tolerance_m, pair_motion(model, q_path)).any(axis=0)
+    motion = pair_motion(model, q_path) if motion is None else motion
+    certified = ~short_of(prior, model.pair_margins, tolerance_m, motion).any(axis=0)
     far = (least >= least[finite].min() + SETTLED_M) & (clear >= clear[finite].min() + SETTLED_M)
     return finite & certified & far
