@@ -489,19 +489,6 @@ def raise_near(
     """
     lo, hi = max(k - NEAR, 0), min(k + NEAR + 1, len(bounds))
     near = np.arange(lo, hi) != k  # of the rows lo..hi-1, a view of the poses (no copy)
-    if not found:
-        return
-    pairs = list(found)
-    directions = np.full((hi - lo, bounds.shape[1], 3), np.nan)  # every pair's normal at once, one pass
-    directions[:, pairs] = np.array([n for _, n in found.values()])
-    have = np.zeros((hi - lo, bounds.shape[1]), dtype=bool)
-    have[:, pairs] = True
-    have[k - lo] = False  # waypoint k keeps its own figures
-    gaps = direction_gaps(shapes_of(model), poses[lo:hi], directions, have)
-    if gaps is not None:  # -inf where the gap is not positive, at waypoint k and in the other pairs
-        rows = bounds[lo:hi]
-        rows[:, pairs] = np.maximum(rows[:, pairs], gaps[:, pairs])
-        return
     for p, (_, n) in found.items():
         gaps = model.plane_bounds(p, poses[lo:hi], n)
         if gaps is not None:

@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 
 import refine.collision.distance as distance_module
-import refine.collision.native_bounds as native_bounds
 from refine.collision.carry import NEAR, checked_bounds, raise_near
 from refine.collision.distance import place, signed_distance
 from refine.collision.geometry import shape_body
@@ -99,17 +98,10 @@ def _furthest(body, T, d):
     return float(((_points(body) @ T[:3, :3].T + T[:3, 3]) @ d).max())
 
 
-@pytest.mark.parametrize("compiled", [True, False])
-def test_raise_near_lifts_the_window_to_the_brute_force_gaps_along_the_measured_normals(
-    irb4600, make_model, monkeypatch, compiled
-):
+def test_raise_near_lifts_the_window_to_the_brute_force_gaps_along_the_measured_normals(irb4600, make_model):
     """Waypoint k's measured pairs, their FCL normals there: every other waypoint within NEAR of k
     takes the larger of its bound and the gap between the bodies' points along that normal (where
     positive); waypoint k, the pairs not measured and the waypoints further away keep theirs."""
-    if not compiled:
-        monkeypatch.setattr(native_bounds, "library", lambda: None)
-    elif native_bounds.library() is None:
-        pytest.skip("no compiled bounds library here")
     model = make_model(irb4600, cell=CELL, tool=TOOL)
     rng = np.random.default_rng(3)
     start = np.radians([-20.0, 25.0, 10.0, 15.0, 40.0, 20.0])
