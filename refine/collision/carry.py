@@ -149,17 +149,14 @@ def checked_bounds(
             other = {p: model.pair_bodies(p)[1] for p in set(ps.tolist())}
             R = poses[ks, [other[p] for p in ps.tolist()], :3, :3]  # the other bodies' rotations (E, 3, 3)
             attached[ks, ps] = np.einsum("kij,ki->kj", R, normals[ks, ps])  # R^T n per entry
+    keep = np.array if copy else np.asarray  # copies, or the caller's arrays as they are
     return CheckedBounds(
         np.array(q, dtype=float),
         tuple(model.pairs),
-        np.array(bounds, dtype=float) if copy else np.asarray(bounds, dtype=float),
+        keep(bounds, dtype=float),
         dict(hull_corners(model)),
         model.base_in_world.copy(),
-        None
-        if normals is None
-        else np.array(normals, dtype=float)
-        if copy
-        else np.asarray(normals, dtype=float),
+        None if normals is None else keep(normals, dtype=float),
         attached,
     )
 
@@ -211,13 +208,10 @@ def carried_directions(
 def _nearest(known: NDArray[np.bool_]) -> NDArray[np.intp]:
     """Per row and column of ``known`` (N, C), the nearest row known in its column (every column has one), the earlier of two as near."""
     n = len(known)
-    rows = np.arange(n)
-    by_column = np.ascontiguousarray(known.T)  # (C, N): the accumulations run along contiguous rows
-    before = np.maximum.accumulate(np.where(by_column, rows, -1), axis=1)  # the last known at or before
-    after = np.where(by_column, rows, n)
-    after = np.minimum.accumulate(after[:, ::-1], axis=1)[:, ::-1]  # the first at or after
-    near = np.where((before >= 0) & ((after >= n) | (rows - before <= after - rows)), before, after)
-    return near.T
+    rows = np.arange(n)[:, None]
+    before = np.maximum.accumulate(np.where(known, rows, -1), axis=0)  # the last known at or before
+    after = np.minimum.accumulate(np.where(known, rows, n)[::-1], axis=0)[::-1]  # the first at or after
+    return np.where((before >= 0) & ((after >= n) | (rows - before <= after - rows)), before, after)
 
 
 def attached_normals(model: CollisionModel, p: int, poses: Array, local: Array) -> Array:
