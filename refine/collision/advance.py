@@ -55,6 +55,7 @@ def advance_pairs(
     tolerance_m: float,
     proved: NDArray[np.bool_] | None = None,
     columns: NDArray[np.intp] | None = None,
+    motion: Array | None = None,
 ) -> tuple[NDArray[np.bool_], dict[int, list[Sample]]]:
     """Certify every segment pair by pair by conservative advancement on the pair's motion bound.
 
@@ -67,6 +68,7 @@ def advance_pairs(
     (:func:`advance`) until the span certified from the end is reached. Segment pairs marked in
     ``proved`` (N-1, P) were proved by the caller and are neither measured nor advanced; with
     ``columns`` (C,), ascending, only those pairs are looked at (the caller proved the others).
+    ``motion``: :func:`pair_motion` of ``q_path`` if the caller has it (read only).
 
     Returns:
         Which segments are certified (N-1,) (the others, with a broken margin or more than
@@ -77,7 +79,8 @@ def advance_pairs(
     margins = model.pair_margins
     cols = np.arange(len(names)) if columns is None else np.asarray(columns, dtype=np.intp)
     if columns is None:
-        margin, motion, view = margins, pair_motion(model, q_path), bounds
+        margin, view = margins, bounds
+        motion = pair_motion(model, q_path) if motion is None else motion
     else:  # the pairs' own columns: their bounds, margins and motion (C of P)
         margin, view = margins[cols], bounds[:, cols]
         motion = np.abs(np.diff(q_path, axis=0)) @ model.pair_motion[cols].T

@@ -130,13 +130,16 @@ def checked_bounds(
     normals: Array | None = None,
     poses: Array | None = None,
     exact: NDArray[np.bool_] | None = None,
+    *,
+    copy: bool = True,
 ) -> CheckedBounds:
     """The bounds ``bounds`` (N, P) [m] of a check of joints ``q`` (N, n) in ``model``, to carry.
 
     ``normals`` (N, P, 3): unit witness normals where the check measured a pair (NaN elsewhere);
     with the moving bodies' poses at ``q`` (N, M, 4, 4) and where the check measured a pair
     ``exact`` (N, P), the self pairs' measured normals are kept in their other body's shape frame
-    too (:attr:`CheckedBounds.attached`).
+    too (:attr:`CheckedBounds.attached`). ``copy`` False: ``bounds`` and ``normals`` (float
+    arrays the caller changes no more) are kept as they are, not copied.
     """
     attached = None
     if normals is not None and poses is not None and exact is not None:
@@ -146,13 +149,14 @@ def checked_bounds(
             other = {p: model.pair_bodies(p)[1] for p in set(ps.tolist())}
             R = poses[ks, [other[p] for p in ps.tolist()], :3, :3]  # the other bodies' rotations (E, 3, 3)
             attached[ks, ps] = np.einsum("kij,ki->kj", R, normals[ks, ps])  # R^T n per entry
+    keep = np.array if copy else np.asarray  # copies, or the caller's arrays as they are
     return CheckedBounds(
         np.array(q, dtype=float),
         tuple(model.pairs),
-        np.array(bounds, dtype=float),
+        keep(bounds, dtype=float),
         dict(hull_corners(model)),
         model.base_in_world.copy(),
-        None if normals is None else np.array(normals, dtype=float),
+        None if normals is None else keep(normals, dtype=float),
         attached,
     )
 
@@ -183,7 +187,8 @@ def carried_directions(
     if not cols:
         return out
     mine, theirs = (np.array(c) for c in zip(*cols, strict=True))
-    out[:, mine] = prior.normals[_nearest(given[:, theirs]), theirs]
+    P0 = prior.normals.shape[1]  # gathered as whole rows of 3 from the flat (N * P0, 3) layout: one pass
+    out[:, mine] = prior.normals.reshape(-1, 3).take(_nearest(given[:, theirs]) * P0 + theirs, axis=0)
     attached = prior.attached if turned else None
     if attached is None or attached.shape != prior.normals.shape:
         return out
@@ -572,7 +577,7 @@ SETTLED_M = 0.05
 
 
 def settled_pairs(
-    model: CollisionModel, q_path: Array, prior: Array, tolerance_m: float
+    model: CollisionModel, q_path: Array, prior: Array, tolerance_m: float, motion: Array | None = None
 ) -> NDArray[np.bool_]:
     """The pairs (P,) whose known lower bounds ``prior`` (N, P) [m] leave nothing to find along ``q_path``.
 
@@ -583,10 +588,12 @@ def settled_pairs(
     (:func:`measure_least` needs lower bounds, not close ones). Its box and direction bounds are not
     computed: the check finds the same, only the lower-bound figures of waypoints it does not
     measure (and the bounds it carries on) keep such a pair's known bound where a box gives more.
+    ``motion``: :func:`refine.collision.advance.pair_motion` of ``q_path`` if the caller has it.
     """
     least, clear, finite = column_least(prior, model.pair_margins)  # per pair (P,)
     if not finite.any():
         return finite
-    certified = ~short_of(prior, model.pair_margins, tolerance_m, pair_motion(model, q_path)).any(axis=0)
+    motion = pair_motion(model, q_path) if motion is None else motion
+    certified = ~short_of(prior, model.pair_margins, tolerance_m, motion).any(axis=0)
     far = (least >= least[finite].min() + SETTLED_M) & (clear >= clear[finite].min() + SETTLED_M)
     return finite & certified & far

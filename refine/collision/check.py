@@ -178,7 +178,8 @@ def check_path_clearance(
     carry = (given or not every_waypoint) and method == "bound" and len(model.pairs) > 0
     at_waypoint = None if carry else lambda q, poses, boxes: points.append(sample(q, poses, boxes))
     normals = np.full((len(q_path), len(model.pairs), 3), np.nan) if directions is None else directions.copy()
-    known = {"prior": prior, "directions": directions, "out": normals}
+    motion = pair_motion(model, q_path)  # per segment and pair [m], (N-1, P), once for the check
+    known = {"prior": prior, "directions": directions, "out": normals, "motion": motion}
     poses, boxes, bounds, exact = _waypoint_bounds(
         model, q_path, tolerance_m, method == "bound", at_waypoint, plane=carry, **known
     )
@@ -212,7 +213,7 @@ def check_path_clearance(
     certified = np.zeros(len(sweep), dtype=bool)
     inner: dict[int, list[Sample]] = {}  # per segment, the samples the advancement took inside
     if method == "bound":
-        certified, inner = advance_pairs(model, q_path, poses, bounds, exact, tolerance_m)
+        certified, inner = advance_pairs(model, q_path, poses, bounds, exact, tolerance_m, motion=motion)
     dense = np.flatnonzero(~certified)
     sampled: dict[int, list[Sample]] = {}  # per segment sampled densely, its inner sub-steps
     steps = np.ones(len(sweep), dtype=np.int64)
@@ -275,10 +276,15 @@ def check_path_clearance(
         tolerance_m=tolerance_m,
         certified_segments=int(certified.sum()),
         waypoint_measured=measured,
-        bounds=checked_bounds(model, q_path, bounds, normals, poses, exact) if method == "bound" else None,
+        bounds=(  # bounds and normals are the check's own, changed no more: kept, not copied
+            checked_bounds(model, q_path, bounds, normals, poses, exact, copy=False)
+            if method == "bound"
+            else None
+        ),
         inner_samples=inner,
     )
-    log.info("%s", result.summary())
+    if log.isEnabledFor(logging.INFO):  # the summary's figures only for a log that shows them
+        log.info("%s", result.summary())
     return result
 
 
@@ -320,13 +326,13 @@ def margins_proved(
     if len(q_path) < 2:
         return False
     left = None  # the segments and pairs the known bounds leave short, (N-1, P)
+    motion = pair_motion(model, q_path)
     if prior is not None:
-        left = short_of(prior, model.pair_margins, tolerance_m, pair_motion(model, q_path))
+        left = short_of(prior, model.pair_margins, tolerance_m, motion)
         if not left.any():
             return True  # the known bounds certify every segment: no pose or distance is needed
-    poses, _, bounds, exact = _waypoint_bounds(
-        model, q_path, tolerance_m, True, plane=True, prior=prior, directions=directions, left=left
-    )
+    known = {"prior": prior, "directions": directions, "left": left, "motion": motion}
+    poses, _, bounds, exact = _waypoint_bounds(model, q_path, tolerance_m, True, plane=True, **known)
     columns = None if left is None else np.flatnonzero(left.any(axis=0))  # the others: certified by prior
     return bool(advance_pairs(model, q_path, poses, bounds, exact, tolerance_m, columns=columns)[0].all())
 
@@ -343,6 +349,7 @@ def _waypoint_bounds(
     directions: Array | None = None,
     out: Array | None = None,
     left: NDArray[np.bool_] | None = None,
+    motion: Array | None = None,
 ) -> tuple[Array, Array | None, Array, NDArray[np.bool_]]:
     """The moving bodies' poses and each pair's distance bounds at every waypoint.
 
@@ -360,7 +367,8 @@ def _waypoint_bounds(
     else is found, and only the waypoints ending a segment left short are placed and bounded
     further, for the pairs left short somewhere: ``prior`` stands for every other bound, and the
     poses of the other waypoints are NaN (nothing reads them: every pair measured or advanced
-    belongs to a segment left short).
+    belongs to a segment left short). ``motion``: :func:`refine.collision.advance.pair_motion` of
+    ``q_path`` if the caller has it (read only).
 
     Returns:
         poses (N, M, 4, 4), box bounds (N, P) [m] (None with ``left``), the better bounds (N, P)
@@ -370,7 +378,7 @@ def _waypoint_bounds(
     if left is None:
         poses = model.moving_poses(q_path)
         if prior is not None and at_waypoint is None:
-            settled = settled_pairs(model, q_path, prior, tolerance_m)
+            settled = settled_pairs(model, q_path, prior, tolerance_m, motion)
         if settled is None or not settled.any():
             boxes = model.box_bounds(poses)  # lower bounds on each pair's distance per waypoint (N, P) [m]
             bounds = boxes.copy() if prior is None else np.maximum(boxes, prior)  # and the better ones found
@@ -390,7 +398,7 @@ def _waypoint_bounds(
         bounds = prior.copy()
         cut = np.ix_(rows, columns)
         bounds[cut] = np.maximum(bounds[cut], model.box_bounds(poses[rows], columns))
-    motion = pair_motion(model, q_path)  # per segment and pair [m], (N-1, P), once
+    motion = pair_motion(model, q_path) if motion is None else motion  # per segment and pair [m], (N-1, P)
     if directions is not None:  # the proof alone (no figures written) bounds only the pairs left short
         columns_left = short_of(bounds, model.pair_margins, tolerance_m, motion).any(0)
         bounds[rows] = np.maximum(

@@ -126,13 +126,14 @@ class Body:
 
     def reach(self, T: Array, direction: Array) -> float:
         """Largest ``direction . x`` [m] over the points x of the body placed at T (4, 4)."""
-        base = float(direction @ T[:3, 3])
+        lifted = direction @ T[:3, :]  # d . [R | t] at once: the direction in the shape frame, and d . t
+        base, local = float(lifted[3]), lifted[:3]
         if self.vertices is not None:
-            return base + float((self.vertices @ (direction @ T[:3, :3])).max())
+            return base + float((self.vertices @ local).max())
         tag, *dims = self.kind_params
         if tag == "convex":
-            return base + float((dims[0] @ (direction @ T[:3, :3])).max())
-        ux, uy, uz = (direction @ T[:3, :3]).tolist()  # the direction in the shape frame
+            return base + float((dims[0] @ local).max())
+        ux, uy, uz = local.tolist()
         if tag == "sphere":
             return base + dims[0] * math.sqrt(ux * ux + uy * uy + uz * uz)
         if tag == "box":

@@ -85,7 +85,7 @@ class _Library:
 
 
 def _ptr(a: np.ndarray) -> int:
-    return a.ctypes.data
+    return a.__array_interface__["data"][0]  # the address a.ctypes.data gives, without its ctypes object
 
 
 def _shaped(*given: tuple[object, tuple[int, ...]]) -> bool:
