@@ -268,16 +268,18 @@ def previous_corrections(
         stayed above ``tolerance``, or its correction exceeds :data:`CORRECTION_MAX_RAD`.
     """
     q_old, old = previous
-    out = np.zeros((len(t), q.shape[1]))
     if old.start_correction is None or q_old.shape != q.shape or old.samples.shape != m.shape:
-        return out
-    rows, at = _same_samples(m, segment, old, np.ones(len(m), dtype=bool))
-    c = np.take(old.start_correction, at, axis=0)
+        return np.zeros((len(t), q.shape[1]))
+    every = np.array_equal(old.samples, m)  # each sample's own at the same index (a re-solve's usual case)
+    rows, at = (None, None) if every else _same_samples(m, segment, old, np.ones(len(m), dtype=bool))
+    c = old.start_correction.copy() if every else np.take(old.start_correction, at, axis=0)
     with np.errstate(invalid="ignore"):
-        good = (np.take(old.ik_error, at) <= tolerance) & (largest_per_row(np.abs(c)) <= CORRECTION_MAX_RAD)
+        err = old.ik_error if every else np.take(old.ik_error, at)
+        good = (err <= tolerance) & (largest_per_row(np.abs(c)) <= CORRECTION_MAX_RAD)
     c[~good] = 0.0
-    if len(rows) == len(t):  # every sample has one (rows are in order, without repeats)
+    if every or len(rows) == len(t):  # every sample has one (rows are in order, without repeats)
         return c
+    out = np.zeros((len(t), q.shape[1]))
     out[rows] = c
     return out
 

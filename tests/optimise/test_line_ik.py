@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -181,6 +183,39 @@ def test_a_re_solve_starts_from_the_newton_step_plus_the_previous_lines_correcti
     assert warm.ik_error.max() <= IK_TOLERANCE and cold.ik_error.max() <= IK_TOLERANCE
     assert warm.violations == cold.violations
     np.testing.assert_allclose(warm.singularity, cold.singularity, rtol=1e-7)
+
+
+def test_with_every_segments_sample_count_kept_each_sample_carries_its_own_filtered_correction():
+    """Every waypoint moved by up to 2e-5 rad (each segment keeps its sample count): the corrections
+    are, sample by sample at the same index, the previous line's where its IK reached the tolerance
+    and the correction is at most ``CORRECTION_MAX_RAD`` on every joint, else 0 (a NaN row, one
+    from a bow, too); a new array, the previous line's left as it was."""
+    plain = PlainIk(BASES["shifted"])
+    kin = TcpKinematics(plain.robot, BASES["shifted"], TCP)
+    q_old = _path(2.0, n=12, seed=7)
+    line = check_controller_lines(kin, q_old, np.arange(len(q_old), dtype=float), Tolerances())
+    c_old = line.start_correction.copy()
+    err_old = line.ik_error.copy()
+    c_old[3] = np.nan  # a sample that started from a bow
+    c_old[5, 2] = 2.0 * CORRECTION_MAX_RAD  # a start far from the line
+    c_old[6, 4] = -0.5 * CORRECTION_MAX_RAD
+    err_old[8] = 10.0 * IK_TOLERANCE  # an IK that stayed short
+    err_old[9] = IK_TOLERANCE
+    old = replace(line, start_correction=c_old, ik_error=err_old)
+    q = q_old + np.random.default_rng(4).uniform(-2e-5, 2e-5, q_old.shape)
+    m, segment, t = sample_parameters(q)
+    assert np.array_equal(m, old.samples) and len(t) == len(old.t)
+
+    got = previous_corrections(q, m, segment, t, (q_old, old), IK_TOLERANCE)
+    want = np.zeros((len(t), q.shape[1]))
+    for i in range(len(t)):
+        row = c_old[i]
+        if err_old[i] <= IK_TOLERANCE and np.all(np.abs(row) <= CORRECTION_MAX_RAD):
+            want[i] = row
+    np.testing.assert_array_equal(got, want)
+    assert not got[[3, 5, 8]].any() and got[6, 4] == -0.5 * CORRECTION_MAX_RAD and got[9].any()
+    assert not np.shares_memory(got, old.start_correction)
+    assert np.isnan(old.start_correction[3]).all() and old.start_correction[5, 2] == 2.0 * CORRECTION_MAX_RAD
 
 
 @pytest.mark.parametrize("name", [ROBOT, "kuka_iiwa14_r820"])
