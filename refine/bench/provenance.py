@@ -88,18 +88,10 @@ def solver_versions() -> str:
 
 
 def _casadi_openblas() -> ctypes.CDLL | None:
-    """The OpenBLAS beside CasADi (the one MUMPS calls under IPOPT), or None where there is none."""
-    import casadi
+    """The OpenBLAS beside CasADi that MUMPS calls under IPOPT (the loaded copy), or None where there is none."""
+    from refine.optimise.threads import _library
 
-    folder = Path(casadi.__file__).parent
-    for path in sorted(folder.glob("libcasadi-tp-openblas.so*")) + sorted(folder.glob("libopenblas*.so*")):
-        try:
-            lib = ctypes.CDLL(str(path))
-            lib.openblas_get_num_threads  # noqa: B018  (it must have the call)
-        except (OSError, AttributeError):
-            continue
-        return lib
-    return None
+    return _library()
 
 
 def _casadi_openblas_threads() -> int | None:

@@ -18,6 +18,7 @@ import ctypes
 import functools
 import logging
 import os
+import re
 from pathlib import Path
 
 from refine.errors import InputError
@@ -66,11 +67,23 @@ def limit_solver_threads() -> int | None:
 
 @functools.cache
 def _library() -> ctypes.CDLL | None:
-    """CasADi's own OpenBLAS, with both thread calls; None where this CasADi build has none."""
+    """CasADi's own OpenBLAS as MUMPS loads it, with both thread calls; None where this build has none.
+
+    CasADi's wheel holds the same OpenBLAS under several file names (``libcasadi-tp-openblas.so``,
+    ``.so.0``, ``.so.0.3``: copies, not links), and MUMPS loads the one its soname names
+    (``.so.0``). Loading another name loads a second copy, whose thread count MUMPS never reads. So
+    IPOPT's plugin is loaded first and the copy the process has mapped is taken
+    (:func:`_loaded_first`); without ``/proc/self/maps`` the names of one version number come first.
+    """
     import casadi
 
     folder = Path(casadi.__file__).parent
-    for path in sorted(folder.glob("libcasadi-tp-openblas.so*")) + sorted(folder.glob("libopenblas*.so*")):
+    try:
+        casadi.load_nlpsol("ipopt")  # MUMPS and the OpenBLAS it links, as a solve would load them
+    except Exception as e:  # another build without the plugin: the names alone decide
+        log.debug("could not load CasADi's IPOPT plugin: %s", e)
+    candidates = sorted(folder.glob("libcasadi-tp-openblas.so*")) + sorted(folder.glob("libopenblas*.so*"))
+    for path in _loaded_first(candidates):
         try:
             lib = ctypes.CDLL(str(path))
             lib.openblas_set_num_threads  # noqa: B018 - both calls must be there
@@ -81,3 +94,19 @@ def _library() -> ctypes.CDLL | None:
         return lib
     log.debug("no OpenBLAS beside CasADi in %s; its threads are left as they are", folder)
     return None
+
+
+def _loaded_first(candidates: list[Path], maps: Path = Path("/proc/self/maps")) -> list[Path]:
+    """``candidates`` with those the process has mapped first, then those named ``*.so.N``, then the rest."""
+    try:
+        mapped = {Path(line.split(maxsplit=5)[5].strip()).resolve() for line in maps.read_text().splitlines()
+                  if len(line.split(maxsplit=5)) == 6}  # fmt: skip
+    except OSError:
+        mapped = set()
+
+    def rank(path: Path) -> int:
+        if path.resolve() in mapped:
+            return 0
+        return 1 if re.search(r"\.so\.\d+$", path.name) else 2
+
+    return sorted(candidates, key=rank)
