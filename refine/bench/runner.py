@@ -21,6 +21,7 @@ import os
 import platform
 import resource
 import statistics
+import tempfile
 import time
 from collections.abc import Callable, Iterable
 from importlib import metadata
@@ -38,7 +39,7 @@ from refine.bench.quality import evaluate
 from refine.bench.rules import columns as rules_columns
 from refine.bench.suites import BenchProblem, load_suites, problems
 from refine.bench.table import COLUMNS, NOT_POSED, SCHEMA_VERSION, check_header, new_run_id
-from refine.bench.watchdog import Workers, prepare
+from refine.bench.watchdog import Workers, captured, output_summary, prepare
 from refine.errors import InputError
 
 log = logging.getLogger(__name__)
@@ -110,6 +111,7 @@ def run_turns(
     unavailable: dict[str, str] | None = None,
     isolate: bool = True,
     log_dir: Path | None = None,
+    output: dict[str, str] | None = None,
 ) -> dict[str, dict[str, Any]]:
     """One row per contender of ``functions`` on ``problem``, the contenders taking turns.
 
@@ -127,11 +129,44 @@ def run_turns(
     ``fork``, it runs in this process and a run over the limit is only scored so). A timed run
     that ends ``timeout``, or takes longer than the limit on its own clock, times the row out.
     ``log_dir``: a folder for each run's log (``CONTENDER-warmup-K.log``, ``CONTENDER-K.log``, K
-    from 1): what the run printed, the solver's iteration log included.
+    from 1; ``CONTENDER-setup.log``: its declared set-up): what the run printed, the solver's
+    iteration log included. Without ``log_dir`` each run's output goes to a temporary file, and
+    ``output`` (when given) receives, by name, a line saying how many lines a contender printed
+    and the last error-like one (:func:`refine.bench.watchdog.output_summary`); the files are
+    then removed.
     """
+    with tempfile.TemporaryDirectory(prefix="refine-bench-") as scratch:
+        folder = Path(scratch) if log_dir is None else log_dir
+        logs: dict[str, list[Path]] = {}
+        rows = _turns(
+            problem, functions, repeat, warmup, echo, time_limit_s, unavailable, isolate, folder, logs
+        )
+        if log_dir is None and output is not None:
+            for name, paths in logs.items():
+                summary = output_summary(paths, name)
+                if summary is not None:
+                    output[name] = summary
+    return rows
 
-    def log(name: str, kind: str, k: int) -> Path | None:
-        return None if log_dir is None else log_dir / f"{name}{kind}-{k + 1}.log"
+
+def _turns(
+    problem: BenchProblem,
+    functions: dict[str, Callable[[BenchProblem], Answer]],
+    repeat: int,
+    warmup: int,
+    echo: Callable[[str], None],
+    time_limit_s: float,
+    unavailable: dict[str, str] | None,
+    isolate: bool,
+    folder: Path,
+    logs: dict[str, list[Path]],
+) -> dict[str, dict[str, Any]]:
+    """:func:`run_turns` with each run's output sent to a file in ``folder``, listed in ``logs``."""
+
+    def log(name: str, kind: str, k: int | None) -> Path:
+        path = folder / (f"{name}{kind}.log" if k is None else f"{name}{kind}-{k + 1}.log")
+        logs.setdefault(name, []).append(path)
+        return path
 
     functions = dict(functions)
     setups: dict[str, tuple[float, float]] = {}  # name -> the declared set-up's wall and CPU time [s]
@@ -153,7 +188,13 @@ def run_turns(
     with Workers() as workers:
         for name in list(functions):
             try:
-                setups[name] = prepare(problem, functions[name])
+                setup_log = log(name, "-setup", None)
+                try:
+                    with captured(setup_log):
+                        setups[name] = prepare(problem, functions[name])
+                finally:
+                    if setup_log.is_file() and setup_log.stat().st_size == 0:  # a set-up that printed nothing leaves no file
+                        setup_log.unlink()
                 for k in range(warmup):
                     workers.run(
                         problem, name, functions[name], time_limit_s, isolate, log(name, "-warmup", k)
@@ -387,9 +428,11 @@ def run_suites(
                     problem.solver_options.setdefault("ipopt.print_level", LOG_PRINT_LEVEL)
                 t0 = time.perf_counter()
                 functions = {name: CONTENDERS[name] for name in contenders if name not in skipped}
+                output: dict[str, str] = {}  # contender -> what its runs printed, without log_dir
                 with fixed_threads(blas_threads):  # libraries loaded by earlier problems included
                     found = run_turns(
-                        problem, functions, repeat, warmup, echo, time_limit_s, skipped, isolate, logs
+                        problem, functions, repeat, warmup, echo, time_limit_s, skipped, isolate, logs,
+                        output,
                     )
                     threads = current_blas_threads()  # as they were for these runs
                 for name in contenders:  # a contender that cannot run here still leaves its row
@@ -408,6 +451,8 @@ def run_suites(
                         f"total {row['total_s']:7.3f} s cpu {row['cpu_s']:7.3f} s set-up {row.get('setup_s', 0.0):6.3f} s load {row.get('load_1min', '')} "
                         f"({time.perf_counter() - t0:.1f} s for the problem's runs)"
                     )
+                    if name in output:
+                        echo(f"  {output[name]}")
     return rows
 
 

@@ -39,6 +39,7 @@ import logging
 import math
 import multiprocessing
 import os
+import re
 import signal
 import sys
 import time
@@ -250,6 +251,33 @@ def captured(log: Path | None) -> Iterator[None]:
             os.dup2(saved[1], 2)
             for fd in saved:
                 os.close(fd)
+
+
+_ANSI = re.compile(r"\x1b\[[0-9;]*[A-Za-z]")
+_ERROR_LIKE = re.compile(r"error|fail|fatal|abort|exception|terminat", re.IGNORECASE)
+_WARNING_LIKE = re.compile(r"warn|leak", re.IGNORECASE)
+
+
+def output_summary(logs: list[Path], name: str) -> str | None:
+    """A line saying what ``name``'s runs printed to the files ``logs`` (:func:`captured`), or None.
+
+    How many lines there were and the last error-like one (else the last warning-like one, else the
+    last line), its colour codes removed; None when the runs printed nothing.
+    """
+    lines: list[str] = []
+    for path in logs:
+        if path.is_file():
+            text = path.read_text(errors="replace")
+            lines += [_ANSI.sub("", line).strip() for line in text.splitlines()]
+    if not lines:
+        return None
+    said = [line for line in lines if line]
+    last = next((line for line in reversed(said) if _ERROR_LIKE.search(line)), None)
+    last = last or next((line for line in reversed(said) if _WARNING_LIKE.search(line)), None)
+    last = last or (said[-1] if said else "")
+    if len(last) > 100:
+        last = last[:97] + "..."
+    return f'{name} printed {len(lines)} line(s) (last: "{last}"); --log-dir DIR keeps them'
 
 
 def _serve(requests: Any, answers: Any, problem: BenchProblem, name: str, function: Contender) -> None:
