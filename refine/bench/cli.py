@@ -73,7 +73,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--log-dir",
         type=Path,
         default=None,
-        help="write each run's log (the solver's iteration log) to DIR/RUN_ID/SUITE/PROBLEM/CONTENDER-K.log",
+        help="write each run's log (the solver's iteration log) to DIR/RUN_ID/SUITE/PROBLEM/CONTENDER-K.log; "
+        "without it what the runs print goes to temporary files, and after a contender's row one line "
+        "says how many lines it printed and its last error-like line",
     )
     listing = actions.add_parser("list", help="list the suites and contenders")
     listing.add_argument("--suites-file", type=Path, default=DEFAULT_SUITES)

@@ -268,7 +268,7 @@ def output_summary(logs: list[Path], name: str) -> str | None:
     for path in logs:
         if path.is_file():
             text = path.read_text(errors="replace")
-            lines += [_ANSI.sub("", line).strip() for line in text.splitlines()]
+            lines += [" ".join(_ANSI.sub("", line).split()) for line in text.splitlines()]
     if not lines:
         return None
     said = [line for line in lines if line]
