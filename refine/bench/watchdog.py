@@ -35,6 +35,7 @@ failure, but it is not interrupted.
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import logging
 import math
 import multiprocessing
@@ -238,6 +239,7 @@ def captured(log: Path | None) -> Iterator[None]:
     log.parent.mkdir(parents=True, exist_ok=True)
     sys.stdout.flush()
     sys.stderr.flush()
+    _flush_c_streams()  # what the C library buffered before the block stays where it was going
     saved = [os.dup(1), os.dup(2)]
     with log.open("a", buffering=1) as f:
         os.dup2(f.fileno(), 1)
@@ -247,10 +249,20 @@ def captured(log: Path | None) -> Iterator[None]:
                 yield
         finally:
             f.flush()
+            _flush_c_streams()  # and what it buffered inside goes to the log, not after it
             os.dup2(saved[0], 1)
             os.dup2(saved[1], 2)
             for fd in saved:
                 os.close(fd)
+
+
+def _flush_c_streams() -> None:
+    """Flush the C library's ``stdout`` and ``stderr`` (``fflush(NULL)``).
+
+    C and C++ libraries print through them, fully buffered when file descriptor 1 is a file or a pipe.
+    """
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None).fflush(None)
 
 
 _ANSI = re.compile(r"\x1b\[[0-9;]*[A-Za-z]")

@@ -88,3 +88,31 @@ def test_with_a_log_folder_the_files_hold_what_the_runs_printed(
     for name in ("noisy-warmup-1.log", "noisy-1.log", "noisy-2.log"):
         assert (folder / name).read_text() == run_text
     assert (folder / "noisy-setup.log").read_text() == SETUP_LINE + "\n"
+
+
+_C_STDIO = """
+import ctypes, sys
+from pathlib import Path
+from refine.bench.watchdog import captured
+libc = ctypes.CDLL(None)
+libc.printf(b"before the block\\n")
+with captured(Path(sys.argv[1])):
+    libc.printf(b"Error: printed through the C library's stdout\\n")
+libc.printf(b"after the block\\n")
+"""
+
+
+def test_what_the_c_library_buffered_inside_the_block_goes_to_the_log(tmp_path):
+    """C's ``printf`` to a pipe or a file is fully buffered (unless Python runs unbuffered, which sets
+    C's streams unbuffered too): the text printed inside the block belongs in the log, the rest not."""
+    import subprocess
+    import sys
+
+    log = tmp_path / "run.log"
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}
+    done = subprocess.run(
+        [sys.executable, "-c", _C_STDIO, str(log)], env=env, capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode == 0, done.stderr
+    assert log.read_text() == "Error: printed through the C library's stdout\n"
+    assert done.stdout == "before the block\nafter the block\n"
