@@ -99,7 +99,8 @@ def _library() -> ctypes.CDLL | None:
 def _loaded_first(candidates: list[Path], maps: Path = Path("/proc/self/maps")) -> list[Path]:
     """``candidates`` with those the process has mapped first, then those named ``*.so.N``, then the rest."""
     try:
-        mapped = {Path(line.split(maxsplit=5)[5].strip()).resolve() for line in maps.read_text().splitlines()
+        text = os.fsdecode(maps.read_bytes())  # the names as the file system's bytes, UTF-8 or not
+        mapped = {Path(line.split(maxsplit=5)[5].strip()).resolve() for line in text.split("\n")
                   if len(line.split(maxsplit=5)) == 6}  # fmt: skip
     except OSError:
         mapped = set()

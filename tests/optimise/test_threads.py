@@ -124,3 +124,21 @@ def test_the_mapped_copy_comes_first(tmp_path):
     assert threads._loaded_first(files, maps) == [files[2], files[1], files[0]]
     # nothing mapped (or no /proc): the soname-like name (one version number) first
     assert threads._loaded_first(files, tmp_path / "absent")[0] == files[1]
+
+
+def test_a_mapped_path_that_is_not_utf8_neither_fails_nor_hides_the_mapped_copy(tmp_path):
+    """/proc/self/maps holds each file's name as its bytes: another library of the process may live
+    under a name that is not UTF-8 (a folder named in Latin-1), or be the very copy sought."""
+    folder = tmp_path / os.fsdecode(b"caf\xe9")  # the bytes of a Latin-1 "café"
+    folder.mkdir()
+    names = ["libcasadi-tp-openblas.so", "libcasadi-tp-openblas.so.0", "libcasadi-tp-openblas.so.0.3"]
+    files = [folder / n for n in names]
+    for f in files:
+        f.write_bytes(b"")
+    other = os.fsencode(tmp_path) + b"/lib\xff.so"
+    maps = tmp_path / "maps"
+    maps.write_bytes(
+        b"7f00-7f10 r-xp 00000000 fd:01 41 " + other + b"\n"
+        b"7f20-7f30 r-xp 00000000 fd:01 42 " + os.fsencode(files[2]) + b"\n"
+    )
+    assert threads._loaded_first(files, maps) == [files[2], files[1], files[0]]
