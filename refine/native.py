@@ -204,3 +204,20 @@ def build_library(
         os.replace(listing, library.with_suffix(".names"))
     log.info("compiled %s", library)
     evict(library.parent, cache_max_bytes(), keep=library)
+
+
+def cached_library(
+    cc: str, source: Callable[[], str], library: Path, names: list[str], flags: Sequence[str]
+) -> None:
+    """Make sure ``library`` is in the cache folder, compiling ``source()`` only where it is missing.
+
+    Where it and its ``.names`` are there, it is marked recently used (the last to be evicted);
+    else it is compiled (:func:`build_library`).
+
+    Raises:
+        OSError, RuntimeError: as :func:`build_library`.
+    """
+    if library.exists() and library.with_suffix(".names").exists():
+        os.utime(library)
+    else:
+        build_library(cc, source(), library, names, flags)

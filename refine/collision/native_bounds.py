@@ -41,7 +41,7 @@ from numpy.typing import NDArray
 
 from refine.collision.bounds_source import SOURCE
 from refine.collision.geometry import world_aabb
-from refine.native import build_library, cache_dir, compiler, compiler_version
+from refine.native import cache_dir, cached_library, compiler, compiler_version
 from refine.types import Array
 
 log = logging.getLogger(__name__)
@@ -63,7 +63,7 @@ _state: dict[str, object] = {}  # "lib": the checked library, or None for NumPy
 
 
 class _Library:
-    """The loaded library's three functions, called on C-contiguous arrays."""
+    """The loaded library's functions, called on C-contiguous arrays."""
 
     def __init__(self, path: Path) -> None:
         self.path = path
@@ -131,10 +131,7 @@ def compiled() -> _Library | None:
         h.update(part.encode() + b"\0")
     path = cache_dir() / f"{PREFIX}-{h.hexdigest()[:24]}.so"
     try:
-        if path.exists() and path.with_suffix(".names").exists():
-            os.utime(path)  # recently used: the last to be evicted
-        else:
-            build_library(cc, SOURCE, path, list(FUNCTIONS), FLAGS)
+        cached_library(cc, lambda: SOURCE, path, list(FUNCTIONS), FLAGS)
         return _Library(path)
     except (OSError, RuntimeError, AttributeError) as e:
         log.warning("compiling the clearance bounds failed (%s); using NumPy's", e)

@@ -36,7 +36,6 @@ from __future__ import annotations
 import hashlib
 import importlib.metadata
 import logging
-import os
 import threading
 from pathlib import Path
 from typing import Any
@@ -46,8 +45,8 @@ import pinocchio as pin
 
 from refine.native import (
     BoundedCache,
-    build_library,
     cache_dir,
+    cached_library,
     compiler,
     compiler_version,
 )
@@ -461,12 +460,9 @@ class CompiledChain:
         """Load (compiling first when missing) and check the library; False when it cannot be used."""
         library = cache_dir() / f"{PREFIX}-{digest}.so"
         try:
-            if library.exists() and library.with_suffix(".names").exists():
-                os.utime(library)  # recently used: the last to be evicted
-            else:
-                build_library(
-                    cc, chain_source(self.numpy, self.flange_id, PREFIX), library, list(FUNCTIONS), FLAGS
-                )
+            cached_library(
+                cc, lambda: chain_source(self.numpy, self.flange_id, PREFIX), library, list(FUNCTIONS), FLAGS
+            )
             lib = ChainLibrary(library, self.nq)
         except (OSError, RuntimeError, AttributeError, ImportError) as e:
             log.warning("compiling the batch kinematics failed (%s); using NumPy's", e)
