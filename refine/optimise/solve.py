@@ -106,12 +106,6 @@ class CoarseTimeLimit(TimeLimitReached):
         self.spent = spent
 
 
-"""Rounds of solve -> verify -> add constraints before giving up on adding more."""
-
-
-# ---- seed ----------------------------------------------------------------------------------------
-
-
 # ---- the outer loop ------------------------------------------------------------------------------
 
 
