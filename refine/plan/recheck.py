@@ -41,7 +41,6 @@ import math
 import threading
 import time
 import weakref
-from collections import OrderedDict
 from collections.abc import Callable
 
 import numpy as np
@@ -59,6 +58,7 @@ from refine.collision.carry import (
     raise_near,
     tightener,
 )
+from refine.native import BoundedCache
 from refine.types import Array
 
 UNBOUND_ROWS = 2
@@ -176,8 +176,9 @@ def recheck(
 
 
 _MEASURED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-"""Per collision model: the rows it measured exactly (joints' and moving poses' bytes -> what was found)."""
-_MEASURED_LOCK = threading.Lock()  # held while _MEASURED or a model's rows are read or changed
+"""Per collision model: the rows it measured exactly (joints' and moving poses' bytes -> what was found),
+the last :data:`MEASURED_ROWS` used (a :class:`refine.native.BoundedCache`, which holds its own lock)."""
+_MEASURED_LOCK = threading.Lock()  # held while _MEASURED itself is read or changed
 
 Measured = tuple[Sample, dict[int, tuple[float, Array]]]
 """A row measured exactly: its least figures and the pairs measured there, by pair index, with their
@@ -194,20 +195,16 @@ def _measured_row(model: CollisionModel, key: bytes) -> Measured | None:
     """
     with _MEASURED_LOCK:
         rows = _MEASURED.get(model)
-        if rows is None or key not in rows:
-            return None
-        rows.move_to_end(key)
-        return rows[key]
+    return None if rows is None else rows.get(key)
 
 
 def _keep_row(model: CollisionModel, key: bytes, found: Measured) -> None:
     """Keep ``found`` at the row ``key`` of ``model`` (past :data:`MEASURED_ROWS`, the oldest used goes)."""
     with _MEASURED_LOCK:
-        rows = _MEASURED.setdefault(model, OrderedDict())
-        rows[key] = found
-        rows.move_to_end(key)
-        while len(rows) > MEASURED_ROWS:
-            rows.popitem(last=False)
+        rows = _MEASURED.get(model)
+        if rows is None:
+            rows = _MEASURED[model] = BoundedCache(MEASURED_ROWS)
+    rows.put(key, found)
 
 
 _SHIFTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
